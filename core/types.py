@@ -88,6 +88,8 @@ class SignalSet:
     time_s: np.ndarray
     distance_m: np.ndarray
     channels: dict[str, np.ndarray] = field(default_factory=dict)
+    #: channel name → SHA-256 content hash of its stored samples (filled by ``db``)
+    hashes: dict[str, str] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.time_s.shape[0])
