@@ -32,17 +32,17 @@ from scipy.optimize import linear_sum_assignment
 from core.errors import InvalidParameter, InvalidSignal
 
 __all__ = [
-    "Pole",
-    "Mode",
     "ModalResult",
+    "Mode",
+    "Pole",
     "StabilisationCriteria",
     "mac",
     "mac_matrix",
-    "pair_modes",
-    "output_covariances",
-    "ssi_cov_poles",
-    "ssi_cov",
     "modes_from_matrices",
+    "output_covariances",
+    "pair_modes",
+    "ssi_cov",
+    "ssi_cov_poles",
 ]
 
 
@@ -110,7 +110,7 @@ def output_covariances(y: np.ndarray, max_lag: int) -> np.ndarray:
     """Unbiased output covariance matrices R_k = 1/(N−k) Σ_t y_{t+k} y_tᵀ, k = 0 … max_lag
     ([PdR99] eq. 8). ``y`` is (N, l); returns (max_lag + 1, l, l). Computed by FFT."""
     y = np.asarray(y, dtype=float)
-    n, l = y.shape
+    n, _l = y.shape
     if max_lag >= n:
         raise InvalidParameter(f"max_lag must be < number of samples {n}, got {max_lag}")
     nfft = 1 << int(np.ceil(np.log2(2 * n)))

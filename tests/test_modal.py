@@ -99,7 +99,7 @@ def test_modes_from_matrices_single_oscillator():
     mu = -z * w + 1j * w * np.sqrt(1 - z * z)
     lam = np.exp(mu / fs)
     A = np.array([[lam.real, -lam.imag], [lam.imag, lam.real]])
-    freq, damp, shapes = modes_from_matrices(A, np.array([[1.0, 0.0]]), fs)
+    freq, damp, _shapes = modes_from_matrices(A, np.array([[1.0, 0.0]]), fs)
     assert freq[0] == pytest.approx(f, rel=1e-10)
     assert damp[0] == pytest.approx(z, rel=1e-10)
 
