@@ -1,0 +1,156 @@
+"""Batch executor: run independent tasks (simulate a section, evaluate a section, one
+optimiser candidate) on a local process pool or on a Dask distributed cluster.
+
+* default: ``concurrent.futures.ProcessPoolExecutor`` with 2 workers (the 2-core machines of
+  the deployment), started with the ``forkserver`` method so it is safe to use from the
+  Panel app's background threads;
+* ``scheduler="serial"`` (or ``workers=1``): in the calling process, no pickling — for
+  debugging and for tiny jobs;
+* ``scheduler="tcp://host:8786"``: a ``dask.distributed.Client`` connected to that scheduler
+  (``deploy/`` starts one); tasks must be importable top-level functions with picklable
+  arguments, exactly as for the process pool.
+
+Results come back in task order and are identical whichever back end ran them (the test
+``tests/test_batch_dask.py`` checks this against a real ``LocalCluster``). An executor is a
+context manager and can be reused for many ``map`` calls (the calibration optimiser maps one
+generation at a time); its ``map`` has the ``map(func, iterable)`` signature that
+``scipy.optimize.differential_evolution(workers=...)`` accepts.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Any, Self
+
+from core.errors import InvalidParameter
+
+DEFAULT_WORKERS = 2
+
+Progress = Callable[[int, int], None]
+
+
+class BatchExecutor:
+    """Map a function over items on the chosen back end.
+
+    Parameters
+    ----------
+    scheduler : None (local process pool), ``"serial"``, or a Dask scheduler address
+        (``"tcp://…"``, ``"host:port"``) — also accepts an existing ``dask.distributed.Client``.
+    workers : process-pool size (default 2; ``$RAILVAL_WORKERS`` overrides); 1 → serial.
+    """
+
+    def __init__(self, scheduler: Any = None, workers: int | None = None):
+        if workers is None:
+            workers = int(os.environ.get("RAILVAL_WORKERS", DEFAULT_WORKERS))
+        if workers < 1:
+            raise InvalidParameter(f"workers must be ≥ 1, got {workers}")
+        self.workers = workers
+        self._client = None
+        self._own_client = False
+        self._pool: ProcessPoolExecutor | None = None
+        if scheduler is None:
+            self.backend = "serial" if workers == 1 else "process"
+        elif isinstance(scheduler, str) and scheduler.lower() in ("serial", "local-serial"):
+            self.backend = "serial"
+        elif isinstance(scheduler, str) and scheduler.lower() in ("process", "local"):
+            self.backend = "serial" if workers == 1 else "process"
+        else:
+            self.backend = "dask"
+            self._scheduler = scheduler
+
+    # -- lifecycle
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+        if self._client is not None and self._own_client:
+            self._client.close()
+        self._client = None
+
+    def _dask_client(self):
+        if self._client is None:
+            try:
+                from dask.distributed import Client
+            except ImportError as exc:  # pragma: no cover - dask is a declared extra
+                raise InvalidParameter(
+                    f"--scheduler {self._scheduler!r} needs dask.distributed (pip install 'railval[dask]')"
+                ) from exc
+            if isinstance(self._scheduler, Client):
+                self._client = self._scheduler
+            else:
+                try:
+                    self._client = Client(self._scheduler, timeout="10s")
+                except OSError as exc:
+                    raise InvalidParameter(
+                        f"cannot reach the Dask scheduler at --scheduler {self._scheduler!r}: {exc}") from exc
+                self._own_client = True
+        return self._client
+
+    def _process_pool(self) -> ProcessPoolExecutor:
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(max_workers=self.workers,
+                                             mp_context=multiprocessing.get_context("forkserver"))
+        return self._pool
+
+    # -- work
+    def map(self, func: Callable[..., Any], items: Iterable[Any], progress: Progress | None = None) -> list[Any]:
+        """``[func(item) for item in items]`` on the back end, in order. ``progress(done, total)``
+        is called in the calling thread after every finished task."""
+        items = list(items)
+        total = len(items)
+        if total == 0:
+            return []
+        if self.backend == "serial" or total == 1 and self.backend == "process":
+            out = []
+            for k, item in enumerate(items):
+                out.append(func(item))
+                if progress:
+                    progress(k + 1, total)
+            return out
+        if self.backend == "process":
+            pool = self._process_pool()
+            futures = {pool.submit(func, item): k for k, item in enumerate(items)}
+        else:
+            client = self._dask_client()
+            futs = client.map(func, items, pure=False)
+            futures = {f: k for k, f in enumerate(futs)}
+        results: list[Any] = [None] * total
+        if self.backend == "process":
+            done_iter = as_completed(futures)
+        else:
+            from dask.distributed import as_completed as dask_as_completed
+
+            done_iter = dask_as_completed(list(futures))
+        for done, fut in enumerate(done_iter, start=1):
+            results[futures[fut]] = fut.result()
+            if progress:
+                progress(done, total)
+        return results
+
+    # scipy's differential_evolution calls workers(func, iterable)
+    __call__ = map
+
+
+def _call(task: tuple[Callable[..., Any], Sequence[Any], dict[str, Any]]) -> Any:
+    func, args, kwargs = task
+    return func(*args, **kwargs)
+
+
+def run_tasks(tasks: Sequence[tuple[Callable[..., Any], Sequence[Any], dict[str, Any]]], *,
+              scheduler: Any = None, workers: int | None = None, progress: Progress | None = None) -> list[Any]:
+    """Run heterogeneous tasks ``(func, args, kwargs)`` and return their results in order.
+
+    Example: ``run_tasks([(simulate_section, (vehicle, section), {"effects": e}) for ...])``.
+    Functions must be importable top-level callables (pickled by reference).
+    """
+    with BatchExecutor(scheduler, workers) as ex:
+        return ex.map(_call, list(tasks), progress=progress)
