@@ -1,0 +1,362 @@
+"""Calibration of model parameters: a global genetic-type search plus a local polish, and
+modal calibration from identified modes (seed 002).
+
+* :func:`calibrate` minimises any scalar objective of named, bounded parameters with
+  ``scipy.optimize.differential_evolution`` (Latin-hypercube initial population, as seed 002
+  initialises its genetic algorithm; small population; seeded; candidates of one generation
+  evaluated through an optional ``map``-like executor) followed by a bounded local polish
+  (``scipy.optimize.minimize``, Powell — derivative-free, so it tolerates the slightly
+  non-smooth objectives of percentile-based EN quantities).
+* :func:`validation_objective` is the scalar form of the DynoTRAIN verdict (DESIGN §3).
+* :func:`calibrate_modal` fits model parameters to identified natural frequencies and mode
+  shapes: numerical modes are paired with experimental ones by highest MAC and the objective
+  is the sum of squared relative frequency residuals plus MAC residuals (seed 002 §4), with
+  the before/after error table of the seed's Fig. 5.
+* :func:`coach_vertical_modes` is the rigid-body vertical modal model of the passenger coach
+  template (car body bounce/pitch on the secondary suspension, bogies on the primary).
+
+Units: SI throughout (kg, kg·m², N/m, m, Hz).
+
+References
+----------
+Seed 002 (Freight wagon calibration from operational modal data), §4: parameters m_cb,
+I_cb,y, k_1,z; LHS-initialised genetic algorithm; objective = sum of natural frequency and
+MAC residuals; pairing by highest MAC; Fig. 5 relative frequency errors before/after.
+R. Storn, K. Price, "Differential evolution", J. Global Optimization 11, 341–359, 1997.
+S. Iwnicki (ed.), "The Manchester Benchmarks for rail vehicle simulation", Vehicle System
+Dynamics 30(3–4), 1998 — vehicle 1 default values used by :data:`COACH_MODAL_DEFAULTS`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.linalg import eigh
+from scipy.optimize import differential_evolution, minimize
+
+from core.errors import CalibrationDidNotConverge, InvalidParameter
+from core.modal import pair_modes
+
+__all__ = [
+    "COACH_MODAL_DEFAULTS",
+    "COACH_MODAL_PARAMETERS",
+    "CalibrationResult",
+    "ModalCalibrationResult",
+    "ParameterSpec",
+    "calibrate",
+    "calibrate_modal",
+    "coach_vertical_modes",
+    "modal_objective",
+    "validation_objective",
+]
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """A calibrated parameter: name, bounds [lower, upper] in ``unit``, optional start value."""
+
+    name: str
+    lower: float
+    upper: float
+    unit: str = ""
+    start: float | None = None
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.lower) and math.isfinite(self.upper) and self.lower < self.upper):
+            raise InvalidParameter(
+                f"parameter {self.name}: bounds must be finite with lower < upper, got [{self.lower}, {self.upper}]")
+        if self.start is not None and not (self.lower <= self.start <= self.upper):
+            raise InvalidParameter(
+                f"parameter {self.name}: start {self.start} outside bounds [{self.lower}, {self.upper}]")
+
+
+Progress = Callable[[str, float, dict[str, Any]], None]
+
+
+@dataclass
+class CalibrationResult:
+    """Outcome of :func:`calibrate`.
+
+    ``parameters`` best values; ``objective_start`` objective at the start values (if given),
+    ``objective`` at the optimum; ``history`` best objective after every generation then after
+    the polish; ``n_evaluations`` objective calls; ``converged`` as reported by the optimiser.
+    Services add ``validation``, ``lineage`` and ``configuration`` entries to ``extra``.
+    """
+
+    parameters: dict[str, float]
+    objective: float
+    objective_start: float | None
+    n_evaluations: int
+    converged: bool
+    message: str
+    history: list[float] = field(default_factory=list)
+    specs: list[ParameterSpec] = field(default_factory=list)
+    elapsed_s: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        out = {
+            "parameters": dict(self.parameters),
+            "bounds": {s.name: [s.lower, s.upper] for s in self.specs},
+            "units": {s.name: s.unit for s in self.specs},
+            "objective": self.objective,
+            "objective_start": self.objective_start,
+            "n_evaluations": self.n_evaluations,
+            "converged": self.converged,
+            "message": self.message,
+            "history": list(self.history),
+            "elapsed_s": self.elapsed_s,
+        }
+        out.update(self.extra)
+        return out
+
+
+class _Counted:
+    """Picklable wrapper mapping a unit-cube vector to a named-parameter objective call."""
+
+    def __init__(self, objective: Callable[[dict[str, float]], float], specs: Sequence[ParameterSpec]):
+        self.objective = objective
+        self.names = [s.name for s in specs]
+
+    def __call__(self, x: np.ndarray) -> float:
+        value = float(self.objective(dict(zip(self.names, (float(v) for v in x), strict=True))))
+        return value if math.isfinite(value) else 1e12
+
+
+def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[ParameterSpec], *,
+              seed: int = 0, popsize: int = 6, maxiter: int = 15, tol: float = 1e-3,
+              polish: bool = True, polish_maxfev: int = 60, workers: Callable | None = None,
+              progress: Progress | None = None, raise_on_failure: bool = False) -> CalibrationResult:
+    """Minimise ``objective(params)`` over the bounded box of ``specs``.
+
+    Global stage: ``differential_evolution`` (strategy best1bin, ``popsize``·n candidates per
+    generation, Latin-hypercube initialisation as seed 002, ``seed`` for reproducibility, the
+    start values — when every spec has one — injected as a population member via ``x0``).
+    ``workers``: a ``map(func, iterable)`` callable (e.g. :class:`app.services.batch.BatchExecutor`)
+    evaluating one generation in parallel (then ``updating="deferred"``). Local stage: Powell
+    with the same bounds, at most ``polish_maxfev`` evaluations. ``progress(stage, fraction,
+    info)`` is called after every generation and at the end.
+    """
+    specs = list(specs)
+    if not specs:
+        raise InvalidParameter("calibrate needs at least one parameter, got none")
+    names = [s.name for s in specs]
+    if len(set(names)) != len(names):
+        raise InvalidParameter(f"parameter names must be unique, got {names}")
+    f = _Counted(objective, specs)
+    bounds = [(s.lower, s.upper) for s in specs]
+    x0 = None
+    obj_start = None
+    if all(s.start is not None for s in specs):
+        x0 = np.array([s.start for s in specs], dtype=float)
+        obj_start = f(x0)
+    history: list[float] = []
+    t0 = time.perf_counter()
+    gen = [0]
+
+    def cb(intermediate_result) -> None:
+        gen[0] += 1
+        history.append(float(intermediate_result.fun))
+        if progress:
+            progress("global", min(gen[0] / maxiter, 1.0),
+                     {"generation": gen[0], "best": float(intermediate_result.fun),
+                      "parameters": dict(zip(names, map(float, intermediate_result.x), strict=True))})
+
+    kwargs: dict[str, Any] = {}
+    if workers is not None:
+        kwargs.update(workers=workers, updating="deferred")
+    res = differential_evolution(f, bounds, seed=seed, popsize=popsize, maxiter=maxiter, tol=tol,
+                                 init="latinhypercube", polish=False, x0=x0, callback=cb, **kwargs)
+    x_best, f_best, nfev = np.asarray(res.x, float), float(res.fun), int(res.nfev)
+    converged, message = bool(res.success), str(res.message)
+    if polish:
+        loc = minimize(f, x_best, method="Powell", bounds=bounds,
+                       options={"maxfev": polish_maxfev, "xtol": 1e-3, "ftol": 1e-4})
+        nfev += int(loc.nfev)
+        if float(loc.fun) < f_best:
+            x_best, f_best = np.clip(np.asarray(loc.x, float), [b[0] for b in bounds], [b[1] for b in bounds]), float(loc.fun)
+        history.append(f_best)
+    if progress:
+        progress("done", 1.0, {"best": f_best, "parameters": dict(zip(names, map(float, x_best), strict=True))})
+    if raise_on_failure and not converged:
+        raise CalibrationDidNotConverge(f"differential evolution stopped after {nfev} evaluations: {message}")
+    return CalibrationResult(dict(zip(names, map(float, x_best), strict=True)), f_best, obj_start, nfev,
+                             converged, message, history, specs, time.perf_counter() - t0)
+
+
+def validation_objective(mean_norm: Mapping[str, float], std_norm: Mapping[str, float], *,
+                         smooth: float = 0.0) -> float:
+    """Scalar form of the DynoTRAIN verdict: Σ_q max(|mean_norm_q|, std_norm_q)².
+
+    ``mean_norm``/``std_norm`` are the per-quantity mean and standard deviation of D_v divided
+    by their limits (DESIGN §3, seed 000 §5: a quantity passes when both are ≤ 1), so the
+    objective is ≤ 12 when every quantity passes and every term is dimensionless. With
+    ``smooth`` > 0 the max is replaced by the log-sum-exp soft maximum
+    s·ln(e^{|m|/s} + e^{σ/s}) (differentiable; tends to the max as s → 0).
+    """
+    total = 0.0
+    for q, m in mean_norm.items():
+        s = std_norm.get(q, 0.0)
+        a, b = abs(float(m)), float(s)
+        if not (math.isfinite(a) and math.isfinite(b)):
+            continue
+        if smooth > 0:
+            hi = max(a, b)
+            v = hi + smooth * math.log(math.exp((a - hi) / smooth) + math.exp((b - hi) / smooth))
+        else:
+            v = max(a, b)
+        total += v * v
+    return total
+
+
+# --------------------------------------------------------------------------- modal calibration
+#: Vertical rigid-body parameters of the passenger coach template (Manchester Benchmark vehicle
+#: 1, DESIGN §6): masses kg, inertia kg·m², stiffness per suspension position N/m, lengths m.
+COACH_MODAL_DEFAULTS: dict[str, float] = {
+    "m_carbody": 32000.0,
+    "I_pitch_carbody": 1.97e6,
+    "k_secondary_z": 430e3,
+    "k_primary_z": 1.2e6,
+    "m_bogie": 2615.0,
+    "bogie_half_distance": 9.5,
+}
+
+#: Calibratable modal parameters: default bounds (± 30 % around the defaults) and units.
+COACH_MODAL_PARAMETERS: dict[str, tuple[float, float, str]] = {
+    "m_carbody": (22400.0, 41600.0, "kg"),
+    "I_pitch_carbody": (1.379e6, 2.561e6, "kg·m²"),
+    "k_secondary_z": (301e3, 559e3, "N/m"),
+    "k_primary_z": (0.84e6, 1.56e6, "N/m"),
+    "m_bogie": (1830.0, 3400.0, "kg"),
+}
+
+
+def coach_vertical_modes(params: Mapping[str, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Undamped vertical modes of the coach: DOFs car body bounce z_c, pitch θ_c, bogie
+    bounces z_b1 (leading, x = +a), z_b2 (x = −a).
+
+    Potential energy Σ_{j=1,2} [k_s,b (z_bj − z_c ∓ a θ_c)² + k_p,b z_bj²]/2 with per-bogie
+    stiffnesses k_s,b = 2·k_secondary_z (two secondary positions) and k_p,b = 4·k_primary_z
+    (four axle boxes); M = diag(m_c, I_c, m_b, m_b). Solved by ``scipy.linalg.eigh`` (K, M).
+    Returns (frequencies in Hz ascending, shapes at the car body sensors above bogie 1 and 2 —
+    z_c ± a θ_c — as a (2, 4) array). Closed-form check (bogies rigidly fixed,
+    k_p → ∞): bounce f = √(2k_s,b/m_c)/2π, pitch f = √(2k_s,b a²/I_c)/2π.
+    """
+    p = dict(COACH_MODAL_DEFAULTS)
+    if params:
+        unknown = set(params) - set(p)
+        if unknown:
+            raise InvalidParameter(f"unknown coach modal parameter(s) {sorted(unknown)}; known: {sorted(p)}")
+        p.update({k: float(v) for k, v in params.items()})
+    for k, v in p.items():
+        if not v > 0:
+            raise InvalidParameter(f"coach modal parameter {k} must be > 0, got {v}")
+    a = p["bogie_half_distance"]
+    ks, kp = 2.0 * p["k_secondary_z"], 4.0 * p["k_primary_z"]
+    M = np.diag([p["m_carbody"], p["I_pitch_carbody"], p["m_bogie"], p["m_bogie"]])
+    K = np.array([
+        [2 * ks, 0.0, -ks, -ks],
+        [0.0, 2 * ks * a * a, -ks * a, ks * a],
+        [-ks, -ks * a, ks + kp, 0.0],
+        [-ks, ks * a, 0.0, ks + kp],
+    ])
+    w2, V = eigh(K, M)
+    sensors = np.array([[1.0, a, 0.0, 0.0], [1.0, -a, 0.0, 0.0]])
+    return np.sqrt(np.maximum(w2, 0.0)) / (2 * np.pi), sensors @ V
+
+
+def modal_objective(freq_model: np.ndarray, shapes_model: np.ndarray, freq_exp: np.ndarray,
+                    shapes_exp: np.ndarray, *, mac_weight: float = 1.0,
+                    freq_weight_pairing: float = 0.5) -> tuple[float, list[tuple[int, int, float]]]:
+    """Seed 002 §4 objective: pair every experimental mode with a model mode by highest MAC
+    (ties broken by frequency, :func:`core.modal.pair_modes`), then
+    J = Σ_i ((f_model − f_exp)/f_exp)² + mac_weight · Σ_i (1 − MAC_i). Dimensionless.
+    Returns (J, pairs ``(i_exp, j_model, mac)``)."""
+    pairs = pair_modes(freq_exp, shapes_exp, freq_model, shapes_model, freq_weight=freq_weight_pairing)
+    J = 0.0
+    for i, j, m in pairs:
+        J += ((freq_model[j] - freq_exp[i]) / freq_exp[i]) ** 2 + mac_weight * (1.0 - m)
+    return float(J), pairs
+
+
+@dataclass
+class ModalCalibrationResult:
+    """Seed 002 Fig. 5 as a table: per experimental mode the frequency, the paired model
+    frequency and relative error (%) and MAC before and after calibration; plus the fitted
+    parameters (:class:`CalibrationResult`)."""
+
+    rows: list[dict[str, float]]
+    calibration: CalibrationResult
+    parameters_before: dict[str, float]
+
+    @property
+    def mean_abs_error_before_pct(self) -> float:
+        return float(np.mean([abs(r["error_before_pct"]) for r in self.rows]))
+
+    @property
+    def mean_abs_error_after_pct(self) -> float:
+        return float(np.mean([abs(r["error_after_pct"]) for r in self.rows]))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"modes": list(self.rows), "parameters_before": dict(self.parameters_before),
+                "parameters_after": dict(self.calibration.parameters),
+                "mean_abs_error_before_pct": self.mean_abs_error_before_pct,
+                "mean_abs_error_after_pct": self.mean_abs_error_after_pct,
+                "calibration": self.calibration.to_dict()}
+
+    def to_pandas(self):
+        import pandas as pd
+
+        return pd.DataFrame(self.rows)
+
+
+class _ModalFit:
+    def __init__(self, model, base, freq_exp, shapes_exp, mac_weight):
+        self.model, self.base = model, dict(base)
+        self.freq_exp, self.shapes_exp, self.mac_weight = freq_exp, shapes_exp, mac_weight
+
+    def __call__(self, params: dict[str, float]) -> float:
+        f, s = self.model({**self.base, **params})
+        return modal_objective(f, s, self.freq_exp, self.shapes_exp, mac_weight=self.mac_weight)[0]
+
+
+def calibrate_modal(freq_exp: Sequence[float], shapes_exp: np.ndarray, specs: Sequence[ParameterSpec], *,
+                    model: Callable[[Mapping[str, float]], tuple[np.ndarray, np.ndarray]] = coach_vertical_modes,
+                    base: Mapping[str, float] | None = None, mac_weight: float = 1.0, seed: int = 0,
+                    popsize: int = 10, maxiter: int = 60, progress: Progress | None = None) -> ModalCalibrationResult:
+    """Fit ``specs`` of ``model`` to identified modes (seed 002 §4; objective
+    :func:`modal_objective`). ``base``: values of the parameters not calibrated (and the
+    starting point). Only parameters that move at least one identified mode can be identified
+    (seed 002: "only those sufficiently correlated parameters can be estimated accurately");
+    with two car body modes choose at most two parameters, e.g. I_pitch_carbody and
+    k_secondary_z with the mass fixed from the static wheel load."""
+    freq_exp = np.asarray(freq_exp, float)
+    shapes_exp = np.atleast_2d(np.asarray(shapes_exp))
+    if shapes_exp.shape[1] != freq_exp.size:
+        raise InvalidParameter(
+            f"shapes_exp must have one column per frequency ({freq_exp.size}), got {shapes_exp.shape[1]}")
+    base = dict(base or {})
+    specs = [ParameterSpec(s.name, s.lower, s.upper, s.unit,
+                           s.start if s.start is not None else
+                           min(max(base.get(s.name, COACH_MODAL_DEFAULTS.get(s.name, (s.lower + s.upper) / 2)),
+                                   s.lower), s.upper)) for s in specs]
+    before = {**base, **{s.name: float(s.start) for s in specs}}
+    fit = _ModalFit(model, base, freq_exp, shapes_exp, mac_weight)
+    cal = calibrate(fit, specs, seed=seed, popsize=popsize, maxiter=maxiter, tol=1e-8, progress=progress)
+    rows = []
+    f0, s0 = model(before)
+    f1, s1 = model({**base, **cal.parameters})
+    _, p0 = modal_objective(f0, s0, freq_exp, shapes_exp)
+    _, p1 = modal_objective(f1, s1, freq_exp, shapes_exp)
+    for (i, j0, m0), (_, j1, m1) in zip(p0, p1, strict=True):
+        rows.append({"mode": i + 1, "freq_exp_hz": float(freq_exp[i]),
+                     "freq_before_hz": float(f0[j0]), "error_before_pct": float(100 * (f0[j0] - freq_exp[i]) / freq_exp[i]),
+                     "mac_before": m0,
+                     "freq_after_hz": float(f1[j1]), "error_after_pct": float(100 * (f1[j1] - freq_exp[i]) / freq_exp[i]),
+                     "mac_after": m1})
+    return ModalCalibrationResult(rows, cal, before)
