@@ -61,6 +61,7 @@ __all__ = [
     "ParameterScan",
     "Pattern",
     "diagnose_patterns",
+    "difference_pairs",
     "fit_scan",
     "pattern_from_pairs",
     "psd_band_pattern",
@@ -147,6 +148,33 @@ def pattern_from_pairs(pairs: Iterable[Mapping[str, Any]], *, value_key: str = "
     keys = sorted(acc)
     return Pattern([f"{q} zone {z} {p}" for q, z, p in keys], [q for q, _, _ in keys],
                    np.array([float(np.mean(acc[k])) for k in keys]))
+
+
+def difference_pairs(measured: Mapping[str, Mapping[tuple[str, str], float]],
+                     simulated: Mapping[str, Mapping[tuple[str, str], float]],
+                     zones: Mapping[str, int], std_limits: Mapping[str, float]) -> list[dict[str, Any]]:
+    """Normalised differences of every (section, quantity, position) present in both sources.
+
+    ``measured[section][(quantity, position)]`` = M_v, ``simulated[…]`` = S_v (EN 14363
+    section values, e.g. :func:`core.en14363.evaluate_batch`); D_v = (S_v − M_v)·M_v/|M_v|, and
+    D_v = S_v where M_v = 0 (seed 000 §5, DESIGN §3); ``norm`` = D_v / std limit of the
+    quantity (Table 2). Records: ``section, zone, quantity, position, D_v, norm``.
+    """
+    out = []
+    for sid, mv in measured.items():
+        sv = simulated.get(sid)
+        if sv is None:
+            continue
+        for key, m in mv.items():
+            if key not in sv:
+                continue
+            q, pos = key
+            s = float(sv[key])
+            m = float(m)
+            d = (s - m) * math.copysign(1.0, m) if m != 0 else s
+            out.append({"section": sid, "zone": int(zones[sid]), "quantity": q, "position": pos,
+                        "D_v": d, "norm": d / float(std_limits[q])})
+    return out
 
 
 def _band_powers(x: np.ndarray, fs: float, bands: Sequence[tuple[float, float]], segment_s: float) -> np.ndarray:

@@ -115,3 +115,17 @@ def test_indistinguishable_effects_are_flagged_with_evidence():
 def test_zero_residual_is_rejected():
     with pytest.raises(InvalidSignal):
         diagnose_patterns(Pattern(["a"], ["g"], [0.0]), {})
+
+
+def test_difference_pairs_sign_convention_and_normalisation():
+    from core.diagnosis import difference_pairs
+
+    meas = {"S1": {("Y_qst", "w1L"): -10.0, ("az_rms", "b1"): 0.0}}
+    sim = {"S1": {("Y_qst", "w1L"): -12.5, ("az_rms", "b1"): 0.3}}
+    pairs = difference_pairs(meas, sim, {"S1": 4}, {"Y_qst": 5.0, "az_rms": 0.15})
+    by_q = {p["quantity"]: p for p in pairs}
+    # (S − M)·M/|M| = (−12.5 + 10)·(−1) = 2.5 → simulation overestimates the magnitude; /5 kN
+    assert by_q["Y_qst"]["D_v"] == pytest.approx(2.5) and by_q["Y_qst"]["norm"] == pytest.approx(0.5)
+    # M = 0 → D_v = S
+    assert by_q["az_rms"]["D_v"] == pytest.approx(0.3) and by_q["az_rms"]["norm"] == pytest.approx(2.0)
+    assert by_q["Y_qst"]["zone"] == 4
