@@ -1,0 +1,377 @@
+"""EN 14363 processing of one test section into the 12 validation values (DESIGN §3).
+
+The same chain is applied to measured and simulated signals (seed 000 §5):
+
+1. filter the *whole* recorded section (zero-phase Butterworth, :mod:`core.filters`):
+   low-pass 20 Hz for Y and Q, band-pass 0.4–10 Hz for car body accelerations;
+2. form Y/Q (per wheel, sample-wise ratio) and ΣY = Y_L + Y_R (per wheelset) from the
+   low-pass filtered forces;
+3. cut to the evaluated (constant-curvature) range by the distance axis:
+   samples with ``eval_start_m ≤ distance_m ≤ eval_end_m``;
+4. statistic per quantity (registry :mod:`core.quantities`):
+
+   * 50 % value (median) — keeps its sign;
+   * maximum — the larger magnitude of the 0.15 % and 99.85 % values (absolute value);
+   * ``Q_max`` — the 99.85 % value;
+   * rms — ``sqrt(mean(x²))`` over the evaluated samples;
+   * ``YQ_max`` and ``SumY_max`` — the 2 m sliding mean evaluated every 0.5 m along the
+     distance axis first (:func:`sliding_mean_distance`), then the maximum.
+
+Percentile definition: the p-value is read from the cumulative distribution of the samples
+of the evaluated part, as EN 14363 describes — the inverse of the empirical distribution
+function, i.e. the smallest sample x with ``F_n(x) ≥ p`` (Hyndman & Fan type 1,
+``numpy.quantile(method="inverted_cdf")``). With n samples sorted ascending this is the sample
+of 1-based rank ``ceil(n·p)`` (rank 1 for p·n < 1). For an even n the 50 % value is therefore
+the lower of the two middle samples, not their average.
+
+:func:`evaluate_section` processes one section; :func:`evaluate_batch` processes many
+sections at once: all channels of all sections of equal length and sampling rate are filtered
+in one compiled call, all statistics of one section come from one row-wise sort.
+
+References
+----------
+Polach & Böttcher 2014 (seed 000), §5 and Table 2.
+EN 14363:2005, on-track tests: filtering, test sections, percentile values from the
+cumulative frequency distribution.
+Hyndman, R.J. & Fan, Y. (1996) Sample quantiles in statistical packages, Am. Stat. 50(4).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from core.errors import InvalidParameter, InvalidSignal
+from core.filters import DEFAULT_ORDER, design, filtfilt_rows, settling_check
+from core.quantities import QUANTITIES, WHEELSET_POSITIONS
+from core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
+
+#: bump whenever the numbers this module produces can change (enters result-cache keys)
+PROCESSING_VERSION = "en14363/1"
+#: numpy.quantile method used for every percentile (EN 14363 cumulative distribution)
+QUANTILE_METHOD = "inverted_cdf"
+P_LOW = 0.0015
+P_MEDIAN = 0.5
+P_HIGH = 0.9985
+WINDOW_M = 2.0
+STEP_M = 0.5
+
+
+class SectionValues(dict):
+    """``{(quantity_id, position): value}`` of one section and one source, plus provenance.
+
+    ``provenance[(quantity_id, position)]`` is the list of processing steps (filter, derived
+    signal, cut, statistic) that produced the value; ``warnings`` lists filter settling
+    warnings (run-in/run-out shorter than the settling time) as messages.
+    """
+
+    def __init__(self, section_id: str, values=(), provenance=None, warnings=None):
+        super().__init__(values)
+        self.section_id = section_id
+        self.provenance: dict[tuple[str, str], tuple[str, ...]] = dict(provenance or {})
+        self.warnings: list[str] = list(warnings or [])
+
+    def to_dict(self) -> dict:
+        return {
+            "section": self.section_id,
+            "values": [{"quantity": q, "position": p, "value": float(v),
+                        "unit": QUANTITIES[q].unit,
+                        "processing": list(self.provenance.get((q, p), ()))}
+                       for (q, p), v in self.items()],
+            "warnings": list(self.warnings),
+            "processing_version": PROCESSING_VERSION,
+        }
+
+    def to_pandas(self):
+        import pandas as pd
+
+        return pd.DataFrame([{"section": self.section_id, "quantity": q, "position": p,
+                              "value": float(v), "unit": QUANTITIES[q].unit}
+                             for (q, p), v in self.items()])
+
+
+# --------------------------------------------------------------------------- statistics
+
+def percentile(x: np.ndarray, p, axis: int = -1) -> np.ndarray:
+    """EN 14363 percentile value(s) ``p`` (fractions, e.g. 0.9985) along ``axis``.
+
+    Inverse of the empirical cumulative distribution (``numpy.quantile`` with
+    ``method="inverted_cdf"``); see the module docstring.
+    """
+    return np.quantile(np.asarray(x, dtype=np.float64), p, axis=axis, method=QUANTILE_METHOD)
+
+
+def _sorted_percentile_index(n: int, p: float) -> int:
+    """0-based index into n ascending samples of the inverted-CDF p-value: rank ceil(n·p)."""
+    k = int(np.ceil(n * p - 1e-12)) - 1
+    return min(max(k, 0), n - 1)
+
+
+def _row_percentiles(rows: np.ndarray) -> np.ndarray:
+    """(0.15 %, 50 %, 99.85 %) values of every row, shape (n_rows, 3); one sort per batch."""
+    n = rows.shape[-1]
+    srt = np.sort(rows, axis=-1)
+    idx = [_sorted_percentile_index(n, p) for p in (P_LOW, P_MEDIAN, P_HIGH)]
+    return srt[:, idx]
+
+
+def maxabs(p_low: np.ndarray | float, p_high: np.ndarray | float):
+    """Larger magnitude of the 0.15 % and 99.85 % values (seed 000 Table 2, footnote a)."""
+    return np.maximum(np.abs(p_low), np.abs(p_high))
+
+
+def rms(x: np.ndarray, axis: int = -1) -> np.ndarray:
+    """Root mean square ``sqrt(mean(x²))`` along ``axis`` (unit of x)."""
+    x = np.asarray(x, dtype=np.float64)
+    return np.sqrt(np.mean(x * x, axis=axis))
+
+
+def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: float,
+                          end_m: float, window_m: float = WINDOW_M,
+                          step_m: float = STEP_M) -> tuple[np.ndarray, np.ndarray]:
+    """Sliding mean over ``window_m`` metres evaluated every ``step_m`` metres of distance.
+
+    The signal is taken as piecewise linear between samples on the distance axis (so variable
+    speed is handled exactly); its integral ``C(x) = ∫ s dx`` is the cumulative trapezoid at
+    the samples and a quadratic in between. The mean over the window centred at ``x`` is
+    ``(C(x + w/2) − C(x − w/2)) / w``. Centres are ``start_m + w/2 + k·step_m`` up to
+    ``end_m − w/2``: every window lies inside the evaluated range.
+
+    ``values``: shape (n,) or (n_rows, n); ``distance_m``: strictly increasing, shape (n,), m.
+    Returns ``(centres_m, means)``, means shaped (n_rows, n_centres) (or (n_centres,)).
+
+    References: seed 000 Table 2 ("sliding mean, 2 m window, step 0.5 m"); EN 14363.
+    """
+    d = np.asarray(distance_m, dtype=np.float64)
+    v = np.asarray(values, dtype=np.float64)
+    one_d = v.ndim == 1
+    if one_d:
+        v = v[np.newaxis, :]
+    if window_m <= 0 or step_m <= 0:
+        raise InvalidParameter(
+            f"window_m and step_m must be > 0 m, got window_m={window_m}, step_m={step_m}")
+    half = window_m / 2.0
+    if end_m - start_m < window_m:
+        raise InvalidSignal(
+            f"evaluated range {start_m}–{end_m} m is shorter than the {window_m} m sliding "
+            f"window")
+    if start_m < d[0] or end_m > d[-1]:
+        raise InvalidSignal(
+            f"evaluated range {start_m}–{end_m} m exceeds the distance axis "
+            f"{d[0]:.3f}–{d[-1]:.3f} m")
+    n_c = int(np.floor((end_m - start_m - window_m) / step_m + 1e-9)) + 1
+    centres = start_m + half + step_m * np.arange(n_c)
+    h = np.diff(d)
+    # cumulative trapezoid at the samples, per row
+    cum = np.zeros_like(v)
+    np.cumsum(0.5 * (v[:, 1:] + v[:, :-1]) * h, axis=1, out=cum[:, 1:])
+
+    def integral_at(x):
+        j = np.clip(np.searchsorted(d, x, side="right") - 1, 0, d.size - 2)
+        u = x - d[j]
+        slope = (v[:, j + 1] - v[:, j]) / h[j]
+        return cum[:, j] + v[:, j] * u + 0.5 * slope * u * u
+
+    means = (integral_at(centres + half) - integral_at(centres - half)) / window_m
+    return centres, (means[0] if one_d else means)
+
+
+# --------------------------------------------------------------------------- validation
+
+def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
+    n = len(ss)
+    if not (np.isfinite(ss.fs) and ss.fs > 0):
+        raise InvalidSignal(f"section {sec.id}: fs must be a positive number of Hz, got {ss.fs}")
+    d = np.asarray(ss.distance_m)
+    if d.shape != (n,):
+        raise InvalidSignal(
+            f"section {sec.id}: distance_m has shape {d.shape}, expected ({n},) like time_s")
+    if n < 2 or not np.all(np.diff(d) > 0):
+        raise InvalidSignal(f"section {sec.id}: distance_m must be strictly increasing")
+    for name, arr in ss.channels.items():
+        if np.shape(arr) != (n,):
+            raise InvalidSignal(
+                f"section {sec.id}: channel {name} has shape {np.shape(arr)}, expected ({n},)")
+    if not sec.eval_start_m < sec.eval_end_m:
+        raise InvalidSignal(
+            f"section {sec.id}: evaluated range start {sec.eval_start_m} m must be below end "
+            f"{sec.eval_end_m} m")
+    if sec.eval_start_m < d[0] or sec.eval_end_m > d[-1]:
+        raise InvalidSignal(
+            f"section {sec.id}: evaluated range {sec.eval_start_m}–{sec.eval_end_m} m exceeds "
+            f"the recorded distance {d[0]:.3f}–{d[-1]:.3f} m")
+
+
+@dataclass
+class _Plan:
+    """Which rows of the stacked filter inputs belong to which section."""
+
+    lp_names: list[str]
+    bp_names: list[str]
+    lp_rows: slice
+    bp_rows: slice
+
+
+def _needed_channels(ss: SignalSet) -> tuple[list[str], list[str]]:
+    names = set(ss.channels)
+    lp = [f"{k}_{p}" for k in ("Y", "Q") for p in WHEEL_POSITIONS if f"{k}_{p}" in names]
+    bp = [f"{k}_cb_{p}" for k in ("ay", "az") for p in BODY_POSITIONS if f"{k}_cb_{p}" in names]
+    return lp, bp
+
+
+def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionInfo], *,
+                   order: int = DEFAULT_ORDER) -> list[SectionValues]:
+    """Process many sections at once (vectorised path); returns one SectionValues each.
+
+    Sections with equal sampling rate and length are filtered together (one compiled
+    zero-phase call per filter kind over all their channels); each section's statistics come
+    from one row-wise sort of all its evaluated rows. Results equal :func:`evaluate_section`
+    on each section alone.
+    """
+    if len(signalsets) != len(sections):
+        raise InvalidParameter(
+            f"evaluate_batch needs one SectionInfo per SignalSet, got {len(signalsets)} "
+            f"signal sets and {len(sections)} sections")
+    plans: list[_Plan] = []
+    groups: dict[tuple[float, int], list[int]] = {}
+    for i, (ss, sec) in enumerate(zip(signalsets, sections)):
+        _check_signalset(ss, sec)
+        lp, bp = _needed_channels(ss)
+        plans.append(_Plan(lp, bp, slice(0, 0), slice(0, 0)))
+        groups.setdefault((float(ss.fs), len(ss)), []).append(i)
+
+    filtered_lp: dict[int, np.ndarray] = {}
+    filtered_bp: dict[int, np.ndarray] = {}
+    for (fs, n), members in groups.items():
+        for kind, attr, store in (("lowpass", "lp_names", filtered_lp),
+                                  ("bandpass", "bp_names", filtered_bp)):
+            rows = [np.asarray(signalsets[i].channels[c], dtype=np.float64)
+                    for i in members for c in getattr(plans[i], attr)]
+            if not rows:
+                continue
+            stacked = np.vstack(rows)
+            if not np.all(np.isfinite(stacked)):
+                bad = [(sections[i].id, c) for i in members for c in getattr(plans[i], attr)
+                       if not np.all(np.isfinite(signalsets[i].channels[c]))]
+                raise InvalidSignal(f"non-finite samples (NaN/inf) in section/channel {bad[0]}")
+            out = filtfilt_rows(stacked, fs, kind, order)
+            pos = 0
+            for i in members:
+                k = len(getattr(plans[i], attr))
+                store[i] = out[pos:pos + k]
+                pos += k
+    return [_section_stats(signalsets[i], sections[i], plans[i], filtered_lp.get(i),
+                           filtered_bp.get(i), order) for i in range(len(signalsets))]
+
+
+def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,
+                     order: int = DEFAULT_ORDER) -> SectionValues:
+    """The 12 quantities at every available position of one section (DESIGN §3).
+
+    Returns ``{(quantity_id, position): value}`` (a :class:`SectionValues`, which also holds
+    the processing steps of each value and any filter settling warning). Units per the
+    registry (kN, –, m/s²). ``order``: Butterworth prototype order of both filters.
+    """
+    return evaluate_batch([signalset], [section_info], order=order)[0]
+
+
+def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray | None,
+                   bp: np.ndarray | None, order: int) -> SectionValues:
+    d = np.asarray(ss.distance_m, dtype=np.float64)
+    mask = (d >= sec.eval_start_m) & (d <= sec.eval_end_m)
+    n_eval = int(mask.sum())
+    if n_eval < 2:
+        raise InvalidSignal(
+            f"section {sec.id}: evaluated range {sec.eval_start_m}–{sec.eval_end_m} m holds "
+            f"{n_eval} samples, needs at least 2")
+    lo_idx, hi_idx = np.flatnonzero(mask)[[0, -1]]
+    cut = slice(int(lo_idx), int(hi_idx) + 1)
+    fs = float(ss.fs)
+    cut_text = (f"cut to evaluated range {sec.eval_start_m:g}–{sec.eval_end_m:g} m by distance "
+                f"({n_eval} samples)")
+    pct_text = f"percentiles: np.quantile method='{QUANTILE_METHOD}' (EN 14363 cumulative distribution)"
+    values: dict[tuple[str, str], float] = {}
+    prov: dict[tuple[str, str], tuple[str, ...]] = {}
+    warnings: list[str] = []
+
+    if lp is not None and lp.shape[0]:
+        lp_label = design(fs, "lowpass", order).label + ", whole section"
+        warnings += [w.message for w in settling_check(ss.time_s, mask, fs, "lowpass", order,
+                                                       sec.id)]
+        index = {c: r for r, c in enumerate(plan.lp_names)}
+        wheels_y = [p for p in WHEEL_POSITIONS if f"Y_{p}" in index]
+        wheels_q = [p for p in WHEEL_POSITIONS if f"Q_{p}" in index]
+        wheels_yq = [p for p in wheels_y if p in wheels_q]
+        wsets = [ws for ws in WHEELSET_POSITIONS
+                 if f"Y_w{ws[2:]}L" in index and f"Y_w{ws[2:]}R" in index]
+        ratio = np.empty((len(wheels_yq), lp.shape[1]))
+        for r, p in enumerate(wheels_yq):
+            q = lp[index[f"Q_{p}"]]
+            if np.any(q[cut] == 0.0):
+                raise InvalidSignal(
+                    f"section {sec.id}: Q_{p} is exactly 0 kN inside the evaluated range; "
+                    f"Y/Q is undefined")
+            np.divide(lp[index[f"Y_{p}"]], q, out=ratio[r])
+        sumy = np.empty((len(wsets), lp.shape[1]))
+        for r, ws in enumerate(wsets):
+            np.add(lp[index[f"Y_w{ws[2:]}L"]], lp[index[f"Y_w{ws[2:]}R"]], out=sumy[r])
+        rows = np.vstack([lp[[index[f"Y_{p}"] for p in wheels_y]][:, cut] if wheels_y else
+                          np.empty((0, n_eval)),
+                          lp[[index[f"Q_{p}"] for p in wheels_q]][:, cut] if wheels_q else
+                          np.empty((0, n_eval)),
+                          ratio[:, cut], sumy[:, cut]])
+        pct = _row_percentiles(rows) if rows.shape[0] else np.empty((0, 3))
+        r = 0
+        for fam, positions in (("Y", wheels_y), ("Q", wheels_q), ("YQ", wheels_yq),
+                               ("SumY", wsets)):
+            derive = {"YQ": "Y/Q formed sample-wise from the low-pass filtered Y and Q",
+                      "SumY": "ΣY = Y_L + Y_R formed from the low-pass filtered forces"}.get(fam)
+            base = (lp_label,) + ((derive,) if derive else ()) + (cut_text,)
+            for p in positions:
+                p_lo, p_med, p_hi = pct[r]
+                r += 1
+                values[(f"{fam}_qst", p)] = float(p_med)
+                prov[(f"{fam}_qst", p)] = base + ("50 % value (median, with sign)", pct_text)
+                if fam == "Y":
+                    values[("Y_max", p)] = float(maxabs(p_lo, p_hi))
+                    prov[("Y_max", p)] = base + (
+                        "max(|0.15 % value|, |99.85 % value|)", pct_text)
+                elif fam == "Q":
+                    values[("Q_max", p)] = float(p_hi)
+                    prov[("Q_max", p)] = base + ("99.85 % value", pct_text)
+        slide_rows = np.vstack([ratio, sumy])
+        if slide_rows.shape[0]:
+            _, means = sliding_mean_distance(slide_rows, d, sec.eval_start_m, sec.eval_end_m)
+            spct = _row_percentiles(means)
+            slide_text = (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
+                          f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "
+                          f"{means.shape[1]} values; exact integral of the linear interpolant)")
+            for r, (fam, p) in enumerate([("YQ", p) for p in wheels_yq] +
+                                         [("SumY", w) for w in wsets]):
+                values[(f"{fam}_max", p)] = float(maxabs(spct[r, 0], spct[r, 2]))
+                derive = ("Y/Q formed sample-wise from the low-pass filtered Y and Q"
+                          if fam == "YQ" else "ΣY = Y_L + Y_R formed from the low-pass "
+                          "filtered forces")
+                prov[(f"{fam}_max", p)] = (lp_label, derive, slide_text,
+                                           "max(|0.15 % value|, |99.85 % value|)", pct_text)
+
+    if bp is not None and bp.shape[0]:
+        bp_label = design(fs, "bandpass", order).label + ", whole section"
+        warnings += [w.message for w in settling_check(ss.time_s, mask, fs, "bandpass", order,
+                                                       sec.id)]
+        rows = bp[:, cut]
+        pct = _row_percentiles(rows)
+        rmsv = rms(rows)
+        for r, name in enumerate(plan.bp_names):
+            kind, _, pos = name.partition("_cb_")
+            values[(f"{kind}_rms", pos)] = float(rmsv[r])
+            prov[(f"{kind}_rms", pos)] = (bp_label, cut_text, "rms value")
+            values[(f"{kind}_max", pos)] = float(maxabs(pct[r, 0], pct[r, 2]))
+            prov[(f"{kind}_max", pos)] = (bp_label, cut_text,
+                                          "max(|0.15 % value|, |99.85 % value|)", pct_text)
+
+    order_keys = [(q, p) for q, quantity in QUANTITIES.items() for p in quantity.positions()]
+    ordered = {k: values[k] for k in order_keys if k in values}
+    return SectionValues(sec.id, ordered, prov, warnings)

@@ -1,0 +1,351 @@
+"""DynoTRAIN validation of a model configuration (seed 000 §5, eq. 4; DESIGN §3).
+
+For every pair (section, signal position) of a quantity the difference
+
+    D_v = (S_v − M_v) · M_v / |M_v|   for M_v ≠ 0,      D_v = S_v   for M_v = 0     (eq. 4)
+
+is positive when the simulation overestimates the magnitude of the measurement. Per quantity,
+over all pairs: mean and **sample** standard deviation (ddof = 1, i.e. divided by n − 1) of
+D_v, compared with the limits of Table 2 (:mod:`core.quantities`; mean limit = 2/3 of the std
+limit, accelerations doubled for freight / no secondary suspension). Normalised values are
+value / limit (seed 000 Fig. 12–13), each with a percentile bootstrap confidence interval
+over the pairs (resampling pairs with replacement, seeded).
+
+A configuration is *validated* when every quantity has |mean| ≤ mean limit and std ≤ std
+limit **and** the coverage holds: ≥ 12 sections, each of the 4 EN 14363 zones with ≥ 3
+sections, and per quantity ≥ 2 signals (positions) and ≥ 24 values. Every shortfall is
+reported as a sentence ("zone 3 has 2 sections, needs 3").
+
+:func:`validate` works purely from memory: ``{section_id: {(quantity_id, position): value}}``
+for measurement and simulation (e.g. from :func:`core.en14363.evaluate_batch`), the
+:class:`~core.types.SectionInfo` records and the vehicle.
+
+References
+----------
+Polach & Böttcher 2014 (seed 000), §5, eq. (4), Table 2, Fig. 11–13.
+Efron, B. & Tibshirani, R. (1993) An Introduction to the Bootstrap, ch. 13 (percentile
+interval).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core.errors import InvalidParameter
+from core.quantities import QUANTITIES, QUANTITY_IDS, VEHICLE_KINDS
+from core.types import ZONES, SectionInfo
+
+MIN_SECTIONS = 12
+MIN_SECTIONS_PER_ZONE = 3
+MIN_POSITIONS = 2
+MIN_VALUES = MIN_SECTIONS * MIN_POSITIONS
+STD_DDOF = 1
+STD_DEFINITION = "sample standard deviation (ddof = 1, divided by n − 1)"
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """What the limits depend on: ``kind`` passenger/freight, secondary suspension present,
+    ``Q0_kN`` static vertical wheel force in kN."""
+
+    kind: str = "passenger"
+    secondary_suspension: bool = True
+    Q0_kN: float = 80.0
+
+    def __post_init__(self):
+        if self.kind not in VEHICLE_KINDS:
+            raise InvalidParameter(f"vehicle kind must be one of {VEHICLE_KINDS}, got {self.kind!r}")
+        if not (self.Q0_kN > 0):
+            raise InvalidParameter(f"vehicle Q0_kN must be > 0 kN, got {self.Q0_kN!r}")
+
+    @classmethod
+    def from_any(cls, obj) -> Vehicle:
+        """Build from a :class:`Vehicle`, a mapping or an object with attributes ``kind``,
+        ``secondary_suspension``, ``Q0_kN`` (e.g. a db vehicle record)."""
+        if isinstance(obj, Vehicle):
+            return obj
+        get = obj.get if isinstance(obj, Mapping) else (lambda k, d=None: getattr(obj, k, d))
+        q0 = get("Q0_kN")
+        if q0 is None:
+            q0 = get("q0_kn")
+        sec = get("secondary_suspension", True)
+        return cls(kind=str(get("kind", "passenger")),
+                   secondary_suspension=bool(True if sec is None else sec),
+                   Q0_kN=float(q0) if q0 is not None else float("nan"))
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "secondary_suspension": self.secondary_suspension,
+                "Q0_kN": self.Q0_kN}
+
+
+def difference(simulated, measured) -> np.ndarray:
+    """D_v of seed 000 eq. (4), element-wise: ``(S − M)·sign(M)``, and ``S`` where ``M = 0``.
+
+    Unit of the quantity. Positive = simulation overestimates the measured magnitude.
+    """
+    s = np.asarray(simulated, dtype=np.float64)
+    m = np.asarray(measured, dtype=np.float64)
+    return np.where(m == 0.0, s, (s - m) * np.sign(m))
+
+
+def _none_if_nan(x):
+    return None if x is None or not np.isfinite(x) else float(x)
+
+
+@dataclass
+class QuantityResult:
+    """Statistics of D_v of one quantity over all its pairs."""
+
+    quantity: str
+    unit: str
+    n: int
+    n_positions: int
+    n_sections: int
+    mean: float
+    std: float
+    mean_limit: float
+    std_limit: float
+    mean_norm_ci: tuple[float, float]
+    std_norm_ci: tuple[float, float]
+    drilldown: list[dict] = field(default_factory=list)
+
+    @property
+    def mean_norm(self) -> float:
+        return self.mean / self.mean_limit
+
+    @property
+    def std_norm(self) -> float:
+        return self.std / self.std_limit
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.n >= 2 and np.isfinite(self.std) and abs(self.mean) <= self.mean_limit
+                    and self.std <= self.std_limit)
+
+    @property
+    def robust(self) -> bool:
+        """True when both confidence intervals lie on the same side of 1 as the verdict."""
+        lo_m, hi_m = self.mean_norm_ci
+        lo_s, hi_s = self.std_norm_ci
+        if not all(np.isfinite([lo_m, hi_m, lo_s, hi_s])):
+            return False
+        worst_mean = max(abs(lo_m), abs(hi_m))
+        if self.passed:
+            return worst_mean <= 1.0 and hi_s <= 1.0
+        mean_fails = min(abs(lo_m), abs(hi_m)) > 1.0 and lo_m * hi_m > 0
+        return mean_fails or lo_s > 1.0
+
+    def to_dict(self) -> dict:
+        return {
+            "quantity": self.quantity, "unit": self.unit, "n": self.n,
+            "n_positions": self.n_positions, "n_sections": self.n_sections,
+            "mean": _none_if_nan(self.mean), "std": _none_if_nan(self.std),
+            "std_ddof": STD_DDOF,
+            "mean_limit": self.mean_limit, "std_limit": self.std_limit,
+            "mean_norm": _none_if_nan(self.mean_norm), "std_norm": _none_if_nan(self.std_norm),
+            "mean_norm_ci": [_none_if_nan(v) for v in self.mean_norm_ci],
+            "std_norm_ci": [_none_if_nan(v) for v in self.std_norm_ci],
+            "pass": self.passed, "robust": self.robust,
+            "drilldown": self.drilldown,
+        }
+
+
+@dataclass
+class Coverage:
+    """Coverage rules of seed 000 §5 and their shortfalls (one sentence each)."""
+
+    n_sections: int
+    zones: dict[int, int]
+    positions: dict[str, int]
+    values: dict[str, int]
+    shortfalls: list[str]
+
+    @property
+    def ok(self) -> bool:
+        return not self.shortfalls
+
+    def to_dict(self) -> dict:
+        return {
+            "ok": self.ok, "sections": self.n_sections, "sections_required": MIN_SECTIONS,
+            "zones": {str(z): n for z, n in self.zones.items()},
+            "sections_per_zone_required": MIN_SECTIONS_PER_ZONE,
+            "signals_per_quantity": dict(self.positions),
+            "signals_per_quantity_required": MIN_POSITIONS,
+            "values_per_quantity": dict(self.values),
+            "values_per_quantity_required": MIN_VALUES,
+            "shortfalls": list(self.shortfalls),
+        }
+
+
+def coverage(pair_sections: Mapping[str, set], pair_positions: Mapping[str, set],
+             pair_counts: Mapping[str, int], zone_of: Mapping[str, int]) -> Coverage:
+    """Check the coverage rules. ``pair_sections[q]``/``pair_positions[q]``: sections and
+    positions with a pair for quantity q; ``pair_counts[q]``: number of pairs; ``zone_of``:
+    section id → zone."""
+    sections = set().union(*pair_sections.values()) if pair_sections else set()
+    zones = {z: sum(1 for s in sections if zone_of[s] == z) for z in ZONES}
+    shortfalls = []
+    if len(sections) < MIN_SECTIONS:
+        shortfalls.append(f"{len(sections)} sections have comparisons, needs {MIN_SECTIONS}")
+    for z, n in zones.items():
+        if n < MIN_SECTIONS_PER_ZONE:
+            shortfalls.append(f"zone {z} has {n} section{'s' if n != 1 else ''}, needs "
+                              f"{MIN_SECTIONS_PER_ZONE}")
+    positions = {q: len(pair_positions.get(q, ())) for q in QUANTITY_IDS}
+    values = {q: int(pair_counts.get(q, 0)) for q in QUANTITY_IDS}
+    for q in QUANTITY_IDS:
+        if positions[q] < MIN_POSITIONS:
+            shortfalls.append(f"quantity {q} has {positions[q]} signal"
+                              f"{'s' if positions[q] != 1 else ''}, needs {MIN_POSITIONS}")
+        if values[q] < MIN_VALUES:
+            shortfalls.append(f"quantity {q} has {values[q]} values, needs {MIN_VALUES}")
+    return Coverage(len(sections), zones, positions, values, shortfalls)
+
+
+@dataclass
+class ValidationResult:
+    """Verdict, coverage, per-quantity statistics and the per-pair table of one
+    configuration. ``pairs``: DataFrame with columns quantity, section, zone, position, M, S,
+    D, D_norm (= D / std limit) — the normalised residual pattern."""
+
+    validated: bool
+    coverage: Coverage
+    quantities: dict[str, QuantityResult]
+    vehicle: Vehicle
+    n_boot: int
+    seed: int
+    ci_level: float
+    pairs: object  # pandas.DataFrame
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        from core.en14363 import PROCESSING_VERSION
+
+        return {
+            "validated": self.validated,
+            "coverage": self.coverage.to_dict(),
+            "quantities": [q.to_dict() for q in self.quantities.values()],
+            "std_ddof": STD_DDOF,
+            "std_definition": STD_DEFINITION,
+            "vehicle": self.vehicle.to_dict(),
+            "bootstrap": {"n_boot": self.n_boot, "seed": self.seed, "ci_level": self.ci_level,
+                          "method": "percentile interval, pairs resampled with replacement"},
+            "processing_version": PROCESSING_VERSION,
+            "warnings": list(self.warnings),
+        }
+
+    def to_pandas(self):
+        import pandas as pd
+
+        rows = []
+        for q in self.quantities.values():
+            d = q.to_dict()
+            d.pop("drilldown")
+            d["mean_norm_ci_low"], d["mean_norm_ci_high"] = d.pop("mean_norm_ci")
+            d["std_norm_ci_low"], d["std_norm_ci_high"] = d.pop("std_norm_ci")
+            rows.append(d)
+        return pd.DataFrame(rows).set_index("quantity")
+
+
+def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_boot: int,
+                      rng: np.random.Generator, ci_level: float = 0.95,
+                      chunk: int = 2_000_000) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Percentile bootstrap CIs of mean/mean_limit and std(ddof=1)/std_limit over pairs."""
+    n = d.size
+    if n < 2 or n_boot < 1:
+        nan = (float("nan"), float("nan"))
+        return nan, nan
+    means = np.empty(n_boot)
+    stds = np.empty(n_boot)
+    rows = max(1, chunk // n)
+    for start in range(0, n_boot, rows):
+        stop = min(n_boot, start + rows)
+        sample = d[rng.integers(0, n, size=(stop - start, n))]
+        means[start:stop] = sample.mean(axis=1)
+        stds[start:stop] = sample.std(axis=1, ddof=STD_DDOF)
+    a = (1.0 - ci_level) / 2.0
+    qs = [100 * a, 100 * (1 - a)]
+    m_lo, m_hi = np.percentile(means / mean_limit, qs)
+    s_lo, s_hi = np.percentile(stds / std_limit, qs)
+    return (float(m_lo), float(m_hi)), (float(s_lo), float(s_hi))
+
+
+def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
+             simulated_values: Mapping[str, Mapping[tuple[str, str], float]],
+             sections: Sequence[SectionInfo] | Mapping[str, SectionInfo],
+             vehicle, *, n_boot: int = 1000, seed: int = 0, ci_level: float = 0.95,
+             top: int = 5, warnings: Sequence[str] = ()) -> ValidationResult:
+    """Validate one configuration from in-memory values (seed 000 §5).
+
+    ``measured_values``/``simulated_values``: ``{section_id: {(quantity_id, position):
+    value}}`` (units of the registry); a pair exists where both hold a finite value.
+    ``sections``: the SectionInfo of every section (zone used for coverage); ``vehicle``: a
+    :class:`Vehicle` or anything :meth:`Vehicle.from_any` accepts. ``n_boot`` bootstrap
+    resamples (seeded by ``seed``); ``top``: pairs listed per quantity in the drill-down.
+    """
+    import pandas as pd
+
+    if n_boot < 0:
+        raise InvalidParameter(f"n_boot must be ≥ 0, got {n_boot}")
+    if not 0.0 < ci_level < 1.0:
+        raise InvalidParameter(f"ci_level must be in (0, 1), got {ci_level}")
+    veh = Vehicle.from_any(vehicle)
+    secs = dict(sections) if isinstance(sections, Mapping) else {s.id: s for s in sections}
+    recs: dict[str, list] = {q: [] for q in QUANTITY_IDS}
+    for sid in sorted(set(measured_values) & set(simulated_values)):
+        if sid not in secs:
+            raise InvalidParameter(f"section {sid!r} has values but no SectionInfo")
+        zone = int(secs[sid].zone)
+        mv, sv = measured_values[sid], simulated_values[sid]
+        for key, m in mv.items():
+            s = sv.get(key)
+            if s is None or not (np.isfinite(m) and np.isfinite(s)):
+                continue
+            qid, pos = key
+            if qid not in recs:
+                raise InvalidParameter(f"unknown quantity {qid!r} in section {sid}")
+            recs[qid].append((sid, zone, pos, float(m), float(s)))
+
+    results: dict[str, QuantityResult] = {}
+    frames = []
+    pair_sections, pair_positions, pair_counts = {}, {}, {}
+    for qi, qid in enumerate(QUANTITY_IDS):
+        q = QUANTITIES[qid]
+        mean_limit = q.mean_limit(veh.Q0_kN, veh.kind, veh.secondary_suspension)
+        std_limit = q.std_limit(veh.Q0_kN, veh.kind, veh.secondary_suspension)
+        rec = recs[qid]
+        m = np.array([r[3] for r in rec], dtype=np.float64)
+        s = np.array([r[4] for r in rec], dtype=np.float64)
+        d = difference(s, m)
+        n = d.size
+        mean = float(d.mean()) if n else float("nan")
+        std = float(d.std(ddof=STD_DDOF)) if n >= 2 else float("nan")
+        rng = np.random.default_rng([seed, qi])
+        mci, sci = bootstrap_norm_ci(d, mean_limit, std_limit, n_boot=n_boot, rng=rng,
+                                     ci_level=ci_level)
+        d_norm = d / std_limit
+        ss = float(np.sum(d * d))
+        order = np.argsort(-np.abs(d_norm), kind="stable")[:top]
+        drill = [{"section": rec[i][0], "zone": rec[i][1], "position": rec[i][2],
+                  "M": rec[i][3], "S": rec[i][4], "D": float(d[i]),
+                  "D_norm": float(d_norm[i]),
+                  "share_of_sum_of_squares": float(d[i] ** 2 / ss) if ss > 0 else 0.0}
+                 for i in order]
+        results[qid] = QuantityResult(qid, q.unit, n, len({r[2] for r in rec}),
+                                      len({r[0] for r in rec}), mean, std, mean_limit,
+                                      std_limit, mci, sci, drill)
+        pair_sections[qid] = {r[0] for r in rec}
+        pair_positions[qid] = {r[2] for r in rec}
+        pair_counts[qid] = n
+        frames.append(pd.DataFrame({
+            "quantity": qid, "section": [r[0] for r in rec], "zone": [r[1] for r in rec],
+            "position": [r[2] for r in rec], "M": m, "S": s, "D": d, "D_norm": d_norm}))
+    zone_of = {sid: int(info.zone) for sid, info in secs.items()}
+    cov = coverage(pair_sections, pair_positions, pair_counts, zone_of)
+    validated = cov.ok and all(r.passed for r in results.values())
+    pairs = pd.concat(frames, ignore_index=True)
+    return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level, pairs,
+                            list(warnings))
