@@ -106,6 +106,14 @@ def _check_data(y: np.ndarray, fs: float) -> np.ndarray:
     return y - y.mean(axis=0)
 
 
+def _records(y, fs: float) -> list[np.ndarray]:
+    """One (n, l) array or a list of them (records of equal channel count)."""
+    recs = [_check_data(r, fs) for r in y] if isinstance(y, (list, tuple)) else [_check_data(y, fs)]
+    if not recs or len({r.shape[1] for r in recs}) != 1:
+        raise InvalidSignal(f"records must share their channel count, got {[r.shape[1] for r in recs]}")
+    return recs
+
+
 def output_covariances(y: np.ndarray, max_lag: int) -> np.ndarray:
     """Unbiased output covariance matrices R_k = 1/(N−k) Σ_t y_{t+k} y_tᵀ, k = 0 … max_lag
     ([PdR99] eq. 8). ``y`` is (N, l); returns (max_lag + 1, l, l). Computed by FFT."""
@@ -167,13 +175,16 @@ def ssi_cov_poles(y: np.ndarray, fs: float, *, block_rows: int, orders: range | 
     [f_min, f_max] Hz (default f_max: 0.45·fs) and non-physical ones (ζ ≤ 0 or ζ ≥ 0.5) are
     dropped.
     """
-    y = _check_data(y, fs)
-    l = y.shape[1]
+    records = _records(y, fs)
+    l = records[0].shape[1]
     orders = list(orders)
     if block_rows < 1 or max(orders) > block_rows * l:
         raise InvalidParameter(
             f"block_rows·channels = {block_rows * l} must be ≥ the largest model order {max(orders)}")
-    R = output_covariances(y, 2 * block_rows)
+    # several records (e.g. one per test section): covariances averaged, weighted by length
+    weights = np.array([r.shape[0] - np.arange(2 * block_rows + 1) for r in records], float)
+    R = sum(w[:, None, None] * output_covariances(r, 2 * block_rows) for w, r in zip(weights, records, strict=True))
+    R = R / weights.sum(axis=0)[:, None, None]
     i = block_rows
     T = np.empty((i * l, i * l))
     for r in range(i):
@@ -277,7 +288,8 @@ def ssi_cov(y: np.ndarray, fs: float, *, channels: list[str] | None = None, bloc
 
     Parameters
     ----------
-    y : (n_samples, n_channels) accelerations, equally sampled at ``fs`` Hz.
+    y : (n_samples, n_channels) accelerations, equally sampled at ``fs`` Hz, or a list of such
+        records (e.g. one per test section; their covariances are averaged).
     block_rows : i of the Toeplitz matrix (default: enough lags to span two periods of
         ``f_min`` or 2·max_order/l, whichever is larger, at most n/20).
     max_order : largest model order (even; default 2·⌊i·l/2⌋ capped at 40); orders 2, 4, …
@@ -288,17 +300,17 @@ def ssi_cov(y: np.ndarray, fs: float, *, channels: list[str] | None = None, bloc
     and MAC tolerances. Stable poles are clustered by frequency (``cluster_tol``); clusters with
     ≥ ``min_stable`` members are returned as modes, sorted by frequency.
     """
-    y = _check_data(y, fs)
-    l = y.shape[1]
+    records = _records(y, fs)
+    l = records[0].shape[1]
     crit = criteria or StabilisationCriteria()
     if block_rows is None:
         lags_fmin = int(np.ceil(2.0 * fs / f_min)) if f_min > 0 else 0
         block_rows = max(lags_fmin, int(np.ceil(60 / l)), 10)
-        block_rows = min(block_rows, max(y.shape[0] // 20, 2))
+        block_rows = min(block_rows, max(min(r.shape[0] for r in records) // 20, 2))
     if max_order is None:
         max_order = min(2 * ((block_rows * l) // 2), 40)
     orders = list(range(2, max_order + 1, 2))
-    poles = ssi_cov_poles(y, fs, block_rows=block_rows, orders=orders, f_min=f_min, f_max=f_max)
+    poles = ssi_cov_poles(records, fs, block_rows=block_rows, orders=orders, f_min=f_min, f_max=f_max)
     flagged: dict[int, list[Pole]] = {}
     prev: list[Pole] = []
     for n in orders:

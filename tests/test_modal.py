@@ -130,3 +130,14 @@ def test_ssi_cov_rejects_nan_and_too_high_order():
         ssi_cov(y, 50.0)
     with pytest.raises(InvalidParameter):
         ssi_cov(np.random.default_rng(0).standard_normal((500, 2)), 50.0, block_rows=3, max_order=10)
+
+
+def test_ssi_cov_several_records_equal_one_long_record_modes():
+    M, K, C, f_true, _ = chain_system()
+    y = simulate_accelerations(M, K, C, 100.0, 30_000, seed=2)
+    parts = [y[:10_000], y[10_000:20_000], y[20_000:]]
+    res = ssi_cov(parts, 100.0, f_min=0.5, f_max=30.0, block_rows=40, max_order=30)
+    for f in f_true:
+        assert np.min(np.abs(res.frequencies - f)) < 0.02 * f
+    with pytest.raises(InvalidSignal):
+        ssi_cov([y[:1000, :2], y[:1000]], 100.0)
