@@ -1,0 +1,149 @@
+"""Array codec: numpy array ⇄ compressed blob with a content hash.
+
+Blob layout (all integers little-endian)::
+
+    magic   4 bytes   b"RVA1"
+    codec   1 byte    0 = raw, 1 = byte-shuffle + zlib
+    level   1 byte    zlib level used (informative)
+    dlen    1 byte    length of the dtype string
+    ndim    1 byte    number of dimensions
+    dtype   dlen      numpy dtype string, always little-endian (``"<f8"``, ``"<i4"``, ``"|u1"``)
+    shape   8·ndim    uint64 per dimension
+    payload           the C-ordered element bytes (codec 0) or zlib(byte-shuffled bytes)
+
+Byte shuffling (the HDF5/Blosc "shuffle" filter) groups byte ``k`` of every element
+together; for smooth floating-point signals the exponent bytes then compress well.
+A blob falls back to codec 0 when compression would not save space.
+
+Content hash: SHA-256 over ``b"dtype=<f8;shape=6000;"`` followed by the raw little-endian
+C-ordered element bytes. It depends on the values only, never on the compression, so the
+same samples always have the same hash whatever file format or codec carried them
+(export → import reproduces it).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import struct
+import zlib
+
+import numpy as np
+
+from core.errors import InvalidSignal
+
+MAGIC = b"RVA1"
+CODEC_RAW = 0
+CODEC_SHUFFLE_ZLIB = 1
+_FIXED = struct.Struct("<4sBBBB")
+_ALLOWED_KINDS = "fiub"
+
+
+def _canonical(array: np.ndarray) -> np.ndarray:
+    a = np.asarray(array)
+    if a.dtype.kind not in _ALLOWED_KINDS:
+        raise InvalidSignal(
+            f"array dtype {a.dtype} is not storable (allowed: float, signed/unsigned int, bool)"
+        )
+    if a.dtype.byteorder == ">" or (a.dtype.byteorder == "=" and not _LITTLE):
+        a = a.astype(a.dtype.newbyteorder("<"))
+    return np.ascontiguousarray(a)
+
+
+_LITTLE = np.little_endian
+
+
+def content_hash(array: np.ndarray) -> str:
+    """SHA-256 hex digest of the canonical dtype, shape and raw bytes of ``array``."""
+    a = _canonical(array)
+    return _hash_canonical(a)
+
+
+def _hash_canonical(a: np.ndarray) -> str:
+    h = hashlib.sha256()
+    shape = "x".join(str(s) for s in a.shape)
+    h.update(f"dtype={a.dtype.str};shape={shape};".encode("ascii"))
+    h.update(memoryview(a).cast("B"))
+    return h.hexdigest()
+
+
+def encode(array: np.ndarray, *, level: int = 1, allow_nonfinite: bool = True) -> tuple[bytes, str]:
+    """Encode ``array`` to a self-describing compressed blob; return ``(blob, sha256)``.
+
+    ``allow_nonfinite=False`` rejects NaN/±inf with :class:`core.errors.InvalidSignal`.
+    Object, string and complex dtypes are rejected.
+    """
+    a = _canonical(array)
+    if not allow_nonfinite and a.dtype.kind == "f" and a.size and not np.isfinite(a).all():
+        bad = int(np.flatnonzero(~np.isfinite(a.ravel()))[0])
+        raise InvalidSignal(f"array holds a non-finite value at flat index {bad}: {a.ravel()[bad]}")
+    if a.ndim > 255:
+        raise InvalidSignal(f"array has {a.ndim} dimensions, at most 255 are storable")
+    sha = _hash_canonical(a)
+    dstr = a.dtype.str.encode("ascii")
+    header = _FIXED.pack(MAGIC, CODEC_SHUFFLE_ZLIB, level, len(dstr), a.ndim) + dstr
+    header += struct.pack(f"<{a.ndim}Q", *a.shape)
+    raw = memoryview(a).cast("B")
+    itemsize = a.dtype.itemsize
+    if itemsize > 1 and a.size:
+        shuffled = a.reshape(-1).view(np.uint8).reshape(a.size, itemsize).T.tobytes()
+    else:
+        shuffled = bytes(raw)
+    packed = zlib.compress(shuffled, level)
+    if len(packed) >= len(raw):
+        header = bytes([*header[:4], CODEC_RAW, 0]) + header[6:]
+        return header + bytes(raw), sha
+    return header + packed, sha
+
+
+def decode(blob: bytes, expected_sha: str | None = None) -> np.ndarray:
+    """Decode a blob made by :func:`encode` to a new array.
+
+    Checks magic, codec, dtype and that the payload length matches the shape; with
+    ``expected_sha`` also verifies the content hash. Raises :class:`InvalidSignal`.
+    """
+    mv = memoryview(blob)
+    if len(mv) < _FIXED.size:
+        raise InvalidSignal(f"blob of {len(mv)} bytes is shorter than the {_FIXED.size}-byte header")
+    magic, codec, _level, dlen, ndim = _FIXED.unpack_from(mv, 0)
+    if magic != MAGIC:
+        raise InvalidSignal(f"blob magic {bytes(magic)!r} is not {MAGIC!r}")
+    pos = _FIXED.size
+    try:
+        dtype = np.dtype(bytes(mv[pos : pos + dlen]).decode("ascii"))
+    except (TypeError, UnicodeDecodeError) as exc:
+        raise InvalidSignal(f"blob dtype field is invalid: {exc}") from None
+    if dtype.kind not in _ALLOWED_KINDS:
+        raise InvalidSignal(f"blob dtype {dtype} is not storable")
+    pos += dlen
+    if len(mv) < pos + 8 * ndim:
+        raise InvalidSignal("blob truncated inside the shape field")
+    shape = struct.unpack_from(f"<{ndim}Q", mv, pos)
+    pos += 8 * ndim
+    size = 1
+    for s in shape:
+        size *= s
+    nbytes = size * dtype.itemsize
+    payload = mv[pos:]
+    if codec == CODEC_RAW:
+        data = payload
+    elif codec == CODEC_SHUFFLE_ZLIB:
+        try:
+            data = zlib.decompress(payload)
+        except zlib.error as exc:
+            raise InvalidSignal(f"blob payload does not decompress: {exc}") from None
+    else:
+        raise InvalidSignal(f"blob codec {codec} is unknown (known: 0 raw, 1 shuffle+zlib)")
+    if len(data) != nbytes:
+        raise InvalidSignal(
+            f"blob payload holds {len(data)} bytes, shape {shape} of {dtype} needs {nbytes}"
+        )
+    if codec == CODEC_SHUFFLE_ZLIB and dtype.itemsize > 1 and size:
+        out = np.frombuffer(data, np.uint8).reshape(dtype.itemsize, size).T.copy()
+        array = out.view(dtype).reshape(shape)
+    else:
+        array = np.frombuffer(data, dtype).reshape(shape).copy()
+    if expected_sha is not None:
+        got = _hash_canonical(array)
+        if got != expected_sha:
+            raise InvalidSignal(f"blob content hash {got} differs from the expected {expected_sha}")
+    return array

@@ -1,0 +1,176 @@
+"""Database connection, unit of work and schema migration.
+
+``connect(url)`` → :class:`Database`. The URL comes from the argument, else ``$RAILVAL_DB``,
+else the embedded SQLite file ``sqlite:///railval.db`` in the working directory.
+
+* SQLite: WAL journal (readers never block the writer), foreign keys enforced, a busy
+  timeout so concurrent writers wait instead of failing, and real ``BEGIN`` statements so
+  a unit of work — DDL included — is atomic.
+* PostgreSQL: ``postgresql+psycopg://user@host/db`` (psycopg 3); ``postgresql://`` is taken
+  to mean the same driver.
+
+``Database.session()`` is one unit of work: it commits when the block ends normally and
+rolls back when it raises. ``Database.init()`` migrates the schema to the newest Alembic
+revision (idempotent); ``ensure_initialised()`` is the cheap check the CLI runs first.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from sqlalchemy import Engine, create_engine, event, inspect
+from sqlalchemy.engine import make_url
+from sqlalchemy.orm import Session, sessionmaker
+from sqlalchemy.pool import StaticPool
+
+from core.errors import RailvalError
+
+DEFAULT_URL = "sqlite:///railval.db"
+MIGRATIONS = Path(__file__).with_name("migrations")
+SQLITE_BUSY_TIMEOUT_MS = 30_000
+
+
+class DatabaseNotInitialised(RailvalError):
+    """The database schema is missing or older than this railval; run ``railval init``."""
+
+
+def resolve_url(url: str | None = None) -> str:
+    """Argument, else ``$RAILVAL_DB``, else :data:`DEFAULT_URL`; normalises PostgreSQL URLs."""
+    url = url or os.environ.get("RAILVAL_DB") or DEFAULT_URL
+    if url.startswith(("postgresql://", "postgres://")):
+        url = "postgresql+psycopg://" + url.split("://", 1)[1]
+    return url
+
+
+def _sqlite_pragmas(dbapi_conn, _record) -> None:
+    # Take over transaction control from pysqlite (SQLAlchemy's documented recipe), so
+    # BEGIN is emitted by the "begin" event below and DDL is transactional.
+    dbapi_conn.isolation_level = None
+    cur = dbapi_conn.cursor()
+    cur.execute("PRAGMA foreign_keys=ON")
+    cur.execute(f"PRAGMA busy_timeout={SQLITE_BUSY_TIMEOUT_MS}")
+    cur.execute("PRAGMA journal_mode=WAL")
+    cur.execute("PRAGMA synchronous=NORMAL")
+    cur.close()
+
+
+def _sqlite_begin(conn) -> None:
+    conn.exec_driver_sql("BEGIN")
+
+
+class Database:
+    """A connected database: engine, session factory, migrations."""
+
+    def __init__(self, url: str, engine: Engine):
+        self.url = url
+        self.engine = engine
+        self._sessions = sessionmaker(engine, expire_on_commit=False)
+        self._initialised = False
+
+    @property
+    def dialect(self) -> str:
+        return self.engine.dialect.name
+
+    @contextmanager
+    def session(self) -> Iterator[Session]:
+        """One unit of work: commit on success, roll back on any exception."""
+        session = self._sessions()
+        try:
+            yield session
+            session.commit()
+        except BaseException:
+            session.rollback()
+            raise
+        finally:
+            session.close()
+
+    # -- migrations ---------------------------------------------------------------------
+    def _alembic_config(self):
+        from alembic.config import Config
+
+        cfg = Config()
+        cfg.set_main_option("script_location", str(MIGRATIONS))
+        cfg.set_main_option("sqlalchemy.url", self.url.replace("%", "%%"))
+        return cfg
+
+    def head_revision(self) -> str:
+        from alembic.script import ScriptDirectory
+
+        head = ScriptDirectory.from_config(self._alembic_config()).get_current_head()
+        assert head is not None
+        return head
+
+    def current_revision(self) -> str | None:
+        from alembic.migration import MigrationContext
+
+        with self.engine.connect() as conn:
+            return MigrationContext.configure(conn).get_current_revision()
+
+    def init(self) -> str:
+        """Create or upgrade the schema to the newest revision; returns that revision."""
+        from alembic import command
+
+        cfg = self._alembic_config()
+        with self.engine.begin() as conn:
+            cfg.attributes["connection"] = conn
+            command.upgrade(cfg, "head")
+        self._initialised = True
+        return self.head_revision()
+
+    def ensure_initialised(self, *, upgrade: bool = False) -> None:
+        """Raise :class:`DatabaseNotInitialised` unless the schema is at the newest revision.
+
+        With ``upgrade=True`` an empty or older database is migrated instead. The check is
+        one small query and is remembered for the lifetime of this object.
+        """
+        if self._initialised:
+            return
+        current = self.current_revision()
+        if current == self.head_revision():
+            self._initialised = True
+            return
+        if upgrade:
+            self.init()
+            return
+        if current is None:
+            tables = inspect(self.engine).get_table_names()
+            state = "is empty" if not tables else f"has tables {tables[:5]} but no revision"
+        else:
+            state = f"is at revision {current}, this railval needs {self.head_revision()}"
+        raise DatabaseNotInitialised(f"database {self.safe_url} {state}; run `railval init`")
+
+    @property
+    def safe_url(self) -> str:
+        return make_url(self.url).render_as_string(hide_password=True)
+
+    def dispose(self) -> None:
+        self.engine.dispose()
+
+    def __repr__(self) -> str:
+        return f"Database({self.safe_url!r})"
+
+
+def connect(url: str | None = None, *, echo: bool = False) -> Database:
+    """Connect to the database at ``url`` (else ``$RAILVAL_DB``, else ``sqlite:///railval.db``)."""
+    url = resolve_url(url)
+    parsed = make_url(url)
+    if parsed.get_backend_name() == "sqlite":
+        kwargs: dict = {"connect_args": {"timeout": SQLITE_BUSY_TIMEOUT_MS / 1000}}
+        if parsed.database in (None, "", ":memory:"):
+            # one shared connection, else every pooled connection sees its own empty DB
+            kwargs["poolclass"] = StaticPool
+            kwargs["connect_args"]["check_same_thread"] = False
+        engine = create_engine(url, echo=echo, **kwargs)
+        event.listen(engine, "connect", _sqlite_pragmas)
+        event.listen(engine, "begin", _sqlite_begin)
+    elif parsed.get_backend_name() == "postgresql":
+        engine = create_engine(url, echo=echo, pool_pre_ping=True)
+    else:
+        raise RailvalError(
+            f"database URL {parsed.render_as_string(hide_password=True)} has an unsupported "
+            "backend; use sqlite:///FILE or postgresql+psycopg://USER@HOST/DB"
+        )
+    return Database(url, engine)

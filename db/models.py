@@ -1,0 +1,229 @@
+"""SQLAlchemy 2.0 ORM models of the railval database.
+
+::
+
+    Campaign 1──1 Vehicle
+        │ 1──n Section 1──n Recording 1──n Signal n──1 Channel n──1 Campaign
+        │ 1──n Channel             │
+        └ 1──n Configuration ──────┘ (configuration_id NULL = the measurement)
+                 └ parent_id → Configuration (lineage)
+    ResultCache (key → bytes), independent
+
+A *recording* is one (section, source) pair: the measurement (``configuration_id`` NULL)
+or one configuration's simulation. It carries the time axis (``fs``, ``t0``, ``n``: sample
+``i`` is at ``t0 + i / fs`` s) and the distance axis as a codec blob (:mod:`db.codec`).
+Every *signal* is one channel of one recording, stored as a codec blob with its SHA-256
+content hash and a provenance record (units converted on import, file it came from).
+Deleting a campaign or a configuration cascades to what hangs below it.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import Any, ClassVar
+
+from sqlalchemy import (
+    JSON,
+    DateTime,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    LargeBinary,
+    MetaData,
+    String,
+    Text,
+    UniqueConstraint,
+    text,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+NAMING = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+def utcnow() -> dt.datetime:
+    return dt.datetime.now(dt.UTC)
+
+
+class Base(DeclarativeBase):
+    metadata = MetaData(naming_convention=NAMING)
+    type_annotation_map: ClassVar = {dict[str, Any]: JSON, bytes: LargeBinary}
+
+
+class Campaign(Base):
+    __tablename__ = "campaign"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200), unique=True)
+    description: Mapped[str] = mapped_column(Text, default="")
+    zone1_min_radius_m: Mapped[float] = mapped_column(Float, default=5000.0)
+    manifest: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    vehicle: Mapped[Vehicle | None] = relationship(
+        back_populates="campaign", cascade="all, delete-orphan", passive_deletes=True,
+        uselist=False,
+    )
+    sections: Mapped[list[Section]] = relationship(
+        back_populates="campaign", cascade="all, delete-orphan", passive_deletes=True,
+        order_by="Section.id",
+    )
+    channels: Mapped[list[Channel]] = relationship(
+        back_populates="campaign", cascade="all, delete-orphan", passive_deletes=True,
+        order_by="Channel.id",
+    )
+    configurations: Mapped[list[Configuration]] = relationship(
+        back_populates="campaign", cascade="all, delete-orphan", passive_deletes=True,
+        order_by="Configuration.id",
+    )
+
+    def __repr__(self) -> str:
+        return f"Campaign(id={self.id!r}, name={self.name!r})"
+
+
+class Vehicle(Base):
+    __tablename__ = "vehicle"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(
+        ForeignKey("campaign.id", ondelete="CASCADE"), unique=True
+    )
+    name: Mapped[str] = mapped_column(String(200), default="")
+    kind: Mapped[str] = mapped_column(String(20))  # passenger | freight
+    secondary_suspension: Mapped[bool] = mapped_column(default=True)
+    Q0_kN: Mapped[float] = mapped_column(Float)
+    template: Mapped[str] = mapped_column(String(100), default="")
+    parameters: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+
+    campaign: Mapped[Campaign] = relationship(back_populates="vehicle")
+
+
+class Section(Base):
+    __tablename__ = "section"
+    __table_args__ = (UniqueConstraint("campaign_id", "section_id"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    section_id: Mapped[str] = mapped_column(String(100))
+    country: Mapped[str] = mapped_column(String(20), default="")
+    radius_m: Mapped[float] = mapped_column(Float, default=0.0)  # 0 = straight
+    cant_mm: Mapped[float] = mapped_column(Float, default=0.0)
+    speed_kmh: Mapped[float] = mapped_column(Float)
+    curve_direction: Mapped[int] = mapped_column(Integer, default=1)
+    zone_override: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    eval_start_m: Mapped[float] = mapped_column(Float)
+    eval_end_m: Mapped[float] = mapped_column(Float)
+    layout: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+
+    campaign: Mapped[Campaign] = relationship(back_populates="sections")
+    recordings: Mapped[list[Recording]] = relationship(
+        back_populates="section", cascade="all, delete-orphan", passive_deletes=True
+    )
+
+
+class Channel(Base):
+    __tablename__ = "channel"
+    __table_args__ = (UniqueConstraint("campaign_id", "name"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    name: Mapped[str] = mapped_column(String(100))
+    kind: Mapped[str] = mapped_column(String(20))
+    position: Mapped[str] = mapped_column(String(20))
+    unit: Mapped[str] = mapped_column(String(20))  # canonical unit as stored
+
+    campaign: Mapped[Campaign] = relationship(back_populates="channels")
+
+
+class Configuration(Base):
+    __tablename__ = "configuration"
+    __table_args__ = (UniqueConstraint("campaign_id", "name"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    name: Mapped[str] = mapped_column(String(200))
+    parent_id: Mapped[int | None] = mapped_column(
+        ForeignKey("configuration.id", ondelete="SET NULL"), nullable=True, index=True
+    )
+    effects: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    parameters: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    description: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    campaign: Mapped[Campaign] = relationship(back_populates="configurations")
+    parent: Mapped[Configuration | None] = relationship(remote_side="Configuration.id")
+    recordings: Mapped[list[Recording]] = relationship(
+        back_populates="configuration", cascade="all, delete-orphan", passive_deletes=True
+    )
+
+    def __repr__(self) -> str:
+        return f"Configuration(id={self.id!r}, name={self.name!r}, parent_id={self.parent_id!r})"
+
+
+class Recording(Base):
+    """One (section, source) pair; ``configuration_id`` NULL is the measurement."""
+
+    __tablename__ = "recording"
+    __table_args__ = (
+        UniqueConstraint("section_id", "configuration_id"),
+        # NULLs are distinct in the constraint above: one measurement per section is
+        # enforced by this partial unique index.
+        Index(
+            "uq_recording_measured", "section_id", unique=True,
+            sqlite_where=text("configuration_id IS NULL"),
+            postgresql_where=text("configuration_id IS NULL"),
+        ),
+        Index("ix_recording_configuration_section", "configuration_id", "section_id"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    section_id: Mapped[int] = mapped_column(ForeignKey("section.id", ondelete="CASCADE"))
+    configuration_id: Mapped[int | None] = mapped_column(
+        ForeignKey("configuration.id", ondelete="CASCADE"), nullable=True
+    )
+    fs: Mapped[float] = mapped_column(Float)
+    t0: Mapped[float] = mapped_column(Float, default=0.0)
+    n: Mapped[int] = mapped_column(Integer)
+    distance_blob: Mapped[bytes] = mapped_column(LargeBinary)
+    distance_sha256: Mapped[str] = mapped_column(String(64))
+    source_file: Mapped[str] = mapped_column(String(500), default="")
+
+    section: Mapped[Section] = relationship(back_populates="recordings")
+    configuration: Mapped[Configuration | None] = relationship(back_populates="recordings")
+    signals: Mapped[list[Signal]] = relationship(
+        back_populates="recording", cascade="all, delete-orphan", passive_deletes=True
+    )
+
+
+class Signal(Base):
+    __tablename__ = "signal"
+    __table_args__ = (
+        UniqueConstraint("recording_id", "channel_id"),
+        Index("ix_signal_channel", "channel_id"),
+        Index("ix_signal_sha256", "sha256"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    recording_id: Mapped[int] = mapped_column(ForeignKey("recording.id", ondelete="CASCADE"))
+    channel_id: Mapped[int] = mapped_column(ForeignKey("channel.id", ondelete="CASCADE"))
+    blob: Mapped[bytes] = mapped_column(LargeBinary)
+    dtype: Mapped[str] = mapped_column(String(16))
+    sha256: Mapped[str] = mapped_column(String(64))
+    provenance: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+
+    recording: Mapped[Recording] = relationship(back_populates="signals")
+    channel: Mapped[Channel] = relationship()
+
+
+class ResultCache(Base):
+    __tablename__ = "result_cache"
+
+    key: Mapped[str] = mapped_column(String(200), primary_key=True)
+    value: Mapped[bytes] = mapped_column(LargeBinary)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)

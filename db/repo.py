@@ -1,0 +1,446 @@
+"""Repository: the functions the rest of railval calls to read and write the database.
+
+All functions take an open :class:`sqlalchemy.orm.Session` (from
+:meth:`db.engine.Database.session`, which commits or rolls back the unit of work) and a
+campaign given as a :class:`db.models.Campaign`, its name or its id.
+
+Reading signals is a hot path (≈ 50 000 comparisons for a DynoTRAIN-size campaign):
+:func:`load_signalsets` issues one SQL query per call, whatever the number of sections and
+channels, and :func:`signal_hashes` reads hashes without touching the blobs.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from sqlalchemy import String, cast, delete, func, literal, null, select, union_all
+from sqlalchemy.orm import Session
+
+from core.errors import InvalidSignal, NotFound
+from core.types import SectionInfo, SignalSet
+from core.zones import zone_for_radius
+from db import codec
+from db.checks import RecordingProblem, check_recording
+from db.models import (
+    Campaign,
+    Channel,
+    Configuration,
+    Recording,
+    ResultCache,
+    Section,
+    Signal,
+    Vehicle,
+    utcnow,
+)
+
+__all__ = [
+    "add_recording",
+    "cache_get",
+    "cache_put",
+    "channels",
+    "get_campaign",
+    "get_configuration",
+    "lineage",
+    "list_campaigns",
+    "list_configurations",
+    "load_signalsets",
+    "section_infos",
+    "signal_hashes",
+    "store_configuration",
+    "vehicle_info",
+]
+
+
+# -- campaigns ---------------------------------------------------------------------------
+def list_campaigns(session: Session) -> list[Campaign]:
+    """All campaigns, ordered by name."""
+    return list(session.scalars(select(Campaign).order_by(Campaign.name)))
+
+
+def get_campaign(session: Session, name_or_id: Campaign | str | int) -> Campaign:
+    """The campaign with this name (or, failing that, this numeric id).
+
+    Raises :class:`core.errors.NotFound` listing the available names.
+    """
+    if isinstance(name_or_id, Campaign):
+        return name_or_id
+    found = session.scalar(select(Campaign).where(Campaign.name == str(name_or_id)))
+    if found is None and str(name_or_id).strip().isdigit():
+        found = session.get(Campaign, int(name_or_id))
+    if found is None:
+        names = list(session.scalars(select(Campaign.name).order_by(Campaign.name)))
+        raise NotFound(
+            f"campaign {name_or_id!r} not found; available: {', '.join(names) or '(none)'}"
+        )
+    return found
+
+
+def _campaign_id(session: Session, campaign: Campaign | str | int) -> int:
+    return get_campaign(session, campaign).id
+
+
+def section_infos(session: Session, campaign: Campaign | str | int) -> list[SectionInfo]:
+    """The campaign's sections (import order) with their EN 14363 zone.
+
+    The zone comes from :func:`core.zones.zone_for_radius` with the campaign's zone 1/2
+    radius boundary; a section's ``zone_override`` wins.
+    """
+    c = get_campaign(session, campaign)
+    rows = session.scalars(select(Section).where(Section.campaign_id == c.id).order_by(Section.id))
+    return [
+        SectionInfo(
+            id=s.section_id,
+            radius_m=s.radius_m,
+            cant_mm=s.cant_mm,
+            speed_kmh=s.speed_kmh,
+            zone=zone_for_radius(s.radius_m, c.zone1_min_radius_m, s.zone_override),
+            eval_start_m=s.eval_start_m,
+            eval_end_m=s.eval_end_m,
+            country=s.country,
+            curve_direction=s.curve_direction,
+        )
+        for s in rows
+    ]
+
+
+def section_layouts(session: Session, campaign: Campaign | str | int) -> dict[str, dict | None]:
+    """section id → the optional ``layout`` record of the manifest (built-in simulator)."""
+    cid = _campaign_id(session, campaign)
+    rows = session.execute(
+        select(Section.section_id, Section.layout).where(Section.campaign_id == cid).order_by(Section.id)
+    )
+    return {sid: layout for sid, layout in rows}
+
+
+def vehicle_info(session: Session, campaign: Campaign | str | int) -> dict[str, Any]:
+    """``{name, kind, secondary_suspension, Q0_kN, template, parameters}`` of the vehicle."""
+    c = get_campaign(session, campaign)
+    v = session.scalar(select(Vehicle).where(Vehicle.campaign_id == c.id))
+    if v is None:
+        raise NotFound(f"campaign {c.name!r} has no vehicle record")
+    return {
+        "name": v.name,
+        "kind": v.kind,
+        "secondary_suspension": bool(v.secondary_suspension),
+        "Q0_kN": float(v.Q0_kN),
+        "template": v.template,
+        "parameters": dict(v.parameters or {}),
+    }
+
+
+def channels(session: Session, campaign: Campaign | str | int) -> list[Channel]:
+    """The campaign's declared channels in manifest order."""
+    cid = _campaign_id(session, campaign)
+    return list(session.scalars(select(Channel).where(Channel.campaign_id == cid).order_by(Channel.id)))
+
+
+# -- configurations ----------------------------------------------------------------------
+def list_configurations(session: Session, campaign: Campaign | str | int) -> list[Configuration]:
+    """The campaign's configurations in creation order."""
+    cid = _campaign_id(session, campaign)
+    return list(
+        session.scalars(
+            select(Configuration).where(Configuration.campaign_id == cid).order_by(Configuration.id)
+        )
+    )
+
+
+def get_configuration(session: Session, campaign: Campaign | str | int, name: str) -> Configuration:
+    """The configuration ``name``; :class:`NotFound` lists the available ones."""
+    c = get_campaign(session, campaign)
+    found = session.scalar(
+        select(Configuration).where(Configuration.campaign_id == c.id, Configuration.name == name)
+    )
+    if found is None:
+        names = [x.name for x in list_configurations(session, c)]
+        raise NotFound(
+            f"configuration {name!r} not found in campaign {c.name!r}; available: "
+            f"{', '.join(names) or '(none)'}"
+        )
+    return found
+
+
+def lineage(session: Session, campaign: Campaign | str | int, name: str) -> list[Configuration]:
+    """The chain of parents of configuration ``name``, root first, ``name`` last."""
+    conf = get_configuration(session, campaign, name)
+    chain = [conf]
+    seen = {conf.id}
+    while chain[-1].parent_id is not None:
+        parent = session.get(Configuration, chain[-1].parent_id)
+        if parent is None or parent.id in seen:  # pragma: no cover - FK and checks prevent it
+            break
+        seen.add(parent.id)
+        chain.append(parent)
+    return chain[::-1]
+
+
+def add_recording(
+    session: Session,
+    section: Section,
+    configuration: Configuration | None,
+    *,
+    fs: float,
+    t0: float,
+    distance_m: np.ndarray,
+    arrays: Mapping[str, np.ndarray],
+    channel_rows: Mapping[str, Channel],
+    provenance: Mapping[str, dict[str, Any]] | None = None,
+    source_file: str = "",
+) -> Recording:
+    """Encode and add one (already checked) recording with its signals to the session."""
+    dblob, dsha = codec.encode(np.asarray(distance_m, dtype=np.float64))
+    rec = Recording(
+        section=section,
+        configuration=configuration,
+        fs=float(fs),
+        t0=float(t0),
+        n=int(np.asarray(distance_m).shape[0]),
+        distance_blob=dblob,
+        distance_sha256=dsha,
+        source_file=source_file,
+    )
+    session.add(rec)
+    for name, values in arrays.items():
+        a = np.asarray(values, dtype=np.float64)
+        blob, sha = codec.encode(a)
+        rec.signals.append(
+            Signal(
+                channel=channel_rows[name],
+                blob=blob,
+                dtype=a.dtype.str,
+                sha256=sha,
+                provenance=dict((provenance or {}).get(name, {})),
+            )
+        )
+    return rec
+
+
+def store_configuration(
+    session: Session,
+    campaign: Campaign | str | int,
+    name: str,
+    *,
+    parent: str | None,
+    effects: dict[str, Any],
+    parameters: dict[str, Any],
+    description: str,
+    signalsets: Mapping[str, SignalSet],
+    replace: bool = False,
+) -> Configuration:
+    """Store a configuration (e.g. a simulation result) with its signals.
+
+    ``signalsets`` maps section id → :class:`SignalSet`. Everything is checked before
+    anything is added, with the importer's rules (:func:`db.checks.check_recording`):
+    known sections and channels, equal lengths, finite values, equally spaced time at the
+    set's ``fs``, strictly increasing distance. ``replace=True`` overwrites an existing
+    configuration of that name in place (its id and children are kept). Fills each set's
+    ``hashes``. Raises :class:`InvalidSignal`, :class:`NotFound` or
+    :class:`core.errors.InvalidParameter`.
+    """
+    from core.errors import InvalidParameter
+
+    c = get_campaign(session, campaign)
+    if not signalsets:
+        raise InvalidSignal(f"configuration {name!r}: no signal sets given")
+    sections = {
+        s.section_id: s for s in session.scalars(select(Section).where(Section.campaign_id == c.id))
+    }
+    chans = {ch.name: ch for ch in channels(session, c)}
+    for sid, ss in signalsets.items():
+        if sid not in sections:
+            raise NotFound(f"configuration {name!r}: section {sid!r} is not in campaign "
+                           f"{c.name!r} (sections: {sorted(sections)})")
+        try:
+            fs = check_recording(ss.time_s, ss.distance_m, ss.channels, chans)
+        except RecordingProblem as exc:
+            raise InvalidSignal(f"configuration {name!r}, section {sid!r}, field {exc.field}: "
+                                f"{exc}") from None
+        if not np.isclose(fs, ss.fs, rtol=1e-6):
+            raise InvalidSignal(f"configuration {name!r}, section {sid!r}: fs is {ss.fs} Hz but "
+                                f"time_s is sampled at {fs} Hz")
+    parent_row = get_configuration(session, c, parent) if parent is not None else None
+    existing = session.scalar(
+        select(Configuration).where(Configuration.campaign_id == c.id, Configuration.name == name)
+    )
+    if existing is not None and not replace:
+        raise InvalidParameter(f"configuration {name!r} already exists in campaign {c.name!r}; "
+                               "pass replace=True to overwrite it")
+    if parent_row is not None and existing is not None:
+        ids = {x.id for x in lineage(session, c, parent_row.name)}
+        if existing.id in ids:
+            raise InvalidParameter(f"configuration {name!r} cannot have {parent!r} as parent: "
+                                   "that would make a cycle in the lineage")
+    if existing is not None:
+        session.execute(delete(Recording).where(Recording.configuration_id == existing.id))
+        session.expire(existing, ["recordings"])
+        conf = existing
+        conf.parent_id = parent_row.id if parent_row is not None else None
+        conf.effects, conf.parameters, conf.description = dict(effects), dict(parameters), description
+        conf.created_at = utcnow()
+    else:
+        conf = Configuration(
+            campaign_id=c.id, name=name, parent_id=parent_row.id if parent_row else None,
+            effects=dict(effects), parameters=dict(parameters), description=description,
+        )
+        session.add(conf)
+    stamp = dt.datetime.now(dt.UTC).isoformat()
+    for sid, ss in signalsets.items():
+        prov = {ch: {"source": "store_configuration", "configuration": name, "stored_at": stamp}
+                for ch in ss.channels}
+        rec = add_recording(
+            session, sections[sid], conf, fs=ss.fs, t0=float(ss.time_s[0]),
+            distance_m=ss.distance_m, arrays=ss.channels, channel_rows=chans, provenance=prov,
+        )
+        ss.hashes = {sig.channel.name: sig.sha256 for sig in rec.signals}
+    session.flush()
+    return conf
+
+
+# -- signals -----------------------------------------------------------------------------
+def _source_filter(session: Session, cid: int, config: str | None):
+    if config is None:
+        return Recording.configuration_id.is_(None)
+    sub = (
+        select(Configuration.id)
+        .where(Configuration.campaign_id == cid, Configuration.name == config)
+        .scalar_subquery()
+    )
+    return Recording.configuration_id == sub
+
+
+def load_signalsets(
+    session: Session,
+    campaign: Campaign | str | int,
+    config: str | None = None,
+    sections: list[str] | None = None,
+    channels: list[str] | None = None,
+) -> dict[str, SignalSet]:
+    """Section id → :class:`SignalSet` of the measurement (``config=None``) or a configuration.
+
+    One SQL query (a UNION of the recordings' distance axes and the signal blobs).
+    ``sections``/``channels`` restrict what is read. Raises :class:`NotFound` for an
+    unknown configuration, section or channel.
+    """
+    c = get_campaign(session, campaign)
+    src = _source_filter(session, c.id, config)
+    sec_filter = [Section.section_id.in_(sections)] if sections is not None else []
+    rec_q = (
+        select(
+            Section.section_id, Recording.id, Recording.fs, Recording.t0, Recording.n,
+            cast(null(), String).label("channel"), Recording.distance_blob.label("blob"),
+            Recording.distance_sha256.label("sha"), literal(0).label("is_signal"),
+        )
+        .join(Section, Recording.section_id == Section.id)
+        .where(Section.campaign_id == c.id, src, *sec_filter)
+    )
+    sig_q = (
+        select(
+            Section.section_id, Recording.id, Recording.fs, Recording.t0, Recording.n,
+            Channel.name, Signal.blob, Signal.sha256, literal(1),
+        )
+        .join(Recording, Signal.recording_id == Recording.id)
+        .join(Section, Recording.section_id == Section.id)
+        .join(Channel, Signal.channel_id == Channel.id)
+        .where(Section.campaign_id == c.id, src, *sec_filter)
+    )
+    if channels is not None:
+        sig_q = sig_q.where(Channel.name.in_(channels))
+    q = union_all(rec_q, sig_q)
+    sub = q.subquery()
+    rows = session.execute(select(sub).order_by(sub.c[1], sub.c.is_signal, sub.c.channel)).all()
+    out: dict[str, SignalSet] = {}
+    for sid, _rid, fs, t0, n, chan, blob, sha, is_signal in rows:
+        if not is_signal:
+            dist = codec.decode(blob)
+            out[sid] = SignalSet(
+                fs=float(fs), time_s=t0 + np.arange(n, dtype=np.float64) / fs, distance_m=dist
+            )
+        else:
+            ss = out[sid]
+            ss.channels[chan] = codec.decode(blob)
+            ss.hashes[chan] = sha
+    _check_requested(session, c, config, out, sections, channels)
+    return out
+
+
+def _check_requested(session: Session, c: Campaign, config: str | None, out: dict,
+                     sections: list[str] | None, channel_names: list[str] | None) -> None:
+    # Only the error paths run further queries, to explain what is missing.
+    if config is not None and not out:
+        get_configuration(session, c, config)
+    if sections is not None:
+        missing = [s for s in sections if s not in out]
+        if missing:
+            known = [s.id for s in section_infos(session, c)]
+            src = "the measurement" if config is None else f"configuration {config!r}"
+            unknown = [s for s in missing if s not in known]
+            what = (f"unknown section(s) {unknown}; sections: {known}" if unknown
+                    else f"{src} has no recording of section(s) {missing}")
+            raise NotFound(f"campaign {c.name!r}: {what}")
+    if channel_names is not None:
+        seen = {ch for ss in out.values() for ch in ss.channels}
+        missing = [ch for ch in channel_names if ch not in seen]
+        if missing:
+            known = [ch.name for ch in channels(session, c)]
+            unknown = [ch for ch in missing if ch not in known]
+            if unknown:
+                raise NotFound(f"campaign {c.name!r}: unknown channel(s) {unknown}; "
+                               f"channels: {known}")
+
+
+def signal_hashes(
+    session: Session, campaign: Campaign | str | int, config: str | None = None
+) -> dict[str, dict[str, str]]:
+    """Section id → channel → SHA-256 content hash, without reading any blob."""
+    c = get_campaign(session, campaign)
+    rows = session.execute(
+        select(Section.section_id, Channel.name, Signal.sha256)
+        .join(Recording, Signal.recording_id == Recording.id)
+        .join(Section, Recording.section_id == Section.id)
+        .join(Channel, Signal.channel_id == Channel.id)
+        .where(Section.campaign_id == c.id, _source_filter(session, c.id, config))
+        .order_by(Section.id, Channel.id)
+    )
+    out: dict[str, dict[str, str]] = {}
+    for sid, chan, sha in rows:
+        out.setdefault(sid, {})[chan] = sha
+    if config is not None and not out:
+        get_configuration(session, c, config)
+    return out
+
+
+def row_counts(session: Session) -> dict[str, int]:
+    """Number of rows per table (used by tests and ``railval list``)."""
+    from db.models import Base
+
+    return {
+        name: int(session.scalar(select(func.count()).select_from(table)) or 0)
+        for name, table in sorted(Base.metadata.tables.items())
+    }
+
+
+# -- result cache ------------------------------------------------------------------------
+def cache_get(session: Session, key: str) -> bytes | None:
+    """The cached bytes under ``key``, or ``None``."""
+    value = session.scalar(select(ResultCache.value).where(ResultCache.key == key))
+    return bytes(value) if value is not None else None
+
+
+def cache_put(session: Session, key: str, value: bytes) -> None:
+    """Insert or overwrite ``key`` (one atomic upsert on SQLite and PostgreSQL)."""
+    dialect = session.get_bind().dialect.name
+    if dialect == "postgresql":
+        from sqlalchemy.dialects.postgresql import insert
+    elif dialect == "sqlite":
+        from sqlalchemy.dialects.sqlite import insert
+    else:  # pragma: no cover - connect() only admits these two
+        raise NotImplementedError(dialect)
+    stmt = insert(ResultCache).values(key=key, value=bytes(value), created_at=utcnow())
+    stmt = stmt.on_conflict_do_update(
+        index_elements=[ResultCache.key],
+        set_={"value": stmt.excluded.value, "created_at": stmt.excluded.created_at},
+    )
+    session.execute(stmt)

@@ -1,0 +1,90 @@
+"""Shared fixtures: a database URL on every backend, and a ready database.
+
+``db_url`` is parametrised over the backends: ``sqlite`` (a fresh file in the test's tmp
+folder) and ``postgresql`` (a fresh schema in the database ``test`` on 127.0.0.1:5432,
+dropped after the test; override the server with ``$RAILVAL_TEST_PG``). When no PostgreSQL
+server answers, the ``postgresql`` cases are skipped with the reason — unless
+``RAILVAL_REQUIRE_PG=1`` (CI), which turns the skip into a failure.
+
+``database`` is a :class:`db.engine.Database` connected to ``db_url`` and migrated to the
+newest schema revision. Tests that want SQLite only use ``sqlite_database``.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Iterator
+
+import pytest
+
+PG_SERVER_URL = os.environ.get(
+    "RAILVAL_TEST_PG", "postgresql+psycopg://postgres@127.0.0.1:5432/test"
+)
+_pg_state: dict[str, str | None] = {}
+
+
+def _pg_unavailable() -> str | None:
+    """``None`` when the PostgreSQL test server answers, else the reason it does not."""
+    if "reason" not in _pg_state:
+        try:
+            import psycopg
+
+            conninfo = PG_SERVER_URL.replace("postgresql+psycopg://", "postgresql://")
+            with psycopg.connect(conninfo, connect_timeout=3) as conn:
+                conn.execute("SELECT 1")
+            _pg_state["reason"] = None
+        except Exception as exc:  # noqa: BLE001 - any failure means "no server"
+            _pg_state["reason"] = f"no PostgreSQL server at {PG_SERVER_URL}: {exc}".strip()
+    return _pg_state["reason"]
+
+
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
+def db_url(request: pytest.FixtureRequest, tmp_path) -> Iterator[str]:
+    """A URL of an empty database (one per test) on each backend."""
+    if request.param == "sqlite":
+        yield f"sqlite:///{tmp_path / 'railval-test.db'}"
+        return
+    reason = _pg_unavailable()
+    if reason is not None:
+        if os.environ.get("RAILVAL_REQUIRE_PG") == "1":
+            pytest.fail(f"RAILVAL_REQUIRE_PG=1 but {reason}")
+        pytest.skip(reason)
+    import psycopg
+
+    schema = f"t_{uuid.uuid4().hex[:16]}"
+    conninfo = PG_SERVER_URL.replace("postgresql+psycopg://", "postgresql://")
+    with psycopg.connect(conninfo, autocommit=True) as conn:
+        conn.execute(f'CREATE SCHEMA "{schema}"')
+    sep = "&" if "?" in PG_SERVER_URL else "?"
+    try:
+        yield f"{PG_SERVER_URL}{sep}options=-csearch_path%3D{schema}"
+    finally:
+        with psycopg.connect(conninfo, autocommit=True) as conn:
+            conn.execute(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE')
+
+
+@pytest.fixture
+def database(db_url: str):
+    """A :class:`db.engine.Database` on ``db_url``, migrated to the newest revision."""
+    from db.engine import connect
+
+    db = connect(db_url)
+    db.init()
+    try:
+        yield db
+    finally:
+        db.dispose()
+
+
+@pytest.fixture
+def sqlite_database(tmp_path):
+    """An initialised SQLite-only database (for tests that need no backend matrix)."""
+    from db.engine import connect
+
+    db = connect(f"sqlite:///{tmp_path / 'railval-sqlite.db'}")
+    db.init()
+    try:
+        yield db
+    finally:
+        db.dispose()
