@@ -1,0 +1,91 @@
+"""CLI verbs ``serve`` and ``report`` (DESIGN §1, §8).
+
+``railval serve [--port 5006] [--address 127.0.0.1] [--no-demo] [--allow-websocket-origin H]``
+    migrate the database, seed the demo campaign (``app.services.synth.ensure_demo``) into an
+    empty database unless ``--no-demo``, and serve the web app until interrupted.
+``railval report CAMPAIGN --config NAME --out FILE.html|FILE.pdf [--worst N] [--json]``
+    write the validation report of a configuration (the same builder as the Report page).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from app.cli import emit_json
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("serve", help="serve the web app (migrates the database, seeds the demo campaign)")
+    p.add_argument("--port", type=int, default=5006, help="TCP port (default 5006)")
+    p.add_argument("--address", default="127.0.0.1", help="listen address (default 127.0.0.1)")
+    p.add_argument("--no-demo", action="store_true", help="do not seed the demo campaign into an empty database")
+    p.add_argument("--allow-websocket-origin", action="append", default=None, metavar="HOST[:PORT]",
+                   help="extra allowed websocket origin (repeatable; '*' for any, behind a proxy)")
+    p.add_argument("--show", action="store_true", help="open a browser tab")
+    p.set_defaults(func=_cmd_serve)
+
+    r = sub.add_parser("report", help="write the HTML or PDF validation report of a configuration")
+    r.add_argument("campaign", help="campaign name or id")
+    r.add_argument("--config", required=True, help="configuration name")
+    r.add_argument("--out", required=True, help="output file, .html or .pdf")
+    r.add_argument("--worst", type=int, default=3, help="worst cases plotted (default 3)")
+    r.add_argument("--json", action="store_true", help="print the report metadata as JSON")
+    r.set_defaults(func=_cmd_report)
+
+
+def _database(url: str | None, upgrade: bool):
+    from db.engine import connect
+
+    database = connect(url)
+    database.ensure_initialised(upgrade=upgrade)
+    return database
+
+
+def seed_demo(database) -> str:
+    """Seed the demo campaign into an empty database (H4's synth service); returns a message."""
+    from db import repo
+
+    with database.session() as s:
+        if repo.list_campaigns(s):
+            return "database holds campaigns; demo not seeded"
+    try:
+        from app.services.synth import ensure_demo
+    except ImportError as exc:
+        return f"demo campaign not available (app.services.synth: {exc}); import one with `railval import DIR`"
+    result = ensure_demo(database)
+    return f"demo campaign seeded: {result}" if result else "demo campaign seeded"
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    from app.main import serve
+
+    database = _database(args.db, upgrade=True)
+    if not args.no_demo:
+        print(f"railval serve: {seed_demo(database)}", file=sys.stderr, flush=True)
+    origins = None
+    if args.allow_websocket_origin:
+        origins = list(args.allow_websocket_origin) + [f"{args.address}:{args.port}", f"localhost:{args.port}"]
+    print(f"railval serve: http://{args.address}:{args.port}/app (database {database.safe_url})",
+          file=sys.stderr, flush=True)
+    serve(database, port=args.port, address=args.address, show=args.show, allow_websocket_origin=origins)
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from app.report import ReportError, build_report
+    from app.state import Backend
+
+    if Path(args.out).suffix.lower() not in (".html", ".htm", ".pdf"):
+        raise ReportError(f"--out {args.out}: extension must be .html or .pdf")
+    database = _database(args.db, upgrade=False)
+    rep = build_report(Backend(database), args.campaign, args.config, worst_cases=args.worst)
+    path = rep.write(args.out)
+    if args.json:
+        emit_json({**rep.to_dict(), "file": str(path)})
+    else:
+        print(f"report of {args.campaign}/{args.config} "
+              f"({'validated' if rep.validated else 'not validated'}) written to {path}")
+    return 0

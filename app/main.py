@@ -1,0 +1,102 @@
+"""The engineers' web app: template, navigation, pages (DESIGN §1, §3–§7).
+
+``build_app(database)`` returns one session's Panel template (each browser session gets its
+own :class:`app.state.AppState`); ``serve(database, ...)`` serves it with ``pn.serve``.
+Pages are one module each under ``app/pages``; their state lives in ``app/state.py``.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+from typing import Any
+
+import panel as pn
+
+from app.pages.compare import ComparePage
+from app.pages.dashboard import DashboardPage
+from app.pages.diagnose import DiagnosePage
+from app.pages.metrics import MetricsPage
+from app.pages.overview import OverviewPage
+from app.pages.report import ReportPage
+from app.state import PAGE_TITLES, PAGES, AppState, Backend
+
+STATIC = Path(__file__).resolve().parent.parent / "static"
+CSS_FILE = STATIC / "railval.css"
+ACCENT = "#0b5394"
+
+pn.extension("tabulator", notifications=False, design="native", sizing_mode="stretch_width")
+
+PAGE_CLASSES = {
+    "overview": OverviewPage, "compare": ComparePage, "dashboard": DashboardPage,
+    "metrics": MetricsPage, "diagnose": DiagnosePage, "report": ReportPage,
+}
+
+
+def _css() -> list[str]:
+    return [CSS_FILE.read_text(encoding="utf-8")] if CSS_FILE.exists() else []
+
+
+def status_area(app: AppState) -> pn.Column:
+    """Status message (level-coloured) and a progress bar shown while a job runs."""
+    kinds = {"info": "info", "success": "success", "warning": "warning", "error": "danger"}
+
+    def alert(status: str, level: str) -> Any:
+        if not status:
+            return pn.pane.Markdown("Ready.", styles={"color": "#666"}, css_classes=["rv-status"])
+        return pn.pane.Alert(html.escape(status), alert_type=kinds[level], css_classes=["rv-status"],
+                             sizing_mode="stretch_width", margin=(5, 5))
+
+    bar = pn.indicators.Progress(value=0, max=100, sizing_mode="stretch_width", visible=False,
+                                 css_classes=["rv-progress"], bar_color="info")
+
+    def sync(*_):
+        bar.visible = app.busy
+        bar.value = round(app.progress * 100)
+    app.param.watch(sync, ["busy", "progress"])
+    return pn.Column(pn.bind(alert, app.param.status, app.param.status_level), bar,
+                     sizing_mode="stretch_width")
+
+
+def build_app(database: Any, page: str = "overview") -> pn.template.FastListTemplate:
+    """One session's app on ``database`` (a ``db.engine.Database``)."""
+    app = AppState(Backend(database))
+    pages = {name: cls(app) for name, cls in PAGE_CLASSES.items()}
+    nav = pn.widgets.RadioButtonGroup(
+        options={PAGE_TITLES[p]: p for p in PAGES}, value=app.page, orientation="vertical",
+        button_type="light", sizing_mode="stretch_width", css_classes=["rv-nav"])
+    nav.link(app, value="page", bidirectional=True)
+    main = pn.Column(sizing_mode="stretch_width", css_classes=["rv-main"])
+
+    def show(*_):
+        main.objects = [pages[app.page]]
+        pages[app.page]._on_page(type("E", (), {"new": app.page})())
+    app.param.watch(show, ["page"])
+    show()
+    sidebar = [
+        pn.widgets.Select.from_param(app.param.campaign, name="Campaign"),
+        pn.widgets.Select.from_param(app.param.configuration, name="Configuration"),
+        pn.pane.Markdown("**Pages**", margin=(10, 10, 0, 10)),
+        nav,
+        pn.layout.Divider(),
+        status_area(app),
+    ]
+    template = pn.template.FastListTemplate(
+        title="railval — model validation (EN 14363)", sidebar=sidebar, main=[main],
+        accent=ACCENT, header_background=ACCENT, sidebar_width=300, main_layout=None,
+        raw_css=_css(), theme_toggle=False,
+    )
+    template.railval_state = app  # for tests and the benchmark
+    template.railval_pages = pages
+    if page != "overview":
+        app.page = page
+    return template
+
+
+def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: bool = False,
+          threaded: bool = False, allow_websocket_origin: list[str] | None = None, **kw: Any):
+    """Serve the app at ``http://address:port/`` (``pn.serve``); returns the server."""
+    origins = allow_websocket_origin or [f"{address}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
+    return pn.serve({"app": lambda: build_app(database)}, port=port, address=address, show=show,
+                    threaded=threaded, title="railval", allow_websocket_origin=origins,
+                    static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {}, **kw)

@@ -1,0 +1,97 @@
+"""Shared pieces of the page views: base class, dispatch onto the Bokeh event loop, tables."""
+
+from __future__ import annotations
+
+import html
+import traceback
+from collections.abc import Callable
+from typing import Any
+
+import pandas as pd
+import panel as pn
+import param
+from panel.io.state import set_curdoc
+
+from app.state import PAGE_TITLES, AppState
+
+TABLE_STYLE = {"font-size": "13px"}
+
+
+def make_dispatch() -> Callable[[Callable[[], None]], None]:
+    """A ``dispatch`` for :meth:`AppState.run_job`: runs a state update on the session's
+    event loop (Bokeh documents must only be changed there), or directly outside a server."""
+    doc = pn.state.curdoc
+
+    def dispatch(fn: Callable[[], None]) -> None:
+        if doc is None or doc.session_context is None:
+            fn()
+            return
+
+        def cb() -> None:
+            with set_curdoc(doc):
+                fn()
+        doc.add_next_tick_callback(cb)
+    return dispatch
+
+
+def table(df: pd.DataFrame, height: int | None = None, **kw: Any) -> pn.widgets.Tabulator:
+    """A read-only, sortable Tabulator with readable font and no index column."""
+    opts: dict[str, Any] = {"show_index": False, "disabled": True, "sizing_mode": "stretch_width",
+                                "layout": "fit_data_stretch", "stylesheets": [":host {font-size: 13px;}"]}
+    if height is not None:
+        opts["height"] = height
+    opts.update(kw)
+    return pn.widgets.Tabulator(df, **opts)
+
+
+def message(text: str, kind: str = "info") -> pn.pane.Alert:
+    return pn.pane.Alert(html.escape(text), alert_type=kind, sizing_mode="stretch_width",
+                         margin=(5, 10))
+
+
+class PageBase(pn.viewable.Viewer):
+    """A page: ``refresh()`` rebuilds its content; it runs when the page is shown and when
+    a watched selection changes while it is shown (hidden pages stay idle)."""
+
+    name_: str = ""
+    watch_app: tuple[str, ...] = ("campaign", "configuration", "revision")
+
+    def __init__(self, app: AppState, **params):
+        super().__init__(**params)
+        self.app = app
+        self._stale = True
+        self.body = pn.Column(sizing_mode="stretch_width")
+        self.header = pn.pane.Markdown(f"## {PAGE_TITLES[self.name_]}", margin=(0, 10))
+        app.param.watch(self._on_app_change, list(self.watch_app))
+        app.param.watch(self._on_page, ["page"])
+
+    def _on_page(self, event: param.parameterized.Event) -> None:
+        if event.new == self.name_ and self._stale:
+            self.safe_refresh()
+
+    def _on_app_change(self, *events: param.parameterized.Event) -> None:
+        self._stale = True
+        if self.app.page == self.name_:
+            self.safe_refresh()
+
+    def safe_refresh(self) -> None:
+        """Refresh; any error is shown in the page and in the status area, never raised."""
+        self._stale = False
+        if self.app.campaign is None:
+            self.body.objects = [message("No campaign in the database. Import one with "
+                                         "`railval import DIR` or start with the demo campaign "
+                                         "(`railval serve` without --no-demo).", "warning")]
+            return
+        try:
+            self.refresh()
+        except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+            detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+            self.app.set_status(f"{PAGE_TITLES[self.name_]}: {detail}", "error")
+            self.body.objects = [message(f"{PAGE_TITLES[self.name_]} is not available: {detail}",
+                                         "danger")]
+
+    def refresh(self) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def __panel__(self) -> pn.viewable.Viewable:
+        return pn.Column(self.header, self.body, sizing_mode="stretch_width")

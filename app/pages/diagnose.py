@@ -1,0 +1,172 @@
+"""Diagnose & model workshop (DESIGN §6–§7).
+
+Ranked candidate effects with their explanation and signature; add an effect, set or
+calibrate its parameters, re-simulate in a background thread with a progress bar; then the
+new configuration's dashboard beside its parent's, and the error along the lineage.
+"""
+
+from __future__ import annotations
+
+import html
+from typing import Any
+
+import holoviews as hv
+import pandas as pd
+import panel as pn
+
+from app import plots
+from app.pages._common import PageBase, make_dispatch, message, table
+from app.pages.dashboard import validation_view
+from app.state import AppState, DashboardState, DiagnoseState
+
+
+def signature_chart(candidate: dict[str, Any], height: int = 280) -> hv.Overlay:
+    """Residual RMS per quantity group before/after adding the candidate (its signature on
+    the residual pattern), as grouped bars."""
+    rows = []
+    for group, change in (candidate.get("quantities") or {}).items():
+        rows.append((group, "before", float(change["before"])))
+        rows.append((group, "after (fitted)", float(change["after"])))
+    bars = hv.Bars(rows, kdims=[hv.Dimension("group", label="quantity / PSD group"),
+                                hv.Dimension("when", label="")],
+                   vdims=[hv.Dimension("rms", label="residual rms (normalised, –)")]).opts(
+        color=hv.dim("when").categorize({"before": plots.FAIL_COLOR, "after (fitted)": plots.PASS_COLOR}),
+        line_color=None, tools=["hover"])
+    return bars.opts(title=f"Signature of {candidate['effect']}: residual before → after",
+                     responsive=True, height=height, fontsize=plots.FONTS, xrotation=45,
+                     show_grid=True, show_legend=False, multi_level=False)
+
+
+class DiagnosePage(PageBase):
+    name_ = "diagnose"
+
+    def __init__(self, app: AppState, **params):
+        super().__init__(app, **params)
+        self.state = DiagnoseState(app)
+        self.dash = DashboardState(app)
+        self.diagnose_btn = pn.widgets.Button(name="Run diagnosis", button_type="primary", width=160)
+        self.diagnose_btn.on_click(lambda e: self.state.run_diagnosis(dispatch=make_dispatch()))
+        self.effect_select = pn.widgets.Select.from_param(self.state.param.effect, name="Effect to add", width=240)
+        self.name_input = pn.widgets.TextInput.from_param(self.state.param.new_name, name="New configuration",
+                                                          width=260)
+        self.calibrate_btn = pn.widgets.Button(name="Add, calibrate & re-simulate", button_type="success",
+                                               width=240)
+        self.calibrate_btn.on_click(lambda e: self._start(calibrate=True))
+        self.simulate_btn = pn.widgets.Button(name="Add with these parameters & re-simulate", width=300)
+        self.simulate_btn.on_click(lambda e: self._start(calibrate=False))
+        self.param_box = pn.Column(sizing_mode="stretch_width")
+        self.explain = pn.pane.Markdown("", sizing_mode="stretch_width")
+        self.candidates_box = pn.Column(sizing_mode="stretch_width")
+        self.result_box = pn.Column(sizing_mode="stretch_width")
+        self._param_widgets: dict[str, pn.widgets.FloatInput] = {}
+        self.state.param.watch(lambda e: self._show_candidates(), ["candidates"])
+        self.state.param.watch(lambda e: self._show_effect(), ["effect"])
+        app.param.watch(self._busy_changed, ["busy"])
+
+    def _busy_changed(self, event) -> None:
+        for b in (self.diagnose_btn, self.calibrate_btn, self.simulate_btn):
+            b.disabled = bool(event.new)
+
+    def _start(self, calibrate: bool) -> None:
+        # manual values: the parameters to simulate with, or the calibration's start point
+        self.state.parameters = {k: float(w.value) for k, w in self._param_widgets.items()
+                                 if w.value is not None}
+        self.state.run_calibration(dispatch=make_dispatch(), calibrate=calibrate)
+
+    def refresh(self) -> None:
+        try:
+            catalogue = {e["name"]: e for e in self.state.effect_catalogue()}
+            available = self.state.available_effects()
+        except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+            catalogue, available = {}, []
+            self.app.set_status(str(exc), "warning")
+        self._catalogue = catalogue
+        ranked = [c["effect"] for c in self.state.candidates]
+        self.state.param.effect.objects = ranked + [e for e in available if e not in ranked]
+        if self.state.effect not in self.state.param.effect.objects:
+            self.state.effect = (self.state.param.effect.objects or [None])[0]
+        if not self.state.new_name or self.state.new_name in self.app.param.configuration.objects:
+            self.state.new_name = self.state.suggested_name()
+        self._show_candidates()
+        self._show_effect()
+        self._show_results()
+        self.body.objects = [
+            pn.pane.Markdown(f"Configuration under study: **{html.escape(str(self.app.configuration))}**. "
+                             "Diagnosis compares its residual pattern with the signature of every "
+                             "effect it lacks.", sizing_mode="stretch_width"),
+            self.diagnose_btn, self.candidates_box,
+            pn.pane.Markdown("#### Add an effect"),
+            pn.Row(self.effect_select, self.name_input),
+            self.explain, self.param_box,
+            pn.Row(self.calibrate_btn, self.simulate_btn),
+            self.result_box,
+        ]
+
+    def _show_candidates(self) -> None:
+        cands = self.state.candidates
+        if not cands:
+            self.candidates_box.objects = [pn.pane.Markdown("*No diagnosis yet — press **Run diagnosis**.*")]
+            return
+        df = pd.DataFrame([{
+            "rank": i + 1, "effect": c["effect"], "explained (%)": round(100 * float(c["explained"]), 1),
+            "fitted parameters": ", ".join(f"{k} = {v:.4g}" for k, v in (c.get("parameters") or {}).items()),
+            "fixes": ", ".join(c.get("fixes", [])), "worsens": ", ".join(c.get("worsens", [])),
+        } for i, c in enumerate(cands)])
+        extra = []
+        note = self.state.diagnosis_note
+        if note:
+            extra.append(message(note, "warning"))
+        top = cands[0]
+        self.candidates_box.objects = [
+            pn.pane.Markdown("#### Ranked candidate effects"),
+            table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"]), *extra,
+            pn.pane.Markdown(f"**Why {html.escape(top['effect'])}?** {html.escape(top.get('explanation', ''))}",
+                             sizing_mode="stretch_width"),
+            pn.pane.HoloViews(signature_chart(top), sizing_mode="stretch_width"),
+        ]
+        ranked = [c["effect"] for c in cands]
+        rest = [e for e in self.state.param.effect.objects if e not in ranked]
+        self.state.param.effect.objects = ranked + rest
+
+    def _show_effect(self) -> None:
+        eff = getattr(self, "_catalogue", {}).get(self.state.effect)
+        self._param_widgets = {}
+        if eff is None:
+            self.explain.object = ""
+            self.param_box.objects = []
+            return
+        self.explain.object = f"**{html.escape(str(eff['title']))}** — {html.escape(str(eff['explanation']))}"
+        fitted = next((c.get("parameters", {}) for c in self.state.candidates if c["effect"] == eff["name"]), {})
+        widgets = []
+        for p in eff["parameters"]:
+            lo, hi = p["bounds"]
+            value = fitted.get(p["name"], p["default"])
+            w = pn.widgets.FloatInput(name=f"{p['name']} ({p['unit']})" if p["unit"] else p["name"],
+                                      value=None if value is None else float(value),
+                                      start=lo, end=hi, width=200)
+            self._param_widgets[p["name"]] = w
+            widgets.append(w)
+        self.param_box.objects = [pn.FlexBox(*widgets)] if widgets else []
+
+    def _show_results(self) -> None:
+        """Parent vs current configuration dashboards and the lineage chart."""
+        config = self.app.configuration
+        ov = self.app.overview
+        parent = next((c.parent for c in (ov.configurations if ov else []) if c.name == config), None)
+        try:
+            lineage = self.state.lineage_errors(config)
+        except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+            self.result_box.objects = [message(f"lineage not available: {exc}", "danger")]
+            return
+        items: list[Any] = [pn.pane.Markdown("#### Error along the lineage")]
+        items.append(pn.pane.HoloViews(plots.lineage_chart(lineage), sizing_mode="stretch_width"))
+        if parent is not None:
+            left, _, _ = validation_view(self.dash, parent, height=260, compact=True)
+            right, _, _ = validation_view(self.dash, config, height=260, compact=True)
+            items += [pn.pane.Markdown(f"#### Parent {html.escape(parent)} beside {html.escape(config)}"),
+                      pn.Row(pn.Column(pn.pane.Markdown(f"**{html.escape(parent)}** (parent)"), left,
+                                       sizing_mode="stretch_width"),
+                             pn.Column(pn.pane.Markdown(f"**{html.escape(config)}**"), right,
+                                       sizing_mode="stretch_width"),
+                             sizing_mode="stretch_width")]
+        self.result_box.objects = items

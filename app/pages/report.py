@@ -1,0 +1,64 @@
+"""Report page: preview and download the HTML/PDF report of a configuration (``app.report``,
+the same builder as ``railval report``)."""
+
+from __future__ import annotations
+
+import html
+import io
+
+import panel as pn
+
+from app.pages._common import PageBase
+from app.state import AppState, ReportState
+
+
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)
+
+
+class ReportPage(PageBase):
+    name_ = "report"
+
+    def __init__(self, app: AppState, **params):
+        super().__init__(app, **params)
+        self.state = ReportState(app)
+        self.worst = pn.widgets.IntInput.from_param(self.state.param.worst_cases, name="Worst cases plotted",
+                                                    width=160)
+        self.html_dl = pn.widgets.FileDownload(callback=self._html_bytes, filename="report.html",
+                                               label="Download HTML", button_type="primary", width=200)
+        self.pdf_dl = pn.widgets.FileDownload(callback=self._pdf_bytes, filename="report.pdf",
+                                              label="Download PDF", button_type="primary", width=200)
+        self.preview = pn.pane.HTML("", sizing_mode="stretch_width", height=900)
+        self.state.param.watch(lambda *e: self._on_app_change(), ["worst_cases"])
+        self._report = None
+
+    def _build(self):
+        self._report = self.state.build()
+        return self._report
+
+    def _html_bytes(self):
+        rep = self._report or self._build()
+        return io.BytesIO(rep.html.encode("utf-8"))
+
+    def _pdf_bytes(self):
+        rep = self._report or self._build()
+        try:
+            return io.BytesIO(rep.pdf_bytes())
+        except Exception as exc:
+            self.app.set_status(f"PDF failed: {exc}", "error")
+            raise
+
+    def refresh(self) -> None:
+        rep = self._build()
+        stem = f"railval-{_slug(rep.campaign)}-{_slug(rep.configuration)}"
+        self.html_dl.filename = f"{stem}.html"
+        self.pdf_dl.filename = f"{stem}.pdf"
+        srcdoc = html.escape(rep.html, quote=True)
+        self.preview.object = (f'<iframe title="report preview" srcdoc="{srcdoc}" '
+                               'style="width:100%;height:880px;border:1px solid #ccc;background:#fff"></iframe>')
+        self.body.objects = [
+            pn.Row(self.worst, self.html_dl, self.pdf_dl),
+            pn.pane.Markdown(f"Evidence digest `{rep.digest[:16]}…` — generated {rep.generated_at}.",
+                             styles={"color": "#555"}),
+            self.preview,
+        ]

@@ -1,0 +1,390 @@
+"""HTML and PDF report of a configuration's validation (DESIGN §1: reviewers, assessors).
+
+One builder serves the Report page and ``railval report``. The HTML is self-contained:
+tables, and charts as inline SVG drawn here (no JavaScript, no network), so it prints the
+same way it displays. The PDF is the HTML printed by headless Chromium
+(``chromium --headless --print-to-pdf``), the browser the app is tested with; when no
+Chromium is found a :class:`ReportError` says so and which path was searched.
+
+Contents: verdict; per quantity n, mean, std (sample std, n − 1), limits, normalised values
+with bootstrap intervals, pass/fail; coverage and its shortfalls; the seed's Fig. 12/13 bar
+charts; plots of the worst cases (largest |D_v|/limit, EN-filtered measurement beneath the
+simulation on the distance axis, evaluated range shaded); the lineage; SHA-256 content
+hashes of every signal used; software versions.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import html
+import math
+import os
+import platform
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from core.errors import RailvalError
+from core.types import CHANNEL_KINDS, split_channel
+
+CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "google-chrome")
+PDF_TIMEOUT_S = 120
+
+
+class ReportError(RailvalError):
+    """The report could not be produced (e.g. no browser for the PDF)."""
+
+
+def _esc(x: Any) -> str:
+    return html.escape(str(x))
+
+
+def _fmt(x: Any, digits: int = 3) -> str:
+    if x is None:
+        return "–"
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return _esc(x)
+    if not math.isfinite(v):
+        return "–"
+    return f"{v:.{digits}g}" if abs(v) >= 1e4 or (v != 0 and abs(v) < 1e-3) else f"{v:.{digits}f}"
+
+
+# ----------------------------------------------------------------------------- SVG charts
+def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
+             limits: tuple[float, ...] = (1.0,), intervals: list | None = None,
+             width: int = 560, height: int = 300) -> str:
+    """Vertical bar chart as SVG; bars beyond ±1 red, others green; dashed limit lines."""
+    ml, mr, mt, mb = 62, 12, 30, 92
+    w, h = width - ml - mr, height - mt - mb
+    finite = [abs(v) for v in values if v is not None and math.isfinite(v)]
+    top = max([1.2] + [v * 1.1 for v in finite])
+    signed = any(lim < 0 for lim in limits)
+    lo = -top if signed else 0.0
+
+    def y(v: float) -> float:
+        return mt + h * (top - v) / (top - lo)
+
+    out = [(f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+           f'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">'),
+           f'<text x="{width / 2}" y="18" text-anchor="middle" font-size="14" font-weight="bold">{_esc(title)}</text>']
+    for t in np.linspace(lo, top, 5):
+        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{y(t):.1f}" y2="{y(t):.1f}" stroke="#e0e0e0"/>'
+                   f'<text x="{ml - 6}" y="{y(t) + 4:.1f}" text-anchor="end">{t:.2f}</text>')
+    n = max(1, len(labels))
+    bw = w / n
+    for i, (lab, v) in enumerate(zip(labels, values, strict=True)):
+        x0 = ml + i * bw
+        if v is not None and math.isfinite(v):
+            color = "#c62828" if abs(v) > 1.0 else "#2e7d32"
+            y0, y1 = sorted((y(0.0), y(v)))
+            out.append(f'<rect x="{x0 + bw * 0.15:.1f}" y="{y0:.1f}" width="{bw * 0.7:.1f}" '
+                       f'height="{max(y1 - y0, 0.5):.1f}" fill="{color}"><title>{_esc(lab)}: {v:.3f}</title></rect>')
+            if intervals and intervals[i] and None not in intervals[i]:
+                a, b = intervals[i]
+                xc = x0 + bw / 2
+                out.append(f'<line x1="{xc:.1f}" x2="{xc:.1f}" y1="{y(a):.1f}" y2="{y(b):.1f}" stroke="#000" '
+                           f'stroke-width="1.3"/>')
+        out.append(f'<text transform="translate({x0 + bw / 2:.1f},{mt + h + 8}) rotate(45)" '
+                   f'font-size="11">{_esc(lab)}</text>')
+    for lim in limits:
+        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{y(lim):.1f}" y2="{y(lim):.1f}" stroke="#000" '
+                   f'stroke-dasharray="6,4" stroke-width="1.4"/>')
+    out.append(f'<line x1="{ml}" x2="{ml}" y1="{mt}" y2="{mt + h}" stroke="#000"/>'
+               f'<line x1="{ml}" x2="{ml + w}" y1="{y(max(lo, 0.0)):.1f}" y2="{y(max(lo, 0.0)):.1f}" stroke="#000"/>')
+    out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
+    out.append("</svg>")
+    return "".join(out)
+
+
+def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: str, xlabel: str,
+              ylabel: str, shade: tuple[float, float] | None = None, width: int = 760,
+              height: int = 280) -> str:
+    """Line chart as SVG: ``traces`` = [(label, x, y, colour)], first drawn first (beneath)."""
+    ml, mr, mt, mb = 70, 14, 30, 46
+    w, h = width - ml - mr, height - mt - mb
+    xs = np.concatenate([t[1] for t in traces]) if traces else np.array([0.0, 1.0])
+    ys = np.concatenate([t[2] for t in traces]) if traces else np.array([0.0, 1.0])
+    from app.plots import nice_limits
+
+    x0, x1 = float(np.min(xs)), float(np.max(xs))
+    y0, y1 = nice_limits(float(np.min(ys)), float(np.max(ys)))
+    x1 = x1 if x1 > x0 else x0 + 1
+
+    def px(v):
+        return ml + w * (np.asarray(v) - x0) / (x1 - x0)
+
+    def py(v):
+        return mt + h * (y1 - np.asarray(v)) / (y1 - y0)
+
+    out = [(f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+           f'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">'),
+           f'<text x="{width / 2}" y="18" text-anchor="middle" font-size="13" font-weight="bold">{_esc(title)}</text>']
+    if shade is not None:
+        a, b = max(shade[0], x0), min(shade[1], x1)
+        out.append(f'<rect x="{px(a):.1f}" y="{mt}" width="{max(px(b) - px(a), 0):.1f}" height="{h}" '
+                   f'fill="#f2c14e" fill-opacity="0.2"/>')
+    for t in np.linspace(y0, y1, 6):
+        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{py(t):.1f}" y2="{py(t):.1f}" stroke="#e6e6e6"/>'
+                   f'<text x="{ml - 6}" y="{py(t) + 4:.1f}" text-anchor="end">{t:.4g}</text>')
+    for t in np.linspace(x0, x1, 6):
+        out.append(f'<text x="{px(t):.1f}" y="{mt + h + 16}" text-anchor="middle">{t:.0f}</text>')
+    for i, (label, x, y, color) in enumerate(traces):
+        pts = " ".join(f"{a:.1f},{b:.1f}" for a, b in zip(px(x), py(y), strict=True))
+        out.append(f'<polyline fill="none" stroke="{color}" stroke-width="{1.4 if i == 0 else 1.1}" '
+                   f'points="{pts}"/>')
+        out.append(f'<rect x="{ml + w - 200}" y="{mt + 6 + 16 * i}" width="14" height="3" fill="{color}"/>'
+                   f'<text x="{ml + w - 180}" y="{mt + 11 + 16 * i}">{_esc(label)}</text>')
+    out.append(f'<rect x="{ml}" y="{mt}" width="{w}" height="{h}" fill="none" stroke="#000"/>')
+    out.append(f'<text x="{ml + w / 2}" y="{height - 8}" text-anchor="middle">{_esc(xlabel)}</text>')
+    out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
+    out.append("</svg>")
+    return "".join(out)
+
+
+def _thin(x: np.ndarray, y: np.ndarray, n_out: int = 1200) -> tuple[np.ndarray, np.ndarray]:
+    """Min-max LTTB downsampling (tsdownsample) for the SVG plots; short signals unchanged."""
+    if x.size <= n_out:
+        return x, y
+    from tsdownsample import MinMaxLTTBDownsampler
+
+    idx = MinMaxLTTBDownsampler().downsample(x, y, n_out=n_out)
+    return x[idx], y[idx]
+
+
+# ----------------------------------------------------------------------------- report
+@dataclass
+class Report:
+    """A built report: ``html`` (self-contained) and its metadata."""
+
+    campaign: str
+    configuration: str
+    html: str
+    validated: bool
+    generated_at: str
+    versions: dict[str, str]
+    digest: str = field(default="")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"campaign": self.campaign, "configuration": self.configuration,
+                "validated": self.validated, "generated_at": self.generated_at,
+                "versions": self.versions, "evidence_digest": self.digest}
+
+    def write(self, path: str | os.PathLike) -> Path:
+        """Write ``.html`` or ``.pdf`` (by extension)."""
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix in (".html", ".htm"):
+            path.write_text(self.html, encoding="utf-8")
+        elif suffix == ".pdf":
+            path.write_bytes(html_to_pdf(self.html))
+        else:
+            raise ReportError(f"report file {path}: extension must be .html or .pdf, got {suffix or '(none)'}")
+        return path
+
+    def pdf_bytes(self) -> bytes:
+        return html_to_pdf(self.html)
+
+
+def find_chromium() -> str:
+    for c in CHROMIUM_CANDIDATES:
+        p = c if os.path.isabs(c) else shutil.which(c)
+        if p and os.path.exists(p):
+            return p
+    raise ReportError(f"PDF needs headless Chromium; none found among {', '.join(CHROMIUM_CANDIDATES)} "
+                      "(install Debian's `chromium`, or write .html)")
+
+
+def html_to_pdf(document: str, timeout_s: float = PDF_TIMEOUT_S) -> bytes:
+    """Print an HTML document to PDF with headless Chromium (A4, background colours kept)."""
+    exe = find_chromium()
+    with tempfile.TemporaryDirectory(prefix="railval-report-") as tmp:
+        src = Path(tmp) / "report.html"
+        out = Path(tmp) / "report.pdf"
+        src.write_text(document, encoding="utf-8")
+        cmd = [exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+               "--disable-background-networking", "--disable-component-update", "--disable-sync",
+               f"--user-data-dir={tmp}/profile", "--no-pdf-header-footer",
+               "--print-to-pdf-no-header", f"--print-to-pdf={out}", src.as_uri()]
+        try:
+            proc = subprocess.run(cmd, capture_output=True, timeout=timeout_s, check=False)
+        except subprocess.TimeoutExpired as exc:
+            raise ReportError(f"Chromium did not print the PDF within {timeout_s:g} s") from exc
+        if not out.exists() or out.stat().st_size == 0:
+            raise ReportError(f"Chromium ({exe}) produced no PDF (exit {proc.returncode}): "
+                              f"{proc.stderr.decode(errors='replace')[-400:]}")
+        return out.read_bytes()
+
+
+def software_versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for dist in ("railval", "numpy", "scipy", "pandas", "sqlalchemy", "panel", "holoviews", "bokeh"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = "not installed"
+    return out
+
+
+CSS = """
+body { font-family: 'DejaVu Sans', Arial, sans-serif; font-size: 13px; color: #1d1d1d; margin: 24px; }
+h1 { font-size: 22px; margin-bottom: 4px; } h2 { font-size: 17px; margin-top: 26px;
+  border-bottom: 1px solid #ccc; padding-bottom: 3px; } h3 { font-size: 14px; }
+table { border-collapse: collapse; margin: 8px 0; } th, td { border: 1px solid #ccc; padding: 3px 7px;
+  text-align: right; } th { background: #f0f2f5; } td.l, th.l { text-align: left; }
+.pass { color: #2e7d32; font-weight: bold; } .fail { color: #c62828; font-weight: bold; }
+.verdict { padding: 10px 14px; border-radius: 4px; font-size: 15px; margin: 10px 0; }
+.verdict.ok { background: #e8f5e9; border: 1px solid #2e7d32; }
+.verdict.no { background: #ffebee; border: 1px solid #c62828; }
+.meta td { text-align: left; border: none; padding: 1px 10px 1px 0; }
+.hashes td { font-family: 'DejaVu Sans Mono', monospace; font-size: 10px; }
+.charts { display: flex; flex-wrap: wrap; gap: 12px; } .note { color: #555; }
+@media print { h2 { page-break-after: avoid; } .worst { page-break-inside: avoid; } }
+"""
+
+
+def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3) -> Report:
+    """Build the report of ``configuration`` of ``campaign`` from the database.
+
+    ``backend`` is an :class:`app.state.Backend`; the validation comes from
+    ``app.services.validation`` through it, exactly as the dashboard shows it.
+    """
+    result = backend.validation(campaign, configuration)
+    d = result.to_dict()
+    rows = d["quantities"]
+    cov = d.get("coverage", {})
+    versions = software_versions()
+    now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+    lineage = backend.lineage(campaign, configuration)
+    ov = backend.overview(campaign)
+    conf = next((c for c in ov.configurations if c.name == configuration), None)
+    v = ov.vehicle
+    h: list[str] = [(f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+                    f"<title>railval report — {_esc(campaign)} / {_esc(configuration)}</title>"
+                    f"<style>{CSS}</style></head><body>")]
+    h.append(f"<h1>Validation report: {_esc(configuration)}</h1>")
+    h.append("<table class='meta'>"
+             f"<tr><td>Campaign</td><td><b>{_esc(campaign)}</b> {_esc(ov.description)}</td></tr>"
+             f"<tr><td>Vehicle</td><td>{_esc(v.get('name', ''))} — {_esc(v.get('kind', ''))}, secondary "
+             f"suspension {'yes' if v.get('secondary_suspension') else 'no'}, Q0 = {_fmt(v.get('Q0_kN'))} kN</td></tr>"
+             f"<tr><td>Configuration</td><td>{_esc(configuration)}; effects: "
+             f"{_esc(', '.join(conf.effects) if conf and conf.effects else 'none')}</td></tr>"
+             f"<tr><td>Lineage</td><td>{' → '.join(_esc(x) for x in lineage)}</td></tr>"
+             f"<tr><td>Generated</td><td>{now}</td></tr>"
+             f"<tr><td>Processing</td><td>{_esc(d.get('processing_version', ''))}; std: "
+             f"{_esc(d.get('std_definition', 'sample standard deviation (n − 1)'))}</td></tr>"
+             "</table>")
+    ok = bool(d["validated"])
+    failing = [r["quantity"] for r in rows if not r.get("pass")]
+    h.append(f"<div class='verdict {'ok' if ok else 'no'}'><b>{'VALIDATED' if ok else 'NOT VALIDATED'}</b>"
+             + ("" if ok else f" — failing quantities: {_esc(', '.join(failing) or 'none')}"
+                + ("" if cov.get("ok", True) else "; coverage not met")) + "</div>")
+
+    # quantities
+    h.append("<h2>Quantities (seed 000 §5, EN 14363)</h2><table><tr><th class='l'>quantity</th><th>unit</th>"
+             "<th>n</th><th>mean D_v</th><th>std D_v</th><th>mean limit</th><th>std limit</th>"
+             "<th>mean/limit</th><th>95 % CI</th><th>std/limit</th><th>95 % CI</th><th>verdict</th></tr>")
+    for r in rows:
+        mci, sci = r.get("mean_norm_ci") or [None, None], r.get("std_norm_ci") or [None, None]
+        h.append(f"<tr><td class='l'>{_esc(r['quantity'])}</td><td>{_esc(r.get('unit', ''))}</td>"
+                 f"<td>{_fmt(r.get('n'))}</td><td>{_fmt(r.get('mean'))}</td><td>{_fmt(r.get('std'))}</td>"
+                 f"<td>{_fmt(r.get('mean_limit'))}</td><td>{_fmt(r.get('std_limit'))}</td>"
+                 f"<td>{_fmt(r.get('mean_norm'))}</td><td>{_fmt(mci[0])} … {_fmt(mci[1])}</td>"
+                 f"<td>{_fmt(r.get('std_norm'))}</td><td>{_fmt(sci[0])} … {_fmt(sci[1])}</td>"
+                 f"<td class='{'pass' if r.get('pass') else 'fail'}'>{'pass' if r.get('pass') else 'FAIL'}</td></tr>")
+    h.append("</table><p class='note'>D_v = (S_v − M_v)·M_v/|M_v| (positive: the simulation overestimates). "
+             "Mean limit = 2/3 of the std limit; intervals: percentile bootstrap over the pairs.</p>")
+    labels = [r["quantity"] for r in rows]
+    h.append("<div class='charts'>")
+    h.append(svg_bars(labels, [r.get("mean_norm") for r in rows], title="Normalised mean (mean / limit)",
+                      ylabel="mean / limit (–)", limits=(1.0, -1.0), intervals=[r.get("mean_norm_ci") for r in rows]))
+    h.append(svg_bars(labels, [r.get("std_norm") for r in rows], title="Normalised std (std / limit, n − 1)",
+                      ylabel="std / limit (–)", limits=(1.0,), intervals=[r.get("std_norm_ci") for r in rows]))
+    h.append("</div>")
+
+    # coverage
+    h.append("<h2>Coverage</h2>")
+    zones = cov.get("zones", {})
+    h.append("<table><tr><th class='l'>rule</th><th>found</th><th>required</th></tr>"
+             f"<tr><td class='l'>sections with comparisons</td><td>{_fmt(cov.get('sections'))}</td>"
+             f"<td>{_fmt(cov.get('sections_required'))}</td></tr>"
+             + "".join(f"<tr><td class='l'>zone {_esc(z)}</td><td>{_fmt(n)}</td>"
+                       f"<td>{_fmt(cov.get('sections_per_zone_required'))}</td></tr>" for z, n in zones.items())
+             + "</table>")
+    short = cov.get("shortfalls", [])
+    h.append("<p class='pass'>Coverage holds.</p>" if not short else
+             "<ul>" + "".join(f"<li class='fail'>{_esc(s)}</li>" for s in short) + "</ul>")
+
+    # worst cases
+    if worst_cases > 0:
+        h.append("<h2>Worst cases</h2><p class='note'>Pairs with the largest |D_v| / std limit over all "
+                 "quantities; EN-filtered signals on the distance axis, measurement (grey) beneath the "
+                 "simulation (blue), evaluated range shaded.</p>")
+        h.extend(_worst_case_plots(backend, campaign, configuration, result, ov, worst_cases))
+
+    # hashes
+    h.append("<h2>Evidence: signal content hashes (SHA-256)</h2>")
+    meas = backend.hashes(campaign, None)
+    sim = backend.hashes(campaign, configuration)
+    digest = hashlib.sha256()
+    hrows = []
+    for sid in sorted(set(meas) | set(sim)):
+        for ch in sorted(set(meas.get(sid, {})) | set(sim.get(sid, {}))):
+            a, b = meas.get(sid, {}).get(ch, ""), sim.get(sid, {}).get(ch, "")
+            digest.update(f"{sid}\t{ch}\t{a}\t{b}\n".encode())
+            hrows.append(f"<tr><td class='l'>{_esc(sid)}</td><td class='l'>{_esc(ch)}</td><td class='l'>{a}</td>"
+                         f"<td class='l'>{b}</td></tr>")
+    h.append(f"<p>Evidence digest (SHA-256 over every line below): <code>{digest.hexdigest()}</code></p>")
+    h.append("<table class='hashes'><tr><th class='l'>section</th><th class='l'>channel</th>"
+             "<th class='l'>measurement</th><th class='l'>simulation</th></tr>" + "".join(hrows) + "</table>")
+
+    h.append("<h2>Software</h2><table>" + "".join(
+        f"<tr><td class='l'>{_esc(k)}</td><td class='l'>{_esc(val)}</td></tr>" for k, val in versions.items())
+        + "</table></body></html>")
+    return Report(campaign, configuration, "".join(h), ok, now, versions, digest.hexdigest())
+
+
+def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: Any, ov: Any,
+                      n: int) -> list[str]:
+    from app.state import EN_FILTER_OF_KIND, _channel_for
+    from core.filters import filtfilt_rows
+
+    pairs = result.pairs
+    if len(pairs) == 0:
+        return ["<p>No pairs.</p>"]
+    order = pairs.reindex(pairs["D_norm"].abs().sort_values(ascending=False).index).head(n)
+    channels = [c["name"] for c in ov.channels]
+    secs = {s.id: s for s in ov.sections}
+    out = []
+    for r in order.itertuples(index=False):
+        ch = _channel_for(r.quantity, r.position, channels)
+        if ch is None:
+            continue
+        kind = split_channel(ch)[0]
+        fkind, flabel = EN_FILTER_OF_KIND.get(kind, ("lowpass", "low-pass 20 Hz"))
+        traces = []
+        for label, cfg, color in (("measurement", None, "#555555"), (configuration, configuration, "#1f77b4")):
+            ss = backend.signals(campaign, cfg, r.section, [ch])
+            y = filtfilt_rows(np.asarray(ss.channels[ch], float)[None, :], float(ss.fs), fkind)[0]
+            x, y = _thin(np.asarray(ss.distance_m, float), y)
+            traces.append((label, x, y, color))
+        sec = secs.get(r.section)
+        unit = CHANNEL_KINDS.get(kind, "").replace("m/s^2", "m/s²")
+        title = (f"{r.quantity} at {r.position}, section {r.section} (zone {r.zone}): "
+                 f"D_v/limit = {r.D_norm:+.2f}")
+        out.append("<div class='worst'>" + svg_lines(
+            traces, title=title, xlabel="distance (m)", ylabel=f"{ch} ({unit}), {flabel}",
+            shade=(sec.eval_start_m, sec.eval_end_m) if sec else None) + "</div>")
+    return out

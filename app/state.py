@@ -1,0 +1,833 @@
+"""UI state of the engineers' web app, apart from any view (DESIGN §2, STYLE habit 9).
+
+Nothing here imports Panel: every class is a :class:`param.Parameterized` that a test can
+drive without a browser. Pages (``app/pages/*.py``) are thin views bound to these states.
+
+::
+
+    Backend            one unit of work per call against db + app.services; says plainly
+                       when a service is not installed ("not available: ...")
+    AppState           campaign, configuration, section, channel, page, status area
+    CompareState       configurations × view (time/distance/PSD) × processing for one
+                       section/channel → CompareData (arrays + axis labels + evaluated range)
+    DashboardState     validation of the selected configuration, selected quantity →
+                       drill-down rows; open_pair() jumps to Compare
+    MetricsState       metric tables (raw and synchronised)
+    DiagnoseState      ranked candidates, chosen effect, calibrate/re-simulate job in a
+                       background thread with progress, lineage of the error
+    ReportState        HTML/PDF of a configuration's validation
+
+Long work runs through :meth:`AppState.run_job`: a thread calls the work function with a
+``progress(fraction, message)`` callback; every state change is handed to ``dispatch`` (the
+view passes one that schedules on the Bokeh document's event loop; tests pass the default,
+which calls directly). Errors land in ``AppState.status`` with level ``"error"``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import threading
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import param
+
+from core.errors import NotFound, RailvalError
+from core.types import CHANNEL_KINDS, SectionInfo, split_channel
+
+PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report")
+PAGE_TITLES = {
+    "overview": "Campaign overview",
+    "compare": "Compare signals",
+    "dashboard": "Validation dashboard",
+    "metrics": "Curve metrics",
+    "diagnose": "Diagnose & model workshop",
+    "report": "Report",
+}
+MEASURED = "measurement"
+
+#: channel kind → (EN processing filter kind of core.filters, human label)
+EN_FILTER_OF_KIND = {
+    "Y": ("lowpass", "low-pass 20 Hz"),
+    "Q": ("lowpass", "low-pass 20 Hz"),
+    "ay_cb": ("bandpass", "band-pass 0.4–10 Hz"),
+    "az_cb": ("bandpass", "band-pass 0.4–10 Hz"),
+    "ay_bg": ("lowpass", "low-pass 20 Hz"),
+    "az_bg": ("lowpass", "low-pass 20 Hz"),
+}
+
+
+def service(name: str):
+    """Import ``app.services.<name>`` or raise :class:`ServiceUnavailable` naming it."""
+    try:
+        return importlib.import_module(f"app.services.{name}")
+    except ImportError as exc:
+        raise ServiceUnavailable(f"not available: app.services.{name} ({exc})") from exc
+
+
+class ServiceUnavailable(RailvalError):
+    """A part of railval this page needs is not installed in this build."""
+
+
+# ----------------------------------------------------------------------------- backend
+@dataclass
+class ConfigInfo:
+    name: str
+    parent: str | None
+    effects: dict[str, Any] = field(default_factory=dict)
+    description: str = ""
+
+
+@dataclass
+class CampaignOverview:
+    name: str
+    description: str
+    vehicle: dict[str, Any]
+    sections: list[SectionInfo]
+    channels: list[dict[str, str]]
+    configurations: list[ConfigInfo]
+
+    def zone_counts(self) -> dict[int, int]:
+        counts = {z: 0 for z in (1, 2, 3, 4)}
+        for s in self.sections:
+            counts[s.zone] = counts.get(s.zone, 0) + 1
+        return counts
+
+    def coverage_shortfalls(self, min_sections: int = 12, min_per_zone: int = 3,
+                            min_signals: int = 2) -> list[str]:
+        """Coverage rules of DESIGN §3 (seed 000 §5) checked on the campaign layout alone.
+
+        ≥ ``min_sections`` sections, every zone 1–4 with ≥ ``min_per_zone`` sections and
+        ≥ ``min_signals`` channels per channel kind. Returns precise messages, empty when met.
+        """
+        out = []
+        if len(self.sections) < min_sections:
+            out.append(f"{len(self.sections)} sections, needs {min_sections}")
+        for zone, n in self.zone_counts().items():
+            if n < min_per_zone:
+                out.append(f"zone {zone} has {n} section{'s' if n != 1 else ''}, needs {min_per_zone}")
+        kinds: dict[str, int] = {}
+        for ch in self.channels:
+            kinds[ch["kind"]] = kinds.get(ch["kind"], 0) + 1
+        for kind in ("Y", "Q", "ay_cb", "az_cb"):
+            n = kinds.get(kind, 0)
+            if n < min_signals:
+                out.append(f"channel kind {kind} has {n} signal{'s' if n != 1 else ''}, needs {min_signals}")
+        return out
+
+    def children(self) -> dict[str | None, list[str]]:
+        tree: dict[str | None, list[str]] = {}
+        for c in self.configurations:
+            tree.setdefault(c.parent, []).append(c.name)
+        return tree
+
+
+def _attr(obj: Any, *names: str, default: Any = None) -> Any:
+    for n in names:
+        if isinstance(obj, dict) and n in obj:
+            return obj[n]
+        if hasattr(obj, n):
+            return getattr(obj, n)
+    return default
+
+
+class Backend:
+    """Every call opens one unit of work on ``database`` (``db.engine.Database``)."""
+
+    def __init__(self, database: Any):
+        self.database = database
+        self._cache: dict[tuple, Any] = {}
+        self._lock = threading.Lock()
+
+    # -- plumbing
+    @staticmethod
+    def repo():
+        return importlib.import_module("db.repo")
+
+    def session(self):
+        return self.database.session()
+
+    def invalidate(self) -> None:
+        with self._lock:
+            self._cache.clear()
+
+    def _cached(self, key: tuple, make: Callable[[], Any]) -> Any:
+        with self._lock:
+            if key in self._cache:
+                return self._cache[key]
+        value = make()
+        with self._lock:
+            self._cache[key] = value
+        return value
+
+    # -- campaign data
+    def campaigns(self) -> list[str]:
+        repo = self.repo()
+        with self.session() as s:
+            return [_attr(c, "name") if not isinstance(c, str) else c for c in repo.list_campaigns(s)]
+
+    def configurations(self, campaign: str) -> list[ConfigInfo]:
+        repo = self.repo()
+        with self.session() as s:
+            confs = list(repo.list_configurations(s, campaign))
+            names = {c.id: c.name for c in confs}
+            return [ConfigInfo(name=c.name, parent=names.get(c.parent_id),
+                               effects=dict(c.effects or {}), description=c.description or "")
+                    for c in confs]
+
+    def overview(self, campaign: str) -> CampaignOverview:
+        repo = self.repo()
+        with self.session() as s:
+            camp = repo.get_campaign(s, campaign)
+            sections = list(repo.section_infos(s, camp))
+            vehicle = repo.vehicle_info(s, camp)
+            vdict = vehicle if isinstance(vehicle, dict) else {
+                k: getattr(vehicle, k) for k in ("name", "kind", "secondary_suspension", "Q0_kN", "template")
+                if hasattr(vehicle, k)}
+            chans = []
+            for ch in repo.channels(s, camp):
+                if isinstance(ch, str):
+                    kind, pos = split_channel(ch)
+                    chans.append({"name": ch, "kind": kind, "position": pos,
+                                  "unit": CHANNEL_KINDS.get(kind, "")})
+                else:
+                    chans.append({k: str(_attr(ch, k, default="")) for k in ("name", "kind", "position", "unit")})
+            name = _attr(camp, "name", default=campaign)
+            desc = _attr(camp, "description", default="") or ""
+        return CampaignOverview(name=name, description=desc, vehicle=vdict, sections=sections,
+                                channels=chans, configurations=self.configurations(campaign))
+
+    def signals(self, campaign: str, config: str | None, section: str,
+                channels: list[str] | None = None):
+        """One section's SignalSet of the measurement (``config`` None) or a configuration."""
+        repo = self.repo()
+        with self.session() as s:
+            camp = repo.get_campaign(s, campaign)
+            sets = repo.load_signalsets(s, camp, config=config, sections=[section], channels=channels)
+        if section not in sets:
+            raise NotFound(f"section {section!r} has no recording for "
+                           f"{'the measurement' if config is None else 'configuration ' + repr(config)}")
+        return sets[section]
+
+    def hashes(self, campaign: str, config: str | None) -> dict[str, dict[str, str]]:
+        """section → channel → SHA-256 of the stored samples (no blob read)."""
+        repo = self.repo()
+        with self.session() as s:
+            return repo.signal_hashes(s, campaign, config)
+
+    def lineage(self, campaign: str, config: str) -> list[str]:
+        """Names from the root configuration down to ``config``."""
+        repo = self.repo()
+        with self.session() as s:
+            camp = repo.get_campaign(s, campaign)
+            chain = [c if isinstance(c, str) else _attr(c, "name") for c in repo.lineage(s, camp, config)]
+        if chain and chain[0] == config and len(chain) > 1:
+            chain = chain[::-1]  # repo gives newest first: show root → config
+        return chain
+
+    # -- services
+    def validation(self, campaign: str, config: str, refresh: bool = False):
+        mod = service("validation")
+        key = ("validation", campaign, config)
+        if refresh:
+            with self._lock:
+                self._cache.pop(key, None)
+
+        def make():
+            with self.session() as s:
+                return mod.validate_configuration(s, campaign, config)
+        return self._cached(key, make)
+
+    def metrics(self, campaign: str, config: str):
+        mod = service("metrics")
+
+        def make():
+            with self.session() as s:
+                return mod.metrics_for_configuration(s, campaign, config)
+        return self._cached(("metrics", campaign, config), make)
+
+    def effects(self) -> list[dict[str, Any]]:
+        """The effect registry (``core.sim.effects``) as plain dicts for the UI."""
+        try:
+            mod = importlib.import_module("core.sim.effects")
+        except ImportError as exc:
+            raise ServiceUnavailable(f"not available: core.sim.effects ({exc})") from exc
+        registry = getattr(mod, "EFFECTS", None) or getattr(mod, "REGISTRY", None)
+        if registry is None:
+            raise ServiceUnavailable("not available: core.sim.effects has no EFFECTS registry")
+        items = registry.values() if isinstance(registry, dict) else registry
+        return [_effect_dict(e) for e in items]
+
+    def diagnose(self, campaign: str, config: str, progress: Callable | None = None, **kw: Any):
+        """``app.services.diagnosis.diagnose`` → DiagnosisResult (ranked candidates)."""
+        mod = service("diagnosis")
+        return mod.diagnose(self.database, campaign, config, progress=_stage_progress(progress), **kw)
+
+    def calibrate(self, campaign: str, config: str, effect: str, new_name: str,
+                  progress: Callable | None = None, start: dict | None = None, **kw: Any):
+        """Add ``effect``, fit its parameters (differential evolution + polish, starting from
+        ``start``), store ``new_name`` with parent ``config``; returns the CalibrationResult."""
+        mod = service("diagnosis")
+        result = mod.calibrate(self.database, campaign, config, [effect], new_name,
+                               progress=_stage_progress(progress),
+                               start={effect: dict(start)} if start else None, **kw)
+        self.invalidate()
+        return result
+
+    def simulate(self, campaign: str, config: str, effects: dict[str, dict], new_name: str,
+                 progress: Callable | None = None):
+        """Re-simulate ``config`` plus ``effects`` with the given parameters (no fit) and
+        store it as ``new_name`` (``app.services.simulation``)."""
+        mod = service("simulation")
+        fn = getattr(mod, "simulate_configuration", None) or getattr(mod, "simulate", None)
+        if fn is None:
+            raise ServiceUnavailable("not available: app.services.simulation has no simulate_configuration")
+        result = fn(self.database, campaign, new_name, parent=config, effects=effects,
+                    progress=_stage_progress(progress))
+        self.invalidate()
+        return result
+
+
+def _stage_progress(progress: Callable | None) -> Callable | None:
+    """Adapt a ``progress(fraction, message)`` to the services' ``progress(stage, fraction, info)``."""
+    if progress is None:
+        return None
+
+    def cb(stage: str, fraction: float, info: dict | None = None) -> None:
+        extra = ""
+        if info and "done" in info and "total" in info:
+            extra = f" {info['done']}/{info['total']}"
+        progress(fraction, f"{stage}{extra}")
+    return cb
+
+
+def _effect_dict(effect: Any) -> dict[str, Any]:
+    params = _attr(effect, "parameters", "params", default={}) or {}
+    plist = []
+    items = params.items() if isinstance(params, dict) else [(_attr(p, "name"), p) for p in params]
+    for pname, p in items:
+        plist.append({
+            "name": pname,
+            "unit": _attr(p, "unit", default=""),
+            "default": _attr(p, "default", default=None),
+            "bounds": tuple(_attr(p, "bounds", default=(None, None)) or (None, None)),
+            "doc": _attr(p, "doc", "description", default=""),
+        })
+    return {
+        "name": _attr(effect, "name", "id"),
+        "title": _attr(effect, "title", "label", default=None) or _attr(effect, "name", "id"),
+        "explanation": _attr(effect, "explanation", "description", "doc", default=""),
+        "parameters": plist,
+    }
+
+
+# ----------------------------------------------------------------------------- app state
+class AppState(param.Parameterized):
+    """What the engineer has selected, shared by all pages."""
+
+    campaign = param.Selector(default=None, objects=[], allow_None=True)
+    configuration = param.Selector(default=None, objects=[], allow_None=True)
+    page = param.Selector(default="overview", objects=list(PAGES))
+    section = param.Selector(default=None, objects=[], allow_None=True)
+    channel = param.Selector(default=None, objects=[], allow_None=True)
+    status = param.String(default="", doc="message of the status area")
+    status_level = param.Selector(default="info", objects=["info", "success", "warning", "error"])
+    busy = param.Boolean(default=False, doc="a background job is running")
+    progress = param.Number(default=0.0, bounds=(0.0, 1.0))
+    revision = param.Integer(default=0, doc="bumped when the database changed (new configuration)")
+
+    def __init__(self, backend: Backend, **params):
+        super().__init__(**params)
+        self.backend = backend
+        self._job: threading.Thread | None = None
+        self.refresh_campaigns()
+
+    # -- selections
+    def refresh_campaigns(self) -> None:
+        try:
+            names = self.backend.campaigns()
+        except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+            self.set_status(f"cannot list campaigns: {exc}", "error")
+            names = []
+        self.param.campaign.objects = names
+        if names and self.campaign not in names:
+            self.campaign = names[0]
+        elif self.campaign is not None:
+            self._campaign_changed()
+
+    @param.depends("campaign", watch=True)
+    def _campaign_changed(self) -> None:
+        if self.campaign is None:
+            return
+        try:
+            ov = self.backend.overview(self.campaign)
+        except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+            self.set_status(f"cannot open campaign {self.campaign!r}: {exc}", "error")
+            return
+        self.overview = ov
+        configs = [c.name for c in ov.configurations]
+        sections = [s.id for s in ov.sections]
+        chans = [c["name"] for c in ov.channels]
+        with param.parameterized.batch_call_watchers(self):
+            self.param.configuration.objects = configs
+            self.param.section.objects = sections
+            self.param.channel.objects = chans
+            if self.configuration not in configs:
+                self.configuration = configs[0] if configs else None
+            if self.section not in sections:
+                self.section = sections[0] if sections else None
+            if self.channel not in chans:
+                self.channel = chans[0] if chans else None
+
+    overview: CampaignOverview | None = None
+
+    def reload_configurations(self, select: str | None = None) -> None:
+        """Re-read configurations after a job stored a new one; optionally select it."""
+        self.backend.invalidate()
+        self._campaign_changed()
+        if select is not None and select in self.param.configuration.objects:
+            self.configuration = select
+        self.revision += 1
+
+    def open_compare(self, section: str, channel: str, configuration: str | None = None) -> None:
+        """Jump to the Compare page for one section/channel (dashboard drill-down)."""
+        with param.parameterized.batch_call_watchers(self):
+            if configuration is not None and configuration in self.param.configuration.objects:
+                self.configuration = configuration
+            if section in self.param.section.objects:
+                self.section = section
+            if channel in self.param.channel.objects:
+                self.channel = channel
+            self.page = "compare"
+
+    def set_status(self, message: str, level: str = "info") -> None:
+        self.status_level = level
+        self.status = message
+
+    # -- background jobs
+    def run_job(self, title: str, work: Callable[[Callable[[float, str], None]], Any],
+                on_done: Callable[[Any], None] | None = None,
+                dispatch: Callable[[Callable[[], None]], None] | None = None,
+                background: bool = True) -> threading.Thread | None:
+        """Run ``work(progress)`` in a thread; ``progress(fraction, message)`` updates the
+        progress bar and status; ``on_done(result)`` runs through ``dispatch`` afterwards.
+        Refuses (status warning) while another job runs so the page never double-submits."""
+        if self.busy:
+            self.set_status(f"{title}: another job is still running — wait for it to finish", "warning")
+            return None
+        call = dispatch or (lambda f: f())
+        self.busy = True
+        self.progress = 0.0
+        self.set_status(f"{title}: started", "info")
+
+        def progress(fraction: float, message: str = "") -> None:
+            frac = float(min(1.0, max(0.0, fraction if math.isfinite(fraction) else 0.0)))
+
+            def apply():
+                self.progress = frac
+                self.set_status(f"{title}: {message}" if message else f"{title}: {frac:.0%}", "info")
+            call(apply)
+
+        def body():
+            try:
+                result = work(progress)
+            except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+                detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+
+                def fail():
+                    self.busy = False
+                    self.set_status(f"{title} failed: {detail}", "error")
+                call(fail)
+                return
+
+            def done():
+                self.busy = False
+                self.progress = 1.0
+                self.set_status(f"{title}: done", "success")
+                if on_done is not None:
+                    try:
+                        on_done(result)
+                    except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+                        self.set_status(f"{title}: finished but showing the result failed: {exc}", "error")
+            call(done)
+
+        if not background:
+            body()
+            return None
+        self._job = threading.Thread(target=body, name=f"railval-job-{title}", daemon=True)
+        self._job.start()
+        return self._job
+
+    def wait(self, timeout: float | None = None) -> None:
+        if self._job is not None:
+            self._job.join(timeout)
+
+
+# ----------------------------------------------------------------------------- compare
+@dataclass
+class Trace:
+    label: str
+    x: np.ndarray
+    y: np.ndarray
+    measured: bool = False
+
+
+@dataclass
+class CompareData:
+    """What the Compare plot shows: traces, axis labels with units, evaluated range."""
+
+    title: str
+    x_label: str
+    y_label: str
+    traces: list[Trace]
+    eval_range: tuple[float, float] | None
+    log_axes: bool = False
+    note: str = ""
+
+
+class CompareState(param.Parameterized):
+    configurations = param.ListSelector(default=[], objects=[])
+    axis = param.Selector(default="time", objects=["time", "distance"])
+    processing = param.Selector(default="EN-filtered and raw", objects=["EN-filtered and raw", "EN-filtered", "raw"])
+    psd_segment_s = param.Number(default=10.0, bounds=(1.0, 60.0), doc="Welch segment length (s)")
+
+    def __init__(self, app: AppState, **params):
+        super().__init__(**params)
+        self.app = app
+        self.app.param.watch(self._sync_configs, ["configuration", "campaign", "revision"])
+        self._sync_configs()
+
+    def _sync_configs(self, *events) -> None:
+        objs = list(self.app.param.configuration.objects)
+        self.param.configurations.objects = objs
+        keep = [c for c in self.configurations if c in objs]
+        if self.app.configuration and self.app.configuration not in keep:
+            keep = [self.app.configuration] + keep
+        self.configurations = keep[:4]
+
+    def _section_info(self) -> SectionInfo:
+        ov = self.app.overview
+        for s in ov.sections if ov else []:
+            if s.id == self.app.section:
+                return s
+        raise NotFound(f"section {self.app.section!r} not in campaign {self.app.campaign!r}")
+
+    def _load(self, config: str | None):
+        return self.app.backend.signals(self.app.campaign, config, self.app.section, [self.app.channel])
+
+    def _process(self, sigset, values: np.ndarray, processing: str) -> np.ndarray:
+        if processing == "raw":
+            return values
+        from core.filters import filtfilt_rows
+
+        kind = split_channel(self.app.channel)[0]
+        fkind = EN_FILTER_OF_KIND.get(kind, ("lowpass", ""))[0]
+        return filtfilt_rows(values[None, :], float(sigset.fs), fkind)[0]
+
+    def sources(self) -> list[tuple[str, Any]]:
+        """[(label, SignalSet)] — the measurement first (drawn beneath), then configurations."""
+        out = [(MEASURED, self._load(None))]
+        for c in self.configurations:
+            try:
+                out.append((c, self._load(c)))
+            except NotFound:
+                continue
+        return out
+
+    def processings(self) -> list[str]:
+        """The processings to show, EN-filtered first."""
+        return ["EN-filtered", "raw"] if self.processing == "EN-filtered and raw" else [self.processing]
+
+    def series(self, processing: str | None = None, sources=None) -> CompareData:
+        """Time or distance series of the selected channel for every source."""
+        processing = processing or self.processings()[0]
+        sec = self._section_info()
+        ch = self.app.channel
+        kind = split_channel(ch)[0]
+        unit = CHANNEL_KINDS.get(kind, "")
+        traces = []
+        eval_range = None
+        for label, ss in sources or self.sources():
+            if ch not in ss.channels:
+                continue
+            y = self._process(ss, np.asarray(ss.channels[ch], dtype=float), processing)
+            if self.axis == "time":
+                x = np.asarray(ss.time_s, dtype=float)
+                if label == MEASURED:
+                    d = np.asarray(ss.distance_m, dtype=float)
+                    eval_range = (float(np.interp(sec.eval_start_m, d, x)),
+                                  float(np.interp(sec.eval_end_m, d, x)))
+            else:
+                x = np.asarray(ss.distance_m, dtype=float)
+                eval_range = (sec.eval_start_m, sec.eval_end_m)
+            traces.append(Trace(label, x, y, measured=(label == MEASURED)))
+        proc_label = "raw" if processing == "raw" else EN_FILTER_OF_KIND.get(kind, ("", "filtered"))[1]
+        return CompareData(
+            title=f"{ch} — section {sec.id} (zone {sec.zone}) — {proc_label}",
+            x_label="time (s)" if self.axis == "time" else "distance (m)",
+            y_label=f"{ch} ({unit_label(unit)})",
+            traces=traces, eval_range=eval_range,
+        )
+
+    def psd(self, sources=None) -> CompareData:
+        """Welch PSD (core.psd) of the evaluated part, EN-filtered, every source alike."""
+        from core.psd import welch_psd
+
+        sec = self._section_info()
+        ch = self.app.channel
+        kind = split_channel(ch)[0]
+        unit = CHANNEL_KINDS.get(kind, "")
+        traces = []
+        for label, ss in sources or self.sources():
+            if ch not in ss.channels:
+                continue
+            y = self._process(ss, np.asarray(ss.channels[ch], dtype=float), "EN-filtered")
+            d = np.asarray(ss.distance_m, dtype=float)
+            mask = (d >= sec.eval_start_m) & (d <= sec.eval_end_m)
+            part = y[mask] if mask.sum() >= 64 else y
+            p = welch_psd(part, float(ss.fs), self.psd_segment_s)
+            keep = p.frequency_hz > 0
+            traces.append(Trace(label, p.frequency_hz[keep], np.maximum(p.density[keep], 1e-30),
+                                measured=(label == MEASURED)))
+        return CompareData(
+            title=f"PSD of {ch} — section {sec.id}, evaluated range, "
+                  f"{EN_FILTER_OF_KIND.get(kind, ('', 'filtered'))[1]}",
+            x_label="frequency (Hz)", y_label=f"PSD ({unit_label(unit)})²/Hz",
+            traces=traces, eval_range=None, log_axes=True,
+            note=f"Welch, Hann window, {self.psd_segment_s:g} s segments, 50 % overlap",
+        )
+
+
+def unit_label(unit: str) -> str:
+    return unit.replace("m/s^2", "m/s²")
+
+
+# ----------------------------------------------------------------------------- dashboard
+def _q_rows(result: Any) -> list[dict[str, Any]]:
+    d = result.to_dict() if hasattr(result, "to_dict") else dict(result)
+    rows = d.get("quantities", d.get("results", []))
+    if isinstance(rows, dict):
+        rows = [dict(v, quantity=k) if "quantity" not in v else v for k, v in rows.items()]
+    return list(rows)
+
+
+class DashboardState(param.Parameterized):
+    quantity = param.Selector(default=None, objects=[], allow_None=True,
+                              doc="quantity whose drill-down is shown")
+    top_n = param.Integer(default=15, bounds=(5, 200))
+
+    def __init__(self, app: AppState, **params):
+        super().__init__(**params)
+        self.app = app
+
+    def result(self, config: str | None = None):
+        config = config or self.app.configuration
+        return self.app.backend.validation(self.app.campaign, config)
+
+    def summary(self, config: str | None = None) -> dict[str, Any]:
+        """``{"validated", "coverage", "quantities": [rows]}`` of the validation contract."""
+        res = self.result(config)
+        d = res.to_dict() if hasattr(res, "to_dict") else dict(res)
+        rows = _q_rows(res)
+        self.param.quantity.objects = [r["quantity"] for r in rows]
+        return {"validated": bool(d.get("validated")), "coverage": d.get("coverage", {}),
+                "quantities": rows, "raw": d}
+
+    def drilldown(self, quantity: str | None = None, config: str | None = None) -> list[dict[str, Any]]:
+        """Pairs of one quantity ranked by their contribution |D_v|/std limit (largest first).
+
+        Each row: section, position, channel, zone, M_v, S_v, D_v, norm (= D_v / std limit).
+        """
+        quantity = quantity or self.quantity
+        if quantity is None:
+            return []
+        res = self.result(config)
+        rows = _pairs_of(res, quantity)
+        limit = next((r.get("std_limit") for r in _q_rows(res) if r["quantity"] == quantity), None)
+        for r in rows:
+            r["norm"] = (r["D_v"] / limit) if limit else float("nan")
+        rows.sort(key=lambda r: -abs(r["D_v"]))
+        return rows[: self.top_n]
+
+    def open_row(self, row: dict[str, Any]) -> None:
+        channel = _channel_for(row.get("quantity"), row.get("position"), self.app.param.channel.objects)
+        self.app.open_compare(row["section"], channel)
+
+
+def _pairs_of(result: Any, quantity: str) -> list[dict[str, Any]]:
+    """All pairs of one quantity from ``ValidationResult.pairs`` (a DataFrame with columns
+    quantity, section, zone, position, M, S, D, D_norm — core.validation)."""
+    pairs = result.pairs
+    sub = pairs[pairs["quantity"] == quantity]
+    return [{
+        "quantity": quantity, "section": str(r.section), "position": str(r.position),
+        "zone": int(r.zone), "M_v": float(r.M), "S_v": float(r.S), "D_v": float(r.D),
+    } for r in sub.itertuples(index=False)]
+
+
+def _channel_for(quantity: str | None, position: str | None, channels: list[str]) -> str | None:
+    """The raw channel to compare for a quantity at a position, from the quantity registry
+    (``core.quantities``): Y/Q at w1L → ``Y_w1L``; ΣY at ws1 → ``Y_w1L``; ay_rms at b1 →
+    ``ay_cb_b1``."""
+    from core.quantities import QUANTITIES
+
+    if quantity in QUANTITIES and position:
+        try:
+            for c in QUANTITIES[quantity].channels(position):
+                if c in channels:
+                    return c
+        except RailvalError:
+            pass
+    return channels[0] if channels else None
+
+
+def _num(x: Any) -> float:
+    return float("nan") if x is None else float(x)
+
+
+# ----------------------------------------------------------------------------- metrics
+class MetricsState(param.Parameterized):
+    synchronised = param.Selector(default="raw", objects=["raw", "synchronised"])
+
+    def __init__(self, app: AppState, **params):
+        super().__init__(**params)
+        self.app = app
+
+    def table(self):
+        """pandas DataFrame of metric values, one row per (section, channel)."""
+        import pandas as pd
+
+        res = self.app.backend.metrics(self.app.campaign, self.app.configuration)
+        if hasattr(res, "to_pandas"):
+            df = res.to_pandas()
+        elif isinstance(res, pd.DataFrame):
+            df = res
+        else:
+            d = res.to_dict() if hasattr(res, "to_dict") else res
+            df = pd.DataFrame(d.get("rows", d) if isinstance(d, dict) else d)
+        if "synchronised" in df.columns:
+            want = self.synchronised == "synchronised"
+            df = df[df["synchronised"].astype(bool) == want].drop(columns=["synchronised"])
+        elif "sync" in df.columns:
+            df = df[df["sync"] == self.synchronised].drop(columns=["sync"])
+        return df.reset_index(drop=True)
+
+
+# ----------------------------------------------------------------------------- diagnose
+class DiagnoseState(param.Parameterized):
+    effect = param.Selector(default=None, objects=[], allow_None=True)
+    new_name = param.String(default="")
+    candidates = param.List(default=[])
+    parameters = param.Dict(default={}, doc="manually set parameters of the chosen effect")
+    last_new_configuration = param.String(default="")
+    diagnosis_note = param.String(default="", doc="separability note of the diagnosis")
+
+    def __init__(self, app: AppState, **params):
+        super().__init__(**params)
+        self.app = app
+        self.app.param.watch(lambda e: self._reset(), ["campaign", "configuration"])
+
+    def _reset(self) -> None:
+        self.candidates = []
+
+    def effect_catalogue(self) -> list[dict[str, Any]]:
+        return self.app.backend.effects()
+
+    def available_effects(self) -> list[str]:
+        """Effects not yet in the current configuration."""
+        ov = self.app.overview
+        present = set()
+        for c in ov.configurations if ov else []:
+            if c.name == self.app.configuration:
+                present = set(c.effects)
+        names = [e["name"] for e in self.effect_catalogue()]
+        return [n for n in names if n not in present]
+
+    def suggested_name(self) -> str:
+        base = f"{self.app.configuration}+{self.effect}" if self.effect else f"{self.app.configuration}-new"
+        existing = set(self.app.param.configuration.objects)
+        name, i = base, 2
+        while name in existing:
+            name, i = f"{base}-{i}", i + 1
+        return name
+
+    def run_diagnosis(self, dispatch=None, background=True):
+        app = self.app
+        campaign, config = app.campaign, app.configuration
+
+        def work(progress):
+            return app.backend.diagnose(campaign, config, progress=progress)
+
+        def done(result):
+            d = result.to_dict() if hasattr(result, "to_dict") else result
+            cands = list(d.get("candidates", []))
+            note = d.get("note") or ""
+            if not d.get("separable", True) and not note:
+                note = "the two best candidates explain nearly the same; see the evidence"
+            self.diagnosis_note = note
+            self.candidates = cands
+            names = self.available_effects() if cands else []
+            order = [c["effect"] for c in cands] + [n for n in names if n not in {c["effect"] for c in cands}]
+            self.param.effect.objects = order
+            if order:
+                self.effect = order[0]
+                self.new_name = self.suggested_name()
+        return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background)
+
+    def run_calibration(self, dispatch=None, background=True, calibrate: bool = True):
+        """Add ``effect`` to the configuration, calibrate it (or use ``parameters``),
+        re-simulate and store as ``new_name`` whose parent is the current configuration."""
+        app = self.app
+        campaign, config, effect = app.campaign, app.configuration, self.effect
+        name = self.new_name or self.suggested_name()
+        params = dict(self.parameters)
+        if effect is None:
+            app.set_status("choose an effect to add first", "warning")
+            return None
+
+        def work(progress):
+            if calibrate:
+                return app.backend.calibrate(campaign, config, effect, name, progress=progress,
+                                             start=params or None)
+            return app.backend.simulate(campaign, config, {effect: params or {}}, name, progress=progress)
+
+        def done(result):
+            self.last_new_configuration = name
+            app.reload_configurations(select=name)
+        return app.run_job("calibration" if calibrate else "re-simulation", work, done,
+                           dispatch=dispatch, background=background)
+
+    def lineage_errors(self, config: str | None = None) -> list[dict[str, Any]]:
+        """Along the lineage root → config: the largest normalised error (max over quantities
+        of |mean|/mean limit and std/std limit) and whether the configuration is validated."""
+        app = self.app
+        config = config or app.configuration
+        out = []
+        for name in app.backend.lineage(app.campaign, config):
+            res = app.backend.validation(app.campaign, name)
+            d = res.to_dict() if hasattr(res, "to_dict") else res
+            rows = _q_rows(res)
+            worst = max((max(abs(_num(r["mean_norm"])), abs(_num(r["std_norm"]))) for r in rows),
+                        default=float("nan"))
+            out.append({"configuration": name, "max_norm": worst, "validated": bool(d.get("validated"))})
+        return out
+
+
+# ----------------------------------------------------------------------------- report
+class ReportState(param.Parameterized):
+    fmt = param.Selector(default="html", objects=["html", "pdf"])
+    worst_cases = param.Integer(default=3, bounds=(0, 12))
+
+    def __init__(self, app: AppState, **params):
+        super().__init__(**params)
+        self.app = app
+
+    def build(self):
+        from app.report import build_report
+
+        return build_report(self.app.backend, self.app.campaign, self.app.configuration,
+                            worst_cases=self.worst_cases)
