@@ -220,6 +220,8 @@ class ValidationResult:
     ci_level: float
     pairs: object  # pandas.DataFrame
     warnings: list[str] = field(default_factory=list)
+    #: free-form context added by callers (campaign, configuration, cache statistics)
+    info: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         from core.en14363 import PROCESSING_VERSION
@@ -235,6 +237,7 @@ class ValidationResult:
                           "method": "percentile interval, pairs resampled with replacement"},
             "processing_version": PROCESSING_VERSION,
             "warnings": list(self.warnings),
+            **({"info": self.info} if self.info else {}),
         }
 
     def to_pandas(self):
