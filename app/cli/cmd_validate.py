@@ -1,0 +1,122 @@
+"""CLI verb ``validate`` (DESIGN §3, §8).
+
+``railval validate CAMPAIGN --config NAME [--json] [--order N] [--boot N] [--seed N]``
+    EN 14363 processing of measurement and configuration, the DynoTRAIN verdict per quantity
+    (mean and sample standard deviation of D_v against the Table 2 limits) and the coverage.
+
+Human output: one table row per quantity with pass/fail, the normalised mean and standard
+deviation as bars (``█`` blocks, the limit 1.0 marked ``│``) and their bootstrap intervals,
+then the coverage lines. ``--json`` prints one JSON document (``validated``, ``coverage``,
+``quantities`` …). The exit code is 0 whether or not the configuration is validated; 2 on
+errors (unknown campaign/configuration, bad data).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from app.cli import emit_json
+from core.quantities import QUANTITIES
+
+BAR_CELLS = 20  # cells for 0 … 2 × limit
+_BLOCKS = " ▏▎▍▌▋▊▉█"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "validate", help="validate a configuration against the measurement (DynoTRAIN method)",
+        description="EN 14363 processing and DynoTRAIN validation of one configuration "
+                    "(seed 000 §5). Exit code 0 whether validated or not.")
+    p.add_argument("campaign", metavar="CAMPAIGN", help="campaign name or id")
+    p.add_argument("--config", required=True, metavar="NAME", help="configuration name")
+    p.add_argument("--json", action="store_true", help="print one JSON document")
+    p.add_argument("--order", type=int, default=4, metavar="N",
+                   help="Butterworth prototype order of the 20 Hz low-pass and the 0.4–10 Hz "
+                        "band-pass (default 4)")
+    p.add_argument("--boot", type=int, default=1000, metavar="N",
+                   help="bootstrap resamples for the confidence intervals (default 1000; 0 off)")
+    p.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    p.set_defaults(func=cmd_validate)
+
+
+def bar(value: float | None, cells: int = BAR_CELLS) -> str:
+    """A bar of |value| (normalised, limit = 1.0 at the middle) with eighth-block resolution;
+    the limit cell is marked ``│`` when the bar does not reach it."""
+    if value is None:
+        return "n/a".ljust(cells + 1)
+    width = min(abs(value), 2.0) / 2.0 * cells
+    full = int(width)
+    frac = round((width - full) * 8)
+    if frac == 8:
+        full, frac = full + 1, 0
+    chars = ["█"] * full + ([_BLOCKS[frac]] if frac and full < cells else [])
+    chars += [" "] * (cells - len(chars))
+    mid = cells // 2
+    if chars[mid] == " ":
+        chars[mid] = "│"
+    return "".join(chars[:cells]) + ("+" if abs(value) > 2.0 else " ")
+
+
+def _fmt(x: float | None, spec: str = ".3g") -> str:
+    return "n/a" if x is None else format(x, spec)
+
+
+def format_result(doc: dict) -> str:
+    """Human-readable table of a :meth:`ValidationResult.to_dict` document."""
+    lines = []
+    info = doc.get("info", {})
+    head = f"validation of {info.get('campaign', '?')} / {info.get('configuration', '?')}"
+    lines.append(head)
+    lines.append("D_v = (S − M)·sign(M) (seed 000 eq. 4); std is the sample standard deviation "
+                 "(n − 1); norm = value / limit; bars: |norm| from 0 to 2, │ = limit")
+    lines.append(f"{'quantity':<9} {'unit':<6} {'n':>4} {'mean':>9} {'limit':>7} "
+                 f"{'std':>9} {'limit':>7}  {'|mean|/limit':<21} {'std/limit':<21} "
+                 f"{'95 % CI mean':>15} {'95 % CI std':>13}  result")
+    for q in doc["quantities"]:
+        ci_m = q["mean_norm_ci"]
+        ci_s = q["std_norm_ci"]
+        ci_m_txt = "n/a" if ci_m[0] is None else f"[{ci_m[0]:+.2f},{ci_m[1]:+.2f}]"
+        ci_s_txt = "n/a" if ci_s[0] is None else f"[{ci_s[0]:.2f},{ci_s[1]:.2f}]"
+        verdict = "PASS" if q["pass"] else "FAIL"
+        if q["n"] and not q.get("robust", True):
+            verdict += " (not robust)"
+        lines.append(
+            f"{q['quantity']:<9} {QUANTITIES[q['quantity']].unit:<6} {q['n']:>4} "
+            f"{_fmt(q['mean'], '+.3g'):>9} {q['mean_limit']:>7.3g} {_fmt(q['std']):>9} "
+            f"{q['std_limit']:>7.3g}  {bar(q['mean_norm'])} {bar(q['std_norm'])} "
+            f"{ci_m_txt:>15} {ci_s_txt:>13}  {verdict}")
+        if not q["pass"] and q["drilldown"]:
+            worst = q["drilldown"][0]
+            lines.append(f"{'':<9} largest: section {worst['section']} (zone {worst['zone']}) "
+                         f"position {worst['position']}: D_v = {worst['D']:+.3g}, "
+                         f"{worst['share_of_sum_of_squares'] * 100:.0f} % of ΣD²")
+    cov = doc["coverage"]
+    zones = ", ".join(f"zone {z}: {n}" for z, n in cov["zones"].items())
+    lines.append(f"coverage: {cov['sections']} sections (needs {cov['sections_required']}); "
+                 f"{zones} (each needs {cov['sections_per_zone_required']})")
+    if cov["shortfalls"]:
+        for s in cov["shortfalls"]:
+            lines.append(f"coverage shortfall: {s}")
+    else:
+        lines.append("coverage: all rules met")
+    for w in doc.get("warnings", []):
+        lines.append(f"warning: {w}")
+    lines.append("VALIDATED" if doc["validated"] else "NOT VALIDATED")
+    return "\n".join(lines)
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from app.services.validation import validate_configuration
+    from db.engine import connect
+
+    database = connect(args.db)
+    database.ensure_initialised()
+    with database.session() as session:
+        result = validate_configuration(session, args.campaign, args.config, order=args.order,
+                                        n_boot=args.boot, seed=args.seed)
+    doc = result.to_dict()
+    if args.json:
+        emit_json(doc)
+    else:
+        print(format_result(doc))
+    return 0
