@@ -6,8 +6,14 @@ dropped after the test; override the server with ``$RAILVAL_TEST_PG``). When no 
 server answers, the ``postgresql`` cases are skipped with the reason — unless
 ``RAILVAL_REQUIRE_PG=1`` (CI), which turns the skip into a failure.
 
+``module_db_url`` is the same with one database per test module (for read-only tests that
+share an expensive set-up). ``backend_url(kind, folder)`` is the context manager behind both.
+
 ``database`` is a :class:`db.engine.Database` connected to ``db_url`` and migrated to the
 newest schema revision. Tests that want SQLite only use ``sqlite_database``.
+``demo_campaign_dir`` is a demo campaign folder (``tests.factories.write_demo_campaign``
+with its defaults plus a ``variant1`` child configuration, Parquet files) written once per
+test session: read it, never modify it (copy it first).
 """
 
 from __future__ import annotations
@@ -15,6 +21,7 @@ from __future__ import annotations
 import os
 import uuid
 from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 
@@ -39,11 +46,18 @@ def _pg_unavailable() -> str | None:
     return _pg_state["reason"]
 
 
-@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
-def db_url(request: pytest.FixtureRequest, tmp_path) -> Iterator[str]:
-    """A URL of an empty database (one per test) on each backend."""
-    if request.param == "sqlite":
-        yield f"sqlite:///{tmp_path / 'railval-test.db'}"
+BACKENDS = ["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)]
+
+
+@contextmanager
+def backend_url(kind: str, folder) -> Iterator[str]:
+    """URL of a fresh empty database of backend ``kind`` ('sqlite' or 'postgresql').
+
+    SQLite: a file in ``folder``. PostgreSQL: a new schema in the test database, dropped on
+    exit; skips (or fails under ``RAILVAL_REQUIRE_PG=1``) when no server answers.
+    """
+    if kind == "sqlite":
+        yield f"sqlite:///{folder / f'railval-{uuid.uuid4().hex[:8]}.db'}"
         return
     reason = _pg_unavailable()
     if reason is not None:
@@ -62,6 +76,20 @@ def db_url(request: pytest.FixtureRequest, tmp_path) -> Iterator[str]:
     finally:
         with psycopg.connect(conninfo, autocommit=True) as conn:
             conn.execute(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE')
+
+
+@pytest.fixture(params=BACKENDS)
+def db_url(request: pytest.FixtureRequest, tmp_path) -> Iterator[str]:
+    """A URL of an empty database (one per test) on each backend."""
+    with backend_url(request.param, tmp_path) as url:
+        yield url
+
+
+@pytest.fixture(scope="module", params=BACKENDS)
+def module_db_url(request: pytest.FixtureRequest, tmp_path_factory) -> Iterator[str]:
+    """Like ``db_url`` but one database per test module and backend (shared state)."""
+    with backend_url(request.param, tmp_path_factory.mktemp("db")) as url:
+        yield url
 
 
 @pytest.fixture
@@ -88,3 +116,13 @@ def sqlite_database(tmp_path):
         yield db
     finally:
         db.dispose()
+
+
+@pytest.fixture(scope="session")
+def demo_campaign_dir(tmp_path_factory):
+    """A read-only demo campaign folder (12 sections, zones 1–4, baseline → variant1)."""
+    from tests.factories import write_demo_campaign
+
+    folder = tmp_path_factory.mktemp("demo-campaign")
+    write_demo_campaign(folder, fmt="parquet", n_configs=2)
+    return folder

@@ -1,0 +1,174 @@
+"""CLI verbs for the data: ``init``, ``import``, ``export``, ``list``.
+
+``railval init``
+    create or upgrade the database schema to the newest revision (idempotent).
+``railval import DIR [--json]``
+    validate the campaign folder DIR completely, then store it in one transaction
+    (progress bar on stderr for imports of more than a few files).
+``railval export NAME DIR [--format parquet|csv|h5|mat|mf4|tdms]``
+    write a stored campaign as a campaign folder (re-importable, identical hashes).
+``railval list [--json]``
+    the campaigns with their sections, zones and configurations.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections import Counter
+
+from app.cli import emit_json
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("init", help="create or upgrade the database schema")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=cmd_init)
+
+    p = sub.add_parser("import", help="import a campaign folder (validated before writing)")
+    p.add_argument("folder", metavar="DIR", help="campaign folder holding campaign.json")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.set_defaults(func=cmd_import)
+
+    p = sub.add_parser("export", help="export a campaign as a campaign folder")
+    p.add_argument("name", metavar="NAME", help="campaign name or id")
+    p.add_argument("folder", metavar="DIR", help="output folder (new or empty)")
+    p.add_argument("--format", default="parquet",
+                   choices=["parquet", "csv", "h5", "mat", "mf4", "tdms"],
+                   help="data file format (default parquet)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("list", help="list campaigns with sections, zones and configurations")
+    p.add_argument("--json", action="store_true", help="print one JSON document")
+    p.set_defaults(func=cmd_list)
+
+
+def _database(args: argparse.Namespace, *, upgrade: bool = True):
+    from db.engine import connect
+
+    database = connect(args.db)
+    database.ensure_initialised(upgrade=upgrade)
+    return database
+
+
+def cmd_init(args: argparse.Namespace) -> int:
+    from db.engine import connect
+
+    database = connect(args.db)
+    before = database.current_revision()
+    head = database.init()
+    doc = {"database": database.safe_url, "revision": head, "previous_revision": before}
+    if args.json:
+        emit_json(doc)
+    else:
+        state = "already at" if before == head else "migrated to"
+        print(f"{database.safe_url}: {state} revision {head}")
+    return 0
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    from db.importer import import_campaign
+
+    database = _database(args)
+    bar = None
+
+    def progress(done: int, total: int, what: str) -> None:
+        nonlocal bar
+        if args.no_progress or total < 4:
+            return
+        if bar is None:
+            from tqdm import tqdm
+
+            bar = tqdm(total=total, unit="file", desc="reading", file=sys.stderr, leave=False)
+        bar.update(done - bar.n)
+        bar.set_postfix_str(what, refresh=False)
+
+    t = time.perf_counter()
+    try:
+        name = import_campaign(database, args.folder, progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    elapsed = time.perf_counter() - t
+    doc = _summary(database, name)
+    doc["seconds"] = round(elapsed, 3)
+    if args.json:
+        emit_json(doc)
+    else:
+        print(f"imported campaign {name!r}: {doc['n_sections']} sections (zones "
+              f"{_zones_text(doc['zones'])}), {len(doc['configurations'])} configuration(s), "
+              f"{doc['n_signals']} signals in {elapsed:.1f} s")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from db.exporter import export_campaign
+
+    database = _database(args, upgrade=False)
+    with database.session() as s:
+        path = export_campaign(s, args.name, args.folder, fmt=args.format)
+    if args.json:
+        emit_json({"campaign": args.name, "manifest": str(path), "format": args.format})
+    else:
+        print(f"exported {args.name!r} to {path.parent} ({args.format})")
+    return 0
+
+
+def _summary(database, name_or_campaign) -> dict:
+    from sqlalchemy import func, select
+
+    from db import repo
+    from db.models import Recording, Section, Signal
+
+    with database.session() as s:
+        c = repo.get_campaign(s, name_or_campaign)
+        infos = repo.section_infos(s, c)
+        n_signals = s.scalar(
+            select(func.count(Signal.id)).join(Recording).join(Section)
+            .where(Section.campaign_id == c.id)
+        )
+        confs = repo.list_configurations(s, c)
+        parent = {x.id: x.name for x in confs}
+        return {
+            "name": c.name,
+            "id": c.id,
+            "description": c.description,
+            "vehicle": repo.vehicle_info(s, c),
+            "n_sections": len(infos),
+            "zones": {str(z): n for z, n in sorted(Counter(i.zone for i in infos).items())},
+            "sections": [{"id": i.id, "zone": i.zone, "radius_m": i.radius_m,
+                          "speed_kmh": i.speed_kmh} for i in infos],
+            "channels": [ch.name for ch in repo.channels(s, c)],
+            "configurations": [{"name": x.name, "parent": parent.get(x.parent_id),
+                                "effects": sorted(x.effects)} for x in confs],
+            "n_signals": int(n_signals or 0),
+        }
+
+
+def _zones_text(zones: dict[str, int]) -> str:
+    return ", ".join(f"{z}: {n}" for z, n in zones.items()) or "none"
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    from db import repo
+
+    database = _database(args)
+    with database.session() as s:
+        ids = [c.id for c in repo.list_campaigns(s)]
+    docs = [_summary(database, cid) for cid in ids]
+    if args.json:
+        emit_json({"database": database.safe_url, "campaigns": docs})
+        return 0
+    if not docs:
+        print(f"{database.safe_url}: no campaigns (import one with `railval import DIR`)")
+        return 0
+    for d in docs:
+        lineage = ", ".join(x["name"] + (f" ← {x['parent']}" if x["parent"] else "")
+                            for x in d["configurations"]) or "none"
+        print(f"{d['name']} (id {d['id']}): {d['n_sections']} sections, zones "
+              f"{_zones_text(d['zones'])}; vehicle {d['vehicle']['name'] or d['vehicle']['kind']} "
+              f"Q0 {d['vehicle']['Q0_kN']:g} kN; configurations: {lineage}")
+    return 0
