@@ -251,12 +251,11 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
                     for i in members for c in getattr(plans[i], attr)]
             if not rows:
                 continue
-            stacked = np.vstack(rows)
-            if not np.all(np.isfinite(stacked)):
+            if not all(np.isfinite(r.sum()) for r in rows):
                 bad = [(sections[i].id, c) for i in members for c in getattr(plans[i], attr)
                        if not np.all(np.isfinite(signalsets[i].channels[c]))]
                 raise InvalidSignal(f"non-finite samples (NaN/inf) in section/channel {bad[0]}")
-            out = filtfilt_rows(stacked, fs, kind, order)
+            out = filtfilt_rows(rows, fs, kind, order)
             pos = 0
             for i in members:
                 k = len(getattr(plans[i], attr))
@@ -306,22 +305,30 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
         wheels_yq = [p for p in wheels_y if p in wheels_q]
         wsets = [ws for ws in WHEELSET_POSITIONS
                  if f"Y_w{ws[2:]}L" in index and f"Y_w{ws[2:]}R" in index]
-        ratio = np.empty((len(wheels_yq), lp.shape[1]))
+        # derived signals only where needed: the evaluated samples plus one on each side
+        # (the sliding-mean windows lie inside the evaluated range)
+        wide = slice(max(cut.start - 1, 0), min(cut.stop + 1, lp.shape[1]))
+        inner = slice(cut.start - wide.start, cut.stop - wide.start)
+        n_wide = wide.stop - wide.start
+        ratio = np.empty((len(wheels_yq), n_wide))
         for r, p in enumerate(wheels_yq):
-            q = lp[index[f"Q_{p}"]]
-            if np.any(q[cut] == 0.0):
+            q = lp[index[f"Q_{p}"], wide]
+            if np.any(q[inner] == 0.0):
                 raise InvalidSignal(
                     f"section {sec.id}: Q_{p} is exactly 0 kN inside the evaluated range; "
                     f"Y/Q is undefined")
-            np.divide(lp[index[f"Y_{p}"]], q, out=ratio[r])
-        sumy = np.empty((len(wsets), lp.shape[1]))
+            np.divide(lp[index[f"Y_{p}"], wide], q, out=ratio[r])
+        sumy = np.empty((len(wsets), n_wide))
         for r, ws in enumerate(wsets):
-            np.add(lp[index[f"Y_w{ws[2:]}L"]], lp[index[f"Y_w{ws[2:]}R"]], out=sumy[r])
-        rows = np.vstack([lp[[index[f"Y_{p}"] for p in wheels_y]][:, cut] if wheels_y else
-                          np.empty((0, n_eval)),
-                          lp[[index[f"Q_{p}"] for p in wheels_q]][:, cut] if wheels_q else
-                          np.empty((0, n_eval)),
-                          ratio[:, cut], sumy[:, cut]])
+            np.add(lp[index[f"Y_w{ws[2:]}L"], wide], lp[index[f"Y_w{ws[2:]}R"], wide],
+                   out=sumy[r])
+        rows = np.empty((len(wheels_y) + len(wheels_q) + len(wheels_yq) + len(wsets), n_eval))
+        r = 0
+        for name in [f"Y_{p}" for p in wheels_y] + [f"Q_{p}" for p in wheels_q]:
+            rows[r] = lp[index[name], cut]
+            r += 1
+        rows[r:r + len(wheels_yq)] = ratio[:, inner]
+        rows[r + len(wheels_yq):] = sumy[:, inner]
         pct = _row_percentiles(rows) if rows.shape[0] else np.empty((0, 3))
         r = 0
         for fam, positions in (("Y", wheels_y), ("Q", wheels_q), ("YQ", wheels_yq),
@@ -343,7 +350,8 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
                     prov[("Q_max", p)] = base + ("99.85 % value", pct_text)
         slide_rows = np.vstack([ratio, sumy])
         if slide_rows.shape[0]:
-            _, means = sliding_mean_distance(slide_rows, d, sec.eval_start_m, sec.eval_end_m)
+            _, means = sliding_mean_distance(slide_rows, d[wide], sec.eval_start_m,
+                                             sec.eval_end_m)
             spct = _row_percentiles(means)
             slide_text = (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
                           f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "

@@ -192,28 +192,37 @@ def _filtfilt_cols_kernel(sos, zi, edge, data_t, out_t):  # pragma: no cover - c
 _BLOCK = 8
 
 
-def filtfilt_rows(data: np.ndarray, fs: float, kind: str, order: int = DEFAULT_ORDER) -> np.ndarray:
-    """Zero-phase filter every row of ``data`` (shape ``(n_signals, n_samples)`` or 1-D).
+def filtfilt_rows(data, fs: float, kind: str, order: int = DEFAULT_ORDER) -> np.ndarray:
+    """Zero-phase filter every row of ``data`` (shape ``(n_signals, n_samples)``, 1-D, or a
+    list of equally long 1-D arrays).
 
     Equal to ``scipy.signal.sosfiltfilt(design(fs, kind, order).sos, data, axis=-1)`` (same
-    padding and initial conditions) to rounding; returns a new float64 array of equal shape.
-    Units are those of ``data``; ``fs`` in Hz.
+    padding and initial conditions) to rounding; returns a new float64 array of shape
+    ``(n_signals, n_samples)`` (1-D for 1-D input). Units are those of ``data``; ``fs`` in Hz.
     """
     d = design(float(fs), kind, order)
-    arr = np.asarray(data, dtype=np.float64)
-    one_d = arr.ndim == 1
-    if one_d:
-        arr = arr[np.newaxis, :]
-    if arr.ndim != 2:
-        raise InvalidSignal(f"filtfilt_rows expects a 1-D or 2-D array, got shape {arr.shape}")
-    if arr.shape[1] <= d.edge:
+    if isinstance(data, (list, tuple)):
+        rows = [np.asarray(r, dtype=np.float64) for r in data]
+        one_d = False
+    else:
+        arr = np.asarray(data, dtype=np.float64)
+        one_d = arr.ndim == 1
+        if arr.ndim not in (1, 2):
+            raise InvalidSignal(f"filtfilt_rows expects a 1-D or 2-D array, got shape {arr.shape}")
+        rows = [arr] if one_d else list(arr)
+    if not rows:
+        return np.empty((0, 0))
+    n = rows[0].shape[0]
+    if any(r.shape != (n,) for r in rows):
+        raise InvalidSignal("filtfilt_rows: all signals must be 1-D and equally long")
+    if n <= d.edge:
         raise InvalidSignal(
-            f"signal length {arr.shape[1]} samples must exceed the filter padding {d.edge} "
+            f"signal length {n} samples must exceed the filter padding {d.edge} "
             f"samples ({d.label})"
         )
-    out = np.empty(arr.shape, dtype=np.float64)
-    for start in range(0, arr.shape[0], _BLOCK):
-        block_t = np.ascontiguousarray(arr[start:start + _BLOCK].T)
+    out = np.empty((len(rows), n), dtype=np.float64)
+    for start in range(0, len(rows), _BLOCK):
+        block_t = np.stack(rows[start:start + _BLOCK], axis=1)  # time-major copy
         res_t = np.empty_like(block_t)
         _filtfilt_cols_kernel(d.sos, d.zi, d.edge, block_t, res_t)
         out[start:start + _BLOCK] = res_t.T
