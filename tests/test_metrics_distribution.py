@@ -44,6 +44,8 @@ def test_autocorrelation_matches_direct_sum():
     d = x - x.mean()
     direct = np.array([np.dot(d[: 64 - k], d[k:]) for k in range(10)]) / np.dot(d, d)
     np.testing.assert_allclose(autocorrelation(x, 9), direct, rtol=1e-10, atol=1e-12)
+    # with the mean removed, 1 + 2 Σ_{k≥1} ρ_k = 0 exactly: why the n_eff sum is truncated
+    assert 1 + 2 * autocorrelation(x)[1:].sum() == pytest.approx(0.0, abs=1e-12)
 
 
 @pytest.mark.parametrize("method", ["bartlett", "ar1"])

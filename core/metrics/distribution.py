@@ -16,8 +16,9 @@ the measured and the simulated signal and ignore time order (seed 001 §4):
   - ``"bartlett"`` (default): ``n_eff = n / (1 + 2 Σ_{k=1}^{K} (1 − k/n) ρ_k)`` — the
     variance-inflation factor of the mean of a stationary series (Bartlett 1946; Bayley &
     Hammersley 1946), with the sum truncated before the first lag where the sample
-    autocorrelation ``ρ_k`` is ≤ 0 (Thiébaux & Zwiers 1984, who recommend such truncation
-    because the full sum of sample autocorrelations is 0 by construction). We choose it as
+    autocorrelation ``ρ_k`` is ≤ 0. Truncation is necessary: with the mean removed, the
+    sample autocorrelations satisfy ``1 + 2 Σ_{k=1}^{n−1} ρ_k = 0`` exactly, so the full sum
+    is useless (Thiébaux & Zwiers 1984 discuss such truncated estimators). We choose it as
     default because railway signals are narrow-band (hunting, body modes): their
     autocorrelation is far from the geometric decay an AR(1) model assumes.
   - ``"ar1"``: ``n_eff = n (1 − ρ_1)/(1 + ρ_1)`` from the lag-1 autocorrelation alone
