@@ -110,3 +110,21 @@ def test_unknown_names(sqlite_database, campaign_folder):
             service.validate_configuration(s, "demo", "nope")
         with pytest.raises(NotFound, match="campaign 'x' not found"):
             service.validate_configuration(s, "x", "baseline")
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_validate_configurations_equals_single(sqlite_database, tmp_path, workers):
+    write_demo_campaign(tmp_path / "c", n_configs=2, fs=200.0)
+    import_campaign(sqlite_database, tmp_path / "c")
+    many = service.validate_configurations(sqlite_database, "demo", n_boot=50, workers=workers,
+                                           chunk_sections=5)
+    assert list(many) == ["baseline", "variant1"]
+    for name, res in many.items():
+        with sqlite_database.session() as s:
+            single = service.validate_configuration(s, "demo", name, n_boot=50)
+        # the single call found every section in the cache the batch call wrote
+        assert single.info["sections_measured"] == {"cached": 12, "computed": 0}
+        assert single.info["sections_simulated"] == {"cached": 12, "computed": 0}
+        a, b = res.to_dict(), single.to_dict()
+        a.pop("info"), b.pop("info")
+        assert a == b

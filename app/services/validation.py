@@ -127,6 +127,108 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
     return out
 
 
+def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
+                    sections: list[SectionInfo], order: int) -> list[bytes]:
+    """Worker task: load and process some sections of one source; returns packed values.
+    ``db_or_url``: a :class:`db.engine.Database` (in-process) or its URL (worker process)."""
+    from db import repo
+
+    database = _worker_database(db_or_url) if isinstance(db_or_url, str) else db_or_url
+    with database.session() as session:
+        sets = repo.load_signalsets(session, campaign, config, sections=[s.id for s in sections])
+    vals = en14363.evaluate_batch([sets[s.id] for s in sections], sections, order=order)
+    return [_pack(v) for v in vals]
+
+
+_WORKER_DB: dict[str, Any] = {}
+
+
+def _worker_database(url: str):
+    if url not in _WORKER_DB:
+        from db.engine import connect
+
+        _WORKER_DB[url] = connect(url)
+    return _WORKER_DB[url]
+
+
+def validate_configurations(database, campaign_name: str, configs: Sequence[str] | None = None,
+                            *, order: int = DEFAULT_ORDER, n_boot: int = 1000, seed: int = 0,
+                            workers: int = 1, chunk_sections: int = 8,
+                            progress=None) -> dict[str, ValidationResult]:
+    """Validate many configurations (default: all) of a campaign; the DynoTRAIN-scale path.
+
+    ``database``: a :class:`db.engine.Database`. Sections not in the result cache are
+    processed in chunks of ``chunk_sections`` sections of one source, by ``workers``
+    processes (each opens its own connection), then written to the cache by this process.
+    ``progress(stage, fraction, info)`` is called after every chunk.
+    """
+    from concurrent.futures import ProcessPoolExecutor
+
+    from db import repo
+
+    with database.session() as session:
+        camp = repo.get_campaign(session, campaign_name)
+        name = camp.name
+        sections = repo.section_infos(session, camp)
+        vehicle = repo.vehicle_info(session, camp)
+        names = ([c.name for c in repo.list_configurations(session, camp)] if configs is None
+                 else [repo.get_configuration(session, camp, c).name for c in configs])
+        by_id = {s.id: s for s in sections}
+        keys: dict[tuple[str | None, str], str] = {}
+        for source in [None, *names]:
+            hashes = repo.signal_hashes(session, camp, source)
+            meta = _recording_meta(session, camp.id, source)
+            for sid, (dsha, fs, n) in meta.items():
+                if sid in by_id:
+                    keys[(source, sid)] = section_cache_key(by_id[sid], fs, n, dsha,
+                                                            hashes.get(sid, {}), order)
+        cached = _cache_get_many(session, list(keys.values()))
+    values: dict[str | None, dict[str, en14363.SectionValues]] = {s: {} for s in [None, *names]}
+    todo: dict[str | None, list[str]] = {}
+    for (source, sid), key in keys.items():
+        if key in cached:
+            values[source][sid] = _unpack(sid, cached[key])
+        else:
+            todo.setdefault(source, []).append(sid)
+    chunks = [(source, sids[i:i + chunk_sections]) for source, sids in todo.items()
+              for i in range(0, len(sids), chunk_sections)]
+    computed: dict[tuple[str | None, str], bytes] = {}
+
+    def collect(chunk, packed):
+        source, sids = chunk
+        for sid, blob in zip(sids, packed, strict=True):
+            computed[(source, sid)] = blob
+            values[source][sid] = _unpack(sid, blob)
+        if progress is not None:
+            progress("processing sections", len(computed) / max(1, sum(map(len, todo.values()))),
+                     {"done": len(computed)})
+
+    if workers > 1 and len(chunks) > 1:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = [(c, pool.submit(_evaluate_chunk, database.url, name, c[0],
+                                       [by_id[s] for s in c[1]], order)) for c in chunks]
+            for chunk, fut in futures:
+                collect(chunk, fut.result())
+    else:
+        for chunk in chunks:
+            collect(chunk, _evaluate_chunk(database, name, chunk[0],
+                                           [by_id[s] for s in chunk[1]], order))
+    if computed:
+        with database.session() as session:
+            for k, blob in computed.items():
+                repo.cache_put(session, keys[k], blob)
+    measured = values[None]
+    out = {}
+    for cname in names:
+        warnings = _warnings("measurement", measured) + _warnings(f"configuration {cname}",
+                                                                  values[cname])
+        res = validate(measured, values[cname], sections, vehicle, n_boot=n_boot, seed=seed,
+                       warnings=warnings)
+        res.info.update({"campaign": name, "configuration": cname, "filter_order": order})
+        out[cname] = res
+    return out
+
+
 def _warnings(label: str, values: Mapping[str, en14363.SectionValues]) -> list[str]:
     return [f"{label}: {w}" for sid in sorted(values) for w in values[sid].warnings]
 
