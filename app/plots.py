@@ -64,10 +64,12 @@ def _curve(x: np.ndarray, y: np.ndarray, label: str, xdim: hv.Dimension, ydim: h
 
 
 def compare_plot(data: CompareData, height: int = 330, downsample: bool = True,
-                 ylim: tuple[float, float] | None = None) -> hv.Overlay:
+                 ylim: tuple[float, float] | None = None) -> hv.Overlay | hv.DynamicMap:
     """Measured vs simulated series (or PSD) of one channel, with the evaluated range shaded."""
-    xdim = hv.Dimension("x", label=data.x_label)
-    ydim = hv.Dimension("y", label=data.y_label)
+    # dimension names decide which axes Panel links across panes: series of one page share
+    # "time"/"distance" and "signal"; a PSD has its own "frequency"/"psd"
+    xdim = hv.Dimension(data.x_label.split(" (")[0], label=data.x_label)
+    ydim = hv.Dimension("psd" if data.log_axes else "signal", label=data.y_label)
     layers: list[Any] = []
     if data.eval_range is not None:
         a, b = data.eval_range
@@ -86,8 +88,8 @@ def compare_plot(data: CompareData, height: int = 330, downsample: bool = True,
     if not layers:
         layers.append(hv.Curve([], xdim, ydim))
     opts: dict[str, Any] = {
-        "title": data.title, "responsive": True, "height": height, "fontsize": FONTS,
-        "show_grid": True, "legend_position": "top_right", "framewise": False,
+        "title": data.title, "xlabel": data.x_label, "ylabel": data.y_label, "responsive": True, "height": height, "fontsize": FONTS,
+        "show_grid": True, "legend_position": "right", "framewise": False,
         "tools": ["hover"], "active_tools": ["box_zoom"],
     }
     if data.log_axes:
@@ -95,6 +97,8 @@ def compare_plot(data: CompareData, height: int = 330, downsample: bool = True,
         if finite:
             lo = min(float(np.min(f[f > 0])) for f in finite if np.any(f > 0))
             hi = max(float(np.max(f)) for f in finite)
+            # six decades below the peak: the filter roll-off would otherwise dominate the axis
+            lo = max(lo, hi * 1e-6)
             opts["ylim"] = (10 ** math.floor(math.log10(lo)), 10 ** math.ceil(math.log10(hi)))
     else:
         if ylim is None and finite:
@@ -102,7 +106,12 @@ def compare_plot(data: CompareData, height: int = 330, downsample: bool = True,
                                max(float(f.max()) for f in finite if f.size))
         if ylim is not None:
             opts["ylim"] = ylim
-    return hv.Overlay(layers).opts(**opts)
+    overlay = layers[0]
+    for layer in layers[1:]:  # `*` keeps DynamicMaps (downsampled curves) dynamic
+        overlay = overlay * layer
+    if not isinstance(overlay, (hv.Overlay, hv.DynamicMap)):
+        overlay = hv.Overlay([overlay])
+    return overlay.opts(hv.opts.Overlay(**opts))
 
 
 def _bars(rows: list[dict[str, Any]], key: str, ci_key: str | None, title: str,
@@ -144,10 +153,10 @@ def validation_bars(rows: list[dict[str, Any]], height: int = 340):
     Returns ``(mean_overlay, mean_bars, std_overlay, std_bars)`` — attach a
     ``hv.streams.Selection1D`` to a ``*_bars`` element to react to clicks.
     """
-    mean_ov, mean_bars = _bars(rows, "mean_norm", "mean_norm_ci", "Normalised mean of D_v (mean / limit)",
+    mean_ov, mean_bars = _bars(rows, "mean_norm", "mean_norm_ci", "Normalised mean (mean / limit)",
                                "mean / limit (–)", True, height)
     std_ov, std_bars = _bars(rows, "std_norm", "std_norm_ci",
-                             "Normalised standard deviation of D_v (std / limit, n − 1)",
+                             "Normalised std (std / limit, n − 1)",
                              "std / limit (–)", False, height)
     return mean_ov, mean_bars, std_ov, std_bars
 

@@ -1,34 +1,54 @@
-"""Curve metrics (Sprague–Geers, Russell, KS, area metric, ISO/TS 18571), raw and
-synchronised, as sortable tables (DESIGN §4)."""
+"""Curve metrics (Sprague–Geers, Russell, KS, area metric, Anderson–Darling, ISO/TS 18571),
+raw and synchronised, as sortable tables (DESIGN §4). Computed per section in a background
+job: the page never freezes."""
 
 from __future__ import annotations
 
 import panel as pn
 
-from app.pages._common import PageBase, table
+from app.pages._common import PageBase, make_dispatch, message, table
 from app.state import AppState, MetricsState
+
+NOTE = ("Signals low-pass 20 Hz and resampled to a common axis (the service says where it "
+        "resampled). *Synchronised*: the lag estimated by cross-correlation within a bounded "
+        "window is removed first (`lag_s`). Click a column header to sort; type in a header "
+        "field to filter.")
 
 
 class MetricsPage(PageBase):
     name_ = "metrics"
+    watch_app = ("campaign", "configuration", "revision", "section")
 
     def __init__(self, app: AppState, **params):
         super().__init__(app, **params)
         self.state = MetricsState(app)
-        self.state.param.watch(lambda *e: self._on_app_change(), ["synchronised"])
-        self.sync = pn.widgets.RadioButtonGroup.from_param(self.state.param.synchronised, name="Signals")
+        self.state.param.watch(lambda *e: self._on_app_change(), ["view", "frame"])
+        self.view = pn.widgets.RadioButtonGroup.from_param(self.state.param.view, name="Signals")
+        self.scope = pn.widgets.RadioButtonGroup.from_param(self.state.param.scope, name="Scope")
+        self.section = pn.widgets.Select.from_param(app.param.section, name="Section", width=160)
+        self.compute_btn = pn.widgets.Button(name="Compute metrics", button_type="primary", width=180)
+        self.compute_btn.on_click(lambda e: self.state.compute(dispatch=make_dispatch()))
+        app.param.watch(lambda e: setattr(self.compute_btn, "disabled", bool(e.new)), ["busy"])
 
     def refresh(self) -> None:
+        controls = pn.Row(self.section, pn.Column(pn.pane.Markdown("Scope", margin=(0, 10)), self.scope),
+                          pn.Column(pn.pane.Markdown("Signals", margin=(0, 10)), self.view),
+                          pn.Column(pn.Spacer(height=18), self.compute_btn))
         df = self.state.table()
+        if df is None or self.state.computed_for != self.state.key():
+            hint = ("Press **Compute metrics** (about 3 s per section; *all sections* runs in the "
+                    "background with a progress bar).")
+            shown = [message(f"Showing {self.state.computed_for}", "info")] if df is not None else []
+            self.body.objects = [controls, pn.pane.Markdown(hint), *shown,
+                                 *( [self._table(df)] if df is not None else [])]
+            return
+        self.body.objects = [controls, pn.pane.Markdown(NOTE, styles={"color": "#555"}), self._table(df)]
+
+    def _table(self, df):
+        df = df.copy()
         num = df.select_dtypes("number").columns
         df[num] = df[num].round(4)
-        tab = table(df, height=560, pagination="local", page_size=50,
-                    header_filters={c: {"type": "input", "func": "like", "placeholder": "filter"}
-                                    for c in df.columns if df[c].dtype == object})
-        self.body.objects = [
-            pn.Row(self.sync, pn.pane.Markdown(
-                "Signals resampled to a common axis; *synchronised*: the lag estimated by "
-                "cross-correlation within a bounded window is removed first. Click a header to "
-                "sort.", styles={"color": "#555"})),
-            tab,
-        ]
+        text_cols = [c for c in ("section", "channel", "unit") if c in df.columns]
+        return table(df, height=560, pagination="local", page_size=50, frozen_columns=text_cols[:2],
+                     header_filters={c: {"type": "input", "func": "like", "placeholder": "filter"}
+                                     for c in text_cols})

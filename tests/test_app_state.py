@@ -1,0 +1,206 @@
+"""UI state of the web app without a browser (app/state.py, STYLE habit 9).
+
+The campaign is the demo folder of ``tests/factories`` imported into a fresh SQLite
+database once per module (12 sections, 4 zones, 2 configurations).
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+
+import numpy as np
+import pytest
+import scipy.signal
+
+from app.state import (
+    MEASURED,
+    AppState,
+    Backend,
+    CampaignOverview,
+    CompareState,
+    ConfigInfo,
+    DashboardState,
+    DiagnoseState,
+    _channel_for,
+)
+from core.types import SectionInfo
+
+
+@pytest.fixture(scope="module")
+def demo_db(tmp_path_factory):
+    from db.engine import connect
+    from db.importer import import_campaign
+    from tests.factories import write_demo_campaign
+
+    tmp = tmp_path_factory.mktemp("appstate")
+    manifest = write_demo_campaign(tmp / "demo", n_sections=12, n_configs=2, name="demo")
+    db = connect(f"sqlite:///{tmp / 'app.db'}")
+    db.init()
+    import_campaign(db, manifest.parent)
+    yield db
+    db.dispose()
+
+
+@pytest.fixture
+def app(demo_db):
+    return AppState(Backend(demo_db))
+
+
+def test_app_state_selects_first_campaign_and_its_lists(app):
+    assert app.campaign == "demo"
+    assert app.param.configuration.objects[0] == "baseline"
+    assert app.configuration == "baseline"
+    assert len(app.param.section.objects) == 12
+    assert app.section == app.param.section.objects[0]
+    assert "Y_w1L" in app.param.channel.objects
+    ov = app.overview
+    assert sum(ov.zone_counts().values()) == 12
+    assert ov.children()[None] == ["baseline"]  # the root of the lineage tree
+
+
+def test_open_compare_switches_page_and_selection(app):
+    target_section = app.param.section.objects[5]
+    app.open_compare(target_section, "ay_cb_b2")
+    assert (app.page, app.section, app.channel) == ("compare", target_section, "ay_cb_b2")
+
+
+def _overview(zones: list[int], kinds: dict[str, int]) -> CampaignOverview:
+    sections = [SectionInfo(f"S{i}", 500.0, 0.0, 80.0, z, 0.0, 100.0) for i, z in enumerate(zones)]
+    channels = [{"name": f"{k}_{i}", "kind": k, "position": str(i), "unit": ""}
+                for k, n in kinds.items() for i in range(n)]
+    return CampaignOverview("c", "", {}, sections, channels,
+                            [ConfigInfo("a", None), ConfigInfo("b", "a"), ConfigInfo("c", "a")])
+
+
+def test_coverage_shortfalls_are_precise():
+    # 11 sections, zone 3 with 2 sections and az_cb with one signal: three precise messages
+    ov = _overview([1, 1, 1, 2, 2, 2, 3, 3, 4, 4, 4], {"Y": 8, "Q": 8, "ay_cb": 2, "az_cb": 1})
+    assert ov.coverage_shortfalls() == [
+        "11 sections, needs 12",
+        "zone 3 has 2 sections, needs 3",
+        "channel kind az_cb has 1 signal, needs 2",
+    ]
+    full = _overview([1, 2, 3, 4] * 3, {"Y": 2, "Q": 2, "ay_cb": 2, "az_cb": 2})
+    assert full.coverage_shortfalls() == []
+    assert full.children() == {None: ["a"], "a": ["b", "c"]}
+
+
+@pytest.mark.parametrize(("quantity", "position", "expected"), [
+    ("Y_qst", "w2R", "Y_w2R"),
+    ("YQ_max", "w1L", "Y_w1L"),      # Y/Q is formed from Y and Q: Y is shown
+    ("SumY_max", "ws1", "Y_w1L"),    # ΣY of wheelset 1: its left-wheel Y
+    ("ay_rms", "b2", "ay_cb_b2"),
+    ("az_max", "b1", "az_cb_b1"),
+])
+def test_channel_for_quantity_position_uses_the_registry(quantity, position, expected):
+    chans = [f"{k}_w{n}{s}" for k in ("Y", "Q") for n in (1, 2) for s in "LR"] + \
+            [f"{k}_{p}" for k in ("ay_cb", "az_cb") for p in ("b1", "b2")]
+    assert _channel_for(quantity, position, chans) == expected
+
+
+def test_compare_series_measured_first_eval_range_and_filter(app):
+    cmp = CompareState(app)
+    app.section = app.param.section.objects[0]
+    app.channel = "Y_w1L"
+    cmp.configurations = ["baseline", "variant1"]
+    sources = cmp.sources()
+    assert [label for label, _ in sources] == [MEASURED, "baseline", "variant1"]
+    raw = cmp.series("raw", sources=sources)
+    en = cmp.series("EN-filtered", sources=sources)
+    assert raw.traces[0].measured and not raw.traces[1].measured
+    assert raw.x_label == "time (s)" and raw.y_label == "Y_w1L (kN)"
+    # evaluated range on the time axis: the times at which the measured distance crosses it
+    sec = app.overview.sections[0]
+    ss = sources[0][1]
+    t_start = np.interp(sec.eval_start_m, ss.distance_m, ss.time_s)
+    assert raw.eval_range[0] == pytest.approx(t_start)
+    # EN-filtered Y: scipy's zero-phase Butterworth low-pass 20 Hz, order 4 (independent path)
+    sos = scipy.signal.butter(4, 20.0, fs=ss.fs, output="sos")
+    expect = scipy.signal.sosfiltfilt(sos, ss.channels["Y_w1L"])
+    np.testing.assert_allclose(en.traces[0].y, expect, rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(raw.traces[0].y, ss.channels["Y_w1L"])
+    cmp.axis = "distance"
+    dist = cmp.series("raw", sources=sources)
+    assert dist.x_label == "distance (m)"
+    assert dist.eval_range == (sec.eval_start_m, sec.eval_end_m)
+
+
+def test_compare_psd_is_welch_of_the_evaluated_part(app):
+    cmp = CompareState(app)
+    app.channel = "az_cb_b1"
+    sources = cmp.sources()
+    psd = cmp.psd(sources=sources)
+    assert psd.log_axes and psd.x_label == "frequency (Hz)"
+    assert psd.y_label == "PSD (m/s²)²/Hz"
+    ss = sources[0][1]
+    sec = app.overview.sections[0]
+    mask = (ss.distance_m >= sec.eval_start_m) & (ss.distance_m <= sec.eval_end_m)
+    sos = scipy.signal.butter(4, [0.4, 10.0], btype="bandpass", fs=ss.fs, output="sos")
+    y = scipy.signal.sosfiltfilt(sos, ss.channels["az_cb_b1"])[mask]
+    f, p = scipy.signal.welch(y, fs=ss.fs, nperseg=round(10 * ss.fs), detrend="linear")
+    np.testing.assert_allclose(psd.traces[0].x, f[1:])
+    np.testing.assert_allclose(psd.traces[0].y, np.maximum(p[1:], 1e-30), rtol=1e-6)
+
+
+def test_run_job_success_progress_and_result(app):
+    seen = []
+    app.run_job("job", lambda progress: (progress(0.5, "half"), 42)[1],
+                on_done=seen.append, background=False)
+    assert seen == [42]
+    assert (app.busy, app.progress, app.status_level) == (False, 1.0, "success")
+
+
+def test_run_job_error_lands_in_status(app):
+    def fail(progress):
+        raise ValueError("bad parameter k = -1, must be > 0")
+    app.run_job("calibration", fail, background=False)
+    assert app.status_level == "error"
+    assert "calibration failed: ValueError: bad parameter k = -1, must be > 0" == app.status
+    assert app.busy is False
+
+
+def test_run_job_in_thread_refuses_a_second_job(app):
+    gate = threading.Event()
+    t = app.run_job("long", lambda progress: gate.wait(5))
+    assert app.busy
+    assert app.run_job("other", lambda progress: 1) is None
+    assert app.status_level == "warning" and "another job" in app.status
+    gate.set()
+    t.join(5)
+    assert not app.busy and app.status_level == "success"
+
+
+def test_dispatch_receives_every_state_change(app):
+    calls = []
+
+    def dispatch(fn):
+        calls.append(fn)
+        fn()
+    app.run_job("job", lambda progress: progress(0.25, "quarter"), dispatch=dispatch, background=False)
+    assert len(calls) == 2  # one progress update, one completion
+
+
+def test_dashboard_summary_and_drilldown(app):
+    dash = DashboardState(app)
+    summary = dash.summary()
+    qs = [r["quantity"] for r in summary["quantities"]]
+    assert len(qs) == 12 and "Y_qst" in qs
+    rows = dash.drilldown("Y_max")
+    assert rows and all(abs(a["D_v"]) >= abs(b["D_v"]) for a, b in itertools.pairwise(rows))
+    limit = next(r["std_limit"] for r in summary["quantities"] if r["quantity"] == "Y_max")
+    assert rows[0]["norm"] == pytest.approx(rows[0]["D_v"] / limit)
+    # D_v = (S_v − M_v)·sign(M_v) (seed 000 eq. 4)
+    r = rows[0]
+    assert r["D_v"] == pytest.approx((r["S_v"] - r["M_v"]) * np.sign(r["M_v"]))
+    dash.open_row(r)
+    assert app.page == "compare" and app.section == r["section"] and app.channel.startswith("Y_")
+
+
+def test_diagnose_suggested_name_is_unique(app):
+    diag = DiagnoseState(app)
+    diag.param.effect.objects = ["friction_damping"]
+    diag.effect = "friction_damping"
+    assert diag.suggested_name() == "baseline+friction_damping"
+    app.param.configuration.objects = ["baseline", "variant1", "baseline+friction_damping"]
+    assert diag.suggested_name() == "baseline+friction_damping-2"
