@@ -206,13 +206,16 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
 
         config_sets = repo.load_signalsets(s, campaign, config)
     registry = _effect_registry()
-    todo = [e for e in (effects or registry) if e not in conf_effects]
-    unknown = [e for e in todo if e not in registry]
+    unknown = [e for e in (effects or ()) if e not in registry]
     if unknown:
         raise InvalidParameter(f"unknown effect(s) {unknown}; known: {sorted(registry)}")
-    base_values = _values(config_sets, ctx.sections)
-    residual, vr = residual_pattern(ctx, base_values, _band_sum(config_sets, ctx.bands))
-    tasks, index = [], []
+    template = str(ctx.vehicle.get("template") or "coach")
+    todo = [e for e in (effects or registry) if e not in conf_effects
+            and template in getattr(registry[e], "templates", (template,))]
+    stored_residual, vr = residual_pattern(ctx, _values(config_sets, ctx.sections), _band_sum(config_sets, ctx.bands))
+    # the configuration itself is re-simulated so that its residual and the scanned patterns
+    # come from the same simulator run settings (signatures are differences of the two)
+    tasks, index = [(ctx, conf_effects, conf_params)], [None]
     for e in todo:
         spec = registry[e]
         for pname, p in _effect_parameters(spec).items():
@@ -226,7 +229,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         results = ex.map(_evaluate_effects, tasks,
                          progress=lambda d, t: _report(progress, "simulate", 0.05 + 0.9 * d / t, done=d, total=t))
     scans: dict[str, dict[str, ParameterScan]] = {}
-    for (e, pname, v, defaults, bounds), (vals, bands) in zip(index, results, strict=True):
+    residual, _ = residual_pattern(ctx, *results[0])
+    for (e, pname, v, defaults, bounds), (vals, bands) in zip(index[1:], results[1:], strict=True):
         pat, _ = residual_pattern(ctx, vals, bands)
         sc = scans.setdefault(e, {}).setdefault(pname, ParameterScan(e, pname, [], [], defaults, bounds))
         sc.values.append(v)
@@ -235,7 +239,9 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     res = diagnose_patterns(residual, {e: list(d.values()) for e, d in scans.items()}, explanations=explanations)
     res.extra.update({"campaign": ctx.campaign, "configuration": config, "validated": bool(vr.validated),
                       "effects_in_configuration": sorted(conf_effects),
-                      "values_per_parameter": values_per_parameter, "simulations": len(tasks)})
+                      "values_per_parameter": values_per_parameter, "simulations": len(tasks),
+                      "stored_residual_norm": math.sqrt(stored_residual.norm2()),
+                      "simulated_residual_norm": math.sqrt(residual.norm2())})
     _report(progress, "done", 1.0)
     return res
 
@@ -436,7 +442,7 @@ def modal(database_or_session: Any, campaign: str, *, sections: Sequence[str] | 
             from db import repo
 
             vparams = repo.vehicle_info(s, campaign)["parameters"]
-        base = {k: float(vparams[k]) for k in COACH_MODAL_DEFAULTS if k in vparams}
+        base = _coach_modal_base(vparams)
         best = sorted(ident.modes, key=lambda m: -m.n_stable)[:n_modes]
         best.sort(key=lambda m: m.freq_hz)
         if len(best) < 1:
@@ -447,3 +453,20 @@ def modal(database_or_session: Any, campaign: str, *, sections: Sequence[str] | 
         out["calibration"] = res.to_dict()
     _report(progress, "done", 1.0)
     return out
+
+
+def _coach_modal_base(vehicle_parameters: Mapping[str, Any]) -> dict[str, float]:
+    """Coach modal model values from the simulator's coach template defaults overlaid by the
+    campaign's vehicle parameters (``bogie_centres`` → ``bogie_half_distance``)."""
+    merged: dict[str, float] = {}
+    try:
+        from core.sim.vehicles import template_parameters
+
+        merged.update({p.name: float(p.default) for p in template_parameters("coach")})
+    except ImportError:  # pragma: no cover - the simulator ships with railval
+        pass
+    merged.update({k: float(v) for k, v in vehicle_parameters.items() if isinstance(v, (int, float))})
+    base = {k: merged[k] for k in COACH_MODAL_DEFAULTS if k in merged}
+    if "bogie_centres" in merged:
+        base["bogie_half_distance"] = merged["bogie_centres"] / 2.0
+    return base
