@@ -1,0 +1,171 @@
+"""The effect library: ONE registry of the physical effects a user can switch on in the built-in
+simulator (DESIGN §6), with parameters (unit, default, bounds), a plain-language explanation
+and the EN 14363 quantities / zones / frequency bands each is expected to move.
+
+``EFFECTS[id]`` is an :class:`Effect`; :func:`resolve_effects` checks a configuration's
+``{effect id: {parameter: value}}`` dict and fills defaults. Unknown ids or parameters and
+out-of-bounds values raise :class:`core.errors.InvalidParameter` naming the effect, the
+parameter, the bounds and the value.
+
+How each effect enters the equations is in :mod:`core.sim.model` (``_apply_effects``) and in
+``docs/simulator.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from core.errors import InvalidParameter
+from core.sim.params import Param, resolve
+
+QUANTITY_IDS = ("Y_qst", "Q_qst", "YQ_qst", "SumY_qst", "Y_max", "Q_max", "YQ_max", "SumY_max",
+                "ay_rms", "az_rms", "ay_max", "az_max")
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One switchable physical effect."""
+
+    id: str
+    title: str
+    explanation: str
+    parameters: dict[str, Param]
+    quantities: tuple[str, ...]
+    zones: tuple[int, ...]
+    bands_hz: tuple[tuple[float, float], ...] = ()
+    templates: tuple[str, ...] = ("coach", "wagon")
+    calibration: str = "continuous"
+    source: str = ""
+    notes: str = ""
+    extra: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {"id": self.id, "title": self.title, "explanation": self.explanation,
+                "parameters": {k: p.to_dict() for k, p in self.parameters.items()},
+                "quantities": list(self.quantities), "zones": list(self.zones),
+                "bands_hz": [list(b) for b in self.bands_hz], "templates": list(self.templates),
+                "calibration": self.calibration, "source": self.source, "notes": self.notes}
+
+
+def _p(*params: Param) -> dict[str, Param]:
+    return {p.name: p for p in params}
+
+
+_LIST = [
+    Effect(
+        "friction_damping", "Friction in the suspension (Coulomb / Saint-Venant)",
+        "Dry friction in the secondary suspension (coach: vertical and lateral, e.g. sliding "
+        "pads, side bearers, air-spring emergency rubbers; wagon: added to the native leaf-spring "
+        "and link friction). Below the breakaway force the spring is locked and the car body "
+        "rides on the stiffer friction element, so small high-frequency inputs pass to the car "
+        "body: the car body accelerations rise, above all in the 2–10 Hz band, while large "
+        "low-frequency motions are damped.",
+        _p(Param("force_kN", "kN", 1.5, 0.0, 6.0, "breakaway friction force per spring (vertical and lateral)")),
+        ("ay_rms", "az_rms", "ay_max", "az_max"), (1, 2, 3, 4), ((2.0, 10.0),),
+        source="Saint-Venant element (spring k_stick in series with a Coulomb slider); Iwnicki 2006 ch. 7"),
+    Effect(
+        "damper_series_stiffness", "Damper with series stiffness (Maxwell element)",
+        "Real hydraulic dampers sit on rubber bushes and contain compressible oil, so each damper "
+        "is a dashpot in series with a spring. Above the corner frequency k/(2πc) the damper no "
+        "longer damps but acts as a spring. For the yaw dampers this lowers the bogie's yaw "
+        "damping at the hunting frequency: more bogie lateral motion, higher guiding forces and "
+        "lateral accelerations on straight track and in large-radius curves at speed.",
+        _p(Param("k_series_MN_m", "MN/m", 4.0, 0.5, 50.0, "series stiffness of every damper (yaw, lateral, vertical secondary)")),
+        ("Y_max", "SumY_max", "YQ_max", "ay_rms", "ay_max"), (1, 2), ((1.0, 10.0),), templates=("coach",),
+        source="Maxwell model, exact exponential update; Alonso & Giménez, VSD 2008 (yaw damper series stiffness)"),
+    Effect(
+        "carbody_flexibility", "Car body first vertical bending mode",
+        "The car body is not rigid: its first vertical bending mode (typically 8–12 Hz for a "
+        "coach) is excited through the secondary suspension and shows in the car body vertical "
+        "accelerations above the bogies as a peak near the bending frequency.",
+        _p(Param("frequency_Hz", "Hz", 8.0, 6.0, 16.0, "first vertical bending frequency"),
+           Param("damping_ratio", "-", 0.02, 0.005, 0.1, "modal damping ratio")),
+        ("az_rms", "az_max"), (1, 2, 3, 4), ((5.0, 12.0),),
+        source="free–free Euler–Bernoulli beam first mode (βL = 4.730), modal mass = car body mass"),
+    Effect(
+        "track_flexibility", "Vertical and lateral track stiffness and damping",
+        "The rails are not rigid: they sit on pads, sleepers and ballast. A flexible track lets "
+        "the wheelset move vertically on the track stiffness (changing the dynamic wheel forces) "
+        "and the rail move laterally under the guiding forces, softening the flange contact: "
+        "lower peaks of the guiding force in curves and of Y/Q.",
+        _p(Param("k_vertical_MN_m", "MN/m", 40.0, 15.0, 300.0, "vertical track stiffness per wheel"),
+           Param("k_lateral_MN_m", "MN/m", 15.0, 5.0, 200.0, "lateral track stiffness per wheelset (both rails)")),
+        ("Y_max", "YQ_max", "SumY_max", "Q_max"), (3, 4), ((2.0, 20.0),),
+        source="massless vertical track spring-damper per wheel (c = 50 kN·s/m), lateral track mass "
+               "1200 kg per wheelset with c = 100 kN·s/m; Knothe & Grassie, VSD 22, 1993 (magnitudes)"),
+    Effect(
+        "wheel_rail_friction", "Wheel–rail friction coefficient",
+        "The creep forces saturate at μ·Q. Measurements are often made on wet or contaminated "
+        "rails with μ well below the dry value the model assumes; in small-radius curves the "
+        "creep forces are saturated, so μ directly sets the lateral force of the inner wheels "
+        "and the steering of the leading wheelset: guiding forces, ΣY and Y/Q change in zones 3–4.",
+        _p(Param("mu", "-", 0.25, 0.1, 0.6, "friction coefficient")),
+        ("Y_qst", "YQ_qst", "SumY_qst", "Y_max", "YQ_max", "SumY_max"), (3, 4), (),
+        source="Shen, Hedrick & Elkins 1983 saturation of Kalker's linear creep forces"),
+    Effect(
+        "conicity", "Equivalent conicity of the measured (worn) profiles",
+        "The model uses the nominal conicity of new profiles; the measured wheel and rail "
+        "profiles give another equivalent conicity. Higher conicity shortens the kinematic "
+        "wavelength (Klingel), raises the bogie's lateral activity and the car body lateral "
+        "accelerations on straight track, and improves steering in curves.",
+        _p(Param("conicity", "-", 0.35, 0.02, 0.6, "equivalent conicity")),
+        ("ay_rms", "ay_max", "Y_max", "SumY_max", "Y_qst"), (1, 2, 3, 4), ((1.0, 6.0),),
+        source="UIC 519 equivalent conicity; Klingel wavelength 2π·sqrt(r0·b0/λe)"),
+    Effect(
+        "measured_irregularities", "Measured instead of generated track irregularities",
+        "The baseline model runs on random irregularities generated from a standard spectrum "
+        "(ORE B176 low level): statistically plausible, but not the track the vehicle ran on. "
+        "Switching to the measured irregularities of every section (recorded with the campaign) "
+        "changes the accelerations and dynamic forces section by section; `scale` is the gain "
+        "of the track recording (chord/transfer-function uncertainty) and is what calibration fits.",
+        _p(Param("scale", "-", 1.0, 0.5, 1.5, "gain applied to the measured irregularities")),
+        ("ay_rms", "az_rms", "ay_max", "az_max", "Q_max", "Y_max", "YQ_max", "SumY_max"), (1, 2, 3, 4),
+        ((0.4, 10.0),),
+        source="layout['irregularities'] of each section (see docs/simulator.md)"),
+    Effect(
+        "parasitic_yaw_stiffness", "Bogie yaw resistance (parasitic yaw stiffness)",
+        "Besides the secondary springs' shear, the bogie's rotation against the car body is "
+        "resisted by traction rods, side bearers, damper bushes and cables. In a curve the bogie "
+        "must turn by about (bogie distance / 2) / R against the car body; the resisting moment "
+        "is reacted by the wheelsets as extra guiding force on the leading outer wheel: "
+        "quasi-static Y, Y/Q and ΣY rise in small-radius curves (zones 3–4), much less elsewhere.",
+        _p(Param("k_yaw_kNm_rad", "kN*m/rad", 600.0, 0.0, 3000.0, "yaw stiffness per bogie")),
+        ("Y_qst", "YQ_qst", "SumY_qst", "Y_max", "YQ_max", "SumY_max"), (3, 4), (),
+        source="rotational spring between car body and bogie; Iwnicki 2006 ch. 7 (bogie yaw resistance)"),
+    Effect(
+        "lateral_bumpstop", "Secondary lateral clearance and bump stop",
+        "The car body's lateral travel on the secondary suspension is limited by bump stops after "
+        "a free clearance. With high cant deficiency the car body moves outward until it hits the "
+        "stop: the lateral stiffness jumps, the car body lateral accelerations get peaks and the "
+        "quasi-static lateral load shifts between the bogies.",
+        _p(Param("clearance_mm", "mm", 20.0, 5.0, 60.0, "free lateral clearance"),
+           Param("stiffness_kN_mm", "kN/mm", 1.0, 0.2, 10.0, "bump stop stiffness")),
+        ("ay_max", "ay_rms", "Y_max", "SumY_max"), (2, 3, 4), ((0.4, 5.0),),
+        source="piecewise-linear bump stop on the secondary lateral displacement"),
+]
+
+EFFECTS: dict[str, Effect] = {e.id: e for e in _LIST}
+EFFECT_IDS: tuple[str, ...] = tuple(EFFECTS)
+
+
+def get_effect(effect_id: str) -> Effect:
+    try:
+        return EFFECTS[effect_id]
+    except KeyError:
+        raise InvalidParameter(f"unknown effect id {effect_id!r}; known: {list(EFFECT_IDS)}") from None
+
+
+def resolve_effects(effects: dict | None) -> dict[str, dict[str, float]]:
+    """``{id: {param: value}}`` with defaults filled and every value checked against its bounds."""
+    out: dict[str, dict[str, float]] = {}
+    for eid, params in (effects or {}).items():
+        e = get_effect(eid)
+        if params is not None and not isinstance(params, dict):
+            raise InvalidParameter(f"effect {eid!r}: parameters must be a mapping, got {params!r}")
+        out[eid] = resolve(f"effect {eid!r}", tuple(e.parameters.values()), params)
+    return out
+
+
+def registry_dict() -> dict:
+    """The registry as JSON-ready data (for the UI and ``--json`` outputs)."""
+    return {eid: e.to_dict() for eid, e in EFFECTS.items()}

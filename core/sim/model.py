@@ -1,0 +1,370 @@
+"""Assembly of the simulator's arrays from a vehicle template, a section and effects, and the
+public simulation API (:func:`simulate_section`, :func:`simulate_campaign`).
+
+Wheel–rail contact (per wheel, :mod:`core.sim.kernel`)
+-----------------------------------------------------
+* Rolling radius difference from the equivalent conicity λe (UIC 519): r_L − r0 = λe·y_rel, plus
+  a flange-root term 1.5·(y_rel − g/2 − (clearance − 2 mm)) beyond it (steeper radius growth of
+  real profiles near the flange).
+* Creepages (Kalker; Iwnicki 2006 ch. 7): ξx,L = −Δr_L/r0 − b0·ψ̇/v − b0·κ,
+  ξx,R = −Δr_R/r0 + b0·ψ̇/v + b0·κ, ξy = ẏ/v − ψ (spin neglected).
+* Linear creep forces F = −f·ξ with f11 = G·c²·C11, f22 = G·c²·C22, c² = a·b = area/π at Q0
+  (Kalker 1967, C11 = 4.12, C22 = 3.67 for a/b = 1, ν = 0.25), scaled with (Q/Q0)^(2/3) (Hertz),
+  saturated at μ·Q (Shen, Hedrick & Elkins 1983).
+* Lateral component of the normal force (gravitational stiffness): Y_n,L = −Q_L·(γ0 + e·y_rel),
+  Y_n,R = +Q_R·(γ0 − e·y_rel), e = ε/b0 with Wickens' contact angle parameter ε, so the
+  wheelset's gravitational stiffness is W·ε/b0 (Wickens, *Fundamentals of rail vehicle
+  dynamics*, 2003, ch. 2).
+* Flange contact: lateral spring k_flange beyond the clearance (+ half the gauge deviation).
+* Rigid track: wheelset vertical position and roll follow the rail (level ± cross level/2);
+  Q_L + Q_R and Q_L − Q_R follow from the wheelset's vertical and roll equilibrium including the
+  moment r0·ΣY of the lateral contact forces.
+* Quasi-static acceleration in the track plane a_q = v²·κ − g·h/s (s = 1500 mm) acts on every
+  body as a pseudo-force −m·a_q; an accelerometer measures ÿ + a_q + g·φ_body.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing as mp
+import os
+import threading
+from collections.abc import Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core.errors import InvalidParameter
+from core.sim import kernel as K
+from core.sim.effects import resolve_effects
+from core.sim.track import DS, TrackSection
+from core.sim.vehicles import G, VehicleModel
+from core.types import SignalSet
+
+H_SECONDARY = 0.9  # m above rail: secondary spring / yaw damper attachment height (coach)
+H_LEAF = 0.8  # m above rail: leaf spring attachment (wagon)
+LAMBDA_FLANGE_ROOT = 1.5  # additional rolling-radius slope near the flange (-)
+FLANGE_ROOT_ONSET = 0.002  # m before flange contact where the flange-root term starts
+TRACK_CZ = 50e3  # N*s/m per wheel, vertical track damping (track_flexibility)
+TRACK_CY = 100e3  # N*s/m per wheelset, lateral track damping
+TRACK_MY = 1200.0  # kg per wheelset, lateral track participating mass
+K_STICK_Z = 2.0e6  # N/m stick stiffness of the vertical friction element (coach)
+K_STICK_Y = 1.0e6  # N/m stick stiffness of the lateral friction element (coach)
+BETA_L, SIGMA_FF = 4.730040745, 0.982502215  # free–free beam, first bending mode
+
+
+def bending_mode_shape(x: np.ndarray | float, length: float) -> np.ndarray:
+    """First free–free Euler–Bernoulli bending mode at ``x`` (m from the centre), normalised so
+    that the mean of φ² over the length is 1 (modal mass = beam mass). Blevins, *Formulas for
+    natural frequency and mode shape*, table 8-1: βL = 4.7300, σ = 0.9825."""
+    xi = 0.5 + np.asarray(x, float) / length
+    a = BETA_L * xi
+    phi = np.cosh(a) + np.cos(a) - SIGMA_FF * (np.sinh(a) + np.sin(a))
+    grid = np.linspace(0, 1, 2001) * BETA_L
+    ref = np.cosh(grid) + np.cos(grid) - SIGMA_FF * (np.sinh(grid) + np.sin(grid))
+    return phi / math.sqrt(np.mean(ref**2))
+
+
+def kalker_coefficients(vehicle: VehicleModel) -> tuple[float, float]:
+    """f11, f22 (N) at Q0: G·c²·C11, G·c²·C22 with c² = area/π (Kalker 1967)."""
+    p = vehicle.parameters
+    c2 = p["contact_area"] / math.pi
+    return p["shear_modulus"] * c2 * p["kalker_c11"], p["shear_modulus"] * c2 * p["kalker_c22"]
+
+
+@dataclass
+class Assembly:
+    SC: np.ndarray
+    massd: np.ndarray
+    free: np.ndarray
+    xabs: np.ndarray
+    CONN: np.ndarray
+    ws_body: np.ndarray
+    bogie_body: np.ndarray
+    names: list = field(default_factory=list)
+
+
+def _conn_row(**kw) -> np.ndarray:
+    row = np.zeros(K.NCC)
+    for k, v in kw.items():
+        row[getattr(K, "C_" + k.upper())] = v
+    return row
+
+
+def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], speed_ms: float,
+             nuisance: Mapping[str, float] | None = None) -> Assembly:
+    """Kernel arrays for ``vehicle`` with ``effects`` (already resolved) at ``speed_ms``."""
+    p = vehicle.parameters
+    nz = dict(nuisance or {})
+    ef = dict(effects)
+    nb, nw = vehicle.n_bogies, vehicle.n_wheelsets
+    nbody = 1 + nb + nw
+    m = vehicle.masses()
+    massd = np.ones((nbody, 5))
+    free = np.zeros((nbody, 5), dtype=np.bool_)
+    xabs = np.zeros(nbody)
+    tflex = "track_flexibility" in ef
+    if vehicle.template == "coach":
+        massd[0] = [m["carbody"], m["carbody"], p["I_roll_carbody"], p["I_pitch_carbody"], p["I_yaw_carbody"]]
+        hcb = p["h_carbody"]
+    else:
+        mb = m["carbody"]
+        # box body of length L, width 2.8 m, height 2.5 m (uniform), payload included
+        lx, wy, hz = p["L_carbody"], 2.8, 2.5
+        massd[0] = [mb, mb, mb * (wy**2 + hz**2) / 12, mb * (lx**2 + hz**2) / 12, mb * (lx**2 + wy**2) / 12]
+        hcb = p["h_carbody"]
+    free[0] = True
+    xw = vehicle.wheelset_x()
+    bogie_body = np.arange(1, 1 + nb, dtype=np.int64)
+    ws_body = np.arange(1 + nb, 1 + nb + nw, dtype=np.int64)
+    rows = []
+    fr = ef.get("friction_damping", {}).get("force_kN", 0.0) * 1e3
+    kser = ef.get("damper_series_stiffness", {}).get("k_series_MN_m", 0.0) * 1e6
+    kpy = ef.get("parasitic_yaw_stiffness", {}).get("k_yaw_kNm_rad", 0.0) * 1e3
+    bs = ef.get("lateral_bumpstop")
+    bs_cl = bs["clearance_mm"] * 1e-3 if bs else 0.0
+    bs_k = bs["stiffness_kN_mm"] * 1e6 if bs else 0.0
+    asym = float(nz.get("damper_asymmetry", 0.0))
+    if vehicle.template == "coach":
+        c = p["bogie_centres"] / 2
+        a = p["wheelbase"] / 2
+        for j, xb in enumerate((c, -c)):
+            k = 1 + j
+            massd[k] = [p["m_bogie"], p["m_bogie"], p["I_roll_bogie"], p["I_pitch_bogie"], p["I_yaw_bogie"]]
+            free[k] = True
+            xabs[k] = xb
+            rows.append(_conn_row(
+                p=0, c=k, x=xb, b=p["b_secondary"], zp=H_SECONDARY - hcb, zc=H_SECONDARY - p["h_bogie"],
+                kx=p["k_secondary_x"], ky=p["k_secondary_y"], kz=p["k_secondary_z"], cz=p["c_secondary_z"],
+                cy=p["c_secondary_y"], byd=p["b_yaw_damper"], cyd=p["c_yaw_damper"], ksyd=kser, ksz=kser,
+                ksy=kser, kroll=p["k_antiroll"], kpyaw=kpy, bscl=bs_cl, bsk=bs_k, fz=fr, fy=fr,
+                kstz=K_STICK_Z, ksty=K_STICK_Y, asym=asym, w=m["carbody"] * G / 2))
+        for i, x in enumerate(xw):
+            k = 1 + nb + i
+            parent = 1 if i < 2 else 2
+            xabs[k] = x
+            rows.append(_conn_row(
+                p=parent, c=k, x=x - xabs[parent], b=p["b_primary"], zp=p["r0"] - p["h_bogie"], zc=0.0,
+                kx=p["k_primary_x"], ky=p["k_primary_y"], kz=p["k_primary_z"], cz=p["c_primary_z"],
+                w=(m["carbody"] / 2 + m["bogie"]) * G / 2))
+        _ = a
+    else:
+        w_spring = m["carbody"] * G / 4
+        k_link = w_spring / p["link_length"]
+        for i, x in enumerate(xw):
+            k = 1 + i
+            xabs[k] = x
+            rows.append(_conn_row(
+                p=0, c=k, x=x, b=p["b_spring"], zp=H_LEAF - hcb, zc=H_LEAF - p["r0"],
+                kx=k_link, ky=k_link, kz=p["k_leaf_z"], kpyaw=kpy, bscl=bs_cl, bsk=bs_k,
+                fz=p["leaf_friction"] * w_spring + fr, fy=p["link_friction"] * w_spring + fr,
+                fx=p["link_friction"] * w_spring, kstz=3.0 * p["k_leaf_z"], ksty=3.0 * k_link,
+                w=m["carbody"] * G / 2))
+    for i in range(nw):
+        k = 1 + nb + i
+        massd[k] = [m["wheelset"], m["wheelset"], p["I_roll_wheelset"], 1.0, p["I_yaw_wheelset"]]
+        free[k, 0] = True
+        free[k, 4] = True
+        if tflex:
+            free[k, 1] = True
+            free[k, 2] = True
+    CONN = np.array(rows)
+    # ------------------------------------------------------------------ scalars
+    SC = np.zeros(K.NSC)
+    lam = ef["conicity"]["conicity"] if "conicity" in ef else p["conicity"]
+    f11, f22 = kalker_coefficients(vehicle)
+    SC[K.V] = speed_ms
+    SC[K.GRAV] = G
+    SC[K.NW] = nw
+    SC[K.R0] = p["r0"]
+    SC[K.B0] = p["b0"]
+    SC[K.LAM] = lam
+    SC[K.LAM2] = LAMBDA_FLANGE_ROOT
+    SC[K.CLEAR] = p["flange_clearance"]
+    SC[K.YFR] = p["flange_clearance"] - FLANGE_ROOT_ONSET
+    SC[K.KFL] = p["k_flange"]
+    SC[K.GAM0] = p["contact_angle"]
+    SC[K.EPSG] = _contact_slope(p["contact_angle_parameter"], p["b0"])
+    SC[K.F11] = f11
+    SC[K.F22] = f22
+    SC[K.Q0] = vehicle.q0_kN() * 1e3
+    SC[K.MU] = ef["wheel_rail_friction"]["mu"] if "wheel_rail_friction" in ef else p["mu_nominal"]
+    SC[K.SAT] = 1.0
+    if tflex:
+        SC[K.TFLEX] = 1.0
+        SC[K.KTZ] = ef["track_flexibility"]["k_vertical_MN_m"] * 1e6
+        SC[K.CTZ] = TRACK_CZ
+        SC[K.KTY] = ef["track_flexibility"]["k_lateral_MN_m"] * 1e6
+        SC[K.CTY] = TRACK_CY
+        SC[K.MTY] = TRACK_MY
+    xs = vehicle.sensor_x()
+    SC[K.XS1], SC[K.XS2] = xs
+    SC[K.ZSENS] = p["h_sensor"] - hcb
+    if "carbody_flexibility" in ef:
+        fl = ef["carbody_flexibility"]
+        SC[K.FLEX] = 1.0
+        SC[K.FLEX_W] = 2 * math.pi * fl["frequency_Hz"]
+        SC[K.FLEX_Z] = fl["damping_ratio"]
+        SC[K.FLEX_M] = m["carbody"]
+        L = p["L_carbody"]
+        SC[K.PHI_S1], SC[K.PHI_S2] = bending_mode_shape(np.array(xs), L)
+        for r in CONN:
+            if r[K.C_P] == 0:
+                r[K.C_PHIF] = float(bending_mode_shape(r[K.C_X], L))
+    return Assembly(SC, massd, free, xabs, CONN, ws_body, bogie_body)
+
+
+def _contact_slope(eps: float, b0: float) -> float:
+    """Change of the contact angle with lateral displacement, rad/m: ε/b0 (Wickens' contact angle
+    parameter ε, so that the gravitational stiffness of the wheelset is W·ε/b0)."""
+    return eps / b0
+
+
+def channel_names(vehicle: VehicleModel) -> list[str]:
+    """Output channels in kernel column order (core/types.py vocabulary)."""
+    names = []
+    for i in range(vehicle.n_wheelsets):
+        names += [f"Y_w{i + 1}L", f"Y_w{i + 1}R", f"Q_w{i + 1}L", f"Q_w{i + 1}R"]
+    names += ["ay_cb_b1", "ay_cb_b2", "az_cb_b1", "az_cb_b2"]
+    for j in range(vehicle.n_bogies):
+        names += [f"ay_bg_b{j + 1}", f"az_bg_b{j + 1}"]
+    return names
+
+
+def choose_substeps(asm: Assembly, fs_out: float) -> int:
+    """Integer number of steps per output sample so that every explicit rate (creep damping,
+    flange and track springs, dampers) satisfies rate·dt ≤ 0.8 (stability of semi-implicit Euler
+    needs ω·dt < 2 and c·dt/m < 2)."""
+    SC = asm.SC
+    v = SC[K.V]
+    mw = asm.massd[asm.ws_body[0], 0]
+    iw = asm.massd[asm.ws_body[0], 4]
+    f11, f22, b0 = SC[K.F11] * 1.6, SC[K.F22] * 1.6, SC[K.B0]  # 1.6: (Q/Q0)^(2/3) headroom
+    rates = [2 * f22 / (v * mw), 2 * f11 * b0**2 / (v * iw), math.sqrt(SC[K.KFL] / mw)]
+    if SC[K.TFLEX]:
+        mred = mw * SC[K.MTY] / (mw + SC[K.MTY])
+        rates += [2 * f22 / (v * mred), math.sqrt(2 * SC[K.KTZ] / mw), 2 * SC[K.CTZ] / mw]
+    for r in asm.CONN:
+        for kk in (K.C_KX, K.C_KY, K.C_KZ):
+            rates.append(math.sqrt(r[kk] / asm.massd[int(r[K.C_C]), 0]))
+        rates.append(2 * r[K.C_CZ] / asm.massd[int(r[K.C_C]), 0])
+        rates.append(2 * r[K.C_CYD] * r[K.C_BYD] ** 2 / asm.massd[int(r[K.C_C]), 4])
+        rates.append(2 * r[K.C_CYD] * r[K.C_BYD] ** 2 / asm.massd[int(r[K.C_P]), 4])
+    dt_max = 0.8 / max(rates)
+    return max(2, math.ceil(1.0 / (fs_out * dt_max)))
+
+
+def _track_arrays(section: TrackSection, vehicle: VehicleModel, use_measured: bool, scale: float,
+                  margin: float = 40.0) -> dict[str, np.ndarray]:
+    reach = max(abs(x) for x in vehicle.wheelset_x()) + margin
+    s0, s1 = -reach, section.length_m + reach
+    irr = section.irregularity_arrays(s0, s1, scale=scale, use_measured=use_measured)
+    s = irr["s"]
+    kap, phit = section.geometry(s)
+    d1 = lambda a: np.gradient(a, DS)
+    return {"s0": float(s[0]), "kap": kap, "phit": phit, "zv": irr["vertical"], "zv1": d1(irr["vertical"]),
+            "zv2": d1(d1(irr["vertical"])), "cl": irr["cross_level"], "cl1": d1(irr["cross_level"]),
+            "cl2": d1(d1(irr["cross_level"])), "ya": irr["alignment"], "ga": irr["gauge"]}
+
+
+def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSection,
+                     effects: Mapping[str, Mapping[str, float]] | None = None, *, fs_out: float = 200.0,
+                     seed: int | None = None, parameters: Mapping[str, float] | None = None,
+                     channels: Sequence[str] | None = None, nuisance: Mapping[str, float] | None = None,
+                     speed_factor: float = 1.0) -> SignalSet:
+    """Simulate one section; return a :class:`core.types.SignalSet` at ``fs_out`` Hz.
+
+    ``effects``: ``{effect id: {param: value}}`` (see :mod:`core.sim.effects`; defaults filled,
+    bounds checked). Irregularities: generated from the section's ORE B176 level with the
+    section's seed (``seed`` overrides it) unless ``measured_irregularities`` is on and the
+    section carries measured ones. ``parameters``: vehicle template overrides (``model.NAME``
+    or ``NAME``). ``nuisance`` and ``speed_factor`` are used by the synthetic-data generator
+    (truth model) only. Distance axis = car body centre position from the section start (m).
+    """
+    veh = VehicleModel.from_any(vehicle, parameters)
+    ef = resolve_effects(dict(effects or {}))
+    if not (fs_out > 0):
+        raise InvalidParameter(f"fs_out must be > 0 Hz, got {fs_out}")
+    if seed is not None:
+        section = TrackSection(**{**section.__dict__, "seed": int(seed)})
+    use_meas = "measured_irregularities" in ef
+    if use_meas and section.irregularities is None:
+        raise InvalidParameter(f"effect 'measured_irregularities': section {section.id!r} carries no "
+                               "measured irregularities (layout['irregularities'])")
+    scale = ef["measured_irregularities"]["scale"] if use_meas else 1.0
+    v = section.speed_ms * float(speed_factor)
+    asm = assemble(veh, ef, v, nuisance)
+    tr = _track_arrays(section, veh, use_meas, scale)
+    decim = choose_substeps(asm, fs_out)
+    dt = 1.0 / (fs_out * decim)
+    duration = section.length_m / v
+    n_out = int(duration * fs_out)
+    n_steps = n_out * decim
+    names = channel_names(veh)
+    out = np.zeros((n_out, len(names)))
+    K.run_kernel(asm.SC, asm.massd, asm.free, asm.xabs, asm.CONN, asm.ws_body, asm.bogie_body,
+                 tr["s0"], DS, tr["kap"], tr["phit"], tr["zv"], tr["zv1"], tr["zv2"], tr["cl"], tr["cl1"],
+                 tr["cl2"], tr["ya"], tr["ga"], n_steps, dt, decim, out)
+    t = np.arange(n_out) / fs_out + (decim + 1) / 2 * dt
+    want = list(channels) if channels is not None else names
+    chans = {n: np.ascontiguousarray(out[:, j]) for j, n in enumerate(names) if n in want}
+    return SignalSet(fs=float(fs_out), time_s=t, distance_m=v * t, channels=chans)
+
+
+# ------------------------------------------------------------------------------- campaigns
+_POOL: ProcessPoolExecutor | None = None
+_POOL_WORKERS = 0
+
+
+def _pool(workers: int) -> ProcessPoolExecutor:
+    global _POOL, _POOL_WORKERS
+    if _POOL is None or _POOL_WORKERS != workers:
+        if _POOL is not None:
+            _POOL.shutdown(wait=False, cancel_futures=True)
+        method = "fork" if threading.active_count() == 1 and "fork" in mp.get_all_start_methods() else "forkserver"
+        _POOL = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(method))
+        _POOL_WORKERS = workers
+    return _POOL
+
+
+def _run_one(task):
+    veh, sec, effects, fs, channels, nuisance, speed_factor = task
+    return simulate_section(veh, sec, effects, fs_out=fs, channels=channels, nuisance=nuisance,
+                            speed_factor=speed_factor)
+
+
+def simulate_campaign(vehicle, sections: Sequence, *, layouts: Mapping[str, dict | None] | None = None,
+                      effects: Mapping[str, Mapping[str, float]] | None = None,
+                      parameters: Mapping[str, float] | None = None, channels: Sequence[str] | None = None,
+                      fs: float | Mapping[str, float] = 200.0, workers: int | None = None,
+                      progress=None, **_ignored) -> dict[str, SignalSet]:
+    """Simulate every section; ``sections`` are :class:`TrackSection` or
+    :class:`core.types.SectionInfo` (then ``layouts[id]`` gives the layout record). Returns
+    ``{section id: SignalSet}``. ``fs``: one rate or ``{section id: rate}``.
+
+    ``workers``: processes (default: 2 in the main process for ≥ 3 sections, 1 inside a
+    worker process — the diagnosis parallelises over candidates itself). Results are identical
+    for any number of workers. ``progress(done, total)`` is called after each section.
+    """
+    veh = VehicleModel.from_any(vehicle, parameters)
+    ef = resolve_effects(dict(effects or {}))
+    secs = [s if isinstance(s, TrackSection) else TrackSection.from_info(s, (layouts or {}).get(s.id))
+            for s in sections]
+    tasks = [(veh, s, ef, float(fs.get(s.id, 200.0) if isinstance(fs, Mapping) else fs), channels, None, 1.0)
+             for s in secs]
+    if workers is None:
+        workers = min(2, os.cpu_count() or 1) if (mp.current_process().name == "MainProcess" and len(tasks) > 2) else 1
+    out: dict[str, SignalSet] = {}
+    if workers <= 1:
+        for i, t in enumerate(tasks):
+            out[t[1].id] = _run_one(t)
+            if progress:
+                progress(i + 1, len(tasks))
+        return out
+    pool = _pool(workers)
+    for i, (t, res) in enumerate(zip(tasks, pool.map(_run_one, tasks), strict=True)):
+        out[t[1].id] = res
+        if progress:
+            progress(i + 1, len(tasks))
+    return out
