@@ -40,6 +40,8 @@ from core.validation import ValidationResult, validate
 
 #: sections per bulk cache read (SQL IN list)
 _CACHE_CHUNK = 500
+#: sections read per query while the previous chunk is processed
+_PIPELINE_CHUNK = 4
 
 
 def section_cache_key(section: SectionInfo, fs: float, n: int, distance_sha: str,
@@ -116,12 +118,22 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
     out = {sid: _unpack(sid, cached[k]) for sid, k in keys.items() if k in cached}
     missing = [sid for sid in keys if sid not in out]
     if missing:
-        sets = repo.load_signalsets(session, camp, config, sections=missing)
-        computed = en14363.evaluate_batch([sets[s] for s in missing],
-                                          [by_id[s] for s in missing], order=order)
-        for sid, vals in zip(missing, computed, strict=True):
-            repo.cache_put(session, keys[sid], _pack(vals))
-            out[sid] = vals
+        # pipeline: this thread reads chunk k+1 (the caller's session stays in this thread)
+        # while a worker thread processes chunk k (compiled filters and sorts release the GIL)
+        from concurrent.futures import ThreadPoolExecutor
+
+        chunks = [missing[i:i + _PIPELINE_CHUNK] for i in range(0, len(missing), _PIPELINE_CHUNK)]
+        pending = []
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            for chunk in chunks:
+                sets = repo.load_signalsets(session, camp, config, sections=chunk)
+                pending.append((chunk, pool.submit(en14363.evaluate_batch,
+                                                   [sets[s] for s in chunk],
+                                                   [by_id[s] for s in chunk], order=order)))
+            for chunk, fut in pending:
+                for sid, vals in zip(chunk, fut.result(), strict=True):
+                    repo.cache_put(session, keys[sid], _pack(vals))
+                    out[sid] = vals
     if stats is not None:
         stats.update({"cached": len(keys) - len(missing), "computed": len(missing)})
     return out
