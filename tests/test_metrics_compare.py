@@ -154,3 +154,19 @@ def test_registry_is_complete_and_consistent():
     rows = registry_table()
     json.dumps(rows)
     assert {r["name"] for r in rows} == set(METRICS)
+
+
+def test_lowpass_other_cutoff_matches_scipy_and_en_cutoff_uses_en_filter():
+    import scipy.signal
+
+    from core import filters
+    from core.metrics import lowpass
+
+    rng = np.random.default_rng(20)
+    x = rng.normal(size=(2, 3000))
+    sos = scipy.signal.butter(4, 5.0, btype="lowpass", fs=200.0, output="sos")
+    np.testing.assert_allclose(lowpass(x, 200.0, 5.0), scipy.signal.sosfiltfilt(sos, x, axis=-1),
+                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(lowpass(x, 200.0, 20.0), filters.filtfilt_rows(x, 200.0, "lowpass", 4))
+    with pytest.raises(InvalidParameter, match="cut-off"):
+        lowpass(x, 200.0, 150.0)

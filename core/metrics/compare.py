@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 import scipy.signal
 
+from core import filters
 from core.errors import InvalidParameter, InvalidSignal, NotFound
 from core.metrics.grid import common_grid
 from core.metrics.iso18571 import ISOParameters
@@ -149,11 +150,7 @@ def lowpass(data: np.ndarray, fs: float, cutoff_hz: float, order: int = 4) -> np
     if not np.isfinite(cutoff_hz) or not 0 < cutoff_hz < fs / 2:
         raise InvalidParameter(f"low-pass cut-off must lie in (0, fs/2 = {fs / 2:g}) Hz, got {cutoff_hz!r}")
     data = np.atleast_2d(np.asarray(data, dtype=np.float64))
-    try:
-        from core import filters
-    except ImportError:  # pragma: no cover - core.filters ships with railval
-        filters = None
-    if filters is not None and cutoff_hz == filters.LOWPASS_HZ:
+    if cutoff_hz == filters.LOWPASS_HZ:
         return filters.filtfilt_rows(data, fs, "lowpass", order)
     sos = scipy.signal.butter(order, cutoff_hz, btype="lowpass", fs=fs, output="sos")
     return scipy.signal.sosfiltfilt(sos, data, axis=-1)

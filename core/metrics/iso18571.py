@@ -24,8 +24,9 @@ combines four sub-scores, each in [0, 1] (1 = identical):
 Overall rating ``R = 0.4 Z + 0.2 E_P + 0.2 E_M + 0.2 E_S``; grade *excellent* for R > 0.94,
 *good* for R > 0.80, *fair* for R > 0.58, else *poor*.
 
-The DTW kernel is compiled with numba (``cache=True``); it stores only the 2-bit choice per
-cell of the band (uint8), e.g. 20 000 × 4 001 bytes ≈ 80 MB for a 20 000-sample curve.
+The DTW kernel is compiled with numba (``cache=True``); it back-tracks from checkpoints
+(the band row before every block of √N rows, recomputing one block at a time), so memory is
+O(√N · band): ≈ 9 MB for a 20 000-sample curve with the default 10 % band.
 
 References
 ----------
@@ -159,61 +160,103 @@ def phase_score(n_shift: int, n: int, *, max_shift: float = 0.2, kp: float = 1.0
 
 
 @numba.njit(cache=True, nogil=True)
-def _dtw_band_error(x, y, radius):  # pragma: no cover - compiled
-    """Band-constrained DTW of x (comparison) and y (reference), squared local cost; returns
-    (Σ|x_w − y_w|, Σ|y_w|, path length, accumulated cost) along the optimal path."""
+def _dtw_rows(x, y, radius, i_start, i_stop, prev_row, out):  # pragma: no cover - compiled
+    """Accumulated DTW costs of rows ``i_start … i_stop−1`` of the band, from the band of row
+    ``i_start − 1`` (``prev_row``, unused for ``i_start = 0``). ``out[r, b]`` is the cost of
+    cell ``(i, j) = (i_start + r, i_start + r − radius + 1 + b)``; cells off the grid are inf.
+    Recursion: ``D(i, j) = (x_i − y_j)² + min(D(i−1, j−1), D(i−1, j), D(i, j−1))``."""
     n = x.shape[0]
     width = 2 * radius - 1
     inf = np.inf
-    prev = np.full(n, inf)
-    cur = np.full(n, inf)
-    # choice: 1 = from (i-1, j), 2 = from (i, j-1), 3 = from (i-1, j-1)
-    choice = np.zeros((n, width), dtype=np.uint8)
-    for i in range(n):
-        j0 = max(0, i - radius + 1)
+    prev = prev_row
+    for r in range(i_stop - i_start):
+        i = i_start + r
+        row = out[r]
+        lo = i - radius + 1  # column of band index 0
+        j0 = max(0, lo)
         j1 = min(n, i + radius)
+        for b in range(width):
+            row[b] = inf
+        xi = x[i]
+        left = inf
         for j in range(j0, j1):
-            d = x[i] - y[j]
-            cost = d * d
-            if i == 0 and j == 0:
-                cur[j] = cost
-                continue
-            best = inf
-            ch = 0
-            if i > 0 and j > 0 and abs(i - 1 - (j - 1)) < radius:
-                best = prev[j - 1]
-                ch = 3
-            if i > 0 and abs(i - 1 - j) < radius and prev[j] < best:
-                best = prev[j]
-                ch = 1
-            if j > j0 and cur[j - 1] < best:
-                best = cur[j - 1]
-                ch = 2
-            cur[j] = cost + best
-            choice[i, j - i + radius - 1] = ch
-        # every read above stays inside the band of row i (cur) or row i-1 (prev), so
-        # stale values outside the band are never used and need no reset
-        prev, cur = cur, prev
-    total = prev[n - 1]
+            b = j - lo
+            d = xi - y[j]
+            if i == 0:
+                best = 0.0 if j == 0 else left
+            else:
+                # in the band of row i-1, column j-1 has index b and column j index b+1
+                best = prev[b] if j > 0 else inf
+                if b + 1 < width:
+                    best = min(best, prev[b + 1])
+                best = min(best, left)
+            left = d * d + best
+            row[b] = left
+        prev = row
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _dtw_band_error(x, y, radius):  # pragma: no cover - compiled
+    """Band-constrained DTW of x (comparison) and y (reference), squared local cost; returns
+    (Σ|x_w − y_w|, Σ|y_w|, path length, accumulated cost) along the optimal path.
+
+    Memory-lean back-tracking: the forward pass keeps only the band row before every block
+    of ``√N`` rows (checkpoints); the back-track recomputes one block at a time and picks,
+    at each cell, the predecessor of least accumulated cost (diagonal first, then vertical,
+    then horizontal on ties) — the same path a stored-choice implementation follows, at two
+    forward passes and O(√N · band) memory.
+    """
+    n = x.shape[0]
+    width = 2 * radius - 1
+    inf = np.inf
+    seg = max(1, int(math.sqrt(n)))
+    nseg = (n + seg - 1) // seg
+    checkpoints = np.empty((nseg, width))  # band of the row before block k
+    buf = np.empty((seg, width))
+    prev = np.full(width, inf)
+    for k in range(nseg):
+        i0 = k * seg
+        i1 = min(n, i0 + seg)
+        checkpoints[k, :] = prev
+        _dtw_rows(x, y, radius, i0, i1, prev, buf)
+        prev = buf[i1 - i0 - 1].copy()
+    total = prev[radius - 1]  # cell (n-1, n-1)
     i = n - 1
     j = n - 1
     num = 0.0
     den = 0.0
     steps = 0
+    k = nseg - 1
+    i0 = k * seg
+    _dtw_rows(x, y, radius, i0, min(n, i0 + seg), checkpoints[k], buf)
     while True:
         num += abs(x[i] - y[j])
         den += abs(y[j])
         steps += 1
         if i == 0 and j == 0:
             break
-        ch = choice[i, j - i + radius - 1]
-        if ch == 3:
+        b = j - (i - radius + 1)
+        dg = inf
+        vt = inf
+        if i > 0:
+            prow = buf[i - 1 - i0] if i - 1 >= i0 else checkpoints[k]
+            if j > 0:
+                dg = prow[b]
+            if b + 1 < width:
+                vt = prow[b + 1]
+        hz = buf[i - i0][b - 1] if (j > 0 and b > 0) else inf
+        if dg <= vt and dg <= hz:
             i -= 1
             j -= 1
-        elif ch == 1:
+        elif vt <= hz:
             i -= 1
         else:
             j -= 1
+        if i < i0:
+            k -= 1
+            i0 = k * seg
+            _dtw_rows(x, y, radius, i0, min(n, i0 + seg), checkpoints[k], buf)
     return num, den, steps, total
 
 
