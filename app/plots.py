@@ -21,7 +21,7 @@ import holoviews as hv
 import numpy as np
 from holoviews.operation.downsample import downsample1d
 
-from app.state import CompareData, unit_label
+from app.state import CompareData, nice_limits, unit_label
 
 hv.extension("bokeh", logo=False)
 
@@ -34,25 +34,6 @@ FONTS = {"title": "13pt", "labels": "12pt", "xticks": "11pt", "yticks": "11pt", 
 #: signals longer than this are downsampled on the server
 DOWNSAMPLE_ABOVE = 2000
 DOWNSAMPLE_WIDTH = 1000
-
-
-def nice_limits(lo: float, hi: float) -> tuple[float, float]:
-    """Round ``[lo, hi]`` outwards to a 'nice' step (1, 2, 2.5, 5 × 10^k) with ~5 intervals.
-
-    Used for fixed, consistent axis scaling (DESIGN §5). Degenerate ranges are widened
-    symmetrically by one unit of their magnitude (or ±1 around 0).
-    """
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        return (-1.0, 1.0)
-    if hi < lo:
-        lo, hi = hi, lo
-    if hi == lo:
-        pad = abs(lo) or 1.0
-        lo, hi = lo - pad, hi + pad
-    raw = (hi - lo) / 5.0
-    mag = 10.0 ** math.floor(math.log10(raw))
-    step = next(m * mag for m in (1.0, 2.0, 2.5, 5.0, 10.0) if m * mag >= raw)
-    return (math.floor(lo / step + 1e-9) * step, math.ceil(hi / step - 1e-9) * step)
 
 
 def _curve(x: np.ndarray, y: np.ndarray, label: str, xdim: hv.Dimension, ydim: hv.Dimension,

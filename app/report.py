@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from app.state import unit_label
 from core.errors import RailvalError
 from core.types import CHANNEL_KINDS, split_channel
 
@@ -117,11 +118,10 @@ def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: s
     w, h = width - ml - mr, height - mt - mb
     xs = np.concatenate([t[1] for t in traces]) if traces else np.array([0.0, 1.0])
     ys = np.concatenate([t[2] for t in traces]) if traces else np.array([0.0, 1.0])
-    from app.plots import nice_limits
+    from app.state import nice_limits, nice_ticks
 
-    x0, x1 = float(np.min(xs)), float(np.max(xs))
+    x0, x1 = nice_limits(float(np.min(xs)), float(np.max(xs)))
     y0, y1 = nice_limits(float(np.min(ys)), float(np.max(ys)))
-    x1 = x1 if x1 > x0 else x0 + 1
 
     def px(v):
         return ml + w * (np.asarray(v) - x0) / (x1 - x0)
@@ -136,11 +136,11 @@ def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: s
         a, b = max(shade[0], x0), min(shade[1], x1)
         out.append(f'<rect x="{px(a):.1f}" y="{mt}" width="{max(px(b) - px(a), 0):.1f}" height="{h}" '
                    f'fill="#f2c14e" fill-opacity="0.2"/>')
-    for t in np.linspace(y0, y1, 6):
+    for t in nice_ticks(y0, y1):
         out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{py(t):.1f}" y2="{py(t):.1f}" stroke="#e6e6e6"/>'
                    f'<text x="{ml - 6}" y="{py(t) + 4:.1f}" text-anchor="end">{t:.4g}</text>')
-    for t in np.linspace(x0, x1, 6):
-        out.append(f'<text x="{px(t):.1f}" y="{mt + h + 16}" text-anchor="middle">{t:.0f}</text>')
+    for t in nice_ticks(x0, x1):
+        out.append(f'<text x="{px(t):.1f}" y="{mt + h + 16}" text-anchor="middle">{t:.4g}</text>')
     for i, (label, x, y, color) in enumerate(traces):
         pts = " ".join(f"{a:.1f},{b:.1f}" for a, b in zip(px(x), py(y), strict=True))
         out.append(f'<polyline fill="none" stroke="{color}" stroke-width="{1.4 if i == 0 else 1.1}" '
@@ -298,7 +298,7 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
              "<th>mean/limit</th><th>95 % CI</th><th>std/limit</th><th>95 % CI</th><th>verdict</th></tr>")
     for r in rows:
         mci, sci = r.get("mean_norm_ci") or [None, None], r.get("std_norm_ci") or [None, None]
-        h.append(f"<tr><td class='l'>{_esc(r['quantity'])}</td><td>{_esc(r.get('unit', ''))}</td>"
+        h.append(f"<tr><td class='l'>{_esc(r['quantity'])}</td><td>{_esc(unit_label(r.get('unit', '')))}</td>"
                  f"<td>{_fmt(r.get('n'))}</td><td>{_fmt(r.get('mean'))}</td><td>{_fmt(r.get('std'))}</td>"
                  f"<td>{_fmt(r.get('mean_limit'))}</td><td>{_fmt(r.get('std_limit'))}</td>"
                  f"<td>{_fmt(r.get('mean_norm'))}</td><td>{_fmt(mci[0])} … {_fmt(mci[1])}</td>"

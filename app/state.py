@@ -126,15 +126,6 @@ class CampaignOverview:
         return tree
 
 
-def _attr(obj: Any, *names: str, default: Any = None) -> Any:
-    for n in names:
-        if isinstance(obj, dict) and n in obj:
-            return obj[n]
-        if hasattr(obj, n):
-            return getattr(obj, n)
-    return default
-
-
 class Backend:
     """Every call opens one unit of work on ``database`` (``db.engine.Database``)."""
 
@@ -168,7 +159,7 @@ class Backend:
     def campaigns(self) -> list[str]:
         repo = self.repo()
         with self.session() as s:
-            return [_attr(c, "name") if not isinstance(c, str) else c for c in repo.list_campaigns(s)]
+            return [c.name for c in repo.list_campaigns(s)]
 
     def configurations(self, campaign: str) -> list[ConfigInfo]:
         repo = self.repo()
@@ -184,21 +175,11 @@ class Backend:
         with self.session() as s:
             camp = repo.get_campaign(s, campaign)
             sections = list(repo.section_infos(s, camp))
-            vehicle = repo.vehicle_info(s, camp)
-            vdict = vehicle if isinstance(vehicle, dict) else {
-                k: getattr(vehicle, k) for k in ("name", "kind", "secondary_suspension", "Q0_kN", "template")
-                if hasattr(vehicle, k)}
-            chans = []
-            for ch in repo.channels(s, camp):
-                if isinstance(ch, str):
-                    kind, pos = split_channel(ch)
-                    chans.append({"name": ch, "kind": kind, "position": pos,
-                                  "unit": CHANNEL_KINDS.get(kind, "")})
-                else:
-                    chans.append({k: str(_attr(ch, k, default="")) for k in ("name", "kind", "position", "unit")})
-            name = _attr(camp, "name", default=campaign)
-            desc = _attr(camp, "description", default="") or ""
-        return CampaignOverview(name=name, description=desc, vehicle=vdict, sections=sections,
+            vehicle = dict(repo.vehicle_info(s, camp))
+            chans = [{"name": ch.name, "kind": ch.kind, "position": ch.position, "unit": ch.unit}
+                     for ch in repo.channels(s, camp)]
+            name, desc = camp.name, camp.description or ""
+        return CampaignOverview(name=name, description=desc, vehicle=vehicle, sections=sections,
                                 channels=chans, configurations=self.configurations(campaign))
 
     def signals(self, campaign: str, config: str | None, section: str,
@@ -224,10 +205,7 @@ class Backend:
         repo = self.repo()
         with self.session() as s:
             camp = repo.get_campaign(s, campaign)
-            chain = [c if isinstance(c, str) else _attr(c, "name") for c in repo.lineage(s, camp, config)]
-        if chain and chain[0] == config and len(chain) > 1:
-            chain = chain[::-1]  # repo gives newest first: show root → config
-        return chain
+            return [c.name for c in repo.lineage(s, camp, config)]
 
     # -- services
     def validation(self, campaign: str, config: str, refresh: bool = False):
@@ -257,11 +235,7 @@ class Backend:
             mod = importlib.import_module("core.sim.effects")
         except ImportError as exc:
             raise ServiceUnavailable(f"not available: core.sim.effects ({exc})") from exc
-        registry = getattr(mod, "EFFECTS", None) or getattr(mod, "REGISTRY", None)
-        if registry is None:
-            raise ServiceUnavailable("not available: core.sim.effects has no EFFECTS registry")
-        items = registry.values() if isinstance(registry, dict) else registry
-        return [_effect_dict(e) for e in items]
+        return [_effect_dict(e) for e in mod.EFFECTS.values()]
 
     def diagnose(self, campaign: str, config: str, progress: Callable | None = None, **kw: Any):
         """``app.services.diagnosis.diagnose`` → DiagnosisResult (ranked candidates)."""
@@ -307,22 +281,15 @@ def _stage_progress(progress: Callable | None) -> Callable | None:
 
 
 def _effect_dict(effect: Any) -> dict[str, Any]:
-    params = _attr(effect, "parameters", "params", default={}) or {}
-    plist = []
-    items = params.items() if isinstance(params, dict) else [(_attr(p, "name"), p) for p in params]
-    for pname, p in items:
-        plist.append({
-            "name": pname,
-            "unit": _attr(p, "unit", default=""),
-            "default": _attr(p, "default", default=None),
-            "bounds": tuple(_attr(p, "bounds", default=(None, None)) or (None, None)),
-            "doc": _attr(p, "doc", "description", default=""),
-        })
+    """An entry of ``core.sim.effects.EFFECTS`` as a plain dict for the views."""
     return {
-        "name": _attr(effect, "name", "id"),
-        "title": _attr(effect, "title", "label", default=None) or _attr(effect, "name", "id"),
-        "explanation": _attr(effect, "explanation", "description", "doc", default=""),
-        "parameters": plist,
+        "name": effect.id,
+        "title": effect.title,
+        "explanation": effect.explanation,
+        "quantities": list(effect.quantities),
+        "parameters": [{"name": p.name, "unit": p.unit, "default": p.default,
+                        "bounds": (p.lower, p.upper), "doc": p.description}
+                       for p in effect.parameters.values()],
     }
 
 
@@ -601,6 +568,37 @@ class CompareState(param.Parameterized):
             traces=traces, eval_range=None, log_axes=True,
             note=f"Welch, Hann window, {self.psd_segment_s:g} s segments, 50 % overlap",
         )
+
+
+def nice_step(lo: float, hi: float, intervals: int = 5) -> float:
+    """A 'nice' step (1, 2, 2.5, 5 × 10^k) giving about ``intervals`` intervals on [lo, hi]."""
+    raw = (hi - lo) / intervals
+    mag = 10.0 ** math.floor(math.log10(raw))
+    return next(m * mag for m in (1.0, 2.0, 2.5, 5.0, 10.0) if m * mag >= raw)
+
+
+def nice_limits(lo: float, hi: float) -> tuple[float, float]:
+    """Round ``[lo, hi]`` outwards to a multiple of :func:`nice_step` (~5 intervals).
+
+    Used for fixed, consistent axis scaling (DESIGN §5). Degenerate ranges are widened
+    symmetrically by one unit of their magnitude (or ±1 around 0).
+    """
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return (-1.0, 1.0)
+    if hi < lo:
+        lo, hi = hi, lo
+    if hi == lo:
+        pad = abs(lo) or 1.0
+        lo, hi = lo - pad, hi + pad
+    step = nice_step(lo, hi)
+    return (math.floor(lo / step + 1e-9) * step, math.ceil(hi / step - 1e-9) * step)
+
+
+def nice_ticks(lo: float, hi: float) -> list[float]:
+    """Tick positions: the multiples of :func:`nice_step` within [lo, hi]."""
+    step = nice_step(lo, hi)
+    first = math.ceil(lo / step - 1e-9)
+    return [k * step for k in range(first, math.floor(hi / step + 1e-9) + 1)]
 
 
 def unit_label(unit: str) -> str:

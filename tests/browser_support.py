@@ -102,3 +102,17 @@ def screenshot(page, name: str) -> Path:
     path = ARTIFACTS / f"{name}.png"
     page.screenshot(path=str(path), full_page=True)
     return path
+
+
+def demo_database(folder: Path, name: str = "demo", n_configs: int = 2):
+    """A fresh SQLite database in ``folder`` holding the ``tests/factories`` demo campaign
+    (12 sections in 4 zones, ``n_configs`` configurations)."""
+    from db.engine import connect
+    from db.importer import import_campaign
+    from tests.factories import write_demo_campaign
+
+    manifest = write_demo_campaign(folder / name, n_sections=12, n_configs=n_configs, name=name)
+    db = connect(f"sqlite:///{folder / 'app.db'}")
+    db.init()
+    import_campaign(db, manifest.parent)
+    return db

@@ -29,15 +29,9 @@ from core.types import SectionInfo
 
 @pytest.fixture(scope="module")
 def demo_db(tmp_path_factory):
-    from db.engine import connect
-    from db.importer import import_campaign
-    from tests.factories import write_demo_campaign
+    from tests.browser_support import demo_database
 
-    tmp = tmp_path_factory.mktemp("appstate")
-    manifest = write_demo_campaign(tmp / "demo", n_sections=12, n_configs=2, name="demo")
-    db = connect(f"sqlite:///{tmp / 'app.db'}")
-    db.init()
-    import_campaign(db, manifest.parent)
+    db = demo_database(tmp_path_factory.mktemp("appstate"))
     yield db
     db.dispose()
 

@@ -1,0 +1,104 @@
+"""Report builder (app/report.py) and the ``railval report`` verb."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+
+import pytest
+
+from app.report import Report, ReportError, build_report, svg_bars, svg_lines
+from app.state import Backend, nice_ticks
+from tests.browser_support import browser_missing_reason
+
+
+@pytest.fixture(scope="module")
+def demo_db(tmp_path_factory):
+    from tests.browser_support import demo_database
+
+    db = demo_database(tmp_path_factory.mktemp("report"))
+    yield db
+    db.dispose()
+
+
+@pytest.fixture(scope="module")
+def report(demo_db):
+    return build_report(Backend(demo_db), "demo", "baseline", worst_cases=2)
+
+
+def test_nice_ticks_by_hand():
+    assert nice_ticks(0.0, 1250.0) == [0.0, 250.0, 500.0, 750.0, 1000.0, 1250.0]
+    assert nice_ticks(-1.0, 1.5) == pytest.approx([-1.0, -0.5, 0.0, 0.5, 1.0, 1.5])
+
+
+def test_svg_bars_colours_escapes_and_limit_lines():
+    svg = svg_bars(["a<b>", "ok", "gone"], [1.4, -0.3, None], title="T & U", ylabel="x / limit (–)",
+                   limits=(1.0, -1.0))
+    assert svg.count('fill="#c62828"') == 1 and svg.count('fill="#2e7d32"') == 1  # 1.4 > 1 fails
+    assert "a&lt;b&gt;" in svg and "T &amp; U" in svg and "<b>" not in svg
+    assert svg.count('stroke-dasharray="6,4"') == 2
+
+
+def test_svg_lines_measurement_first():
+    import numpy as np
+
+    x = np.linspace(0, 100, 50)
+    svg = svg_lines([("measurement", x, np.sin(x), "#555555"), ("sim", x, np.cos(x), "#1f77b4")],
+                    title="t", xlabel="distance (m)", ylabel="Y (kN)", shade=(20.0, 60.0))
+    assert svg.index('stroke="#555555"') < svg.index('stroke="#1f77b4"')
+    assert "distance (m)" in svg and "Y (kN)" in svg and 'fill="#f2c14e"' in svg
+
+
+def test_report_holds_verdict_quantities_coverage_hashes_and_versions(demo_db, report):
+    html = report.html
+    backend = Backend(demo_db)
+    result = backend.validation("demo", "baseline")
+    assert report.validated == result.validated
+    assert ("VALIDATED" in html) and ("NOT VALIDATED" in html) != result.validated
+    for q in result.quantities:
+        assert f">{q}</td>" in html
+    assert "sample standard deviation" in html and "Coverage" in html
+    assert html.count("class='worst'") == 2
+    # the evidence digest, recomputed independently from the repository's hashes
+    meas, sim = backend.hashes("demo", None), backend.hashes("demo", "baseline")
+    h = hashlib.sha256()
+    for sid in sorted(set(meas) | set(sim)):
+        for ch in sorted(set(meas.get(sid, {})) | set(sim.get(sid, {}))):
+            h.update(f"{sid}\t{ch}\t{meas.get(sid, {}).get(ch, '')}\t{sim.get(sid, {}).get(ch, '')}\n".encode())
+    assert report.digest == h.hexdigest() and report.digest in html
+    n_signals = sum(len(v) for v in meas.values())
+    assert len(re.findall(r"<td class='l'>[0-9a-f]{64}</td>", html)) == 2 * n_signals
+    assert report.versions["numpy"] in html and "railval" in report.versions
+    assert "<script" not in html  # self-contained, prints as displayed
+
+
+def test_report_write_rejects_unknown_extension(report, tmp_path):
+    with pytest.raises(ReportError, match="must be .html or .pdf"):
+        report.write(tmp_path / "r.docx")
+
+
+def test_report_pdf_by_headless_chromium(report, tmp_path):
+    reason = browser_missing_reason()
+    if reason is not None:
+        if os.environ.get("RAILVAL_REQUIRE_BROWSER") == "1":
+            pytest.fail(reason)
+        pytest.skip(reason)
+    small = Report(report.campaign, report.configuration, "<html><body><h1>railval</h1></body></html>",
+                   report.validated, report.generated_at, report.versions)
+    path = small.write(tmp_path / "r.pdf")
+    data = path.read_bytes()
+    assert data.startswith(b"%PDF-") and len(data) > 500
+
+
+def test_cli_report_html_and_errors(demo_db, tmp_path, capsys):
+    from app.cli import main
+
+    out = tmp_path / "baseline.html"
+    assert main(["--db", demo_db.url, "report", "demo", "--config", "baseline", "--out", str(out),
+                 "--worst", "0", "--json"]) == 0
+    doc = capsys.readouterr().out
+    assert '"configuration": "baseline"' in doc and out.read_text().startswith("<!DOCTYPE html>")
+    assert main(["--db", demo_db.url, "report", "demo", "--config", "nope", "--out", str(out)]) == 2
+    assert "configuration 'nope' not found" in capsys.readouterr().err
+    assert main(["--db", demo_db.url, "report", "demo", "--config", "baseline", "--out", "x.txt"]) == 2
