@@ -1,0 +1,1 @@
+"""JSON Schemas of the railval file formats (package data)."""
