@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from sqlalchemy import String, cast, delete, func, literal, null, select, union_all
+from sqlalchemy import String, cast, delete, func, insert, literal, null, select, union_all
 from sqlalchemy.orm import Session
 
 from core.errors import InvalidSignal, NotFound
@@ -37,7 +37,7 @@ from db.models import (
 )
 
 __all__ = [
-    "add_recording",
+    "add_recordings",
     "cache_get",
     "cache_put",
     "channels",
@@ -177,45 +177,37 @@ def lineage(session: Session, campaign: Campaign | str | int, name: str) -> list
     return chain[::-1]
 
 
-def add_recording(
+def add_recordings(
     session: Session,
-    section: Section,
-    configuration: Configuration | None,
-    *,
-    fs: float,
-    t0: float,
-    distance_m: np.ndarray,
-    arrays: Mapping[str, np.ndarray],
+    items: list[tuple[Section, Configuration | None, SignalSet, dict[str, dict[str, Any]]]],
     channel_rows: Mapping[str, Channel],
-    provenance: Mapping[str, dict[str, Any]] | None = None,
-    source_file: str = "",
-) -> Recording:
-    """Encode and add one (already checked) recording with its signals to the session."""
-    dblob, dsha = codec.encode(np.asarray(distance_m, dtype=np.float64))
-    rec = Recording(
-        section=section,
-        configuration=configuration,
-        fs=float(fs),
-        t0=float(t0),
-        n=int(np.asarray(distance_m).shape[0]),
-        distance_blob=dblob,
-        distance_sha256=dsha,
-        source_file=source_file,
-    )
-    session.add(rec)
-    for name, values in arrays.items():
-        a = np.asarray(values, dtype=np.float64)
-        blob, sha = codec.encode(a)
-        rec.signals.append(
-            Signal(
-                channel=channel_rows[name],
-                blob=blob,
-                dtype=a.dtype.str,
-                sha256=sha,
-                provenance=dict((provenance or {}).get(name, {})),
-            )
-        )
-    return rec
+) -> None:
+    """Encode and insert already checked recordings with their signals (fills ``hashes``).
+
+    ``items``: (section, configuration or None for the measurement, signal set, channel →
+    provenance). Recordings go through the ORM; the signals are one bulk INSERT.
+    """
+    recs = []
+    for section, configuration, ss, _prov in items:
+        dblob, dsha = codec.encode(np.asarray(ss.distance_m, dtype=np.float64))
+        rec = Recording(section=section, configuration=configuration, fs=float(ss.fs),
+                        t0=float(ss.time_s[0]), n=len(ss), distance_blob=dblob,
+                        distance_sha256=dsha, source_file="")
+        session.add(rec)
+        recs.append(rec)
+    session.flush()
+    rows = []
+    for rec, (_section, _conf, ss, prov) in zip(recs, items, strict=True):
+        ss.hashes = {}
+        for name, values in ss.channels.items():
+            a = np.asarray(values, dtype=np.float64)
+            blob, sha = codec.encode(a)
+            ss.hashes[name] = sha
+            rows.append({"recording_id": rec.id, "channel_id": channel_rows[name].id,
+                         "blob": blob, "dtype": a.dtype.str, "sha256": sha,
+                         "provenance": dict(prov.get(name, {}))})
+    if rows:
+        session.execute(insert(Signal), rows)
 
 
 def store_configuration(
@@ -287,14 +279,12 @@ def store_configuration(
         )
         session.add(conf)
     stamp = dt.datetime.now(dt.UTC).isoformat()
+    items = []
     for sid, ss in signalsets.items():
         prov = {ch: {"source": "store_configuration", "configuration": name, "stored_at": stamp}
                 for ch in ss.channels}
-        rec = add_recording(
-            session, sections[sid], conf, fs=ss.fs, t0=float(ss.time_s[0]),
-            distance_m=ss.distance_m, arrays=ss.channels, channel_rows=chans, provenance=prov,
-        )
-        ss.hashes = {sig.channel.name: sig.sha256 for sig in rec.signals}
+        items.append((sections[sid], conf, ss, prov))
+    add_recordings(session, items, chans)
     session.flush()
     return conf
 

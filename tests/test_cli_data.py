@@ -23,7 +23,8 @@ def test_init_import_list_export(db_url, tmp_path, capsys):
     assert code == 0 and "already at revision" in out
 
     write_demo_campaign(tmp_path / "c", n_sections=4, fmt="csv", n_configs=2)
-    code, out, _ = _run(capsys, "--db", db_url, "import", str(tmp_path / "c"), "--json")
+    code, out, err = _run(capsys, "--db", db_url, "import", str(tmp_path / "c"), "--json")
+    assert "reading" in err and "12/12" in err  # tqdm progress on stderr, stdout stays JSON
     doc = json.loads(out)
     assert code == 0 and doc["name"] == "demo" and doc["n_sections"] == 4
     assert doc["zones"] == {"1": 1, "2": 1, "3": 1, "4": 1}

@@ -90,30 +90,9 @@ def test_malformed_json(good_db, folder):
     assert "column" in str(err)
 
 
-def test_schema_violation(good_db, folder):
-    m = _manifest(folder)
-    m["vehicle"]["kind"] = "tram"
-    _save(folder, m)
-    _expect(good_db, folder, "campaign.json", "vehicle.kind", "schema violation: 'tram'")
-
-
-def test_schema_violation_missing_key(good_db, folder):
-    m = _manifest(folder)
-    del m["sections"][1]["speed_kmh"]
-    _save(folder, m)
-    _expect(good_db, folder, "campaign.json", "sections[1]", "'speed_kmh' is a required property")
-
-
 def test_missing_data_file(good_db, folder):
     (folder / "measured" / "S02.csv").unlink()
     _expect(good_db, folder, "measured/S02.csv", "sections[1].measured", "does not exist")
-
-
-def test_data_file_outside_folder(good_db, folder):
-    m = _manifest(folder)
-    m["sections"][0]["measured"] = "../elsewhere.csv"
-    _save(folder, m)
-    _expect(good_db, folder, "campaign.json", "sections[0].measured", "outside the campaign folder")
 
 
 def test_truncated_csv(good_db, folder):
@@ -194,20 +173,6 @@ def test_inconsistent_sampling(good_db, folder):
     _expect(good_db, folder, "measured/S02.csv", "time_s", "not equally spaced")
 
 
-def test_unknown_unit(good_db, folder):
-    m = _manifest(folder)
-    m["channels"][0]["unit"] = "lbf"
-    _save(folder, m)
-    _expect(good_db, folder, "campaign.json", "channels[0].unit", "unknown unit 'lbf' for kind 'Y'")
-
-
-def test_duplicate_section_ids(good_db, folder):
-    m = _manifest(folder)
-    m["sections"][1]["id"] = "S01"
-    _save(folder, m)
-    _expect(good_db, folder, "campaign.json", "sections[1].id", "duplicate section id 'S01'")
-
-
 def test_empty_signal(good_db, folder):
     path = folder / "measured" / "S01.csv"
     path.write_text(path.read_text().splitlines()[0] + "\n")  # header only
@@ -223,49 +188,63 @@ def test_empty_signal_binary_format(good_db, folder):
     _expect(good_db, folder, "measured/S01.parquet", "time_s", "column 'time_s' is empty")
 
 
-def test_configuration_with_unknown_parent(good_db, folder):
-    m = _manifest(folder)
-    m["configurations"][0]["parent"] = "ghost"
-    _save(folder, m)
-    _expect(good_db, folder, "campaign.json", "configurations[0].parent",
-            "unknown parent configuration 'ghost'")
+def _set(path, value):
+    """A manifest edit: set the value at ``path`` (keys and indices)."""
+    def edit(m):
+        target = m
+        for key in path[:-1]:
+            target = target[key]
+        target[path[-1]] = value
+    return edit
 
 
-def test_configuration_parent_cycle(good_db, folder):
-    m = _manifest(folder)
-    second = dict(m["configurations"][0], name="b", parent="baseline")
+def _delete(path):
+    def edit(m):
+        target = m
+        for key in path[:-1]:
+            target = target[key]
+        del target[path[-1]]
+    return edit
+
+
+def _cycle(m):
+    m["configurations"].append(dict(m["configurations"][0], name="b", parent="baseline"))
     m["configurations"][0]["parent"] = "b"
-    m["configurations"].append(second)
-    _save(folder, m)
-    _expect(good_db, folder, "campaign.json", "configurations[0].parent", "cycle")
 
 
-def test_duplicate_campaign_name(good_db, folder):
+#: (case id, manifest edit, file named by the error, field named, message pattern)
+MANIFEST_CASES = [
+    ("schema_violation", _set(["vehicle", "kind"], "tram"), "campaign.json", "vehicle.kind",
+     "schema violation: 'tram'"),
+    ("schema_missing_key", _delete(["sections", 1, "speed_kmh"]), "campaign.json", "sections[1]",
+     "'speed_kmh' is a required property"),
+    ("path_outside_folder", _set(["sections", 0, "measured"], "../elsewhere.csv"),
+     "campaign.json", "sections[0].measured", "outside the campaign folder"),
+    ("unknown_unit", _set(["channels", 0, "unit"], "lbf"), "campaign.json", "channels[0].unit",
+     "unknown unit 'lbf' for kind 'Y'"),
+    ("duplicate_section_ids", _set(["sections", 1, "id"], "S01"), "campaign.json",
+     "sections[1].id", "duplicate section id 'S01'"),
+    ("unknown_parent", _set(["configurations", 0, "parent"], "ghost"), "campaign.json",
+     "configurations[0].parent", "unknown parent configuration 'ghost'"),
+    ("parent_cycle", _cycle, "campaign.json", "configurations[0].parent", "cycle"),
+    ("duplicate_campaign_name", _set(["name"], "good"), "campaign.json", "name",
+     "campaign named 'good' already exists"),
+    ("evaluated_outside_data", _set(["sections", 0, "evaluated", "end_m"], 1e6),
+     "measured/S01.csv", "distance_m", "not inside the recorded distance"),
+    ("radius_below_zones", _set(["sections", 0, "radius_m"], 180), "campaign.json",
+     "sections[0].radius_m", "below 250 m"),
+    ("channel_name_vs_position", _set(["channels", 0, "position"], "w2L"), "campaign.json",
+     "channels[0].name", "must be kind_position"),
+]
+
+
+@pytest.mark.parametrize("edit,file,field,match", [c[1:] for c in MANIFEST_CASES],
+                         ids=[c[0] for c in MANIFEST_CASES])
+def test_manifest_errors(good_db, folder, edit, file, field, match):
     m = _manifest(folder)
-    m["name"] = "good"
+    edit(m)
     _save(folder, m)
-    _expect(good_db, folder, "campaign.json", "name", "campaign named 'good' already exists")
-
-
-def test_evaluated_range_outside_the_data(good_db, folder):
-    m = _manifest(folder)
-    m["sections"][0]["evaluated"]["end_m"] = 1e6
-    _save(folder, m)
-    _expect(good_db, folder, "measured/S01.csv", "distance_m", "not inside the recorded distance")
-
-
-def test_radius_below_the_zones_needs_an_override(good_db, folder):
-    m = _manifest(folder)
-    m["sections"][0]["radius_m"] = 180
-    _save(folder, m)
-    _expect(good_db, folder, "campaign.json", "sections[0].radius_m", "below 250 m")
-
-
-def test_channel_name_must_match_kind_and_position(good_db, folder):
-    m = _manifest(folder)
-    m["channels"][0]["position"] = "w2L"
-    _save(folder, m)
-    _expect(good_db, folder, "campaign.json", "channels[0].name", "must be kind_position")
+    _expect(good_db, folder, file, field, match)
 
 
 def test_failure_while_writing_rolls_back_everything(good_db, folder):
