@@ -253,3 +253,27 @@ def test_result_cache_upsert(database):
     with database.session() as s:
         assert repo.cache_get(s, "k") == b"three"
         assert repo.cache_get(s, "other") == b"\x00\xff"
+
+
+def test_verify_signals_finds_a_changed_sample(writable_demo):
+    from sqlalchemy import select, update
+
+    from db.models import Channel, Recording, Section, Signal
+
+    with writable_demo.session() as s:
+        assert repo.verify_signals(s, "demo") == []
+        assert len(repo.load_signalsets(s, "demo", sections=["S03"], verify=True)) == 1
+        sig_id = s.scalar(
+            select(Signal.id).join(Recording).join(Section).join(Channel)
+            .where(Section.section_id == "S03", Recording.configuration_id.is_(None),
+                   Channel.name == "Q_w1R"))
+        values = repo.load_signalsets(s, "demo", sections=["S03"])["S03"].channels["Q_w1R"]
+        values[100] += 1e-9  # a tampered sample, re-encoded with the old hash kept
+        s.execute(update(Signal).where(Signal.id == sig_id).values(blob=codec.encode(values)[0]))
+    with writable_demo.session() as s:
+        problems = repo.verify_signals(s, "demo")
+        assert [(p["section"], p["configuration"], p["channel"]) for p in problems] == [
+            ("S03", None, "Q_w1R")]
+        assert "differs from the expected" in problems[0]["error"]
+        with pytest.raises(InvalidSignal, match="differs from the expected"):
+            repo.load_signalsets(s, "demo", sections=["S03"], verify=True)
