@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.errors import InvalidParameter, InvalidSignal
-from core.filters import DEFAULT_ORDER, design, filtfilt_rows, settling_check
+from core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows, settling_check
 from core.quantities import QUANTITIES, WHEELSET_POSITIONS
 from core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
 
@@ -230,6 +230,7 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
     from one row-wise sort of all its evaluated rows. Results equal :func:`evaluate_section`
     on each section alone.
     """
+    check_order(order)
     if len(signalsets) != len(sections):
         raise InvalidParameter(
             f"evaluate_batch needs one SectionInfo per SignalSet, got {len(signalsets)} "

@@ -77,11 +77,17 @@ class FilterDesign:
                 f"(order {2 * self.order}), zero-phase")
 
 
+def check_order(order: int) -> int:
+    """The Butterworth prototype order as int; raises InvalidParameter outside 1..10."""
+    if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or not 1 <= int(order) <= 10:
+        raise InvalidParameter(f"filter order must be an integer in 1..10, got {order!r}")
+    return int(order)
+
+
 def _check_design_args(fs: float, kind: str, order: int) -> None:
     if kind not in FILTER_KINDS:
         raise InvalidParameter(f"filter kind must be one of {FILTER_KINDS}, got {kind!r}")
-    if not isinstance(order, (int, np.integer)) or not 1 <= int(order) <= 10:
-        raise InvalidParameter(f"filter order must be an integer in 1..10, got {order!r}")
+    check_order(order)
     nyquist_needed = LOWPASS_HZ if kind == "lowpass" else BANDPASS_HZ[1]
     if not np.isfinite(fs) or fs <= 2.0 * nyquist_needed:
         raise InvalidParameter(

@@ -34,7 +34,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from core import en14363
-from core.filters import DEFAULT_ORDER
+from core.filters import DEFAULT_ORDER, check_order
 from core.types import SectionInfo, SignalSet
 from core.validation import ValidationResult, validate
 
@@ -178,6 +178,7 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
 
     from db import repo
 
+    check_order(order)
     with database.session() as session:
         camp = repo.get_campaign(session, campaign_name)
         name = camp.name
@@ -256,6 +257,7 @@ def validate_configuration(session: Session, campaign_name: str, config_name: st
     """
     from db import repo
 
+    check_order(order)
     camp = repo.get_campaign(session, campaign_name)
     repo.get_configuration(session, camp, config_name)
     sections = repo.section_infos(session, camp)
