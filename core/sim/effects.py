@@ -67,18 +67,19 @@ _LIST = [
         "damper_series_stiffness", "Damper with series stiffness (Maxwell element)",
         "Real hydraulic dampers sit on rubber bushes and contain compressible oil, so each damper "
         "is a dashpot in series with a spring. Above the corner frequency k/(2πc) the damper no "
-        "longer damps but acts as a spring. For the yaw dampers this lowers the bogie's yaw "
-        "damping at the hunting frequency: more bogie lateral motion, higher guiding forces and "
-        "lateral accelerations on straight track and in large-radius curves at speed.",
-        _p(Param("k_series_MN_m", "MN/m", 4.0, 0.5, 50.0, "series stiffness of every damper (yaw, lateral, vertical secondary)")),
-        ("Y_max", "SumY_max", "YQ_max", "ay_rms", "ay_max"), (1, 2), ((1.0, 10.0),), templates=("coach",),
+        "longer damps but acts as a spring: the secondary vertical and lateral dampers lose "
+        "their effect in the 1–10 Hz band (higher car body accelerations, above all vertically), "
+        "and the yaw dampers lose damping at the bogie's hunting frequency (more bogie lateral "
+        "motion and guiding-force peaks at speed).",
+        _p(Param("k_series_MN_m", "MN/m", 4.0, 0.2, 50.0, "series stiffness of every damper (yaw, lateral, vertical secondary)")),
+        ("az_rms", "az_max", "ay_rms", "ay_max", "Y_max", "SumY_max"), (1, 2, 3, 4), ((1.0, 10.0),), templates=("coach",),
         source="Maxwell model, exact exponential update; Alonso & Giménez, VSD 2008 (yaw damper series stiffness)"),
     Effect(
         "carbody_flexibility", "Car body first vertical bending mode",
         "The car body is not rigid: its first vertical bending mode (typically 8–12 Hz for a "
         "coach) is excited through the secondary suspension and shows in the car body vertical "
         "accelerations above the bogies as a peak near the bending frequency.",
-        _p(Param("frequency_Hz", "Hz", 8.0, 6.0, 16.0, "first vertical bending frequency"),
+        _p(Param("frequency_Hz", "Hz", 8.0, 5.0, 16.0, "first vertical bending frequency"),
            Param("damping_ratio", "-", 0.02, 0.005, 0.1, "modal damping ratio")),
         ("az_rms", "az_max"), (1, 2, 3, 4), ((5.0, 12.0),),
         source="free–free Euler–Bernoulli beam first mode (βL = 4.730), modal mass = car body mass"),
@@ -86,13 +87,15 @@ _LIST = [
         "track_flexibility", "Vertical and lateral track stiffness and damping",
         "The rails are not rigid: they sit on pads, sleepers and ballast. A flexible track lets "
         "the wheelset move vertically on the track stiffness (changing the dynamic wheel forces) "
-        "and the rail move laterally under the guiding forces, softening the flange contact: "
-        "lower peaks of the guiding force in curves and of Y/Q.",
-        _p(Param("k_vertical_MN_m", "MN/m", 40.0, 15.0, 300.0, "vertical track stiffness per wheel"),
-           Param("k_lateral_MN_m", "MN/m", 15.0, 5.0, 200.0, "lateral track stiffness per wheelset (both rails)")),
+        "and the rails move laterally under the guiding forces: the flange contact becomes "
+        "softer (rail head deflection, dynamic gauge widening), the leading wheelset runs "
+        "further out in tight curves and the guiding forces, Y/Q and ΣY change in zones 3–4.",
+        _p(Param("k_vertical_MN_m", "MN/m", 40.0, 10.0, 300.0, "vertical track stiffness per wheel"),
+           Param("k_lateral_MN_m", "MN/m", 15.0, 1.5, 200.0, "lateral stiffness per rail (rail head, fastening, sleeper)")),
         ("Y_max", "YQ_max", "SumY_max", "Q_max"), (3, 4), ((2.0, 20.0),),
-        source="massless vertical track spring-damper per wheel (c = 50 kN·s/m), lateral track mass "
-               "1200 kg per wheelset with c = 100 kN·s/m; Knothe & Grassie, VSD 22, 1993 (magnitudes)"),
+        source="massless vertical track spring-damper per wheel (c = 50 kN·s/m); lateral track mass "
+               "1200 kg per wheelset on 2·k_rail with c = 100 kN·s/m; flange contact in series with "
+               "k_rail; Knothe & Grassie, VSD 22, 1993 (magnitudes)"),
     Effect(
         "wheel_rail_friction", "Wheel–rail friction coefficient",
         "The creep forces saturate at μ·Q. Measurements are often made on wet or contaminated "

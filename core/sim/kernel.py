@@ -31,7 +31,8 @@ from numba import njit
 V, GRAV, NW, R0, B0, LAM, LAM2, YFR, CLEAR, KFL, GAM0, EPSG = range(12)
 F11, F22, Q0, MU, SAT, TFLEX, KTZ, CTZ, KTY, CTY, MTY = range(12, 23)
 FLEX, FLEX_W, FLEX_Z, FLEX_M, ZSENS, S_START, PHI_S1, PHI_S2, XS1, XS2 = range(23, 33)
-NSC = 33
+Y_INIT, Z_INIT, TH_INIT = range(33, 36)  # initial conditions (verification tests)
+NSC = 36
 
 # --- connection columns (CONN array)
 (C_P, C_C, C_X, C_B, C_ZP, C_ZC, C_KX, C_KY, C_KZ, C_CZ, C_CY, C_BYD, C_CYD, C_KSYD, C_KSZ,
@@ -74,7 +75,8 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
     """Integrate ``n_steps`` steps of ``dt`` s; write ``out[n_steps // decim, nch]`` block means.
 
     Output columns: per wheelset i: Y_L, Y_R, Q_L, Q_R (kN) at 4i..4i+3; then car body ay at
-    sensor 1, 2, az at sensor 1, 2 (m/s²); then per bogie ay, az (m/s²).
+    sensor 1, 2, az at sensor 1, 2 (m/s²); then per bogie ay, az (m/s²); if ``out`` has more
+    columns: the wheelsets' lateral displacements (m), then car body z (m) and pitch (rad).
     """
     nbody = massd.shape[0]
     nc = CONN.shape[0]
@@ -107,6 +109,11 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
     cnt = 0
     ws_az = np.zeros(nw)
     ws_aphi = np.zeros(nw)
+    for i in range(nw):
+        q[ws_body[i], 0] = SC[Y_INIT]
+    q[0, 1] = SC[Z_INIT]
+    q[0, 3] = SC[TH_INIT]
+    ncol_std = 4 * nw + 4 + 2 * nb
     for step in range(n_steps):
         s_cb = SC[S_START] + v * (step + 1) * dt
         for k in range(nbody):
@@ -309,19 +316,23 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
                 fxR, fyR = _sat(fxR, fyR, SC[MU] * max(QR, 0.0))
             YL = fyL - max(QL, 0.0) * (SC[GAM0] + SC[EPSG] * yrel)
             YR = fyR + max(QR, 0.0) * (SC[GAM0] - SC[EPSG] * yrel)
+            kfl = SC[KFL]
+            if SC[TFLEX] > 0.0:
+                # flange contact in series with the rail's own lateral (head/fastening) stiffness
+                kfl = kfl * SC[KTY] / (kfl + SC[KTY])
             dL = yrel - 0.5 * gai - SC[CLEAR]
             if dL > 0.0:
-                YL -= SC[KFL] * dL
+                YL -= kfl * dL
             dR = -yrel - 0.5 * gai - SC[CLEAR]
             if dR > 0.0:
-                YR += SC[KFL] * dR
+                YR += kfl * dR
             Yw[i, 0] = YL
             Yw[i, 1] = YR
             F[k, 0] += YL + YR
             F[k, 4] += -b0 * fxL + b0 * fxR
             if SC[TFLEX] > 0.0:
-                # lateral track mass: m δ'' = -(Y_L + Y_R) - k δ - c δ'
-                a_t = (-(YL + YR) - SC[KTY] * dtr[i] - SC[CTY] * dtrv[i]) / SC[MTY]
+                # lateral track mass: m δ'' = -(Y_L + Y_R) - 2 k_rail δ - c δ'
+                a_t = (-(YL + YR) - 2.0 * SC[KTY] * dtr[i] - SC[CTY] * dtrv[i]) / SC[MTY]
                 dtrv[i] += dt * a_t
                 dtr[i] += dt * dtrv[i]
                 zr = _interp(zv, s, s_arr0, inv_ds, ngrid)
@@ -377,6 +388,11 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
             k = bogie_body[j]
             acc_blk[col + 2 * j] += acc[k, 0] + aqb[k] + g * q[k, 2]
             acc_blk[col + 2 * j + 1] += acc[k, 1]
+        if nch > ncol_std:
+            for i in range(nw):
+                acc_blk[ncol_std + i] += q[ws_body[i], 0]
+            acc_blk[ncol_std + nw] += q[0, 1]
+            acc_blk[ncol_std + nw + 1] += q[0, 3]
         cnt += 1
         if cnt == decim:
             if k_out < out.shape[0]:

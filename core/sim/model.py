@@ -295,21 +295,36 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
     scale = ef["measured_irregularities"]["scale"] if use_meas else 1.0
     v = section.speed_ms * float(speed_factor)
     asm = assemble(veh, ef, v, nuisance)
-    tr = _track_arrays(section, veh, use_meas, scale)
+    ss, _ = run_assembled(asm, veh, section, fs_out=fs_out, use_measured=use_meas, scale=scale)
+    if channels is not None:
+        want = set(channels)
+        ss.channels = {k: x for k, x in ss.channels.items() if k in want}
+    return ss
+
+
+def run_assembled(asm: Assembly, veh: VehicleModel, section: TrackSection, *, fs_out: float = 200.0,
+                  use_measured: bool = False, scale: float = 1.0, states: bool = False,
+                  duration_s: float | None = None) -> tuple[SignalSet, np.ndarray | None]:
+    """Run the kernel for an assembled model. ``states=True`` also returns the wheelsets' lateral
+    displacements and the car body's vertical displacement and pitch (columns, per output
+    sample) for verification tests."""
+    tr = _track_arrays(section, veh, use_measured, scale)
+    v = asm.SC[K.V]
     decim = choose_substeps(asm, fs_out)
     dt = 1.0 / (fs_out * decim)
-    duration = section.length_m / v
+    duration = section.length_m / v if duration_s is None else duration_s
     n_out = int(duration * fs_out)
     n_steps = n_out * decim
     names = channel_names(veh)
-    out = np.zeros((n_out, len(names)))
+    extra = veh.n_wheelsets + 2 if states else 0
+    out = np.zeros((n_out, len(names) + extra))
     K.run_kernel(asm.SC, asm.massd, asm.free, asm.xabs, asm.CONN, asm.ws_body, asm.bogie_body,
                  tr["s0"], DS, tr["kap"], tr["phit"], tr["zv"], tr["zv1"], tr["zv2"], tr["cl"], tr["cl1"],
                  tr["cl2"], tr["ya"], tr["ga"], n_steps, dt, decim, out)
     t = np.arange(n_out) / fs_out + (decim + 1) / 2 * dt
-    want = list(channels) if channels is not None else names
-    chans = {n: np.ascontiguousarray(out[:, j]) for j, n in enumerate(names) if n in want}
-    return SignalSet(fs=float(fs_out), time_s=t, distance_m=v * t, channels=chans)
+    chans = {n: np.ascontiguousarray(out[:, j]) for j, n in enumerate(names)}
+    ss = SignalSet(fs=float(fs_out), time_s=t, distance_m=asm.SC[K.S_START] + v * t, channels=chans)
+    return ss, (out[:, len(names):] if states else None)
 
 
 # ------------------------------------------------------------------------------- campaigns

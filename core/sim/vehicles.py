@@ -80,7 +80,7 @@ _COACH: tuple[Param, ...] = (
     # wheel–rail
     Param("conicity", "-", 0.15, 0.02, 0.6, "nominal equivalent conicity (new S1002 on UIC60 1:40)", "[typ]"),
     Param("flange_clearance", "m", 0.007, 0.003, 0.012, "flangeway clearance per side", "[typ]"),
-    Param("k_flange", "N/m", 40e6, 5e6, 1e8, "lateral contact stiffness in flange contact", "[typ]"),
+    Param("k_flange", "N/m", 80e6, 5e6, 2e8, "lateral contact stiffness in flange contact", "[typ]"),
     Param("contact_angle", "rad", 0.04, 0.0, 0.1, "tread contact angle at the centred position", "[typ]"),
     Param("contact_angle_parameter", "-", 2.0, 0.0, 20.0,
           "Wickens contact angle parameter epsilon (gravitational stiffness W*eps/b0)", "[typ]"),
@@ -110,7 +110,7 @@ _WAGON: tuple[Param, ...] = (
     Param("b_spring", "m", 1.0, 0.8, 1.2, "lateral semi-spacing of the leaf springs", "UIC 517"),
     Param("conicity", "-", 0.15, 0.02, 0.6, "nominal equivalent conicity", "[typ]"),
     Param("flange_clearance", "m", 0.007, 0.003, 0.012, "flangeway clearance per side", "[typ]"),
-    Param("k_flange", "N/m", 40e6, 5e6, 1e8, "lateral contact stiffness in flange contact", "[typ]"),
+    Param("k_flange", "N/m", 80e6, 5e6, 2e8, "lateral contact stiffness in flange contact", "[typ]"),
     Param("contact_angle", "rad", 0.04, 0.0, 0.1, "tread contact angle at the centred position", "[typ]"),
     Param("contact_angle_parameter", "-", 2.0, 0.0, 20.0, "Wickens contact angle parameter epsilon", "[typ]"),
     Param("kalker_c11", "-", 4.12, 3.0, 6.0, "Kalker coefficient C11 (a/b = 1, nu = 0.25)", "Kalker 1967 table"),

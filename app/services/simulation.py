@@ -1,0 +1,75 @@
+"""Service: simulate a configuration of a campaign with the built-in simulator and store it.
+
+The simulator needs the campaign's vehicle record (template + parameters), the sections with
+their ``layout`` records (geometry, irregularity level/seed and the measured irregularities,
+see docs/simulator.md) and the measurement's sampling rate and channel names; all come from
+the database through :mod:`db.repo`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from core.errors import NotFound
+from core.sim import resolve_effects, simulate_campaign
+
+Progress = Callable[[str, float, dict], None]
+
+
+def simulation_inputs(session: Any, campaign: Any) -> dict[str, Any]:
+    """Extra keyword arguments for :func:`core.sim.simulate_campaign` beyond vehicle, sections,
+    layouts, effects, parameters, channels and fs: none — the measured irregularities travel in
+    the sections' layout records. (Hook read by :mod:`app.services.diagnosis`.)"""
+    return {}
+
+
+def simulate_configuration(database: Any, campaign: str, name: str, *, parent: str | None = None,
+                           effects: Mapping[str, Mapping[str, float]] | None = None,
+                           parameters: Mapping[str, float] | None = None, description: str | None = None,
+                           replace: bool = False, workers: int | None = None,
+                           progress: Progress | None = None) -> dict:
+    """Simulate every section of ``campaign`` with ``effects`` (and vehicle ``parameters``
+    overrides, ``model.NAME`` or ``NAME``), store the result as configuration ``name`` (parent
+    ``parent``) and return a summary. With a ``parent``, its effects and parameters are the
+    starting point and ``effects``/``parameters`` are added on top."""
+    from db import repo
+
+    with database.session() as s:
+        camp = repo.get_campaign(s, campaign)
+        vehicle = repo.vehicle_info(s, camp)
+        sections = repo.section_infos(s, camp)
+        layouts = repo.section_layouts(s, camp)
+        measured = repo.load_signalsets(s, camp, None)
+        base_eff, base_par = {}, {}
+        if parent is not None:
+            pconf = repo.get_configuration(s, camp, parent)
+            base_eff, base_par = dict(pconf.effects or {}), dict(pconf.parameters or {})
+        camp_name = camp.name
+    if not measured:
+        raise NotFound(f"campaign {camp_name!r} has no measurement recordings")
+    eff = {k: dict(v or {}) for k, v in base_eff.items()}
+    for k, v in (effects or {}).items():
+        eff[k] = {**eff.get(k, {}), **dict(v or {})}
+    eff = resolve_effects(eff)
+    par = {**base_par, **dict(parameters or {})}
+    channels = sorted({c for ss in measured.values() for c in ss.channels})
+    fs = {sid: ss.fs for sid, ss in measured.items()}
+    secs = [sec for sec in sections if sec.id in measured]
+
+    def cb(done: int, total: int) -> None:
+        if progress:
+            progress("simulate", 0.9 * done / total, {"done": done, "total": total})
+
+    sets = simulate_campaign(vehicle, secs, layouts=layouts, effects=eff, parameters=par, channels=channels,
+                             fs=fs, workers=workers, progress=cb)
+    if progress:
+        progress("store", 0.95, {})
+    desc = description or ("built-in simulator: " + (", ".join(sorted(eff)) or "no effects"))
+    with database.session() as s:
+        repo.store_configuration(s, camp_name, name, parent=parent, effects=eff, parameters=par,
+                                 description=desc, signalsets=sets, replace=replace)
+    if progress:
+        progress("done", 1.0, {})
+    return {"campaign": camp_name, "configuration": name, "parent": parent, "effects": eff,
+            "parameters": par, "sections": len(sets)}
