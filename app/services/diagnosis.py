@@ -290,7 +290,8 @@ class _Objective:
 
 def calibrate(database: Any, campaign: str, config: str, effects: list[str], new_name: str, *,
               params: list[str] | None = None, progress: Progress | None = None, scheduler: Any = None,
-              seed: int = 0, popsize: int = 5, maxiter: int = 8, workers: int | None = None,
+              seed: int = 0, popsize: int = 5, maxiter: int = 5, polish_maxfev: int = 20,
+              workers: int | None = None,
               start: Mapping[str, Mapping[str, float]] | None = None, replace: bool = False) -> CalibrationResult:
     """Add ``effects`` to configuration ``config``, fit their parameters (all of them, or only
     ``params`` — names ``"effect.param"``/``"param"`` of the effects, or ``"model.NAME"`` for
@@ -338,6 +339,7 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     objective = _Objective(ctx, base_effects, conf_params, targets)
     with BatchExecutor(scheduler, workers) as ex:
         res = cal.calibrate(objective, specs, seed=seed, popsize=popsize, maxiter=maxiter,
+                            polish_maxfev=polish_maxfev,
                             workers=ex if ex.backend != "serial" else None,
                             progress=lambda st, f, i: _report(progress, f"calibrate:{st}", 0.05 + 0.85 * f, **i))
     eff, model = objective.split(res.parameters)
