@@ -90,7 +90,7 @@ def synth(database: Any, *, name: str = "synth", template: str = "coach", hidden
         if progress:
             progress(stage, frac, info)
 
-    hid = parse_hidden(hidden or ["friction_damping"])
+    hid = parse_hidden(hidden or ["friction_damping"], template)
     sc = build_campaign(name=name, template=template, hidden=hid, seed=seed, n_sections=n_sections,
                         progress=lambda d, t: rep("simulate", 0.85 * d / t, done=d, total=t))
     with tempfile.TemporaryDirectory(prefix="railval-synth-") as tmp:

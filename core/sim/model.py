@@ -249,6 +249,8 @@ def choose_substeps(asm: Assembly, fs_out: float) -> int:
         for kk in (K.C_KX, K.C_KY, K.C_KZ):
             rates.append(math.sqrt(r[kk] / asm.massd[int(r[K.C_C]), 0]))
         rates.append(2 * r[K.C_CZ] / asm.massd[int(r[K.C_C]), 0])
+        for kk in (K.C_BSK, K.C_KSTZ, K.C_KSTY):
+            rates.append(math.sqrt(r[kk] / asm.massd[int(r[K.C_C]), 0]))
         rates.append(2 * r[K.C_CYD] * r[K.C_BYD] ** 2 / asm.massd[int(r[K.C_C]), 4])
         rates.append(2 * r[K.C_CYD] * r[K.C_BYD] ** 2 / asm.massd[int(r[K.C_P]), 4])
     dt_max = 0.8 / max(rates)

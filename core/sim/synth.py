@@ -5,8 +5,8 @@ Recipe
 ------
 * ≥ 12 sections, ≥ 3 per EN 14363 zone, several countries; each section carries ≈ 10 s of
   run-in and run-out around its evaluated constant-curvature range.
-* "True" track: irregularities from the ORE B176 **high** level spectrum × 1.15 (a worn
-  conventional line) with a few isolated short defects (dipped welds, 2–4 mm over 3–5 m). The campaign
+* "True" track: irregularities from the ORE B176 **high** level spectrum × 1.15 (coach: a
+  worn conventional line) or × 1.4 (wagon: a freight line) with a few isolated short defects (dipped welds, 2–4 mm over 3–5 m). The campaign
   stores them as the measured irregularities (``layout["irregularities"]``) as a track
   recording car would: gain 0.96 and 0.15 mm noise (so the stored arrays are not exactly
   the truth).
@@ -52,11 +52,29 @@ HIDDEN_DEFAULTS: dict[str, dict[str, float]] = {
     "parasitic_yaw_stiffness": {"k_yaw_kNm_rad": 1500.0},
     "lateral_bumpstop": {"clearance_mm": 12.0, "stiffness_kN_mm": 2.0},
 }
+#: the wagon's values where they differ (freight: acceleration limits doubled, stiffer suspension)
+HIDDEN_DEFAULTS_WAGON: dict[str, dict[str, float]] = {
+    "carbody_flexibility": {"frequency_Hz": 5.0, "damping_ratio": 0.005},
+    "track_flexibility": {"k_vertical_MN_m": 10.0, "k_lateral_MN_m": 1.5},
+    "wheel_rail_friction": {"mu": 0.1},
+    "conicity": {"conicity": 0.55},
+    "lateral_bumpstop": {"clearance_mm": 8.0, "stiffness_kN_mm": 2.0},
+}
+
+
+def hidden_defaults(template: str = "coach") -> dict[str, dict[str, float]]:
+    """Default hidden-effect values for ``template``."""
+    out = {k: dict(v) for k, v in HIDDEN_DEFAULTS.items()}
+    if template == "wagon":
+        out.update({k: dict(v) for k, v in HIDDEN_DEFAULTS_WAGON.items()})
+    return out
+
+
 #: which parameter ``--hidden EFFECT=VALUE`` sets
 MAIN_PARAMETER = {e: next(iter(EFFECTS[e].parameters)) for e in EFFECTS}
 
-#: the true track is 15 % worse than the ORE B176 high level (a worn conventional line)
-TRUE_TRACK_SCALE = 1.15
+#: the true track is worse than the ORE B176 high level (worn conventional / freight line)
+TRUE_TRACK_SCALE = {"coach": 1.15, "wagon": 1.4}
 
 COUNTRIES = ("DE", "AT", "CH", "IT", "FR", "CZ", "SE", "PL")
 
@@ -104,9 +122,10 @@ class SynthCampaign:
                 "Q0_kN": round(v.q0_kN(), 3), "template": v.template, "parameters": dict(v.parameters)}
 
 
-def parse_hidden(items: list[str] | None) -> dict[str, dict[str, float]]:
+def parse_hidden(items: list[str] | None, template: str = "coach") -> dict[str, dict[str, float]]:
     """``["friction_damping", "conicity=0.4", "lateral_bumpstop:clearance_mm=15,stiffness_kN_mm=2"]``
-    → checked ``{effect: {param: value}}`` (defaults from :data:`HIDDEN_DEFAULTS`)."""
+    → checked ``{effect: {param: value}}`` (defaults from :func:`hidden_defaults`)."""
+    defaults = hidden_defaults(template)
     out: dict[str, dict[str, float]] = {}
     for item in items or []:
         eff, params = item, {}
@@ -125,7 +144,7 @@ def parse_hidden(items: list[str] | None) -> dict[str, dict[str, float]]:
         eff = eff.strip()
         if eff not in EFFECTS:
             raise InvalidParameter(f"unknown effect id {eff!r}; known: {list(EFFECTS)}")
-        out[eff] = {**HIDDEN_DEFAULTS.get(eff, {}), **params}
+        out[eff] = {**defaults.get(eff, {}), **params}
     return resolve_effects(out)
 
 
@@ -189,6 +208,8 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
     ``{"friction_damping": HIDDEN_DEFAULTS[...]}``. ``progress(done, total)`` per simulation."""
     veh = VehicleModel(template)
     hidden = resolve_effects(hidden if hidden is not None else {"friction_damping": HIDDEN_DEFAULTS["friction_damping"]})
+    if template not in TRUE_TRACK_SCALE:
+        raise InvalidParameter(f"vehicle template {template!r} is unknown; known: {sorted(TRUE_TRACK_SCALE)}")
     if not hidden:
         raise InvalidParameter("synth needs at least one hidden effect")
     for e in hidden:
@@ -210,7 +231,7 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
                 "transition_out_m": trans, "straight_out_m": max(run - trans, 60.0)}
         length = sum(geom.values())
         true_irr = generate_irregularities(length + 120.0, level="high", seed=int(rng.integers(2**31)),
-                                           s0=-60.0, scale=TRUE_TRACK_SCALE)
+                                           s0=-60.0, scale=TRUE_TRACK_SCALE[template])
         _defects(true_irr, rng, length)
         rec = {"s": true_irr["s"]}
         for key in ("vertical", "alignment", "cross_level", "gauge"):
@@ -257,4 +278,4 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
                                      f"{veh.kind} vehicle ({template} template)")
 
 
-__all__ = ["DS", "HIDDEN_DEFAULTS", "SynthCampaign", "SynthSection", "build_campaign", "parse_hidden"]
+__all__ = ["DS", "HIDDEN_DEFAULTS", "HIDDEN_DEFAULTS_WAGON", "SynthCampaign", "SynthSection", "build_campaign", "hidden_defaults", "parse_hidden"]
