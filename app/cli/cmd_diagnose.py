@@ -40,7 +40,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     from app.services.diagnosis import diagnose
 
     res = diagnose(_db(args), args.campaign, args.config, progress=_progress, scheduler=args.scheduler,
-                   values_per_parameter=args.values)
+                   values_per_parameter=args.values, effects=args.candidates)
     if args.json:
         emit_json(res.to_dict())
         return 0
@@ -58,8 +58,18 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from app.services.diagnosis import calibrate
 
+    start: dict[str, dict[str, float]] = {}
+    for item in args.start or []:
+        key, sep, value = item.partition("=")
+        effect, dot, pname = key.partition(".")
+        if not (sep and dot):
+            from core.errors import InvalidParameter
+
+            raise InvalidParameter(f"--start expects EFFECT.PARAM=VALUE, got {item!r}")
+        start.setdefault(effect, {})[pname] = float(value)
     res = calibrate(_db(args), args.campaign, args.config, args.effect, args.new_name, params=args.params,
-                    progress=_progress, scheduler=args.scheduler, seed=args.seed, replace=args.replace)
+                    progress=_progress, scheduler=args.scheduler, seed=args.seed, replace=args.replace,
+                    start=start or None)
     d = res.to_dict()
     if args.json:
         emit_json(d)
@@ -104,7 +114,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--config", required=True, metavar="NAME")
     p.add_argument("--scheduler", metavar="ADDR", default=None,
                    help="Dask scheduler address (default: local process pool, 2 workers)")
-    p.add_argument("--values", type=int, default=4, help="simulated values per effect parameter (default 4)")
+    p.add_argument("--values", type=int, default=3, help="simulated values per effect parameter besides its default (default 3)")
+    p.add_argument("--candidates", nargs="+", default=None, metavar="E",
+                   help="consider only these effects (default: every effect of the library not in NAME)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_diagnose)
 
@@ -118,6 +130,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--scheduler", metavar="ADDR", default=None)
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--replace", action="store_true", help="overwrite NEW if it exists")
+    c.add_argument("--start", nargs="+", default=None, metavar="EFFECT.PARAM=VALUE",
+                   help="start values of the search (e.g. the values diagnose fitted)")
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=_cmd_calibrate)
 

@@ -193,7 +193,7 @@ def scan_values(lower: float, upper: float, default: float, n: int) -> list[floa
 
 
 def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
-             scheduler: Any = None, values_per_parameter: int = 4, effects: Sequence[str] | None = None,
+             scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
              workers: int | None = None) -> DiagnosisResult:
     """Rank the effects missing from configuration ``config`` by the share of its residual
     they explain (:mod:`core.diagnosis`). Each candidate effect parameter is simulated at
