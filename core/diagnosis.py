@@ -60,6 +60,8 @@ __all__ = [
     "DiagnosisResult",
     "ParameterScan",
     "Pattern",
+    "band_powers",
+    "band_ratio_pattern",
     "diagnose_patterns",
     "difference_pairs",
     "fit_scan",
@@ -177,33 +179,45 @@ def difference_pairs(measured: Mapping[str, Mapping[tuple[str, str], float]],
     return out
 
 
-def _band_powers(x: np.ndarray, fs: float, bands: Sequence[tuple[float, float]], segment_s: float) -> np.ndarray:
+def band_powers(x: np.ndarray, fs: float, bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ,
+                segment_s: float = 10.0) -> np.ndarray:
+    """Power of ``x`` (unit²) in each band [lo, hi) Hz: the Welch PSD (:func:`core.psd.welch_psd`,
+    ``segment_s`` segments) summed over the band's bins times the bin width."""
     psd = welch_psd(np.asarray(x, float), fs, segment_s=segment_s)
     f, d = np.asarray(psd.frequency_hz), np.asarray(psd.density)
     df = f[1] - f[0]
     return np.array([float(np.sum(d[(f >= lo) & (f < hi)]) * df) for lo, hi in bands])
 
 
-def psd_band_pattern(simulated: Mapping[str, Sequence[np.ndarray]], measured: Mapping[str, Sequence[np.ndarray]],
-                     fs: float, *, bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ,
-                     segment_s: float = 10.0) -> Pattern:
+def band_ratio_pattern(simulated: Mapping[str, np.ndarray], measured: Mapping[str, np.ndarray],
+                       bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ) -> Pattern:
     """Log₂ ratio of band powers simulated/measured per acceleration channel and band.
 
-    ``simulated[channel]`` and ``measured[channel]``: lists of signals (one per section,
-    m/s², sampled at ``fs`` Hz) whose band powers are summed over the sections before the
-    ratio. Value ln(P_sim/P_meas)/ln 2 (dimensionless; 1 = twice the power). Group
-    ``"psd ay"``/``"psd az"`` from the channel kind. A band without measured power is skipped.
+    ``simulated[channel]``/``measured[channel]``: band powers (one per band, e.g. summed over
+    the sections with :func:`band_powers`). Value ln(P_sim/P_meas)/ln 2 (dimensionless;
+    1 = twice the power). Label ``"psd az_cb_b1 5-10 Hz"``, group ``"psd ay"``/``"psd az"``
+    from the channel kind. A band without power on either side is skipped.
     """
     labels, groups, vals = [], [], []
     for ch in sorted(set(simulated) & set(measured)):
-        ps = sum(_band_powers(x, fs, bands, segment_s) for x in simulated[ch])
-        pm = sum(_band_powers(x, fs, bands, segment_s) for x in measured[ch])
-        for (lo, hi), a, b in zip(bands, np.atleast_1d(ps), np.atleast_1d(pm), strict=True):
+        for (lo, hi), a, b in zip(bands, np.atleast_1d(simulated[ch]), np.atleast_1d(measured[ch]), strict=True):
             if b > 0 and a > 0:
                 labels.append(f"psd {ch} {lo:g}-{hi:g} Hz")
                 groups.append(f"psd {ch.split('_')[0]}")
                 vals.append(math.log(a / b) / math.log(2.0))
     return Pattern(labels, groups, np.array(vals))
+
+
+def psd_band_pattern(simulated: Mapping[str, Sequence[np.ndarray]], measured: Mapping[str, Sequence[np.ndarray]],
+                     fs: float, *, bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ,
+                     segment_s: float = 10.0) -> Pattern:
+    """:func:`band_ratio_pattern` of signals: ``simulated[channel]`` and ``measured[channel]``
+    are lists of signals (one per section, m/s², sampled at ``fs`` Hz) whose band powers are
+    summed over the sections before the ratio."""
+    def total(sets):
+        return {ch: sum(band_powers(x, fs, bands, segment_s) for x in xs) for ch, xs in sets.items()}
+
+    return band_ratio_pattern(total(simulated), total(measured), bands)
 
 
 @dataclass

@@ -37,7 +37,8 @@ from core.diagnosis import (
     DiagnosisResult,
     ParameterScan,
     Pattern,
-    _band_powers,
+    band_powers,
+    band_ratio_pattern,
     diagnose_patterns,
     pattern_from_pairs,
 )
@@ -94,7 +95,7 @@ def _band_sum(signalsets: Mapping[str, SignalSet], bands) -> dict[str, np.ndarra
     for ss in signalsets.values():
         for ch in ACC_CHANNELS:
             if ch in ss.channels:
-                out[ch] = out.get(ch, 0.0) + _band_powers(ss.channels[ch], ss.fs, bands, 10.0)
+                out[ch] = out.get(ch, 0.0) + band_powers(ss.channels[ch], ss.fs, bands, 10.0)
     return out
 
 
@@ -133,14 +134,7 @@ def residual_pattern(ctx: CampaignContext, sim_values: Mapping[str, Mapping], si
     vr = validate(ctx.measured_values, sim_values, ctx.sections, ctx.vehicle, n_boot=0)
     pairs = vr.pairs.to_dict("records")
     pat = pattern_from_pairs(pairs, value_key="D_norm")
-    labels, groups, vals = [], [], []
-    for ch in sorted(set(sim_bands) & set(ctx.measured_bands)):
-        for (lo, hi), a, b in zip(ctx.bands, sim_bands[ch], ctx.measured_bands[ch], strict=True):
-            if a > 0 and b > 0:
-                labels.append(f"psd {ch} {lo:g}-{hi:g} Hz")
-                groups.append(f"psd {ch.split('_')[0]}")
-                vals.append(math.log(a / b) / math.log(2.0))
-    return Pattern.concat(pat, Pattern(labels, groups, np.array(vals))), vr
+    return Pattern.concat(pat, band_ratio_pattern(sim_bands, ctx.measured_bands, ctx.bands)), vr
 
 
 # --------------------------------------------------------------------------- simulator adapter
