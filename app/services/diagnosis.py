@@ -437,7 +437,12 @@ def modal(database_or_session: Any, campaign: str, *, sections: Sequence[str] | 
         with _session(database_or_session) as s:
             from db import repo
 
-            vparams = repo.vehicle_info(s, campaign)["parameters"]
+            vinfo = repo.vehicle_info(s, campaign)
+        if (vinfo.get("template") or "coach") != "coach":
+            raise InvalidParameter(
+                f"modal calibration models the coach template; campaign {campaign!r} uses "
+                f"template {vinfo.get('template')!r} (identification alone works for any vehicle)")
+        vparams = vinfo["parameters"]
         base = _coach_modal_base(vparams)
         best = sorted(ident.modes, key=lambda m: -m.n_stable)[:n_modes]
         best.sort(key=lambda m: m.freq_hz)
