@@ -11,20 +11,46 @@ from core.errors import InvalidParameter
 from core.modal import output_covariances, ssi_cov
 
 
+def _sim_tasks():
+    """Simulate two short sections (one with an effect) and evaluate a third, independently."""
+    from core.en14363 import evaluate_section
+    from core.sim import TrackSection, VehicleModel, simulate_section
+    from core.types import SectionInfo
+
+    veh = VehicleModel("coach")
+    tracks = [TrackSection(f"T{k}", speed_kmh=80, radius_m=400, cant_mm=100, straight_in_m=100,
+                           transition_in_m=50, curve_m=150, transition_out_m=50, straight_out_m=100,
+                           seed=k) for k in range(2)]
+    tasks = [(simulate_section, (veh, tracks[0], {}), {"fs_out": 100.0}),
+             (simulate_section, (veh, tracks[1], {"friction_damping": {"force_kN": 2.0}}), {"fs_out": 100.0})]
+    ss = simulate_section(veh, tracks[0], {}, fs_out=100.0)
+    info = SectionInfo("T0", 400, 100, 80, 3, 160.0, 290.0)
+    tasks.append((evaluate_section, (ss, info), {}))
+    return tasks
+
+
 def _tasks():
     rng = np.random.default_rng(42)
     data = [rng.standard_normal((3000, 2)).cumsum(axis=0) * 0.01 + rng.standard_normal((3000, 2))
             for _ in range(4)]
     tasks = [(output_covariances, (y, 8), {}) for y in data]
     tasks += [(ssi_cov, (y, 50.0), {"block_rows": 10, "max_order": 12}) for y in data[:2]]
-    return tasks
+    return tasks + _sim_tasks()
 
 
 def _same(a, b):
+    from core.types import SignalSet
+
     assert len(a) == len(b)
     for x, y in zip(a, b, strict=True):
         if isinstance(x, np.ndarray):
             np.testing.assert_array_equal(x, y)
+        elif isinstance(x, SignalSet):
+            assert x.channels.keys() == y.channels.keys()
+            for ch in x.channels:
+                np.testing.assert_array_equal(x.channels[ch], y.channels[ch])
+        elif isinstance(x, dict):
+            assert dict(x) == dict(y) and len(x) > 10
         else:
             np.testing.assert_array_equal(x.frequencies, y.frequencies)
             assert x.to_dict() == y.to_dict()
@@ -39,7 +65,7 @@ def test_process_pool_equals_serial(serial_results):
     seen = []
     got = run_tasks(_tasks(), workers=2, progress=lambda d, t: seen.append((d, t)))
     _same(serial_results, got)
-    assert seen[-1] == (6, 6) and len(seen) == 6
+    assert seen[-1] == (9, 9) and len(seen) == 9
 
 
 def test_dask_local_cluster_equals_serial(serial_results):
