@@ -15,6 +15,7 @@ top-level so they pickle by reference.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -209,23 +210,26 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     stored_residual, vr = residual_pattern(ctx, _values(config_sets, ctx.sections), _band_sum(config_sets, ctx.bands))
     # the configuration itself is re-simulated so that its residual and the scanned patterns
     # come from the same simulator run settings (signatures are differences of the two)
-    tasks, index = [(ctx, conf_effects, conf_params)], [None]
+    tasks, index, unique = [(ctx, conf_effects, conf_params)], [], {}
     for e in todo:
         spec = registry[e]
         for pname, p in _effect_parameters(spec).items():
             defaults = {k: float(v["default"]) for k, v in _effect_parameters(spec).items()}
             for v in scan_values(p["lower"], p["upper"], p["default"], values_per_parameter):
                 eff = {**conf_effects, e: {**defaults, pname: v}}
-                tasks.append((ctx, eff, conf_params))
-                index.append((e, pname, v, defaults, (p["lower"], p["upper"])))
+                key = json.dumps(eff, sort_keys=True)
+                if key not in unique:  # the all-defaults point of a multi-parameter effect once
+                    unique[key] = len(tasks)
+                    tasks.append((ctx, eff, conf_params))
+                index.append((e, pname, v, defaults, (p["lower"], p["upper"]), unique[key]))
     _report(progress, "simulate", 0.05, tasks=len(tasks))
     with BatchExecutor(scheduler, workers) as ex:
         results = ex.map(_evaluate_effects, tasks,
                          progress=lambda d, t: _report(progress, "simulate", 0.05 + 0.9 * d / t, done=d, total=t))
     scans: dict[str, dict[str, ParameterScan]] = {}
     residual, _ = residual_pattern(ctx, *results[0])
-    for (e, pname, v, defaults, bounds), (vals, bands) in zip(index[1:], results[1:], strict=True):
-        pat, _ = residual_pattern(ctx, vals, bands)
+    for e, pname, v, defaults, bounds, k in index:
+        pat, _ = residual_pattern(ctx, *results[k])
         sc = scans.setdefault(e, {}).setdefault(pname, ParameterScan(e, pname, [], [], defaults, bounds))
         sc.values.append(v)
         sc.patterns.append(pat)
