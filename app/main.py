@@ -64,7 +64,7 @@ def build_app(database: Any, page: str = "overview") -> pn.template.FastListTemp
     pages = {name: cls(app) for name, cls in PAGE_CLASSES.items()}
     nav = pn.widgets.RadioButtonGroup(
         options={PAGE_TITLES[p]: p for p in PAGES}, value=app.page, orientation="vertical",
-        button_type="light", sizing_mode="stretch_width", css_classes=["rv-nav"])
+        color="light", sizing_mode="stretch_width", css_classes=["rv-nav"])
     nav.link(app, value="page", bidirectional=True)
     main = pn.Column(sizing_mode="stretch_width", css_classes=["rv-main"])
 

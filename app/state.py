@@ -724,8 +724,8 @@ class MetricsState(param.Parameterized):
             return pd.concat(frames, ignore_index=True) if frames else None
 
         def done(df):
+            self.computed_for = key  # first: the view refreshes when ``frame`` changes
             self.frame = df
-            self.computed_for = key
         return app.run_job("metrics", work, done, dispatch=dispatch, background=background)
 
     def table(self):

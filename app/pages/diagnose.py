@@ -44,15 +44,15 @@ class DiagnosePage(PageBase):
         super().__init__(app, **params)
         self.state = DiagnoseState(app)
         self.dash = DashboardState(app)
-        self.diagnose_btn = pn.widgets.Button(name="Run diagnosis", button_type="primary", width=160)
+        self.diagnose_btn = pn.widgets.Button(label="Run diagnosis", color="primary", width=160)
         self.diagnose_btn.on_click(lambda e: self.state.run_diagnosis(dispatch=make_dispatch()))
         self.effect_select = pn.widgets.Select.from_param(self.state.param.effect, name="Effect to add", width=240)
         self.name_input = pn.widgets.TextInput.from_param(self.state.param.new_name, name="New configuration",
                                                           width=260)
-        self.calibrate_btn = pn.widgets.Button(name="Add, calibrate & re-simulate", button_type="success",
+        self.calibrate_btn = pn.widgets.Button(label="Add, calibrate & re-simulate", color="success",
                                                width=240)
         self.calibrate_btn.on_click(lambda e: self._start(calibrate=True))
-        self.simulate_btn = pn.widgets.Button(name="Add with these parameters & re-simulate", width=300)
+        self.simulate_btn = pn.widgets.Button(label="Add with these parameters & re-simulate", width=300)
         self.simulate_btn.on_click(lambda e: self._start(calibrate=False))
         self.param_box = pn.Column(sizing_mode="stretch_width")
         self.explain = pn.pane.Markdown("", sizing_mode="stretch_width")
@@ -158,7 +158,7 @@ class DiagnosePage(PageBase):
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
             self.result_box.objects = [message(f"lineage not available: {exc}", "danger")]
             return
-        items: list[Any] = [pn.pane.Markdown("#### Error along the lineage")]
+        items: list[Any] = []
         items.append(pn.pane.HoloViews(plots.lineage_chart(lineage), sizing_mode="stretch_width"))
         if parent is not None:
             left, _, _ = validation_view(self.dash, parent, height=260, compact=True)

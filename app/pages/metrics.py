@@ -7,7 +7,7 @@ from __future__ import annotations
 import panel as pn
 
 from app.pages._common import PageBase, make_dispatch, message, table
-from app.state import AppState, MetricsState
+from app.state import AppState, MetricsState, unit_label
 
 NOTE = ("Signals low-pass 20 Hz and resampled to a common axis (the service says where it "
         "resampled). *Synchronised*: the lag estimated by cross-correlation within a bounded "
@@ -26,14 +26,14 @@ class MetricsPage(PageBase):
         self.view = pn.widgets.RadioButtonGroup.from_param(self.state.param.view, name="Signals")
         self.scope = pn.widgets.RadioButtonGroup.from_param(self.state.param.scope, name="Scope")
         self.section = pn.widgets.Select.from_param(app.param.section, name="Section", width=160)
-        self.compute_btn = pn.widgets.Button(name="Compute metrics", button_type="primary", width=180)
+        self.compute_btn = pn.widgets.Button(label="Compute metrics", color="primary", width=180)
         self.compute_btn.on_click(lambda e: self.state.compute(dispatch=make_dispatch()))
         app.param.watch(lambda e: setattr(self.compute_btn, "disabled", bool(e.new)), ["busy"])
 
     def refresh(self) -> None:
         controls = pn.Row(self.section, pn.Column(pn.pane.Markdown("Scope", margin=(0, 10)), self.scope),
                           pn.Column(pn.pane.Markdown("Signals", margin=(0, 10)), self.view),
-                          pn.Column(pn.Spacer(height=18), self.compute_btn))
+                          pn.Column(pn.Spacer(height=30), self.compute_btn))
         df = self.state.table()
         if df is None or self.state.computed_for != self.state.key():
             hint = ("Press **Compute metrics** (about 3 s per section; *all sections* runs in the "
@@ -46,6 +46,8 @@ class MetricsPage(PageBase):
 
     def _table(self, df):
         df = df.copy()
+        if "unit" in df.columns:
+            df["unit"] = df["unit"].map(unit_label)
         num = df.select_dtypes("number").columns
         df[num] = df[num].round(4)
         text_cols = [c for c in ("section", "channel", "unit") if c in df.columns]

@@ -25,9 +25,9 @@ class ReportPage(PageBase):
         self.worst = pn.widgets.IntInput.from_param(self.state.param.worst_cases, name="Worst cases plotted",
                                                     width=160)
         self.html_dl = pn.widgets.FileDownload(callback=self._html_bytes, filename="report.html",
-                                               label="Download HTML", button_type="primary", width=200)
+                                               label="Download HTML", color="primary", width=200)
         self.pdf_dl = pn.widgets.FileDownload(callback=self._pdf_bytes, filename="report.pdf",
-                                              label="Download PDF", button_type="primary", width=200)
+                                              label="Download PDF", color="primary", width=200)
         self.preview = pn.pane.HTML("", sizing_mode="stretch_width", height=900)
         self.state.param.watch(lambda *e: self._on_app_change(), ["worst_cases"])
         self._report = None

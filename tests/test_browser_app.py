@@ -1,0 +1,109 @@
+"""The web app in a real browser (Playwright driving Debian's Chromium, NOTES-stack.md).
+
+The app is served with ``pn.serve(..., threaded=True)`` on a free loopback port over the
+``tests/factories`` demo campaign. Screenshots go to ``test-artifacts/``. Skipped with the
+reason when ``/usr/bin/chromium`` is missing, unless ``RAILVAL_REQUIRE_BROWSER=1``.
+"""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from tests.browser_support import (
+    CHROMIUM,
+    CHROMIUM_ARGS,
+    nav,
+    open_app,
+    require_browser,
+    screenshot,
+    served_app,
+)
+
+# Bokeh warns (benignly) when a button-click event refers to a model the server knows;
+# pytest turns warnings into errors process-wide, which would break the server thread
+pytestmark = [pytest.mark.browser,
+              pytest.mark.filterwarnings("ignore:reference already known:UserWarning")]
+PAGE_TIMEOUT_MS = 120_000
+
+
+@pytest.fixture(scope="session")
+def browser_type_launch_args(browser_type_launch_args):
+    require_browser()
+    return {**browser_type_launch_args, "executable_path": CHROMIUM, "args": CHROMIUM_ARGS}
+
+
+@pytest.fixture(scope="module")
+def app_url(tmp_path_factory):
+    require_browser()
+    from tests.browser_support import demo_database
+
+    db = demo_database(tmp_path_factory.mktemp("browser"))
+    with served_app(db) as url:
+        yield url
+    db.dispose()
+
+
+def _wait_page(page, title: str) -> None:
+    page.locator(".rv-main h2", has_text=title).wait_for(timeout=PAGE_TIMEOUT_MS)
+
+
+def test_overview_and_compare_pages(page, app_url):
+    open_app(page, app_url)
+    _wait_page(page, "Campaign overview")
+    main = page.locator(".rv-main")
+    assert main.get_by_text("Coverage holds").is_visible()
+    assert main.locator(".tabulator-row").count() >= 12  # sections (+ channels)
+    assert main.get_by_text("baseline", exact=True).first.is_visible()  # lineage tree
+    screenshot(page, "overview")
+
+    nav(page, "Compare signals")
+    _wait_page(page, "Compare signals")
+    main.get_by_text("Measurement in dark grey beneath").wait_for(timeout=PAGE_TIMEOUT_MS)
+    # two series (EN-filtered, raw) and the PSD: three Bokeh canvases in the page
+    main.locator("canvas").nth(2).wait_for(state="attached", timeout=PAGE_TIMEOUT_MS)
+    screenshot(page, "compare")
+
+
+def test_dashboard_drilldown_row_opens_compare(page, app_url):
+    open_app(page, app_url)
+    nav(page, "Validation dashboard")
+    _wait_page(page, "Validation dashboard")
+    main = page.locator(".rv-main")
+    main.get_by_text(re.compile(r"baseline: (NOT )?VALIDATED")).wait_for(timeout=PAGE_TIMEOUT_MS)
+    assert main.get_by_text("std is the sample standard deviation (n − 1)", exact=False).is_visible()
+    rows = main.locator(".rv-drilldown .tabulator-row")
+    rows.first.wait_for(timeout=PAGE_TIMEOUT_MS)
+    section = rows.first.locator(".tabulator-cell[tabulator-field='section']").inner_text().strip()
+    screenshot(page, "dashboard")
+    rows.first.locator(".tabulator-cell[tabulator-field='position']").click()
+    _wait_page(page, "Compare signals")
+    shown = main.locator("select").first.evaluate("s => s.options[s.selectedIndex].text")
+    assert shown == section
+    main.locator("canvas").nth(2).wait_for(state="attached", timeout=PAGE_TIMEOUT_MS)
+    screenshot(page, "drilldown-compare")
+
+
+def test_metrics_report_and_workshop_pages(page, app_url):
+    open_app(page, app_url)
+    nav(page, "Curve metrics")
+    _wait_page(page, "Curve metrics")
+    main = page.locator(".rv-main")
+    main.get_by_role("button", name="Compute metrics").click()
+    main.locator(".tabulator-col-title", has_text="sg_M").first.wait_for(timeout=PAGE_TIMEOUT_MS)
+    assert main.locator(".tabulator-row").count() >= 12  # one section × its channels
+    screenshot(page, "metrics")
+
+    nav(page, "Report")
+    _wait_page(page, "Report")
+    frame = page.frame_locator("iframe[title='report preview']")
+    frame.locator("h1", has_text="Validation report: baseline").wait_for(timeout=PAGE_TIMEOUT_MS)
+    assert main.get_by_role("button", name="Download PDF").is_visible()
+    screenshot(page, "report")
+
+    nav(page, "Diagnose & model workshop")
+    _wait_page(page, "Diagnose & model workshop")
+    assert main.get_by_role("button", name="Run diagnosis").is_visible()
+    main.get_by_text("Error along the lineage").wait_for(timeout=PAGE_TIMEOUT_MS)
+    screenshot(page, "workshop")
