@@ -151,24 +151,24 @@ def test_template_q0_magnitudes():
     assert 25 < VehicleModel("wagon", {"payload": 0.0}).q0_kN() < 40
 
 
-@pytest.mark.parametrize("template", ["coach", "wagon"])
-def test_quasi_static_sum_y_equals_mass_times_uncompensated_acceleration(template):
+@pytest.mark.parametrize(("template", "radius", "speed", "cant"), [("coach", 600.0, 90.0, 60.0),
+                                                                   ("wagon", 400.0, 60.0, 20.0)])
+def test_quasi_static_sum_y_equals_mass_times_uncompensated_acceleration(template, radius, speed, cant):
     """In a steady curve without irregularities the lateral forces of all wheelsets balance the
-    pseudo-force: Σ_wheelsets ΣY = M·(v²/R − g·h/s), s = 1500 mm. Coach: median, tolerance
-    0.5 %. The two-axle wagon keeps a friction-limited lateral oscillation (stick–slip of the
-    links) in the curve, so its window mean is compared, tolerance 3 % (a few periods' residual)."""
+    pseudo-force: Σ_wheelsets ΣY = M·(v²/R − g·h/s), s = 1500 mm (median over the curve).
+    Tolerance 0.5 %. (The loaded wagon is run below the speeds where its links' stick–slip
+    keeps a lateral oscillation going, see docs/simulator.md.)"""
     veh = VehicleModel(template)
-    sec = _flat(length=0.0, speed_kmh=90.0, radius_m=600.0, cant_mm=60.0,
+    sec = _flat(length=0.0, speed_kmh=speed, radius_m=radius, cant_mm=cant,
                 geom={"straight_in_m": 60.0, "transition_in_m": 60.0, "curve_m": 250.0,
                       "transition_out_m": 0.0, "straight_out_m": 0.0})
     ss = simulate_section(veh, sec, {"measured_irregularities": {}})
     a, b = sec.eval_range
     m = (ss.distance_m > a + 120) & (ss.distance_m < b - 5)
-    stat, tol = (np.median, 0.005) if template == "coach" else (np.mean, 0.03)
-    total = sum(stat(ss.channels[f"Y_w{i}L"][m] + ss.channels[f"Y_w{i}R"][m])
+    total = sum(np.median(ss.channels[f"Y_w{i}L"][m] + ss.channels[f"Y_w{i}R"][m])
                 for i in range(1, veh.n_wheelsets + 1))
-    aq = (90 / 3.6) ** 2 / 600 - G * 0.060 / S_TRACK
-    assert total == pytest.approx(veh.total_mass() * aq / 1000, rel=tol)
+    aq = (speed / 3.6) ** 2 / radius - G * cant / 1000 / S_TRACK
+    assert total == pytest.approx(veh.total_mass() * aq / 1000, rel=0.005)
     # the car body accelerometer sees a_q plus the roll of the car body (roll coefficient > 0)
     assert np.median(ss.channels["ay_cb_b1"][m]) > aq
 

@@ -71,7 +71,7 @@ _LIST = [
         "their effect in the 1–10 Hz band (higher car body accelerations, above all vertically), "
         "and the yaw dampers lose damping at the bogie's hunting frequency (more bogie lateral "
         "motion and guiding-force peaks at speed).",
-        _p(Param("k_series_MN_m", "MN/m", 4.0, 0.2, 50.0, "series stiffness of every damper (yaw, lateral, vertical secondary)")),
+        _p(Param("k_series_MN_m", "MN/m", 4.0, 0.2, 50.0, "series stiffness of every damper (yaw, lateral, vertical secondary)", scale="log")),
         ("az_rms", "az_max", "ay_rms", "ay_max", "Y_max", "SumY_max"), (1, 2, 3, 4), ((1.0, 10.0),), templates=("coach",),
         source="Maxwell model, exact exponential update; Alonso & Giménez, VSD 2008 (yaw damper series stiffness)"),
     Effect(
@@ -90,8 +90,8 @@ _LIST = [
         "and the rails move laterally under the guiding forces: the flange contact becomes "
         "softer (rail head deflection, dynamic gauge widening), the leading wheelset runs "
         "further out in tight curves and the guiding forces, Y/Q and ΣY change in zones 3–4.",
-        _p(Param("k_vertical_MN_m", "MN/m", 40.0, 10.0, 300.0, "vertical track stiffness per wheel"),
-           Param("k_lateral_MN_m", "MN/m", 15.0, 1.5, 200.0, "lateral stiffness per rail (rail head, fastening, sleeper)")),
+        _p(Param("k_vertical_MN_m", "MN/m", 40.0, 10.0, 300.0, "vertical track stiffness per wheel", scale="log"),
+           Param("k_lateral_MN_m", "MN/m", 15.0, 1.5, 200.0, "lateral stiffness per rail (rail head, fastening, sleeper)", scale="log")),
         ("Y_max", "YQ_max", "SumY_max", "Q_max"), (3, 4), ((2.0, 20.0),),
         source="massless vertical track spring-damper per wheel (c = 50 kN·s/m); lateral track mass "
                "1200 kg per wheelset on 2·k_rail with c = 100 kN·s/m; flange contact in series with "

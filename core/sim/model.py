@@ -152,12 +152,13 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
     else:
         w_spring = m["carbody"] * G / 4
         k_link = w_spring / p["link_length"]
+        k_link_x = w_spring / p["link_length_x"]
         for i, x in enumerate(xw):
             k = 1 + i
             xabs[k] = x
             rows.append(_conn_row(
                 p=0, c=k, x=x, b=p["b_spring"], zp=H_LEAF - hcb, zc=H_LEAF - p["r0"],
-                kx=k_link, ky=k_link, kz=p["k_leaf_z"], kpyaw=kpy, bscl=bs_cl, bsk=bs_k,
+                kx=k_link_x, ky=k_link, kz=p["k_leaf_z"], kpyaw=kpy, bscl=bs_cl, bsk=bs_k,
                 fz=p["leaf_friction"] * w_spring + fr, fy=p["link_friction"] * w_spring + fr,
                 fx=p["link_friction"] * w_spring, kstz=3.0 * p["k_leaf_z"], ksty=3.0 * k_link,
                 w=m["carbody"] * G / 2))

@@ -18,7 +18,9 @@ class Param:
     """One scalar model parameter.
 
     ``unit`` is the SI-derived unit the value is given in (as shown to users), ``lower``/
-    ``upper`` the inclusive bounds, ``source`` where the default comes from.
+    ``upper`` the inclusive bounds, ``source`` where the default comes from. ``scale`` is
+    ``"log"`` for parameters whose effect is roughly proportional to 1/value or spans decades
+    (series stiffnesses, track stiffnesses): scan or search them on a logarithmic grid.
     """
 
     name: str
@@ -28,10 +30,12 @@ class Param:
     upper: float
     description: str
     source: str = ""
+    scale: str = "linear"
 
     def to_dict(self) -> dict:
         return {"name": self.name, "unit": self.unit, "default": self.default, "lower": self.lower,
-                "upper": self.upper, "description": self.description, "source": self.source}
+                "upper": self.upper, "description": self.description, "source": self.source,
+                "scale": self.scale}
 
 
 def check_value(owner: str, p: Param, value) -> float:
