@@ -8,6 +8,11 @@ Pages are one module each under ``app/pages``; their state lives in ``app/state.
 from __future__ import annotations
 
 import html
+import socket
+import time
+import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -100,3 +105,34 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     return pn.serve({"app": lambda: build_app(database)}, port=port, address=address, show=show,
                     threaded=threaded, title="railval", allow_websocket_origin=origins,
                     static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {}, **kw)
+
+
+def free_port() -> int:
+    """A free TCP port on the loopback interface."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextmanager
+def served(database: Any, timeout_s: float = 60.0) -> Iterator[str]:
+    """Serve the app on a free loopback port in a background thread (tests, benchmarks);
+    yields its URL once it answers 200, stops the server afterwards."""
+    port = free_port()
+    server = serve(database, port=port, address="127.0.0.1", threaded=True)
+    url = f"http://127.0.0.1:{port}/app"
+    deadline = time.monotonic() + timeout_s
+    try:
+        while True:
+            try:
+                with urllib.request.urlopen(url, timeout=30) as resp:
+                    if resp.status == 200:
+                        break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.1)
+        yield url
+    finally:
+        server.stop()
+        server.join(10)

@@ -36,6 +36,9 @@ from core.errors import RailvalError
 from core.types import CHANNEL_KINDS, split_channel
 
 CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "google-chrome")
+#: flags that let Debian's Chromium run headless in containers and CI (NOTES-stack.md)
+CHROMIUM_ARGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync")
 PDF_TIMEOUT_S = 120
 
 
@@ -214,9 +217,7 @@ def html_to_pdf(document: str, timeout_s: float = PDF_TIMEOUT_S) -> bytes:
         src = Path(tmp) / "report.html"
         out = Path(tmp) / "report.pdf"
         src.write_text(document, encoding="utf-8")
-        cmd = [exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-               "--disable-background-networking", "--disable-component-update", "--disable-sync",
-               f"--user-data-dir={tmp}/profile", "--no-pdf-header-footer",
+        cmd = [exe, *CHROMIUM_ARGS, f"--user-data-dir={tmp}/profile", "--no-pdf-header-footer",
                "--print-to-pdf-no-header", f"--print-to-pdf={out}", src.as_uri()]
         try:
             proc = subprocess.run(cmd, capture_output=True, timeout=timeout_s, check=False)

@@ -8,17 +8,12 @@ Browser tests skip with a visible reason when ``/usr/bin/chromium`` is missing, 
 from __future__ import annotations
 
 import os
-import socket
-import time
-import urllib.request
-from contextlib import contextmanager
 from pathlib import Path
 
+from app import report as _report
+
 CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = [
-    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-]
+CHROMIUM_ARGS = list(_report.CHROMIUM_ARGS)
 ARTIFACTS = Path(__file__).resolve().parent.parent / "test-artifacts"
 VIEWPORT = {"width": 1280, "height": 1200}
 
@@ -46,37 +41,11 @@ def require_browser() -> None:
     pytest.skip(reason)
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+def served_app(database):
+    """Serve the railval app on ``database`` in a thread; yields its URL (app.main.served)."""
+    from app.main import served
 
-
-@contextmanager
-def served_app(database, timeout_s: float = 30.0):
-    """Serve the railval app on ``database`` in a background thread; yields the base URL
-    of the app (``http://127.0.0.1:PORT/app``)."""
-    from app.main import serve
-
-    port = free_port()
-    server = serve(database, port=port, address="127.0.0.1", threaded=True)
-    url = f"http://127.0.0.1:{port}/app"
-    deadline = time.monotonic() + timeout_s
-    while True:
-        try:
-            with urllib.request.urlopen(url, timeout=5) as resp:
-                if resp.status == 200:
-                    break
-        except OSError:
-            if time.monotonic() > deadline:
-                server.stop()
-                raise
-            time.sleep(0.1)
-    try:
-        yield url
-    finally:
-        server.stop()
-        server.join(10)
+    return served(database)
 
 
 def block_fonts(page) -> None:

@@ -1,0 +1,188 @@
+"""Web app: first-page interactive time in Chromium and Compare-plot switching (server side).
+
+Builds a small campaign in a temporary SQLite database: 4 sections (one per zone) of
+``--seconds`` × ``--fs`` samples (default 100 s × 200 Hz = 20 000 samples per signal),
+6 channels, the measurement and 2 configurations. Then:
+
+* **switching** — the Compare page's callback for ``--switches`` section × channel switches
+  (load the sources, EN filter, build the plots with server-side ``downsample1d``
+  min-max-LTTB, and render them to Bokeh models as the server does): p50/p95 wall time.
+  Baseline in the same run: the same plots without downsampling (20 000 points per trace).
+* **first page** — ``--loads`` page loads of the app served on a loopback port (Playwright,
+  Debian's Chromium): navigation → first canvas attached. Baseline in the same run: a bare
+  FastListTemplate with one HoloViews curve.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+CHANNELS = ("Y_w1L", "Q_w1L", "Y_w1R", "Q_w1R", "ay_cb_b1", "az_cb_b1")
+RADII = (0.0, 1200.0, 500.0, 300.0)  # one section per EN 14363 zone
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--seconds", type=float, default=100.0, help="section length in s (default 100)")
+    parser.add_argument("--fs", type=float, default=200.0, help="sampling rate in Hz (default 200)")
+    parser.add_argument("--switches", type=int, default=20, help="compare switches timed (default 20)")
+    parser.add_argument("--loads", type=int, default=3, help="page loads timed (default 3)")
+    parser.add_argument("--no-browser", action="store_true", help="skip the first-page measurement")
+
+
+def write_campaign(folder: Path, seconds: float, fs: float) -> None:
+    """A minimal valid campaign folder: 4 sections, measured + 2 configurations."""
+    from db.io import write_table
+
+    rng = np.random.default_rng(7)
+    n = round(seconds * fs)
+    t = np.arange(n) / fs
+    kernel = np.ones(9) / 9
+    sections, files = [], {"baseline": {}, "variant": {}}
+    for i, radius in enumerate(RADII):
+        sid = f"S{i + 1:02d}"
+        dist = t * 25.0
+        sections.append({"id": sid, "radius_m": radius, "cant_mm": 0.0 if radius == 0 else 100.0,
+                         "speed_kmh": 90.0, "evaluated": {"start_m": float(dist[n // 5]),
+                                                          "end_m": float(dist[4 * n // 5])},
+                         "measured": f"measured/{sid}.csv"})
+        for source, gain in (("measured", 1.0), ("baseline", 0.8), ("variant", 1.1)):
+            cols = {"time_s": t, "distance_m": dist}
+            for ch in CHANNELS:
+                base = 77.0 if ch.startswith("Q") else 0.0
+                scale = 4.0 if ch[0] in "YQ" else 0.3
+                noise = np.convolve(rng.standard_normal(n + 9), kernel, mode="same")[:n]
+                cols[ch] = base + gain * scale * (noise + np.sin(2 * np.pi * 0.8 * t))
+            rel = f"{'measured' if source == 'measured' else 'sim/' + source}/{sid}.csv"
+            write_table(folder / rel, cols)
+            if source != "measured":
+                files[source][sid] = rel
+    manifest = {
+        "format": {"id": "railval-campaign", "version": 1}, "name": "bench-app",
+        "vehicle": {"name": "bench coach", "kind": "passenger", "secondary_suspension": True,
+                    "Q0_kN": 77.0, "template": "coach"},
+        "channels": [{"name": c, "kind": c.rpartition("_")[0], "position": c.rpartition("_")[2],
+                      "unit": "kN" if c[0] in "YQ" else "m/s^2"} for c in CHANNELS],
+        "sections": sections,
+        "configurations": [
+            {"name": "baseline", "parent": None, "effects": {}, "files": files["baseline"]},
+            {"name": "variant", "parent": "baseline", "effects": {}, "files": files["variant"]},
+        ],
+    }
+    (folder / "campaign.json").write_text(json.dumps(manifest))
+
+
+def _pct(values: list[float], q: float) -> float:
+    return float(np.percentile(np.asarray(values), q))
+
+
+def _switching(database, switches: int) -> dict:
+    import holoviews as hv
+
+    from app import plots
+    from app.main import build_app
+    from app.pages.compare import build_compare_objects
+
+    template = build_app(database)
+    app = template.railval_state
+    page = template.railval_pages["compare"]
+    page.state.configurations = ["baseline", "variant"]
+    combos = [(s, c) for s in app.param.section.objects for c in CHANNELS]
+
+    def one(i: int, downsample: bool) -> float:
+        sec, ch = combos[i % len(combos)]
+        t0 = time.perf_counter()
+        with app.param.discard_events():  # select without triggering the page's own refresh
+            app.section, app.channel = sec, ch
+        if downsample:
+            series, psd = build_compare_objects(page.state)
+        else:
+            sources = page.state.sources()
+            series = [plots.compare_plot(page.state.series(p, sources=sources), downsample=False)
+                      for p in page.state.processings()]
+            psd = plots.compare_plot(page.state.psd(sources=sources))
+        for obj in [*series, psd]:
+            hv.render(obj, backend="bokeh")
+        return time.perf_counter() - t0
+
+    one(0, True)  # warm-up: numba filter kernels, imports
+    one(0, False)
+    fast = [one(i, True) for i in range(switches)]
+    slow = [one(i, False) for i in range(max(3, switches // 4))]
+    n = len(app.backend.signals(app.campaign, None, app.section, [CHANNELS[0]]))
+    return {"samples_per_signal": n, "traces_per_switch": 3 * 2 + 3,
+            "p50_ms": 1e3 * _pct(fast, 50), "p95_ms": 1e3 * _pct(fast, 95),
+            "baseline_no_downsampling_p50_ms": 1e3 * _pct(slow, 50),
+            "baseline_no_downsampling_p95_ms": 1e3 * _pct(slow, 95)}
+
+
+def _first_page(database, loads: int) -> dict:
+    import holoviews as hv
+    import panel as pn
+    from playwright.sync_api import sync_playwright
+
+    from app.main import free_port, served
+    from app.report import CHROMIUM_ARGS, find_chromium
+
+    def bare():
+        return pn.template.FastListTemplate(
+            title="bare", main=[pn.pane.HoloViews(hv.Curve(np.arange(100.0)), sizing_mode="stretch_width")])
+
+    def measure(browser, url) -> list[float]:
+        out = []
+        for _ in range(loads):
+            page = browser.new_page(viewport={"width": 1280, "height": 1200})
+            page.route("**/fonts.googleapis.com/**", lambda route: route.abort())
+            t0 = time.perf_counter()
+            page.goto(url)
+            page.locator("canvas").first.wait_for(state="attached", timeout=120_000)
+            out.append(time.perf_counter() - t0)
+            page.close()
+        return out
+
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=find_chromium(), args=list(CHROMIUM_ARGS))
+        try:
+            with served(database) as url:
+                app_times = measure(browser, url)
+            port = free_port()
+            server = pn.serve({"bare": bare}, port=port, address="127.0.0.1", threaded=True, show=False)
+            try:
+                time.sleep(0.5)
+                bare_times = measure(browser, f"http://127.0.0.1:{port}/bare")
+            finally:
+                server.stop()
+                server.join(10)
+        finally:
+            browser.close()
+    return {"median_s": statistics.median(app_times), "max_s": max(app_times),
+            "baseline_bare_template_median_s": statistics.median(bare_times), "loads": loads}
+
+
+def run(args: argparse.Namespace) -> dict:
+    from db.engine import connect
+    from db.importer import import_campaign
+
+    with tempfile.TemporaryDirectory(prefix="railval-bench-app-") as tmp:
+        root = Path(tmp)
+        write_campaign(root / "campaign", args.seconds, args.fs)
+        database = connect(f"sqlite:///{root / 'bench.db'}")
+        database.init()
+        import_campaign(database, root / "campaign")
+        out = {"compare_switch": _switching(database, args.switches)}
+        if not args.no_browser:
+            from app.report import ReportError, find_chromium
+
+            try:
+                find_chromium()
+                out["first_page"] = _first_page(database, args.loads)
+            except ReportError as exc:
+                out["first_page"] = {"skipped": str(exc)}
+        database.dispose()
+    return out

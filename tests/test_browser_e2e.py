@@ -1,0 +1,89 @@
+"""End to end in a real browser (DESIGN §7): open the demo campaign (hidden effect, built by
+``app.services.synth.ensure_demo``) → the baseline fails on the dashboard → diagnosis ranks
+the candidates → add the top one and calibrate it (background job with a progress bar) →
+the new configuration passes on the dashboard and the lineage shows the error falling.
+
+Slow (diagnosis and calibration simulate the campaign dozens of times: about 3–4 min on two
+busy cores), so marked ``slow``; run with ``pytest -m slow tests/test_browser_e2e.py``.
+"""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from tests.browser_support import (
+    CHROMIUM,
+    CHROMIUM_ARGS,
+    nav,
+    open_app,
+    require_browser,
+    screenshot,
+    served_app,
+)
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow,
+              pytest.mark.filterwarnings("ignore:reference already known:UserWarning")]
+PAGE_MS = 120_000
+JOB_MS = 1_200_000
+
+
+@pytest.fixture(scope="session")
+def browser_type_launch_args(browser_type_launch_args):
+    require_browser()
+    return {**browser_type_launch_args, "executable_path": CHROMIUM, "args": CHROMIUM_ARGS}
+
+
+@pytest.fixture(scope="module")
+def demo_url(tmp_path_factory):
+    require_browser()
+    from app.services.synth import ensure_demo
+    from db.engine import connect
+
+    db = connect(f"sqlite:///{tmp_path_factory.mktemp('e2e') / 'e2e.db'}")
+    db.init()
+    assert ensure_demo(db) is not None
+    with served_app(db) as url:
+        yield url
+    db.dispose()
+
+
+def _page(page, title: str) -> None:
+    page.locator(".rv-main h2", has_text=title).wait_for(timeout=PAGE_MS)
+
+
+def test_baseline_fails_diagnose_calibrate_then_passes(page, demo_url):
+    open_app(page, demo_url)
+    main = page.locator(".rv-main")
+    nav(page, "Validation dashboard")
+    _page(page, "Validation dashboard")
+    main.get_by_text("baseline: NOT VALIDATED").wait_for(timeout=PAGE_MS)
+    screenshot(page, "e2e-1-baseline-fails")
+
+    nav(page, "Diagnose & model workshop")
+    _page(page, "Diagnose & model workshop")
+    main.get_by_role("button", name="Run diagnosis").click()
+    page.locator("progress.rv-progress").wait_for(state="visible", timeout=PAGE_MS)  # job running
+    rows = main.locator(".rv-candidates .tabulator-row")
+    rows.first.wait_for(timeout=JOB_MS)
+    top = rows.first.locator(".tabulator-cell[tabulator-field='effect']").inner_text().strip()
+    effect_select = main.locator("select").first
+    assert effect_select.evaluate("s => s.options[s.selectedIndex].text") == top
+    new_name = f"baseline+{top}"
+    assert main.locator("input[type='text']").first.input_value() == new_name
+    screenshot(page, "e2e-2-diagnosis")
+
+    main.get_by_role("button", name="Add, calibrate & re-simulate").click()
+    page.locator("progress.rv-progress").wait_for(state="visible", timeout=PAGE_MS)
+    page.locator(".rv-status", has_text="calibration: done").wait_for(timeout=JOB_MS)
+    # the new configuration is selected; its dashboard stands beside its parent's
+    main.get_by_text(f"Parent baseline beside {new_name}").wait_for(timeout=PAGE_MS)
+    main.get_by_text(f"{new_name}: VALIDATED").wait_for(timeout=PAGE_MS)
+    screenshot(page, "e2e-3-calibrated")
+
+    nav(page, "Validation dashboard")
+    _page(page, "Validation dashboard")
+    main.get_by_text(re.compile(rf"{re.escape(new_name)}: VALIDATED")).wait_for(timeout=PAGE_MS)
+    assert not main.get_by_text(f"{new_name}: NOT VALIDATED").count()
+    screenshot(page, "e2e-4-dashboard-passes")
