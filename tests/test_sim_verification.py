@@ -215,3 +215,16 @@ def test_sanity_ranges_normal_running():
     yq = max(np.max(np.abs(ss.channels[f"Y_w{i}{s}"][m] / ss.channels[f"Q_w{i}{s}"][m]))
              for i in range(1, 5) for s in "LR")
     assert yq < 0.6
+
+
+def test_section_from_info_without_layout_puts_the_curve_on_the_evaluated_range():
+    from core.types import SectionInfo
+
+    info = SectionInfo(id="X", radius_m=500.0, cant_mm=100.0, speed_kmh=100.0, zone=3,
+                       eval_start_m=320.0, eval_end_m=620.0, curve_direction=-1)
+    sec = TrackSection.from_info(info, None)
+    assert sec.eval_range == pytest.approx((320.0, 620.0))
+    kap, phit = sec.geometry(np.array([10.0, 330.0, 610.0]))
+    assert kap[0] == 0.0 and kap[1] == pytest.approx(-1 / 500.0) and kap[2] == pytest.approx(-1 / 500.0)
+    assert phit[1] == pytest.approx(-0.1 / S_TRACK)
+    assert sec.length_m - 620.0 >= 100 / 3.6 * 10 - 1e-9

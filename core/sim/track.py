@@ -195,8 +195,8 @@ class TrackSection:
     @classmethod
     def from_info(cls, info, layout: dict | None = None, **kw) -> TrackSection:
         """Build from a :class:`core.types.SectionInfo` and its optional ``layout`` record (see
-        docs/simulator.md). Without a layout the evaluated range is the constant curve, with
-        transitions of 0.3·v·... estimated from the evaluated range and speed."""
+        docs/simulator.md). Without a layout the evaluated range is the constant curve, preceded
+        by a transition of min(6 s·v, 150 m, half the run-in) and followed by ≈ 10 s of track."""
         lay = dict(layout or {})
         radius = float(info.radius_m or 0.0)
         if not math.isfinite(radius):
@@ -206,10 +206,13 @@ class TrackSection:
             geom = {k: float(lay.get(k, 0.0)) for k in
                     ("straight_in_m", "transition_in_m", "curve_m", "transition_out_m", "straight_out_m")}
         else:
+            # no layout: the constant curve is the evaluated range; transitions of up to
+            # min(6 s·v, 150 m) end where it starts; ≈ 10 s of run-out after it
+            start = max(float(info.eval_start_m), 0.0)
             run = max(10.0 * v, 100.0)
-            trans = min(run * 0.6, 150.0) if radius else 0.0
-            geom = {"straight_in_m": max(float(info.eval_start_m) - trans, run - trans),
-                    "transition_in_m": trans, "curve_m": float(info.eval_end_m - info.eval_start_m),
+            trans = min(6.0 * v, 150.0, 0.5 * start) if radius else 0.0
+            geom = {"straight_in_m": start - trans, "transition_in_m": trans,
+                    "curve_m": float(info.eval_end_m - info.eval_start_m),
                     "transition_out_m": trans, "straight_out_m": max(run - trans, 50.0)}
         irr = lay.get("irregularities")
         irr_arr = None
