@@ -133,3 +133,25 @@ def test_effects_are_deterministic_and_wagon_runs_with_its_effects():
     for ch in a.channels:
         np.testing.assert_array_equal(a.channels[ch], b.channels[ch])
     assert all(np.isfinite(x).all() for x in a.channels.values())
+
+
+def test_linear_effect_scales_linearly_for_small_values():
+    """A linear effect (parasitic yaw stiffness: a moment k·Δψ with the curve-imposed bogie yaw
+    Δψ ≈ (bogie distance / 2)/R) changes the quasi-static guiding force in proportion to k for
+    small k: ΔY(200) / ΔY(100) = 2 within 5 % (the curving equilibrium is nearly linear there)."""
+    veh = VehicleModel("coach")
+    s = np.arange(-100.0, 900.0, 0.5)
+    z = np.zeros_like(s)
+    sec = TrackSection("Q", speed_kmh=70.0, radius_m=400.0, cant_mm=100.0, straight_in_m=60.0,
+                       transition_in_m=60.0, curve_m=250.0, transition_out_m=0.0, straight_out_m=0.0,
+                       irregularities={"s": s, "vertical": z, "alignment": z, "cross_level": z, "gauge": z})
+    m = None
+    vals = []
+    for k in (0.0, 100.0, 200.0):
+        ss = simulate_section(veh, sec, {"measured_irregularities": {}, "parasitic_yaw_stiffness": {"k_yaw_kNm_rad": k}})
+        if m is None:
+            m = (ss.distance_m > 250.0) & (ss.distance_m < 365.0)
+        vals.append(np.median(ss.channels["Y_w1L"][m] + ss.channels["Y_w1R"][m]))
+    d1, d2 = vals[1] - vals[0], vals[2] - vals[0]
+    assert abs(d1) > 0.05
+    assert d2 / d1 == pytest.approx(2.0, rel=0.05)

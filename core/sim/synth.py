@@ -44,7 +44,7 @@ from core.zones import zone_for_radius
 HIDDEN_DEFAULTS: dict[str, dict[str, float]] = {
     "friction_damping": {"force_kN": 2.5},
     "damper_series_stiffness": {"k_series_MN_m": 0.3},
-    "carbody_flexibility": {"frequency_Hz": 6.0, "damping_ratio": 0.01},
+    "carbody_flexibility": {"frequency_Hz": 5.0, "damping_ratio": 0.005},
     "track_flexibility": {"k_vertical_MN_m": 12.0, "k_lateral_MN_m": 2.0},
     "wheel_rail_friction": {"mu": 0.18},
     "conicity": {"conicity": 0.45},
@@ -149,8 +149,9 @@ def parse_hidden(items: list[str] | None, template: str = "coach") -> dict[str, 
 
 
 def _plan(template: str, n: int, rng: np.random.Generator) -> list[dict]:
-    """Section geometry and speed per zone. Speeds give cant deficiencies of 60–130 mm (coach)
-    or 40–90 mm (wagon); radii per EN 14363 zones."""
+    """Section geometry and speed per zone (coach 160–200 km/h on straight track, wagon
+    90–100 km/h); in curves the speed gives a cant deficiency of 70–130 mm (coach, ≤ 200 km/h)
+    or 40–90 mm (wagon, ≤ 100 km/h); radii per EN 14363 zones."""
     if n < 12:
         raise InvalidParameter(f"synth needs at least 12 sections (≥ 3 per zone), got {n}")
     per_zone = [n // 4 + (1 if i < n % 4 else 0) for i in range(4)]
