@@ -118,7 +118,10 @@ def _bars(rows: list[dict[str, Any]], key: str, ci_key: str | None, title: str,
     if signed:
         layers.append(hv.HLine(-1.0).opts(color=LIMIT_COLOR, line_dash="dashed", line_width=1.5))
         layers.append(hv.HLine(0.0).opts(color="#888888", line_width=0.8))
-    top = max([1.2] + [abs(v) * 1.1 for v in values if math.isfinite(v)])
+    extent = [abs(v) for v in values if math.isfinite(v)]
+    extent += [abs(float(b)) for c in cis if isinstance(c, (list, tuple)) for b in c
+               if b is not None and math.isfinite(float(b))]
+    top = max([1.2] + [e * 1.1 for e in extent])  # bars and their intervals stay inside
     ylim = (-top, top) if signed else (0.0, top)
     overlay = hv.Overlay(layers).opts(
         title=title, responsive=True, height=height, fontsize=FONTS, ylim=ylim,

@@ -84,7 +84,8 @@ def test_validation_bars_colour_by_limit_and_limit_lines():
     mean_ov, mean_bars, std_ov, _std_bars = plots.validation_bars(_rows())
     fig = hv.render(mean_ov, backend="bokeh")
     assert _spans(fig) == [-1.0, 0.0, 1.0]  # ±limit and zero
-    assert fig.y_range.start == pytest.approx(-1.76) and fig.y_range.end == pytest.approx(1.76)
+    # the axis holds the largest bar or interval end (|−1.9|) with 10 % room: ±2.09
+    assert fig.y_range.start == pytest.approx(-2.09) and fig.y_range.end == pytest.approx(2.09)
     verdicts = list(mean_bars.dimension_values("verdict"))
     assert verdicts == ["pass", "fail", "fail"]  # |−1.6| > 1; a missing value is not a pass
     fig_s = hv.render(std_ov, backend="bokeh")

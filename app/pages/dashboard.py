@@ -96,7 +96,7 @@ class DashboardPage(PageBase):
             self.state.quantity = worst["quantity"] if worst else None
         self.body.objects = [
             col,
-            pn.pane.Markdown("Bars: |mean| and std of D_v = (S_v − M_v)·sign(M_v) over all (section, "
+            pn.pane.Markdown("Bars: signed mean and std of D_v = (S_v − M_v)·sign(M_v) over all (section, "
                              "position) pairs, divided by the EN 14363 limits (dashed line 1.0). "
                              "std is the sample standard deviation (n − 1). Click a bar for its "
                              "drill-down.", styles={"color": "#555"}),
