@@ -58,13 +58,15 @@ __all__ = [
 
 @dataclass(frozen=True)
 class ParameterSpec:
-    """A calibrated parameter: name, bounds [lower, upper] in ``unit``, optional start value."""
+    """A calibrated parameter: name, bounds [lower, upper] in ``unit``, optional start value.
+    ``log``: search log10(value) (stiffness-like parameters spanning decades; needs lower > 0)."""
 
     name: str
     lower: float
     upper: float
     unit: str = ""
     start: float | None = None
+    log: bool = False
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.lower) and math.isfinite(self.upper) and self.lower < self.upper):
@@ -73,6 +75,14 @@ class ParameterSpec:
         if self.start is not None and not (self.lower <= self.start <= self.upper):
             raise InvalidParameter(
                 f"parameter {self.name}: start {self.start} outside bounds [{self.lower}, {self.upper}]")
+        if self.log and not self.lower > 0:
+            raise InvalidParameter(f"parameter {self.name}: a log-scale search needs lower > 0, got {self.lower}")
+
+    def to_search(self, value: float) -> float:
+        return math.log10(value) if self.log else float(value)
+
+    def from_search(self, x: float) -> float:
+        return float(min(max(10.0 ** x if self.log else x, self.lower), self.upper))
 
 
 Progress = Callable[[str, float, dict[str, Any]], None]
@@ -104,6 +114,7 @@ class CalibrationResult:
             "parameters": dict(self.parameters),
             "bounds": {s.name: [s.lower, s.upper] for s in self.specs},
             "units": {s.name: s.unit for s in self.specs},
+            "log_scale": [s.name for s in self.specs if s.log],
             "objective": self.objective,
             "objective_start": self.objective_start,
             "n_evaluations": self.n_evaluations,
@@ -121,10 +132,13 @@ class _Counted:
 
     def __init__(self, objective: Callable[[dict[str, float]], float], specs: Sequence[ParameterSpec]):
         self.objective = objective
-        self.names = [s.name for s in specs]
+        self.specs = list(specs)
+
+    def params(self, x: np.ndarray) -> dict[str, float]:
+        return {s.name: s.from_search(float(v)) for s, v in zip(self.specs, x, strict=True)}
 
     def __call__(self, x: np.ndarray) -> float:
-        value = float(self.objective(dict(zip(self.names, (float(v) for v in x), strict=True))))
+        value = float(self.objective(self.params(x)))
         return value if math.isfinite(value) else 1e12
 
 
@@ -134,7 +148,8 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
               progress: Progress | None = None, raise_on_failure: bool = False) -> CalibrationResult:
     """Minimise ``objective(params)`` over the bounded box of ``specs``.
 
-    Global stage: ``differential_evolution`` (strategy best1bin, ``popsize``·n candidates per
+    Parameters with ``log=True`` are searched as log10(value). Global stage:
+    ``differential_evolution`` (strategy best1bin, ``popsize``·n candidates per
     generation, Latin-hypercube initialisation as seed 002, ``seed`` for reproducibility, the
     start values — when every spec has one — injected as a population member via ``x0``).
     ``workers``: a ``map(func, iterable)`` callable (e.g. :class:`app.services.batch.BatchExecutor`)
@@ -149,11 +164,11 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
     if len(set(names)) != len(names):
         raise InvalidParameter(f"parameter names must be unique, got {names}")
     f = _Counted(objective, specs)
-    bounds = [(s.lower, s.upper) for s in specs]
+    bounds = [(s.to_search(s.lower), s.to_search(s.upper)) for s in specs]
     x0 = None
     obj_start = None
     if all(s.start is not None for s in specs):
-        x0 = np.array([s.start for s in specs], dtype=float)
+        x0 = np.array([s.to_search(s.start) for s in specs], dtype=float)
         obj_start = f(x0)
     history: list[float] = []
     t0 = time.perf_counter()
@@ -165,7 +180,7 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
         if progress:
             progress("global", min(gen[0] / maxiter, 1.0),
                      {"generation": gen[0], "best": float(intermediate_result.fun),
-                      "parameters": dict(zip(names, map(float, intermediate_result.x), strict=True))})
+                      "parameters": f.params(intermediate_result.x)})
 
     kwargs: dict[str, Any] = {}
     if workers is not None:
@@ -182,10 +197,10 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
             x_best, f_best = np.clip(np.asarray(loc.x, float), [b[0] for b in bounds], [b[1] for b in bounds]), float(loc.fun)
         history.append(f_best)
     if progress:
-        progress("done", 1.0, {"best": f_best, "parameters": dict(zip(names, map(float, x_best), strict=True))})
+        progress("done", 1.0, {"best": f_best, "parameters": f.params(x_best)})
     if raise_on_failure and not converged:
         raise CalibrationDidNotConverge(f"differential evolution stopped after {nfev} evaluations: {message}")
-    return CalibrationResult(dict(zip(names, map(float, x_best), strict=True)), f_best, obj_start, nfev,
+    return CalibrationResult(f.params(x_best), f_best, obj_start, nfev,
                              converged, message, history, specs, time.perf_counter() - t0)
 
 

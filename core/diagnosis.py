@@ -223,7 +223,8 @@ def psd_band_pattern(simulated: Mapping[str, Sequence[np.ndarray]], measured: Ma
 @dataclass
 class ParameterScan:
     """Patterns of configuration + effect at several values of one parameter (others at
-    ``defaults``). ``values`` ascending within ``bounds``."""
+    ``defaults``). ``values`` ascending within ``bounds``; ``log``: interpolate in log(value)
+    (stiffness-like parameters scanned on a logarithmic grid)."""
 
     effect: str
     parameter: str
@@ -231,6 +232,7 @@ class ParameterScan:
     patterns: list[Pattern]
     defaults: dict[str, float] = field(default_factory=dict)
     bounds: tuple[float, float] | None = None
+    log: bool = False
 
 
 @dataclass
@@ -285,7 +287,8 @@ class DiagnosisResult:
 
 def fit_scan(residual: Pattern, scan: ParameterScan, *, n_fine: int = 401) -> tuple[float, float, np.ndarray]:
     """Bounded 1-D search along one parameter: interpolate the scanned patterns linearly in
-    the parameter value and return (v*, ‖P(v*)‖²_W, P(v*)) minimising the remaining residual.
+    the parameter value (in log(value) when ``scan.log``) and return (v*, ‖P(v*)‖²_W, P(v*))
+    minimising the remaining residual.
     With one scanned value it is that value."""
     if len(scan.values) != len(scan.patterns) or not scan.values:
         raise InvalidParameter(
@@ -296,13 +299,15 @@ def fit_scan(residual: Pattern, scan: ParameterScan, *, n_fine: int = 401) -> tu
     w = residual.weights()
     if v.size == 1:
         return float(v[0]), float(np.sum((w * P[0]) ** 2)), P[0]
-    fine = np.linspace(v[0], v[-1], n_fine)
-    idx = np.clip(np.searchsorted(v, fine, side="right") - 1, 0, v.size - 2)
-    t = (fine - v[idx]) / (v[idx + 1] - v[idx])
+    u = np.log(v) if scan.log else v
+    fine = np.linspace(u[0], u[-1], n_fine)
+    idx = np.clip(np.searchsorted(u, fine, side="right") - 1, 0, u.size - 2)
+    t = (fine - u[idx]) / (u[idx + 1] - u[idx])
     Pf = P[idx] * (1 - t)[:, None] + P[idx + 1] * t[:, None]
     cost = np.sum((Pf * w) ** 2, axis=1)
     k = int(np.argmin(cost))
-    return float(fine[k]), float(cost[k]), Pf[k]
+    best = float(np.exp(fine[k])) if scan.log else float(fine[k])
+    return best, float(cost[k]), Pf[k]
 
 
 def diagnose_patterns(residual: Pattern, scans: Mapping[str, Sequence[ParameterScan]], *,

@@ -174,3 +174,18 @@ def test_modal_service_and_cli_on_an_imported_campaign(tmp_path, capsys):
     assert main(["--db", url, "modal", "modal-demo", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert len(doc["identification"]["modes"]) >= 2 and doc["stabilisation"]
+
+
+def _log_bowl(p):
+    # minimum 0 at k = 0.3 in a box spanning 0.2 … 50 (2.4 decades)
+    return (math.log10(p["k"]) - math.log10(0.3)) ** 2
+
+
+def test_log_scale_parameter_is_searched_in_log10():
+    spec = ParameterSpec("k", 0.2, 50.0, "MN/m", start=4.0, log=True)
+    assert spec.to_search(10.0) == pytest.approx(1.0) and spec.from_search(1.0) == pytest.approx(10.0)
+    res = calibrate(_log_bowl, [spec], seed=0, popsize=5, maxiter=5, polish_maxfev=20)
+    assert res.parameters["k"] == pytest.approx(0.3, rel=0.02)
+    assert res.to_dict()["log_scale"] == ["k"]
+    with pytest.raises(InvalidParameter, match="lower > 0"):
+        ParameterSpec("k", 0.0, 1.0, log=True)

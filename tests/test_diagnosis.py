@@ -129,3 +129,15 @@ def test_difference_pairs_sign_convention_and_normalisation():
     # M = 0 → D_v = S
     assert by_q["az_rms"]["D_v"] == pytest.approx(0.3) and by_q["az_rms"]["norm"] == pytest.approx(2.0)
     assert by_q["Y_qst"]["zone"] == 4
+
+
+def test_fit_scan_log_interpolation_recovers_power_law_minimum():
+    # pattern linear in log(v): P(v) = ln(v / 0.3)·a, zero at v = 0.3, scanned on a log grid
+    a = np.ones(len(LABELS))
+    vals = [0.2, 1.0, 5.0, 50.0]
+    pats = [Pattern(LABELS, GROUPS, math.log(v / 0.3) * a) for v in vals]
+    r = Pattern(LABELS, GROUPS, math.log(1 / 0.3) * a)
+    v, cost, _ = fit_scan(r, ParameterScan("E", "k", vals, pats, log=True))
+    assert v == pytest.approx(0.3, rel=0.02) and cost == pytest.approx(0.0, abs=1e-3)
+    lin, _, _ = fit_scan(r, ParameterScan("E", "k", vals, pats, log=False))
+    assert abs(lin - 0.3) > abs(v - 0.3)  # linear interpolation misplaces it

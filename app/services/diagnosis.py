@@ -181,10 +181,11 @@ def _config(session: Any, campaign: str, name: str) -> tuple[dict, dict, Any]:
 
 
 # --------------------------------------------------------------------------- diagnose
-def scan_values(lower: float, upper: float, default: float, n: int) -> list[float]:
-    """``n`` values spanning [lower, upper] (equally spaced) plus the default, sorted, unique."""
-    vals = set(np.linspace(lower, upper, n).tolist()) | {float(default)}
-    return sorted(vals)
+def scan_values(lower: float, upper: float, default: float, n: int, log: bool = False) -> list[float]:
+    """``n`` values spanning [lower, upper] (equally spaced, or geometrically with ``log``) plus
+    the default, sorted, unique."""
+    grid = np.geomspace(lower, upper, n) if log else np.linspace(lower, upper, n)
+    return sorted(set(grid.tolist()) | {float(default)})
 
 
 def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
@@ -215,22 +216,22 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         spec = registry[e]
         for pname, p in _effect_parameters(spec).items():
             defaults = {k: float(v["default"]) for k, v in _effect_parameters(spec).items()}
-            for v in scan_values(p["lower"], p["upper"], p["default"], values_per_parameter):
+            for v in scan_values(p["lower"], p["upper"], p["default"], values_per_parameter, p["log"]):
                 eff = {**conf_effects, e: {**defaults, pname: v}}
                 key = json.dumps(eff, sort_keys=True)
                 if key not in unique:  # the all-defaults point of a multi-parameter effect once
                     unique[key] = len(tasks)
                     tasks.append((ctx, eff, conf_params))
-                index.append((e, pname, v, defaults, (p["lower"], p["upper"]), unique[key]))
+                index.append((e, pname, v, defaults, (p["lower"], p["upper"]), p["log"], unique[key]))
     _report(progress, "simulate", 0.05, tasks=len(tasks))
     with BatchExecutor(scheduler, workers) as ex:
         results = ex.map(_evaluate_effects, tasks,
                          progress=lambda d, t: _report(progress, "simulate", 0.05 + 0.9 * d / t, done=d, total=t))
     scans: dict[str, dict[str, ParameterScan]] = {}
     residual, _ = residual_pattern(ctx, *results[0])
-    for e, pname, v, defaults, bounds, k in index:
+    for e, pname, v, defaults, bounds, log, k in index:
         pat, _ = residual_pattern(ctx, *results[k])
-        sc = scans.setdefault(e, {}).setdefault(pname, ParameterScan(e, pname, [], [], defaults, bounds))
+        sc = scans.setdefault(e, {}).setdefault(pname, ParameterScan(e, pname, [], [], defaults, bounds, log))
         sc.values.append(v)
         sc.patterns.append(pat)
     explanations = {e: _effect_explanation(registry[e]) for e in todo}
@@ -250,8 +251,11 @@ def _effect_parameters(spec: Any) -> dict[str, dict[str, float]]:
     out = {}
     for name, p in (params.items() if isinstance(params, Mapping) else ((q.name, q) for q in params)):
         get = p.get if isinstance(p, Mapping) else (lambda k, _p=p: getattr(_p, k))
-        out[name] = {"lower": float(get("lower")), "upper": float(get("upper")),
-                     "default": float(get("default")), "unit": str(get("unit") or "")}
+        scale = p.get("scale", "linear") if isinstance(p, Mapping) else getattr(p, "scale", "linear")
+        lower = float(get("lower"))
+        out[name] = {"lower": lower, "upper": float(get("upper")),
+                     "default": float(get("default")), "unit": str(get("unit") or ""),
+                     "log": scale == "log" and lower > 0}
     return out
 
 
@@ -321,7 +325,7 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
                 continue
             st = (start or {}).get(e, {}).get(pname, base_effects[e].get(pname, p["default"]))
             specs.append(ParameterSpec(f"{e}.{pname}", p["lower"], p["upper"], p["unit"],
-                                       min(max(float(st), p["lower"]), p["upper"])))
+                                       min(max(float(st), p["lower"]), p["upper"]), log=p["log"]))
             targets.append((e, pname))
     for name in sorted(w for w in wanted if w.startswith("model.")):
         specs.append(_model_spec(name[6:], ctx, conf_params))
