@@ -102,7 +102,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"switch an effect on (repeatable); ids: {', '.join(EFFECT_IDS)}")
     p.add_argument("--param", action="append", metavar="k=v", help="vehicle template parameter override")
     p.add_argument("--replace", action="store_true", help="overwrite an existing configuration NAME")
-    p.add_argument("--workers", type=int, default=None, help="processes (default 2)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="processes (default: 2 for long runs above 1500 s simulated, else 1)")
     p.add_argument("--json", action="store_true", help="print one JSON document")
     p.set_defaults(func=_cmd_simulate)
 
