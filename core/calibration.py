@@ -170,6 +170,9 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
     if all(s.start is not None for s in specs):
         x0 = np.array([s.to_search(s.start) for s in specs], dtype=float)
         obj_start = f(x0)
+        # a start on a bound can round outside it in scipy's unit-cube check: nudge inwards
+        lo, hi = np.array(bounds).T
+        x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
     history: list[float] = []
     t0 = time.perf_counter()
     gen = [0]

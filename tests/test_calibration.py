@@ -189,3 +189,10 @@ def test_log_scale_parameter_is_searched_in_log10():
     assert res.to_dict()["log_scale"] == ["k"]
     with pytest.raises(InvalidParameter, match="lower > 0"):
         ParameterSpec("k", 0.0, 1.0, log=True)
+
+
+def test_start_on_the_bounds_is_accepted():
+    # (start on both lower bounds; scipy rejects an x0 that rounds outside its unit cube)
+    specs = [ParameterSpec("a", 5.0, 16.0, start=5.0), ParameterSpec("b", 0.005, 0.1, start=0.005)]
+    res = calibrate(lambda p: (p["a"] - 5.0) ** 2 + (p["b"] - 0.005) ** 2, specs, seed=0, maxiter=3)
+    assert res.objective_start == pytest.approx(0.0) and res.objective <= 1e-12
