@@ -102,3 +102,15 @@ def test_zone_coverage_marks_short_zones_and_lineage_chart():
         {"configuration": "baseline+fd", "max_norm": 0.7, "validated": True}]), backend="bokeh")
     assert fig.yaxis[0].axis_label == "largest normalised error (–)"
     assert _spans(fig) == [1.0]
+
+
+def test_signature_chart_of_a_candidate():
+    from app.pages.diagnose import signature_chart
+
+    cand = {"effect": "friction_damping",
+            "quantities": {"az_rms": {"before": 1.4, "after": 0.3}, "Y_qst": {"before": 0.2, "after": 0.25}}}
+    chart = signature_chart(cand)
+    assert list(chart.dimension_values("rms")) == [1.4, 0.3, 0.2, 0.25]
+    fig = hv.render(chart, backend="bokeh")
+    assert fig.yaxis[0].axis_label == "residual rms (normalised, –)"
+    assert "friction_damping" in fig.title.text

@@ -28,7 +28,7 @@ def signature_chart(candidate: dict[str, Any], height: int = 280) -> hv.Overlay:
         rows.append((group, "before", float(change["before"])))
         rows.append((group, "after (fitted)", float(change["after"])))
     bars = hv.Bars(rows, kdims=[hv.Dimension("group", label="quantity / PSD group"),
-                                hv.Dimension("when", label="")],
+                                hv.Dimension("when", label="residual")],
                    vdims=[hv.Dimension("rms", label="residual rms (normalised, –)")]).opts(
         color=hv.dim("when").categorize({"before": plots.FAIL_COLOR, "after (fitted)": plots.PASS_COLOR}),
         line_color=None, tools=["hover"])
