@@ -130,10 +130,12 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
                 pending.append((chunk, pool.submit(en14363.evaluate_batch,
                                                    [sets[s] for s in chunk],
                                                    [by_id[s] for s in chunk], order=order)))
+            new: dict[str, bytes] = {}
             for chunk, fut in pending:
                 for sid, vals in zip(chunk, fut.result(), strict=True):
-                    repo.cache_put(session, keys[sid], _pack(vals))
+                    new[keys[sid]] = _pack(vals)
                     out[sid] = vals
+        repo.cache_put_many(session, new)
     if stats is not None:
         stats.update({"cached": len(keys) - len(missing), "computed": len(missing)})
     return out
@@ -228,8 +230,7 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
                                            [by_id[s] for s in chunk[1]], order))
     if computed:
         with database.session() as session:
-            for k, blob in computed.items():
-                repo.cache_put(session, keys[k], blob)
+            repo.cache_put_many(session, {keys[k]: blob for k, blob in computed.items()})
     measured = values[None]
     out = {}
     for cname in names:
