@@ -756,6 +756,7 @@ class DiagnoseState(param.Parameterized):
     parameters = param.Dict(default={}, doc="manually set parameters of the chosen effect")
     last_new_configuration = param.String(default="")
     diagnosis_note = param.String(default="", doc="separability note of the diagnosis")
+    separable = param.Boolean(default=True, doc="the two best candidates are told apart")
 
     def __init__(self, app: AppState, **params):
         super().__init__(**params)
@@ -800,6 +801,7 @@ class DiagnoseState(param.Parameterized):
             if not d.get("separable", True) and not note:
                 note = "the two best candidates explain nearly the same; see the evidence"
             self.diagnosis_note = note
+            self.separable = bool(d.get("separable", True))
             self.candidates = cands
             names = self.available_effects() if cands else []
             order = [c["effect"] for c in cands] + [n for n in names if n not in {c["effect"] for c in cands}]

@@ -114,3 +114,8 @@ def test_signature_chart_of_a_candidate():
     fig = hv.render(chart, backend="bokeh")
     assert fig.yaxis[0].axis_label == "residual rms (normalised, –)"
     assert "friction_damping" in fig.title.text
+    bars = next(r for r in fig.renderers if hasattr(r, "glyph"))
+    mapper = bars.glyph.fill_color.transform  # colours follow "when", not the bar order
+    assert bars.glyph.fill_color.field == "when"
+    assert dict(zip(mapper.factors, mapper.palette, strict=True)) == {
+        "before": plots.FAIL_COLOR, "after (fitted)": plots.PASS_COLOR}

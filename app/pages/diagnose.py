@@ -30,11 +30,11 @@ def signature_chart(candidate: dict[str, Any], height: int = 280) -> hv.Overlay:
     bars = hv.Bars(rows, kdims=[hv.Dimension("group", label="quantity / PSD group"),
                                 hv.Dimension("when", label="residual")],
                    vdims=[hv.Dimension("rms", label="residual rms (normalised, –)")]).opts(
-        color=hv.dim("when").categorize({"before": plots.FAIL_COLOR, "after (fitted)": plots.PASS_COLOR}),
+        cmap={"before": plots.FAIL_COLOR, "after (fitted)": plots.PASS_COLOR},  # colour by "when"
         line_color=None, tools=["hover"])
     return bars.opts(title=f"Signature of {candidate['effect']}: residual before → after",
                      responsive=True, height=height, fontsize=plots.FONTS, xrotation=45,
-                     show_grid=True, show_legend=False, multi_level=False)
+                     show_grid=True, show_legend=True, legend_position="top_right", multi_level=False)
 
 
 class DiagnosePage(PageBase):
@@ -115,7 +115,7 @@ class DiagnosePage(PageBase):
         extra = []
         note = self.state.diagnosis_note
         if note:
-            extra.append(message(note, "warning"))
+            extra.append(message(note, "info" if self.state.separable else "warning"))
         top = cands[0]
         self.candidates_box.objects = [
             pn.pane.Markdown("#### Ranked candidate effects"),
