@@ -12,7 +12,7 @@ channels, and :func:`signal_hashes` reads hashes without touching the blobs.
 from __future__ import annotations
 
 import datetime as dt
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -42,6 +42,7 @@ __all__ = [
     "cache_put",
     "cache_put_many",
     "channels",
+    "fetch_signalsets",
     "get_campaign",
     "get_configuration",
     "lineage",
@@ -314,14 +315,34 @@ def load_signalsets(
 ) -> dict[str, SignalSet]:
     """Section id → :class:`SignalSet` of the measurement (``config=None``) or a configuration.
 
+    ``sections``/``channels`` restrict what is read. ``verify=True`` recomputes every
+    content hash while decoding (about 10–30 % slower) and raises
+    :class:`core.errors.InvalidSignal` on a mismatch. Raises :class:`NotFound` for an
+    unknown configuration, section or channel. One SQL query: see :func:`fetch_signalsets`.
+    """
+    return fetch_signalsets(session, campaign, config, sections, channels, verify=verify)()
+
+
+def fetch_signalsets(
+    session: Session,
+    campaign: Campaign | str | int,
+    config: str | None = None,
+    sections: list[str] | None = None,
+    channels: list[str] | None = None,
+    *,
+    verify: bool = False,
+) -> Callable[[], dict[str, SignalSet]]:
+    """Read the blobs of :func:`load_signalsets` now; return the function that decodes them.
+
+    The returned function uses no database session, so another thread may call it (the
+    validation service decodes and processes one chunk of sections in a worker thread
+    while this thread reads the next). Unknown names raise :class:`NotFound` here.
+
     One SQL query (a UNION ALL of the recordings' distance axes and the signal blobs,
-    selecting only the columns decoded here) executed through SQLAlchemy Core; rows are put
-    in recording, then channel-name order in Python, because an SQL ``ORDER BY`` over the
-    blob columns made SQLite copy every blob into a temporary sort B-tree (3–4× the time
-    of the read itself on the benchmark database). ``sections``/``channels`` restrict what
-    is read. ``verify=True`` recomputes every content hash while decoding (about 10–30 %
-    slower) and raises :class:`core.errors.InvalidSignal` on a mismatch. Raises
-    :class:`NotFound` for an unknown configuration, section or channel.
+    selecting only the columns decoded) executed through SQLAlchemy Core; rows are put in
+    recording, then channel-name order in Python, because an SQL ``ORDER BY`` over the blob
+    columns made SQLite copy every blob into a temporary sort B-tree (3–4× the time of the
+    read itself on the benchmark database).
     """
     c = get_campaign(session, campaign)
     src = _source_filter(session, c.id, config)
@@ -349,24 +370,34 @@ def load_signalsets(
         sig_q = sig_q.where(Channel.name.in_(channels))
     rows = session.connection().execute(union_all(rec_q, sig_q)).all()
     rows.sort(key=lambda r: (r[1], r[8], r[5] or ""))
-    out: dict[str, SignalSet] = {}
-    decode = codec.decode
-    for sid, _rid, fs, t0, n, chan, blob, sha, is_signal in rows:
-        if not is_signal:
-            dist = decode(blob, sha if verify else None)
-            out[sid] = SignalSet(
-                fs=float(fs), time_s=t0 + np.arange(n, dtype=np.float64) / fs, distance_m=dist
-            )
-        else:
-            ss = out[sid]
-            ss.channels[chan] = decode(blob, sha if verify else None)
-            ss.hashes[chan] = sha
-    _check_requested(session, c, config, out, sections, channels)
-    return out
+    present: dict[str, list[str]] = {}
+    for r in rows:
+        chans = present.setdefault(r[0], [])
+        if r[8]:
+            chans.append(r[5])
+    _check_requested(session, c, config, present, sections, channels)
+
+    def decode_all() -> dict[str, SignalSet]:
+        out: dict[str, SignalSet] = {}
+        decode = codec.decode
+        for sid, _rid, fs, t0, n, chan, blob, sha, is_signal in rows:
+            if not is_signal:
+                dist = decode(blob, sha if verify else None)
+                out[sid] = SignalSet(fs=float(fs),
+                                     time_s=t0 + np.arange(n, dtype=np.float64) / fs,
+                                     distance_m=dist)
+            else:
+                ss = out[sid]
+                ss.channels[chan] = decode(blob, sha if verify else None)
+                ss.hashes[chan] = sha
+        return out
+
+    return decode_all
 
 
-def _check_requested(session: Session, c: Campaign, config: str | None, out: dict,
-                     sections: list[str] | None, channel_names: list[str] | None) -> None:
+def _check_requested(session: Session, c: Campaign, config: str | None,
+                     out: Mapping[str, list[str]], sections: list[str] | None,
+                     channel_names: list[str] | None) -> None:
     # Only the error paths run further queries, to explain what is missing.
     if config is not None and not out:
         get_configuration(session, c, config)
@@ -380,7 +411,7 @@ def _check_requested(session: Session, c: Campaign, config: str | None, out: dic
                     else f"{src} has no recording of section(s) {missing}")
             raise NotFound(f"campaign {c.name!r}: {what}")
     if channel_names is not None:
-        seen = {ch for ss in out.values() for ch in ss.channels}
+        seen = {ch for chans in out.values() for ch in chans}
         missing = [ch for ch in channel_names if ch not in seen]
         if missing:
             known = [ch.name for ch in channels(session, c)]

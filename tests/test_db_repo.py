@@ -145,6 +145,28 @@ def test_load_is_one_query_and_filters(demo):
         assert measured["S02"]["Y_w1L"] != hashes["S02"]["Y_w1L"]
 
 
+def test_fetch_reads_now_and_decodes_later_in_another_thread(demo):
+    from concurrent.futures import ThreadPoolExecutor
+
+    with demo.session() as s:
+        c = repo.get_campaign(s, "demo")
+        with QueryCounter(demo.engine) as q:
+            decode = repo.fetch_signalsets(s, c, "variant1", sections=["S03", "S01"])
+        assert len(q.statements) == 1
+        with pytest.raises(NotFound, match="unknown section"):
+            repo.fetch_signalsets(s, "demo", sections=["S99"])
+        direct = repo.load_signalsets(s, "demo", "variant1", sections=["S03", "S01"])
+    with ThreadPoolExecutor(1) as pool:  # session closed: decoding needs no database
+        later = pool.submit(decode).result()
+    assert list(later) == list(direct) == ["S01", "S03"]
+    for sid, ss in direct.items():
+        assert later[sid].hashes == ss.hashes and list(later[sid].channels) == sorted(ss.channels)
+        assert np.array_equal(later[sid].distance_m, ss.distance_m)
+        for ch, values in ss.channels.items():
+            assert np.array_equal(later[sid].channels[ch], values)
+            assert codec.content_hash(values) == ss.hashes[ch]
+
+
 def test_load_errors_name_what_is_missing(demo):
     with demo.session() as s:
         with pytest.raises(NotFound, match="configuration 'nope' not found.*baseline, variant1"):

@@ -26,7 +26,8 @@ def campaign_folder(tmp_path_factory):
 def counting(monkeypatch):
     """Count the sections processed by en14363.evaluate_batch and the blob reads."""
     counts = {"processed": 0, "loads": 0}
-    real_eval, real_load = en14363.evaluate_batch, repo.load_signalsets
+    # every blob read goes through repo.fetch_signalsets (load_signalsets calls it too)
+    real_eval, real_load = en14363.evaluate_batch, repo.fetch_signalsets
 
     def eval_batch(sets, secs, **kw):
         counts["processed"] += len(sets)
@@ -37,7 +38,7 @@ def counting(monkeypatch):
         return real_load(*a, **kw)
 
     monkeypatch.setattr(en14363, "evaluate_batch", eval_batch)
-    monkeypatch.setattr(repo, "load_signalsets", load)
+    monkeypatch.setattr(repo, "fetch_signalsets", load)
     return counts
 
 

@@ -75,6 +75,22 @@ def _recording_meta(session: Session, campaign_id: int,
     return {sid: (sha, float(fs), int(n)) for sid, sha, fs, n in session.execute(q)}
 
 
+def source_cache_keys(session: Session, campaign, config: str | None,
+                      sections: Sequence[SectionInfo], *, order: int = DEFAULT_ORDER
+                      ) -> dict[str, str]:
+    """section id → result-cache key of every recorded section of one source, read from the
+    stored content hashes only (no blob is decoded)."""
+    from db import repo
+
+    camp = repo.get_campaign(session, campaign)
+    hashes = repo.signal_hashes(session, camp, config)
+    meta = _recording_meta(session, camp.id, config)
+    by_id = {s.id: s for s in sections}
+    return {sid: section_cache_key(by_id[sid], meta[sid][1], meta[sid][2], meta[sid][0],
+                                   hashes.get(sid, {}), order)
+            for sid in meta if sid in by_id}
+
+
 def _cache_get_many(session: Session, keys: Sequence[str]) -> dict[str, bytes]:
     """Bulk read of the result cache (one query per chunk instead of one per key)."""
     from db.models import ResultCache
@@ -108,28 +124,25 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
     from db import repo
 
     camp = repo.get_campaign(session, campaign)
-    hashes = repo.signal_hashes(session, camp, config)
-    meta = _recording_meta(session, camp.id, config)
     by_id = {s.id: s for s in sections}
-    keys = {sid: section_cache_key(by_id[sid], meta[sid][1], meta[sid][2], meta[sid][0],
-                                   hashes.get(sid, {}), order)
-            for sid in meta if sid in by_id}
+    keys = source_cache_keys(session, camp, config, sections, order=order)
     cached = _cache_get_many(session, list(keys.values()))
     out = {sid: _unpack(sid, cached[k]) for sid, k in keys.items() if k in cached}
     missing = [sid for sid in keys if sid not in out]
     if missing:
-        # pipeline: this thread reads chunk k+1 (the caller's session stays in this thread)
-        # while a worker thread processes chunk k (compiled filters and sorts release the GIL)
+        # pipeline: this thread reads the blobs of chunk k+1 (the caller's session stays in
+        # this thread) while a worker thread decodes and processes chunk k. Decoding in the
+        # worker, not here, avoids thousands of GIL hand-overs between the two threads
+        # (every inflate and plane copy releases the GIL), which doubled the decode time.
         from concurrent.futures import ThreadPoolExecutor
 
         chunks = [missing[i:i + _PIPELINE_CHUNK] for i in range(0, len(missing), _PIPELINE_CHUNK)]
         pending = []
         with ThreadPoolExecutor(max_workers=1) as pool:
             for chunk in chunks:
-                sets = repo.load_signalsets(session, camp, config, sections=chunk)
-                pending.append((chunk, pool.submit(en14363.evaluate_batch,
-                                                   [sets[s] for s in chunk],
-                                                   [by_id[s] for s in chunk], order=order)))
+                decode = repo.fetch_signalsets(session, camp, config, sections=chunk)
+                pending.append((chunk, pool.submit(_decode_and_evaluate, decode,
+                                                   [by_id[s] for s in chunk], order)))
             new: dict[str, bytes] = {}
             for chunk, fut in pending:
                 for sid, vals in zip(chunk, fut.result(), strict=True):
@@ -139,6 +152,12 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
     if stats is not None:
         stats.update({"cached": len(keys) - len(missing), "computed": len(missing)})
     return out
+
+
+def _decode_and_evaluate(decode, sections: list[SectionInfo],
+                         order: int) -> list[en14363.SectionValues]:
+    sets = decode()
+    return en14363.evaluate_batch([sets[s.id] for s in sections], sections, order=order)
 
 
 def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
