@@ -37,11 +37,8 @@ DOWNSAMPLE_WIDTH = 1000
 
 
 def _curve(x: np.ndarray, y: np.ndarray, label: str, xdim: hv.Dimension, ydim: hv.Dimension,
-           color: str, width: float, downsample: bool) -> Any:
-    curve = hv.Curve((x, y), xdim, ydim, label=label).opts(color=color, line_width=width)
-    if downsample and len(x) > DOWNSAMPLE_ABOVE:
-        return downsample1d(curve, algorithm="minmax-lttb", width=DOWNSAMPLE_WIDTH)
-    return curve
+           color: str, width: float) -> hv.Curve:
+    return hv.Curve((x, y), xdim, ydim, label=label).opts(color=color, line_width=width)
 
 
 def compare_plot(data: CompareData, height: int = 330, downsample: bool = True,
@@ -51,12 +48,9 @@ def compare_plot(data: CompareData, height: int = 330, downsample: bool = True,
     # "time"/"distance" and "signal"; a PSD has its own "frequency"/"psd"
     xdim = hv.Dimension(data.x_label.split(" (")[0], label=data.x_label)
     ydim = hv.Dimension("psd" if data.log_axes else "signal", label=data.y_label)
-    layers: list[Any] = []
-    if data.eval_range is not None:
-        a, b = data.eval_range
-        layers.append(hv.VSpan(a, b).opts(color="#f2c14e", alpha=0.18, line_alpha=0))
     ordered = sorted(data.traces, key=lambda t: not t.measured)  # measurement beneath
     finite = [t.y[np.isfinite(t.y)] for t in ordered if t.y.size]
+    curves: list[hv.Curve] = []
     sim_i = 0
     for t in ordered:
         if t.measured:
@@ -64,10 +58,16 @@ def compare_plot(data: CompareData, height: int = 330, downsample: bool = True,
         else:
             color, width = SIM_COLORS[sim_i % len(SIM_COLORS)], 1.3
             sim_i += 1
-        layers.append(_curve(t.x, t.y, t.label, xdim, ydim, color, width,
-                             downsample and not data.log_axes))
-    if not layers:
-        layers.append(hv.Curve([], xdim, ydim))
+        curves.append(_curve(t.x, t.y, t.label, xdim, ydim, color, width))
+    if not curves:
+        curves.append(hv.Curve([], xdim, ydim))
+    overlay: Any = hv.Overlay(curves)
+    if downsample and not data.log_axes and max(len(c) for c in curves) > DOWNSAMPLE_ABOVE:
+        # one dynamic operation for the whole overlay (one RangeXY stream, data sliced once)
+        overlay = downsample1d(overlay, algorithm="minmax-lttb", width=DOWNSAMPLE_WIDTH)
+    if data.eval_range is not None:
+        a, b = data.eval_range
+        overlay = overlay * hv.VSpan(a, b).opts(color="#f2c14e", alpha=0.18, line_alpha=0)
     opts: dict[str, Any] = {
         "title": data.title, "xlabel": data.x_label, "ylabel": data.y_label, "responsive": True, "height": height, "fontsize": FONTS,
         "show_grid": True, "legend_position": "right", "framewise": False,
@@ -87,11 +87,6 @@ def compare_plot(data: CompareData, height: int = 330, downsample: bool = True,
                                max(float(f.max()) for f in finite if f.size))
         if ylim is not None:
             opts["ylim"] = ylim
-    overlay = layers[0]
-    for layer in layers[1:]:  # `*` keeps DynamicMaps (downsampled curves) dynamic
-        overlay = overlay * layer
-    if not isinstance(overlay, (hv.Overlay, hv.DynamicMap)):
-        overlay = hv.Overlay([overlay])
     return overlay.opts(hv.opts.Overlay(**opts))
 
 

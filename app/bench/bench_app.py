@@ -98,8 +98,7 @@ def _switching(database, switches: int) -> dict:
     def one(i: int, downsample: bool) -> float:
         sec, ch = combos[i % len(combos)]
         t0 = time.perf_counter()
-        with app.param.discard_events():  # select without triggering the page's own refresh
-            app.section, app.channel = sec, ch
+        app.section, app.channel = sec, ch  # the Compare page is hidden: it does not refresh
         if downsample:
             series, psd = build_compare_objects(page.state)
         else:
