@@ -105,5 +105,6 @@ def test_metrics_report_and_workshop_pages(page, app_url):
     nav(page, "Diagnose & model workshop")
     _wait_page(page, "Diagnose & model workshop")
     assert main.get_by_role("button", name="Run diagnosis").is_visible()
-    main.get_by_text("Error along the lineage").wait_for(timeout=PAGE_TIMEOUT_MS)
+    main.get_by_text("Add an effect").wait_for(timeout=PAGE_TIMEOUT_MS)
+    main.locator("canvas").first.wait_for(state="attached", timeout=PAGE_TIMEOUT_MS)  # lineage chart
     screenshot(page, "workshop")
