@@ -7,9 +7,13 @@ House rules, applied by every builder here:
 * fixed y scaling per plot from all traces (nice round limits) — switching a configuration
   on or off never rescales the other traces silently (``framewise=False``);
 * the evaluated (constant-curvature) range shaded;
-* long signals downsampled on the server with HoloViews ``downsample1d``
-  (``minmax-lttb`` via tsdownsample) so a 20 000-sample trace sends ~1 000 points and
+* long signals downsampled on the server so a 20 000-sample trace sends ~2 000 points and
   re-samples on zoom.
+
+The Compare page uses :class:`CompareFigure`: plain Bokeh figures built once per session whose
+``ColumnDataSource`` data are replaced on a switch (min-max-LTTB with tsdownsample directly),
+because building and rendering HoloViews overlays with a ``downsample1d`` stream cost ~0.3 s
+per plot. :func:`compare_plot` (HoloViews) remains for static use.
 """
 
 from __future__ import annotations
@@ -19,7 +23,11 @@ from typing import Any
 
 import holoviews as hv
 import numpy as np
+from bokeh.events import RangesUpdate
+from bokeh.models import BoxAnnotation, ColumnDataSource, HoverTool, Legend, LegendItem, Range1d
+from bokeh.plotting import figure
 from holoviews.operation.downsample import downsample1d
+from tsdownsample import MinMaxLTTBDownsampler
 
 from app.state import CompareData, nice_limits, unit_label
 
@@ -34,6 +42,11 @@ FONTS = {"title": "13pt", "labels": "12pt", "xticks": "11pt", "yticks": "11pt", 
 #: signals longer than this are downsampled on the server
 DOWNSAMPLE_ABOVE = 2000
 DOWNSAMPLE_WIDTH = 1000
+#: points per trace sent by :class:`CompareFigure` (per visible window, refined on zoom)
+FIGURE_POINTS = 2000
+#: traces a :class:`CompareFigure` can show: the measurement + 4 configurations
+MAX_TRACES = 5
+EVAL_FILL = "#f2c14e"
 
 
 def _curve(x: np.ndarray, y: np.ndarray, label: str, xdim: hv.Dimension, ydim: hv.Dimension,
@@ -88,6 +101,148 @@ def compare_plot(data: CompareData, height: int = 330, downsample: bool = True,
         if ylim is not None:
             opts["ylim"] = ylim
     return overlay.opts(hv.opts.Overlay(**opts))
+
+
+def downsample_xy(x: np.ndarray, y: np.ndarray, n_out: int = FIGURE_POINTS,
+                  x_range: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """At most ``n_out`` points of ``(x, y)`` within ``x_range`` (inclusive, plus one
+    neighbour each side so lines reach the window edges), chosen by min-max LTTB
+    (tsdownsample ``MinMaxLTTBDownsampler``: per-bucket min/max preselection, then
+    largest-triangle-three-buckets, Steinarsson 2013; the first and last point kept).
+
+    ``x`` must be increasing. Non-finite samples are dropped before selection.
+    """
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if x_range is not None and x.size:
+        i0 = max(int(np.searchsorted(x, x_range[0], side="left")) - 1, 0)
+        i1 = min(int(np.searchsorted(x, x_range[1], side="right")) + 1, x.size)
+        x, y = x[i0:i1], y[i0:i1]
+    ok = np.isfinite(x) & np.isfinite(y)
+    if not ok.all():
+        x, y = x[ok], y[ok]
+    if x.size <= n_out:
+        return x, y
+    idx = MinMaxLTTBDownsampler().downsample(np.ascontiguousarray(x), np.ascontiguousarray(y), n_out=n_out)
+    return x[idx], y[idx]
+
+
+class CompareFigure:
+    """One plain Bokeh figure of the Compare page, built once and updated in place.
+
+    Up to :data:`MAX_TRACES` line renderers (the first reserved for the measurement, dark grey,
+    drawn beneath; then :data:`SIM_COLORS`), the evaluated range as a ``BoxAnnotation``, the
+    legend outside right, fixed y range. :meth:`update` replaces the sources' data (downsampled
+    to :data:`FIGURE_POINTS`) and labels; with ``x_range`` shared between figures, zooming one
+    zooms the others, and the visible window is re-sampled from the full arrays on the server
+    (``RangesUpdate``). ``log_axes`` gives a log–log figure (PSD, never downsampled).
+    """
+
+    def __init__(self, height: int = 330, log_axes: bool = False, x_range: Range1d | None = None,
+                 x_name: str = "x", y_name: str = "y"):
+        self.log_axes = log_axes
+        self.x_range = x_range if x_range is not None else Range1d(0.0, 1.0)
+        kw: dict[str, Any] = {"x_axis_type": "log", "y_axis_type": "log"} if log_axes else {}
+        self.fig = figure(height=height, sizing_mode="stretch_width", x_range=self.x_range,
+                          y_range=Range1d(0.0, 1.0), tools="pan,box_zoom,wheel_zoom,reset,save",
+                          active_drag="box_zoom", toolbar_location="right", **kw)
+        self.fig.title.text_font_size = FONTS["title"]
+        for ax in (*self.fig.xaxis, *self.fig.yaxis):
+            ax.axis_label_text_font_size = FONTS["labels"]
+            ax.major_label_text_font_size = FONTS["xticks"]
+        self.shade = BoxAnnotation(left=0.0, right=0.0, fill_color=EVAL_FILL, fill_alpha=0.18,
+                                   line_alpha=0, visible=False, level="underlay")
+        self.fig.add_layout(self.shade)
+        self.sources: list[ColumnDataSource] = []
+        self.renderers = []
+        for i in range(MAX_TRACES):
+            color, width = (MEASURED_COLOR, 1.6) if i == 0 else (SIM_COLORS[(i - 1) % len(SIM_COLORS)], 1.3)
+            src = ColumnDataSource({"x": np.zeros(0), "y": np.zeros(0)})
+            self.sources.append(src)
+            self.renderers.append(self.fig.line("x", "y", source=src, line_color=color,
+                                                line_width=width, visible=False))
+        self.legend = Legend(items=[], location="top_left", label_text_font_size=FONTS["legend"],
+                             click_policy="hide")
+        self.fig.add_layout(self.legend, "right")
+        self.hover = HoverTool(tooltips=[("", "$name"), (x_name, "$x"), (y_name, "$y")],
+                               renderers=self.renderers, mode="mouse")
+        self.fig.add_tools(self.hover)
+        self._full: list[tuple[np.ndarray, np.ndarray] | None] = [None] * MAX_TRACES
+        if not log_axes:
+            self.fig.on_event(RangesUpdate, self._on_ranges)
+
+    def update(self, data: CompareData, ylim: tuple[float, float] | None = None) -> None:
+        """Show ``data``: measurement beneath, simulations on top, evaluated range shaded,
+        x range reset to the data, y range ``ylim`` (or nice limits / six decades for log)."""
+        ordered = sorted(data.traces, key=lambda t: not t.measured)
+        self.fig.title.text = data.title
+        self.fig.xaxis[0].axis_label = data.x_label
+        self.fig.yaxis[0].axis_label = data.y_label
+        slots: list[int] = []
+        sim_i = 1
+        for t in ordered:
+            if t.measured and 0 not in slots:
+                slots.append(0)
+            elif sim_i < MAX_TRACES:
+                slots.append(sim_i)
+                sim_i += 1
+            else:
+                slots.append(-1)  # more configurations than renderers: not shown
+        items = []
+        used = set()
+        for t, slot in zip(ordered, slots, strict=True):
+            if slot < 0:
+                continue
+            used.add(slot)
+            x, y = np.asarray(t.x, dtype=float), np.asarray(t.y, dtype=float)
+            self._full[slot] = (x, y)
+            if self.log_axes:
+                keep = (x > 0) & (y > 0)
+                sx, sy = x[keep], y[keep]
+            else:
+                sx, sy = downsample_xy(x, y)
+            self.sources[slot].data = {"x": sx, "y": sy}
+            self.renderers[slot].name = t.label
+            self.renderers[slot].visible = True
+            items.append(LegendItem(label=t.label, renderers=[self.renderers[slot]]))
+        for slot in range(MAX_TRACES):
+            if slot not in used:
+                self._full[slot] = None
+                self.renderers[slot].visible = False
+                self.sources[slot].data = {"x": np.zeros(0), "y": np.zeros(0)}
+        self.legend.items = items
+        if data.eval_range is not None:
+            self.shade.update(left=float(data.eval_range[0]), right=float(data.eval_range[1]), visible=True)
+        else:
+            self.shade.visible = False
+        xs = [f[0][np.isfinite(f[0])] for f in self._full if f is not None]
+        xs = [v[v > 0] if self.log_axes else v for v in xs]
+        xs = [v for v in xs if v.size]
+        if xs:
+            self.x_range.update(start=min(float(v.min()) for v in xs), end=max(float(v.max()) for v in xs))
+        finite = [t.y[np.isfinite(t.y)] for t in ordered if t.y.size]
+        finite = [f for f in finite if f.size]
+        if self.log_axes:
+            pos = [f[f > 0] for f in finite if np.any(f > 0)]
+            if pos:
+                hi = max(float(np.max(f)) for f in pos)
+                lo = max(min(float(np.min(f)) for f in pos), hi * 1e-6)  # six decades below the peak
+                ylim = (10 ** math.floor(math.log10(lo)), 10 ** math.ceil(math.log10(hi)))
+        elif ylim is None and finite:
+            ylim = nice_limits(min(float(f.min()) for f in finite), max(float(f.max()) for f in finite))
+        if ylim is not None:
+            self.fig.y_range.update(start=float(ylim[0]), end=float(ylim[1]))
+
+    def refine(self, x0: float, x1: float) -> None:
+        """Re-sample the window ``[x0, x1]`` from the full arrays (zoom)."""
+        for slot, full in enumerate(self._full):
+            if full is not None:
+                sx, sy = downsample_xy(full[0], full[1], x_range=(x0, x1))
+                self.sources[slot].data = {"x": sx, "y": sy}
+
+    def _on_ranges(self, event: RangesUpdate) -> None:
+        if event.x0 is not None and event.x1 is not None:
+            self.refine(float(event.x0), float(event.x1))
 
 
 def _bars(rows: list[dict[str, Any]], key: str, ci_key: str | None, title: str,
@@ -174,7 +329,9 @@ def lineage_chart(rows: list[dict[str, Any]], height: int = 300) -> hv.Overlay:
 
 
 __all__ = [
+    "CompareFigure",
     "compare_plot",
+    "downsample_xy",
     "lineage_chart",
     "nice_limits",
     "unit_label",

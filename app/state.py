@@ -484,17 +484,41 @@ class CompareState(param.Parameterized):
                 return s
         raise NotFound(f"section {self.app.section!r} not in campaign {self.app.campaign!r}")
 
+    #: entries kept by the per-session caches of loaded SignalSets and EN-filtered arrays
+    CACHE_SIZE = 48
+
     def _load(self, config: str | None):
-        return self.app.backend.signals(self.app.campaign, config, self.app.section, [self.app.channel])
+        """The SignalSet of one source for the current section and channel, cached per
+        (campaign, revision, configuration, section, channel) — a database change bumps
+        ``AppState.revision`` and so invalidates the entries."""
+        app = self.app
+        key = (app.campaign, app.revision, config, app.section, app.channel)
+        cache = self.__dict__.setdefault("_signal_cache", {})
+        if key not in cache:
+            if len(cache) >= self.CACHE_SIZE:
+                cache.pop(next(iter(cache)))
+            cache[key] = app.backend.signals(app.campaign, config, app.section, [app.channel])
+        return cache[key]
 
     def _process(self, sigset, values: np.ndarray, processing: str) -> np.ndarray:
+        """``values`` as shown: raw, or EN-filtered (``core.filters.filtfilt_rows``); the
+        filtered array is cached per (SignalSet, channel) while that SignalSet is cached."""
         if processing == "raw":
             return values
         from core.filters import filtfilt_rows
 
         kind = split_channel(self.app.channel)[0]
         fkind = EN_FILTER_OF_KIND.get(kind, ("lowpass", ""))[0]
-        return filtfilt_rows(values[None, :], float(sigset.fs), fkind)[0]
+        cache = self.__dict__.setdefault("_filter_cache", {})
+        key = (id(sigset), self.app.channel, fkind)
+        hit = cache.get(key)
+        if hit is not None and hit[0] is sigset and hit[1] is values:
+            return hit[2]
+        out = filtfilt_rows(values[None, :], float(sigset.fs), fkind)[0]
+        if len(cache) >= self.CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+        cache[key] = (sigset, values, out)
+        return out
 
     def sources(self) -> list[tuple[str, Any]]:
         """[(label, SignalSet)] — the measurement first (drawn beneath), then configurations."""

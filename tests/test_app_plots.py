@@ -65,6 +65,62 @@ def test_large_signals_are_downsampled_on_the_server():
                if type(r.glyph).__name__ == "Line") == 500
 
 
+def test_downsample_xy_keeps_extremes_ends_and_window():
+    x = np.linspace(0.0, 100.0, 20_001)
+    y = np.sin(x)
+    y[12_345] = 9.0  # a spike min-max LTTB must keep
+    sx, sy = plots.downsample_xy(x, y, n_out=2000)
+    assert len(sx) == 2000 and np.all(np.diff(sx) > 0)
+    assert (sx[0], sx[-1]) == (0.0, 100.0) and sy.max() == 9.0
+    wx, _ = plots.downsample_xy(x, y, n_out=2000, x_range=(10.0, 20.0))
+    # window [10, 20] holds 2001 samples (+1 neighbour each side) → downsampled to 2000
+    assert len(wx) == 2000 and wx[0] == pytest.approx(9.995) and wx[-1] == pytest.approx(20.005)
+    short_x, short_y = plots.downsample_xy(x[:10], np.r_[y[:9], np.nan])
+    assert len(short_x) == 9 and np.all(np.isfinite(short_y))  # NaN dropped, nothing thinned
+
+
+def test_compare_figure_updates_in_place():
+    fig = plots.CompareFigure()
+    other = plots.CompareFigure(x_range=fig.x_range)
+    assert other.fig.x_range is fig.fig.x_range  # linked zoom
+    fig.update(_data(n=20_000))
+    f = fig.fig
+    assert f.xaxis[0].axis_label == "time (s)" and f.yaxis[0].axis_label == "Y_w1L (kN)"
+    shown = [r for r in fig.renderers if r.visible]
+    # measurement beneath (first renderer, dark grey), simulation on top
+    assert [r.name for r in shown] == ["measurement", "sim A"]
+    assert shown[0].glyph.line_color == plots.MEASURED_COLOR
+    assert shown[1].glyph.line_color == plots.SIM_COLORS[0]
+    assert all(len(r.data_source.data["x"]) == plots.FIGURE_POINTS for r in shown)
+    assert (fig.shade.left, fig.shade.right, fig.shade.visible) == (2.0, 8.0, True)
+    assert (f.y_range.start, f.y_range.end) == pytest.approx((-1.0, 1.5))
+    assert (fig.x_range.start, fig.x_range.end) == (0.0, 10.0)
+    assert [i.label.value for i in fig.legend.items] == ["measurement", "sim A"]
+    fig.refine(4.0, 5.0)  # zoom: the window re-sampled from the full arrays
+    xs = shown[0].data_source.data["x"]
+    assert xs[0] < 4.0 < xs[1] and xs[-2] < 5.0 < xs[-1] and len(xs) == 2000
+    models = {id(m) for m in (f, *fig.sources, *fig.renderers)}
+    only_meas = _data(n=300)
+    only_meas.traces = [only_meas.traces[1]]
+    only_meas.eval_range = None
+    fig.update(only_meas, ylim=(-2.0, 2.0))
+    assert {id(m) for m in (f, *fig.sources, *fig.renderers)} == models  # same Bokeh models
+    assert [r.name for r in fig.renderers if r.visible] == ["measurement"]
+    assert len(fig.sources[0].data["x"]) == 300 and len(fig.sources[1].data["x"]) == 0
+    assert not fig.shade.visible and (f.y_range.start, f.y_range.end) == (-2.0, 2.0)
+
+
+def test_compare_figure_psd_is_log_log_six_decades():
+    fig = plots.CompareFigure(log_axes=True)
+    f = np.linspace(0.1, 50.0, 500)
+    d = _data(log=True)
+    d.traces = [Trace("measurement", f, 3.0 / f ** 4, measured=True)]
+    fig.update(d)
+    assert type(fig.fig.x_scale).__name__ == "LogScale" and type(fig.fig.y_scale).__name__ == "LogScale"
+    # peak 3/0.1^4 = 3e4 → top 1e5; six decades below the peak 3e-2 → bottom 1e-2
+    assert (fig.fig.y_range.start, fig.fig.y_range.end) == pytest.approx((1e-2, 1e5))
+
+
 def test_psd_plot_is_log_log():
     fig = hv.render(plots.compare_plot(_data(log=True)), backend="bokeh")
     assert type(fig.x_scale).__name__ == "LogScale" and type(fig.y_scale).__name__ == "LogScale"

@@ -120,6 +120,24 @@ def test_compare_series_measured_first_eval_range_and_filter(app):
     assert dist.eval_range == (sec.eval_start_m, sec.eval_end_m)
 
 
+def test_compare_caches_sources_and_filtered_arrays_per_selection(app):
+    cmp = CompareState(app)
+    app.section = app.param.section.objects[0]
+    app.channel = "Y_w1L"
+    first = cmp.sources()
+    again = cmp.sources()
+    assert all(a[1] is b[1] for a, b in zip(first, again, strict=True))  # cached SignalSets
+    en1 = cmp.series("EN-filtered", sources=first).traces[0].y
+    assert cmp.series("EN-filtered", sources=again).traces[0].y is en1  # cached filter output
+    app.channel = "Q_w1L"  # another channel: other signals, not the cached ones
+    other = cmp.sources()
+    assert other[0][1] is not first[0][1] and "Q_w1L" in other[0][1].channels
+    app.channel = "Y_w1L"
+    app.revision += 1  # the database changed: reload
+    assert cmp.sources()[0][1] is not first[0][1]
+    np.testing.assert_array_equal(cmp.series("EN-filtered").traces[0].y, en1)
+
+
 def test_compare_psd_is_welch_of_the_evaluated_part(app):
     cmp = CompareState(app)
     app.channel = "az_cb_b1"

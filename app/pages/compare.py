@@ -2,6 +2,9 @@
 
 The EN-filtered and raw series share their x axis (linked zoom) and one fixed y range; the
 evaluated range is shaded; long signals are downsampled on the server (``app.plots``).
+
+The figures are plain Bokeh figures built once per session (:class:`CompareView`); a switch
+only replaces their data sources (DESIGN §9: p95 ≤ 300 ms server-side for 20 000 samples).
 """
 
 from __future__ import annotations
@@ -14,19 +17,42 @@ from app.pages._common import PageBase, message
 from app.state import AppState, CompareState
 
 
-def build_compare_objects(state: CompareState):
-    """The HoloViews objects of the Compare page: ([series plots], PSD plot).
-
-    Loads each source once and shares it between the views. This is the callback timed by
-    ``railval bench app`` (plot switching)."""
+def _compare_datas(state: CompareState):
+    """([series CompareData], PSD CompareData, shared y limits); each source loaded once."""
     sources = state.sources()
     datas = [state.series(p, sources=sources) for p in state.processings()]
     finite = [t.y[np.isfinite(t.y)] for d in datas for t in d.traces if t.y.size]
+    finite = [f for f in finite if f.size]
     ylim = plots.nice_limits(min(float(f.min()) for f in finite), max(float(f.max()) for f in finite)) \
         if finite else None
-    series = [plots.compare_plot(d, ylim=ylim) for d in datas]
-    psd = plots.compare_plot(state.psd(sources=sources), height=320)
-    return series, psd
+    return datas, state.psd(sources=sources), ylim
+
+
+def build_compare_objects(state: CompareState):
+    """The HoloViews objects of the Compare page: ([series plots], PSD plot) — for static
+    use and as the baseline of ``railval bench app``; the page itself uses :class:`CompareView`."""
+    datas, psd, ylim = _compare_datas(state)
+    return [plots.compare_plot(d, ylim=ylim) for d in datas], plots.compare_plot(psd, height=320)
+
+
+class CompareView:
+    """The Compare page's figures, built once: two series figures sharing their x range
+    (linked zoom) and the PSD. :meth:`update` is the switch callback timed by
+    ``railval bench app``."""
+
+    def __init__(self):
+        first = plots.CompareFigure(height=330)
+        self.series = [first, plots.CompareFigure(height=330, x_range=first.x_range)]
+        self.psd = plots.CompareFigure(height=320, log_axes=True)
+
+    def update(self, state: CompareState) -> int:
+        """Load, filter, downsample and push the data of the current selection; returns the
+        number of series figures in use (1 or 2)."""
+        datas, psd, ylim = _compare_datas(state)
+        for fig, d in zip(self.series, datas, strict=False):
+            fig.update(d, ylim=ylim)
+        self.psd.update(psd)
+        return len(datas)
 
 
 class ComparePage(PageBase):
@@ -48,24 +74,21 @@ class ComparePage(PageBase):
             pn.widgets.Select.from_param(self.state.param.processing, name="Processing", width=190),
             pn.widgets.FloatInput.from_param(self.state.param.psd_segment_s, name="PSD segment (s)", width=120),
         )
-        # one pane per series; Panel links the axes of panes sharing dimension names
-        self.series_panes = [pn.pane.HoloViews(sizing_mode="stretch_width", linked_axes=True)
-                             for _ in range(2)]
-        self.psd_pane = pn.pane.HoloViews(sizing_mode="stretch_width")
+        # Bokeh figures built once; the series share one x range (linked zoom)
+        self.view = CompareView()
+        self.series_panes = [pn.pane.Bokeh(f.fig, sizing_mode="stretch_width") for f in self.view.series]
+        self.psd_pane = pn.pane.Bokeh(self.view.psd.fig, sizing_mode="stretch_width")
         self.note = pn.pane.Markdown("", sizing_mode="stretch_width", styles={"color": "#555"})
 
     def refresh(self) -> None:
         if self.app.section is None or self.app.channel is None:
             self.body.objects = [self.controls, message("choose a section and a channel", "warning")]
             return
-        series, psd = build_compare_objects(self.state)
-        for pane, obj in zip(self.series_panes, series, strict=False):
-            pane.object = obj
-        self.psd_pane.object = psd
+        n_series = self.view.update(self.state)
         self.note.object = (
             "Measurement in dark grey beneath, simulations on top; shaded: evaluated "
             "(constant-curvature) range. Zoom on one series plot zooms the other. Series are "
-            "downsampled on the server (min-max LTTB) and refined on zoom. PSD: evaluated range, "
+            "downsampled on the server (min-max LTTB, 2 000 points) and refined on zoom. PSD: evaluated range, "
             f"EN-filtered, Welch with {self.state.psd_segment_s:g} s Hann segments.")
-        self.body.objects = [self.controls, pn.Column(*self.series_panes[:len(series)], sizing_mode="stretch_width"),
+        self.body.objects = [self.controls, pn.Column(*self.series_panes[:n_series], sizing_mode="stretch_width"),
                              self.psd_pane, self.note]
