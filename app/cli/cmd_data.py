@@ -82,7 +82,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         if bar is None:
             from tqdm import tqdm
 
-            bar = tqdm(total=total, unit="file", desc="reading", file=sys.stderr, leave=False)
+            bar = tqdm(total=total, unit="file", desc="reading", file=sys.stderr, leave=True)
         bar.update(done - bar.n)
         bar.set_postfix_str(what, refresh=False)
 
