@@ -55,7 +55,7 @@ class OverviewPage(PageBase):
             "section": s.id, "country": s.country,
             "radius (m)": "straight" if (not s.radius_m or math.isinf(s.radius_m)) else round(s.radius_m),
             "cant (mm)": s.cant_mm, "speed (km/h)": s.speed_kmh, "zone": s.zone,
-            "evaluated from (m)": s.eval_start_m, "to (m)": s.eval_end_m,
+            "evaluated from (m)": round(s.eval_start_m, 1), "to (m)": round(s.eval_end_m, 1),
             "evaluated length (m)": round(s.eval_end_m - s.eval_start_m, 1),
         } for s in ov.sections]).sort_values(["zone", "section"]) if ov.sections else pd.DataFrame()
         ch_df = pd.DataFrame([{"channel": c["name"], "kind": c["kind"], "position": c["position"],
