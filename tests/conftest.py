@@ -126,3 +126,12 @@ def demo_campaign_dir(tmp_path_factory):
     folder = tmp_path_factory.mktemp("demo-campaign")
     write_demo_campaign(folder, fmt="parquet", n_configs=2)
     return folder
+
+
+@pytest.fixture(scope="session")
+def browser_type_launch_args(browser_type_launch_args):
+    """pytest-playwright's launch arguments pointed at Debian's Chromium (no browser download)."""
+    from tests.browser_support import CHROMIUM, CHROMIUM_ARGS, require_browser
+
+    require_browser()
+    return {**browser_type_launch_args, "executable_path": CHROMIUM, "args": CHROMIUM_ARGS}

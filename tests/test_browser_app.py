@@ -12,8 +12,6 @@ import re
 import pytest
 
 from tests.browser_support import (
-    CHROMIUM,
-    CHROMIUM_ARGS,
     nav,
     open_app,
     require_browser,
@@ -26,12 +24,6 @@ from tests.browser_support import (
 pytestmark = [pytest.mark.browser,
               pytest.mark.filterwarnings("ignore:reference already known:UserWarning")]
 PAGE_TIMEOUT_MS = 120_000
-
-
-@pytest.fixture(scope="session")
-def browser_type_launch_args(browser_type_launch_args):
-    require_browser()
-    return {**browser_type_launch_args, "executable_path": CHROMIUM, "args": CHROMIUM_ARGS}
 
 
 @pytest.fixture(scope="module")

@@ -14,8 +14,6 @@ import re
 import pytest
 
 from tests.browser_support import (
-    CHROMIUM,
-    CHROMIUM_ARGS,
     nav,
     open_app,
     require_browser,
@@ -27,12 +25,6 @@ pytestmark = [pytest.mark.browser,
               pytest.mark.filterwarnings("ignore:reference already known:UserWarning")]
 PAGE_MS = 120_000
 JOB_MS = 1_200_000
-
-
-@pytest.fixture(scope="session")
-def browser_type_launch_args(browser_type_launch_args):
-    require_browser()
-    return {**browser_type_launch_args, "executable_path": CHROMIUM, "args": CHROMIUM_ARGS}
 
 
 @pytest.fixture(scope="module")
