@@ -134,27 +134,14 @@ def _settling_time(sos: np.ndarray, fs: float) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
-def _filtfilt_cols_kernel(sos, zi, edge, data_t, out_t):  # pragma: no cover - compiled
-    """Forward–backward direct form II transposed cascade (the recursion of
-    scipy.signal.sosfilt) on a time-major block ``data_t[n_samples, n_signals]``.
-
-    The inner loop runs over signals, so independent recursions are interleaved (SIMD and
-    instruction-level parallelism hide the latency of the recursive update)."""
-    n, n_cols = data_t.shape
+def _sos_pass(sos, zi, ext, first, stop, step):  # pragma: no cover - compiled
+    """One in-place pass of the cascade over ``ext[first:stop:step]`` (all columns), each
+    section starting in the steady state ``zi`` scaled by the first sample of the pass."""
     n_sec = sos.shape[0]
-    m = n + 2 * edge
-    ext = np.empty((m, n_cols))
-    for i in range(edge):
-        for c in range(n_cols):
-            ext[i, c] = 2.0 * data_t[0, c] - data_t[edge - i, c]
-            ext[n + edge + i, c] = 2.0 * data_t[n - 1, c] - data_t[n - 2 - i, c]
-    for i in range(n):
-        for c in range(n_cols):
-            ext[edge + i, c] = data_t[i, c]
+    n_cols = ext.shape[1]
     z0 = np.empty(n_cols)
     z1 = np.empty(n_cols)
-    # forward pass; every section starts in the steady state of a step of height ext[0]
-    x_first = ext[0].copy()
+    x_first = ext[first].copy()
     for s in range(n_sec):
         b0 = sos[s, 0]
         b1 = sos[s, 1]
@@ -164,31 +151,36 @@ def _filtfilt_cols_kernel(sos, zi, edge, data_t, out_t):  # pragma: no cover - c
         for c in range(n_cols):
             z0[c] = zi[s, 0] * x_first[c]
             z1[c] = zi[s, 1] * x_first[c]
-        for i in range(m):
+        for i in range(first, stop, step):
             for c in range(n_cols):
                 v = ext[i, c]
                 y = b0 * v + z0[c]
                 z0[c] = b1 * v - a1 * y + z1[c]
                 z1[c] = b2 * v - a2 * y
                 ext[i, c] = y
-    # backward pass, starting in the steady state of the last forward output
-    x_last = ext[m - 1].copy()
-    for s in range(n_sec):
-        b0 = sos[s, 0]
-        b1 = sos[s, 1]
-        b2 = sos[s, 2]
-        a1 = sos[s, 4]
-        a2 = sos[s, 5]
+
+
+@numba.njit(cache=True, nogil=True)
+def _filtfilt_cols_kernel(sos, zi, edge, data_t, out_t):  # pragma: no cover - compiled
+    """Forward–backward direct form II transposed cascade (the recursion of
+    scipy.signal.sosfilt) on a time-major block ``data_t[n_samples, n_signals]``.
+
+    The inner loop runs over signals, so independent recursions are interleaved (SIMD and
+    instruction-level parallelism hide the latency of the recursive update)."""
+    n, n_cols = data_t.shape
+    m = n + 2 * edge
+    ext = np.empty((m, n_cols))
+    for i in range(edge):
         for c in range(n_cols):
-            z0[c] = zi[s, 0] * x_last[c]
-            z1[c] = zi[s, 1] * x_last[c]
-        for i in range(m - 1, -1, -1):
-            for c in range(n_cols):
-                v = ext[i, c]
-                y = b0 * v + z0[c]
-                z0[c] = b1 * v - a1 * y + z1[c]
-                z1[c] = b2 * v - a2 * y
-                ext[i, c] = y
+            ext[i, c] = 2.0 * data_t[0, c] - data_t[edge - i, c]
+            ext[n + edge + i, c] = 2.0 * data_t[n - 1, c] - data_t[n - 2 - i, c]
+    for i in range(n):
+        for c in range(n_cols):
+            ext[edge + i, c] = data_t[i, c]
+    # forward pass; every section starts in the steady state of a step of height ext[0]
+    _sos_pass(sos, zi, ext, 0, m, 1)
+    # backward pass, starting in the steady state of the last forward output
+    _sos_pass(sos, zi, ext, m - 1, -1, -1)
     for i in range(n):
         for c in range(n_cols):
             out_t[i, c] = ext[edge + i, c]
