@@ -11,7 +11,7 @@ import html
 import socket
 import time
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -63,10 +63,37 @@ def status_area(app: AppState) -> pn.Column:
                      sizing_mode="stretch_width")
 
 
+class Pages(Mapping[str, Any]):
+    """The pages of one session, each built on first access (its view, figures and
+    watchers cost server time and JavaScript models only once the user opens it)."""
+
+    def __init__(self, app: AppState):
+        self.app = app
+        self._built: dict[str, Any] = {}
+
+    def __getitem__(self, name: str) -> Any:
+        if name not in self._built:
+            self._built[name] = PAGE_CLASSES[name](self.app)  # KeyError for unknown names
+        return self._built[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(PAGE_CLASSES)
+
+    def __len__(self) -> int:
+        return len(PAGE_CLASSES)
+
+    def built(self) -> list[str]:
+        """Names of the pages built so far."""
+        return list(self._built)
+
+
 def build_app(database: Any, page: str = "overview") -> pn.template.FastListTemplate:
-    """One session's app on ``database`` (a ``db.engine.Database``)."""
+    """One session's app on ``database`` (a ``db.engine.Database``); only the page shown
+    is built (:class:`Pages`), the others when first opened."""
     app = AppState(Backend(database))
-    pages = {name: cls(app) for name, cls in PAGE_CLASSES.items()}
+    if page != "overview":
+        app.page = page
+    pages = Pages(app)
     nav = pn.widgets.RadioButtonGroup(
         options={PAGE_TITLES[p]: p for p in PAGES}, value=app.page, orientation="vertical",
         color="light", sizing_mode="stretch_width", css_classes=["rv-nav"])
@@ -74,8 +101,9 @@ def build_app(database: Any, page: str = "overview") -> pn.template.FastListTemp
     main = pn.Column(sizing_mode="stretch_width", css_classes=["rv-main"])
 
     def show(*_):
-        main.objects = [pages[app.page]]
-        pages[app.page]._on_page(type("E", (), {"new": app.page})())
+        view = pages[app.page]
+        view.show()  # content first, so the page arrives in the browser whole
+        main.objects = [view]
     app.param.watch(show, ["page"])
     show()
     sidebar = [
@@ -93,8 +121,6 @@ def build_app(database: Any, page: str = "overview") -> pn.template.FastListTemp
     )
     template.railval_state = app  # for tests and the benchmark
     template.railval_pages = pages
-    if page != "overview":
-        app.page = page
     return template
 
 

@@ -24,7 +24,15 @@ from typing import Any
 import holoviews as hv
 import numpy as np
 from bokeh.events import RangesUpdate
-from bokeh.models import BoxAnnotation, ColumnDataSource, HoverTool, Legend, LegendItem, Range1d
+from bokeh.models import (
+    BoxAnnotation,
+    ColumnDataSource,
+    HoverTool,
+    Legend,
+    LegendItem,
+    Range1d,
+    Span,
+)
 from bokeh.plotting import figure
 from holoviews.operation.downsample import downsample1d
 from tsdownsample import MinMaxLTTBDownsampler
@@ -146,10 +154,7 @@ class CompareFigure:
         self.fig = figure(height=height, sizing_mode="stretch_width", x_range=self.x_range,
                           y_range=Range1d(0.0, 1.0), tools="pan,box_zoom,wheel_zoom,reset,save",
                           active_drag="box_zoom", toolbar_location="right", **kw)
-        self.fig.title.text_font_size = FONTS["title"]
-        for ax in (*self.fig.xaxis, *self.fig.yaxis):
-            ax.axis_label_text_font_size = FONTS["labels"]
-            ax.major_label_text_font_size = FONTS["xticks"]
+        _fonts(self.fig)
         self.shade = BoxAnnotation(left=0.0, right=0.0, fill_color=EVAL_FILL, fill_alpha=0.18,
                                    line_alpha=0, visible=False, level="underlay")
         self.fig.add_layout(self.shade)
@@ -295,19 +300,36 @@ def validation_bars(rows: list[dict[str, Any]], height: int = 340):
     return mean_ov, mean_bars, std_ov, std_bars
 
 
-def zone_coverage(counts: dict[int, int], need: int = 3, height: int = 260) -> hv.Overlay:
-    """Sections per EN 14363 test zone; zones below ``need`` in red, the need as a line."""
+def zone_coverage(counts: dict[int, int], need: int = 3, height: int = 260):
+    """Sections per EN 14363 test zone as a plain Bokeh figure (first page: no HoloViews
+    render on the way to the first paint): zones below ``need`` red, the need dashed,
+    integer ticks (sections are counted)."""
     zones = [f"zone {z}" for z in sorted(counts)]
-    vals = [counts[z] for z in sorted(counts)]
+    vals = [int(counts[z]) for z in sorted(counts)]
     ok = ["ok" if v >= need else "short" for v in vals]
-    bars = hv.Bars({"zone": zones, "sections": vals, "ok": ok},
-                   kdims=[hv.Dimension("zone", label="EN 14363 test zone")],
-                   vdims=[hv.Dimension("sections", label="sections (count)"), "ok"]).opts(
-        color=hv.dim("ok").categorize({"ok": PASS_COLOR, "short": FAIL_COLOR}), line_color=None)
-    line = hv.HLine(need).opts(color=LIMIT_COLOR, line_dash="dashed", line_width=1.5)
-    return (bars * line).opts(title=f"Sections per zone (need ≥ {need})", responsive=True,
-                              height=height, fontsize=FONTS, ylim=(0, max(vals + [need]) + 1),
-                              show_grid=True)
+    top = max(vals + [need]) + 1
+    fig = figure(x_range=zones, y_range=Range1d(0, top), height=height, sizing_mode="stretch_width",
+                 title=f"Sections per zone (need ≥ {need})", tools="save", toolbar_location="right")
+    src = ColumnDataSource({"zone": zones, "sections": vals, "ok": ok,
+                            "color": [PASS_COLOR if o == "ok" else FAIL_COLOR for o in ok]})
+    fig.vbar(x="zone", top="sections", width=0.8, source=src, fill_color="color", line_color=None)
+    fig.add_layout(Span(location=need, dimension="width", line_color=LIMIT_COLOR,
+                        line_dash="dashed", line_width=1.5))
+    fig.add_tools(HoverTool(tooltips=[("zone", "@zone"), ("sections", "@sections")]))
+    fig.xaxis.axis_label = "EN 14363 test zone"
+    fig.yaxis.axis_label = "sections (count)"
+    fig.yaxis.ticker = list(range(0, top + 1, 1 if top <= 12 else max(1, top // 8)))
+    fig.xgrid.grid_line_color = None
+    _fonts(fig)
+    return fig
+
+
+def _fonts(fig) -> None:
+    """House fonts (:data:`FONTS`) on a plain Bokeh figure."""
+    fig.title.text_font_size = FONTS["title"]
+    for ax in (*fig.xaxis, *fig.yaxis):
+        ax.axis_label_text_font_size = FONTS["labels"]
+        ax.major_label_text_font_size = FONTS["xticks"]
 
 
 def lineage_chart(rows: list[dict[str, Any]], height: int = 300) -> hv.Overlay:

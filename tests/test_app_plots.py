@@ -150,9 +150,13 @@ def test_validation_bars_colour_by_limit_and_limit_lines():
 
 
 def test_zone_coverage_marks_short_zones_and_lineage_chart():
-    ov = plots.zone_coverage({1: 3, 2: 4, 3: 2, 4: 3})
-    bars = ov.get(0)
-    assert list(bars.dimension_values("ok")) == ["ok", "ok", "short", "ok"]
+    zfig = plots.zone_coverage({1: 3, 2: 4, 3: 2, 4: 3})
+    data = zfig.renderers[0].data_source.data
+    assert list(data["ok"]) == ["ok", "ok", "short", "ok"]
+    assert list(data["color"]) == [plots.PASS_COLOR] * 2 + [plots.FAIL_COLOR, plots.PASS_COLOR]
+    assert _spans(zfig) == [3]
+    assert zfig.yaxis[0].axis_label == "sections (count)"
+    assert zfig.yaxis[0].ticker.ticks == [0, 1, 2, 3, 4, 5]  # counts: integer ticks only
     fig = hv.render(plots.lineage_chart([
         {"configuration": "baseline", "max_norm": 2.4, "validated": False},
         {"configuration": "baseline+fd", "max_norm": 0.7, "validated": True}]), backend="bokeh")

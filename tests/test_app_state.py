@@ -216,3 +216,39 @@ def test_diagnose_suggested_name_is_unique(app):
     assert diag.suggested_name() == "baseline+friction_damping"
     app.param.configuration.objects = ["baseline", "variant1", "baseline+friction_damping"]
     assert diag.suggested_name() == "baseline+friction_damping-2"
+
+
+def test_pages_are_built_on_first_view_and_refresh_when_shown(demo_db):
+    """Only the page shown is built at session start (first-page speed); another page is
+    built when opened, and a hidden page refreshes when shown after a selection changed."""
+    from app.main import build_app
+
+    template = build_app(demo_db)
+    app, pages = template.railval_state, template.railval_pages
+    assert pages.built() == ["overview"]
+    main = template.main[0]
+
+    def shown() -> str:  # the page header of what the main area holds
+        (view,) = main.objects
+        return view.objects[0].object
+
+    assert shown() == "## Campaign overview"
+    overview_html = pages["overview"].body.objects  # sections table already filled
+    assert any("rv-sections" in str(getattr(o, "object", "")) for o in overview_html)
+
+    app.page = "dashboard"
+    assert pages.built() == ["overview", "dashboard"]
+    assert shown() == "## Validation dashboard"
+    assert pages["dashboard"].state.quantity is not None  # refreshed before being shown
+
+    # a change while the overview is hidden marks it stale; it refreshes on its next view
+    overview = pages["overview"]
+    other = app.param.configuration.objects[1]
+    app.configuration = other
+    assert overview._stale
+    app.page = "overview"
+    assert not overview._stale
+    tree = overview.body.objects[2][1][1].object  # lineage tree beside the zone chart
+    assert f"<b class='rv-selected'>{other}</b>" in tree
+    assert set(pages) == {"overview", "compare", "dashboard", "metrics", "diagnose", "report"}
+    assert pages.built() == ["overview", "dashboard"]

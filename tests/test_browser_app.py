@@ -46,7 +46,10 @@ def test_overview_and_compare_pages(page, app_url):
     _wait_page(page, "Campaign overview")
     main = page.locator(".rv-main")
     assert main.get_by_text("Coverage holds").is_visible()
-    assert main.locator(".tabulator-row").count() >= 12  # sections (+ channels)
+    sections = main.locator("table.rv-sections tbody tr")
+    assert sections.count() == 12
+    assert sections.first.locator("td").first.inner_text() == "S01"  # zone 1 first
+    assert main.locator("table.rv-channels tbody tr").count() >= 8
     assert main.get_by_text("baseline", exact=True).first.is_visible()  # lineage tree
     screenshot(page, "overview")
 

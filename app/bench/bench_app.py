@@ -12,8 +12,10 @@ Builds a small campaign in a temporary SQLite database: 4 sections (one per zone
   (HoloViews overlays with ``downsample1d``, rendered to Bokeh models) and the same HoloViews
   plots without downsampling (20 000 points per trace).
 * **first page** — ``--loads`` page loads of the app served on a loopback port (Playwright,
-  Debian's Chromium): navigation → first canvas attached. Baseline in the same run: a bare
-  FastListTemplate with one HoloViews curve.
+  Debian's Chromium): navigation → first canvas attached (the overview's zone chart), and
+  navigation → the overview complete (its section table drawn). Baseline in the same run: a
+  bare FastListTemplate with one HoloViews curve. ``--cpu-load N`` repeats both with N
+  busy-looping processes competing for the 2 cores (a loaded shared machine, reproducibly).
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--switches", type=int, default=20, help="compare switches timed (default 20)")
     parser.add_argument("--loads", type=int, default=3, help="page loads timed (default 3)")
     parser.add_argument("--no-browser", action="store_true", help="skip the first-page measurement")
+    parser.add_argument("--cpu-load", type=int, default=0, metavar="N",
+                        help="also measure the first page with N busy-looping processes running")
 
 
 def write_campaign(folder: Path, seconds: float, fs: float) -> None:
@@ -147,7 +151,17 @@ def _switching(database, switches: int) -> dict:
             "baseline_no_downsampling_p95_ms": 1e3 * _pct(slow, 95)}
 
 
-def _first_page(database, loads: int) -> dict:
+def _spin(stop) -> None:
+    """Busy loop (a competing CPU-bound job) until ``stop`` is set."""
+    x = 0
+    while not stop.is_set():
+        for _ in range(100_000):
+            x += 1
+
+
+def _first_page(database, loads: int, cpu_load: int = 0) -> dict:
+    import multiprocessing as mp
+
     import holoviews as hv
     import panel as pn
     from playwright.sync_api import sync_playwright
@@ -159,35 +173,58 @@ def _first_page(database, loads: int) -> dict:
         return pn.template.FastListTemplate(
             title="bare", main=[pn.pane.HoloViews(hv.Curve(np.arange(100.0)), sizing_mode="stretch_width")])
 
-    def measure(browser, url) -> list[float]:
-        out = []
-        for _ in range(loads):
+    def measure(browser, url, complete: str | None, n: int = loads) -> tuple[list[float], list[float]]:
+        first, whole = [], []
+        for _ in range(n):
             page = browser.new_page(viewport={"width": 1280, "height": 1200})
             page.route("**/fonts.googleapis.com/**", lambda route: route.abort())
             t0 = time.perf_counter()
             page.goto(url)
             page.locator("canvas").first.wait_for(state="attached", timeout=120_000)
-            out.append(time.perf_counter() - t0)
+            first.append(time.perf_counter() - t0)
+            if complete:
+                page.locator(complete).first.wait_for(state="visible", timeout=120_000)
+                whole.append(time.perf_counter() - t0)
             page.close()
-        return out
+        return first, whole
 
+    def both(browser, app_url, bare_url, label) -> dict:
+        first, whole = measure(browser, app_url, "table.rv-sections tbody tr")
+        bare_first, _ = measure(browser, bare_url, None)
+        return {f"{label}median_s": statistics.median(first), f"{label}max_s": max(first),
+                f"{label}overview_complete_median_s": statistics.median(whole),
+                f"{label}baseline_bare_template_median_s": statistics.median(bare_first)}
+
+    out: dict = {"loads": loads}
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=find_chromium(), args=list(CHROMIUM_ARGS))
+        port = free_port()
+        server = pn.serve({"bare": bare}, port=port, address="127.0.0.1", threaded=True, show=False)
         try:
+            time.sleep(0.5)
             with served(database) as url:
-                app_times = measure(browser, url)
-            port = free_port()
-            server = pn.serve({"bare": bare}, port=port, address="127.0.0.1", threaded=True, show=False)
-            try:
-                time.sleep(0.5)
-                bare_times = measure(browser, f"http://127.0.0.1:{port}/bare")
-            finally:
-                server.stop()
-                server.join(10)
+                cold, _ = measure(browser, url, None, n=1)  # first session after start: imports
+                out["cold_first_session_s"] = cold[0]
+                out.update(both(browser, url, f"http://127.0.0.1:{port}/bare", ""))
+                if cpu_load > 0:
+                    ctx = mp.get_context("spawn")
+                    stop = ctx.Event()
+                    spinners = [ctx.Process(target=_spin, args=(stop,), daemon=True) for _ in range(cpu_load)]
+                    for proc in spinners:
+                        proc.start()
+                    try:
+                        time.sleep(1.0)
+                        out["cpu_load_processes"] = cpu_load
+                        out.update(both(browser, url, f"http://127.0.0.1:{port}/bare", "loaded_"))
+                    finally:
+                        stop.set()
+                        for proc in spinners:
+                            proc.join(5)
         finally:
+            server.stop()
+            server.join(10)
             browser.close()
-    return {"median_s": statistics.median(app_times), "max_s": max(app_times),
-            "baseline_bare_template_median_s": statistics.median(bare_times), "loads": loads}
+    return out
 
 
 def run(args: argparse.Namespace) -> dict:
@@ -206,7 +243,7 @@ def run(args: argparse.Namespace) -> dict:
 
             try:
                 find_chromium()
-                out["first_page"] = _first_page(database, args.loads)
+                out["first_page"] = _first_page(database, args.loads, args.cpu_load)
             except ReportError as exc:
                 out["first_page"] = {"skipped": str(exc)}
         database.dispose()

@@ -44,6 +44,31 @@ def table(df: pd.DataFrame, height: int | None = None, **kw: Any) -> pn.widgets.
     return pn.widgets.Tabulator(df, **opts)
 
 
+HTML_TABLE_CSS = """
+table.rv-table { border-collapse: collapse; width: 100%; font-size: 13px; }
+table.rv-table th { text-align: left; border-bottom: 2px solid #0b5394; padding: 5px 8px;
+                    background: #f4f6f8; position: sticky; top: 0; }
+table.rv-table td { padding: 4px 8px; border-bottom: 1px solid #e3e6ea; }
+table.rv-table td.num { text-align: right; font-variant-numeric: tabular-nums; }
+table.rv-table tr:nth-child(even) td { background: #fafbfc; }
+"""
+
+
+def html_table(df: pd.DataFrame, css_class: str = "", max_height: int | None = None) -> pn.pane.HTML:
+    """A static HTML table (one light model, no table widget): for read-only lists shown
+    on page load. Cells are escaped; numbers right-aligned."""
+    numeric = {c for c in df.columns if pd.api.types.is_numeric_dtype(df[c])}
+    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in df.columns)
+    rows = "".join(
+        "<tr>" + "".join(f"<td class='num'>{html.escape(str(v))}</td>" if c in numeric
+                         else f"<td>{html.escape(str(v))}</td>" for c, v in zip(df.columns, rec, strict=True))
+        + "</tr>" for rec in df.itertuples(index=False))
+    style = {"overflow-y": "auto", "max-height": f"{max_height}px"} if max_height else {}
+    return pn.pane.HTML(f"<table class='rv-table {html.escape(css_class)}'><thead><tr>{head}</tr></thead>"
+                        f"<tbody>{rows}</tbody></table>", sizing_mode="stretch_width",
+                        stylesheets=[HTML_TABLE_CSS], styles=style)
+
+
 def message(text: str, kind: str = "info") -> pn.pane.Alert:
     return pn.pane.Alert(html.escape(text), alert_type=kind, sizing_mode="stretch_width",
                          margin=(5, 10))
@@ -63,10 +88,10 @@ class PageBase(pn.viewable.Viewer):
         self.body = pn.Column(sizing_mode="stretch_width")
         self.header = pn.pane.Markdown(f"## {PAGE_TITLES[self.name_]}", margin=(0, 10))
         app.param.watch(self._on_app_change, list(self.watch_app))
-        app.param.watch(self._on_page, ["page"])
 
-    def _on_page(self, event: param.parameterized.Event) -> None:
-        if event.new == self.name_ and self._stale:
+    def show(self) -> None:
+        """The page is being shown: refresh it if a watched selection changed meanwhile."""
+        if self._stale:
             self.safe_refresh()
 
     def _on_app_change(self, *events: param.parameterized.Event) -> None:

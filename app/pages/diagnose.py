@@ -62,10 +62,11 @@ class DiagnosePage(PageBase):
         self.state.param.watch(lambda e: self._show_candidates(), ["candidates"])
         self.state.param.watch(lambda e: self._show_effect(), ["effect"])
         app.param.watch(self._busy_changed, ["busy"])
+        self._busy_changed()  # the page may be opened while another page's job runs
 
-    def _busy_changed(self, event) -> None:
+    def _busy_changed(self, *_) -> None:
         for b in (self.diagnose_btn, self.calibrate_btn, self.simulate_btn):
-            b.disabled = bool(event.new)
+            b.disabled = bool(self.app.busy)
 
     def _start(self, calibrate: bool) -> None:
         # manual values: the parameters to simulate with, or the calibration's start point

@@ -28,6 +28,7 @@ class MetricsPage(PageBase):
         self.section = pn.widgets.Select.from_param(app.param.section, name="Section", width=160)
         self.compute_btn = pn.widgets.Button(label="Compute metrics", color="primary", width=180)
         self.compute_btn.on_click(lambda e: self.state.compute(dispatch=make_dispatch()))
+        self.compute_btn.disabled = app.busy  # the page may be opened while another job runs
         app.param.watch(lambda e: setattr(self.compute_btn, "disabled", bool(e.new)), ["busy"])
 
     def refresh(self) -> None:

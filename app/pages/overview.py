@@ -9,7 +9,7 @@ import pandas as pd
 import panel as pn
 
 from app import plots
-from app.pages._common import PageBase, message, table
+from app.pages._common import PageBase, html_table, message
 from app.state import CampaignOverview, unit_label
 
 
@@ -60,7 +60,7 @@ class OverviewPage(PageBase):
         } for s in ov.sections]).sort_values(["zone", "section"]) if ov.sections else pd.DataFrame()
         ch_df = pd.DataFrame([{"channel": c["name"], "kind": c["kind"], "position": c["position"],
                                "unit": unit_label(c["unit"])} for c in ov.channels])
-        zone_plot = pn.pane.HoloViews(plots.zone_coverage(ov.zone_counts()), sizing_mode="stretch_width")
+        zone_plot = pn.pane.Bokeh(plots.zone_coverage(ov.zone_counts()), sizing_mode="stretch_width")
         tree = pn.pane.HTML(lineage_tree_html(ov, self.app.configuration), sizing_mode="stretch_width",
                             stylesheets=[TREE_CSS])
         desc = pn.pane.Markdown(f"### {html.escape(ov.name)}\n{html.escape(ov.description)}\n\n{vehicle_md}",
@@ -70,8 +70,8 @@ class OverviewPage(PageBase):
             pn.Row(pn.Column(zone_plot, sizing_mode="stretch_width"),
                    pn.Column(pn.pane.Markdown("#### Configurations and lineage"), tree,
                              sizing_mode="stretch_width"), sizing_mode="stretch_width"),
-            pn.pane.Markdown("#### Sections (by zone)"), table(sec_df, height=min(420, 40 + 32 * len(sec_df))),
-            pn.pane.Markdown("#### Channels"), table(ch_df, height=min(300, 40 + 32 * len(ch_df))),
+            pn.pane.Markdown("#### Sections (by zone)"), html_table(sec_df, "rv-sections", max_height=520),
+            pn.pane.Markdown("#### Channels"), html_table(ch_df, "rv-channels", max_height=360),
         ]
 
 
