@@ -779,16 +779,57 @@ class DiagnoseState(param.Parameterized):
     candidates = param.List(default=[])
     parameters = param.Dict(default={}, doc="manually set parameters of the chosen effect")
     last_new_configuration = param.String(default="")
+    last_result = param.Dict(default={}, doc="to_dict() of the last calibration or re-simulation")
+    diagnosis_run = param.Dict(default={}, doc="settings and simulation count of the last diagnosis")
     diagnosis_note = param.String(default="", doc="separability note of the diagnosis")
     separable = param.Boolean(default=True, doc="the two best candidates are told apart")
+    # diagnosis settings (app.services.diagnosis.diagnose)
+    candidate_effects = param.ListSelector(default=[], objects=[], doc=(
+        "effects the diagnosis tries; none chosen = every effect the configuration lacks"))
+    values_per_parameter = param.Integer(default=3, bounds=(2, 9), doc=(
+        "values of each effect parameter simulated over its bounds (plus its default)"))
+    # calibration settings (app.services.diagnosis.calibrate → core.calibration.calibrate)
+    fit_parameters = param.ListSelector(default=[], objects=[], doc=(
+        "parameters of the chosen effect to fit; none chosen = all; the others keep the values set"))
+    popsize = param.Integer(default=5, bounds=(2, 40), doc="differential evolution: population per parameter")
+    maxiter = param.Integer(default=5, bounds=(1, 200), doc="differential evolution: generations at most")
+    polish_maxfev = param.Integer(default=20, bounds=(0, 1000), doc="local polish: simulations at most")
+    seed = param.Integer(default=0, bounds=(0, None), doc="random seed of the global search")
 
     def __init__(self, app: AppState, **params):
         super().__init__(**params)
         self.app = app
         self.app.param.watch(lambda e: self._reset(), ["campaign", "configuration"])
+        self.param.watch(lambda e: self._effect_changed(), ["effect"])
 
     def _reset(self) -> None:
         self.candidates = []
+
+    def _effect_changed(self) -> None:
+        eff = next((e for e in self.effect_catalogue() if e["name"] == self.effect), None)
+        names = [p["name"] for p in eff["parameters"]] if eff else []
+        self.param.fit_parameters.objects = names
+        self.fit_parameters = []
+
+    def refresh_choices(self) -> None:
+        """Candidate effects to choose from: those the configuration lacks (a choice no
+        longer available is dropped)."""
+        available = self.available_effects()
+        self.param.candidate_effects.objects = available
+        self.candidate_effects = [e for e in self.candidate_effects if e in available]
+
+    def diagnosis_simulations(self) -> int:
+        """Campaign simulations the diagnosis will run with the current settings."""
+        effects = self.candidate_effects or self.available_effects()
+        return service("diagnosis").diagnosis_simulations(effects, self.values_per_parameter)
+
+    def calibration_simulations(self) -> int:
+        """Upper bound of the campaign simulations a calibration runs: the optimiser's
+        (``core.calibration.max_evaluations``) plus the final stored run."""
+        from core.calibration import max_evaluations
+
+        n = len(self.fit_parameters or self.param.fit_parameters.objects) or 1
+        return max_evaluations(n, self.popsize, self.maxiter, self.polish_maxfev) + 1
 
     def effect_catalogue(self) -> list[dict[str, Any]]:
         return self.app.backend.effects()
@@ -815,8 +856,11 @@ class DiagnoseState(param.Parameterized):
         app = self.app
         campaign, config = app.campaign, app.configuration
 
+        settings = {"values_per_parameter": self.values_per_parameter,
+                    "effects": list(self.candidate_effects) or None}
+
         def work(progress):
-            return app.backend.diagnose(campaign, config, progress=progress)
+            return app.backend.diagnose(campaign, config, progress=progress, **settings)
 
         def done(result):
             d = result.to_dict() if hasattr(result, "to_dict") else result
@@ -826,6 +870,7 @@ class DiagnoseState(param.Parameterized):
                 note = "the two best candidates explain nearly the same; see the evidence"
             self.diagnosis_note = note
             self.separable = bool(d.get("separable", True))
+            self.diagnosis_run = {k: d.get(k) for k in ("simulations", "values_per_parameter", "configuration")}
             self.candidates = cands
             names = self.available_effects() if cands else []
             order = [c["effect"] for c in cands] + [n for n in names if n not in {c["effect"] for c in cands}]
@@ -846,13 +891,19 @@ class DiagnoseState(param.Parameterized):
             app.set_status("choose an effect to add first", "warning")
             return None
 
+        settings = {"popsize": self.popsize, "maxiter": self.maxiter, "polish_maxfev": self.polish_maxfev,
+                    "seed": self.seed, "params": [f"{effect}.{p}" for p in self.fit_parameters] or None}
+
         def work(progress):
             if calibrate:
                 return app.backend.calibrate(campaign, config, effect, name, progress=progress,
-                                             start=params or None)
+                                             start=params or None, **settings)
             return app.backend.simulate(campaign, config, {effect: params or {}}, name, progress=progress)
 
         def done(result):
+            d = result.to_dict() if hasattr(result, "to_dict") else dict(result or {})
+            self.last_result = {**d, "kind": "calibration" if calibrate else "re-simulation",
+                                "effect": effect, "configuration": name, "parent": config}
             self.last_new_configuration = name
             app.reload_configurations(select=name)
         return app.run_job("calibration" if calibrate else "re-simulation", work, done,

@@ -142,6 +142,38 @@ class _Counted:
         return value if math.isfinite(value) else 1e12
 
 
+class _BudgetSpent(Exception):
+    """The local polish used its evaluation budget."""
+
+
+class _Budgeted:
+    """``f`` allowed ``maxfev`` calls (then :class:`_BudgetSpent`), remembering the best."""
+
+    def __init__(self, f: Callable[[np.ndarray], float], maxfev: int):
+        self.f, self.maxfev, self.calls = f, int(maxfev), 0
+        self.best_x: np.ndarray | None = None
+        self.best_f = math.inf
+
+    def __call__(self, x: np.ndarray) -> float:
+        if self.calls >= self.maxfev:
+            raise _BudgetSpent
+        self.calls += 1
+        value = self.f(x)
+        if value < self.best_f:
+            self.best_x, self.best_f = np.array(x, float), value
+        return value
+
+
+def max_evaluations(n_parameters: int, popsize: int, maxiter: int, polish_maxfev: int,
+                    start: bool = True) -> int:
+    """Upper bound of the objective calls of :func:`calibrate`: the start point, scipy's
+    differential evolution population of max(5, ``popsize``·n) members initially and per
+    generation for at most ``maxiter`` generations (it may stop earlier at convergence),
+    and the polish budget."""
+    members = max(5, popsize * max(1, n_parameters))
+    return int(start) + members * (maxiter + 1) + polish_maxfev
+
+
 def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[ParameterSpec], *,
               seed: int = 0, popsize: int = 6, maxiter: int = 15, tol: float = 1e-3,
               polish: bool = True, polish_maxfev: int = 60, workers: Callable | None = None,
@@ -154,8 +186,10 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
     start values — when every spec has one — injected as a population member via ``x0``).
     ``workers``: a ``map(func, iterable)`` callable (e.g. :class:`app.services.batch.BatchExecutor`)
     evaluating one generation in parallel (then ``updating="deferred"``). Local stage: Powell
-    with the same bounds, at most ``polish_maxfev`` evaluations. ``progress(stage, fraction,
-    info)`` is called after every generation and at the end.
+    with the same bounds, at most ``polish_maxfev`` evaluations (strictly; 0 = no polish).
+    ``n_evaluations`` counts the optimiser's calls, the start point's call not included;
+    :func:`max_evaluations` bounds the total. ``progress(stage, fraction, info)`` is called
+    after every generation and at the end.
     """
     specs = list(specs)
     if not specs:
@@ -192,12 +226,18 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
                                  init="latinhypercube", polish=False, x0=x0, callback=cb, **kwargs)
     x_best, f_best, nfev = np.asarray(res.x, float), float(res.fun), int(res.nfev)
     converged, message = bool(res.success), str(res.message)
-    if polish:
-        loc = minimize(f, x_best, method="Powell", bounds=bounds,
-                       options={"maxfev": polish_maxfev, "xtol": 1e-3, "ftol": 1e-4})
-        nfev += int(loc.nfev)
-        if float(loc.fun) < f_best:
-            x_best, f_best = np.clip(np.asarray(loc.x, float), [b[0] for b in bounds], [b[1] for b in bounds]), float(loc.fun)
+    if polish and polish_maxfev > 0:
+        # Powell checks its maxfev only between line searches; the budget here is strict
+        g = _Budgeted(f, polish_maxfev)
+        try:
+            loc = minimize(g, x_best, method="Powell", bounds=bounds,
+                           options={"maxfev": polish_maxfev, "xtol": 1e-3, "ftol": 1e-4})
+            x_loc, f_loc = np.asarray(loc.x, float), float(loc.fun)
+        except _BudgetSpent:
+            x_loc, f_loc = g.best_x, g.best_f
+        nfev += g.calls
+        if x_loc is not None and f_loc < f_best:
+            x_best, f_best = np.clip(x_loc, [b[0] for b in bounds], [b[1] for b in bounds]), f_loc
         history.append(f_best)
     if progress:
         progress("done", 1.0, {"best": f_best, "parameters": f.params(x_best)})

@@ -174,6 +174,8 @@ def test_signature_chart_of_a_candidate():
     fig = hv.render(chart, backend="bokeh")
     assert fig.yaxis[0].axis_label == "residual rms (normalised, –)"
     assert "friction_damping" in fig.title.text
+    assert [tuple(map(str, f)) for f in fig.x_range.factors] == [  # before, then after, per group
+        ("az_rms", "before"), ("az_rms", "after (fitted)"), ("Y_qst", "before"), ("Y_qst", "after (fitted)")]
     bars = next(r for r in fig.renderers if hasattr(r, "glyph"))
     mapper = bars.glyph.fill_color.transform  # colours follow "when", not the bar order
     assert bars.glyph.fill_color.field == "when"

@@ -102,4 +102,16 @@ def test_metrics_report_and_workshop_pages(page, app_url):
     assert main.get_by_role("button", name="Run diagnosis").is_visible()
     main.get_by_text("Add an effect").wait_for(timeout=PAGE_TIMEOUT_MS)
     main.locator("canvas").first.wait_for(state="attached", timeout=PAGE_TIMEOUT_MS)  # lineage chart
+    # the settings cards open and announce the cost in campaign simulations
+    main.get_by_text("Diagnosis settings").click()
+    main.get_by_text(re.compile(r"Run diagnosis simulates the campaign \d+ times")).wait_for(
+        timeout=PAGE_TIMEOUT_MS)
+    main.get_by_text("Calibration settings").click()
+    cost = main.get_by_text(re.compile(r"Calibrate simulates the campaign at most \d+ times"))
+    cost.wait_for(timeout=PAGE_TIMEOUT_MS)
+    before = int(re.search(r"at most (\d+)", cost.inner_text()).group(1))
+    generations = main.locator(".rv-cal-settings input").nth(2)  # population, generations, polish, seed
+    generations.fill("10")
+    generations.press("Enter")
+    main.get_by_text(re.compile(rf"at most (?!{before}\b)\d+ times")).wait_for(timeout=PAGE_TIMEOUT_MS)
     screenshot(page, "workshop")

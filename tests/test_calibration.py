@@ -16,6 +16,7 @@ from core.calibration import (
     calibrate,
     calibrate_modal,
     coach_vertical_modes,
+    max_evaluations,
     modal_objective,
     validation_objective,
 )
@@ -46,6 +47,24 @@ def test_calibrate_finds_known_minimum_and_reports_progress():
     with BatchExecutor("serial") as ex:
         par = calibrate(_quadratic, specs, seed=1, workers=ex)
     assert par.parameters["a"] == pytest.approx(1.5, abs=1e-3)
+
+
+@pytest.mark.parametrize("popsize,maxiter,polish_maxfev", [(3, 1, 4), (6, 3, 2), (2, 2, 0)])
+def test_objective_calls_stay_within_the_announced_budget(popsize, maxiter, polish_maxfev):
+    calls = []
+
+    def counted(p):
+        calls.append(p)
+        return _quadratic(p)
+
+    specs = [ParameterSpec("a", 0.0, 3.0, start=0.5), ParameterSpec("b", -1.0, 1.0, start=0.5)]
+    res = calibrate(counted, specs, seed=2, popsize=popsize, maxiter=maxiter, tol=0.0,
+                    polish_maxfev=polish_maxfev)
+    # scipy keeps at least 5 population members: max(5, popsize·n) per generation
+    bound = 1 + max(5, popsize * 2) * (maxiter + 1) + polish_maxfev
+    assert max_evaluations(2, popsize, maxiter, polish_maxfev) == bound
+    assert len(calls) == res.n_evaluations + 1 <= bound  # + 1: the start point
+    assert res.objective <= res.objective_start
 
 
 def test_parameter_spec_and_calibrate_validate_inputs():

@@ -28,7 +28,7 @@ def signature_chart(candidate: dict[str, Any], height: int = 280) -> hv.Overlay:
         rows.append((group, "before", float(change["before"])))
         rows.append((group, "after (fitted)", float(change["after"])))
     bars = hv.Bars(rows, kdims=[hv.Dimension("group", label="quantity / PSD group"),
-                                hv.Dimension("when", label="residual")],
+                                hv.Dimension("when", label="residual", values=["before", "after (fitted)"])],
                    vdims=[hv.Dimension("rms", label="residual rms (normalised, –)")]).opts(
         cmap={"before": plots.FAIL_COLOR, "after (fitted)": plots.PASS_COLOR},  # colour by "when"
         line_color=None, tools=["hover"])
@@ -54,6 +54,32 @@ class DiagnosePage(PageBase):
         self.calibrate_btn.on_click(lambda e: self._start(calibrate=True))
         self.simulate_btn = pn.widgets.Button(label="Add with these parameters & re-simulate", width=300)
         self.simulate_btn.on_click(lambda e: self._start(calibrate=False))
+        st = self.state
+        self.diag_estimate = pn.pane.Markdown("", margin=(0, 10), styles={"color": "#555"})
+        self.cal_estimate = pn.pane.Markdown("", margin=(0, 10), styles={"color": "#555"})
+        self.diag_settings = pn.Card(
+            pn.Row(pn.widgets.MultiChoice.from_param(st.param.candidate_effects,
+                                                     name="Candidate effects (none chosen: every missing effect)",
+                                                     width=480, css_classes=["rv-candidate-effects"]),
+                   pn.widgets.IntInput.from_param(st.param.values_per_parameter, name="Scan values per parameter",
+                                                  width=200)),
+            self.diag_estimate, title="Diagnosis settings", collapsed=True, sizing_mode="stretch_width",
+            css_classes=["rv-diag-settings"])
+        self.cal_settings = pn.Card(
+            pn.FlexBox(
+                pn.widgets.MultiChoice.from_param(st.param.fit_parameters,
+                                                  name="Parameters to fit (none chosen: all; others keep the values set)",
+                                                  width=420),
+                pn.widgets.IntInput.from_param(st.param.popsize, name="Population per parameter", width=170),
+                pn.widgets.IntInput.from_param(st.param.maxiter, name="Generations (at most)", width=170),
+                pn.widgets.IntInput.from_param(st.param.polish_maxfev, name="Polish simulations (at most)",
+                                               width=190),
+                pn.widgets.IntInput.from_param(st.param.seed, name="Seed", width=110)),
+            self.cal_estimate, title="Calibration settings (differential evolution + local polish)",
+            collapsed=True, sizing_mode="stretch_width", css_classes=["rv-cal-settings"])
+        st.param.watch(lambda e: self._show_estimates(), ["candidate_effects", "values_per_parameter",
+                                                          "fit_parameters", "popsize", "maxiter",
+                                                          "polish_maxfev", "effect"])
         self.param_box = pn.Column(sizing_mode="stretch_width")
         self.explain = pn.pane.Markdown("", sizing_mode="stretch_width")
         self.candidates_box = pn.Column(sizing_mode="stretch_width")
@@ -88,6 +114,9 @@ class DiagnosePage(PageBase):
             self.state.effect = (self.state.param.effect.objects or [None])[0]
         if not self.state.new_name or self.state.new_name in self.app.param.configuration.objects:
             self.state.new_name = self.state.suggested_name()
+        if catalogue:
+            self.state.refresh_choices()
+            self._show_estimates()
         self._show_candidates()
         self._show_effect()
         self._show_results()
@@ -95,13 +124,26 @@ class DiagnosePage(PageBase):
             pn.pane.Markdown(f"Configuration under study: **{html.escape(str(self.app.configuration))}**. "
                              "Diagnosis compares its residual pattern with the signature of every "
                              "effect it lacks.", sizing_mode="stretch_width"),
-            self.diagnose_btn, self.candidates_box,
+            self.diagnose_btn, self.diag_settings, self.candidates_box,
             pn.pane.Markdown("#### Add an effect"),
             pn.Row(self.effect_select, self.name_input),
-            self.explain, self.param_box,
+            self.explain, self.param_box, self.cal_settings,
             pn.Row(self.calibrate_btn, self.simulate_btn),
             self.result_box,
         ]
+
+    def _show_estimates(self) -> None:
+        """The cost of the next diagnosis and calibration, in campaign simulations."""
+        try:
+            n_diag = self.state.diagnosis_simulations()
+            n_cal = self.state.calibration_simulations()
+        except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+            self.diag_estimate.object = f"cost not known: {html.escape(str(exc))}"
+            return
+        self.diag_estimate.object = (f"**Run diagnosis** simulates the campaign {n_diag} times "
+                                     "(each candidate parameter over its bounds).")
+        self.cal_estimate.object = (f"**Calibrate** simulates the campaign at most {n_cal} times "
+                                    "(start point, population × generations, polish, final run).")
 
     def _show_candidates(self) -> None:
         cands = self.state.candidates
@@ -160,6 +202,9 @@ class DiagnosePage(PageBase):
             self.result_box.objects = [message(f"lineage not available: {exc}", "danger")]
             return
         items: list[Any] = []
+        summary = self._last_result_text(config)
+        if summary:
+            items.append(message(summary, "success"))
         items.append(pn.pane.HoloViews(plots.lineage_chart(lineage), sizing_mode="stretch_width"))
         if parent is not None:
             left, _, _ = validation_view(self.dash, parent, height=260, compact=True)
@@ -171,3 +216,19 @@ class DiagnosePage(PageBase):
                                        sizing_mode="stretch_width"),
                              sizing_mode="stretch_width")]
         self.result_box.objects = items
+
+    def _last_result_text(self, config: str) -> str:
+        """One line on the job that made ``config``: fitted values, objective, simulations."""
+        r = self.state.last_result
+        if not r or r.get("configuration") != config:
+            return ""
+        if r["kind"] == "re-simulation":
+            return f"{config}: {r['parent']} + {r['effect']} re-simulated with the parameters set."
+        units = r.get("units") or {}
+        fitted = ", ".join(f"{k.split('.', 1)[-1]} = {v:.4g}{' ' + units[k] if units.get(k) else ''}"
+                           for k, v in (r.get("parameters") or {}).items())
+        start = r.get("objective_start")
+        obj = (f"objective {start:.3g} → {r['objective']:.3g}" if start is not None
+               else f"objective {r['objective']:.3g}")
+        return (f"{config}: {r['effect']} calibrated from {r['parent']}: {fitted}; {obj} "
+                f"(Σ of squared worst normalised errors); {r.get('n_evaluations', 0) + 2} simulations.")

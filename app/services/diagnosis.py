@@ -188,6 +188,28 @@ def scan_values(lower: float, upper: float, default: float, n: int, log: bool = 
     return sorted(set(grid.tolist()) | {float(default)})
 
 
+def scan_points(spec: Any, values_per_parameter: int) -> Iterator[tuple[str, float, dict[str, float], dict]]:
+    """The one-parameter scan of an effect: for each parameter and each of its
+    :func:`scan_values`, ``(parameter, value, all parameters at default but this one, its
+    bounds record)``."""
+    params = _effect_parameters(spec)
+    defaults = {k: float(v["default"]) for k, v in params.items()}
+    for pname, p in params.items():
+        for v in scan_values(p["lower"], p["upper"], p["default"], values_per_parameter, p["log"]):
+            yield pname, v, {**defaults, pname: v}, p
+
+
+def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3) -> int:
+    """How many campaign simulations :func:`diagnose` runs for ``effects`` (the configuration
+    itself once, plus every distinct scan point): shown before a user starts it."""
+    registry = _effect_registry()
+    n = 1
+    for e in effects:
+        n += len({json.dumps(point, sort_keys=True)
+                  for _, _, point, _ in scan_points(registry[e], values_per_parameter)})
+    return n
+
+
 def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
              scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
              workers: int | None = None) -> DiagnosisResult:
@@ -213,16 +235,14 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     # come from the same simulator run settings (signatures are differences of the two)
     tasks, index, unique = [(ctx, conf_effects, conf_params)], [], {}
     for e in todo:
-        spec = registry[e]
-        for pname, p in _effect_parameters(spec).items():
-            defaults = {k: float(v["default"]) for k, v in _effect_parameters(spec).items()}
-            for v in scan_values(p["lower"], p["upper"], p["default"], values_per_parameter, p["log"]):
-                eff = {**conf_effects, e: {**defaults, pname: v}}
-                key = json.dumps(eff, sort_keys=True)
-                if key not in unique:  # the all-defaults point of a multi-parameter effect once
-                    unique[key] = len(tasks)
-                    tasks.append((ctx, eff, conf_params))
-                index.append((e, pname, v, defaults, (p["lower"], p["upper"]), p["log"], unique[key]))
+        for pname, v, point, p in scan_points(registry[e], values_per_parameter):
+            eff = {**conf_effects, e: point}
+            key = json.dumps(eff, sort_keys=True)
+            if key not in unique:  # the all-defaults point of a multi-parameter effect once
+                unique[key] = len(tasks)
+                tasks.append((ctx, eff, conf_params))
+            defaults = {k: float(q["default"]) for k, q in _effect_parameters(registry[e]).items()}
+            index.append((e, pname, v, defaults, (p["lower"], p["upper"]), p["log"], unique[key]))
     _report(progress, "simulate", 0.05, tasks=len(tasks))
     with BatchExecutor(scheduler, workers) as ex:
         results = ex.map(_evaluate_effects, tasks,
@@ -299,7 +319,8 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     ``params`` — names ``"effect.param"``/``"param"`` of the effects, or ``"model.NAME"`` for
     a vehicle-template parameter) to the validation objective
     (:func:`core.calibration.validation_objective`) with differential evolution and a local
-    polish, store the result as configuration ``new_name`` (parent ``config``) with its
+    polish (``start``: the start point of the fitted parameters and the value of those not
+    fitted), store the result as configuration ``new_name`` (parent ``config``) with its
     simulated signals, and return the :class:`CalibrationResult` whose ``to_dict()`` holds the
     new configuration's ``validation`` and the ``lineage`` (root → new, normalised error of
     every quantity)."""
@@ -319,7 +340,9 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     wanted = set(params or [])
     for e in effects:
         eparams = _effect_parameters(registry[e])
-        base_effects.setdefault(e, {k: p["default"] for k, p in eparams.items()})
+        # a parameter left out of ``params`` keeps its ``start`` value (else its default)
+        base_effects.setdefault(e, {k: float((start or {}).get(e, {}).get(k, p["default"]))
+                                    for k, p in eparams.items()})
         for pname, p in eparams.items():
             if params and not ({pname, f"{e}.{pname}"} & wanted):
                 continue
