@@ -626,7 +626,8 @@ def nice_ticks(lo: float, hi: float) -> list[float]:
 
 
 def unit_label(unit: str) -> str:
-    return unit.replace("m/s^2", "m/s²")
+    """A stored unit as shown to a reader: ``m/s^2`` → ``m/s²``, ``kN*m/rad`` → ``kN·m/rad``."""
+    return unit.replace("m/s^2", "m/s²").replace("*", "·")
 
 
 # ----------------------------------------------------------------------------- dashboard

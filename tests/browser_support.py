@@ -85,3 +85,30 @@ def demo_database(folder: Path, name: str = "demo", n_configs: int = 2):
     db.init()
     import_campaign(db, manifest.parent)
     return db
+
+
+_SOURCES_JS = """() => {
+  const doc = Bokeh.documents[0];
+  const models = doc.all_models ? Array.from(doc.all_models) : Array.from(doc._all_models.values());
+  return models.filter(m => m.data && m.data.x && m.data.y && m.data.x.length > 0)
+    .map(m => { const x = Array.from(m.data.x);
+                return {id: m.id, n: x.length, x0: Math.min(...x), x1: Math.max(...x)}; });
+}"""
+
+
+def bokeh_sources(page) -> dict[str, dict]:
+    """The non-empty x/y data sources the browser holds: id → {n, x0, x1}."""
+    return {d["id"]: d for d in page.evaluate(_SOURCES_JS)}
+
+
+def box_zoom(page, canvas, fx: tuple[float, float], fy: tuple[float, float] = (0.3, 0.7)) -> None:
+    """Drag a box over ``canvas`` between fractions ``fx`` of its width and ``fy`` of its height
+    (the Compare figures' active drag tool is box zoom)."""
+    box = canvas.bounding_box()
+    x0, x1 = (box["x"] + f * box["width"] for f in fx)
+    y0, y1 = (box["y"] + f * box["height"] for f in fy)
+    page.mouse.move(x0, y0)
+    page.mouse.down()
+    page.mouse.move((x0 + x1) / 2, (y0 + y1) / 2, steps=5)
+    page.mouse.move(x1, y1, steps=5)
+    page.mouse.up()

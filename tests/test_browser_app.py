@@ -12,6 +12,8 @@ import re
 import pytest
 
 from tests.browser_support import (
+    bokeh_sources,
+    box_zoom,
     nav,
     open_app,
     require_browser,
@@ -59,6 +61,28 @@ def test_overview_and_compare_pages(page, app_url):
     # two series (EN-filtered, raw) and the PSD: three Bokeh canvases in the page
     main.locator("canvas").nth(2).wait_for(state="attached", timeout=PAGE_TIMEOUT_MS)
     screenshot(page, "compare")
+
+    # zoom: the visible window is re-sampled on the server from the full 200 Hz arrays
+    before = bokeh_sources(page)
+    series = {k: v for k, v in before.items() if v["n"] == 2000}  # 2 traces × 2 series figures
+    assert len(series) == 4, before
+    full = max(v["x1"] - v["x0"] for v in series.values())
+    assert all(v["n"] / (v["x1"] - v["x0"]) < 100 for v in series.values())  # thinned: < 100 points/s
+    box_zoom(page, main.locator("canvas").first, (0.45, 0.55))
+
+    def refined() -> dict:
+        now = bokeh_sources(page)
+        return {k: now[k] for k in series if now[k]["x1"] - now[k]["x0"] < 0.3 * full}
+
+    for _ in range(100):
+        if len(refined()) == 4:  # both figures follow (linked x range)
+            break
+        page.wait_for_timeout(100)
+    zoomed = refined()
+    assert len(zoomed) == 4, bokeh_sources(page)
+    for v in zoomed.values():  # every sample of the window: the recording's 200 Hz
+        assert v["n"] / (v["x1"] - v["x0"]) == pytest.approx(200, rel=0.02)
+    screenshot(page, "compare-zoomed")
 
 
 def test_dashboard_drilldown_row_opens_compare(page, app_url):

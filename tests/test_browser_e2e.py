@@ -60,10 +60,10 @@ def test_baseline_fails_diagnose_calibrate_then_passes(page, demo_url):
     rows = main.locator(".rv-candidates .tabulator-row")
     rows.first.wait_for(timeout=JOB_MS)
     top = rows.first.locator(".tabulator-cell[tabulator-field='effect']").inner_text().strip()
-    effect_select = main.locator("select").first
+    effect_select = main.locator(".rv-effect select")
     assert effect_select.evaluate("s => s.options[s.selectedIndex].text") == top
     new_name = f"baseline+{top}"
-    assert main.locator("input[type='text']").first.input_value() == new_name
+    assert main.locator(".rv-new-name input").input_value() == new_name
     screenshot(page, "e2e-2-diagnosis")
 
     main.get_by_role("button", name="Add, calibrate & re-simulate").click()

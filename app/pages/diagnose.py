@@ -17,7 +17,7 @@ import panel as pn
 from app import plots
 from app.pages._common import PageBase, make_dispatch, message, table
 from app.pages.dashboard import validation_view
-from app.state import AppState, DashboardState, DiagnoseState
+from app.state import AppState, DashboardState, DiagnoseState, unit_label
 
 
 def signature_chart(candidate: dict[str, Any], height: int = 280) -> hv.Overlay:
@@ -46,9 +46,10 @@ class DiagnosePage(PageBase):
         self.dash = DashboardState(app)
         self.diagnose_btn = pn.widgets.Button(label="Run diagnosis", color="primary", width=160)
         self.diagnose_btn.on_click(lambda e: self.state.run_diagnosis(dispatch=make_dispatch()))
-        self.effect_select = pn.widgets.Select.from_param(self.state.param.effect, name="Effect to add", width=240)
+        self.effect_select = pn.widgets.Select.from_param(self.state.param.effect, name="Effect to add", width=240,
+                                                          css_classes=["rv-effect"])
         self.name_input = pn.widgets.TextInput.from_param(self.state.param.new_name, name="New configuration",
-                                                          width=260)
+                                                          width=260, css_classes=["rv-new-name"])
         self.calibrate_btn = pn.widgets.Button(label="Add, calibrate & re-simulate", color="success",
                                                width=240)
         self.calibrate_btn.on_click(lambda e: self._start(calibrate=True))
@@ -225,10 +226,11 @@ class DiagnosePage(PageBase):
         if r["kind"] == "re-simulation":
             return f"{config}: {r['parent']} + {r['effect']} re-simulated with the parameters set."
         units = r.get("units") or {}
-        fitted = ", ".join(f"{k.split('.', 1)[-1]} = {v:.4g}{' ' + units[k] if units.get(k) else ''}"
+        fitted = ", ".join(f"{k.split('.', 1)[-1]} = {v:.4g}{' ' + unit_label(units[k]) if units.get(k) else ''}"
                            for k, v in (r.get("parameters") or {}).items())
         start = r.get("objective_start")
-        obj = (f"objective {start:.3g} → {r['objective']:.3g}" if start is not None
-               else f"objective {r['objective']:.3g}")
-        return (f"{config}: {r['effect']} calibrated from {r['parent']}: {fitted}; {obj} "
-                f"(Σ of squared worst normalised errors); {r.get('n_evaluations', 0) + 2} simulations.")
+        obj = (f"at the start values {start:.3g}, fitted {r['objective']:.3g}" if start is not None
+               else f"fitted {r['objective']:.3g}")
+        return (f"{config}: {r['effect']} calibrated from {r['parent']}: {fitted}. Objective (Σ over "
+                f"quantities of the squared worst normalised error) {obj}; "
+                f"{r.get('n_evaluations', 0) + 2} campaign simulations.")
