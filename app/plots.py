@@ -332,6 +332,28 @@ def _fonts(fig) -> None:
         ax.major_label_text_font_size = FONTS["xticks"]
 
 
+def pattern_heatmap(grid, title: str, limit: float, value_label: str, x_label: str,
+                    y_label: str = "EN 14363 quantity", height: int = 330) -> hv.Overlay:
+    """Heat map of a :class:`app.state.PatternGrid` with the value in each cell; diverging
+    colours fixed at ±``limit`` (pass the same limit to plots that are compared: red =
+    simulation above measurement, blue = below)."""
+    cells = [(c, r, float(grid.values[i, j])) for i, r in enumerate(grid.rows)
+             for j, c in enumerate(grid.cols) if math.isfinite(grid.values[i, j])]
+    xdim = hv.Dimension("col", label=x_label)
+    ydim = hv.Dimension("row", label=y_label)
+    vdim = hv.Dimension("value", label=value_label)
+    heat = hv.HeatMap(cells, [xdim, ydim], vdim).redim.values(col=grid.cols, row=grid.rows[::-1]).opts(
+        cmap="RdBu_r", clim=(-limit, limit), colorbar=True, tools=["hover"], line_color="white")
+    overlay = heat
+    for dark, color in ((False, "#222222"), (True, "#ffffff")):  # light text on the deep colours
+        part = [(c, r, f"{v:+.2f}") for c, r, v in cells if (abs(v) > 0.55 * limit) == dark]
+        if part:
+            overlay = overlay * hv.Labels(part, [xdim, ydim], "text").opts(text_font_size="9pt",
+                                                                          text_color=color)
+    return overlay.opts(title=title, responsive=True, height=height, fontsize=FONTS,
+                        xrotation=0, toolbar="right")
+
+
 def lineage_chart(rows: list[dict[str, Any]], height: int = 300) -> hv.Overlay:
     """Largest normalised error along a configuration lineage, limit 1.0 dashed."""
     names = [r["configuration"] for r in rows]
@@ -356,6 +378,7 @@ __all__ = [
     "downsample_xy",
     "lineage_chart",
     "nice_limits",
+    "pattern_heatmap",
     "unit_label",
     "validation_bars",
     "zone_coverage",

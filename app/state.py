@@ -782,6 +782,7 @@ class DiagnoseState(param.Parameterized):
     last_new_configuration = param.String(default="")
     last_result = param.Dict(default={}, doc="to_dict() of the last calibration or re-simulation")
     diagnosis_run = param.Dict(default={}, doc="settings and simulation count of the last diagnosis")
+    residual = param.Dict(default={}, doc="residual pattern of the diagnosed configuration (labels, values)")
     diagnosis_note = param.String(default="", doc="separability note of the diagnosis")
     separable = param.Boolean(default=True, doc="the two best candidates are told apart")
     # diagnosis settings (app.services.diagnosis.diagnose)
@@ -805,6 +806,21 @@ class DiagnoseState(param.Parameterized):
 
     def _reset(self) -> None:
         self.candidates = []
+        self.residual = {}
+
+    def where(self, effect: str | None = None) -> dict[str, PatternGrid]:
+        """Where the configuration fails and what ``effect`` (a ranked candidate, default
+        the selected effect) leaves: the residual pattern now and after adding the fitted
+        candidate (residual − its signature), each as a quantity × zone grid and a PSD
+        band grid (:func:`pattern_grids`). Empty before a diagnosis."""
+        effect = effect or self.effect
+        cand = next((c for c in self.candidates if c["effect"] == effect), None)
+        res = self.residual
+        if cand is None or "values" not in res or "signature" not in cand:
+            return {}
+        now = np.asarray(res["values"], float)
+        after = now - np.asarray(cand["signature"]["values"], float)
+        return {"now": pattern_grids(res["labels"], now), "after": pattern_grids(res["labels"], after)}
 
     def _effect_changed(self) -> None:
         eff = next((e for e in self.effect_catalogue() if e["name"] == self.effect), None)
@@ -864,21 +880,22 @@ class DiagnoseState(param.Parameterized):
             return app.backend.diagnose(campaign, config, progress=progress, **settings)
 
         def done(result):
-            d = result.to_dict() if hasattr(result, "to_dict") else result
+            d = result.to_dict(with_signatures=True) if hasattr(result, "to_dict") else result
             cands = list(d.get("candidates", []))
+            self.residual = dict(d.get("residual") or {})
             note = d.get("note") or ""
             if not d.get("separable", True) and not note:
                 note = "the two best candidates explain nearly the same; see the evidence"
             self.diagnosis_note = note
             self.separable = bool(d.get("separable", True))
             self.diagnosis_run = {k: d.get(k) for k in ("simulations", "values_per_parameter", "configuration")}
-            self.candidates = cands
             names = self.available_effects() if cands else []
             order = [c["effect"] for c in cands] + [n for n in names if n not in {c["effect"] for c in cands}]
             self.param.effect.objects = order
-            if order:
+            if order:  # the top candidate chosen before the ranking is shown
                 self.effect = order[0]
                 self.new_name = self.suggested_name()
+            self.candidates = cands
         return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background)
 
     def run_calibration(self, dispatch=None, background=True, calibrate: bool = True):
@@ -924,6 +941,53 @@ class DiagnoseState(param.Parameterized):
                         default=float("nan"))
             out.append({"configuration": name, "max_norm": worst, "validated": bool(d.get("validated"))})
         return out
+
+
+@dataclass
+class PatternGrid:
+    """Components of a residual pattern arranged for a heat map: ``rows`` × ``cols`` with
+    ``values[i][j]`` the mean over positions (NaN where nothing was evaluated)."""
+
+    rows: list[str]
+    cols: list[str]
+    values: np.ndarray
+
+
+def pattern_grids(labels: list[str], values) -> tuple[PatternGrid, PatternGrid]:
+    """Arrange a diagnosis pattern (``core.diagnosis``: components ``"Y_qst zone 4 w1L"`` =
+    mean normalised D_v of a quantity in a zone at a position, and ``"psd az_cb_b1 5-10 Hz"``
+    = log2 PSD ratio simulation/measurement in a band) into (quantity × zone, car body
+    acceleration direction × band) grids, averaging over positions. Quantities in the order
+    of ``core.quantities``."""
+    from core.quantities import QUANTITY_IDS
+
+    q_acc: dict[tuple[str, str], list[float]] = {}
+    p_acc: dict[tuple[str, str], list[float]] = {}
+    bands: list[str] = []
+    for label, v in zip(labels, np.asarray(values, float), strict=True):
+        parts = label.split()
+        if parts[0] == "psd":  # psd <channel> <lo-hi> Hz
+            kind = parts[1].split("_")[0]
+            band = f"{parts[2]} Hz"
+            if band not in bands:
+                bands.append(band)
+            p_acc.setdefault((kind, band), []).append(v)
+        elif len(parts) >= 3 and parts[1] == "zone":
+            q_acc.setdefault((parts[0], f"zone {parts[2]}"), []).append(v)
+    zones = [f"zone {z}" for z in (1, 2, 3, 4)]
+    quantities = [q for q in QUANTITY_IDS if any((q, z) in q_acc for z in zones)]
+
+    def grid(rows, cols, acc):
+        m = np.full((len(rows), len(cols)), np.nan)
+        for i, r in enumerate(rows):
+            for j, c in enumerate(cols):
+                if (r, c) in acc:
+                    m[i, j] = float(np.mean(acc[(r, c)]))
+        return PatternGrid(list(rows), list(cols), m)
+
+    bands.sort(key=lambda b: float(b.split("-")[0]))
+    kinds = [k for k in ("ay", "az") if any((k, b) in p_acc for b in bands)]
+    return grid(quantities, zones, q_acc), grid(kinds, bands, p_acc)
 
 
 # ----------------------------------------------------------------------------- report

@@ -272,10 +272,16 @@ class DiagnosisResult:
     note: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
 
-    def to_dict(self) -> dict[str, Any]:
-        d = {"candidates": [c.to_dict() for c in self.candidates], "separable": self.separable,
-             "evidence": list(self.evidence), "note": self.note,
-             "residual": {"norm": math.sqrt(self.residual.norm2()), "groups": self.residual.group_norms()}}
+    def to_dict(self, with_signatures: bool = False) -> dict[str, Any]:
+        """Plain dict; ``with_signatures`` adds the residual's components (``labels``,
+        ``values``) and every candidate's fitted signature (for plots of where it acts)."""
+        residual: dict[str, Any] = {"norm": math.sqrt(self.residual.norm2()),
+                                    "groups": self.residual.group_norms()}
+        if with_signatures:
+            residual.update(self.residual.to_dict())
+        d = {"candidates": [c.to_dict(with_signature=with_signatures) for c in self.candidates],
+             "separable": self.separable, "evidence": list(self.evidence), "note": self.note,
+             "residual": residual}
         d.update(self.extra)
         return d
 

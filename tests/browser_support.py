@@ -67,9 +67,18 @@ def nav(page, title: str) -> None:
 
 
 def screenshot(page, name: str) -> Path:
+    """The page (the template's main area scrolls: what the viewport shows) as an artifact."""
     ARTIFACTS.mkdir(exist_ok=True)
     path = ARTIFACTS / f"{name}.png"
     page.screenshot(path=str(path), full_page=True)
+    return path
+
+
+def element_screenshot(locator, name: str) -> Path:
+    """One element, scrolled into view, as an artifact (for content below the fold)."""
+    ARTIFACTS.mkdir(exist_ok=True)
+    path = ARTIFACTS / f"{name}.png"
+    locator.screenshot(path=str(path))
     return path
 
 

@@ -170,14 +170,47 @@ def test_signature_chart_of_a_candidate():
     cand = {"effect": "friction_damping",
             "quantities": {"az_rms": {"before": 1.4, "after": 0.3}, "Y_qst": {"before": 0.2, "after": 0.25}}}
     chart = signature_chart(cand)
-    assert list(chart.dimension_values("rms")) == [1.4, 0.3, 0.2, 0.25]
+    assert list(chart.dimension_values("rms")) == [0.2, 0.25, 1.4, 0.3]  # EN quantity order
     fig = hv.render(chart, backend="bokeh")
     assert fig.yaxis[0].axis_label == "residual rms (normalised, –)"
     assert "friction_damping" in fig.title.text
     assert [tuple(map(str, f)) for f in fig.x_range.factors] == [  # before, then after, per group
-        ("az_rms", "before"), ("az_rms", "after (fitted)"), ("Y_qst", "before"), ("Y_qst", "after (fitted)")]
+        ("Y_qst", "before"), ("Y_qst", "after (fitted)"), ("az_rms", "before"), ("az_rms", "after (fitted)")]
     bars = next(r for r in fig.renderers if hasattr(r, "glyph"))
     mapper = bars.glyph.fill_color.transform  # colours follow "when", not the bar order
     assert bars.glyph.fill_color.field == "when"
     assert dict(zip(mapper.factors, mapper.palette, strict=True)) == {
         "before": plots.FAIL_COLOR, "after (fitted)": plots.PASS_COLOR}
+
+
+def test_pattern_grids_average_positions_per_quantity_zone_and_psd_band():
+    from app.state import pattern_grids
+
+    labels = ["Y_qst zone 4 w1L", "Y_qst zone 4 w2L", "Y_qst zone 1 w1L", "az_rms zone 2 b1",
+              "psd az_cb_b1 5-10 Hz", "psd az_cb_b2 5-10 Hz", "psd ay_cb_b1 0.4-1 Hz"]
+    values = [-1.0, -2.0, 0.5, 0.25, 1.0, 0.0, -0.5]
+    q, p = pattern_grids(labels, values)
+    assert q.rows == ["Y_qst", "az_rms"] and q.cols == ["zone 1", "zone 2", "zone 3", "zone 4"]
+    np.testing.assert_array_equal(q.values, [[0.5, np.nan, np.nan, -1.5], [np.nan, 0.25, np.nan, np.nan]])
+    assert p.rows == ["ay", "az"] and p.cols == ["0.4-1 Hz", "5-10 Hz"]  # bands by frequency
+    np.testing.assert_array_equal(p.values, [[-0.5, np.nan], [np.nan, 0.5]])
+
+
+def test_pattern_heatmap_fixed_symmetric_scale_and_cell_values():
+    from app.state import PatternGrid
+
+    grid = PatternGrid(["Y_qst", "Q_qst"], ["zone 1", "zone 2"], np.array([[0.2, -1.8], [np.nan, 0.0]]))
+    fig = hv.render(plots.pattern_heatmap(grid, "now", 2.0, "D_v / limit (–)", "EN 14363 test zone"),
+                    backend="bokeh")
+    rect = next(r for r in fig.renderers if type(r.glyph).__name__ == "Rect")
+    mapper = rect.glyph.fill_color.transform
+    assert (mapper.low, mapper.high) == (-2.0, 2.0)  # the limit given, not the data's range
+    z = rect.data_source.data["zvalues"]
+    assert np.isnan(z).sum() == 1 and sorted(z[np.isfinite(z)]) == [-1.8, 0.0, 0.2]  # the gap stays empty
+    texts = {(str(c), str(r)): (t, g.glyph.text_color) for g in fig.renderers if type(g.glyph).__name__ == "Text"
+             for c, r, t in zip(g.data_source.data["col"], g.data_source.data["row"], g.data_source.data["text"],
+                                strict=True)}
+    assert texts[("zone 2", "Y_qst")] == ("-1.80", "#ffffff")  # deep colour: light text
+    assert texts[("zone 1", "Y_qst")] == ("+0.20", "#222222")
+    assert fig.xaxis[0].axis_label == "EN 14363 test zone"
+    assert list(fig.y_range.factors) == ["Q_qst", "Y_qst"]  # first row on top

@@ -80,6 +80,14 @@ def test_diagnosis_settings_subset_and_scan_resolution(workshop):
     assert sorted(c["effect"] for c in st.candidates) == sorted([HIDDEN, "conicity"])
     assert st.candidates[0]["effect"] == HIDDEN
     assert st.effect == HIDDEN  # the top candidate is preselected
+    # where it fails: the baseline underestimates ΣY_qst in zone 4 (tight curves); the
+    # candidate, fitted, takes most of it away
+    where = st.where()
+    (q_now, _), (q_after, _) = where["now"], where["after"]
+    i, z4 = q_now.rows.index("SumY_qst"), q_now.cols.index("zone 4")
+    assert q_now.values[i, z4] < -0.5
+    assert abs(q_after.values[i, z4]) < 0.5 * abs(q_now.values[i, z4])
+    assert st.where("conicity")["now"][0].values[i, z4] == q_now.values[i, z4]  # same "now" for all
     # what the service reports it ran is what the page announced
     assert st.diagnosis_run == {"simulations": announced, "values_per_parameter": 2,
                                 "configuration": "baseline"}

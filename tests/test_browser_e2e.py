@@ -14,6 +14,7 @@ import re
 import pytest
 
 from tests.browser_support import (
+    element_screenshot,
     nav,
     open_app,
     require_browser,
@@ -65,6 +66,10 @@ def test_baseline_fails_diagnose_calibrate_then_passes(page, demo_url):
     new_name = f"baseline+{top}"
     assert main.locator(".rv-new-name input").input_value() == new_name
     screenshot(page, "e2e-2-diagnosis")
+    # the chosen candidate: why, signature, and where the residual lies now / with it
+    main.get_by_text(f"Candidate 1: {top}").wait_for(timeout=PAGE_MS)
+    main.locator(".rv-where canvas").nth(1).wait_for(state="attached", timeout=PAGE_MS)
+    element_screenshot(main.locator(".rv-candidate"), "e2e-2b-where")
 
     main.get_by_role("button", name="Add, calibrate & re-simulate").click()
     page.locator("progress.rv-progress").wait_for(state="visible", timeout=PAGE_MS)

@@ -11,6 +11,7 @@ import html
 from typing import Any
 
 import holoviews as hv
+import numpy as np
 import pandas as pd
 import panel as pn
 
@@ -23,8 +24,12 @@ from app.state import AppState, DashboardState, DiagnoseState, unit_label
 def signature_chart(candidate: dict[str, Any], height: int = 280) -> hv.Overlay:
     """Residual RMS per quantity group before/after adding the candidate (its signature on
     the residual pattern), as grouped bars."""
+    from core.quantities import QUANTITY_IDS
+
+    order = {q: i for i, q in enumerate(QUANTITY_IDS)}  # the quantities in EN order, then PSD groups
+    groups = sorted((candidate.get("quantities") or {}).items(), key=lambda kv: (order.get(kv[0], 99), kv[0]))
     rows = []
-    for group, change in (candidate.get("quantities") or {}).items():
+    for group, change in groups:
         rows.append((group, "before", float(change["before"])))
         rows.append((group, "after (fitted)", float(change["after"])))
     bars = hv.Bars(rows, kdims=[hv.Dimension("group", label="quantity / PSD group"),
@@ -84,10 +89,11 @@ class DiagnosePage(PageBase):
         self.param_box = pn.Column(sizing_mode="stretch_width")
         self.explain = pn.pane.Markdown("", sizing_mode="stretch_width")
         self.candidates_box = pn.Column(sizing_mode="stretch_width")
+        self.candidate_box = pn.Column(sizing_mode="stretch_width", css_classes=["rv-candidate"])
         self.result_box = pn.Column(sizing_mode="stretch_width")
         self._param_widgets: dict[str, pn.widgets.FloatInput] = {}
-        self.state.param.watch(lambda e: self._show_candidates(), ["candidates"])
-        self.state.param.watch(lambda e: self._show_effect(), ["effect"])
+        self.state.param.watch(lambda e: (self._show_candidates(), self._show_effect()), ["candidates"])
+        self.state.param.watch(lambda e: (self._show_effect(), self._show_candidate()), ["effect"])
         app.param.watch(self._busy_changed, ["busy"])
         self._busy_changed()  # the page may be opened while another page's job runs
 
@@ -160,17 +166,66 @@ class DiagnosePage(PageBase):
         note = self.state.diagnosis_note
         if note:
             extra.append(message(note, "info" if self.state.separable else "warning"))
-        top = cands[0]
         self.candidates_box.objects = [
             pn.pane.Markdown("#### Ranked candidate effects"),
             table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"]), *extra,
-            pn.pane.Markdown(f"**Why {html.escape(top['effect'])}?** {html.escape(top.get('explanation', ''))}",
-                             sizing_mode="stretch_width"),
-            pn.pane.HoloViews(signature_chart(top), sizing_mode="stretch_width"),
+            self.candidate_box,
         ]
         ranked = [c["effect"] for c in cands]
         rest = [e for e in self.state.param.effect.objects if e not in ranked]
         self.state.param.effect.objects = ranked + rest
+        self._show_candidate()
+
+    def _show_candidate(self) -> None:
+        """The chosen effect (the top candidate unless another is chosen): why, its signature
+        per quantity group, and where the residual lies now and after adding it."""
+        cands = self.state.candidates
+        cand = next((c for c in cands if c["effect"] == self.state.effect), cands[0] if cands else None)
+        if cand is None:
+            self.candidate_box.objects = []
+            return
+        rank = cands.index(cand) + 1
+        items: list[Any] = [
+            pn.pane.Markdown(f"#### Candidate {rank}: {html.escape(cand['effect'])} — explains "
+                             f"{100 * float(cand['explained']):.1f} % of the residual"),
+            pn.pane.Markdown(f"**Why {html.escape(cand['effect'])}?** {html.escape(cand.get('explanation', ''))}",
+                             sizing_mode="stretch_width"),
+            pn.pane.HoloViews(signature_chart(cand), sizing_mode="stretch_width"),
+        ]
+        where = self.state.where(cand["effect"])
+        if where:
+            (q_now, p_now), (q_after, p_after) = where["now"], where["after"]
+            grids = [g.values for g in (q_now, p_now, q_after, p_after) if g.values.size]
+            limit = max([1.0] + [float(np.nanmax(np.abs(v))) for v in grids if np.isfinite(v).any()])
+            dv = "mean D_v / std limit (–)"  # axis of the hover and the paragraph above
+            items += [
+                pn.pane.Markdown("**Where the model fails, and what is left with the candidate** — mean "
+                                 "normalised D_v per quantity and EN 14363 zone (positions averaged), one "
+                                 "colour scale for both maps: red = simulation above the measurement.",
+                                 sizing_mode="stretch_width"),
+                pn.Row(pn.pane.HoloViews(plots.pattern_heatmap(q_now, f"{self.app.configuration} now", limit, dv,
+                                                               "EN 14363 test zone"), sizing_mode="stretch_width"),
+                       pn.pane.HoloViews(plots.pattern_heatmap(q_after, f"with {cand['effect']} (fitted)", limit,
+                                                               dv, "EN 14363 test zone"),
+                                         sizing_mode="stretch_width"),
+                       sizing_mode="stretch_width", css_classes=["rv-where"]),
+            ]
+            if p_now.rows:
+                items.append(pn.pane.Markdown("Car body accelerations per frequency band: log2 of the PSD "
+                                              "ratio simulation / measurement (+1 = twice the power).",
+                                              sizing_mode="stretch_width"))
+                lp = "log2 PSD ratio (–)"  # simulation / measurement, per band
+                plim = max([1.0] + [float(np.nanmax(np.abs(g.values))) for g in (p_now, p_after)
+                                    if np.isfinite(g.values).any()])
+                items.append(pn.Row(
+                    pn.pane.HoloViews(plots.pattern_heatmap(p_now, "car body PSD bands now", plim, lp,
+                                                            "frequency band", "car body acc.", height=200),
+                                      sizing_mode="stretch_width"),
+                    pn.pane.HoloViews(plots.pattern_heatmap(p_after, f"with {cand['effect']} (fitted)", plim, lp,
+                                                            "frequency band", "car body acc.", height=200),
+                                      sizing_mode="stretch_width"),
+                    sizing_mode="stretch_width"))
+        self.candidate_box.objects = items
 
     def _show_effect(self) -> None:
         eff = getattr(self, "_catalogue", {}).get(self.state.effect)
