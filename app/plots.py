@@ -332,6 +332,13 @@ def _fonts(fig) -> None:
         ax.major_label_text_font_size = FONTS["xticks"]
 
 
+#: Colour limits of the "where it fails" heat maps, the same on every page and configuration
+#: so colours compare: mean D_v / std limit (beyond ±2 saturated; the cell text is exact) and
+#: log2 PSD ratio (±1 = a factor 2 in power).
+WHERE_LIMIT = 2.0
+PSD_RATIO_LIMIT = 1.0
+
+
 def pattern_heatmap(grid, title: str, limit: float, value_label: str, x_label: str,
                     y_label: str = "EN 14363 quantity", height: int = 330) -> hv.Overlay:
     """Heat map of a :class:`app.state.PatternGrid` with the value in each cell; diverging

@@ -677,6 +677,14 @@ class DashboardState(param.Parameterized):
         rows.sort(key=lambda r: -abs(r["D_v"]))
         return rows[: self.top_n]
 
+    def where(self, config: str | None = None) -> PatternGrid:
+        """Where the configuration fails: mean of D_v / std limit over the sections and
+        positions of each quantity × EN zone (``ValidationResult.pairs``), as a grid."""
+        pairs = self.result(config).pairs
+        labels = [f"{q} zone {int(z)} {p}" for q, z, p in zip(pairs["quantity"], pairs["zone"],
+                                                               pairs["position"], strict=True)]
+        return pattern_grids(labels, pairs["D_norm"].to_numpy(float))[0]
+
     def open_row(self, row: dict[str, Any]) -> None:
         channel = _channel_for(row.get("quantity"), row.get("position"), self.app.param.channel.objects)
         self.app.open_compare(row["section"], channel)
@@ -965,6 +973,8 @@ def pattern_grids(labels: list[str], values) -> tuple[PatternGrid, PatternGrid]:
     p_acc: dict[tuple[str, str], list[float]] = {}
     bands: list[str] = []
     for label, v in zip(labels, np.asarray(values, float), strict=True):
+        if not math.isfinite(v):
+            continue
         parts = label.split()
         if parts[0] == "psd":  # psd <channel> <lo-hi> Hz
             kind = parts[1].split("_")[0]

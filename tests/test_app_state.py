@@ -209,6 +209,19 @@ def test_dashboard_summary_and_drilldown(app):
     assert app.page == "compare" and app.section == r["section"] and app.channel.startswith("Y_")
 
 
+def test_dashboard_where_grid_is_the_mean_normalised_dv_per_quantity_and_zone(app):
+    dash = DashboardState(app)
+    dash.top_n = 200
+    grid = dash.where()
+    assert grid.cols == ["zone 1", "zone 2", "zone 3", "zone 4"] and grid.rows[0] == "Y_qst"
+    assert len(grid.rows) == 12 and np.isfinite(grid.values).all()  # 12 quantities, every zone
+    for q in ("Y_qst", "az_max"):  # by hand from the drill-down rows (D_v / std limit)
+        rows = dash.drilldown(q)
+        for j, zone in enumerate((1, 2, 3, 4)):
+            norms = [r["norm"] for r in rows if r["zone"] == zone]
+            assert grid.values[grid.rows.index(q), j] == pytest.approx(np.mean(norms))
+
+
 def test_diagnose_suggested_name_is_unique(app):
     diag = DiagnoseState(app)
     diag.param.effect.objects = ["friction_damping"]
@@ -252,3 +265,18 @@ def test_pages_are_built_on_first_view_and_refresh_when_shown(demo_db):
     assert f"<b class='rv-selected'>{other}</b>" in tree
     assert set(pages) == {"overview", "compare", "dashboard", "metrics", "diagnose", "report"}
     assert pages.built() == ["overview", "dashboard"]
+
+
+def test_dashboard_where_map_keeps_its_own_row_order_beside_the_bar_charts(demo_db):
+    """The heat map's quantity axis is not linked to the bar charts' quantity axis (a shared
+    FactorRange would turn the rows upside down): Y_qst on top, az_max at the bottom."""
+    from bokeh.document import Document
+    from bokeh.models import Plot
+
+    from app.main import build_app
+
+    doc = Document()
+    build_app(demo_db, page="dashboard").server_doc(doc)
+    (heat,) = [m for m in doc.models if isinstance(m, Plot) and "mean D_v" in (m.title.text or "")]
+    factors = [str(f) for f in heat.y_range.factors]  # Bokeh lists categories bottom → top
+    assert factors[-1] == "Y_qst" and factors[0] == "az_max"

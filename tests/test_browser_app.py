@@ -14,6 +14,7 @@ import pytest
 from tests.browser_support import (
     bokeh_sources,
     box_zoom,
+    element_screenshot,
     nav,
     open_app,
     require_browser,
@@ -96,6 +97,9 @@ def test_dashboard_drilldown_row_opens_compare(page, app_url):
     rows.first.wait_for(timeout=PAGE_TIMEOUT_MS)
     section = rows.first.locator(".tabulator-cell[tabulator-field='section']").inner_text().strip()
     screenshot(page, "dashboard")
+    where = main.locator(".rv-where")
+    where.locator("canvas").first.wait_for(state="attached", timeout=PAGE_TIMEOUT_MS)
+    element_screenshot(main.locator(".rv-where-box"), "dashboard-where")
     rows.first.locator(".tabulator-cell[tabulator-field='position']").click()
     _wait_page(page, "Compare signals")
     shown = main.locator("select").first.evaluate("s => s.options[s.selectedIndex].text")

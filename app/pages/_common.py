@@ -12,6 +12,7 @@ import panel as pn
 import param
 from panel.io.state import set_curdoc
 
+from app import plots
 from app.state import PAGE_TITLES, AppState
 
 TABLE_STYLE = {"font-size": "13px"}
@@ -67,6 +68,23 @@ def html_table(df: pd.DataFrame, css_class: str = "", max_height: int | None = N
     return pn.pane.HTML(f"<table class='rv-table {html.escape(css_class)}'><thead><tr>{head}</tr></thead>"
                         f"<tbody>{rows}</tbody></table>", sizing_mode="stretch_width",
                         stylesheets=[HTML_TABLE_CSS], styles=style)
+
+
+DV_LABEL = "mean D_v / std limit (–)"
+PSD_RATIO_LABEL = "log2 PSD ratio (–)"
+
+
+def where_map(grid: Any, title: str, psd: bool = False, height: int = 330) -> pn.pane.HoloViews:
+    """A "where it fails" heat map (``plots.pattern_heatmap``) of a quantity × zone grid, or
+    with ``psd`` of a car body acceleration × band grid, on the fixed colour scale. Its
+    categorical axes are not linked to other plots of the page (Panel would otherwise share
+    the quantity axis with the bar charts' and reverse the rows)."""
+    if psd:
+        obj = plots.pattern_heatmap(grid, title, plots.PSD_RATIO_LIMIT, PSD_RATIO_LABEL, "frequency band",
+                                    "car body acc.", height=height)
+    else:
+        obj = plots.pattern_heatmap(grid, title, plots.WHERE_LIMIT, DV_LABEL, "EN 14363 test zone", height=height)
+    return pn.pane.HoloViews(obj, linked_axes=False, sizing_mode="stretch_width")
 
 
 def message(text: str, kind: str = "info") -> pn.pane.Alert:

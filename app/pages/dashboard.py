@@ -11,7 +11,7 @@ import pandas as pd
 import panel as pn
 
 from app import plots
-from app.pages._common import PageBase, message, table
+from app.pages._common import PageBase, message, table, where_map
 from app.state import AppState, DashboardState
 
 SUMMARY_COLUMNS = ["quantity", "n", "mean", "std", "mean_limit", "std_limit", "mean_norm", "std_norm", "pass"]
@@ -101,12 +101,25 @@ class DashboardPage(PageBase):
                              "std is the sample standard deviation (n − 1). Click a bar for its "
                              "drill-down.", styles={"color": "#555"}),
             table(summary_frame(summary["quantities"]), height=40 + 32 * len(qs)),
+            self._where(config),
             pn.Row(self.quantity_select, pn.pane.Markdown(
                 "Pairs contributing most (largest |D_v|). **Click a row** to compare that section "
                 "and channel.", margin=(28, 10, 0, 10))),
             self.drill_box,
         ]
         self._show_drilldown()
+
+    def _where(self, config: str) -> pn.viewable.Viewable:
+        """Heat map of the mean normalised D_v per quantity × EN zone: where it fails."""
+        grid = self.state.where(config)
+        return pn.Column(
+            pn.pane.Markdown("#### Where it fails: quantity × test zone\nMean of D_v / std limit over the "
+                             "sections and positions of each zone; red = simulation above the measurement, "
+                             "blue = below; colour scale fixed at ±2 for every configuration.",
+                             sizing_mode="stretch_width"),
+            pn.Row(where_map(grid, f"{config}: mean D_v / std limit", height=380), sizing_mode="stretch_width",
+                   css_classes=["rv-where"]),
+            sizing_mode="stretch_width", css_classes=["rv-where-box"])
 
     def _bar_clicked(self, index: list[int], quantities: list[str]) -> None:
         if index:

@@ -11,12 +11,11 @@ import html
 from typing import Any
 
 import holoviews as hv
-import numpy as np
 import pandas as pd
 import panel as pn
 
 from app import plots
-from app.pages._common import PageBase, make_dispatch, message, table
+from app.pages._common import PageBase, make_dispatch, message, table, where_map
 from app.pages.dashboard import validation_view
 from app.state import AppState, DashboardState, DiagnoseState, unit_label
 
@@ -195,36 +194,23 @@ class DiagnosePage(PageBase):
         where = self.state.where(cand["effect"])
         if where:
             (q_now, p_now), (q_after, p_after) = where["now"], where["after"]
-            grids = [g.values for g in (q_now, p_now, q_after, p_after) if g.values.size]
-            limit = max([1.0] + [float(np.nanmax(np.abs(v))) for v in grids if np.isfinite(v).any()])
-            dv = "mean D_v / std limit (–)"  # axis of the hover and the paragraph above
+            after = f"with {cand['effect']} (fitted)"
             items += [
                 pn.pane.Markdown("**Where the model fails, and what is left with the candidate** — mean "
-                                 "normalised D_v per quantity and EN 14363 zone (positions averaged), one "
-                                 "colour scale for both maps: red = simulation above the measurement.",
-                                 sizing_mode="stretch_width"),
-                pn.Row(pn.pane.HoloViews(plots.pattern_heatmap(q_now, f"{self.app.configuration} now", limit, dv,
-                                                               "EN 14363 test zone"), sizing_mode="stretch_width"),
-                       pn.pane.HoloViews(plots.pattern_heatmap(q_after, f"with {cand['effect']} (fitted)", limit,
-                                                               dv, "EN 14363 test zone"),
-                                         sizing_mode="stretch_width"),
+                                 "normalised D_v per quantity and EN 14363 zone (positions averaged); the "
+                                 "colour scale is fixed (±2, as on the dashboard): red = simulation above "
+                                 "the measurement, blue = below.", sizing_mode="stretch_width"),
+                pn.Row(where_map(q_now, f"{self.app.configuration} now"), where_map(q_after, after),
                        sizing_mode="stretch_width", css_classes=["rv-where"]),
             ]
             if p_now.rows:
-                items.append(pn.pane.Markdown("Car body accelerations per frequency band: log2 of the PSD "
-                                              "ratio simulation / measurement (+1 = twice the power).",
-                                              sizing_mode="stretch_width"))
-                lp = "log2 PSD ratio (–)"  # simulation / measurement, per band
-                plim = max([1.0] + [float(np.nanmax(np.abs(g.values))) for g in (p_now, p_after)
-                                    if np.isfinite(g.values).any()])
-                items.append(pn.Row(
-                    pn.pane.HoloViews(plots.pattern_heatmap(p_now, "car body PSD bands now", plim, lp,
-                                                            "frequency band", "car body acc.", height=200),
-                                      sizing_mode="stretch_width"),
-                    pn.pane.HoloViews(plots.pattern_heatmap(p_after, f"with {cand['effect']} (fitted)", plim, lp,
-                                                            "frequency band", "car body acc.", height=200),
-                                      sizing_mode="stretch_width"),
-                    sizing_mode="stretch_width"))
+                items += [
+                    pn.pane.Markdown("Car body accelerations per frequency band: log2 of the PSD ratio "
+                                     "simulation / measurement (+1 = twice the power; scale fixed at ±1).",
+                                     sizing_mode="stretch_width"),
+                    pn.Row(where_map(p_now, "car body PSD bands now", psd=True, height=200),
+                           where_map(p_after, after, psd=True, height=200), sizing_mode="stretch_width"),
+                ]
         self.candidate_box.objects = items
 
     def _show_effect(self) -> None:
