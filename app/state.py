@@ -846,7 +846,9 @@ class DiagnoseState(param.Parameterized):
     def diagnosis_simulations(self) -> int:
         """Campaign simulations the diagnosis will run with the current settings."""
         effects = self.candidate_effects or self.available_effects()
-        return service("diagnosis").diagnosis_simulations(effects, self.values_per_parameter)
+        ov = self.app.overview
+        template = str(ov.vehicle.get("template") or "coach") if ov else None
+        return service("diagnosis").diagnosis_simulations(effects, self.values_per_parameter, template)
 
     def calibration_simulations(self) -> int:
         """Upper bound of the campaign simulations a calibration runs: the optimiser's

@@ -199,12 +199,16 @@ def scan_points(spec: Any, values_per_parameter: int) -> Iterator[tuple[str, flo
             yield pname, v, {**defaults, pname: v}, p
 
 
-def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3) -> int:
+def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3,
+                          template: str | None = None) -> int:
     """How many campaign simulations :func:`diagnose` runs for ``effects`` (the configuration
-    itself once, plus every distinct scan point): shown before a user starts it."""
+    itself once, plus every distinct scan point of the effects that apply to the vehicle
+    ``template``): shown before a user starts it."""
     registry = _effect_registry()
     n = 1
     for e in effects:
+        if template and template not in getattr(registry[e], "templates", (template,)):
+            continue
         n += len({json.dumps(point, sort_keys=True)
                   for _, _, point, _ in scan_points(registry[e], values_per_parameter)})
     return n
@@ -235,13 +239,13 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     # come from the same simulator run settings (signatures are differences of the two)
     tasks, index, unique = [(ctx, conf_effects, conf_params)], [], {}
     for e in todo:
+        defaults = {k: float(q["default"]) for k, q in _effect_parameters(registry[e]).items()}
         for pname, v, point, p in scan_points(registry[e], values_per_parameter):
             eff = {**conf_effects, e: point}
             key = json.dumps(eff, sort_keys=True)
             if key not in unique:  # the all-defaults point of a multi-parameter effect once
                 unique[key] = len(tasks)
                 tasks.append((ctx, eff, conf_params))
-            defaults = {k: float(q["default"]) for k, q in _effect_parameters(registry[e]).items()}
             index.append((e, pname, v, defaults, (p["lower"], p["upper"]), p["log"], unique[key]))
     _report(progress, "simulate", 0.05, tasks=len(tasks))
     with BatchExecutor(scheduler, workers) as ex:
