@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from app.state import unit_label
+from app.state import unit_label, where_grid
 from core.errors import RailvalError
 from core.types import CHANNEL_KINDS, split_channel
 
@@ -256,6 +256,37 @@ table { border-collapse: collapse; margin: 8px 0; } th, td { border: 1px solid #
 """
 
 
+def diverging_color(value: float, limit: float = 2.0) -> str:
+    """Cell colour of a signed value on the fixed scale ±``limit`` (ColorBrewer RdBu, 11
+    classes, from Bokeh's palettes): red above zero, blue below, white near zero; the app's
+    heat maps use the same scale."""
+    from bokeh.palettes import RdBu11  # dark blue … white … dark red
+
+    if not math.isfinite(value):
+        return "#ffffff"
+    i = round((min(max(value / limit, -1.0), 1.0) + 1.0) / 2.0 * (len(RdBu11) - 1))
+    return RdBu11[i]
+
+
+def where_table(grid: Any, limit: float = 2.0) -> str:
+    """"Where it fails" as an HTML table: mean D_v / std limit per quantity × EN zone, each
+    cell coloured on the fixed scale ±``limit`` (white text on the deep colours)."""
+    out = ["<h2>Where it fails: quantity × test zone</h2><table class='where'><tr><th class='l'>quantity</th>"
+           + "".join(f"<th>{_esc(c)}</th>" for c in grid.cols) + "</tr>"]
+    for i, q in enumerate(grid.rows):
+        cells = []
+        for v in grid.values[i]:
+            if not math.isfinite(v):
+                cells.append("<td>–</td>")
+                continue
+            ink = "#ffffff" if abs(v) > 0.55 * limit else "#1d1d1d"
+            cells.append(f"<td style='background:{diverging_color(v, limit)};color:{ink}'>{v:+.2f}</td>")
+        out.append(f"<tr><td class='l'>{_esc(q)}</td>{''.join(cells)}</tr>")
+    out.append(f"</table><p class='note'>Mean of D_v / std limit over the sections and positions of each "
+               f"zone; red: the simulation above the measurement, blue: below; colours saturate at ±{limit:g}.</p>")
+    return "".join(out)
+
+
 def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3) -> Report:
     """Build the report of ``configuration`` of ``campaign`` from the database.
 
@@ -314,6 +345,8 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
     h.append(svg_bars(labels, [r.get("std_norm") for r in rows], title="Normalised std (std / limit, n − 1)",
                       ylabel="std / limit (–)", limits=(1.0,), intervals=[r.get("std_norm_ci") for r in rows]))
     h.append("</div>")
+
+    h.append(where_table(where_grid(result)))
 
     # coverage
     h.append("<h2>Coverage</h2>")

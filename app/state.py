@@ -680,10 +680,7 @@ class DashboardState(param.Parameterized):
     def where(self, config: str | None = None) -> PatternGrid:
         """Where the configuration fails: mean of D_v / std limit over the sections and
         positions of each quantity × EN zone (``ValidationResult.pairs``), as a grid."""
-        pairs = self.result(config).pairs
-        labels = [f"{q} zone {int(z)} {p}" for q, z, p in zip(pairs["quantity"], pairs["zone"],
-                                                               pairs["position"], strict=True)]
-        return pattern_grids(labels, pairs["D_norm"].to_numpy(float))[0]
+        return where_grid(self.result(config))
 
     def open_row(self, row: dict[str, Any]) -> None:
         channel = _channel_for(row.get("quantity"), row.get("position"), self.app.param.channel.objects)
@@ -951,6 +948,15 @@ class DiagnoseState(param.Parameterized):
                         default=float("nan"))
             out.append({"configuration": name, "max_norm": worst, "validated": bool(d.get("validated"))})
         return out
+
+
+def where_grid(result: Any) -> PatternGrid:
+    """Mean of D_v / std limit over the sections and positions of each quantity × EN zone of
+    a validation result (``ValidationResult.pairs``): where a configuration fails."""
+    pairs = result.pairs
+    labels = [f"{q} zone {int(z)} {p}" for q, z, p in zip(pairs["quantity"], pairs["zone"],
+                                                           pairs["position"], strict=True)]
+    return pattern_grids(labels, pairs["D_norm"].to_numpy(float))[0]
 
 
 @dataclass

@@ -8,7 +8,7 @@ import re
 
 import pytest
 
-from app.report import Report, ReportError, build_report, svg_bars, svg_lines
+from app.report import Report, ReportError, build_report, diverging_color, svg_bars, svg_lines, where_table
 from app.state import Backend, nice_ticks
 from tests.browser_support import browser_missing_reason
 
@@ -59,6 +59,7 @@ def test_report_holds_verdict_quantities_coverage_hashes_and_versions(demo_db, r
     for q in result.quantities:
         assert f">{q}</td>" in html
     assert "sample standard deviation" in html and "Coverage" in html
+    assert "Where it fails: quantity × test zone" in html and html.count("class='where'") == 1
     assert html.count("class='worst'") == 2
     # the evidence digest, recomputed independently from the repository's hashes
     meas, sim = backend.hashes("demo", None), backend.hashes("demo", "baseline")
@@ -71,6 +72,21 @@ def test_report_holds_verdict_quantities_coverage_hashes_and_versions(demo_db, r
     assert len(re.findall(r"<td class='l'>[0-9a-f]{64}</td>", html)) == 2 * n_signals
     assert report.versions["numpy"] in html and "railval" in report.versions
     assert "<script" not in html  # self-contained, prints as displayed
+
+
+def test_where_table_colours_on_the_fixed_scale():
+    import numpy as np
+
+    from app.state import PatternGrid
+
+    assert diverging_color(0.0) == "#f7f7f7"  # the palette's white middle class
+    assert diverging_color(2.0) == diverging_color(9.0) == "#67001f"  # saturated dark red
+    assert diverging_color(-2.0) == "#053061" and diverging_color(-1.0) == "#4393c3"  # index 2 of 11
+    grid = PatternGrid(["Y_qst", "a<b"], ["zone 1", "zone 2"], np.array([[-1.6, 0.1], [np.nan, 0.0]]))
+    html = where_table(grid)
+    # −1.6 / 2 = −0.8 → class round((−0.8 + 1)/2 · 10) = 1 of 0…10; |−1.6| > 0.55·2: white text
+    assert "background:#2166ac;color:#ffffff'>-1.60<" in html
+    assert ">+0.10<" in html and "<td>–</td>" in html and "a&lt;b" in html
 
 
 def test_report_write_rejects_unknown_extension(report, tmp_path):
