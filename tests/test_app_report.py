@@ -8,7 +8,15 @@ import re
 
 import pytest
 
-from app.report import Report, ReportError, build_report, diverging_color, svg_bars, svg_lines, where_table
+from app.report import (
+    Report,
+    ReportError,
+    build_report,
+    diverging_color,
+    svg_bars,
+    svg_lines,
+    where_table,
+)
 from app.state import Backend, nice_ticks
 from tests.browser_support import browser_missing_reason
 
