@@ -121,3 +121,39 @@ def box_zoom(page, canvas, fx: tuple[float, float], fy: tuple[float, float] = (0
     page.mouse.move((x0 + x1) / 2, (y0 + y1) / 2, steps=5)
     page.mouse.move(x1, y1, steps=5)
     page.mouse.up()
+
+
+_FRAME_JS = """(title) => {
+  const out = [], seen = new Set();
+  const visit = (v) => {
+    if (!v || seen.has(v)) return;
+    seen.add(v);
+    if (v.frame && v.model && v.model.title && v.model.title.text === title) {
+      const r = v.canvas_view.el.getBoundingClientRect(), b = v.frame.bbox;
+      out.push({left: r.left + b.x0, right: r.left + b.x1, top: r.top + b.y0, bottom: r.top + b.y1,
+                factors: Array.from(v.model.x_range.factors || [])});
+    }
+    const kids = v.child_views || [];
+    for (const c of (kids.values ? Array.from(kids.values()) : kids)) visit(c);
+  };
+  const roots = Bokeh.index instanceof Map ? Array.from(Bokeh.index.values()) : Object.values(Bokeh.index);
+  for (const r of roots) visit(r);
+  return out;
+}"""
+
+
+def plot_frame(page, title: str) -> dict:
+    """Page coordinates of the data frame of the Bokeh plot titled ``title`` (from BokehJS's
+    views: left, right, top, bottom) and its categorical x factors."""
+    frames = page.evaluate(_FRAME_JS, title)
+    assert len(frames) == 1, f"{len(frames)} plots titled {title!r}"
+    return frames[0]
+
+
+def click_bar(page, title: str, factor: str, above_base_px: float = 4.0) -> None:
+    """Click the bar of ``factor`` in the bar chart ``title``, just above its base (the bars
+    of a chart whose y axis starts at 0)."""
+    fr = plot_frame(page, title)
+    i = fr["factors"].index(factor)
+    x = fr["left"] + (i + 0.5) / len(fr["factors"]) * (fr["right"] - fr["left"])
+    page.mouse.click(x, fr["bottom"] - above_base_px)

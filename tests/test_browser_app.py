@@ -14,6 +14,7 @@ import pytest
 from tests.browser_support import (
     bokeh_sources,
     box_zoom,
+    click_bar,
     element_screenshot,
     nav,
     open_app,
@@ -106,6 +107,16 @@ def test_dashboard_drilldown_row_opens_compare(page, app_url):
     assert shown == section
     main.locator("canvas").nth(2).wait_for(state="attached", timeout=PAGE_TIMEOUT_MS)
     screenshot(page, "drilldown-compare")
+
+    # back on the dashboard, a click on a bar of the std chart drills to that quantity
+    nav(page, "Validation dashboard")
+    _wait_page(page, "Validation dashboard")
+    drill_select = main.locator("select").first
+    shown_q = drill_select.evaluate("s => s.value")
+    other = "az_max" if shown_q != "az_max" else "ay_max"
+    click_bar(page, "Normalised std (std / limit, n − 1)", other)
+    page.wait_for_function("([el, q]) => el.value === q", arg=[drill_select.element_handle(), other],
+                           timeout=PAGE_TIMEOUT_MS)
 
 
 def test_metrics_report_and_workshop_pages(page, app_url):
