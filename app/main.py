@@ -1,7 +1,7 @@
-"""The engineers' web app: template, navigation, pages (DESIGN §1, §3–§7).
+"""The engineers' web app: template, navigation, pages (docs/design.md §1, §3–§7).
 
 ``build_app(database)`` returns one session's Panel template (each browser session gets its
-own :class:`app.state.AppState`); ``serve(database, ...)`` serves it with ``pn.serve``.
+own :class:`railval.app.state.AppState`); ``serve(database, ...)`` serves it with ``pn.serve``.
 Pages are one module each under ``app/pages``; their state lives in ``app/state.py``.
 """
 
@@ -18,13 +18,13 @@ from typing import Any
 
 import panel as pn
 
-from app.pages.compare import ComparePage
-from app.pages.dashboard import DashboardPage
-from app.pages.diagnose import DiagnosePage
-from app.pages.metrics import MetricsPage
-from app.pages.overview import OverviewPage
-from app.pages.report import ReportPage
-from app.state import PAGE_TITLES, PAGES, AppState, Backend
+from railval.app.pages.compare import ComparePage
+from railval.app.pages.dashboard import DashboardPage
+from railval.app.pages.diagnose import DiagnosePage
+from railval.app.pages.metrics import MetricsPage
+from railval.app.pages.overview import OverviewPage
+from railval.app.pages.report import ReportPage
+from railval.app.state import PAGE_TITLES, PAGES, AppState, Backend
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
 CSS_FILE = STATIC / "railval.css"
@@ -88,7 +88,7 @@ class Pages(Mapping[str, Any]):
 
 
 def build_app(database: Any, page: str = "overview") -> pn.template.FastListTemplate:
-    """One session's app on ``database`` (a ``db.engine.Database``); only the page shown
+    """One session's app on ``database`` (a ``railval.db.engine.Database``); only the page shown
     is built (:class:`Pages`), the others when first opened."""
     app = AppState(Backend(database))
     if page != "overview":

@@ -1,4 +1,4 @@
-"""HoloViews/Bokeh plot builders of the web app (DESIGN §3–§5).
+"""HoloViews/Bokeh plot builders of the web app (docs/design.md §3–§5).
 
 House rules, applied by every builder here:
 
@@ -37,7 +37,7 @@ from bokeh.plotting import figure
 from holoviews.operation.downsample import downsample1d
 from tsdownsample import MinMaxLTTBDownsampler
 
-from app.state import CompareData, nice_limits, unit_label
+from railval.app.state import CompareData, nice_limits, unit_label
 
 hv.extension("bokeh", logo=False)
 
@@ -341,7 +341,7 @@ PSD_RATIO_LIMIT = 1.0
 
 def pattern_heatmap(grid, title: str, limit: float, value_label: str, x_label: str,
                     y_label: str = "EN 14363 quantity", height: int = 330) -> hv.Overlay:
-    """Heat map of a :class:`app.state.PatternGrid` with the value in each cell; diverging
+    """Heat map of a :class:`railval.app.state.PatternGrid` with the value in each cell; diverging
     colours fixed at ±``limit`` (pass the same limit to plots that are compared: red =
     simulation above measurement, blue = below)."""
     cells = [(c, r, float(grid.values[i, j])) for i, r in enumerate(grid.rows)

@@ -1,4 +1,4 @@
-"""HTML and PDF report of a configuration's validation (DESIGN §1: reviewers, assessors).
+"""HTML and PDF report of a configuration's validation (docs/design.md §1: reviewers, assessors).
 
 One builder serves the Report page and ``railval report``. The HTML is self-contained:
 tables, and charts as inline SVG drawn here (no JavaScript, no network), so it prints the
@@ -7,7 +7,7 @@ same way it displays. The PDF is the HTML printed by headless Chromium
 Chromium is found a :class:`ReportError` says so and which path was searched.
 
 Contents: verdict; per quantity n, mean, std (sample std, n − 1), limits, normalised values
-with bootstrap intervals, pass/fail; coverage and its shortfalls; the seed's Fig. 12/13 bar
+with bootstrap intervals, pass/fail; coverage and its shortfalls; Polach & Böttcher 2014, Fig. 12/13 bar
 charts; plots of the worst cases (largest |D_v|/limit, EN-filtered measurement beneath the
 simulation on the distance axis, evaluated range shaded); the lineage; SHA-256 content
 hashes of every signal used; software versions.
@@ -31,12 +31,12 @@ from typing import Any
 
 import numpy as np
 
-from app.state import unit_label, where_grid
-from core.errors import RailvalError
-from core.types import CHANNEL_KINDS, split_channel
+from railval.app.state import unit_label, where_grid
+from railval.core.errors import RailvalError
+from railval.core.types import CHANNEL_KINDS, split_channel
 
 CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "google-chrome")
-#: flags that let Debian's Chromium run headless in containers and CI (NOTES-stack.md)
+#: flags that let Debian's Chromium run headless in containers and CI
 CHROMIUM_ARGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync")
 PDF_TIMEOUT_S = 120
@@ -121,7 +121,7 @@ def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: s
     w, h = width - ml - mr, height - mt - mb
     xs = np.concatenate([t[1] for t in traces]) if traces else np.array([0.0, 1.0])
     ys = np.concatenate([t[2] for t in traces]) if traces else np.array([0.0, 1.0])
-    from app.state import nice_limits, nice_ticks
+    from railval.app.state import nice_limits, nice_ticks
 
     x0, x1 = nice_limits(float(np.min(xs)), float(np.max(xs)))
     y0, y1 = nice_limits(float(np.min(ys)), float(np.max(ys)))
@@ -290,8 +290,8 @@ def where_table(grid: Any, limit: float = 2.0) -> str:
 def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3) -> Report:
     """Build the report of ``configuration`` of ``campaign`` from the database.
 
-    ``backend`` is an :class:`app.state.Backend`; the validation comes from
-    ``app.services.validation`` through it, exactly as the dashboard shows it.
+    ``backend`` is an :class:`railval.app.state.Backend`; the validation comes from
+    ``railval.app.services.validation`` through it, exactly as the dashboard shows it.
     """
     result = backend.validation(campaign, configuration)
     d = result.to_dict()
@@ -325,7 +325,7 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
                 + ("" if cov.get("ok", True) else "; coverage not met")) + "</div>")
 
     # quantities
-    h.append("<h2>Quantities (seed 000 §5, EN 14363)</h2><table><tr><th class='l'>quantity</th><th>unit</th>"
+    h.append("<h2>Quantities (Polach & Böttcher 2014 §5, EN 14363)</h2><table><tr><th class='l'>quantity</th><th>unit</th>"
              "<th>n</th><th>mean D_v</th><th>std D_v</th><th>mean limit</th><th>std limit</th>"
              "<th>mean/limit</th><th>95 % CI</th><th>std/limit</th><th>95 % CI</th><th>verdict</th></tr>")
     for r in rows:
@@ -392,8 +392,8 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
 
 def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: Any, ov: Any,
                       n: int) -> list[str]:
-    from app.state import EN_FILTER_OF_KIND, _channel_for
-    from core.filters import filtfilt_rows
+    from railval.app.state import EN_FILTER_OF_KIND, _channel_for
+    from railval.core.filters import filtfilt_rows
 
     pairs = result.pairs
     if len(pairs) == 0:

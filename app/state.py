@@ -1,4 +1,4 @@
-"""UI state of the engineers' web app, apart from any view (DESIGN §2, STYLE habit 9).
+"""UI state of the engineers' web app, apart from any view (docs/design.md §2).
 
 Nothing here imports Panel: every class is a :class:`param.Parameterized` that a test can
 drive without a browser. Pages (``app/pages/*.py``) are thin views bound to these states.
@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 import param
 
-from core.errors import NotFound, RailvalError
-from core.types import CHANNEL_KINDS, SectionInfo, split_channel
+from railval.core.errors import NotFound, RailvalError
+from railval.core.types import CHANNEL_KINDS, SectionInfo, split_channel
 
 PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report")
 PAGE_TITLES = {
@@ -62,9 +62,9 @@ EN_FILTER_OF_KIND = {
 
 
 def service(name: str):
-    """Import ``app.services.<name>`` or raise :class:`ServiceUnavailable` naming it."""
+    """Import ``railval.app.services.<name>`` or raise :class:`ServiceUnavailable` naming it."""
     try:
-        return importlib.import_module(f"app.services.{name}")
+        return importlib.import_module(f"railval.app.services.{name}")
     except ImportError as exc:
         raise ServiceUnavailable(f"not available: app.services.{name} ({exc})") from exc
 
@@ -99,7 +99,7 @@ class CampaignOverview:
 
     def coverage_shortfalls(self, min_sections: int = 12, min_per_zone: int = 3,
                             min_signals: int = 2) -> list[str]:
-        """Coverage rules of DESIGN §3 (seed 000 §5) checked on the campaign layout alone.
+        """Coverage rules of docs/design.md §3 (Polach & Böttcher 2014 §5) checked on the campaign layout alone.
 
         ≥ ``min_sections`` sections, every zone 1–4 with ≥ ``min_per_zone`` sections and
         ≥ ``min_signals`` channels per channel kind. Returns precise messages, empty when met.
@@ -127,7 +127,7 @@ class CampaignOverview:
 
 
 class Backend:
-    """Every call opens one unit of work on ``database`` (``db.engine.Database``)."""
+    """Every call opens one unit of work on ``database`` (``railval.db.engine.Database``)."""
 
     def __init__(self, database: Any):
         self.database = database
@@ -137,7 +137,7 @@ class Backend:
     # -- plumbing
     @staticmethod
     def repo():
-        return importlib.import_module("db.repo")
+        return importlib.import_module(f"railval.db.repo")
 
     def session(self):
         return self.database.session()
@@ -221,7 +221,7 @@ class Backend:
         return self._cached(key, make)
 
     def metrics(self, campaign: str, config: str, sections: list[str] | None = None):
-        """DataFrame of ``app.services.metrics.metrics_for_configuration`` (cached)."""
+        """DataFrame of ``railval.app.services.metrics.metrics_for_configuration`` (cached)."""
         mod = service("metrics")
 
         def make():
@@ -230,15 +230,15 @@ class Backend:
         return self._cached(("metrics", campaign, config, tuple(sections or ())), make)
 
     def effects(self) -> list[dict[str, Any]]:
-        """The effect registry (``core.sim.effects``) as plain dicts for the UI."""
+        """The effect registry (``railval.core.sim.effects``) as plain dicts for the UI."""
         try:
-            mod = importlib.import_module("core.sim.effects")
+            mod = importlib.import_module(f"railval.core.sim.effects")
         except ImportError as exc:
             raise ServiceUnavailable(f"not available: core.sim.effects ({exc})") from exc
         return [_effect_dict(e) for e in mod.EFFECTS.values()]
 
     def diagnose(self, campaign: str, config: str, progress: Callable | None = None, **kw: Any):
-        """``app.services.diagnosis.diagnose`` → DiagnosisResult (ranked candidates)."""
+        """``railval.app.services.diagnosis.diagnose`` → DiagnosisResult (ranked candidates)."""
         mod = service("diagnosis")
         return mod.diagnose(self.database, campaign, config, progress=_stage_progress(progress), **kw)
 
@@ -256,7 +256,7 @@ class Backend:
     def simulate(self, campaign: str, config: str, effects: dict[str, dict], new_name: str,
                  progress: Callable | None = None):
         """Re-simulate ``config`` plus ``effects`` with the given parameters (no fit) and
-        store it as ``new_name`` (``app.services.simulation``)."""
+        store it as ``new_name`` (``railval.app.services.simulation``)."""
         mod = service("simulation")
         fn = getattr(mod, "simulate_configuration", None) or getattr(mod, "simulate", None)
         if fn is None:
@@ -281,7 +281,7 @@ def _stage_progress(progress: Callable | None) -> Callable | None:
 
 
 def _effect_dict(effect: Any) -> dict[str, Any]:
-    """An entry of ``core.sim.effects.EFFECTS`` as a plain dict for the views."""
+    """An entry of ``railval.core.sim.effects.EFFECTS`` as a plain dict for the views."""
     return {
         "name": effect.id,
         "title": effect.title,
@@ -501,11 +501,11 @@ class CompareState(param.Parameterized):
         return cache[key]
 
     def _process(self, sigset, values: np.ndarray, processing: str) -> np.ndarray:
-        """``values`` as shown: raw, or EN-filtered (``core.filters.filtfilt_rows``); the
+        """``values`` as shown: raw, or EN-filtered (``railval.core.filters.filtfilt_rows``); the
         filtered array is cached per (SignalSet, channel) while that SignalSet is cached."""
         if processing == "raw":
             return values
-        from core.filters import filtfilt_rows
+        from railval.core.filters import filtfilt_rows
 
         kind = split_channel(self.app.channel)[0]
         fkind = EN_FILTER_OF_KIND.get(kind, ("lowpass", ""))[0]
@@ -567,7 +567,7 @@ class CompareState(param.Parameterized):
 
     def psd(self, sources=None) -> CompareData:
         """Welch PSD (core.psd) of the evaluated part, EN-filtered, every source alike."""
-        from core.psd import welch_psd
+        from railval.core.psd import welch_psd
 
         sec = self._section_info()
         ch = self.app.channel
@@ -604,7 +604,7 @@ def nice_step(lo: float, hi: float, intervals: int = 5) -> float:
 def nice_limits(lo: float, hi: float) -> tuple[float, float]:
     """Round ``[lo, hi]`` outwards to a multiple of :func:`nice_step` (~5 intervals).
 
-    Used for fixed, consistent axis scaling (DESIGN §5). Degenerate ranges are widened
+    Used for fixed, consistent axis scaling (docs/design.md §5). Degenerate ranges are widened
     symmetrically by one unit of their magnitude (or ±1 around 0).
     """
     if not (math.isfinite(lo) and math.isfinite(hi)):
@@ -700,9 +700,9 @@ def _pairs_of(result: Any, quantity: str) -> list[dict[str, Any]]:
 
 def _channel_for(quantity: str | None, position: str | None, channels: list[str]) -> str | None:
     """The raw channel to compare for a quantity at a position, from the quantity registry
-    (``core.quantities``): Y/Q at w1L → ``Y_w1L``; ΣY at ws1 → ``Y_w1L``; ay_rms at b1 →
+    (``railval.core.quantities``): Y/Q at w1L → ``Y_w1L``; ΣY at ws1 → ``Y_w1L``; ay_rms at b1 →
     ``ay_cb_b1``."""
-    from core.quantities import QUANTITIES
+    from railval.core.quantities import QUANTITIES
 
     if quantity in QUANTITIES and position:
         try:
@@ -720,7 +720,7 @@ def _num(x: Any) -> float:
 
 # ----------------------------------------------------------------------------- metrics
 class MetricsState(param.Parameterized):
-    """Curve metrics of the selected configuration (``app.services.metrics``), computed per
+    """Curve metrics of the selected configuration (``railval.app.services.metrics``), computed per
     section in a background job (≈ 3 s per section of 12 channels on one core)."""
 
     scope = param.Selector(default="selected section", objects=["selected section", "all sections"])
@@ -849,8 +849,8 @@ class DiagnoseState(param.Parameterized):
 
     def calibration_simulations(self) -> int:
         """Upper bound of the campaign simulations a calibration runs: the optimiser's
-        (``core.calibration.max_evaluations``) plus the final stored run."""
-        from core.calibration import max_evaluations
+        (``railval.core.calibration.max_evaluations``) plus the final stored run."""
+        from railval.core.calibration import max_evaluations
 
         n = len(self.fit_parameters or self.param.fit_parameters.objects) or 1
         return max_evaluations(n, self.popsize, self.maxiter, self.polish_maxfev) + 1
@@ -970,12 +970,12 @@ class PatternGrid:
 
 
 def pattern_grids(labels: list[str], values) -> tuple[PatternGrid, PatternGrid]:
-    """Arrange a diagnosis pattern (``core.diagnosis``: components ``"Y_qst zone 4 w1L"`` =
+    """Arrange a diagnosis pattern (``railval.core.diagnosis``: components ``"Y_qst zone 4 w1L"`` =
     mean normalised D_v of a quantity in a zone at a position, and ``"psd az_cb_b1 5-10 Hz"``
     = log2 PSD ratio simulation/measurement in a band) into (quantity × zone, car body
     acceleration direction × band) grids, averaging over positions. Quantities in the order
-    of ``core.quantities``."""
-    from core.quantities import QUANTITY_IDS
+    of ``railval.core.quantities``."""
+    from railval.core.quantities import QUANTITY_IDS
 
     q_acc: dict[tuple[str, str], list[float]] = {}
     p_acc: dict[tuple[str, str], list[float]] = {}
@@ -1018,7 +1018,7 @@ class ReportState(param.Parameterized):
         self.app = app
 
     def build(self):
-        from app.report import build_report
+        from railval.app.report import build_report
 
         return build_report(self.app.backend, self.app.campaign, self.app.configuration,
                             worst_cases=self.worst_cases)

@@ -1,17 +1,17 @@
 """Calibration of model parameters: a global genetic-type search plus a local polish, and
-modal calibration from identified modes (seed 002).
+modal calibration from identified modes ([ref 3]).
 
 * :func:`calibrate` minimises any scalar objective of named, bounded parameters with
-  ``scipy.optimize.differential_evolution`` (Latin-hypercube initial population, as seed 002
+  ``scipy.optimize.differential_evolution`` (Latin-hypercube initial population, as [ref 3]
   initialises its genetic algorithm; small population; seeded; candidates of one generation
   evaluated through an optional ``map``-like executor) followed by a bounded local polish
   (``scipy.optimize.minimize``, Powell — derivative-free, so it tolerates the slightly
   non-smooth objectives of percentile-based EN quantities).
-* :func:`validation_objective` is the scalar form of the DynoTRAIN verdict (DESIGN §3).
+* :func:`validation_objective` is the scalar form of the DynoTRAIN verdict (docs/design.md §3).
 * :func:`calibrate_modal` fits model parameters to identified natural frequencies and mode
   shapes: numerical modes are paired with experimental ones by highest MAC and the objective
-  is the sum of squared relative frequency residuals plus MAC residuals (seed 002 §4), with
-  the before/after error table of the seed's Fig. 5.
+  is the sum of squared relative frequency residuals plus MAC residuals ([ref 3] §4), with
+  the before/after error table of [ref 3] Fig. 5.
 * :func:`coach_vertical_modes` is the rigid-body vertical modal model of the passenger coach
   template (car body bounce/pitch on the secondary suspension, bogies on the primary).
 
@@ -39,8 +39,8 @@ import numpy as np
 from scipy.linalg import eigh
 from scipy.optimize import differential_evolution, minimize
 
-from core.errors import CalibrationDidNotConverge, InvalidParameter
-from core.modal import pair_modes
+from railval.core.errors import CalibrationDidNotConverge, InvalidParameter
+from railval.core.modal import pair_modes
 
 __all__ = [
     "COACH_MODAL_DEFAULTS",
@@ -182,9 +182,9 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
 
     Parameters with ``log=True`` are searched as log10(value). Global stage:
     ``differential_evolution`` (strategy best1bin, ``popsize``·n candidates per
-    generation, Latin-hypercube initialisation as seed 002, ``seed`` for reproducibility, the
+    generation, Latin-hypercube initialisation as [ref 3], ``seed`` for reproducibility, the
     start values — when every spec has one — injected as a population member via ``x0``).
-    ``workers``: a ``map(func, iterable)`` callable (e.g. :class:`app.services.batch.BatchExecutor`)
+    ``workers``: a ``map(func, iterable)`` callable (e.g. :class:`railval.app.services.batch.BatchExecutor`)
     evaluating one generation in parallel (then ``updating="deferred"``). Local stage: Powell
     with the same bounds, at most ``polish_maxfev`` evaluations (strictly; 0 = no polish).
     ``n_evaluations`` counts the optimiser's calls, the start point's call not included;
@@ -252,7 +252,7 @@ def validation_objective(mean_norm: Mapping[str, float], std_norm: Mapping[str, 
     """Scalar form of the DynoTRAIN verdict: Σ_q max(|mean_norm_q|, std_norm_q)².
 
     ``mean_norm``/``std_norm`` are the per-quantity mean and standard deviation of D_v divided
-    by their limits (DESIGN §3, seed 000 §5: a quantity passes when both are ≤ 1), so the
+    by their limits (docs/design.md §3, Polach & Böttcher 2014 §5: a quantity passes when both are ≤ 1), so the
     objective is ≤ 12 when every quantity passes and every term is dimensionless. With
     ``smooth`` > 0 the max is replaced by the log-sum-exp soft maximum
     s·ln(e^{|m|/s} + e^{σ/s}) (differentiable; tends to the max as s → 0).
@@ -274,7 +274,7 @@ def validation_objective(mean_norm: Mapping[str, float], std_norm: Mapping[str, 
 
 # --------------------------------------------------------------------------- modal calibration
 #: Vertical rigid-body parameters of the passenger coach template (Manchester Benchmark vehicle
-#: 1, DESIGN §6): masses kg, inertia kg·m², stiffness per suspension position N/m, lengths m.
+#: 1, docs/design.md §6): masses kg, inertia kg·m², stiffness per suspension position N/m, lengths m.
 COACH_MODAL_DEFAULTS: dict[str, float] = {
     "m_carbody": 32000.0,
     "I_pitch_carbody": 1.97e6,
@@ -332,7 +332,7 @@ def modal_objective(freq_model: np.ndarray, shapes_model: np.ndarray, freq_exp: 
                     shapes_exp: np.ndarray, *, mac_weight: float = 1.0,
                     freq_weight_pairing: float = 0.5) -> tuple[float, list[tuple[int, int, float]]]:
     """Seed 002 §4 objective: pair every experimental mode with a model mode by highest MAC
-    (ties broken by frequency, :func:`core.modal.pair_modes`), then
+    (ties broken by frequency, :func:`railval.core.modal.pair_modes`), then
     J = Σ_i ((f_model − f_exp)/f_exp)² + mac_weight · Σ_i (1 − MAC_i). Dimensionless.
     Returns (J, pairs ``(i_exp, j_model, mac)``)."""
     pairs = pair_modes(freq_exp, shapes_exp, freq_model, shapes_model, freq_weight=freq_weight_pairing)
@@ -387,10 +387,10 @@ def calibrate_modal(freq_exp: Sequence[float], shapes_exp: np.ndarray, specs: Se
                     model: Callable[[Mapping[str, float]], tuple[np.ndarray, np.ndarray]] = coach_vertical_modes,
                     base: Mapping[str, float] | None = None, mac_weight: float = 1.0, seed: int = 0,
                     popsize: int = 10, maxiter: int = 60, progress: Progress | None = None) -> ModalCalibrationResult:
-    """Fit ``specs`` of ``model`` to identified modes (seed 002 §4; objective
+    """Fit ``specs`` of ``model`` to identified modes ([ref 3] §4; objective
     :func:`modal_objective`). ``base``: values of the parameters not calibrated (and the
     starting point). Only parameters that move at least one identified mode can be identified
-    (seed 002: "only those sufficiently correlated parameters can be estimated accurately");
+    ([ref 3]: "only those sufficiently correlated parameters can be estimated accurately");
     with two car body modes choose at most two parameters, e.g. I_pitch_carbody and
     k_secondary_z with the mass fixed from the static wheel load."""
     freq_exp = np.asarray(freq_exp, float)

@@ -1,16 +1,16 @@
 """Diagnosis: which missing physical effect explains the residual of a configuration
-(DESIGN §7).
+(docs/design.md §7).
 
 Residual pattern
 ----------------
 A :class:`Pattern` is a vector of dimensionless components with labels and groups:
 
 * per quantity × test zone × signal position: the mean over the sections of the normalised
-  difference D_v / std-limit (D_v = (S_v − M_v)·sign(M_v), seed 000 §5; the limit from Table 2
+  difference D_v / std-limit (D_v = (S_v − M_v)·sign(M_v), Polach & Böttcher 2014 §5; the limit from Table 2
   via the validation), label ``"Y_qst zone 4 w1L"``, group the quantity id — built by
   :func:`pattern_from_pairs`;
 * per car body acceleration channel × frequency band: log-ratio of the band powers of
-  simulation and measurement (Welch PSD, :func:`core.psd.welch_psd`), ln(P_sim/P_meas)/ln 2,
+  simulation and measurement (Welch PSD, :func:`railval.core.psd.welch_psd`), ln(P_sim/P_meas)/ln 2,
   so a factor-2 power error counts 1 — the same order as a normalised D_v at its limit;
   label ``"psd az_cb_b1 5-10 Hz"``, group ``"psd az"`` — built by :func:`psd_band_pattern`.
 
@@ -37,8 +37,8 @@ pattern components where their signatures differ most as the evidence to look at
 
 References
 ----------
-Polach & Böttcher 2014 (seed 000), §5: D_v, limits, zones. DESIGN §7 (this procedure).
-Welch 1967 (PSD estimate, via :mod:`core.psd`).
+Polach & Böttcher 2014 (Polach & Böttcher 2014), §5: D_v, limits, zones. docs/design.md §7 (this procedure).
+Welch 1967 (PSD estimate, via :mod:`railval.core.psd`).
 """
 
 from __future__ import annotations
@@ -51,8 +51,8 @@ from typing import Any
 
 import numpy as np
 
-from core.errors import InvalidParameter, InvalidSignal
-from core.psd import welch_psd
+from railval.core.errors import InvalidParameter, InvalidSignal
+from railval.core.psd import welch_psd
 
 __all__ = [
     "DEFAULT_BANDS_HZ",
@@ -158,8 +158,8 @@ def difference_pairs(measured: Mapping[str, Mapping[tuple[str, str], float]],
     """Normalised differences of every (section, quantity, position) present in both sources.
 
     ``measured[section][(quantity, position)]`` = M_v, ``simulated[…]`` = S_v (EN 14363
-    section values, e.g. :func:`core.en14363.evaluate_batch`); D_v = (S_v − M_v)·M_v/|M_v|, and
-    D_v = S_v where M_v = 0 (seed 000 §5, DESIGN §3); ``norm`` = D_v / std limit of the
+    section values, e.g. :func:`railval.core.en14363.evaluate_batch`); D_v = (S_v − M_v)·M_v/|M_v|, and
+    D_v = S_v where M_v = 0 (Polach & Böttcher 2014 §5, docs/design.md §3); ``norm`` = D_v / std limit of the
     quantity (Table 2). Records: ``section, zone, quantity, position, D_v, norm``.
     """
     out = []
@@ -181,7 +181,7 @@ def difference_pairs(measured: Mapping[str, Mapping[tuple[str, str], float]],
 
 def band_powers(x: np.ndarray, fs: float, bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ,
                 segment_s: float = 10.0) -> np.ndarray:
-    """Power of ``x`` (unit²) in each band [lo, hi) Hz: the Welch PSD (:func:`core.psd.welch_psd`,
+    """Power of ``x`` (unit²) in each band [lo, hi) Hz: the Welch PSD (:func:`railval.core.psd.welch_psd`,
     ``segment_s`` segments) summed over the band's bins times the bin width."""
     psd = welch_psd(np.asarray(x, float), fs, segment_s=segment_s)
     f, d = np.asarray(psd.frequency_hz), np.asarray(psd.density)

@@ -1,14 +1,14 @@
-"""EN 14363 processing of one test section into the 12 validation values (DESIGN §3).
+"""EN 14363 processing of one test section into the 12 validation values (docs/design.md §3).
 
-The same chain is applied to measured and simulated signals (seed 000 §5):
+The same chain is applied to measured and simulated signals (Polach & Böttcher 2014 §5):
 
-1. filter the *whole* recorded section (zero-phase Butterworth, :mod:`core.filters`):
+1. filter the *whole* recorded section (zero-phase Butterworth, :mod:`railval.core.filters`):
    low-pass 20 Hz for Y and Q, band-pass 0.4–10 Hz for car body accelerations;
 2. form Y/Q (per wheel, sample-wise ratio) and ΣY = Y_L + Y_R (per wheelset) from the
    low-pass filtered forces;
 3. cut to the evaluated (constant-curvature) range by the distance axis:
    samples with ``eval_start_m ≤ distance_m ≤ eval_end_m``;
-4. statistic per quantity (registry :mod:`core.quantities`):
+4. statistic per quantity (registry :mod:`railval.core.quantities`):
 
    * 50 % value (median) — keeps its sign;
    * maximum — the larger magnitude of the 0.15 % and 99.85 % values (absolute value);
@@ -30,7 +30,7 @@ in one compiled call, all statistics of one section come from one row-wise sort.
 
 References
 ----------
-Polach & Böttcher 2014 (seed 000), §5 and Table 2.
+Polach & Böttcher 2014 (Polach & Böttcher 2014), §5 and Table 2.
 EN 14363:2005, on-track tests: filtering, test sections, percentile values from the
 cumulative frequency distribution.
 Hyndman, R.J. & Fan, Y. (1996) Sample quantiles in statistical packages, Am. Stat. 50(4).
@@ -43,10 +43,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.errors import InvalidParameter, InvalidSignal
-from core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows, settling_check
-from core.quantities import QUANTITIES, WHEELSET_POSITIONS
-from core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
+from railval.core.errors import InvalidParameter, InvalidSignal
+from railval.core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows, settling_check
+from railval.core.quantities import QUANTITIES, WHEELSET_POSITIONS
+from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
 
 #: bump whenever the numbers this module produces can change (enters result-cache keys)
 PROCESSING_VERSION = "en14363/1"
@@ -118,7 +118,7 @@ def _row_percentiles(rows: np.ndarray) -> np.ndarray:
 
 
 def maxabs(p_low: np.ndarray | float, p_high: np.ndarray | float):
-    """Larger magnitude of the 0.15 % and 99.85 % values (seed 000 Table 2, footnote a)."""
+    """Larger magnitude of the 0.15 % and 99.85 % values (Polach & Böttcher 2014 Table 2, footnote a)."""
     return np.maximum(np.abs(p_low), np.abs(p_high))
 
 
@@ -142,7 +142,7 @@ def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: f
     ``values``: shape (n,) or (n_rows, n); ``distance_m``: strictly increasing, shape (n,), m.
     Returns ``(centres_m, means)``, means shaped (n_rows, n_centres) (or (n_centres,)).
 
-    References: seed 000 Table 2 ("sliding mean, 2 m window, step 0.5 m"); EN 14363.
+    References: Polach & Böttcher 2014 Table 2 ("sliding mean, 2 m window, step 0.5 m"); EN 14363.
     """
     d = np.asarray(distance_m, dtype=np.float64)
     v = np.asarray(values, dtype=np.float64)
@@ -268,7 +268,7 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
 
 def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,
                      order: int = DEFAULT_ORDER) -> SectionValues:
-    """The 12 quantities at every available position of one section (DESIGN §3).
+    """The 12 quantities at every available position of one section (docs/design.md §3).
 
     Returns ``{(quantity_id, position): value}`` (a :class:`SectionValues`, which also holds
     the processing steps of each value and any filter settling warning). Units per the

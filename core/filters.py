@@ -1,4 +1,4 @@
-"""Zero-phase Butterworth filters of EN 14363 processing (DESIGN §3, seed 000 Table 2).
+"""Zero-phase Butterworth filters of EN 14363 processing (docs/design.md §3, Polach & Böttcher 2014 Table 2).
 
 Two filters are used by the 12 validation quantities:
 
@@ -23,7 +23,7 @@ the evaluated range is shorter than the filter settling time.
 
 References
 ----------
-Polach & Böttcher 2014 (seed 000), §5 and Table 2: filtering of the 12 quantities.
+Polach & Böttcher 2014 (Polach & Böttcher 2014), §5 and Table 2: filtering of the 12 quantities.
 EN 14363:2005, on-track tests: filtering of wheel–rail forces (low-pass 20 Hz) and car body
 accelerations (band-pass 0.4–10 Hz).
 Gustafsson, F. (1996) Determining the initial states in forward-backward filtering, IEEE
@@ -39,7 +39,7 @@ import numba
 import numpy as np
 import scipy.signal
 
-from core.errors import InvalidParameter, InvalidSignal
+from railval.core.errors import InvalidParameter, InvalidSignal
 
 LOWPASS_HZ = 20.0
 BANDPASS_HZ = (0.4, 10.0)

@@ -29,7 +29,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from core.errors import InvalidParameter, InvalidSignal
+from railval.core.errors import InvalidParameter, InvalidSignal
 
 __all__ = [
     "ModalResult",
@@ -77,7 +77,7 @@ def mac_matrix(shapes_a: np.ndarray, shapes_b: np.ndarray) -> np.ndarray:
 
 def pair_modes(freq_ref: np.ndarray, shapes_ref: np.ndarray, freq_other: np.ndarray,
                shapes_other: np.ndarray, *, freq_weight: float = 0.0) -> list[tuple[int, int, float]]:
-    """Pair reference modes with other modes by highest MAC (seed 002 §4).
+    """Pair reference modes with other modes by highest MAC ([ref 3] §4).
 
     One-to-one assignment maximising the summed score MAC − ``freq_weight``·|Δf|/f_ref
     (Hungarian algorithm, ``scipy.optimize.linear_sum_assignment``); with ``freq_weight`` 0 it

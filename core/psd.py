@@ -1,4 +1,4 @@
-"""Power spectral density of measured and simulated signals (DESIGN §5: PSD plots).
+"""Power spectral density of measured and simulated signals (docs/design.md §5: PSD plots).
 
 One function, :func:`welch_psd`, used by the Compare page and the report so that a
 measurement and a simulation are always estimated with identical settings (same segment
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal as _signal
 
-from core.errors import InvalidParameter, InvalidSignal
+from railval.core.errors import InvalidParameter, InvalidSignal
 
 
 @dataclass(frozen=True)

@@ -1,12 +1,12 @@
-"""The registry of the 12 validation quantities (seed 000 §5, Table 2; DESIGN §3).
+"""The registry of the 12 validation quantities (Polach & Böttcher 2014 §5, Table 2; docs/design.md §3).
 
-This is the ONE list of the quantities: the processing chain (:mod:`core.en14363`), the
-validation (:mod:`core.validation`), the UI and the CLI all read :data:`QUANTITIES`.
+This is the ONE list of the quantities: the processing chain (:mod:`railval.core.en14363`), the
+validation (:mod:`railval.core.validation`), the UI and the CLI all read :data:`QUANTITIES`.
 
-Signal positions (the "signals" of a quantity; seed 000 §5 asks for ≥ 2 per quantity)
+Signal positions (the "signals" of a quantity; Polach & Böttcher 2014 §5 asks for ≥ 2 per quantity)
 ------------------------------------------------------------------------------------
 =================================  ==========  ===========================================
-quantities                         position    channels (vocabulary of :mod:`core.types`)
+quantities                         position    channels (vocabulary of :mod:`railval.core.types`)
 =================================  ==========  ===========================================
 ``Y_qst``, ``Y_max``               wheel       ``Y_w{n}{L|R}``
 ``Q_qst``, ``Q_max``               wheel       ``Q_w{n}{L|R}``
@@ -24,17 +24,17 @@ suspension the acceleration limits (mean and std) are doubled.
 References
 ----------
 Polach, O. & Böttcher, A. (2014) A new approach to define criteria for rail vehicle model
-validation, Vehicle System Dynamics 52:sup1, 125–141, §5 and Table 2 (seed 000).
+validation, Vehicle System Dynamics 52:sup1, 125–141, §5 and Table 2 (Polach & Böttcher 2014).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from core.errors import InvalidParameter
-from core.types import BODY_POSITIONS, WHEEL_POSITIONS
+from railval.core.errors import InvalidParameter
+from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS
 
-SOURCE = "Polach & Böttcher 2014 (seed 000), §5, Table 2"
+SOURCE = "Polach & Böttcher 2014 (Polach & Böttcher 2014), §5, Table 2"
 
 #: Processing kinds: "median" = 50 % value with sign; "maxabs" = larger magnitude of the
 #: 0.15 % and 99.85 % values; "p99.85" = 99.85 % value; "rms" = root mean square.
@@ -49,7 +49,7 @@ class Quantity:
     """One validation quantity of Table 2.
 
     ``signal``: the processed signal family (``Y``, ``Q``, ``YQ``, ``SumY``, ``ay``, ``az``);
-    ``filter``: ``"lowpass"`` (20 Hz) or ``"bandpass"`` (0.4–10 Hz), see :mod:`core.filters`;
+    ``filter``: ``"lowpass"`` (20 Hz) or ``"bandpass"`` (0.4–10 Hz), see :mod:`railval.core.filters`;
     ``sliding_mean``: True when the 2 m sliding mean (0.5 m step, along distance) precedes the
     statistic; ``level``: what one position is (wheel, wheelset, carbody);
     ``std_limit_base``: Table 2 std limit (for Q quantities the factor multiplying
@@ -117,7 +117,7 @@ class Quantity:
 
         ``Q0_kN``: static vertical wheel force in kN (needed for Q quantities);
         ``vehicle_kind``: ``passenger`` or ``freight``; accelerations doubled for freight or
-        no secondary suspension (seed 000 §5).
+        no secondary suspension (Polach & Böttcher 2014 §5).
         """
         if vehicle_kind not in VEHICLE_KINDS:
             raise InvalidParameter(
@@ -135,7 +135,7 @@ class Quantity:
 
     def mean_limit(self, Q0_kN: float | None = None, vehicle_kind: str = "passenger",
                    secondary_suspension: bool = True) -> float:
-        """Validation limit for |mean of D_v| = 2/3 of the std limit (seed 000 §5)."""
+        """Validation limit for |mean of D_v| = 2/3 of the std limit (Polach & Böttcher 2014 §5)."""
         return self.std_limit(Q0_kN, vehicle_kind, secondary_suspension) * 2.0 / 3.0
 
     def to_dict(self) -> dict:

@@ -1,6 +1,6 @@
 """Small data contracts shared by core, db and app.
 
-Channel vocabulary (the raw measured/simulated signals; DESIGN §3, seed 000 Table 2)
+Channel vocabulary (the raw measured/simulated signals; docs/design.md §3, Polach & Böttcher 2014 Table 2)
 ----------------------------------------------------------------------------------
 A channel is named ``f"{kind}_{position}"``.
 
@@ -55,7 +55,7 @@ def split_channel(name: str) -> tuple[str, str]:
 
 @dataclass(frozen=True)
 class SectionInfo:
-    """One test section (a part of track, seed 000 §2).
+    """One test section (a part of track, Polach & Böttcher 2014 §2).
 
     radius_m: curve radius of the constant-curvature part in m (``inf`` or 0 → straight);
     cant_mm: cant in mm; speed_kmh: nominal speed; zone: EN 14363 test zone (1–4) after any

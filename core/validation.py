@@ -1,4 +1,4 @@
-"""DynoTRAIN validation of a model configuration (seed 000 §5, eq. 4; DESIGN §3).
+"""DynoTRAIN validation of a model configuration (Polach & Böttcher 2014 §5, eq. 4; docs/design.md §3).
 
 For every pair (section, signal position) of a quantity the difference
 
@@ -6,9 +6,9 @@ For every pair (section, signal position) of a quantity the difference
 
 is positive when the simulation overestimates the magnitude of the measurement. Per quantity,
 over all pairs: mean and **sample** standard deviation (ddof = 1, i.e. divided by n − 1) of
-D_v, compared with the limits of Table 2 (:mod:`core.quantities`; mean limit = 2/3 of the std
+D_v, compared with the limits of Table 2 (:mod:`railval.core.quantities`; mean limit = 2/3 of the std
 limit, accelerations doubled for freight / no secondary suspension). Normalised values are
-value / limit (seed 000 Fig. 12–13), each with a percentile bootstrap confidence interval
+value / limit (Polach & Böttcher 2014 Fig. 12–13), each with a percentile bootstrap confidence interval
 over the pairs (resampling pairs with replacement, seeded).
 
 A configuration is *validated* when every quantity has |mean| ≤ mean limit and std ≤ std
@@ -17,12 +17,12 @@ sections, and per quantity ≥ 2 signals (positions) and ≥ 24 values. Every sh
 reported as a sentence ("zone 3 has 2 sections, needs 3").
 
 :func:`validate` works purely from memory: ``{section_id: {(quantity_id, position): value}}``
-for measurement and simulation (e.g. from :func:`core.en14363.evaluate_batch`), the
-:class:`~core.types.SectionInfo` records and the vehicle.
+for measurement and simulation (e.g. from :func:`railval.core.en14363.evaluate_batch`), the
+:class:`~railval.core.types.SectionInfo` records and the vehicle.
 
 References
 ----------
-Polach & Böttcher 2014 (seed 000), §5, eq. (4), Table 2, Fig. 11–13.
+Polach & Böttcher 2014 (Polach & Böttcher 2014), §5, eq. (4), Table 2, Fig. 11–13.
 Efron, B. & Tibshirani, R. (1993) An Introduction to the Bootstrap, ch. 13 (percentile
 interval).
 """
@@ -34,9 +34,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.errors import InvalidParameter
-from core.quantities import QUANTITIES, QUANTITY_IDS, VEHICLE_KINDS
-from core.types import ZONES, SectionInfo
+from railval.core.errors import InvalidParameter
+from railval.core.quantities import QUANTITIES, QUANTITY_IDS, VEHICLE_KINDS
+from railval.core.types import ZONES, SectionInfo
 
 MIN_SECTIONS = 12
 MIN_SECTIONS_PER_ZONE = 3
@@ -82,7 +82,7 @@ class Vehicle:
 
 
 def difference(simulated, measured) -> np.ndarray:
-    """D_v of seed 000 eq. (4), element-wise: ``(S − M)·sign(M)``, and ``S`` where ``M = 0``.
+    """D_v of Polach & Böttcher 2014 eq. (4), element-wise: ``(S − M)·sign(M)``, and ``S`` where ``M = 0``.
 
     Unit of the quantity. Positive = simulation overestimates the measured magnitude.
     """
@@ -155,7 +155,7 @@ class QuantityResult:
 
 @dataclass
 class Coverage:
-    """Coverage rules of seed 000 §5 and their shortfalls (one sentence each)."""
+    """Coverage rules of Polach & Böttcher 2014 §5 and their shortfalls (one sentence each)."""
 
     n_sections: int
     zones: dict[int, int]
@@ -224,7 +224,7 @@ class ValidationResult:
     info: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        from core.en14363 import PROCESSING_VERSION
+        from railval.core.en14363 import PROCESSING_VERSION
 
         return {
             "validated": self.validated,
@@ -281,7 +281,7 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
              sections: Sequence[SectionInfo] | Mapping[str, SectionInfo],
              vehicle, *, n_boot: int = 1000, seed: int = 0, ci_level: float = 0.95,
              top: int = 5, warnings: Sequence[str] = ()) -> ValidationResult:
-    """Validate one configuration from in-memory values (seed 000 §5).
+    """Validate one configuration from in-memory values (Polach & Böttcher 2014 §5).
 
     ``measured_values``/``simulated_values``: ``{section_id: {(quantity_id, position):
     value}}`` (units of the registry); a pair exists where both hold a finite value.

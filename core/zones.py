@@ -1,4 +1,4 @@
-"""EN 14363 test zones from curve radius (DESIGN §3).
+"""EN 14363 test zones from curve radius (docs/design.md §3).
 
 Zone 1: straight track and very large radius curves (R ≥ ``zone1_min_radius_m``, a campaign
 setting); zone 2: large radius curves, 600 m < R < ``zone1_min_radius_m``; zone 3: small
@@ -6,7 +6,7 @@ radius curves, 400 m ≤ R ≤ 600 m; zone 4: very small radius curves, 250 m �
 
 References
 ----------
-EN 14363:2005, test zones for on-track tests; seed 000 §2 (zone definitions used in
+EN 14363:2005, test zones for on-track tests; Polach & Böttcher 2014 §2 (zone definitions used in
 DynoTRAIN).
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from core.errors import InvalidParameter
+from railval.core.errors import InvalidParameter
 
 DEFAULT_ZONE1_MIN_RADIUS_M = 5000.0
 

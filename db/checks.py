@@ -1,8 +1,8 @@
 """Shared checks of one recording (time axis, distance axis, channel arrays).
 
-Used by the importer (errors become :class:`core.errors.CampaignFormatError` naming the
-file) and by :func:`db.repo.store_configuration` (errors become
-:class:`core.errors.InvalidSignal`). Both paths therefore accept and reject the same data.
+Used by the importer (errors become :class:`railval.core.errors.CampaignFormatError` naming the
+file) and by :func:`railval.db.repo.store_configuration` (errors become
+:class:`railval.core.errors.InvalidSignal`). Both paths therefore accept and reject the same data.
 """
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ import zlib
 
 import numpy as np
 
-from core.errors import InvalidSignal
+from railval.core.errors import InvalidSignal
 
 MAGIC = b"RVA1"
 CODEC_RAW = 0
@@ -102,7 +102,7 @@ def _hash_canonical(a: np.ndarray) -> str:
 def encode(array: np.ndarray, *, level: int = 1, allow_nonfinite: bool = True) -> tuple[bytes, str]:
     """Encode ``array`` to a self-describing compressed blob; return ``(blob, sha256)``.
 
-    ``allow_nonfinite=False`` rejects NaN/±inf with :class:`core.errors.InvalidSignal`.
+    ``allow_nonfinite=False`` rejects NaN/±inf with :class:`railval.core.errors.InvalidSignal`.
     Object, string and complex dtypes are rejected.
     """
     a = _canonical(array)

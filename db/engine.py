@@ -28,7 +28,7 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 from sqlalchemy.pool import StaticPool
 
-from core.errors import RailvalError
+from railval.core.errors import RailvalError
 
 DEFAULT_URL = "sqlite:///railval.db"
 MIGRATIONS = Path(__file__).with_name("migrations")

@@ -18,11 +18,11 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from core.errors import InvalidParameter
-from db import codec
-from db.io import FORMAT_EXTENSIONS, write_table
-from db.models import Channel, Configuration, Recording, Section, Signal
-from db.repo import get_campaign, list_configurations, vehicle_info
+from railval.core.errors import InvalidParameter
+from railval.db import codec
+from railval.db.io import FORMAT_EXTENSIONS, write_table
+from railval.db.models import Channel, Configuration, Recording, Section, Signal
+from railval.db.repo import get_campaign, list_configurations, vehicle_info
 
 EXPORT_FORMATS = ("parquet", "csv", "h5", "mat", "mf4", "tdms")
 

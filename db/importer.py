@@ -2,13 +2,13 @@
 
 ``validate_campaign_folder(folder)`` reads and checks everything — the manifest against
 ``db/schema/campaign.schema.json``, the cross-references (channels, sections, parents),
-units, and every data file (:func:`db.checks.check_recording`) — and returns a
+units, and every data file (:func:`railval.db.checks.check_recording`) — and returns a
 :class:`ValidatedCampaign` holding the already encoded signals. Nothing is written.
 ``import_campaign(database_or_session, folder)`` validates and then writes the campaign in
-one transaction: a bad folder raises :class:`core.errors.CampaignFormatError` (naming the
+one transaction: a bad folder raises :class:`railval.core.errors.CampaignFormatError` (naming the
 file and field) and leaves the database unchanged.
 
-Units are converted to the canonical unit of each channel kind (``core.types.CHANNEL_KINDS``)
+Units are converted to the canonical unit of each channel kind (``railval.core.types.CHANNEL_KINDS``)
 on import and the conversion is recorded in each signal's provenance:
 N → kN (× 0.001), g → m/s² (× 9.80665, the standard gravity of ISO 80000-3).
 """
@@ -28,13 +28,13 @@ from sqlalchemy import insert, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from core.errors import CampaignFormatError, InvalidParameter
-from core.types import BODY_POSITIONS, CHANNEL_KINDS, WHEEL_POSITIONS
-from core.zones import zone_for_radius
-from db import codec
-from db.checks import RecordingProblem, check_recording
-from db.io import read_table
-from db.models import Campaign, Channel, Configuration, Recording, Section, Signal, Vehicle
+from railval.core.errors import CampaignFormatError, InvalidParameter
+from railval.core.types import BODY_POSITIONS, CHANNEL_KINDS, WHEEL_POSITIONS
+from railval.core.zones import zone_for_radius
+from railval.db import codec
+from railval.db.checks import RecordingProblem, check_recording
+from railval.db.io import read_table
+from railval.db.models import Campaign, Channel, Configuration, Recording, Section, Signal, Vehicle
 
 SCHEMA_PATH = Path(__file__).with_name("schema") / "campaign.schema.json"
 MANIFEST = "campaign.json"
@@ -335,7 +335,7 @@ def import_campaign(database_or_session: Any, folder: str | Path,
                     progress: Progress | None = None) -> str:
     """Validate ``folder`` and write it in one transaction; return the campaign name.
 
-    ``database_or_session``: a :class:`db.engine.Database` (a unit of work is opened and
+    ``database_or_session``: a :class:`railval.db.engine.Database` (a unit of work is opened and
     committed here) or an open :class:`Session` (the caller commits).
     """
     vc = validate_campaign_folder(folder, progress=progress)

@@ -11,7 +11,7 @@
 
 A *recording* is one (section, source) pair: the measurement (``configuration_id`` NULL)
 or one configuration's simulation. It carries the time axis (``fs``, ``t0``, ``n``: sample
-``i`` is at ``t0 + i / fs`` s) and the distance axis as a codec blob (:mod:`db.codec`).
+``i`` is at ``t0 + i / fs`` s) and the distance axis as a codec blob (:mod:`railval.db.codec`).
 Every *signal* is one channel of one recording, stored as a codec blob with its SHA-256
 content hash and a provenance record (units converted on import, file it came from).
 Deleting a campaign or a configuration cascades to what hangs below it.

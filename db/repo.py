@@ -1,8 +1,8 @@
 """Repository: the functions the rest of railval calls to read and write the database.
 
 All functions take an open :class:`sqlalchemy.orm.Session` (from
-:meth:`db.engine.Database.session`, which commits or rolls back the unit of work) and a
-campaign given as a :class:`db.models.Campaign`, its name or its id.
+:meth:`railval.db.engine.Database.session`, which commits or rolls back the unit of work) and a
+campaign given as a :class:`railval.db.models.Campaign`, its name or its id.
 
 Reading signals is a hot path (≈ 50 000 comparisons for a DynoTRAIN-size campaign):
 :func:`load_signalsets` issues one SQL query per call, whatever the number of sections and
@@ -19,12 +19,12 @@ import numpy as np
 from sqlalchemy import String, cast, delete, func, insert, literal, null, select, union_all
 from sqlalchemy.orm import Session
 
-from core.errors import InvalidSignal, NotFound
-from core.types import SectionInfo, SignalSet
-from core.zones import zone_for_radius
-from db import codec
-from db.checks import RecordingProblem, check_recording
-from db.models import (
+from railval.core.errors import InvalidSignal, NotFound
+from railval.core.types import SectionInfo, SignalSet
+from railval.core.zones import zone_for_radius
+from railval.db import codec
+from railval.db.checks import RecordingProblem, check_recording
+from railval.db.models import (
     Campaign,
     Channel,
     Configuration,
@@ -66,7 +66,7 @@ def list_campaigns(session: Session) -> list[Campaign]:
 def get_campaign(session: Session, name_or_id: Campaign | str | int) -> Campaign:
     """The campaign with this name (or, failing that, this numeric id).
 
-    Raises :class:`core.errors.NotFound` listing the available names.
+    Raises :class:`railval.core.errors.NotFound` listing the available names.
     """
     if isinstance(name_or_id, Campaign):
         return name_or_id
@@ -88,7 +88,7 @@ def _campaign_id(session: Session, campaign: Campaign | str | int) -> int:
 def section_infos(session: Session, campaign: Campaign | str | int) -> list[SectionInfo]:
     """The campaign's sections (import order) with their EN 14363 zone.
 
-    The zone comes from :func:`core.zones.zone_for_radius` with the campaign's zone 1/2
+    The zone comes from :func:`railval.core.zones.zone_for_radius` with the campaign's zone 1/2
     radius boundary; a section's ``zone_override`` wins.
     """
     c = get_campaign(session, campaign)
@@ -228,14 +228,14 @@ def store_configuration(
     """Store a configuration (e.g. a simulation result) with its signals.
 
     ``signalsets`` maps section id → :class:`SignalSet`. Everything is checked before
-    anything is added, with the importer's rules (:func:`db.checks.check_recording`):
+    anything is added, with the importer's rules (:func:`railval.db.checks.check_recording`):
     known sections and channels, equal lengths, finite values, equally spaced time at the
     set's ``fs``, strictly increasing distance. ``replace=True`` overwrites an existing
     configuration of that name in place (its id and children are kept). Fills each set's
     ``hashes``. Raises :class:`InvalidSignal`, :class:`NotFound` or
-    :class:`core.errors.InvalidParameter`.
+    :class:`railval.core.errors.InvalidParameter`.
     """
-    from core.errors import InvalidParameter
+    from railval.core.errors import InvalidParameter
 
     c = get_campaign(session, campaign)
     if not signalsets:
@@ -317,7 +317,7 @@ def load_signalsets(
 
     ``sections``/``channels`` restrict what is read. ``verify=True`` recomputes every
     content hash while decoding (about 10–30 % slower) and raises
-    :class:`core.errors.InvalidSignal` on a mismatch. Raises :class:`NotFound` for an
+    :class:`railval.core.errors.InvalidSignal` on a mismatch. Raises :class:`NotFound` for an
     unknown configuration, section or channel. One SQL query: see :func:`fetch_signalsets`.
     """
     return fetch_signalsets(session, campaign, config, sections, channels, verify=verify)()
@@ -476,7 +476,7 @@ def verify_signals(session: Session, campaign: Campaign | str | int) -> list[dic
 
 def row_counts(session: Session) -> dict[str, int]:
     """Number of rows per table (used by tests and ``railval list``)."""
-    from db.models import Base
+    from railval.db.models import Base
 
     return {
         name: int(session.scalar(select(func.count()).select_from(table)) or 0)

@@ -1,5 +1,5 @@
 """Helpers of the browser tests and the app benchmark: serve the app in a thread on a free
-loopback port, drive Debian's Chromium with Playwright (NOTES-stack.md).
+loopback port, drive Debian's Chromium with Playwright.
 
 Browser tests skip with a visible reason when ``/usr/bin/chromium`` is missing, unless
 ``RAILVAL_REQUIRE_BROWSER=1`` (CI), which turns the skip into a failure.
@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from app import report as _report
+from railval.app import report as _report
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = list(_report.CHROMIUM_ARGS)
@@ -43,7 +43,7 @@ def require_browser() -> None:
 
 def served_app(database):
     """Serve the railval app on ``database`` in a thread; yields its URL (app.main.served)."""
-    from app.main import served
+    from railval.app.main import served
 
     return served(database)
 
@@ -85,8 +85,8 @@ def element_screenshot(locator, name: str) -> Path:
 def demo_database(folder: Path, name: str = "demo", n_configs: int = 2):
     """A fresh SQLite database in ``folder`` holding the ``tests/factories`` demo campaign
     (12 sections in 4 zones, ``n_configs`` configurations)."""
-    from db.engine import connect
-    from db.importer import import_campaign
+    from railval.db.engine import connect
+    from railval.db.importer import import_campaign
     from tests.factories import write_demo_campaign
 
     manifest = write_demo_campaign(folder / name, n_sections=12, n_configs=n_configs, name=name)

@@ -9,7 +9,7 @@ server answers, the ``postgresql`` cases are skipped with the reason — unless
 ``module_db_url`` is the same with one database per test module (for read-only tests that
 share an expensive set-up). ``backend_url(kind, folder)`` is the context manager behind both.
 
-``database`` is a :class:`db.engine.Database` connected to ``db_url`` and migrated to the
+``database`` is a :class:`railval.db.engine.Database` connected to ``db_url`` and migrated to the
 newest schema revision. Tests that want SQLite only use ``sqlite_database``.
 ``demo_campaign_dir`` is a demo campaign folder (``tests.factories.write_demo_campaign``
 with its defaults plus a ``variant1`` child configuration, Parquet files) written once per
@@ -94,8 +94,8 @@ def module_db_url(request: pytest.FixtureRequest, tmp_path_factory) -> Iterator[
 
 @pytest.fixture
 def database(db_url: str):
-    """A :class:`db.engine.Database` on ``db_url``, migrated to the newest revision."""
-    from db.engine import connect
+    """A :class:`railval.db.engine.Database` on ``db_url``, migrated to the newest revision."""
+    from railval.db.engine import connect
 
     db = connect(db_url)
     db.init()
@@ -108,7 +108,7 @@ def database(db_url: str):
 @pytest.fixture
 def sqlite_database(tmp_path):
     """An initialised SQLite-only database (for tests that need no backend matrix)."""
-    from db.engine import connect
+    from railval.db.engine import connect
 
     db = connect(f"sqlite:///{tmp_path / 'railval-sqlite.db'}")
     db.init()

@@ -136,7 +136,7 @@ def _signals(rng: np.random.Generator, t: np.ndarray, dist: np.ndarray, fs: floa
 
 
 def _write(path: Path, columns: dict[str, np.ndarray]) -> None:
-    from db.io import write_table
+    from railval.db.io import write_table
 
     write_table(path, columns)
 

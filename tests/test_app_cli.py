@@ -11,9 +11,9 @@ import urllib.request
 
 import pytest
 
-from app.cli import build_parser
-from app.cli.cmd_app import seed_demo
-from app.main import free_port
+from railval.app.cli import build_parser
+from railval.app.cli.cmd_app import seed_demo
+from railval.app.main import free_port
 
 
 def test_serve_defaults():
@@ -56,7 +56,7 @@ def test_serve_migrates_an_empty_database_and_answers(tmp_path):
         proc.wait(20)
         proc.stdout.close()
         proc.stderr.close()
-    from db.engine import connect
+    from railval.db.engine import connect
 
     db = connect(url)
     assert db.current_revision() == db.head_revision()  # migrated on start

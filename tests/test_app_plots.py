@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from bokeh.models import GlyphRenderer, Span
 
-from app import plots
-from app.state import CompareData, Trace
+from railval.app import plots
+from railval.app.state import CompareData, Trace
 
 
 @pytest.mark.parametrize(("lo", "hi", "expected"), [
@@ -165,7 +165,7 @@ def test_zone_coverage_marks_short_zones_and_lineage_chart():
 
 
 def test_signature_chart_of_a_candidate():
-    from app.pages.diagnose import signature_chart
+    from railval.app.pages.diagnose import signature_chart
 
     cand = {"effect": "friction_damping",
             "quantities": {"az_rms": {"before": 1.4, "after": 0.3}, "Y_qst": {"before": 0.2, "after": 0.25}}}
@@ -184,7 +184,7 @@ def test_signature_chart_of_a_candidate():
 
 
 def test_pattern_grids_average_positions_per_quantity_zone_and_psd_band():
-    from app.state import pattern_grids
+    from railval.app.state import pattern_grids
 
     labels = ["Y_qst zone 4 w1L", "Y_qst zone 4 w2L", "Y_qst zone 1 w1L", "az_rms zone 2 b1",
               "psd az_cb_b1 5-10 Hz", "psd az_cb_b2 5-10 Hz", "psd ay_cb_b1 0.4-1 Hz"]
@@ -197,7 +197,7 @@ def test_pattern_grids_average_positions_per_quantity_zone_and_psd_band():
 
 
 def test_pattern_heatmap_fixed_symmetric_scale_and_cell_values():
-    from app.state import PatternGrid
+    from railval.app.state import PatternGrid
 
     grid = PatternGrid(["Y_qst", "Q_qst"], ["zone 1", "zone 2"], np.array([[0.2, -1.8], [np.nan, 0.0]]))
     fig = hv.render(plots.pattern_heatmap(grid, "now", 2.0, "D_v / limit (–)", "EN 14363 test zone"),

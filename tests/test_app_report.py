@@ -8,7 +8,7 @@ import re
 
 import pytest
 
-from app.report import (
+from railval.app.report import (
     Report,
     ReportError,
     build_report,
@@ -17,7 +17,7 @@ from app.report import (
     svg_lines,
     where_table,
 )
-from app.state import Backend, nice_ticks
+from railval.app.state import Backend, nice_ticks
 from tests.browser_support import browser_missing_reason
 
 
@@ -85,7 +85,7 @@ def test_report_holds_verdict_quantities_coverage_hashes_and_versions(demo_db, r
 def test_where_table_colours_on_the_fixed_scale():
     import numpy as np
 
-    from app.state import PatternGrid
+    from railval.app.state import PatternGrid
 
     assert diverging_color(0.0) == "#f7f7f7"  # the palette's white middle class
     assert diverging_color(2.0) == diverging_color(9.0) == "#67001f"  # saturated dark red
@@ -116,7 +116,7 @@ def test_report_pdf_by_headless_chromium(report, tmp_path):
 
 
 def test_cli_report_html_and_errors(demo_db, tmp_path, capsys):
-    from app.cli import main
+    from railval.app.cli import main
 
     out = tmp_path / "baseline.html"
     assert main(["--db", demo_db.url, "report", "demo", "--config", "baseline", "--out", str(out),

@@ -1,4 +1,4 @@
-"""UI state of the web app without a browser (app/state.py, STYLE habit 9).
+"""UI state of the web app without a browser (app/state.py).
 
 The campaign is the demo folder of ``tests/factories`` imported into a fresh SQLite
 database once per module (12 sections, 4 zones, 2 configurations).
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from app.state import (
+from railval.app.state import (
     MEASURED,
     AppState,
     Backend,
@@ -24,7 +24,7 @@ from app.state import (
     DiagnoseState,
     _channel_for,
 )
-from core.types import SectionInfo
+from railval.core.types import SectionInfo
 
 
 @pytest.fixture(scope="module")
@@ -202,7 +202,7 @@ def test_dashboard_summary_and_drilldown(app):
     assert rows and all(abs(a["D_v"]) >= abs(b["D_v"]) for a, b in itertools.pairwise(rows))
     limit = next(r["std_limit"] for r in summary["quantities"] if r["quantity"] == "Y_max")
     assert rows[0]["norm"] == pytest.approx(rows[0]["D_v"] / limit)
-    # D_v = (S_v − M_v)·sign(M_v) (seed 000 eq. 4)
+    # D_v = (S_v − M_v)·sign(M_v) (Polach & Böttcher 2014 eq. 4)
     r = rows[0]
     assert r["D_v"] == pytest.approx((r["S_v"] - r["M_v"]) * np.sign(r["M_v"]))
     dash.open_row(r)
@@ -234,7 +234,7 @@ def test_diagnose_suggested_name_is_unique(app):
 def test_pages_are_built_on_first_view_and_refresh_when_shown(demo_db):
     """Only the page shown is built at session start (first-page speed); another page is
     built when opened, and a hidden page refreshes when shown after a selection changed."""
-    from app.main import build_app
+    from railval.app.main import build_app
 
     template = build_app(demo_db)
     app, pages = template.railval_state, template.railval_pages
@@ -273,7 +273,7 @@ def test_dashboard_where_map_keeps_its_own_row_order_beside_the_bar_charts(demo_
     from bokeh.document import Document
     from bokeh.models import Plot
 
-    from app.main import build_app
+    from railval.app.main import build_app
 
     doc = Document()
     build_app(demo_db, page="dashboard").server_doc(doc)

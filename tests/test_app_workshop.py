@@ -1,8 +1,8 @@
 """The Diagnose & model workshop's state against the real services (no browser, no mocks).
 
-A synthetic campaign with a hidden parasitic yaw stiffness of 1500 kN·m/rad (``app.services.
+A synthetic campaign with a hidden parasitic yaw stiffness of 1500 kN·m/rad (``railval.app.services.
 synth``, truth read from the reveal file) is imported once per module into SQLite. The tests
-drive :class:`app.state.DiagnoseState` as the page does, with ``background=False``:
+drive :class:`railval.app.state.DiagnoseState` as the page does, with ``background=False``:
 
 * "Add with these parameters & re-simulate": the hidden value typed in by hand → a child
   configuration with exactly those parameters, the error falling along the lineage;
@@ -18,15 +18,15 @@ import json
 
 import pytest
 
-from app.state import AppState, Backend, DiagnoseState
+from railval.app.state import AppState, Backend, DiagnoseState
 
 HIDDEN = "parasitic_yaw_stiffness"
 
 
 @pytest.fixture(scope="module")
 def campaign(tmp_path_factory):
-    from app.services.synth import synth
-    from db.engine import connect
+    from railval.app.services.synth import synth
+    from railval.db.engine import connect
 
     folder = tmp_path_factory.mktemp("workshop")
     database = connect(f"sqlite:///{folder / 'workshop.db'}")

@@ -6,16 +6,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.services.batch import BatchExecutor, run_tasks
-from core.errors import InvalidParameter
-from core.modal import output_covariances, ssi_cov
+from railval.app.services.batch import BatchExecutor, run_tasks
+from railval.core.errors import InvalidParameter
+from railval.core.modal import output_covariances, ssi_cov
 
 
 def _sim_tasks():
     """Simulate two short sections (one with an effect) and evaluate a third, independently."""
-    from core.en14363 import evaluate_section
-    from core.sim import TrackSection, VehicleModel, simulate_section
-    from core.types import SectionInfo
+    from railval.core.en14363 import evaluate_section
+    from railval.core.sim import TrackSection, VehicleModel, simulate_section
+    from railval.core.types import SectionInfo
 
     veh = VehicleModel("coach")
     tracks = [TrackSection(f"T{k}", speed_kmh=80, radius_m=400, cant_mm=100, straight_in_m=100,
@@ -39,7 +39,7 @@ def _tasks():
 
 
 def _same(a, b):
-    from core.types import SignalSet
+    from railval.core.types import SignalSet
 
     assert len(a) == len(b)
     for x, y in zip(a, b, strict=True):

@@ -1,4 +1,4 @@
-"""The web app in a real browser (Playwright driving Debian's Chromium, NOTES-stack.md).
+"""The web app in a real browser (Playwright driving Debian's Chromium).
 
 The app is served with ``pn.serve(..., threaded=True)`` on a free loopback port over the
 ``tests/factories`` demo campaign. Screenshots go to ``test-artifacts/``. Skipped with the

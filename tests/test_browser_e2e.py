@@ -1,5 +1,5 @@
-"""End to end in a real browser (DESIGN §7): open the demo campaign (hidden effect, built by
-``app.services.synth.ensure_demo``) → the baseline fails on the dashboard → diagnosis ranks
+"""End to end in a real browser (docs/design.md §7): open the demo campaign (hidden effect, built by
+``railval.app.services.synth.ensure_demo``) → the baseline fails on the dashboard → diagnosis ranks
 the candidates → add the top one and calibrate it (background job with a progress bar) →
 the new configuration passes on the dashboard and the lineage shows the error falling.
 
@@ -31,8 +31,8 @@ JOB_MS = 1_200_000
 @pytest.fixture(scope="module")
 def demo_url(tmp_path_factory):
     require_browser()
-    from app.services.synth import ensure_demo
-    from db.engine import connect
+    from railval.app.services.synth import ensure_demo
+    from railval.db.engine import connect
 
     db = connect(f"sqlite:///{tmp_path_factory.mktemp('e2e') / 'e2e.db'}")
     db.init()

@@ -1,5 +1,5 @@
 """Tests of core.calibration: optimiser, validation objective, coach modal model and the
-seed-002 modal calibration (identify with SSI-COV, pair by MAC, fit frequencies and MAC)."""
+[ref 3] modal calibration (identify with SSI-COV, pair by MAC, fit frequencies and MAC)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.linalg import eigh
 
-from app.services.batch import BatchExecutor
-from core.calibration import (
+from railval.app.services.batch import BatchExecutor
+from railval.core.calibration import (
     COACH_MODAL_DEFAULTS,
     ParameterSpec,
     calibrate,
@@ -20,8 +20,8 @@ from core.calibration import (
     modal_objective,
     validation_objective,
 )
-from core.errors import InvalidParameter
-from core.modal import ssi_cov
+from railval.core.errors import InvalidParameter
+from railval.core.modal import ssi_cov
 from tests.test_modal import simulate_accelerations
 
 
@@ -162,11 +162,11 @@ def test_modal_service_and_cli_on_an_imported_campaign(tmp_path, capsys):
     k_secondary_z to the truth (within 3 %); the CLI prints the same as JSON."""
     import json
 
-    from app.cli import main
-    from app.services.diagnosis import modal
-    from db.engine import connect
-    from db.importer import import_campaign
-    from db.io import read_table, write_table
+    from railval.app.cli import main
+    from railval.app.services.diagnosis import modal
+    from railval.db.engine import connect
+    from railval.db.importer import import_campaign
+    from railval.db.io import read_table, write_table
     from tests.factories import write_demo_campaign
 
     manifest = write_demo_campaign(tmp_path / "camp", n_sections=12, name="modal-demo", fs=50.0)

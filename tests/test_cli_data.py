@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from app.cli import main
+from railval.app.cli import main
 from tests.factories import write_demo_campaign
 
 
@@ -69,9 +69,9 @@ def test_export_needs_an_initialised_database(tmp_path, capsys):
 def test_bench_lists_and_runs(tmp_path, capsys, monkeypatch):
     import types
 
-    from app.cli import cmd_bench
+    from railval.app.cli import cmd_bench
 
-    fake = types.ModuleType("app.bench.bench_fake")
+    fake = types.ModuleType("railval.app.bench.bench_fake")
     fake.__doc__ = "A fake benchmark."
 
     def add_arguments(parser):
@@ -80,7 +80,7 @@ def test_bench_lists_and_runs(tmp_path, capsys, monkeypatch):
     fake.add_arguments = add_arguments
     fake.run = lambda args: {"n": args.n, "speed": {"MB_per_s": 12.5}}
     monkeypatch.setattr(cmd_bench, "available", lambda: {"fake": "bench_fake"})
-    monkeypatch.setitem(__import__("sys").modules, "app.bench.bench_fake", fake)
+    monkeypatch.setitem(__import__("sys").modules, "railval.app.bench.bench_fake", fake)
     code, out, _ = _run(capsys, "bench")
     assert code == 0 and "fake" in out and "A fake benchmark." in out
     code, out, _ = _run(capsys, "bench", "fake", "--n", "7")

@@ -6,11 +6,11 @@ import json
 
 import pytest
 
-from app.cli import main
-from app.cli.cmd_validate import BAR_CELLS, bar
-from core.quantities import QUANTITY_IDS
-from db.engine import connect
-from db.importer import import_campaign
+from railval.app.cli import main
+from railval.app.cli.cmd_validate import BAR_CELLS, bar
+from railval.core.quantities import QUANTITY_IDS
+from railval.db.engine import connect
+from railval.db.importer import import_campaign
 from tests.factories import write_demo_campaign
 
 

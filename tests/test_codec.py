@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from core.errors import InvalidSignal
-from db import codec
+from railval.core.errors import InvalidSignal
+from railval.db import codec
 
 
 @pytest.mark.parametrize("dtype", ["<f8", "<f4", "<i8", "<i4", "<i2", "i1", "<u4", "u1", "?"])

@@ -8,10 +8,10 @@ from alembic.migration import MigrationContext
 from sqlalchemy import text
 from sqlalchemy.exc import IntegrityError
 
-from core.errors import RailvalError
-from db import codec
-from db.engine import DatabaseNotInitialised, connect, resolve_url
-from db.models import Base, Campaign, Configuration, Recording, Section
+from railval.core.errors import RailvalError
+from railval.db import codec
+from railval.db.engine import DatabaseNotInitialised, connect, resolve_url
+from railval.db.models import Base, Campaign, Configuration, Recording, Section
 
 
 def test_upgrade_to_head_matches_the_models(database):

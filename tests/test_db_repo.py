@@ -9,18 +9,18 @@ import numpy as np
 import pytest
 from sqlalchemy import event
 
-from core.errors import InvalidParameter, InvalidSignal, NotFound
-from core.types import SignalSet
-from db import codec, repo
-from db.importer import import_campaign
-from db.io import read_table
+from railval.core.errors import InvalidParameter, InvalidSignal, NotFound
+from railval.core.types import SignalSet
+from railval.db import codec, repo
+from railval.db.importer import import_campaign
+from railval.db.io import read_table
 from tests.factories import CHANNELS, Q0_KN
 
 
 @pytest.fixture(scope="module")
 def shared_demo(module_db_url, demo_campaign_dir):
     """The demo campaign imported once per backend; tests using it must not write."""
-    from db.engine import connect
+    from railval.db.engine import connect
 
     database = connect(module_db_url)
     database.init()
@@ -296,7 +296,7 @@ def test_result_cache_put_many_upserts_in_one_statement(database):
 def test_verify_signals_finds_a_changed_sample(writable_demo):
     from sqlalchemy import select, update
 
-    from db.models import Channel, Recording, Section, Signal
+    from railval.db.models import Channel, Recording, Section, Signal
 
     with writable_demo.session() as s:
         assert repo.verify_signals(s, "demo") == []

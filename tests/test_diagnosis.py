@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from core.diagnosis import (
+from railval.core.diagnosis import (
     ParameterScan,
     Pattern,
     diagnose_patterns,
@@ -15,7 +15,7 @@ from core.diagnosis import (
     pattern_from_pairs,
     psd_band_pattern,
 )
-from core.errors import InvalidSignal
+from railval.core.errors import InvalidSignal
 
 LABELS = [f"{q} zone {z} p" for q in ("Y_qst", "Q_max", "az_rms") for z in (1, 4)]
 GROUPS = [lab.split()[0] for lab in LABELS]
@@ -118,7 +118,7 @@ def test_zero_residual_is_rejected():
 
 
 def test_difference_pairs_sign_convention_and_normalisation():
-    from core.diagnosis import difference_pairs
+    from railval.core.diagnosis import difference_pairs
 
     meas = {"S1": {("Y_qst", "w1L"): -10.0, ("az_rms", "b1"): 0.0}}
     sim = {"S1": {("Y_qst", "w1L"): -12.5, ("az_rms", "b1"): 0.3}}

@@ -9,16 +9,16 @@ import pytest
 import scipy.integrate
 import scipy.signal
 
-from core.en14363 import (
+from railval.core.en14363 import (
     QUANTILE_METHOD,
     evaluate_batch,
     evaluate_section,
     percentile,
     sliding_mean_distance,
 )
-from core.errors import InvalidSignal
-from core.filters import BANDPASS_HZ, design
-from core.types import WHEEL_POSITIONS, SectionInfo, SignalSet
+from railval.core.errors import InvalidSignal
+from railval.core.filters import BANDPASS_HZ, design
+from railval.core.types import WHEEL_POSITIONS, SectionInfo, SignalSet
 
 FS = 200.0
 

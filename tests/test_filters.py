@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from core.errors import InvalidParameter, InvalidSignal
-from core.filters import BANDPASS_HZ, LOWPASS_HZ, design, filtfilt_rows, settling_check
+from railval.core.errors import InvalidParameter, InvalidSignal
+from railval.core.filters import BANDPASS_HZ, LOWPASS_HZ, design, filtfilt_rows, settling_check
 
 FS = 500.0
 

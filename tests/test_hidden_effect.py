@@ -1,4 +1,4 @@
-"""THE end-to-end test of DESIGN §7: a synthetic campaign with a hidden effect (sensor noise,
+"""THE end-to-end test of docs/design.md §7: a synthetic campaign with a hidden effect (sensor noise,
 gain errors, time offsets and speed scatter on) → the baseline fails validation → diagnosis
 ranks the hidden effect first → calibrating it passes every quantity (or halves the largest
 normalised error) and recovers the hidden value within 20 % (read from ``--reveal``).
@@ -18,12 +18,12 @@ import json
 
 import pytest
 
-from app.services.diagnosis import calibrate, diagnose
-from app.services.synth import synth
-from app.services.validation import validate_configuration
-from core.sim.effects import EFFECTS
-from core.sim.synth import MAIN_PARAMETER
-from db.engine import connect
+from railval.app.services.diagnosis import calibrate, diagnose
+from railval.app.services.synth import synth
+from railval.app.services.validation import validate_configuration
+from railval.core.sim.effects import EFFECTS
+from railval.core.sim.synth import MAIN_PARAMETER
+from railval.db.engine import connect
 
 COACH_EFFECTS = [e for e in EFFECTS if "coach" in EFFECTS[e].templates]
 WAGON_EFFECTS = [e for e in EFFECTS if "wagon" in EFFECTS[e].templates]
@@ -38,7 +38,7 @@ def make_campaign(tmp_path, hidden: list[str], *, template: str = "coach", seed:
     truth = json.loads(reveal.read_text())
     # nothing in the campaign names the truth
     with database.session() as s:
-        from db import repo
+        from railval.db import repo
 
         conf = repo.get_configuration(s, "hidden", "baseline")
         assert not set(truth["hidden_effects"]) & set(conf.effects or {})
@@ -50,7 +50,7 @@ def _max_error(validation) -> float:
 
 
 def _cli(database, capsys, *argv: str) -> dict:
-    from app.cli import main
+    from railval.app.cli import main
 
     capsys.readouterr()
     assert main(["--db", database.url, *argv, "--json"]) == 0
@@ -130,9 +130,9 @@ def test_two_hidden_effects_both_in_top_three(tmp_path):
 @pytest.mark.parametrize("factor", [0.9, 1.1])
 def test_mis_set_baseline_still_ranks_hidden_effect_first(tmp_path, factor):
     """The baseline's secondary suspension stiffnesses and dampings mis-set by ±10 %."""
-    from app.services.diagnosis import _simulate_campaign, load_context
-    from core.sim.vehicles import template_parameters
-    from db import repo
+    from railval.app.services.diagnosis import _simulate_campaign, load_context
+    from railval.core.sim.vehicles import template_parameters
+    from railval.db import repo
 
     database, _ = make_campaign(tmp_path, ["parasitic_yaw_stiffness"])
     defaults = {p.name: p.default for p in template_parameters("coach")}

@@ -13,11 +13,11 @@ import shutil
 import numpy as np
 import pytest
 
-from core.errors import CampaignFormatError
-from db import repo
-from db.engine import connect
-from db.importer import import_campaign, validate_campaign_folder, write_validated
-from db.io import read_table, write_table
+from railval.core.errors import CampaignFormatError
+from railval.db import repo
+from railval.db.engine import connect
+from railval.db.importer import import_campaign, validate_campaign_folder, write_validated
+from railval.db.io import read_table, write_table
 from tests.factories import write_demo_campaign
 
 

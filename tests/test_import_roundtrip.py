@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from db import codec, repo
-from db.exporter import export_campaign
-from db.importer import STANDARD_GRAVITY, import_campaign
-from db.io import read_table, write_table
+from railval.db import codec, repo
+from railval.db.exporter import export_campaign
+from railval.db.importer import STANDARD_GRAVITY, import_campaign
+from railval.db.io import read_table, write_table
 from tests.factories import CHANNELS, write_demo_campaign
 
 
@@ -100,7 +100,7 @@ def test_units_are_converted_and_recorded(sqlite_database, tmp_path):
     with sqlite_database.session() as s:
         ss = repo.load_signalsets(s, "demo")["S01"]
         units = {c.name: c.unit for c in repo.channels(s, "demo")}
-        from db.models import Recording, Signal
+        from railval.db.models import Recording, Signal
         prov = {sig.channel.name: sig.provenance
                 for sig in s.query(Signal).join(Recording).filter(Recording.configuration_id.is_(None))}
     assert units["Y_w1L"] == "kN" and units["ay_cb_b1"] == "m/s^2"

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from core.errors import InvalidParameter, InvalidSignal, NotFound
-from core.metrics import (
+from railval.core.errors import InvalidParameter, InvalidSignal, NotFound
+from railval.core.metrics import (
     FAMILIES,
     METRICS,
     apply_lag,
@@ -18,7 +18,7 @@ from core.metrics import (
     registry_table,
     sprague_geers,
 )
-from core.types import SignalSet
+from railval.core.types import SignalSet
 
 FS = 100.0
 
@@ -159,8 +159,8 @@ def test_registry_is_complete_and_consistent():
 def test_lowpass_other_cutoff_matches_scipy_and_en_cutoff_uses_en_filter():
     import scipy.signal
 
-    from core import filters
-    from core.metrics import lowpass
+    from railval.core import filters
+    from railval.core.metrics import lowpass
 
     rng = np.random.default_rng(20)
     x = rng.normal(size=(2, 3000))

@@ -6,8 +6,8 @@ import pytest
 import scipy.signal
 import scipy.stats
 
-from core.errors import InvalidParameter
-from core.metrics import (
+from railval.core.errors import InvalidParameter
+from railval.core.metrics import (
     anderson_darling,
     area_validation_metric,
     autocorrelation,

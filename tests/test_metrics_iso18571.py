@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from core.errors import InvalidParameter
-from core.metrics import ISOParameters, grade, iso18571
-from core.metrics.iso18571 import (
+from railval.core.errors import InvalidParameter
+from railval.core.metrics import ISOParameters, grade, iso18571
+from railval.core.metrics.iso18571 import (
     corridor_score,
     dtw_cost,
     dtw_magnitude_error,

@@ -5,7 +5,7 @@ import scipy.signal
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from core.metrics import (
+from railval.core.metrics import (
     area_validation_metric,
     compare,
     estimate_lag,

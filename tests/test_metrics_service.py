@@ -1,20 +1,20 @@
-"""``app.services.metrics`` and the ``railval metrics`` verb on a small demo campaign."""
+"""``railval.app.services.metrics`` and the ``railval metrics`` verb on a small demo campaign."""
 
 import json
 
 import numpy as np
 import pytest
 
-from app.cli import main
-from app.services.metrics import metrics_for_configuration, summary
-from core.errors import NotFound
-from core.metrics import compare, lowpass
+from railval.app.cli import main
+from railval.app.services.metrics import metrics_for_configuration, summary
+from railval.core.errors import NotFound
+from railval.core.metrics import compare, lowpass
 
 
 @pytest.fixture(scope="module")
 def demo_db(tmp_path_factory):
-    from db.engine import connect
-    from db.importer import import_campaign
+    from railval.db.engine import connect
+    from railval.db.importer import import_campaign
     from tests.factories import write_demo_campaign
 
     folder = tmp_path_factory.mktemp("metrics-demo")
@@ -28,7 +28,7 @@ def demo_db(tmp_path_factory):
 
 
 def test_service_rows_match_direct_comparison(demo_db):
-    from db import repo
+    from railval.db import repo
 
     db, _ = demo_db
     chans = ["Y_w1L", "ay_cb_b1"]

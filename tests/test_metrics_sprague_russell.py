@@ -12,8 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from core.errors import InvalidSignal
-from core.metrics import russell, sprague_geers
+from railval.core.errors import InvalidSignal
+from railval.core.metrics import russell, sprague_geers
 
 N = 1000
 PERIODS = 7

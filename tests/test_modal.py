@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.linalg import eigh, expm
 
-from core.errors import InvalidParameter, InvalidSignal
-from core.modal import (
+from railval.core.errors import InvalidParameter, InvalidSignal
+from railval.core.modal import (
     mac,
     mac_matrix,
     modes_from_matrices,

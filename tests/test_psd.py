@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.errors import InvalidParameter, InvalidSignal
-from core.psd import welch_psd
+from railval.core.errors import InvalidParameter, InvalidSignal
+from railval.core.psd import welch_psd
 
 
 def test_sine_power_integrates_to_half_amplitude_squared():

@@ -1,12 +1,12 @@
-"""The quantity registry against seed 000 Table 2 (typed in here independently)."""
+"""The quantity registry against Polach & Böttcher 2014 Table 2 (typed in here independently)."""
 
 from __future__ import annotations
 
 import pytest
 
-from core.errors import InvalidParameter
-from core.quantities import QUANTITIES, QUANTITY_IDS, get, limits, pairs_for_channels
-from core.types import WHEEL_POSITIONS
+from railval.core.errors import InvalidParameter
+from railval.core.quantities import QUANTITIES, QUANTITY_IDS, get, limits, pairs_for_channels
+from railval.core.types import WHEEL_POSITIONS
 
 # Table 2 of Polach & Böttcher 2014: id → (unit, filter, processing, std limit at Q0)
 TABLE2 = {

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.signal import butter, sosfiltfilt
 
-from core.errors import InvalidParameter
-from core.sim import (
+from railval.core.errors import InvalidParameter
+from railval.core.sim import (
     EFFECT_IDS,
     EFFECTS,
     TrackSection,
@@ -16,9 +16,9 @@ from core.sim import (
     resolve_effects,
     simulate_section,
 )
-from core.sim.effects import QUANTITY_IDS
-from core.sim.synth import HIDDEN_DEFAULTS
-from core.sim.track import generate_irregularities
+from railval.core.sim.effects import QUANTITY_IDS
+from railval.core.sim.synth import HIDDEN_DEFAULTS
+from railval.core.sim.track import generate_irregularities
 
 EXPECTED_IDS = ("friction_damping", "damper_series_stiffness", "carbody_flexibility", "track_flexibility",
                 "wheel_rail_friction", "conicity", "measured_irregularities", "parasitic_yaw_stiffness",

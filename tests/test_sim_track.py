@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from core.errors import InvalidParameter
-from core.sim import TrackSection, VehicleModel, simulate_campaign
-from core.sim.model import bending_mode_shape, kalker_coefficients
-from core.sim.track import generate_irregularities, irregularities_to_layout, ore_b176_psd
+from railval.core.errors import InvalidParameter
+from railval.core.sim import TrackSection, VehicleModel, simulate_campaign
+from railval.core.sim.model import bending_mode_shape, kalker_coefficients
+from railval.core.sim.track import generate_irregularities, irregularities_to_layout, ore_b176_psd
 
 
 @pytest.mark.parametrize("kind", ["vertical", "alignment", "cross_level", "gauge"])

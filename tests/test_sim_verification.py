@@ -1,4 +1,4 @@
-"""Verification of the built-in simulator against closed forms (DESIGN §6).
+"""Verification of the built-in simulator against closed forms (docs/design.md §6).
 
 Each expected value is computed here independently of the simulator code (closed-form
 formulas or a 2×2 eigenvalue problem solved with numpy); tolerances state why they are what
@@ -12,10 +12,10 @@ import math
 import numpy as np
 import pytest
 
-from core.sim import TrackSection, VehicleModel, simulate_section
-from core.sim import kernel as K
-from core.sim.model import assemble, run_assembled
-from core.sim.track import DS, S_TRACK, generate_irregularities
+from railval.core.sim import TrackSection, VehicleModel, simulate_section
+from railval.core.sim import kernel as K
+from railval.core.sim.model import assemble, run_assembled
+from railval.core.sim.track import DS, S_TRACK, generate_irregularities
 
 G = 9.81
 
@@ -218,7 +218,7 @@ def test_sanity_ranges_normal_running():
 
 
 def test_section_from_info_without_layout_puts_the_curve_on_the_evaluated_range():
-    from core.types import SectionInfo
+    from railval.core.types import SectionInfo
 
     info = SectionInfo(id="X", radius_m=500.0, cant_mm=100.0, speed_kmh=100.0, zone=3,
                        eval_start_m=320.0, eval_end_m=620.0, curve_direction=-1)

@@ -8,9 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from app.cli import main
-from core.errors import InvalidParameter
-from core.sim.synth import HIDDEN_DEFAULTS, build_campaign, hidden_defaults, parse_hidden
+from railval.app.cli import main
+from railval.core.errors import InvalidParameter
+from railval.core.sim.synth import HIDDEN_DEFAULTS, build_campaign, hidden_defaults, parse_hidden
 
 
 def test_parse_hidden_forms_and_errors():
@@ -72,7 +72,7 @@ def test_synth_cli_imports_campaign_and_reveals_truth_only_on_request(sqlite_dat
     manifest = (out / "campaign.json").read_text()
     assert "parasitic" not in manifest and "hidden" not in manifest and "truth" not in manifest
 
-    from db import repo
+    from railval.db import repo
 
     with sqlite_database.session() as s:
         confs = [c.name for c in repo.list_configurations(s, "hid")]
@@ -103,19 +103,19 @@ def test_synth_cli_imports_campaign_and_reveals_truth_only_on_request(sqlite_dat
 
 
 def test_ensure_demo_seeds_only_an_empty_database(sqlite_database):
-    from app.services.synth import DEMO_NAME, ensure_demo
+    from railval.app.services.synth import DEMO_NAME, ensure_demo
 
     assert ensure_demo(sqlite_database) == DEMO_NAME
     assert ensure_demo(sqlite_database) is None
 
 
 def test_baseline_fails_and_corrected_model_passes(wagon_campaign):
-    """DESIGN §7: the baseline clearly fails the DynoTRAIN limits, baseline + the hidden effect at
+    """docs/design.md §7: the baseline clearly fails the DynoTRAIN limits, baseline + the hidden effect at
     its true value passes (the nuisances keep it from being perfect)."""
-    from core.en14363 import evaluate_batch
-    from core.sim import simulate_section
-    from core.types import SectionInfo
-    from core.validation import validate
+    from railval.core.en14363 import evaluate_batch
+    from railval.core.sim import simulate_section
+    from railval.core.types import SectionInfo
+    from railval.core.validation import validate
 
     sc = wagon_campaign
     infos = [SectionInfo(id=s.track.id, radius_m=s.track.radius_m, cant_mm=s.track.cant_mm,

@@ -1,5 +1,5 @@
 """DynoTRAIN validation (core.validation): eq. (4) sign rule, statistics by hand, coverage
-shortfall messages, verdict, bootstrap CIs, drill-down and the JSON contract of DESIGN §8."""
+shortfall messages, verdict, bootstrap CIs, drill-down and the JSON contract of docs/design.md §8."""
 
 from __future__ import annotations
 
@@ -10,11 +10,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from core.en14363 import evaluate_section
-from core.errors import InvalidParameter
-from core.quantities import QUANTITY_IDS, pairs_for_channels
-from core.types import WHEEL_POSITIONS, SectionInfo, SignalSet
-from core.validation import Vehicle, difference, validate
+from railval.core.en14363 import evaluate_section
+from railval.core.errors import InvalidParameter
+from railval.core.quantities import QUANTITY_IDS, pairs_for_channels
+from railval.core.types import WHEEL_POSITIONS, SectionInfo, SignalSet
+from railval.core.validation import Vehicle, difference, validate
 
 ALL_CHANNELS = [f"{k}_{p}" for k in "YQ" for p in WHEEL_POSITIONS] + [
     f"{k}_cb_{b}" for k in ("ay", "az") for b in ("b1", "b2")]

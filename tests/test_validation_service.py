@@ -1,4 +1,4 @@
-"""app.services.validation on SQLite and PostgreSQL (``database`` fixture): result equals the
+"""railval.app.services.validation on SQLite and PostgreSQL (``database`` fixture): result equals the
 in-memory path, and the result cache spares the processing — counted, not timed."""
 
 from __future__ import annotations
@@ -7,11 +7,11 @@ import json
 
 import pytest
 
-from app.services import validation as service
-from core import en14363
-from core.errors import NotFound
-from db import repo
-from db.importer import import_campaign
+from railval.app.services import validation as service
+from railval.core import en14363
+from railval.core.errors import NotFound
+from railval.db import repo
+from railval.db.importer import import_campaign
 from tests.factories import write_demo_campaign
 
 
@@ -88,7 +88,7 @@ def test_service_equals_in_memory_path(database, campaign_folder):
 
 
 def test_cache_key_changes_with_content_and_range():
-    from core.types import SectionInfo
+    from railval.core.types import SectionInfo
 
     sec = SectionInfo("S1", 0, 0, 100, 1, 10.0, 90.0)
     base = service.section_cache_key(sec, 200.0, 1000, "d" * 64, {"Y_w1L": "a", "Q_w1L": "b"}, 4)

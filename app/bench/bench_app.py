@@ -45,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def write_campaign(folder: Path, seconds: float, fs: float) -> None:
     """A minimal valid campaign folder: 4 sections, measured + 2 configurations."""
-    from db.io import write_table
+    from railval.db.io import write_table
 
     rng = np.random.default_rng(7)
     n = round(seconds * fs)
@@ -93,9 +93,9 @@ def _switching(database, switches: int) -> dict:
     import holoviews as hv
     from bokeh.core.serialization import Serializer
 
-    from app import plots
-    from app.main import build_app
-    from app.pages.compare import build_compare_objects
+    from railval.app import plots
+    from railval.app.main import build_app
+    from railval.app.pages.compare import build_compare_objects
 
     template = build_app(database)
     app = template.railval_state
@@ -166,8 +166,8 @@ def _first_page(database, loads: int, cpu_load: int = 0) -> dict:
     import panel as pn
     from playwright.sync_api import sync_playwright
 
-    from app.main import free_port, served
-    from app.report import CHROMIUM_ARGS, find_chromium
+    from railval.app.main import free_port, served
+    from railval.app.report import CHROMIUM_ARGS, find_chromium
 
     def bare():
         return pn.template.FastListTemplate(
@@ -228,8 +228,8 @@ def _first_page(database, loads: int, cpu_load: int = 0) -> dict:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from db.engine import connect
-    from db.importer import import_campaign
+    from railval.db.engine import connect
+    from railval.db.importer import import_campaign
 
     with tempfile.TemporaryDirectory(prefix="railval-bench-app-") as tmp:
         root = Path(tmp)
@@ -239,7 +239,7 @@ def run(args: argparse.Namespace) -> dict:
         import_campaign(database, root / "campaign")
         out = {"compare_switch": _switching(database, args.switches)}
         if not args.no_browser:
-            from app.report import ReportError, find_chromium
+            from railval.app.report import ReportError, find_chromium
 
             try:
                 find_chromium()

@@ -22,10 +22,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from app.services.diagnosis import _evaluate_effects, calibrate, diagnose, load_context
-    from app.services.synth import synth
-    from db import repo
-    from db.engine import connect
+    from railval.app.services.diagnosis import _evaluate_effects, calibrate, diagnose, load_context
+    from railval.app.services.synth import synth
+    from railval.db import repo
+    from railval.db.engine import connect
 
     effect = getattr(args, "effect", "friction_damping")
     workers = getattr(args, "workers", 2)

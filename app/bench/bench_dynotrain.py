@@ -7,14 +7,14 @@ Data (built once, reused): ``./bench-data/dynotrain.db`` (SQLite) holding a camp
 configuration gives sections × 64 values (comparisons); the full DynoTRAIN scale of ≈ 50 000
 comparisons is 46 configurations (≈ 2.5 GB of samples). The build imports the measurement and
 the first configuration through the campaign importer (HDF5 files under
-``./bench-data/campaign``) and stores the others with :func:`db.repo.store_configuration`;
+``./bench-data/campaign``) and stores the others with :func:`railval.db.repo.store_configuration`;
 ``./bench-data/dynotrain.json`` records what was built, its size and build time. A build with
 other parameters is rebuilt.
 
 Figures:
 
 * ``all`` — every configuration validated from the database with an empty result cache
-  (:func:`app.services.validation.validate_configurations`, ``--workers`` processes over
+  (:func:`railval.app.services.validation.validate_configurations`, ``--workers`` processes over
   chunks of sections), seconds and comparisons per second; when fewer than 50 000
   comparisons were built, the time for 50 000 is extrapolated linearly and labelled so;
 * ``new_config`` — one new configuration stored, then validated including database reads
@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from core.types import BODY_POSITIONS, WHEEL_POSITIONS, SignalSet
+from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SignalSet
 
 CHANNELS = [f"{k}_{p}" for p in WHEEL_POSITIONS for k in ("Y", "Q")] + [
     f"{k}_cb_{b}" for b in BODY_POSITIONS for k in ("ay", "az")]
@@ -97,10 +97,10 @@ def _config_sets(rng, n_sections, n, fs, gain) -> dict[str, SignalSet]:
 
 def build(data: Path, n_configs: int, n_sections: int, n: int, fs: float) -> dict:
     """Build (or reuse) the benchmark database; returns the build record."""
-    from db import repo
-    from db.engine import connect
-    from db.importer import import_campaign
-    from db.io import write_table
+    from railval.db import repo
+    from railval.db.engine import connect
+    from railval.db.importer import import_campaign
+    from railval.db.io import write_table
 
     spec = {"configs": n_configs, "sections": n_sections, "samples": n, "fs": fs,
             "channels": len(CHANNELS), "seed": 0}
@@ -174,14 +174,14 @@ def _cpu_seconds() -> float:
 def run(args: argparse.Namespace) -> dict:
     from sqlalchemy import delete
 
-    from app.services.validation import (
+    from railval.app.services.validation import (
         source_cache_keys,
         validate_configuration,
         validate_configurations,
     )
-    from db import repo
-    from db.engine import connect
-    from db.models import ResultCache
+    from railval.db import repo
+    from railval.db.engine import connect
+    from railval.db.models import ResultCache
 
     data = Path(args.data)
     record = build(data, args.configs, args.sections, args.samples, args.fs)
@@ -209,8 +209,8 @@ def run(args: argparse.Namespace) -> dict:
 
     # warm this process (compiled filter kernel loaded from numba's cache, imports), as in a
     # running app server; the all-configurations run above used the worker processes
-    from core.en14363 import evaluate_batch
-    from core.types import SectionInfo
+    from railval.core.en14363 import evaluate_batch
+    from railval.core.types import SectionInfo
 
     warm = _config_sets(np.random.default_rng(1), 1, 4000, args.fs, 1.0)["S01"]
     evaluate_batch([warm], [SectionInfo("W", 0, 0, 90, 1, 50.0, 150.0)])

@@ -8,7 +8,7 @@ variable speed) and produce the same 64 values per section:
   Y/Q and ΣY formed per wheel/wheelset, cut, then one ``np.quantile(method="inverted_cdf")``
   call per statistic; sliding mean by ``scipy.integrate.cumulative_trapezoid`` over distance
   and ``np.interp`` at the window edges;
-* **batch** — :func:`core.en14363.evaluate_batch`: all channels of all sections filtered in one
+* **batch** — :func:`railval.core.en14363.evaluate_batch`: all channels of all sections filtered in one
   compiled call per filter kind, one row-wise sort per section for all percentiles.
 
 Figures: wall time of each (best of ``--repeat``), speed-up (target ≥ 2×) and the largest
@@ -24,9 +24,9 @@ import numpy as np
 import scipy.integrate
 import scipy.signal
 
-from core.en14363 import evaluate_batch
-from core.filters import design
-from core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
+from railval.core.en14363 import evaluate_batch
+from railval.core.filters import design
+from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

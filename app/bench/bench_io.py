@@ -5,10 +5,10 @@ sections of ``--seconds`` s at ``--fs`` Hz, files in ``--format``) in a temporar
 imports it into a temporary SQLite database and measures:
 
 * import: wall time, MB/s of data files read, channel samples/s;
-* decode: every signal blob of the campaign decoded (:func:`db.codec.decode`) against the
+* decode: every signal blob of the campaign decoded (:func:`railval.db.codec.decode`) against the
   baseline of ``numpy.load`` of the same arrays from ``.npy`` files written in the same
   run (warm page cache), as a ratio decode/npy;
-* load: :func:`db.repo.load_signalsets` of the whole measurement (one query plus decode);
+* load: :func:`railval.db.repo.load_signalsets` of the whole measurement (one query plus decode);
 * size: stored blob bytes / raw float64 bytes.
 """
 
@@ -43,7 +43,7 @@ def _smooth_noise(rng: np.random.Generator, n: int, width: int = 8) -> np.ndarra
 
 def write_campaign(folder: Path, sections: int, seconds: float, fs: float, fmt: str) -> None:
     """A minimal valid campaign (straight sections, measured data only)."""
-    from db.io import write_table
+    from railval.db.io import write_table
 
     rng = np.random.default_rng(0)
     n = int(seconds * fs)
@@ -74,10 +74,10 @@ def write_campaign(folder: Path, sections: int, seconds: float, fs: float, fmt: 
 def run(args: argparse.Namespace) -> dict:
     from sqlalchemy import select
 
-    from db import codec, repo
-    from db.engine import connect
-    from db.importer import import_campaign, validate_campaign_folder
-    from db.models import Signal
+    from railval.db import codec, repo
+    from railval.db.engine import connect
+    from railval.db.importer import import_campaign, validate_campaign_folder
+    from railval.db.models import Signal
 
     with tempfile.TemporaryDirectory(prefix="railval-bench-io-") as tmp:
         root = Path(tmp)

@@ -52,8 +52,8 @@ def _pair(n: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from core.metrics import FAMILIES, compare
-    from core.metrics.iso18571 import _dtw_band_error
+    from railval.core.metrics import FAMILIES, compare
+    from railval.core.metrics.iso18571 import _dtw_band_error
 
     n, fs, rep = int(args.n), float(args.fs), max(1, int(args.repeat))
     m, c = _pair(n, fs)

@@ -18,14 +18,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _all_effects() -> dict:
-    from core.sim.synth import HIDDEN_DEFAULTS
+    from railval.core.sim.synth import HIDDEN_DEFAULTS
 
     return {k: dict(v) for k, v in HIDDEN_DEFAULTS.items()}
 
 
 def run(args: argparse.Namespace | None = None) -> dict:
-    from core.sim import VehicleModel, simulate_campaign, simulate_section
-    from core.sim.synth import build_campaign, parse_hidden
+    from railval.core.sim import VehicleModel, simulate_campaign, simulate_section
+    from railval.core.sim.synth import build_campaign, parse_hidden
 
     workers = getattr(args, "workers", 2)
     n_sections = getattr(args, "sections", 12)

@@ -15,7 +15,7 @@ import json
 import pkgutil
 import sys
 
-from core.errors import RailvalError
+from railval.core.errors import RailvalError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def emit_json(document: object) -> None:
-    """Print one JSON document on stdout (the ``--json`` contract of DESIGN §8)."""
+    """Print one JSON document on stdout (the ``--json`` contract of docs/design.md §8)."""
     json.dump(document, sys.stdout, indent=2, default=_json_default, allow_nan=False)
     sys.stdout.write("\n")
 

@@ -1,7 +1,7 @@
-"""CLI verbs ``serve`` and ``report`` (DESIGN §1, §8).
+"""CLI verbs ``serve`` and ``report`` (docs/design.md §1, §8).
 
 ``railval serve [--port 5006] [--address 127.0.0.1] [--no-demo] [--allow-websocket-origin H]``
-    migrate the database, seed the demo campaign (``app.services.synth.ensure_demo``) into an
+    migrate the database, seed the demo campaign (``railval.app.services.synth.ensure_demo``) into an
     empty database unless ``--no-demo``, and serve the web app until interrupted.
 ``railval report CAMPAIGN --config NAME --out FILE.html|FILE.pdf [--worst N] [--json]``
     write the validation report of a configuration (the same builder as the Report page).
@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from app.cli import emit_json
+from railval.app.cli import emit_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(url: str | None, upgrade: bool):
-    from db.engine import connect
+    from railval.db.engine import connect
 
     database = connect(url)
     database.ensure_initialised(upgrade=upgrade)
@@ -44,13 +44,13 @@ def _database(url: str | None, upgrade: bool):
 
 def seed_demo(database) -> str:
     """Seed the demo campaign into an empty database (H4's synth service); returns a message."""
-    from db import repo
+    from railval.db import repo
 
     with database.session() as s:
         if repo.list_campaigns(s):
             return "database holds campaigns; demo not seeded"
     try:
-        from app.services.synth import ensure_demo
+        from railval.app.services.synth import ensure_demo
     except ImportError as exc:
         return f"demo campaign not available (app.services.synth: {exc}); import one with `railval import DIR`"
     result = ensure_demo(database)
@@ -58,7 +58,7 @@ def seed_demo(database) -> str:
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
-    from app.main import serve
+    from railval.app.main import serve
 
     database = _database(args.db, upgrade=True)
     if not args.no_demo:
@@ -75,8 +75,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 def _cmd_report(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from app.report import ReportError, build_report
-    from app.state import Backend
+    from railval.app.report import ReportError, build_report
+    from railval.app.state import Backend
 
     if Path(args.out).suffix.lower() not in (".html", ".htm", ".pdf"):
         raise ReportError(f"--out {args.out}: extension must be .html or .pdf")

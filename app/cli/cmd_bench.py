@@ -12,16 +12,16 @@ import argparse
 import importlib
 import pkgutil
 
-from app.cli import emit_json
-from core.errors import NotFound
+from railval.app.cli import emit_json
+from railval.core.errors import NotFound
 
 
 def available() -> dict[str, str]:
-    """Benchmark name → first docstring line, from the ``app.bench.bench_*`` modules."""
-    import app.bench
+    """Benchmark name → first docstring line, from the ``railval.app.bench.bench_*`` modules."""
+    import railval.app.bench
 
     out = {}
-    for info in sorted(pkgutil.iter_modules(app.bench.__path__), key=lambda m: m.name):
+    for info in sorted(pkgutil.iter_modules(railval.app.bench.__path__), key=lambda m: m.name):
         if info.name.startswith("bench_"):
             out[info.name[len("bench_"):]] = info.name
     return out
@@ -31,7 +31,7 @@ def _load(name: str):
     names = available()
     if name not in names:
         raise NotFound(f"benchmark {name!r} not found; available: {', '.join(names) or '(none)'}")
-    return importlib.import_module(f"app.bench.{names[name]}")
+    return importlib.import_module(f"railval.app.bench.{names[name]}")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -48,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def cmd_bench(args: argparse.Namespace) -> int:
     if not args.name:
         for name, module in available().items():
-            doc = (importlib.import_module(f"app.bench.{module}").__doc__ or "").strip()
+            doc = (importlib.import_module(f"railval.app.bench.{module}").__doc__ or "").strip()
             print(f"{name:20s} {doc.splitlines()[0] if doc else ''}")
         return 0
     module = _load(args.name)

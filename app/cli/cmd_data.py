@@ -18,7 +18,7 @@ import sys
 import time
 from collections import Counter
 
-from app.cli import emit_json
+from railval.app.cli import emit_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -47,7 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(args: argparse.Namespace, *, upgrade: bool = True):
-    from db.engine import connect
+    from railval.db.engine import connect
 
     database = connect(args.db)
     database.ensure_initialised(upgrade=upgrade)
@@ -55,7 +55,7 @@ def _database(args: argparse.Namespace, *, upgrade: bool = True):
 
 
 def cmd_init(args: argparse.Namespace) -> int:
-    from db.engine import connect
+    from railval.db.engine import connect
 
     database = connect(args.db)
     before = database.current_revision()
@@ -70,7 +70,7 @@ def cmd_init(args: argparse.Namespace) -> int:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    from db.importer import import_campaign
+    from railval.db.importer import import_campaign
 
     database = _database(args)
     bar = None
@@ -105,7 +105,7 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from db.exporter import export_campaign
+    from railval.db.exporter import export_campaign
 
     database = _database(args, upgrade=False)
     with database.session() as s:
@@ -120,8 +120,8 @@ def cmd_export(args: argparse.Namespace) -> int:
 def _summary(database, name_or_campaign) -> dict:
     from sqlalchemy import func, select
 
-    from db import repo
-    from db.models import Recording, Section, Signal
+    from railval.db import repo
+    from railval.db.models import Recording, Section, Signal
 
     with database.session() as s:
         c = repo.get_campaign(s, name_or_campaign)
@@ -153,7 +153,7 @@ def _zones_text(zones: dict[str, int]) -> str:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    from db import repo
+    from railval.db import repo
 
     database = _database(args)
     with database.session() as s:

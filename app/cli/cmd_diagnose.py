@@ -1,11 +1,11 @@
-"""CLI verbs ``diagnose``, ``calibrate`` and ``modal`` (DESIGN §7, §8).
+"""CLI verbs ``diagnose``, ``calibrate`` and ``modal`` (docs/design.md §7, §8).
 
 ``railval diagnose CAMPAIGN --config NAME [--json] [--scheduler ADDR]``
     rank the effects missing from a configuration by the share of its residual they explain.
 ``railval calibrate CAMPAIGN --config NAME --effect E [--effect …] --as NEW [--params P …]``
     add and fit effects, store NEW (parent NAME) and print its validation and the lineage.
 ``railval modal CAMPAIGN [--section S …] [--calibrate PARAM …] [--json]``
-    SSI-COV car body modes and seed-002 modal calibration (before/after frequency errors).
+    SSI-COV car body modes and [ref 3] modal calibration (before/after frequency errors).
 
 Progress goes to stderr; ``--json`` prints one JSON document on stdout.
 """
@@ -16,7 +16,7 @@ import argparse
 import sys
 from typing import Any
 
-from app.cli import emit_json
+from railval.app.cli import emit_json
 
 
 def _progress(stage: str, fraction: float, info: dict[str, Any]) -> None:
@@ -29,7 +29,7 @@ def _progress(stage: str, fraction: float, info: dict[str, Any]) -> None:
 
 
 def _db(args: argparse.Namespace):
-    from db.engine import connect
+    from railval.db.engine import connect
 
     database = connect(args.db)
     database.ensure_initialised()
@@ -37,7 +37,7 @@ def _db(args: argparse.Namespace):
 
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
-    from app.services.diagnosis import diagnose
+    from railval.app.services.diagnosis import diagnose
 
     res = diagnose(_db(args), args.campaign, args.config, progress=_progress, scheduler=args.scheduler,
                    values_per_parameter=args.values, effects=args.candidates)
@@ -56,14 +56,14 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from app.services.diagnosis import calibrate
+    from railval.app.services.diagnosis import calibrate
 
     start: dict[str, dict[str, float]] = {}
     for item in args.start or []:
         key, sep, value = item.partition("=")
         effect, dot, pname = key.partition(".")
         if not (sep and dot):
-            from core.errors import InvalidParameter
+            from railval.core.errors import InvalidParameter
 
             raise InvalidParameter(f"--start expects EFFECT.PARAM=VALUE, got {item!r}")
         start.setdefault(effect, {})[pname] = float(value)
@@ -85,7 +85,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_modal(args: argparse.Namespace) -> int:
-    from app.services.diagnosis import modal
+    from railval.app.services.diagnosis import modal
 
     d = modal(_db(args), args.campaign, sections=args.section, calibrate_params=args.calibrate,
               progress=_progress)
@@ -135,7 +135,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=_cmd_calibrate)
 
-    m = subparsers.add_parser("modal", help="SSI-COV car body modes and modal calibration (seed 002)")
+    m = subparsers.add_parser("modal", help="SSI-COV car body modes and modal calibration ([ref 3])")
     m.add_argument("campaign")
     m.add_argument("--section", action="append", default=None, metavar="S")
     m.add_argument("--calibrate", nargs="+", default=None, metavar="PARAM",

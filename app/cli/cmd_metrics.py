@@ -1,4 +1,4 @@
-"""CLI verb ``metrics`` (DESIGN §4, §8).
+"""CLI verb ``metrics`` (docs/design.md §4, §8).
 
 ``railval metrics CAMPAIGN --config NAME [--section S …] [--channel C …] [--family F …]
 [--max-lag SECONDS] [--lowpass HZ | --no-lowpass] [--part section|evaluated] [--json]``
@@ -17,7 +17,7 @@ import argparse
 import math
 from typing import Any
 
-from app.cli import emit_json
+from railval.app.cli import emit_json
 
 #: headline columns of the text table: (metric, width, format)
 _TABLE = (("sg_M", "SG M", 6, "+.3f"), ("sg_P", "SG P", 5, ".3f"), ("sg_C", "SG C", 5, ".3f"),
@@ -43,8 +43,8 @@ def _clean(v: Any) -> Any:
 
 
 def _cmd_metrics(args: argparse.Namespace) -> int:
-    from core.errors import InvalidParameter
-    from core.metrics import METRICS, metric_names, registry_table
+    from railval.core.errors import InvalidParameter
+    from railval.core.metrics import METRICS, metric_names, registry_table
 
     if args.list:
         rows = registry_table()
@@ -59,8 +59,8 @@ def _cmd_metrics(args: argparse.Namespace) -> int:
     if not args.campaign or not args.config:
         raise InvalidParameter("metrics needs CAMPAIGN and --config NAME (or --list)")
 
-    from app.services.metrics import metrics_for_configuration, summary
-    from db.engine import connect
+    from railval.app.services.metrics import metrics_for_configuration, summary
+    from railval.db.engine import connect
 
     database = connect(args.db)
     database.ensure_initialised()
@@ -105,7 +105,7 @@ def _cmd_metrics(args: argparse.Namespace) -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from core.metrics import FAMILIES
+    from railval.core.metrics import FAMILIES
 
     p = subparsers.add_parser(
         "metrics", help="curve-comparison metrics (Sprague–Geers, Russell, KS, area, AD, ISO 18571)",

@@ -1,4 +1,4 @@
-"""CLI verbs ``simulate`` and ``synth`` (DESIGN §6, §7).
+"""CLI verbs ``simulate`` and ``synth`` (docs/design.md §6, §7).
 
 ``railval simulate CAMPAIGN --config NAME [--parent P] [--effect ID[:k=v,...]]... [--param k=v]... [--replace]``
     simulate every section with the built-in simulator and store the configuration.
@@ -15,8 +15,8 @@ import argparse
 import sys
 from typing import Any
 
-from app.cli import emit_json
-from core.errors import InvalidParameter
+from railval.app.cli import emit_json
+from railval.core.errors import InvalidParameter
 
 
 def _progress(stage: str, fraction: float, info: dict[str, Any]) -> None:
@@ -28,7 +28,7 @@ def _progress(stage: str, fraction: float, info: dict[str, Any]) -> None:
 
 
 def _db(args: argparse.Namespace):
-    from db.engine import connect
+    from railval.db.engine import connect
 
     database = connect(args.db)
     database.ensure_initialised()
@@ -61,7 +61,7 @@ def parse_param(item: str) -> tuple[str, float]:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from app.services.simulation import simulate_configuration
+    from railval.app.services.simulation import simulate_configuration
 
     effects = dict(parse_effect(e) for e in args.effect or [])
     params = dict(parse_param(p) for p in args.param or [])
@@ -77,7 +77,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
-    from app.services.synth import synth
+    from railval.app.services.synth import synth
 
     res = synth(_db(args), name=args.name, template=args.vehicle, hidden=args.hidden, seed=args.seed,
                 n_sections=args.sections, out=args.out, reveal=args.reveal, progress=_progress)
@@ -91,7 +91,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from core.sim.effects import EFFECT_IDS
+    from railval.core.sim.effects import EFFECT_IDS
 
     p = sub.add_parser("simulate", help="simulate a configuration with the built-in simulator and store it",
                        description="Simulate every section of CAMPAIGN and store configuration NAME.")

@@ -1,4 +1,4 @@
-"""CLI verb ``validate`` (DESIGN §3, §8).
+"""CLI verb ``validate`` (docs/design.md §3, §8).
 
 ``railval validate CAMPAIGN --config NAME [--json] [--order N] [--boot N] [--seed N]``
     EN 14363 processing of measurement and configuration, the DynoTRAIN verdict per quantity
@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import argparse
 
-from app.cli import emit_json
-from core.quantities import QUANTITIES
+from railval.app.cli import emit_json
+from railval.core.quantities import QUANTITIES
 
 BAR_CELLS = 20  # cells for 0 … 2 × limit
 _BLOCKS = " ▏▎▍▌▋▊▉█"
@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "validate", help="validate a configuration against the measurement (DynoTRAIN method)",
         description="EN 14363 processing and DynoTRAIN validation of one configuration "
-                    "(seed 000 §5). Exit code 0 whether validated or not.")
+                    "(Polach & Böttcher 2014 §5). Exit code 0 whether validated or not.")
     p.add_argument("campaign", metavar="CAMPAIGN", help="campaign name or id")
     p.add_argument("--config", required=True, metavar="NAME", help="configuration name")
     p.add_argument("--json", action="store_true", help="print one JSON document")
@@ -67,7 +67,7 @@ def format_result(doc: dict) -> str:
     info = doc.get("info", {})
     head = f"validation of {info.get('campaign', '?')} / {info.get('configuration', '?')}"
     lines.append(head)
-    lines.append("D_v = (S − M)·sign(M) (seed 000 eq. 4); std is the sample standard deviation "
+    lines.append("D_v = (S − M)·sign(M) (Polach & Böttcher 2014 eq. 4); std is the sample standard deviation "
                  "(n − 1); norm = value / limit; bars: |norm| from 0 to 2, │ = limit")
     lines.append(f"{'quantity':<9} {'unit':<6} {'n':>4} {'mean':>9} {'limit':>7} "
                  f"{'std':>9} {'limit':>7}  {'|mean|/limit':<21} {'std/limit':<21} "
@@ -106,8 +106,8 @@ def format_result(doc: dict) -> str:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from app.services.validation import validate_configuration
-    from db.engine import connect
+    from railval.app.services.validation import validate_configuration
+    from railval.db.engine import connect
 
     database = connect(args.db)
     database.ensure_initialised()

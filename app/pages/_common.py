@@ -12,8 +12,8 @@ import panel as pn
 import param
 from panel.io.state import set_curdoc
 
-from app import plots
-from app.state import PAGE_TITLES, AppState
+from railval.app import plots
+from railval.app.state import PAGE_TITLES, AppState
 
 TABLE_STYLE = {"font-size": "13px"}
 

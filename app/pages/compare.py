@@ -1,10 +1,10 @@
 """Compare: measured vs simulated series and PSD for any section × channel × configuration.
 
 The EN-filtered and raw series share their x axis (linked zoom) and one fixed y range; the
-evaluated range is shaded; long signals are downsampled on the server (``app.plots``).
+evaluated range is shaded; long signals are downsampled on the server (``railval.app.plots``).
 
 The figures are plain Bokeh figures built once per session (:class:`CompareView`); a switch
-only replaces their data sources (DESIGN §9: p95 ≤ 300 ms server-side for 20 000 samples).
+only replaces their data sources (docs/design.md §9: p95 ≤ 300 ms server-side for 20 000 samples).
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import panel as pn
 
-from app import plots
-from app.pages._common import PageBase, message
-from app.state import AppState, CompareState
+from railval.app import plots
+from railval.app.pages._common import PageBase, message
+from railval.app.state import AppState, CompareState
 
 
 def _compare_datas(state: CompareState):

@@ -1,4 +1,4 @@
-"""Validation dashboard: normalised mean/std bars (seed 000 Fig. 12/13), verdict, coverage,
+"""Validation dashboard: normalised mean/std bars (Polach & Böttcher 2014 Fig. 12/13), verdict, coverage,
 drill-down of the pairs contributing most; a drill-down row opens Compare."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import holoviews as hv
 import pandas as pd
 import panel as pn
 
-from app import plots
-from app.pages._common import PageBase, message, table, where_map
-from app.state import AppState, DashboardState
+from railval.app import plots
+from railval.app.pages._common import PageBase, message, table, where_map
+from railval.app.state import AppState, DashboardState
 
 SUMMARY_COLUMNS = ["quantity", "n", "mean", "std", "mean_limit", "std_limit", "mean_norm", "std_norm", "pass"]
 

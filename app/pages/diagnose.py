@@ -1,4 +1,4 @@
-"""Diagnose & model workshop (DESIGN §6–§7).
+"""Diagnose & model workshop (docs/design.md §6–§7).
 
 Ranked candidate effects with their explanation and signature; add an effect, set or
 calibrate its parameters, re-simulate in a background thread with a progress bar; then the
@@ -14,16 +14,16 @@ import holoviews as hv
 import pandas as pd
 import panel as pn
 
-from app import plots
-from app.pages._common import PageBase, make_dispatch, message, table, where_map
-from app.pages.dashboard import validation_view
-from app.state import AppState, DashboardState, DiagnoseState, unit_label
+from railval.app import plots
+from railval.app.pages._common import PageBase, make_dispatch, message, table, where_map
+from railval.app.pages.dashboard import validation_view
+from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 
 
 def signature_chart(candidate: dict[str, Any], height: int = 280) -> hv.Overlay:
     """Residual RMS per quantity group before/after adding the candidate (its signature on
     the residual pattern), as grouped bars."""
-    from core.quantities import QUANTITY_IDS
+    from railval.core.quantities import QUANTITY_IDS
 
     order = {q: i for i, q in enumerate(QUANTITY_IDS)}  # the quantities in EN order, then PSD groups
     groups = sorted((candidate.get("quantities") or {}).items(), key=lambda kv: (order.get(kv[0], 99), kv[0]))

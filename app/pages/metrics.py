@@ -1,13 +1,13 @@
 """Curve metrics (Sprague–Geers, Russell, KS, area metric, Anderson–Darling, ISO/TS 18571),
-raw and synchronised, as sortable tables (DESIGN §4). Computed per section in a background
+raw and synchronised, as sortable tables (docs/design.md §4). Computed per section in a background
 job: the page never freezes."""
 
 from __future__ import annotations
 
 import panel as pn
 
-from app.pages._common import PageBase, make_dispatch, message, table
-from app.state import AppState, MetricsState, unit_label
+from railval.app.pages._common import PageBase, make_dispatch, message, table
+from railval.app.state import AppState, MetricsState, unit_label
 
 NOTE = ("Signals low-pass 20 Hz and resampled to a common axis (the service says where it "
         "resampled). *Synchronised*: the lag estimated by cross-correlation within a bounded "

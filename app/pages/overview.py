@@ -8,9 +8,9 @@ import math
 import pandas as pd
 import panel as pn
 
-from app import plots
-from app.pages._common import PageBase, html_table, message
-from app.state import CampaignOverview, unit_label
+from railval.app import plots
+from railval.app.pages._common import PageBase, html_table, message
+from railval.app.state import CampaignOverview, unit_label
 
 
 def lineage_tree_html(ov: CampaignOverview, selected: str | None = None) -> str:

@@ -1,4 +1,4 @@
-"""Report page: preview and download the HTML/PDF report of a configuration (``app.report``,
+"""Report page: preview and download the HTML/PDF report of a configuration (``railval.app.report``,
 the same builder as ``railval report``)."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import io
 
 import panel as pn
 
-from app.pages._common import PageBase
-from app.state import AppState, ReportState
+from railval.app.pages._common import PageBase
+from railval.app.state import AppState, ReportState
 
 
 def _slug(text: str) -> str:

@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, Self
 
-from core.errors import InvalidParameter
+from railval.core.errors import InvalidParameter
 
 DEFAULT_WORKERS = 2
 

@@ -1,15 +1,15 @@
 """Services joining the database, the simulator and the diagnosis/calibration core
-(DESIGN §7): ``diagnose``, ``calibrate`` and the modal identification/calibration of seed 002.
+(docs/design.md §7): ``diagnose``, ``calibrate`` and the modal identification/calibration of [ref 3].
 
 The Panel app calls these from a background thread with a ``progress(stage, fraction, info)``
 callback; the CLI prints the same callbacks on stderr. Simulation and evaluation of the
-campaign for many candidate effect values run through :class:`app.services.batch.BatchExecutor`
+campaign for many candidate effect values run through :class:`railval.app.services.batch.BatchExecutor`
 (local process pool, or Dask with ``scheduler="tcp://…"``).
 
 Simulator adapter
 -----------------
 :func:`_simulate_campaign` is the one place that calls the built-in simulator
-(:mod:`core.sim`); the task functions sent to the workers (:func:`_evaluate_effects`) are
+(:mod:`railval.core.sim`); the task functions sent to the workers (:func:`_evaluate_effects`) are
 top-level so they pickle by reference.
 """
 
@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from app.services.batch import BatchExecutor
-from core.calibration import (
+from railval.app.services.batch import BatchExecutor
+from railval.core.calibration import (
     COACH_MODAL_DEFAULTS,
     COACH_MODAL_PARAMETERS,
     CalibrationResult,
@@ -33,7 +33,7 @@ from core.calibration import (
     calibrate_modal,
     validation_objective,
 )
-from core.diagnosis import (
+from railval.core.diagnosis import (
     DEFAULT_BANDS_HZ,
     DiagnosisResult,
     ParameterScan,
@@ -43,9 +43,9 @@ from core.diagnosis import (
     diagnose_patterns,
     pattern_from_pairs,
 )
-from core.errors import InvalidParameter, NotFound
-from core.modal import ssi_cov
-from core.types import SectionInfo, SignalSet
+from railval.core.errors import InvalidParameter, NotFound
+from railval.core.modal import ssi_cov
+from railval.core.types import SectionInfo, SignalSet
 
 Progress = Callable[[str, float, dict[str, Any]], None]
 
@@ -55,14 +55,14 @@ ACC_CHANNELS = ("ay_cb_b1", "ay_cb_b2", "az_cb_b1", "az_cb_b2")
 # --------------------------------------------------------------------------- db helpers
 @contextmanager
 def _session(database_or_session: Any) -> Iterator[Any]:
-    """Yield a session from a :class:`db.engine.Database`, a URL string or a Session."""
+    """Yield a session from a :class:`railval.db.engine.Database`, a URL string or a Session."""
     from sqlalchemy.orm import Session
 
     if isinstance(database_or_session, Session):
         yield database_or_session
         return
     if database_or_session is None or isinstance(database_or_session, str):
-        from db.engine import connect
+        from railval.db.engine import connect
 
         database_or_session = connect(database_or_session)
     with database_or_session.session() as s:
@@ -101,7 +101,7 @@ def _band_sum(signalsets: Mapping[str, SignalSet], bands) -> dict[str, np.ndarra
 
 
 def _values(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo]) -> dict[str, dict]:
-    from core.en14363 import evaluate_batch
+    from railval.core.en14363 import evaluate_batch
 
     secs = [s for s in sections if s.id in signalsets]
     vals = evaluate_batch([signalsets[s.id] for s in secs], secs)
@@ -110,7 +110,7 @@ def _values(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo]
 
 def load_context(session: Any, campaign: str) -> CampaignContext:
     """Read the campaign's vehicle, sections and measurement; evaluate the measurement once."""
-    from db import repo
+    from railval.db import repo
 
     camp = repo.get_campaign(session, campaign)
     sections = repo.section_infos(session, camp)
@@ -129,8 +129,8 @@ def load_context(session: Any, campaign: str) -> CampaignContext:
 
 def residual_pattern(ctx: CampaignContext, sim_values: Mapping[str, Mapping], sim_bands: Mapping[str, np.ndarray]) -> tuple[Pattern, Any]:
     """Pattern (normalised D_v per quantity × zone × position + log₂ band-power ratios) and the
-    :class:`core.validation.ValidationResult` (no bootstrap) of simulated values."""
-    from core.validation import validate
+    :class:`railval.core.validation.ValidationResult` (no bootstrap) of simulated values."""
+    from railval.core.validation import validate
 
     vr = validate(ctx.measured_values, sim_values, ctx.sections, ctx.vehicle, n_boot=0)
     pairs = vr.pairs.to_dict("records")
@@ -141,7 +141,7 @@ def residual_pattern(ctx: CampaignContext, sim_values: Mapping[str, Mapping], si
 # --------------------------------------------------------------------------- simulator adapter
 def _simulation_inputs(session: Any, camp: Any, ctx: CampaignContext, measured: Mapping[str, SignalSet]) -> dict[str, Any]:
     """What the simulator needs beyond vehicle and sections (track irregularities …)."""
-    from app.services import simulation as sim_service
+    from railval.app.services import simulation as sim_service
 
     hook = getattr(sim_service, "simulation_inputs", None)
     if hook is not None:
@@ -152,7 +152,7 @@ def _simulation_inputs(session: Any, camp: Any, ctx: CampaignContext, measured: 
 def _simulate_campaign(ctx: CampaignContext, effects: Mapping[str, Mapping[str, float]],
                        parameters: Mapping[str, float] | None = None) -> dict[str, SignalSet]:
     """Simulate every section of the campaign with the built-in simulator."""
-    from core.sim import simulate_campaign
+    from railval.core.sim import simulate_campaign
 
     return simulate_campaign(ctx.vehicle, ctx.sections, layouts=ctx.layouts, effects=dict(effects),
                              parameters=dict(parameters or {}), channels=ctx.channels,
@@ -160,7 +160,7 @@ def _simulate_campaign(ctx: CampaignContext, effects: Mapping[str, Mapping[str, 
 
 
 def _effect_registry() -> dict[str, Any]:
-    from core.sim.effects import EFFECTS
+    from railval.core.sim.effects import EFFECTS
 
     return dict(EFFECTS)
 
@@ -174,7 +174,7 @@ def _evaluate_effects(task: tuple[CampaignContext, dict, dict]) -> tuple[dict, d
 
 
 def _config(session: Any, campaign: str, name: str) -> tuple[dict, dict, Any]:
-    from db import repo
+    from railval.db import repo
 
     conf = repo.get_configuration(session, campaign, name)
     return dict(conf.effects or {}), dict(conf.parameters or {}), conf
@@ -218,13 +218,13 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
              scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
              workers: int | None = None) -> DiagnosisResult:
     """Rank the effects missing from configuration ``config`` by the share of its residual
-    they explain (:mod:`core.diagnosis`). Each candidate effect parameter is simulated at
+    they explain (:mod:`railval.core.diagnosis`). Each candidate effect parameter is simulated at
     ``values_per_parameter`` values over its bounds (plus its default) on the whole campaign."""
     _report(progress, "load", 0.0, campaign=campaign, config=config)
     with _session(database_or_session) as s:
         ctx = load_context(s, campaign)
         conf_effects, conf_params, _ = _config(s, campaign, config)
-        from db import repo
+        from railval.db import repo
 
         config_sets = repo.load_signalsets(s, campaign, config)
     registry = _effect_registry()
@@ -305,7 +305,7 @@ class _Objective:
         return effects, model
 
     def __call__(self, params: Mapping[str, float]) -> float:
-        from core.validation import validate
+        from railval.core.validation import validate
 
         effects, model = self.split(params)
         vals, _ = _evaluate_effects((self.ctx, effects, model))
@@ -322,13 +322,13 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     """Add ``effects`` to configuration ``config``, fit their parameters (all of them, or only
     ``params`` — names ``"effect.param"``/``"param"`` of the effects, or ``"model.NAME"`` for
     a vehicle-template parameter) to the validation objective
-    (:func:`core.calibration.validation_objective`) with differential evolution and a local
+    (:func:`railval.core.calibration.validation_objective`) with differential evolution and a local
     polish (``start``: the start point of the fitted parameters and the value of those not
     fitted), store the result as configuration ``new_name`` (parent ``config``) with its
     simulated signals, and return the :class:`CalibrationResult` whose ``to_dict()`` holds the
     new configuration's ``validation`` and the ``lineage`` (root → new, normalised error of
     every quantity)."""
-    from core import calibration as cal
+    from railval.core import calibration as cal
 
     _report(progress, "load", 0.0, campaign=campaign, config=config)
     with _session(database) as s:
@@ -375,11 +375,11 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     _report(progress, "store", 0.92)
     sets = _simulate_campaign(ctx, eff, model)
     vals = _values(sets, ctx.sections)
-    from core.validation import validate
+    from railval.core.validation import validate
 
     vr_full = validate(ctx.measured_values, vals, ctx.sections, ctx.vehicle)
     with _session(database) as s:
-        from db import repo
+        from railval.db import repo
 
         repo.store_configuration(
             s, campaign, new_name, parent=config, effects=eff, parameters=model,
@@ -405,8 +405,8 @@ def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float
 def lineage_errors(session: Any, ctx: CampaignContext, name: str, known: Mapping[str, Any] | None = None) -> list[dict]:
     """Root → ``name``: per configuration its effects and every quantity's normalised error
     max(|mean_norm|, std_norm) (with both parts), so the UI can draw the error falling."""
-    from core.validation import validate
-    from db import repo
+    from railval.core.validation import validate
+    from railval.db import repo
 
     out = []
     for conf in repo.lineage(session, ctx.campaign, name):
@@ -426,7 +426,7 @@ def _finite(x: float) -> float | None:
     return float(x) if x is not None and math.isfinite(x) else None
 
 
-# --------------------------------------------------------------------------- modal (seed 002)
+# --------------------------------------------------------------------------- modal ([ref 3])
 def identify_modes(database_or_session: Any, campaign: str, *, sections: Sequence[str] | None = None,
                    config: str | None = None, channels: Sequence[str] = ("az_cb_b1", "az_cb_b2"),
                    fs_target: float = 20.0, f_min: float = 0.5, f_max: float = 4.0):
@@ -436,7 +436,7 @@ def identify_modes(database_or_session: Any, campaign: str, *, sections: Sequenc
     (``scipy.signal.resample_poly``)."""
     from scipy.signal import resample_poly
 
-    from db import repo
+    from railval.db import repo
 
     with _session(database_or_session) as s:
         sets = repo.load_signalsets(s, campaign, config, sections=list(sections) if sections else None,
@@ -458,8 +458,8 @@ def modal(database_or_session: Any, campaign: str, *, sections: Sequence[str] | 
           calibrate_params: Sequence[str] | None = None, progress: Progress | None = None,
           n_modes: int = 2) -> dict[str, Any]:
     """Identify the car body modes and, with ``calibrate_params``, fit those coach modal
-    parameters (:data:`core.calibration.COACH_MODAL_PARAMETERS`) to the ``n_modes`` best
-    supported modes (seed 002). Returns a JSON-ready dict with ``modes`` and ``calibration``
+    parameters (:data:`railval.core.calibration.COACH_MODAL_PARAMETERS`) to the ``n_modes`` best
+    supported modes ([ref 3]). Returns a JSON-ready dict with ``modes`` and ``calibration``
     (the before/after frequency error table)."""
     _report(progress, "identify", 0.0)
     ident = identify_modes(database_or_session, campaign, sections=sections)
@@ -470,7 +470,7 @@ def modal(database_or_session: Any, campaign: str, *, sections: Sequence[str] | 
         if unknown:
             raise InvalidParameter(f"unknown modal parameter(s) {unknown}; known: {sorted(COACH_MODAL_PARAMETERS)}")
         with _session(database_or_session) as s:
-            from db import repo
+            from railval.db import repo
 
             vinfo = repo.vehicle_info(s, campaign)
         if (vinfo.get("template") or "coach") != "coach":
@@ -496,7 +496,7 @@ def _coach_modal_base(vehicle_parameters: Mapping[str, Any]) -> dict[str, float]
     campaign's vehicle parameters (``bogie_centres`` → ``bogie_half_distance``)."""
     merged: dict[str, float] = {}
     try:
-        from core.sim.vehicles import template_parameters
+        from railval.core.sim.vehicles import template_parameters
 
         merged.update({p.name: float(p.default) for p in template_parameters("coach")})
     except ImportError:  # pragma: no cover - the simulator ships with railval

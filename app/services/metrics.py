@@ -2,12 +2,12 @@
 
 ``metrics_for_configuration(session, campaign, config, sections=None, channels=None, ...)``
 reads the measured and simulated signal sets of the chosen sections (one query each,
-``db.repo.load_signalsets``) and runs :func:`core.metrics.compare_signalsets` per section:
-low-pass (default 20 Hz, the seed's plots), common grid, synchronisation within ±max_lag_s,
+``railval.db.repo.load_signalsets``) and runs :func:`railval.core.metrics.compare_signalsets` per section:
+low-pass (default 20 Hz, Polach & Böttcher 2014's plots), common grid, synchronisation within ±max_lag_s,
 every metric raw and synchronised. Returns one row per (section, channel).
 
-``part="section"`` (default) compares the whole recorded section, like the seed's time plots
-(seed 000 §3.4); ``part="evaluated"`` filters the whole section first and then compares only
+``part="section"`` (default) compares the whole recorded section, like Polach & Böttcher 2014's time plots
+(Polach & Böttcher 2014 §3.4); ``part="evaluated"`` filters the whole section first and then compares only
 the constant-curvature part (the EN-evaluated range on each record's own distance axis,
 both cut records starting at time 0 so the remaining offset is left to synchronisation).
 """
@@ -20,17 +20,17 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from core.errors import InvalidParameter, NotFound
-from core.metrics import compare_signalsets, lowpass, metric_names
-from core.metrics.compare import DEFAULT_LOWPASS_HZ
-from core.metrics.sync import DEFAULT_MAX_LAG_S
-from core.types import CHANNEL_KINDS, SectionInfo, SignalSet, split_channel
+from railval.core.errors import InvalidParameter, NotFound
+from railval.core.metrics import compare_signalsets, lowpass, metric_names
+from railval.core.metrics.compare import DEFAULT_LOWPASS_HZ
+from railval.core.metrics.sync import DEFAULT_MAX_LAG_S
+from railval.core.types import CHANNEL_KINDS, SectionInfo, SignalSet, split_channel
 
 PARTS = ("section", "evaluated")
 
 
 def channel_unit(channel: str) -> str:
-    """Unit of a channel from the channel vocabulary (``core.types.CHANNEL_KINDS``)."""
+    """Unit of a channel from the channel vocabulary (``railval.core.types.CHANNEL_KINDS``)."""
     return CHANNEL_KINDS.get(split_channel(channel)[0], "")
 
 
@@ -60,9 +60,9 @@ def metrics_for_configuration(session: Any, campaign: Any, config: str,
                               subsample: bool = False) -> pd.DataFrame:
     """Metrics of configuration ``config`` against the measurement: one row per
     (section, channel) with ``section``, ``zone``, ``unit`` and the columns of
-    :func:`core.metrics.compare_signalsets` (``<metric>`` raw, ``<metric>_sync``, ``lag_s`` …).
+    :func:`railval.core.metrics.compare_signalsets` (``<metric>`` raw, ``<metric>_sync``, ``lag_s`` …).
     """
-    from db import repo
+    from railval.db import repo
 
     if part not in PARTS:
         raise InvalidParameter(f"part must be one of {PARTS}, got {part!r}")

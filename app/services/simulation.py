@@ -3,7 +3,7 @@
 The simulator needs the campaign's vehicle record (template + parameters), the sections with
 their ``layout`` records (geometry, irregularity level/seed and the measured irregularities,
 see docs/simulator.md) and the measurement's sampling rate and channel names; all come from
-the database through :mod:`db.repo`.
+the database through :mod:`railval.db.repo`.
 """
 
 from __future__ import annotations
@@ -11,16 +11,16 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from core.errors import NotFound
-from core.sim import resolve_effects, simulate_campaign
+from railval.core.errors import NotFound
+from railval.core.sim import resolve_effects, simulate_campaign
 
 Progress = Callable[[str, float, dict], None]
 
 
 def simulation_inputs(session: Any, campaign: Any) -> dict[str, Any]:
-    """Extra keyword arguments for :func:`core.sim.simulate_campaign` beyond vehicle, sections,
+    """Extra keyword arguments for :func:`railval.core.sim.simulate_campaign` beyond vehicle, sections,
     layouts, effects, parameters, channels and fs: none — the measured irregularities travel in
-    the sections' layout records. (Hook read by :mod:`app.services.diagnosis`.)"""
+    the sections' layout records. (Hook read by :mod:`railval.app.services.diagnosis`.)"""
     return {}
 
 
@@ -33,7 +33,7 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
     overrides, ``model.NAME`` or ``NAME``), store the result as configuration ``name`` (parent
     ``parent``) and return a summary. With a ``parent``, its effects and parameters are the
     starting point and ``effects``/``parameters`` are added on top."""
-    from db import repo
+    from railval.db import repo
 
     with database.session() as s:
         camp = repo.get_campaign(s, campaign)

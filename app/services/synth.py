@@ -1,4 +1,4 @@
-"""Write a synthetic campaign (:mod:`core.sim.synth`) as a campaign folder (docs/campaign-format.md)
+"""Write a synthetic campaign (:mod:`railval.core.sim.synth`) as a campaign folder (docs/campaign-format.md)
 and import it; seed the demo campaign of an empty database.
 
 Folder layout::
@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from core.sim.synth import SynthCampaign, build_campaign, parse_hidden
-from core.types import CHANNEL_KINDS, split_channel
+from railval.core.sim.synth import SynthCampaign, build_campaign, parse_hidden
+from railval.core.types import CHANNEL_KINDS, split_channel
 
 DEMO_NAME = "demo-coach"
 DEMO_HIDDEN = ["parasitic_yaw_stiffness"]
@@ -41,7 +41,7 @@ def _json_safe(obj: Any) -> Any:
 
 def write_folder(sc: SynthCampaign, folder: str | Path, *, ext: str = "parquet") -> Path:
     """Write ``sc`` as a campaign folder; return the folder path."""
-    from db.io import write_table
+    from railval.db.io import write_table
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -84,7 +84,7 @@ def synth(database: Any, *, name: str = "synth", template: str = "coach", hidden
     ``friction_damping``. ``out``: keep the folder there (else a temporary folder). ``reveal``:
     write the truth as JSON to this file.
     """
-    from db.importer import import_campaign
+    from railval.db.importer import import_campaign
 
     def rep(stage: str, frac: float, **info):
         if progress:
@@ -111,7 +111,7 @@ def ensure_demo(database: Any, progress: Progress | None = None) -> str | None:
     """Seed the demo campaign (coach, hidden parasitic yaw stiffness: the model underestimates the
     guiding forces in tight curves) when the database holds no campaign. Returns its name, or
     ``None`` when the database already had campaigns. Takes a few seconds."""
-    from db import repo
+    from railval.db import repo
 
     with database.session() as s:
         if repo.list_campaigns(s):

@@ -1,26 +1,26 @@
 """Validation of a stored configuration: database → EN 14363 processing → DynoTRAIN verdict.
 
 :func:`validate_configuration` reads the campaign (sections, vehicle) and both sides of the
-comparison from the database, processes them with :mod:`core.en14363` and judges them with
-:func:`core.validation.validate`.
+comparison from the database, processes them with :mod:`railval.core.en14363` and judges them with
+:func:`railval.core.validation.validate`.
 
 Results cache
 -------------
 Processing a section of one source (the measurement or a configuration) is cached in the
-database table ``result_cache`` (:func:`db.repo.cache_get` / :func:`db.repo.cache_put`) under
+database table ``result_cache`` (:func:`railval.db.repo.cache_get` / :func:`railval.db.repo.cache_put`) under
 
     sha256(PROCESSING_VERSION, filter order, section id, evaluated range, fs, n,
            distance-axis hash, sorted (channel, content hash) of the recording)
 
 and holds the section's values as JSON. Content hashes are read first
-(:func:`db.repo.signal_hashes`, no blob is touched); only sections whose key is not cached are
+(:func:`railval.db.repo.signal_hashes`, no blob is touched); only sections whose key is not cached are
 loaded and processed. So the measured side is processed once per campaign and filter order,
 and a new configuration costs only its own signals. Any change of samples, distance axis,
 evaluated range, filter order or processing code changes the key.
 
-:func:`evaluate_signalsets` is the same pipeline for in-memory :class:`~core.types.SignalSet`
+:func:`evaluate_signalsets` is the same pipeline for in-memory :class:`~railval.core.types.SignalSet`
 objects (simulation and calibration loops without the database); the pure-core entry
-point is :func:`core.validation.validate` on already processed values.
+point is :func:`railval.core.validation.validate` on already processed values.
 """
 
 from __future__ import annotations
@@ -33,10 +33,10 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from core import en14363
-from core.filters import DEFAULT_ORDER, check_order
-from core.types import SectionInfo, SignalSet
-from core.validation import ValidationResult, validate
+from railval.core import en14363
+from railval.core.filters import DEFAULT_ORDER, check_order
+from railval.core.types import SectionInfo, SignalSet
+from railval.core.validation import ValidationResult, validate
 
 #: sections per bulk cache read (SQL IN list)
 _CACHE_CHUNK = 500
@@ -60,9 +60,9 @@ def _recording_meta(session: Session, campaign_id: int,
                     config: str | None) -> dict[str, tuple[str, float, int]]:
     """section id → (distance-axis hash, fs, n) of the source's recordings, no blobs read.
 
-    (Adapter: :mod:`db.repo` exposes channel hashes but not the distance-axis hash.)
+    (Adapter: :mod:`railval.db.repo` exposes channel hashes but not the distance-axis hash.)
     """
-    from db.models import Configuration, Recording, Section
+    from railval.db.models import Configuration, Recording, Section
 
     q = (select(Section.section_id, Recording.distance_sha256, Recording.fs, Recording.n)
          .join(Section, Recording.section_id == Section.id)
@@ -80,7 +80,7 @@ def source_cache_keys(session: Session, campaign, config: str | None,
                       ) -> dict[str, str]:
     """section id → result-cache key of every recorded section of one source, read from the
     stored content hashes only (no blob is decoded)."""
-    from db import repo
+    from railval.db import repo
 
     camp = repo.get_campaign(session, campaign)
     hashes = repo.signal_hashes(session, camp, config)
@@ -93,7 +93,7 @@ def source_cache_keys(session: Session, campaign, config: str | None,
 
 def _cache_get_many(session: Session, keys: Sequence[str]) -> dict[str, bytes]:
     """Bulk read of the result cache (one query per chunk instead of one per key)."""
-    from db.models import ResultCache
+    from railval.db.models import ResultCache
 
     out: dict[str, bytes] = {}
     for i in range(0, len(keys), _CACHE_CHUNK):
@@ -121,7 +121,7 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
     """Processed values of every section of one source (``config=None``: the measurement),
     from the result cache where possible. ``stats`` (optional dict) receives
     ``{"cached": n, "computed": n}``."""
-    from db import repo
+    from railval.db import repo
 
     camp = repo.get_campaign(session, campaign)
     by_id = {s.id: s for s in sections}
@@ -163,8 +163,8 @@ def _decode_and_evaluate(decode, sections: list[SectionInfo],
 def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
                     sections: list[SectionInfo], order: int) -> list[bytes]:
     """Worker task: load and process some sections of one source; returns packed values.
-    ``db_or_url``: a :class:`db.engine.Database` (in-process) or its URL (worker process)."""
-    from db import repo
+    ``db_or_url``: a :class:`railval.db.engine.Database` (in-process) or its URL (worker process)."""
+    from railval.db import repo
 
     database = _worker_database(db_or_url) if isinstance(db_or_url, str) else db_or_url
     with database.session() as session:
@@ -178,7 +178,7 @@ _WORKER_DB: dict[str, Any] = {}
 
 def _worker_database(url: str):
     if url not in _WORKER_DB:
-        from db.engine import connect
+        from railval.db.engine import connect
 
         _WORKER_DB[url] = connect(url)
     return _WORKER_DB[url]
@@ -190,14 +190,14 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
                             progress=None) -> dict[str, ValidationResult]:
     """Validate many configurations (default: all) of a campaign; the DynoTRAIN-scale path.
 
-    ``database``: a :class:`db.engine.Database`. Sections not in the result cache are
+    ``database``: a :class:`railval.db.engine.Database`. Sections not in the result cache are
     processed in chunks of ``chunk_sections`` sections of one source, by ``workers``
     processes (each opens its own connection), then written to the cache by this process.
     ``progress(stage, fraction, info)`` is called after every chunk.
     """
     from concurrent.futures import ProcessPoolExecutor
 
-    from db import repo
+    from railval.db import repo
 
     check_order(order)
     with database.session() as session:
@@ -273,9 +273,9 @@ def validate_configuration(session: Session, campaign_name: str, config_name: st
 
     ``order``: Butterworth prototype order of both filters; ``n_boot``/``seed``: bootstrap of
     the normalised values. The result's ``info`` records how many sections of each side
-    came from the cache. Raises :class:`core.errors.NotFound` for unknown names.
+    came from the cache. Raises :class:`railval.core.errors.NotFound` for unknown names.
     """
-    from db import repo
+    from railval.db import repo
 
     check_order(order)
     camp = repo.get_campaign(session, campaign_name)
@@ -302,7 +302,7 @@ def evaluate_signalsets(measured: Mapping[str, SignalSet], simulated: Mapping[st
                         seed: int = 0) -> ValidationResult:
     """Validate in-memory signal sets (no database): section id → SignalSet on each side.
 
-    ``vehicle``: :class:`core.validation.Vehicle` or a mapping with ``kind``,
+    ``vehicle``: :class:`railval.core.validation.Vehicle` or a mapping with ``kind``,
     ``secondary_suspension``, ``Q0_kN``. Sections missing on either side are skipped (and
     show up in the coverage).
     """

@@ -1,4 +1,4 @@
-"""Curve-comparison metrics (DESIGN §4; seeds 000 §3.3 and 001 §4).
+"""Curve-comparison metrics (docs/design.md §4; seeds 000 §3.3 and 001 §4).
 
 Public API::
 
@@ -14,8 +14,8 @@ Modules: ``sprague_geers``, ``russell``, ``distribution`` (KS, n_eff, area, AD),
 (with the numba DTW), ``sync``, ``grid``, ``registry``, ``compare``.
 """
 
-from core.metrics.compare import ComparisonResult, compare, compare_signalsets, lowpass
-from core.metrics.distribution import (
+from railval.core.metrics.compare import ComparisonResult, compare, compare_signalsets, lowpass
+from railval.core.metrics.distribution import (
     ADResult,
     KSResult,
     anderson_darling,
@@ -25,12 +25,12 @@ from core.metrics.distribution import (
     kolmogorov_smirnov,
     ks_pvalue,
 )
-from core.metrics.grid import CommonGrid, common_grid
-from core.metrics.iso18571 import ISOParameters, ISORating, grade, iso18571
-from core.metrics.registry import FAMILIES, METRICS, MetricInfo, metric_names, registry_table
-from core.metrics.russell import Russell, russell
-from core.metrics.sprague_geers import SpragueGeers, sprague_geers
-from core.metrics.sync import SyncResult, apply_lag, estimate_lag
+from railval.core.metrics.grid import CommonGrid, common_grid
+from railval.core.metrics.iso18571 import ISOParameters, ISORating, grade, iso18571
+from railval.core.metrics.registry import FAMILIES, METRICS, MetricInfo, metric_names, registry_table
+from railval.core.metrics.russell import Russell, russell
+from railval.core.metrics.sprague_geers import SpragueGeers, sprague_geers
+from railval.core.metrics.sync import SyncResult, apply_lag, estimate_lag
 
 __all__ = [
     "FAMILIES",

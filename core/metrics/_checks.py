@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from core.errors import InvalidParameter, InvalidSignal
+from railval.core.errors import InvalidParameter, InvalidSignal
 
 
 def as_signal(x: object, name: str, *, min_len: int = 2) -> np.ndarray:

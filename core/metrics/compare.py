@@ -1,8 +1,8 @@
 """``compare`` one measured/simulated pair and ``compare_signalsets`` for whole sections.
 
-Every metric is reported twice (DESIGN §4): **raw** — on the common grid as given — and
+Every metric is reported twice (docs/design.md §4): **raw** — on the common grid as given — and
 **synchronised** — after removing the lag that maximises the cross-correlation within
-±``max_lag_s`` (:mod:`core.metrics.sync`), on the overlapping samples only. Distribution
+±``max_lag_s`` (:mod:`railval.core.metrics.sync`), on the overlapping samples only. Distribution
 metrics (KS, area, Anderson–Darling) ignore time order, so their synchronised values differ
 from the raw ones only through the trimmed ends.
 """
@@ -17,13 +17,13 @@ import numpy as np
 import pandas as pd
 import scipy.signal
 
-from core import filters
-from core.errors import InvalidParameter, InvalidSignal, NotFound
-from core.metrics.grid import common_grid
-from core.metrics.iso18571 import ISOParameters
-from core.metrics.registry import FAMILIES, METRICS, metric_names, resolve_families
-from core.metrics.sync import DEFAULT_MAX_LAG_S, SyncResult, apply_lag, estimate_lag
-from core.types import SignalSet
+from railval.core import filters
+from railval.core.errors import InvalidParameter, InvalidSignal, NotFound
+from railval.core.metrics.grid import common_grid
+from railval.core.metrics.iso18571 import ISOParameters
+from railval.core.metrics.registry import FAMILIES, METRICS, metric_names, resolve_families
+from railval.core.metrics.sync import DEFAULT_MAX_LAG_S, SyncResult, apply_lag, estimate_lag
+from railval.core.types import SignalSet
 
 DEFAULT_LOWPASS_HZ = 20.0
 
@@ -32,7 +32,7 @@ DEFAULT_LOWPASS_HZ = 20.0
 class ComparisonResult:
     """Metrics of one simulated signal against one measured signal.
 
-    ``raw``/``synced``: metric name → value (see ``core.metrics.registry.METRICS``);
+    ``raw``/``synced``: metric name → value (see ``railval.core.metrics.registry.METRICS``);
     ``sync``: the lag estimate (``sync.lag_s`` in s, positive = simulated delayed);
     ``fs``: common sampling rate in Hz; ``n``: samples of the raw comparison; ``n_synced``:
     samples of the synchronised overlap; ``resampled``/``grid_note``: what the common-grid
@@ -117,7 +117,7 @@ def compare(measured: np.ndarray, simulated: np.ndarray, fs: float, *,
         differ; the simulated signal is then put on the measured grid (``resampled`` says so).
     max_lag_s : synchronisation window ±max_lag_s in s (default 2 s).
     subsample : refine the lag below one sample (parabolic peak, linear interpolation).
-    families : metric families to compute (``core.metrics.registry.FAMILIES``; default all).
+    families : metric families to compute (``railval.core.metrics.registry.FAMILIES``; default all).
     iso_params : ISO/TS 18571 parameters (default: the standard's).
     neff_method : effective-sample-size estimator of the KS p-value (``"bartlett"``/``"ar1"``).
     unit : unit of the signals, carried into the result.
@@ -141,9 +141,9 @@ def compare(measured: np.ndarray, simulated: np.ndarray, fs: float, *,
 
 
 def lowpass(data: np.ndarray, fs: float, cutoff_hz: float, order: int = 4) -> np.ndarray:
-    """Zero-phase Butterworth low-pass of the rows of ``data`` (DESIGN §3 processing).
+    """Zero-phase Butterworth low-pass of the rows of ``data`` (docs/design.md §3 processing).
 
-    At the EN cut-off of 20 Hz the shared EN implementation ``core.filters.filtfilt_rows``
+    At the EN cut-off of 20 Hz the shared EN implementation ``railval.core.filters.filtfilt_rows``
     is used (identical processing to the EN quantities); other cut-offs use
     ``scipy.signal.butter`` + ``sosfiltfilt`` with the same order and zero phase.
     """
@@ -160,7 +160,7 @@ def compare_signalsets(measured: SignalSet, simulated: SignalSet, channels: Iter
                        lowpass_hz: float | None = DEFAULT_LOWPASS_HZ, **options: Any) -> pd.DataFrame:
     """Compare every common channel of two signal sets of one section.
 
-    Both records are low-passed (``lowpass_hz``, default 20 Hz as for the seed's plots;
+    Both records are low-passed (``lowpass_hz``, default 20 Hz as for Polach & Böttcher 2014's plots;
     ``None`` = no filter) at their own rate, then put on a common grid aligned by
     ``time_s[0]``. Returns one row per channel with ``channel``, ``n``, ``fs_hz``,
     ``lag_s``, ``sync_correlation``, ``resampled``, ``error`` (message when the channel

@@ -1,9 +1,9 @@
 """Distribution-based comparison: Kolmogorov–Smirnov, area validation metric, Anderson–Darling.
 
 These metrics compare the empirical cumulative distribution functions (CDF) of the samples of
-the measured and the simulated signal and ignore time order (seed 001 §4):
+the measured and the simulated signal and ignore time order ([ref 2] §4):
 
-* **Kolmogorov–Smirnov distance** ``D = sup_x |F_m(x) − F_c(x)|`` (seed 001 eq. 1),
+* **Kolmogorov–Smirnov distance** ``D = sup_x |F_m(x) − F_c(x)|`` ([ref 2] eq. 1),
   dimensionless, 0…1, with the classical two-sample p-value of ``scipy.stats.ks_2samp``.
 * **Autocorrelation-aware KS p-value.** The classical p-value treats the ``n`` samples of a
   time series as independent; samples of a low-pass filtered signal at a high sampling rate
@@ -26,7 +26,7 @@ the measured and the simulated signal and ignore time order (seed 001 §4):
 
   ``n_eff`` is bounded to ``[2, n]`` (negative correlation never *adds* information here).
 * **Area validation metric** ``d = ∫ |F_m(x) − F_c(x)| dx`` (Ferson, Oberkampf & Ginzburg
-  2008; seed 001 eq. 2), in the **unit of the signal**; for two empirical distributions this
+  2008; [ref 2] eq. 2), in the **unit of the signal**; for two empirical distributions this
   equals the 1-Wasserstein distance (``scipy.stats.wasserstein_distance``).
 * **Anderson–Darling k-sample statistic** (Scholz & Stephens 1987) via
   ``scipy.stats.anderson_ksamp`` (midrank variant). Caveats: its p-value is interpolated from
@@ -59,8 +59,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import scipy.stats
 
-from core.errors import InvalidParameter, InvalidSignal
-from core.metrics._checks import as_signal
+from railval.core.errors import InvalidParameter, InvalidSignal
+from railval.core.metrics._checks import as_signal
 
 NEFF_METHODS = ("bartlett", "ar1")
 
@@ -154,7 +154,7 @@ def ks_pvalue(d: float, n1: float, n2: float) -> float:
 
 def kolmogorov_smirnov(measured: np.ndarray, simulated: np.ndarray, *,
                        neff_method: str = "bartlett") -> KSResult:
-    """KS distance (seed 001 eq. 1), classical and autocorrelation-aware p-values.
+    """KS distance ([ref 2] eq. 1), classical and autocorrelation-aware p-values.
 
     The samples need not share a grid or length. ``D`` and ``p`` are those of
     ``scipy.stats.ks_2samp`` (``method="auto"``); ``p_eff`` uses :func:`effective_sample_size`.
@@ -173,7 +173,7 @@ def kolmogorov_smirnov(measured: np.ndarray, simulated: np.ndarray, *,
 def area_validation_metric(measured: np.ndarray, simulated: np.ndarray) -> float:
     """Area between the empirical CDFs, ``∫ |F_m(x) − F_c(x)| dx``, in the signal's unit.
 
-    Ferson et al. (2008); seed 001 eq. 2. Both CDFs are step functions, so the integral is the
+    Ferson et al. (2008); [ref 2] eq. 2. Both CDFs are step functions, so the integral is the
     exact sum over the intervals between consecutive pooled sample values of
     ``|F_m − F_c| · Δx``. Equals ``scipy.stats.wasserstein_distance(measured, simulated)``.
     """

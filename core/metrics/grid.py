@@ -1,6 +1,6 @@
 """Bring a measured and a simulated signal onto one uniform grid of equal length.
 
-Every curve metric of DESIGN §4 needs equally sampled, equally long signals. The common grid
+Every curve metric of docs/design.md §4 needs equally sampled, equally long signals. The common grid
 is the measured grid (``fs_measured``, time ``t0_measured + i/fs_measured``) restricted to the
 time span both records cover; the simulated signal is evaluated on it by linear
 interpolation when its rate or time origin differ. The result says what was done (``resampled``,
@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.errors import InvalidSignal
-from core.metrics._checks import as_signal, positive
+from railval.core.errors import InvalidSignal
+from railval.core.metrics._checks import as_signal, positive
 
 
 @dataclass(frozen=True)

@@ -45,9 +45,9 @@ from dataclasses import asdict, dataclass
 import numba
 import numpy as np
 
-from core.errors import InvalidParameter, InvalidSignal
-from core.metrics._checks import as_pair, fraction, positive
-from core.metrics.sync import lag_correlations
+from railval.core.errors import InvalidParameter, InvalidSignal
+from railval.core.metrics._checks import as_pair, fraction, positive
+from railval.core.metrics.sync import lag_correlations
 
 GRADES = (("excellent", 0.94), ("good", 0.80), ("fair", 0.58))
 WEIGHTS = (0.4, 0.2, 0.2, 0.2)

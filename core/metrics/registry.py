@@ -1,4 +1,4 @@
-"""The one registry of curve-comparison metrics (DESIGN §4). UI and CLI read it; no other list.
+"""The one registry of curve-comparison metrics (docs/design.md §4). UI and CLI read it; no other list.
 
 Two levels:
 
@@ -16,15 +16,15 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from core.errors import InvalidParameter
-from core.metrics.distribution import anderson_darling, area_validation_metric, kolmogorov_smirnov
-from core.metrics.iso18571 import ISOParameters, iso18571
-from core.metrics.russell import russell
-from core.metrics.sprague_geers import sprague_geers
+from railval.core.errors import InvalidParameter
+from railval.core.metrics.distribution import anderson_darling, area_validation_metric, kolmogorov_smirnov
+from railval.core.metrics.iso18571 import ISOParameters, iso18571
+from railval.core.metrics.russell import russell
+from railval.core.metrics.sprague_geers import sprague_geers
 
-_SG = "Sprague & Geers 2004; seed 000 §3.3 eq. 1–3"
+_SG = "Sprague & Geers 2004; Polach & Böttcher 2014 §3.3 eq. 1–3"
 _RU = "Russell 1997 (Part I)"
-_KS = "seed 001 §4.1 eq. 1; scipy.stats.ks_2samp"
+_KS = "[ref 2] §4.1 eq. 1; scipy.stats.ks_2samp"
 _ISO = "ISO/TS 18571:2014"
 
 
@@ -108,7 +108,7 @@ METRICS: dict[str, MetricInfo] = {m.name: m for m in (
                "samples", "[2, n]", "n", "higher", "ks", "Bartlett 1946; Thiébaux & Zwiers 1984"),
     MetricInfo("area", "area validation metric", "area between the empirical CDFs (1-Wasserstein)",
                "signal", "[0, ∞)", 0.0, "lower", "area",
-               "Ferson, Oberkampf & Ginzburg 2008; seed 001 §4.2 eq. 2"),
+               "Ferson, Oberkampf & Ginzburg 2008; [ref 2] §4.2 eq. 2"),
     MetricInfo("ad_stat", "Anderson–Darling", "normalised k-sample statistic (k = 2), midrank",
                "-", "(−∞, ∞)", "≤ 0", "lower", "anderson_darling",
                "Scholz & Stephens 1987; scipy.stats.anderson_ksamp"),

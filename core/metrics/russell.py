@@ -27,7 +27,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from core.metrics.sprague_geers import energies, normalised_correlation
+from railval.core.metrics.sprague_geers import energies, normalised_correlation
 
 
 @dataclass(frozen=True)

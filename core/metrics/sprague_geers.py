@@ -3,22 +3,22 @@
 For a measured signal ``m_i`` and a simulated signal ``c_i`` (same sampling rate, same length,
 ``i = 1 … n``), with ``ψ_mm = Σ m_i²``, ``ψ_cc = Σ c_i²``, ``ψ_cm = Σ c_i m_i``:
 
-* magnitude  ``M = sqrt(ψ_cc / ψ_mm) − 1``                       (seed 000 eq. 1)
-* phase      ``P = arccos(ψ_cm / sqrt(ψ_cc ψ_mm)) / π``           (seed 000 eq. 2)
-* comprehensive ``C = sqrt(M² + P²)``                             (seed 000 eq. 3)
+* magnitude  ``M = sqrt(ψ_cc / ψ_mm) − 1``                       (Polach & Böttcher 2014 eq. 1)
+* phase      ``P = arccos(ψ_cm / sqrt(ψ_cc ψ_mm)) / π``           (Polach & Böttcher 2014 eq. 2)
+* comprehensive ``C = sqrt(M² + P²)``                             (Polach & Böttcher 2014 eq. 3)
 
 ``M`` is dimensionless, ``M ∈ (−1, ∞)``, 0 for equal energy (``c = k·m`` gives ``M = k − 1``);
 ``P ∈ [0, 1]``, 0 for curves in phase, 1 for opposite sign (a sinusoid shifted by ``φ`` over
 whole periods gives ``P = φ/π``); ``C ≥ 0``. Sprague & Geers define these with time integrals;
 on a common uniform grid the sampling interval cancels and the sums are exact equivalents
-(Polach & Böttcher 2014, seed 000 §3.3, citing [10]).
+(Polach & Böttcher 2014, Polach & Böttcher 2014 §3.3, citing [10]).
 
 References
 ----------
 Sprague, M. A. & Geers, T. L. (2004) A spectral-element method for modelling cavitation in
 transient fluid–structure interaction. Int. J. Numer. Meth. Engng 60, 2467–2499 (error factors).
 Polach, O. & Böttcher, A. (2014) A new approach to define criteria for rail vehicle model
-validation. Vehicle System Dynamics 52 sup1, 125–141 (seed 000), §3.3 eq. (1)–(3).
+validation. Vehicle System Dynamics 52 sup1, 125–141 (Polach & Böttcher 2014), §3.3 eq. (1)–(3).
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from core.errors import InvalidSignal
-from core.metrics._checks import as_pair
+from railval.core.errors import InvalidSignal
+from railval.core.metrics._checks import as_pair
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,7 @@ def normalised_correlation(psi_mm: float, psi_cc: float, psi_cm: float) -> float
 
 
 def sprague_geers(measured: np.ndarray, simulated: np.ndarray) -> SpragueGeers:
-    """Sprague–Geers error factors of ``simulated`` against ``measured`` (seed 000 eq. 1–3).
+    """Sprague–Geers error factors of ``simulated`` against ``measured`` (Polach & Böttcher 2014 eq. 1–3).
 
     Parameters
     ----------

@@ -23,7 +23,7 @@ References
 ----------
 Bendat, J. S. & Piersol, A. G. (2010) Random Data: Analysis and Measurement Procedures, 4th
 ed., Wiley, ch. 5 and 8 (cross-correlation, time-delay estimation).
-Polach & Böttcher 2014 (seed 000) §4.2: influence of synchronisation on the phase error.
+Polach & Böttcher 2014 (Polach & Böttcher 2014) §4.2: influence of synchronisation on the phase error.
 """
 
 from __future__ import annotations
@@ -33,8 +33,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import scipy.signal
 
-from core.errors import InvalidParameter
-from core.metrics._checks import as_pair, positive
+from railval.core.errors import InvalidParameter
+from railval.core.metrics._checks import as_pair, positive
 
 DEFAULT_MAX_LAG_S = 2.0
 

@@ -1,13 +1,13 @@
 """The effect library: ONE registry of the physical effects a user can switch on in the built-in
-simulator (DESIGN §6), with parameters (unit, default, bounds), a plain-language explanation
+simulator (docs/design.md §6), with parameters (unit, default, bounds), a plain-language explanation
 and the EN 14363 quantities / zones / frequency bands each is expected to move.
 
 ``EFFECTS[id]`` is an :class:`Effect`; :func:`resolve_effects` checks a configuration's
 ``{effect id: {parameter: value}}`` dict and fills defaults. Unknown ids or parameters and
-out-of-bounds values raise :class:`core.errors.InvalidParameter` naming the effect, the
+out-of-bounds values raise :class:`railval.core.errors.InvalidParameter` naming the effect, the
 parameter, the bounds and the value.
 
-How each effect enters the equations is in :mod:`core.sim.model` (``_apply_effects``) and in
+How each effect enters the equations is in :mod:`railval.core.sim.model` (``_apply_effects``) and in
 ``docs/simulator.md``.
 """
 
@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from core.errors import InvalidParameter
-from core.sim.params import Param, resolve
+from railval.core.errors import InvalidParameter
+from railval.core.sim.params import Param, resolve
 
 QUANTITY_IDS = ("Y_qst", "Q_qst", "YQ_qst", "SumY_qst", "Y_max", "Q_max", "YQ_max", "SumY_max",
                 "ay_rms", "az_rms", "ay_max", "az_max")

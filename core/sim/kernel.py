@@ -17,7 +17,7 @@ the caller's choice of dt). Output: block means over ``decim`` steps (anti-alias
 The equations (quasi-static acceleration in the track plane a_q = v²κ − g·φ_t, Kalker linear
 creep with Shen–Hedrick–Elkins saturation, gravitational stiffness via the contact angle,
 flange contact as a stiff spring beyond the clearance) are documented in ``docs/simulator.md``
-and in :mod:`core.sim.model`.
+and in :mod:`railval.core.sim.model`.
 """
 
 from __future__ import annotations

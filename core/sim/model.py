@@ -1,7 +1,7 @@
 """Assembly of the simulator's arrays from a vehicle template, a section and effects, and the
 public simulation API (:func:`simulate_section`, :func:`simulate_campaign`).
 
-Wheel–rail contact (per wheel, :mod:`core.sim.kernel`)
+Wheel–rail contact (per wheel, :mod:`railval.core.sim.kernel`)
 -----------------------------------------------------
 * Rolling radius difference from the equivalent conicity λe (UIC 519): r_L − r0 = λe·y_rel, plus
   a flange-root term 1.5·(y_rel − g/2 − (clearance − 2 mm)) beyond it (steeper radius growth of
@@ -35,12 +35,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.errors import InvalidParameter
-from core.sim import kernel as K
-from core.sim.effects import resolve_effects
-from core.sim.track import DS, TrackSection
-from core.sim.vehicles import G, VehicleModel
-from core.types import SignalSet
+from railval.core.errors import InvalidParameter
+from railval.core.sim import kernel as K
+from railval.core.sim.effects import resolve_effects
+from railval.core.sim.track import DS, TrackSection
+from railval.core.sim.vehicles import G, VehicleModel
+from railval.core.types import SignalSet
 
 H_SECONDARY = 0.9  # m above rail: secondary spring / yaw damper attachment height (coach)
 H_LEAF = 0.8  # m above rail: leaf spring attachment (wagon)
@@ -276,9 +276,9 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
                      seed: int | None = None, parameters: Mapping[str, float] | None = None,
                      channels: Sequence[str] | None = None, nuisance: Mapping[str, float] | None = None,
                      speed_factor: float = 1.0) -> SignalSet:
-    """Simulate one section; return a :class:`core.types.SignalSet` at ``fs_out`` Hz.
+    """Simulate one section; return a :class:`railval.core.types.SignalSet` at ``fs_out`` Hz.
 
-    ``effects``: ``{effect id: {param: value}}`` (see :mod:`core.sim.effects`; defaults filled,
+    ``effects``: ``{effect id: {param: value}}`` (see :mod:`railval.core.sim.effects`; defaults filled,
     bounds checked). Irregularities: generated from the section's ORE B176 level with the
     section's seed (``seed`` overrides it) unless ``measured_irregularities`` is on and the
     section carries measured ones. ``parameters``: vehicle template overrides (``model.NAME``
@@ -359,7 +359,7 @@ def simulate_campaign(vehicle, sections: Sequence, *, layouts: Mapping[str, dict
                       fs: float | Mapping[str, float] = 200.0, workers: int | None = None,
                       progress=None, **_ignored) -> dict[str, SignalSet]:
     """Simulate every section; ``sections`` are :class:`TrackSection` or
-    :class:`core.types.SectionInfo` (then ``layouts[id]`` gives the layout record). Returns
+    :class:`railval.core.types.SectionInfo` (then ``layouts[id]`` gives the layout record). Returns
     ``{section id: SignalSet}``. ``fs``: one rate or ``{section id: rate}``.
 
     ``workers``: processes (default: 2 in the main process when more than

@@ -2,7 +2,7 @@
 
 Every model parameter of the simulator (vehicle templates, effects) is a :class:`Param`; values
 are checked against its bounds where they enter (:func:`check_value`) and a violation raises
-:class:`core.errors.InvalidParameter` naming the owner, the parameter, the bounds and the value.
+:class:`railval.core.errors.InvalidParameter` naming the owner, the parameter, the bounds and the value.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from core.errors import InvalidParameter
+from railval.core.errors import InvalidParameter
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
-"""Synthetic campaigns with a hidden effect (DESIGN §7 "Data with a hidden effect"). Pure: builds
-arrays and manifest records; :mod:`app.services.synth` writes and imports them.
+"""Synthetic campaigns with a hidden effect (docs/design.md §7 "Data with a hidden effect"). Pure: builds
+arrays and manifest records; :mod:`railval.app.services.synth` writes and imports them.
 
 Recipe
 ------
@@ -31,13 +31,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.errors import InvalidParameter
-from core.sim.effects import EFFECTS, resolve_effects
-from core.sim.model import simulate_section
-from core.sim.track import DS, TrackSection, generate_irregularities, irregularities_to_layout
-from core.sim.vehicles import G, VehicleModel
-from core.types import SignalSet, split_channel
-from core.zones import zone_for_radius
+from railval.core.errors import InvalidParameter
+from railval.core.sim.effects import EFFECTS, resolve_effects
+from railval.core.sim.model import simulate_section
+from railval.core.sim.track import DS, TrackSection, generate_irregularities, irregularities_to_layout
+from railval.core.sim.vehicles import G, VehicleModel
+from railval.core.types import SignalSet, split_channel
+from railval.core.zones import zone_for_radius
 
 #: hidden-effect values used when ``--hidden EFFECT`` gives no value: chosen so the baseline
 #: clearly fails the DynoTRAIN limits (see docs/simulator.md for the check)

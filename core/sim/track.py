@@ -28,11 +28,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.errors import InvalidParameter
+from railval.core.errors import InvalidParameter
 
 G = 9.81
 GAUGE_HALF_BASE = 0.75  # m, b in the ORE spectra (half the rail spacing)
-S_TRACK = 1.5  # m, rail centre spacing used for cant: angle = h / s (DESIGN, s = 1500 mm)
+S_TRACK = 1.5  # m, rail centre spacing used for cant: angle = h / s (standard-gauge rail centre spacing, s = 1500 mm)
 DS = 0.5  # m, irregularity grid spacing
 OMEGA_C, OMEGA_R, OMEGA_S = 0.8246, 0.0206, 0.4380
 ORE_LEVELS = {"low": (4.032e-7, 2.119e-7), "high": (1.080e-6, 6.125e-7)}
@@ -152,7 +152,7 @@ class TrackSection:
 
     def cant_deficiency_acc(self) -> float:
         """Quasi-static lateral acceleration in the track plane a_q = v²/R − g·h/s (m/s², s =
-        1500 mm) in the constant curve (EN 14363 / DESIGN §6)."""
+        1500 mm) in the constant curve (EN 14363 / docs/design.md §6)."""
         if not self.is_curve:
             return 0.0
         return self.speed_ms**2 / abs(self.radius_m) - G * self.cant_mm / 1000.0 / S_TRACK
@@ -194,7 +194,7 @@ class TrackSection:
 
     @classmethod
     def from_info(cls, info, layout: dict | None = None, **kw) -> TrackSection:
-        """Build from a :class:`core.types.SectionInfo` and its optional ``layout`` record (see
+        """Build from a :class:`railval.core.types.SectionInfo` and its optional ``layout`` record (see
         docs/simulator.md). Without a layout the evaluated range is the constant curve, preceded
         by a transition of min(6 s·v, 150 m, half the run-in) and followed by ≈ 10 s of track."""
         lay = dict(layout or {})

@@ -9,7 +9,7 @@ roll follow the rail, or are free on the track springs with ``track_flexibility`
 secondary suspension with springs in x/y/z per side, vertical and lateral dampers, yaw dampers,
 anti-roll bar.
 
-Defaults marked **[MB]** are the Manchester Benchmark vehicle 1 values quoted in DESIGN §6
+Defaults marked **[MB]** are the Manchester Benchmark vehicle 1 values quoted in docs/design.md §6
 (Iwnicki S., *The Manchester Benchmarks for rail vehicle simulation*, Vehicle System Dynamics
 30(3–4), 1998): car body 32 000 kg, pitch inertia 1.97e6 kg·m², bogie centres 19 m; bogie
 2615 kg, pitch 1476 kg·m², wheelbase 2.56 m; wheelset 1813 kg; primary 1.2 MN/m and 4 kN·s/m,
@@ -36,8 +36,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from core.errors import InvalidParameter
-from core.sim.params import Param, resolve
+from railval.core.errors import InvalidParameter
+from railval.core.sim.params import Param, resolve
 
 G = 9.81  #: gravitational acceleration, m/s²
 
@@ -130,7 +130,7 @@ class VehicleModel:
     """A vehicle template with (checked) parameter values.
 
     ``VehicleModel("coach", {"m_carbody": 35000})``; unknown names or out-of-bounds values raise
-    :class:`core.errors.InvalidParameter`.
+    :class:`railval.core.errors.InvalidParameter`.
     """
 
     template: str = "coach"

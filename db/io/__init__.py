@@ -15,7 +15,7 @@ extension          library     layout
 =================  ==========  ====================================================
 
 Columns are ``time_s``, ``distance_m`` and channel names (``docs/campaign-format.md``).
-A file that cannot be read raises :class:`core.errors.CampaignFormatError` naming it.
+A file that cannot be read raises :class:`railval.core.errors.CampaignFormatError` naming it.
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from core.errors import CampaignFormatError
-from db.io import formats
+from railval.core.errors import CampaignFormatError
+from railval.db.io import formats
 
 READERS = {
     ".csv": formats.read_csv,

@@ -1,4 +1,4 @@
-"""One reader and one writer per file format (see :mod:`db.io`). Floats stay float64."""
+"""One reader and one writer per file format (see :mod:`railval.db.io`). Floats stay float64."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from core.errors import CampaignFormatError
+from railval.core.errors import CampaignFormatError
 
 
 # -- CSV ---------------------------------------------------------------------------------

@@ -1,6 +1,6 @@
-"""Alembic environment of railval: the target metadata is :data:`db.models.Base.metadata`.
+"""Alembic environment of railval: the target metadata is :data:`railval.db.models.Base.metadata`.
 
-Runs programmatically from :meth:`db.engine.Database.init`, which hands over an open
+Runs programmatically from :meth:`railval.db.engine.Database.init`, which hands over an open
 connection in ``config.attributes["connection"]``; from the ``alembic`` command line it
 connects to ``sqlalchemy.url``. SQLite uses batch mode (table rebuilds for ALTER).
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 from alembic import context
 from sqlalchemy import create_engine
 
-from db.models import Base
+from railval.db.models import Base
 
 config = context.config
 target_metadata = Base.metadata
