@@ -31,9 +31,18 @@ from typing import Any
 
 import numpy as np
 
-from railval.app.scales import nice_limits, nice_ticks, unit_label
-from railval.core.errors import RailvalError
+from railval.app.scales import (
+    FAIL_COLOR,
+    PASS_COLOR,
+    bar_top,
+    downsample_xy,
+    nice_limits,
+    nice_ticks,
+    unit_label,
+    verdict_color,
+)
 from railval.core.diagnosis import where_grid
+from railval.core.errors import RailvalError
 from railval.core.filters import filtfilt_rows
 from railval.core.quantities import channel_for
 from railval.core.types import channel_kind
@@ -43,6 +52,8 @@ CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "goo
 CHROMIUM_ARGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync")
 PDF_TIMEOUT_S = 120
+#: points per trace of the report's line charts
+SVG_POINTS = 1200
 
 
 class ReportError(RailvalError):
@@ -76,8 +87,7 @@ def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
     """Vertical bar chart as SVG; bars beyond ±1 red, others green; dashed limit lines."""
     ml, mr, mt, mb = 62, 12, 30, 92
     w, h = width - ml - mr, height - mt - mb
-    finite = [abs(v) for v in values if v is not None and math.isfinite(v)]
-    top = max([1.2] + [v * 1.1 for v in finite])
+    top = bar_top(values)
     signed = any(lim < 0 for lim in limits)
     lo = -top if signed else 0.0
 
@@ -95,7 +105,7 @@ def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
     for i, (lab, v) in enumerate(zip(labels, values, strict=True)):
         x0 = ml + i * bw
         if v is not None and math.isfinite(v):
-            color = "#c62828" if abs(v) > 1.0 else "#2e7d32"
+            color = verdict_color(v)
             y0, y1 = sorted((y(0.0), y(v)))
             out.append(f'<rect x="{x0 + bw * 0.15:.1f}" y="{y0:.1f}" width="{bw * 0.7:.1f}" '
                        f'height="{max(y1 - y0, 0.5):.1f}" fill="{color}"><title>{_esc(lab)}: {v:.3f}</title></rect>')
@@ -156,16 +166,6 @@ def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: s
     out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
     out.append("</svg>")
     return "".join(out)
-
-
-def _thin(x: np.ndarray, y: np.ndarray, n_out: int = 1200) -> tuple[np.ndarray, np.ndarray]:
-    """Min-max LTTB downsampling (tsdownsample) for the SVG plots; short signals unchanged."""
-    if x.size <= n_out:
-        return x, y
-    from tsdownsample import MinMaxLTTBDownsampler
-
-    idx = MinMaxLTTBDownsampler().downsample(x, y, n_out=n_out)
-    return x[idx], y[idx]
 
 
 # ----------------------------------------------------------------------------- report
@@ -246,15 +246,15 @@ h1 { font-size: 22px; margin-bottom: 4px; } h2 { font-size: 17px; margin-top: 26
   border-bottom: 1px solid #ccc; padding-bottom: 3px; } h3 { font-size: 14px; }
 table { border-collapse: collapse; margin: 8px 0; } th, td { border: 1px solid #ccc; padding: 3px 7px;
   text-align: right; } th { background: #f0f2f5; } td.l, th.l { text-align: left; }
-.pass { color: #2e7d32; font-weight: bold; } .fail { color: #c62828; font-weight: bold; }
+.pass { color: {pass_}; font-weight: bold; } .fail { color: {fail}; font-weight: bold; }
 .verdict { padding: 10px 14px; border-radius: 4px; font-size: 15px; margin: 10px 0; }
-.verdict.ok { background: #e8f5e9; border: 1px solid #2e7d32; }
-.verdict.no { background: #ffebee; border: 1px solid #c62828; }
+.verdict.ok { background: #e8f5e9; border: 1px solid {pass_}; }
+.verdict.no { background: #ffebee; border: 1px solid {fail}; }
 .meta td { text-align: left; border: none; padding: 1px 10px 1px 0; }
 .hashes td { font-family: 'DejaVu Sans Mono', monospace; font-size: 10px; }
 .charts { display: flex; flex-wrap: wrap; gap: 12px; } .note { color: #555; }
 @media print { h2 { page-break-after: avoid; } .worst { page-break-inside: avoid; } }
-"""
+""".replace("{pass_}", PASS_COLOR).replace("{fail}", FAIL_COLOR)
 
 
 def diverging_color(value: float, limit: float = 2.0) -> str:
@@ -410,7 +410,7 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
         for label, cfg, color in (("measurement", None, "#555555"), (configuration, configuration, "#1f77b4")):
             ss = backend.signals(campaign, cfg, r.section, [ch])
             y = filtfilt_rows(np.asarray(ss.channels[ch], float)[None, :], float(ss.fs), fkind)[0]
-            x, y = _thin(np.asarray(ss.distance_m, float), y)
+            x, y = downsample_xy(np.asarray(ss.distance_m, float), y, n_out=SVG_POINTS)
             traces.append((label, x, y, color))
         sec = secs.get(r.section)
         unit = unit_label(entry.unit if entry else "")

@@ -77,9 +77,3 @@ def _pairs_of(result: Any, quantity: str) -> list[dict[str, Any]]:
         "quantity": quantity, "section": str(r.section), "position": str(r.position),
         "zone": int(r.zone), "M_v": float(r.M), "S_v": float(r.S), "D_v": float(r.D),
     } for r in sub.itertuples(index=False)]
-
-
-def finite_or_nan(x: Any) -> float:
-    return float("nan") if x is None else float(x)
-
-
