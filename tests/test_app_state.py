@@ -1,4 +1,4 @@
-"""UI state of the web app without a browser (app/state.py).
+"""UI state of the web app without a browser (app/state/).
 
 The campaign is the demo folder of ``tests/factories`` imported into a fresh SQLite
 database once per module (12 sections, 4 zones, 2 configurations).
@@ -22,8 +22,8 @@ from railval.app.state import (
     ConfigInfo,
     DashboardState,
     DiagnoseState,
-    _channel_for,
 )
+from railval.core.quantities import channel_for
 from railval.core.types import SectionInfo
 
 
@@ -90,7 +90,7 @@ def test_coverage_shortfalls_are_precise():
 def test_channel_for_quantity_position_uses_the_registry(quantity, position, expected):
     chans = [f"{k}_w{n}{s}" for k in ("Y", "Q") for n in (1, 2) for s in "LR"] + \
             [f"{k}_{p}" for k in ("ay_cb", "az_cb") for p in ("b1", "b2")]
-    assert _channel_for(quantity, position, chans) == expected
+    assert channel_for(quantity, position, chans) == expected
 
 
 def test_compare_series_measured_first_eval_range_and_filter(app):
