@@ -11,7 +11,8 @@ returns a :class:`WorkshopAnalysis`; ``to_dict()`` is the JSON of ``railval work
 * ``agreement`` — Fleiss κ, Krippendorff α and Gwet AC1, each with a percentile bootstrap
   interval over plots;
 * ``threshold`` — the normalised deviation (and the Sprague–Geers C) at which a typical
-  reviewer says Yes half of the time, with a bootstrap interval over plots;
+  reviewer says Yes half of the time, with a cluster-robust delta-method interval
+  (:mod:`.threshold`);
 * ``scaling_effect`` — the paired comparison of the same reviewer's answers on the same plot
   at the workshop's fixed scaling and at automatic scaling (exact McNemar test), or ``None``.
 
@@ -269,7 +270,7 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
     (``"fixed"`` or ``"auto"``), ``seconds`` (time on the plot, float, may be NaN).
     ``plots``: one row per plot, columns ``plot`` (id), ``kind``, ``deviation`` (normalised
     |D_v| / std limit, NaN if none) and ``sg_c`` (Sprague–Geers C, NaN if none).
-    ``n_boot``: bootstrap replicates for the agreement and threshold intervals (0 = none);
+    ``n_boot``: bootstrap replicates for the agreement intervals (0 = none);
     ``seed``: their random seed (the result is reproducible).
 
     Raises :class:`~railval.core.errors.InvalidParameter` naming the row and column of a bad
@@ -355,7 +356,7 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
     offs = strict[fr]
     for col, key, ci_key in (("deviation", "deviation_at_50", "ci"), ("sg_c", "sg_c_at_50", "sg_c_ci")):
         vals = p[col].to_numpy()[fp]
-        fit_t = fit_threshold(vals, fy, offs, fp, n_boot=int(n_boot), confidence=CONFIDENCE, rng=rng)
+        fit_t = fit_threshold(vals, fy, offs, fp, confidence=CONFIDENCE)
         threshold[key] = _f(fit_t.at_50)
         threshold[ci_key] = _interval(*fit_t.ci) if fit_t.ci else None
         threshold[f"{col}_fit"] = {k: (_f(v) if isinstance(v, float) else v) for k, v in fit_t.to_dict().items()

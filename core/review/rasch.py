@@ -8,7 +8,8 @@ plot plays the person and the reviewer the item):
 
 fitted by joint maximum likelihood with a small ridge penalty ``λ/2 (Σ a_p² + Σ s_r²)``
 (a Gaussian prior of standard deviation ``1/√λ``, which keeps plots or reviewers with only
-Yes or only No answers finite), by Newton's method on the exact gradient and Hessian. The
+Yes or only No answers finite), by Newton's method on the exact gradient and Hessian (solved through the Schur complement
+of the diagonal plot block). The
 likelihood only identifies differences ``a_p − s_r``; the reported scale is centred so that
 the mean strictness of the reviewers is 0 ("a typical reviewer"), and a reviewer with
 strictness +1 needs a plot one logit more acceptable than a typical reviewer does to say Yes
@@ -86,35 +87,44 @@ def fit_rasch(reviewer, plot, answer, *, n_reviewers: int | None = None, n_plots
         raise InvalidParameter("fit_rasch: reviewer/plot index out of range")
     n_par = npl + nr
     theta = np.zeros(n_par)                      # [acceptability (npl), strictness (nr)]
+    flat = p * nr + r
 
     def objective(th: np.ndarray) -> float:
         eta = th[p] - th[npl + r]
         return float(np.sum(np.logaddexp(0.0, eta) - y * eta) + 0.5 * ridge * th @ th)
 
+    def information(th: np.ndarray):
+        """Penalised observed information in blocks: diagonal ``d_a`` (plots), diagonal
+        ``d_s`` (reviewers) and the plots × reviewers block ``cross`` (= −w_pr)."""
+        pi = scipy.special.expit(th[p] - th[npl + r])
+        wgt = pi * (1.0 - pi)
+        d_a = np.bincount(p, wgt, npl) + ridge
+        d_s = np.bincount(r, wgt, nr) + ridge
+        cross = -np.bincount(flat, wgt, npl * nr).reshape(npl, nr)
+        return pi, d_a, d_s, cross
+
+    def schur(d_a, d_s, cross):
+        """Cholesky factor of the Schur complement ``S = D_s − Cᵀ D_a⁻¹ C`` (reviewers ×
+        reviewers) — the plot block is diagonal, so only an nr × nr system is solved."""
+        m = cross / d_a[:, None]
+        s_mat = np.diag(d_s) - np.einsum("pr,pq->rq", cross, m)
+        return m, scipy.linalg.cho_factor(s_mat, lower=True)
+
     f = objective(theta)
     converged = False
     it = 0
-    hess = np.eye(n_par) * ridge
     for it in range(1, max_iter + 1):
-        eta = theta[p] - theta[npl + r]
-        pi = scipy.special.expit(eta)
+        pi, d_a, d_s, cross = information(theta)
         resid = y - pi
-        wgt = pi * (1.0 - pi)
-        grad = ridge * theta
-        grad[:npl] -= np.bincount(p, resid, npl)
-        grad[npl:] += np.bincount(r, resid, nr)
-        hess = np.zeros((n_par, n_par))
-        hess[np.arange(npl), np.arange(npl)] = np.bincount(p, wgt, npl)
-        hess[npl + np.arange(nr), npl + np.arange(nr)] = np.bincount(r, wgt, nr)
-        cross = np.zeros((npl, nr))
-        np.add.at(cross, (p, r), -wgt)
-        hess[:npl, npl:] = cross
-        hess[npl:, :npl] = cross.T
-        hess[np.diag_indices(n_par)] += ridge
-        if np.max(np.abs(grad)) < tol:
+        g_a = ridge * theta[:npl] - np.bincount(p, resid, npl)
+        g_s = ridge * theta[npl:] + np.bincount(r, resid, nr)
+        if max(np.max(np.abs(g_a), initial=0.0), np.max(np.abs(g_s), initial=0.0)) < tol:
             converged = True
             break
-        step = scipy.linalg.solve(hess, grad, assume_a="pos")
+        m, chol = schur(d_a, d_s, cross)
+        step_s = scipy.linalg.cho_solve(chol, g_s - m.T @ g_a)
+        step_a = (g_a - cross @ step_s) / d_a
+        step = np.concatenate([step_a, step_s])
         t = 1.0
         while True:
             cand = theta - t * step
@@ -123,15 +133,21 @@ def fit_rasch(reviewer, plot, answer, *, n_reviewers: int | None = None, n_plots
                 break
             t *= 0.5
         theta, f = cand, fc
-    cov = scipy.linalg.inv(hess)
-    # centre: s_c = s − mean(s), a_c = a − mean(s)  (a linear map T of theta)
-    t_map = np.eye(n_par)
-    t_map[:, npl:] -= np.full((n_par, nr), 1.0 / nr)
-    centred = t_map @ theta
-    cov_c = t_map @ cov @ t_map.T
-    se = np.sqrt(np.clip(np.diag(cov_c), 0.0, None))
+    # covariance = inverse information, by blocks:  Σ_ss = S⁻¹,  Σ_as = −M S⁻¹,
+    # Σ_aa = D_a⁻¹ + M S⁻¹ Mᵀ  (M = D_a⁻¹ C); then centred on the mean strictness:
+    # s_c = s − s̄, a_c = a − s̄.
+    _, d_a, d_s, cross = information(theta)
+    m, chol = schur(d_a, d_s, cross)
+    s_inv = scipy.linalg.cho_solve(chol, np.eye(nr))
+    m_sinv = np.einsum("pr,rq->pq", m, s_inv)
+    var_a = 1.0 / d_a + np.einsum("pq,pq->p", m_sinv, m)
+    cov_a_sbar = -m_sinv.mean(axis=1)
+    var_sbar = float(s_inv.mean())
+    var_s_c = np.diag(s_inv) - 2.0 * s_inv.mean(axis=1) + var_sbar
+    var_a_c = var_a - 2.0 * cov_a_sbar + var_sbar
+    s_bar = float(theta[npl:].mean())
     return RaschFit(
-        strictness=centred[npl:], strictness_se=se[npl:],
-        acceptability=centred[:npl], acceptability_se=se[:npl],
+        strictness=theta[npl:] - s_bar, strictness_se=np.sqrt(np.clip(var_s_c, 0.0, None)),
+        acceptability=theta[:npl] - s_bar, acceptability_se=np.sqrt(np.clip(var_a_c, 0.0, None)),
         iterations=it, converged=converged,
     )
