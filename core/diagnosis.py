@@ -37,7 +37,7 @@ pattern components where their signatures differ most as the evidence to look at
 
 References
 ----------
-Polach & Böttcher 2014 (Polach & Böttcher 2014), §5: D_v, limits, zones. docs/design.md §7 (this procedure).
+Polach & Böttcher 2014, §5: D_v, limits, zones. docs/design.md §7 (this procedure).
 Welch 1967 (PSD estimate, via :mod:`railval.core.psd`).
 """
 

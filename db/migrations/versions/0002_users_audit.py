@@ -4,7 +4,7 @@
 (and TRUNCATE on PostgreSQL). ``audit_head`` holds one row (id 1: seq 0, the genesis hash).
 
 Revision ID: 0002_users_audit
-Revises: 0001
+Revises: 0006_analysis_runs
 Create Date: 2026-11-23 11:45:00
 
 """
@@ -15,7 +15,7 @@ from alembic import op
 
 # revision identifiers, used by Alembic.
 revision: str = '0002_users_audit'
-down_revision: str | Sequence[str] | None = '0001'
+down_revision: str | Sequence[str] | None = '0006_analysis_runs'
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 
