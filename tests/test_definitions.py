@@ -238,3 +238,17 @@ def test_cli_marks_definition_sensitive_quantities():
     assert "passes with percentile linearly interpolated" in text
     assert "definition-sensitive (pass/fail changes" in text and text.endswith(
         "NOT VALIDATED (definition-sensitive: another reading gives the opposite verdict)")
+
+
+def test_result_cache_keeps_alternatives_and_supplementary():
+    from railval.app.services.validation import _pack, _unpack
+
+    rid = Reading("linear", "first_sample", "samples_closed").id
+    v = SectionValues("S1", {("SumY_max", "ws1"): 3.0}, warnings=["w"],
+                      alternatives={rid: {("SumY_max", "ws1"): math.nan}},
+                      supplementary={("ay_bg_rms", "b1"): 0.25})
+    back = _unpack("S1", _pack(v))
+    assert dict(back) == dict(v) and back.warnings == ["w"]
+    assert math.isnan(back.value_under(rid, ("SumY_max", "ws1")))
+    assert back.value_under(CHOSEN.id, ("SumY_max", "ws1")) == 3.0
+    assert back.supplementary == {("ay_bg_rms", "b1"): 0.25}
