@@ -3,7 +3,7 @@
 House rules, applied by every builder here:
 
 * axes labelled with their quantity **and unit**; fonts readable at 1280 px width;
-* measurement drawn first (beneath, dark grey), simulations on top in a fixed colour order;
+* measurement drawn first (beneath, black), simulations on top in a fixed colour order;
 * fixed y scaling per plot from all traces (nice round limits) — switching a configuration
   on or off never rescales the other traces silently (``framewise=False``);
 * the evaluated (constant-curvature) range shaded;
@@ -39,7 +39,9 @@ from holoviews.operation.downsample import downsample1d
 from railval.app.scales import (
     FAIL_COLOR,
     LIMIT_COLOR,
+    MEASURED_COLOR,
     PASS_COLOR,
+    SIM_COLORS,
     bar_top,
     downsample_xy,
     nice_limits,
@@ -50,8 +52,6 @@ from railval.app.state.compare import CompareData
 
 hv.extension("bokeh", logo=False)
 
-MEASURED_COLOR = "#444444"
-SIM_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
 FONTS = {"title": "13pt", "labels": "12pt", "xticks": "11pt", "yticks": "11pt", "legend": "11pt"}
 #: signals longer than this are downsampled on the server
 DOWNSAMPLE_ABOVE = 2000
@@ -120,7 +120,7 @@ def compare_plot(data: CompareData, height: int = 330, downsample: bool = True,
 class CompareFigure:
     """One plain Bokeh figure of the Compare page, built once and updated in place.
 
-    Up to :data:`MAX_TRACES` line renderers (the first reserved for the measurement, dark grey,
+    Up to :data:`MAX_TRACES` line renderers (the first reserved for the measurement, black,
     drawn beneath; then :data:`SIM_COLORS`), the evaluated range as a ``BoxAnnotation``, the
     legend outside right, fixed y range. :meth:`update` replaces the sources' data (downsampled
     to :data:`FIGURE_POINTS`) and labels; with ``x_range`` shared between figures, zooming one

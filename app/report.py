@@ -33,7 +33,9 @@ import numpy as np
 
 from railval.app.scales import (
     FAIL_COLOR,
+    MEASURED_COLOR,
     PASS_COLOR,
+    SIM_COLORS,
     bar_top,
     downsample_xy,
     nice_limits,
@@ -407,7 +409,8 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
         entry = channel_kind(ch)
         fkind, flabel = (entry.en_filter, entry.filter_label) if entry else ("lowpass", "low-pass 20 Hz")
         traces = []
-        for label, cfg, color in (("measurement", None, "#555555"), (configuration, configuration, "#1f77b4")):
+        for label, cfg, color in (("measurement", None, MEASURED_COLOR),
+                                  (configuration, configuration, SIM_COLORS[0])):
             ss = backend.signals(campaign, cfg, r.section, [ch])
             y = filtfilt_rows(np.asarray(ss.channels[ch], float)[None, :], float(ss.fs), fkind)[0]
             x, y = downsample_xy(np.asarray(ss.distance_m, float), y, n_out=SVG_POINTS)

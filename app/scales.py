@@ -1,7 +1,7 @@
 """Chart conventions shared by the app's plots (HoloViews/Bokeh), pages and the HTML report
-(docs/design.md §5: fixed, consistent axis scaling): nice axis limits and ticks, unit labels,
-pass/fail colours and the bar-chart rule of the normalised values, and the downsampling of
-long signals for display."""
+(docs/design.md §5: fixed, consistent axis scaling; measurement beneath, simulation on top):
+nice axis limits and ticks, unit labels, line colours, pass/fail colours and the bar-chart
+rule of the normalised values, and the downsampling of long signals for display."""
 
 from __future__ import annotations
 
@@ -14,6 +14,12 @@ from tsdownsample import MinMaxLTTBDownsampler
 PASS_COLOR = "#2e7d32"
 FAIL_COLOR = "#c62828"
 LIMIT_COLOR = "#000000"
+
+#: measurement black (drawn beneath); simulations in the Okabe–Ito colour-blind-safe palette
+#: (Okabe & Ito 2008, "Color Universal Design"), vermillion first: distinct from black in
+#: greyscale print and for the common colour-vision deficiencies
+MEASURED_COLOR = "#000000"
+SIM_COLORS = ("#D55E00", "#0072B2", "#009E73", "#CC79A7", "#E69F00")
 
 
 def nice_step(lo: float, hi: float, intervals: int = 5) -> float:

@@ -37,7 +37,7 @@ pattern components where their signatures differ most as the evidence to look at
 
 References
 ----------
-Polach & Böttcher 2014 (Polach & Böttcher 2014), §5: D_v, limits, zones. docs/design.md §7 (this procedure).
+Polach & Böttcher 2014, §5: D_v, limits, zones. docs/design.md §7 (this procedure).
 Welch 1967 (PSD estimate, via :mod:`railval.core.psd`).
 """
 
@@ -82,8 +82,10 @@ DEFAULT_BANDS_HZ: tuple[tuple[float, float], ...] = ((0.4, 1.0), (1.0, 2.0), (2.
 @dataclass(frozen=True)
 class Component:
     """What one pattern component measures, as fields: a validation pair aggregate
-    (``kind="pair"``: ``quantity``, EN 14363 ``zone``, ``position``) or a band-power ratio
-    (``kind="psd"``: acceleration ``channel``, ``band`` in Hz)."""
+    (``kind="pair"``: ``quantity``, EN 14363 ``zone``, ``position``), a band-power ratio
+    (``kind="psd"``: acceleration ``channel``, ``band`` in Hz) or a supplementary quantity
+    (``kind="supplementary"``: ``quantity``, ``position``, ``channel`` = its channel kind,
+    :mod:`railval.core.supplementary`)."""
 
     kind: str
     quantity: str = ""
@@ -100,9 +102,13 @@ class Component:
     def psd(cls, channel: str, band: tuple[float, float]) -> Component:
         return cls("psd", channel=channel, band=(float(band[0]), float(band[1])))
 
+    @classmethod
+    def supplementary(cls, quantity: str, position: str, channel_kind: str) -> Component:
+        return cls("supplementary", quantity=quantity, position=position, channel=channel_kind)
+
     @property
     def direction(self) -> str:
-        """Of a band-power component: the acceleration direction (``"ay"``, ``"az"``)."""
+        """Of a band-power or supplementary component: the acceleration direction (``"ay"``, ``"az"``)."""
         return self.channel.split("_")[0]
 
     @property
@@ -114,22 +120,31 @@ class Component:
         """As shown to a reader: ``"Y_qst zone 4 w1L"``, ``"psd az_cb_b1 5-10 Hz"``."""
         if self.kind == "psd":
             return f"psd {self.channel} {self.band_label}"
+        if self.kind == "supplementary":
+            return f"supp {self.quantity} {self.position}"
         return f"{self.quantity} zone {self.zone} {self.position}"
 
     @property
     def group(self) -> str:
-        """The weighting group: the quantity id, or ``"psd ay"``/``"psd az"``."""
-        return f"psd {self.direction}" if self.kind == "psd" else self.quantity
+        """The weighting group: the quantity id, ``"psd ay"``/``"psd az"`` or ``"bogie ay"``/``"bogie az"``."""
+        if self.kind == "psd":
+            return f"psd {self.direction}"
+        return f"bogie {self.direction}" if self.kind == "supplementary" else self.quantity
 
     def to_dict(self) -> dict[str, Any]:
         if self.kind == "psd":
             return {"kind": "psd", "channel": self.channel, "band": list(self.band)}
+        if self.kind == "supplementary":
+            return {"kind": "supplementary", "quantity": self.quantity, "position": self.position,
+                    "channel": self.channel}
         return {"kind": "pair", "quantity": self.quantity, "zone": self.zone, "position": self.position}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Component:
         if d["kind"] == "psd":
             return cls.psd(d["channel"], tuple(d["band"]))
+        if d["kind"] == "supplementary":
+            return cls.supplementary(d["quantity"], d["position"], d["channel"])
         return cls.pair(d["quantity"], d["zone"], d["position"])
 
 
@@ -492,7 +507,8 @@ def pattern_grids(components: Sequence[Component], values) -> tuple[PatternGrid,
     """Arrange a diagnosis pattern (its :class:`Component` s and values: mean normalised D_v
     of a quantity in a zone at a position, and log₂ PSD ratio simulation/measurement of an
     acceleration channel in a band) into (quantity × zone, car body acceleration direction ×
-    band) grids, averaging over positions and channels."""
+    band) grids, averaging over positions and channels; supplementary components are on
+    neither grid."""
     q_acc: dict[tuple[str, str], list[float]] = defaultdict(list)
     p_acc: dict[tuple[str, str], list[float]] = defaultdict(list)
     bands: dict[str, float] = {}
@@ -502,7 +518,7 @@ def pattern_grids(components: Sequence[Component], values) -> tuple[PatternGrid,
         if c.kind == "psd":
             bands[c.band_label] = c.band[0]
             p_acc[(c.direction, c.band_label)].append(v)
-        else:
+        elif c.kind == "pair":
             q_acc[(c.quantity, f"zone {c.zone}")].append(v)
     cols = sorted(bands, key=bands.__getitem__)
     kinds = [k for k in ("ay", "az") if any((k, b) in p_acc for b in cols)]

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from railval.core.errors import InvalidParameter
 from railval.core.types import BODY_POSITIONS, EN_FILTER_LABELS, WHEEL_POSITIONS, channel_kind
 
-SOURCE = "Polach & Böttcher 2014 (Polach & Böttcher 2014), §5, Table 2"
+SOURCE = "Polach & Böttcher 2014, §5, Table 2"
 
 #: Processing kinds: "median" = 50 % value with sign; "maxabs" = larger magnitude of the
 #: 0.15 % and 99.85 % values; "p99.85" = 99.85 % value; "rms" = root mean square.

@@ -38,7 +38,8 @@ class ChannelKind:
 
     ``en_filter`` is a filter kind of :mod:`railval.core.filters` (EN 14363:2005 on-track
     tests: wheel–rail forces low-pass 20 Hz, car body accelerations band-pass 0.4–10 Hz; the
-    bogie frame accelerations, shown but not validated, low-pass 20 Hz).
+    bogie frame accelerations, supplementary quantities of :mod:`railval.core.supplementary`,
+    the same band-pass).
     """
 
     kind: str
@@ -62,8 +63,8 @@ CHANNELS: dict[str, ChannelKind] = {c.kind: c for c in (
     ChannelKind("Q", "kN", "lowpass", "vertical wheel–rail force of one wheel", WHEEL_POSITIONS),
     ChannelKind("ay_cb", "m/s^2", "bandpass", "car body lateral acceleration", BODY_POSITIONS),
     ChannelKind("az_cb", "m/s^2", "bandpass", "car body vertical acceleration", BODY_POSITIONS),
-    ChannelKind("ay_bg", "m/s^2", "lowpass", "bogie frame lateral acceleration", BODY_POSITIONS),
-    ChannelKind("az_bg", "m/s^2", "lowpass", "bogie frame vertical acceleration", BODY_POSITIONS),
+    ChannelKind("ay_bg", "m/s^2", "bandpass", "bogie frame lateral acceleration", BODY_POSITIONS),
+    ChannelKind("az_bg", "m/s^2", "bandpass", "bogie frame vertical acceleration", BODY_POSITIONS),
 )}
 
 #: channel kind → canonical unit (a view of :data:`CHANNELS`)

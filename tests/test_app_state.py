@@ -231,6 +231,25 @@ def test_diagnose_suggested_name_is_unique(app):
     assert diag.suggested_name() == "baseline+friction_damping-2"
 
 
+def test_diagnose_new_name_follows_the_effect_until_typed(app):
+    """The new configuration's name names the effect that is added: it follows the choice
+    until the user types a name, and a name the user did not type is never stored with
+    another effect."""
+    diag = DiagnoseState(app)
+    diag.param.effect.objects = ["friction_damping", "parasitic_yaw_stiffness"]
+    diag.effect = "friction_damping"
+    assert diag.new_name == "baseline+friction_damping" and not diag.name_edited
+    diag.effect = "parasitic_yaw_stiffness"
+    assert diag.new_name == "baseline+parasitic_yaw_stiffness"
+    diag.new_name = "yaw-fit"  # typed by the user: kept when the effect changes
+    assert diag.name_edited
+    diag.effect = "friction_damping"
+    assert diag.new_name == "yaw-fit"
+    diag.new_name = ""  # cleared: follows the effect again
+    diag.effect = "parasitic_yaw_stiffness"
+    assert diag.new_name == "baseline+parasitic_yaw_stiffness"
+
+
 def test_pages_are_built_on_first_view_and_refresh_when_shown(demo_db):
     """Only the page shown is built at session start (first-page speed); another page is
     built when opened, and a hidden page refreshes when shown after a selection changed."""

@@ -18,6 +18,8 @@ from railval.core.validation import normalised_errors
 class DiagnoseState(param.Parameterized):
     effect = param.Selector(default=None, objects=[], allow_None=True)
     new_name = param.String(default="")
+    name_edited = param.Boolean(default=False, doc=(
+        "the user typed the new configuration's name; until then it follows the chosen effect"))
     candidates = param.List(default=[])
     parameters = param.Dict(default={}, doc="manually set parameters of the chosen effect")
     last_new_configuration = param.String(default="")
@@ -42,12 +44,32 @@ class DiagnoseState(param.Parameterized):
     def __init__(self, app: AppState, **params):
         super().__init__(**params)
         self.app = app
+        self._naming = False
         self.app.param.watch(lambda e: self._reset(), ["campaign", "configuration"])
         self.param.watch(lambda e: self._effect_changed(), ["effect"])
+        self.param.watch(self._name_typed, ["new_name"])
 
     def _reset(self) -> None:
         self.candidates = []
         self.residual = {}
+        if self.effect is not None and self.effect not in self.available_effects():
+            self.effect = None  # already part of the newly selected configuration
+        self.name_edited = False
+        self._suggest_name()
+
+    def _name_typed(self, event) -> None:
+        if not self._naming:  # a change that did not come from _suggest_name: the user typed it
+            self.name_edited = bool(event.new.strip())
+
+    def _suggest_name(self) -> None:
+        """Let the name follow the chosen effect until the user edits it."""
+        if self.name_edited:
+            return
+        self._naming = True
+        try:
+            self.new_name = self.suggested_name()
+        finally:
+            self._naming = False
 
     def where(self, effect: str | None = None) -> dict[str, PatternGrid]:
         """Where the configuration fails and what ``effect`` (a ranked candidate, default
@@ -69,6 +91,7 @@ class DiagnoseState(param.Parameterized):
         names = [p["name"] for p in eff["parameters"]] if eff else []
         self.param.fit_parameters.objects = names
         self.fit_parameters = []
+        self._suggest_name()
 
     def refresh_choices(self) -> None:
         """Candidate effects to choose from: those the configuration lacks (a choice no
@@ -136,7 +159,7 @@ class DiagnoseState(param.Parameterized):
             self.param.effect.objects = order
             if order:  # the top candidate chosen before the ranking is shown
                 self.effect = order[0]
-                self.new_name = self.suggested_name()
+                self._suggest_name()
             self.candidates = cands
         return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background)
 
@@ -145,7 +168,8 @@ class DiagnoseState(param.Parameterized):
         re-simulate and store as ``new_name`` whose parent is the current configuration."""
         app = self.app
         campaign, config, effect = app.campaign, app.configuration, self.effect
-        name = self.new_name or self.suggested_name()
+        # a name the user did not type always names the effect that is added
+        name = self.new_name if (self.name_edited and self.new_name.strip()) else self.suggested_name()
         params = dict(self.parameters)
         if effect is None:
             app.set_status("choose an effect to add first", "warning")
