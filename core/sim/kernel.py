@@ -386,43 +386,48 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR,
                 dQR = SC[KTZ] * (zr - cr - q[k, 1] + b0 * q[k, 2]) + SC[CTZ] * (zr1 - cr1 - u[k, 1] + b0 * u[k, 2])
                 Qw[i, 0] = q0 + dQL
                 Qw[i, 1] = q0 + dQR
-            for _it in range(2 if tflex else 1):
+            yrel = yw - 0.5 * (dtr[i, 0] + dtr[i, 1])
+            eL = yrel - 0.5 * gai - SC[YFR]
+            eR = -yrel - 0.5 * gai - SC[YFR]
+            drL = SC[LAM] * yrel + (SC[LAM2] * eL if eL > 0.0 else 0.0)
+            drR = -SC[LAM] * yrel + (SC[LAM2] * eR if eR > 0.0 else 0.0)
+            xiL = -drL / r0 - b0 * u[k, 4] / v - b0 * kb[k]
+            xiR = -drR / r0 + b0 * u[k, 4] / v + b0 * kb[k]
+            xiy = u[k, 0] / v - q[k, 4]
+            QL = Qw[i, 0]
+            QR = Qw[i, 1]
+            fL = np.cbrt(QL / q0) ** 2 if QL > 0.0 else 0.0
+            fR = np.cbrt(QR / q0) ** 2 if QR > 0.0 else 0.0
+            fxL = -SC[F11] * fL * xiL
+            fyL = -SC[F22] * fL * xiy
+            fxR = -SC[F11] * fR * xiR
+            fyR = -SC[F22] * fR * xiy
+            sL = 1.0
+            sR = 1.0
+            if SC[SAT] > 0.0:
+                sL = _sat_factor(fxL, fyL, SC[MU] * max(QL, 0.0))
+                sR = _sat_factor(fxR, fyR, SC[MU] * max(QR, 0.0))
+                fxL *= sL
+                fyL *= sL
+                fxR *= sR
+                fyR *= sR
+            # creep damping coefficients (secant, saturation included), integrated exponentially
+            cimp[k, 0] = SC[F22] * (fL * sL + fR * sR) / v
+            cimp[k, 4] = SC[F11] * b0 * b0 * (fL * sL + fR * sR) / v
+            YL = fyL - max(QL, 0.0) * (SC[GAM0] + SC[EPSG] * yrel)
+            YR = fyR + max(QR, 0.0) * (SC[GAM0] - SC[EPSG] * yrel)
+            if tflex:
+                # each rail deflects quasi-statically under its tread force (massless lateral track;
+                # the wheel pushes the rail with −Y: a rail deflects by −Y/k_rail); a second pass
+                # makes the normal-force component consistent with the deflection (contraction
+                # ≈ Q·ε/(b0·k)); the creep forces keep the first pass's rolling-radius difference
+                dtr[i, 0] = -YL / kty
+                dtr[i, 1] = -YR / kty
                 yrel = yw - 0.5 * (dtr[i, 0] + dtr[i, 1])
-                eL = yrel - 0.5 * gai - SC[YFR]
-                eR = -yrel - 0.5 * gai - SC[YFR]
-                drL = SC[LAM] * yrel + (SC[LAM2] * eL if eL > 0.0 else 0.0)
-                drR = -SC[LAM] * yrel + (SC[LAM2] * eR if eR > 0.0 else 0.0)
-                xiL = -drL / r0 - b0 * u[k, 4] / v - b0 * kb[k]
-                xiR = -drR / r0 + b0 * u[k, 4] / v + b0 * kb[k]
-                xiy = u[k, 0] / v - q[k, 4]
-                QL = Qw[i, 0]
-                QR = Qw[i, 1]
-                fL = np.cbrt(QL / q0) ** 2 if QL > 0.0 else 0.0
-                fR = np.cbrt(QR / q0) ** 2 if QR > 0.0 else 0.0
-                fxL = -SC[F11] * fL * xiL
-                fyL = -SC[F22] * fL * xiy
-                fxR = -SC[F11] * fR * xiR
-                fyR = -SC[F22] * fR * xiy
-                sL = 1.0
-                sR = 1.0
-                if SC[SAT] > 0.0:
-                    sL = _sat_factor(fxL, fyL, SC[MU] * max(QL, 0.0))
-                    sR = _sat_factor(fxR, fyR, SC[MU] * max(QR, 0.0))
-                    fxL *= sL
-                    fyL *= sL
-                    fxR *= sR
-                    fyR *= sR
-                # creep damping coefficients (secant, saturation included), integrated implicitly
-                cimp[k, 0] = SC[F22] * (fL * sL + fR * sR) / v
-                cimp[k, 4] = SC[F11] * b0 * b0 * (fL * sL + fR * sR) / v
                 YL = fyL - max(QL, 0.0) * (SC[GAM0] + SC[EPSG] * yrel)
                 YR = fyR + max(QR, 0.0) * (SC[GAM0] - SC[EPSG] * yrel)
-                if tflex:
-                    # each rail deflects quasi-statically under its tread force (massless lateral track;
-                    # the wheel pushes the rail with −Y: a rail deflects by −Y/k_rail); a second pass
-                    # makes the tread forces consistent with the deflection (contraction ≈ Q·ε/(b0·k))
-                    dtr[i, 0] = -YL / kty
-                    dtr[i, 1] = -YR / kty
+                dtr[i, 0] = -YL / kty
+                dtr[i, 1] = -YR / kty
             dL = (yw - dtr[i, 0]) - 0.5 * gai - SC[CLEAR]
             if dL > 0.0:
                 YL -= kfl * dL
