@@ -296,4 +296,4 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
                                      f"{veh.kind} vehicle ({template} template)")
 
 
-__all__ = ["DS", "HIDDEN_DEFAULTS", "HIDDEN_DEFAULTS_WAGON", "TRUE_TRACK_BANDS", "true_track_scale", "SynthCampaign", "SynthSection", "build_campaign", "hidden_defaults", "parse_hidden"]
+__all__ = ["DS", "HIDDEN_DEFAULTS", "HIDDEN_DEFAULTS_WAGON", "TRUE_TRACK_BANDS", "SynthCampaign", "SynthSection", "build_campaign", "hidden_defaults", "parse_hidden", "true_track_scale"]
