@@ -187,3 +187,29 @@ def test_damper_series_stiffness_moves_quantities_as_its_explanation_says():
     for q in ("Y_max", "SumY_max"):
         assert low[q] > 1.1 * moderate[q], (q, low[q], moderate[q])
     assert low["az_rms"] > 1.05 * plain["az_rms"]
+
+
+def test_yaw_damper_force_limit_caps_the_yaw_damping():
+    """Yaw damper blow-off (template parameter ``yaw_damper_blowoff``): a 2 kN force limit leaves
+    the bogie with little yaw damping at 200 km/h — guiding forces rise by more than 20 % over
+    an unlimited (50 kN) damper; the default 12 kN limit is not reached on good track (within
+    1 % of the unlimited damper)."""
+    import math
+
+    from railval.core.en14363 import evaluate_batch
+    from railval.core.types import SectionInfo
+
+    sec = TrackSection("D", speed_kmh=200.0, straight_in_m=250.0, curve_m=0.0, straight_out_m=400.0,
+                       irregularities=generate_irregularities(900.0, level="low", seed=21, s0=-60.0))
+    info = SectionInfo(id="D", radius_m=math.inf, cant_mm=0.0, speed_kmh=200.0, zone=1,
+                       eval_start_m=250.0, eval_end_m=600.0)
+
+    def worst(blowoff):
+        veh = VehicleModel("coach", {"yaw_damper_blowoff": blowoff})
+        r = dict(evaluate_batch([simulate_section(veh, sec, {"measured_irregularities": {}})], [info])[0])
+        return {q: max(v for key, v in r.items() if key[0] == q) for q in ("Y_max", "SumY_max")}
+
+    weak, default, unlimited = worst(2e3), worst(12e3), worst(5e4)
+    for q in ("Y_max", "SumY_max"):
+        assert weak[q] > 1.2 * unlimited[q], (q, weak[q], unlimited[q])
+        assert default[q] == pytest.approx(unlimited[q], rel=0.01)

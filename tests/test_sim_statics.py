@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from railval.core.sim import TrackSection, VehicleModel
+from railval.core.sim import kernel as K
 from railval.core.sim.model import assemble, run_assembled
 from railval.core.sim.track import DS, S_TRACK
 
@@ -89,7 +90,7 @@ def test_yaw_dampers_do_not_damp_car_body_pitch():
                           ("with dampers", {})):
         veh = VehicleModel("coach", params)
         asm = assemble(veh, {}, 10.0)
-        asm.SC[asm_index("TH_INIT")] = 0.002
+        asm.SC[K.TH_INIT] = 0.002
         sec = TrackSection("P", speed_kmh=36.0, straight_in_m=300.0, curve_m=0.0, straight_out_m=0.0,
                            irregularities=_flat_irr(300.0))
         ss, st = run_assembled(asm, veh, sec, use_measured=True, states=True)
@@ -97,8 +98,3 @@ def test_yaw_dampers_do_not_damp_car_body_pitch():
     assert abs(zeta["no vertical dampers"]) < 0.002, zeta
     assert zeta["with dampers"] > 0.05, zeta
 
-
-def asm_index(name: str) -> int:
-    from railval.core.sim import kernel as K
-
-    return getattr(K, name)
