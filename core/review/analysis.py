@@ -351,12 +351,12 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
     # ---- agreement
     agreement = _agreement(y, names, int(n_boot), rng)
 
-    # ---- threshold: answers against the objective values, strictness as offset
+    # ---- threshold: answers against the objective values (linear logistic test model)
     threshold: dict = {}
-    offs = strict[fr]
+    fnames = first["reviewer"].to_numpy()
     for col, key, ci_key in (("deviation", "deviation_at_50", "ci"), ("sg_c", "sg_c_at_50", "sg_c_ci")):
         vals = p[col].to_numpy()[fp]
-        fit_t = fit_threshold(vals, fy, offs, fp, confidence=CONFIDENCE)
+        fit_t = fit_threshold(vals, fy, fnames, fp, confidence=CONFIDENCE)
         threshold[key] = _f(fit_t.at_50)
         threshold[ci_key] = _interval(*fit_t.ci) if fit_t.ci else None
         threshold[f"{col}_fit"] = {k: (_f(v) if isinstance(v, float) else v) for k, v in fit_t.to_dict().items()
