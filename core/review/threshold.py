@@ -53,14 +53,14 @@ class ThresholdFit:
 
     ``at_50``: the value at which a typical reviewer says Yes with probability ½ (``None``
     if the fitted curve does not fall); ``ci``: its interval ``(low, high)`` or ``None``;
-    ``slope``: β (per unit of ``log v``); ``typical``: s̄, the typical reviewer's intercept
-    (so the typical curve is ``expit(β log v − s̄)``); ``strictness``: each reviewer's
+    ``slope``: β (per unit of ``log v``); ``intercept``: ``−s̄``, so that a typical
+    reviewer's curve is ``expit(intercept + slope · log v)``; ``strictness``: each reviewer's
     ``s_r − s̄`` (reviewer → value); ``plots``/``answers``: how many entered the fit."""
 
     at_50: float | None
     ci: tuple[float, float] | None
+    intercept: float | None
     slope: float | None
-    typical: float | None
     strictness: dict
     plots: int
     answers: int
@@ -68,17 +68,18 @@ class ThresholdFit:
     def to_dict(self) -> dict:
         return {
             "at_50": self.at_50, "ci": list(self.ci) if self.ci is not None else None,
-            "slope": self.slope, "typical": self.typical, "plots": self.plots,
+            "intercept": self.intercept, "slope": self.slope, "plots": self.plots,
             "answers": self.answers,
         }
 
 
-def yes_curve(values, slope: float, typical: float, strictness: float = 0.0) -> np.ndarray:
+def yes_curve(values, intercept: float, slope: float, strictness: float = 0.0) -> np.ndarray:
     """P(Yes) at objective ``values`` of a reviewer ``strictness`` logits stricter than the
-    typical one: ``expit(β log v − s̄ − strictness)`` — the fitted curve to draw beside the
-    limit 1.0 (``slope`` = β, ``typical`` = s̄ of a :class:`ThresholdFit`)."""
+    typical one: ``expit(intercept + slope · log v − strictness)`` with ``intercept = −s̄``
+    and ``slope = β`` of a :class:`ThresholdFit` — the fitted curve to draw beside the limit
+    1.0."""
     v = np.maximum(np.asarray(values, dtype=float), MIN_VALUE)
-    return scipy.special.expit(slope * np.log(v) - typical - strictness)
+    return scipy.special.expit(intercept + slope * np.log(v) - strictness)
 
 
 def fit_threshold(value, answer, reviewer, plot, *, ridge: float = DEFAULT_RIDGE,
@@ -145,7 +146,7 @@ def fit_threshold(value, answer, reviewer, plot, *, ridge: float = DEFAULT_RIDGE
     s_bar = float(s.mean())
     strict = {str(n): float(v_) for n, v_ in zip(names.tolist(), (s - s_bar).tolist(), strict=True)}
     if not b < 0:
-        return ThresholdFit(None, None, b, s_bar, strict, n_g, int(y.size))
+        return ThresholdFit(None, None, -s_bar, b, strict, n_g, int(y.size))
     # cluster-robust covariance of (β, s_1 … s_R): c · H⁻¹ (Σ_g u_g u_gᵀ) H⁻¹
     pi, h_bb, h_bs, d_s = blocks(b, s)
     hess = np.diag(np.concatenate([[h_bb], d_s]))
@@ -163,4 +164,4 @@ def fit_threshold(value, answer, reviewer, plot, *, ridge: float = DEFAULT_RIDGE
     se = float(np.sqrt(max(grad @ cov @ grad, 0.0)))
     z = scipy.stats.norm.ppf(1.0 - (1.0 - confidence) / 2.0)
     ci = (float(np.exp(log50 - z * se)), float(np.exp(log50 + z * se)))
-    return ThresholdFit(float(np.exp(log50)), ci, b, s_bar, strict, n_g, int(y.size))
+    return ThresholdFit(float(np.exp(log50)), ci, -s_bar, b, strict, n_g, int(y.size))
