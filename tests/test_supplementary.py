@@ -117,3 +117,26 @@ def test_pattern_leaves_out_car_body_psd():
     pat = supplementary_pattern(pairs)
     assert pat.labels == ["supp psd_az_bg_1-2Hz b2"] and pat.groups == ["bogie az"]
     assert pat.values.tolist() == [-1.0]
+
+
+def test_diagnosis_residual_pattern_holds_the_bogie_frame_components():
+    from railval.app.services.diagnosis import CampaignContext, residual_pattern
+    from railval.core.en14363 import SectionValues
+
+    sections = [SectionInfo(f"S{i}", 500.0, 100.0, 80.0, 1 + i % 4, 0.0, 100.0) for i in range(4)]
+    meas, sim = {}, {}
+    for s in sections:
+        meas[s.id] = SectionValues(s.id, {("Y_qst", "w1L"): 10.0},
+                                   supplementary={("az_bg_rms", "b1"): 1.0,
+                                                  ("psd_ay_cb_1-2Hz", "b1"): 0.1})
+        sim[s.id] = SectionValues(s.id, {("Y_qst", "w1L"): 12.0},
+                                  supplementary={("az_bg_rms", "b1"): 2.0,
+                                                 ("psd_ay_cb_1-2Hz", "b1"): 0.2})
+    ctx = CampaignContext("c", {"kind": "passenger", "Q0_kN": 80.0}, sections, {}, meas, {}, [], {})
+    pat, vr = residual_pattern(ctx, sim, {})
+    # D_v/std limit of Y_qst: 2/5 per zone; bogie rms doubled → 2·log2(2) = 2; car body PSD
+    # bands stay with the existing PSD components (not repeated)
+    assert pat.labels == [f"Y_qst zone {z} w1L" for z in (1, 2, 3, 4)] + ["supp az_bg_rms b1"]
+    np.testing.assert_allclose(pat.values, [0.4] * 4 + [2.0])
+    assert pat.groups[-1] == "bogie az"
+    assert {r["quantity"] for r in vr.supplementary["quantities"]} == {"az_bg_rms", "psd_ay_cb_1-2Hz"}
