@@ -120,7 +120,7 @@ def test_pattern_leaves_out_car_body_psd():
 
 
 def test_diagnosis_residual_pattern_holds_the_bogie_frame_components():
-    from railval.app.services.diagnosis import CampaignContext, residual_pattern
+    from railval.app.services.campaign_context import CampaignContext, residual_pattern
     from railval.core.en14363 import SectionValues
 
     sections = [SectionInfo(f"S{i}", 500.0, 100.0, 80.0, 1 + i % 4, 0.0, 100.0) for i in range(4)]
