@@ -84,7 +84,7 @@ def test_section_carries_psd_values_of_the_unfiltered_evaluated_part():
     cut = (ss.distance_m >= 200.0) & (ss.distance_m <= 1000.0)
     want = psd_band_values({"az_bg_b2": ss.channels["az_bg_b2"][cut]}, FS)
     for k, v in want.items():
-        assert vals.supplementary[k] == v
+        assert vals.supplementary[k] == pytest.approx(v, rel=1e-12)
     assert ("psd_ay_cb_1-2Hz", "b1") in vals.supplementary
 
 
@@ -140,3 +140,15 @@ def test_diagnosis_residual_pattern_holds_the_bogie_frame_components():
     np.testing.assert_allclose(pat.values, [0.4] * 4 + [2.0])
     assert pat.groups[-1] == "bogie az"
     assert {r["quantity"] for r in vr.supplementary["quantities"]} == {"az_bg_rms", "psd_ay_cb_1-2Hz"}
+
+
+def test_fast_linear_detrend_equals_scipy():
+    from railval.core.psd import detrend_linear, welch_psd
+
+    x = np.random.default_rng(5).normal(size=(3, 1001)) + np.linspace(0, 4, 1001)
+    np.testing.assert_allclose(detrend_linear(x), scipy.signal.detrend(x, type="linear"),
+                               atol=1e-12)
+    f, g = scipy.signal.welch(x[0], fs=FS, nperseg=500, detrend="linear")
+    p = welch_psd(x[0], FS, segment_s=5.0)
+    np.testing.assert_allclose(p.density, g, rtol=1e-10, atol=1e-15)
+    np.testing.assert_array_equal(p.frequency_hz, f)
