@@ -68,6 +68,11 @@ TEXT = {
     "samples_half_open": "mean of the samples in the half-open window [x − 1 m, x + 1 m)",
 }
 
+SHORT = {"inverted_cdf": "inverted-CDF percentiles", "linear": "linear percentiles",
+         "section_start": "grid from range start", "first_sample": "grid from first sample",
+         "interpolant": "distance-weighted mean", "samples_closed": "closed sample window",
+         "samples_half_open": "half-open sample window"}
+
 
 @dataclass(frozen=True)
 class Reading:
@@ -108,6 +113,14 @@ class Reading:
     def to_dict(self) -> dict[str, str]:
         return {"id": self.id, "percentile": self.percentile, "grid": self.grid,
                 "window": self.window}
+
+    def short(self, sliding_mean: bool = True) -> str:
+        """The components that differ from :data:`CHOSEN`, in a few words
+        (e.g. "linear percentiles + half-open sample window")."""
+        words = {"percentile": SHORT[self.percentile], "grid": SHORT[self.grid],
+                 "window": SHORT[self.window]}
+        parts = [words[c] for c in self.differs_from_chosen(sliding_mean)]
+        return " + ".join(parts) or "chosen reading"
 
     def describe(self, sliding_mean: bool = True) -> str:
         parts = [self.percentile] + ([self.grid, self.window] if sliding_mean else [])

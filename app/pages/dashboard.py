@@ -86,11 +86,11 @@ def definition_block(doc: dict[str, Any]) -> pn.Column:
     df = pd.DataFrame([{
         "quantity": r["quantity"], "verdict": r["verdict"],
         "definition-sensitive": "yes" if r["definition_sensitive"] else "no",
-        "readings": r["readings"],
+        "flipped by": r["flipped by"],
         "mean/limit": None if r["mean/limit"] is None else round(r["mean/limit"], 4),
         "mean/limit other readings": _range(r["mean/limit other readings"]),
         "std/limit other readings": _range(r["std/limit other readings"]),
-        "flipped by": r["flipped by"]} for r in rows])
+        "readings": r["readings"]} for r in rows])
     return pn.Column(
         pn.pane.Markdown(
             "#### Definition sensitivity\nChosen reading: percentiles by the inverted CDF, sliding-mean "

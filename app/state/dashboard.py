@@ -99,8 +99,10 @@ def definition_rows(doc: dict[str, Any]) -> list[dict[str, Any]]:
             "mean/limit": q.get("mean_norm"),
             "mean/limit other readings": (min(means), max(means)) if means else None,
             "std/limit other readings": (min(stds), max(stds)) if stds else None,
-            "flipped by": "; ".join(
-                f"{'passes' if a['pass'] else 'fails'} with {a['description']}" for a in flips),
+            "flipped by": "" if not flips else (
+                f"{'passes' if flips[0]['pass'] else 'fails'} with "
+                f"{flips[0].get('label', flips[0]['description'])}"
+                + (f" (and {len(flips) - 1} more of {len(alts)} readings)" if len(flips) > 1 else "")),
         })
     return out
 
