@@ -433,11 +433,11 @@ def definition_html(doc: dict[str, Any]) -> str:
 
     rows = definition_rows(doc)
     defs = doc.get("definitions", {})
-    out = ["<h2>Definition sensitivity</h2><p class='note'>Chosen reading: percentiles by the inverted "
+    out = [("<h2>Definition sensitivity</h2><p class='note'>Chosen reading: percentiles by the inverted "
            "CDF (the smallest sample with F_n ≥ p), sliding-mean grid from the evaluated range's start, "
            "distance-weighted 2 m mean. Alternatives evaluated on the same filtered signals: linear "
            "percentiles (Hyndman–Fan type 7); grid from the first evaluated sample; arithmetic means of "
-           "the samples in closed or half-open windows (docs/validation.md).</p>"]
+           "the samples in closed or half-open windows (docs/validation.md).</p>")]
     if not rows:
         out.append("<p>Not available for this result.</p>")
         return "".join(out)
@@ -468,13 +468,13 @@ def supplementary_html(doc: dict[str, Any]) -> str:
     from railval.app.state.dashboard import supplementary_rows
 
     rows = supplementary_rows(doc)
-    out = ["<h2>Supplementary results (do not change the verdict)</h2><p class='note'>Bogie-frame "
+    out = [("<h2>Supplementary results (do not change the verdict)</h2><p class='note'>Bogie-frame "
            "accelerations: band-pass 0.4–10 Hz of the whole section, evaluated range, rms and max(|0.15 %|, "
            "|99.85 %|) (EN 14363 acceleration processing). PSD bands: band rms √(Σ G(f)·Δf) of the Welch PSD "
            "(Hann, 50 % overlap, linear detrend, 10 s segments) of the unfiltered evaluated samples, bands "
            "0.4–1, 1–2, 2–5, 5–10 Hz. D_v statistics as for the verdict (Polach & Böttcher 2014 eq. 4, std with "
            "n − 1); rel = value / mean |M_v|; log2 S/M = mean log₂ ratio. No validation limits exist for "
-           "these quantities (Polach & Böttcher 2014 §3.1 compared them before settling on the 12).</p>"]
+           "these quantities (Polach & Böttcher 2014 §3.1 compared them before settling on the 12).</p>")]
     if not rows:
         out.append("<p>No supplementary channels in this campaign.</p>")
         return "".join(out)

@@ -189,17 +189,21 @@ def window_centres(start_m: float, end_m: float, origin_m: float, window_m: floa
 
 
 def sample_window_means(values: np.ndarray, distance_m: np.ndarray, centres: np.ndarray,
-                        window_m: float, closed: bool) -> np.ndarray:
+                        window_m: float, closed: bool, prefix: np.ndarray | None = None) -> np.ndarray:
     """Arithmetic mean of the samples inside each window ``[x − w/2, x + w/2]`` (``closed``)
     or ``[x − w/2, x + w/2)`` of every row of ``values`` (shape (rows, n)) on the distance
-    axis ``distance_m`` (increasing, m). Windows holding no sample give NaN."""
+    axis ``distance_m`` (increasing, m). Windows holding no sample give NaN. ``prefix``: the
+    rows' prefix sums (shape (rows, n + 1), first column 0) when already formed."""
     v = np.atleast_2d(np.asarray(values, dtype=np.float64))
     d = np.asarray(distance_m, dtype=np.float64)
     half = window_m / 2.0
     lo = np.searchsorted(d, centres - half, side="left")
     hi = np.searchsorted(d, centres + half, side="right" if closed else "left")
-    cum = np.zeros((v.shape[0], v.shape[1] + 1))
-    np.cumsum(v, axis=1, out=cum[:, 1:])
+    if prefix is None:
+        cum = np.zeros((v.shape[0], v.shape[1] + 1))
+        np.cumsum(v, axis=1, out=cum[:, 1:])
+    else:
+        cum = prefix
     count = (hi - lo).astype(np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
         means = (cum[:, hi] - cum[:, lo]) / count
