@@ -18,11 +18,11 @@ relative to a bogie (or of a bogie relative to a wheelset) moves the load with i
 transfer w·Δy/b0 (and the P-Δ moments of rolled or pitched bodies).
 
 Integration: semi-implicit (symplectic) Euler with a fixed step. Stiff terms get exact or
-implicit updates: Maxwell dampers the exact exponential solution of their spring deflection
+exponential updates: Maxwell dampers the exact exponential solution of their spring deflection
 for a constant relative velocity over the step (Δₙ₊₁ = Δₙ·e^(−a) + v·(c/k)·(1 − e^(−a)),
 a = k·dt/c; force k·Δₙ₊₁ from the updated state), friction sliders a return map, the
 wheelsets' creep damping (lateral f22/v, yaw f11·b0²/v per wheel, the saturation factor
-included) linearly implicit. The step is chosen by the caller for accuracy
+included) exponentially on the wheelset's own velocity. The step is chosen by the caller for accuracy
 (:func:`railval.core.sim.model.choose_substeps`). Output: block means over ``decim`` steps
 (anti-alias boxcar).
 
@@ -159,7 +159,7 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR,
     u = np.zeros((nbody, NDOF))
     F = np.zeros((nbody, NDOF))
     acc = np.zeros((nbody, NDOF))
-    cimp = np.zeros((nbody, NDOF))  # implicitly treated damping coefficients (creep)
+    cimp = np.zeros((nbody, NDOF))  # creep damping coefficients integrated exponentially
     st = np.zeros((nc, 12))  # internal states of Maxwell dampers and friction sliders
     # exp(−k·dt/c) of every Maxwell element: vertical (symmetric, extension, compression),
     # lateral, yaw
@@ -461,7 +461,8 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR,
                 if free[k, j]:
                     ci = cimp[k, j]
                     if ci > 0.0:
-                        # linearly implicit: the creep damping force −c·u taken at the new velocity
+                        # exponential update: exact for the damping term −c·u with the other forces
+                        # held over the step
                         ee = math.exp(-ci * dt / massd[k, j])
                         un = u[k, j] * ee + (F[k, j] + ci * u[k, j]) / ci * (1.0 - ee)
                         a = (un - u[k, j]) / dt
