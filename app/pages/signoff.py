@@ -104,12 +104,12 @@ class SignoffPage(PageBase):
                 objs.append(message("Signing needs a user account (identity and password); "
                                     "this server runs in open single-user mode.", "warning"))
             else:
-                objs += [pn.pane.Markdown(
-                    f"**Sign configuration `{html.escape(self.app.configuration)}`** as "
-                    f"{html.escape(self.app.principal.printed_name)}. The signature is bound to "
-                    "the SHA-256 of the evidence (every signal hash of both sides, the "
+                objs += [pn.pane.HTML(
+                    f"<b>Sign configuration <code>{html.escape(self.app.configuration)}</code></b> "
+                    f"as {html.escape(self.app.principal.printed_name)}. The signature is bound "
+                    "to the SHA-256 of the evidence (every signal hash of both sides, the "
                     "configuration's effects and parameters, processing version and settings, "
-                    "the validation result, the software version)."),
+                    "the validation result, the software version).", sizing_mode="stretch_width"),
                     pn.Row(self.decision, self.password),
                     self.restrictions, self.statement, self.sign_btn]
         if not items:
