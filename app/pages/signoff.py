@@ -43,6 +43,28 @@ def signoff_card(rec: dict, status: str, reasons: list[str]) -> pn.pane.HTML:
         + "</div>", sizing_mode="stretch_width")
 
 
+def signoff_banner(app: AppState, config: str | None) -> pn.pane.HTML:
+    """One line per sign-off of ``config`` with its status (dashboard), escaped."""
+    from railval.app.services.signoff import statuses
+
+    with app.backend.session() as s:
+        items = [(db_signoff.as_dict(so), st) for so, st in statuses(s, app.campaign, config)]
+    if not items:
+        return pn.pane.HTML("<div class='rv-signoff-banner' style='color:#555;font-size:13px'>"
+                            "Not signed off.</div>", sizing_mode="stretch_width")
+    e = html.escape
+    lines = []
+    for d, st in items:
+        colour = "#1e7b34" if st.valid else "#b3261e"
+        why = f" — evidence changed: {e(st.reasons[0])}" if st.reasons else ""
+        lines.append(f"<div style='border-left:4px solid {colour};padding:2px 8px;margin:2px 0'>"
+                     f"Sign-off {d['id']} <b style='color:{colour}'>{e(st.status.upper())}</b>: "
+                     f"{e(d['decision_text'])} by {e(d['printed_name'])}, {e(d['signed_at_utc'])} "
+                     f"UTC, evidence {e(d['evidence_sha256'][:16])}…{why}</div>")
+    return pn.pane.HTML("<div class='rv-signoff-banner' style='font-size:13px'>" + "".join(lines)
+                        + "</div>", sizing_mode="stretch_width")
+
+
 class SignoffPage(PageBase):
     name_ = "signoff"
 
