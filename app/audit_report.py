@@ -81,16 +81,15 @@ def build_audit_report(database) -> AuditReport:
         items = [(db_signoff.as_dict(so), st) for so, st in statuses(s)]
         rows = list(audit.iter_rows(s))
     stale = sum(1 for _, st in items if st.status != "valid")
-    h: list[str] = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
-                    f"<title>railval audit report</title><style>{CSS}</style></head><body>",
+    h: list[str] = [("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+                     f"<title>railval audit report</title><style>{CSS}</style></head><body>"),
                     "<h1>Audit report</h1>",
-                    f"<table class='meta'><tr><td>database</td><td>{_esc(database.safe_url)}</td></tr>"
-                    f"<tr><td>generated</td><td>{now}</td></tr>"
-                    f"<tr><td>audit rows</td><td>{check.rows}</td></tr>"
-                    f"<tr><td>head</td><td><code>{_esc(check.head_hash)}</code></td></tr></table>"]
+                    (f"<table class='meta'><tr><td>database</td><td>{_esc(database.safe_url)}</td></tr>"
+                     f"<tr><td>generated</td><td>{now}</td></tr>"
+                     f"<tr><td>audit rows</td><td>{check.rows}</td></tr>"
+                     f"<tr><td>head</td><td><code>{_esc(check.head_hash)}</code></td></tr></table>")]
     ok = not chain_findings
-    h.append(f"<div class='verdict {'ok' if ok else 'no'}'>Hash chain: {_esc(chain_status)}"
-             f"{'' if ok else ''}</div>")
+    h.append(f"<div class='verdict {'ok' if ok else 'no'}'>Hash chain: {_esc(chain_status)}</div>")
     h.append("<p class='note'>This report checks the chain and each sign-off's evidence without "
              "decoding the stored signals. The complete check is <code>railval audit verify "
              "--checkpoint FILE</code>; offline: <code>railval audit verify --bundle DIR</code> "

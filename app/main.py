@@ -26,7 +26,7 @@ from railval.app.pages.overview import OverviewPage
 from railval.app.pages.audit import AuditPage
 from railval.app.pages.report import ReportPage
 from railval.app.pages.signoff import SignoffPage
-from railval.app.state import PAGE_TITLES, PAGES, AppState, Backend
+from railval.app.state import PAGE_TITLES, AppState, Backend
 from railval.core.roles import PAGE_ACTIONS, Principal
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
