@@ -187,17 +187,22 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
 
 def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: bool = False,
           threaded: bool = False, allow_websocket_origin: list[str] | None = None,
-          cookie_secret_file: str | None = None, session_max_age_s: int | None = None, **kw: Any):
+          cookie_secret_file: str | None = None, session_max_age_s: int | None = None,
+          behind_proxy: bool = False, **kw: Any):
     """Serve the app at ``http://address:port/`` (``pn.serve``) behind the sign-in of
     :mod:`railval.app.auth`; returns the server. Raises
     :class:`railval.app.auth.StartupRefused` when the database has no users and ``address``
-    is not a loopback address."""
+    is not a loopback address. ``behind_proxy``: take the client address from the proxy's
+    X-Forwarded-For / X-Real-Ip headers (Tornado ``xheaders``), so the sign-in rate limit per
+    address counts clients, not the proxy; only behind a proxy that sets these headers."""
     from railval.app.auth import SESSION_MAX_AGE_S, RailvalAuth, check_startup, cookie_secret
 
     check_startup(database, address)
     secret, _origin = cookie_secret(cookie_secret_file)
     auth = RailvalAuth(database, secret, max_age_s=session_max_age_s or SESSION_MAX_AGE_S)
     origins = allow_websocket_origin or [f"{address}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
+    if behind_proxy:
+        kw["http_server_kwargs"] = {**kw.get("http_server_kwargs", {}), "xheaders": True}
     return pn.serve({"app": lambda: build_app(database, auth=auth)}, port=port, address=address,
                     show=show, threaded=threaded, title="railval", allow_websocket_origin=origins,
                     static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {},

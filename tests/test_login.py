@@ -162,3 +162,17 @@ def test_no_users_open_mode_on_loopback_only(db_url):
         users.create_user(s, "admin", password="admin password", roles=["admin"])
     assert check_startup(database, "0.0.0.0") is True
     database.dispose()
+
+
+def test_behind_proxy_the_rate_limit_counts_the_forwarded_client(database, monkeypatch):
+    monkeypatch.setenv("RAILVAL_COOKIE_SECRET", SECRET)
+    with database.session() as s:
+        users.create_user(s, "eng", password="engineer pw", roles=["engineer"])
+    with served(database, behind_proxy=True) as url:
+        req = urllib.request.Request(url.rsplit("/app", 1)[0] + "/login",
+                                     data=b"username=eng&password=nope",
+                                     headers={"X-Forwarded-For": "203.0.113.7"})
+        with pytest.raises(urllib.error.HTTPError) as err:
+            urllib.request.urlopen(req, timeout=60)
+        assert err.value.code == 401
+    assert rows(database, "login.failed")[0]["detail"]["source"] == "203.0.113.7"

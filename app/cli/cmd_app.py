@@ -29,6 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cookie-secret-file", metavar="FILE", default=None,
                    help="file holding the session cookie secret (else $RAILVAL_COOKIE_SECRET, "
                    "$RAILVAL_COOKIE_SECRET_FILE, else a random one per start)")
+    p.add_argument("--behind-proxy", action="store_true",
+                   help="client addresses from the proxy's X-Forwarded-For header (rate limit per client)")
     p.set_defaults(func=_cmd_serve)
 
     r = sub.add_parser("report", help="write the HTML or PDF validation report of a configuration")
@@ -84,7 +86,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     print(f"railval serve: http://{args.address}:{args.port}/app (database {database.safe_url})",
           file=sys.stderr, flush=True)
     serve(database, port=args.port, address=args.address, show=args.show, allow_websocket_origin=origins,
-          cookie_secret_file=args.cookie_secret_file)
+          cookie_secret_file=args.cookie_secret_file, behind_proxy=args.behind_proxy)
     return 0
 
 
