@@ -176,3 +176,21 @@ def test_behind_proxy_the_rate_limit_counts_the_forwarded_client(database, monke
             urllib.request.urlopen(req, timeout=60)
         assert err.value.code == 401
     assert rows(database, "login.failed")[0]["detail"]["source"] == "203.0.113.7"
+
+
+def test_session_cookie_expires_and_forged_cookies_are_refused(database):
+    from tornado.web import create_signed_value
+
+    from railval.app.auth import COOKIE, RailvalAuth
+
+    with database.session() as s:
+        users.create_user(s, "eng", password="engineer pw", roles=["engineer"])
+    auth = RailvalAuth(database, SECRET, max_age_s=60)
+    fresh = create_signed_value(SECRET, COOKIE, f"eng|{time.time():.3f}").decode()
+    old = create_signed_value(SECRET, COOKIE, f"eng|{time.time() - 61:.3f}").decode()
+    forged = create_signed_value("y" * 40, COOKIE, f"eng|{time.time():.3f}").decode()
+    assert auth.principal_from_cookie(fresh).roles == frozenset({"engineer"})
+    assert auth.principal_from_cookie(old) is None  # older than the session lifetime
+    assert auth.principal_from_cookie(forged) is None  # signed with another secret
+    assert auth.principal_from_cookie(None) is None
+    assert auth.principal_from_cookie("eng|0") is None  # unsigned
