@@ -36,13 +36,10 @@ from railval.app.scales import (
     MEASURED_COLOR,
     PASS_COLOR,
     SIM_COLORS,
-    bar_top,
     downsample_xy,
-    nice_limits,
-    nice_ticks,
     unit_label,
-    verdict_color,
 )
+from railval.app.svg_charts import svg_bars, svg_lines
 from railval.core.diagnosis import where_grid
 from railval.core.errors import RailvalError
 from railval.core.filters import filtfilt_rows
@@ -80,94 +77,6 @@ def _fmt(x: Any, digits: int = 3) -> str:
     if not math.isfinite(v):
         return "–"
     return f"{v:.{digits}g}" if abs(v) >= 1e4 or (v != 0 and abs(v) < 1e-3) else f"{v:.{digits}f}"
-
-
-# ----------------------------------------------------------------------------- SVG charts
-def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
-             limits: tuple[float, ...] = (1.0,), intervals: list | None = None,
-             width: int = 560, height: int = 300) -> str:
-    """Vertical bar chart as SVG; bars beyond ±1 red, others green; dashed limit lines."""
-    ml, mr, mt, mb = 62, 12, 30, 92
-    w, h = width - ml - mr, height - mt - mb
-    top = bar_top(values)
-    signed = any(lim < 0 for lim in limits)
-    lo = -top if signed else 0.0
-
-    def y(v: float) -> float:
-        return mt + h * (top - v) / (top - lo)
-
-    out = [(f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
-           f'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">'),
-           f'<text x="{width / 2}" y="18" text-anchor="middle" font-size="14" font-weight="bold">{_esc(title)}</text>']
-    for t in np.linspace(lo, top, 5):
-        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{y(t):.1f}" y2="{y(t):.1f}" stroke="#e0e0e0"/>'
-                   f'<text x="{ml - 6}" y="{y(t) + 4:.1f}" text-anchor="end">{t:.2f}</text>')
-    n = max(1, len(labels))
-    bw = w / n
-    for i, (lab, v) in enumerate(zip(labels, values, strict=True)):
-        x0 = ml + i * bw
-        if v is not None and math.isfinite(v):
-            color = verdict_color(v)
-            y0, y1 = sorted((y(0.0), y(v)))
-            out.append(f'<rect x="{x0 + bw * 0.15:.1f}" y="{y0:.1f}" width="{bw * 0.7:.1f}" '
-                       f'height="{max(y1 - y0, 0.5):.1f}" fill="{color}"><title>{_esc(lab)}: {v:.3f}</title></rect>')
-            if intervals and intervals[i] and None not in intervals[i]:
-                a, b = intervals[i]
-                xc = x0 + bw / 2
-                out.append(f'<line x1="{xc:.1f}" x2="{xc:.1f}" y1="{y(a):.1f}" y2="{y(b):.1f}" stroke="#000" '
-                           f'stroke-width="1.3"/>')
-        out.append(f'<text transform="translate({x0 + bw / 2:.1f},{mt + h + 8}) rotate(45)" '
-                   f'font-size="11">{_esc(lab)}</text>')
-    for lim in limits:
-        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{y(lim):.1f}" y2="{y(lim):.1f}" stroke="#000" '
-                   f'stroke-dasharray="6,4" stroke-width="1.4"/>')
-    out.append(f'<line x1="{ml}" x2="{ml}" y1="{mt}" y2="{mt + h}" stroke="#000"/>'
-               f'<line x1="{ml}" x2="{ml + w}" y1="{y(max(lo, 0.0)):.1f}" y2="{y(max(lo, 0.0)):.1f}" stroke="#000"/>')
-    out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
-    out.append("</svg>")
-    return "".join(out)
-
-
-def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: str, xlabel: str,
-              ylabel: str, shade: tuple[float, float] | None = None, width: int = 760,
-              height: int = 280) -> str:
-    """Line chart as SVG: ``traces`` = [(label, x, y, colour)], first drawn first (beneath)."""
-    ml, mr, mt, mb = 70, 14, 30, 46
-    w, h = width - ml - mr, height - mt - mb
-    xs = np.concatenate([t[1] for t in traces]) if traces else np.array([0.0, 1.0])
-    ys = np.concatenate([t[2] for t in traces]) if traces else np.array([0.0, 1.0])
-    x0, x1 = nice_limits(float(np.min(xs)), float(np.max(xs)))
-    y0, y1 = nice_limits(float(np.min(ys)), float(np.max(ys)))
-
-    def px(v):
-        return ml + w * (np.asarray(v) - x0) / (x1 - x0)
-
-    def py(v):
-        return mt + h * (y1 - np.asarray(v)) / (y1 - y0)
-
-    out = [(f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
-           f'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">'),
-           f'<text x="{width / 2}" y="18" text-anchor="middle" font-size="13" font-weight="bold">{_esc(title)}</text>']
-    if shade is not None:
-        a, b = max(shade[0], x0), min(shade[1], x1)
-        out.append(f'<rect x="{px(a):.1f}" y="{mt}" width="{max(px(b) - px(a), 0):.1f}" height="{h}" '
-                   f'fill="#f2c14e" fill-opacity="0.2"/>')
-    for t in nice_ticks(y0, y1):
-        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{py(t):.1f}" y2="{py(t):.1f}" stroke="#e6e6e6"/>'
-                   f'<text x="{ml - 6}" y="{py(t) + 4:.1f}" text-anchor="end">{t:.4g}</text>')
-    for t in nice_ticks(x0, x1):
-        out.append(f'<text x="{px(t):.1f}" y="{mt + h + 16}" text-anchor="middle">{t:.4g}</text>')
-    for i, (label, x, y, color) in enumerate(traces):
-        pts = " ".join(f"{a:.1f},{b:.1f}" for a, b in zip(px(x), py(y), strict=True))
-        out.append(f'<polyline fill="none" stroke="{color}" stroke-width="{1.4 if i == 0 else 1.1}" '
-                   f'points="{pts}"/>')
-        out.append(f'<rect x="{ml + w - 200}" y="{mt + 6 + 16 * i}" width="14" height="3" fill="{color}"/>'
-                   f'<text x="{ml + w - 180}" y="{mt + 11 + 16 * i}">{_esc(label)}</text>')
-    out.append(f'<rect x="{ml}" y="{mt}" width="{w}" height="{h}" fill="none" stroke="#000"/>')
-    out.append(f'<text x="{ml + w / 2}" y="{height - 8}" text-anchor="middle">{_esc(xlabel)}</text>')
-    out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
-    out.append("</svg>")
-    return "".join(out)
 
 
 # ----------------------------------------------------------------------------- report
@@ -290,6 +199,31 @@ def where_table(grid: Any, limit: float = 2.0) -> str:
     return "".join(out)
 
 
+def signoff_rows_html(items: list[tuple[dict[str, Any], Any]]) -> str:
+    """The sign-off table (escaped) of the validation report and the audit report
+    (:mod:`railval.app.audit_report`)."""
+    if not items:
+        return "<p class='note'>No sign-off.</p>"
+    rows = []
+    for d, st in items:
+        cls = "pass" if st.status == "valid" else "fail"
+        why = "<br>".join(_esc(r) for r in st.reasons[:5])
+        rows.append(
+            f"<tr><td>{d['id']}</td><td class='l'>{_esc(d['campaign'])} / {_esc(d['configuration'])}</td>"
+            f"<td class='l {cls}'>{_esc(st.status)}</td><td class='l'>{_esc(d['decision_text'])}</td>"
+            f"<td class='l'>{_esc(d['printed_name'])} ({_esc(d['username'])})</td>"
+            f"<td class='l'>{_esc(d['signed_at_utc'])}</td>"
+            f"<td class='l'>{_esc(d['meaning'])}</td>"
+            f"<td class='l'>{_esc(d['restrictions'] or '–')}</td><td class='l'>{_esc(d['statement'] or '–')}</td>"
+            f"<td class='l' style='font-family:monospace;font-size:10px'>{_esc(d['evidence_sha256'])}</td>"
+            f"<td class='l'>{why}</td></tr>")
+    return ("<table><tr><th>id</th><th class='l'>configuration</th><th class='l'>status</th>"
+            "<th class='l'>decision</th><th class='l'>signed by</th><th class='l'>UTC</th>"
+            "<th class='l'>meaning</th><th class='l'>restrictions</th><th class='l'>statement</th>"
+            "<th class='l'>evidence SHA-256</th><th class='l'>changed since</th></tr>"
+            + "".join(rows) + "</table>")
+
+
 def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3) -> Report:
     """Build the report of ``configuration`` of ``campaign`` from the database.
 
@@ -338,7 +272,8 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
                  f"<td>{_fmt(r.get('mean_limit'))}</td><td>{_fmt(r.get('std_limit'))}</td>"
                  f"<td>{_fmt(r.get('mean_norm'))}</td><td>{_fmt(mci[0])} … {_fmt(mci[1])}</td>"
                  f"<td>{_fmt(r.get('std_norm'))}</td><td>{_fmt(sci[0])} … {_fmt(sci[1])}</td>"
-                 f"<td class='{'pass' if r.get('pass') else 'fail'}'>{'pass' if r.get('pass') else 'FAIL'}</td></tr>")
+                 f"<td class='{'pass' if r.get('pass') else 'fail'}'>{'pass' if r.get('pass') else 'FAIL'}"
+                 f"{' (definition-sensitive)' if r.get('definition_sensitive') else ''}</td></tr>")
     h.append("</table><p class='note'>D_v = (S_v − M_v)·M_v/|M_v| (positive: the simulation overestimates). "
              "Mean limit = 2/3 of the std limit; intervals: percentile bootstrap over the pairs.</p>")
     labels = [r["quantity"] for r in rows]
@@ -350,6 +285,8 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
     h.append("</div>")
 
     h.append(where_table(where_grid(result.pairs)))
+    h.append(definition_html(d))
+    h.append(supplementary_html(d))
 
     # coverage
     h.append("<h2>Coverage</h2>")
@@ -370,6 +307,19 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
                  "quantities; EN-filtered signals on the distance axis, measurement (grey) beneath the "
                  "simulation (blue), evaluated range shaded.</p>")
         h.extend(_worst_case_plots(backend, campaign, configuration, result, ov, worst_cases))
+
+    # independent sign-offs of this configuration, with their status
+    session = getattr(backend, "session", None)
+    if session is not None:
+        from railval.app.services.signoff import statuses
+        from railval.db import signoff as db_signoff
+
+        with session() as s:
+            items = [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, configuration)]
+        h.append("<h2>Sign-offs</h2>")
+        h.append("<p class='note'>Each sign-off is bound to the SHA-256 of its evidence "
+                 "(docs/audit.md); <b>stale</b> means the evidence changed after signing.</p>")
+        h.append(signoff_rows_html(items))
 
     # hashes
     h.append("<h2>Evidence: signal content hashes (SHA-256)</h2>")
@@ -423,3 +373,66 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
             traces, title=title, xlabel="distance (m)", ylabel=f"{ch} ({unit}), {flabel}",
             shade=(sec.eval_start_m, sec.eval_end_m) if sec else None) + "</div>")
     return out
+
+
+def definition_html(doc: dict[str, Any]) -> str:
+    """Report section: which verdicts rest on an open choice of the definitions (percentile
+    method, sliding-window grid and mean; docs/validation.md)."""
+    from railval.app.state.dashboard import definition_rows
+
+    rows = definition_rows(doc)
+    defs = doc.get("definitions", {})
+    out = [("<h2>Definition sensitivity</h2><p class='note'>Chosen reading: percentiles by the inverted "
+           "CDF (the smallest sample with F_n ≥ p), sliding-mean grid from the evaluated range's start, "
+           "distance-weighted 2 m mean. Alternatives evaluated on the same filtered signals: linear "
+           "percentiles (Hyndman–Fan type 7); grid from the first evaluated sample; arithmetic means of "
+           "the samples in closed or half-open windows (docs/validation.md).</p>")]
+    if not rows:
+        out.append("<p>Not available for this result.</p>")
+        return "".join(out)
+    sensitive = [r["quantity"] for r in rows if r["definition_sensitive"]]
+    out.append(f"<p class='{'fail' if sensitive else 'pass'}'>"
+               + (("definition-sensitive: " + _esc(", ".join(sensitive))
+                   + ("; the verdict itself changes under another reading" if defs.get("verdict_sensitive")
+                      else "")) if sensitive
+                  else "No verdict changes under the alternative readings.") + "</p>")
+    out.append("<table><tr><th class='l'>quantity</th><th>verdict</th><th>definition-sensitive</th>"
+               "<th>readings</th><th>mean/limit</th><th>other readings</th><th>std/limit, other readings</th>"
+               "<th class='l'>flipped by</th></tr>")
+    for r in rows:
+        mr, sr = r["mean/limit other readings"], r["std/limit other readings"]
+        out.append(f"<tr><td class='l'>{_esc(r['quantity'])}</td><td>{_esc(r['verdict'])}</td>"
+                   f"<td class='{'fail' if r['definition_sensitive'] else ''}'>"
+                   f"{'yes' if r['definition_sensitive'] else 'no'}</td><td>{r['readings']}</td>"
+                   f"<td>{_fmt(r['mean/limit'])}</td>"
+                   f"<td>{'' if not mr else _fmt(mr[0]) + ' … ' + _fmt(mr[1])}</td>"
+                   f"<td>{'' if not sr else _fmt(sr[0]) + ' … ' + _fmt(sr[1])}</td>"
+                   f"<td class='l'>{_esc(r['flipped by'])}</td></tr>")
+    out.append("</table>")
+    return "".join(out)
+
+
+def supplementary_html(doc: dict[str, Any]) -> str:
+    """Report section: bogie-frame and PSD-band quantities next to the verdict."""
+    from railval.app.state.dashboard import supplementary_rows
+
+    rows = supplementary_rows(doc)
+    out = [("<h2>Supplementary results (do not change the verdict)</h2><p class='note'>Bogie-frame "
+           "accelerations: band-pass 0.4–10 Hz of the whole section, evaluated range, rms and max(|0.15 %|, "
+           "|99.85 %|) (EN 14363 acceleration processing). PSD bands: band rms √(Σ G(f)·Δf) of the Welch PSD "
+           "(Hann, 50 % overlap, linear detrend, 10 s segments) of the unfiltered evaluated samples, bands "
+           "0.4–1, 1–2, 2–5, 5–10 Hz. D_v statistics as for the verdict (Polach & Böttcher 2014 eq. 4, std with "
+           "n − 1); rel = value / mean |M_v|; log2 S/M = mean log₂ ratio. No validation limits exist for "
+           "these quantities (Polach & Böttcher 2014 §3.1 compared them before settling on the 12).</p>")]
+    if not rows:
+        out.append("<p>No supplementary channels in this campaign.</p>")
+        return "".join(out)
+    out.append("<table><tr><th class='l'>quantity</th><th class='l'>group</th><th>unit</th><th>n</th>"
+               "<th>mean D_v</th><th>std D_v</th><th>mean rel</th><th>std rel</th><th>log2 S/M</th></tr>")
+    for r in rows:
+        out.append(f"<tr><td class='l'>{_esc(r['quantity'])}</td><td class='l'>{_esc(r['group'])}</td>"
+                   f"<td>{_esc(unit_label(r.get('unit', '')))}</td><td>{_fmt(r['n'])}</td>"
+                   f"<td>{_fmt(r['mean'])}</td><td>{_fmt(r['std'])}</td><td>{_fmt(r['mean_rel'])}</td>"
+                   f"<td>{_fmt(r['std_rel'])}</td><td>{_fmt(r['log2_ratio_mean'])}</td></tr>")
+    out.append("</table>")
+    return "".join(out)

@@ -84,9 +84,9 @@ def band_sums(signalsets: Mapping[str, SignalSet], bands) -> dict[str, np.ndarra
 
 
 def section_values(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo]) -> dict[str, dict]:
-    """EN 14363 values (:func:`railval.core.en14363.evaluate_present`) of the sections present,
-    as plain dicts (small to send between processes)."""
-    return {sid: dict(v) for sid, v in evaluate_present(signalsets, sections).items()}
+    """EN 14363 values (:func:`railval.core.en14363.evaluate_present`) of the sections present;
+    the SectionValues (a dict) keep the supplementary values the residual pattern uses."""
+    return evaluate_present(signalsets, sections)
 
 
 def load_context(session: Any, campaign: str) -> CampaignContext:
@@ -114,12 +114,16 @@ def validate_values(ctx: CampaignContext, sim_values: Mapping[str, Mapping], n_b
 
 def residual_pattern(ctx: CampaignContext, sim_values: Mapping[str, Mapping],
                      sim_bands: Mapping[str, np.ndarray]) -> tuple[Pattern, ValidationResult]:
-    """Pattern (normalised D_v per quantity × zone × position + log₂ band-power ratios) and the
-    :class:`railval.core.validation.ValidationResult` (no bootstrap) of simulated values."""
+    """Pattern (normalised D_v per quantity × zone × position + log₂ band-power ratios + the
+    bogie-frame supplementary quantities, :func:`railval.core.supplementary.supplementary_pattern`)
+    and the :class:`railval.core.validation.ValidationResult` (no bootstrap) of simulated values."""
+    from railval.core.supplementary import supplementary_pattern
+
     vr = validate_values(ctx, sim_values)
     pairs = vr.pairs.to_dict("records")
     pat = pattern_from_pairs(pairs, value_key="D_norm")
-    return Pattern.concat(pat, band_ratio_pattern(sim_bands, ctx.measured_bands, ctx.bands)), vr
+    return Pattern.concat(pat, band_ratio_pattern(sim_bands, ctx.measured_bands, ctx.bands),
+                          supplementary_pattern(vr.supplementary.get("pairs", ()))), vr
 
 
 def simulate_context(ctx: CampaignContext, effects: Mapping[str, Mapping[str, float]],
