@@ -20,6 +20,7 @@ from sqlalchemy import String, cast, delete, func, insert, literal, null, select
 from sqlalchemy.orm import Session
 
 from railval.core.errors import InvalidSignal, NotFound
+from railval.core.names import check_name
 from railval.core.types import SectionInfo, SignalSet
 from railval.core.zones import zone_for_radius
 from railval.db import codec
@@ -237,6 +238,7 @@ def store_configuration(
     """
     from railval.core.errors import InvalidParameter
 
+    check_name(name, "configuration name")
     c = get_campaign(session, campaign)
     if not signalsets:
         raise InvalidSignal(f"configuration {name!r}: no signal sets given")
@@ -262,7 +264,7 @@ def store_configuration(
     )
     if existing is not None and not replace:
         raise InvalidParameter(f"configuration {name!r} already exists in campaign {c.name!r}; "
-                               "pass replace=True to overwrite it")
+                               "choose another name, or overwrite it with --replace")
     if parent_row is not None and existing is not None:
         ids = {x.id for x in lineage(session, c, parent_row.name)}
         if existing.id in ids:
