@@ -501,9 +501,12 @@ def import_campaign(database_or_session: Any, folder: str | Path,
         if isinstance(database_or_session, Session):
             write_validated(database_or_session, vc)
         else:
-            with database_or_session.session() as session:
+            with database_or_session.session(write=True) as session:
                 write_validated(session, vc)
-    except IntegrityError as exc:  # a concurrent import of the same name won the race
-        raise CampaignFormatError(f"database rejected the campaign: {exc.orig}",
-                                  file=MANIFEST, field="name") from None
+    except IntegrityError:
+        # a concurrent import of the same name committed first (PostgreSQL; on SQLite the
+        # write lock taken at BEGIN makes the second import see the first): same message
+        # as the check in write_validated
+        raise CampaignFormatError(f"a campaign named {vc.name!r} already exists in the "
+                                  "database", file=MANIFEST, field="name") from None
     return vc.name

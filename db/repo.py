@@ -12,6 +12,7 @@ channels, and :func:`signal_hashes` reads hashes without touching the blobs.
 from __future__ import annotations
 
 import datetime as dt
+import logging
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -37,12 +38,15 @@ from railval.db.models import (
     utcnow,
 )
 
+_log = logging.getLogger(__name__)
+
 __all__ = [
     "add_recordings",
     "cache_get",
     "cache_put",
     "cache_put_many",
     "channels",
+    "check_new_configuration",
     "fetch_signalsets",
     "get_campaign",
     "get_configuration",
@@ -67,7 +71,8 @@ def list_campaigns(session: Session) -> list[Campaign]:
 def get_campaign(session: Session, name_or_id: Campaign | str | int) -> Campaign:
     """The campaign with this name (or, failing that, this numeric id).
 
-    Raises :class:`railval.core.errors.NotFound` listing the available names.
+    Raises :class:`railval.core.errors.NotFound` saying how to list the campaigns (it does
+    not list them: whoever mistyped a name is not shown the others).
     """
     if isinstance(name_or_id, Campaign):
         return name_or_id
@@ -75,10 +80,9 @@ def get_campaign(session: Session, name_or_id: Campaign | str | int) -> Campaign
     if found is None and str(name_or_id).strip().isdigit():
         found = session.get(Campaign, int(name_or_id))
     if found is None:
-        names = list(session.scalars(select(Campaign.name).order_by(Campaign.name)))
-        raise NotFound(
-            f"campaign {name_or_id!r} not found; available: {', '.join(names) or '(none)'}"
-        )
+        # the names of the other campaigns are not shown to whoever typed a wrong one
+        raise NotFound(f"campaign {name_or_id!r} not found; list the campaigns with "
+                       "`railval list`")
     return found
 
 
@@ -214,6 +218,25 @@ def add_recordings(
         session.execute(insert(Signal), rows)
 
 
+def check_new_configuration(session: Session, campaign: Campaign | str | int, name: str, *,
+                            replace: bool = False) -> Configuration | None:
+    """Check that configuration ``name`` may be stored: a safe name
+    (:func:`railval.core.names.check_name`) that does not exist yet unless ``replace``.
+    Returns the existing configuration (when replacing) or ``None``. Callers that compute
+    for minutes call it before computing, so a clash is reported at once."""
+    from railval.core.errors import InvalidParameter
+
+    check_name(name, "configuration name")
+    c = get_campaign(session, campaign)
+    existing = session.scalar(
+        select(Configuration).where(Configuration.campaign_id == c.id, Configuration.name == name)
+    )
+    if existing is not None and not replace:
+        raise InvalidParameter(f"configuration {name!r} already exists in campaign {c.name!r}; "
+                               "choose another name, or overwrite it with --replace")
+    return existing
+
+
 def store_configuration(
     session: Session,
     campaign: Campaign | str | int,
@@ -259,12 +282,7 @@ def store_configuration(
             raise InvalidSignal(f"configuration {name!r}, section {sid!r}: fs is {ss.fs} Hz but "
                                 f"time_s is sampled at {fs} Hz")
     parent_row = get_configuration(session, c, parent) if parent is not None else None
-    existing = session.scalar(
-        select(Configuration).where(Configuration.campaign_id == c.id, Configuration.name == name)
-    )
-    if existing is not None and not replace:
-        raise InvalidParameter(f"configuration {name!r} already exists in campaign {c.name!r}; "
-                               "choose another name, or overwrite it with --replace")
+    existing = check_new_configuration(session, c, name, replace=replace)
     if parent_row is not None and existing is not None:
         ids = {x.id for x in lineage(session, c, parent_row.name)}
         if existing.id in ids:
@@ -515,6 +533,18 @@ def cache_put_many(session: Session, items: Mapping[str, bytes]) -> None:
         set_={"value": stmt.excluded.value, "created_at": stmt.excluded.created_at},
     )
     now = utcnow()
-    session.connection().execute(
-        stmt, [{"key": k, "value": bytes(v), "created_at": now} for k, v in items.items()]
-    )
+    rows = [{"key": k, "value": bytes(v), "created_at": now} for k, v in items.items()]
+    if dialect == "sqlite" and not session.get_bind().get_execution_options().get("railval_write"):
+        # a read unit of work that caches what it computed: on SQLite its deferred
+        # transaction cannot wait for another writer, and a cache entry is worth no error —
+        # skip it (it is computed again next time)
+        from sqlalchemy.exc import OperationalError
+
+        try:
+            session.connection().execute(stmt, rows)
+        except OperationalError as exc:
+            if "locked" not in str(exc.orig) and "busy" not in str(exc.orig):
+                raise
+            _log.info("result cache not written (database busy): %d entries", len(rows))
+        return
+    session.connection().execute(stmt, rows)

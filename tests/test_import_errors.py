@@ -18,6 +18,7 @@ from railval.db import repo
 from railval.db.engine import connect
 from railval.db.importer import import_campaign, validate_campaign_folder, write_validated
 from railval.db.io import read_table, write_table
+
 from tests.factories import write_demo_campaign
 
 

@@ -48,6 +48,7 @@ def test_schema_uses_the_same_pattern():
 def test_store_configuration_refuses_unsafe_name(sqlite_database, tmp_path):
     from railval.db import repo
     from railval.db.importer import import_campaign
+
     from tests.factories import write_demo_campaign
 
     write_demo_campaign(tmp_path / "c", n_sections=1, fmt="parquet", seed=3, name="c")

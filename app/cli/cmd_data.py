@@ -4,7 +4,7 @@
     create or upgrade the database schema to the newest revision (idempotent).
 ``railval import DIR [--json]``
     validate the campaign folder DIR completely, then store it in one transaction
-    (progress bar on stderr for imports of more than a few files).
+    (progress on stderr for imports of more than a few files).
 ``railval export NAME DIR [--format parquet|csv|h5|mat|mf4|tdms]``
     write a stored campaign as a campaign folder (re-importable, identical hashes).
 ``railval list [--json]``
@@ -14,11 +14,10 @@
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from collections import Counter
 
-from railval.app.cli import emit_json
+from railval.app.cli import Progress, emit_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -73,25 +72,15 @@ def cmd_import(args: argparse.Namespace) -> int:
     from railval.db.importer import import_campaign
 
     database = _database(args)
-    bar = None
+    bar = Progress()
 
     def progress(done: int, total: int, what: str) -> None:
-        nonlocal bar
         if args.no_progress or total < 4:
             return
-        if bar is None:
-            from tqdm import tqdm
-
-            bar = tqdm(total=total, unit="file", desc="reading", file=sys.stderr, leave=True)
-        bar.update(done - bar.n)
-        bar.set_postfix_str(what, refresh=False)
+        bar("reading", done / total, {"done": done, "total": total})
 
     t = time.perf_counter()
-    try:
-        name = import_campaign(database, args.folder, progress=progress)
-    finally:
-        if bar is not None:
-            bar.close()
+    name = import_campaign(database, args.folder, progress=progress)
     elapsed = time.perf_counter() - t
     doc = _summary(database, name)
     doc["seconds"] = round(elapsed, 3)

@@ -238,7 +238,9 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
                      {"done": len(computed)})
 
     if workers > 1 and len(chunks) > 1:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        from railval.core.workers import pool_kwargs
+
+        with ProcessPoolExecutor(max_workers=workers, **pool_kwargs()) as pool:
             futures = [(c, pool.submit(_evaluate_chunk, database.url, name, c[0],
                                        [by_id[s] for s in c[1]], order)) for c in chunks]
             for chunk, fut in futures:
@@ -248,7 +250,7 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
             collect(chunk, _evaluate_chunk(database, name, chunk[0],
                                            [by_id[s] for s in chunk[1]], order))
     if computed:
-        with database.session() as session:
+        with database.session(write=True) as session:
             repo.cache_put_many(session, {keys[k]: blob for k, blob in computed.items()})
     measured = values[None]
     out = {}
