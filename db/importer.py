@@ -33,7 +33,7 @@ from railval.core.errors import CampaignFormatError, InvalidParameter
 from railval.core.names import NAME_PATTERN, name_problem
 from railval.core.types import BODY_POSITIONS, CHANNEL_KINDS, WHEEL_POSITIONS
 from railval.core.zones import zone_for_radius
-from railval.db import codec
+from railval.db import codec, integrity
 from railval.db.checks import (
     RecordingProblem,
     check_magnitudes,
@@ -478,9 +478,12 @@ def write_validated(session: Session, vc: ValidatedCampaign) -> Campaign:
         session.add(rec)
         recs.append(rec)
     session.flush()
+    secret = integrity.session_secret(session)
     rows = [
         {"recording_id": rec.id, "channel_id": chans[name].id, "blob": blob, "dtype": "<f8",
-         "sha256": sha, "provenance": prov}
+         "sha256": sha,
+         "provenance": {**prov, "seal": integrity.seal_signal(
+             secret, rec.id, chans[name].id, sha, rec.distance_sha256, rec.fs, rec.t0, rec.n)}}
         for rec, r in zip(recs, vc.recordings, strict=True)
         for name, (blob, sha, prov) in r.signals.items()
     ]

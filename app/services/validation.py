@@ -92,16 +92,10 @@ def source_cache_keys(session: Session, campaign, config: str | None,
 
 
 def _cache_get_many(session: Session, keys: Sequence[str]) -> dict[str, bytes]:
-    """Bulk read of the result cache (one query per chunk instead of one per key)."""
-    from railval.db.models import ResultCache
+    """Bulk read of the result cache; only authentic entries (:func:`railval.db.repo.cache_get_many`)."""
+    from railval.db import repo
 
-    out: dict[str, bytes] = {}
-    for i in range(0, len(keys), _CACHE_CHUNK):
-        chunk = list(keys[i:i + _CACHE_CHUNK])
-        for k, v in session.execute(select(ResultCache.key, ResultCache.value)
-                                    .where(ResultCache.key.in_(chunk))):
-            out[k] = bytes(v)
-    return out
+    return repo.cache_get_many(session, list(keys), chunk=_CACHE_CHUNK)
 
 
 def _pack(values: en14363.SectionValues) -> bytes:
@@ -140,7 +134,9 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
         pending = []
         with ThreadPoolExecutor(max_workers=1) as pool:
             for chunk in chunks:
-                decode = repo.fetch_signalsets(session, camp, config, sections=chunk)
+                # computed once per content: check every blob against its hash on the way
+                decode = repo.fetch_signalsets(session, camp, config, sections=chunk,
+                                               verify=True)
                 pending.append((chunk, pool.submit(_decode_and_evaluate, decode,
                                                    [by_id[s] for s in chunk], order)))
             new: dict[str, bytes] = {}
@@ -168,7 +164,8 @@ def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
 
     database = _worker_database(db_or_url) if isinstance(db_or_url, str) else db_or_url
     with database.session() as session:
-        sets = repo.load_signalsets(session, campaign, config, sections=[s.id for s in sections])
+        sets = repo.load_signalsets(session, campaign, config, sections=[s.id for s in sections],
+                                    verify=True)
     vals = en14363.evaluate_batch([sets[s.id] for s in sections], sections, order=order)
     return [_pack(v) for v in vals]
 
@@ -270,18 +267,23 @@ def _warnings(label: str, values: Mapping[str, en14363.SectionValues]) -> list[s
 
 def validate_configuration(session: Session, campaign_name: str, config_name: str, *,
                            order: int = DEFAULT_ORDER, n_boot: int = 1000,
-                           seed: int = 0) -> ValidationResult:
+                           seed: int = 0, check_seals: bool = True) -> ValidationResult:
     """Validate configuration ``config_name`` of ``campaign_name`` against the measurement.
 
     ``order``: Butterworth prototype order of both filters; ``n_boot``/``seed``: bootstrap of
     the normalised values. The result's ``info`` records how many sections of each side
-    came from the cache. Raises :class:`railval.core.errors.NotFound` for unknown names.
+    came from the cache. First the seals of both sides' signals are checked
+    (:func:`railval.db.repo.require_evidence` without reading blobs): a signal changed
+    outside railval raises :class:`railval.db.integrity.IntegrityError` instead of giving a
+    verdict. Raises :class:`railval.core.errors.NotFound` for unknown names.
     """
     from railval.db import repo
 
     check_order(order)
     camp = repo.get_campaign(session, campaign_name)
     repo.get_configuration(session, camp, config_name)
+    if check_seals:
+        repo.require_evidence(session, camp, config_name, blobs=False)
     sections = repo.section_infos(session, camp)
     vehicle = repo.vehicle_info(session, camp)
     m_stats: dict[str, int] = {}
