@@ -33,6 +33,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="database URL (sqlite:///file.db or postgresql+psycopg://...); default $RAILVAL_DB "
         "or sqlite:///railval.db",
     )
+    parser.add_argument(
+        "--as", dest="as_user", metavar="USER", default=None,
+        help="the user you act as when the database holds users (default $RAILVAL_USER); "
+        "the verb needs a role of that user (docs/security.md)",
+    )
     parser.add_argument("--debug", action="store_true",
                         help="print the traceback of an error (also RAILVAL_DEBUG=1)")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
@@ -110,6 +115,60 @@ def _database_message(exc: Exception) -> str:
     return f"database error ({type(orig).__name__}: {first[:200]})"
 
 
+def verb_name(args: argparse.Namespace) -> str:
+    """``VERB`` or ``VERB SUBVERB`` as in :data:`railval.core.roles.CLI_ACTIONS`."""
+    sub = getattr(args, "subverb", None)
+    return f"{args.verb} {sub}" if sub else args.verb
+
+
+def authorize(args: argparse.Namespace) -> None:
+    """Check the verb's action for the acting user when the database holds users.
+
+    The acting user is ``--as`` (else ``$RAILVAL_USER``); audit rows written by the verb name
+    them. Without users (a fresh or single-user database) every verb runs and the audit
+    trail names ``cli:<OS user>``.
+    """
+    import getpass
+    import os
+
+    from railval.core.roles import CLI_ACTIONS, require
+    from railval.db import engine
+
+    verb = verb_name(args)
+    action = CLI_ACTIONS[verb]
+    who = args.as_user or os.environ.get("RAILVAL_USER")
+    engine.default_actor = who or f"cli:{getpass.getuser()}"
+    if action is None or getattr(args, "bundle", None):  # a bundle is checked without the database
+        return
+    from railval.db import users
+
+    database = engine.connect(args.db)
+    try:
+        if database.current_revision() is None or not _has_user_table(database):
+            return
+        with database.session() as s:
+            if not users.has_users(s):
+                return
+            if not who:
+                raise RailvalError(
+                    f"this database has users: name the user you act as with --as USER or "
+                    f"RAILVAL_USER (`{verb}` needs the permission to {action})")
+            user = users.find_user(s, who)
+            if user is None:
+                raise RailvalError(f"--as {who!r}: no such user in {database.safe_url}")
+            if user.disabled:
+                raise RailvalError(f"--as {who!r}: this account is disabled")
+            require(users.principal(user), action)
+    finally:
+        database.dispose()
+
+
+def _has_user_table(database) -> bool:
+    from sqlalchemy import inspect
+
+    return "app_user" in inspect(database.engine).get_table_names()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one verb. Errors print one line ``railval VERB: error: …`` on stderr (exit 2 for
     bad input, 1 for anything else); ``--debug`` (or ``RAILVAL_DEBUG=1``) adds the
@@ -121,6 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         logging.basicConfig(level=logging.INFO, stream=sys.stderr)
     code = 1
     try:
+        authorize(args)
         code = int(args.func(args) or 0)
         sys.stdout.flush()
         return code
@@ -130,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         return code
     except KeyboardInterrupt:
-        print(f"railval {args.verb}: interrupted", file=sys.stderr)
+        print(f"railval {verb_name(args)}: interrupted", file=sys.stderr)
         return 130
     except RailvalError as exc:
         error, message, code = exc, str(exc), 2
@@ -144,11 +204,11 @@ def main(argv: list[str] | None = None) -> int:
             message = f"{exc.strerror}" + (f": {exc.filename}" if exc.filename else "")
         else:
             message = (f"internal error ({type(exc).__name__}); run `railval --debug "
-                       f"{args.verb} …` for the details")
+                       f"{verb_name(args)} …` for the details")
         code = 1
     if debug:
         traceback.print_exception(error, file=sys.stderr)
-    print(f"railval {args.verb}: error: {message}", file=sys.stderr)
+    print(f"railval {verb_name(args)}: error: {message}", file=sys.stderr)
     return code
 
 
