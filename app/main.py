@@ -18,6 +18,7 @@ from typing import Any
 
 import panel as pn
 
+from railval.app import security
 from railval.app.pages.compare import ComparePage
 from railval.app.pages.dashboard import DashboardPage
 from railval.app.pages.diagnose import DiagnosePage
@@ -30,6 +31,7 @@ STATIC = Path(__file__).resolve().parent.parent / "static"
 CSS_FILE = STATIC / "railval.css"
 ACCENT = "#0b5394"
 
+security.use_local_fonts()
 pn.extension("tabulator", notifications=False, design="native", sizing_mode="stretch_width")
 
 PAGE_CLASSES = {
@@ -126,11 +128,25 @@ def build_app(database: Any, page: str = "overview") -> pn.template.FastListTemp
 
 def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: bool = False,
           threaded: bool = False, allow_websocket_origin: list[str] | None = None, **kw: Any):
-    """Serve the app at ``http://address:port/`` (``pn.serve``); returns the server."""
+    """Serve the app at ``http://address:port/`` (``pn.serve``); returns the server.
+
+    Every response carries the security headers of :mod:`railval.app.security`; session ids
+    are signed with :func:`railval.app.security.session_secret` (a forged one is refused);
+    websocket connections are accepted only from ``allow_websocket_origin`` (default: this
+    address and port, ``localhost`` and ``127.0.0.1``) — never from any origin (``*``).
+    """
+    from railval.core.errors import InvalidParameter
+
     origins = allow_websocket_origin or [f"{address}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
+    if any(o.strip() == "*" or o.strip().startswith("*:") for o in origins):
+        raise InvalidParameter("--allow-websocket-origin '*' would let any web site drive a "
+                               "session (cross-site websocket hijacking); name the host[:port] "
+                               "the users' browsers connect to")
     return pn.serve({"app": lambda: build_app(database)}, port=port, address=address, show=show,
                     threaded=threaded, title="railval", allow_websocket_origin=origins,
-                    static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {}, **kw)
+                    static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {},
+                    transforms=security.transforms(), sign_sessions=True,
+                    secret_key=security.session_secret().encode(), **kw)
 
 
 def free_port() -> int:

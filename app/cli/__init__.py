@@ -104,15 +104,9 @@ class Progress:
 
 
 def _database_message(exc: Exception) -> str:
-    """A plain sentence for a database driver error: no SQL, no parameters."""
-    orig = getattr(exc, "orig", None) or exc
-    first = str(orig).strip().splitlines()[0] if str(orig).strip() else type(orig).__name__
-    if "locked" in first or "busy" in first:
-        return ("the database is busy: another process held its write lock for longer than "
-                "the 30 s wait; try again when it has finished")
-    if "could not connect" in first or "Connection refused" in first or "unable to open" in first:
-        return f"cannot open the database ({first})"
-    return f"database error ({type(orig).__name__}: {first[:200]})"
+    from railval.app.security import database_message
+
+    return database_message(exc)
 
 
 def verb_name(args: argparse.Namespace) -> str:

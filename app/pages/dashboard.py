@@ -10,6 +10,7 @@ import holoviews as hv
 import pandas as pd
 import panel as pn
 
+from railval.app.security import plain_message
 from railval.app import plots
 from railval.app.pages._common import PageBase, message, table, where_map
 from railval.app.state import AppState, DashboardState
@@ -132,7 +133,8 @@ class DashboardPage(PageBase):
         try:
             self._rows = self.state.drilldown()
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            self.drill_box.objects = [message(f"drill-down of {self.state.quantity} not available: {exc}",
+            self.drill_box.objects = [message(f"drill-down of {self.state.quantity} not available: "
+                                         f"{plain_message(exc, 'drill-down')}",
                                               "danger")]
             return
         df = pd.DataFrame(self._rows)

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import math
 import threading
-import traceback
 from collections.abc import Callable
 from typing import Any
 
 import param
 
+from railval.app.security import plain_message
 from railval.app.state.backend import Backend, CampaignOverview
 
 PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report")
@@ -54,7 +54,7 @@ class AppState(param.Parameterized):
         try:
             names = self.backend.campaigns()
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            self.set_status(f"cannot list campaigns: {exc}", "error")
+            self.set_status(f"cannot list campaigns: {plain_message(exc, 'campaigns')}", "error")
             names = []
         self.param.campaign.objects = names
         if names and self.campaign not in names:
@@ -69,7 +69,8 @@ class AppState(param.Parameterized):
         try:
             ov = self.backend.overview(self.campaign)
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            self.set_status(f"cannot open campaign {self.campaign!r}: {exc}", "error")
+            self.set_status(f"cannot open campaign {self.campaign!r}: "
+                            f"{plain_message(exc, 'campaign')}", "error")
             return
         self.overview = ov
         configs = [c.name for c in ov.configurations]
@@ -139,7 +140,7 @@ class AppState(param.Parameterized):
             try:
                 result = work(progress)
             except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-                detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+                detail = plain_message(exc, title)
 
                 def fail():
                     self.busy = False
@@ -155,7 +156,8 @@ class AppState(param.Parameterized):
                     try:
                         on_done(result)
                     except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-                        self.set_status(f"{title}: finished but showing the result failed: {exc}", "error")
+                        self.set_status(f"{title}: finished but showing the result failed: "
+                                        f"{plain_message(exc, title)}", "error")
             call(done)
 
         if not background:
