@@ -10,9 +10,9 @@ import holoviews as hv
 import pandas as pd
 import panel as pn
 
-from railval.app.security import plain_message
 from railval.app import plots
 from railval.app.pages._common import PageBase, message, table, where_map
+from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState
 
 SUMMARY_COLUMNS = ["quantity", "n", "mean", "std", "mean_limit", "std_limit", "mean_norm", "std_norm", "pass"]

@@ -14,10 +14,10 @@ import holoviews as hv
 import pandas as pd
 import panel as pn
 
-from railval.app.security import plain_message
 from railval.app import plots
 from railval.app.pages._common import PageBase, make_dispatch, message, table, where_map
 from railval.app.pages.dashboard import validation_view
+from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 
 

@@ -8,9 +8,9 @@ import math
 import pandas as pd
 import panel as pn
 
-from railval.app.security import no_external_images
 from railval.app import plots
 from railval.app.pages._common import PageBase, html_table, message
+from railval.app.security import no_external_images
 from railval.app.state import CampaignOverview, unit_label
 
 

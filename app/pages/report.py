@@ -8,8 +8,8 @@ import io
 
 import panel as pn
 
-from railval.app.security import plain_message
 from railval.app.pages._common import PageBase
+from railval.app.security import plain_message
 from railval.app.state import AppState, ReportState
 
 
