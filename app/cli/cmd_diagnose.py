@@ -124,7 +124,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=_cmd_calibrate)
 
-    m = subparsers.add_parser("modal", help="SSI-COV car body modes and modal calibration ([ref 3])")
+    m = subparsers.add_parser("modal", help="SSI-COV car body modes and modal calibration: model frequencies fitted to "
+                                   "the identified modes, paired by MAC (docs/design.md §7)")
     m.add_argument("campaign")
     m.add_argument("--section", action="append", default=None, metavar="S")
     m.add_argument("--calibrate", nargs="+", default=None, metavar="PARAM",
