@@ -9,6 +9,7 @@ which calls directly). Errors land in ``AppState.status`` with level ``"error"``
 from __future__ import annotations
 
 import math
+import os
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -27,6 +28,13 @@ PAGE_TITLES = {
     "diagnose": "Diagnose & model workshop",
     "report": "Report",
 }
+
+
+#: jobs (simulation, calibration, diagnosis, metrics) running at once in this server, over
+#: all browser sessions (``$RAILVAL_MAX_JOBS``, default 1: one calibration already keeps the
+#: two cores of the deployment busy); further jobs wait in line with a "queued" status
+MAX_JOBS = max(1, int(os.environ.get("RAILVAL_MAX_JOBS", "1")))
+_JOB_SLOTS = threading.BoundedSemaphore(MAX_JOBS)
 
 
 class AppState(param.Parameterized):
@@ -137,6 +145,11 @@ class AppState(param.Parameterized):
             call(apply)
 
         def body():
+            if not _JOB_SLOTS.acquire(blocking=False):
+                call(lambda: self.set_status(
+                    f"{title}: queued — {MAX_JOBS} job(s) of this server are running; it starts "
+                    "when one has finished", "info"))
+                _JOB_SLOTS.acquire()
             try:
                 result = work(progress)
             except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
@@ -147,6 +160,8 @@ class AppState(param.Parameterized):
                     self.set_status(f"{title} failed: {detail}", "error")
                 call(fail)
                 return
+            finally:
+                _JOB_SLOTS.release()
 
             def done():
                 self.busy = False
