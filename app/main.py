@@ -57,11 +57,15 @@ def status_area(app: AppState) -> pn.Column:
     bar = pn.indicators.Progress(value=0, max=100, sizing_mode="stretch_width", visible=False,
                                  css_classes=["rv-progress"], bar_color="info")
 
+    cancel = pn.widgets.Button(name="Cancel job", button_type="warning", visible=False,
+                               width=120, css_classes=["rv-cancel"])
+    cancel.on_click(lambda _: app.cancel_job())
+
     def sync(*_):
-        bar.visible = app.busy
+        bar.visible = cancel.visible = app.busy
         bar.value = round(app.progress * 100)
     app.param.watch(sync, ["busy", "progress"])
-    return pn.Column(pn.bind(alert, app.param.status, app.param.status_level), bar,
+    return pn.Column(pn.bind(alert, app.param.status, app.param.status_level), bar, cancel,
                      sizing_mode="stretch_width")
 
 

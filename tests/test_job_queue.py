@@ -55,3 +55,26 @@ def test_calibrate_refuses_an_existing_name_before_fitting(sqlite_database, tmp_
     with pytest.raises(InvalidParameter, match="'variant1' already exists .* --replace"):
         calibrate(sqlite_database, "demo", "baseline", ["friction_damping"], "variant1")
     assert time.perf_counter() - t < 5
+
+
+def test_cancel_stops_a_job_at_its_next_step(sqlite_database):
+    state = AppState(Backend(sqlite_database))
+    steps: list[int] = []
+    go = threading.Event()
+
+    def work(progress):
+        for k in range(200):
+            progress(k / 200, f"step {k}")
+            steps.append(k)
+            if k == 2:
+                go.set()
+            time.sleep(0.02)
+        return "finished"
+
+    state.run_job("calibrate", work)
+    assert go.wait(30)
+    state.cancel_job()
+    state.wait(30)
+    assert not state.busy
+    assert state.status == "calibrate: cancelled"
+    assert len(steps) < 200

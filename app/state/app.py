@@ -18,6 +18,7 @@ import param
 
 from railval.app.security import plain_message
 from railval.app.state.backend import Backend, CampaignOverview
+from railval.core.errors import RailvalError
 
 PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report")
 PAGE_TITLES = {
@@ -29,6 +30,10 @@ PAGE_TITLES = {
     "report": "Report",
 }
 
+
+
+class JobCancelled(RailvalError):
+    """The user cancelled a background job."""
 
 #: jobs (simulation, calibration, diagnosis, metrics) running at once in this server, over
 #: all browser sessions (``$RAILVAL_MAX_JOBS``, default 1: one calibration already keeps the
@@ -132,11 +137,14 @@ class AppState(param.Parameterized):
             self.set_status(f"{title}: another job is still running — wait for it to finish", "warning")
             return None
         call = dispatch or (lambda f: f())
+        cancel = self._cancel = threading.Event()
         self.busy = True
         self.progress = 0.0
         self.set_status(f"{title}: started", "info")
 
         def progress(fraction: float, message: str = "") -> None:
+            if cancel.is_set():  # the job stops at its next progress report
+                raise JobCancelled(f"{title}: cancelled")
             frac = float(min(1.0, max(0.0, fraction if math.isfinite(fraction) else 0.0)))
 
             def apply():
@@ -151,8 +159,16 @@ class AppState(param.Parameterized):
                     "when one has finished", "info"))
                 _JOB_SLOTS.acquire()
             try:
+                if cancel.is_set():
+                    raise JobCancelled(f"{title}: cancelled before it started")
                 result = work(progress)
             except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+                if isinstance(exc, JobCancelled):
+                    def cancelled(msg=str(exc)):
+                        self.busy = False
+                        self.set_status(msg, "warning")
+                    call(cancelled)
+                    return
                 detail = plain_message(exc, title)
 
                 def fail():
@@ -181,6 +197,14 @@ class AppState(param.Parameterized):
         self._job = threading.Thread(target=body, name=f"railval-job-{title}", daemon=True)
         self._job.start()
         return self._job
+
+    def cancel_job(self) -> None:
+        """Ask the running job to stop: it ends at its next progress report (a simulation
+        or calibration step), or before it starts when it is still queued."""
+        cancel = getattr(self, "_cancel", None)
+        if self.busy and cancel is not None:
+            cancel.set()
+            self.set_status("cancelling — the job stops after its current step", "warning")
 
     def wait(self, timeout: float | None = None) -> None:
         if self._job is not None:
