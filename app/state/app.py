@@ -40,6 +40,9 @@ class JobCancelled(RailvalError):
 #: two cores of the deployment busy); further jobs wait in line with a "queued" status
 MAX_JOBS = max(1, int(os.environ.get("RAILVAL_MAX_JOBS", "1")))
 _JOB_SLOTS = threading.BoundedSemaphore(MAX_JOBS)
+#: most campaign simulations one job may run (``$RAILVAL_MAX_JOB_SIMULATIONS``); a larger
+#: diagnosis or calibration is refused with its cost shown, before it starts
+MAX_JOB_SIMULATIONS = max(1, int(os.environ.get("RAILVAL_MAX_JOB_SIMULATIONS", "1000")))
 
 
 class AppState(param.Parameterized):
@@ -197,6 +200,16 @@ class AppState(param.Parameterized):
         self._job = threading.Thread(target=body, name=f"railval-job-{title}", daemon=True)
         self._job.start()
         return self._job
+
+    def within_cost_cap(self, title: str, simulations: int) -> bool:
+        """``True`` when a job of ``simulations`` campaign simulations may run; else the
+        status says the cost and the cap and ``False`` is returned."""
+        if simulations > MAX_JOB_SIMULATIONS:
+            self.set_status(f"{title} refused: it would simulate the campaign {simulations} times, "
+                            f"more than the limit of {MAX_JOB_SIMULATIONS} per job — choose fewer "
+                            "candidates, values or generations", "error")
+            return False
+        return True
 
     def cancel_job(self) -> None:
         """Ask the running job to stop: it ends at its next progress report (a simulation
