@@ -238,6 +238,9 @@ def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
             raise InvalidSignal(
                 f"section {sec.id}: channel {name} has shape {np.shape(arr)}, expected ({n},)")
         peak = float(np.max(np.abs(arr))) if n else 0.0
+        if not np.isfinite(peak):
+            raise InvalidSignal(f"section {sec.id}: channel {name} holds non-finite values "
+                                f"({peak:g})")
         if not peak <= MAX_ABS_SAMPLE:
             raise InvalidSignal(
                 f"section {sec.id}: channel {name} holds {peak:g}; samples must be finite and "
