@@ -206,9 +206,6 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     ``allow_websocket_origin`` — never from any origin (``*``)."""
     from railval.app.auth import SESSION_MAX_AGE_S, RailvalAuth, check_startup, cookie_secret
 
-    check_startup(database, address)
-    secret, _origin = cookie_secret(cookie_secret_file)
-    auth = RailvalAuth(database, secret, max_age_s=session_max_age_s or SESSION_MAX_AGE_S)
     origins = allow_websocket_origin or [f"{address}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
     if any(o.strip() == "*" or o.strip().startswith("*:") for o in origins):
         # checked before anything else starts: '*' lets any web site drive a session
@@ -217,6 +214,9 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
         raise InvalidParameter("--allow-websocket-origin '*' would let any web site drive a "
                                "session (cross-site websocket hijacking); name the host[:port] "
                                "the users' browsers connect to")
+    check_startup(database, address)
+    secret, _origin = cookie_secret(cookie_secret_file)
+    auth = RailvalAuth(database, secret, max_age_s=session_max_age_s or SESSION_MAX_AGE_S)
     if behind_proxy:
         kw["http_server_kwargs"] = {**kw.get("http_server_kwargs", {}), "xheaders": True}
     return pn.serve({"app": lambda: build_app(database, auth=auth)}, port=port, address=address,
