@@ -75,6 +75,9 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     every quantity)."""
     report(progress, "load", 0.0, campaign=campaign, config=config)
     with session_of(database) as s:
+        from railval.db import repo as _repo
+
+        _repo.check_new_configuration(s, campaign, new_name, replace=replace)  # before fitting
         ctx = load_context(s, campaign)
         conf_effects, conf_params, _ = configuration_of(s, campaign, config)
     registry = EFFECTS

@@ -140,6 +140,8 @@ class DiagnoseState(param.Parameterized):
 
         settings = {"values_per_parameter": self.values_per_parameter,
                     "effects": list(self.candidate_effects) or None}
+        if not app.within_cost_cap("diagnosis", self.diagnosis_simulations()):
+            return None
 
         def work(progress):
             return app.backend.diagnose(campaign, config, progress=progress, **settings)
@@ -180,6 +182,8 @@ class DiagnoseState(param.Parameterized):
 
         settings = {"popsize": self.popsize, "maxiter": self.maxiter, "polish_maxfev": self.polish_maxfev,
                     "seed": self.seed, "params": [f"{effect}.{p}" for p in self.fit_parameters] or None}
+        if calibrate and not app.within_cost_cap("calibration", self.calibration_simulations()):
+            return None
 
         def work(progress):
             if calibrate:
