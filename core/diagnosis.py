@@ -50,7 +50,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.psd import welch_psd
 
@@ -60,24 +59,24 @@ __all__ = [
     "Candidate",
     "CandidateFamily",
     "DiagnosisResult",
-    "SectionEvidence",
-    "TrustedCandidate",
-    "component_parts",
-    "diagnose_evidence",
-    "plausibility_flags",
-    "section_evidence",
-    "separating_evidence",
-    "zone_bootstrap",
-    "zone_folds",
     "ParameterScan",
     "Pattern",
+    "SectionEvidence",
+    "TrustedCandidate",
     "band_powers",
     "band_ratio_pattern",
+    "component_parts",
+    "diagnose_evidence",
     "diagnose_patterns",
     "difference_pairs",
     "fit_scan",
     "pattern_from_pairs",
+    "plausibility_flags",
     "psd_band_pattern",
+    "section_evidence",
+    "separating_evidence",
+    "zone_bootstrap",
+    "zone_folds",
 ]
 
 #: Frequency bands (Hz) of the car body acceleration log-PSD ratios: body modes (0.4–2),
