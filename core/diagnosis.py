@@ -385,22 +385,21 @@ def diagnose_patterns(residual: Pattern, scans: Mapping[str, Sequence[ParameterS
 
 #: Vehicle-template parameters tried as candidate causes beside the effects (masses, inertias,
 #: stiffnesses and dampings per direction: primary, secondary, yaw dampers). Each entry
-#: ``name: step`` gives the factor of the one perturbed simulation of the linearised
-#: sensitivity (stiffness/damping: ×0.5 — worn or soft components are the frequent error;
-#: masses/inertias: ×1.2). The names, units, defaults and bounds come from the template
-#: registry :mod:`railval.core.sim.vehicles`.
-PARAMETER_CANDIDATES: dict[str, dict[str, float]] = {
-    "coach": {"m_carbody": 1.2, "I_pitch_carbody": 1.2, "I_yaw_carbody": 1.2, "m_bogie": 1.2,
-              "k_primary_x": 0.5, "k_primary_y": 0.5, "k_primary_z": 0.5, "c_primary_z": 0.5,
-              "k_secondary_y": 0.5, "k_secondary_z": 0.5, "c_secondary_y": 0.5, "c_secondary_z": 0.5,
-              "c_yaw_damper": 0.5},
-    "wagon": {"m_body_tare": 1.2, "payload": 1.2, "k_leaf_z": 0.5, "leaf_friction": 0.5,
-              "link_length": 0.5, "link_friction": 0.5},
+#: ``name: (step, low, high)``: ``step`` is the factor of the one perturbed simulation of the
+#: linearised sensitivity (stiffness/damping ×0.5 — worn or soft components are the frequent
+#: error; masses/inertias ×1.2), ``low``–``high`` the search box as factors of the model's
+#: value (log scale, clipped to the template bounds). Names, units, defaults and bounds come
+#: from the template registry :mod:`railval.core.sim.vehicles`.
+_KC = (0.5, 0.1, 4.0)
+_MI = (1.2, 0.5, 2.0)
+PARAMETER_CANDIDATES: dict[str, dict[str, tuple[float, float, float]]] = {
+    "coach": {"m_carbody": _MI, "I_pitch_carbody": _MI, "I_yaw_carbody": _MI, "m_bogie": _MI,
+              "k_primary_x": _KC, "k_primary_y": _KC, "k_primary_z": _KC, "c_primary_z": _KC,
+              "k_secondary_y": _KC, "k_secondary_z": _KC, "c_secondary_y": _KC, "c_secondary_z": _KC,
+              "c_yaw_damper": _KC},
+    "wagon": {"m_body_tare": _MI, "payload": _MI, "k_leaf_z": _KC, "leaf_friction": _KC,
+              "link_length": _KC, "link_friction": _KC},
 }
-
-#: Search box of a parameter candidate as factors of the model's value (log scale); clipped to
-#: the template bounds.
-PARAMETER_SEARCH_FACTORS: tuple[float, float] = (0.1, 4.0)
 
 #: Verdict thresholds: a cause must explain at least ``STRONG`` of the residual on held-out
 #: sections; two candidates "explain alike" when their held-out shares differ by less than

@@ -36,11 +36,9 @@ from railval.core.calibration import (
 from railval.core.diagnosis import (
     DEFAULT_BANDS_HZ,
     DiagnosisResult,
-    ParameterScan,
     Pattern,
     band_powers,
     band_ratio_pattern,
-    diagnose_patterns,
     pattern_from_pairs,
 )
 from railval.core.errors import InvalidParameter, NotFound
@@ -200,12 +198,16 @@ def scan_points(spec: Any, values_per_parameter: int) -> Iterator[tuple[str, flo
 
 
 def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3,
-                          template: str | None = None) -> int:
+                          template: str | None = None, parameters: bool | int = True, refine: int = 3) -> int:
     """How many campaign simulations :func:`diagnose` runs for ``effects`` (the configuration
     itself once, plus every distinct scan point of the effects that apply to the vehicle
-    ``template``): shown before a user starts it."""
+    ``template``, plus one per template parameter candidate (``parameters``: all of the
+    template's, or that many) and at most ``refine`` refinements): shown before a user starts it."""
+    from railval.core.diagnosis import PARAMETER_CANDIDATES
+
     registry = _effect_registry()
-    n = 1
+    n_par = len(PARAMETER_CANDIDATES.get(template or "coach", {})) if parameters is True else int(parameters)
+    n = 1 + (n_par + min(refine, n_par) if n_par else 0)
     for e in effects:
         if template and template not in getattr(registry[e], "templates", (template,)):
             continue
@@ -216,57 +218,24 @@ def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3,
 
 def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
              scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
-             workers: int | None = None) -> DiagnosisResult:
-    """Rank the effects missing from configuration ``config`` by the share of its residual
-    they explain (:mod:`railval.core.diagnosis`). Each candidate effect parameter is simulated at
-    ``values_per_parameter`` values over its bounds (plus its default) on the whole campaign."""
-    _report(progress, "load", 0.0, campaign=campaign, config=config)
-    with _session(database_or_session) as s:
-        ctx = load_context(s, campaign)
-        conf_effects, conf_params, _ = _config(s, campaign, config)
-        from railval.db import repo
+             workers: int | None = None, **options: Any) -> DiagnosisResult:
+    """Rank the causes of the residual of configuration ``config``: the effects it lacks and
+    the vehicle-template parameters that may be mis-set, by the share of the residual they
+    explain on held-out sections, with noise floor, plausibility, identifiability and a
+    verdict (:func:`railval.app.services.diagnosis_evidence.diagnose`). ``effects``: candidate
+    names — effect ids and ``model.NAME`` parameters; given without any ``model.`` name, only
+    those effects are tried."""
+    from railval.app.services.diagnosis_evidence import diagnose as diagnose_evidence_service
 
-        config_sets = repo.load_signalsets(s, campaign, config)
-    registry = _effect_registry()
-    unknown = [e for e in (effects or ()) if e not in registry]
-    if unknown:
-        raise InvalidParameter(f"unknown effect(s) {unknown}; known: {sorted(registry)}")
-    template = str(ctx.vehicle.get("template") or "coach")
-    todo = [e for e in (effects or registry) if e not in conf_effects
-            and template in getattr(registry[e], "templates", (template,))]
-    stored_residual, vr = residual_pattern(ctx, _values(config_sets, ctx.sections), _band_sum(config_sets, ctx.bands))
-    # the configuration itself is re-simulated so that its residual and the scanned patterns
-    # come from the same simulator run settings (signatures are differences of the two)
-    tasks, index, unique = [(ctx, conf_effects, conf_params)], [], {}
-    for e in todo:
-        defaults = {k: float(q["default"]) for k, q in _effect_parameters(registry[e]).items()}
-        for pname, v, point, p in scan_points(registry[e], values_per_parameter):
-            eff = {**conf_effects, e: point}
-            key = json.dumps(eff, sort_keys=True)
-            if key not in unique:  # the all-defaults point of a multi-parameter effect once
-                unique[key] = len(tasks)
-                tasks.append((ctx, eff, conf_params))
-            index.append((e, pname, v, defaults, (p["lower"], p["upper"]), p["log"], unique[key]))
-    _report(progress, "simulate", 0.05, tasks=len(tasks))
-    with BatchExecutor(scheduler, workers) as ex:
-        results = ex.map(_evaluate_effects, tasks,
-                         progress=lambda d, t: _report(progress, "simulate", 0.05 + 0.9 * d / t, done=d, total=t))
-    scans: dict[str, dict[str, ParameterScan]] = {}
-    residual, _ = residual_pattern(ctx, *results[0])
-    for e, pname, v, defaults, bounds, log, k in index:
-        pat, _ = residual_pattern(ctx, *results[k])
-        sc = scans.setdefault(e, {}).setdefault(pname, ParameterScan(e, pname, [], [], defaults, bounds, log))
-        sc.values.append(v)
-        sc.patterns.append(pat)
-    explanations = {e: _effect_explanation(registry[e]) for e in todo}
-    res = diagnose_patterns(residual, {e: list(d.values()) for e, d in scans.items()}, explanations=explanations)
-    res.extra.update({"campaign": ctx.campaign, "configuration": config, "validated": bool(vr.validated),
-                      "effects_in_configuration": sorted(conf_effects),
-                      "values_per_parameter": values_per_parameter, "simulations": len(tasks),
-                      "stored_residual_norm": math.sqrt(stored_residual.norm2()),
-                      "simulated_residual_norm": math.sqrt(residual.norm2())})
-    _report(progress, "done", 1.0)
-    return res
+    if effects is not None:
+        names = list(effects)
+        params = [n for n in names if n.startswith("model.")]
+        options.setdefault("parameters", params or None)
+        options.setdefault("include_parameters", bool(params))
+        effects = [n for n in names if not n.startswith("model.")]
+    return diagnose_evidence_service(database_or_session, campaign, config, progress=progress, scheduler=scheduler,
+                                     values_per_parameter=values_per_parameter, effects=effects, workers=workers,
+                                     **options)
 
 
 def _effect_parameters(spec: Any) -> dict[str, dict[str, float]]:
