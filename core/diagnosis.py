@@ -709,7 +709,8 @@ def _family_summary(fam: CandidateFamily, value: float) -> str:
     if fam.kind == "parameter" and fam.reference:
         return (f"{fam.title or fam.parameter} ≈ {100 * value / fam.reference:.0f} % of the model's value "
                 f"({value:.4g} {fam.unit} instead of {fam.reference:.4g})")
-    return f"{fam.title or fam.name}: {fam.parameter} ≈ {value:.4g} {fam.unit}".strip()
+    unit = "" if fam.unit in ("", "-") else f" {fam.unit}"
+    return f"{fam.title or fam.name}: {fam.parameter} ≈ {value:.4g}{unit}"
 
 
 def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily], *, validated: bool = False,
