@@ -34,7 +34,6 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from railval.core.errors import InvalidParameter
 from railval.core.sim import kernel as K
 from railval.core.sim.effects import resolve_effects

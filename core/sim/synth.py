@@ -30,11 +30,15 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import EFFECTS, resolve_effects
 from railval.core.sim.model import simulate_section
-from railval.core.sim.track import DS, TrackSection, generate_irregularities, irregularities_to_layout
+from railval.core.sim.track import (
+    DS,
+    TrackSection,
+    generate_irregularities,
+    irregularities_to_layout,
+)
 from railval.core.sim.vehicles import G, VehicleModel
 from railval.core.types import SignalSet, split_channel
 from railval.core.zones import zone_for_radius
