@@ -37,7 +37,8 @@ from bokeh.plotting import figure
 from holoviews.operation.downsample import downsample1d
 from tsdownsample import MinMaxLTTBDownsampler
 
-from railval.app.state import CompareData, nice_limits, unit_label
+from railval.app.scales import nice_limits, unit_label
+from railval.app.state.compare import CompareData
 
 hv.extension("bokeh", logo=False)
 

@@ -37,7 +37,7 @@ pattern components where their signatures differ most as the evidence to look at
 
 References
 ----------
-Polach & Böttcher 2014 (Polach & Böttcher 2014), §5: D_v, limits, zones. docs/design.md §7 (this procedure).
+Polach & Böttcher 2014, §5: D_v, limits, zones. docs/design.md §7 (this procedure).
 Welch 1967 (PSD estimate, via :mod:`railval.core.psd`).
 """
 
@@ -61,6 +61,7 @@ __all__ = [
     "DiagnosisResult",
     "ParameterScan",
     "Pattern",
+    "PatternGrid",
     "SectionEvidence",
     "TrustedCandidate",
     "band_powers",
@@ -71,10 +72,12 @@ __all__ = [
     "difference_pairs",
     "fit_scan",
     "pattern_from_pairs",
+    "pattern_grids",
     "plausibility_flags",
     "psd_band_pattern",
     "section_evidence",
     "separating_evidence",
+    "where_grid",
     "zone_bootstrap",
     "zone_folds",
 ]
@@ -879,3 +882,69 @@ def _unexplained(residual: Pattern, best: Candidate | None, n: int = 6) -> list[
                     "residual": float(residual.values[k]), "after_best": float(after[k])})
     return out
 
+
+# ----------------------------------------------------------------------------- grids
+@dataclass
+class PatternGrid:
+    """Components of a residual pattern arranged for a heat map: ``rows`` × ``cols`` with
+    ``values[i][j]`` the mean over positions (NaN where nothing was evaluated)."""
+
+    rows: list[str]
+    cols: list[str]
+    values: np.ndarray
+
+
+ZONE_COLUMNS = tuple(f"zone {z}" for z in (1, 2, 3, 4))
+
+
+def _grid(rows: Sequence[str], cols: Sequence[str], acc: Mapping[tuple[str, str], list[float]]) -> PatternGrid:
+    m = np.full((len(rows), len(cols)), np.nan)
+    for i, r in enumerate(rows):
+        for j, c in enumerate(cols):
+            if (r, c) in acc:
+                m[i, j] = float(np.mean(acc[(r, c)]))
+    return PatternGrid(list(rows), list(cols), m)
+
+
+def _quantity_zone_grid(acc: Mapping[tuple[str, str], list[float]]) -> PatternGrid:
+    from railval.core.quantities import QUANTITY_IDS
+
+    quantities = [q for q in QUANTITY_IDS if any((q, z) in acc for z in ZONE_COLUMNS)]
+    return _grid(quantities, ZONE_COLUMNS, acc)
+
+
+def where_grid(pairs: Mapping[str, Sequence]) -> PatternGrid:
+    """Where a configuration fails: the mean of D_v / std limit (Polach & Böttcher 2014 §5)
+    over the sections and positions of each quantity × EN 14363 test zone. ``pairs`` has the
+    columns ``quantity``, ``zone`` and ``D_norm`` (``railval.core.validation.ValidationResult.pairs``).
+    Quantities in the order of :mod:`railval.core.quantities`."""
+    acc: dict[tuple[str, str], list[float]] = defaultdict(list)
+    for q, z, v in zip(pairs["quantity"], pairs["zone"], np.asarray(pairs["D_norm"], float), strict=True):
+        if math.isfinite(v):
+            acc[(str(q), f"zone {int(z)}")].append(float(v))
+    return _quantity_zone_grid(acc)
+
+
+def pattern_grids(labels: Sequence[str], values) -> tuple[PatternGrid, PatternGrid]:
+    """Arrange a diagnosis pattern (components ``"Y_qst zone 4 w1L"`` = mean normalised D_v
+    of a quantity in a zone at a position, and ``"psd az_cb_b1 5-10 Hz"`` = log2 PSD ratio
+    simulation/measurement in a band) into (quantity × zone, car body acceleration
+    direction × band) grids, averaging over positions."""
+    q_acc: dict[tuple[str, str], list[float]] = defaultdict(list)
+    p_acc: dict[tuple[str, str], list[float]] = defaultdict(list)
+    bands: list[str] = []
+    for label, v in zip(labels, np.asarray(values, float), strict=True):
+        if not math.isfinite(v):
+            continue
+        parts = label.split()
+        if parts[0] == "psd":  # psd <channel> <lo-hi> Hz
+            kind = parts[1].split("_")[0]
+            band = f"{parts[2]} Hz"
+            if band not in bands:
+                bands.append(band)
+            p_acc[(kind, band)].append(v)
+        elif len(parts) >= 3 and parts[1] == "zone":
+            q_acc[(parts[0], f"zone {parts[2]}")].append(v)
+    bands.sort(key=lambda b: float(b.split("-")[0]))
+    kinds = [k for k in ("ay", "az") if any((k, b) in p_acc for b in bands)]
+    return _quantity_zone_grid(q_acc), _grid(kinds, bands, p_acc)

@@ -30,7 +30,7 @@ in one compiled call, all statistics of one section come from one row-wise sort.
 
 References
 ----------
-Polach & Böttcher 2014 (Polach & Böttcher 2014), §5 and Table 2.
+Polach & Böttcher 2014, §5 and Table 2.
 EN 14363:2005, on-track tests: filtering, test sections, percentile values from the
 cumulative frequency distribution.
 Hyndman, R.J. & Fan, Y. (1996) Sample quantiles in statistical packages, Am. Stat. 50(4).

@@ -23,7 +23,7 @@ the evaluated range is shorter than the filter settling time.
 
 References
 ----------
-Polach & Böttcher 2014 (Polach & Böttcher 2014), §5 and Table 2: filtering of the 12 quantities.
+Polach & Böttcher 2014, §5 and Table 2: filtering of the 12 quantities.
 EN 14363:2005, on-track tests: filtering of wheel–rail forces (low-pass 20 Hz) and car body
 accelerations (band-pass 0.4–10 Hz).
 Gustafsson, F. (1996) Determining the initial states in forward-backward filtering, IEEE

@@ -22,7 +22,7 @@ for measurement and simulation (e.g. from :func:`railval.core.en14363.evaluate_b
 
 References
 ----------
-Polach & Böttcher 2014 (Polach & Böttcher 2014), §5, eq. (4), Table 2, Fig. 11–13.
+Polach & Böttcher 2014, §5, eq. (4), Table 2, Fig. 11–13.
 Efron, B. & Tibshirani, R. (1993) An Introduction to the Bootstrap, ch. 13 (percentile
 interval).
 """

@@ -231,3 +231,30 @@ class ResultCache(Base):
     key: Mapped[str] = mapped_column(String(200), primary_key=True)
     value: Mapped[bytes] = mapped_column(LargeBinary)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class AnalysisRun(Base):
+    """A stored diagnosis or metrics run of one configuration.
+
+    ``inputs_sha256`` is the SHA-256 over the canonical JSON of everything the result depends
+    on (signal content hashes of both sides, section records, settings, processing version):
+    a later request with the same inputs reads this row instead of recomputing; when any
+    input changes the hash changes and the run is computed afresh. Earlier runs stay listed.
+    """
+
+    __tablename__ = "analysis_run"
+    __table_args__ = (
+        Index("ix_analysis_run_lookup", "configuration_id", "kind", "inputs_sha256"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="CASCADE"))
+    configuration_id: Mapped[int] = mapped_column(
+        ForeignKey("configuration.id", ondelete="CASCADE"))
+    kind: Mapped[str] = mapped_column(String(32))
+    inputs_sha256: Mapped[str] = mapped_column(String(64))
+    settings: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    result: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    seconds: Mapped[float] = mapped_column(Float, default=0.0)
+    actor: Mapped[str] = mapped_column(String(200), default="")
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)

@@ -11,7 +11,7 @@ For a measured signal ``m_i`` and a simulated signal ``c_i`` (same sampling rate
 ``P ∈ [0, 1]``, 0 for curves in phase, 1 for opposite sign (a sinusoid shifted by ``φ`` over
 whole periods gives ``P = φ/π``); ``C ≥ 0``. Sprague & Geers define these with time integrals;
 on a common uniform grid the sampling interval cancels and the sums are exact equivalents
-(Polach & Böttcher 2014, Polach & Böttcher 2014 §3.3, citing [10]).
+(Polach & Böttcher 2014 §3.3, citing [10]).
 
 References
 ----------

@@ -23,7 +23,7 @@ References
 ----------
 Bendat, J. S. & Piersol, A. G. (2010) Random Data: Analysis and Measurement Procedures, 4th
 ed., Wiley, ch. 5 and 8 (cross-correlation, time-delay estimation).
-Polach & Böttcher 2014 (Polach & Böttcher 2014) §4.2: influence of synchronisation on the phase error.
+Polach & Böttcher 2014 §4.2: influence of synchronisation on the phase error.
 """
 
 from __future__ import annotations
