@@ -316,7 +316,11 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
         conf_effects, conf_params, _ = _config(s, campaign, config)
     model_candidates = [e for e in effects if e.startswith("model.")]
     effects = [e for e in effects if not e.startswith("model.")]
-    start = dict(start or {})
+    start = {k: dict(v) for k, v in (start or {}).items()}
+    for key in [k for k in start if k.startswith("model.")]:  # {"model.P": {"P": v}} as the app sends it
+        value = start.pop(key)
+        if value:
+            start.setdefault("model", {})[key[6:]] = float(value.get(key[6:], next(iter(value.values()))))
     fit_ids, held_ids = _calibration_split(ctx, fit_sections, holdout, split)
     registry = _effect_registry()
     for e in effects:
