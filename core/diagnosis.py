@@ -580,6 +580,32 @@ class _Curve:
         return float(np.exp(x)) if self.log else x
 
 
+def _min_cost(curve: _Curve, P: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """min over the curve's range of ‖w·P(u)‖² for many node sets at once: ``P`` (B, K, n) in
+    family order → (B,). Exact on each linear segment (a quadratic in the segment parameter,
+    minimised in closed form and clipped to the segment; the first and last segments extend
+    to the ends of the range when the family extrapolates)."""
+    P = P[:, curve.order, :] * w
+    u = curve.u
+    lo_end, hi_end = float(curve.fine[0]), float(curve.fine[-1])
+    best = np.full(P.shape[0], np.inf)
+    for j in range(u.size - 1):
+        du = u[j + 1] - u[j]
+        t_lo = (lo_end - u[j]) / du if j == 0 else 0.0
+        t_hi = (hi_end - u[j]) / du if j == u.size - 2 else 1.0
+        if t_hi < t_lo:
+            continue
+        a, d = P[:, j, :], P[:, j + 1, :] - P[:, j, :]
+        dd = np.sum(d * d, axis=1)
+        ad = np.sum(a * d, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(dd > 0, -ad / dd, t_lo)
+        t = np.clip(t, t_lo, t_hi)
+        cost = np.sum((a + t[:, None] * d) ** 2, axis=1)
+        best = np.minimum(best, cost)
+    return best
+
+
 def _fit(curve: _Curve, P: np.ndarray, w: np.ndarray) -> tuple[int, float, np.ndarray]:
     Pf = curve.patterns(P)
     cost = np.sum((Pf * w) ** 2, axis=1)
@@ -774,17 +800,17 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
             den += float(np.sum((w * r_te) ** 2))
         held = float(np.clip(1 - num / den, 0.0, 1.0)) if den > 0 else 0.0
         # bootstrap: refit on resampled sections; and the share of pure scatter it explains
-        boot = []
+        boot: list[float] = []
         if n_boot:
-            P_boot = np.stack([e.values(Wb) for e in fam.evidence], axis=1)  # (B, K, n)
-            delta = curve.patterns(P_full) - r_full[None, :]  # (F, n) change the candidate makes
-            for b in range(n_boot):
-                _, cb, _ = _fit(curve, P_boot[b], w)
-                rb2 = float(np.sum((w * R_boot[b]) ** 2))
-                boot.append(1 - cb / rb2 if rb2 > 0 else 0.0)
-                if noise2[b] > 0:
-                    cn = np.min(np.sum(((noise[b][None, :] + delta) * w) ** 2, axis=1))
-                    noise_share[fi, b] = max(0.0, 1 - cn / noise2[b])
+            P_boot = np.stack([e.values(Wb) for e in fam.evidence], axis=1)  # (B, K, n), family order
+            rb2 = np.sum((w * R_boot) ** 2, axis=1)
+            cb = _min_cost(curve, P_boot, w)
+            boot = [1 - c / d if d > 0 else 0.0 for c, d in zip(cb, rb2, strict=True)]
+            # the candidate's change P(v) − r added to pure scatter n_b: nodes P_k − r + n_b
+            cn = _min_cost(curve, P_full[None, :, :] - r_full[None, None, :] + noise[:, None, :], w)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                share = np.where(noise2 > 0, 1 - cn / noise2, 0.0)
+            noise_share[fi] = np.maximum(share, 0.0)
         ci = (float(np.clip(np.percentile(boot, 5), 0, 1)), float(np.clip(np.percentile(boot, 95), 0, 1))) \
             if boot else (explained, explained)
         after = residual.group_norms(Pk)

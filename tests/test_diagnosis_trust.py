@@ -181,3 +181,22 @@ def test_linearised_parameter_candidate_extrapolates_over_its_bounds():
     assert c.fitted == pytest.approx(0.3, rel=0.03)
     assert "30 % of the model's value" in c.summary
     assert c.parameters == {"c": pytest.approx(0.3, rel=0.03)}
+
+
+def test_closed_form_segment_minimum_matches_a_fine_grid():
+    from railval.core.diagnosis import _Curve, _fit, _min_cost
+
+    rng = np.random.default_rng(3)
+    base, *_ = _evidence(lambda q, z, p: A[(q, z, p)])
+    ev = [base, base, base]
+    for extrapolate, log in ((False, False), (True, True)):
+        fam = CandidateFamily("parameter", "model.k", "k", [1.0, 0.4, 2.0], ev, (0.1, 4.0), log=log,
+                              extrapolate=extrapolate)
+        curve = _Curve(fam, n_fine=20001)
+        P = rng.normal(size=(5, 3, 7))
+        w = rng.uniform(0.5, 1.5, 7)
+        exact = _min_cost(curve, P, w)
+        for b in range(5):
+            _, grid, _ = _fit(curve, P[b], w)
+            assert exact[b] <= grid + 1e-12
+            assert exact[b] == pytest.approx(grid, rel=1e-5, abs=1e-9)
