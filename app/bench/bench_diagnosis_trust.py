@@ -169,8 +169,8 @@ def summarise(records: list[dict]) -> dict:
 
 
 def format_table(records: list[dict], summary: dict) -> str:
-    lines = [f"{'cls':<3} {'case':<44} {'verdict':<9} {'top candidate':<26} {'expl':>5} {'held':>5} "
-             f"{'nf':>5} {'ok':>3}"]
+    lines = [(f"{'cls':<3} {'case':<44} {'verdict':<9} {'top candidate':<26} {'expl':>5} {'held':>5} "
+              f"{'nf':>5} {'ok':>3}")]
     for r in records:
         lines.append(f"{r['class']:<3} {r['case'][:44]:<44} {r['verdict']:<9} {str(r['top'])[:26]:<26} "
                      f"{r['top_explained']:5.2f} {r['top_held_out']:5.2f} {r['noise_floor']:5.2f} "
