@@ -69,6 +69,16 @@ def test_class_b_parameter_error_is_diagnosed_calibrated_on_a_split_and_flagged_
     assert doc["in_sample"] is True and doc["info"]["held_out_sections"] == sorted(cd["held_out_sections"])
     main(["--db", url, "validate", "tb", "--config", "baseline", "--boot", "20", "--json"])
     assert json.loads(capsys.readouterr().out)["in_sample"] is False
+    # the report and the dashboard say so too
+    from railval.app.pages.dashboard import in_sample_note
+    from railval.app.report import build_report
+    from railval.app.state import Backend
+
+    backend = Backend(database)
+    assert "In-sample" in build_report(backend, "tb", "tb+c", worst_cases=1).html
+    assert "In-sample" not in build_report(backend, "tb", "baseline", worst_cases=1).html
+    summary = {"raw": backend.validation("tb", "tb+c").to_dict()}
+    assert "in-sample: tb+c was calibrated on 8 of these sections" in in_sample_note(summary)
 
 
 def test_class_c_cause_outside_the_library_is_not_claimed(database):
