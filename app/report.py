@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from railval.app.scales import nice_limits, nice_ticks, unit_label
+from railval.app.scales import MEASURED_COLOR, SIM_COLORS, nice_limits, nice_ticks, unit_label
 from railval.core.errors import RailvalError
 from railval.core.diagnosis import where_grid
 from railval.core.filters import filtfilt_rows
@@ -415,7 +415,8 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
         entry = channel_kind(ch)
         fkind, flabel = (entry.en_filter, entry.filter_label) if entry else ("lowpass", "low-pass 20 Hz")
         traces = []
-        for label, cfg, color in (("measurement", None, "#555555"), (configuration, configuration, "#1f77b4")):
+        for label, cfg, color in (("measurement", None, MEASURED_COLOR),
+                                  (configuration, configuration, SIM_COLORS[0])):
             ss = backend.signals(campaign, cfg, r.section, [ch])
             y = filtfilt_rows(np.asarray(ss.channels[ch], float)[None, :], float(ss.fs), fkind)[0]
             x, y = _thin(np.asarray(ss.distance_m, float), y)

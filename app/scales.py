@@ -1,9 +1,15 @@
-"""Axis scales and unit labels shared by the app's charts, pages and the report (docs/design.md §5:
-fixed, consistent axis scaling)."""
+"""Axis scales, unit labels and line colours shared by the app's charts, pages and the report
+(docs/design.md §5: fixed, consistent axis scaling; measurement beneath, simulation on top)."""
 
 from __future__ import annotations
 
 import math
+
+#: measurement black (drawn beneath); simulations in the Okabe–Ito colour-blind-safe palette
+#: (Okabe & Ito 2008, "Color Universal Design"), vermillion first: distinct from black in
+#: greyscale print and for the common colour-vision deficiencies
+MEASURED_COLOR = "#000000"
+SIM_COLORS = ("#D55E00", "#0072B2", "#009E73", "#CC79A7", "#E69F00")
 
 
 def nice_step(lo: float, hi: float, intervals: int = 5) -> float:

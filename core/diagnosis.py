@@ -75,6 +75,7 @@ __all__ = [
     "pattern_grids",
     "plausibility_flags",
     "psd_band_pattern",
+    "scan_values",
     "section_evidence",
     "separating_evidence",
     "where_grid",
@@ -974,3 +975,11 @@ def pattern_grids(labels: Sequence[str], values) -> tuple[PatternGrid, PatternGr
     bands.sort(key=lambda b: float(b.split("-")[0]))
     kinds = [k for k in ("ay", "az") if any((k, b) in p_acc for b in bands)]
     return _quantity_zone_grid(q_acc), _grid(kinds, bands, p_acc)
+
+
+def scan_values(lower: float, upper: float, default: float, n: int, log: bool = False) -> list[float]:
+    """The values of one effect parameter a diagnosis simulates (docs/design.md §7): ``n``
+    values spanning [lower, upper] (equally spaced, or geometrically with ``log``) plus the
+    default, sorted, unique."""
+    grid = np.geomspace(lower, upper, n) if log else np.linspace(lower, upper, n)
+    return sorted(set(grid.tolist()) | {float(default)})

@@ -233,6 +233,133 @@ class ResultCache(Base):
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
+# -- users, roles, invitations (docs/security.md) ------------------------------------------
+class AppUser(Base):
+    """A person who signs in. ``password_hash`` is an argon2id hash (NULL: cannot sign in)."""
+
+    __tablename__ = "app_user"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    username: Mapped[str] = mapped_column(String(100), unique=True)
+    display_name: Mapped[str] = mapped_column(String(200), default="")
+    password_hash: Mapped[str | None] = mapped_column(String(200), nullable=True)
+    disabled: Mapped[bool] = mapped_column(default=False)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    roles: Mapped[list[UserRole]] = relationship(
+        back_populates="user", cascade="all, delete-orphan", passive_deletes=True,
+        order_by="UserRole.role",
+    )
+
+    @property
+    def role_names(self) -> list[str]:
+        return [r.role for r in self.roles]
+
+    def __repr__(self) -> str:
+        return f"AppUser(id={self.id!r}, username={self.username!r})"
+
+
+class UserRole(Base):
+    """One role (a name of :data:`railval.core.roles.ROLES`) held by one user."""
+
+    __tablename__ = "user_role"
+
+    user_id: Mapped[int] = mapped_column(
+        ForeignKey("app_user.id", ondelete="CASCADE"), primary_key=True
+    )
+    role: Mapped[str] = mapped_column(String(20), primary_key=True)
+
+    user: Mapped[AppUser] = relationship(back_populates="roles")
+
+
+class Invitation(Base):
+    """A single-use invitation link; only the SHA-256 of its random token is stored."""
+
+    __tablename__ = "invitation"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    token_sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    role: Mapped[str] = mapped_column(String(20), default="reviewer")
+    #: the workshop the invitee joins (filled by the workshop feature; free-form reference)
+    workshop_ref: Mapped[str | None] = mapped_column(String(100), nullable=True, index=True)
+    note: Mapped[str] = mapped_column(String(200), default="")
+    created_by: Mapped[int | None] = mapped_column(
+        ForeignKey("app_user.id", ondelete="SET NULL"), nullable=True
+    )
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    expires_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True))
+    used_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    used_by: Mapped[int | None] = mapped_column(
+        ForeignKey("app_user.id", ondelete="SET NULL"), nullable=True
+    )
+
+
+# -- audit trail and sign-offs (append-only; docs/audit.md) -------------------------------
+class AuditEvent(Base):
+    """One row of the hash-chained audit trail (UPDATE/DELETE refused by triggers).
+
+    ``row_hash`` = SHA-256(``prev_hash`` ‖ canonical JSON of the row's other fields); see
+    :mod:`railval.db.audit`.
+    """
+
+    __tablename__ = "audit_event"
+    __table_args__ = (
+        Index("ix_audit_event_object", "object"),
+        Index("ix_audit_event_action_at", "action", "at_utc"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    seq: Mapped[int] = mapped_column(Integer, unique=True)
+    at_utc: Mapped[str] = mapped_column(String(32))
+    actor: Mapped[str] = mapped_column(String(100))
+    action: Mapped[str] = mapped_column(String(60))
+    object: Mapped[str] = mapped_column(String(400))
+    before_sha256: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    after_sha256: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    reason: Mapped[str] = mapped_column(Text, default="")
+    detail: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    prev_hash: Mapped[str] = mapped_column(String(64), unique=True)
+    row_hash: Mapped[str] = mapped_column(String(64), unique=True)
+
+
+class AuditHead(Base):
+    """The chain's head (one row, id 1): its UPDATE serialises concurrent appenders."""
+
+    __tablename__ = "audit_head"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    seq: Mapped[int] = mapped_column(Integer, default=0)
+    row_hash: Mapped[str] = mapped_column(String(64))
+
+
+class Signoff(Base):
+    """An independent sign-off of a configuration's validation (append-only).
+
+    Names are stored as text (not foreign keys) so that deleting the evidence leaves the
+    sign-off in place — it then shows as stale.
+    """
+
+    __tablename__ = "signoff"
+    __table_args__ = (Index("ix_signoff_campaign_configuration", "campaign", "configuration"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    campaign: Mapped[str] = mapped_column(String(200))
+    configuration: Mapped[str] = mapped_column(String(200))
+    user_id: Mapped[int | None] = mapped_column(
+        ForeignKey("app_user.id", ondelete="RESTRICT"), nullable=True
+    )
+    username: Mapped[str] = mapped_column(String(100))
+    printed_name: Mapped[str] = mapped_column(String(200))
+    signed_at_utc: Mapped[str] = mapped_column(String(32))
+    meaning: Mapped[str] = mapped_column(Text)
+    decision: Mapped[str] = mapped_column(String(20))
+    restrictions: Mapped[str] = mapped_column(Text, default="")
+    statement: Mapped[str] = mapped_column(Text, default="")
+    evidence_sha256: Mapped[str] = mapped_column(String(64))
+    manifest: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    software_version: Mapped[str] = mapped_column(String(40))
+
+
 class AnalysisRun(Base):
     """A stored diagnosis or metrics run of one configuration.
 

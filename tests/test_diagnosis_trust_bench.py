@@ -43,7 +43,7 @@ def test_class_a_library_effect_is_claimed(database):
 
 def test_class_b_parameter_error_is_diagnosed_calibrated_on_a_split_and_flagged_in_sample(database, tmp_path, capsys):
     from railval.app.cli import main
-    from railval.app.services.diagnosis import calibrate
+    from railval.app.services.calibration import calibrate
 
     label, kw, truth = _case("b", "secondary vertical damping x0.5")
     rec = run_case(database, "tb", "b", label, kw, truth, candidates=CANDIDATES)

@@ -105,7 +105,8 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
              candidates: list[str] | None = None, n_sections: int = 12) -> dict:
     """Synthesise, import and diagnose one case; return its record. ``candidates``: restrict
     the diagnosis (effect ids and ``model.PARAM``; the CI subset uses a few)."""
-    from railval.app.services.diagnosis import calibrate, diagnose
+    from railval.app.services.calibration import calibrate
+    from railval.app.services.diagnosis import diagnose
     from railval.app.services.synth import write_folder
     from railval.core.sim.synth import build_campaign
     from railval.db.importer import import_campaign

@@ -100,13 +100,11 @@ def _evaluate_sections(task: tuple[Any, dict, dict]) -> tuple[list[dict], dict[s
     """Worker task: simulate with ``effects`` and model ``parameters``; return the validation
     pairs (section, zone, quantity, position, D_norm) and the band powers per section and
     acceleration channel."""
-    from railval.app.services.diagnosis import ACC_CHANNELS, _simulate_campaign, _values
-    from railval.core.validation import validate
+    from railval.app.services.campaign_context import ACC_CHANNELS, section_values, simulate_context, validate_values
 
     ctx, effects, parameters = task
-    sets = _simulate_campaign(ctx, effects, parameters)
-    vals = _values(sets, ctx.sections)
-    vr = validate(ctx.measured_values, vals, ctx.sections, ctx.vehicle, n_boot=0)
+    sets = simulate_context(ctx, effects, parameters)
+    vr = validate_values(ctx, section_values(sets, ctx.sections))
     pairs = vr.pairs[["section", "zone", "quantity", "position", "D_norm"]].to_dict("records")
     bands = {sid: {ch: band_powers(ss.channels[ch], ss.fs, ctx.bands, 10.0) for ch in ACC_CHANNELS
                    if ch in ss.channels} for sid, ss in sets.items()}
@@ -115,7 +113,7 @@ def _evaluate_sections(task: tuple[Any, dict, dict]) -> tuple[list[dict], dict[s
 
 def measured_section_bands(session: Any, ctx: Any) -> dict[str, dict[str, np.ndarray]]:
     """Band powers of the measurement per section and acceleration channel."""
-    from railval.app.services.diagnosis import ACC_CHANNELS
+    from railval.app.services.campaign_context import ACC_CHANNELS
     from railval.db import repo
 
     sets = repo.load_signalsets(session, ctx.campaign, None, channels=[c for c in ACC_CHANNELS if c in ctx.channels])
@@ -136,34 +134,33 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     candidates (``parameters``: template names or ``model.NAME``; ``include_parameters=False``:
     effects only)."""
     from railval.app.services.batch import BatchExecutor
-    from railval.app.services.diagnosis import (
-        _band_sum,
-        _config,
-        _effect_explanation,
-        _effect_parameters,
-        _effect_registry,
-        _report,
-        _session,
-        _values,
+    from railval.app.services.campaign_context import (
+        band_sums,
+        configuration_of,
+        effect_parameters,
         load_context,
         residual_pattern,
-        scan_points,
+        section_values,
+        session_of,
     )
+    from railval.app.services.campaign_context import report as _report
+    from railval.app.services.diagnosis import scan_points
+    from railval.core.sim.effects import EFFECTS
     from railval.db import repo
 
     _report(progress, "load", 0.0, campaign=campaign, config=config)
-    with _session(database_or_session) as s:
+    with session_of(database_or_session) as s:
         ctx = load_context(s, campaign)
-        conf_effects, conf_params, _ = _config(s, campaign, config)
+        conf_effects, conf_params, _ = configuration_of(s, campaign, config)
         config_sets = repo.load_signalsets(s, campaign, config)
         meas_bands = measured_section_bands(s, ctx)
-    registry = _effect_registry()
+    registry = EFFECTS
     unknown = [e for e in (effects or ()) if e not in registry]
     if unknown:
         raise InvalidParameter(f"unknown effect(s) {unknown}; known: {sorted(registry)}")
     template = str(ctx.vehicle.get("template") or "coach")
     todo = [e for e in (effects if effects is not None else registry) if e not in conf_effects
-            and template in getattr(registry[e], "templates", (template,))]
+            and template in registry[e].templates]
     plan = parameter_plan(ctx, conf_params) if include_parameters else []
     if parameters:
         wanted = {p.removeprefix("model.") for p in parameters}
@@ -172,13 +169,14 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         if bad:
             raise InvalidParameter(f"parameter candidate(s) {bad} unknown; known: {sorted(known)}")
         plan = [p for p in parameter_plan(ctx, conf_params) if p["parameter"] in wanted]
-    stored_residual, vr = residual_pattern(ctx, _values(config_sets, ctx.sections), _band_sum(config_sets, ctx.bands))
+    stored_residual, vr = residual_pattern(ctx, section_values(config_sets, ctx.sections),
+                                           band_sums(config_sets, ctx.bands))
     tasks: list[tuple] = [(ctx, conf_effects, conf_params)]
     index: list[tuple] = []
     unique: dict[str, int] = {}
     for e in todo:
         spec = registry[e]
-        eparams = _effect_parameters(spec)
+        eparams = effect_parameters(spec)
         defaults = {k: float(q["default"]) for k, q in eparams.items()}
         for pname, v, point, _p in scan_points(spec, values_per_parameter):
             key = json.dumps({**conf_effects, e: point}, sort_keys=True)
@@ -204,14 +202,14 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         for kind, name, pname, v, defaults, k in index:
             if kind == "effect":
                 spec = registry[name]
-                p = _effect_parameters(spec)[pname]
+                p = effect_parameters(spec)[pname]
                 key = f"{name}.{pname}"
                 if key not in families:
-                    plaus, source = plausible_range(_param_object(spec, pname))
+                    plaus, source = plausible_range(spec.parameters[pname])
                     families[key] = CandidateFamily(
                         "effect", name, pname, [], [], (p["lower"], p["upper"]), log=p["log"], defaults=defaults,
                         plausible=plaus, plausible_source=source, unit=p["unit"],
-                        title=str(getattr(spec, "title", name)), explanation=_effect_explanation(spec))
+                        title=spec.title, explanation=spec.explanation)
                 families[key].values.append(v)
                 families[key].evidence.append(evidence(k))
             else:
@@ -270,11 +268,6 @@ def _best_per_effect(base: SectionEvidence, fams: list[CandidateFamily], validat
         best = max(res.candidates, key=lambda c: c.explained)
         out.append(next(f for f in group if f.parameter == best.parameter))
     return out
-
-
-def _param_object(spec: Any, pname: str) -> Any:
-    params = spec["parameters"] if isinstance(spec, Mapping) else spec.parameters
-    return params[pname] if isinstance(params, Mapping) else next(p for p in params if p.name == pname)
 
 
 def next_step(res: DiagnosisResult, campaign: str, config: str) -> dict[str, Any]:

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from railval.app.services import calibration as calibration_service
 from railval.app.services import diagnosis as diagnosis_service
 from railval.app.services import metrics as metrics_service
 from railval.app.services import simulation as simulation_service
@@ -175,7 +176,7 @@ class Backend:
                   progress: Callable | None = None, start: dict | None = None, **kw: Any):
         """Add ``effect``, fit its parameters (differential evolution + polish, starting from
         ``start``), store ``new_name`` with parent ``config``; returns the CalibrationResult."""
-        result = diagnosis_service.calibrate(self.database, campaign, config, [effect], new_name,
+        result = calibration_service.calibrate(self.database, campaign, config, [effect], new_name,
                                progress=_stage_progress(progress),
                                start={effect: dict(start)} if start else None, **kw)
         self.invalidate()

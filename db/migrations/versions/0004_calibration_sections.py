@@ -2,7 +2,7 @@
 which were held out), so that a verdict on fitted sections is flagged in-sample.
 
 Revision ID: 0004_calibration_sections
-Revises: 0006_analysis_runs
+Revises: 0002_users_audit
 Create Date: 2026-11-23 12:00:00
 
 """
@@ -13,7 +13,7 @@ from alembic import op
 
 # revision identifiers, used by Alembic.
 revision: str = '0004_calibration_sections'
-down_revision: str | Sequence[str] | None = '0006_analysis_runs'
+down_revision: str | Sequence[str] | None = '0002_users_audit'
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 

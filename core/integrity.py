@@ -1,0 +1,145 @@
+"""Canonical JSON, the audit hash chain and the evidence hash (docs/audit.md).
+
+Pure functions shared by the database side (:mod:`railval.db.audit`,
+:mod:`railval.db.signoff`) and the offline verification of an exported bundle, so that both
+compute the very same bytes.
+
+* **Canonical JSON** (:func:`canonical_json`): keys sorted, no insignificant white space,
+  UTF-8, no NaN/Infinity — the same document always gives the same bytes (the rules of
+  RFC 8785 §3.2 for the documents railval writes: strings, integers, finite floats printed by
+  Python's shortest round-trip ``repr``, lists and objects).
+* **Hash chain** (:func:`chain_hash`): ``h_i = SHA-256(h_{i−1} ‖ canonical JSON of row i)``
+  where ``h_{i−1}`` enters as its 64 lower-case hexadecimal ASCII characters and
+  ``h_0`` = :data:`GENESIS` (64 zeros). Changing, removing or re-ordering any row changes
+  every later hash; cutting the tail is caught by comparing with a checkpoint kept elsewhere
+  (Schneier & Kelsey, "Secure audit logs to support computer forensics", ACM TISSEC 2(2),
+  1999 — the hash-chain construction).
+* **Evidence hash** (:func:`evidence_hash`): SHA-256 of the canonical JSON of an evidence
+  manifest (21 CFR 11.70: the signature is linked to its record so that it cannot be moved
+  to other evidence).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+GENESIS = "0" * 64
+
+#: the fields of an audit row that enter its hash, in no particular order (keys are sorted)
+CHAIN_FIELDS = ("seq", "at_utc", "actor", "action", "object", "before_sha256",
+                "after_sha256", "reason", "detail")
+
+
+def _check_finite(obj: Any, path: str = "$") -> None:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        raise ValueError(f"{path}: {obj!r} has no canonical JSON form")
+    if isinstance(obj, Mapping):
+        for k, v in obj.items():
+            if not isinstance(k, str):
+                raise ValueError(f"{path}: key {k!r} is not a string")
+            _check_finite(v, f"{path}.{k}")
+    elif isinstance(obj, list | tuple):
+        for i, v in enumerate(obj):
+            _check_finite(v, f"{path}[{i}]")
+
+
+def canonical_json(obj: Any) -> bytes:
+    """The canonical UTF-8 bytes of a JSON document (sorted keys, compact, finite numbers)."""
+    _check_finite(obj)
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=False,
+                      allow_nan=False).encode("utf-8")
+
+
+def sha256_hex(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def content_hash(obj: Any) -> str:
+    """SHA-256 of the canonical JSON of ``obj`` (the before/after hashes of audit rows)."""
+    return sha256_hex(canonical_json(obj))
+
+
+def chain_payload(row: Mapping[str, Any]) -> dict[str, Any]:
+    """The part of an audit row that its hash covers (:data:`CHAIN_FIELDS`)."""
+    return {k: row.get(k) for k in CHAIN_FIELDS}
+
+
+def chain_hash(prev_hash: str, row: Mapping[str, Any]) -> str:
+    """``SHA-256(prev_hash ‖ canonical JSON of the row)`` with ``prev_hash`` as hex ASCII."""
+    if len(prev_hash) != 64:
+        raise ValueError(f"previous hash {prev_hash!r} is not 64 hexadecimal characters")
+    return sha256_hex(prev_hash.encode("ascii") + canonical_json(chain_payload(row)))
+
+
+@dataclass(frozen=True)
+class ChainBreak:
+    """The first place where a chain does not hold."""
+
+    seq: int | None
+    object: str
+    field: str
+    expected: str
+    found: str
+
+    def __str__(self) -> str:
+        where = f"row seq {self.seq}" if self.seq is not None else "end of chain"
+        return (f"{where} (object {self.object!r}): {self.field} expected {self.expected}, "
+                f"found {self.found}")
+
+
+def verify_chain(rows: Iterable[Mapping[str, Any]]) -> tuple[int, str, ChainBreak | None]:
+    """Recompute the chain over ``rows`` (in ``seq`` order) → (rows checked, head, first break).
+
+    Each row needs :data:`CHAIN_FIELDS` plus ``prev_hash`` and ``row_hash``. A break is
+    reported when a row's ``prev_hash`` is not the previous row's hash (a row removed or
+    inserted before it), when its ``row_hash`` differs from the recomputed hash (a field
+    changed), or when ``seq`` does not increase by one.
+    """
+    prev = GENESIS
+    expected_seq = 1
+    n = 0
+    for row in rows:
+        seq = int(row["seq"])
+        obj = str(row.get("object", ""))
+        if seq != expected_seq:
+            return n, prev, ChainBreak(seq, obj, "seq", str(expected_seq), str(seq))
+        if row["prev_hash"] != prev:
+            return n, prev, ChainBreak(seq, obj, "prev_hash", prev, str(row["prev_hash"]))
+        h = chain_hash(prev, row)
+        if h != row["row_hash"]:
+            return n, prev, ChainBreak(seq, obj, "row_hash", h, str(row["row_hash"]))
+        prev = h
+        expected_seq += 1
+        n += 1
+    return n, prev, None
+
+
+def check_checkpoint(rows_by_seq: Mapping[int, str], head_seq: int,
+                     checkpoint: Mapping[str, Any]) -> ChainBreak | None:
+    """Compare a checkpoint ``{seq, row_hash}`` with the chain (``seq → row_hash``).
+
+    The chain must still hold row ``seq`` with the same hash; a shorter chain means its tail
+    was cut, another hash means history was rewritten.
+    """
+    seq = int(checkpoint["seq"])
+    want = str(checkpoint["row_hash"])
+    if seq == 0:
+        return None
+    if seq > head_seq:
+        return ChainBreak(None, "", "length",
+                          f"at least {seq} rows (checkpoint {want[:16]}…)",
+                          f"{head_seq} rows: the tail after row {head_seq} was removed")
+    found = rows_by_seq.get(seq)
+    if found != want:
+        return ChainBreak(seq, "", "row_hash (checkpoint)", want, str(found))
+    return None
+
+
+def evidence_hash(manifest: Mapping[str, Any]) -> str:
+    """SHA-256 of the canonical JSON of an evidence manifest (21 CFR 11.70)."""
+    return content_hash(dict(manifest))

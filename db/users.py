@@ -1,0 +1,344 @@
+"""Users, roles and invitations (docs/security.md).
+
+Passwords are hashed with argon2id (argon2-cffi's :class:`PasswordHasher`, whose defaults are
+the RFC 9106 §4 second recommended option: t = 3, m = 64 MiB, p = 4) and never stored or
+compared in clear. Invitation tokens are 256-bit random strings of which only the SHA-256 is
+stored; an invitation is single-use and expires. Every change appends an audit row in the
+same transaction (:func:`railval.db.audit.record`). Roles are the names of
+:data:`railval.core.roles.ROLES`.
+
+Sign-in (:func:`authenticate`) is rate limited from the audit trail itself: after
+:data:`MAX_FAILURES_PER_USER` failed sign-ins of one user name (or
+:data:`MAX_FAILURES_PER_SOURCE` from one client address) within :data:`FAILURE_WINDOW`,
+further attempts are refused until the window has passed; every failure and every refusal
+is recorded.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import re
+import secrets
+from dataclasses import dataclass
+from typing import Any
+
+from argon2 import PasswordHasher
+from argon2.exceptions import InvalidHashError, VerificationError, VerifyMismatchError
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session, selectinload
+
+from railval.core.errors import InvalidParameter, NotFound, RailvalError
+from railval.core.roles import ROLES, Principal, check_roles
+from railval.db import audit
+from railval.db.models import AppUser, Invitation, UserRole, utcnow
+
+__all__ = [
+    "InvitationRefused",
+    "LoginResult",
+    "authenticate",
+    "create_invitation",
+    "create_user",
+    "disable",
+    "enable",
+    "get_user",
+    "has_users",
+    "list_users",
+    "principal",
+    "redeem_invitation",
+    "set_password",
+    "set_roles",
+    "verify_password",
+]
+
+MIN_PASSWORD_LENGTH = 8
+MAX_FAILURES_PER_USER = 5
+MAX_FAILURES_PER_SOURCE = 20
+FAILURE_WINDOW = dt.timedelta(minutes=15)
+INVITATION_VALIDITY = dt.timedelta(days=7)
+_USERNAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.@-]{0,99}$")
+
+_hasher = PasswordHasher()  # argon2id, RFC 9106 defaults
+#: verified against for unknown user names, so that their answer takes as long as a real one
+_DUMMY_HASH = _hasher.hash(secrets.token_hex(16))
+
+
+class InvitationRefused(RailvalError):
+    """An invitation token is unknown, expired or already used."""
+
+
+def _aware(when: dt.datetime | None) -> dt.datetime | None:
+    """SQLite returns naive datetimes for ``DateTime(timezone=True)``: they are UTC."""
+    if when is not None and when.tzinfo is None:
+        return when.replace(tzinfo=dt.UTC)
+    return when
+
+
+def _check_username(username: str) -> str:
+    username = (username or "").strip()
+    if not _USERNAME.match(username):
+        raise InvalidParameter(
+            f"user name {username!r}: use 1–100 letters, digits, '_', '.', '@' or '-', "
+            "starting with a letter or digit")
+    return username
+
+
+def _check_password(password: str) -> None:
+    if not isinstance(password, str) or len(password) < MIN_PASSWORD_LENGTH:
+        raise InvalidParameter(f"password: at least {MIN_PASSWORD_LENGTH} characters are needed")
+
+
+def hash_password(password: str) -> str:
+    """The argon2id hash string (PHC format) of ``password``."""
+    _check_password(password)
+    return _hasher.hash(password)
+
+
+def user_state(user: AppUser) -> dict[str, Any]:
+    """What an audit row's before/after hash of a user covers (never the password hash)."""
+    return {"username": user.username, "display_name": user.display_name,
+            "disabled": bool(user.disabled), "roles": sorted(r.role for r in user.roles),
+            "password_set": user.password_hash is not None}
+
+
+# -- queries -----------------------------------------------------------------------------
+def has_users(session: Session) -> bool:
+    """True when at least one user exists (then the web app requires sign-in)."""
+    return session.scalar(select(func.count()).select_from(AppUser)) > 0
+
+
+def list_users(session: Session) -> list[AppUser]:
+    return list(session.scalars(select(AppUser).options(selectinload(AppUser.roles))
+                                .order_by(AppUser.username)))
+
+
+def get_user(session: Session, username: str) -> AppUser:
+    user = session.scalar(select(AppUser).options(selectinload(AppUser.roles))
+                          .where(AppUser.username == username))
+    if user is None:
+        raise NotFound(f"user {username!r} not found")
+    return user
+
+
+def find_user(session: Session, username: str) -> AppUser | None:
+    return session.scalar(select(AppUser).options(selectinload(AppUser.roles))
+                          .where(AppUser.username == username))
+
+
+def principal(user: AppUser) -> Principal:
+    """The :class:`railval.core.roles.Principal` of a user (no roles when disabled)."""
+    roles = frozenset() if user.disabled else frozenset(user.role_names)
+    return Principal(user.username, roles, display_name=user.display_name, user_id=user.id)
+
+
+# -- changes (each audited) --------------------------------------------------------------
+def create_user(session: Session, username: str, *, display_name: str = "",
+                password: str | None = None, roles: tuple[str, ...] | list[str] = (),
+                actor: Any = "system", reason: str = "") -> AppUser:
+    """Add a user (password optional: NULL cannot sign in until one is set)."""
+    username = _check_username(username)
+    roles = check_roles(roles)
+    if find_user(session, username) is not None:
+        raise InvalidParameter(f"user {username!r} already exists")
+    user = AppUser(username=username, display_name=(display_name or "").strip()[:200],
+                   password_hash=hash_password(password) if password is not None else None,
+                   disabled=False)
+    user.roles = [UserRole(role=r) for r in roles]
+    session.add(user)
+    session.flush()
+    audit.record(session, actor, "user.add", f"user:{username}", None, user_state(user), reason)
+    return user
+
+
+def set_roles(session: Session, username: str, roles: list[str] | tuple[str, ...], *,
+              actor: Any = "system", reason: str = "") -> AppUser:
+    """Replace the user's roles by ``roles``."""
+    user = get_user(session, username)
+    roles = check_roles(roles)
+    before = user_state(user)
+    user.roles = [UserRole(role=r) for r in roles]
+    session.flush()
+    audit.record(session, actor, "user.roles", f"user:{username}", before, user_state(user),
+                 reason, detail={"roles": roles})
+    return user
+
+
+def disable(session: Session, username: str, *, actor: Any = "system", reason: str = "") -> AppUser:
+    """Disable a user: they can no longer sign in and hold no permission."""
+    user = get_user(session, username)
+    before = user_state(user)
+    user.disabled = True
+    session.flush()
+    audit.record(session, actor, "user.disable", f"user:{username}", before, user_state(user),
+                 reason)
+    return user
+
+
+def enable(session: Session, username: str, *, actor: Any = "system", reason: str = "") -> AppUser:
+    user = get_user(session, username)
+    before = user_state(user)
+    user.disabled = False
+    session.flush()
+    audit.record(session, actor, "user.enable", f"user:{username}", before, user_state(user),
+                 reason)
+    return user
+
+
+def set_password(session: Session, username: str, password: str, *, actor: Any = "system",
+                 reason: str = "") -> AppUser:
+    user = get_user(session, username)
+    before = user_state(user)
+    user.password_hash = hash_password(password)
+    session.flush()
+    audit.record(session, actor, "user.password", f"user:{username}", before, user_state(user),
+                 reason)
+    return user
+
+
+# -- passwords and sign-in ---------------------------------------------------------------
+def verify_password(session: Session, username: str, password: str) -> AppUser | None:
+    """The user when ``password`` matches its argon2id hash and the user is enabled, else None.
+
+    Unknown users take as long as known ones (a dummy hash is verified). Rehashes the stored
+    hash when the hasher's parameters changed since it was made.
+    """
+    user = find_user(session, username)
+    stored = user.password_hash if user is not None else None
+    try:
+        _hasher.verify(stored or _DUMMY_HASH, password or "")
+    except (VerifyMismatchError, VerificationError, InvalidHashError):
+        return None
+    if user is None or stored is None or user.disabled:
+        return None
+    if _hasher.check_needs_rehash(stored):
+        user.password_hash = _hasher.hash(password)
+    return user
+
+
+@dataclass(frozen=True)
+class LoginResult:
+    """Outcome of :func:`authenticate`: ``user`` on success, else a message to show."""
+
+    user: AppUser | None
+    message: str
+
+    @property
+    def ok(self) -> bool:
+        return self.user is not None
+
+
+def _failures(session: Session, username: str, source: str) -> tuple[int, int]:
+    since = audit.utc_stamp(dt.datetime.now(dt.UTC) - FAILURE_WINDOW)
+    per_user = audit.count_since(session, "login.failed", since, object=f"user:{username}")
+    per_source = (audit.count_since(session, "login.failed", since, source=source)
+                  if source else 0)
+    return per_user, per_source
+
+
+def authenticate(session: Session, username: str, password: str, *, source: str = "",
+                 record_success: bool = True) -> LoginResult:
+    """Check a sign-in; records every failure and refusal in the audit trail.
+
+    The caller commits ``session`` whatever the outcome (the audit row of a failure must
+    persist). Messages say what to do without revealing whether a user name exists — except
+    for a disabled account, which is only reported after the right password.
+    """
+    username = (username or "").strip()[:100]
+    obj = f"user:{username or '(empty)'}"
+    per_user, per_source = _failures(session, username, source)
+    if per_user >= MAX_FAILURES_PER_USER or (source and per_source >= MAX_FAILURES_PER_SOURCE):
+        minutes = int(FAILURE_WINDOW.total_seconds() // 60)
+        audit.record(session, username or "(anonymous)", "login.refused", obj,
+                     reason="rate limit", detail={"source": source, "failures": per_user})
+        return LoginResult(None, f"Too many failed sign-ins; try again in {minutes} minutes.")
+    user = find_user(session, username)
+    ok = verify_password(session, username, password) is not None
+    if ok:
+        if record_success:
+            audit.record(session, username, "login.ok", obj, detail={"source": source})
+        return LoginResult(user, "")
+    if user is not None and user.disabled and user.password_hash is not None:
+        try:
+            right = _hasher.verify(user.password_hash, password or "")
+        except (VerifyMismatchError, VerificationError, InvalidHashError):
+            right = False
+        if right:
+            audit.record(session, username, "login.failed", obj, reason="account disabled",
+                         detail={"source": source})
+            return LoginResult(None, "This account is disabled; ask an administrator.")
+    audit.record(session, username or "(anonymous)", "login.failed", obj,
+                 reason="wrong user name or password", detail={"source": source})
+    return LoginResult(None, "Wrong user name or password.")
+
+
+# -- invitations -------------------------------------------------------------------------
+def token_hash(token: str) -> str:
+    return hashlib.sha256((token or "").encode("utf-8")).hexdigest()
+
+
+def create_invitation(session: Session, *, role: str = "reviewer", workshop_ref: str | int | None = None,
+                      valid_for: dt.timedelta = INVITATION_VALIDITY, note: str = "",
+                      actor: Any = "system") -> tuple[Invitation, str]:
+    """A new single-use invitation → (row, token). The token is returned once, never stored."""
+    check_roles([role])
+    if valid_for <= dt.timedelta(0):
+        raise InvalidParameter(f"invitation validity {valid_for} must be positive")
+    token = secrets.token_urlsafe(32)
+    creator = find_user(session, getattr(actor, "username", str(actor)))
+    inv = Invitation(token_sha256=token_hash(token), role=role,
+                     workshop_ref=None if workshop_ref is None else str(workshop_ref),
+                     note=(note or "")[:200], created_by=creator.id if creator else None,
+                     created_at=utcnow(), expires_at=utcnow() + valid_for)
+    session.add(inv)
+    session.flush()
+    audit.record(session, actor, "invitation.create", f"invitation:{inv.id}", None,
+                 {"role": role, "workshop_ref": inv.workshop_ref,
+                  "expires_at": audit.utc_stamp(inv.expires_at)},
+                 detail={"role": role, "workshop_ref": inv.workshop_ref})
+    return inv, token
+
+
+def check_invitation(session: Session, token: str) -> Invitation:
+    """The open invitation of ``token``; :class:`InvitationRefused` says why not."""
+    inv = session.scalar(select(Invitation).where(Invitation.token_sha256 == token_hash(token)))
+    if inv is None:
+        raise InvitationRefused("This invitation link is not valid; ask the organiser for a new one.")
+    if inv.used_at is not None:
+        raise InvitationRefused("This invitation link has already been used; sign in instead, "
+                                "or ask the organiser for a new one.")
+    if _aware(inv.expires_at) <= dt.datetime.now(dt.UTC):
+        raise InvitationRefused(
+            f"This invitation link expired on {audit.utc_stamp(_aware(inv.expires_at))[:16]} UTC; "
+            "ask the organiser for a new one.")
+    return inv
+
+
+def redeem_invitation(session: Session, token: str, *, username: str, password: str,
+                      display_name: str = "") -> AppUser:
+    """Create the invitee's account with the invitation's role and mark the link used.
+
+    Raises :class:`InvitationRefused` (unknown, used, expired) — the caller records the
+    refusal with :func:`record_refusal` in its own transaction — or
+    :class:`InvalidParameter` (bad user name or password, name taken).
+    """
+    inv = check_invitation(session, token)
+    user = create_user(session, username, display_name=display_name, password=password,
+                       roles=[inv.role], actor=username,
+                       reason=f"invitation {inv.id}")
+    inv.used_at = utcnow()
+    inv.used_by = user.id
+    session.flush()
+    audit.record(session, username, "invitation.redeem", f"invitation:{inv.id}",
+                 detail={"role": inv.role, "workshop_ref": inv.workshop_ref, "user": username})
+    return user
+
+
+def record_refusal(session: Session, token: str, message: str, *, source: str = "") -> None:
+    """Audit a refused invitation (only the first 8 hex digits of the token's hash)."""
+    audit.record(session, "(anonymous)", "invitation.refused",
+                 f"invitation:{token_hash(token)[:8]}", reason=message, detail={"source": source})
+
+
+def role_names() -> list[str]:
+    """The role registry's names (for forms and CLI choices)."""
+    return list(ROLES)

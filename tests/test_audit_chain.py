@@ -1,0 +1,80 @@
+"""The hash-chained audit trail: append path, append-only triggers, chain arithmetic."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import pytest
+from sqlalchemy import text
+from sqlalchemy.exc import DBAPIError
+
+from railval.core.integrity import GENESIS, canonical_json, chain_hash, verify_chain
+from railval.db import audit
+
+
+def test_canonical_json_is_sorted_compact_utf8_and_refuses_nan():
+    assert canonical_json({"b": 1, "a": [1.5, "é"]}) == '{"a":[1.5,"é"],"b":1}'.encode()
+    with pytest.raises(ValueError, match=r"\$.x.*nan"):
+        canonical_json({"x": float("nan")})
+
+
+def test_chain_hash_matches_an_independent_computation():
+    row = {"seq": 1, "at_utc": "2026-11-23T11:00:00.000000Z", "actor": "a", "action": "x",
+           "object": "o", "before_sha256": None, "after_sha256": None, "reason": "",
+           "detail": {}}
+    doc = json.dumps(row, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+    expected = hashlib.sha256(("0" * 64 + doc).encode("utf-8")).hexdigest()
+    assert chain_hash(GENESIS, row) == expected
+
+
+def test_record_appends_a_verifiable_chain(database):
+    with database.session() as s:
+        for i in range(5):
+            audit.record(s, "tester", "thing.change", f"thing:{i}", {"v": i}, {"v": i + 1},
+                         reason=f"step {i}")
+    with database.session() as s:
+        rows = list(audit.iter_rows(s))
+        n, head, brk = verify_chain(rows)
+        assert (n, brk) == (5, None)
+        assert audit.head(s) == (5, head)
+        assert rows[0]["prev_hash"] == GENESIS
+        assert rows[2]["before_sha256"] == hashlib.sha256(b'{"v":2}').hexdigest()
+        assert [r["seq"] for r in rows] == [1, 2, 3, 4, 5]
+
+
+def test_audit_row_rolls_back_with_the_change(database):
+    with pytest.raises(RuntimeError):
+        with database.session() as s:
+            audit.record(s, "tester", "thing.change", "thing:1")
+            raise RuntimeError("the change failed")
+    with database.session() as s:
+        assert audit.count(s) == 0 and audit.head(s) == (0, GENESIS)
+        audit.record(s, "tester", "thing.change", "thing:1")
+    with database.session() as s:
+        assert verify_chain(audit.iter_rows(s))[2] is None
+
+
+@pytest.mark.parametrize("statement", [
+    "UPDATE audit_event SET actor = 'mallory'",
+    "DELETE FROM audit_event WHERE seq = 1",
+    "TRUNCATE audit_event",  # PostgreSQL; SQLite has no TRUNCATE: DELETE without WHERE
+    "UPDATE signoff SET decision = 'validated'",
+    "DELETE FROM signoff",
+])
+def test_database_refuses_update_and_delete_of_audit_rows(database, statement):
+    if statement.startswith("TRUNCATE") and database.dialect == "sqlite":
+        statement = "DELETE FROM audit_event"
+    with database.session() as s:
+        audit.record(s, "tester", "thing.change", "thing:1")
+        s.execute(text(
+            "INSERT INTO signoff (campaign, configuration, username, printed_name, signed_at_utc,"
+            " meaning, decision, restrictions, statement, evidence_sha256, manifest,"
+            " software_version) VALUES ('c', 'k', 'u', 'U', 't', 'm', 'not-validated', '', '',"
+            " :h, '{}', '0')"), {"h": "0" * 64})
+    with pytest.raises(DBAPIError, match="append-only"):
+        with database.session() as s:
+            s.execute(text(statement))
+    with database.session() as s:
+        assert [r["actor"] for r in audit.iter_rows(s)] == ["tester"]
+        assert s.execute(text("SELECT decision FROM signoff")).scalars().all() == ["not-validated"]
