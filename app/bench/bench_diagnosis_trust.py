@@ -59,7 +59,7 @@ CASES: dict[str, list[tuple[str, dict[str, Any], str | None]]] = {
         ("conicity 0.5", {"hidden": {"conicity": {"conicity": 0.5}}}, "conicity"),
     ],
     "b": [
-        ("secondary vertical damping x0.5", {"truth_parameters": {"c_secondary_z": 10000.0}}, "model.c_secondary_z"),
+        ("secondary vertical damping x0.6", {"truth_parameters": {"c_secondary_z": 12000.0}}, "model.c_secondary_z"),
         ("secondary lateral damping x0.4", {"truth_parameters": {"c_secondary_y": 12800.0}}, "model.c_secondary_y"),
         ("secondary lateral stiffness x1.8", {"truth_parameters": {"k_secondary_y": 288000.0}}, "model.k_secondary_y"),
         ("secondary vertical stiffness x0.6", {"truth_parameters": {"k_secondary_z": 258000.0}}, "model.k_secondary_z"),
