@@ -296,6 +296,10 @@ class DiagnosePage(PageBase):
             text += " Its verdict is in-sample (fitted on all sections)."
         elif r.get("held_out_sections"):
             text += f" Fitted without sections {', '.join(r['held_out_sections'])} (held out)."
+            held = ((r.get("lineage") or [{}])[-1] or {}).get("held_out") or {}
+            if held.get("max_error") is not None and held.get("parent_max_error") is not None:
+                text += (f" On the held-out sections the largest normalised error went from "
+                         f"{held['parent_max_error']:.2f} to {held['max_error']:.2f}.")
         for f in r.get("flags") or []:
             if not str(f).startswith("in-sample"):
                 text += f" Warning: {f}."
