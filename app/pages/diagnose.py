@@ -79,7 +79,9 @@ class DiagnosePage(PageBase):
                 pn.widgets.IntInput.from_param(st.param.maxiter, name="Generations (at most)", width=170),
                 pn.widgets.IntInput.from_param(st.param.polish_maxfev, name="Polish simulations (at most)",
                                                width=190),
-                pn.widgets.IntInput.from_param(st.param.seed, name="Seed", width=110)),
+                pn.widgets.IntInput.from_param(st.param.seed, name="Seed", width=110),
+                pn.widgets.Checkbox.from_param(st.param.split, name="Hold out one section per zone "
+                                               "(judge the fit on sections it has not seen)", width=420)),
             self.cal_estimate, title="Calibration settings (differential evolution + local polish)",
             collapsed=True, sizing_mode="stretch_width", css_classes=["rv-cal-settings"])
         st.param.watch(lambda e: self._show_estimates(), ["candidate_effects", "values_per_parameter",

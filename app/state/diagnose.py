@@ -43,6 +43,9 @@ class DiagnoseState(param.Parameterized):
     maxiter = param.Integer(default=5, bounds=(1, 200), doc="differential evolution: generations at most")
     polish_maxfev = param.Integer(default=20, bounds=(0, 1000), doc="local polish: simulations at most")
     seed = param.Integer(default=0, bounds=(0, None), doc="random seed of the global search")
+    split = param.Boolean(default=False, doc=(
+        "fit on part of the sections and validate on the others (one section per zone and fold held "
+        "out); otherwise the verdict on the campaign is in-sample"))
 
     def __init__(self, app: AppState, **params):
         super().__init__(**params)
@@ -188,7 +191,7 @@ class DiagnoseState(param.Parameterized):
             return None
 
         settings = {"popsize": self.popsize, "maxiter": self.maxiter, "polish_maxfev": self.polish_maxfev,
-                    "seed": self.seed,
+                    "seed": self.seed, **({"split": True} if self.split else {}),
                     "params": ([f"{effect}.{p}" for p in self.fit_parameters] or None)
                     if not (effect or "").startswith("model.") else None}
 
