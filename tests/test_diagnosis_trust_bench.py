@@ -94,3 +94,24 @@ def test_class_d_nothing_gives_no_cause(database):
     assert rec["verdict"] in ("none", "uncertain"), d["note"]
     s = summarise([rec])
     assert s["d"]["none_or_uncertain"] == 1.0 and s["confident_wrong"] == 0.0
+
+
+def test_calibration_split_choices_and_errors():
+    from types import SimpleNamespace
+
+    from railval.app.services.calibration import _calibration_split
+    from railval.core.errors import InvalidParameter
+
+    ctx = SimpleNamespace(campaign="c", sections=[SimpleNamespace(id=f"S{i:02d}", zone=1 + i // 3) for i in range(12)])
+    fit, held = _calibration_split(ctx, None, None, False)
+    assert len(fit) == 12 and held == []
+    fit, held = _calibration_split(ctx, None, None, True)
+    assert len(held) == 4 and sorted({1 + int(h[1:]) // 3 for h in held}) == [1, 2, 3, 4]  # one per zone
+    fit, held = _calibration_split(ctx, None, ["S01", "S05"], False)
+    assert held == ["S01", "S05"] and len(fit) == 10
+    fit, held = _calibration_split(ctx, ["S00", "S03"], None, False)
+    assert fit == ["S00", "S03"] and len(held) == 10
+    with pytest.raises(InvalidParameter, match="S99"):
+        _calibration_split(ctx, ["S99"], None, False)
+    with pytest.raises(InvalidParameter, match="only one"):
+        _calibration_split(ctx, ["S00"], ["S01"], False)
