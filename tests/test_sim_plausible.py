@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 from railval.core.sim.effects import EFFECTS
 from railval.core.sim.params import Param, plausibility
+from railval.core.sim.synth import hidden_defaults
 from railval.core.sim.vehicles import TEMPLATES
 
 
@@ -41,3 +42,10 @@ def test_plausible_range_must_lie_inside_bounds_and_plausibility_report():
     rep = plausibility((p,), {"x": 1.8, "unknown": 1.0})
     assert rep == {"x": {"value": 1.8, "plausible": [0.5, 1.5], "inside": False, "source": "test"}}
     assert Param("y", "-", 1.0, 0.0, 2.0, "y").plausible_range == (0.0, 2.0)
+@pytest.mark.parametrize("template", ["coach", "wagon"])
+def test_hidden_defaults_are_plausible(template):
+    for eid, values in hidden_defaults(template).items():
+        for name, v in values.items():
+            assert EFFECTS[eid].parameters[name].is_plausible(v), (template, eid, name, v)
+
+

@@ -173,12 +173,15 @@ class DiagnoseState(param.Parameterized):
                 self.effect = order[0]
                 self._suggest_name()
             self.candidates = cands
-        return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background)
+        return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background,
+                           action="diagnose")
 
     def run_calibration(self, dispatch=None, background=True, calibrate: bool = True):
         """Add ``effect`` to the configuration, calibrate it (or use ``parameters``),
         re-simulate and store as ``new_name`` whose parent is the current configuration."""
         app = self.app
+        if not app.guard("calibrate" if calibrate else "simulate"):
+            return None
         campaign, config, effect = app.campaign, app.configuration, self.effect
         # a name the user did not type always names the effect that is added
         name = self.new_name if (self.name_edited and self.new_name.strip()) else self.suggested_name()
@@ -208,7 +211,8 @@ class DiagnoseState(param.Parameterized):
             self.last_new_configuration = name
             app.reload_configurations(select=name)
         return app.run_job("calibration" if calibrate else "re-simulation", work, done,
-                           dispatch=dispatch, background=background)
+                           dispatch=dispatch, background=background,
+                           action="calibrate" if calibrate else "simulate")
 
     def lineage_errors(self, config: str | None = None) -> list[dict[str, Any]]:
         """Along the lineage root → config: the largest normalised error (max over quantities

@@ -69,20 +69,27 @@ _LIST = [
         source="Saint-Venant element (spring k_stick in series with a Coulomb slider); Iwnicki 2006 ch. 7"),
     Effect(
         "damper_series_stiffness", "Damper with series stiffness (Maxwell element)",
-        "Real hydraulic dampers sit on rubber bushes and contain compressible oil, so each damper "
-        "is a dashpot in series with a spring. Above the corner frequency k/(2πc) the damper no "
-        "longer damps but acts as a spring: the secondary vertical and lateral dampers lose "
-        "their effect in the 1–10 Hz band (higher car body accelerations, above all vertically), "
-        "and the yaw dampers lose damping at the bogie's hunting frequency (more bogie lateral "
-        "motion and guiding-force peaks at speed).",
+        "Real hydraulic dampers sit on rubber end bushes and contain compressible oil, so each "
+        "damper is a dashpot in series with a spring. Its effective damping falls and it acts "
+        "more and more as a spring above the corner frequency k/(2πc). With a series stiffness of "
+        "a few MN/m the yaw and lateral dampers pass less high-frequency force from the bogies "
+        "to the car body: on good track at high speed the car body lateral accelerations and "
+        "guiding-force peaks fall; on rougher track, where the yaw dampers' damping of the bogie "
+        "matters more, the lateral accelerations can rise instead. Much lower series stiffness "
+        "(≲ 1–2 MN/m, yaw damper corner frequency near the bogie's kinematic frequency) loses the "
+        "yaw damping: guiding forces Y_max and ΣY_max rise at speed, and the vertical dampers "
+        "lose their effect (car body vertical accelerations rise).",
         _p(Param("k_series_MN_m", "MN/m", 4.0, 0.2, 50.0, "series stiffness of every damper (yaw, lateral, vertical secondary)", scale="log",
                  plausible=(2.0, 20.0),
                  plausible_source="assumption of the order of magnitude of rubber end bushes plus oil "
                                   "compressibility (a few MN/m to ≈ 20 MN/m); Alonso & Giménez, VSD 2008 (yaw "
                                   "damper series stiffness); Polach & Böttcher 2014 §2 (damper models are a "
                                   "dashpot with series stiffness)")),
-        ("az_rms", "az_max", "ay_rms", "ay_max", "Y_max", "SumY_max"), (1, 2, 3, 4), ((1.0, 10.0),), templates=("coach",),
-        source="Maxwell model, exact exponential update; Alonso & Giménez, VSD 2008 (yaw damper series stiffness)"),
+        ("ay_rms", "ay_max", "Y_max", "SumY_max", "az_rms", "az_max"), (1, 2, 3, 4), ((1.0, 10.0),), templates=("coach",),
+        source="Maxwell element: effective damping c/(1 + (ωc/k)²) and stiffness k·(ωc/k)²/(1 + (ωc/k)²) "
+               "(standard linear viscoelasticity); exact exponential update; yaw damper series "
+               "stiffness in vehicle dynamics: Alonso & Giménez, VSD 2008; Polach & Böttcher 2014 §2. "
+               "Directions of change measured with this simulator: tests/test_sim_effects.py"),
     Effect(
         "carbody_flexibility", "Car body first vertical bending mode",
         "The car body is not rigid: its first vertical bending mode (typically 8–12 Hz for a "
@@ -102,9 +109,10 @@ _LIST = [
         "track_flexibility", "Vertical and lateral track stiffness and damping",
         "The rails are not rigid: they sit on pads, sleepers and ballast. A flexible track lets "
         "the wheelset move vertically on the track stiffness (changing the dynamic wheel forces) "
-        "and the rails move laterally under the guiding forces: the flange contact becomes "
-        "softer (rail head deflection, dynamic gauge widening), the leading wheelset runs "
-        "further out in tight curves and the guiding forces, Y/Q and ΣY change in zones 3–4.",
+        "and each rail deflect laterally under its wheel's lateral force: the flange contact "
+        "becomes softer (rail head and fastening deflection, dynamic gauge widening), the "
+        "leading wheelset runs further out in tight curves and the guiding forces, Y/Q and ΣY "
+        "change in zones 3–4.",
         _p(Param("k_vertical_MN_m", "MN/m", 40.0, 10.0, 300.0, "vertical track stiffness per wheel", scale="log",
                  plausible=(20.0, 200.0),
                  plausible_source="ballasted track on soft formation ≈ 20–40 MN/m per wheel, good ballasted "
@@ -116,9 +124,10 @@ _LIST = [
                                   "the order of 10–50 MN/m (Knothe & Grassie 1993, magnitudes), lower on "
                                   "worn fastenings")),
         ("Y_max", "YQ_max", "SumY_max", "Q_max"), (3, 4), ((2.0, 20.0),),
-        source="massless vertical track spring-damper per wheel (c = 50 kN·s/m); lateral track mass "
-               "1200 kg per wheelset on 2·k_rail with c = 100 kN·s/m; flange contact in series with "
-               "k_rail; Knothe & Grassie, VSD 22, 1993 (magnitudes)"),
+        source="massless vertical track spring-damper per wheel (c = 50 kN·s/m, assumption); lateral "
+               "track compliance counted once: each rail a massless spring k_rail deflecting under its "
+               "wheel's tread force, the flange contact in series with k_rail; Knothe & Grassie, VSD "
+               "22, 1993 (magnitudes)"),
     Effect(
         "wheel_rail_friction", "Wheel–rail friction coefficient",
         "The creep forces saturate at μ·Q. Measurements are often made on wet or contaminated "

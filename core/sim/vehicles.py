@@ -82,6 +82,9 @@ _COACH: tuple[Param, ...] = (
     Param("k_antiroll", "N*m/rad", 2.0e6, 0.0, 5e6, "anti-roll bar stiffness per bogie", "[typ] assumption"),
     Param("c_yaw_damper", "N*s/m", 250e3, 0.0, 8e5, "yaw damper damping (linearised) per damper", "[typ] assumption"),
     Param("b_yaw_damper", "m", 1.3, 1.0, 1.5, "lateral semi-spacing of the yaw dampers", "[typ] assumption"),
+    Param("k_traction", "N/m", 5e6, 5e5, 5e7,
+          "traction rod (longitudinal restraint car body - bogie) stiffness per bogie, at the secondary "
+          "attachment height", "[typ] assumption"),
     Param("yaw_damper_blowoff", "N", 12e3, 2e3, 5e4,
           "yaw damper force limit (blow-off valve) per damper: force saturates at this value", "[typ] assumption"),
     # wheel–rail
@@ -167,6 +170,7 @@ PLAUSIBLE_COACH: dict[str, tuple[float, float, str]] = {
     "k_antiroll": (5e5, 3e6, _CAT),
     "c_yaw_damper": (1e5, 5e5, _CAT + " (linearised, per damper, > 160 km/h)"),
     "b_yaw_damper": (1.2, 1.4, _CAT),
+    "k_traction": (2e6, 2e7, _CAT + " (traction rod with rubber bushes)"),
     "yaw_damper_blowoff": (6e3, 2e4, _CAT + " (yaw damper force limit per damper)"),
     "conicity": (0.03, 0.5, _WR),
     "flange_clearance": (0.004, 0.01, _WR + " (gauge 1435 mm, wheelset back-to-back 1360 mm)"),
