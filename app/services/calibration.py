@@ -22,6 +22,7 @@ from railval.app.services.campaign_context import (
     section_values,
     session_of,
     simulate_context,
+    validate_values,
 )
 from railval.core.calibration import (
     COACH_MODAL_DEFAULTS,
@@ -33,7 +34,7 @@ from railval.core.calibration import (
 from railval.core.calibration import calibrate as fit_parameters
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import EFFECTS
-from railval.core.validation import validate
+from railval.core.validation import normalised_errors, validate
 from railval.db import repo
 
 
@@ -56,7 +57,7 @@ class _Objective:
     def __call__(self, params: Mapping[str, float]) -> float:
         effects, model = self.split(params)
         vals, _ = evaluate_effects((self.ctx, effects, model))
-        vr = validate(self.ctx.measured_values, vals, self.ctx.sections, self.ctx.vehicle, n_boot=0)
+        vr = validate_values(self.ctx, vals)
         return validation_objective({q: r.mean_norm for q, r in vr.quantities.items()},
                                     {q: r.std_norm for q, r in vr.quantities.items()})
 
@@ -145,7 +146,7 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     report(progress, "store", 0.92)
     sets = simulate_context(ctx, eff, model)
     vals = section_values(sets, ctx.sections)
-    vr_full = validate(ctx.measured_values, vals, ctx.sections, ctx.vehicle)
+    vr_full = validate_values(ctx, vals, n_boot=1000)
     record = {"fit_sections": fit_ids, "held_out_sections": held_ids, "parameters": [s.name for s in specs]}
     vr_held = None
     if held_ids:
@@ -267,7 +268,8 @@ def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float
 
 def lineage_errors(session: Any, ctx: CampaignContext, name: str, known: Mapping[str, Any] | None = None) -> list[dict]:
     """Root → ``name``: per configuration its effects and every quantity's normalised error
-    max(|mean_norm|, std_norm) (with both parts), so the UI can draw the error falling.
+    (:func:`railval.core.validation.normalised_errors`), so the UI can draw the error falling.
+    ``known``: validation results already at hand, by configuration name.
 
     A calibrated configuration also carries ``fit_sections``, ``held_out_sections``,
     ``in_sample`` (its verdict is on sections the calibration was fitted to) and, when it was
@@ -283,13 +285,11 @@ def lineage_errors(session: Any, ctx: CampaignContext, name: str, known: Mapping
             sets = repo.load_signalsets(session, ctx.campaign, conf.name)
         vals = section_values(sets, ctx.sections) if sets is not None else None
         if vr is None:
-            vr = validate(ctx.measured_values, vals, ctx.sections, ctx.vehicle, n_boot=0)
-        worst = _max_error(vr)
+            vr = validate_values(ctx, vals)
         cal_rec = conf.calibration or {}
         held = list(cal_rec.get("held_out_sections") or [])
         item = {"configuration": conf.name, "effects": dict(conf.effects or {}),
-                "parameters": dict(conf.parameters or {}),
-                "validated": bool(vr.validated), "max_error": worst, "quantities": _quantity_errors(vr),
+                "parameters": dict(conf.parameters or {}), **normalised_errors(vr),
                 "fit_sections": cal_rec.get("fit_sections"), "held_out_sections": held or None,
                 "in_sample": bool(cal_rec) and not held}
         if held and vals is not None:
@@ -309,15 +309,6 @@ def lineage_errors(session: Any, ctx: CampaignContext, name: str, known: Mapping
     return out
 
 
-def _quantity_errors(vr: Any) -> dict[str, dict]:
-    return {k: {"mean_norm": _finite(r.mean_norm), "std_norm": _finite(r.std_norm),
-                "error": _finite(max(abs(r.mean_norm), r.std_norm))} for k, r in vr.quantities.items()}
-
-
 def _max_error(vr: Any) -> float | None:
-    return max((v["error"] for v in _quantity_errors(vr).values() if v["error"] is not None), default=None)
-
-
-def _finite(x: float) -> float | None:
-    return float(x) if x is not None and math.isfinite(x) else None
+    return normalised_errors(vr)["max_error"]
 
