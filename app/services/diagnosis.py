@@ -14,23 +14,16 @@ modal identification of [ref 3] in :mod:`railval.app.services.modal`.
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from typing import Any
 
-from railval.app.services.campaign_context import Progress, effect_parameters
-from railval.core.diagnosis import PARAMETER_CANDIDATES, DiagnosisResult, scan_values
-from railval.core.sim.effects import EFFECTS, Effect
+from railval.app.services.campaign_context import Progress
+from railval.app.services.diagnosis_evidence import diagnose as diagnose_evidence_service
+from railval.app.services.diagnosis_evidence import scan_points
+from railval.core.diagnosis import PARAMETER_CANDIDATES, DiagnosisResult
+from railval.core.sim.effects import EFFECTS
 
-
-def scan_points(effect: Effect, values_per_parameter: int) -> Iterator[tuple[str, float, dict[str, float], dict]]:
-    """The one-parameter scan of an effect: for each parameter and each of its
-    :func:`railval.core.diagnosis.scan_values`, ``(parameter, value, all parameters at default
-    but this one, its bounds record)``."""
-    params = effect_parameters(effect)
-    defaults = {k: float(v["default"]) for k, v in params.items()}
-    for pname, p in params.items():
-        for v in scan_values(p["lower"], p["upper"], p["default"], values_per_parameter, p["log"]):
-            yield pname, v, {**defaults, pname: v}, p
+__all__ = ["diagnose", "diagnosis_simulations", "scan_points"]
 
 
 def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3,
@@ -58,8 +51,6 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     verdict (:func:`railval.app.services.diagnosis_evidence.diagnose`). ``effects``: candidate
     names — effect ids and ``model.NAME`` parameters; given without any ``model.`` name, only
     those effects are tried."""
-    from railval.app.services.diagnosis_evidence import diagnose as diagnose_evidence_service
-
     if effects is not None:
         names = list(effects)
         params = [n for n in names if n.startswith("model.")]

@@ -22,11 +22,12 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
+from railval.app.services.campaign_context import effect_parameters
 from railval.core.diagnosis import (
     PARAMETER_CANDIDATES,
     CandidateFamily,
@@ -34,11 +35,24 @@ from railval.core.diagnosis import (
     SectionEvidence,
     band_powers,
     diagnose_evidence,
+    scan_values,
     section_evidence,
 )
 from railval.core.errors import InvalidParameter
+from railval.core.sim.effects import Effect
 
 Progress = Any
+
+
+def scan_points(effect: Effect, values_per_parameter: int) -> Iterator[tuple[str, float, dict[str, float], dict]]:
+    """The one-parameter scan of an effect: for each parameter and each of its
+    :func:`railval.core.diagnosis.scan_values`, ``(parameter, value, all parameters at default
+    but this one, its bounds record)``."""
+    params = effect_parameters(effect)
+    defaults = {k: float(v["default"]) for k, v in params.items()}
+    for pname, p in params.items():
+        for v in scan_values(p["lower"], p["upper"], p["default"], values_per_parameter, p["log"]):
+            yield pname, v, {**defaults, pname: v}, p
 
 
 # --------------------------------------------------------------------------- registry accessors
@@ -144,7 +158,6 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         session_of,
     )
     from railval.app.services.campaign_context import report as _report
-    from railval.app.services.diagnosis import scan_points
     from railval.core.sim.effects import EFFECTS
     from railval.db import repo
 
