@@ -18,6 +18,7 @@ from __future__ import annotations
 import datetime as dt
 import hashlib
 import html
+import json
 import math
 import os
 import platform
@@ -224,12 +225,30 @@ def signoff_rows_html(items: list[tuple[dict[str, Any], Any]]) -> str:
             + "".join(rows) + "</table>")
 
 
+def _verdict_document(d: dict) -> dict:
+    """The parts of a validation result the evidence digest covers: verdict, coverage and
+    every quantity's values, limits, intervals and section pairs (no time stamps)."""
+    def clean(x):
+        if isinstance(x, float):
+            return repr(x) if not math.isfinite(x) else x
+        if isinstance(x, dict):
+            return {str(k): clean(v) for k, v in x.items()}
+        if isinstance(x, list | tuple):
+            return [clean(v) for v in x]
+        return x
+    return clean({k: d.get(k) for k in ("validated", "coverage", "quantities")})
+
+
 def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3) -> Report:
     """Build the report of ``configuration`` of ``campaign`` from the database.
 
     ``backend`` is an :class:`railval.app.state.backend.Backend` (or anything with its methods); the validation comes from
     ``railval.app.services.validation`` through it, exactly as the dashboard shows it.
     """
+    from railval.db import repo
+
+    with backend.database.session() as s:  # every blob against its hash and seal first
+        repo.require_evidence(s, campaign, configuration, blobs=True)
     result = backend.validation(campaign, configuration)
     d = result.to_dict()
     rows = d["quantities"]
@@ -341,7 +360,11 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
             digest.update(f"{sid}\t{ch}\t{a}\t{b}\n".encode())
             hrows.append(f"<tr><td class='l'>{_esc(sid)}</td><td class='l'>{_esc(ch)}</td><td class='l'>{a}</td>"
                          f"<td class='l'>{b}</td></tr>")
-    h.append(f"<p>Evidence digest (SHA-256 over every line below): <code>{digest.hexdigest()}</code></p>")
+    # the digest covers the verdict and every value it rests on, not only the inputs' hashes
+    digest.update(json.dumps(_verdict_document(d), sort_keys=True, allow_nan=False,
+                             default=str).encode())
+    h.append(f"<p>Evidence digest (SHA-256 over every line below, then the verdict and the "
+             f"values of every quantity): <code>{digest.hexdigest()}</code></p>")
     h.append("<table class='hashes'><tr><th class='l'>section</th><th class='l'>channel</th>"
              "<th class='l'>measurement</th><th class='l'>simulation</th></tr>" + "".join(hrows) + "</table>")
 

@@ -77,6 +77,9 @@ P_LOW = 0.0015
 P_MEDIAN = 0.5
 P_HIGH = 0.9985
 WINDOW_M = 2.0
+#: largest sample magnitude processed: squares and filter states of larger values overflow
+#: float64 (±1.8e308) and turn statistics into inf or NaN
+MAX_ABS_SAMPLE = 1e100
 STEP_M = 0.5
 PERCENTILES = (P_LOW, P_MEDIAN, P_HIGH)
 #: the reading that differs from the chosen one only in the percentile method
@@ -246,6 +249,14 @@ def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
         if np.shape(arr) != (n,):
             raise InvalidSignal(
                 f"section {sec.id}: channel {name} has shape {np.shape(arr)}, expected ({n},)")
+        peak = float(np.max(np.abs(arr))) if n else 0.0
+        if not np.isfinite(peak):
+            raise InvalidSignal(f"section {sec.id}: channel {name} holds non-finite values "
+                                f"({peak:g})")
+        if not peak <= MAX_ABS_SAMPLE:
+            raise InvalidSignal(
+                f"section {sec.id}: channel {name} holds {peak:g}; samples must be finite and "
+                f"within ±{MAX_ABS_SAMPLE:g} (MAX_ABS_SAMPLE)")
     if not sec.eval_start_m < sec.eval_end_m:
         raise InvalidSignal(
             f"section {sec.id}: evaluated range start {sec.eval_start_m} m must be below end "

@@ -80,7 +80,7 @@ CLI_ACTIONS: dict[str, str | None] = {
     "list": "data.read", "metrics": "data.read", "report": "report.download",
     "import": "data.import", "synth": "data.import", "export": "data.export",
     "simulate": "simulate", "diagnose": "diagnose", "calibrate": "calibrate",
-    "modal": "calibrate", "validate": "validate",
+    "modal": "calibrate", "validate": "validate", "verify": "audit.read",
     "user add": "user.manage", "user list": "user.manage", "user disable": "user.manage",
     "user enable": "user.manage", "user passwd": "user.manage", "user role": "user.manage",
     "user invite": "user.manage",

@@ -17,19 +17,8 @@ Progress goes to stderr; ``--json`` prints one JSON document on stdout.
 from __future__ import annotations
 
 import argparse
-import sys
-from typing import Any
 
-from railval.app.cli import emit_json
-
-
-def _progress(stage: str, fraction: float, info: dict[str, Any]) -> None:
-    extra = ""
-    if "best" in info:
-        extra = f" best objective {info['best']:.4g}"
-    elif "done" in info:
-        extra = f" {info['done']}/{info['total']}"
-    print(f"[{fraction * 100:5.1f} %] {stage}{extra}", file=sys.stderr, flush=True)
+from railval.app.cli import Progress, emit_json
 
 
 def _db(args: argparse.Namespace):
@@ -43,7 +32,7 @@ def _db(args: argparse.Namespace):
 def _cmd_diagnose(args: argparse.Namespace) -> int:
     from railval.app.services.diagnosis import diagnose
 
-    res = diagnose(_db(args), args.campaign, args.config, progress=_progress, scheduler=args.scheduler,
+    res = diagnose(_db(args), args.campaign, args.config, progress=Progress(), scheduler=args.scheduler,
                    values_per_parameter=args.values, effects=args.candidates,
                    **({"include_parameters": False} if args.no_parameters else {}))
     d = res.to_dict()
@@ -80,7 +69,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             raise InvalidParameter(f"--start expects EFFECT.PARAM=VALUE or model.NAME=VALUE, got {item!r}")
         start.setdefault(effect, {})[pname] = float(value)
     res = calibrate(_db(args), args.campaign, args.config, args.effect, args.new_name, params=args.params,
-                    progress=_progress, scheduler=args.scheduler, seed=args.seed, replace=args.replace,
+                    progress=Progress(), scheduler=args.scheduler, seed=args.seed, replace=args.replace,
                     start=start or None, fit_sections=args.fit_sections, holdout=args.holdout, split=args.split)
     d = res.to_dict()
     if args.json:
@@ -111,7 +100,7 @@ def _cmd_modal(args: argparse.Namespace) -> int:
     from railval.app.services.modal import modal
 
     d = modal(_db(args), args.campaign, sections=args.section, calibrate_params=args.calibrate,
-              progress=_progress)
+              progress=Progress())
     if args.json:
         emit_json(d)
         return 0
@@ -169,7 +158,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=_cmd_calibrate)
 
-    m = subparsers.add_parser("modal", help="SSI-COV car body modes and modal calibration ([ref 3])")
+    m = subparsers.add_parser("modal", help="SSI-COV car body modes and modal calibration: model frequencies fitted to "
+                                   "the identified modes, paired by MAC (docs/design.md §7)")
     m.add_argument("campaign")
     m.add_argument("--section", action="append", default=None, metavar="S")
     m.add_argument("--calibrate", nargs="+", default=None, metavar="PARAM",

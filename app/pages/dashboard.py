@@ -12,6 +12,7 @@ import panel as pn
 
 from railval.app import plots
 from railval.app.pages._common import PageBase, message, table, where_map
+from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState
 from railval.app.state.dashboard import definition_rows, supplementary_rows
 
@@ -218,7 +219,8 @@ class DashboardPage(PageBase):
         try:
             self._rows = self.state.drilldown()
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            self.drill_box.objects = [message(f"drill-down of {self.state.quantity} not available: {exc}",
+            self.drill_box.objects = [message(f"drill-down of {self.state.quantity} not available: "
+                                         f"{plain_message(exc, 'drill-down')}",
                                               "danger")]
             return
         df = pd.DataFrame(self._rows)

@@ -17,6 +17,7 @@ import panel as pn
 from railval.app import plots
 from railval.app.pages._common import PageBase, make_dispatch, message, table, where_map
 from railval.app.pages.dashboard import validation_view
+from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 
 
@@ -114,7 +115,7 @@ class DiagnosePage(PageBase):
             available = self.state.available_effects()
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
             catalogue, available = {}, []
-            self.app.set_status(str(exc), "warning")
+            self.app.set_status(plain_message(exc, "diagnose"), "warning")
         self._catalogue = catalogue
         ranked = [c["effect"] for c in self.state.candidates]
         self.state.param.effect.objects = ranked + [e for e in available if e not in ranked]
@@ -147,7 +148,7 @@ class DiagnosePage(PageBase):
             n_diag = self.state.diagnosis_simulations()
             n_cal = self.state.calibration_simulations()
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            self.diag_estimate.object = f"cost not known: {html.escape(str(exc))}"
+            self.diag_estimate.object = f"cost not known: {html.escape(plain_message(exc, 'cost'))}"
             return
         self.diag_estimate.object = (f"**Run diagnosis** simulates the campaign {n_diag} times at most "
                                      "(each candidate effect parameter over its bounds, one linearised "
@@ -260,7 +261,7 @@ class DiagnosePage(PageBase):
         try:
             lineage = self.state.lineage_errors(config)
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            self.result_box.objects = [message(f"lineage not available: {exc}", "danger")]
+            self.result_box.objects = [message(f"lineage not available: {plain_message(exc, 'lineage')}", "danger")]
             return
         items: list[Any] = []
         summary = self._last_result_text(config)

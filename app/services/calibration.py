@@ -89,6 +89,9 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     ``plausible`` (fitted values inside their plausible ranges and off the search bounds)."""
     report(progress, "load", 0.0, campaign=campaign, config=config)
     with session_of(database) as s:
+        from railval.db import repo as _repo
+
+        _repo.check_new_configuration(s, campaign, new_name, replace=replace)  # before fitting
         ctx = load_context(s, campaign)
         conf_effects, conf_params, _ = configuration_of(s, campaign, config)
     model_candidates = [e for e in effects if e.startswith("model.")]

@@ -83,7 +83,8 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
         pending = []
         with ThreadPoolExecutor(max_workers=1) as pool:
             for chunk in chunks:
-                decode = repo.fetch_signalsets(session, camp, source, sections=chunk)
+                decode = repo.fetch_signalsets(session, camp, source, sections=chunk,
+                                               verify=True)
                 pending.append((chunk, pool.submit(_decode_and_evaluate, decode,
                                                    [by_id[s] for s in chunk], order)))
             new: dict[str, bytes] = {}
@@ -109,7 +110,8 @@ def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
     ``db_or_url``: a :class:`railval.db.engine.Database` (in-process) or its URL (worker process)."""
     database = _worker_database(db_or_url) if isinstance(db_or_url, str) else db_or_url
     with database.session() as session:
-        decode = repo.fetch_signalsets(session, campaign, config, sections=[s.id for s in sections])
+        decode = repo.fetch_signalsets(session, campaign, config, sections=[s.id for s in sections],
+                                       verify=True)
         vals = _decode_and_evaluate(decode, sections, order)
     return [pack_values(v) for v in vals]
 
@@ -171,7 +173,9 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
                      {"done": len(computed)})
 
     if workers > 1 and len(chunks) > 1:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        from railval.core.workers import pool_kwargs
+
+        with ProcessPoolExecutor(max_workers=workers, **pool_kwargs()) as pool:
             futures = [(c, pool.submit(_evaluate_chunk, database.url, name, c[0],
                                        [by_id[s] for s in c[1]], order)) for c in chunks]
             for chunk, fut in futures:
@@ -181,7 +185,7 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
             collect(chunk, _evaluate_chunk(database, name, chunk[0],
                                            [by_id[s] for s in chunk[1]], order))
     if computed:
-        with database.session() as session:
+        with database.session(write=True) as session:
             repo.cache_put_many(session, {keys[k]: blob for k, blob in computed.items()})
     measured = values[None]
     out = {}
@@ -220,15 +224,20 @@ def calibration_provenance(session: Session, campaign, config_name: str) -> dict
 
 def validate_configuration(session: Session, campaign_name: str, config_name: str, *,
                            order: int = DEFAULT_ORDER, n_boot: int = 1000,
-                           seed: int = 0) -> ValidationResult:
+                           seed: int = 0, check_seals: bool = True) -> ValidationResult:
     """Validate configuration ``config_name`` of ``campaign_name`` against the measurement.
 
     ``order``: Butterworth prototype order of both filters; ``n_boot``/``seed``: bootstrap of
     the normalised values. The result's ``info`` records how many sections of each side
-    came from the cache. Raises :class:`railval.core.errors.NotFound` for unknown names.
+    came from the cache. First the seals of both sides' signals are checked
+    (:func:`railval.db.repo.require_evidence` without reading blobs): a signal changed
+    outside railval raises :class:`railval.db.integrity.IntegrityError` instead of giving a
+    verdict. Raises :class:`railval.core.errors.NotFound` for unknown names.
     """
     check_order(order)
     camp, conf = repo.resolve(session, campaign_name, config_name)
+    if check_seals:
+        repo.require_evidence(session, camp, config_name, blobs=False)
     sections = repo.section_infos(session, camp)
     vehicle = repo.vehicle_info(session, camp)
     m_stats: dict[str, int] = {}

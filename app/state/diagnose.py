@@ -150,6 +150,8 @@ class DiagnoseState(param.Parameterized):
 
         settings = {"values_per_parameter": self.values_per_parameter,
                     "effects": list(self.candidate_effects) or None}
+        if not app.within_cost_cap("diagnosis", self.diagnosis_simulations()):
+            return None
 
         def work(progress):
             return app.backend.diagnose(campaign, config, progress=progress, **settings)
@@ -198,6 +200,8 @@ class DiagnoseState(param.Parameterized):
                     "seed": self.seed, **({"split": True} if self.split else {}),
                     "params": ([f"{effect}.{p}" for p in self.fit_parameters] or None)
                     if not (effect or "").startswith("model.") else None}
+        if calibrate and not app.within_cost_cap("calibration", self.calibration_simulations()):
+            return None
 
         def work(progress):
             if calibrate:
