@@ -279,6 +279,14 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
     h.append(f"<div class='verdict {'ok' if ok else 'no'}'><b>{'VALIDATED' if ok else 'NOT VALIDATED'}</b>"
              + ("" if ok else f" — failing quantities: {_esc(', '.join(failing) or 'none')}"
                 + ("" if cov.get("ok", True) else "; coverage not met")) + "</div>")
+    info = d.get("info") or {}
+    if info.get("in_sample"):
+        held = info.get("held_out_sections") or []
+        h.append("<div class='verdict insample'><b>In-sample</b> — "
+                 f"{_esc(', '.join(info.get('calibrated_in') or []))} was calibrated on "
+                 f"{len(info.get('fit_sections') or [])} of these sections, so this verdict is partly on the "
+                 "data the fit used" + (f"; held out: {_esc(', '.join(held))}" if held else
+                                         "; no section was held out") + ".</div>")
 
     # quantities
     h.append("<h2>Quantities (Polach & Böttcher 2014 §5, EN 14363)</h2><table><tr><th class='l'>quantity</th><th>unit</th>"

@@ -154,6 +154,10 @@ class Configuration(Base):
     effects: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     parameters: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     description: Mapped[str] = mapped_column(Text, default="")
+    #: how a calibrated configuration was fitted: ``{"fit_sections": [...], "held_out_sections":
+    #: [...], "parameters": [...]}`` (NULL for configurations that were not calibrated); a
+    #: validation on fitted sections is in-sample (docs/diagnosis.md)
+    calibration: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True, default=None)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
     campaign: Mapped[Campaign] = relationship(back_populates="configurations")

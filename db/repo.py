@@ -313,6 +313,7 @@ def store_configuration(
     description: str,
     signalsets: Mapping[str, SignalSet],
     replace: bool = False,
+    calibration: dict[str, Any] | None = None,
 ) -> Configuration:
     """Store a configuration (e.g. a simulation result) with its signals.
 
@@ -321,8 +322,9 @@ def store_configuration(
     known sections and channels, equal lengths, finite values, equally spaced time at the
     set's ``fs``, strictly increasing distance. ``replace=True`` overwrites an existing
     configuration of that name in place (its id and children are kept). Fills each set's
-    ``hashes``. Raises :class:`InvalidSignal`, :class:`NotFound` or
-    :class:`railval.core.errors.InvalidParameter`.
+    ``hashes``. ``calibration``: how a calibrated configuration was fitted (fit and held-out
+    section ids, fitted parameters), stored in ``Configuration.calibration``. Raises
+    :class:`InvalidSignal`, :class:`NotFound` or :class:`railval.core.errors.InvalidParameter`.
     """
     from railval.core.errors import InvalidParameter
 
@@ -360,11 +362,13 @@ def store_configuration(
         conf = existing
         conf.parent_id = parent_row.id if parent_row is not None else None
         conf.effects, conf.parameters, conf.description = dict(effects), dict(parameters), description
+        conf.calibration = dict(calibration) if calibration is not None else None
         conf.created_at = utcnow()
     else:
         conf = Configuration(
             campaign_id=c.id, name=name, parent_id=parent_row.id if parent_row else None,
             effects=dict(effects), parameters=dict(parameters), description=description,
+            calibration=dict(calibration) if calibration is not None else None,
         )
         session.add(conf)
     stamp = dt.datetime.now(dt.UTC).isoformat()

@@ -80,7 +80,9 @@ class DiagnosePage(PageBase):
                 pn.widgets.IntInput.from_param(st.param.maxiter, name="Generations (at most)", width=170),
                 pn.widgets.IntInput.from_param(st.param.polish_maxfev, name="Polish simulations (at most)",
                                                width=190),
-                pn.widgets.IntInput.from_param(st.param.seed, name="Seed", width=110)),
+                pn.widgets.IntInput.from_param(st.param.seed, name="Seed", width=110),
+                pn.widgets.Checkbox.from_param(st.param.split, name="Hold out one section per zone "
+                                               "(judge the fit on sections it has not seen)", width=420)),
             self.cal_estimate, title="Calibration settings (differential evolution + local polish)",
             collapsed=True, sizing_mode="stretch_width", css_classes=["rv-cal-settings"])
         st.param.watch(lambda e: self._show_estimates(), ["candidate_effects", "values_per_parameter",
@@ -148,8 +150,9 @@ class DiagnosePage(PageBase):
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
             self.diag_estimate.object = f"cost not known: {html.escape(plain_message(exc, 'cost'))}"
             return
-        self.diag_estimate.object = (f"**Run diagnosis** simulates the campaign {n_diag} times "
-                                     "(each candidate parameter over its bounds).")
+        self.diag_estimate.object = (f"**Run diagnosis** simulates the campaign {n_diag} times at most "
+                                     "(each candidate effect parameter over its bounds, one linearised "
+                                     "simulation per model parameter, a few refinements).")
         self.cal_estimate.object = (f"**Calibrate** simulates the campaign at most {n_cal} times "
                                     "(start point, population × generations, polish, final run).")
 
@@ -159,16 +162,30 @@ class DiagnosePage(PageBase):
             self.candidates_box.objects = [pn.pane.Markdown("*No diagnosis yet — press **Run diagnosis**.*")]
             return
         df = pd.DataFrame([{
-            "rank": i + 1, "effect": c["effect"], "explained (%)": round(100 * float(c["explained"]), 1),
+            "rank": i + 1, "candidate": c["effect"], "kind": c.get("kind", "effect"),
+            "held-out (%)": round(100 * float(c.get("held_out_explained", c["explained"])), 1),
+            "explained (%)": round(100 * float(c["explained"]), 1),
+            "plausible": "yes" if c.get("plausible", True) else "no", "flags": len(c.get("flags") or []),
             "fitted parameters": ", ".join(f"{k} = {v:.4g}" for k, v in (c.get("parameters") or {}).items()),
             "fixes": ", ".join(c.get("fixes", [])), "worsens": ", ".join(c.get("worsens", [])),
         } for i, c in enumerate(cands)])
         extra = []
         note = self.state.diagnosis_note
-        if note:
+        verdict = self.state.verdict
+        if verdict:
+            nf = self.state.noise_floor
+            head = {"cause": "Cause found", "uncertain": "Uncertain",
+                    "none": "No candidate explains the residual"}.get(verdict, verdict)
+            text = f"{head}: {note}" + (f" (noise floor {nf:.2f})" if nf is not None else "")
+            extra.append(message(text, {"cause": "success", "uncertain": "warning"}.get(verdict, "danger")))
+            if verdict == "none" and self.state.unexplained:
+                extra.append(message("Unexplained: " + "; ".join(
+                    f"{u['component']} {u['residual']:+.2f}" for u in self.state.unexplained), "info"))
+        elif note:
             extra.append(message(note, "info" if self.state.separable else "warning"))
         self.candidates_box.objects = [
-            pn.pane.Markdown("#### Ranked candidate effects"),
+            pn.pane.Markdown("#### Ranked candidates (effects and model parameters), by the share "
+                             "explained on held-out sections"),
             table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"]), *extra,
             self.candidate_box,
         ]
@@ -191,6 +208,7 @@ class DiagnosePage(PageBase):
                              f"{100 * float(cand['explained']):.1f} % of the residual"),
             pn.pane.Markdown(f"**Why {html.escape(cand['effect'])}?** {html.escape(cand.get('explanation', ''))}",
                              sizing_mode="stretch_width"),
+            *[message(str(f), "warning") for f in (cand.get("flags") or [])],
             pn.pane.HoloViews(signature_chart(cand), sizing_mode="stretch_width"),
         ]
         where = self.state.where(cand["effect"])
@@ -274,6 +292,18 @@ class DiagnosePage(PageBase):
         start = r.get("objective_start")
         obj = (f"at the start values {start:.3g}, fitted {r['objective']:.3g}" if start is not None
                else f"fitted {r['objective']:.3g}")
-        return (f"{config}: {r['effect']} calibrated from {r['parent']}: {fitted}. Objective (Σ over "
+        text = (f"{config}: {r['effect']} calibrated from {r['parent']}: {fitted}. Objective (Σ over "
                 f"quantities of the squared worst normalised error) {obj}; "
                 f"{r.get('n_evaluations', 0) + 2} campaign simulations.")
+        if r.get("in_sample"):
+            text += " Its verdict is in-sample (fitted on all sections)."
+        elif r.get("held_out_sections"):
+            text += f" Fitted without sections {', '.join(r['held_out_sections'])} (held out)."
+            held = ((r.get("lineage") or [{}])[-1] or {}).get("held_out") or {}
+            if held.get("max_error") is not None and held.get("parent_max_error") is not None:
+                text += (f" On the held-out sections the largest normalised error went from "
+                         f"{held['parent_max_error']:.2f} to {held['max_error']:.2f}.")
+        for f in r.get("flags") or []:
+            if not str(f).startswith("in-sample"):
+                text += f" Warning: {f}."
+        return text + f" Next: diagnose {config} — press **Run diagnosis**."

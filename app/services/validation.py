@@ -144,6 +144,7 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
         vehicle = repo.vehicle_info(session, camp)
         refs = {c.name: repo.ConfigRef(camp, c.id, c.name) for c in repo.list_configurations(session, camp)}
         names = list(refs) if configs is None else [repo.resolve(session, camp, c)[1].name for c in configs]
+        provenance = {c: calibration_provenance(session, camp, c) for c in names}
         by_id = {s.id: s for s in sections}
         keys: dict[tuple[str | None, str], str] = {}
         for source in [None, *names]:
@@ -193,9 +194,32 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
                                                                               values[cname])
         res = validate(measured, values[cname], sections, vehicle, n_boot=n_boot, seed=seed,
                        warnings=warnings)
-        res.info.update({"campaign": name, "configuration": cname, "filter_order": order})
+        res.info.update({"campaign": name, "configuration": cname, "filter_order": order,
+                         **provenance[cname]})
         out[cname] = res
     return out
+
+
+def calibration_provenance(session: Session, campaign, config_name: str) -> dict:
+    """Whether a verdict on configuration ``config_name`` is in-sample: it, or one of its
+    ancestors, was calibrated on sections of this campaign (``Configuration.calibration``), so
+    a verdict over all sections includes the sections the fit used. Returns ``in_sample``,
+    ``calibrated_in`` (the calibrated configurations of the lineage), ``fit_sections`` and
+    ``held_out_sections`` (union over the lineage; held-out = never fitted to)."""
+    from railval.db import repo
+
+    fitted: set[str] = set()
+    held: set[str] = set()
+    calibrated = []
+    for conf in repo.lineage(session, campaign, config_name):
+        rec = conf.calibration or {}
+        if rec:
+            calibrated.append(conf.name)
+            fitted |= set(rec.get("fit_sections") or [])
+            held |= set(rec.get("held_out_sections") or [])
+    held -= fitted
+    return {"in_sample": bool(fitted), "calibrated_in": calibrated, "fit_sections": sorted(fitted),
+            "held_out_sections": sorted(held)}
 
 
 def validate_configuration(session: Session, campaign_name: str, config_name: str, *,
@@ -226,5 +250,6 @@ def validate_configuration(session: Session, campaign_name: str, config_name: st
                       warnings=warnings)
     result.info.update({"campaign": camp.name, "configuration": conf.name,
                         "filter_order": order,
-                        "sections_measured": m_stats, "sections_simulated": s_stats})
+                        "sections_measured": m_stats, "sections_simulated": s_stats,
+                        **calibration_provenance(session, camp, config_name)})
     return result

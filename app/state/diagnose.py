@@ -28,6 +28,9 @@ class DiagnoseState(param.Parameterized):
     residual = param.Dict(default={}, doc="residual pattern of the diagnosed configuration (labels, values)")
     diagnosis_note = param.String(default="", doc="separability note of the diagnosis")
     separable = param.Boolean(default=True, doc="the two best candidates are told apart")
+    verdict = param.String(default="", doc="verdict of the last diagnosis: cause, uncertain or none")
+    noise_floor = param.Number(default=None, allow_None=True, doc="noise floor of the last diagnosis")
+    unexplained = param.List(default=[], doc="what the best candidate leaves unexplained (verdict none)")
     # diagnosis settings (app.services.diagnosis.diagnose)
     candidate_effects = param.ListSelector(default=[], objects=[], doc=(
         "effects the diagnosis tries; none chosen = every effect the configuration lacks"))
@@ -40,6 +43,9 @@ class DiagnoseState(param.Parameterized):
     maxiter = param.Integer(default=5, bounds=(1, 200), doc="differential evolution: generations at most")
     polish_maxfev = param.Integer(default=20, bounds=(0, 1000), doc="local polish: simulations at most")
     seed = param.Integer(default=0, bounds=(0, None), doc="random seed of the global search")
+    split = param.Boolean(default=False, doc=(
+        "fit on part of the sections and validate on the others (one section per zone and fold held "
+        "out); otherwise the verdict on the campaign is in-sample"))
 
     def __init__(self, app: AppState, **params):
         super().__init__(**params)
@@ -101,11 +107,15 @@ class DiagnoseState(param.Parameterized):
         self.candidate_effects = [e for e in self.candidate_effects if e in available]
 
     def diagnosis_simulations(self) -> int:
-        """Campaign simulations the diagnosis will run with the current settings."""
+        """Campaign simulations the diagnosis will run with the current settings (at most: the
+        refinement of parameter candidates runs only where needed). Chosen candidate effects
+        restrict the diagnosis to them; none chosen = every effect lacking and the template's
+        parameters."""
         effects = self.candidate_effects or self.available_effects()
         ov = self.app.overview
         template = str(ov.vehicle.get("template") or "coach") if ov else None
-        return diagnosis_simulations(effects, self.values_per_parameter, template)
+        return diagnosis_simulations(effects, self.values_per_parameter, template,
+                                     parameters=not self.candidate_effects)
 
     def calibration_simulations(self) -> int:
         """Upper bound of the campaign simulations a calibration runs: the optimiser's
@@ -155,6 +165,9 @@ class DiagnoseState(param.Parameterized):
                 note = "the two best candidates explain nearly the same; see the evidence"
             self.diagnosis_note = note
             self.separable = bool(d.get("separable", True))
+            self.verdict = str(d.get("verdict") or "")
+            self.noise_floor = d.get("noise_floor")
+            self.unexplained = list(d.get("unexplained") or [])
             self.diagnosis_run = {k: d.get(k) for k in ("simulations", "values_per_parameter", "configuration")}
             names = self.available_effects() if cands else []
             order = [c["effect"] for c in cands] + [n for n in names if n not in {c["effect"] for c in cands}]
@@ -176,12 +189,17 @@ class DiagnoseState(param.Parameterized):
         # a name the user did not type always names the effect that is added
         name = self.new_name if (self.name_edited and self.new_name.strip()) else self.suggested_name()
         params = dict(self.parameters)
+        if effect is not None and effect.startswith("model."):  # a parameter candidate: start at its fitted value
+            cand = next((c for c in self.candidates if c.get("name") == effect), None)
+            params = {effect[6:]: float(cand["fitted"])} if cand and cand.get("fitted") is not None else {}
         if effect is None:
             app.set_status("choose an effect to add first", "warning")
             return None
 
         settings = {"popsize": self.popsize, "maxiter": self.maxiter, "polish_maxfev": self.polish_maxfev,
-                    "seed": self.seed, "params": [f"{effect}.{p}" for p in self.fit_parameters] or None}
+                    "seed": self.seed, **({"split": True} if self.split else {}),
+                    "params": ([f"{effect}.{p}" for p in self.fit_parameters] or None)
+                    if not (effect or "").startswith("model.") else None}
         if calibrate and not app.within_cost_cap("calibration", self.calibration_simulations()):
             return None
 
