@@ -128,9 +128,13 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
           threaded: bool = False, allow_websocket_origin: list[str] | None = None, **kw: Any):
     """Serve the app at ``http://address:port/`` (``pn.serve``); returns the server."""
     origins = allow_websocket_origin or [f"{address}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
+    from railval.app.workshop_web import routes
+
+    extra = list(kw.pop("extra_patterns", [])) + routes(database)
     return pn.serve({"app": lambda: build_app(database)}, port=port, address=address, show=show,
                     threaded=threaded, title="railval", allow_websocket_origin=origins,
-                    static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {}, **kw)
+                    static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {},
+                    extra_patterns=extra, **kw)
 
 
 def free_port() -> int:
