@@ -756,28 +756,44 @@ def _fmt(x: Any, digits: int = 2) -> str:
         return esc(x)
 
 
-def threshold_png(doc: dict[str, Any], key: str, label: str, limit: float | None) -> str:
-    """A small chart: the 50 % value with its interval beside the objective limit, and the
-    fitted curve when the analysis gives one; returned as a data URL."""
+def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | None) -> str:
+    """The answers against an objective value (``deviation`` or ``sg_c``): each plot's share
+    of Yes (points), the fitted curve of a typical reviewer
+    (:func:`railval.core.review.yes_curve`), the value at 50 % with its interval, and the
+    limit; returned as a PNG data URL."""
+    import numpy as np
     from matplotlib.figure import Figure
 
-    thr = doc.get(key) or {}
-    fig = Figure(figsize=(7, 3.2), dpi=100)
+    from railval.core.review import yes_curve
+
+    thr = doc.get("threshold") or {}
+    at50 = thr.get("deviation_at_50" if column == "deviation" else "sg_c_at_50")
+    ci = thr.get("ci" if column == "deviation" else "sg_c_ci")
+    fit = thr.get(f"{column}_fit") or {}
+    pts = [(r[column], r["yes_share"]) for r in doc.get("plots", [])
+           if r.get(column) is not None and r.get("yes_share") is not None]
+    fig = Figure(figsize=(7.5, 3.4), dpi=100)
     ax = fig.add_subplot(1, 1, 1)
-    curve = thr.get("curve") or {}
-    xs, ys = curve.get("x") or curve.get("deviation") or [], curve.get("p_yes") or curve.get("y") or []
-    if xs and ys:
-        ax.plot(xs, ys, color="#0072B2", label="fitted P(yes), typical reviewer")
-    x50 = thr.get("deviation_at_50") if key == "threshold" else thr.get("value_at_50", thr.get("sg_c_at_50"))
-    ci = thr.get("ci")
-    if x50 is not None:
-        ax.axvline(x50, color="#0072B2", linestyle="--", label=f"50 % Yes at {x50:.2f}")
+    top = max([1.5 if limit else 0.5] + [x for x, _ in pts] + [at50 or 0.0] + list(ci or [0.0]))
+    if pts:
+        ax.scatter([x for x, _ in pts], [y for _, y in pts], s=14, color="#999999",
+                   label="share of Yes of one plot", zorder=2)
+    if fit.get("intercept") is not None and fit.get("slope") is not None:
+        xs = np.linspace(top / 400, top * 1.05, 400)
+        ax.plot(xs, yes_curve(xs, fit["intercept"], fit["slope"]), color="#0072B2",
+                label="fitted P(Yes), typical reviewer", zorder=3)
+    if at50 is not None:
         if ci and None not in ci:
-            ax.axvspan(ci[0], ci[1], color="#0072B2", alpha=0.15, label="interval")
+            ax.errorbar([at50], [0.5], xerr=[[at50 - ci[0]], [ci[1] - at50]], fmt="o",
+                        color="#0072B2", capsize=5, label=f"50 % Yes at {at50:.2f} (interval)",
+                        zorder=4)
+        else:
+            ax.plot([at50], [0.5], "o", color="#0072B2", label=f"50 % Yes at {at50:.2f}")
     if limit is not None:
-        ax.axvline(limit, color="#D55E00", linewidth=2, label=f"limit {limit:g}")
-    ax.axhline(0.5, color="#999", linewidth=0.8)
-    ax.set_ylim(0, 1)
+        ax.axvline(limit, color="#D55E00", linewidth=2, label=f"validation limit {limit:g}")
+    ax.axhline(0.5, color="#bbbbbb", linewidth=0.8, zorder=1)
+    ax.set_xlim(0, top * 1.05)
+    ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel(label)
     ax.set_ylabel("share of Yes")
     ax.legend(loc="upper right", fontsize=8)
@@ -800,15 +816,38 @@ class WorkshopAnalysis(_OrganiserBase):
         self.finish(page(f"Analysis {name}", analysis_html(doc), user=p.username))
 
 
+def _pct(x: Any) -> str:
+    return "—" if x is None else f"{100 * float(x):.1f} %"
+
+
+def _pct_ci(ci: Any) -> str:
+    if not ci or None in ci:
+        return "—"
+    return f"{100 * ci[0]:.1f} … {100 * ci[1]:.1f} %"
+
+
+def _scaling_html(sc: dict[str, Any] | None) -> str:
+    if not sc:
+        return "<p>not measured (no plots with automatic scaling, or no answers to them)</p>"
+    return (f"<table><tr><th>pairs</th><th>answer changed</th><th>interval</th>"
+            f"<th>Yes at fixed scaling</th><th>Yes at automatic scaling</th><th>test</th>"
+            f"<th>p</th></tr><tr><td class='num'>{sc.get('pairs')}</td>"
+            f"<td class='num'>{_pct(sc.get('changed_share'))}</td>"
+            f"<td class='num'>{_pct_ci(sc.get('changed_share_ci'))}</td>"
+            f"<td class='num'>{_pct(sc.get('fixed_yes_share'))}</td>"
+            f"<td class='num'>{_pct(sc.get('auto_yes_share'))}</td><td>{esc(sc.get('test'))}</td>"
+            f"<td class='num'>{_fmt(sc.get('p_value'), 3)}</td></tr></table>")
+
+
 def analysis_html(doc: dict[str, Any]) -> str:
     """The analysis document as HTML tables and charts (all values escaped)."""
     t1 = "".join(f"<tr><td>{esc(r['kind'])}</td><td class='num'>{r['plots']}</td>"
-                 f"<td class='num'>{_fmt(100 * r['min_yes'], 1)} %</td>"
-                 f"<td class='num'>{_fmt(100 * r['max_yes'], 1)} %</td></tr>"
+                 f"<td class='num'>{_pct(r.get('min_yes'))}</td>"
+                 f"<td class='num'>{_pct(r.get('max_yes'))}</td></tr>"
                  for r in doc.get("table1", []))
     rv = "".join(f"<tr><td>{esc(r['reviewer'])}</td><td class='num'>{r['answers']}</td>"
-                 f"<td class='num'>{_fmt(100 * r['yes_share'], 1)} %</td>"
-                 f"<td class='num'>{_fmt([100 * v for v in r['yes_share_ci']], 1) if r.get('yes_share_ci') else '—'}</td>"
+                 f"<td class='num'>{_pct(r.get('yes_share'))}</td>"
+                 f"<td class='num'>{_pct_ci(r.get('yes_share_ci'))}</td>"
                  f"<td class='num'>{_fmt(r.get('strictness'))}</td>"
                  f"<td class='num'>{_fmt(r.get('strictness_ci'))}</td>"
                  f"<td class='num'>{_fmt(r.get('consistency'))}</td></tr>"
@@ -819,9 +858,13 @@ def analysis_html(doc: dict[str, Any]) -> str:
                   for k, v in ag.items())
     thr = doc.get("threshold") or {}
     sc = doc.get("scaling_effect")
-    charts = f"<img alt='threshold against the normalised deviation' src='{threshold_png(doc, 'threshold', 'largest |D_v| / std limit', 1.0)}'>"
-    if doc.get("threshold_sg_c"):
-        charts += f"<img alt='threshold against Sprague–Geers C' src='{threshold_png(doc, 'threshold_sg_c', 'Sprague–Geers C', None)}'>"
+    charts = (f"<h4>Against the normalised deviation (largest |D_v| / std limit)</h4>"
+              f"<img alt='answers against the normalised deviation' "
+              f"src='{threshold_png(doc, 'deviation', 'largest |D_v| / std limit', 1.0)}'>"
+              f"<p>Sprague–Geers C at 50 % Yes: <strong>{_fmt(thr.get('sg_c_at_50'))}</strong> "
+              f"(interval {_fmt(thr.get('sg_c_ci'))})</p>"
+              f"<img alt='answers against Sprague–Geers C' "
+              f"src='{threshold_png(doc, 'sg_c', 'Sprague–Geers C', None)}'>")
     return f"""
 <h2>{esc(doc.get('workshop', ''))}</h2>
 <h3>Table 1 — share of Yes per plot kind (min and max over reviewers)</h3>
@@ -834,7 +877,7 @@ def analysis_html(doc: dict[str, Any]) -> str:
 <p>Deviation at which a typical reviewer says Yes half of the time:
 <strong>{_fmt(thr.get('deviation_at_50'))}</strong> (interval {_fmt(thr.get('ci'))}); the
 validation limit is 1.0.</p>{charts}
-<h3>Scaling effect</h3><p>{esc(json.dumps(sc)) if sc else 'not measured (no plots with automatic scaling, or no answers to them)'}</p>
+<h3>Scaling effect (same reviewer, same plot: fixed against automatic scaling)</h3>{_scaling_html(sc)}
 """
 
 

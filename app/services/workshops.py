@@ -441,9 +441,10 @@ def export_answers(database, name: str, path: str | Path) -> int:
 def analysis_frames(session, name: str):
     """``(answers_df, plots_df)`` of workshop ``name`` for :func:`railval.core.review.analyse`.
 
-    answers: ``reviewer, plot, answer`` (bool), ``seconds, repeat, scaling, position``;
-    plots: ``plot, kind, deviation, sg_c, scaling, twin`` (the fixed plot an ``auto`` plot
-    repeats).
+    answers: ``reviewer, plot, answer`` (bool), ``repeat, scaling, seconds, position``; an
+    answer on an automatic-scaling plot is reported on its fixed twin with ``scaling`` =
+    ``auto`` (the pairing the scaling effect needs). plots: the fixed plots, ``plot, kind,
+    deviation, sg_c`` (NaN where none).
     """
     import pandas as pd
 
@@ -452,15 +453,19 @@ def analysis_frames(session, name: str):
     w = wsdb.get_workshop(session, name)
     rows = wsdb.answer_rows(session, w)
     answers = pd.DataFrame(
-        [{"reviewer": r["reviewer"], "plot": r["plot"], "answer": r["answer"] == "yes",
-          "seconds": r["seconds"], "repeat": r["repeat"], "scaling": r["scaling"],
-          "position": r["position"]} for r in rows],
-        columns=["reviewer", "plot", "answer", "seconds", "repeat", "scaling", "position"])
+        [{"reviewer": r["reviewer"],
+          "plot": r["twin"] if r["scaling"] == "auto" and r["twin"] is not None else r["plot"],
+          "answer": r["answer"] == "yes", "repeat": r["repeat"], "scaling": r["scaling"],
+          "seconds": r["seconds"], "position": r["position"]} for r in rows],
+        columns=["reviewer", "plot", "answer", "repeat", "scaling", "seconds", "position"])
+    answers = answers[~((answers["scaling"] == "auto") & answers["repeat"])]
     plots = pd.DataFrame(
-        [{"plot": p.id, "kind": p.kind, "deviation": p.deviation, "sg_c": p.sg_c,
-          "scaling": p.scaling, "twin": p.twin_id} for p in wsdb.plots(session, w)],
-        columns=["plot", "kind", "deviation", "sg_c", "scaling", "twin"])
-    return answers, plots
+        [{"plot": p.id, "kind": p.kind,
+          "deviation": float("nan") if p.deviation is None else p.deviation,
+          "sg_c": float("nan") if p.sg_c is None else p.sg_c}
+         for p in wsdb.plots(session, w) if p.scaling == "fixed"],
+        columns=["plot", "kind", "deviation", "sg_c"])
+    return answers.reset_index(drop=True), plots
 
 
 def analyse(database, name: str, *, actor: Principal | str = "system") -> dict[str, Any]:
