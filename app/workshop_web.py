@@ -640,7 +640,7 @@ async function refresh() {
     for (const rv of d.reviewers) {
       const tr = document.createElement('tr');
       const cells = [rv.reviewer, rv.answered + ' of ' + rv.total, '', rv.finished ? 'finished' : '',
-                     rv.last_answer_at || '—'];
+                     rv.last_answer_at ? rv.last_answer_at.slice(0, 19).replace('T', ' ') : '—'];
       cells.forEach((c, i) => { const td = document.createElement('td');
         if (i === 2) { td.innerHTML = '<div class="bar"><div></div></div>';
           td.firstChild.firstChild.style.width = (100 * rv.answered / Math.max(1, rv.total)) + '%'; }
@@ -742,7 +742,7 @@ answers <strong id='nanswers'>{d['answers']}</strong></p>
 def _analysis(database, name: str, actor) -> dict[str, Any]:
     from railval.app.services.workshops import analyse
 
-    return analyse(database, name, actor=actor)
+    return analyse(database, name, actor=actor, with_plots=True)
 
 
 def _fmt(x: Any, digits: int = 2) -> str:
@@ -841,7 +841,10 @@ def _scaling_html(sc: dict[str, Any] | None) -> str:
 
 def analysis_html(doc: dict[str, Any]) -> str:
     """The analysis document as HTML tables and charts (all values escaped)."""
-    t1 = "".join(f"<tr><td>{esc(r['kind'])}</td><td class='num'>{r['plots']}</td>"
+    from railval.core.workshop import PLOT_KINDS
+
+    t1 = "".join(f"<tr><td>{esc(PLOT_KINDS[r['kind']].label if r['kind'] in PLOT_KINDS else r['kind'])}"
+                 f" <span class='muted'>({esc(r['kind'])})</span></td><td class='num'>{r['plots']}</td>"
                  f"<td class='num'>{_pct(r.get('min_yes'))}</td>"
                  f"<td class='num'>{_pct(r.get('max_yes'))}</td></tr>"
                  for r in doc.get("table1", []))

@@ -468,8 +468,10 @@ def analysis_frames(session, name: str):
     return answers.reset_index(drop=True), plots
 
 
-def analyse(database, name: str, *, actor: Principal | str = "system") -> dict[str, Any]:
-    """The ``workshop analyse NAME --json`` document (railval.core.review.analyse)."""
+def analyse(database, name: str, *, actor: Principal | str = "system",
+            with_plots: bool = False) -> dict[str, Any]:
+    """The ``workshop analyse NAME --json`` document (railval.core.review.analyse);
+    ``with_plots`` adds the per-plot rows (share of Yes, objective values) for the page."""
     from railval.core.review import analyse as core_analyse
 
     if isinstance(actor, Principal):
@@ -478,8 +480,11 @@ def analyse(database, name: str, *, actor: Principal | str = "system") -> dict[s
         answers, plots = analysis_frames(session, name)
     if answers.empty:
         raise InvalidParameter(f"workshop {name!r} has no answers yet")
-    doc = core_analyse(answers, plots).to_dict()
-    return {"workshop": name, **doc}
+    result = core_analyse(answers, plots)
+    doc = {"workshop": name, **result.to_dict()}
+    if with_plots:
+        doc["plots"] = result.plots
+    return doc
 
 
 def kind_labels() -> dict[str, str]:
