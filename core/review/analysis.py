@@ -108,6 +108,11 @@ def _where(frame: str, idx, row: pd.Series | None = None) -> str:
     return f"{frame} row {idx} (reviewer {row['reviewer']!r}, plot {row['plot']!r})"
 
 
+def _show(v) -> str:
+    """``repr`` of a cell value as the user wrote it (numpy scalars as plain Python)."""
+    return repr(v.item() if isinstance(v, np.generic) else v)
+
+
 def _bool_column(df: pd.DataFrame, col: str, frame: str) -> np.ndarray:
     s = df[col]
     if s.dtype == bool:
@@ -118,7 +123,7 @@ def _bool_column(df: pd.DataFrame, col: str, frame: str) -> np.ndarray:
             out[i] = bool(v)
         else:
             row = df.loc[idx] if frame == "answers" else None
-            raise InvalidParameter(f"{_where(frame, idx, row)}: column {col!r} must be True/False, got {v!r}")
+            raise InvalidParameter(f"{_where(frame, idx, row)}: column {col!r} must be True/False, got {_show(v)}")
     return out
 
 
@@ -142,7 +147,7 @@ def _prepare(answers: pd.DataFrame, plots: pd.DataFrame) -> tuple[pd.DataFrame, 
             if mask.any():
                 i = int(np.flatnonzero(mask)[0])
                 raise InvalidParameter(f"plots row {plots.index[i]} (plot {p['plot'].iloc[i]!r}): column "
-                                       f"{col!r} must be {what}, got {plots[col].iloc[i]!r}")
+                                       f"{col!r} must be {what}, got {_show(plots[col].iloc[i])}")
         p[col] = vals.to_numpy(dtype=float)
     dup = p["plot"].duplicated()
     if dup.any():
@@ -160,14 +165,14 @@ def _prepare(answers: pd.DataFrame, plots: pd.DataFrame) -> tuple[pd.DataFrame, 
     if bad.any():
         idx = bad[bad].index[0]
         raise InvalidParameter(f"{_where('answers', idx, a.loc[idx])}: column 'scaling' must be one of "
-                               f"{list(SCALINGS)}, got {answers.loc[idx, 'scaling']!r}")
+                               f"{list(SCALINGS)}, got {_show(answers.loc[idx, 'scaling'])}")
     a["scaling"] = scaling.to_numpy()
     secs = pd.to_numeric(answers["seconds"], errors="coerce")
     bad = (answers["seconds"].notna() & secs.isna()) | (secs < 0)
     if bad.any():
         idx = bad[bad].index[0]
         raise InvalidParameter(f"{_where('answers', idx, a.loc[idx])}: column 'seconds' must be a number "
-                               f"≥ 0, got {answers.loc[idx, 'seconds']!r}")
+                               f"≥ 0, got {_show(answers.loc[idx, 'seconds'])}")
     a["seconds"] = secs.to_numpy(dtype=float)
     unknown = ~a["plot"].isin(set(p["plot"]))
     if unknown.any():
@@ -351,12 +356,12 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
     # ---- agreement
     agreement = _agreement(y, names, int(n_boot), rng)
 
-    # ---- threshold: answers against the objective values, strictness as offset
+    # ---- threshold: answers against the objective values (linear logistic test model)
     threshold: dict = {}
-    offs = strict[fr]
+    fnames = first["reviewer"].to_numpy()
     for col, key, ci_key in (("deviation", "deviation_at_50", "ci"), ("sg_c", "sg_c_at_50", "sg_c_ci")):
         vals = p[col].to_numpy()[fp]
-        fit_t = fit_threshold(vals, fy, offs, fp, confidence=CONFIDENCE)
+        fit_t = fit_threshold(vals, fy, fnames, fp, confidence=CONFIDENCE)
         threshold[key] = _f(fit_t.at_50)
         threshold[ci_key] = _interval(*fit_t.ci) if fit_t.ci else None
         threshold[f"{col}_fit"] = {k: (_f(v) if isinstance(v, float) else v) for k, v in fit_t.to_dict().items()
@@ -373,7 +378,7 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
             stat, pval = mcnemar_exact(table)
             changed = int(table[0, 1] + table[1, 0])
             scaling_effect = {
-                "pairs": int(len(pair)), "changed": changed,
+                "pairs": len(pair), "changed": changed,
                 "changed_share": _f(changed / len(pair)),
                 "changed_share_ci": _interval(*wilson_interval(changed, len(pair), confidence=CONFIDENCE)),
                 "fixed_yes_share": _f(fx.mean()), "auto_yes_share": _f(au.mean()),

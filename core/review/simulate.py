@@ -84,11 +84,11 @@ def simulate_answers(acceptability: Mapping[str, float], strictness: Mapping[str
     n = acc.size
     for reviewer, s in strictness.items():
         order = rng.permutation(n)
-        answered = order[: int(round(answer_share * n))]
+        answered = order[: round(answer_share * n)]
         emit(str(reviewer), answered, float(s), False, "fixed", 0.0)
-        k_rep = int(round(repeat_share * answered.size))
+        k_rep = round(repeat_share * answered.size)
         emit(str(reviewer), rng.choice(answered, k_rep, replace=False), float(s), True, "fixed", 0.0)
-        k_auto = int(round(auto_share * answered.size))
+        k_auto = round(auto_share * answered.size)
         emit(str(reviewer), rng.choice(answered, k_auto, replace=False), float(s), False, "auto",
              float(auto_shift))
     return pd.DataFrame({
