@@ -373,22 +373,23 @@ def _answer(database, token: str, body: dict[str, Any]) -> dict[str, Any]:
 
     with database.session() as s:
         ctx = wsdb.reviewer_by_token(s, token)
-        if ctx is None or not allowed(ctx.principal, "workshop.answer"):
-            raise NotFound("review link not valid")
-        if ctx.finished:
-            raise wsdb.WorkshopClosed("you have finished this review; answers are final")
-        ans = str(body.get("answer", "")).lower()
-        if ans not in ("yes", "no"):
-            raise InvalidParameter(f"answer must be yes or no, got {body.get('answer')!r}")
-        try:
-            position = int(body.get("position"))
-            seconds = float(body.get("seconds", 0.0))
-        except (TypeError, ValueError):
-            raise InvalidParameter("position must be a whole number and seconds a number") from None
+    if ctx is None or not allowed(ctx.principal, "workshop.answer"):
+        raise NotFound("review link not valid")
+    if ctx.finished:
+        raise wsdb.WorkshopClosed("you have finished this review; answers are final")
+    ans = str(body.get("answer", "")).lower()
+    if ans not in ("yes", "no"):
+        raise InvalidParameter(f"answer must be yes or no, got {body.get('answer')!r}")
+    try:
+        position = int(body.get("position"))
+        seconds = float(body.get("seconds", 0.0))
+    except (TypeError, ValueError):
+        raise InvalidParameter("position must be a whole number and seconds a number") from None
+    with database.session() as s:  # the write comes first in its own unit of work
         outcome = wsdb.record_answer(s, ctx, position, ans == "yes", seconds=seconds,
                                      comment=str(body.get("comment") or ""),
                                      submission=str(body.get("submission") or ""))
-        return {"stored": outcome, "position": position}
+    return {"stored": outcome, "position": position}
 
 
 def _finish(database, token: str) -> dict[str, Any]:

@@ -22,7 +22,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import case, func, select
+from sqlalchemy import case, func, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
@@ -248,6 +248,11 @@ def record_answer(session: Session, ctx: ReviewerContext, position: int, answer:
 
     Refused (:class:`WorkshopClosed`) when the workshop is closed or the reviewer has
     finished; :class:`InvalidParameter` for a position outside the sequence.
+
+    Call it as the first statement of its unit of work (``ctx`` read in an earlier one): its
+    first statement is a write, so on SQLite the transaction takes the write lock at once
+    (waiting up to the busy timeout) instead of failing to upgrade a read snapshot that a
+    concurrent answer has made stale.
     """
     if ctx.workshop_status != "open":
         raise WorkshopClosed(f"workshop {ctx.workshop_name!r} is closed; answers are not taken")
@@ -259,30 +264,36 @@ def record_answer(session: Session, ctx: ReviewerContext, position: int, answer:
     submission = (submission or "")[:64]
     plot_id, rep = ctx.sequence[position]
     now = utcnow()
-    existing = session.scalar(select(WorkshopAnswer).where(
-        WorkshopAnswer.reviewer_id == ctx.reviewer_id, WorkshopAnswer.position == position))
-    if existing is None:
-        try:
-            with session.begin_nested():
-                session.add(WorkshopAnswer(
-                    reviewer_id=ctx.reviewer_id, plot_id=plot_id, position=position, repeat=rep,
-                    answer=bool(answer), comment=comment, seconds=float(seconds),
-                    submission=submission, source="web", answered_at=now, updated_at=now))
-            return "new"
-        except IntegrityError:  # a concurrent first submission of the same place won
-            existing = session.scalar(select(WorkshopAnswer).where(
-                WorkshopAnswer.reviewer_id == ctx.reviewer_id,
-                WorkshopAnswer.position == position))
-    if submission and existing.submission == submission:
-        return "repeated"
-    existing.answer = bool(answer)
-    existing.comment = comment
-    existing.seconds = float(existing.seconds) + float(seconds)
-    existing.changes = int(existing.changes) + 1
-    existing.submission = submission
-    existing.updated_at = now
-    session.flush()
-    return "changed"
+    where = [WorkshopAnswer.reviewer_id == ctx.reviewer_id, WorkshopAnswer.position == position]
+
+    def change() -> str | None:
+        # one atomic UPDATE (row lock / write lock): concurrent changes of one place never
+        # lose an increment; a resent submission matches no row
+        cond = [*where, WorkshopAnswer.submission != submission] if submission else where
+        n = session.execute(
+            update(WorkshopAnswer).where(*cond).values(
+                answer=bool(answer), comment=comment,
+                seconds=WorkshopAnswer.seconds + float(seconds),
+                changes=WorkshopAnswer.changes + 1, submission=submission, updated_at=now)
+            .execution_options(synchronize_session=False)).rowcount
+        if n:
+            return "changed"
+        if session.scalar(select(WorkshopAnswer.id).where(*where)) is not None:
+            return "repeated"
+        return None
+
+    outcome = change()
+    if outcome is not None:
+        return outcome
+    try:
+        with session.begin_nested():
+            session.add(WorkshopAnswer(
+                reviewer_id=ctx.reviewer_id, plot_id=plot_id, position=position, repeat=rep,
+                answer=bool(answer), comment=comment, seconds=float(seconds),
+                submission=submission, source="web", answered_at=now, updated_at=now))
+        return "new"
+    except IntegrityError:  # a concurrent first submission of the same place won
+        return change() or "repeated"
 
 
 def finish(session: Session, ctx: ReviewerContext) -> None:
