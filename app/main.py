@@ -2,7 +2,7 @@
 
 ``build_app(database)`` returns one session's Panel template (each browser session gets its
 own :class:`railval.app.state.AppState`); ``serve(database, ...)`` serves it with ``pn.serve``.
-Pages are one module each under ``app/pages``; their state lives in ``app/state.py``.
+Pages are one module each under ``app/pages``; their state lives in ``app/state/`` (one module per page).
 """
 
 from __future__ import annotations

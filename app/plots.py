@@ -3,7 +3,7 @@
 House rules, applied by every builder here:
 
 * axes labelled with their quantity **and unit**; fonts readable at 1280 px width;
-* measurement drawn first (beneath, dark grey), simulations on top in a fixed colour order;
+* measurement drawn first (beneath, black), simulations on top in a fixed colour order;
 * fixed y scaling per plot from all traces (nice round limits) — switching a configuration
   on or off never rescales the other traces silently (``framewise=False``);
 * the evaluated (constant-curvature) range shaded;
@@ -37,12 +37,11 @@ from bokeh.plotting import figure
 from holoviews.operation.downsample import downsample1d
 from tsdownsample import MinMaxLTTBDownsampler
 
-from railval.app.state import CompareData, nice_limits, unit_label
+from railval.app.scales import MEASURED_COLOR, SIM_COLORS, nice_limits, unit_label
+from railval.app.state.compare import CompareData
 
 hv.extension("bokeh", logo=False)
 
-MEASURED_COLOR = "#444444"
-SIM_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
 PASS_COLOR = "#2e7d32"
 FAIL_COLOR = "#c62828"
 LIMIT_COLOR = "#000000"
@@ -138,7 +137,7 @@ def downsample_xy(x: np.ndarray, y: np.ndarray, n_out: int = FIGURE_POINTS,
 class CompareFigure:
     """One plain Bokeh figure of the Compare page, built once and updated in place.
 
-    Up to :data:`MAX_TRACES` line renderers (the first reserved for the measurement, dark grey,
+    Up to :data:`MAX_TRACES` line renderers (the first reserved for the measurement, black,
     drawn beneath; then :data:`SIM_COLORS`), the evaluated range as a ``BoxAnnotation``, the
     legend outside right, fixed y range. :meth:`update` replaces the sources' data (downsampled
     to :data:`FIGURE_POINTS`) and labels; with ``x_range`` shared between figures, zooming one

@@ -31,9 +31,12 @@ from typing import Any
 
 import numpy as np
 
-from railval.app.state import unit_label, where_grid
+from railval.app.scales import MEASURED_COLOR, SIM_COLORS, nice_limits, nice_ticks, unit_label
 from railval.core.errors import RailvalError
-from railval.core.types import CHANNEL_KINDS, split_channel
+from railval.core.diagnosis import where_grid
+from railval.core.filters import filtfilt_rows
+from railval.core.quantities import channel_for
+from railval.core.types import channel_kind
 
 CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "google-chrome")
 #: flags that let Debian's Chromium run headless in containers and CI
@@ -121,8 +124,6 @@ def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: s
     w, h = width - ml - mr, height - mt - mb
     xs = np.concatenate([t[1] for t in traces]) if traces else np.array([0.0, 1.0])
     ys = np.concatenate([t[2] for t in traces]) if traces else np.array([0.0, 1.0])
-    from railval.app.state import nice_limits, nice_ticks
-
     x0, x1 = nice_limits(float(np.min(xs)), float(np.max(xs)))
     y0, y1 = nice_limits(float(np.min(ys)), float(np.max(ys)))
 
@@ -290,7 +291,7 @@ def where_table(grid: Any, limit: float = 2.0) -> str:
 def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3) -> Report:
     """Build the report of ``configuration`` of ``campaign`` from the database.
 
-    ``backend`` is an :class:`railval.app.state.Backend`; the validation comes from
+    ``backend`` is an :class:`railval.app.state.backend.Backend` (or anything with its methods); the validation comes from
     ``railval.app.services.validation`` through it, exactly as the dashboard shows it.
     """
     result = backend.validation(campaign, configuration)
@@ -346,7 +347,7 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
                       ylabel="std / limit (–)", limits=(1.0,), intervals=[r.get("std_norm_ci") for r in rows]))
     h.append("</div>")
 
-    h.append(where_table(where_grid(result)))
+    h.append(where_table(where_grid(result.pairs)))
 
     # coverage
     h.append("<h2>Coverage</h2>")
@@ -392,9 +393,6 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
 
 def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: Any, ov: Any,
                       n: int) -> list[str]:
-    from railval.app.state import EN_FILTER_OF_KIND, _channel_for
-    from railval.core.filters import filtfilt_rows
-
     pairs = result.pairs
     if len(pairs) == 0:
         return ["<p>No pairs.</p>"]
@@ -403,19 +401,20 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
     secs = {s.id: s for s in ov.sections}
     out = []
     for r in order.itertuples(index=False):
-        ch = _channel_for(r.quantity, r.position, channels)
+        ch = channel_for(r.quantity, r.position, channels)
         if ch is None:
             continue
-        kind = split_channel(ch)[0]
-        fkind, flabel = EN_FILTER_OF_KIND.get(kind, ("lowpass", "low-pass 20 Hz"))
+        entry = channel_kind(ch)
+        fkind, flabel = (entry.en_filter, entry.filter_label) if entry else ("lowpass", "low-pass 20 Hz")
         traces = []
-        for label, cfg, color in (("measurement", None, "#555555"), (configuration, configuration, "#1f77b4")):
+        for label, cfg, color in (("measurement", None, MEASURED_COLOR),
+                                  (configuration, configuration, SIM_COLORS[0])):
             ss = backend.signals(campaign, cfg, r.section, [ch])
             y = filtfilt_rows(np.asarray(ss.channels[ch], float)[None, :], float(ss.fs), fkind)[0]
             x, y = _thin(np.asarray(ss.distance_m, float), y)
             traces.append((label, x, y, color))
         sec = secs.get(r.section)
-        unit = CHANNEL_KINDS.get(kind, "").replace("m/s^2", "m/s²")
+        unit = unit_label(entry.unit if entry else "")
         title = (f"{r.quantity} at {r.position}, section {r.section} (zone {r.zone}): "
                  f"D_v/limit = {r.D_norm:+.2f}")
         out.append("<div class='worst'>" + svg_lines(

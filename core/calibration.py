@@ -41,6 +41,7 @@ from scipy.optimize import differential_evolution, minimize
 
 from railval.core.errors import CalibrationDidNotConverge, InvalidParameter
 from railval.core.modal import pair_modes
+from railval.core.sim.vehicles import template_parameters
 
 __all__ = [
     "COACH_MODAL_DEFAULTS",
@@ -50,6 +51,7 @@ __all__ = [
     "ParameterSpec",
     "calibrate",
     "calibrate_modal",
+    "coach_modal_base",
     "coach_vertical_modes",
     "modal_objective",
     "validation_objective",
@@ -418,3 +420,15 @@ def calibrate_modal(freq_exp: Sequence[float], shapes_exp: np.ndarray, specs: Se
                      "freq_after_hz": float(f1[j1]), "error_after_pct": float(100 * (f1[j1] - freq_exp[i]) / freq_exp[i]),
                      "mac_after": m1})
     return ModalCalibrationResult(rows, cal, before)
+
+
+def coach_modal_base(vehicle_parameters: Mapping[str, Any]) -> dict[str, float]:
+    """Coach modal model values (:data:`COACH_MODAL_DEFAULTS` names) from the simulator's coach
+    template defaults (:func:`railval.core.sim.vehicles.template_parameters`) overlaid by a
+    campaign's numeric vehicle parameters; ``bogie_centres`` gives ``bogie_half_distance``."""
+    merged = {p.name: float(p.default) for p in template_parameters("coach")}
+    merged.update({k: float(v) for k, v in vehicle_parameters.items() if isinstance(v, (int, float))})
+    base = {k: merged[k] for k in COACH_MODAL_DEFAULTS if k in merged}
+    if "bogie_centres" in merged:
+        base["bogie_half_distance"] = merged["bogie_centres"] / 2.0
+    return base

@@ -60,13 +60,17 @@ __all__ = [
     "DiagnosisResult",
     "ParameterScan",
     "Pattern",
+    "PatternGrid",
     "band_powers",
     "band_ratio_pattern",
     "diagnose_patterns",
     "difference_pairs",
     "fit_scan",
     "pattern_from_pairs",
+    "pattern_grids",
     "psd_band_pattern",
+    "scan_values",
+    "where_grid",
 ]
 
 #: Frequency bands (Hz) of the car body acceleration log-PSD ratios: body modes (0.4–2),
@@ -366,3 +370,78 @@ def diagnose_patterns(residual: Pattern, scans: Mapping[str, Sequence[ParameterS
             note = (f"{a.effect} explains {a.explained:.2f} of the residual, next {b.effect} "
                     f"{b.explained:.2f} (signature correlation {corr:.2f})")
     return DiagnosisResult(residual, cands, separable, evidence, note)
+
+
+# ----------------------------------------------------------------------------- grids
+@dataclass
+class PatternGrid:
+    """Components of a residual pattern arranged for a heat map: ``rows`` × ``cols`` with
+    ``values[i][j]`` the mean over positions (NaN where nothing was evaluated)."""
+
+    rows: list[str]
+    cols: list[str]
+    values: np.ndarray
+
+
+ZONE_COLUMNS = tuple(f"zone {z}" for z in (1, 2, 3, 4))
+
+
+def _grid(rows: Sequence[str], cols: Sequence[str], acc: Mapping[tuple[str, str], list[float]]) -> PatternGrid:
+    m = np.full((len(rows), len(cols)), np.nan)
+    for i, r in enumerate(rows):
+        for j, c in enumerate(cols):
+            if (r, c) in acc:
+                m[i, j] = float(np.mean(acc[(r, c)]))
+    return PatternGrid(list(rows), list(cols), m)
+
+
+def _quantity_zone_grid(acc: Mapping[tuple[str, str], list[float]]) -> PatternGrid:
+    from railval.core.quantities import QUANTITY_IDS
+
+    quantities = [q for q in QUANTITY_IDS if any((q, z) in acc for z in ZONE_COLUMNS)]
+    return _grid(quantities, ZONE_COLUMNS, acc)
+
+
+def where_grid(pairs: Mapping[str, Sequence]) -> PatternGrid:
+    """Where a configuration fails: the mean of D_v / std limit (Polach & Böttcher 2014 §5)
+    over the sections and positions of each quantity × EN 14363 test zone. ``pairs`` has the
+    columns ``quantity``, ``zone`` and ``D_norm`` (``railval.core.validation.ValidationResult.pairs``).
+    Quantities in the order of :mod:`railval.core.quantities`."""
+    acc: dict[tuple[str, str], list[float]] = defaultdict(list)
+    for q, z, v in zip(pairs["quantity"], pairs["zone"], np.asarray(pairs["D_norm"], float), strict=True):
+        if math.isfinite(v):
+            acc[(str(q), f"zone {int(z)}")].append(float(v))
+    return _quantity_zone_grid(acc)
+
+
+def pattern_grids(labels: Sequence[str], values) -> tuple[PatternGrid, PatternGrid]:
+    """Arrange a diagnosis pattern (components ``"Y_qst zone 4 w1L"`` = mean normalised D_v
+    of a quantity in a zone at a position, and ``"psd az_cb_b1 5-10 Hz"`` = log2 PSD ratio
+    simulation/measurement in a band) into (quantity × zone, car body acceleration
+    direction × band) grids, averaging over positions."""
+    q_acc: dict[tuple[str, str], list[float]] = defaultdict(list)
+    p_acc: dict[tuple[str, str], list[float]] = defaultdict(list)
+    bands: list[str] = []
+    for label, v in zip(labels, np.asarray(values, float), strict=True):
+        if not math.isfinite(v):
+            continue
+        parts = label.split()
+        if parts[0] == "psd":  # psd <channel> <lo-hi> Hz
+            kind = parts[1].split("_")[0]
+            band = f"{parts[2]} Hz"
+            if band not in bands:
+                bands.append(band)
+            p_acc[(kind, band)].append(v)
+        elif len(parts) >= 3 and parts[1] == "zone":
+            q_acc[(parts[0], f"zone {parts[2]}")].append(v)
+    bands.sort(key=lambda b: float(b.split("-")[0]))
+    kinds = [k for k in ("ay", "az") if any((k, b) in p_acc for b in bands)]
+    return _quantity_zone_grid(q_acc), _grid(kinds, bands, p_acc)
+
+
+def scan_values(lower: float, upper: float, default: float, n: int, log: bool = False) -> list[float]:
+    """The values of one effect parameter a diagnosis simulates (docs/design.md §7): ``n``
+    values spanning [lower, upper] (equally spaced, or geometrically with ``log``) plus the
+    default, sorted, unique."""
+    grid = np.geomspace(lower, upper, n) if log else np.linspace(lower, upper, n)
+    return sorted(set(grid.tolist()) | {float(default)})

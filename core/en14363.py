@@ -24,6 +24,16 @@ function, i.e. the smallest sample x with ``F_n(x) ≥ p`` (Hyndman & Fan type 1
 of 1-based rank ``ceil(n·p)`` (rank 1 for p·n < 1). For an even n the 50 % value is therefore
 the lower of the two middle samples, not their average.
 
+Definition sensitivity: the percentile method, the alignment of the sliding-mean grid and
+the definition of the window mean are open choices of the texts
+(:mod:`railval.core.definitions`). Besides the chosen reading's values, every section carries
+the values of the other readings (``SectionValues.alternatives``), computed from the same
+filtered arrays and the same sorts — nothing is filtered twice.
+
+Supplementary values (:mod:`railval.core.supplementary`): bogie-frame accelerations go through
+the band-pass with the car body channels (rms, max); the PSD band rms of all acceleration
+channels come from the unfiltered evaluated samples (``SectionValues.supplementary``).
+
 :func:`evaluate_section` processes one section; :func:`evaluate_batch` processes many
 sections at once: all channels of all sections of equal length and sampling rate are filtered
 in one compiled call, all statistics of one section come from one row-wise sort.
@@ -43,20 +53,32 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from railval.core.definitions import (
+    CHOSEN,
+    SLIDING_VARIANTS,
+    Reading,
+    sample_window_means,
+    sorted_percentiles,
+    window_centres,
+)
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows, settling_check
 from railval.core.quantities import QUANTITIES, WHEELSET_POSITIONS
+from railval.core.supplementary import BOGIE_KINDS, PSD_KINDS, SUPPLEMENTARY, psd_band_values
 from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
 
 #: bump whenever the numbers this module produces can change (enters result-cache keys)
-PROCESSING_VERSION = "en14363/1"
+PROCESSING_VERSION = "en14363/2"
 #: numpy.quantile method used for every percentile (EN 14363 cumulative distribution)
-QUANTILE_METHOD = "inverted_cdf"
+QUANTILE_METHOD = CHOSEN.percentile
 P_LOW = 0.0015
 P_MEDIAN = 0.5
 P_HIGH = 0.9985
 WINDOW_M = 2.0
 STEP_M = 0.5
+PERCENTILES = (P_LOW, P_MEDIAN, P_HIGH)
+#: the reading that differs from the chosen one only in the percentile method
+_LINEAR = Reading("linear", CHOSEN.grid, CHOSEN.window)
 
 
 class SectionValues(dict):
@@ -65,13 +87,28 @@ class SectionValues(dict):
     ``provenance[(quantity_id, position)]`` is the list of processing steps (filter, derived
     signal, cut, statistic) that produced the value; ``warnings`` lists filter settling
     warnings (run-in/run-out shorter than the settling time) as messages.
+
+    ``alternatives[reading_id][(quantity_id, position)]``: the value under another reading of
+    the open definitions (:mod:`railval.core.definitions`), stored only where it differs from
+    the chosen value (:meth:`value_under` fills the rest); NaN where the reading is undefined
+    (a sample window without samples). ``supplementary[(quantity_id, position)]``: the
+    supplementary values (:mod:`railval.core.supplementary`).
     """
 
-    def __init__(self, section_id: str, values=(), provenance=None, warnings=None):
+    def __init__(self, section_id: str, values=(), provenance=None, warnings=None,
+                 alternatives=None, supplementary=None):
         super().__init__(values)
         self.section_id = section_id
         self.provenance: dict[tuple[str, str], tuple[str, ...]] = dict(provenance or {})
         self.warnings: list[str] = list(warnings or [])
+        self.alternatives: dict[str, dict[tuple[str, str], float]] = {
+            k: dict(v) for k, v in (alternatives or {}).items()}
+        self.supplementary: dict[tuple[str, str], float] = dict(supplementary or {})
+
+    def value_under(self, reading_id: str, key: tuple[str, str]) -> float:
+        """The value of ``key`` under the reading ``reading_id`` (the chosen value where the
+        reading does not change it)."""
+        return self.alternatives.get(reading_id, {}).get(key, self[key])
 
     def to_dict(self) -> dict:
         return {
@@ -82,6 +119,13 @@ class SectionValues(dict):
                        for (q, p), v in self.items()],
             "warnings": list(self.warnings),
             "processing_version": PROCESSING_VERSION,
+            "alternatives": {rid: [{"quantity": q, "position": p,
+                                    "value": None if not np.isfinite(v) else float(v)}
+                                   for (q, p), v in vals.items()]
+                             for rid, vals in self.alternatives.items()},
+            "supplementary": [{"quantity": q, "position": p, "value": float(v),
+                               "unit": SUPPLEMENTARY[q].unit}
+                              for (q, p), v in self.supplementary.items()],
         }
 
     def to_pandas(self):
@@ -103,18 +147,12 @@ def percentile(x: np.ndarray, p, axis: int = -1) -> np.ndarray:
     return np.quantile(np.asarray(x, dtype=np.float64), p, axis=axis, method=QUANTILE_METHOD)
 
 
-def _sorted_percentile_index(n: int, p: float) -> int:
-    """0-based index into n ascending samples of the inverted-CDF p-value: rank ceil(n·p)."""
-    k = int(np.ceil(n * p - 1e-12)) - 1
-    return min(max(k, 0), n - 1)
-
-
-def _row_percentiles(rows: np.ndarray) -> np.ndarray:
-    """(0.15 %, 50 %, 99.85 %) values of every row, shape (n_rows, 3); one sort per batch."""
-    n = rows.shape[-1]
+def _row_percentiles(rows: np.ndarray, methods: tuple[str, ...] = (QUANTILE_METHOD,)
+                     ) -> list[np.ndarray]:
+    """(0.15 %, 50 %, 99.85 %) values of every row under each percentile method, each of shape
+    (n_rows, 3); one sort serves all methods."""
     srt = np.sort(rows, axis=-1)
-    idx = [_sorted_percentile_index(n, p) for p in (P_LOW, P_MEDIAN, P_HIGH)]
-    return srt[:, idx]
+    return [sorted_percentiles(srt, PERCENTILES, m) for m in methods]
 
 
 def maxabs(p_low: np.ndarray | float, p_high: np.ndarray | float):
@@ -130,14 +168,16 @@ def rms(x: np.ndarray, axis: int = -1) -> np.ndarray:
 
 def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: float,
                           end_m: float, window_m: float = WINDOW_M,
-                          step_m: float = STEP_M) -> tuple[np.ndarray, np.ndarray]:
+                          step_m: float = STEP_M, *,
+                          origin_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Sliding mean over ``window_m`` metres evaluated every ``step_m`` metres of distance.
 
     The signal is taken as piecewise linear between samples on the distance axis (so variable
     speed is handled exactly); its integral ``C(x) = ∫ s dx`` is the cumulative trapezoid at
     the samples and a quadratic in between. The mean over the window centred at ``x`` is
-    ``(C(x + w/2) − C(x − w/2)) / w``. Centres are ``start_m + w/2 + k·step_m`` up to
-    ``end_m − w/2``: every window lies inside the evaluated range.
+    ``(C(x + w/2) − C(x − w/2)) / w``. Centres are ``origin_m + w/2 + k·step_m`` up to
+    ``end_m − w/2`` with ``origin_m = start_m`` unless given (the alternative grid starts at
+    the first evaluated sample): every window lies inside the evaluated range.
 
     ``values``: shape (n,) or (n_rows, n); ``distance_m``: strictly increasing, shape (n,), m.
     Returns ``(centres_m, means)``, means shaped (n_rows, n_centres) (or (n_centres,)).
@@ -161,8 +201,8 @@ def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: f
         raise InvalidSignal(
             f"evaluated range {start_m}–{end_m} m exceeds the distance axis "
             f"{d[0]:.3f}–{d[-1]:.3f} m")
-    n_c = int(np.floor((end_m - start_m - window_m) / step_m + 1e-9)) + 1
-    centres = start_m + half + step_m * np.arange(n_c)
+    centres = window_centres(start_m, end_m, start_m if origin_m is None else origin_m,
+                             window_m, step_m)
     h = np.diff(d)
     # cumulative trapezoid at the samples, per row
     cum = np.zeros_like(v)
@@ -217,7 +257,8 @@ class _Plan:
 def _needed_channels(ss: SignalSet) -> tuple[list[str], list[str]]:
     names = set(ss.channels)
     lp = [f"{k}_{p}" for k in ("Y", "Q") for p in WHEEL_POSITIONS if f"{k}_{p}" in names]
-    bp = [f"{k}_cb_{p}" for k in ("ay", "az") for p in BODY_POSITIONS if f"{k}_cb_{p}" in names]
+    bp = [f"{k}_{p}" for k in ("ay_cb", "az_cb") + BOGIE_KINDS for p in BODY_POSITIONS
+          if f"{k}_{p}" in names]
     return lp, bp
 
 
@@ -295,6 +336,14 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
     values: dict[tuple[str, str], float] = {}
     prov: dict[tuple[str, str], tuple[str, ...]] = {}
     warnings: list[str] = []
+    alts: dict[str, dict[tuple[str, str], float]] = {}
+    supp: dict[tuple[str, str], float] = {}
+    methods = (QUANTILE_METHOD, _LINEAR.percentile)
+
+    def alternative(reading: Reading, key: tuple[str, str], value: float) -> None:
+        # kept only where the reading changes the value (NaN: undefined under the reading)
+        if not value == values[key]:
+            alts.setdefault(reading.id, {})[key] = float(value)
 
     if lp is not None and lp.shape[0]:
         lp_label = design(fs, "lowpass", order).label + ", whole section"
@@ -330,7 +379,8 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
             r += 1
         rows[r:r + len(wheels_yq)] = ratio[:, inner]
         rows[r + len(wheels_yq):] = sumy[:, inner]
-        pct = _row_percentiles(rows) if rows.shape[0] else np.empty((0, 3))
+        pct, pct_lin = (_row_percentiles(rows, methods) if rows.shape[0]
+                        else (np.empty((0, 3)), np.empty((0, 3))))
         r = 0
         for fam, positions in (("Y", wheels_y), ("Q", wheels_q), ("YQ", wheels_yq),
                                ("SumY", wsets)):
@@ -339,48 +389,95 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
             base = (lp_label,) + ((derive,) if derive else ()) + (cut_text,)
             for p in positions:
                 p_lo, p_med, p_hi = pct[r]
+                l_lo, l_med, l_hi = pct_lin[r]
                 r += 1
                 values[(f"{fam}_qst", p)] = float(p_med)
                 prov[(f"{fam}_qst", p)] = base + ("50 % value (median, with sign)", pct_text)
+                alternative(_LINEAR, (f"{fam}_qst", p), l_med)
                 if fam == "Y":
                     values[("Y_max", p)] = float(maxabs(p_lo, p_hi))
                     prov[("Y_max", p)] = base + (
                         "max(|0.15 % value|, |99.85 % value|)", pct_text)
+                    alternative(_LINEAR, ("Y_max", p), maxabs(l_lo, l_hi))
                 elif fam == "Q":
                     values[("Q_max", p)] = float(p_hi)
                     prov[("Q_max", p)] = base + ("99.85 % value", pct_text)
+                    alternative(_LINEAR, ("Q_max", p), l_hi)
         slide_rows = np.vstack([ratio, sumy])
         if slide_rows.shape[0]:
-            _, means = sliding_mean_distance(slide_rows, d[wide], sec.eval_start_m,
+            slide_keys = ([("YQ_max", p) for p in wheels_yq] +
+                          [("SumY_max", w) for w in wsets])
+            d_wide = d[wide]
+            _, means = sliding_mean_distance(slide_rows, d_wide, sec.eval_start_m,
                                              sec.eval_end_m)
-            spct = _row_percentiles(means)
+            spct, = _row_percentiles(means)
             slide_text = (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
                           f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "
                           f"{means.shape[1]} values; exact integral of the linear interpolant)")
-            for r, (fam, p) in enumerate([("YQ", p) for p in wheels_yq] +
-                                         [("SumY", w) for w in wsets]):
-                values[(f"{fam}_max", p)] = float(maxabs(spct[r, 0], spct[r, 2]))
+            for r, key in enumerate(slide_keys):
+                fam = key[0].split("_")[0]
+                values[key] = float(maxabs(spct[r, 0], spct[r, 2]))
                 derive = ("Y/Q formed sample-wise from the low-pass filtered Y and Q"
                           if fam == "YQ" else "ΣY = Y_L + Y_R formed from the low-pass "
                           "filtered forces")
-                prov[(f"{fam}_max", p)] = (lp_label, derive, slide_text,
-                                           "max(|0.15 % value|, |99.85 % value|)", pct_text)
+                prov[key] = (lp_label, derive, slide_text,
+                             "max(|0.15 % value|, |99.85 % value|)", pct_text)
+            _sliding_alternatives(slide_rows, d_wide, d[cut.start], sec, slide_keys,
+                                  means, methods, alternative)
 
     if bp is not None and bp.shape[0]:
         bp_label = design(fs, "bandpass", order).label + ", whole section"
         warnings += [w.message for w in settling_check(ss.time_s, mask, fs, "bandpass", order,
                                                        sec.id)]
         rows = bp[:, cut]
-        pct = _row_percentiles(rows)
+        pct, pct_lin = _row_percentiles(rows, methods)
         rmsv = rms(rows)
         for r, name in enumerate(plan.bp_names):
-            kind, _, pos = name.partition("_cb_")
-            values[(f"{kind}_rms", pos)] = float(rmsv[r])
-            prov[(f"{kind}_rms", pos)] = (bp_label, cut_text, "rms value")
-            values[(f"{kind}_max", pos)] = float(maxabs(pct[r, 0], pct[r, 2]))
-            prov[(f"{kind}_max", pos)] = (bp_label, cut_text,
-                                          "max(|0.15 % value|, |99.85 % value|)", pct_text)
+            kind, _, pos = name.rpartition("_")
+            if kind in BOGIE_KINDS:  # supplementary: same filter call, same statistics
+                supp[(f"{kind}_rms", pos)] = float(rmsv[r])
+                supp[(f"{kind}_max", pos)] = float(maxabs(pct[r, 0], pct[r, 2]))
+                continue
+            q = kind.split("_")[0]
+            values[(f"{q}_rms", pos)] = float(rmsv[r])
+            prov[(f"{q}_rms", pos)] = (bp_label, cut_text, "rms value")
+            values[(f"{q}_max", pos)] = float(maxabs(pct[r, 0], pct[r, 2]))
+            prov[(f"{q}_max", pos)] = (bp_label, cut_text,
+                                       "max(|0.15 % value|, |99.85 % value|)", pct_text)
+            alternative(_LINEAR, (f"{q}_max", pos), maxabs(pct_lin[r, 0], pct_lin[r, 2]))
+
+    raw_acc = {name: np.asarray(arr, dtype=np.float64)[cut] for name, arr in ss.channels.items()
+               if name.rpartition("_")[0] in PSD_KINDS}
+    supp.update(psd_band_values(raw_acc, fs))
 
     order_keys = [(q, p) for q, quantity in QUANTITIES.items() for p in quantity.positions()]
     ordered = {k: values[k] for k in order_keys if k in values}
-    return SectionValues(sec.id, ordered, prov, warnings)
+    supp_keys = [(q, p) for q, sq in SUPPLEMENTARY.items() for p in sq.positions()]
+    return SectionValues(sec.id, ordered, prov, warnings, alts,
+                         {k: supp[k] for k in supp_keys if k in supp})
+
+
+def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: float,
+                          sec: SectionInfo, keys: list[tuple[str, str]], chosen_means: np.ndarray,
+                          methods: tuple[str, ...], alternative) -> None:
+    """Values of the sliding-mean maxima under every other reading (grid alignment × window
+    mean × percentile method, :mod:`railval.core.definitions`) from the same derived rows."""
+    for grid, window in SLIDING_VARIANTS:
+        origin = sec.eval_start_m if grid == "section_start" else float(first_m)
+        if (grid, window) == CHOSEN.sliding:
+            means = chosen_means
+        elif window == "interpolant":
+            _, means = sliding_mean_distance(slide_rows, d_wide, sec.eval_start_m,
+                                             sec.eval_end_m, origin_m=origin)
+        else:
+            centres = window_centres(sec.eval_start_m, sec.eval_end_m, origin, WINDOW_M, STEP_M)
+            means = sample_window_means(slide_rows, d_wide, centres, WINDOW_M,
+                                        closed=(window == "samples_closed"))
+        undefined = ~np.all(np.isfinite(means), axis=1)
+        for method, pct in zip(methods, _row_percentiles(means, methods), strict=True):
+            reading = Reading(method, grid, window)
+            if reading == CHOSEN:
+                continue
+            for r, key in enumerate(keys):
+                alternative(reading, key, float("nan") if undefined[r]
+                            else float(maxabs(pct[r, 0], pct[r, 2])))

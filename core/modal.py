@@ -24,12 +24,16 @@ References
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
+from scipy.signal import resample_poly
 
 from railval.core.errors import InvalidParameter, InvalidSignal
+from railval.core.types import SignalSet
 
 __all__ = [
     "ModalResult",
@@ -40,6 +44,7 @@ __all__ = [
     "mac_matrix",
     "modes_from_matrices",
     "output_covariances",
+    "decimated_records",
     "pair_modes",
     "ssi_cov",
     "ssi_cov_poles",
@@ -343,3 +348,20 @@ def ssi_cov(y: np.ndarray, fs: float, *, channels: list[str] | None = None, bloc
         close(cluster)
     return ModalResult(fs=fs, channels=list(channels) if channels else [f"ch{k}" for k in range(l)],
                        modes=modes, poles=flagged, criteria=crit, block_rows=block_rows)
+
+
+def decimated_records(signalsets: Iterable[SignalSet], channels: Sequence[str],
+                      fs_target: float = 20.0) -> tuple[list[np.ndarray], float | None]:
+    """The records for :func:`ssi_cov`: each SignalSet's ``channels`` as columns, decimated by
+    the integer factor nearest ``fs / fs_target`` with an anti-alias FIR
+    (``scipy.signal.resample_poly``). Records whose decimated rate differs from the first
+    one's are left out. Returns (records, decimated rate), ([], None) when nothing is given."""
+    records, fs_used = [], None
+    for ss in signalsets:
+        q = max(round(ss.fs / fs_target), 1)
+        fs_new = ss.fs / q
+        if fs_used is not None and not math.isclose(fs_new, fs_used):
+            continue
+        fs_used = fs_new
+        records.append(np.column_stack([resample_poly(ss.channels[c], 1, q) for c in channels]))
+    return records, fs_used

@@ -29,6 +29,7 @@ validation, Vehicle System Dynamics 52:sup1, 125–141, §5 and Table 2 (Polach 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from railval.core.errors import InvalidParameter
@@ -198,3 +199,14 @@ def pairs_for_channels(channel_names) -> list[tuple[str, str]]:
     """Every (quantity_id, position) that the given raw channels allow, registry order."""
     names = list(channel_names)
     return [(qid, p) for qid, q in QUANTITIES.items() for p in q.available_positions(names)]
+
+
+def channel_for(quantity: str | None, position: str | None, channels: Sequence[str]) -> str | None:
+    """The raw channel to look at for a quantity at a position: Y/Q at w1L → ``Y_w1L``; ΣY at
+    ws1 → ``Y_w1L``; ay_rms at b1 → ``ay_cb_b1``; the first of ``channels`` when the
+    quantity/position forms none of them (None when ``channels`` is empty)."""
+    if quantity in QUANTITIES and position and position in QUANTITIES[quantity].positions():
+        for c in QUANTITIES[quantity].channels(position):
+            if c in channels:
+                return c
+    return channels[0] if channels else None

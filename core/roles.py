@@ -66,6 +66,23 @@ PERMISSIONS: dict[str, frozenset[str]] = {
     "assessor": frozenset({*_READ_ALL, "workshop.results", "audit.read", "audit.checkpoint"}),
 }
 
+#: CLI verb (``railval VERB`` or ``railval VERB SUBVERB``) → the action it needs when the
+#: database holds users; None = no data access checked (schema, server, benchmarks)
+CLI_ACTIONS: dict[str, str | None] = {
+    "init": None, "serve": None, "bench": None,
+    "list": "data.read", "metrics": "data.read", "report": "report.download",
+    "import": "data.import", "synth": "data.import", "export": "data.export",
+    "simulate": "simulate", "diagnose": "diagnose", "calibrate": "calibrate",
+    "modal": "calibrate", "validate": "validate",
+    "user add": "user.manage", "user list": "user.manage", "user disable": "user.manage",
+    "user enable": "user.manage", "user passwd": "user.manage", "user role": "user.manage",
+    "user invite": "user.manage",
+    "signoff create": "signoff.create", "signoff list": "signoff.read",
+    "signoff show": "signoff.read",
+    "audit verify": "audit.read", "audit export": "audit.read", "audit report": "audit.read",
+    "audit checkpoint": "audit.checkpoint", "audit log": "audit.read",
+}
+
 #: the identity of open single-user mode (no users in the database, loopback only): it may
 #: do everything a product user may do, as before users existed
 LOCAL_ACTOR = "local"

@@ -16,6 +16,14 @@ limit **and** the coverage holds: ≥ 12 sections, each of the 4 EN 14363 zones 
 sections, and per quantity ≥ 2 signals (positions) and ≥ 24 values. Every shortfall is
 reported as a sentence ("zone 3 has 2 sections, needs 3").
 
+Definition sensitivity: when the section values carry the values of the other readings of the
+open definitions (percentile method, sliding-window grid and mean;
+:mod:`railval.core.definitions`, filled by :mod:`railval.core.en14363`), every quantity's
+mean, std and pass/fail are recomputed under each reading that can change it, over the same
+pairs. A quantity is ``definition_sensitive`` when some reading flips its pass/fail; the
+verdict is sensitive when some reading flips ``validated``. Supplementary quantities
+(:mod:`railval.core.supplementary`) get the same D_v statistics and never enter the verdict.
+
 :func:`validate` works purely from memory: ``{section_id: {(quantity_id, position): value}}``
 for measurement and simulation (e.g. from :func:`railval.core.en14363.evaluate_batch`), the
 :class:`~railval.core.types.SectionInfo` records and the vehicle.
@@ -34,8 +42,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from railval.core.definitions import CHOSEN, READINGS, alternatives_for
 from railval.core.errors import InvalidParameter
 from railval.core.quantities import QUANTITIES, QUANTITY_IDS, VEHICLE_KINDS
+from railval.core.supplementary import supplementary_results
 from railval.core.types import ZONES, SectionInfo
 
 MIN_SECTIONS = 12
@@ -95,6 +105,12 @@ def _none_if_nan(x):
     return None if x is None or not np.isfinite(x) else float(x)
 
 
+def judge(n: int, mean: float, std: float, mean_limit: float, std_limit: float) -> bool:
+    """Pass/fail of one quantity: n ≥ 2, |mean| ≤ mean limit and std ≤ std limit
+    (Polach & Böttcher 2014 §5)."""
+    return bool(n >= 2 and np.isfinite(std) and abs(mean) <= mean_limit and std <= std_limit)
+
+
 @dataclass
 class QuantityResult:
     """Statistics of D_v of one quantity over all its pairs."""
@@ -111,6 +127,8 @@ class QuantityResult:
     mean_norm_ci: tuple[float, float]
     std_norm_ci: tuple[float, float]
     drilldown: list[dict] = field(default_factory=list)
+    #: results under the other readings of the open definitions (None: values carried none)
+    alternatives: list[dict] | None = None
 
     @property
     def mean_norm(self) -> float:
@@ -122,8 +140,15 @@ class QuantityResult:
 
     @property
     def passed(self) -> bool:
-        return bool(self.n >= 2 and np.isfinite(self.std) and abs(self.mean) <= self.mean_limit
-                    and self.std <= self.std_limit)
+        return judge(self.n, self.mean, self.std, self.mean_limit, self.std_limit)
+
+    @property
+    def definition_sensitive(self) -> bool | None:
+        """True when another reading of the open definitions flips pass/fail; None when the
+        values carried no alternatives (plain dictionaries)."""
+        if self.alternatives is None:
+            return None
+        return any(a["flips"] for a in self.alternatives)
 
     @property
     def robust(self) -> bool:
@@ -149,6 +174,10 @@ class QuantityResult:
             "mean_norm_ci": [_none_if_nan(v) for v in self.mean_norm_ci],
             "std_norm_ci": [_none_if_nan(v) for v in self.std_norm_ci],
             "pass": self.passed, "robust": self.robust,
+            "definition_sensitive": self.definition_sensitive,
+            "definition_flips": [a["reading"]["id"] for a in self.alternatives or ()
+                                 if a["flips"]],
+            "definition_alternatives": list(self.alternatives or ()),
             "drilldown": self.drilldown,
         }
 
@@ -222,6 +251,17 @@ class ValidationResult:
     warnings: list[str] = field(default_factory=list)
     #: free-form context added by callers (campaign, configuration, cache statistics)
     info: dict = field(default_factory=dict)
+    #: :func:`railval.core.supplementary.supplementary_results` (empty: no supplementary values)
+    supplementary: dict = field(default_factory=dict)
+    #: reading id → validated under that reading (empty: no alternatives carried)
+    validated_under: dict = field(default_factory=dict)
+
+    @property
+    def definition_sensitive(self) -> bool | None:
+        """True when some reading of the open definitions flips the verdict."""
+        if not self.validated_under:
+            return None
+        return any(v != self.validated for v in self.validated_under.values())
 
     def to_dict(self) -> dict:
         from railval.core.en14363 import PROCESSING_VERSION
@@ -237,6 +277,15 @@ class ValidationResult:
                           "method": "percentile interval, pairs resampled with replacement"},
             "processing_version": PROCESSING_VERSION,
             "warnings": list(self.warnings),
+            "definitions": {
+                "chosen": CHOSEN.to_dict(),
+                "readings": [r.to_dict() for r in READINGS],
+                "sensitive_quantities": [q for q, r in self.quantities.items()
+                                         if r.definition_sensitive],
+                "verdict_sensitive": self.definition_sensitive,
+                "validated_under": dict(self.validated_under),
+            },
+            "supplementary": {k: v for k, v in self.supplementary.items() if k != "pairs"},
             **({"info": self.info} if self.info else {}),
         }
 
@@ -247,6 +296,8 @@ class ValidationResult:
         for q in self.quantities.values():
             d = q.to_dict()
             d.pop("drilldown")
+            d.pop("definition_alternatives")
+            d["definition_flips"] = ", ".join(d["definition_flips"])
             d["mean_norm_ci_low"], d["mean_norm_ci_high"] = d.pop("mean_norm_ci")
             d["std_norm_ci_low"], d["std_norm_ci_high"] = d.pop("std_norm_ci")
             rows.append(d)
@@ -298,7 +349,11 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     veh = Vehicle.from_any(vehicle)
     secs = dict(sections) if isinstance(sections, Mapping) else {s.id: s for s in sections}
     recs: dict[str, list] = {q: [] for q in QUANTITY_IDS}
-    for sid in sorted(set(measured_values) & set(simulated_values)):
+    common = sorted(set(measured_values) & set(simulated_values))
+    with_alternatives = bool(common) and all(
+        hasattr(measured_values[sid], "value_under") and hasattr(simulated_values[sid], "value_under")
+        for sid in common)
+    for sid in common:
         if sid not in secs:
             raise InvalidParameter(f"section {sid!r} has values but no SectionInfo")
         zone = int(secs[sid].zone)
@@ -350,5 +405,58 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     cov = coverage(pair_sections, pair_positions, pair_counts, zone_of)
     validated = cov.ok and all(r.passed for r in results.values())
     pairs = pd.concat(frames, ignore_index=True)
+    validated_under: dict[str, bool] = {}
+    if with_alternatives:
+        for qid, res in results.items():
+            res.alternatives = _alternatives(qid, res, recs[qid], measured_values,
+                                             simulated_values)
+        for reading in READINGS:
+            if reading == CHOSEN:
+                continue
+            ok = []
+            for res in results.values():
+                alt = next((a for a in res.alternatives if a["reading"]["id"] == reading.id), None)
+                ok.append(res.passed if alt is None or alt["pass"] is None else alt["pass"])
+            validated_under[reading.id] = bool(cov.ok and all(ok))
+    supp = {}
+    if common and all(getattr(measured_values[s], "supplementary", None) is not None and
+                      getattr(simulated_values[s], "supplementary", None) is not None
+                      for s in common):
+        supp = supplementary_results({s: measured_values[s].supplementary for s in common},
+                                     {s: simulated_values[s].supplementary for s in common},
+                                     {s: zone_of[s] for s in common if s in zone_of})
     return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level, pairs,
-                            list(warnings))
+                            list(warnings), supplementary=supp, validated_under=validated_under)
+
+
+def _alternatives(qid: str, res: QuantityResult, rec: list, measured_values, simulated_values
+                  ) -> list[dict]:
+    """Mean, std and pass/fail of one quantity under each reading that can change it, over
+    the pairs of the chosen reading. ``pass`` is None where the reading is undefined for
+    some pair (NaN value, e.g. a sample window without samples)."""
+    out = []
+    for reading in alternatives_for(QUANTITIES[qid]):
+        key_m = [measured_values[r[0]].value_under(reading.id, (qid, r[2])) for r in rec]
+        key_s = [simulated_values[r[0]].value_under(reading.id, (qid, r[2])) for r in rec]
+        m = np.array(key_m, dtype=np.float64)
+        s = np.array(key_s, dtype=np.float64)
+        changed = int(np.sum((m != np.array([r[3] for r in rec])) |
+                             (s != np.array([r[4] for r in rec]))))
+        d = difference(s, m)
+        n = d.size
+        defined = bool(np.all(np.isfinite(d)))
+        mean = float(d.mean()) if n and defined else float("nan")
+        std = float(d.std(ddof=STD_DDOF)) if n >= 2 and defined else float("nan")
+        passed = judge(n, mean, std, res.mean_limit, res.std_limit) if defined else None
+        out.append({
+            "reading": reading.to_dict(),
+            "differs_in": reading.differs_from_chosen(QUANTITIES[qid].sliding_mean),
+            "description": reading.describe(QUANTITIES[qid].sliding_mean),
+            "values_changed": changed,
+            "mean": _none_if_nan(mean), "std": _none_if_nan(std),
+            "mean_norm": _none_if_nan(mean / res.mean_limit),
+            "std_norm": _none_if_nan(std / res.std_limit),
+            "pass": passed,
+            "flips": passed is not None and passed != res.passed,
+        })
+    return out

@@ -25,7 +25,7 @@ from sqlalchemy.orm import Session
 from railval.core.integrity import GENESIS, chain_hash, content_hash
 from railval.db.models import AuditEvent, AuditHead
 
-__all__ = ["GENESIS", "head", "iter_rows", "record", "row_dict", "utc_stamp"]
+__all__ = ["GENESIS", "actor_of", "head", "iter_rows", "record", "row_dict", "utc_stamp"]
 
 _HEX64 = re.compile(r"^[0-9a-f]{64}$")
 
@@ -100,6 +100,11 @@ def record(
     session.execute(insert(AuditEvent).values(**row, prev_hash=prev, row_hash=h))
     session.execute(update(AuditHead).where(AuditHead.id == 1).values(row_hash=h))
     return session.scalar(select(AuditEvent).where(AuditEvent.seq == int(seq)))
+
+
+def actor_of(session: Session) -> str:
+    """The actor of the unit of work (``Database.session(actor=...)``), else ``system``."""
+    return str(session.info.get("actor") or "system")
 
 
 def head(session: Session) -> tuple[int, str]:

@@ -42,6 +42,10 @@ SQLITE_MMAP_BYTES = 1 << 31
 SQLITE_CACHE_KIB = 65_536
 
 
+#: the actor of new :class:`Database` objects (the CLI sets the acting user before a verb runs)
+default_actor = "system"
+
+
 class DatabaseNotInitialised(RailvalError):
     """The database schema is missing or older than this railval; run ``railval init``."""
 
@@ -80,15 +84,23 @@ class Database:
         self.engine = engine
         self._sessions = sessionmaker(engine, expire_on_commit=False)
         self._initialised = False
+        #: who the audit trail names for changes made through :meth:`session` when the
+        #: caller names nobody (the CLI sets ``cli:<OS user>``, the web app the signed-in user)
+        self.actor = default_actor
 
     @property
     def dialect(self) -> str:
         return self.engine.dialect.name
 
     @contextmanager
-    def session(self) -> Iterator[Session]:
-        """One unit of work: commit on success, roll back on any exception."""
+    def session(self, actor: str | None = None) -> Iterator[Session]:
+        """One unit of work: commit on success, roll back on any exception.
+
+        ``actor`` (else :attr:`actor`) is kept in ``session.info["actor"]``: the audit rows
+        written in this unit of work name it (:func:`railval.db.audit.actor_of`).
+        """
         session = self._sessions()
+        session.info["actor"] = actor or self.actor
         try:
             yield session
             session.commit()

@@ -16,6 +16,7 @@ N → kN (× 0.001), g → m/s² (× 9.80665, the standard gravity of ISO 80000-
 from __future__ import annotations
 
 import datetime as dt
+import hashlib
 import json
 import math
 from collections.abc import Callable
@@ -31,7 +32,7 @@ from sqlalchemy.orm import Session
 from railval.core.errors import CampaignFormatError, InvalidParameter
 from railval.core.types import BODY_POSITIONS, CHANNEL_KINDS, WHEEL_POSITIONS
 from railval.core.zones import zone_for_radius
-from railval.db import codec
+from railval.db import audit, codec
 from railval.db.checks import RecordingProblem, check_recording
 from railval.db.io import read_table
 from railval.db.models import Campaign, Channel, Configuration, Recording, Section, Signal, Vehicle
@@ -328,6 +329,13 @@ def write_validated(session: Session, vc: ValidatedCampaign) -> Campaign:
     ]
     if rows:
         session.execute(insert(Signal), rows)
+    digest = hashlib.sha256(json.dumps(m, sort_keys=True, default=str).encode("utf-8"))
+    for r in sorted(row["sha256"] for row in rows):
+        digest.update(r.encode("ascii"))
+    audit.record(session, audit.actor_of(session), "campaign.import", f"campaign:{m['name']}",
+                 None, digest.hexdigest(),
+                 detail={"sections": len(sections), "configurations": sorted(confs),
+                         "signals": len(rows)})
     return camp
 
 

@@ -22,7 +22,7 @@ from sqlalchemy.orm import Session
 from railval.core.errors import InvalidSignal, NotFound
 from railval.core.types import SectionInfo, SignalSet
 from railval.core.zones import zone_for_radius
-from railval.db import codec
+from railval.db import audit, codec
 from railval.db.checks import RecordingProblem, check_recording
 from railval.db.models import (
     Campaign,
@@ -42,6 +42,9 @@ __all__ = [
     "cache_put",
     "cache_put_many",
     "channels",
+    "configuration_state",
+    "delete_campaign",
+    "delete_configuration",
     "fetch_signalsets",
     "get_campaign",
     "get_configuration",
@@ -51,6 +54,7 @@ __all__ = [
     "load_signalsets",
     "section_infos",
     "signal_hashes",
+    "source_hashes",
     "store_configuration",
     "vehicle_info",
     "verify_signals",
@@ -268,6 +272,7 @@ def store_configuration(
         if existing.id in ids:
             raise InvalidParameter(f"configuration {name!r} cannot have {parent!r} as parent: "
                                    "that would make a cycle in the lineage")
+    before = configuration_state(session, existing) if existing is not None else None
     if existing is not None:
         session.execute(delete(Recording).where(Recording.configuration_id == existing.id))
         session.expire(existing, ["recordings"])
@@ -289,7 +294,86 @@ def store_configuration(
         items.append((sections[sid], conf, ss, prov))
     add_recordings(session, items, chans)
     session.flush()
+    audit.record(session, audit.actor_of(session),
+                 "configuration.replace" if before is not None else "configuration.store",
+                 f"configuration:{c.name}/{name}", before, configuration_state(session, conf),
+                 detail={"parent": parent, "effects": sorted(effects)})
     return conf
+
+
+def source_hashes(session: Session, campaign: Campaign | str | int,
+                  config: str | None = None) -> dict[str, dict[str, str]]:
+    """Section id → {``distance_m``: hash of the distance axis, channel: content hash} of the
+    measurement (``config=None``) or a configuration; reads no blob."""
+    c = get_campaign(session, campaign)
+    if config is not None:
+        get_configuration(session, c, config)
+    out: dict[str, dict[str, str]] = {}
+    for sid, dsha in session.execute(
+        select(Section.section_id, Recording.distance_sha256)
+        .join(Section, Recording.section_id == Section.id)
+        .where(Section.campaign_id == c.id, _source_filter(session, c.id, config))
+        .order_by(Section.id)
+    ):
+        out[sid] = {"distance_m": dsha}
+    for sid, chans in signal_hashes(session, c, config).items():
+        out.setdefault(sid, {}).update(chans)
+    return out
+
+
+def configuration_state(session: Session, conf: Configuration) -> dict[str, Any]:
+    """What the audit trail's before/after hash of a configuration covers: parent, effects,
+    parameters, description and every signal's content hash (no blob is read)."""
+    parent = session.get(Configuration, conf.parent_id).name if conf.parent_id else None
+    rows = session.execute(
+        select(Section.section_id, Recording.distance_sha256, Channel.name, Signal.sha256)
+        .join(Recording, Signal.recording_id == Recording.id)
+        .join(Section, Recording.section_id == Section.id)
+        .join(Channel, Signal.channel_id == Channel.id)
+        .where(Recording.configuration_id == conf.id)
+    )
+    signals: dict[str, dict[str, str]] = {}
+    for sid, dsha, chan, sha in rows:
+        signals.setdefault(sid, {"distance_m": dsha})[chan] = sha
+    return {"parent": parent, "effects": _jsonable(conf.effects),
+            "parameters": _jsonable(conf.parameters), "description": conf.description,
+            "signals": signals}
+
+
+def _jsonable(obj: Any) -> Any:
+    """A JSON document with non-finite floats written as strings (canonical JSON refuses them)."""
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return repr(obj)
+    if isinstance(obj, Mapping):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    return obj
+
+
+def delete_configuration(session: Session, campaign: Campaign | str | int, name: str, *,
+                         reason: str = "") -> None:
+    """Delete configuration ``name`` with its recordings (children keep no parent); audited."""
+    c = get_campaign(session, campaign)
+    conf = get_configuration(session, c, name)
+    before = configuration_state(session, conf)
+    session.delete(conf)
+    session.flush()
+    audit.record(session, audit.actor_of(session), "configuration.delete",
+                 f"configuration:{c.name}/{name}", before, None, reason)
+
+
+def delete_campaign(session: Session, campaign: Campaign | str | int, *, reason: str = "") -> None:
+    """Delete a campaign with everything below it; audited (before = its signal hashes)."""
+    c = get_campaign(session, campaign)
+    hashes = sorted(session.scalars(
+        select(Signal.sha256).join(Recording, Signal.recording_id == Recording.id)
+        .join(Section, Recording.section_id == Section.id).where(Section.campaign_id == c.id)))
+    name = c.name
+    session.delete(c)
+    session.flush()
+    audit.record(session, audit.actor_of(session), "campaign.delete", f"campaign:{name}",
+                 {"campaign": name, "signals": hashes}, None, reason)
 
 
 # -- signals -----------------------------------------------------------------------------
@@ -472,6 +556,19 @@ def verify_signals(session: Session, campaign: Campaign | str | int) -> list[dic
             except InvalidSignal as exc:
                 problems.append({**where, "channel": name, "error": str(exc)})
     return problems
+
+
+def count_signals(session: Session, campaign: Campaign | str | int) -> int:
+    """Number of stored arrays of the campaign (signals plus distance axes)."""
+    cid = _campaign_id(session, campaign)
+    recs = session.scalar(select(func.count()).select_from(Recording)
+                          .join(Section, Recording.section_id == Section.id)
+                          .where(Section.campaign_id == cid)) or 0
+    sigs = session.scalar(select(func.count()).select_from(Signal)
+                          .join(Recording, Signal.recording_id == Recording.id)
+                          .join(Section, Recording.section_id == Section.id)
+                          .where(Section.campaign_id == cid)) or 0
+    return int(recs) + int(sigs)
 
 
 def row_counts(session: Session) -> dict[str, int]:

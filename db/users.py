@@ -235,7 +235,8 @@ def _failures(session: Session, username: str, source: str) -> tuple[int, int]:
     return per_user, per_source
 
 
-def authenticate(session: Session, username: str, password: str, *, source: str = "") -> LoginResult:
+def authenticate(session: Session, username: str, password: str, *, source: str = "",
+                 record_success: bool = True) -> LoginResult:
     """Check a sign-in; records every failure and refusal in the audit trail.
 
     The caller commits ``session`` whatever the outcome (the audit row of a failure must
@@ -253,7 +254,8 @@ def authenticate(session: Session, username: str, password: str, *, source: str 
     user = find_user(session, username)
     ok = verify_password(session, username, password) is not None
     if ok:
-        audit.record(session, username, "login.ok", obj, detail={"source": source})
+        if record_success:
+            audit.record(session, username, "login.ok", obj, detail={"source": source})
         return LoginResult(user, "")
     if user is not None and user.disabled and user.password_hash is not None:
         try:

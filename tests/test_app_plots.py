@@ -87,7 +87,7 @@ def test_compare_figure_updates_in_place():
     f = fig.fig
     assert f.xaxis[0].axis_label == "time (s)" and f.yaxis[0].axis_label == "Y_w1L (kN)"
     shown = [r for r in fig.renderers if r.visible]
-    # measurement beneath (first renderer, dark grey), simulation on top
+    # measurement beneath (first renderer, black), simulation on top
     assert [r.name for r in shown] == ["measurement", "sim A"]
     assert shown[0].glyph.line_color == plots.MEASURED_COLOR
     assert shown[1].glyph.line_color == plots.SIM_COLORS[0]
@@ -214,3 +214,19 @@ def test_pattern_heatmap_fixed_symmetric_scale_and_cell_values():
     assert texts[("zone 1", "Y_qst")] == ("+0.20", "#222222")
     assert fig.xaxis[0].axis_label == "EN 14363 test zone"
     assert list(fig.y_range.factors) == ["Q_qst", "Y_qst"]  # first row on top
+
+
+def test_measurement_and_simulation_colours_stay_distinct_in_greyscale():
+    """Measurement and the first simulation must differ in print (greyscale) too: relative
+    luminance (WCAG 2.1 definition) differs by at least 0.15, and every simulation colour is
+    one of the Okabe–Ito colour-blind-safe set."""
+    from railval.app.scales import MEASURED_COLOR, SIM_COLORS
+
+    def luminance(hex_colour: str) -> float:
+        rgb = [int(hex_colour[i:i + 2], 16) / 255 for i in (1, 3, 5)]
+        lin = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in rgb]
+        return 0.2126 * lin[0] + 0.7152 * lin[1] + 0.0722 * lin[2]
+
+    assert abs(luminance(SIM_COLORS[0]) - luminance(MEASURED_COLOR)) >= 0.15
+    okabe_ito = {"#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "#CC79A7"}
+    assert set(SIM_COLORS) <= okabe_ito

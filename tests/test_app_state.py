@@ -1,4 +1,4 @@
-"""UI state of the web app without a browser (app/state.py).
+"""UI state of the web app without a browser (app/state/).
 
 The campaign is the demo folder of ``tests/factories`` imported into a fresh SQLite
 database once per module (12 sections, 4 zones, 2 configurations).
@@ -22,8 +22,8 @@ from railval.app.state import (
     ConfigInfo,
     DashboardState,
     DiagnoseState,
-    _channel_for,
 )
+from railval.core.quantities import channel_for
 from railval.core.types import SectionInfo
 
 
@@ -90,7 +90,7 @@ def test_coverage_shortfalls_are_precise():
 def test_channel_for_quantity_position_uses_the_registry(quantity, position, expected):
     chans = [f"{k}_w{n}{s}" for k in ("Y", "Q") for n in (1, 2) for s in "LR"] + \
             [f"{k}_{p}" for k in ("ay_cb", "az_cb") for p in ("b1", "b2")]
-    assert _channel_for(quantity, position, chans) == expected
+    assert channel_for(quantity, position, chans) == expected
 
 
 def test_compare_series_measured_first_eval_range_and_filter(app):
@@ -229,6 +229,25 @@ def test_diagnose_suggested_name_is_unique(app):
     assert diag.suggested_name() == "baseline+friction_damping"
     app.param.configuration.objects = ["baseline", "variant1", "baseline+friction_damping"]
     assert diag.suggested_name() == "baseline+friction_damping-2"
+
+
+def test_diagnose_new_name_follows_the_effect_until_typed(app):
+    """The new configuration's name names the effect that is added: it follows the choice
+    until the user types a name, and a name the user did not type is never stored with
+    another effect."""
+    diag = DiagnoseState(app)
+    diag.param.effect.objects = ["friction_damping", "parasitic_yaw_stiffness"]
+    diag.effect = "friction_damping"
+    assert diag.new_name == "baseline+friction_damping" and not diag.name_edited
+    diag.effect = "parasitic_yaw_stiffness"
+    assert diag.new_name == "baseline+parasitic_yaw_stiffness"
+    diag.new_name = "yaw-fit"  # typed by the user: kept when the effect changes
+    assert diag.name_edited
+    diag.effect = "friction_damping"
+    assert diag.new_name == "yaw-fit"
+    diag.new_name = ""  # cleared: follows the effect again
+    diag.effect = "parasitic_yaw_stiffness"
+    assert diag.new_name == "baseline+parasitic_yaw_stiffness"
 
 
 def test_pages_are_built_on_first_view_and_refresh_when_shown(demo_db):

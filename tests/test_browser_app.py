@@ -59,7 +59,7 @@ def test_overview_and_compare_pages(page, app_url):
 
     nav(page, "Compare signals")
     _wait_page(page, "Compare signals")
-    main.get_by_text("Measurement in dark grey beneath").wait_for(timeout=PAGE_TIMEOUT_MS)
+    main.get_by_text("Measurement in black beneath").wait_for(timeout=PAGE_TIMEOUT_MS)
     # two series (EN-filtered, raw) and the PSD: three Bokeh canvases in the page
     main.locator("canvas").nth(2).wait_for(state="attached", timeout=PAGE_TIMEOUT_MS)
     screenshot(page, "compare")

@@ -163,7 +163,7 @@ def test_modal_service_and_cli_on_an_imported_campaign(tmp_path, capsys):
     import json
 
     from railval.app.cli import main
-    from railval.app.services.diagnosis import modal
+    from railval.app.services.modal import modal
     from railval.db.engine import connect
     from railval.db.importer import import_campaign
     from railval.db.io import read_table, write_table

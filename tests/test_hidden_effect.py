@@ -18,7 +18,8 @@ import json
 
 import pytest
 
-from railval.app.services.diagnosis import calibrate, diagnose
+from railval.app.services.calibration import calibrate
+from railval.app.services.diagnosis import diagnose
 from railval.app.services.synth import synth
 from railval.app.services.validation import validate_configuration
 from railval.core.sim.effects import EFFECTS
@@ -130,7 +131,7 @@ def test_two_hidden_effects_both_in_top_three(tmp_path):
 @pytest.mark.parametrize("factor", [0.9, 1.1])
 def test_mis_set_baseline_still_ranks_hidden_effect_first(tmp_path, factor):
     """The baseline's secondary suspension stiffnesses and dampings mis-set by ±10 %."""
-    from railval.app.services.diagnosis import _simulate_campaign, load_context
+    from railval.app.services.campaign_context import load_context, simulate_context
     from railval.core.sim.vehicles import template_parameters
     from railval.db import repo
 
@@ -141,7 +142,7 @@ def test_mis_set_baseline_still_ranks_hidden_effect_first(tmp_path, factor):
     with database.session() as s:
         ctx = load_context(s, "hidden")
         effects = dict(repo.get_configuration(s, "hidden", "baseline").effects)
-    sets = _simulate_campaign(ctx, effects, params)
+    sets = simulate_context(ctx, effects, params)
     with database.session() as s:
         repo.store_configuration(s, "hidden", "misset", parent="baseline", effects=effects,
                                  parameters=params, description="mis-set", signalsets=sets)

@@ -170,3 +170,44 @@ def test_lowpass_other_cutoff_matches_scipy_and_en_cutoff_uses_en_filter():
     np.testing.assert_array_equal(lowpass(x, 200.0, 20.0), filters.filtfilt_rows(x, 200.0, "lowpass", 4))
     with pytest.raises(InvalidParameter, match="cut-off"):
         lowpass(x, 200.0, 150.0)
+
+
+@pytest.mark.parametrize(("f0", "amp"), [(1.0, 1.0), (1.0, 0.9), (0.5, 1.3), (2.0, 0.8)])
+def test_in_phase_periodic_pair_keeps_lag_zero(f0, amp):
+    # c = A·m, periodic, 20 s at 200 Hz: every whole-period lag correlates to 1 up to
+    # rounding noise; the tie rule keeps lag 0 and nothing is trimmed (the old first-maximum
+    # rule returned −400 samples = the −2 s bound for f0 = 1 Hz)
+    fs = 200.0
+    t = np.arange(int(20 * fs)) / fs
+    m = np.sin(2 * np.pi * f0 * t) + 0.3 * np.sin(2 * np.pi * 3 * f0 * t + 0.4)
+    c = amp * m
+    r = estimate_lag(m, c, fs, max_lag_s=2.0)
+    assert r.lag_samples == 0 and not r.at_bound and r.reliable
+    res = compare(m, c, fs, families=["sprague_geers"])
+    assert res.n_synced == res.n == t.size
+    assert res.synced == res.raw
+    assert res.raw["sg_M"] == pytest.approx(amp - 1, abs=1e-12)
+
+
+def test_best_lag_index_prefers_smallest_lag_within_tolerance():
+    from railval.core.metrics.sync import best_lag_index
+
+    lags = np.arange(-3, 4)
+    rho = np.array([0.9, 1.0, 0.2, 1.0 - 1e-12, 0.3, 1.0 + 5e-10, 0.1])
+    assert lags[best_lag_index(lags, rho)] == 0  # all three maxima lie within 1e-9
+    assert lags[best_lag_index(lags, rho, tol=0.0)] == 2  # strict: the largest
+    rho2 = np.array([0.9, 1.0, 0.2, 0.5, 0.3, 1.0, 0.1])
+    assert lags[best_lag_index(lags, rho2)] == -2  # −k before +k
+
+
+def test_lag_near_the_search_bound_is_flagged_unreliable():
+    base = smooth_noise(2000, 3, pad=400)
+    m = base[200:2200]
+    for lag, reliable in ((150, True), (189, True), (191, False), (-195, False)):
+        c = base[200 - lag: 2200 - lag]
+        r = estimate_lag(m, c, FS, max_lag_s=2.0)  # K = 200; 5 % of K = 10 samples
+        assert r.lag_samples == lag
+        assert r.reliable is reliable and r.near_bound is (not reliable)
+        d = compare(m, c, FS, families=["sprague_geers"]).to_dict()
+        assert d["lag_reliable"] is reliable and d["lag_near_bound"] is (not reliable)
+        assert any("unreliable" in n for n in d["notes"]) is (not reliable)

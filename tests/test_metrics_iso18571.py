@@ -144,3 +144,37 @@ def test_custom_weights_change_rating():
     ref, comp = pulse(), 1.3 * pulse(0.31)
     r = iso18571(ref, comp, FS, ISOParameters(weights=(1.0, 0.0, 0.0, 0.0)))
     assert r.rating == pytest.approx(r.corridor, abs=1e-12)
+
+
+def test_in_phase_periodic_curves_keep_zero_shift():
+    # 50 Hz, c = 0.9·m with m a 1 Hz sine over 10 s: shifts by whole periods (±50 samples)
+    # correlate to 1 up to ~1e-16 rounding noise; the old first-maximum rule chose −50
+    # (E_P = 0.9). Zero shift must stay: E_P = 1 and the rating follows by hand.
+    fs = 50.0
+    t = np.arange(500) / fs
+    m = np.sin(2 * np.pi * t)
+    c = 0.9 * m
+    r = iso18571(m, c, fs)
+    assert r.shift_samples == 0 and r.phase == 1.0
+    # corridor by hand: |c − m| = 0.1|m|, T_norm = max|m|, δ_i = 0.05 T_norm, δ_o = 0.5 T_norm
+    tn = np.max(np.abs(m))
+    diff = 0.1 * np.abs(m)
+    z = np.mean(np.where(diff < 0.05 * tn, 1.0, ((0.5 * tn - diff) / (0.45 * tn)) ** 2))
+    # slope: C' = 0.9 T' exactly → e_S = 0.1, E_S = (2 − 0.1)/2 = 0.95
+    # magnitude: DTW on the unshifted curves (DTW itself is checked against a plain DP above)
+    e_m = dtw_magnitude_error(m, c, 0.1)
+    expected = 0.4 * z + 0.2 * 1.0 + 0.2 * (0.5 - e_m) / 0.5 + 0.2 * 0.95
+    assert r.corridor == pytest.approx(z, rel=1e-12)
+    assert r.slope == pytest.approx(0.95, rel=1e-12)
+    assert r.rating == pytest.approx(expected, rel=1e-12)
+
+
+def test_phase_shift_prefers_zero_unless_beaten_by_more_than_the_tolerance():
+    from railval.core.metrics.iso18571 import phase_shift
+
+    # two pulses 100 samples apart, equal heights: the comparison repeats the reference
+    # shifted by one pulse spacing; a true improvement (pulse moved by 13) still wins
+    ref = pulse(0.3, 0.03) + pulse(0.4, 0.03)
+    assert phase_shift(ref, ref) == 0
+    moved = pulse(0.313, 0.03) + pulse(0.413, 0.03)
+    assert phase_shift(ref, moved) == 13

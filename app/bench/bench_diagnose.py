@@ -22,7 +22,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from railval.app.services.diagnosis import _evaluate_effects, calibrate, diagnose, load_context
+    from railval.app.services.calibration import calibrate
+    from railval.app.services.campaign_context import evaluate_effects, load_context
+    from railval.app.services.diagnosis import diagnose
     from railval.app.services.synth import synth
     from railval.db import repo
     from railval.db.engine import connect
@@ -41,9 +43,9 @@ def run(args: argparse.Namespace) -> dict:
             ctx = load_context(s, "bench")
             conf = repo.get_configuration(s, "bench", "baseline")
             effects = dict(conf.effects or {})
-        _evaluate_effects((ctx, effects, {}))  # warm the compiled kernels
+        evaluate_effects((ctx, effects, {}))  # warm the compiled kernels
         t0 = time.perf_counter()
-        _evaluate_effects((ctx, effects, {}))
+        evaluate_effects((ctx, effects, {}))
         t_one = time.perf_counter() - t0
         t0 = time.perf_counter()
         diag = diagnose(database, "bench", "baseline", scheduler=scheduler, workers=workers,

@@ -76,7 +76,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from railval.app.report import ReportError, build_report
-    from railval.app.state import Backend
+    from railval.app.state.backend import Backend
 
     if Path(args.out).suffix.lower() not in (".html", ".htm", ".pdf"):
         raise ReportError(f"--out {args.out}: extension must be .html or .pdf")

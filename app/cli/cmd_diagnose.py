@@ -56,7 +56,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from railval.app.services.diagnosis import calibrate
+    from railval.app.services.calibration import calibrate
 
     start: dict[str, dict[str, float]] = {}
     for item in args.start or []:
@@ -85,7 +85,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_modal(args: argparse.Namespace) -> int:
-    from railval.app.services.diagnosis import modal
+    from railval.app.services.modal import modal
 
     d = modal(_db(args), args.campaign, sections=args.section, calibrate_params=args.calibrate,
               progress=_progress)

@@ -92,7 +92,8 @@ def _cmd_metrics(args: argparse.Namespace) -> int:
         head += f"  {'ISO grade':<20}"
     print(head)
     for rec in df.to_dict(orient="records"):
-        line = f"{rec['section']:<8} {rec['channel']:<10} {_fmt(rec['lag_s'], '+.2f'):>6} "
+        lag_txt = _fmt(rec['lag_s'], '+.2f') + ("" if rec.get("lag_reliable", True) else "!")
+        line = f"{rec['section']:<8} {rec['channel']:<10} {lag_txt:>6} "
         line += " ".join(f"{_fmt(rec[n], f):>{w}}/{_fmt(rec[n + '_sync'], f):<{w}}" for n, _, w, f in cols)
         if "iso_grade" in names:
             line += f"  {_fmt(rec['iso_grade'], 's')}/{_fmt(rec['iso_grade_sync'], 's')}"
@@ -101,6 +102,9 @@ def _cmd_metrics(args: argparse.Namespace) -> int:
         print(line)
     print(f"{len(df)} comparisons; units: area in the channel unit (kN or m/s^2); "
           f"`railval metrics --list` explains every metric")
+    if "lag_reliable" in df.columns and not df["lag_reliable"].astype(bool).all():
+        print(f"! lag at or within 5 % of the ±{args.max_lag:g} s search bound: unreliable "
+              f"(the true lag may lie outside the window; the synchronised values are doubtful)")
     return 0
 
 

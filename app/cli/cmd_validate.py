@@ -6,8 +6,11 @@
 
 Human output: one table row per quantity with pass/fail, the normalised mean and standard
 deviation as bars (``█`` blocks, the limit 1.0 marked ``│``) and their bootstrap intervals,
-then the coverage lines. ``--json`` prints one JSON document (``validated``, ``coverage``,
-``quantities`` …). The exit code is 0 whether or not the configuration is validated; 2 on
+then the coverage lines, the supplementary results and which quantities are
+definition-sensitive (pass/fail changes under another reading of the open percentile or
+sliding-mean definitions). ``--json`` prints one JSON document (``validated``, ``coverage``,
+``quantities`` with ``definition_sensitive`` and ``definition_alternatives`` each,
+``definitions``, ``supplementary`` …). The exit code is 0 whether or not the configuration is validated; 2 on
 errors (unknown campaign/configuration, bad data).
 """
 
@@ -80,11 +83,18 @@ def format_result(doc: dict) -> str:
         verdict = "PASS" if q["pass"] else "FAIL"
         if q["n"] and not q.get("robust", True):
             verdict += " (not robust)"
+        if q.get("definition_sensitive"):
+            verdict += " (definition-sensitive)"
         lines.append(
             f"{q['quantity']:<9} {QUANTITIES[q['quantity']].unit:<6} {q['n']:>4} "
             f"{_fmt(q['mean'], '+.3g'):>9} {q['mean_limit']:>7.3g} {_fmt(q['std']):>9} "
             f"{q['std_limit']:>7.3g}  {bar(q['mean_norm'])} {bar(q['std_norm'])} "
             f"{ci_m_txt:>15} {ci_s_txt:>13}  {verdict}")
+        for alt in q.get("definition_alternatives", []):
+            if alt["flips"]:
+                lines.append(f"{'':<9} {'passes' if alt['pass'] else 'fails'} with "
+                             f"{alt['description']}: mean {_fmt(alt['mean'], '+.4g')}, "
+                             f"std {_fmt(alt['std'], '.4g')}")
         if not q["pass"] and q["drilldown"]:
             worst = q["drilldown"][0]
             lines.append(f"{'':<9} largest: section {worst['section']} (zone {worst['zone']}) "
@@ -101,8 +111,35 @@ def format_result(doc: dict) -> str:
         lines.append("coverage: all rules met")
     for w in doc.get("warnings", []):
         lines.append(f"warning: {w}")
-    lines.append("VALIDATED" if doc["validated"] else "NOT VALIDATED")
+    lines += format_supplementary(doc.get("supplementary", {}))
+    defs = doc.get("definitions", {})
+    sensitive = defs.get("sensitive_quantities") or []
+    if sensitive:
+        lines.append("definition-sensitive (pass/fail changes under another reading of the "
+                     "percentile or sliding-mean definition, docs/validation.md): "
+                     + ", ".join(sensitive))
+    verdict = "VALIDATED" if doc["validated"] else "NOT VALIDATED"
+    if defs.get("verdict_sensitive"):
+        verdict += " (definition-sensitive: another reading gives the opposite verdict)"
+    lines.append(verdict)
     return "\n".join(lines)
+
+
+def format_supplementary(supp: dict) -> list[str]:
+    """Lines of the supplementary block (bogie-frame and PSD-band quantities)."""
+    rows = supp.get("quantities") or []
+    if not rows:
+        return []
+    lines = ["supplementary results (shown next to the verdict, they do not change it): "
+             "D_v statistics, rel = value / mean |M_v|, log2 S/M = mean log2 ratio",
+             f"{'quantity':<20} {'unit':<6} {'n':>4} {'mean':>9} {'std':>9} {'mean rel':>9} "
+             f"{'std rel':>8} {'log2 S/M':>9}  processing"]
+    for r in rows:
+        lines.append(f"{r['quantity']:<20} {r['unit']:<6} {r['n']:>4} "
+                     f"{_fmt(r['mean'], '+.3g'):>9} {_fmt(r['std'], '.3g'):>9} "
+                     f"{_fmt(r['mean_rel'], '+.2f'):>9} {_fmt(r['std_rel'], '.2f'):>8} "
+                     f"{_fmt(r['log2_ratio_mean'], '+.2f'):>9}  {r['processing']}")
+    return lines
 
 
 def cmd_validate(args: argparse.Namespace) -> int:

@@ -17,6 +17,24 @@ from railval.app.state import PAGE_TITLES, AppState
 
 TABLE_STYLE = {"font-size": "13px"}
 
+#: button groups (time/distance, processing, scope): the selected button is filled in the
+#: app's blue with white text, the others white with a blue outline, so the choice is obvious
+TOGGLE_CSS = """
+:host .bk-btn-group .bk-btn { background: #ffffff; color: #0b5394; border: 1px solid #0b5394; }
+:host .bk-btn-group .bk-btn.bk-active { background: #0b5394; color: #ffffff; font-weight: 600;
+                                        box-shadow: none; }
+"""
+
+
+def toggle_group(parameter: param.Parameter, label: str, **kw: Any) -> pn.Column:
+    """A labelled button group for a Selector parameter: the label above (button groups show
+    no title of their own) and the selected state drawn with :data:`TOGGLE_CSS`."""
+    widget = pn.widgets.RadioButtonGroup.from_param(parameter, name=label, stylesheets=[TOGGLE_CSS],
+                                                    **kw)
+    caption = pn.pane.HTML(f"<label class='rv-label'>{html.escape(label)}</label>",
+                           margin=(5, 10, 0, 10), styles={"font-size": "13px"})
+    return pn.Column(caption, widget, margin=0)
+
 
 def make_dispatch() -> Callable[[Callable[[], None]], None]:
     """A ``dispatch`` for :meth:`AppState.run_job`: runs a state update on the session's

@@ -13,7 +13,7 @@ import numpy as np
 import panel as pn
 
 from railval.app import plots
-from railval.app.pages._common import PageBase, message
+from railval.app.pages._common import PageBase, message, toggle_group
 from railval.app.state import AppState, CompareState
 
 
@@ -69,8 +69,8 @@ class ComparePage(PageBase):
             pn.widgets.Select.from_param(app.param.channel, name="Channel", width=160),
             pn.widgets.MultiChoice.from_param(self.state.param.configurations, name="Configurations",
                                               width=360, max_items=4),
-            pn.widgets.RadioButtonGroup.from_param(self.state.param.axis, name="Axis", width=180,
-                                                   sizing_mode="fixed", margin=(26, 10, 5, 10)),
+            toggle_group(self.state.param.axis, "Axis", width=180, sizing_mode="fixed",
+                         margin=(2, 10, 5, 10)),
             pn.widgets.Select.from_param(self.state.param.processing, name="Processing", width=190),
             pn.widgets.FloatInput.from_param(self.state.param.psd_segment_s, name="PSD segment (s)", width=120),
         )
@@ -86,7 +86,7 @@ class ComparePage(PageBase):
             return
         n_series = self.view.update(self.state)
         self.note.object = (
-            "Measurement in dark grey beneath, simulations on top; shaded: evaluated "
+            "Measurement in black beneath, simulations on top in colour-blind-safe colours; shaded: evaluated "
             "(constant-curvature) range. Zoom on one series plot zooms the other. Series are "
             "downsampled on the server (min-max LTTB, 2 000 points) and refined on zoom. PSD: evaluated range, "
             f"EN-filtered, Welch with {self.state.psd_segment_s:g} s Hann segments.")

@@ -118,8 +118,9 @@ class DiagnosePage(PageBase):
         self.state.param.effect.objects = ranked + [e for e in available if e not in ranked]
         if self.state.effect not in self.state.param.effect.objects:
             self.state.effect = (self.state.param.effect.objects or [None])[0]
-        if not self.state.new_name or self.state.new_name in self.app.param.configuration.objects:
-            self.state.new_name = self.state.suggested_name()
+        if self.state.new_name in self.app.param.configuration.objects:
+            self.state.name_edited = False  # a stored name cannot be reused: suggest again
+        self.state._suggest_name()
         if catalogue:
             self.state.refresh_choices()
             self._show_estimates()

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import panel as pn
 
-from railval.app.pages._common import PageBase, make_dispatch, message, table
+from railval.app.pages._common import PageBase, make_dispatch, message, table, toggle_group
 from railval.app.state import AppState, MetricsState, unit_label
 
 NOTE = ("Signals low-pass 20 Hz and resampled to a common axis (the service says where it "
@@ -23,8 +23,8 @@ class MetricsPage(PageBase):
         super().__init__(app, **params)
         self.state = MetricsState(app)
         self.state.param.watch(lambda *e: self._on_app_change(), ["view", "frame"])
-        self.view = pn.widgets.RadioButtonGroup.from_param(self.state.param.view, name="Signals")
-        self.scope = pn.widgets.RadioButtonGroup.from_param(self.state.param.scope, name="Scope")
+        self.view = toggle_group(self.state.param.view, "Signals")
+        self.scope = toggle_group(self.state.param.scope, "Scope")
         self.section = pn.widgets.Select.from_param(app.param.section, name="Section", width=160)
         self.compute_btn = pn.widgets.Button(label="Compute metrics", color="primary", width=180)
         self.compute_btn.on_click(lambda e: self.state.compute(dispatch=make_dispatch()))
@@ -32,8 +32,7 @@ class MetricsPage(PageBase):
         app.param.watch(lambda e: setattr(self.compute_btn, "disabled", bool(e.new)), ["busy"])
 
     def refresh(self) -> None:
-        controls = pn.Row(self.section, pn.Column(pn.pane.Markdown("Scope", margin=(0, 10)), self.scope),
-                          pn.Column(pn.pane.Markdown("Signals", margin=(0, 10)), self.view),
+        controls = pn.Row(self.section, self.scope, self.view,
                           pn.Column(pn.Spacer(height=30), self.compute_btn))
         df = self.state.table()
         if df is None or self.state.computed_for != self.state.key():

@@ -1,198 +1,45 @@
-"""Services joining the database, the simulator and the diagnosis/calibration core
-(docs/design.md §7): ``diagnose``, ``calibrate`` and the modal identification/calibration of [ref 3].
+"""Service: rank the effects missing from a configuration by the share of its residual they
+explain (docs/design.md §7, :mod:`railval.core.diagnosis`).
 
-The Panel app calls these from a background thread with a ``progress(stage, fraction, info)``
-callback; the CLI prints the same callbacks on stderr. Simulation and evaluation of the
-campaign for many candidate effect values run through :class:`railval.app.services.batch.BatchExecutor`
-(local process pool, or Dask with ``scheduler="tcp://…"``).
-
-Simulator adapter
------------------
-:func:`_simulate_campaign` is the one place that calls the built-in simulator
-(:mod:`railval.core.sim`); the task functions sent to the workers (:func:`_evaluate_effects`) are
-top-level so they pickle by reference.
+The Panel app calls :func:`diagnose` from a background thread with a ``progress(stage,
+fraction, info)`` callback; the CLI prints the same callbacks on stderr. The simulations of
+the campaign for many candidate effect values run through
+:class:`railval.app.services.batch.BatchExecutor` (local process pool, or Dask with
+``scheduler="tcp://…"``). Calibration is in :mod:`railval.app.services.calibration`, the
+modal identification of [ref 3] in :mod:`railval.app.services.modal`.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
-from dataclasses import dataclass, field
+from collections.abc import Iterator, Sequence
 from typing import Any
 
-import numpy as np
-
 from railval.app.services.batch import BatchExecutor
-from railval.core.calibration import (
-    COACH_MODAL_DEFAULTS,
-    COACH_MODAL_PARAMETERS,
-    CalibrationResult,
-    ParameterSpec,
-    calibrate_modal,
-    validation_objective,
+from railval.app.services.campaign_context import (
+    Progress,
+    band_sums,
+    configuration_of,
+    effect_parameters,
+    evaluate_effects,
+    load_context,
+    report,
+    residual_pattern,
+    section_values,
+    session_of,
 )
-from railval.core.diagnosis import (
-    DEFAULT_BANDS_HZ,
-    DiagnosisResult,
-    ParameterScan,
-    Pattern,
-    band_powers,
-    band_ratio_pattern,
-    diagnose_patterns,
-    pattern_from_pairs,
-)
-from railval.core.errors import InvalidParameter, NotFound
-from railval.core.modal import ssi_cov
-from railval.core.types import SectionInfo, SignalSet
-
-Progress = Callable[[str, float, dict[str, Any]], None]
-
-ACC_CHANNELS = ("ay_cb_b1", "ay_cb_b2", "az_cb_b1", "az_cb_b2")
+from railval.core.diagnosis import DiagnosisResult, ParameterScan, diagnose_patterns, scan_values
+from railval.core.errors import InvalidParameter
+from railval.core.sim.effects import EFFECTS, Effect
+from railval.db import repo
 
 
-# --------------------------------------------------------------------------- db helpers
-@contextmanager
-def _session(database_or_session: Any) -> Iterator[Any]:
-    """Yield a session from a :class:`railval.db.engine.Database`, a URL string or a Session."""
-    from sqlalchemy.orm import Session
-
-    if isinstance(database_or_session, Session):
-        yield database_or_session
-        return
-    if database_or_session is None or isinstance(database_or_session, str):
-        from railval.db.engine import connect
-
-        database_or_session = connect(database_or_session)
-    with database_or_session.session() as s:
-        yield s
-
-
-def _report(progress: Progress | None, stage: str, fraction: float, **info: Any) -> None:
-    if progress is not None:
-        progress(stage, float(min(max(fraction, 0.0), 1.0)), info)
-
-
-# --------------------------------------------------------------------------- campaign context
-@dataclass
-class CampaignContext:
-    """Everything a worker needs to simulate and evaluate the campaign (picklable)."""
-
-    campaign: str
-    vehicle: dict[str, Any]
-    sections: list[SectionInfo]
-    layouts: dict[str, Any]
-    measured_values: dict[str, dict[tuple[str, str], float]]
-    measured_bands: dict[str, np.ndarray]
-    channels: list[str]
-    fs: dict[str, float]
-    sim_inputs: dict[str, Any] = field(default_factory=dict)
-    bands: tuple[tuple[float, float], ...] = DEFAULT_BANDS_HZ
-
-
-def _band_sum(signalsets: Mapping[str, SignalSet], bands) -> dict[str, np.ndarray]:
-    out: dict[str, np.ndarray] = {}
-    for ss in signalsets.values():
-        for ch in ACC_CHANNELS:
-            if ch in ss.channels:
-                out[ch] = out.get(ch, 0.0) + band_powers(ss.channels[ch], ss.fs, bands, 10.0)
-    return out
-
-
-def _values(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo]) -> dict[str, dict]:
-    from railval.core.en14363 import evaluate_batch
-
-    secs = [s for s in sections if s.id in signalsets]
-    vals = evaluate_batch([signalsets[s.id] for s in secs], secs)
-    return {s.id: dict(v) for s, v in zip(secs, vals, strict=True)}
-
-
-def load_context(session: Any, campaign: str) -> CampaignContext:
-    """Read the campaign's vehicle, sections and measurement; evaluate the measurement once."""
-    from railval.db import repo
-
-    camp = repo.get_campaign(session, campaign)
-    sections = repo.section_infos(session, camp)
-    vehicle = repo.vehicle_info(session, camp)
-    layouts = repo.section_layouts(session, camp)
-    measured = repo.load_signalsets(session, camp, None)
-    if not measured:
-        raise NotFound(f"campaign {camp.name!r} has no measurement recordings")
-    ctx = CampaignContext(camp.name, vehicle, sections, layouts, _values(measured, sections),
-                          _band_sum(measured, DEFAULT_BANDS_HZ),
-                          sorted({c for ss in measured.values() for c in ss.channels}),
-                          {sid: ss.fs for sid, ss in measured.items()})
-    ctx.sim_inputs = _simulation_inputs(session, camp, ctx, measured)
-    return ctx
-
-
-def residual_pattern(ctx: CampaignContext, sim_values: Mapping[str, Mapping], sim_bands: Mapping[str, np.ndarray]) -> tuple[Pattern, Any]:
-    """Pattern (normalised D_v per quantity × zone × position + log₂ band-power ratios) and the
-    :class:`railval.core.validation.ValidationResult` (no bootstrap) of simulated values."""
-    from railval.core.validation import validate
-
-    vr = validate(ctx.measured_values, sim_values, ctx.sections, ctx.vehicle, n_boot=0)
-    pairs = vr.pairs.to_dict("records")
-    pat = pattern_from_pairs(pairs, value_key="D_norm")
-    return Pattern.concat(pat, band_ratio_pattern(sim_bands, ctx.measured_bands, ctx.bands)), vr
-
-
-# --------------------------------------------------------------------------- simulator adapter
-def _simulation_inputs(session: Any, camp: Any, ctx: CampaignContext, measured: Mapping[str, SignalSet]) -> dict[str, Any]:
-    """What the simulator needs beyond vehicle and sections (track irregularities …)."""
-    from railval.app.services import simulation as sim_service
-
-    hook = getattr(sim_service, "simulation_inputs", None)
-    if hook is not None:
-        return dict(hook(session, camp))
-    return {}
-
-
-def _simulate_campaign(ctx: CampaignContext, effects: Mapping[str, Mapping[str, float]],
-                       parameters: Mapping[str, float] | None = None) -> dict[str, SignalSet]:
-    """Simulate every section of the campaign with the built-in simulator."""
-    from railval.core.sim import simulate_campaign
-
-    return simulate_campaign(ctx.vehicle, ctx.sections, layouts=ctx.layouts, effects=dict(effects),
-                             parameters=dict(parameters or {}), channels=ctx.channels,
-                             fs=ctx.fs, **ctx.sim_inputs)
-
-
-def _effect_registry() -> dict[str, Any]:
-    from railval.core.sim.effects import EFFECTS
-
-    return dict(EFFECTS)
-
-
-def _evaluate_effects(task: tuple[CampaignContext, dict, dict]) -> tuple[dict, dict]:
-    """Worker task: simulate with ``effects`` (and model ``parameters``) and return the section
-    values and the summed acceleration band powers (small; no signals travel back)."""
-    ctx, effects, parameters = task
-    sets = _simulate_campaign(ctx, effects, parameters)
-    return _values(sets, ctx.sections), _band_sum(sets, ctx.bands)
-
-
-def _config(session: Any, campaign: str, name: str) -> tuple[dict, dict, Any]:
-    from railval.db import repo
-
-    conf = repo.get_configuration(session, campaign, name)
-    return dict(conf.effects or {}), dict(conf.parameters or {}), conf
-
-
-# --------------------------------------------------------------------------- diagnose
-def scan_values(lower: float, upper: float, default: float, n: int, log: bool = False) -> list[float]:
-    """``n`` values spanning [lower, upper] (equally spaced, or geometrically with ``log``) plus
-    the default, sorted, unique."""
-    grid = np.geomspace(lower, upper, n) if log else np.linspace(lower, upper, n)
-    return sorted(set(grid.tolist()) | {float(default)})
-
-
-def scan_points(spec: Any, values_per_parameter: int) -> Iterator[tuple[str, float, dict[str, float], dict]]:
+def scan_points(effect: Effect, values_per_parameter: int) -> Iterator[tuple[str, float, dict[str, float], dict]]:
     """The one-parameter scan of an effect: for each parameter and each of its
-    :func:`scan_values`, ``(parameter, value, all parameters at default but this one, its
-    bounds record)``."""
-    params = _effect_parameters(spec)
+    :func:`railval.core.diagnosis.scan_values`, ``(parameter, value, all parameters at default
+    but this one, its bounds record)``."""
+    params = effect_parameters(effect)
     defaults = {k: float(v["default"]) for k, v in params.items()}
     for pname, p in params.items():
         for v in scan_values(p["lower"], p["upper"], p["default"], values_per_parameter, p["log"]):
@@ -204,13 +51,12 @@ def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3,
     """How many campaign simulations :func:`diagnose` runs for ``effects`` (the configuration
     itself once, plus every distinct scan point of the effects that apply to the vehicle
     ``template``): shown before a user starts it."""
-    registry = _effect_registry()
     n = 1
     for e in effects:
-        if template and template not in getattr(registry[e], "templates", (template,)):
+        if template and template not in EFFECTS[e].templates:
             continue
         n += len({json.dumps(point, sort_keys=True)
-                  for _, _, point, _ in scan_points(registry[e], values_per_parameter)})
+                  for _, _, point, _ in scan_points(EFFECTS[e], values_per_parameter)})
     return n
 
 
@@ -220,26 +66,24 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     """Rank the effects missing from configuration ``config`` by the share of its residual
     they explain (:mod:`railval.core.diagnosis`). Each candidate effect parameter is simulated at
     ``values_per_parameter`` values over its bounds (plus its default) on the whole campaign."""
-    _report(progress, "load", 0.0, campaign=campaign, config=config)
-    with _session(database_or_session) as s:
+    report(progress, "load", 0.0, campaign=campaign, config=config)
+    with session_of(database_or_session) as s:
         ctx = load_context(s, campaign)
-        conf_effects, conf_params, _ = _config(s, campaign, config)
-        from railval.db import repo
-
+        conf_effects, conf_params, _ = configuration_of(s, campaign, config)
         config_sets = repo.load_signalsets(s, campaign, config)
-    registry = _effect_registry()
+    registry = EFFECTS
     unknown = [e for e in (effects or ()) if e not in registry]
     if unknown:
         raise InvalidParameter(f"unknown effect(s) {unknown}; known: {sorted(registry)}")
     template = str(ctx.vehicle.get("template") or "coach")
     todo = [e for e in (effects or registry) if e not in conf_effects
-            and template in getattr(registry[e], "templates", (template,))]
-    stored_residual, vr = residual_pattern(ctx, _values(config_sets, ctx.sections), _band_sum(config_sets, ctx.bands))
+            and template in registry[e].templates]
+    stored_residual, vr = residual_pattern(ctx, section_values(config_sets, ctx.sections), band_sums(config_sets, ctx.bands))
     # the configuration itself is re-simulated so that its residual and the scanned patterns
     # come from the same simulator run settings (signatures are differences of the two)
     tasks, index, unique = [(ctx, conf_effects, conf_params)], [], {}
     for e in todo:
-        defaults = {k: float(q["default"]) for k, q in _effect_parameters(registry[e]).items()}
+        defaults = {k: float(q["default"]) for k, q in effect_parameters(registry[e]).items()}
         for pname, v, point, p in scan_points(registry[e], values_per_parameter):
             eff = {**conf_effects, e: point}
             key = json.dumps(eff, sort_keys=True)
@@ -247,10 +91,10 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                 unique[key] = len(tasks)
                 tasks.append((ctx, eff, conf_params))
             index.append((e, pname, v, defaults, (p["lower"], p["upper"]), p["log"], unique[key]))
-    _report(progress, "simulate", 0.05, tasks=len(tasks))
+    report(progress, "simulate", 0.05, tasks=len(tasks))
     with BatchExecutor(scheduler, workers) as ex:
-        results = ex.map(_evaluate_effects, tasks,
-                         progress=lambda d, t: _report(progress, "simulate", 0.05 + 0.9 * d / t, done=d, total=t))
+        results = ex.map(evaluate_effects, tasks,
+                         progress=lambda d, t: report(progress, "simulate", 0.05 + 0.9 * d / t, done=d, total=t))
     scans: dict[str, dict[str, ParameterScan]] = {}
     residual, _ = residual_pattern(ctx, *results[0])
     for e, pname, v, defaults, bounds, log, k in index:
@@ -258,251 +102,13 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         sc = scans.setdefault(e, {}).setdefault(pname, ParameterScan(e, pname, [], [], defaults, bounds, log))
         sc.values.append(v)
         sc.patterns.append(pat)
-    explanations = {e: _effect_explanation(registry[e]) for e in todo}
+    explanations = {e: registry[e].explanation for e in todo}
     res = diagnose_patterns(residual, {e: list(d.values()) for e, d in scans.items()}, explanations=explanations)
     res.extra.update({"campaign": ctx.campaign, "configuration": config, "validated": bool(vr.validated),
                       "effects_in_configuration": sorted(conf_effects),
                       "values_per_parameter": values_per_parameter, "simulations": len(tasks),
                       "stored_residual_norm": math.sqrt(stored_residual.norm2()),
                       "simulated_residual_norm": math.sqrt(residual.norm2())})
-    _report(progress, "done", 1.0)
+    report(progress, "done", 1.0)
     return res
 
-
-def _effect_parameters(spec: Any) -> dict[str, dict[str, float]]:
-    """``{name: {lower, upper, default, unit}}`` of an effect registry entry (adapter)."""
-    params = spec["parameters"] if isinstance(spec, Mapping) else spec.parameters
-    out = {}
-    for name, p in (params.items() if isinstance(params, Mapping) else ((q.name, q) for q in params)):
-        get = p.get if isinstance(p, Mapping) else (lambda k, _p=p: getattr(_p, k))
-        scale = p.get("scale", "linear") if isinstance(p, Mapping) else getattr(p, "scale", "linear")
-        lower = float(get("lower"))
-        out[name] = {"lower": lower, "upper": float(get("upper")),
-                     "default": float(get("default")), "unit": str(get("unit") or ""),
-                     "log": scale == "log" and lower > 0}
-    return out
-
-
-def _effect_explanation(spec: Any) -> str:
-    return str(spec.get("explanation", "") if isinstance(spec, Mapping) else getattr(spec, "explanation", ""))
-
-
-# --------------------------------------------------------------------------- calibrate
-class _Objective:
-    """Validation objective of a parameter vector (picklable; evaluated in the workers)."""
-
-    def __init__(self, ctx: CampaignContext, base_effects: dict, base_params: dict, targets: list[tuple[str, str]]):
-        self.ctx, self.base_effects, self.base_params, self.targets = ctx, base_effects, base_params, targets
-
-    def split(self, params: Mapping[str, float]) -> tuple[dict, dict]:
-        effects = {k: dict(v) for k, v in self.base_effects.items()}
-        model = dict(self.base_params)
-        for (owner, pname), key in zip(self.targets, params, strict=True):
-            if owner == "model":
-                model[pname] = float(params[key])
-            else:
-                effects.setdefault(owner, {})[pname] = float(params[key])
-        return effects, model
-
-    def __call__(self, params: Mapping[str, float]) -> float:
-        from railval.core.validation import validate
-
-        effects, model = self.split(params)
-        vals, _ = _evaluate_effects((self.ctx, effects, model))
-        vr = validate(self.ctx.measured_values, vals, self.ctx.sections, self.ctx.vehicle, n_boot=0)
-        return validation_objective({q: r.mean_norm for q, r in vr.quantities.items()},
-                                    {q: r.std_norm for q, r in vr.quantities.items()})
-
-
-def calibrate(database: Any, campaign: str, config: str, effects: list[str], new_name: str, *,
-              params: list[str] | None = None, progress: Progress | None = None, scheduler: Any = None,
-              seed: int = 0, popsize: int = 5, maxiter: int = 5, polish_maxfev: int = 20,
-              workers: int | None = None,
-              start: Mapping[str, Mapping[str, float]] | None = None, replace: bool = False) -> CalibrationResult:
-    """Add ``effects`` to configuration ``config``, fit their parameters (all of them, or only
-    ``params`` — names ``"effect.param"``/``"param"`` of the effects, or ``"model.NAME"`` for
-    a vehicle-template parameter) to the validation objective
-    (:func:`railval.core.calibration.validation_objective`) with differential evolution and a local
-    polish (``start``: the start point of the fitted parameters and the value of those not
-    fitted), store the result as configuration ``new_name`` (parent ``config``) with its
-    simulated signals, and return the :class:`CalibrationResult` whose ``to_dict()`` holds the
-    new configuration's ``validation`` and the ``lineage`` (root → new, normalised error of
-    every quantity)."""
-    from railval.core import calibration as cal
-
-    _report(progress, "load", 0.0, campaign=campaign, config=config)
-    with _session(database) as s:
-        ctx = load_context(s, campaign)
-        conf_effects, conf_params, _ = _config(s, campaign, config)
-    registry = _effect_registry()
-    for e in effects:
-        if e not in registry:
-            raise InvalidParameter(f"unknown effect {e!r}; known: {sorted(registry)}")
-    base_effects = {k: dict(v) for k, v in conf_effects.items()}
-    specs: list[ParameterSpec] = []
-    targets: list[tuple[str, str]] = []
-    wanted = set(params or [])
-    for e in effects:
-        eparams = _effect_parameters(registry[e])
-        # a parameter left out of ``params`` keeps its ``start`` value (else its default)
-        base_effects.setdefault(e, {k: float((start or {}).get(e, {}).get(k, p["default"]))
-                                    for k, p in eparams.items()})
-        for pname, p in eparams.items():
-            if params and not ({pname, f"{e}.{pname}"} & wanted):
-                continue
-            st = (start or {}).get(e, {}).get(pname, base_effects[e].get(pname, p["default"]))
-            specs.append(ParameterSpec(f"{e}.{pname}", p["lower"], p["upper"], p["unit"],
-                                       min(max(float(st), p["lower"]), p["upper"]), log=p["log"]))
-            targets.append((e, pname))
-    for name in sorted(w for w in wanted if w.startswith("model.")):
-        specs.append(_model_spec(name[6:], ctx, conf_params))
-        targets.append(("model", name[6:]))
-    if params:
-        matched = {s.name for s in specs} | {s.name.split(".", 1)[1] for s in specs}
-        missing = [p for p in params if p not in matched]
-        if missing:
-            raise InvalidParameter(f"--params {missing} are not parameters of effects {effects} "
-                                   f"(use effect.param or model.NAME)")
-    if not specs:
-        raise InvalidParameter(f"nothing to calibrate for effects {effects} and params {params}")
-    objective = _Objective(ctx, base_effects, conf_params, targets)
-    with BatchExecutor(scheduler, workers) as ex:
-        res = cal.calibrate(objective, specs, seed=seed, popsize=popsize, maxiter=maxiter,
-                            polish_maxfev=polish_maxfev,
-                            workers=ex if ex.backend != "serial" else None,
-                            progress=lambda st, f, i: _report(progress, f"calibrate:{st}", 0.05 + 0.85 * f, **i))
-    eff, model = objective.split(res.parameters)
-    _report(progress, "store", 0.92)
-    sets = _simulate_campaign(ctx, eff, model)
-    vals = _values(sets, ctx.sections)
-    from railval.core.validation import validate
-
-    vr_full = validate(ctx.measured_values, vals, ctx.sections, ctx.vehicle)
-    with _session(database) as s:
-        from railval.db import repo
-
-        repo.store_configuration(
-            s, campaign, new_name, parent=config, effects=eff, parameters=model,
-            description=f"calibrated {', '.join(effects)} from {config} (objective {res.objective:.3g})",
-            signalsets=sets, replace=replace)
-        s.flush()
-        res.extra["lineage"] = lineage_errors(s, ctx, new_name, {new_name: vr_full})
-    res.extra.update({"configuration": new_name, "parent": config, "effects": eff,
-                      "model_parameters": model, "validation": vr_full.to_dict()})
-    _report(progress, "done", 1.0)
-    return res
-
-
-def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float]) -> ParameterSpec:
-    value = conf_params.get(name, ctx.vehicle.get("parameters", {}).get(name, COACH_MODAL_DEFAULTS.get(name)))
-    if value is None:
-        raise InvalidParameter(f"model parameter {name!r} has no value in the vehicle template or configuration")
-    lo, hi = (COACH_MODAL_PARAMETERS[name][:2] if name in COACH_MODAL_PARAMETERS
-              else (0.7 * float(value), 1.3 * float(value)))
-    return ParameterSpec(f"model.{name}", lo, hi, "", float(value))
-
-
-def lineage_errors(session: Any, ctx: CampaignContext, name: str, known: Mapping[str, Any] | None = None) -> list[dict]:
-    """Root → ``name``: per configuration its effects and every quantity's normalised error
-    max(|mean_norm|, std_norm) (with both parts), so the UI can draw the error falling."""
-    from railval.core.validation import validate
-    from railval.db import repo
-
-    out = []
-    for conf in repo.lineage(session, ctx.campaign, name):
-        vr = (known or {}).get(conf.name)
-        if vr is None:
-            sets = repo.load_signalsets(session, ctx.campaign, conf.name)
-            vr = validate(ctx.measured_values, _values(sets, ctx.sections), ctx.sections, ctx.vehicle, n_boot=0)
-        q = {k: {"mean_norm": _finite(r.mean_norm), "std_norm": _finite(r.std_norm),
-                 "error": _finite(max(abs(r.mean_norm), r.std_norm))} for k, r in vr.quantities.items()}
-        worst = max((v["error"] for v in q.values() if v["error"] is not None), default=None)
-        out.append({"configuration": conf.name, "effects": dict(conf.effects or {}),
-                    "validated": bool(vr.validated), "max_error": worst, "quantities": q})
-    return out
-
-
-def _finite(x: float) -> float | None:
-    return float(x) if x is not None and math.isfinite(x) else None
-
-
-# --------------------------------------------------------------------------- modal ([ref 3])
-def identify_modes(database_or_session: Any, campaign: str, *, sections: Sequence[str] | None = None,
-                   config: str | None = None, channels: Sequence[str] = ("az_cb_b1", "az_cb_b2"),
-                   fs_target: float = 20.0, f_min: float = 0.5, f_max: float = 4.0):
-    """SSI-COV modes of the car body from the accelerations of the measurement (or of a
-    configuration) over the chosen sections (all by default; covariances averaged over the
-    sections). Signals are decimated to about ``fs_target`` Hz with an anti-alias FIR
-    (``scipy.signal.resample_poly``)."""
-    from scipy.signal import resample_poly
-
-    from railval.db import repo
-
-    with _session(database_or_session) as s:
-        sets = repo.load_signalsets(s, campaign, config, sections=list(sections) if sections else None,
-                                    channels=list(channels))
-    records, fs_used = [], None
-    for ss in sets.values():
-        q = max(round(ss.fs / fs_target), 1)
-        fs_new = ss.fs / q
-        if fs_used is not None and not math.isclose(fs_new, fs_used):
-            continue
-        fs_used = fs_new
-        records.append(np.column_stack([resample_poly(ss.channels[c], 1, q) for c in channels]))
-    if not records:
-        raise NotFound(f"campaign {campaign!r}: no recordings with channels {list(channels)}")
-    return ssi_cov(records, fs_used, channels=list(channels), f_min=f_min, f_max=f_max)
-
-
-def modal(database_or_session: Any, campaign: str, *, sections: Sequence[str] | None = None,
-          calibrate_params: Sequence[str] | None = None, progress: Progress | None = None,
-          n_modes: int = 2) -> dict[str, Any]:
-    """Identify the car body modes and, with ``calibrate_params``, fit those coach modal
-    parameters (:data:`railval.core.calibration.COACH_MODAL_PARAMETERS`) to the ``n_modes`` best
-    supported modes ([ref 3]). Returns a JSON-ready dict with ``modes`` and ``calibration``
-    (the before/after frequency error table)."""
-    _report(progress, "identify", 0.0)
-    ident = identify_modes(database_or_session, campaign, sections=sections)
-    out: dict[str, Any] = {"campaign": campaign, "identification": ident.to_dict(),
-                           "stabilisation": ident.stabilisation_diagram()}
-    if calibrate_params:
-        unknown = [p for p in calibrate_params if p not in COACH_MODAL_PARAMETERS]
-        if unknown:
-            raise InvalidParameter(f"unknown modal parameter(s) {unknown}; known: {sorted(COACH_MODAL_PARAMETERS)}")
-        with _session(database_or_session) as s:
-            from railval.db import repo
-
-            vinfo = repo.vehicle_info(s, campaign)
-        if (vinfo.get("template") or "coach") != "coach":
-            raise InvalidParameter(
-                f"modal calibration models the coach template; campaign {campaign!r} uses "
-                f"template {vinfo.get('template')!r} (identification alone works for any vehicle)")
-        vparams = vinfo["parameters"]
-        base = _coach_modal_base(vparams)
-        best = sorted(ident.modes, key=lambda m: -m.n_stable)[:n_modes]
-        best.sort(key=lambda m: m.freq_hz)
-        if len(best) < 1:
-            raise NotFound(f"campaign {campaign!r}: no stable mode identified between 0.5 and 4 Hz")
-        specs = [ParameterSpec(p, *COACH_MODAL_PARAMETERS[p]) for p in calibrate_params]
-        res = calibrate_modal([m.freq_hz for m in best], np.column_stack([m.shape for m in best]), specs,
-                              base=base, progress=progress)
-        out["calibration"] = res.to_dict()
-    _report(progress, "done", 1.0)
-    return out
-
-
-def _coach_modal_base(vehicle_parameters: Mapping[str, Any]) -> dict[str, float]:
-    """Coach modal model values from the simulator's coach template defaults overlaid by the
-    campaign's vehicle parameters (``bogie_centres`` → ``bogie_half_distance``)."""
-    merged: dict[str, float] = {}
-    try:
-        from railval.core.sim.vehicles import template_parameters
-
-        merged.update({p.name: float(p.default) for p in template_parameters("coach")})
-    except ImportError:  # pragma: no cover - the simulator ships with railval
-        pass
-    merged.update({k: float(v) for k, v in vehicle_parameters.items() if isinstance(v, (int, float))})
-    base = {k: merged[k] for k in COACH_MODAL_DEFAULTS if k in merged}
-    if "bogie_centres" in merged:
-        base["bogie_half_distance"] = merged["bogie_centres"] / 2.0
-    return base

@@ -20,7 +20,7 @@ Progress = Callable[[str, float, dict], None]
 def simulation_inputs(session: Any, campaign: Any) -> dict[str, Any]:
     """Extra keyword arguments for :func:`railval.core.sim.simulate_campaign` beyond vehicle, sections,
     layouts, effects, parameters, channels and fs: none — the measured irregularities travel in
-    the sections' layout records. (Hook read by :mod:`railval.app.services.diagnosis`.)"""
+    the sections' layout records. (Read by :func:`railval.app.services.campaign_context.load_context`.)"""
     return {}
 
 

@@ -12,7 +12,8 @@ database table ``result_cache`` (:func:`railval.db.repo.cache_get` / :func:`rail
     sha256(PROCESSING_VERSION, filter order, section id, evaluated range, fs, n,
            distance-axis hash, sorted (channel, content hash) of the recording)
 
-and holds the section's values as JSON. Content hashes are read first
+and holds the section's values as JSON (with the values under the alternative readings of
+the open definitions and the supplementary values). Content hashes are read first
 (:func:`railval.db.repo.signal_hashes`, no blob is touched); only sections whose key is not cached are
 loaded and processed. So the measured side is processed once per campaign and filter order,
 and a new configuration costs only its own signals. Any change of samples, distance axis,
@@ -30,6 +31,7 @@ import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
@@ -105,14 +107,24 @@ def _cache_get_many(session: Session, keys: Sequence[str]) -> dict[str, bytes]:
 
 
 def _pack(values: en14363.SectionValues) -> bytes:
-    return json.dumps({"values": [[q, p, float(v)] for (q, p), v in values.items()],
-                       "warnings": values.warnings}, allow_nan=False).encode()
+    return json.dumps({
+        "values": [[q, p, float(v)] for (q, p), v in values.items()],
+        "warnings": values.warnings,
+        "alternatives": {rid: [[q, p, float(v) if np.isfinite(v) else None]
+                               for (q, p), v in vals.items()]
+                         for rid, vals in values.alternatives.items()},
+        "supplementary": [[q, p, float(v)] for (q, p), v in values.supplementary.items()],
+    }, allow_nan=False).encode()
 
 
 def _unpack(section_id: str, blob: bytes) -> en14363.SectionValues:
     doc = json.loads(blob)
+    alts = {rid: {(q, p): (float("nan") if v is None else v) for q, p, v in vals}
+            for rid, vals in doc.get("alternatives", {}).items()}
     return en14363.SectionValues(section_id, {(q, p): v for q, p, v in doc["values"]},
-                                 warnings=doc["warnings"])
+                                 warnings=doc["warnings"], alternatives=alts,
+                                 supplementary={(q, p): v for q, p, v in
+                                                doc.get("supplementary", [])})
 
 
 def source_values(session: Session, campaign, config: str | None, sections: Sequence[SectionInfo],

@@ -64,6 +64,8 @@ class ComparisonResult:
             "lag_samples": self.sync.lag_samples,
             "sync_correlation": self.sync.correlation,
             "lag_at_bound": self.sync.at_bound,
+            "lag_near_bound": self.sync.near_bound,
+            "lag_reliable": self.sync.reliable,
             "max_lag_s": self.sync.max_lag_samples / self.fs,
             "resampled": self.resampled,
             "grid_note": self.grid_note,
@@ -130,9 +132,10 @@ def compare(measured: np.ndarray, simulated: np.ndarray, fs: float, *,
     sync = estimate_lag(m, c, f, max_lag_s=max_lag_s, subsample=subsample)
     ms, cs = apply_lag(m, c, sync.lag_samples)
     notes = [grid.note]
-    if sync.at_bound:
-        notes.append(f"best lag lies on the search bound ±{sync.max_lag_samples / f:g} s; "
-                     "the true lag may be larger")
+    if sync.near_bound:
+        where = "on" if sync.at_bound else "near"
+        notes.append(f"lag {sync.lag_s:+.3g} s lies {where} the search bound "
+                     f"±{sync.max_lag_samples / f:g} s: unreliable, the true lag may be larger")
     raw = _evaluate(m, c, f, fams, opts)
     synced = _evaluate(ms, cs, f, fams, opts) if sync.lag_samples != 0 else dict(raw)
     return ComparisonResult(raw=raw, synced=synced, sync=sync, fs=f, n=len(grid),
@@ -163,7 +166,8 @@ def compare_signalsets(measured: SignalSet, simulated: SignalSet, channels: Iter
     Both records are low-passed (``lowpass_hz``, default 20 Hz as for Polach & Böttcher 2014's plots;
     ``None`` = no filter) at their own rate, then put on a common grid aligned by
     ``time_s[0]``. Returns one row per channel with ``channel``, ``n``, ``fs_hz``,
-    ``lag_s``, ``sync_correlation``, ``resampled``, ``error`` (message when the channel
+    ``lag_s``, ``sync_correlation``, ``lag_reliable`` (False when the lag lies at or within
+    5 % of the ±max_lag bound), ``resampled``, ``error`` (message when the channel
     could not be compared, else empty) and each metric ``<name>`` (raw) and ``<name>_sync``.
     ``options`` go to :func:`compare`.
     """
@@ -178,7 +182,8 @@ def compare_signalsets(measured: SignalSet, simulated: SignalSet, channels: Iter
                                    f"(has {sorted(ss.channels)})")
     fams = resolve_families(options.get("families"))
     metric_cols = metric_names(fams)
-    columns = ["channel", "n", "fs_hz", "lag_s", "sync_correlation", "resampled", "error"]
+    columns = ["channel", "n", "fs_hz", "lag_s", "sync_correlation", "lag_reliable", "resampled",
+               "error"]
     columns += [c for name in metric_cols for c in (name, f"{name}_sync")]
     if not names:
         return pd.DataFrame(columns=columns)
@@ -198,11 +203,13 @@ def compare_signalsets(measured: SignalSet, simulated: SignalSet, channels: Iter
                           t0_measured=t0m, t0_simulated=t0c, **options)
         except InvalidSignal as exc:
             row.update({"n": len(measured), "fs_hz": measured.fs, "lag_s": np.nan,
-                        "sync_correlation": np.nan, "resampled": False, "error": str(exc)})
+                        "sync_correlation": np.nan, "lag_reliable": False, "resampled": False,
+                        "error": str(exc)})
             row.update({c: np.nan for c in columns if c not in row})
         else:
             row.update({"n": res.n, "fs_hz": res.fs, "lag_s": res.sync.lag_s,
-                        "sync_correlation": res.sync.correlation, "resampled": res.resampled})
+                        "sync_correlation": res.sync.correlation,
+                        "lag_reliable": res.sync.reliable, "resampled": res.resampled})
             for name in metric_cols:
                 row[name] = res.raw[name]
                 row[f"{name}_sync"] = res.synced[name]

@@ -9,8 +9,12 @@ combines four sub-scores, each in [0, 1] (1 = identical):
    else ``((δ_o − |C_i − T_i|)/(δ_o − δ_i))^kz`` (kz = 2); ``Z = mean_i C_i``.
 2. **Phase score E_P.** The comparison curve is shifted against the reference by ``n`` samples,
    ``|n| ≤ ε_P · N`` (default ε_P = 0.2, i.e. 20 % of the duration), in both directions; the
-   shift ``n_ε`` maximising the Pearson correlation of the overlapping parts is chosen
-   (smallest |n| on ties). ``E_P = 1`` for ``n_ε = 0``, 0 for ``|n_ε| ≥ ε_P N``, else
+   shift ``n_ε`` maximising the Pearson correlation of the overlapping parts is chosen.
+   Ties: zero shift is kept unless another shift beats its correlation by more than
+   ``RHO_TIE_TOL`` = 1e-9; in general the smallest |n| among the shifts within that
+   tolerance of the largest correlation wins (:func:`railval.core.metrics.sync.best_lag_index`)
+   — whole-period shifts of exactly in-phase periodic curves differ only by rounding noise
+   (~1e-16) and must not move the shift. ``E_P = 1`` for ``n_ε = 0``, 0 for ``|n_ε| ≥ ε_P N``, else
    ``((ε_P N − |n_ε|)/(ε_P N))^kp`` (kp = 1). Magnitude and slope use the shifted, truncated
    curves.
 3. **Magnitude score E_M.** Dynamic time warping (squared-difference local cost, Sakoe–Chiba
@@ -47,7 +51,7 @@ import numpy as np
 
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.metrics._checks import as_pair, fraction, positive
-from railval.core.metrics.sync import lag_correlations
+from railval.core.metrics.sync import RHO_TIE_TOL, best_lag_index, lag_correlations
 
 GRADES = (("excellent", 0.94), ("good", 0.80), ("fair", 0.58))
 WEIGHTS = (0.4, 0.2, 0.2, 0.2)
@@ -138,14 +142,14 @@ def corridor_score(reference: np.ndarray, comparison: np.ndarray, *, a0: float =
 
 def phase_shift(reference: np.ndarray, comparison: np.ndarray, max_shift: float = 0.2) -> int:
     """Shift n_ε (samples, positive: comparison delayed) maximising the overlap correlation,
-    ``|n| ≤ floor(max_shift · N)``; the smallest |n| wins ties (first maximum from 0 outwards)."""
+    ``|n| ≤ floor(max_shift · N)``. Ties within ``RHO_TIE_TOL`` of the largest correlation go
+    to the smallest |n| (−n before +n): zero shift stays unless a shift beats it by more
+    than the tolerance."""
     t, c = as_pair(reference, comparison)
     n = t.shape[0]
     k = min(math.floor(max_shift * n), n - 2)
     lags, rho = lag_correlations(t, c, k)
-    order = np.argsort(np.abs(lags), kind="stable")  # 0, -1, 1, -2, 2, ...
-    best = order[int(np.argmax(rho[order]))]
-    return int(lags[best])
+    return int(lags[best_lag_index(lags, rho, RHO_TIE_TOL)])
 
 
 def phase_score(n_shift: int, n: int, *, max_shift: float = 0.2, kp: float = 1.0) -> float:

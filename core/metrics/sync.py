@@ -9,7 +9,11 @@ measurement, ``c(t) ≈ m(t − τ)``. For every integer lag ``k`` with ``|k| �
 correlation coefficient of the overlapping parts (``m[0:n−k]`` with ``c[k:n]`` for ``k ≥ 0``)
 is evaluated — the cross products come from one FFT correlation, the overlap means and
 variances from prefix sums, so all ``2K + 1`` coefficients cost ``O(n log n)``. The lag of the
-largest coefficient is chosen; ``K = round(max_lag_s · fs)`` is capped at ``n // 2`` so the
+largest coefficient is chosen; **ties** — every lag whose coefficient lies within
+``RHO_TIE_TOL`` (1e-9) of the largest — go to the smallest |lag| (and, between ±k, to −k), so
+an in-phase periodic pair (whose whole-period lags all correlate to 1 up to rounding noise of
+~1e-16) keeps lag 0 instead of a rounding-dependent multiple of the period
+(:func:`best_lag_index`). ``K = round(max_lag_s · fs)`` is capped at ``n // 2`` so the
 synchronised overlap always keeps at least half of the samples. Lags whose overlap has no
 variance in either signal score 0. Optional sub-sample refinement fits a parabola through
 the peak and its two neighbours (the standard three-point peak interpolation) and shifts
@@ -37,6 +41,10 @@ from railval.core.errors import InvalidParameter
 from railval.core.metrics._checks import as_pair, positive
 
 DEFAULT_MAX_LAG_S = 2.0
+#: correlation coefficients closer than this to the largest one count as ties (dimensionless)
+RHO_TIE_TOL = 1e-9
+#: a lag within this share of the search bound K is flagged as unreliable (``near_bound``)
+NEAR_BOUND_SHARE = 0.05
 
 
 @dataclass(frozen=True)
@@ -47,6 +55,10 @@ class SyncResult:
     Pearson coefficient at the chosen integer lag, ``max_lag_samples``: searched bound ``K``,
     ``at_bound``: the best lag lies on ±K (the true lag may be outside the window),
     ``refined``: sub-sample refinement applied.
+
+    ``near_bound`` (property): |lag| ≥ (1 − NEAR_BOUND_SHARE)·K, i.e. within 5 % of the search
+    bound; ``reliable`` (property) is its negation — a lag at or near the bound may be
+    limited by the window rather than found inside it.
     """
 
     lag_samples: float
@@ -56,8 +68,28 @@ class SyncResult:
     at_bound: bool
     refined: bool
 
+    @property
+    def near_bound(self) -> bool:
+        k = self.max_lag_samples
+        return bool(k > 0 and abs(self.lag_samples) >= (1.0 - NEAR_BOUND_SHARE) * k)
+
+    @property
+    def reliable(self) -> bool:
+        return not self.near_bound
+
     def to_dict(self) -> dict[str, float | int | bool]:
-        return asdict(self)
+        return {**asdict(self), "near_bound": self.near_bound, "reliable": self.reliable}
+
+
+def best_lag_index(lags: np.ndarray, rho: np.ndarray, tol: float = RHO_TIE_TOL) -> int:
+    """Index of the chosen lag: among the lags whose coefficient is within ``tol`` of the
+    largest, the smallest |lag| (−k before +k). With ``tol = 0`` this is the first maximum
+    counted outwards from lag 0."""
+    lags = np.asarray(lags)
+    rho = np.asarray(rho, dtype=np.float64)
+    candidates = np.flatnonzero(rho >= rho.max() - tol)
+    order = np.lexsort((lags[candidates], np.abs(lags[candidates])))  # |lag|, then lag
+    return int(candidates[order[0]])
 
 
 def lag_correlations(measured: np.ndarray, simulated: np.ndarray, max_lag: int) -> tuple[np.ndarray, np.ndarray]:
@@ -117,7 +149,7 @@ def estimate_lag(measured: np.ndarray, simulated: np.ndarray, fs: float, *,
     n = m.shape[0]
     big_k = int(min(round(max_lag_s * fs), n // 2))
     lags, rho = lag_correlations(m, c, big_k)
-    j = int(np.argmax(rho))
+    j = best_lag_index(lags, rho)
     lag = float(lags[j])
     refined = False
     if subsample and 0 < j < rho.shape[0] - 1:

@@ -1,0 +1,238 @@
+"""CLI verbs ``audit …`` and ``signoff …`` (docs/audit.md).
+
+``railval audit checkpoint FILE``  write the chain's head (count + hash) to FILE; keep it elsewhere
+``railval audit verify [--checkpoint FILE] [--bundle DIR] [--quick] [--json]``
+    recompute the chain, every signal blob's SHA-256 and every sign-off's evidence hash (or
+    check an exported bundle without the database); names the first break; exit 0 only
+    when everything holds, 1 when something does not
+``railval audit export DIR``  the offline bundle
+``railval audit log [--object PREFIX] [--actor NAME] [--json]``  the trail, oldest first
+``railval audit report --out FILE.html|FILE.pdf``  the assessor's audit report
+
+``railval signoff create CAMPAIGN --config NAME --decision validated|restricted|not-validated
+[--restrictions TEXT] --statement TEXT [--password-stdin | --password-file F]``
+    sign as ``--as USER`` (asks the password again)
+``railval signoff list [CAMPAIGN] [--config NAME] [--json]`` / ``railval signoff show ID``
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from railval.app.cli import emit_json
+from railval.core.errors import RailvalError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("audit", help="audit trail: checkpoint, verify, export, log, report")
+    au = p.add_subparsers(dest="subverb", metavar="SUBVERB")
+    au.required = True
+
+    c = au.add_parser("checkpoint", help="write the audit head (count + hash) to a file")
+    c.add_argument("file", help="checkpoint file to write (keep a copy away from the database)")
+    c.set_defaults(func=_cmd_checkpoint)
+
+    v = au.add_parser("verify", help="verify chain, signal hashes and sign-offs; exit 0 if all hold")
+    v.add_argument("--checkpoint", metavar="FILE", help="a checkpoint written earlier")
+    v.add_argument("--bundle", metavar="DIR", help="verify an exported bundle (no database)")
+    v.add_argument("--quick", action="store_true",
+                   help="skip decoding the signal blobs and recomputing the validation")
+    v.add_argument("--json", action="store_true", help="print the result as JSON")
+    v.set_defaults(func=_cmd_verify)
+
+    e = au.add_parser("export", help="write the offline audit bundle to a new folder")
+    e.add_argument("dir")
+    e.set_defaults(func=_cmd_export)
+
+    lg = au.add_parser("log", help="print the audit trail")
+    lg.add_argument("--object", default=None, help="object prefix, e.g. configuration:demo/")
+    lg.add_argument("--actor", default=None)
+    lg.add_argument("--json", action="store_true")
+    lg.set_defaults(func=_cmd_log)
+
+    r = au.add_parser("report", help="write the assessor's audit report (HTML or PDF)")
+    r.add_argument("--out", required=True, help="output file, .html or .pdf")
+    r.set_defaults(func=_cmd_report)
+
+    s = sub.add_parser("signoff", help="independent sign-off of a configuration")
+    so = s.add_subparsers(dest="subverb", metavar="SUBVERB")
+    so.required = True
+    cr = so.add_parser("create", help="sign off a configuration (asks your password again)")
+    cr.add_argument("campaign")
+    cr.add_argument("--config", required=True)
+    cr.add_argument("--decision", required=True,
+                    choices=["validated", "restricted", "not-validated"])
+    cr.add_argument("--restrictions", default="", help="required with --decision restricted")
+    cr.add_argument("--statement", required=True, help="the reviewer's statement")
+    g = cr.add_mutually_exclusive_group()
+    g.add_argument("--password-stdin", action="store_true")
+    g.add_argument("--password-file", metavar="FILE")
+    cr.add_argument("--json", action="store_true")
+    cr.set_defaults(func=_cmd_signoff_create)
+    sl = so.add_parser("list", help="list sign-offs with their status (valid / stale)")
+    sl.add_argument("campaign", nargs="?")
+    sl.add_argument("--config", default=None)
+    sl.add_argument("--json", action="store_true")
+    sl.set_defaults(func=_cmd_signoff_list)
+    sh = so.add_parser("show", help="show one sign-off with its evidence and status")
+    sh.add_argument("id", type=int)
+    sh.add_argument("--json", action="store_true")
+    sh.set_defaults(func=_cmd_signoff_show)
+
+
+def _database(args):
+    from railval.db.engine import connect
+
+    database = connect(args.db)
+    database.ensure_initialised()
+    return database
+
+
+def _cmd_checkpoint(args) -> int:
+    from railval.app.services.audit import write_checkpoint
+
+    doc = write_checkpoint(_database(args), args.file)
+    print(f"checkpoint written to {args.file}: {doc['seq']} rows, head {doc['row_hash']}")
+    return 0
+
+
+def _cmd_verify(args) -> int:
+    from railval.app.services import audit as svc
+
+    checkpoint = svc.read_checkpoint(args.checkpoint) if args.checkpoint else None
+    if args.bundle:
+        report = svc.verify_bundle(args.bundle, checkpoint)
+    else:
+        report = svc.verify_database(_database(args), checkpoint, signals=not args.quick,
+                                     full=not args.quick)
+    if args.json:
+        emit_json(report.to_dict())
+    else:
+        print(f"audit verify {report.source}: {report.rows} audit rows, head seq "
+              f"{report.head_seq} {report.head_hash[:16]}…, {report.signals} stored arrays, "
+              f"{report.signoffs} sign-offs ({report.seconds:.2f} s)")
+        if report.ok:
+            print("OK: the chain, " + ("the checkpoint, " if checkpoint else "")
+                  + ("every stored array, " if report.signals else "")
+                  + "and every sign-off's evidence hash hold")
+        else:
+            print(f"FAILED: first break: {report.findings[0]}")
+            for f in report.findings[1:]:
+                print(f"  also: {f}")
+    return 0 if report.ok else 1
+
+
+def _cmd_export(args) -> int:
+    from railval.app.services.audit import export_bundle
+
+    head = export_bundle(_database(args), args.dir)
+    print(f"audit bundle written to {args.dir}: {head['rows']} rows, head {head['row_hash']}; "
+          f"check it with `railval audit verify --bundle {args.dir}`")
+    return 0
+
+
+def _cmd_log(args) -> int:
+    from railval.db import audit
+
+    with _database(args).session() as s:
+        rows = list(audit.iter_rows(s, actor=args.actor, object_prefix=args.object))
+    if args.json:
+        emit_json({"rows": rows})
+        return 0
+    for r in rows:
+        reason = f"  — {r['reason']}" if r["reason"] else ""
+        print(f"{r['seq']:>6}  {r['at_utc'][:19]}Z  {r['actor']:<14} {r['action']:<22} "
+              f"{r['object']}{reason}")
+    return 0
+
+
+def _cmd_report(args) -> int:
+    from pathlib import Path
+
+    from railval.app.audit_report import build_audit_report
+
+    if Path(args.out).suffix.lower() not in (".html", ".htm", ".pdf"):
+        raise RailvalError(f"--out {args.out}: extension must be .html or .pdf")
+    rep = build_audit_report(_database(args))
+    path = rep.write(args.out)
+    print(f"audit report ({rep.chain_status}) written to {path}")
+    return 0
+
+
+# -- sign-off ----------------------------------------------------------------------------
+def _signer(args) -> str:
+    from railval.db import engine
+
+    who = engine.default_actor
+    if who.startswith("cli:"):
+        raise RailvalError("name the signer with --as USER or RAILVAL_USER")
+    return who
+
+
+def _cmd_signoff_create(args) -> int:
+    from railval.app.cli.cmd_user import read_password
+    from railval.app.services.signoff import sign
+
+    database = _database(args)
+    username = _signer(args)
+    password = read_password(args, confirm=False, prompt=f"Password of {username} (signature): ")
+    rec = sign(database, username, password, args.campaign, args.config,
+               decision=args.decision, restrictions=args.restrictions,
+               statement=args.statement, source="cli")
+    if args.json:
+        rec = {k: v for k, v in rec.items() if k != "manifest"}
+        emit_json(rec)
+    else:
+        _print_signoff(rec, "valid", [])
+    return 0
+
+
+def _print_signoff(rec: dict, status: str, reasons: list[str]) -> None:
+    print(f"sign-off {rec['id']}: {rec['campaign']}/{rec['configuration']} — "
+          f"{rec['decision_text'].upper()}  [{status.upper()}]")
+    print(f"  signed by   {rec['printed_name']} ({rec['username']})")
+    print(f"  at          {rec['signed_at_utc']} (UTC)")
+    print(f"  meaning     {rec['meaning']}")
+    if rec["restrictions"]:
+        print(f"  restrictions {rec['restrictions']}")
+    print(f"  statement   {rec['statement']}")
+    print(f"  evidence    SHA-256 {rec['evidence_sha256']} (railval {rec['software_version']})")
+    for r in reasons:
+        print(f"  stale: {r}")
+
+
+def _cmd_signoff_list(args) -> int:
+    from railval.app.services.signoff import statuses
+    from railval.db import signoff as db_signoff
+
+    with _database(args).session() as s:
+        items = [(db_signoff.as_dict(so), st) for so, st in statuses(s, args.campaign, args.config)]
+    if args.json:
+        emit_json({"signoffs": [{**{k: v for k, v in d.items() if k != "manifest"},
+                                 "status": st.status, "stale_reasons": st.reasons}
+                                for d, st in items]})
+        return 0
+    if not items:
+        print("no sign-offs")
+    for d, st in items:
+        print(f"{d['id']:>4}  {st.status.upper():<5}  {d['campaign']}/{d['configuration']}  "
+              f"{d['decision_text']}  by {d['printed_name']} at {d['signed_at_utc'][:19]}Z  "
+              f"evidence {d['evidence_sha256'][:16]}…")
+    return 0
+
+
+def _cmd_signoff_show(args) -> int:
+    from railval.app.services.signoff import status
+    from railval.db import signoff as db_signoff
+
+    with _database(args).session() as s:
+        so = db_signoff.get(s, args.id)
+        st = status(s, so)
+        rec = db_signoff.as_dict(so)
+    if args.json:
+        emit_json({**rec, "status": st.status, "stale_reasons": st.reasons})
+    else:
+        _print_signoff(rec, st.status, st.reasons)
+    sys.stdout.flush()
+    return 0

@@ -1,0 +1,147 @@
+"""The campaign as the diagnosis and calibration services see it (docs/design.md §7): one
+:class:`CampaignContext` (vehicle, sections, layouts, the measurement evaluated once), the
+simulator adapter and the worker task that simulates and evaluates the campaign.
+
+:func:`simulate_context` is the one place these services call the built-in simulator
+(:mod:`railval.core.sim`); the task sent to the workers (:func:`evaluate_effects`) is
+top-level so it pickles by reference.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from sqlalchemy.orm import Session
+
+from railval.app.services.simulation import simulation_inputs
+from railval.core.diagnosis import DEFAULT_BANDS_HZ, Pattern, band_powers, band_ratio_pattern, pattern_from_pairs
+from railval.core.en14363 import evaluate_batch
+from railval.core.errors import NotFound
+from railval.core.sim import simulate_campaign
+from railval.core.sim.effects import Effect
+from railval.core.types import SectionInfo, SignalSet
+from railval.core.validation import ValidationResult, validate
+from railval.db import repo
+from railval.db.engine import connect
+
+Progress = Callable[[str, float, dict[str, Any]], None]
+
+ACC_CHANNELS = ("ay_cb_b1", "ay_cb_b2", "az_cb_b1", "az_cb_b2")
+
+
+@contextmanager
+def session_of(database_or_session: Any) -> Iterator[Any]:
+    """Yield a session from a :class:`railval.db.engine.Database`, a URL string or a Session."""
+    if isinstance(database_or_session, Session):
+        yield database_or_session
+        return
+    if database_or_session is None or isinstance(database_or_session, str):
+        database_or_session = connect(database_or_session)
+    with database_or_session.session() as s:
+        yield s
+
+
+def report(progress: Progress | None, stage: str, fraction: float, **info: Any) -> None:
+    """Call ``progress(stage, fraction clipped to [0, 1], info)`` when a callback is given."""
+    if progress is not None:
+        progress(stage, float(min(max(fraction, 0.0), 1.0)), info)
+
+
+@dataclass
+class CampaignContext:
+    """Everything a worker needs to simulate and evaluate the campaign (picklable)."""
+
+    campaign: str
+    vehicle: dict[str, Any]
+    sections: list[SectionInfo]
+    layouts: dict[str, Any]
+    measured_values: dict[str, dict[tuple[str, str], float]]
+    measured_bands: dict[str, np.ndarray]
+    channels: list[str]
+    fs: dict[str, float]
+    sim_inputs: dict[str, Any] = field(default_factory=dict)
+    bands: tuple[tuple[float, float], ...] = DEFAULT_BANDS_HZ
+
+
+def band_sums(signalsets: Mapping[str, SignalSet], bands) -> dict[str, np.ndarray]:
+    """Car body acceleration channel → band powers summed over the sections (10 s Welch segments)."""
+    out: dict[str, np.ndarray] = {}
+    for ss in signalsets.values():
+        for ch in ACC_CHANNELS:
+            if ch in ss.channels:
+                out[ch] = out.get(ch, 0.0) + band_powers(ss.channels[ch], ss.fs, bands, 10.0)
+    return out
+
+
+def section_values(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo]) -> dict[str, dict]:
+    """EN 14363 values (:func:`railval.core.en14363.evaluate_batch`) of the sections present."""
+    secs = [s for s in sections if s.id in signalsets]
+    vals = evaluate_batch([signalsets[s.id] for s in secs], secs)
+    return {s.id: dict(v) for s, v in zip(secs, vals, strict=True)}
+
+
+def load_context(session: Any, campaign: str) -> CampaignContext:
+    """Read the campaign's vehicle, sections and measurement; evaluate the measurement once."""
+    camp = repo.get_campaign(session, campaign)
+    sections = repo.section_infos(session, camp)
+    vehicle = repo.vehicle_info(session, camp)
+    layouts = repo.section_layouts(session, camp)
+    measured = repo.load_signalsets(session, camp, None)
+    if not measured:
+        raise NotFound(f"campaign {camp.name!r} has no measurement recordings")
+    ctx = CampaignContext(camp.name, vehicle, sections, layouts, section_values(measured, sections),
+                          band_sums(measured, DEFAULT_BANDS_HZ),
+                          sorted({c for ss in measured.values() for c in ss.channels}),
+                          {sid: ss.fs for sid, ss in measured.items()})
+    ctx.sim_inputs = dict(simulation_inputs(session, camp))
+    return ctx
+
+
+def validate_values(ctx: CampaignContext, sim_values: Mapping[str, Mapping], n_boot: int = 0) -> ValidationResult:
+    """The validation (:func:`railval.core.validation.validate`) of simulated section values
+    against the context's measurement."""
+    return validate(ctx.measured_values, sim_values, ctx.sections, ctx.vehicle, n_boot=n_boot)
+
+
+def residual_pattern(ctx: CampaignContext, sim_values: Mapping[str, Mapping],
+                     sim_bands: Mapping[str, np.ndarray]) -> tuple[Pattern, ValidationResult]:
+    """Pattern (normalised D_v per quantity × zone × position + log₂ band-power ratios) and the
+    :class:`railval.core.validation.ValidationResult` (no bootstrap) of simulated values."""
+    vr = validate_values(ctx, sim_values)
+    pairs = vr.pairs.to_dict("records")
+    pat = pattern_from_pairs(pairs, value_key="D_norm")
+    return Pattern.concat(pat, band_ratio_pattern(sim_bands, ctx.measured_bands, ctx.bands)), vr
+
+
+def simulate_context(ctx: CampaignContext, effects: Mapping[str, Mapping[str, float]],
+                     parameters: Mapping[str, float] | None = None) -> dict[str, SignalSet]:
+    """Simulate every section of the campaign with the built-in simulator."""
+    return simulate_campaign(ctx.vehicle, ctx.sections, layouts=ctx.layouts, effects=dict(effects),
+                             parameters=dict(parameters or {}), channels=ctx.channels,
+                             fs=ctx.fs, **ctx.sim_inputs)
+
+
+def evaluate_effects(task: tuple[CampaignContext, dict, dict]) -> tuple[dict, dict]:
+    """Worker task: simulate with ``effects`` (and model ``parameters``) and return the section
+    values and the summed acceleration band powers (small; no signals travel back)."""
+    ctx, effects, parameters = task
+    sets = simulate_context(ctx, effects, parameters)
+    return section_values(sets, ctx.sections), band_sums(sets, ctx.bands)
+
+
+def configuration_of(session: Any, campaign: str, name: str) -> tuple[dict, dict, Any]:
+    """(effects, model parameters, row) of a stored configuration."""
+    conf = repo.get_configuration(session, campaign, name)
+    return dict(conf.effects or {}), dict(conf.parameters or {}), conf
+
+
+def effect_parameters(effect: Effect) -> dict[str, dict[str, Any]]:
+    """``{name: {lower, upper, default, unit, log}}`` of an effect of :mod:`railval.core.sim.effects`
+    (``log``: scanned and fitted on a logarithmic scale)."""
+    return {name: {"lower": float(p.lower), "upper": float(p.upper), "default": float(p.default),
+                   "unit": str(p.unit or ""), "log": p.scale == "log" and p.lower > 0}
+            for name, p in effect.parameters.items()}

@@ -1,0 +1,247 @@
+"""Independent sign-off of a configuration's validation, bound to its evidence (docs/audit.md).
+
+The **evidence manifest** of a configuration is one JSON document holding
+
+* ``measurement`` and ``simulation``: section → channel → SHA-256 content hash of every
+  stored signal of both sides (and of each distance axis),
+* ``configuration``: parent, lineage, effects and parameters of the configuration,
+* ``sections`` and ``vehicle``: the campaign records the processing reads (evaluated range,
+  radius, speed, zone; vehicle kind and static wheel load),
+* ``processing``: the EN 14363 processing version and settings (filter order, bootstrap
+  size and seed),
+* ``result``: the validation result — per quantity the values, limits and verdict — as
+  computed for the signature,
+* ``software_version``: the railval version that computed it.
+
+Its **evidence hash** is SHA-256 over its canonical JSON
+(:func:`railval.core.integrity.evidence_hash`). A sign-off stores both; it is *valid* while
+the manifest rebuilt from the database today has the same hash, and *stale* otherwise
+(21 CFR 11.70: the signature cannot be moved to other evidence). The quick status
+(:func:`status`, used by pages, lists and the report) rebuilds everything except the result;
+``full=True`` (``railval audit verify``) recomputes the validation too.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any
+
+from sqlalchemy.orm import Session
+
+from railval.core.en14363 import PROCESSING_VERSION
+from railval.core.errors import NotFound, RailvalError
+from railval.core.filters import DEFAULT_ORDER
+from railval.core.integrity import evidence_hash
+from railval.core.roles import PermissionDenied, require
+from railval.db import audit, repo, users
+from railval.db import signoff as db_signoff
+from railval.db.models import Signoff
+
+SCHEMA = "railval-evidence/1"
+#: the processing settings a sign-off is computed with (the defaults of ``railval validate``)
+SETTINGS: dict[str, Any] = {"filter_order": DEFAULT_ORDER, "n_boot": 1000, "seed": 0}
+_INPUT_KEYS = ("schema", "campaign", "configuration", "measurement", "simulation",
+               "configuration_record", "sections", "vehicle", "processing", "software_version")
+
+
+def software_version() -> str:
+    try:
+        return version("railval")
+    except PackageNotFoundError:  # pragma: no cover - always installed in this project
+        return "unknown"
+
+
+def _plain(obj: Any) -> Any:
+    """JSON-clean copy: numpy scalars → Python, non-finite floats → their repr string."""
+    def default(v):
+        import numpy as np
+
+        if isinstance(v, np.generic):
+            return v.item()
+        if isinstance(v, np.ndarray):
+            return v.tolist()
+        raise TypeError(f"not JSON serialisable: {type(v).__name__}")
+
+    return repo._jsonable(json.loads(json.dumps(obj, default=default)))
+
+
+def input_manifest(session: Session, campaign: str, configuration: str,
+                   settings: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The manifest without the validation result (cheap: no blob is read)."""
+    settings = {**SETTINGS, **(settings or {})}
+    camp = repo.get_campaign(session, campaign)
+    conf = repo.get_configuration(session, camp, configuration)
+    chain = repo.lineage(session, camp, conf.name)
+    sections = [
+        {"id": s.id, "radius_m": s.radius_m, "cant_mm": s.cant_mm, "speed_kmh": s.speed_kmh,
+         "zone": int(s.zone), "eval_start_m": s.eval_start_m, "eval_end_m": s.eval_end_m,
+         "curve_direction": s.curve_direction}
+        for s in repo.section_infos(session, camp)
+    ]
+    return _plain({
+        "schema": SCHEMA,
+        "campaign": camp.name,
+        "configuration": conf.name,
+        "measurement": repo.source_hashes(session, camp, None),
+        "simulation": repo.source_hashes(session, camp, conf.name),
+        "configuration_record": {
+            "parent": chain[-2].name if len(chain) > 1 else None,
+            "lineage": [c.name for c in chain],
+            "effects": conf.effects or {}, "parameters": conf.parameters or {},
+        },
+        "sections": sections,
+        "vehicle": repo.vehicle_info(session, camp),
+        "processing": {"version": PROCESSING_VERSION, **settings},
+        "software_version": software_version(),
+    })
+
+
+def validation_result(session: Session, campaign: str, configuration: str,
+                      settings: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The validation result (values, limits, verdict) as it enters the manifest."""
+    from railval.app.services.validation import validate_configuration
+
+    settings = {**SETTINGS, **(settings or {})}
+    res = validate_configuration(session, campaign, configuration,
+                                 order=settings["filter_order"], n_boot=settings["n_boot"],
+                                 seed=settings["seed"])
+    d = res.to_dict()
+    d.pop("info", None)
+    return _plain(d)
+
+
+def evidence_manifest(session: Session, campaign: str, configuration: str,
+                      settings: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The complete evidence manifest (runs the validation, from the result cache if warm)."""
+    m = input_manifest(session, campaign, configuration, settings)
+    m["result"] = validation_result(session, m["campaign"], m["configuration"], settings)
+    return m
+
+
+# -- status ------------------------------------------------------------------------------
+@dataclass
+class SignoffStatus:
+    """``valid`` while the evidence is unchanged, else ``stale`` with the reasons."""
+
+    signoff_id: int
+    status: str
+    reasons: list[str] = field(default_factory=list)
+    current_sha256: str | None = None
+
+    @property
+    def valid(self) -> bool:
+        return self.status == "valid"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"signoff": self.signoff_id, "status": self.status, "reasons": self.reasons,
+                "current_evidence_sha256": self.current_sha256}
+
+
+def _short(h: Any) -> str:
+    return str(h)[:12] + "…" if isinstance(h, str) and len(h) == 64 else json.dumps(h)[:80]
+
+
+def manifest_differences(signed: dict[str, Any], now: dict[str, Any], *,
+                         keys: tuple[str, ...] | None = None, limit: int = 5) -> list[str]:
+    """Readable differences between two manifests (first ``limit`` per part)."""
+    out: list[str] = []
+    for key in keys or tuple(sorted(set(signed) | set(now))):
+        a, b = signed.get(key), now.get(key)
+        if a == b:
+            continue
+        if key in ("measurement", "simulation") and isinstance(a, dict) and isinstance(b, dict):
+            n = 0
+            for sid in sorted(set(a) | set(b)):
+                ca, cb = a.get(sid) or {}, b.get(sid) or {}
+                for ch in sorted(set(ca) | set(cb)):
+                    if ca.get(ch) != cb.get(ch) and n < limit:
+                        out.append(f"{key} section {sid} {ch}: signed {_short(ca.get(ch))}, "
+                                   f"now {_short(cb.get(ch))}")
+                        n += 1
+        elif isinstance(a, dict) and isinstance(b, dict):
+            for sub in sorted(set(a) | set(b)):
+                if a.get(sub) != b.get(sub):
+                    out.append(f"{key}.{sub}: signed {json.dumps(a.get(sub))[:120]}, "
+                               f"now {json.dumps(b.get(sub))[:120]}")
+        else:
+            out.append(f"{key}: signed {json.dumps(a)[:120]}, now {json.dumps(b)[:120]}")
+    return out
+
+
+def status(session: Session, so: Signoff, *, full: bool = False) -> SignoffStatus:
+    """Is the sign-off still bound to the current evidence? (``full``: recompute the result.)"""
+    reasons: list[str] = []
+    stored = dict(so.manifest or {})
+    if evidence_hash(stored) != so.evidence_sha256:
+        reasons.append(f"stored manifest does not hash to the signed evidence hash "
+                       f"{so.evidence_sha256} (found {evidence_hash(stored)})")
+    settings = dict(stored.get("processing") or {})
+    settings.pop("version", None)
+    try:
+        now = input_manifest(session, so.campaign, so.configuration, settings)
+        if full:
+            now["result"] = validation_result(session, so.campaign, so.configuration, settings)
+    except NotFound as exc:
+        return SignoffStatus(so.id, "stale", reasons + [f"evidence no longer exists: {exc}"])
+    keys = None if full else _INPUT_KEYS
+    reasons += manifest_differences(stored, now, keys=keys)
+    current = evidence_hash(now) if full else None
+    return SignoffStatus(so.id, "stale" if reasons else "valid", reasons, current)
+
+
+def statuses(session: Session, campaign: str | None = None, configuration: str | None = None
+             ) -> list[tuple[Signoff, SignoffStatus]]:
+    """Every sign-off (optionally of one campaign/configuration) with its quick status."""
+    return [(so, status(session, so)) for so in
+            db_signoff.list_signoffs(session, campaign, configuration)]
+
+
+# -- signing -----------------------------------------------------------------------------
+class SignoffRefused(RailvalError):
+    """The password did not match, the role is missing or the signer is not independent."""
+
+
+def independence_problem(session: Session, username: str, campaign: str,
+                         configuration: str) -> str | None:
+    """Why ``username`` is not independent of the configuration (stored or replaced it)."""
+    for row in audit.iter_rows(session, actor=username,
+                               object=f"configuration:{campaign}/{configuration}"):
+        if row["action"] in ("configuration.store", "configuration.replace"):
+            return (f"{username} stored configuration {configuration!r} "
+                    f"(audit row {row['seq']}, {row['at_utc']}); the sign-off must come "
+                    "from an independent reviewer")
+    return None
+
+
+def sign(database, username: str, password: str, campaign: str, configuration: str, *,
+         decision: str, restrictions: str = "", statement: str = "", source: str = "") -> dict:
+    """Verify the password again (21 CFR 11.200(a)(1)), check role and independence, build
+    the evidence manifest and append the sign-off; returns it as a record.
+
+    A wrong password is recorded (``login.failed``) and counts towards the sign-in rate
+    limit. Raises :class:`SignoffRefused` or :class:`PermissionDenied`.
+    """
+    with database.session(actor=username) as s:
+        result = users.authenticate(s, username, password, source=source or "signoff",
+                                    record_success=False)
+    if not result.ok:
+        raise SignoffRefused(f"sign-off refused: {result.message}")
+    with database.session(actor=username) as s:
+        user = users.get_user(s, username)
+        try:
+            require(users.principal(user), "signoff.create")
+        except PermissionDenied as exc:
+            raise SignoffRefused(f"sign-off refused: {exc}") from None
+        camp = repo.get_campaign(s, campaign)
+        conf = repo.get_configuration(s, camp, configuration)
+        problem = independence_problem(s, username, camp.name, conf.name)
+        if problem:
+            raise SignoffRefused(f"sign-off refused: {problem}")
+        manifest = evidence_manifest(s, camp.name, conf.name)
+        so = db_signoff.create(s, user=user, campaign=camp.name, configuration=conf.name,
+                               decision=decision, restrictions=restrictions,
+                               statement=statement, manifest=manifest,
+                               software_version=software_version())
+        return db_signoff.as_dict(so)

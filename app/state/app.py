@@ -1,0 +1,172 @@
+"""The engineer's selections shared by all pages, and background jobs (docs/design.md §2).
+
+Long work runs through :meth:`AppState.run_job`: a thread calls the work function with a
+``progress(fraction, message)`` callback; every state change is handed to ``dispatch`` (the
+view passes one that schedules on the Bokeh document's event loop; tests pass the default,
+which calls directly). Errors land in ``AppState.status`` with level ``"error"``.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import traceback
+from collections.abc import Callable
+from typing import Any
+
+import param
+
+from railval.app.state.backend import Backend, CampaignOverview
+
+PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report")
+PAGE_TITLES = {
+    "overview": "Campaign overview",
+    "compare": "Compare signals",
+    "dashboard": "Validation dashboard",
+    "metrics": "Curve metrics",
+    "diagnose": "Diagnose & model workshop",
+    "report": "Report",
+}
+
+
+class AppState(param.Parameterized):
+    """What the engineer has selected, shared by all pages."""
+
+    campaign = param.Selector(default=None, objects=[], allow_None=True)
+    configuration = param.Selector(default=None, objects=[], allow_None=True)
+    page = param.Selector(default="overview", objects=list(PAGES))
+    section = param.Selector(default=None, objects=[], allow_None=True)
+    channel = param.Selector(default=None, objects=[], allow_None=True)
+    status = param.String(default="", doc="message of the status area")
+    status_level = param.Selector(default="info", objects=["info", "success", "warning", "error"])
+    busy = param.Boolean(default=False, doc="a background job is running")
+    progress = param.Number(default=0.0, bounds=(0.0, 1.0))
+    revision = param.Integer(default=0, doc="bumped when the database changed (new configuration)")
+
+    def __init__(self, backend: Backend, **params):
+        super().__init__(**params)
+        self.backend = backend
+        self._job: threading.Thread | None = None
+        self.refresh_campaigns()
+
+    # -- selections
+    def refresh_campaigns(self) -> None:
+        try:
+            names = self.backend.campaigns()
+        except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+            self.set_status(f"cannot list campaigns: {exc}", "error")
+            names = []
+        self.param.campaign.objects = names
+        if names and self.campaign not in names:
+            self.campaign = names[0]
+        elif self.campaign is not None:
+            self._campaign_changed()
+
+    @param.depends("campaign", watch=True)
+    def _campaign_changed(self) -> None:
+        if self.campaign is None:
+            return
+        try:
+            ov = self.backend.overview(self.campaign)
+        except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+            self.set_status(f"cannot open campaign {self.campaign!r}: {exc}", "error")
+            return
+        self.overview = ov
+        configs = [c.name for c in ov.configurations]
+        sections = [s.id for s in ov.sections]
+        chans = [c["name"] for c in ov.channels]
+        with param.parameterized.batch_call_watchers(self):
+            self.param.configuration.objects = configs
+            self.param.section.objects = sections
+            self.param.channel.objects = chans
+            if self.configuration not in configs:
+                self.configuration = configs[0] if configs else None
+            if self.section not in sections:
+                self.section = sections[0] if sections else None
+            if self.channel not in chans:
+                self.channel = chans[0] if chans else None
+
+    overview: CampaignOverview | None = None
+
+    def reload_configurations(self, select: str | None = None) -> None:
+        """Re-read configurations after a job stored a new one; optionally select it."""
+        self.backend.invalidate()
+        self._campaign_changed()
+        if select is not None and select in self.param.configuration.objects:
+            self.configuration = select
+        self.revision += 1
+
+    def open_compare(self, section: str, channel: str, configuration: str | None = None) -> None:
+        """Jump to the Compare page for one section/channel (dashboard drill-down)."""
+        with param.parameterized.batch_call_watchers(self):
+            if configuration is not None and configuration in self.param.configuration.objects:
+                self.configuration = configuration
+            if section in self.param.section.objects:
+                self.section = section
+            if channel in self.param.channel.objects:
+                self.channel = channel
+            self.page = "compare"
+
+    def set_status(self, message: str, level: str = "info") -> None:
+        self.status_level = level
+        self.status = message
+
+    # -- background jobs
+    def run_job(self, title: str, work: Callable[[Callable[[float, str], None]], Any],
+                on_done: Callable[[Any], None] | None = None,
+                dispatch: Callable[[Callable[[], None]], None] | None = None,
+                background: bool = True) -> threading.Thread | None:
+        """Run ``work(progress)`` in a thread; ``progress(fraction, message)`` updates the
+        progress bar and status; ``on_done(result)`` runs through ``dispatch`` afterwards.
+        Refuses (status warning) while another job runs so the page never double-submits."""
+        if self.busy:
+            self.set_status(f"{title}: another job is still running — wait for it to finish", "warning")
+            return None
+        call = dispatch or (lambda f: f())
+        self.busy = True
+        self.progress = 0.0
+        self.set_status(f"{title}: started", "info")
+
+        def progress(fraction: float, message: str = "") -> None:
+            frac = float(min(1.0, max(0.0, fraction if math.isfinite(fraction) else 0.0)))
+
+            def apply():
+                self.progress = frac
+                self.set_status(f"{title}: {message}" if message else f"{title}: {frac:.0%}", "info")
+            call(apply)
+
+        def body():
+            try:
+                result = work(progress)
+            except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+                detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+
+                def fail():
+                    self.busy = False
+                    self.set_status(f"{title} failed: {detail}", "error")
+                call(fail)
+                return
+
+            def done():
+                self.busy = False
+                self.progress = 1.0
+                self.set_status(f"{title}: done", "success")
+                if on_done is not None:
+                    try:
+                        on_done(result)
+                    except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
+                        self.set_status(f"{title}: finished but showing the result failed: {exc}", "error")
+            call(done)
+
+        if not background:
+            body()
+            return None
+        self._job = threading.Thread(target=body, name=f"railval-job-{title}", daemon=True)
+        self._job.start()
+        return self._job
+
+    def wait(self, timeout: float | None = None) -> None:
+        if self._job is not None:
+            self._job.join(timeout)
+
+

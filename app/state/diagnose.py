@@ -1,0 +1,210 @@
+"""State of the Diagnose & model workshop page: ranked candidates, chosen effect,
+calibrate/re-simulate job in a background thread with progress, lineage of the error."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import param
+
+from railval.app.services.diagnosis import diagnosis_simulations
+from railval.app.state.app import AppState
+from railval.app.state.dashboard import finite_or_nan, quantity_rows
+from railval.core.calibration import max_evaluations
+from railval.core.diagnosis import PatternGrid, pattern_grids
+
+
+class DiagnoseState(param.Parameterized):
+    effect = param.Selector(default=None, objects=[], allow_None=True)
+    new_name = param.String(default="")
+    name_edited = param.Boolean(default=False, doc=(
+        "the user typed the new configuration's name; until then it follows the chosen effect"))
+    candidates = param.List(default=[])
+    parameters = param.Dict(default={}, doc="manually set parameters of the chosen effect")
+    last_new_configuration = param.String(default="")
+    last_result = param.Dict(default={}, doc="to_dict() of the last calibration or re-simulation")
+    diagnosis_run = param.Dict(default={}, doc="settings and simulation count of the last diagnosis")
+    residual = param.Dict(default={}, doc="residual pattern of the diagnosed configuration (labels, values)")
+    diagnosis_note = param.String(default="", doc="separability note of the diagnosis")
+    separable = param.Boolean(default=True, doc="the two best candidates are told apart")
+    # diagnosis settings (app.services.diagnosis.diagnose)
+    candidate_effects = param.ListSelector(default=[], objects=[], doc=(
+        "effects the diagnosis tries; none chosen = every effect the configuration lacks"))
+    values_per_parameter = param.Integer(default=3, bounds=(2, 9), doc=(
+        "values of each effect parameter simulated over its bounds (plus its default)"))
+    # calibration settings (app.services.diagnosis.calibrate → core.calibration.calibrate)
+    fit_parameters = param.ListSelector(default=[], objects=[], doc=(
+        "parameters of the chosen effect to fit; none chosen = all; the others keep the values set"))
+    popsize = param.Integer(default=5, bounds=(2, 40), doc="differential evolution: population per parameter")
+    maxiter = param.Integer(default=5, bounds=(1, 200), doc="differential evolution: generations at most")
+    polish_maxfev = param.Integer(default=20, bounds=(0, 1000), doc="local polish: simulations at most")
+    seed = param.Integer(default=0, bounds=(0, None), doc="random seed of the global search")
+
+    def __init__(self, app: AppState, **params):
+        super().__init__(**params)
+        self.app = app
+        self._naming = False
+        self.app.param.watch(lambda e: self._reset(), ["campaign", "configuration"])
+        self.param.watch(lambda e: self._effect_changed(), ["effect"])
+        self.param.watch(self._name_typed, ["new_name"])
+
+    def _reset(self) -> None:
+        self.candidates = []
+        self.residual = {}
+        if self.effect is not None and self.effect not in self.available_effects():
+            self.effect = None  # already part of the newly selected configuration
+        self.name_edited = False
+        self._suggest_name()
+
+    def _name_typed(self, event) -> None:
+        if not self._naming:  # a change that did not come from _suggest_name: the user typed it
+            self.name_edited = bool(event.new.strip())
+
+    def _suggest_name(self) -> None:
+        """Let the name follow the chosen effect until the user edits it."""
+        if self.name_edited:
+            return
+        self._naming = True
+        try:
+            self.new_name = self.suggested_name()
+        finally:
+            self._naming = False
+
+    def where(self, effect: str | None = None) -> dict[str, PatternGrid]:
+        """Where the configuration fails and what ``effect`` (a ranked candidate, default
+        the selected effect) leaves: the residual pattern now and after adding the fitted
+        candidate (residual − its signature), each as a quantity × zone grid and a PSD
+        band grid (:func:`pattern_grids`). Empty before a diagnosis."""
+        effect = effect or self.effect
+        cand = next((c for c in self.candidates if c["effect"] == effect), None)
+        res = self.residual
+        if cand is None or "values" not in res or "signature" not in cand:
+            return {}
+        now = np.asarray(res["values"], float)
+        after = now - np.asarray(cand["signature"]["values"], float)
+        return {"now": pattern_grids(res["labels"], now), "after": pattern_grids(res["labels"], after)}
+
+    def _effect_changed(self) -> None:
+        eff = next((e for e in self.effect_catalogue() if e["name"] == self.effect), None)
+        names = [p["name"] for p in eff["parameters"]] if eff else []
+        self.param.fit_parameters.objects = names
+        self.fit_parameters = []
+        self._suggest_name()
+
+    def refresh_choices(self) -> None:
+        """Candidate effects to choose from: those the configuration lacks (a choice no
+        longer available is dropped)."""
+        available = self.available_effects()
+        self.param.candidate_effects.objects = available
+        self.candidate_effects = [e for e in self.candidate_effects if e in available]
+
+    def diagnosis_simulations(self) -> int:
+        """Campaign simulations the diagnosis will run with the current settings."""
+        effects = self.candidate_effects or self.available_effects()
+        ov = self.app.overview
+        template = str(ov.vehicle.get("template") or "coach") if ov else None
+        return diagnosis_simulations(effects, self.values_per_parameter, template)
+
+    def calibration_simulations(self) -> int:
+        """Upper bound of the campaign simulations a calibration runs: the optimiser's
+        (``railval.core.calibration.max_evaluations``) plus the final stored run."""
+        n = len(self.fit_parameters or self.param.fit_parameters.objects) or 1
+        return max_evaluations(n, self.popsize, self.maxiter, self.polish_maxfev) + 1
+
+    def effect_catalogue(self) -> list[dict[str, Any]]:
+        return self.app.backend.effects()
+
+    def available_effects(self) -> list[str]:
+        """Effects not yet in the current configuration."""
+        ov = self.app.overview
+        present = set()
+        for c in ov.configurations if ov else []:
+            if c.name == self.app.configuration:
+                present = set(c.effects)
+        names = [e["name"] for e in self.effect_catalogue()]
+        return [n for n in names if n not in present]
+
+    def suggested_name(self) -> str:
+        base = f"{self.app.configuration}+{self.effect}" if self.effect else f"{self.app.configuration}-new"
+        existing = set(self.app.param.configuration.objects)
+        name, i = base, 2
+        while name in existing:
+            name, i = f"{base}-{i}", i + 1
+        return name
+
+    def run_diagnosis(self, dispatch=None, background=True):
+        app = self.app
+        campaign, config = app.campaign, app.configuration
+
+        settings = {"values_per_parameter": self.values_per_parameter,
+                    "effects": list(self.candidate_effects) or None}
+
+        def work(progress):
+            return app.backend.diagnose(campaign, config, progress=progress, **settings)
+
+        def done(result):
+            d = result.to_dict(with_signatures=True) if hasattr(result, "to_dict") else result
+            cands = list(d.get("candidates", []))
+            self.residual = dict(d.get("residual") or {})
+            note = d.get("note") or ""
+            if not d.get("separable", True) and not note:
+                note = "the two best candidates explain nearly the same; see the evidence"
+            self.diagnosis_note = note
+            self.separable = bool(d.get("separable", True))
+            self.diagnosis_run = {k: d.get(k) for k in ("simulations", "values_per_parameter", "configuration")}
+            names = self.available_effects() if cands else []
+            order = [c["effect"] for c in cands] + [n for n in names if n not in {c["effect"] for c in cands}]
+            self.param.effect.objects = order
+            if order:  # the top candidate chosen before the ranking is shown
+                self.effect = order[0]
+                self._suggest_name()
+            self.candidates = cands
+        return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background)
+
+    def run_calibration(self, dispatch=None, background=True, calibrate: bool = True):
+        """Add ``effect`` to the configuration, calibrate it (or use ``parameters``),
+        re-simulate and store as ``new_name`` whose parent is the current configuration."""
+        app = self.app
+        campaign, config, effect = app.campaign, app.configuration, self.effect
+        # a name the user did not type always names the effect that is added
+        name = self.new_name if (self.name_edited and self.new_name.strip()) else self.suggested_name()
+        params = dict(self.parameters)
+        if effect is None:
+            app.set_status("choose an effect to add first", "warning")
+            return None
+
+        settings = {"popsize": self.popsize, "maxiter": self.maxiter, "polish_maxfev": self.polish_maxfev,
+                    "seed": self.seed, "params": [f"{effect}.{p}" for p in self.fit_parameters] or None}
+
+        def work(progress):
+            if calibrate:
+                return app.backend.calibrate(campaign, config, effect, name, progress=progress,
+                                             start=params or None, **settings)
+            return app.backend.simulate(campaign, config, {effect: params or {}}, name, progress=progress)
+
+        def done(result):
+            d = result.to_dict() if hasattr(result, "to_dict") else dict(result or {})
+            self.last_result = {**d, "kind": "calibration" if calibrate else "re-simulation",
+                                "effect": effect, "configuration": name, "parent": config}
+            self.last_new_configuration = name
+            app.reload_configurations(select=name)
+        return app.run_job("calibration" if calibrate else "re-simulation", work, done,
+                           dispatch=dispatch, background=background)
+
+    def lineage_errors(self, config: str | None = None) -> list[dict[str, Any]]:
+        """Along the lineage root → config: the largest normalised error (max over quantities
+        of |mean|/mean limit and std/std limit) and whether the configuration is validated."""
+        app = self.app
+        config = config or app.configuration
+        out = []
+        for name in app.backend.lineage(app.campaign, config):
+            res = app.backend.validation(app.campaign, name)
+            d = res.to_dict() if hasattr(res, "to_dict") else res
+            rows = quantity_rows(res)
+            worst = max((max(abs(finite_or_nan(r["mean_norm"])), abs(finite_or_nan(r["std_norm"]))) for r in rows),
+                        default=float("nan"))
+            out.append({"configuration": name, "max_norm": worst, "validated": bool(d.get("validated"))})
+        return out
+
+

@@ -1,0 +1,93 @@
+"""Sign-offs: append-only records of an independent decision on a configuration (docs/audit.md).
+
+A sign-off stores the signer's printed name, the UTC time, the meaning of the signature
+(21 CFR 11.50(a)), the decision, restrictions and statement, and the evidence it is bound to:
+the canonical manifest and its SHA-256 (21 CFR 11.70). The database refuses UPDATE and
+DELETE on the table; :func:`create` appends the row and its audit record in one transaction.
+Building the manifest (which needs the validation) is the application's part:
+:mod:`railval.app.services.signoff`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from railval.core.errors import InvalidParameter, NotFound
+from railval.core.integrity import evidence_hash
+from railval.db import audit
+from railval.db.models import AppUser, Signoff
+
+#: decision → the words printed with the signature
+DECISIONS: dict[str, str] = {
+    "validated": "validated",
+    "restricted": "validated with restrictions",
+    "not-validated": "not validated",
+}
+
+
+def meaning(decision: str, campaign: str, configuration: str, evidence_sha256: str) -> str:
+    """The meaning of the signature (21 CFR 11.50(a)(3)), stored and shown with it."""
+    return (f"Independent review and approval: I have reviewed the validation evidence "
+            f"SHA-256 {evidence_sha256} of configuration {configuration!r} of campaign "
+            f"{campaign!r} and I decide: {DECISIONS[decision]}.")
+
+
+def create(session: Session, *, user: AppUser, campaign: str, configuration: str,
+           decision: str, restrictions: str, statement: str, manifest: dict[str, Any],
+           software_version: str) -> Signoff:
+    """Append a sign-off bound to ``manifest``; audited as ``signoff.create``."""
+    if decision not in DECISIONS:
+        raise InvalidParameter(f"decision {decision!r}: choose one of {', '.join(DECISIONS)}")
+    restrictions = (restrictions or "").strip()
+    if decision == "restricted" and not restrictions:
+        raise InvalidParameter("restrictions: a decision 'restricted' (validated with "
+                               "restrictions) must state the restrictions")
+    if decision != "restricted" and restrictions:
+        raise InvalidParameter(f"restrictions: only the decision 'restricted' takes "
+                               f"restrictions (decision is {decision!r})")
+    h = evidence_hash(manifest)
+    so = Signoff(campaign=campaign, configuration=configuration, user_id=user.id,
+                 username=user.username, printed_name=user.display_name or user.username,
+                 signed_at_utc=audit.utc_stamp(), meaning=meaning(decision, campaign,
+                                                                  configuration, h),
+                 decision=decision, restrictions=restrictions,
+                 statement=(statement or "").strip(), evidence_sha256=h, manifest=manifest,
+                 software_version=software_version)
+    session.add(so)
+    session.flush()
+    audit.record(session, user.username, "signoff.create",
+                 f"configuration:{campaign}/{configuration}", None, h,
+                 statement[:2000] if statement else "",
+                 detail={"signoff": so.id, "decision": decision})
+    return so
+
+
+def list_signoffs(session: Session, campaign: str | None = None,
+                  configuration: str | None = None) -> list[Signoff]:
+    q = select(Signoff).order_by(Signoff.id)
+    if campaign is not None:
+        q = q.where(Signoff.campaign == campaign)
+    if configuration is not None:
+        q = q.where(Signoff.configuration == configuration)
+    return list(session.scalars(q))
+
+
+def get(session: Session, signoff_id: int) -> Signoff:
+    so = session.get(Signoff, int(signoff_id))
+    if so is None:
+        raise NotFound(f"sign-off {signoff_id} not found")
+    return so
+
+
+def as_dict(so: Signoff) -> dict[str, Any]:
+    """A sign-off as a plain record (bundle export, JSON output), manifest included."""
+    return {"id": so.id, "campaign": so.campaign, "configuration": so.configuration,
+            "username": so.username, "printed_name": so.printed_name,
+            "signed_at_utc": so.signed_at_utc, "meaning": so.meaning, "decision": so.decision,
+            "decision_text": DECISIONS.get(so.decision, so.decision),
+            "restrictions": so.restrictions, "statement": so.statement,
+            "evidence_sha256": so.evidence_sha256, "software_version": so.software_version,
+            "manifest": so.manifest}
