@@ -6,9 +6,9 @@ rescale them. Output is deterministic: fixed size and dpi, DejaVu Sans (shipped 
 matplotlib), no time stamp or software version in the PNG metadata, no antialiasing
 differences between runs (same library build) — the same inputs give byte-identical files.
 
-Look (the same for every plot of a workshop): measurement drawn first (beneath) in
-Okabe–Ito blue, simulation on top in Okabe–Ito vermilion (a colour-blind-safe pair; Okabe &
-Ito 2008, "Color Universal Design"), legend in the upper right corner, both axes labelled
+Look (the same for every plot of a workshop): measurement drawn first (beneath) in black,
+simulation on top in Okabe–Ito vermilion (the app's colours, :mod:`railval.app.scales`: a
+colour-blind-safe pair; Okabe & Ito 2008, "Color Universal Design"), legend in the upper right corner, both axes labelled
 with units, the kind's fixed axis ranges (:func:`railval.core.workshop.kind_scale`).
 """
 
@@ -25,6 +25,7 @@ matplotlib.use("Agg", force=False)
 import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
+from railval.app.scales import MEASURED_COLOR, SIM_COLORS  # noqa: E402
 from railval.core.workshop import Scale  # noqa: E402
 
 #: the look of every review plot (stored with each plot's render parameters)
@@ -35,8 +36,8 @@ STYLE: dict[str, Any] = {
     "font": "DejaVu Sans",
     "font_size": 12,
     "title_size": 13,
-    "measurement": {"label": "measurement", "color": "#0072B2", "linewidth": 1.3, "zorder": 2},
-    "simulation": {"label": "simulation", "color": "#D55E00", "linewidth": 1.1, "zorder": 3},
+    "measurement": {"label": "measurement", "color": MEASURED_COLOR, "linewidth": 1.2, "zorder": 2},
+    "simulation": {"label": "simulation", "color": SIM_COLORS[0], "linewidth": 1.1, "zorder": 3},
     "legend": "upper right",
     "grid_color": "#d9d9d9",
 }
