@@ -1,7 +1,7 @@
 """Review workshop under load: N concurrent reviewers × M answers against `railval serve`.
 
 Set-up: a database holding the demo campaign (``railval.app.services.synth.ensure_demo``, or
-``--db URL`` of an existing one with ``--campaign``), one workshop of ``--plots`` plots
+``--url URL`` of an existing one with ``--campaign``), one workshop of ``--plots`` plots
 rendered once (its creation time is reported), ``--reviewers`` invited reviewers. Then
 ``railval serve --no-demo`` is started as a separate process on a free loopback port and
 every reviewer runs in its own thread with its own keep-alive HTTP connection, as the
@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="places per reviewer = plots of the workshop, no repeats (default 120)")
     parser.add_argument("--resend", type=float, default=0.05,
                         help="share of answers posted twice with the same submission id (default 0.05)")
-    parser.add_argument("--db", default=None, help="database URL (default: a fresh SQLite file)")
+    parser.add_argument("--url", default=None, help="database URL (default: a fresh SQLite file)")
     parser.add_argument("--campaign", default=None, help="campaign (default: the demo campaign)")
     parser.add_argument("--keep", action="store_true", help="keep the temporary folder")
 
@@ -157,7 +157,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from railval.app.main import free_port
 
     folder = Path(tempfile.mkdtemp(prefix="railval-bench-ws-"))
-    url = args.db or f"sqlite:///{folder / 'bench.db'}"
+    url = args.url or f"sqlite:///{folder / 'bench.db'}"
     setup = _setup(url, args.campaign, args.plots, args.reviewers)
     port = free_port()
     log = open(folder / "serve.log", "wb")  # noqa: SIM115 - closed below
@@ -214,7 +214,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "analyse_s": round(analyse_s, 2), "analysed_reviewers": len(doc["reviewers"]),
         "cpu_count": os.cpu_count(), "loadavg_1min": round(os.getloadavg()[0], 2),
     }
-    if not args.keep and args.db is None:
+    if not args.keep and args.url is None:
         import shutil
 
         shutil.rmtree(folder, ignore_errors=True)
