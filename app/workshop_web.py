@@ -42,6 +42,7 @@ import ipaddress
 import json
 import os
 import secrets
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -187,11 +188,39 @@ class _OrganiserBase(_Base):
 
 
 # -------------------------------------------------------------------------- reviewer
+#: seconds a personal link's context (reviewer, workshop status, sequence) is reused before
+#: it is read again; closing or reopening on the organiser page clears it at once, a change
+#: made elsewhere (CLI, another server) is seen within this time
+CONTEXT_TTL_S = 5.0
+#: bytes of plot images kept in memory (images never change once stored)
+IMAGE_CACHE_BYTES = 64 * 1024 * 1024
+_contexts: dict[str, tuple[float, Any]] = {}
+_images: dict[tuple[int, int], tuple[bytes, str]] = {}
+_image_bytes = [0]
+_cache_lock = threading.Lock()
+
+
+def clear_contexts() -> None:
+    with _cache_lock:
+        _contexts.clear()
+
+
 def _ctx(database, token: str):
     from railval.db import workshops as wsdb
 
+    key = hashlib.sha256(token.encode()).hexdigest()
+    now = time.monotonic()
+    with _cache_lock:
+        hit = _contexts.get(key)
+    if hit is not None and now - hit[0] < CONTEXT_TTL_S:
+        return hit[1]
     with database.session() as s:
-        return wsdb.reviewer_by_token(s, token)
+        ctx = wsdb.reviewer_by_token(s, token)
+    with _cache_lock:
+        if len(_contexts) > 10_000:
+            _contexts.clear()
+        _contexts[key] = (now, ctx)
+    return ctx
 
 
 def _state(database, ctx) -> dict[str, Any]:
@@ -345,9 +374,20 @@ class ReviewState(_ReviewerBase):
 def _image_at(database, ctx, position: int) -> tuple[bytes, str]:
     from railval.db import workshops as wsdb
 
-    plot_id = ctx.sequence[position][0]
+    key = (ctx.workshop_id, ctx.sequence[position][0])
+    with _cache_lock:
+        hit = _images.get(key)
+    if hit is not None:
+        return hit
     with database.session() as s:
-        return wsdb.plot_image(s, ctx.workshop_id, plot_id)
+        data, sha = wsdb.plot_image(s, *key)
+    with _cache_lock:
+        if _image_bytes[0] + len(data) > IMAGE_CACHE_BYTES:
+            _images.clear()
+            _image_bytes[0] = 0
+        _images[key] = (data, sha)
+        _image_bytes[0] += len(data)
+    return data, sha
 
 
 class ReviewImage(_ReviewerBase):
@@ -371,8 +411,7 @@ class ReviewImage(_ReviewerBase):
 def _answer(database, token: str, body: dict[str, Any]) -> dict[str, Any]:
     from railval.db import workshops as wsdb
 
-    with database.session() as s:
-        ctx = wsdb.reviewer_by_token(s, token)
+    ctx = _ctx(database, token)
     if ctx is None or not allowed(ctx.principal, "workshop.answer"):
         raise NotFound("review link not valid")
     if ctx.finished:
@@ -400,6 +439,7 @@ def _finish(database, token: str) -> dict[str, Any]:
         if ctx is None or not allowed(ctx.principal, "workshop.answer"):
             raise NotFound("review link not valid")
         wsdb.finish(s, ctx)
+    clear_contexts()
     return {"finished": True}
 
 
@@ -678,6 +718,7 @@ def _set_status(database, name: str, status: str, actor) -> None:
 
     with database.session() as s:
         wsdb.set_status(s, wsdb.get_workshop(s, name), status, actor=actor)
+    clear_contexts()
 
 
 class WorkshopPage(_OrganiserBase):

@@ -283,17 +283,27 @@ def record_answer(session: Session, ctx: ReviewerContext, position: int, answer:
         return None
 
     outcome = change()
-    if outcome is not None:
-        return outcome
-    try:
-        with session.begin_nested():
-            session.add(WorkshopAnswer(
-                reviewer_id=ctx.reviewer_id, plot_id=plot_id, position=position, repeat=rep,
-                answer=bool(answer), comment=comment, seconds=float(seconds),
-                submission=submission, source="web", answered_at=now, updated_at=now))
-        return "new"
-    except IntegrityError:  # a concurrent first submission of the same place won
-        return change() or "repeated"
+    if outcome is None:
+        try:
+            with session.begin_nested():
+                session.add(WorkshopAnswer(
+                    reviewer_id=ctx.reviewer_id, plot_id=plot_id, position=position, repeat=rep,
+                    answer=bool(answer), comment=comment, seconds=float(seconds),
+                    submission=submission, source="web", answered_at=now, updated_at=now))
+            outcome = "new"
+        except IntegrityError:  # a concurrent first submission of the same place won
+            outcome = change() or "repeated"
+    # the stored state decides, not ``ctx`` (which a caller may have cached): checked after
+    # the write, inside the same transaction, so a refusal rolls the write back
+    status, finished = session.execute(
+        select(Workshop.status, WorkshopReviewer.finished_at)
+        .join(WorkshopReviewer, WorkshopReviewer.workshop_id == Workshop.id)
+        .where(WorkshopReviewer.id == ctx.reviewer_id)).one()
+    if status != "open":
+        raise WorkshopClosed(f"workshop {ctx.workshop_name!r} is closed; answers are not taken")
+    if finished is not None:
+        raise WorkshopClosed("you have finished this review; answers are final")
+    return outcome
 
 
 def finish(session: Session, ctx: ReviewerContext) -> None:
