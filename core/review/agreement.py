@@ -37,7 +37,7 @@ __all__ = [
 
 def wilson_interval(successes, n, *, confidence: float = 0.95):
     """Wilson score interval of a binomial proportion (Wilson 1927, "Probable inference, the
-    law of succession, and statistical inference", JASA 22:209–212; as eq. (4) of Brown, Cai
+    law of succession, and statistical inference", JASA 22:209–212; as written in Brown, Cai
     & DasGupta 2001, Statistical Science 16:101–133):
 
     ``centre = (p̂ + z²/2n) / (1 + z²/n)``,
@@ -100,7 +100,7 @@ def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
 def fleiss_kappa_counts(counts: np.ndarray, weights=None) -> np.ndarray:
     """Fleiss κ of a subjects × categories count table with the same number ``n`` of raters
     for every subject (Fleiss 1971, "Measuring nominal scale agreement among many raters",
-    Psychological Bulletin 76:378–382, eqs. (2)–(9)):
+    Psychological Bulletin 76:378–382):
 
     ``P_i = (Σ_j n_ij² − n) / (n(n − 1))``, ``P̄ = mean_i P_i``,
     ``p_j = Σ_i n_ij / (N n)``, ``P̄_e = Σ_j p_j²``, ``κ = (P̄ − P̄_e) / (1 − P̄_e)``.
@@ -119,7 +119,7 @@ def fleiss_kappa_counts(counts: np.ndarray, weights=None) -> np.ndarray:
 
 
 def fleiss_kappa(table) -> float:
-    """Fleiss κ (Fleiss 1971, eqs. (2)–(9); see :func:`fleiss_kappa_counts`) of a subjects ×
+    """Fleiss κ (Fleiss 1971; see :func:`fleiss_kappa_counts`) of a subjects ×
     categories table of counts in which every subject was rated by the same number (≥ 2) of
     raters — the input of ``statsmodels.stats.inter_rater.fleiss_kappa``. Returns ``NaN``
     when every answer falls in one category (κ undefined)."""

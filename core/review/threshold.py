@@ -1,7 +1,7 @@
 """The objective value at which a typical reviewer says Yes half of the time (docs/workshops.md).
 
 Each plot carries an objective value ``v`` — its normalised deviation (largest |D_v| / std
-limit of the EN 14363 quantities of that signal in that section, Polach & Böttcher 2014 §3.1,
+limit of the EN 14363 quantities of that signal in that section, Polach & Böttcher 2014 §5,
 limit 1.0) or its Sprague–Geers comprehensive error C. The answers are related to it by the
 Rasch-type model of :mod:`railval.core.review.rasch` with the plot's acceptability replaced
 by a linear function of ``log v`` — a linear logistic test model (Fischer 1973, "The linear
@@ -22,7 +22,7 @@ plot are correlated (a plot is more or less acceptable than its ``v`` says), so 
 covariance is the cluster-robust sandwich with the plots as clusters (Liang & Zeger 1986,
 Biometrika 73:13–22; small-sample factor ``G/(G−1) · (N−1)/(N−K)`` as in statsmodels, G
 plots, N answers, K parameters), and the interval of ``log v₅₀`` is the delta method on it
-(Agresti 2013 §16.1.1), exponentiated. The fit is penalised maximum likelihood by Newton's
+(Agresti 2013 §16.1), exponentiated. The fit is penalised maximum likelihood by Newton's
 method with the ridge ``λ/2 Σ s_r²`` of the Rasch fit (keeps reviewers with only Yes or only
 No finite; ``ridge = 0`` gives plain maximum likelihood). ``v ≤ 0`` is clipped to
 :data:`MIN_VALUE` before the log; answers on plots without a value (NaN) stay out.
