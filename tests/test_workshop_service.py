@@ -31,6 +31,11 @@ def made(tmp_path_factory):
     db = demo_database(folder, n_configs=2)
     summary = ws.create(db, "W", "demo", sections=["S01", "S05"], kinds=KINDS, repeats=0.2,
                         auto_share=0.25, seed=3)
+    from railval.db import users
+
+    with db.session() as s:  # the CLI's acting user once the database has users
+        users.create_user(s, "orga", password="organiser-pass", roles=["organiser"])
+        users.create_user(s, "revx", roles=["reviewer"])
     yield db, summary, folder
     db.dispose()
 
@@ -162,7 +167,7 @@ def test_import_bad_header_and_cli_error(made, tmp_path, capsys):
     path = _write(tmp_path / "a.csv", [("x", "1", "yes", "1")], header=("reviewer", "plot", "answer", "seconds"))
     with pytest.raises(InvalidParameter, match="line 1: missing column"):
         ws.import_answers(db, "W", path)
-    assert cli(["--db", db.url, "workshop", "import-answers", "W", str(path)]) == 2
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "import-answers", "W", str(path)]) == 2
     assert "missing column(s) comment" in capsys.readouterr().err
 
 
@@ -191,7 +196,7 @@ def test_import_export_and_analyse_round_trip(made, tmp_path, capsys):
         ws.import_answers(db, "W", path)
     assert _count(db, WorkshopAnswer) == n
     exp = tmp_path / "export.csv"
-    assert cli(["--db", db.url, "workshop", "export", "W", str(exp)]) == 0
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "export", "W", str(exp)]) == 0
     got = list(csv.DictReader(exp.open(encoding="utf-8")))
     assert set(ws.EXPORT_COLUMNS) == set(got[0])
     paper = [r for r in got if r["reviewer"].startswith("paper")]
@@ -201,7 +206,7 @@ def test_import_export_and_analyse_round_trip(made, tmp_path, capsys):
     assert all(r["answered_at"].endswith("Z") and r["repeat"] == "false" and r["scaling"] == "fixed"
                for r in paper)
     capsys.readouterr()
-    assert cli(["--db", db.url, "workshop", "analyse", "W", "--json"]) == 0
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "analyse", "W", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert {"table1", "reviewers", "agreement", "threshold", "scaling_effect"} <= set(doc)
     assert {r["kind"] for r in doc["table1"]} == set(KINDS)
@@ -213,23 +218,29 @@ def test_import_export_and_analyse_round_trip(made, tmp_path, capsys):
 
 def test_cli_create_dry_run_plots_invite_status(made, capsys):
     db, _, _ = made
-    assert cli(["--db", db.url, "workshop", "create", "X", "--campaign", "demo", "--sections", "S01",
+    # a reviewer may not run organiser verbs
+    assert cli(["--db", db.url, "--as", "cli-rev0", "workshop", "status", "W"]) == 2
+    assert "no such user" in capsys.readouterr().err
+    for verb in (["analyse", "W", "--json"], ["invite", "W", "--reviewer", "x"], ["close", "W"]):
+        assert cli(["--db", db.url, "--as", "revx", "workshop", *verb]) == 2
+        assert "revx (reviewer) may not" in capsys.readouterr().err
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "create", "X", "--campaign", "demo", "--sections", "S01",
                 "--configurations", "baseline", "--kinds", "Y_time", "ay_bg_time", "--dry-run", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     # the demo campaign records no bogie frame channels: only the 2 Y plots (w1L, w1R)
     assert doc["plots"] == 2 and doc["by_kind"] == {"Y_time": 2} and doc["stored"] is False
-    assert cli(["--db", db.url, "workshop", "plots", "W", "--json"]) == 0
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "plots", "W", "--json"]) == 0
     plots = json.loads(capsys.readouterr().out)["plots"]
     assert all(PLOT_KINDS[p["kind"]] for p in plots)
-    assert cli(["--db", db.url, "workshop", "invite", "W", "--reviewer", "cli-rev",
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "invite", "W", "--reviewer", "cli-rev",
                 "--base-url", "http://h:1"]) == 0
     link = capsys.readouterr().out.strip()
     assert link.startswith("http://h:1/review/") and len(link) > 40
     with db.session() as s:
         ctx = wsdb.reviewer_by_token(s, link.rsplit("/", 1)[1])
         assert ctx.username == "cli-rev"
-    assert cli(["--db", db.url, "workshop", "status", "W", "--json"]) == 0
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "status", "W", "--json"]) == 0
     st = json.loads(capsys.readouterr().out)
     assert "cli-rev" in {r["reviewer"] for r in st["reviewers"]}
-    assert cli(["--db", db.url, "workshop", "plots", "nope", "--json"]) == 2
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "plots", "nope", "--json"]) == 2
     assert "workshop 'nope' not found" in capsys.readouterr().err

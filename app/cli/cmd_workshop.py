@@ -13,9 +13,9 @@
 ``railval workshop import-answers NAME FILE.csv`` / ``export NAME FILE.csv``
 ``railval workshop analyse NAME --json``
 
-The CLI acts as the local operator (the person with shell access to the database); every
-change is recorded in the audit trail under the actor name given by ``--actor`` (default
-``cli``).
+Permissions (:data:`railval.core.roles.CLI_ACTIONS`) are checked for the user named by
+``railval --as USER`` once the database has users; every change is recorded in the audit
+trail under that name.
 """
 
 from __future__ import annotations
@@ -26,6 +26,14 @@ import sys
 from railval.app.cli import emit_json
 
 
+def _actor() -> str:
+    """The acting user of this command (``--as`` / ``$RAILVAL_USER``, checked by the CLI),
+    else ``cli:<OS user>``: the name in the audit trail."""
+    from railval.db import engine
+
+    return engine.default_actor
+
+
 def _list(text: str | None) -> list[str] | None:
     if text is None:
         return None
@@ -34,7 +42,7 @@ def _list(text: str | None) -> list[str] | None:
 
 def register(sub: argparse._SubParsersAction) -> None:
     w = sub.add_parser("workshop", help="expert review workshops (plot sets, reviewers, answers)")
-    wsub = w.add_subparsers(dest="workshop_verb", metavar="ACTION")
+    wsub = w.add_subparsers(dest="subverb", metavar="ACTION")
     wsub.required = True
 
     c = wsub.add_parser("create", help="create a workshop from a campaign (renders every plot once)")
@@ -51,7 +59,6 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="share of plots also shown with per-plot automatic scaling (default 0)")
     c.add_argument("--seed", type=int, default=0, help="seed of the automatic-scaling choice")
     c.add_argument("--dry-run", action="store_true", help="only count the plots, store nothing")
-    c.add_argument("--actor", default="cli", help="name recorded in the audit trail")
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=_create)
 
@@ -69,7 +76,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     i.add_argument("--reviewer", required=True, help="user name (created as reviewer when new)")
     i.add_argument("--base-url", default="http://127.0.0.1:5006",
                    help="address of `railval serve` as reviewers reach it")
-    i.add_argument("--actor", default="cli")
     i.add_argument("--json", action="store_true")
     i.set_defaults(func=_invite)
 
@@ -81,13 +87,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     for verb, status in (("close", "closed"), ("reopen", "open")):
         x = wsub.add_parser(verb, help=f"{verb} a workshop")
         x.add_argument("name")
-        x.add_argument("--actor", default="cli")
         x.set_defaults(func=_set_status, status=status)
 
     im = wsub.add_parser("import-answers", help="import answers from a CSV (all rows or none)")
     im.add_argument("name")
     im.add_argument("file")
-    im.add_argument("--actor", default="cli")
     im.add_argument("--json", action="store_true")
     im.set_defaults(func=_import)
 
@@ -138,7 +142,7 @@ def _create(args: argparse.Namespace) -> int:
               f"({', '.join(f'{k} {n}' for k, n in counts.items())})", file=sys.stderr, flush=True)
     out = ws.create(database, args.name, args.campaign, configurations=configs,
                     sections=sections, kinds=kinds, blind=args.blind, repeats=args.repeats,
-                    auto_share=args.auto_share, seed=args.seed, actor=args.actor)
+                    auto_share=args.auto_share, seed=args.seed, actor=_actor())
     if args.json:
         emit_json({**out, "stored": True})
     else:
@@ -181,7 +185,7 @@ def _invite(args: argparse.Namespace) -> int:
     database = _database(args.db)
     with database.session() as session:
         w = wsdb.get_workshop(session, args.name)
-        token = wsdb.invite(session, w, args.reviewer, actor=args.actor)
+        token = wsdb.invite(session, w, args.reviewer, actor=_actor())
     link = review_link(args.base_url, token)
     if args.json:
         emit_json({"workshop": args.name, "reviewer": args.reviewer, "link": link})
@@ -212,7 +216,7 @@ def _set_status(args: argparse.Namespace) -> int:
     database = _database(args.db)
     with database.session() as session:
         w = wsdb.set_status(session, wsdb.get_workshop(session, args.name), args.status,
-                            actor=args.actor)
+                            actor=_actor())
         print(f"workshop {w.name} is {w.status}")
     return 0
 
@@ -220,7 +224,7 @@ def _set_status(args: argparse.Namespace) -> int:
 def _import(args: argparse.Namespace) -> int:
     from railval.app.services.workshops import import_answers
 
-    out = import_answers(_database(args.db), args.name, args.file, actor=args.actor)
+    out = import_answers(_database(args.db), args.name, args.file, actor=_actor())
     if args.json:
         emit_json({"workshop": args.name, **out})
     else:
