@@ -336,7 +336,8 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
                  f"<td>{_fmt(r.get('mean_limit'))}</td><td>{_fmt(r.get('std_limit'))}</td>"
                  f"<td>{_fmt(r.get('mean_norm'))}</td><td>{_fmt(mci[0])} … {_fmt(mci[1])}</td>"
                  f"<td>{_fmt(r.get('std_norm'))}</td><td>{_fmt(sci[0])} … {_fmt(sci[1])}</td>"
-                 f"<td class='{'pass' if r.get('pass') else 'fail'}'>{'pass' if r.get('pass') else 'FAIL'}</td></tr>")
+                 f"<td class='{'pass' if r.get('pass') else 'fail'}'>{'pass' if r.get('pass') else 'FAIL'}"
+                 f"{' (definition-sensitive)' if r.get('definition_sensitive') else ''}</td></tr>")
     h.append("</table><p class='note'>D_v = (S_v − M_v)·M_v/|M_v| (positive: the simulation overestimates). "
              "Mean limit = 2/3 of the std limit; intervals: percentile bootstrap over the pairs.</p>")
     labels = [r["quantity"] for r in rows]
@@ -348,6 +349,8 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
     h.append("</div>")
 
     h.append(where_table(where_grid(result.pairs)))
+    h.append(definition_html(d))
+    h.append(supplementary_html(d))
 
     # coverage
     h.append("<h2>Coverage</h2>")
@@ -421,3 +424,66 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
             traces, title=title, xlabel="distance (m)", ylabel=f"{ch} ({unit}), {flabel}",
             shade=(sec.eval_start_m, sec.eval_end_m) if sec else None) + "</div>")
     return out
+
+
+def definition_html(doc: dict[str, Any]) -> str:
+    """Report section: which verdicts rest on an open choice of the definitions (percentile
+    method, sliding-window grid and mean; docs/validation.md)."""
+    from railval.app.state.dashboard import definition_rows
+
+    rows = definition_rows(doc)
+    defs = doc.get("definitions", {})
+    out = [("<h2>Definition sensitivity</h2><p class='note'>Chosen reading: percentiles by the inverted "
+           "CDF (the smallest sample with F_n ≥ p), sliding-mean grid from the evaluated range's start, "
+           "distance-weighted 2 m mean. Alternatives evaluated on the same filtered signals: linear "
+           "percentiles (Hyndman–Fan type 7); grid from the first evaluated sample; arithmetic means of "
+           "the samples in closed or half-open windows (docs/validation.md).</p>")]
+    if not rows:
+        out.append("<p>Not available for this result.</p>")
+        return "".join(out)
+    sensitive = [r["quantity"] for r in rows if r["definition_sensitive"]]
+    out.append(f"<p class='{'fail' if sensitive else 'pass'}'>"
+               + (("definition-sensitive: " + _esc(", ".join(sensitive))
+                   + ("; the verdict itself changes under another reading" if defs.get("verdict_sensitive")
+                      else "")) if sensitive
+                  else "No verdict changes under the alternative readings.") + "</p>")
+    out.append("<table><tr><th class='l'>quantity</th><th>verdict</th><th>definition-sensitive</th>"
+               "<th>readings</th><th>mean/limit</th><th>other readings</th><th>std/limit, other readings</th>"
+               "<th class='l'>flipped by</th></tr>")
+    for r in rows:
+        mr, sr = r["mean/limit other readings"], r["std/limit other readings"]
+        out.append(f"<tr><td class='l'>{_esc(r['quantity'])}</td><td>{_esc(r['verdict'])}</td>"
+                   f"<td class='{'fail' if r['definition_sensitive'] else ''}'>"
+                   f"{'yes' if r['definition_sensitive'] else 'no'}</td><td>{r['readings']}</td>"
+                   f"<td>{_fmt(r['mean/limit'])}</td>"
+                   f"<td>{'' if not mr else _fmt(mr[0]) + ' … ' + _fmt(mr[1])}</td>"
+                   f"<td>{'' if not sr else _fmt(sr[0]) + ' … ' + _fmt(sr[1])}</td>"
+                   f"<td class='l'>{_esc(r['flipped by'])}</td></tr>")
+    out.append("</table>")
+    return "".join(out)
+
+
+def supplementary_html(doc: dict[str, Any]) -> str:
+    """Report section: bogie-frame and PSD-band quantities next to the verdict."""
+    from railval.app.state.dashboard import supplementary_rows
+
+    rows = supplementary_rows(doc)
+    out = [("<h2>Supplementary results (do not change the verdict)</h2><p class='note'>Bogie-frame "
+           "accelerations: band-pass 0.4–10 Hz of the whole section, evaluated range, rms and max(|0.15 %|, "
+           "|99.85 %|) (EN 14363 acceleration processing). PSD bands: band rms √(Σ G(f)·Δf) of the Welch PSD "
+           "(Hann, 50 % overlap, linear detrend, 10 s segments) of the unfiltered evaluated samples, bands "
+           "0.4–1, 1–2, 2–5, 5–10 Hz. D_v statistics as for the verdict (Polach & Böttcher 2014 eq. 4, std with "
+           "n − 1); rel = value / mean |M_v|; log2 S/M = mean log₂ ratio. No validation limits exist for "
+           "these quantities (Polach & Böttcher 2014 §3.1 compared them before settling on the 12).</p>")]
+    if not rows:
+        out.append("<p>No supplementary channels in this campaign.</p>")
+        return "".join(out)
+    out.append("<table><tr><th class='l'>quantity</th><th class='l'>group</th><th>unit</th><th>n</th>"
+               "<th>mean D_v</th><th>std D_v</th><th>mean rel</th><th>std rel</th><th>log2 S/M</th></tr>")
+    for r in rows:
+        out.append(f"<tr><td class='l'>{_esc(r['quantity'])}</td><td class='l'>{_esc(r['group'])}</td>"
+                   f"<td>{_esc(unit_label(r.get('unit', '')))}</td><td>{_fmt(r['n'])}</td>"
+                   f"<td>{_fmt(r['mean'])}</td><td>{_fmt(r['std'])}</td><td>{_fmt(r['mean_rel'])}</td>"
+                   f"<td>{_fmt(r['std_rel'])}</td><td>{_fmt(r['log2_ratio_mean'])}</td></tr>")
+    out.append("</table>")
+    return "".join(out)

@@ -68,6 +68,11 @@ TEXT = {
     "samples_half_open": "mean of the samples in the half-open window [x − 1 m, x + 1 m)",
 }
 
+SHORT = {"inverted_cdf": "inverted-CDF percentiles", "linear": "linear percentiles",
+         "section_start": "grid from range start", "first_sample": "grid from first sample",
+         "interpolant": "distance-weighted mean", "samples_closed": "closed sample window",
+         "samples_half_open": "half-open sample window"}
+
 
 @dataclass(frozen=True)
 class Reading:
@@ -108,6 +113,14 @@ class Reading:
     def to_dict(self) -> dict[str, str]:
         return {"id": self.id, "percentile": self.percentile, "grid": self.grid,
                 "window": self.window}
+
+    def short(self, sliding_mean: bool = True) -> str:
+        """The components that differ from :data:`CHOSEN`, in a few words
+        (e.g. "linear percentiles + half-open sample window")."""
+        words = {"percentile": SHORT[self.percentile], "grid": SHORT[self.grid],
+                 "window": SHORT[self.window]}
+        parts = [words[c] for c in self.differs_from_chosen(sliding_mean)]
+        return " + ".join(parts) or "chosen reading"
 
     def describe(self, sliding_mean: bool = True) -> str:
         parts = [self.percentile] + ([self.grid, self.window] if sliding_mean else [])
@@ -176,17 +189,21 @@ def window_centres(start_m: float, end_m: float, origin_m: float, window_m: floa
 
 
 def sample_window_means(values: np.ndarray, distance_m: np.ndarray, centres: np.ndarray,
-                        window_m: float, closed: bool) -> np.ndarray:
+                        window_m: float, closed: bool, prefix: np.ndarray | None = None) -> np.ndarray:
     """Arithmetic mean of the samples inside each window ``[x − w/2, x + w/2]`` (``closed``)
     or ``[x − w/2, x + w/2)`` of every row of ``values`` (shape (rows, n)) on the distance
-    axis ``distance_m`` (increasing, m). Windows holding no sample give NaN."""
+    axis ``distance_m`` (increasing, m). Windows holding no sample give NaN. ``prefix``: the
+    rows' prefix sums (shape (rows, n + 1), first column 0) when already formed."""
     v = np.atleast_2d(np.asarray(values, dtype=np.float64))
     d = np.asarray(distance_m, dtype=np.float64)
     half = window_m / 2.0
     lo = np.searchsorted(d, centres - half, side="left")
     hi = np.searchsorted(d, centres + half, side="right" if closed else "left")
-    cum = np.zeros((v.shape[0], v.shape[1] + 1))
-    np.cumsum(v, axis=1, out=cum[:, 1:])
+    if prefix is None:
+        cum = np.zeros((v.shape[0], v.shape[1] + 1))
+        np.cumsum(v, axis=1, out=cum[:, 1:])
+    else:
+        cum = prefix
     count = (hi - lo).astype(np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
         means = (cum[:, hi] - cum[:, lo]) / count

@@ -192,7 +192,6 @@ def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: f
     if window_m <= 0 or step_m <= 0:
         raise InvalidParameter(
             f"window_m and step_m must be > 0 m, got window_m={window_m}, step_m={step_m}")
-    half = window_m / 2.0
     if end_m - start_m < window_m:
         raise InvalidSignal(
             f"evaluated range {start_m}–{end_m} m is shorter than the {window_m} m sliding "
@@ -201,8 +200,16 @@ def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: f
         raise InvalidSignal(
             f"evaluated range {start_m}–{end_m} m exceeds the distance axis "
             f"{d[0]:.3f}–{d[-1]:.3f} m")
-    centres = window_centres(start_m, end_m, start_m if origin_m is None else origin_m,
-                             window_m, step_m)
+    (centres, means), = _interpolant_means(
+        v, d, start_m, end_m, window_m, step_m, [start_m if origin_m is None else origin_m])
+    return centres, (means[0] if one_d else means)
+
+
+def _interpolant_means(v: np.ndarray, d: np.ndarray, start_m: float, end_m: float,
+                       window_m: float, step_m: float, origins) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Distance-weighted window means of the rows of ``v`` for the grid of each origin in
+    ``origins``; the cumulative integral is formed once for all of them."""
+    half = window_m / 2.0
     h = np.diff(d)
     # cumulative trapezoid at the samples, per row
     cum = np.zeros_like(v)
@@ -214,8 +221,11 @@ def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: f
         slope = (v[:, j + 1] - v[:, j]) / h[j]
         return cum[:, j] + v[:, j] * u + 0.5 * slope * u * u
 
-    means = (integral_at(centres + half) - integral_at(centres - half)) / window_m
-    return centres, (means[0] if one_d else means)
+    out = []
+    for origin in origins:
+        centres = window_centres(start_m, end_m, origin, window_m, step_m)
+        out.append((centres, (integral_at(centres + half) - integral_at(centres - half)) / window_m))
+    return out
 
 
 # --------------------------------------------------------------------------- validation
@@ -342,7 +352,7 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
 
     def alternative(reading: Reading, key: tuple[str, str], value: float) -> None:
         # kept only where the reading changes the value (NaN: undefined under the reading)
-        if not value == values[key]:
+        if value != values[key]:  # True for NaN as well
             alts.setdefault(reading.id, {})[key] = float(value)
 
     if lp is not None and lp.shape[0]:
@@ -461,23 +471,28 @@ def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: f
                           sec: SectionInfo, keys: list[tuple[str, str]], chosen_means: np.ndarray,
                           methods: tuple[str, ...], alternative) -> None:
     """Values of the sliding-mean maxima under every other reading (grid alignment × window
-    mean × percentile method, :mod:`railval.core.definitions`) from the same derived rows."""
+    mean × percentile method, :mod:`railval.core.definitions`) from the same derived rows;
+    the prefix sums and the cumulative integral are formed once for all readings."""
+    origins = {"section_start": sec.eval_start_m, "first_sample": float(first_m)}
+    (_, first_interp), = _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
+                                            WINDOW_M, STEP_M, [origins["first_sample"]])
+    prefix = np.zeros((slide_rows.shape[0], slide_rows.shape[1] + 1))
+    np.cumsum(slide_rows, axis=1, out=prefix[:, 1:])
     for grid, window in SLIDING_VARIANTS:
-        origin = sec.eval_start_m if grid == "section_start" else float(first_m)
         if (grid, window) == CHOSEN.sliding:
             means = chosen_means
         elif window == "interpolant":
-            _, means = sliding_mean_distance(slide_rows, d_wide, sec.eval_start_m,
-                                             sec.eval_end_m, origin_m=origin)
+            means = first_interp
         else:
-            centres = window_centres(sec.eval_start_m, sec.eval_end_m, origin, WINDOW_M, STEP_M)
+            centres = window_centres(sec.eval_start_m, sec.eval_end_m, origins[grid], WINDOW_M,
+                                     STEP_M)
             means = sample_window_means(slide_rows, d_wide, centres, WINDOW_M,
-                                        closed=(window == "samples_closed"))
+                                        closed=(window == "samples_closed"), prefix=prefix)
         undefined = ~np.all(np.isfinite(means), axis=1)
         for method, pct in zip(methods, _row_percentiles(means, methods), strict=True):
             reading = Reading(method, grid, window)
             if reading == CHOSEN:
                 continue
+            vals = maxabs(pct[:, 0], pct[:, 2])
             for r, key in enumerate(keys):
-                alternative(reading, key, float("nan") if undefined[r]
-                            else float(maxabs(pct[r, 0], pct[r, 2])))
+                alternative(reading, key, float("nan") if undefined[r] else float(vals[r]))

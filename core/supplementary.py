@@ -57,7 +57,7 @@ import numpy as np
 
 from railval.core.diagnosis import DEFAULT_BANDS_HZ, Pattern
 from railval.core.errors import InvalidParameter
-from railval.core.psd import welch_psd
+from railval.core.psd import welch_rows
 from railval.core.types import BODY_POSITIONS
 
 PSD_SEGMENT_S = 10.0
@@ -137,17 +137,23 @@ def psd_band_values(evaluated: Mapping[str, np.ndarray], fs: float) -> dict[tupl
     ``{(quantity id, position): band rms}``; channels shorter than 8 samples are skipped and
     bands without a frequency bin give no value."""
     out: dict[tuple[str, str], float] = {}
-    for ch, x in evaluated.items():
-        kind, _, pos = ch.rpartition("_")
-        if kind not in PSD_KINDS or np.asarray(x).size < 8:
-            continue
-        psd = welch_psd(np.asarray(x, dtype=np.float64), fs, PSD_SEGMENT_S)
-        f, g = np.asarray(psd.frequency_hz), np.asarray(psd.density)
+    names = [ch for ch, x in evaluated.items()
+             if ch.rpartition("_")[0] in PSD_KINDS and np.asarray(x).size >= 8]
+    by_length: dict[int, list[str]] = defaultdict(list)
+    for ch in names:
+        by_length[np.asarray(evaluated[ch]).size].append(ch)
+    for chans in by_length.values():  # one Welch call for the channels of equal length
+        f, g, _ = welch_rows(np.vstack([np.asarray(evaluated[c], dtype=np.float64) for c in chans]),
+                             fs, PSD_SEGMENT_S)
         df = f[1] - f[0]
         for lo, hi in DEFAULT_BANDS_HZ:
             inside = (f >= lo) & (f < hi)  # the bins of railval.core.diagnosis.band_powers
-            if inside.any():
-                out[(f"psd_{kind}_{lo:g}-{hi:g}Hz", pos)] = float(math.sqrt(np.sum(g[inside]) * df))
+            if not inside.any():
+                continue
+            power = np.sum(g[:, inside], axis=1) * df
+            for ch, pw in zip(chans, power, strict=True):
+                kind, _, pos = ch.rpartition("_")
+                out[(f"psd_{kind}_{lo:g}-{hi:g}Hz", pos)] = float(math.sqrt(pw))
     return out
 
 

@@ -452,6 +452,7 @@ def _alternatives(qid: str, res: QuantityResult, rec: list, measured_values, sim
             "reading": reading.to_dict(),
             "differs_in": reading.differs_from_chosen(QUANTITIES[qid].sliding_mean),
             "description": reading.describe(QUANTITIES[qid].sliding_mean),
+            "label": reading.short(QUANTITIES[qid].sliding_mean),
             "values_changed": changed,
             "mean": _none_if_nan(mean), "std": _none_if_nan(std),
             "mean_norm": _none_if_nan(mean / res.mean_limit),

@@ -252,3 +252,85 @@ def test_result_cache_keeps_alternatives_and_supplementary():
     assert math.isnan(back.value_under(rid, ("SumY_max", "ws1")))
     assert back.value_under(CHOSEN.id, ("SumY_max", "ws1")) == 3.0
     assert back.supplementary == {("ay_bg_rms", "b1"): 0.25}
+
+
+# ------------------------------------------------------------------ real signals, stored
+def store_definition_sensitive_configuration(database, campaign: str = "demo",
+                                             name: str = "scaled") -> float:
+    """Store a configuration whose signals are the measurement with every Y channel scaled by
+    k, chosen so that SumY_max's mean D_v = (k − 1)·mean|M_v| lies between its values under
+    the chosen reading and under the alternative reading with the most different mean|M_v|:
+    the verdict of SumY_max then depends on the reading. Returns k."""
+    from railval.core.en14363 import evaluate_batch
+    from railval.db import repo
+
+    with database.session() as s:
+        sections = repo.section_infos(s, campaign)
+        measured = repo.load_signalsets(s, campaign, None)
+    secs = [x for x in sections if x.id in measured]
+    vals = evaluate_batch([measured[x.id] for x in secs], secs)
+    keys = [(v, k) for v in vals for k in v if k[0] == "SumY_max"]
+    chosen = np.mean([abs(v[k]) for v, k in keys])
+    alts = {r.id: np.mean([abs(v.value_under(r.id, k)) for v, k in keys])
+            for r in alternatives_for(QUANTITIES["SumY_max"])}
+    far = max(alts.values(), key=lambda m: abs(m - chosen))
+    assert far != chosen
+    k = 1.0 + 6.0 / math.sqrt(chosen * far)  # SumY mean limit 6 kN between the two readings
+    scaled = {}
+    for sid, ss in measured.items():
+        ch = {c: (k * x if c.startswith("Y_") else x) for c, x in ss.channels.items()}
+        scaled[sid] = SignalSet(ss.fs, ss.time_s, ss.distance_m, ch)
+    with database.session() as s:
+        repo.store_configuration(s, campaign, name, parent=None, effects={}, parameters={},
+                                 description=f"measurement with Y scaled by {k:.4f}",
+                                 signalsets=scaled)
+    return k
+
+
+def test_stored_configuration_is_definition_sensitive(sqlite_database, tmp_path):
+    from railval.app.services.validation import validate_configuration
+    from railval.db.importer import import_campaign
+    from tests.factories import write_demo_campaign
+
+    manifest = write_demo_campaign(tmp_path / "demo", n_sections=12, n_configs=1)
+    import_campaign(sqlite_database, manifest.parent)
+    k = store_definition_sensitive_configuration(sqlite_database)
+    with sqlite_database.session() as s:
+        res = validate_configuration(s, "demo", "scaled", n_boot=0)
+    q = res.quantities["SumY_max"]
+    # S = k·M exactly after the linear chain: D_v = (k − 1)·|M_v|
+    pairs = res.pairs[res.pairs["quantity"] == "SumY_max"]
+    np.testing.assert_allclose(pairs["D"], (k - 1) * pairs["M"].abs(), rtol=1e-9)
+    assert q.definition_sensitive
+    flips = [a for a in q.alternatives if a["flips"]]
+    assert flips
+    assert (abs(q.mean) > 6.0) != (abs(flips[0]["mean"]) > 6.0)
+    assert "SumY_max" in res.to_dict()["definitions"]["sensitive_quantities"]
+
+
+def test_reading_labels():
+    r = Reading("linear", "first_sample", "samples_half_open")
+    assert r.short() == "linear percentiles + grid from first sample + half-open sample window"
+    assert r.short(sliding_mean=False) == "linear percentiles"
+    assert CHOSEN.short() == "chosen reading"
+
+
+def test_report_sections_show_sensitivity_and_supplementary():
+    from railval.app.report import definition_html, supplementary_html
+    from railval.app.state.dashboard import definition_rows
+
+    sections, meas, sim, _ = _flip_campaign()
+    for sid in meas:
+        meas[sid].supplementary = {("az_bg_rms", "b1"): 1.0}
+        sim[sid].supplementary = {("az_bg_rms", "b1"): 1.5}
+    doc = validate(meas, sim, sections, {"kind": "passenger", "Q0_kN": 80.0}, n_boot=0).to_dict()
+    rows = {r["quantity"]: r for r in definition_rows(doc)}
+    assert set(rows) == {q for q in QUANTITIES if QUANTITIES[q].processing != "rms"}
+    assert rows["SumY_max"]["definition_sensitive"] and rows["SumY_max"]["readings"] == 11
+    assert rows["SumY_max"]["flipped by"] == "passes with linear percentiles"
+    html = definition_html(doc)
+    assert "definition-sensitive: SumY_max; the verdict itself changes" in html
+    supp = supplementary_html(doc)
+    assert "do not change the verdict" in supp and "az_bg_rms" in supp
+    # D_v = 0.5 on 12 pairs: mean 0.5, rel 0.5, log2 ratio log2(1.5) = 0.585
+    assert "<td>12</td><td>0.500</td><td>0.000</td><td>0.500</td><td>0.000</td><td>0.585</td>" in supp

@@ -89,3 +89,18 @@ def test_cli_metrics_list_and_errors(demo_db, capsys):
     assert "iso_rating" in names and "ks_p_eff" in names
     assert main(["--db", url, "metrics", "demo", "--config", "nope"]) == 2
     assert "nope" in capsys.readouterr().err
+
+
+def test_metrics_table_shows_whether_the_lag_is_reliable():
+    import pandas as pd
+
+    from railval.app.state.metrics import MetricsState
+
+    df = pd.DataFrame({"section": ["S01", "S02"], "channel": ["az_bg_b1", "Y_w1L"],
+                       "lag_s": [1.92, 0.01], "lag_reliable": [False, True],
+                       "sg_M": [0.1, 0.2], "sg_M_sync": [0.05, 0.2]})
+    for view in ("synchronised", "raw and synchronised"):
+        out = MetricsState(None, frame=df, view=view).table()
+        assert list(out.columns[:4]) == ["section", "channel", "lag_s", "lag_reliable"]
+        assert out["lag_reliable"].tolist() == [False, True]
+    assert "lag_reliable" not in MetricsState(None, frame=df, view="raw").table().columns

@@ -432,3 +432,18 @@ def test_bad_input_names_row_and_column(mutate, match):
     a, p = mutate(answers, plots)
     with pytest.raises(InvalidParameter, match=match):
         analyse(a, p)
+
+
+def test_bench_review_runs_on_a_small_workshop():
+    import argparse
+
+    from railval.app.bench import bench_review
+
+    parser = argparse.ArgumentParser()
+    bench_review.add_arguments(parser)
+    figures = bench_review.run(parser.parse_args(["--reviewers", "5", "--plots", "20", "--boot", "50",
+                                                  "--repeat", "1"]))
+    assert figures["first_answers"] == 100
+    assert figures["answers_total"] == 100 + 5 * 2 + 5 * 2      # 10 % repeats, 10 % automatic scaling
+    assert figures["analyse_full"]["wall_ms"] > 0 and figures["baseline_analyse_without_bootstrap"]["cpu_ms"] >= 0
+    assert "baseline_rasch_fit_statsmodels_glm_one_call" not in figures

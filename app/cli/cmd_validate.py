@@ -130,10 +130,10 @@ def format_supplementary(supp: dict) -> list[str]:
     rows = supp.get("quantities") or []
     if not rows:
         return []
-    lines = ["supplementary results (shown next to the verdict, they do not change it): "
-             "D_v statistics, rel = value / mean |M_v|, log2 S/M = mean log2 ratio",
-             f"{'quantity':<20} {'unit':<6} {'n':>4} {'mean':>9} {'std':>9} {'mean rel':>9} "
-             f"{'std rel':>8} {'log2 S/M':>9}  processing"]
+    lines = [("supplementary results (shown next to the verdict, they do not change it): "
+              "D_v statistics, rel = value / mean |M_v|, log2 S/M = mean log2 ratio"),
+             (f"{'quantity':<20} {'unit':<6} {'n':>4} {'mean':>9} {'std':>9} {'mean rel':>9} "
+              f"{'std rel':>8} {'log2 S/M':>9}  processing")]
     for r in rows:
         lines.append(f"{r['quantity']:<20} {r['unit']:<6} {r['n']:>4} "
                      f"{_fmt(r['mean'], '+.3g'):>9} {_fmt(r['std'], '.3g'):>9} "

@@ -13,6 +13,7 @@ import panel as pn
 from railval.app import plots
 from railval.app.pages._common import PageBase, message, table, where_map
 from railval.app.state import AppState, DashboardState
+from railval.app.state.dashboard import definition_rows, supplementary_rows
 
 SUMMARY_COLUMNS = ["quantity", "n", "mean", "std", "mean_limit", "std_limit", "mean_norm", "std_norm", "pass"]
 
@@ -31,16 +32,20 @@ def coverage_lines(coverage: Any) -> tuple[bool, list[str]]:
 def verdict_panel(summary: dict[str, Any], config: str) -> pn.pane.Alert:
     ok_cov, lines = coverage_lines(summary["coverage"])
     failing = [r["quantity"] for r in summary["quantities"] if not r.get("pass", False)]
+    defs = summary.get("raw", {}).get("definitions", {})
+    sensitive = defs.get("sensitive_quantities") or []
+    note = ("" if not sensitive else " — definition-sensitive: " + ", ".join(html.escape(q) for q in sensitive)
+            + (" (another reading gives the opposite verdict)" if defs.get("verdict_sensitive") else ""))
     if summary["validated"]:
         return pn.pane.Alert(f"<b>{html.escape(config)}: VALIDATED</b> — every quantity within its "
-                             "limits and coverage holds.", alert_type="success", sizing_mode="stretch_width")
+                             "limits and coverage holds." + note, alert_type="success", sizing_mode="stretch_width")
     parts = []
     if failing:
         parts.append(f"{len(failing)} of {len(summary['quantities'])} quantities exceed their limits: "
                      + ", ".join(html.escape(q) for q in failing))
     if not ok_cov:
         parts.append("coverage: " + "; ".join(html.escape(x) for x in lines))
-    return pn.pane.Alert(f"<b>{html.escape(config)}: NOT VALIDATED</b> — " + " — ".join(parts or ["see table"]),
+    return pn.pane.Alert(f"<b>{html.escape(config)}: NOT VALIDATED</b> — " + " — ".join(parts or ["see table"]) + note,
                          alert_type="danger", sizing_mode="stretch_width")
 
 
@@ -54,6 +59,70 @@ def summary_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
     if "pass" in df:
         df["pass"] = df["pass"].map({True: "pass", False: "FAIL"})
     return df
+
+
+def _range(r: Any) -> str:
+    return "" if not r else f"{r[0]:+.3f} … {r[1]:+.3f}"
+
+
+def definition_block(doc: dict[str, Any]) -> pn.Column:
+    """Which verdicts rest on an open choice of the definitions (docs/validation.md)."""
+    rows = definition_rows(doc)
+    sensitive = [r["quantity"] for r in rows if r["definition_sensitive"]]
+    defs = doc.get("definitions", {})
+    if defs.get("verdict_sensitive") is None and not rows:
+        head = pn.pane.Markdown("#### Definition sensitivity\nNot available for this result.")
+        return pn.Column(head, css_classes=["rv-definitions"], sizing_mode="stretch_width")
+    if sensitive:
+        alert = pn.pane.Alert(
+            "<b>definition-sensitive</b>: " + ", ".join(html.escape(q) for q in sensitive)
+            + " — pass/fail changes under another reading of the percentile or sliding-mean "
+            "definition" + ("; so does the verdict" if defs.get("verdict_sensitive") else ""),
+            alert_type="warning", sizing_mode="stretch_width")
+    else:
+        alert = pn.pane.Alert("No verdict changes under the alternative readings of the percentile "
+                              "and sliding-mean definitions.", alert_type="light",
+                              sizing_mode="stretch_width")
+    df = pd.DataFrame([{
+        "quantity": r["quantity"], "verdict": r["verdict"],
+        "definition-sensitive": "yes" if r["definition_sensitive"] else "no",
+        "flipped by": r["flipped by"],
+        "mean/limit": None if r["mean/limit"] is None else round(r["mean/limit"], 4),
+        "mean/limit other readings": _range(r["mean/limit other readings"]),
+        "std/limit other readings": _range(r["std/limit other readings"]),
+        "readings": r["readings"]} for r in rows])
+    return pn.Column(
+        pn.pane.Markdown(
+            "#### Definition sensitivity\nChosen reading: percentiles by the inverted CDF, sliding-mean "
+            "grid from the evaluated range's start, distance-weighted 2 m mean. The alternatives "
+            "(linear percentiles; grid from the first evaluated sample; sample means over closed or "
+            "half-open windows) are evaluated on the same filtered signals (docs/validation.md).",
+            sizing_mode="stretch_width"),
+        alert, table(df, height=40 + 32 * max(1, len(df))) if len(df) else pn.Spacer(height=0),
+        css_classes=["rv-definitions"], sizing_mode="stretch_width")
+
+
+def supplementary_block(doc: dict[str, Any]) -> pn.Column:
+    """Bogie-frame and PSD-band quantities next to the verdict (they do not change it)."""
+    rows = supplementary_rows(doc)
+    head = pn.pane.Markdown(
+        "#### Supplementary results (do not change the verdict)\nBogie-frame accelerations "
+        "(band-pass 0.4–10 Hz, rms and max of the 0.15 %/99.85 % values, EN 14363) and band rms "
+        "of the Welch PSD of car body and bogie-frame accelerations in 0.4–1, 1–2, 2–5, 5–10 Hz; "
+        "D_v statistics as for the verdict, rel = value / mean |M_v|, log2 S/M = mean log₂ ratio "
+        "(Polach & Böttcher 2014 §3.1 compared such quantities; no limits exist for them).",
+        sizing_mode="stretch_width")
+    if not rows:
+        return pn.Column(head, pn.pane.Markdown("No supplementary channels in this campaign."),
+                         css_classes=["rv-supplementary"], sizing_mode="stretch_width")
+    df = pd.DataFrame([{
+        "quantity": r["quantity"], "group": r["group"], "unit": r["unit"], "n": r["n"],
+        "mean D_v": r["mean"], "std D_v": r["std"], "mean rel": r["mean_rel"],
+        "std rel": r["std_rel"], "log2 S/M": r["log2_ratio_mean"]} for r in rows])
+    for c in ("mean D_v", "std D_v", "mean rel", "std rel", "log2 S/M"):
+        df[c] = df[c].astype(float).round(4)
+    return pn.Column(head, table(df, height=min(560, 40 + 32 * len(df))),
+                     css_classes=["rv-supplementary"], sizing_mode="stretch_width")
 
 
 def validation_view(state: DashboardState, config: str, height: int = 320, compact: bool = False):
@@ -101,7 +170,9 @@ class DashboardPage(PageBase):
                              "std is the sample standard deviation (n − 1). Click a bar for its "
                              "drill-down.", styles={"color": "#555"}),
             table(summary_frame(summary["quantities"]), height=40 + 32 * len(qs)),
+            definition_block(summary["raw"]),
             self._where(config),
+            supplementary_block(summary["raw"]),
             pn.Row(self.quantity_select, pn.pane.Markdown(
                 "Pairs contributing most (largest |D_v|). **Click a row** to compare that section "
                 "and channel.", margin=(28, 10, 0, 10))),

@@ -11,8 +11,9 @@ from railval.app.state import AppState, MetricsState, unit_label
 
 NOTE = ("Signals low-pass 20 Hz and resampled to a common axis (the service says where it "
         "resampled). *Synchronised*: the lag estimated by cross-correlation within a bounded "
-        "window is removed first (`lag_s`). Click a column header to sort; type in a header "
-        "field to filter.")
+        "window is removed first (`lag_s`); `lag_reliable` is false when the lag lies at or within "
+        "5 % of the window's bound (the true lag may lie outside; the synchronised values are "
+        "doubtful). Click a column header to sort; type in a header field to filter.")
 
 
 class MetricsPage(PageBase):

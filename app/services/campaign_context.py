@@ -81,7 +81,8 @@ def section_values(signalsets: Mapping[str, SignalSet], sections: Sequence[Secti
     """EN 14363 values (:func:`railval.core.en14363.evaluate_batch`) of the sections present."""
     secs = [s for s in sections if s.id in signalsets]
     vals = evaluate_batch([signalsets[s.id] for s in secs], secs)
-    return {s.id: dict(v) for s, v in zip(secs, vals, strict=True)}
+    # SectionValues (a dict) keep the supplementary values the residual pattern uses
+    return {s.id: v for s, v in zip(secs, vals, strict=True)}
 
 
 def load_context(session: Any, campaign: str) -> CampaignContext:
@@ -109,12 +110,16 @@ def validate_values(ctx: CampaignContext, sim_values: Mapping[str, Mapping], n_b
 
 def residual_pattern(ctx: CampaignContext, sim_values: Mapping[str, Mapping],
                      sim_bands: Mapping[str, np.ndarray]) -> tuple[Pattern, ValidationResult]:
-    """Pattern (normalised D_v per quantity × zone × position + log₂ band-power ratios) and the
-    :class:`railval.core.validation.ValidationResult` (no bootstrap) of simulated values."""
+    """Pattern (normalised D_v per quantity × zone × position + log₂ band-power ratios + the
+    bogie-frame supplementary quantities, :func:`railval.core.supplementary.supplementary_pattern`)
+    and the :class:`railval.core.validation.ValidationResult` (no bootstrap) of simulated values."""
+    from railval.core.supplementary import supplementary_pattern
+
     vr = validate_values(ctx, sim_values)
     pairs = vr.pairs.to_dict("records")
     pat = pattern_from_pairs(pairs, value_key="D_norm")
-    return Pattern.concat(pat, band_ratio_pattern(sim_bands, ctx.measured_bands, ctx.bands)), vr
+    return Pattern.concat(pat, band_ratio_pattern(sim_bands, ctx.measured_bands, ctx.bands),
+                          supplementary_pattern(vr.supplementary.get("pairs", ()))), vr
 
 
 def simulate_context(ctx: CampaignContext, effects: Mapping[str, Mapping[str, float]],

@@ -79,6 +79,40 @@ def _pairs_of(result: Any, quantity: str) -> list[dict[str, Any]]:
     } for r in sub.itertuples(index=False)]
 
 
+def definition_rows(doc: dict[str, Any]) -> list[dict[str, Any]]:
+    """Per quantity that another reading of the open definitions can change (percentile
+    method, sliding-window grid and mean; docs/validation.md): verdict, whether some reading
+    flips it, which, and the range of mean/limit and std/limit over the readings."""
+    out = []
+    for q in doc.get("quantities", []):
+        alts = q.get("definition_alternatives") or []
+        if not alts:
+            continue
+        means = [a["mean_norm"] for a in alts if a.get("mean_norm") is not None]
+        stds = [a["std_norm"] for a in alts if a.get("std_norm") is not None]
+        flips = [a for a in alts if a.get("flips")]
+        out.append({
+            "quantity": q["quantity"],
+            "verdict": "pass" if q.get("pass") else "FAIL",
+            "definition_sensitive": bool(q.get("definition_sensitive")),
+            "readings": len(alts),
+            "mean/limit": q.get("mean_norm"),
+            "mean/limit other readings": (min(means), max(means)) if means else None,
+            "std/limit other readings": (min(stds), max(stds)) if stds else None,
+            "flipped by": "" if not flips else (
+                f"{'passes' if flips[0]['pass'] else 'fails'} with "
+                f"{flips[0].get('label', flips[0]['description'])}"
+                + (f" (and {len(flips) - 1} more of {len(alts)} readings)" if len(flips) > 1 else "")),
+        })
+    return out
+
+
+def supplementary_rows(doc: dict[str, Any]) -> list[dict[str, Any]]:
+    """The supplementary results (bogie-frame and PSD-band quantities) of a validation
+    document, one row each (core.supplementary); they never change the verdict."""
+    return [dict(r) for r in (doc.get("supplementary") or {}).get("quantities", [])]
+
+
 def finite_or_nan(x: Any) -> float:
     return float("nan") if x is None else float(x)
 

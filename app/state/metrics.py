@@ -53,14 +53,16 @@ class MetricsState(param.Parameterized):
             return None
         ids = [c for c in self.ID_COLUMNS if c in df.columns]
         metric_cols = [c for c in df.columns if c not in ids and f"{c}_sync" in df.columns]
+        # the lag and whether it is reliable (not within 5 % of the ±max_lag search bound)
+        lag = ["lag_s"] + (["lag_reliable"] if "lag_reliable" in df.columns else [])
         if self.view == "raw":
             cols = ids + metric_cols
             out = df[cols]
         elif self.view == "synchronised":
-            out = df[ids + ["lag_s"] + [f"{c}_sync" for c in metric_cols]]
+            out = df[ids + lag + [f"{c}_sync" for c in metric_cols]]
             out = out.rename(columns={f"{c}_sync": c for c in metric_cols})
         else:
-            cols = ids + ["lag_s"] + [x for c in metric_cols for x in (c, f"{c}_sync")]
+            cols = ids + lag + [x for c in metric_cols for x in (c, f"{c}_sync")]
             out = df[cols]
         return out.reset_index(drop=True)
 
