@@ -49,10 +49,9 @@ from typing import Any
 from urllib.parse import quote
 
 import tornado.web
-from tornado.ioloop import IOLoop
-
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
 from railval.core.roles import Principal, allowed, open_principal
+from tornado.ioloop import IOLoop
 
 COOKIE = "railval_user"
 COOKIE_DAYS = 1
@@ -130,10 +129,9 @@ def _is_local(handler: tornado.web.RequestHandler) -> bool:
 
 
 def _principal_for(database, username: str | None, local: bool) -> Principal | None:
-    from sqlalchemy import func, select
-
     from railval.db import users
     from railval.db.models import AppUser
+    from sqlalchemy import func, select
 
     with database.session() as s:
         if username:
@@ -341,7 +339,7 @@ class ReviewPage(_ReviewerBase):
         if ctx is None:
             return
         title = "Expert review" if ctx.blind else f"Expert review — {ctx.workshop_name}"
-        body = f"""
+        body = """
 <p class='muted'>Question for every plot: <strong>is the model validated for this signal?</strong>
 Answer with the buttons or the keys <kbd>y</kbd> / <kbd>n</kbd>; <kbd>←</kbd> goes back.
 Every answer is saved at once; you can close the page and come back with the same link.</p>
@@ -449,9 +447,9 @@ class ReviewAnswer(_Base):
 
         try:
             body = json.loads(self.request.body or b"{}")
-            if not isinstance(body, dict):
-                raise ValueError
         except ValueError:
+            body = None
+        if not isinstance(body, dict):
             self.json({"error": "the request body must be a JSON object"}, 400)
             return
         try:
@@ -805,7 +803,6 @@ def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | N
     limit; returned as a PNG data URL."""
     import numpy as np
     from matplotlib.figure import Figure
-
     from railval.core.review import yes_curve
 
     thr = doc.get("threshold") or {}

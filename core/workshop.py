@@ -50,7 +50,6 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
-
 from railval.core.errors import InvalidParameter
 from railval.core.quantities import QUANTITIES
 
@@ -315,7 +314,7 @@ def review_order(n_plots: int, seed: int, repeat_share: float = 0.1,
         raise InvalidParameter(f"repeat share must be between 0 and 1, got {repeat_share!r}")
     rng = np.random.default_rng(seed)
     seq: list[tuple[int, bool]] = [(int(i), False) for i in rng.permutation(n_plots)]
-    n_rep = int(round(repeat_share * n_plots))
+    n_rep = round(repeat_share * n_plots)
     if n_rep == 0:
         return seq
     chosen = rng.choice(n_plots, size=n_rep, replace=False)

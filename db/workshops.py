@@ -22,10 +22,6 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from sqlalchemy import case, func, select, update
-from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session
-
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
 from railval.core.roles import Principal
 from railval.core.workshop import review_order
@@ -38,6 +34,9 @@ from railval.db.models import (
     WorkshopReviewer,
     utcnow,
 )
+from sqlalchemy import case, func, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
 
 STATUSES = ("open", "closed")
 

@@ -72,6 +72,7 @@ def env(tmp_path_factory):
     from railval.app.services import workshops as ws
     from railval.db import users
     from railval.db import workshops as wsdb
+
     from tests.browser_support import demo_database
 
     folder = tmp_path_factory.mktemp("wsbrowser")

@@ -7,7 +7,6 @@ import math
 
 import numpy as np
 import pytest
-
 from railval.core.errors import InvalidParameter
 from railval.core.quantities import QUANTITIES
 from railval.core.workshop import (

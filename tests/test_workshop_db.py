@@ -7,11 +7,10 @@ from __future__ import annotations
 import threading
 
 import pytest
-from sqlalchemy import func, select
-from sqlalchemy.exc import IntegrityError
-
 from railval.db import workshops as wsdb
 from railval.db.models import Campaign, WorkshopAnswer
+from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
 
 
 def _workshop(database, n_plots: int = 6):
@@ -30,7 +29,7 @@ def _workshop(database, n_plots: int = 6):
 
 
 def test_concurrent_submissions_of_one_place_store_one_answer(database):
-    t1, t2 = _workshop(database)
+    t1, _ = _workshop(database)
     errors: list[BaseException] = []
     barrier = threading.Barrier(8)
 

@@ -9,14 +9,13 @@ import hashlib
 import json
 
 import pytest
-from sqlalchemy import func, select
-
 from railval.app.cli import main as cli
 from railval.app.services import workshops as ws
 from railval.core.errors import InvalidParameter
 from railval.core.workshop import PLOT_KINDS
 from railval.db import workshops as wsdb
 from railval.db.models import AppUser, WorkshopAnswer, WorkshopReviewer
+from sqlalchemy import func, select
 
 KINDS = ["Y_time", "ay_cb_time", "ay_cb_psd"]
 
@@ -57,7 +56,7 @@ def test_plan_counts_before_creating(made):
 
 
 def test_plots_contract_and_one_scaling_per_kind(made):
-    db, summary, _ = made
+    db, _, _ = made
     with db.session() as s:
         doc = ws.plots_document(s, "W")
         w = wsdb.get_workshop(s, "W")
@@ -89,9 +88,8 @@ def test_plots_contract_and_one_scaling_per_kind(made):
 
 def test_rendering_is_deterministic(made):
     import numpy as np
-
     from railval.app.services.workshop_render import render_png
-    from railval.core.workshop import kind_scale, Extent
+    from railval.core.workshop import Extent, kind_scale
 
     x = np.linspace(0, 100, 500)
     y = np.sin(x / 7)
@@ -172,7 +170,7 @@ def test_import_bad_header_and_cli_error(made, tmp_path, capsys):
 
 
 def test_import_export_and_analyse_round_trip(made, tmp_path, capsys):
-    db, _, folder = made
+    db, _, _ = made
     from railval.core.review import simulate_answers  # noqa: F401 - the statistics core is present
 
     with db.session() as s:

@@ -59,7 +59,7 @@ def _rss_kib(pid: int) -> int:
 
 def _pct(values: list[float], p: float) -> float:
     s = sorted(values)
-    return s[min(len(s) - 1, max(0, int(round(p / 100 * (len(s) - 1)))))]
+    return s[min(len(s) - 1, max(0, round(p / 100 * (len(s) - 1))))]
 
 
 def _summary(ms: list[float]) -> dict[str, float]:
@@ -68,12 +68,11 @@ def _summary(ms: list[float]) -> dict[str, float]:
 
 
 def _setup(url: str, campaign: str | None, n_plots: int, n_reviewers: int) -> dict[str, Any]:
-    from sqlalchemy import select
-
     from railval.app.services import workshops as ws
     from railval.db import workshops as wsdb
     from railval.db.engine import connect
     from railval.db.models import Workshop
+    from sqlalchemy import select
 
     db = connect(url)
     db.init()
@@ -246,10 +245,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 def _check(url: str, threads: list[_Reviewer]) -> tuple[int, int, int, int]:
     """(stored, lost, duplicated, wrong value) from the database against what was sent."""
-    from sqlalchemy import select
-
     from railval.db.engine import connect
     from railval.db.models import AppUser, WorkshopAnswer, WorkshopReviewer
+    from sqlalchemy import select
 
     db = connect(url)
     with db.session() as s:

@@ -22,11 +22,10 @@ import matplotlib
 
 matplotlib.use("Agg", force=False)
 
-import numpy as np  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-
-from railval.app.scales import MEASURED_COLOR, SIM_COLORS  # noqa: E402
-from railval.core.workshop import Scale  # noqa: E402
+import numpy as np
+from matplotlib.figure import Figure
+from railval.app.scales import MEASURED_COLOR, SIM_COLORS
+from railval.core.workshop import Scale
 
 #: the look of every review plot (stored with each plot's render parameters)
 STYLE: dict[str, Any] = {
@@ -83,7 +82,7 @@ def render_png(x_meas: np.ndarray, y_meas: np.ndarray, x_sim: np.ndarray, y_sim:
 
 
 def _ticks(lo: float, hi: float, step: float) -> np.ndarray:
-    n = int(round((hi - lo) / step))
+    n = round((hi - lo) / step)
     return np.round(lo + step * np.arange(n + 1), 12)
 
 

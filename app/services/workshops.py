@@ -25,7 +25,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.filters import filtfilt_rows
 from railval.core.metrics.grid import common_grid
@@ -244,7 +243,7 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
             extents.setdefault(k.id, []).extend([_extent(k, cm), _extent(k, cs)])
         scales = {kid: kind_scale(PLOT_KINDS[kid].domain, ex) for kid, ex in extents.items()}
         rng = random.Random(seed)
-        n_auto = int(round(auto_share * len(facts)))
+        n_auto = round(auto_share * len(facts))
         auto_idx = sorted(rng.sample(range(len(facts)), n_auto)) if n_auto else []
         rows: list[dict[str, Any]] = []
         jobs = [(i, "fixed") for i in range(len(facts))] + [(i, "auto") for i in auto_idx]
@@ -290,9 +289,8 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
 
 
 def _exists_query(name: str):
-    from sqlalchemy import select
-
     from railval.db.models import Workshop
+    from sqlalchemy import select
 
     return select(Workshop.id).where(Workshop.name == name)
 
@@ -358,10 +356,10 @@ def parse_answers_csv(text: str, source_name: str = "FILE") -> list[dict[str, An
             raise InvalidParameter(f"{source_name} line {line_no}: {len(cells)} fields, the header "
                                    f"has {len(header)}")
 
-        def cell(name: str) -> str:
+        def cell(name: str, cells: list[str] = cells) -> str:
             return cells[col[name]].strip()
 
-        def bad(name: str, why: str) -> InvalidParameter:
+        def bad(name: str, why: str, line_no: int = line_no) -> InvalidParameter:
             return InvalidParameter(f"{source_name} line {line_no}, column {name}: {why}")
 
         reviewer = cell("reviewer")
@@ -447,7 +445,6 @@ def analysis_frames(session, name: str):
     deviation, sg_c`` (NaN where none).
     """
     import pandas as pd
-
     from railval.db import workshops as wsdb
 
     w = wsdb.get_workshop(session, name)
