@@ -31,9 +31,17 @@ from typing import Any
 
 import numpy as np
 
-from railval.app.scales import MEASURED_COLOR, SIM_COLORS, nice_limits, nice_ticks, unit_label
-from railval.core.errors import RailvalError
+from railval.app.scales import (
+    FAIL_COLOR,
+    MEASURED_COLOR,
+    PASS_COLOR,
+    SIM_COLORS,
+    downsample_xy,
+    unit_label,
+)
+from railval.app.svg_charts import svg_bars, svg_lines
 from railval.core.diagnosis import where_grid
+from railval.core.errors import RailvalError
 from railval.core.filters import filtfilt_rows
 from railval.core.quantities import channel_for
 from railval.core.types import channel_kind
@@ -43,6 +51,8 @@ CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "goo
 CHROMIUM_ARGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync")
 PDF_TIMEOUT_S = 120
+#: points per trace of the report's line charts
+SVG_POINTS = 1200
 
 
 class ReportError(RailvalError):
@@ -67,105 +77,6 @@ def _fmt(x: Any, digits: int = 3) -> str:
     if not math.isfinite(v):
         return "–"
     return f"{v:.{digits}g}" if abs(v) >= 1e4 or (v != 0 and abs(v) < 1e-3) else f"{v:.{digits}f}"
-
-
-# ----------------------------------------------------------------------------- SVG charts
-def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
-             limits: tuple[float, ...] = (1.0,), intervals: list | None = None,
-             width: int = 560, height: int = 300) -> str:
-    """Vertical bar chart as SVG; bars beyond ±1 red, others green; dashed limit lines."""
-    ml, mr, mt, mb = 62, 12, 30, 92
-    w, h = width - ml - mr, height - mt - mb
-    finite = [abs(v) for v in values if v is not None and math.isfinite(v)]
-    top = max([1.2] + [v * 1.1 for v in finite])
-    signed = any(lim < 0 for lim in limits)
-    lo = -top if signed else 0.0
-
-    def y(v: float) -> float:
-        return mt + h * (top - v) / (top - lo)
-
-    out = [(f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
-           f'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">'),
-           f'<text x="{width / 2}" y="18" text-anchor="middle" font-size="14" font-weight="bold">{_esc(title)}</text>']
-    for t in np.linspace(lo, top, 5):
-        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{y(t):.1f}" y2="{y(t):.1f}" stroke="#e0e0e0"/>'
-                   f'<text x="{ml - 6}" y="{y(t) + 4:.1f}" text-anchor="end">{t:.2f}</text>')
-    n = max(1, len(labels))
-    bw = w / n
-    for i, (lab, v) in enumerate(zip(labels, values, strict=True)):
-        x0 = ml + i * bw
-        if v is not None and math.isfinite(v):
-            color = "#c62828" if abs(v) > 1.0 else "#2e7d32"
-            y0, y1 = sorted((y(0.0), y(v)))
-            out.append(f'<rect x="{x0 + bw * 0.15:.1f}" y="{y0:.1f}" width="{bw * 0.7:.1f}" '
-                       f'height="{max(y1 - y0, 0.5):.1f}" fill="{color}"><title>{_esc(lab)}: {v:.3f}</title></rect>')
-            if intervals and intervals[i] and None not in intervals[i]:
-                a, b = intervals[i]
-                xc = x0 + bw / 2
-                out.append(f'<line x1="{xc:.1f}" x2="{xc:.1f}" y1="{y(a):.1f}" y2="{y(b):.1f}" stroke="#000" '
-                           f'stroke-width="1.3"/>')
-        out.append(f'<text transform="translate({x0 + bw / 2:.1f},{mt + h + 8}) rotate(45)" '
-                   f'font-size="11">{_esc(lab)}</text>')
-    for lim in limits:
-        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{y(lim):.1f}" y2="{y(lim):.1f}" stroke="#000" '
-                   f'stroke-dasharray="6,4" stroke-width="1.4"/>')
-    out.append(f'<line x1="{ml}" x2="{ml}" y1="{mt}" y2="{mt + h}" stroke="#000"/>'
-               f'<line x1="{ml}" x2="{ml + w}" y1="{y(max(lo, 0.0)):.1f}" y2="{y(max(lo, 0.0)):.1f}" stroke="#000"/>')
-    out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
-    out.append("</svg>")
-    return "".join(out)
-
-
-def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: str, xlabel: str,
-              ylabel: str, shade: tuple[float, float] | None = None, width: int = 760,
-              height: int = 280) -> str:
-    """Line chart as SVG: ``traces`` = [(label, x, y, colour)], first drawn first (beneath)."""
-    ml, mr, mt, mb = 70, 14, 30, 46
-    w, h = width - ml - mr, height - mt - mb
-    xs = np.concatenate([t[1] for t in traces]) if traces else np.array([0.0, 1.0])
-    ys = np.concatenate([t[2] for t in traces]) if traces else np.array([0.0, 1.0])
-    x0, x1 = nice_limits(float(np.min(xs)), float(np.max(xs)))
-    y0, y1 = nice_limits(float(np.min(ys)), float(np.max(ys)))
-
-    def px(v):
-        return ml + w * (np.asarray(v) - x0) / (x1 - x0)
-
-    def py(v):
-        return mt + h * (y1 - np.asarray(v)) / (y1 - y0)
-
-    out = [(f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
-           f'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">'),
-           f'<text x="{width / 2}" y="18" text-anchor="middle" font-size="13" font-weight="bold">{_esc(title)}</text>']
-    if shade is not None:
-        a, b = max(shade[0], x0), min(shade[1], x1)
-        out.append(f'<rect x="{px(a):.1f}" y="{mt}" width="{max(px(b) - px(a), 0):.1f}" height="{h}" '
-                   f'fill="#f2c14e" fill-opacity="0.2"/>')
-    for t in nice_ticks(y0, y1):
-        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{py(t):.1f}" y2="{py(t):.1f}" stroke="#e6e6e6"/>'
-                   f'<text x="{ml - 6}" y="{py(t) + 4:.1f}" text-anchor="end">{t:.4g}</text>')
-    for t in nice_ticks(x0, x1):
-        out.append(f'<text x="{px(t):.1f}" y="{mt + h + 16}" text-anchor="middle">{t:.4g}</text>')
-    for i, (label, x, y, color) in enumerate(traces):
-        pts = " ".join(f"{a:.1f},{b:.1f}" for a, b in zip(px(x), py(y), strict=True))
-        out.append(f'<polyline fill="none" stroke="{color}" stroke-width="{1.4 if i == 0 else 1.1}" '
-                   f'points="{pts}"/>')
-        out.append(f'<rect x="{ml + w - 200}" y="{mt + 6 + 16 * i}" width="14" height="3" fill="{color}"/>'
-                   f'<text x="{ml + w - 180}" y="{mt + 11 + 16 * i}">{_esc(label)}</text>')
-    out.append(f'<rect x="{ml}" y="{mt}" width="{w}" height="{h}" fill="none" stroke="#000"/>')
-    out.append(f'<text x="{ml + w / 2}" y="{height - 8}" text-anchor="middle">{_esc(xlabel)}</text>')
-    out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
-    out.append("</svg>")
-    return "".join(out)
-
-
-def _thin(x: np.ndarray, y: np.ndarray, n_out: int = 1200) -> tuple[np.ndarray, np.ndarray]:
-    """Min-max LTTB downsampling (tsdownsample) for the SVG plots; short signals unchanged."""
-    if x.size <= n_out:
-        return x, y
-    from tsdownsample import MinMaxLTTBDownsampler
-
-    idx = MinMaxLTTBDownsampler().downsample(x, y, n_out=n_out)
-    return x[idx], y[idx]
 
 
 # ----------------------------------------------------------------------------- report
@@ -246,15 +157,15 @@ h1 { font-size: 22px; margin-bottom: 4px; } h2 { font-size: 17px; margin-top: 26
   border-bottom: 1px solid #ccc; padding-bottom: 3px; } h3 { font-size: 14px; }
 table { border-collapse: collapse; margin: 8px 0; } th, td { border: 1px solid #ccc; padding: 3px 7px;
   text-align: right; } th { background: #f0f2f5; } td.l, th.l { text-align: left; }
-.pass { color: #2e7d32; font-weight: bold; } .fail { color: #c62828; font-weight: bold; }
+.pass { color: {pass_}; font-weight: bold; } .fail { color: {fail}; font-weight: bold; }
 .verdict { padding: 10px 14px; border-radius: 4px; font-size: 15px; margin: 10px 0; }
-.verdict.ok { background: #e8f5e9; border: 1px solid #2e7d32; }
-.verdict.no { background: #ffebee; border: 1px solid #c62828; }
+.verdict.ok { background: #e8f5e9; border: 1px solid {pass_}; }
+.verdict.no { background: #ffebee; border: 1px solid {fail}; }
 .meta td { text-align: left; border: none; padding: 1px 10px 1px 0; }
 .hashes td { font-family: 'DejaVu Sans Mono', monospace; font-size: 10px; }
 .charts { display: flex; flex-wrap: wrap; gap: 12px; } .note { color: #555; }
 @media print { h2 { page-break-after: avoid; } .worst { page-break-inside: avoid; } }
-"""
+""".replace("{pass_}", PASS_COLOR).replace("{fail}", FAIL_COLOR)
 
 
 def diverging_color(value: float, limit: float = 2.0) -> str:
@@ -286,6 +197,31 @@ def where_table(grid: Any, limit: float = 2.0) -> str:
     out.append(f"</table><p class='note'>Mean of D_v / std limit over the sections and positions of each "
                f"zone; red: the simulation above the measurement, blue: below; colours saturate at ±{limit:g}.</p>")
     return "".join(out)
+
+
+def signoff_rows_html(items: list[tuple[dict[str, Any], Any]]) -> str:
+    """The sign-off table (escaped) of the validation report and the audit report
+    (:mod:`railval.app.audit_report`)."""
+    if not items:
+        return "<p class='note'>No sign-off.</p>"
+    rows = []
+    for d, st in items:
+        cls = "pass" if st.status == "valid" else "fail"
+        why = "<br>".join(_esc(r) for r in st.reasons[:5])
+        rows.append(
+            f"<tr><td>{d['id']}</td><td class='l'>{_esc(d['campaign'])} / {_esc(d['configuration'])}</td>"
+            f"<td class='l {cls}'>{_esc(st.status)}</td><td class='l'>{_esc(d['decision_text'])}</td>"
+            f"<td class='l'>{_esc(d['printed_name'])} ({_esc(d['username'])})</td>"
+            f"<td class='l'>{_esc(d['signed_at_utc'])}</td>"
+            f"<td class='l'>{_esc(d['meaning'])}</td>"
+            f"<td class='l'>{_esc(d['restrictions'] or '–')}</td><td class='l'>{_esc(d['statement'] or '–')}</td>"
+            f"<td class='l' style='font-family:monospace;font-size:10px'>{_esc(d['evidence_sha256'])}</td>"
+            f"<td class='l'>{why}</td></tr>")
+    return ("<table><tr><th>id</th><th class='l'>configuration</th><th class='l'>status</th>"
+            "<th class='l'>decision</th><th class='l'>signed by</th><th class='l'>UTC</th>"
+            "<th class='l'>meaning</th><th class='l'>restrictions</th><th class='l'>statement</th>"
+            "<th class='l'>evidence SHA-256</th><th class='l'>changed since</th></tr>"
+            + "".join(rows) + "</table>")
 
 
 def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3) -> Report:
@@ -372,6 +308,19 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
                  "simulation (blue), evaluated range shaded.</p>")
         h.extend(_worst_case_plots(backend, campaign, configuration, result, ov, worst_cases))
 
+    # independent sign-offs of this configuration, with their status
+    session = getattr(backend, "session", None)
+    if session is not None:
+        from railval.app.services.signoff import statuses
+        from railval.db import signoff as db_signoff
+
+        with session() as s:
+            items = [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, configuration)]
+        h.append("<h2>Sign-offs</h2>")
+        h.append("<p class='note'>Each sign-off is bound to the SHA-256 of its evidence "
+                 "(docs/audit.md); <b>stale</b> means the evidence changed after signing.</p>")
+        h.append(signoff_rows_html(items))
+
     # hashes
     h.append("<h2>Evidence: signal content hashes (SHA-256)</h2>")
     meas = backend.hashes(campaign, None)
@@ -414,7 +363,7 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
                                   (configuration, configuration, SIM_COLORS[0])):
             ss = backend.signals(campaign, cfg, r.section, [ch])
             y = filtfilt_rows(np.asarray(ss.channels[ch], float)[None, :], float(ss.fs), fkind)[0]
-            x, y = _thin(np.asarray(ss.distance_m, float), y)
+            x, y = downsample_xy(np.asarray(ss.distance_m, float), y, n_out=SVG_POINTS)
             traces.append((label, x, y, color))
         sec = secs.get(r.section)
         unit = unit_label(entry.unit if entry else "")

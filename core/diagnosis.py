@@ -57,6 +57,7 @@ from railval.core.psd import welch_psd
 __all__ = [
     "DEFAULT_BANDS_HZ",
     "Candidate",
+    "Component",
     "DiagnosisResult",
     "ParameterScan",
     "Pattern",
@@ -78,13 +79,84 @@ __all__ = [
 DEFAULT_BANDS_HZ: tuple[tuple[float, float], ...] = ((0.4, 1.0), (1.0, 2.0), (2.0, 5.0), (5.0, 10.0))
 
 
+@dataclass(frozen=True)
+class Component:
+    """What one pattern component measures, as fields: a validation pair aggregate
+    (``kind="pair"``: ``quantity``, EN 14363 ``zone``, ``position``), a band-power ratio
+    (``kind="psd"``: acceleration ``channel``, ``band`` in Hz) or a supplementary quantity
+    (``kind="supplementary"``: ``quantity``, ``position``, ``channel`` = its channel kind,
+    :mod:`railval.core.supplementary`)."""
+
+    kind: str
+    quantity: str = ""
+    zone: int = 0
+    position: str = ""
+    channel: str = ""
+    band: tuple[float, float] = (0.0, 0.0)
+
+    @classmethod
+    def pair(cls, quantity: str, zone: int, position: str) -> Component:
+        return cls("pair", quantity=quantity, zone=int(zone), position=position)
+
+    @classmethod
+    def psd(cls, channel: str, band: tuple[float, float]) -> Component:
+        return cls("psd", channel=channel, band=(float(band[0]), float(band[1])))
+
+    @classmethod
+    def supplementary(cls, quantity: str, position: str, channel_kind: str) -> Component:
+        return cls("supplementary", quantity=quantity, position=position, channel=channel_kind)
+
+    @property
+    def direction(self) -> str:
+        """Of a band-power or supplementary component: the acceleration direction (``"ay"``, ``"az"``)."""
+        return self.channel.split("_")[0]
+
+    @property
+    def band_label(self) -> str:
+        return f"{self.band[0]:g}-{self.band[1]:g} Hz"
+
+    @property
+    def label(self) -> str:
+        """As shown to a reader: ``"Y_qst zone 4 w1L"``, ``"psd az_cb_b1 5-10 Hz"``."""
+        if self.kind == "psd":
+            return f"psd {self.channel} {self.band_label}"
+        if self.kind == "supplementary":
+            return f"supp {self.quantity} {self.position}"
+        return f"{self.quantity} zone {self.zone} {self.position}"
+
+    @property
+    def group(self) -> str:
+        """The weighting group: the quantity id, ``"psd ay"``/``"psd az"`` or ``"bogie ay"``/``"bogie az"``."""
+        if self.kind == "psd":
+            return f"psd {self.direction}"
+        return f"bogie {self.direction}" if self.kind == "supplementary" else self.quantity
+
+    def to_dict(self) -> dict[str, Any]:
+        if self.kind == "psd":
+            return {"kind": "psd", "channel": self.channel, "band": list(self.band)}
+        if self.kind == "supplementary":
+            return {"kind": "supplementary", "quantity": self.quantity, "position": self.position,
+                    "channel": self.channel}
+        return {"kind": "pair", "quantity": self.quantity, "zone": self.zone, "position": self.position}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Component:
+        if d["kind"] == "psd":
+            return cls.psd(d["channel"], tuple(d["band"]))
+        if d["kind"] == "supplementary":
+            return cls.supplementary(d["quantity"], d["position"], d["channel"])
+        return cls.pair(d["quantity"], d["zone"], d["position"])
+
+
 @dataclass
 class Pattern:
-    """Labelled dimensionless residual vector; ``groups[i]`` names the quantity of component i."""
+    """Labelled dimensionless residual vector; ``groups[i]`` names the quantity of component i;
+    ``components[i]`` (when built from data) says what component i measures, as fields."""
 
     labels: list[str]
     groups: list[str]
     values: np.ndarray
+    components: list[Component] | None = None
 
     def __post_init__(self) -> None:
         self.values = np.asarray(self.values, dtype=float)
@@ -92,6 +164,14 @@ class Pattern:
             raise InvalidSignal(
                 f"pattern needs equal numbers of labels ({len(self.labels)}), groups ({len(self.groups)}) "
                 f"and values ({self.values.size})")
+        if self.components is not None and len(self.components) != len(self.labels):
+            raise InvalidSignal(f"pattern has {len(self.components)} components for {len(self.labels)} labels")
+
+    @classmethod
+    def of(cls, components: Sequence[Component], values) -> Pattern:
+        """A pattern of structured components (labels and groups from them)."""
+        comps = list(components)
+        return cls([c.label for c in comps], [c.group for c in comps], values, comps)
 
     def weights(self) -> np.ndarray:
         """Per-component weight 1/√n_group (each group's total weight is 1)."""
@@ -130,10 +210,20 @@ class Pattern:
             labels += p.labels
             groups += p.groups
             vals.append(p.values)
-        return Pattern(labels, groups, np.concatenate(vals) if vals else np.zeros(0))
+        comps = (None if any(p.components is None for p in patterns)
+                 else [c for p in patterns for c in p.components])
+        return Pattern(labels, groups, np.concatenate(vals) if vals else np.zeros(0), comps)
+
+    def with_values(self, values) -> Pattern:
+        """The same components with other values."""
+        return Pattern(self.labels, self.groups, values, self.components)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"labels": list(self.labels), "groups": list(self.groups), "values": self.values.tolist()}
+        d: dict[str, Any] = {"labels": list(self.labels), "groups": list(self.groups),
+                             "values": self.values.tolist()}
+        if self.components is not None:
+            d["components"] = [c.to_dict() for c in self.components]
+        return d
 
 
 def pattern_from_pairs(pairs: Iterable[Mapping[str, Any]], *, value_key: str = "norm") -> Pattern:
@@ -152,8 +242,8 @@ def pattern_from_pairs(pairs: Iterable[Mapping[str, Any]], *, value_key: str = "
     if not acc:
         raise InvalidSignal(f"no finite '{value_key}' values in the validation pairs")
     keys = sorted(acc)
-    return Pattern([f"{q} zone {z} {p}" for q, z, p in keys], [q for q, _, _ in keys],
-                   np.array([float(np.mean(acc[k])) for k in keys]))
+    return Pattern.of([Component.pair(q, z, p) for q, z, p in keys],
+                      np.array([float(np.mean(acc[k])) for k in keys]))
 
 
 def difference_pairs(measured: Mapping[str, Mapping[tuple[str, str], float]],
@@ -202,14 +292,13 @@ def band_ratio_pattern(simulated: Mapping[str, np.ndarray], measured: Mapping[st
     1 = twice the power). Label ``"psd az_cb_b1 5-10 Hz"``, group ``"psd ay"``/``"psd az"``
     from the channel kind. A band without power on either side is skipped.
     """
-    labels, groups, vals = [], [], []
+    comps, vals = [], []
     for ch in sorted(set(simulated) & set(measured)):
-        for (lo, hi), a, b in zip(bands, np.atleast_1d(simulated[ch]), np.atleast_1d(measured[ch]), strict=True):
+        for band, a, b in zip(bands, np.atleast_1d(simulated[ch]), np.atleast_1d(measured[ch]), strict=True):
             if b > 0 and a > 0:
-                labels.append(f"psd {ch} {lo:g}-{hi:g} Hz")
-                groups.append(f"psd {ch.split('_')[0]}")
+                comps.append(Component.psd(ch, band))
                 vals.append(math.log(a / b) / math.log(2.0))
-    return Pattern(labels, groups, np.array(vals))
+    return Pattern.of(comps, np.array(vals))
 
 
 def psd_band_pattern(simulated: Mapping[str, Sequence[np.ndarray]], measured: Mapping[str, Sequence[np.ndarray]],
@@ -348,7 +437,7 @@ def diagnose_patterns(residual: Pattern, scans: Mapping[str, Sequence[ParameterS
                                sorted(fixes, key=lambda g: after[g] - before[g]),
                                sorted(worsens, key=lambda g: before[g] - after[g]),
                                (explanations or {}).get(effect, ""),
-                               Pattern(residual.labels, residual.groups, residual.values - P),
+                               residual.with_values(residual.values - P),
                                math.sqrt(cost), {g: (before[g], after[g]) for g in before}))
     cands.sort(key=lambda c: -c.explained)
     separable, evidence, note = True, [], ""
@@ -414,29 +503,26 @@ def where_grid(pairs: Mapping[str, Sequence]) -> PatternGrid:
     return _quantity_zone_grid(acc)
 
 
-def pattern_grids(labels: Sequence[str], values) -> tuple[PatternGrid, PatternGrid]:
-    """Arrange a diagnosis pattern (components ``"Y_qst zone 4 w1L"`` = mean normalised D_v
-    of a quantity in a zone at a position, and ``"psd az_cb_b1 5-10 Hz"`` = log2 PSD ratio
-    simulation/measurement in a band) into (quantity × zone, car body acceleration
-    direction × band) grids, averaging over positions."""
+def pattern_grids(components: Sequence[Component], values) -> tuple[PatternGrid, PatternGrid]:
+    """Arrange a diagnosis pattern (its :class:`Component` s and values: mean normalised D_v
+    of a quantity in a zone at a position, and log₂ PSD ratio simulation/measurement of an
+    acceleration channel in a band) into (quantity × zone, car body acceleration direction ×
+    band) grids, averaging over positions and channels; supplementary components are on
+    neither grid."""
     q_acc: dict[tuple[str, str], list[float]] = defaultdict(list)
     p_acc: dict[tuple[str, str], list[float]] = defaultdict(list)
-    bands: list[str] = []
-    for label, v in zip(labels, np.asarray(values, float), strict=True):
+    bands: dict[str, float] = {}
+    for c, v in zip(components, np.asarray(values, float), strict=True):
         if not math.isfinite(v):
             continue
-        parts = label.split()
-        if parts[0] == "psd":  # psd <channel> <lo-hi> Hz
-            kind = parts[1].split("_")[0]
-            band = f"{parts[2]} Hz"
-            if band not in bands:
-                bands.append(band)
-            p_acc[(kind, band)].append(v)
-        elif len(parts) >= 3 and parts[1] == "zone":
-            q_acc[(parts[0], f"zone {parts[2]}")].append(v)
-    bands.sort(key=lambda b: float(b.split("-")[0]))
-    kinds = [k for k in ("ay", "az") if any((k, b) in p_acc for b in bands)]
-    return _quantity_zone_grid(q_acc), _grid(kinds, bands, p_acc)
+        if c.kind == "psd":
+            bands[c.band_label] = c.band[0]
+            p_acc[(c.direction, c.band_label)].append(v)
+        elif c.kind == "pair":
+            q_acc[(c.quantity, f"zone {c.zone}")].append(v)
+    cols = sorted(bands, key=bands.__getitem__)
+    kinds = [k for k in ("ay", "az") if any((k, b) in p_acc for b in cols)]
+    return _quantity_zone_grid(q_acc), _grid(kinds, cols, p_acc)
 
 
 def scan_values(lower: float, upper: float, default: float, n: int, log: bool = False) -> list[float]:

@@ -48,7 +48,9 @@ Hyndman, R.J. & Fan, Y. (1996) Sample quantiles in statistical packages, Am. Sta
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import hashlib
+import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,7 +67,7 @@ from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows, settling_check
 from railval.core.quantities import QUANTITIES, WHEELSET_POSITIONS
 from railval.core.supplementary import BOGIE_KINDS, PSD_KINDS, SUPPLEMENTARY, psd_band_values
-from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
+from railval.core.types import CHANNELS, WHEEL_POSITIONS, SectionInfo, SignalSet, channel_name
 
 #: bump whenever the numbers this module produces can change (enters result-cache keys)
 PROCESSING_VERSION = "en14363/2"
@@ -264,12 +266,18 @@ class _Plan:
     bp_rows: slice
 
 
+#: channel kinds the EN chain processes: those the validation quantities are formed from
+#: (Polach & Böttcher 2014 Table 2), then the supplementary bogie-frame accelerations
+EN_CHAIN_KINDS = ("Y", "Q", "ay_cb", "az_cb", *BOGIE_KINDS)
+
+
 def _needed_channels(ss: SignalSet) -> tuple[list[str], list[str]]:
+    """The channels of :data:`EN_CHAIN_KINDS` present, split by their EN filter
+    (:data:`railval.core.types.CHANNELS`): (low-pass, band-pass), in channel-kind order."""
     names = set(ss.channels)
-    lp = [f"{k}_{p}" for k in ("Y", "Q") for p in WHEEL_POSITIONS if f"{k}_{p}" in names]
-    bp = [f"{k}_{p}" for k in ("ay_cb", "az_cb") + BOGIE_KINDS for p in BODY_POSITIONS
-          if f"{k}_{p}" in names]
-    return lp, bp
+    present = [(CHANNELS[k].en_filter, channel_name(k, p)) for k in EN_CHAIN_KINDS
+               for p in CHANNELS[k].positions if channel_name(k, p) in names]
+    return ([c for f, c in present if f == "lowpass"], [c for f, c in present if f == "bandpass"])
 
 
 def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionInfo], *,
@@ -496,3 +504,50 @@ def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: f
             vals = maxabs(pct[:, 0], pct[:, 2])
             for r, key in enumerate(keys):
                 alternative(reading, key, float("nan") if undefined[r] else float(vals[r]))
+
+
+def evaluate_present(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo], *,
+                     order: int = DEFAULT_ORDER) -> dict[str, SectionValues]:
+    """:func:`evaluate_batch` of the sections of ``sections`` that ``signalsets`` holds
+    (section id → SignalSet), keyed by section id in the order of ``sections``."""
+    present = [s for s in sections if s.id in signalsets]
+    values = evaluate_batch([signalsets[s.id] for s in present], present, order=order)
+    return {s.id: v for s, v in zip(present, values, strict=True)}
+
+
+def section_cache_key(section: SectionInfo, fs: float, n: int, distance_sha: str,
+                      channel_hashes: Mapping[str, str], order: int) -> str:
+    """Key of the processed values of one section of one source: SHA-256 over the processing
+    version, filter order, section id, evaluated range, fs, n, the distance-axis hash and the
+    sorted (channel, content hash) pairs. Any change of samples, axis, range, order or
+    processing code changes the key."""
+    h = hashlib.sha256()
+    parts = [PROCESSING_VERSION, f"order={int(order)}", f"section={section.id}",
+             f"eval={section.eval_start_m!r}:{section.eval_end_m!r}", f"fs={float(fs)!r}",
+             f"n={int(n)}", f"distance={distance_sha}"]
+    parts += [f"{c}={channel_hashes[c]}" for c in sorted(channel_hashes)]
+    h.update("\n".join(parts).encode())
+    return "en14363:" + h.hexdigest()
+
+
+def pack_values(values: SectionValues) -> bytes:
+    """A section's values, warnings, values under the alternative readings and supplementary
+    values as JSON bytes (the cached form; provenance not kept)."""
+    return json.dumps({
+        "values": [[q, p, float(v)] for (q, p), v in values.items()],
+        "warnings": values.warnings,
+        "alternatives": {rid: [[q, p, float(v) if np.isfinite(v) else None]
+                               for (q, p), v in vals.items()]
+                         for rid, vals in values.alternatives.items()},
+        "supplementary": [[q, p, float(v)] for (q, p), v in values.supplementary.items()],
+    }, allow_nan=False).encode()
+
+
+def unpack_values(section_id: str, blob: bytes) -> SectionValues:
+    """The inverse of :func:`pack_values`."""
+    doc = json.loads(blob)
+    alts = {rid: {(q, p): (float("nan") if v is None else v) for q, p, v in vals}
+            for rid, vals in doc.get("alternatives", {}).items()}
+    return SectionValues(section_id, {(q, p): v for q, p, v in doc["values"]},
+                         warnings=doc["warnings"], alternatives=alts,
+                         supplementary={(q, p): v for q, p, v in doc.get("supplementary", [])})

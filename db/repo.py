@@ -12,11 +12,12 @@ channels, and :func:`signal_hashes` reads hashes without touching the blobs.
 from __future__ import annotations
 
 import datetime as dt
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from sqlalchemy import String, cast, delete, func, insert, literal, null, select, union_all
+from sqlalchemy import String, cast, delete, func, insert, literal, null, or_, select, union_all
 from sqlalchemy.orm import Session
 
 from railval.core.errors import InvalidSignal, NotFound
@@ -37,10 +38,15 @@ from railval.db.models import (
 )
 
 __all__ = [
+    "CampaignRef",
+    "ConfigRef",
     "add_recordings",
+    "cache_delete",
     "cache_get",
+    "cache_get_many",
     "cache_put",
     "cache_put_many",
+    "campaign_summary",
     "channels",
     "configuration_state",
     "delete_campaign",
@@ -52,13 +58,54 @@ __all__ = [
     "list_campaigns",
     "list_configurations",
     "load_signalsets",
+    "recording_meta",
+    "resolve",
     "section_infos",
     "signal_hashes",
     "source_hashes",
     "store_configuration",
+    "stored_blobs",
     "vehicle_info",
     "verify_signals",
 ]
+
+
+# -- references --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CampaignRef:
+    """A campaign resolved once at the entrance (:func:`resolve`): its id and name. Every
+    function of this module takes it where it takes a campaign, without another lookup."""
+
+    id: int
+    name: str
+
+
+@dataclass(frozen=True)
+class ConfigRef:
+    """A configuration of a campaign resolved once (:func:`resolve`). Functions that take a
+    configuration name (``config``) take this too, without another lookup."""
+
+    campaign: CampaignRef
+    id: int
+    name: str
+
+
+def resolve(session: Session, campaign: Campaign | CampaignRef | str | int,
+            config: str | ConfigRef | None = None) -> tuple[CampaignRef, ConfigRef | None]:
+    """The campaign (and configuration ``config``, when given) as references; raises
+    :class:`NotFound` naming what is available."""
+    c = get_campaign(session, campaign)
+    ref = CampaignRef(c.id, c.name)
+    if config is None:
+        return ref, None
+    if isinstance(config, ConfigRef):
+        return ref, config
+    conf = get_configuration(session, c, config)
+    return ref, ConfigRef(ref, conf.id, conf.name)
+
+
+def _config_name(config: str | ConfigRef | None) -> str | None:
+    return config.name if isinstance(config, ConfigRef) else config
 
 
 # -- campaigns ---------------------------------------------------------------------------
@@ -67,13 +114,15 @@ def list_campaigns(session: Session) -> list[Campaign]:
     return list(session.scalars(select(Campaign).order_by(Campaign.name)))
 
 
-def get_campaign(session: Session, name_or_id: Campaign | str | int) -> Campaign:
-    """The campaign with this name (or, failing that, this numeric id).
+def get_campaign(session: Session, name_or_id: Campaign | CampaignRef | str | int) -> Campaign:
+    """The campaign with this name (or, failing that, this numeric id; or a :class:`CampaignRef`).
 
     Raises :class:`railval.core.errors.NotFound` listing the available names.
     """
     if isinstance(name_or_id, Campaign):
         return name_or_id
+    if isinstance(name_or_id, CampaignRef):
+        return session.get(Campaign, name_or_id.id)
     found = session.scalar(select(Campaign).where(Campaign.name == str(name_or_id)))
     if found is None and str(name_or_id).strip().isdigit():
         found = session.get(Campaign, int(name_or_id))
@@ -85,7 +134,9 @@ def get_campaign(session: Session, name_or_id: Campaign | str | int) -> Campaign
     return found
 
 
-def _campaign_id(session: Session, campaign: Campaign | str | int) -> int:
+def _campaign_id(session: Session, campaign: Campaign | CampaignRef | str | int) -> int:
+    if isinstance(campaign, (Campaign, CampaignRef)):
+        return campaign.id
     return get_campaign(session, campaign).id
 
 
@@ -155,8 +206,11 @@ def list_configurations(session: Session, campaign: Campaign | str | int) -> lis
     )
 
 
-def get_configuration(session: Session, campaign: Campaign | str | int, name: str) -> Configuration:
+def get_configuration(session: Session, campaign: Campaign | CampaignRef | str | int,
+                      name: str | ConfigRef) -> Configuration:
     """The configuration ``name``; :class:`NotFound` lists the available ones."""
+    if isinstance(name, ConfigRef):
+        return session.get(Configuration, name.id)
     c = get_campaign(session, campaign)
     found = session.scalar(
         select(Configuration).where(Configuration.campaign_id == c.id, Configuration.name == name)
@@ -377,9 +431,11 @@ def delete_campaign(session: Session, campaign: Campaign | str | int, *, reason:
 
 
 # -- signals -----------------------------------------------------------------------------
-def _source_filter(session: Session, cid: int, config: str | None):
+def _source_filter(session: Session, cid: int, config: str | ConfigRef | None):
     if config is None:
         return Recording.configuration_id.is_(None)
+    if isinstance(config, ConfigRef):
+        return Recording.configuration_id == config.id
     sub = (
         select(Configuration.id)
         .where(Configuration.campaign_id == cid, Configuration.name == config)
@@ -489,7 +545,7 @@ def _check_requested(session: Session, c: Campaign, config: str | None,
         missing = [s for s in sections if s not in out]
         if missing:
             known = [s.id for s in section_infos(session, c)]
-            src = "the measurement" if config is None else f"configuration {config!r}"
+            src = "the measurement" if config is None else f"configuration {_config_name(config)!r}"
             unknown = [s for s in missing if s not in known]
             what = (f"unknown section(s) {unknown}; sections: {known}" if unknown
                     else f"{src} has no recording of section(s) {missing}")
@@ -593,6 +649,33 @@ def cache_put(session: Session, key: str, value: bytes) -> None:
     cache_put_many(session, {key: value})
 
 
+def cache_delete(session: Session, *, keys: Sequence[str] | None = None, prefix: str | None = None) -> int:
+    """Delete the cached entries under ``keys`` and/or whose key starts with ``prefix``
+    (e.g. ``"en14363:"``, every processed section); returns how many were deleted."""
+    conditions = []
+    if keys is not None:
+        conditions.append(ResultCache.key.in_(list(keys)))
+    if prefix is not None:
+        conditions.append(ResultCache.key.startswith(prefix, autoescape=True))
+    if not conditions:
+        return 0
+    return int(session.execute(delete(ResultCache).where(or_(*conditions))).rowcount or 0)
+
+
+#: keys per bulk cache read (SQL IN list)
+CACHE_CHUNK = 500
+
+
+def cache_get_many(session: Session, keys: Sequence[str]) -> dict[str, bytes]:
+    """The cached bytes of those ``keys`` that are cached (one query per :data:`CACHE_CHUNK` keys)."""
+    out: dict[str, bytes] = {}
+    for i in range(0, len(keys), CACHE_CHUNK):
+        chunk = list(keys[i:i + CACHE_CHUNK])
+        for k, v in session.execute(select(ResultCache.key, ResultCache.value).where(ResultCache.key.in_(chunk))):
+            out[k] = bytes(v)
+    return out
+
+
 def cache_put_many(session: Session, items: Mapping[str, bytes]) -> None:
     """Insert or overwrite every ``key → value`` of ``items`` in one executemany upsert."""
     if not items:
@@ -613,3 +696,48 @@ def cache_put_many(session: Session, items: Mapping[str, bytes]) -> None:
     session.connection().execute(
         stmt, [{"key": k, "value": bytes(v), "created_at": now} for k, v in items.items()]
     )
+
+
+# -- summaries ---------------------------------------------------------------------------
+def stored_blobs(session: Session) -> list[tuple[bytes, str]]:
+    """Every stored signal blob with its SHA-256 content hash (storage benchmarks)."""
+    return [(bytes(b), h) for b, h in session.execute(select(Signal.blob, Signal.sha256))]
+
+
+def recording_meta(session: Session, campaign: Campaign | CampaignRef | str | int,
+                   config: str | ConfigRef | None = None) -> dict[str, tuple[str, float, int]]:
+    """Section id → (distance-axis SHA-256, fs, n) of the recordings of the measurement
+    (``config=None``) or a configuration; no blob is read."""
+    cid = _campaign_id(session, campaign)
+    q = (select(Section.section_id, Recording.distance_sha256, Recording.fs, Recording.n)
+         .join(Section, Recording.section_id == Section.id)
+         .where(Section.campaign_id == cid, _source_filter(session, cid, config)))
+    return {sid: (sha, float(fs), int(n)) for sid, sha, fs, n in session.execute(q)}
+
+
+def campaign_summary(session: Session, campaign: Campaign | CampaignRef | str | int) -> dict[str, Any]:
+    """A campaign at a glance (``railval list``): name, id, description, vehicle, sections
+    with zones, channels, configurations with parent and effects, number of stored signals."""
+    c = get_campaign(session, campaign)
+    infos = section_infos(session, c)
+    n_signals = session.scalar(
+        select(func.count(Signal.id)).join(Recording).join(Section).where(Section.campaign_id == c.id))
+    confs = list_configurations(session, c)
+    parent = {x.id: x.name for x in confs}
+    zones: dict[int, int] = {}
+    for i in infos:
+        zones[i.zone] = zones.get(i.zone, 0) + 1
+    return {
+        "name": c.name,
+        "id": c.id,
+        "description": c.description,
+        "vehicle": vehicle_info(session, c),
+        "n_sections": len(infos),
+        "zones": {str(z): n for z, n in sorted(zones.items())},
+        "sections": [{"id": i.id, "zone": i.zone, "radius_m": i.radius_m,
+                      "speed_kmh": i.speed_kmh} for i in infos],
+        "channels": [ch.name for ch in channels(session, c)],
+        "configurations": [{"name": x.name, "parent": parent.get(x.parent_id),
+                            "effects": sorted(x.effects)} for x in confs],
+        "n_signals": int(n_signals or 0),
+    }

@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections import Counter
 
 from railval.app.cli import emit_json
 
@@ -118,34 +117,10 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def _summary(database, name_or_campaign) -> dict:
-    from sqlalchemy import func, select
-
     from railval.db import repo
-    from railval.db.models import Recording, Section, Signal
 
     with database.session() as s:
-        c = repo.get_campaign(s, name_or_campaign)
-        infos = repo.section_infos(s, c)
-        n_signals = s.scalar(
-            select(func.count(Signal.id)).join(Recording).join(Section)
-            .where(Section.campaign_id == c.id)
-        )
-        confs = repo.list_configurations(s, c)
-        parent = {x.id: x.name for x in confs}
-        return {
-            "name": c.name,
-            "id": c.id,
-            "description": c.description,
-            "vehicle": repo.vehicle_info(s, c),
-            "n_sections": len(infos),
-            "zones": {str(z): n for z, n in sorted(Counter(i.zone for i in infos).items())},
-            "sections": [{"id": i.id, "zone": i.zone, "radius_m": i.radius_m,
-                          "speed_kmh": i.speed_kmh} for i in infos],
-            "channels": [ch.name for ch in repo.channels(s, c)],
-            "configurations": [{"name": x.name, "parent": parent.get(x.parent_id),
-                                "effects": sorted(x.effects)} for x in confs],
-            "n_signals": int(n_signals or 0),
-        }
+        return repo.campaign_summary(s, name_or_campaign)
 
 
 def _zones_text(zones: dict[str, int]) -> str:

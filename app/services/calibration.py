@@ -4,7 +4,6 @@ and store the result as a new configuration (docs/design.md §7, :mod:`railval.c
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -20,6 +19,7 @@ from railval.app.services.campaign_context import (
     section_values,
     session_of,
     simulate_context,
+    validate_values,
 )
 from railval.core.calibration import (
     COACH_MODAL_DEFAULTS,
@@ -31,7 +31,7 @@ from railval.core.calibration import (
 from railval.core.calibration import calibrate as fit_parameters
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import EFFECTS
-from railval.core.validation import validate
+from railval.core.validation import normalised_errors
 from railval.db import repo
 
 
@@ -54,7 +54,7 @@ class _Objective:
     def __call__(self, params: Mapping[str, float]) -> float:
         effects, model = self.split(params)
         vals, _ = evaluate_effects((self.ctx, effects, model))
-        vr = validate(self.ctx.measured_values, vals, self.ctx.sections, self.ctx.vehicle, n_boot=0)
+        vr = validate_values(self.ctx, vals)
         return validation_objective({q: r.mean_norm for q, r in vr.quantities.items()},
                                     {q: r.std_norm for q, r in vr.quantities.items()})
 
@@ -118,7 +118,7 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     report(progress, "store", 0.92)
     sets = simulate_context(ctx, eff, model)
     vals = section_values(sets, ctx.sections)
-    vr_full = validate(ctx.measured_values, vals, ctx.sections, ctx.vehicle)
+    vr_full = validate_values(ctx, vals, n_boot=1000)
     with session_of(database) as s:
         repo.store_configuration(
             s, campaign, new_name, parent=config, effects=eff, parameters=model,
@@ -143,21 +143,13 @@ def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float
 
 def lineage_errors(session: Any, ctx: CampaignContext, name: str, known: Mapping[str, Any] | None = None) -> list[dict]:
     """Root → ``name``: per configuration its effects and every quantity's normalised error
-    max(|mean_norm|, std_norm) (with both parts), so the UI can draw the error falling."""
+    (:func:`railval.core.validation.normalised_errors`), so the UI can draw the error falling.
+    ``known``: validation results already at hand, by configuration name."""
     out = []
     for conf in repo.lineage(session, ctx.campaign, name):
         vr = (known or {}).get(conf.name)
         if vr is None:
             sets = repo.load_signalsets(session, ctx.campaign, conf.name)
-            vr = validate(ctx.measured_values, section_values(sets, ctx.sections), ctx.sections, ctx.vehicle, n_boot=0)
-        q = {k: {"mean_norm": _finite(r.mean_norm), "std_norm": _finite(r.std_norm),
-                 "error": _finite(max(abs(r.mean_norm), r.std_norm))} for k, r in vr.quantities.items()}
-        worst = max((v["error"] for v in q.values() if v["error"] is not None), default=None)
-        out.append({"configuration": conf.name, "effects": dict(conf.effects or {}),
-                    "validated": bool(vr.validated), "max_error": worst, "quantities": q})
+            vr = validate_values(ctx, section_values(sets, ctx.sections))
+        out.append({"configuration": conf.name, "effects": dict(conf.effects or {}), **normalised_errors(vr)})
     return out
-
-
-def _finite(x: float) -> float | None:
-    return float(x) if x is not None and math.isfinite(x) else None
-

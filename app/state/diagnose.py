@@ -10,9 +10,9 @@ import param
 
 from railval.app.services.diagnosis import diagnosis_simulations
 from railval.app.state.app import AppState
-from railval.app.state.dashboard import finite_or_nan, quantity_rows
 from railval.core.calibration import max_evaluations
-from railval.core.diagnosis import PatternGrid, pattern_grids
+from railval.core.diagnosis import Component, PatternGrid, pattern_grids
+from railval.core.validation import normalised_errors
 
 
 class DiagnoseState(param.Parameterized):
@@ -79,11 +79,12 @@ class DiagnoseState(param.Parameterized):
         effect = effect or self.effect
         cand = next((c for c in self.candidates if c["effect"] == effect), None)
         res = self.residual
-        if cand is None or "values" not in res or "signature" not in cand:
+        if cand is None or "components" not in res or "signature" not in cand:
             return {}
+        components = [Component.from_dict(c) for c in res["components"]]
         now = np.asarray(res["values"], float)
         after = now - np.asarray(cand["signature"]["values"], float)
-        return {"now": pattern_grids(res["labels"], now), "after": pattern_grids(res["labels"], after)}
+        return {"now": pattern_grids(components, now), "after": pattern_grids(components, after)}
 
     def _effect_changed(self) -> None:
         eff = next((e for e in self.effect_catalogue() if e["name"] == self.effect), None)
@@ -160,12 +161,15 @@ class DiagnoseState(param.Parameterized):
                 self.effect = order[0]
                 self._suggest_name()
             self.candidates = cands
-        return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background)
+        return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background,
+                           action="diagnose")
 
     def run_calibration(self, dispatch=None, background=True, calibrate: bool = True):
         """Add ``effect`` to the configuration, calibrate it (or use ``parameters``),
         re-simulate and store as ``new_name`` whose parent is the current configuration."""
         app = self.app
+        if not app.guard("calibrate" if calibrate else "simulate"):
+            return None
         campaign, config, effect = app.campaign, app.configuration, self.effect
         # a name the user did not type always names the effect that is added
         name = self.new_name if (self.name_edited and self.new_name.strip()) else self.suggested_name()
@@ -190,21 +194,19 @@ class DiagnoseState(param.Parameterized):
             self.last_new_configuration = name
             app.reload_configurations(select=name)
         return app.run_job("calibration" if calibrate else "re-simulation", work, done,
-                           dispatch=dispatch, background=background)
+                           dispatch=dispatch, background=background,
+                           action="calibrate" if calibrate else "simulate")
 
     def lineage_errors(self, config: str | None = None) -> list[dict[str, Any]]:
-        """Along the lineage root → config: the largest normalised error (max over quantities
-        of |mean|/mean limit and std/std limit) and whether the configuration is validated."""
+        """Along the lineage root → config: the largest normalised error ``max_norm``
+        (:func:`railval.core.validation.normalised_errors`, NaN when none is finite) and whether
+        the configuration is validated."""
         app = self.app
         config = config or app.configuration
         out = []
         for name in app.backend.lineage(app.campaign, config):
-            res = app.backend.validation(app.campaign, name)
-            d = res.to_dict() if hasattr(res, "to_dict") else res
-            rows = quantity_rows(res)
-            worst = max((max(abs(finite_or_nan(r["mean_norm"])), abs(finite_or_nan(r["std_norm"]))) for r in rows),
-                        default=float("nan"))
-            out.append({"configuration": name, "max_norm": worst, "validated": bool(d.get("validated"))})
+            err = normalised_errors(app.backend.validation(app.campaign, name))
+            out.append({"configuration": name,
+                        "max_norm": float("nan") if err["max_error"] is None else err["max_error"],
+                        "validated": err["validated"]})
         return out
-
-
