@@ -43,7 +43,7 @@ class ServerProcess:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "railval.app", "--db", self.db_url, "serve", "--no-demo",
              "--port", str(self.port)], stdout=log, stderr=log,
-            env={**os.environ, "RAILVAL_COOKIE_SECRET": "browser-test-secret"})
+            env={**os.environ, "RAILVAL_COOKIE_SECRET": "browser-test-secret-0123456789abcdef"})
         deadline = time.monotonic() + timeout_s
         while True:
             try:
