@@ -1,7 +1,9 @@
 """The engineers' web app: template, navigation, pages (docs/design.md §1, §3–§7).
 
 ``build_app(database)`` returns one session's Panel template (each browser session gets its
-own :class:`railval.app.state.AppState`); ``serve(database, ...)`` serves it with ``pn.serve``.
+own :class:`railval.app.state.AppState`); ``serve(database, ...)`` serves it with ``pn.serve``,
+together with the review-workshop pages (``/workshops``, ``/review/…``) of
+:mod:`railval.app.workshop_web` as plain Tornado handlers.
 Pages are one module each under ``app/pages``; their state lives in ``app/state/`` (one module per page).
 """
 
@@ -217,13 +219,16 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     check_startup(database, address)
     secret, _origin = cookie_secret(cookie_secret_file)
     auth = RailvalAuth(database, secret, max_age_s=session_max_age_s or SESSION_MAX_AGE_S)
+    from railval.app.workshop_web import routes
+
+    extra = list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database)
     if behind_proxy:
         kw["http_server_kwargs"] = {**kw.get("http_server_kwargs", {}), "xheaders": True}
     return pn.serve({"app": lambda: build_app(database, auth=auth)}, port=port, address=address,
                     show=show, threaded=threaded, title="railval", allow_websocket_origin=origins,
                     static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {},
                     auth_provider=auth, cookie_secret=secret,
-                    extra_patterns=auth.extra_patterns(), transforms=security.transforms(),
+                    extra_patterns=extra, transforms=security.transforms(),
                     sign_sessions=True, secret_key=security.session_secret().encode(), **kw)
 
 

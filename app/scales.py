@@ -15,6 +15,9 @@ PASS_COLOR = "#2e7d32"
 FAIL_COLOR = "#c62828"
 LIMIT_COLOR = "#000000"
 
+from railval.core.workshop import nice_range as _core_nice_range
+from railval.core.workshop import nice_step as _core_nice_step
+
 #: measurement black (drawn beneath); simulations in the Okabe–Ito colour-blind-safe palette
 #: (Okabe & Ito 2008, "Color Universal Design"), vermillion first: distinct from black in
 #: greyscale print and for the common colour-vision deficiencies
@@ -23,27 +26,24 @@ SIM_COLORS = ("#D55E00", "#0072B2", "#009E73", "#CC79A7", "#E69F00")
 
 
 def nice_step(lo: float, hi: float, intervals: int = 5) -> float:
-    """A 'nice' step (1, 2, 2.5, 5 × 10^k) giving about ``intervals`` intervals on [lo, hi]."""
-    raw = (hi - lo) / intervals
-    mag = 10.0 ** math.floor(math.log10(raw))
-    return next(m * mag for m in (1.0, 2.0, 2.5, 5.0, 10.0) if m * mag >= raw)
+    """A 'nice' step (1, 2, 2.5, 5 × 10^k) giving about ``intervals`` intervals on [lo, hi]
+    (the one rule of :func:`railval.core.workshop.nice_step`)."""
+    return _core_nice_step(hi - lo, intervals)
 
 
 def nice_limits(lo: float, hi: float) -> tuple[float, float]:
     """Round ``[lo, hi]`` outwards to a multiple of :func:`nice_step` (~5 intervals).
 
-    Used for fixed, consistent axis scaling (docs/design.md §5). Degenerate ranges are widened
-    symmetrically by one unit of their magnitude (or ±1 around 0).
+    Used for fixed, consistent axis scaling (docs/design.md §5); the rule is
+    :func:`railval.core.workshop.nice_range`, shared with the review workshops. Degenerate
+    ranges are widened symmetrically by one unit of their magnitude (or ±1 around 0).
     """
     if not (math.isfinite(lo) and math.isfinite(hi)):
         return (-1.0, 1.0)
     if hi < lo:
         lo, hi = hi, lo
-    if hi == lo:
-        pad = abs(lo) or 1.0
-        lo, hi = lo - pad, hi + pad
-    step = nice_step(lo, hi)
-    return (math.floor(lo / step + 1e-9) * step, math.ceil(hi / step - 1e-9) * step)
+    r = _core_nice_range(lo, hi)
+    return (r.lo, r.hi)
 
 
 def nice_ticks(lo: float, hi: float) -> list[float]:

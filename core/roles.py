@@ -88,6 +88,12 @@ CLI_ACTIONS: dict[str, str | None] = {
     "signoff show": "signoff.read",
     "audit verify": "audit.read", "audit export": "audit.read", "audit report": "audit.read",
     "audit checkpoint": "audit.checkpoint", "audit log": "audit.read",
+    "workshop kinds": None,
+    "workshop create": "workshop.run", "workshop invite": "workshop.run",
+    "workshop status": "workshop.run", "workshop close": "workshop.run",
+    "workshop reopen": "workshop.run", "workshop import-answers": "workshop.run",
+    "workshop plots": "workshop.results", "workshop export": "workshop.results",
+    "workshop analyse": "workshop.results",
 }
 
 #: the identity of open single-user mode (no users in the database, loopback only): it may
