@@ -221,7 +221,7 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     auth = RailvalAuth(database, secret, max_age_s=session_max_age_s or SESSION_MAX_AGE_S)
     from railval.app.workshop_web import routes
 
-    extra = list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database)
+    extra = list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database, auth)
     if behind_proxy:
         kw["http_server_kwargs"] = {**kw.get("http_server_kwargs", {}), "xheaders": True}
     return pn.serve({"app": lambda: build_app(database, auth=auth)}, port=port, address=address,

@@ -147,8 +147,9 @@ def _principal_for(database, username: str | None, local: bool) -> Principal | N
 
 
 class _Base(tornado.web.RequestHandler):
-    def initialize(self, database) -> None:
+    def initialize(self, database, auth=None) -> None:
         self.database = database
+        self.auth = auth  # the app's sign-in (railval.app.auth.RailvalAuth) when served with it
 
     def set_default_headers(self) -> None:
         self.set_header("X-Content-Type-Options", "nosniff")
@@ -169,6 +170,17 @@ class _OrganiserBase(_Base):
     """Pages for signed-in users; :meth:`principal` resolves who is asking."""
 
     async def principal(self) -> Principal | None:
+        """Who is asking: a user signed in to the app (its session cookie, with the app's
+        expiry and password-change checks) is recognised here too; else this page's own
+        sign-in cookie."""
+        if self.auth is not None:
+            from railval.app.auth import COOKIE as APP_COOKIE
+
+            raw = self.get_cookie(APP_COOKIE)
+            if raw:
+                p = await run(self.auth.principal_from_cookie, raw)
+                if p is not None:
+                    return p
         name = _unsign(self.get_cookie(COOKIE))
         return await run(_principal_for, self.database, name, _is_local(self))
 
@@ -923,9 +935,10 @@ validation limit is 1.0.</p>{charts}
 """
 
 
-def routes(database) -> list[tuple]:
-    """Tornado URL patterns of the workshop pages (``pn.serve(extra_patterns=…)``)."""
-    kw = {"database": database}
+def routes(database, auth=None) -> list[tuple]:
+    """Tornado URL patterns of the workshop pages (``pn.serve(extra_patterns=…)``);
+    ``auth``: the app's sign-in, whose session the organiser pages accept."""
+    kw = {"database": database, "auth": auth}
     tok = r"([A-Za-z0-9_\-]{20,100})"
     name = r"([^/]+)"
     return [

@@ -3,7 +3,7 @@ workshop_reviewer (personal link as SHA-256, order seed, sequence) and workshop_
 (one row per place of a reviewer's sequence).
 
 Revision ID: 0003_workshops
-Revises: 0002_users_audit
+Revises: 0004_calibration_sections
 """
 from collections.abc import Sequence
 
