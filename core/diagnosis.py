@@ -541,6 +541,7 @@ class SectionEvidence:
     counts: np.ndarray
     sim_power: np.ndarray
     meas_power: np.ndarray
+    components: list[Component] | None = None
 
     def values(self, weights: np.ndarray | None = None) -> np.ndarray:
         """Pattern values for section weights (shape (S,) → (n,), or (B, S) → (B, n))."""
@@ -556,7 +557,8 @@ class SectionEvidence:
         return out[0] if w.ndim == 1 else out
 
     def pattern(self, weights: np.ndarray | None = None) -> Pattern:
-        return Pattern(list(self.labels), list(self.groups), self.values(weights))
+        comps = None if self.components is None else list(self.components)
+        return Pattern(list(self.labels), list(self.groups), self.values(weights), comps)
 
 
 def section_evidence(pairs: Iterable[Mapping[str, Any]], sim_bands: Mapping[str, Mapping[str, np.ndarray]],
@@ -578,14 +580,13 @@ def section_evidence(pairs: Iterable[Mapping[str, Any]], sim_bands: Mapping[str,
             recs.append((row[str(r["section"])], (str(r["quantity"]), int(r["zone"]), str(r["position"])), v))
     if like is None:
         keys = sorted({k for _, k, _ in recs})
-        pair_labels = [f"{q} zone {z} {p}" for q, z, p in keys]
-        pair_groups = [q for q, _, _ in keys]
         chans = sorted({c for d in sim_bands.values() for c in d} & {c for d in meas_bands.values() for c in d})
-        band_labels = [f"psd {ch} {lo:g}-{hi:g} Hz" for ch in chans for lo, hi in bands]
-        band_groups = [f"psd {ch.split('_')[0]}" for ch in chans for _ in bands]
-        labels, groups, n_pair = pair_labels + band_labels, pair_groups + band_groups, len(pair_labels)
+        comps = ([Component.pair(q, z, p) for q, z, p in keys]
+                 + [Component.psd(ch, band) for ch in chans for band in bands])
+        labels, groups, n_pair = [c.label for c in comps], [c.group for c in comps], len(keys)
     else:
         labels, groups, n_pair = list(like.labels), list(like.groups), like.n_pair
+        comps = None if like.components is None else list(like.components)
     col = {lab: j for j, lab in enumerate(labels[:n_pair])}
     sums = np.zeros((len(sids), n_pair))
     counts = np.zeros((len(sids), n_pair))
@@ -606,7 +607,8 @@ def section_evidence(pairs: Iterable[Mapping[str, Any]], sim_bands: Mapping[str,
                     j = bcol.get(f"psd {ch} {lo:g}-{hi:g} Hz")
                     if j is not None:
                         dst[row[sid], j] = float(x)
-    return SectionEvidence(sids, [int(z) for _, z in sections], labels, groups, n_pair, sums, counts, sim_p, meas_p)
+    return SectionEvidence(sids, [int(z) for _, z in sections], labels, groups, n_pair, sums, counts, sim_p, meas_p,
+                           comps)
 
 
 @dataclass
@@ -918,7 +920,7 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
         cands.append(TrustedCandidate(
             fam.name, explained, params, sorted(fixes, key=lambda g: after[g] - before[g]),
             sorted(worsens, key=lambda g: before[g] - after[g]), expl,
-            Pattern(residual.labels, residual.groups, r_full - Pk), math.sqrt(cost),
+            Pattern(residual.labels, residual.groups, r_full - Pk, residual.components), math.sqrt(cost),
             {g: (before[g], after[g]) for g in before}, kind=fam.kind, name=fam.name,
             held_out_explained=held, explained_ci=ci, plausible=ok, at_bound=at_edge, flags=flags,
             summary=summary, reference=fam.reference, fitted=v, parameter=fam.parameter))
