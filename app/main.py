@@ -3,7 +3,7 @@
 ``build_app(database)`` returns one session's Panel template (each browser session gets its
 own :class:`railval.app.state.AppState`); ``serve(database, ...)`` serves it with ``pn.serve``,
 together with the review-workshop pages (``/workshops``, ``/review/…``) of
-:mod:`railval.app.workshop_web` as plain Tornado handlers.
+:mod:`railval.app.workshop_web` (package) as plain Tornado handlers.
 Pages are one module each under ``app/pages``; their state lives in ``app/state/`` (one module per page).
 """
 

@@ -1,0 +1,161 @@
+"""Analysis page: Table 1, reviewers, agreement, the 50 % deviation beside the limit 1.0."""
+
+from __future__ import annotations
+
+import base64
+import io
+from typing import Any
+
+from railval.app.workshop_web.common import (
+    _OrganiserBase,
+    esc,
+    page,
+    run,
+)
+from railval.core.errors import RailvalError
+
+
+# -------------------------------------------------------------------------- analysis
+def _analysis(database, name: str, actor) -> dict[str, Any]:
+    from railval.app.services.workshops import analyse
+
+    return analyse(database, name, actor=actor, with_plots=True)
+
+
+def _fmt(x: Any, digits: int = 2) -> str:
+    if x is None:
+        return "—"
+    if isinstance(x, (list, tuple)) and len(x) == 2:
+        return f"{_fmt(x[0], digits)} … {_fmt(x[1], digits)}"
+    try:
+        return f"{float(x):.{digits}f}"
+    except (TypeError, ValueError):
+        return esc(x)
+
+
+def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | None) -> str:
+    """The answers against an objective value (``deviation`` or ``sg_c``): each plot's share
+    of Yes (points), the fitted curve of a typical reviewer
+    (:func:`railval.core.review.yes_curve`), the value at 50 % with its interval, and the
+    limit; returned as a PNG data URL."""
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    from railval.core.review import yes_curve
+
+    thr = doc.get("threshold") or {}
+    at50 = thr.get("deviation_at_50" if column == "deviation" else "sg_c_at_50")
+    ci = thr.get("ci" if column == "deviation" else "sg_c_ci")
+    fit = thr.get(f"{column}_fit") or {}
+    pts = [(r[column], r["yes_share"]) for r in doc.get("plots", [])
+           if r.get(column) is not None and r.get("yes_share") is not None]
+    fig = Figure(figsize=(7.5, 3.4), dpi=100)
+    ax = fig.add_subplot(1, 1, 1)
+    top = max([1.5 if limit else 0.5] + [x for x, _ in pts] + [at50 or 0.0] + list(ci or [0.0]))
+    if pts:
+        ax.scatter([x for x, _ in pts], [y for _, y in pts], s=14, color="#999999",
+                   label="share of Yes of one plot", zorder=2)
+    if fit.get("intercept") is not None and fit.get("slope") is not None:
+        xs = np.linspace(top / 400, top * 1.05, 400)
+        ax.plot(xs, yes_curve(xs, fit["intercept"], fit["slope"]), color="#0072B2",
+                label="fitted P(Yes), typical reviewer", zorder=3)
+    if at50 is not None:
+        if ci and None not in ci:
+            ax.errorbar([at50], [0.5], xerr=[[at50 - ci[0]], [ci[1] - at50]], fmt="o",
+                        color="#0072B2", capsize=5, label=f"50 % Yes at {at50:.2f} (interval)",
+                        zorder=4)
+        else:
+            ax.plot([at50], [0.5], "o", color="#0072B2", label=f"50 % Yes at {at50:.2f}")
+    if limit is not None:
+        ax.axvline(limit, color="#D55E00", linewidth=2, label=f"validation limit {limit:g}")
+    ax.axhline(0.5, color="#bbbbbb", linewidth=0.8, zorder=1)
+    ax.set_xlim(0, top * 1.05)
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel(label)
+    ax.set_ylabel("share of Yes")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", metadata={"Software": None})
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+
+
+class WorkshopAnalysis(_OrganiserBase):
+    async def get(self, name: str) -> None:
+        p = await self.require("workshop.results")
+        if p is None:
+            return
+        try:
+            doc = await run(_analysis, self.database, name, p)
+        except RailvalError as exc:
+            self.finish(page(f"Analysis {name}", f"<p class='err'>{esc(exc)}</p>", user=p.username))
+            return
+        self.finish(page(f"Analysis {name}", analysis_html(doc), user=p.username))
+
+
+def _pct(x: Any) -> str:
+    return "—" if x is None else f"{100 * float(x):.1f} %"
+
+
+def _pct_ci(ci: Any) -> str:
+    if not ci or None in ci:
+        return "—"
+    return f"{100 * ci[0]:.1f} … {100 * ci[1]:.1f} %"
+
+
+def _scaling_html(sc: dict[str, Any] | None) -> str:
+    if not sc:
+        return "<p>not measured (no plots with automatic scaling, or no answers to them)</p>"
+    return (f"<table><tr><th>pairs</th><th>answer changed</th><th>interval</th>"
+            f"<th>Yes at fixed scaling</th><th>Yes at automatic scaling</th><th>test</th>"
+            f"<th>p</th></tr><tr><td class='num'>{sc.get('pairs')}</td>"
+            f"<td class='num'>{_pct(sc.get('changed_share'))}</td>"
+            f"<td class='num'>{_pct_ci(sc.get('changed_share_ci'))}</td>"
+            f"<td class='num'>{_pct(sc.get('fixed_yes_share'))}</td>"
+            f"<td class='num'>{_pct(sc.get('auto_yes_share'))}</td><td>{esc(sc.get('test'))}</td>"
+            f"<td class='num'>{_fmt(sc.get('p_value'), 3)}</td></tr></table>")
+
+
+def analysis_html(doc: dict[str, Any]) -> str:
+    """The analysis document as HTML tables and charts (all values escaped)."""
+    from railval.core.workshop import PLOT_KINDS
+
+    t1 = "".join(f"<tr><td>{esc(PLOT_KINDS[r['kind']].label if r['kind'] in PLOT_KINDS else r['kind'])}"
+                 f" <span class='muted'>({esc(r['kind'])})</span></td><td class='num'>{r['plots']}</td>"
+                 f"<td class='num'>{_pct(r.get('min_yes'))}</td>"
+                 f"<td class='num'>{_pct(r.get('max_yes'))}</td></tr>"
+                 for r in doc.get("table1", []))
+    rv = "".join(f"<tr><td>{esc(r['reviewer'])}</td><td class='num'>{r['answers']}</td>"
+                 f"<td class='num'>{_pct(r.get('yes_share'))}</td>"
+                 f"<td class='num'>{_pct_ci(r.get('yes_share_ci'))}</td>"
+                 f"<td class='num'>{_fmt(r.get('strictness'))}</td>"
+                 f"<td class='num'>{_fmt(r.get('strictness_ci'))}</td>"
+                 f"<td class='num'>{_fmt(r.get('consistency'))}</td></tr>"
+                 for r in doc.get("reviewers", []))
+    ag = doc.get("agreement") or {}
+    agr = "".join(f"<tr><td>{esc(k)}</td><td class='num'>{_fmt((v or {}).get('value') if isinstance(v, dict) else v)}</td>"
+                  f"<td class='num'>{_fmt((v or {}).get('ci')) if isinstance(v, dict) else '—'}</td></tr>"
+                  for k, v in ag.items())
+    thr = doc.get("threshold") or {}
+    sc = doc.get("scaling_effect")
+    charts = (f"<h4>Against the normalised deviation (largest |D_v| / std limit)</h4>"
+              f"<img alt='answers against the normalised deviation' "
+              f"src='{threshold_png(doc, 'deviation', 'largest |D_v| / std limit', 1.0)}'>"
+              f"<p>Sprague–Geers C at 50 % Yes: <strong>{_fmt(thr.get('sg_c_at_50'))}</strong> "
+              f"(interval {_fmt(thr.get('sg_c_ci'))})</p>"
+              f"<img alt='answers against Sprague–Geers C' "
+              f"src='{threshold_png(doc, 'sg_c', 'Sprague–Geers C', None)}'>")
+    return f"""
+<h2>{esc(doc.get('workshop', ''))}</h2>
+<h3>Table 1 — share of Yes per plot kind (min and max over reviewers)</h3>
+<table><tr><th>plot kind</th><th>plots</th><th>min Yes</th><th>max Yes</th></tr>{t1}</table>
+<h3>Reviewers</h3>
+<table><tr><th>reviewer</th><th>answers</th><th>share of Yes</th><th>Wilson 95 % interval</th>
+<th>strictness</th><th>interval</th><th>consistency on repeats</th></tr>{rv}</table>
+<h3>Agreement</h3><table><tr><th>statistic</th><th>value</th><th>interval</th></tr>{agr}</table>
+<h3>Threshold</h3>
+<p>Deviation at which a typical reviewer says Yes half of the time:
+<strong>{_fmt(thr.get('deviation_at_50'))}</strong> (interval {_fmt(thr.get('ci'))}); the
+validation limit is 1.0.</p>{charts}
+<h3>Scaling effect (same reviewer, same plot: fixed against automatic scaling)</h3>{_scaling_html(sc)}
+"""

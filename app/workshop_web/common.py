@@ -1,0 +1,213 @@
+"""Shared pieces of the workshop pages: page frame, escaping, worker pool, sign-in (cookie,
+principal, login/logout pages) and the base handlers."""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import html
+import ipaddress
+import json
+import os
+import secrets
+import time
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+from urllib.parse import quote
+
+import tornado.web
+from tornado.ioloop import IOLoop
+
+from railval.core.roles import Principal, allowed, open_principal
+
+COOKIE = "railval_user"
+COOKIE_DAYS = 1
+_SECRET = (os.environ.get("RAILVAL_COOKIE_SECRET") or secrets.token_hex(32)).encode()
+#: database work runs here, off the server's event loop
+_POOL = ThreadPoolExecutor(max_workers=4, thread_name_prefix="railval-workshop")
+
+_CSS = """
+body{font-family:'DejaVu Sans',Arial,sans-serif;margin:0;background:#f6f7f9;color:#1b1b1b}
+header{background:#0b5394;color:#fff;padding:10px 20px;display:flex;gap:20px;align-items:center}
+header a{color:#fff} main{padding:16px 24px;max-width:1200px;margin:auto}
+table{border-collapse:collapse;background:#fff} td,th{border:1px solid #ccd;padding:4px 8px;text-align:left}
+th{background:#eef1f6} .num{text-align:right;font-variant-numeric:tabular-nums}
+button,.btn{font-size:16px;padding:8px 18px;border-radius:4px;border:1px solid #889;background:#fff;cursor:pointer}
+button.yes{background:#1a7f37;color:#fff;border-color:#1a7f37} button.no{background:#b42318;color:#fff;border-color:#b42318}
+button.chosen{outline:4px solid #f5b700} .muted{color:#666} .err{color:#b42318;font-weight:bold}
+#plot{width:100%;max-width:1000px;border:1px solid #ccd;background:#fff;display:block}
+.bar{height:10px;background:#dde;border-radius:5px;overflow:hidden;min-width:120px}.bar>div{height:100%;background:#0b5394}
+textarea{width:100%;max-width:990px;font-size:15px} .row{display:flex;gap:12px;align-items:center;margin:10px 0;flex-wrap:wrap}
+code{background:#eef;padding:2px 4px;word-break:break-all}
+"""
+
+
+def esc(value: Any) -> str:
+    return html.escape("" if value is None else str(value), quote=True)
+
+
+def page(title: str, body: str, *, user: str = "", script: str = "") -> str:
+    who = (f'<span>{esc(user)}</span> <a href="/workshops/logout">sign out</a>' if user else "")
+    return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'>"
+            f"<meta name='viewport' content='width=device-width,initial-scale=1'>"
+            f"<title>{esc(title)}</title><style>{_CSS}</style></head><body>"
+            f"<header><strong>railval</strong><span>{esc(title)}</span>"
+            f"<span style='margin-left:auto'>{who}</span></header><main>{body}</main>"
+            f"{'<script>' + script + '</script>' if script else ''}</body></html>")
+
+
+async def run(fn, *args, **kw):
+    """Run blocking database work in the workshop thread pool."""
+    return await IOLoop.current().run_in_executor(_POOL, lambda: fn(*args, **kw))
+
+
+# -------------------------------------------------------------------------- sign-in
+def _sign(value: str) -> str:
+    mac = hmac.new(_SECRET, value.encode(), hashlib.sha256).hexdigest()
+    return base64.urlsafe_b64encode(f"{value}|{mac}".encode()).decode()
+
+
+def _unsign(cookie: str | None) -> str | None:
+    if not cookie:
+        return None
+    try:
+        value, mac = base64.urlsafe_b64decode(cookie.encode()).decode().rsplit("|", 1)
+    except (ValueError, UnicodeDecodeError):
+        return None
+    good = hmac.new(_SECRET, value.encode(), hashlib.sha256).hexdigest()
+    if not hmac.compare_digest(mac, good):
+        return None
+    username, _, expiry = value.partition("|")
+    try:
+        if float(expiry) < time.time():
+            return None
+    except ValueError:
+        return None
+    return username
+
+
+def _is_local(handler: tornado.web.RequestHandler) -> bool:
+    if any(h in handler.request.headers for h in ("X-Forwarded-For", "X-Real-Ip", "Forwarded")):
+        return False
+    try:
+        return ipaddress.ip_address(handler.request.remote_ip).is_loopback
+    except ValueError:
+        return False
+
+
+def _principal_for(database, username: str | None, local: bool) -> Principal | None:
+    from sqlalchemy import func, select
+
+    from railval.db import users
+    from railval.db.models import AppUser
+
+    with database.session() as s:
+        if username:
+            user = users.find_user(s, username)
+            if user is not None and not user.disabled:
+                return users.principal(user)
+        if local:
+            n_pw = s.scalar(select(func.count()).select_from(AppUser)
+                            .where(AppUser.password_hash.is_not(None)))
+            if n_pw == 0:
+                return open_principal()
+    return None
+
+
+class _Base(tornado.web.RequestHandler):
+    def initialize(self, database, auth=None) -> None:
+        self.database = database
+        self.auth = auth  # the app's sign-in (railval.app.auth.RailvalAuth) when served with it
+
+    def set_default_headers(self) -> None:
+        self.set_header("X-Content-Type-Options", "nosniff")
+        self.set_header("Referrer-Policy", "no-referrer")
+        self.set_header("X-Frame-Options", "DENY")
+
+    def json(self, doc: Any, status: int = 200) -> None:
+        self.set_status(status)
+        self.set_header("Content-Type", "application/json; charset=utf-8")
+        self.set_header("Cache-Control", "no-store")
+        self.finish(json.dumps(doc, allow_nan=False))
+
+    def check_xsrf_cookie(self) -> None:  # SameSite=Strict cookie; reviewer token in the URL
+        return None
+
+
+class _OrganiserBase(_Base):
+    """Pages for signed-in users; :meth:`principal` resolves who is asking."""
+
+    async def principal(self) -> Principal | None:
+        """Who is asking: a user signed in to the app (its session cookie, with the app's
+        expiry and password-change checks) is recognised here too; else this page's own
+        sign-in cookie."""
+        if self.auth is not None:
+            from railval.app.auth import COOKIE as APP_COOKIE
+
+            raw = self.get_cookie(APP_COOKIE)
+            if raw:
+                p = await run(self.auth.principal_from_cookie, raw)
+                if p is not None:
+                    return p
+        name = _unsign(self.get_cookie(COOKIE))
+        return await run(_principal_for, self.database, name, _is_local(self))
+
+    async def require(self, action: str) -> Principal | None:
+        p = await self.principal()
+        if p is None:
+            self.redirect(f"/workshops/login?next={quote(self.request.uri or '/workshops')}")
+            return None
+        if not allowed(p, action):
+            self.set_status(403)
+            self.finish(page("Not allowed", f"<p class='err'>{esc(p.username)} may not open "
+                             f"this page (needs permission {esc(action)}).</p>", user=p.username))
+            return None
+        return p
+
+
+
+# -------------------------------------------------------------------------- sign-in pages
+class Login(_Base):
+    def get(self) -> None:
+        nxt = self.get_argument("next", "/workshops")
+        self.finish(page("Sign in", _login_form(nxt, "")))
+
+    async def post(self) -> None:
+        from railval.db import users
+
+        nxt = self.get_argument("next", "/workshops")
+        if not nxt.startswith("/") or nxt.startswith("//"):
+            nxt = "/workshops"
+        username = self.get_argument("username", "")
+        password = self.get_argument("password", "")
+
+        def check():
+            with self.database.session() as s:
+                res = users.authenticate(s, username, password, source=self.request.remote_ip or "")
+                return res.ok, res.message
+        ok, message = await run(check)
+        if not ok:
+            self.set_status(401)
+            self.finish(page("Sign in", _login_form(nxt, message)))
+            return
+        expiry = time.time() + COOKIE_DAYS * 86400
+        self.set_cookie(COOKIE, _sign(f"{username.strip()}|{expiry}"), httponly=True,
+                        samesite="Strict", expires_days=COOKIE_DAYS)
+        self.redirect(nxt)
+
+
+def _login_form(nxt: str, message: str) -> str:
+    return (f"<form method='post' action='/workshops/login'>"
+            f"<input type='hidden' name='next' value='{esc(nxt)}'>"
+            f"<p><label>User name<br><input name='username' autocomplete='username'></label></p>"
+            f"<p><label>Password<br><input name='password' type='password' "
+            f"autocomplete='current-password'></label></p>"
+            f"<p><button type='submit'>Sign in</button></p>"
+            f"<p class='err'>{esc(message)}</p></form>")
+
+
+class Logout(_Base):
+    def get(self) -> None:
+        self.clear_cookie(COOKIE)
+        self.redirect("/workshops/login")

@@ -1,0 +1,280 @@
+"""Organiser pages: workshop list, create form with the plot count, progress, links,
+close/reopen."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+from urllib.parse import quote
+
+import tornado.web
+
+from railval.app.workshop_web.common import (
+    _OrganiserBase,
+    esc,
+    page,
+    run,
+)
+from railval.app.workshop_web.reviewer import clear_contexts
+from railval.core.errors import InvalidParameter, NotFound, RailvalError
+from railval.core.roles import allowed
+
+
+# -------------------------------------------------------------------------- organiser
+def _list_doc(database) -> list[dict[str, Any]]:
+    from railval.db import workshops as wsdb
+
+    with database.session() as s:
+        out = []
+        for w in wsdb.list_workshops(s):
+            prog = wsdb.progress(s, w)
+            out.append({"name": w.name, "campaign": w.campaign.name, "status": w.status,
+                        "blind": w.blind, "reviewers": len(prog),
+                        "answers": sum(r["answered"] for r in prog)})
+        return out
+
+
+class WorkshopList(_OrganiserBase):
+    async def get(self) -> None:
+        p = await self.require("workshop.run")
+        if p is None:
+            return
+        rows = await run(_list_doc, self.database)
+        trs = "".join(
+            f"<tr><td><a href='/workshops/{quote(r['name'], safe='')}'>{esc(r['name'])}</a></td>"
+            f"<td>{esc(r['campaign'])}</td><td>{esc(r['status'])}</td>"
+            f"<td>{'yes' if r['blind'] else 'no'}</td><td class='num'>{r['reviewers']}</td>"
+            f"<td class='num'>{r['answers']}</td></tr>" for r in rows)
+        body = (f"<p><a class='btn' href='/workshops/new'>New workshop</a></p>"
+                f"<table><tr><th>workshop</th><th>campaign</th><th>status</th><th>blind</th>"
+                f"<th>reviewers</th><th>answers</th></tr>{trs}</table>")
+        self.finish(page("Workshops", body, user=p.username))
+
+
+def _form_choices(database) -> dict[str, Any]:
+    from railval.app.services.workshops import describe_kinds
+    from railval.db import repo
+
+    with database.session() as s:
+        camps = {c.name: {"configurations": [x.name for x in repo.list_configurations(s, c)],
+                          "sections": [x.id for x in repo.section_infos(s, c)]}
+                 for c in repo.list_campaigns(s)}
+    return {"campaigns": camps, "kinds": describe_kinds()}
+
+
+_NEW_JS = r"""
+const form = document.getElementById('f');
+const choices = JSON.parse(document.getElementById('choices').textContent);
+function boxes(id, name, items, labels) {
+  const el = document.getElementById(id); el.innerHTML = '';
+  for (const it of items) { const l = document.createElement('label'); l.style.marginRight = '12px';
+    const b = document.createElement('input'); b.type = 'checkbox'; b.name = name; b.value = it; b.checked = true;
+    b.onchange = count; l.appendChild(b); l.appendChild(document.createTextNode(' ' + (labels ? labels[it] : it)));
+    el.appendChild(l); } }
+function fill() { const c = choices.campaigns[form.campaign.value] || {configurations: [], sections: []};
+  boxes('cfgs', 'configurations', c.configurations); boxes('secs', 'sections', c.sections); count(); }
+async function count() {
+  const q = new URLSearchParams(new FormData(form));
+  const r = await fetch('/workshops/plan?' + q.toString());
+  const d = await r.json();
+  document.getElementById('count').textContent = r.ok ? (d.plots + ' plots: ' +
+    Object.entries(d.by_kind).map(([k, n]) => k + ' ' + n).join(', ')) : d.error;
+}
+const kl = {}; for (const k of choices.kinds) kl[k.id] = k.label + ' (' + k.domain + ')';
+boxes('kinds', 'kinds', choices.kinds.map(k => k.id), kl);
+form.campaign.onchange = fill; form.onsubmit = () => { document.getElementById('create').disabled = true;
+  document.getElementById('count').textContent += ' — rendering, please wait…'; };
+fill();
+"""
+
+
+def _plan_doc(database, args: dict[str, list[str]]) -> dict[str, Any]:
+    from railval.app.services import workshops as ws
+
+    # the form sends the ticked boxes only: a group with none ticked gives no plot
+    if not all(args.get(g) for g in ("configurations", "sections", "kinds")):
+        return {"plots": 0, "by_kind": {}}
+    with database.session() as s:
+        planned = ws.plan(s, (args.get("campaign") or [""])[0], args["configurations"],
+                          args["sections"], args["kinds"])
+    return {"plots": len(planned), "by_kind": ws.count_by_kind(planned)}
+
+
+def _args(handler: tornado.web.RequestHandler) -> dict[str, list[str]]:
+    return {k: [v.decode() for v in vs] for k, vs in handler.request.arguments.items()}
+
+
+class WorkshopPlan(_OrganiserBase):
+    async def get(self) -> None:
+        p = await self.require("workshop.run")
+        if p is None:
+            return
+        try:
+            self.json(await run(_plan_doc, self.database, _args(self)))
+        except RailvalError as exc:
+            self.json({"error": str(exc)}, 400)
+
+
+class WorkshopNew(_OrganiserBase):
+    async def get(self, message: str = "") -> None:
+        p = await self.require("workshop.run")
+        if p is None:
+            return
+        ch = await run(_form_choices, self.database)
+        opts = "".join(f"<option>{esc(c)}</option>" for c in ch["campaigns"])
+        choices_json = json.dumps(ch).replace("</", "<\\/")
+        body = f"""
+<form id='f' method='post' action='/workshops/new'>
+<p><label>Name <input name='name' required maxlength='200'></label>
+<label>Campaign <select name='campaign'>{opts}</select></label></p>
+<p><strong>Configurations</strong><br><span id='cfgs'></span></p>
+<p><strong>Sections</strong><br><span id='secs'></span></p>
+<p><strong>Plot kinds</strong><br><span id='kinds'></span></p>
+<p><label><input type='checkbox' name='blind' value='1'> blind (no vehicle, configuration or
+section names)</label> <label>hidden repeats <input name='repeats' value='0.1' size='4'></label>
+<label>share also shown with automatic scaling <input name='auto_share' value='0' size='4'></label></p>
+<p>Count: <strong id='count'>…</strong></p>
+<p><button id='create' type='submit'>Create workshop</button></p>
+<p class='err'>{esc(message)}</p></form>
+<script type='application/json' id='choices'>{choices_json}</script>"""
+        self.finish(page("New workshop", body, user=p.username, script=_NEW_JS))
+
+    async def post(self) -> None:
+        from railval.app.services import workshops as ws
+
+        p = await self.require("workshop.run")
+        if p is None:
+            return
+        a = _args(self)
+        try:
+            name = (a.get("name") or [""])[0]
+            await run(ws.create, self.database, name, (a.get("campaign") or [""])[0],
+                      configurations=a.get("configurations") or ["(none chosen)"],
+                      sections=a.get("sections") or ["(none chosen)"],
+                      kinds=a.get("kinds") or ["(none chosen)"], blind=bool(a.get("blind")),
+                      repeats=float((a.get("repeats") or ["0.1"])[0]),
+                      auto_share=float((a.get("auto_share") or ["0"])[0]), actor=p)
+        except (RailvalError, ValueError) as exc:
+            self.set_status(400)
+            await self.get(message=str(exc))
+            return
+        self.redirect(f"/workshops/{quote(name, safe='')}")
+
+
+def _status_doc(database, name: str) -> dict[str, Any]:
+    from railval.app.services.workshops import status_document
+
+    with database.session() as s:
+        return status_document(s, name)
+
+
+_STATUS_JS = r"""
+const name = document.body.dataset.workshop;
+async function refresh() {
+  try {
+    const r = await fetch('/workshops/' + encodeURIComponent(name) + '/status', {cache: 'no-store'});
+    if (!r.ok) return;
+    const d = await r.json();
+    document.getElementById('wstatus').textContent = d.status;
+    document.getElementById('nanswers').textContent = d.answers;
+    const tb = document.getElementById('progress'); tb.innerHTML = '';
+    for (const rv of d.reviewers) {
+      const tr = document.createElement('tr');
+      const cells = [rv.reviewer, rv.answered + ' of ' + rv.total, '', rv.finished ? 'finished' : '',
+                     rv.last_answer_at ? rv.last_answer_at.slice(0, 19).replace('T', ' ') : '—'];
+      cells.forEach((c, i) => { const td = document.createElement('td');
+        if (i === 2) { td.innerHTML = '<div class="bar"><div></div></div>';
+          td.firstChild.firstChild.style.width = (100 * rv.answered / Math.max(1, rv.total)) + '%'; }
+        else td.textContent = c; tr.appendChild(td); });
+      tb.appendChild(tr);
+    }
+    document.body.dataset.refreshed = String(Date.now());
+  } catch (e) { }
+}
+refresh(); setInterval(refresh, 3000);
+"""
+
+
+class WorkshopStatus(_OrganiserBase):
+    async def get(self, name: str) -> None:
+        p = await self.require("workshop.run")
+        if p is None:
+            return
+        try:
+            self.json(await run(_status_doc, self.database, name))
+        except NotFound as exc:
+            self.json({"error": str(exc)}, 404)
+
+
+def _invite(database, name: str, reviewer: str, actor) -> str:
+    from railval.db import workshops as wsdb
+
+    with database.session() as s:
+        return wsdb.invite(s, wsdb.get_workshop(s, name), reviewer, actor=actor)
+
+
+def _set_status(database, name: str, status: str, actor) -> None:
+    from railval.db import workshops as wsdb
+
+    with database.session() as s:
+        wsdb.set_status(s, wsdb.get_workshop(s, name), status, actor=actor)
+    clear_contexts()
+
+
+class WorkshopPage(_OrganiserBase):
+    async def get(self, name: str, link: str = "", message: str = "") -> None:
+        p = await self.require("workshop.run")
+        if p is None:
+            return
+        try:
+            d = await run(_status_doc, self.database, name)
+        except NotFound as exc:
+            self.set_status(404)
+            self.finish(page("Workshop", f"<p class='err'>{esc(exc)}</p>", user=p.username))
+            return
+        q = quote(name, safe="")
+        toggle = ("close", "Close workshop") if d["status"] == "open" else ("reopen", "Reopen workshop")
+        link_html = (f"<p>Personal link (shown once; send it to the reviewer): <code id='link'>{esc(link)}</code></p>"
+                     if link else "")
+        analysis = (f"<a class='btn' href='/workshops/{q}/analysis'>Analysis</a>"
+                    if allowed(p, "workshop.results") else "")
+        body = f"""
+<h2>{esc(d['workshop'])}</h2>
+<p>Campaign {esc(d['campaign'])} · {d['plots']} plots · blind: {'yes' if d['blind'] else 'no'} ·
+hidden repeats {100 * d['repeats']:.0f} % · status <strong id='wstatus'>{esc(d['status'])}</strong> ·
+answers <strong id='nanswers'>{d['answers']}</strong></p>
+<div class='row'><form method='post' action='/workshops/{q}/status'>
+<input type='hidden' name='status' value='{toggle[0]}'><button type='submit' id='toggle'>{toggle[1]}</button></form>
+{analysis}</div>
+<h3>Reviewers (live)</h3>
+<table><thead><tr><th>reviewer</th><th>answered</th><th>progress</th><th></th><th>last answer (UTC)</th></tr></thead>
+<tbody id='progress'></tbody></table>
+<h3>Invite a reviewer</h3>
+<form method='post' action='/workshops/{q}/invite' class='row'>
+<label>User name <input name='reviewer' required maxlength='100'></label>
+<button type='submit' id='invite'>Create personal link</button></form>
+{link_html}<p class='err'>{esc(message)}</p>
+<p class='muted'>A new link replaces the reviewer's earlier one. Answers stay with the reviewer.</p>"""
+        html_page = page(f"Workshop {name}", body, user=p.username, script=_STATUS_JS)
+        self.finish(html_page.replace("<body>", f"<body data-workshop='{esc(name)}'>", 1))
+
+    async def post(self, name: str, action: str) -> None:
+        p = await self.require("workshop.run")
+        if p is None:
+            return
+        try:
+            if action == "invite":
+                reviewer = self.get_argument("reviewer", "").strip()
+                token = await run(_invite, self.database, name, reviewer, p)
+                base = f"{self.request.protocol}://{self.request.host}"
+                await WorkshopPage.get(self, name, link=f"{base}/review/{token}")
+                return
+            status = {"close": "closed", "reopen": "open"}.get(self.get_argument("status", ""))
+            if status is None:
+                raise InvalidParameter("status must be close or reopen")
+            await run(_set_status, self.database, name, status, p)
+        except RailvalError as exc:
+            self.set_status(400)
+            await WorkshopPage.get(self, name, message=str(exc))
+            return
+        self.redirect(f"/workshops/{quote(name, safe='')}")
