@@ -60,7 +60,7 @@ def test_baseline_fails_diagnose_calibrate_then_passes(page, demo_url):
     page.locator("progress.rv-progress").wait_for(state="visible", timeout=PAGE_MS)  # job running
     rows = main.locator(".rv-candidates .tabulator-row")
     rows.first.wait_for(timeout=JOB_MS)
-    top = rows.first.locator(".tabulator-cell[tabulator-field='effect']").inner_text().strip()
+    top = rows.first.locator(".tabulator-cell[tabulator-field='candidate']").inner_text().strip()
     effect_select = main.locator(".rv-effect select")
     assert effect_select.evaluate("s => s.options[s.selectedIndex].text") == top
     new_name = f"baseline+{top}"
