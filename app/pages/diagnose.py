@@ -176,7 +176,7 @@ class DiagnosePage(PageBase):
             nf = self.state.noise_floor
             head = {"cause": "Cause found", "uncertain": "Uncertain",
                     "none": "No candidate explains the residual"}.get(verdict, verdict)
-            text = f"{head}: {note}" + (f" (noise floor {nf:.2f})" if nf is not None else "")
+            text = f"{head}: {note}" + (f" (noise floor {nf:.2f})" if nf is not None and "noise floor" not in note else "")
             extra.append(message(text, {"cause": "success", "uncertain": "warning"}.get(verdict, "danger")))
             if verdict == "none" and self.state.unexplained:
                 extra.append(message("Unexplained: " + "; ".join(
