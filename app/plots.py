@@ -37,7 +37,7 @@ from bokeh.plotting import figure
 from holoviews.operation.downsample import downsample1d
 from tsdownsample import MinMaxLTTBDownsampler
 
-from railval.app.scales import MEASURED_COLOR, SIM_COLORS, nice_limits, unit_label
+from railval.app.scales import MEASURED_COLOR, SIM_COLORS, nice_limits, norm_axis_top, norm_ticks, unit_label
 from railval.app.state.compare import CompareData
 
 hv.extension("bokeh", logo=False)
@@ -275,10 +275,13 @@ def _bars(rows: list[dict[str, Any]], key: str, ci_key: str | None, title: str,
     extent = [abs(v) for v in values if math.isfinite(v)]
     extent += [abs(float(b)) for c in cis if isinstance(c, (list, tuple)) for b in c
                if b is not None and math.isfinite(float(b))]
-    top = max([1.2] + [e * 1.1 for e in extent])  # bars and their intervals stay inside
+    # one axis for every configuration (±2 like the heat map), wider only when a bar or its
+    # interval exceeds it; bars and intervals stay inside
+    top = norm_axis_top(extent)
     ylim = (-top, top) if signed else (0.0, top)
     overlay = hv.Overlay(layers).opts(
         title=title, responsive=True, height=height, fontsize=FONTS, ylim=ylim,
+        yticks=norm_ticks(top, signed),
         xrotation=45, show_grid=True, show_legend=False,
     )
     return overlay, bars

@@ -31,7 +31,15 @@ from typing import Any
 
 import numpy as np
 
-from railval.app.scales import MEASURED_COLOR, SIM_COLORS, nice_limits, nice_ticks, unit_label
+from railval.app.scales import (
+    MEASURED_COLOR,
+    SIM_COLORS,
+    nice_limits,
+    nice_ticks,
+    norm_axis_top,
+    norm_ticks,
+    unit_label,
+)
 from railval.core.errors import RailvalError
 from railval.core.diagnosis import where_grid
 from railval.core.filters import filtfilt_rows
@@ -76,8 +84,8 @@ def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
     """Vertical bar chart as SVG; bars beyond ±1 red, others green; dashed limit lines."""
     ml, mr, mt, mb = 62, 12, 30, 92
     w, h = width - ml - mr, height - mt - mb
-    finite = [abs(v) for v in values if v is not None and math.isfinite(v)]
-    top = max([1.2] + [v * 1.1 for v in finite])
+    ends = [b for c in (intervals or []) if c for b in c]
+    top = norm_axis_top([*values, *ends])  # the dashboard's axis: ±2 unless exceeded
     signed = any(lim < 0 for lim in limits)
     lo = -top if signed else 0.0
 
@@ -87,9 +95,9 @@ def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
     out = [(f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
            f'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">'),
            f'<text x="{width / 2}" y="18" text-anchor="middle" font-size="14" font-weight="bold">{_esc(title)}</text>']
-    for t in np.linspace(lo, top, 5):
+    for t in norm_ticks(top, signed):  # nice steps and the limit 1.0
         out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{y(t):.1f}" y2="{y(t):.1f}" stroke="#e0e0e0"/>'
-                   f'<text x="{ml - 6}" y="{y(t) + 4:.1f}" text-anchor="end">{t:.2f}</text>')
+                   f'<text x="{ml - 6}" y="{y(t) + 4:.1f}" text-anchor="end" class="tick">{t:g}</text>')
     n = max(1, len(labels))
     bw = w / n
     for i, (lab, v) in enumerate(zip(labels, values, strict=True)):

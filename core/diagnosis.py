@@ -135,6 +135,11 @@ class Pattern:
     def to_dict(self) -> dict[str, Any]:
         return {"labels": list(self.labels), "groups": list(self.groups), "values": self.values.tolist()}
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Pattern:
+        """Inverse of :meth:`to_dict` (a stored run read back)."""
+        return cls(list(d["labels"]), list(d["groups"]), np.asarray(d["values"], dtype=float))
+
 
 def pattern_from_pairs(pairs: Iterable[Mapping[str, Any]], *, value_key: str = "norm") -> Pattern:
     """Aggregate per-pair normalised differences into the quantity × zone × position pattern.
@@ -264,6 +269,16 @@ class Candidate:
             d["signature"] = self.signature.to_dict()
         return d
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Candidate:
+        """Inverse of :meth:`to_dict` with ``with_signature=True``."""
+        return cls(effect=d["effect"], explained=float(d["explained"]),
+                   parameters={k: float(v) for k, v in d["parameters"].items()},
+                   fixes=list(d["fixes"]), worsens=list(d["worsens"]), explanation=d["explanation"],
+                   signature=Pattern.from_dict(d["signature"]), residual_after=float(d["residual_after"]),
+                   group_change={g: (float(v["before"]), float(v["after"]))
+                                 for g, v in d.get("quantities", {}).items()})
+
 
 @dataclass
 class DiagnosisResult:
@@ -288,6 +303,16 @@ class DiagnosisResult:
              "residual": residual}
         d.update(self.extra)
         return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> DiagnosisResult:
+        """Inverse of :meth:`to_dict` with ``with_signatures=True`` (a stored run read back);
+        the keys beyond the ranked result go to ``extra``."""
+        own = {"candidates", "separable", "evidence", "note", "residual"}
+        return cls(residual=Pattern.from_dict(d["residual"]),
+                   candidates=[Candidate.from_dict(c) for c in d["candidates"]],
+                   separable=bool(d["separable"]), evidence=list(d["evidence"]), note=d.get("note", ""),
+                   extra={k: v for k, v in d.items() if k not in own})
 
     def to_pandas(self):
         import pandas as pd

@@ -48,6 +48,26 @@ def test_svg_bars_colours_escapes_and_limit_lines():
     assert svg.count('stroke-dasharray="6,4"') == 2
 
 
+def test_svg_bars_nice_ticks_with_the_limit_and_whole_error_bars():
+    """Ticks are nice numbers including the limit 1.0 (not 0.93, 1.86); an error bar
+    reaching beyond the bars stays inside the plot area."""
+    import re
+
+    svg = svg_bars(["a", "b"], [0.6, 1.5], title="T", ylabel="y", limits=(1.0,),
+                   intervals=[(0.2, 1.1), (0.9, 2.6)])
+    ticks = [float(t) for t in re.findall(r'class="tick">([^<]+)<', svg)]
+    assert 1.0 in ticks and ticks == sorted(ticks) and ticks[0] == 0.0
+    assert all(abs(t * 2 - round(t * 2)) < 1e-9 for t in ticks)  # multiples of 0.5: nice
+    assert ticks[-1] >= 2.6
+    ys = [float(v) for v in re.findall(r'<line x1="[\d.]+" x2="[\d.]+" y1="[\d.]+" y2="([\d.]+)" stroke="#000" '
+                                       r'stroke-width="1.3"', svg)]
+    top_px = 30  # the plot area's top margin
+    assert len(ys) == 2 and min(ys) >= top_px  # the error bar's upper end is not clipped
+    # the same fixed axis as the dashboard: values within ±2 → ticks up to 2
+    small = svg_bars(["a"], [0.4], title="T", ylabel="y", limits=(1.0,))
+    assert [float(t) for t in re.findall(r'class="tick">([^<]+)<', small)][-1] == 2.0
+
+
 def test_svg_lines_measurement_first():
     import numpy as np
 

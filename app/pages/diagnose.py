@@ -167,14 +167,45 @@ class DiagnosePage(PageBase):
         if note:
             extra.append(message(note, "info" if self.state.separable else "warning"))
         self.candidates_box.objects = [
-            pn.pane.Markdown("#### Ranked candidate effects"),
+            pn.pane.Markdown("#### Ranked candidate effects"), *self._run_line(),
             table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"]), *extra,
-            self.candidate_box,
+            *self._earlier_runs(), self.candidate_box,
         ]
         ranked = [c["effect"] for c in cands]
         rest = [e for e in self.state.param.effect.objects if e not in ranked]
         self.state.param.effect.objects = ranked + rest
         self._show_candidate()
+
+    def _run_line(self) -> list:
+        """Which stored run is shown: when, with which settings, how long it took."""
+        run = self.state.stored_run
+        if not run:
+            return []
+        st = run.get("settings", {})
+        text = (f"Stored diagnosis of {run.get('created_at', '').replace('T', ' ')} UTC "
+                f"({st.get('values_per_parameter')} values per parameter, "
+                f"{len(st.get('effects') or [])} candidate effects; computed in {run.get('seconds', 0):.0f} s"
+                f"{', reused without simulating' if run.get('reused') else ''}).")
+        if run.get("current") is False:
+            return [message(text + " The signals or sections changed since: run the diagnosis again.", "warning")]
+        return [pn.pane.Markdown(html.escape(text), css_classes=["rv-stored-run"])]
+
+    def _earlier_runs(self) -> list:
+        """Every stored diagnosis of the configuration (newest first)."""
+        rows = self.state.runs
+        if len(rows) < 2:
+            return []
+        df = pd.DataFrame([{
+            "time (UTC)": r["created_at"].replace("T", " "),
+            "values per parameter": r["settings"].get("values_per_parameter"),
+            "candidates": len(r["settings"].get("effects") or []),
+            "top candidate": r["top"],
+            "explained (%)": round(100 * float(r["explained"]), 1) if r["explained"] is not None else None,
+            "separable": "yes" if r["separable"] else "no",
+            "data current": "yes" if r.get("current") else "no (signals changed)",
+            "seconds": round(r["seconds"], 1)} for r in rows])
+        return [pn.pane.Markdown("#### Earlier diagnoses of this configuration"),
+                table(df, height=40 + 32 * min(len(df), 8), css_classes=["rv-diagnosis-runs"])]
 
     def _show_candidate(self) -> None:
         """The chosen effect (the top candidate unless another is chosen): why, its signature

@@ -4,6 +4,7 @@ job: the page never freezes."""
 
 from __future__ import annotations
 
+import pandas as pd
 import panel as pn
 
 from railval.app.pages._common import PageBase, make_dispatch, message, table, toggle_group
@@ -36,6 +37,8 @@ class MetricsPage(PageBase):
         controls = pn.Row(self.section, self.scope, self.view,
                           pn.Column(pn.Spacer(height=30), self.compute_btn))
         df = self.state.table()
+        if (df is None or self.state.computed_for != self.state.key()) and self.state.load_stored():
+            return  # the stored run is shown (setting the frame redrew the page)
         if df is None or self.state.computed_for != self.state.key():
             hint = ("Press **Compute metrics** (about 3 s per section; *all sections* runs in the "
                     "background with a progress bar).")
@@ -43,7 +46,22 @@ class MetricsPage(PageBase):
             self.body.objects = [controls, pn.pane.Markdown(hint), *shown,
                                  *( [self._table(df)] if df is not None else [])]
             return
-        self.body.objects = [controls, pn.pane.Markdown(NOTE, styles={"color": "#555"}), self._table(df)]
+        self.body.objects = [controls, pn.pane.Markdown(NOTE, styles={"color": "#555"}), self._table(df),
+                             *self._runs()]
+
+    def _runs(self) -> list:
+        """Stored metrics runs of the configuration (newest first, at most 20)."""
+        rows = self.state.runs
+        if not rows:
+            return []
+        df = pd.DataFrame([{
+            "time (UTC)": r["created_at"].replace("T", " "),
+            "sections": ", ".join(r["settings"].get("sections") or ["all"]),
+            "channels": len(r["settings"]["channels"]) if r["settings"].get("channels") else "all",
+            "rows": r["rows"], "seconds": round(r["seconds"], 1),
+            "data current": "yes" if r.get("current") else "no (signals changed)"} for r in rows[:20]])
+        return [pn.pane.Markdown(f"#### Stored metrics runs of this configuration ({len(rows)})"),
+                table(df, height=40 + 32 * min(len(df), 8), css_classes=["rv-metrics-runs"])]
 
     def _table(self, df):
         df = df.copy()

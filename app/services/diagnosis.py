@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -29,10 +30,16 @@ from railval.app.services.campaign_context import (
     section_values,
     session_of,
 )
+from railval.app.services.stored_runs import data_inputs, digests, run_info
 from railval.core.diagnosis import DiagnosisResult, ParameterScan, diagnose_patterns, scan_values
+from railval.core.en14363 import PROCESSING_VERSION
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import EFFECTS, Effect
-from railval.db import repo
+from railval.db import repo, runs
+
+#: version of the diagnosis procedure in the stored runs' digest (with the EN processing
+#: version): a change of the procedure computes afresh instead of reusing an older run
+DIAGNOSIS_VERSION = f"diagnosis/1+{PROCESSING_VERSION}"
 
 
 def scan_points(effect: Effect, values_per_parameter: int) -> Iterator[tuple[str, float, dict[str, float], dict]]:
@@ -62,22 +69,38 @@ def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3,
 
 def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
              scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
-             workers: int | None = None) -> DiagnosisResult:
+             workers: int | None = None, refresh: bool = False, store: bool = True,
+             actor: str = "") -> DiagnosisResult:
     """Rank the effects missing from configuration ``config`` by the share of its residual
     they explain (:mod:`railval.core.diagnosis`). Each candidate effect parameter is simulated at
-    ``values_per_parameter`` values over its bounds (plus its default) on the whole campaign."""
+    ``values_per_parameter`` values over its bounds (plus its default) on the whole campaign.
+
+    A stored run with the same inputs (signal content hashes of both sides, section records,
+    configuration, candidate effects, ``values_per_parameter``, :data:`DIAGNOSIS_VERSION`) is
+    returned without simulating unless ``refresh``; every computed run is stored (``store``).
+    ``result.extra["run"]`` describes the stored run (:func:`railval.app.services.stored_runs.run_info`)."""
     report(progress, "load", 0.0, campaign=campaign, config=config)
-    with session_of(database_or_session) as s:
-        ctx = load_context(s, campaign)
-        conf_effects, conf_params, _ = configuration_of(s, campaign, config)
-        config_sets = repo.load_signalsets(s, campaign, config)
     registry = EFFECTS
     unknown = [e for e in (effects or ()) if e not in registry]
     if unknown:
         raise InvalidParameter(f"unknown effect(s) {unknown}; known: {sorted(registry)}")
-    template = str(ctx.vehicle.get("template") or "coach")
-    todo = [e for e in (effects or registry) if e not in conf_effects
-            and template in registry[e].templates]
+    with session_of(database_or_session) as s:
+        ctx = load_context(s, campaign)
+        conf_effects, conf_params, conf_row = configuration_of(s, campaign, config)
+        template = str(ctx.vehicle.get("template") or "coach")
+        todo = [e for e in (effects or registry) if e not in conf_effects
+                and template in registry[e].templates]
+        settings = {"values_per_parameter": int(values_per_parameter), "effects": sorted(todo)}
+        data_sha, inputs_sha = digests(data_inputs(s, campaign, config), settings, DIAGNOSIS_VERSION)
+        stored = None if refresh else runs.latest_run(s, conf_row.id, "diagnosis", inputs_sha)
+        if stored is not None:
+            res = DiagnosisResult.from_dict(stored.result)
+            res.extra["run"] = run_info(stored, reused=True, current_data_sha256=data_sha)
+            report(progress, "done", 1.0, stored_run=stored.id)
+            return res
+        config_sets = repo.load_signalsets(s, campaign, config)
+        ids = (conf_row.campaign_id, conf_row.id)
+    started = time.perf_counter()
     stored_residual, vr = residual_pattern(ctx, section_values(config_sets, ctx.sections), band_sums(config_sets, ctx.bands))
     # the configuration itself is re-simulated so that its residual and the scanned patterns
     # come from the same simulator run settings (signatures are differences of the two)
@@ -109,6 +132,44 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                       "values_per_parameter": values_per_parameter, "simulations": len(tasks),
                       "stored_residual_norm": math.sqrt(stored_residual.norm2()),
                       "simulated_residual_norm": math.sqrt(residual.norm2())})
+    if store:
+        with session_of(database_or_session) as s:
+            row = runs.store_run(s, campaign_id=ids[0], configuration_id=ids[1], kind="diagnosis",
+                                 inputs_sha256=inputs_sha,
+                                 settings={**settings, "data_sha256": data_sha,
+                                           "version": DIAGNOSIS_VERSION},
+                                 result=res.to_dict(with_signatures=True),
+                                 seconds=time.perf_counter() - started, actor=actor)
+            res.extra["run"] = run_info(row, reused=False, current_data_sha256=data_sha)
     report(progress, "done", 1.0)
+    return res
+
+
+def diagnosis_runs(session: Any, campaign: str, config: str) -> list[dict[str, Any]]:
+    """Stored diagnoses of ``config``, newest first: :func:`run_info` plus the top candidate,
+    the share it explains and whether the two best are told apart; ``current`` is false
+    when the signals or sections changed since the run."""
+    conf = repo.get_configuration(session, campaign, config)
+    data_sha, _ = digests(data_inputs(session, campaign, config), {}, DIAGNOSIS_VERSION)
+    out = []
+    for r in runs.list_runs(session, conf.id, "diagnosis"):
+        cands = (r.result or {}).get("candidates") or []
+        out.append({**run_info(r, reused=True, current_data_sha256=data_sha),
+                    "top": cands[0]["effect"] if cands else "",
+                    "explained": cands[0]["explained"] if cands else None,
+                    "separable": bool((r.result or {}).get("separable", True))})
+    return out
+
+
+def latest_diagnosis(session: Any, campaign: str, config: str) -> DiagnosisResult | None:
+    """The newest stored diagnosis of ``config`` (any settings), ``extra["run"]`` saying
+    whether its data are still current; None when never diagnosed."""
+    conf = repo.get_configuration(session, campaign, config)
+    row = runs.latest_run(session, conf.id, "diagnosis")
+    if row is None:
+        return None
+    data_sha, _ = digests(data_inputs(session, campaign, config), {}, DIAGNOSIS_VERSION)
+    res = DiagnosisResult.from_dict(row.result)
+    res.extra["run"] = run_info(row, reused=True, current_data_sha256=data_sha)
     return res
 

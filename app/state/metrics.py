@@ -16,6 +16,7 @@ class MetricsState(param.Parameterized):
     view = param.Selector(default="raw", objects=["raw", "synchronised", "raw and synchronised"])
     frame = param.DataFrame(default=None, allow_None=True, doc="metrics of the last computation")
     computed_for = param.String(default="", doc="what ``frame`` holds (campaign/config/scope)")
+    runs = param.List(default=[], doc="stored metrics runs of the configuration, newest first")
 
     ID_COLUMNS = ("section", "zone", "channel", "unit")
 
@@ -27,10 +28,35 @@ class MetricsState(param.Parameterized):
         scope = self.app.section if self.scope == "selected section" else "all sections"
         return f"{self.app.campaign} / {self.app.configuration} / {scope}"
 
+    def scope_sections(self) -> list[str]:
+        app = self.app
+        return [app.section] if self.scope == "selected section" else list(app.param.section.objects)
+
+    def load_stored(self) -> bool:
+        """Show the stored metrics of the current scope when every section of it was computed
+        with the current data (a reload, a second tab, another user); True when shown."""
+        app = self.app
+        if not app.campaign or not app.configuration:
+            return False
+        self.runs = app.backend.metrics_runs(app.campaign, app.configuration)
+        if not self.runs:
+            return False
+        frames = []
+        for sid in self.scope_sections():
+            df = app.backend.stored_metrics(app.campaign, app.configuration, [sid])
+            if df is None:
+                return False
+            frames.append(df)
+        if not frames:
+            return False
+        self.computed_for = self.key()
+        self.frame = pd.concat(frames, ignore_index=True)
+        return True
+
     def compute(self, dispatch=None, background: bool = True):
         app = self.app
         campaign, config = app.campaign, app.configuration
-        sections = [app.section] if self.scope == "selected section" else list(app.param.section.objects)
+        sections = self.scope_sections()
         key = self.key()
 
         def work(progress):
@@ -41,6 +67,7 @@ class MetricsState(param.Parameterized):
             return pd.concat(frames, ignore_index=True) if frames else None
 
         def done(df):
+            self.runs = app.backend.metrics_runs(campaign, config)
             self.computed_for = key  # first: the view refreshes when ``frame`` changes
             self.frame = df
         return app.run_job("metrics", work, done, dispatch=dispatch, background=background)
