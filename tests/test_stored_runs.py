@@ -23,6 +23,15 @@ def demo(database, tmp_path):
     return database
 
 
+@pytest.fixture
+def synth_demo(database):
+    """A small synthetic campaign the built-in simulator can re-simulate (12 sections, the fewest synth makes)."""
+    from railval.app.services.synth import synth
+
+    synth(database, name="demo", template="coach", hidden=["conicity"], seed=1, n_sections=12)
+    return database
+
+
 class _NoSimulation:
     """Stands in for the batch executor: any simulation fails the test."""
 
@@ -30,7 +39,8 @@ class _NoSimulation:
         raise AssertionError("the stored diagnosis should have been reused, not simulated")
 
 
-def test_diagnosis_is_stored_and_reused(demo, monkeypatch):
+def test_diagnosis_is_stored_and_reused(synth_demo, monkeypatch):
+    demo = synth_demo
     kw = {"effects": ["conicity"], "values_per_parameter": 2, "workers": 1}
     first = diagnosis_service.diagnose(demo, "demo", "baseline", **kw)
     assert first.extra["run"]["reused"] is False and first.extra["run"]["current"] is True
@@ -95,7 +105,8 @@ def test_metrics_are_stored_reused_and_recomputed_when_inputs_change(demo, monke
     assert [r["current"] for r in listed] == [True, False, False]
 
 
-def test_a_new_session_shows_the_stored_diagnosis_and_metrics(demo):
+def test_a_new_session_shows_the_stored_diagnosis_and_metrics(synth_demo):
+    demo = synth_demo
     from railval.app.state import AppState, Backend, DiagnoseState, MetricsState
 
     app = AppState(Backend(demo))

@@ -36,6 +36,34 @@ def toggle_group(parameter: param.Parameter, label: str, **kw: Any) -> pn.Column
     return pn.Column(caption, widget, margin=0)
 
 
+def bounded_input(parameter: param.Parameter, label: str, app: Any, **kw: Any) -> pn.widgets.Widget:
+    """A number input for a bounded Integer/Number parameter that never takes a value outside
+    its bounds silently: a value outside is refused with a message in the status area naming
+    the field, the value and the allowed range, and the field shows the kept value again."""
+    owner, name = parameter.owner, parameter.name
+    lo, hi = parameter.bounds or (None, None)
+    integer = isinstance(parameter, param.Integer)
+    cls = pn.widgets.IntInput if integer else pn.widgets.FloatInput
+    widget = cls(name=label, value=getattr(owner, name), **kw)
+
+    def text(v: float | None) -> str:
+        return "no limit" if v is None else f"{v:g}"
+
+    def typed(event) -> None:
+        v = event.new
+        if v is None or (lo is not None and v < lo) or (hi is not None and v > hi):
+            kept = getattr(owner, name)
+            app.set_status(f"{label}: {text(v) if v is not None else 'empty'} is outside the allowed range "
+                           f"{text(lo)} … {text(hi)}; kept {kept:g}", "warning")
+            widget.value = kept
+            return
+        setattr(owner, name, int(v) if integer else float(v))
+
+    widget.param.watch(typed, ["value"])
+    owner.param.watch(lambda e: setattr(widget, "value", e.new), [name])
+    return widget
+
+
 def make_dispatch() -> Callable[[Callable[[], None]], None]:
     """A ``dispatch`` for :meth:`AppState.run_job`: runs a state update on the session's
     event loop (Bokeh documents must only be changed there), or directly outside a server."""

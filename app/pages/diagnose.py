@@ -15,7 +15,7 @@ import pandas as pd
 import panel as pn
 
 from railval.app import plots
-from railval.app.pages._common import PageBase, make_dispatch, message, table, where_map
+from railval.app.pages._common import PageBase, bounded_input, make_dispatch, message, table, where_map
 from railval.app.pages.dashboard import validation_view
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 
@@ -66,8 +66,7 @@ class DiagnosePage(PageBase):
             pn.Row(pn.widgets.MultiChoice.from_param(st.param.candidate_effects,
                                                      name="Candidate effects (none chosen: every missing effect)",
                                                      width=480, css_classes=["rv-candidate-effects"]),
-                   pn.widgets.IntInput.from_param(st.param.values_per_parameter, name="Scan values per parameter",
-                                                  width=200)),
+                   bounded_input(st.param.values_per_parameter, "Scan values per parameter", app, width=200)),
             self.diag_estimate, title="Diagnosis settings", collapsed=True, sizing_mode="stretch_width",
             css_classes=["rv-diag-settings"])
         self.cal_settings = pn.Card(
@@ -75,11 +74,10 @@ class DiagnosePage(PageBase):
                 pn.widgets.MultiChoice.from_param(st.param.fit_parameters,
                                                   name="Parameters to fit (none chosen: all; others keep the values set)",
                                                   width=420),
-                pn.widgets.IntInput.from_param(st.param.popsize, name="Population per parameter", width=170),
-                pn.widgets.IntInput.from_param(st.param.maxiter, name="Generations (at most)", width=170),
-                pn.widgets.IntInput.from_param(st.param.polish_maxfev, name="Polish simulations (at most)",
-                                               width=190),
-                pn.widgets.IntInput.from_param(st.param.seed, name="Seed", width=110)),
+                bounded_input(st.param.popsize, "Population per parameter", app, width=170),
+                bounded_input(st.param.maxiter, "Generations (at most)", app, width=170),
+                bounded_input(st.param.polish_maxfev, "Polish simulations (at most)", app, width=190),
+                bounded_input(st.param.seed, "Seed", app, width=110)),
             self.cal_estimate, title="Calibration settings (differential evolution + local polish)",
             collapsed=True, sizing_mode="stretch_width", css_classes=["rv-cal-settings"])
         st.param.watch(lambda e: self._show_estimates(), ["candidate_effects", "values_per_parameter",

@@ -4,15 +4,18 @@ job: the page never freezes."""
 
 from __future__ import annotations
 
+import html
+
 import pandas as pd
 import panel as pn
 
 from railval.app.pages._common import PageBase, make_dispatch, message, table, toggle_group
 from railval.app.state import AppState, MetricsState, unit_label
+from railval.core.metrics.registry import METRICS
 
 NOTE = ("Signals low-pass 20 Hz and resampled to a common axis (the service says where it "
         "resampled). *Synchronised*: the lag estimated by cross-correlation within a bounded "
-        "window is removed first (`lag_s`); `lag_reliable` is false when the lag lies at or within "
+        "window is removed first (*lag (s)*); *lag reliable* is NO when the lag lies at or within "
         "5 % of the window's bound (the true lag may lie outside; the synchronised values are "
         "doubtful). Click a column header to sort; type in a header field to filter.")
 
@@ -69,7 +72,50 @@ class MetricsPage(PageBase):
             df["unit"] = df["unit"].map(unit_label)
         num = df.select_dtypes("number").columns
         df[num] = df[num].round(4)
+        if "lag_reliable" in df.columns:
+            df["lag_reliable"] = df["lag_reliable"].map({True: "yes", False: "NO (at the bound)"})
+        df = df.rename(columns=metric_headers(df.columns))
         text_cols = [c for c in ("section", "channel", "unit") if c in df.columns]
-        return table(df, height=560, pagination="local", page_size=50, frozen_columns=text_cols[:2],
-                     header_filters={c: {"type": "input", "func": "like", "placeholder": "filter"}
-                                     for c in text_cols})
+        tab = table(df, height=560, pagination="local", page_size=50, frozen_columns=text_cols[:2],
+                    layout="fit_data_fill", css_classes=["rv-metrics"],
+                    header_filters={c: {"type": "input", "func": "like", "placeholder": "filter"}
+                                    for c in text_cols})
+        if LAG_HEADER in df.columns:
+            tab.style.map(lambda v: "color: #b71c1c; font-weight: bold" if str(v).startswith("NO") else "",
+                          subset=[LAG_HEADER])
+        return pn.Column(tab, metric_legend([c for c in self.state.frame.columns if c in METRICS]),
+                         sizing_mode="stretch_width")
+
+
+LAG_HEADER = "lag reliable"
+#: headers of the non-metric columns of the metrics table
+OTHER_HEADERS = {"lag_s": "lag (s)", "lag_reliable": LAG_HEADER}
+
+
+def metric_headers(columns) -> dict[str, str]:
+    """Column → header: the metric registry's label (``railval.core.metrics.registry``),
+    "(sync)" for the synchronised value shown beside the raw one, the unit where it has one
+    ("signal": the unit column of the row)."""
+    out = {}
+    for c in columns:
+        base = c[:-5] if c.endswith("_sync") else c
+        if base in METRICS:
+            m = METRICS[base]
+            unit = {"-": "", "signal": " [signal unit]"}.get(m.unit, f" [{m.unit}]")
+            out[c] = f"{m.label}{unit}{' (sync)' if c.endswith('_sync') else ''}"
+        elif c in OTHER_HEADERS:
+            out[c] = OTHER_HEADERS[c]
+    return out
+
+
+def metric_legend(names) -> pn.pane.HTML:
+    """One line per shown metric from the registry: label, what it measures, range, best value,
+    source."""
+    items = "".join(
+        f"<li><b>{html.escape(METRICS[n].label)}</b>: {html.escape(METRICS[n].description)}; "
+        f"range {html.escape(METRICS[n].range)}, best {html.escape(str(METRICS[n].best))} "
+        f"({html.escape(METRICS[n].better)}) — {html.escape(METRICS[n].source)}</li>"
+        for n in names)
+    return pn.pane.HTML(f"<details open class='rv-metric-legend'><summary><b>What the columns mean</b>"
+                        f"</summary><ul style='font-size: 13px; margin: 4px 0'>{items}</ul></details>",
+                        sizing_mode="stretch_width")
