@@ -42,9 +42,8 @@ from railval.app.scales import (
 )
 from railval.core.errors import RailvalError
 from railval.core.diagnosis import where_grid
-from railval.core.filters import filtfilt_rows
-from railval.core.quantities import channel_for
-from railval.core.types import channel_kind
+from railval.core.en14363 import quantity_trace
+from railval.core.quantities import QUANTITIES
 
 CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "google-chrome")
 #: flags that let Debian's Chromium run headless in containers and CI
@@ -126,12 +125,16 @@ def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
 
 def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: str, xlabel: str,
               ylabel: str, shade: tuple[float, float] | None = None, width: int = 760,
-              height: int = 280) -> str:
-    """Line chart as SVG: ``traces`` = [(label, x, y, colour)], first drawn first (beneath)."""
+              height: int = 280, marks: list[tuple[str, float, str]] | None = None) -> str:
+    """Line chart as SVG: ``traces`` = [(label, x, y, colour)], first drawn first (beneath);
+    ``marks`` = [(label, y, colour)]: dashed horizontal lines across ``shade`` (the evaluated
+    range) or the whole width, e.g. the evaluated statistic of each side."""
     ml, mr, mt, mb = 70, 14, 30, 46
     w, h = width - ml - mr, height - mt - mb
+    marks = [m for m in (marks or []) if math.isfinite(m[1])]
     xs = np.concatenate([t[1] for t in traces]) if traces else np.array([0.0, 1.0])
-    ys = np.concatenate([t[2] for t in traces]) if traces else np.array([0.0, 1.0])
+    ys = np.concatenate([t[2] for t in traces] + [np.array([m[1] for m in marks])]) if traces \
+        else np.array([0.0, 1.0])
     x0, x1 = nice_limits(float(np.min(xs)), float(np.max(xs)))
     y0, y1 = nice_limits(float(np.min(ys)), float(np.max(ys)))
 
@@ -159,6 +162,14 @@ def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: s
                    f'points="{pts}"/>')
         out.append(f'<rect x="{ml + w - 200}" y="{mt + 6 + 16 * i}" width="14" height="3" fill="{color}"/>'
                    f'<text x="{ml + w - 180}" y="{mt + 11 + 16 * i}">{_esc(label)}</text>')
+    for j, (label, yv, color) in enumerate(marks):
+        a, b = (max(shade[0], x0), min(shade[1], x1)) if shade is not None else (x0, x1)
+        out.append(f'<line class="mark" x1="{px(a):.1f}" x2="{px(b):.1f}" y1="{py(yv):.1f}" y2="{py(yv):.1f}" '
+                   f'stroke="{color}" stroke-width="1.6" stroke-dasharray="7,3"><title>{_esc(label)}</title></line>')
+        k = len(traces) + j
+        out.append(f'<line x1="{ml + w - 200}" x2="{ml + w - 186}" y1="{mt + 8 + 16 * k}" y2="{mt + 8 + 16 * k}" '
+                   f'stroke="{color}" stroke-width="1.6" stroke-dasharray="4,2"/>'
+                   f'<text x="{ml + w - 180}" y="{mt + 11 + 16 * k}">{_esc(label)}</text>')
     out.append(f'<rect x="{ml}" y="{mt}" width="{w}" height="{h}" fill="none" stroke="#000"/>')
     out.append(f'<text x="{ml + w / 2}" y="{height - 8}" text-anchor="middle">{_esc(xlabel)}</text>')
     out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
@@ -412,25 +423,34 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
     secs = {s.id: s for s in ov.sections}
     out = []
     for r in order.itertuples(index=False):
-        ch = channel_for(r.quantity, r.position, channels)
-        if ch is None:
+        q = QUANTITIES.get(r.quantity)
+        sec = secs.get(r.section)
+        if q is None or sec is None or r.position not in q.positions():
             continue
-        entry = channel_kind(ch)
-        fkind, flabel = (entry.en_filter, entry.filter_label) if entry else ("lowpass", "low-pass 20 Hz")
-        traces = []
+        names = [c for c in q.channels(r.position) if c in channels]
+        if len(names) < len(q.channels(r.position)):
+            continue
+        traces, marks, trace = [], [], None
         for label, cfg, color in (("measurement", None, MEASURED_COLOR),
                                   (configuration, configuration, SIM_COLORS[0])):
-            ss = backend.signals(campaign, cfg, r.section, [ch])
-            y = filtfilt_rows(np.asarray(ss.channels[ch], float)[None, :], float(ss.fs), fkind)[0]
-            x, y = _thin(np.asarray(ss.distance_m, float), y)
-            traces.append((label, x, y, color))
-        sec = secs.get(r.section)
-        unit = unit_label(entry.unit if entry else "")
+            ss = backend.signals(campaign, cfg, r.section, names)
+            trace = quantity_trace(ss, sec, r.quantity, r.position)
+            if trace.sliding_means is not None:  # the 2 m sliding means are what is evaluated
+                x, y = trace.sliding_centres_m, trace.sliding_means
+            else:
+                x, y = _thin(trace.distance_m, trace.values)
+            traces.append((label, np.asarray(x, float), np.asarray(y, float), color))
+            for stat, v in trace.marks.items():
+                marks.append((f"{label}: {stat} = {v:.4g}", v, color))
+        unit = unit_label(q.unit if q.unit != "-" else "")
+        what = (f"{trace.signal_label}, 2 m sliding mean" if trace.sliding_means is not None
+                else trace.signal_label)
         title = (f"{r.quantity} at {r.position}, section {r.section} (zone {r.zone}): "
                  f"D_v/limit = {r.D_norm:+.2f}")
         out.append("<div class='worst'>" + svg_lines(
-            traces, title=title, xlabel="distance (m)", ylabel=f"{ch} ({unit}), {flabel}",
-            shade=(sec.eval_start_m, sec.eval_end_m) if sec else None) + "</div>")
+            traces, title=title, xlabel="distance (m)",
+            ylabel=f"{what}{f' ({unit})' if unit else ''}",
+            shade=(sec.eval_start_m, sec.eval_end_m), marks=marks) + "</div>")
     return out
 
 

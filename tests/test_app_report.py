@@ -146,3 +146,32 @@ def test_cli_report_html_and_errors(demo_db, tmp_path, capsys):
     assert main(["--db", demo_db.url, "report", "demo", "--config", "nope", "--out", str(out)]) == 2
     assert "configuration 'nope' not found" in capsys.readouterr().err
     assert main(["--db", demo_db.url, "report", "demo", "--config", "baseline", "--out", "x.txt"]) == 2
+
+
+def test_worst_case_plots_show_the_quantity_of_the_row(demo_db):
+    """Y/Q, Y and ΣY rows at the same place plot three different signals: Y/Q formed from
+    the filtered Y and Q, Y itself, the 2 m sliding means of ΣY per wheelset; each with its
+    evaluated statistic marked for both sides."""
+    import types
+
+    import pandas as pd
+
+    from railval.app.report import _worst_case_plots
+    from railval.app.state import Backend
+
+    backend = Backend(demo_db)
+    ov = backend.overview("demo")
+    sid = ov.sections[0].id
+    pairs = pd.DataFrame([
+        {"quantity": "YQ_qst", "position": "w1L", "section": sid, "zone": 1, "D_norm": 3.0},
+        {"quantity": "Y_qst", "position": "w1L", "section": sid, "zone": 1, "D_norm": 2.0},
+        {"quantity": "SumY_max", "position": "ws1", "section": sid, "zone": 1, "D_norm": 1.0}])
+    out = _worst_case_plots(backend, "demo", "baseline", types.SimpleNamespace(pairs=pairs), ov, 3)
+    assert len(out) == 3
+    labels = [re.search(r'rotate\(-90\)" text-anchor="middle">([^<]+)<', svg).group(1) for svg in out]
+    assert labels[0].startswith("Y/Q w1L") and labels[1].startswith("Y_w1L")
+    assert labels[2].startswith("ΣY ws1 = Y_w1L + Y_w1R") and "2 m sliding mean" in labels[2]
+    polylines = [re.findall(r'<polyline[^>]*points="([^"]+)"', svg) for svg in out]
+    assert polylines[0][0] != polylines[1][0]  # not the same Y trace twice
+    assert out[0].count('class="mark"') == 2 and "50 % value" in out[0]  # median, both sides
+    assert out[2].count('class="mark"') == 4 and "99.85 % value" in out[2] and "0.15 % value" in out[2]

@@ -20,6 +20,13 @@ NOTE = ("Signals low-pass 20 Hz and resampled to a common axis (the service says
         "doubtful). Click a column header to sort; type in a header field to filter.")
 
 
+#: measured on the demo campaign (12 channels, 6983 samples at 200 Hz per section, one core,
+#: CPU time; docs/metrics.md): the page states these until its own runs are stored
+DEMO_COST = "measured 0.4 s CPU per section of 12 channels on the demo"
+DEMO_COST_WITH_ISO = ("measured 1.5–1.7 s CPU per section of 12 channels on the demo, "
+                      "73–88 % of it ISO/TS 18571")
+
+
 class MetricsPage(PageBase):
     name_ = "metrics"
     watch_app = ("campaign", "configuration", "revision", "section")
@@ -30,6 +37,9 @@ class MetricsPage(PageBase):
         self.state.param.watch(lambda *e: self._on_app_change(), ["view", "frame"])
         self.view = toggle_group(self.state.param.view, "Signals")
         self.scope = toggle_group(self.state.param.scope, "Scope")
+        self.iso = pn.widgets.Checkbox.from_param(self.state.param.include_iso,
+                                                  name="include ISO/TS 18571 rating (slow)", width=230)
+        self.state.param.watch(lambda *e: self._on_app_change(), ["include_iso"])
         self.section = pn.widgets.Select.from_param(app.param.section, name="Section", width=160)
         self.compute_btn = pn.widgets.Button(label="Compute metrics", color="primary", width=180)
         self.compute_btn.on_click(lambda e: self.state.compute(dispatch=make_dispatch()))
@@ -38,19 +48,29 @@ class MetricsPage(PageBase):
 
     def refresh(self) -> None:
         controls = pn.Row(self.section, self.scope, self.view,
+                          pn.Column(pn.Spacer(height=30), self.iso),
                           pn.Column(pn.Spacer(height=30), self.compute_btn))
         df = self.state.table()
         if (df is None or self.state.computed_for != self.state.key()) and self.state.load_stored():
             return  # the stored run is shown (setting the frame redrew the page)
         if df is None or self.state.computed_for != self.state.key():
-            hint = ("Press **Compute metrics** (about 3 s per section; *all sections* runs in the "
-                    "background with a progress bar).")
+            hint = f"Press **Compute metrics** ({self._cost()}; *all sections* runs in the background " \
+                   "with a progress bar)."
             shown = [message(f"Showing {self.state.computed_for}", "info")] if df is not None else []
             self.body.objects = [controls, pn.pane.Markdown(hint), *shown,
                                  *( [self._table(df)] if df is not None else [])]
             return
         self.body.objects = [controls, pn.pane.Markdown(NOTE, styles={"color": "#555"}), self._table(df),
                              *self._runs()]
+
+    def _cost(self) -> str:
+        """The cost of one section as measured: this installation's stored runs with these
+        settings, else the figures measured on the demo campaign (docs/metrics.md)."""
+        measured = self.state.measured_cost()
+        if measured is not None:
+            sec, n = measured
+            return f"{sec:.1f} s per section here (median of {n} stored run{'s' if n != 1 else ''})"
+        return DEMO_COST_WITH_ISO if self.state.include_iso else DEMO_COST
 
     def _runs(self) -> list:
         """Stored metrics runs of the configuration (newest first, at most 20)."""

@@ -156,19 +156,23 @@ class Backend:
                 return validation_service.validate_configuration(s, campaign, config)
         return self._cached(key, make)
 
-    def metrics(self, campaign: str, config: str, sections: list[str] | None = None):
-        """DataFrame of ``railval.app.services.metrics.metrics_for_configuration`` (cached)."""
+    def metrics(self, campaign: str, config: str, sections: list[str] | None = None,
+                families: list[str] | None = None):
+        """DataFrame of ``railval.app.services.metrics.metrics_for_configuration`` (stored in
+        the database with its inputs' hashes; cached in memory too)."""
 
         def make():
             with self.session() as s:
-                return metrics_service.metrics_for_configuration(s, campaign, config, sections=sections)
-        return self._cached(("metrics", campaign, config, tuple(sections or ())), make)
+                return metrics_service.metrics_for_configuration(s, campaign, config, sections=sections,
+                                                                 families=families)
+        return self._cached(("metrics", campaign, config, tuple(sections or ()), tuple(families or ())), make)
 
-    def stored_metrics(self, campaign: str, config: str, sections: list[str] | None = None):
+    def stored_metrics(self, campaign: str, config: str, sections: list[str] | None = None,
+                       families: list[str] | None = None):
         """The stored metrics of these sections with the current data and default settings,
         or None (nothing computed)."""
         with self.session() as s:
-            return metrics_service.stored_metrics(s, campaign, config, sections=sections)
+            return metrics_service.stored_metrics(s, campaign, config, sections=sections, families=families)
 
     def metrics_runs(self, campaign: str, config: str) -> list[dict[str, Any]]:
         """Stored metrics runs of the configuration, newest first."""
