@@ -17,6 +17,7 @@ from typing import Any
 import param
 
 from railval.app.state.backend import Backend, CampaignOverview
+from railval.core.quantities import derived_signals
 
 PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report")
 PAGE_TITLES = {
@@ -74,7 +75,9 @@ class AppState(param.Parameterized):
         self.overview = ov
         configs = [c.name for c in ov.configurations]
         sections = [s.id for s in ov.sections]
-        chans = [c["name"] for c in ov.channels]
+        raw = [c["name"] for c in ov.channels]
+        # the Compare page also shows the derived signals the quantities use (Y/Q, ΣY)
+        chans = raw + list(derived_signals(raw))
         with param.parameterized.batch_call_watchers(self):
             self.param.configuration.objects = configs
             self.param.section.objects = sections
