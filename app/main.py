@@ -23,8 +23,11 @@ from railval.app.pages.dashboard import DashboardPage
 from railval.app.pages.diagnose import DiagnosePage
 from railval.app.pages.metrics import MetricsPage
 from railval.app.pages.overview import OverviewPage
+from railval.app.pages.audit import AuditPage
 from railval.app.pages.report import ReportPage
-from railval.app.state import PAGE_TITLES, PAGES, AppState, Backend
+from railval.app.pages.signoff import SignoffPage
+from railval.app.state import PAGE_TITLES, AppState, Backend
+from railval.core.roles import PAGE_ACTIONS, Principal
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
 CSS_FILE = STATIC / "railval.css"
@@ -35,7 +38,26 @@ pn.extension("tabulator", notifications=False, design="native", sizing_mode="str
 PAGE_CLASSES = {
     "overview": OverviewPage, "compare": ComparePage, "dashboard": DashboardPage,
     "metrics": MetricsPage, "diagnose": DiagnosePage, "report": ReportPage,
+    "signoff": SignoffPage, "audit": AuditPage,
 }
+
+
+class DeniedPage(pn.viewable.Viewer):
+    """What a page the session's user may not open shows (it is never built)."""
+
+    def __init__(self, app: AppState, name: str):
+        super().__init__()
+        self.name_ = name
+        self.view = pn.Column(pn.pane.Markdown(f"## {html.escape(PAGE_TITLES[name])}"),
+                              pn.pane.Alert(html.escape(app.denial(PAGE_ACTIONS[name])),
+                                            alert_type="danger", css_classes=["rv-denied"]),
+                              sizing_mode="stretch_width")
+
+    def show(self) -> None:
+        pass
+
+    def __panel__(self):
+        return self.view
 
 
 def _css() -> list[str]:
@@ -73,7 +95,9 @@ class Pages(Mapping[str, Any]):
 
     def __getitem__(self, name: str) -> Any:
         if name not in self._built:
-            self._built[name] = PAGE_CLASSES[name](self.app)  # KeyError for unknown names
+            cls = PAGE_CLASSES[name]  # KeyError for unknown names
+            self._built[name] = (cls(self.app) if self.app.page_allowed(name)
+                                 else DeniedPage(self.app, name))
         return self._built[name]
 
     def __iter__(self) -> Iterator[str]:
@@ -87,15 +111,51 @@ class Pages(Mapping[str, Any]):
         return list(self._built)
 
 
-def build_app(database: Any, page: str = "overview") -> pn.template.FastListTemplate:
+def user_box(app: AppState) -> pn.pane.HTML:
+    """Who is signed in (escaped) with the sign-out link, or the open-mode note."""
+    p = app.principal
+    if p.open_mode:
+        return pn.pane.HTML(
+            "<div class='rv-open-mode' style='background:#fff4e5;border:1px solid #e0a030;"
+            "padding:6px 8px;border-radius:4px;font-size:13px'><b>Open single-user mode</b>: "
+            "this database has no users, so anyone who reaches this server (loopback only) "
+            "acts as the local user and nothing asks for a password. Add users with "
+            "<code>railval user add NAME --role admin</code> to require sign-in.</div>",
+            sizing_mode="stretch_width")
+    roles = ", ".join(sorted(p.roles)) or "no role"
+    return pn.pane.HTML(
+        f"<div class='rv-user' style='font-size:13px'>Signed in as <b>{html.escape(p.printed_name)}"
+        f"</b> ({html.escape(p.username)}; {html.escape(roles)}) · "
+        f"<a href='/logout' class='rv-logout'>Sign out</a></div>", sizing_mode="stretch_width")
+
+
+def session_principal(auth: Any) -> Principal | None:
+    """The principal of the current Bokeh session, from its request's session cookie."""
+    from railval.app.auth import COOKIE
+
+    ctx = pn.state.curdoc.session_context if pn.state.curdoc is not None else None
+    cookies = dict(getattr(getattr(ctx, "request", None), "cookies", None) or {})
+    return auth.principal_from_cookie(cookies.get(COOKIE))
+
+
+def build_app(database: Any, page: str = "overview", principal: Principal | None = None,
+              auth: Any = None) -> pn.template.FastListTemplate:
     """One session's app on ``database`` (a ``railval.db.engine.Database``); only the page shown
-    is built (:class:`Pages`), the others when first opened."""
-    app = AppState(Backend(database))
+    is built (:class:`Pages`), the others when first opened. ``auth``: the server's
+    :class:`railval.app.auth.RailvalAuth` (the session's user comes from its cookie); else
+    ``principal`` (tests), else open single-user mode."""
+    if auth is not None:
+        principal = session_principal(auth)
+        if principal is None:  # the cookie expired between the page and its websocket
+            return pn.Column(pn.pane.Alert("Your session has ended. <a href='/login'>Sign in</a>.",
+                                           alert_type="warning"))
+    app = AppState(Backend(database), principal=principal)
     if page != "overview":
         app.page = page
     pages = Pages(app)
+    allowed_pages = app.pages_allowed()
     nav = pn.widgets.RadioButtonGroup(
-        options={PAGE_TITLES[p]: p for p in PAGES}, value=app.page, orientation="vertical",
+        options={PAGE_TITLES[p]: p for p in allowed_pages}, value=app.page, orientation="vertical",
         color="light", sizing_mode="stretch_width", css_classes=["rv-nav"])
     nav.link(app, value="page", bidirectional=True)
     main = pn.Column(sizing_mode="stretch_width", css_classes=["rv-main"])
@@ -107,6 +167,7 @@ def build_app(database: Any, page: str = "overview") -> pn.template.FastListTemp
     app.param.watch(show, ["page"])
     show()
     sidebar = [
+        user_box(app),
         pn.widgets.Select.from_param(app.param.campaign, name="Campaign"),
         pn.widgets.Select.from_param(app.param.configuration, name="Configuration"),
         pn.pane.Markdown("**Pages**", margin=(10, 10, 0, 10)),
@@ -125,12 +186,28 @@ def build_app(database: Any, page: str = "overview") -> pn.template.FastListTemp
 
 
 def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: bool = False,
-          threaded: bool = False, allow_websocket_origin: list[str] | None = None, **kw: Any):
-    """Serve the app at ``http://address:port/`` (``pn.serve``); returns the server."""
+          threaded: bool = False, allow_websocket_origin: list[str] | None = None,
+          cookie_secret_file: str | None = None, session_max_age_s: int | None = None,
+          behind_proxy: bool = False, **kw: Any):
+    """Serve the app at ``http://address:port/`` (``pn.serve``) behind the sign-in of
+    :mod:`railval.app.auth`; returns the server. Raises
+    :class:`railval.app.auth.StartupRefused` when the database has no users and ``address``
+    is not a loopback address. ``behind_proxy``: take the client address from the proxy's
+    X-Forwarded-For / X-Real-Ip headers (Tornado ``xheaders``), so the sign-in rate limit per
+    address counts clients, not the proxy; only behind a proxy that sets these headers."""
+    from railval.app.auth import SESSION_MAX_AGE_S, RailvalAuth, check_startup, cookie_secret
+
+    check_startup(database, address)
+    secret, _origin = cookie_secret(cookie_secret_file)
+    auth = RailvalAuth(database, secret, max_age_s=session_max_age_s or SESSION_MAX_AGE_S)
     origins = allow_websocket_origin or [f"{address}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
-    return pn.serve({"app": lambda: build_app(database)}, port=port, address=address, show=show,
-                    threaded=threaded, title="railval", allow_websocket_origin=origins,
-                    static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {}, **kw)
+    if behind_proxy:
+        kw["http_server_kwargs"] = {**kw.get("http_server_kwargs", {}), "xheaders": True}
+    return pn.serve({"app": lambda: build_app(database, auth=auth)}, port=port, address=address,
+                    show=show, threaded=threaded, title="railval", allow_websocket_origin=origins,
+                    static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {},
+                    auth_provider=auth, cookie_secret=secret,
+                    extra_patterns=auth.extra_patterns(), **kw)
 
 
 def free_port() -> int:
@@ -141,11 +218,12 @@ def free_port() -> int:
 
 
 @contextmanager
-def served(database: Any, timeout_s: float = 60.0) -> Iterator[str]:
+def served(database: Any, timeout_s: float = 60.0, **kw: Any) -> Iterator[str]:
     """Serve the app on a free loopback port in a background thread (tests, benchmarks);
-    yields its URL once it answers 200, stops the server afterwards."""
+    yields its URL once it answers 200 (the sign-in page when the database has users),
+    stops the server afterwards."""
     port = free_port()
-    server = serve(database, port=port, address="127.0.0.1", threaded=True)
+    server = serve(database, port=port, address="127.0.0.1", threaded=True, **kw)
     url = f"http://127.0.0.1:{port}/app"
     deadline = time.monotonic() + timeout_s
     try:

@@ -391,6 +391,20 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
                  "simulation (blue), evaluated range shaded.</p>")
         h.extend(_worst_case_plots(backend, campaign, configuration, result, ov, worst_cases))
 
+    # independent sign-offs of this configuration, with their status
+    session = getattr(backend, "session", None)
+    if session is not None:
+        from railval.app.audit_report import signoff_rows_html
+        from railval.app.services.signoff import statuses
+        from railval.db import signoff as db_signoff
+
+        with session() as s:
+            items = [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, configuration)]
+        h.append("<h2>Sign-offs</h2>")
+        h.append("<p class='note'>Each sign-off is bound to the SHA-256 of its evidence "
+                 "(docs/audit.md); <b>stale</b> means the evidence changed after signing.</p>")
+        h.append(signoff_rows_html(items))
+
     # hashes
     h.append("<h2>Evidence: signal content hashes (SHA-256)</h2>")
     meas = backend.hashes(campaign, None)

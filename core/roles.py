@@ -66,6 +66,13 @@ PERMISSIONS: dict[str, frozenset[str]] = {
     "assessor": frozenset({*_READ_ALL, "workshop.results", "audit.read", "audit.checkpoint"}),
 }
 
+#: web app page → the action needed to open it (pages list themselves here when added)
+PAGE_ACTIONS: dict[str, str] = {
+    "overview": "data.read", "compare": "data.read", "dashboard": "data.read",
+    "metrics": "data.read", "diagnose": "data.read", "report": "data.read",
+    "signoff": "signoff.read", "audit": "audit.read",
+}
+
 #: CLI verb (``railval VERB`` or ``railval VERB SUBVERB``) → the action it needs when the
 #: database holds users; None = no data access checked (schema, server, benchmarks)
 CLI_ACTIONS: dict[str, str | None] = {

@@ -18,6 +18,7 @@ revision (idempotent); ``ensure_initialised()`` is the cheap check the CLI runs 
 
 from __future__ import annotations
 
+import contextvars
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -44,6 +45,19 @@ SQLITE_CACHE_KIB = 65_536
 
 #: the actor of new :class:`Database` objects (the CLI sets the acting user before a verb runs)
 default_actor = "system"
+#: the actor of the current thread/context (the web app's jobs run inside :func:`acting_as`)
+_current_actor: contextvars.ContextVar[str | None] = contextvars.ContextVar(
+    "railval_actor", default=None)
+
+
+@contextmanager
+def acting_as(actor: str) -> Iterator[None]:
+    """Within the block, units of work that name no actor are recorded as ``actor``."""
+    token = _current_actor.set(actor)
+    try:
+        yield
+    finally:
+        _current_actor.reset(token)
 
 
 class DatabaseNotInitialised(RailvalError):
@@ -96,11 +110,11 @@ class Database:
     def session(self, actor: str | None = None) -> Iterator[Session]:
         """One unit of work: commit on success, roll back on any exception.
 
-        ``actor`` (else :attr:`actor`) is kept in ``session.info["actor"]``: the audit rows
+        ``actor`` (else the one set by :func:`acting_as`, else :attr:`actor`) is kept in ``session.info["actor"]``: the audit rows
         written in this unit of work name it (:func:`railval.db.audit.actor_of`).
         """
         session = self._sessions()
-        session.info["actor"] = actor or self.actor
+        session.info["actor"] = actor or _current_actor.get() or self.actor
         try:
             yield session
             session.commit()

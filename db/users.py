@@ -215,6 +215,19 @@ def verify_password(session: Session, username: str, password: str) -> AppUser |
     return user
 
 
+def password_changed_at(session: Session, username: str) -> float:
+    """POSIX time of the user's last password change or disabling (0 if never): sessions
+    issued before it end (:mod:`railval.app.auth`)."""
+    from railval.db.models import AuditEvent
+
+    last = session.scalar(select(func.max(AuditEvent.at_utc)).where(
+        AuditEvent.object == f"user:{username}",
+        AuditEvent.action.in_(("user.password", "user.disable"))))
+    if not last:
+        return 0.0
+    return dt.datetime.strptime(last, "%Y-%m-%dT%H:%M:%S.%fZ").replace(tzinfo=dt.UTC).timestamp()
+
+
 @dataclass(frozen=True)
 class LoginResult:
     """Outcome of :func:`authenticate`: ``user`` on success, else a message to show."""

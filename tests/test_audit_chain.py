@@ -78,3 +78,31 @@ def test_database_refuses_update_and_delete_of_audit_rows(database, statement):
     with database.session() as s:
         assert [r["actor"] for r in audit.iter_rows(s)] == ["tester"]
         assert s.execute(text("SELECT decision FROM signoff")).scalars().all() == ["not-validated"]
+
+
+def test_import_store_and_delete_are_audited_with_content_hashes(database, tmp_path):
+    from railval.db import repo
+    from railval.db.importer import import_campaign
+    from tests.factories import write_demo_campaign
+
+    write_demo_campaign(tmp_path / "c", n_sections=12, fs=50.0, n_configs=2)
+    database.actor = "importer"
+    import_campaign(database, tmp_path / "c")
+    with database.session(actor="eng") as s:
+        conf = repo.get_configuration(s, "demo", "variant1")
+        state = repo.configuration_state(s, conf)
+        repo.delete_configuration(s, "demo", "variant1", reason="superseded")
+    with database.session(actor="eng") as s:
+        repo.delete_campaign(s, "demo", reason="test over")
+    with database.session() as s:
+        rows = list(audit.iter_rows(s))
+        assert [(r["actor"], r["action"], r["object"]) for r in rows] == [
+            ("importer", "campaign.import", "campaign:demo"),
+            ("eng", "configuration.delete", "configuration:demo/variant1"),
+            ("eng", "campaign.delete", "campaign:demo")]
+        assert rows[1]["before_sha256"] == hashlib.sha256(canonical_json(state)).hexdigest()
+        assert rows[1]["after_sha256"] is None and rows[1]["reason"] == "superseded"
+        assert state["signals"] and all(len(h) == 64 for sec in state["signals"].values()
+                                        for h in sec.values())
+        assert verify_chain(rows)[2] is None
+        assert repo.list_campaigns(s) == []

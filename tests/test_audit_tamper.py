@@ -159,7 +159,7 @@ def test_parameter_changed_after_signoff_makes_it_stale(signed, capsys):
     with database.session() as s:
         st = status(s, db_signoff.get(s, rec["id"]))
     assert st.status == "stale"
-    assert any(r.startswith(f"configuration_record.parameters") for r in st.reasons), st.reasons
+    assert any(r.startswith("configuration_record.parameters") for r in st.reasons), st.reasons
     report = verify(database)
     (f,) = [f for f in report.findings if f.kind == "signoff"]
     assert f"sign-off {rec['id']}" in f.where and "stale" in f.where

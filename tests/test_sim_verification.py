@@ -42,7 +42,10 @@ def _free_wheelsets(asm, rigid_bogie: bool):
     bogies (primary x/y 2 GN/m, secondary removed)."""
     asm.SC[K.GAM0] = 0.0
     asm.SC[K.EPSG] = 0.0
-    cols = (K.C_KX, K.C_KY, K.C_KZ, K.C_CZ, K.C_CY, K.C_CYD, K.C_KROLL, K.C_KPYAW, K.C_FZ, K.C_FY, K.C_FX)
+    # the removed connections also carry no static load (C_W) and no traction rod (C_KTR): the
+    # car body is detached, its weight does not shift onto the bogies
+    cols = (K.C_KX, K.C_KY, K.C_KZ, K.C_CZ, K.C_CY, K.C_CYD, K.C_KROLL, K.C_KPYAW, K.C_FZ, K.C_FY, K.C_FX,
+            K.C_W, K.C_KTR)
     for r in asm.CONN:
         primary = r[K.C_P] != 0
         if primary and rigid_bogie:
@@ -81,7 +84,11 @@ def test_rigid_bogie_kinematic_wavelength(c22):
     _free_wheelsets(asm, rigid_bogie=True)
     asm.SC[K.Y_INIT] = 0.002
     sec = _flat(length=220.0, speed_kmh=v * 3.6)
-    ss, st = run_assembled(asm, veh, sec, use_measured=True, states=True)
+    # refine=4: the artificial 2 GN/m primary couples each wheelset stiffly to the bogie while
+    # its creep damping rate at 5 m/s (≈ 2500 1/s) is integrated on the wheelset alone; that pair
+    # needs a 4× finer step than the accuracy criteria of choose_substeps give (docs/simulator.md,
+    # limitations); at the chosen step the amplitude grows
+    ss, st = run_assembled(asm, veh, sec, use_measured=True, states=True, refine=4)
     lw = 2 * math.pi * math.sqrt(veh["r0"] * veh["b0"] / veh["conicity"])
     a = veh["wheelbase"] / 2
     expected = lw * math.sqrt(1 + (c22 / veh["kalker_c11"]) * (a / veh["b0"]) ** 2)

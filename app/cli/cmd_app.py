@@ -1,8 +1,11 @@
 """CLI verbs ``serve`` and ``report`` (docs/design.md §1, §8).
 
-``railval serve [--port 5006] [--address 127.0.0.1] [--no-demo] [--allow-websocket-origin H]``
+``railval serve [--port 5006] [--address 127.0.0.1] [--no-demo] [--allow-websocket-origin H]
+[--cookie-secret-file FILE]``
     migrate the database, seed the demo campaign (``railval.app.services.synth.ensure_demo``) into an
-    empty database unless ``--no-demo``, and serve the web app until interrupted.
+    empty database unless ``--no-demo``, and serve the web app until interrupted. With users in
+    the database every page needs sign-in (:mod:`railval.app.auth`); without users it serves
+    open single-user mode on a loopback address only and refuses any other address.
 ``railval report CAMPAIGN --config NAME --out FILE.html|FILE.pdf [--worst N] [--json]``
     write the validation report of a configuration (the same builder as the Report page).
 """
@@ -23,6 +26,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--allow-websocket-origin", action="append", default=None, metavar="HOST[:PORT]",
                    help="extra allowed websocket origin (repeatable; '*' for any, behind a proxy)")
     p.add_argument("--show", action="store_true", help="open a browser tab")
+    p.add_argument("--cookie-secret-file", metavar="FILE", default=None,
+                   help="file holding the session cookie secret (else $RAILVAL_COOKIE_SECRET, "
+                   "$RAILVAL_COOKIE_SECRET_FILE, else a random one per start)")
+    p.add_argument("--behind-proxy", action="store_true",
+                   help="client addresses from the proxy's X-Forwarded-For header (rate limit per client)")
     p.set_defaults(func=_cmd_serve)
 
     r = sub.add_parser("report", help="write the HTML or PDF validation report of a configuration")
@@ -58,9 +66,18 @@ def seed_demo(database) -> str:
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
+    from railval.app.auth import check_startup, cookie_secret
     from railval.app.main import serve
 
     database = _database(args.db, upgrade=True)
+    has_users = check_startup(database, args.address)
+    if has_users:
+        _secret, origin = cookie_secret(args.cookie_secret_file)
+        print(f"railval serve: sign-in required (users in the database); cookie secret: {origin}",
+              file=sys.stderr, flush=True)
+    else:
+        print("railval serve: open single-user mode (no users in the database; loopback only)",
+              file=sys.stderr, flush=True)
     if not args.no_demo:
         print(f"railval serve: {seed_demo(database)}", file=sys.stderr, flush=True)
     origins = None
@@ -68,7 +85,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         origins = list(args.allow_websocket_origin) + [f"{args.address}:{args.port}", f"localhost:{args.port}"]
     print(f"railval serve: http://{args.address}:{args.port}/app (database {database.safe_url})",
           file=sys.stderr, flush=True)
-    serve(database, port=args.port, address=args.address, show=args.show, allow_websocket_origin=origins)
+    serve(database, port=args.port, address=args.address, show=args.show, allow_websocket_origin=origins,
+          cookie_secret_file=args.cookie_secret_file, behind_proxy=args.behind_proxy)
     return 0
 
 

@@ -166,6 +166,11 @@ class PageBase(pn.viewable.Viewer):
     def safe_refresh(self) -> None:
         """Refresh; any error is shown in the page and in the status area, never raised."""
         self._stale = False
+        if not self.app.page_allowed(self.name_):  # server side, whatever the browser sent
+            from railval.core.roles import PAGE_ACTIONS
+
+            self.body.objects = [message(self.app.denial(PAGE_ACTIONS[self.name_]), "danger")]
+            return
         if self.app.campaign is None:
             self.body.objects = [message("No campaign in the database. Import one with "
                                          "`railval import DIR` or start with the demo campaign "

@@ -196,7 +196,10 @@ class DashboardPage(PageBase):
             worst = max(summary["quantities"],
                         key=lambda r: max(abs(r["mean_norm"]), abs(r["std_norm"])), default=None)
             self.state.quantity = worst["quantity"] if worst else None
+        from railval.app.pages.signoff import signoff_banner
+
         self.body.objects = [
+            signoff_banner(self.app, config),
             col,
             pn.pane.Markdown("Bars: signed mean and std of D_v = (S_v − M_v)·sign(M_v) over all (section, "
                              "position) pairs, divided by the EN 14363 limits (dashed line 1.0). "

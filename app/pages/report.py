@@ -36,10 +36,14 @@ class ReportPage(PageBase):
         return self._report
 
     def _html_bytes(self):
+        if not self.app.guard("report.download"):
+            return io.BytesIO(self.app.denial("report.download").encode("utf-8"))
         rep = self._report or self._build()
         return io.BytesIO(rep.html.encode("utf-8"))
 
     def _pdf_bytes(self):
+        if not self.app.guard("report.download"):
+            return io.BytesIO(self.app.denial("report.download").encode("utf-8"))
         rep = self._report or self._build()
         try:
             return io.BytesIO(rep.pdf_bytes())

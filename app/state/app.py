@@ -18,8 +18,9 @@ import param
 
 from railval.app.state.backend import Backend, CampaignOverview
 from railval.core.quantities import derived_signals
+from railval.core.roles import ACTIONS, PAGE_ACTIONS, Principal, allowed, open_principal
 
-PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report")
+PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report", "signoff", "audit")
 PAGE_TITLES = {
     "overview": "Campaign overview",
     "compare": "Compare signals",
@@ -27,6 +28,8 @@ PAGE_TITLES = {
     "metrics": "Curve metrics",
     "diagnose": "Diagnose & model workshop",
     "report": "Report",
+    "signoff": "Sign-off",
+    "audit": "Audit trail",
 }
 
 
@@ -44,11 +47,39 @@ class AppState(param.Parameterized):
     progress = param.Number(default=0.0, bounds=(0.0, 1.0))
     revision = param.Integer(default=0, doc="bumped when the database changed (new configuration)")
 
-    def __init__(self, backend: Backend, **params):
+    def __init__(self, backend: Backend, principal: Principal | None = None, **params):
         super().__init__(**params)
         self.backend = backend
+        #: who acts in this browser session (server side; open mode without users)
+        self.principal = principal or open_principal()
         self._job: threading.Thread | None = None
+        if not self.page_allowed(self.page):
+            permitted = self.pages_allowed()
+            self.page = permitted[0] if permitted else "overview"
         self.refresh_campaigns()
+
+    # -- authorization (core/roles.py is the registry)
+    def allowed(self, action: str) -> bool:
+        return allowed(self.principal, action)
+
+    def page_allowed(self, page: str) -> bool:
+        return page in PAGE_ACTIONS and self.allowed(PAGE_ACTIONS[page])
+
+    def pages_allowed(self) -> list[str]:
+        return [p for p in PAGES if self.page_allowed(p)]
+
+    def denial(self, action: str) -> str:
+        """The message shown when ``action`` is refused (never a traceback)."""
+        held = ", ".join(sorted(self.principal.roles)) or "no role"
+        return (f"Not allowed: {self.principal.printed_name} ({held}) may not "
+                f"{ACTIONS[action]}.")
+
+    def guard(self, action: str) -> bool:
+        """True when allowed; otherwise an error in the status area and False."""
+        if self.allowed(action):
+            return True
+        self.set_status(self.denial(action), "error")
+        return False
 
     # -- selections
     def refresh_campaigns(self) -> None:
@@ -118,10 +149,14 @@ class AppState(param.Parameterized):
     def run_job(self, title: str, work: Callable[[Callable[[float, str], None]], Any],
                 on_done: Callable[[Any], None] | None = None,
                 dispatch: Callable[[Callable[[], None]], None] | None = None,
-                background: bool = True) -> threading.Thread | None:
+                background: bool = True, action: str | None = None) -> threading.Thread | None:
         """Run ``work(progress)`` in a thread; ``progress(fraction, message)`` updates the
         progress bar and status; ``on_done(result)`` runs through ``dispatch`` afterwards.
-        Refuses (status warning) while another job runs so the page never double-submits."""
+        Refuses (status warning) while another job runs so the page never double-submits,
+        and (status error) when the session's user may not do ``action``. The job's database
+        changes are recorded in the audit trail as that user."""
+        if action is not None and not self.guard(action):
+            return None
         if self.busy:
             self.set_status(f"{title}: another job is still running — wait for it to finish", "warning")
             return None
@@ -139,8 +174,11 @@ class AppState(param.Parameterized):
             call(apply)
 
         def body():
+            from railval.db.engine import acting_as
+
             try:
-                result = work(progress)
+                with acting_as(self.principal.username):
+                    result = work(progress)
             except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
                 detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
 

@@ -165,7 +165,8 @@ class DiagnoseState(param.Parameterized):
         def done(result):
             self.runs = app.backend.diagnosis_runs(campaign, config)  # before the view redraws
             self.show_diagnosis(result)
-        return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background)
+        return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background,
+                           action="diagnose")
 
     def show_diagnosis(self, result) -> None:
         """Show a diagnosis (computed now or stored): ranked candidates, residual, verdict."""
@@ -191,6 +192,8 @@ class DiagnoseState(param.Parameterized):
         """Add ``effect`` to the configuration, calibrate it (or use ``parameters``),
         re-simulate and store as ``new_name`` whose parent is the current configuration."""
         app = self.app
+        if not app.guard("calibrate" if calibrate else "simulate"):
+            return None
         campaign, config, effect = app.campaign, app.configuration, self.effect
         # a name the user did not type always names the effect that is added
         name = self.new_name if (self.name_edited and self.new_name.strip()) else self.suggested_name()
@@ -215,7 +218,8 @@ class DiagnoseState(param.Parameterized):
             self.last_new_configuration = name
             app.reload_configurations(select=name)
         return app.run_job("calibration" if calibrate else "re-simulation", work, done,
-                           dispatch=dispatch, background=background)
+                           dispatch=dispatch, background=background,
+                           action="calibrate" if calibrate else "simulate")
 
     def lineage_errors(self, config: str | None = None) -> list[dict[str, Any]]:
         """Along the lineage root → config: the largest normalised error (max over quantities

@@ -96,7 +96,8 @@ class MetricsState(param.Parameterized):
             self.runs = app.backend.metrics_runs(campaign, config)
             self.computed_for = key  # first: the view refreshes when ``frame`` changes
             self.frame = df
-        return app.run_job("metrics", work, done, dispatch=dispatch, background=background)
+        return app.run_job("metrics", work, done, dispatch=dispatch, background=background,
+                           action="data.read")
 
     def table(self):
         """The metric table in the chosen view: raw columns, synchronised columns (``*_sync``

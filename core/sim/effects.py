@@ -60,49 +60,84 @@ _LIST = [
         "rides on the stiffer friction element, so small high-frequency inputs pass to the car "
         "body: the car body accelerations rise, above all in the 2–10 Hz band, while large "
         "low-frequency motions are damped.",
-        _p(Param("force_kN", "kN", 1.5, 0.0, 6.0, "breakaway friction force per spring (vertical and lateral)")),
+        _p(Param("force_kN", "kN", 1.5, 0.0, 6.0, "breakaway friction force per spring (vertical and lateral)",
+                 plausible=(0.0, 3.0),
+                 plausible_source="assumption: dry friction of air-spring secondary suspensions (side bearers, "
+                                  "emergency springs, sliding pads) of the order of 0.5–2 kN per spring; for the "
+                                  "wagon it adds to the native 0.05–0.08 × static load of leaf springs and links")),
         ("ay_rms", "az_rms", "ay_max", "az_max"), (1, 2, 3, 4), ((2.0, 10.0),),
         source="Saint-Venant element (spring k_stick in series with a Coulomb slider); Iwnicki 2006 ch. 7"),
     Effect(
         "damper_series_stiffness", "Damper with series stiffness (Maxwell element)",
-        "Real hydraulic dampers sit on rubber bushes and contain compressible oil, so each damper "
-        "is a dashpot in series with a spring. Above the corner frequency k/(2πc) the damper no "
-        "longer damps but acts as a spring: the secondary vertical and lateral dampers lose "
-        "their effect in the 1–10 Hz band (higher car body accelerations, above all vertically), "
-        "and the yaw dampers lose damping at the bogie's hunting frequency (more bogie lateral "
-        "motion and guiding-force peaks at speed).",
-        _p(Param("k_series_MN_m", "MN/m", 4.0, 0.2, 50.0, "series stiffness of every damper (yaw, lateral, vertical secondary)", scale="log")),
-        ("az_rms", "az_max", "ay_rms", "ay_max", "Y_max", "SumY_max"), (1, 2, 3, 4), ((1.0, 10.0),), templates=("coach",),
-        source="Maxwell model, exact exponential update; Alonso & Giménez, VSD 2008 (yaw damper series stiffness)"),
+        "Real hydraulic dampers sit on rubber end bushes and contain compressible oil, so each "
+        "damper is a dashpot in series with a spring. Its effective damping falls and it acts "
+        "more and more as a spring above the corner frequency k/(2πc). With a series stiffness of "
+        "a few MN/m the yaw and lateral dampers pass less high-frequency force from the bogies "
+        "to the car body: on good track at high speed the car body lateral accelerations and "
+        "guiding-force peaks fall; on rougher track, where the yaw dampers' damping of the bogie "
+        "matters more, the lateral accelerations can rise instead. Much lower series stiffness "
+        "(≲ 1–2 MN/m, yaw damper corner frequency near the bogie's kinematic frequency) loses the "
+        "yaw damping: guiding forces Y_max and ΣY_max rise at speed, and the vertical dampers "
+        "lose their effect (car body vertical accelerations rise).",
+        _p(Param("k_series_MN_m", "MN/m", 4.0, 0.2, 50.0, "series stiffness of every damper (yaw, lateral, vertical secondary)", scale="log",
+                 plausible=(2.0, 20.0),
+                 plausible_source="assumption of the order of magnitude of rubber end bushes plus oil "
+                                  "compressibility (a few MN/m to ≈ 20 MN/m); Alonso & Giménez, VSD 2008 (yaw "
+                                  "damper series stiffness); Polach & Böttcher 2014 §2 (damper models are a "
+                                  "dashpot with series stiffness)")),
+        ("ay_rms", "ay_max", "Y_max", "SumY_max", "az_rms", "az_max"), (1, 2, 3, 4), ((1.0, 10.0),), templates=("coach",),
+        source="Maxwell element: effective damping c/(1 + (ωc/k)²) and stiffness k·(ωc/k)²/(1 + (ωc/k)²) "
+               "(standard linear viscoelasticity); exact exponential update; yaw damper series "
+               "stiffness in vehicle dynamics: Alonso & Giménez, VSD 2008; Polach & Böttcher 2014 §2. "
+               "Directions of change measured with this simulator: tests/test_sim_effects.py"),
     Effect(
         "carbody_flexibility", "Car body first vertical bending mode",
         "The car body is not rigid: its first vertical bending mode (typically 8–12 Hz for a "
         "coach) is excited through the secondary suspension and shows in the car body vertical "
         "accelerations above the bogies as a peak near the bending frequency.",
-        _p(Param("frequency_Hz", "Hz", 8.0, 5.0, 16.0, "first vertical bending frequency"),
-           Param("damping_ratio", "-", 0.02, 0.005, 0.1, "modal damping ratio")),
+        _p(Param("frequency_Hz", "Hz", 8.0, 5.0, 16.0, "first vertical bending frequency",
+                 plausible=(7.0, 14.0),
+                 plausible_source="first vertical bending of passenger car bodies 8–12 Hz (Carlbom, KTH "
+                                  "thesis 2000); light modern car bodies down to ≈ 7 Hz (assumption)"),
+           Param("damping_ratio", "-", 0.02, 0.005, 0.1, "modal damping ratio",
+                 plausible=(0.01, 0.05),
+                 plausible_source="structural damping of car bodies with interior 1–3 % (Carlbom 2000), "
+                                  "up to 5 % assumed")),
         ("az_rms", "az_max"), (1, 2, 3, 4), ((5.0, 12.0),),
         source="free–free Euler–Bernoulli beam first mode (βL = 4.730), modal mass = car body mass"),
     Effect(
         "track_flexibility", "Vertical and lateral track stiffness and damping",
         "The rails are not rigid: they sit on pads, sleepers and ballast. A flexible track lets "
         "the wheelset move vertically on the track stiffness (changing the dynamic wheel forces) "
-        "and the rails move laterally under the guiding forces: the flange contact becomes "
-        "softer (rail head deflection, dynamic gauge widening), the leading wheelset runs "
-        "further out in tight curves and the guiding forces, Y/Q and ΣY change in zones 3–4.",
-        _p(Param("k_vertical_MN_m", "MN/m", 40.0, 10.0, 300.0, "vertical track stiffness per wheel", scale="log"),
-           Param("k_lateral_MN_m", "MN/m", 15.0, 1.5, 200.0, "lateral stiffness per rail (rail head, fastening, sleeper)", scale="log")),
+        "and each rail deflect laterally under its wheel's lateral force: the flange contact "
+        "becomes softer (rail head and fastening deflection, dynamic gauge widening), the "
+        "leading wheelset runs further out in tight curves and the guiding forces, Y/Q and ΣY "
+        "change in zones 3–4.",
+        _p(Param("k_vertical_MN_m", "MN/m", 40.0, 10.0, 300.0, "vertical track stiffness per wheel", scale="log",
+                 plausible=(20.0, 200.0),
+                 plausible_source="ballasted track on soft formation ≈ 20–40 MN/m per wheel, good ballasted "
+                                  "track 50–100 MN/m, slab track up to ≈ 200 MN/m (Knothe & Grassie, VSD 22, "
+                                  "1993, magnitudes; the limits are an assumption)"),
+           Param("k_lateral_MN_m", "MN/m", 15.0, 1.5, 200.0, "lateral stiffness per rail (rail head, fastening, sleeper)", scale="log",
+                 plausible=(5.0, 60.0),
+                 plausible_source="assumption: lateral rail-head + fastening + sleeper stiffness per rail of "
+                                  "the order of 10–50 MN/m (Knothe & Grassie 1993, magnitudes), lower on "
+                                  "worn fastenings")),
         ("Y_max", "YQ_max", "SumY_max", "Q_max"), (3, 4), ((2.0, 20.0),),
-        source="massless vertical track spring-damper per wheel (c = 50 kN·s/m); lateral track mass "
-               "1200 kg per wheelset on 2·k_rail with c = 100 kN·s/m; flange contact in series with "
-               "k_rail; Knothe & Grassie, VSD 22, 1993 (magnitudes)"),
+        source="massless vertical track spring-damper per wheel (c = 50 kN·s/m, assumption); lateral "
+               "track compliance counted once: each rail a massless spring k_rail deflecting under its "
+               "wheel's tread force, the flange contact in series with k_rail; Knothe & Grassie, VSD "
+               "22, 1993 (magnitudes)"),
     Effect(
         "wheel_rail_friction", "Wheel–rail friction coefficient",
         "The creep forces saturate at μ·Q. Measurements are often made on wet or contaminated "
         "rails with μ well below the dry value the model assumes; in small-radius curves the "
         "creep forces are saturated, so μ directly sets the lateral force of the inner wheels "
         "and the steering of the leading wheelset: guiding forces, ΣY and Y/Q change in zones 3–4.",
-        _p(Param("mu", "-", 0.25, 0.1, 0.6, "friction coefficient")),
+        _p(Param("mu", "-", 0.25, 0.1, 0.6, "friction coefficient",
+                 plausible=(0.1, 0.5),
+                 plausible_source="wet or contaminated rail 0.1–0.25, dry rail 0.3–0.5 (Iwnicki (ed.), "
+                                  "Handbook of Railway Vehicle Dynamics, 2006, wheel–rail contact)")),
         ("Y_qst", "YQ_qst", "SumY_qst", "Y_max", "YQ_max", "SumY_max"), (3, 4), (),
         source="Shen, Hedrick & Elkins 1983 saturation of Kalker's linear creep forces"),
     Effect(
@@ -111,7 +146,11 @@ _LIST = [
         "profiles give another equivalent conicity. Higher conicity shortens the kinematic "
         "wavelength (Klingel), raises the bogie's lateral activity and the car body lateral "
         "accelerations on straight track, and improves steering in curves.",
-        _p(Param("conicity", "-", 0.35, 0.02, 0.6, "equivalent conicity")),
+        _p(Param("conicity", "-", 0.35, 0.02, 0.6, "equivalent conicity",
+                 plausible=(0.03, 0.5),
+                 plausible_source="EN 15302 equivalent conicity at 3 mm amplitude: new S1002/UIC60 1:40 "
+                                  "≈ 0.05–0.2, worn wheel–rail pairs up to ≈ 0.4–0.5 (the limits are an "
+                                  "assumption)")),
         ("ay_rms", "ay_max", "Y_max", "SumY_max", "Y_qst"), (1, 2, 3, 4), ((1.0, 6.0),),
         source="UIC 519 equivalent conicity; Klingel wavelength 2π·sqrt(r0·b0/λe)"),
     Effect(
@@ -121,7 +160,10 @@ _LIST = [
         "Switching to the measured irregularities of every section (recorded with the campaign) "
         "changes the accelerations and dynamic forces section by section; `scale` is the gain "
         "of the track recording (chord/transfer-function uncertainty) and is what calibration fits.",
-        _p(Param("scale", "-", 1.0, 0.5, 1.5, "gain applied to the measured irregularities")),
+        _p(Param("scale", "-", 1.0, 0.5, 1.5, "gain applied to the measured irregularities",
+                 plausible=(0.9, 1.1),
+                 plausible_source="assumption: amplitude uncertainty of track recording cars in the D1 band "
+                                  "(chord transfer function, EN 13848-2 accuracy class) of the order of ±10 %")),
         ("ay_rms", "az_rms", "ay_max", "az_max", "Q_max", "Y_max", "YQ_max", "SumY_max"), (1, 2, 3, 4),
         ((0.4, 10.0),),
         source="layout['irregularities'] of each section (see docs/simulator.md)"),
@@ -132,7 +174,11 @@ _LIST = [
         "must turn by about (bogie distance / 2) / R against the car body; the resisting moment "
         "is reacted by the wheelsets as extra guiding force on the leading outer wheel: "
         "quasi-static Y, Y/Q and ΣY rise in small-radius curves (zones 3–4), much less elsewhere.",
-        _p(Param("k_yaw_kNm_rad", "kN*m/rad", 600.0, 0.0, 3000.0, "yaw stiffness per bogie")),
+        _p(Param("k_yaw_kNm_rad", "kN*m/rad", 600.0, 0.0, 3000.0, "yaw stiffness per bogie",
+                 plausible=(0.0, 2000.0),
+                 plausible_source="assumption: traction-rod rubber, side bearers, damper bushes and cables of "
+                                  "an air-spring bogie, 0.1–2 MN·m/rad; Polach & Böttcher 2014 §2 name "
+                                  "parasitic suspension stiffness an unknown the modellers must estimate")),
         ("Y_qst", "YQ_qst", "SumY_qst", "Y_max", "YQ_max", "SumY_max"), (3, 4), (),
         source="rotational spring between car body and bogie; Iwnicki 2006 ch. 7 (bogie yaw resistance)"),
     Effect(
@@ -141,8 +187,14 @@ _LIST = [
         "a free clearance. With high cant deficiency the car body moves outward until it hits the "
         "stop: the lateral stiffness jumps, the car body lateral accelerations get peaks and the "
         "quasi-static lateral load shifts between the bogies.",
-        _p(Param("clearance_mm", "mm", 20.0, 5.0, 60.0, "free lateral clearance"),
-           Param("stiffness_kN_mm", "kN/mm", 1.0, 0.2, 10.0, "bump stop stiffness")),
+        _p(Param("clearance_mm", "mm", 20.0, 5.0, 60.0, "free lateral clearance",
+                 plausible=(5.0, 60.0),
+                 plausible_source="assumption: secondary lateral free play of coaches 20–40 mm, less with "
+                                  "moved or worn stops; wagon link stops 5–30 mm"),
+           Param("stiffness_kN_mm", "kN/mm", 1.0, 0.2, 10.0, "bump stop stiffness",
+                 plausible=(0.5, 5.0),
+                 plausible_source="assumption: progressive rubber bump stops, 0.5–5 kN/mm in their working "
+                                  "range")),
         ("ay_max", "ay_rms", "Y_max", "SumY_max"), (2, 3, 4), ((0.4, 5.0),),
         source="piecewise-linear bump stop on the secondary lateral displacement"),
 ]

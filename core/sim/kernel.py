@@ -1,23 +1,35 @@
 """The numba-compiled time integration loop of the built-in simulator.
 
-Bodies (car body, bogie frames, wheelsets) each carry five coordinates relative to the local
+Bodies (car body, bogie frames, wheelsets) each carry six coordinates relative to the local
 track frame at their own position along the track (y lateral, z vertical, φ roll, θ pitch,
-ψ yaw; x forward, y left, z up; small rotations). Connections (secondary: car body → bogie or
-car body → wheelset; primary: bogie → wheelset) are springs, dampers (optionally Maxwell with a
-series stiffness), Saint-Venant friction elements, bump stops, anti-roll bars and yaw
-stiffnesses acting between attachment points; the track frame of a child differs from its
-parent's by the curve geometry (lateral offset x²(2κ_p+κ_c)/6, yaw x(κ_p+κ_c)/2, exact for a
-linear curvature ramp, and the cant difference).
+ψ yaw, x longitudinal; x forward, y left, z up; small rotations). Wheelsets have no
+longitudinal freedom (held by the longitudinal creep forces). Connections (secondary: car
+body → bogie or car body → wheelset; primary: bogie → wheelset) are springs, dampers
+(optionally Maxwell with a series stiffness), Saint-Venant friction elements, bump stops,
+anti-roll bars, yaw stiffnesses, traction rods (longitudinal restraint at the secondary
+attachment height) and yaw dampers with a force limit, acting between attachment points; the
+track frame of a child differs from its parent's by the curve geometry (lateral offset
+x²(2κ_p+κ_c)/6, yaw x(κ_p+κ_c)/2, exact for a linear curvature ramp, and the cant difference).
 
-Integration: semi-implicit (symplectic) Euler with a fixed step; Maxwell dampers use the exact
-exponential update of their internal stroke and friction sliders a return map, so the
-integration is stable with the flange, bump-stop and track springs for ω·dt < 2 (checked by
-the caller's choice of dt). Output: block means over ``decim`` steps (anti-alias boxcar).
+Static load path (lateral and longitudinal weight shift): the static vertical load ``w`` of a
+connection acts upwards on the parent at the parent's attachment point and downwards on the
+child at the SAME point (a collinear pair), so a lateral or longitudinal offset of the car body
+relative to a bogie (or of a bogie relative to a wheelset) moves the load with it: wheel-load
+transfer w·Δy/b0 (and the P-Δ moments of rolled or pitched bodies).
+
+Integration: semi-implicit (symplectic) Euler with a fixed step. Stiff terms get exact or
+exponential updates: Maxwell dampers the exact exponential solution of their spring deflection
+for a constant relative velocity over the step (Δₙ₊₁ = Δₙ·e^(−a) + v·(c/k)·(1 − e^(−a)),
+a = k·dt/c; force k·Δₙ₊₁ from the updated state), friction sliders a return map, the
+wheelsets' creep damping (lateral f22/v, yaw f11·b0²/v per wheel, the saturation factor
+included) exponentially on the wheelset's own velocity. The step is chosen by the caller for accuracy
+(:func:`railval.core.sim.model.choose_substeps`). Output: block means over ``decim`` steps
+(anti-alias boxcar).
 
 The equations (quasi-static acceleration in the track plane a_q = v²κ − g·φ_t, Kalker linear
 creep with Shen–Hedrick–Elkins saturation, gravitational stiffness via the contact angle,
-flange contact as a stiff spring beyond the clearance) are documented in ``docs/simulator.md``
-and in :mod:`railval.core.sim.model`.
+flange contact as a stiff spring beyond the clearance, lateral track compliance as a massless
+spring per rail) are documented in ``docs/simulator.md`` and in :mod:`railval.core.sim.model`.
 """
 
 from __future__ import annotations
@@ -29,75 +41,147 @@ from numba import njit
 
 # --- scalar parameter indices (SC array)
 V, GRAV, NW, R0, B0, LAM, LAM2, YFR, CLEAR, KFL, GAM0, EPSG = range(12)
-F11, F22, Q0, MU, SAT, TFLEX, KTZ, CTZ, KTY, CTY, MTY = range(12, 23)
-FLEX, FLEX_W, FLEX_Z, FLEX_M, ZSENS, S_START, PHI_S1, PHI_S2, XS1, XS2 = range(23, 33)
-Y_INIT, Z_INIT, TH_INIT = range(33, 36)  # initial conditions (verification tests)
-NSC = 36
+F11, F22, Q0, MU, SAT, TFLEX, KTZ, CTZ, KTY = range(12, 21)
+FLEX, FLEX_W, FLEX_Z, FLEX_M, ZSENS, S_START, PHI_S1, PHI_S2, XS1, XS2 = range(21, 31)
+Y_INIT, Z_INIT, TH_INIT = range(31, 34)  # initial conditions (verification tests)
+NSC = 34
 
 # --- connection columns (CONN array)
 (C_P, C_C, C_X, C_B, C_ZP, C_ZC, C_KX, C_KY, C_KZ, C_CZ, C_CY, C_BYD, C_CYD, C_KSYD, C_KSZ,
  C_KSY, C_KROLL, C_KPYAW, C_BSCL, C_BSK, C_FZ, C_FY, C_FX, C_KSTZ, C_KSTY, C_ASYM, C_W,
- C_PHIF) = range(28)
-NCC = 28
+ C_PHIF, C_KTR, C_FYD, C_KSTX) = range(31)
+NCC = 31
+NDOF = 6  # y, z, roll, pitch, yaw, x
+# --- track array columns (TR array, one row per grid point)
+T_KAP, T_PHI, T_ZV, T_ZV1, T_ZV2, T_CL, T_CL1, T_CL2, T_YA, T_GA = range(10)
+NTC = 10
 
 
 @njit(cache=True, inline="always")
-def _interp(arr, s, s0, inv_ds, n):
-    f = (s - s0) * inv_ds
-    if f <= 0.0:
-        return arr[0]
-    i = int(f)
-    if i >= n - 1:
-        return arr[n - 1]
-    w = f - i
-    return arr[i] * (1.0 - w) + arr[i + 1] * w
-
-
-@njit(cache=True, inline="always")
-def _sat(fx, fy, mu_q):
-    """Shen–Hedrick–Elkins (1983) saturation of the linear creep force resultant at μ·Q."""
+def _sat_factor(fx, fy, mu_q):
+    """Shen–Hedrick–Elkins factor by which the linear creep force resultant is scaled (1 below
+    saturation onset, → μQ/|F| far beyond it)."""
     f = math.sqrt(fx * fx + fy * fy)
     if mu_q <= 0.0:
-        return 0.0, 0.0
+        return 0.0
     if f <= 1e-12:
-        return fx, fy
+        return 1.0
     b = f / mu_q
     if b < 3.0:
-        fac = (b - b * b / 3.0 + b * b * b / 27.0) / b
-    else:
-        fac = 1.0 / b
-    return fx * fac, fy * fac
+        return (b - b * b / 3.0 + b * b * b / 27.0) / b
+    return 1.0 / b
+
+
+@njit(cache=True, inline="always")
+def slider(d, s_prev, kst, ff):
+    """Saint-Venant element (stick spring ``kst`` in series with a Coulomb slider of breakaway
+    force ``ff``), return map: elastic trial force kst·(d − s); beyond ±ff the slider moves so
+    the force stays at ±ff. Returns (force, new slider position). Iwnicki (ed.) 2006 (friction
+    elements); Simo & Hughes, *Computational Inelasticity*, 1998 §1.2 (return mapping)."""
+    fr = kst * (d - s_prev)
+    if fr > ff:
+        return ff, d - ff / kst
+    if fr < -ff:
+        return -ff, d + ff / kst
+    return fr, s_prev
+
+
+@njit(cache=True, inline="always")
+def maxwell(delta, vrel, k, c, dt):
+    """Spring deflection of a Maxwell element (spring k in series with dashpot c) after one step
+    of ``dt`` with the relative velocity ``vrel`` of its end points held constant: the exact
+    solution of dΔ/dt = v − (k/c)·Δ, Δₙ₊₁ = Δₙ·e^(−a) + v·(c/k)·(1 − e^(−a)), a = k·dt/c. The force
+    is k·Δₙ₊₁. Limits: k → ∞ gives the dashpot force c·v, c → ∞ the spring k·∫v dt."""
+    a = k * dt / c
+    return delta * math.exp(-a) - vrel * (c / k) * math.expm1(-a)
+
+
+@njit(cache=True, inline="always")
+def _maxwell_e(delta, vrel, k, c, e):
+    """:func:`maxwell` with e = exp(−k·dt/c) precomputed."""
+    return delta * e + vrel * (c / k) * (1.0 - e)
+
+
+@njit(cache=True, inline="always")
+def _damper(delta, vrel, k, c, asym, e_sym, e_ext, e_com):
+    """Damper with optional series stiffness ``k`` (> 0: Maxwell element, else a plain dashpot) and
+    asymmetry ``asym`` (c·(1 + asym) in extension, c·(1 − asym) in compression, by the sign of
+    the damper's own velocity = sign of the force); ``e_*`` = exp(−k·dt/c) for c, c·(1 + asym),
+    c·(1 − asym). Returns (force, new spring deflection)."""
+    if k > 0.0:
+        d1 = _maxwell_e(delta, vrel, k, c, e_sym)
+        if asym != 0.0:
+            if d1 > 0.0:
+                d1 = _maxwell_e(delta, vrel, k, c * (1.0 + asym), e_ext)
+            else:
+                d1 = _maxwell_e(delta, vrel, k, c * (1.0 - asym), e_com)
+        return k * d1, d1
+    return c * vrel * (1.0 + asym * (1.0 if vrel > 0.0 else -1.0)), 0.0
+
+
+@njit(cache=True, inline="always")
+def _locate(s, s0, inv_ds, n):
+    """Grid index and weight of distance ``s`` for linear interpolation (clamped at the ends)."""
+    f = (s - s0) * inv_ds
+    if f <= 0.0:
+        return 0, 0.0
+    i = int(f)
+    if i >= n - 1:
+        return n - 2, 1.0
+    return i, f - i
 
 
 @njit(cache=True)
-def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap, phit, zv, zv1, zv2,
-               cl, cl1, cl2, ya, ga, n_steps, dt, decim, out):
+def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR, n_steps, dt, decim, out):
     """Integrate ``n_steps`` steps of ``dt`` s; write ``out[n_steps // decim, nch]`` block means.
 
+    ``massd``/``free``: (n_bodies, 6) masses/inertias and free flags for y, z, φ, θ, ψ, x.
+    ``TR``: track arrays on the grid ``s_arr0 + k·ds`` (columns ``T_*``: curvature, cant angle,
+    vertical level and its first two derivatives in s, cross level and derivatives, alignment,
+    gauge).
     Output columns: per wheelset i: Y_L, Y_R, Q_L, Q_R (kN) at 4i..4i+3; then car body ay at
     sensor 1, 2, az at sensor 1, 2 (m/s²); then per bogie ay, az (m/s²); if ``out`` has more
-    columns: the wheelsets' lateral displacements (m), then car body z (m) and pitch (rad).
+    columns: the wheelsets' lateral displacements (m), car body z (m), pitch (rad), lateral y
+    (m), then per bogie lateral y (m).
     """
     nbody = massd.shape[0]
     nc = CONN.shape[0]
     nw = ws_body.shape[0]
     nb = bogie_body.shape[0]
-    ngrid = kap.shape[0]
+    ngrid = TR.shape[0]
     inv_ds = 1.0 / ds
     v = SC[V]
     g = SC[GRAV]
     b0 = SC[B0]
     r0 = SC[R0]
-    q = np.zeros((nbody, 5))
-    u = np.zeros((nbody, 5))
-    F = np.zeros((nbody, 5))
-    acc = np.zeros((nbody, 5))
+    q0 = SC[Q0]
+    q = np.zeros((nbody, NDOF))
+    u = np.zeros((nbody, NDOF))
+    F = np.zeros((nbody, NDOF))
+    acc = np.zeros((nbody, NDOF))
+    cimp = np.zeros((nbody, NDOF))  # creep damping coefficients integrated exponentially
     st = np.zeros((nc, 12))  # internal states of Maxwell dampers and friction sliders
+    # exp(−k·dt/c) of every Maxwell element: vertical (symmetric, extension, compression),
+    # lateral, yaw
+    emx = np.zeros((nc, 5))
+    for c in range(nc):
+        ks = CONN[c, C_KSZ]
+        cz = CONN[c, C_CZ]
+        asym = CONN[c, C_ASYM]
+        if ks > 0.0 and cz > 0.0:
+            emx[c, 0] = math.exp(-ks * dt / cz)
+            emx[c, 1] = math.exp(-ks * dt / (cz * (1.0 + asym)))
+            emx[c, 2] = math.exp(-ks * dt / (cz * (1.0 - asym)))
+        if CONN[c, C_KSY] > 0.0 and CONN[c, C_CY] > 0.0:
+            emx[c, 3] = math.exp(-CONN[c, C_KSY] * dt / CONN[c, C_CY])
+        if CONN[c, C_KSYD] > 0.0 and CONN[c, C_CYD] > 0.0:
+            emx[c, 4] = math.exp(-CONN[c, C_KSYD] * dt / CONN[c, C_CYD])
+    bi = np.zeros(nbody, dtype=np.int64)
+    bw = np.zeros(nbody)
     qf = 0.0
     uf = 0.0
-    dtr = np.zeros(nw)  # lateral track deflection per wheelset
-    dtrv = np.zeros(nw)
-    Qw = np.full((nw, 2), SC[Q0])
+    dtr = np.zeros((nw, 2))  # quasi-static lateral rail deflection under the tread forces, L/R
+    Qw = np.full((nw, 2), q0)
     Yw = np.zeros((nw, 2))
     sb = np.zeros(nbody)
     kb = np.zeros(nbody)
@@ -114,26 +198,36 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
     q[0, 1] = SC[Z_INIT]
     q[0, 3] = SC[TH_INIT]
     ncol_std = 4 * nw + 4 + 2 * nb
+    tflex = SC[TFLEX] > 0.0
+    kty = SC[KTY]
+    # flange contact in series with the rail's lateral stiffness (track_flexibility): counted once,
+    # the tread forces deflect the rail by Y/k_rail (dtr), the flange force through the series spring
+    kfl = SC[KFL] * kty / (SC[KFL] + kty) if tflex else SC[KFL]
     for step in range(n_steps):
-        s_cb = SC[S_START] + v * (step + 1) * dt
+        s_cb = SC[S_START] + v * step * dt
         for k in range(nbody):
             sb[k] = s_cb + xabs[k]
-            kb[k] = _interp(kap, sb[k], s_arr0, inv_ds, ngrid)
-            pb[k] = _interp(phit, sb[k], s_arr0, inv_ds, ngrid)
+            i0, w1 = _locate(sb[k], s_arr0, inv_ds, ngrid)
+            bi[k] = i0
+            bw[k] = w1
+            kb[k] = TR[i0, T_KAP] * (1.0 - w1) + TR[i0 + 1, T_KAP] * w1
+            pb[k] = TR[i0, T_PHI] * (1.0 - w1) + TR[i0 + 1, T_PHI] * w1
             aqb[k] = v * v * kb[k] - g * pb[k]
         # prescribed wheelset vertical/roll on rigid track (evaluated at the new time)
-        for i in range(nw):
-            k = ws_body[i]
-            s = sb[k]
-            if SC[TFLEX] == 0.0:
-                q[k, 1] = _interp(zv, s, s_arr0, inv_ds, ngrid)
-                u[k, 1] = v * _interp(zv1, s, s_arr0, inv_ds, ngrid)
-                ws_az[i] = v * v * _interp(zv2, s, s_arr0, inv_ds, ngrid)
-                q[k, 2] = _interp(cl, s, s_arr0, inv_ds, ngrid) / (2.0 * b0)
-                u[k, 2] = v * _interp(cl1, s, s_arr0, inv_ds, ngrid) / (2.0 * b0)
-                ws_aphi[i] = v * v * _interp(cl2, s, s_arr0, inv_ds, ngrid) / (2.0 * b0)
+        if not tflex:
+            for i in range(nw):
+                k = ws_body[i]
+                i0 = bi[k]
+                w1 = bw[k]
+                w0 = 1.0 - w1
+                q[k, 1] = TR[i0, T_ZV] * w0 + TR[i0 + 1, T_ZV] * w1
+                u[k, 1] = v * (TR[i0, T_ZV1] * w0 + TR[i0 + 1, T_ZV1] * w1)
+                ws_az[i] = v * v * (TR[i0, T_ZV2] * w0 + TR[i0 + 1, T_ZV2] * w1)
+                q[k, 2] = (TR[i0, T_CL] * w0 + TR[i0 + 1, T_CL] * w1) / (2.0 * b0)
+                u[k, 2] = v * (TR[i0, T_CL1] * w0 + TR[i0 + 1, T_CL1] * w1) / (2.0 * b0)
+                ws_aphi[i] = v * v * (TR[i0, T_CL2] * w0 + TR[i0 + 1, T_CL2] * w1) / (2.0 * b0)
         for k in range(nbody):
-            for j in range(5):
+            for j in range(NDOF):
                 F[k, j] = 0.0
             F[k, 0] = -massd[k, 0] * aqb[k]
         Fq = 0.0
@@ -150,15 +244,17 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
             dy = x * x * (2.0 * kp_ + kc_) / 6.0
             dpsi = x * (kp_ + kc_) * 0.5
             dphi = pb[ch] - pb[p]
-            # parent pose
-            py, pz, pph, pth, pps = q[p, 0], q[p, 1], q[p, 2], q[p, 3], q[p, 4]
-            vy, vz, vph, vth, vps = u[p, 0], u[p, 1], u[p, 2], u[p, 3], u[p, 4]
-            cy_, cz_, cph, cth, cps = q[ch, 0] + dy, q[ch, 1], q[ch, 2] + dphi, q[ch, 3], q[ch, 4] + dpsi
-            wy, wz_, wph, wth, wps = u[ch, 0], u[ch, 1], u[ch, 2], u[ch, 3], u[ch, 4]
+            py, pz, pph, pth, pps, px = q[p, 0], q[p, 1], q[p, 2], q[p, 3], q[p, 4], q[p, 5]
+            vy, vz, vph, vth, vps, vx = u[p, 0], u[p, 1], u[p, 2], u[p, 3], u[p, 4], u[p, 5]
+            cy_, cz_, cph, cth, cps, cx = (q[ch, 0] + dy, q[ch, 1], q[ch, 2] + dphi, q[ch, 3],
+                                           q[ch, 4] + dpsi, q[ch, 5])
+            wy, wz_, wph, wth, wps, wx = u[ch, 0], u[ch, 1], u[ch, 2], u[ch, 3], u[ch, 4], u[ch, 5]
             pfl = phif * qf
             pflv = phif * uf
+            asym = CONN[c, C_ASYM]
             for side in range(3):
-                # side 0: left spring (+b), 1: right spring (-b), 2: centre (lateral damper/bump stop)
+                # side 0: left spring (+b), 1: right spring (-b), 2: centre (lateral damper,
+                # bump stop, traction rod)
                 if side == 0:
                     yo = CONN[c, C_B]
                 elif side == 1:
@@ -166,10 +262,10 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
                 else:
                     yo = 0.0
                 # relative displacement child point (0, yo, zc) minus parent point (x, yo, zp)
-                dX = (cth * zc - cps * yo) - (pth * zp - pps * yo)
+                dX = (cx + cth * zc - cps * yo) - (px + pth * zp - pps * yo)
                 dY = (cy_ - cph * zc) - (py + pps * x - pph * zp)
                 dZ = (cz_ + cph * yo) - (pz + pph * yo - pth * x + pfl)
-                vX = (wth * zc - wps * yo) - (vth * zp - vps * yo)
+                vX = (wx + wth * zc - wps * yo) - (vx + vth * zp - vps * yo)
                 vY = (wy - wph * zc) - (vy + vps * x - vph * zp)
                 vZ = (wz_ + wph * yo) - (vz + vph * yo - vth * x + pflv)
                 fx = 0.0
@@ -181,60 +277,26 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
                     fz = -CONN[c, C_KZ] * dZ
                     cz = CONN[c, C_CZ]
                     if cz > 0.0:
-                        asym = CONN[c, C_ASYM]
-                        ks = CONN[c, C_KSZ]
-                        if ks > 0.0:
-                            e = st[c, side]
-                            fd = ks * (dZ - e)
-                            ceff = cz * (1.0 + asym * (1.0 if fd > 0 else -1.0))
-                            st[c, side] = dZ - (dZ - e) * math.exp(-ks * dt / ceff)
-                            fz -= fd
-                        else:
-                            fz -= cz * vZ * (1.0 + asym * (1.0 if vZ > 0 else -1.0))
+                        fd, st[c, side] = _damper(st[c, side], vZ, CONN[c, C_KSZ], cz, asym, emx[c, 0],
+                                                  emx[c, 1], emx[c, 2])
+                        fz -= fd
                     ff = CONN[c, C_FZ]
                     if ff > 0.0:
-                        kst = CONN[c, C_KSTZ]
-                        fr = kst * (dZ - st[c, 5 + side])
-                        if fr > ff:
-                            fr = ff
-                            st[c, 5 + side] = dZ - ff / kst
-                        elif fr < -ff:
-                            fr = -ff
-                            st[c, 5 + side] = dZ + ff / kst
+                        fr, st[c, 5 + side] = slider(dZ, st[c, 5 + side], CONN[c, C_KSTZ], ff)
                         fz -= fr
                     ff = CONN[c, C_FY]
                     if ff > 0.0:
-                        kst = CONN[c, C_KSTY]
-                        fr = kst * (dY - st[c, 7 + side])
-                        if fr > ff:
-                            fr = ff
-                            st[c, 7 + side] = dY - ff / kst
-                        elif fr < -ff:
-                            fr = -ff
-                            st[c, 7 + side] = dY + ff / kst
+                        fr, st[c, 7 + side] = slider(dY, st[c, 7 + side], CONN[c, C_KSTY], ff)
                         fy -= fr
                     ff = CONN[c, C_FX]
                     if ff > 0.0:
-                        kst = CONN[c, C_KSTY]
-                        fr = kst * (dX - st[c, 9 + side])
-                        if fr > ff:
-                            fr = ff
-                            st[c, 9 + side] = dX - ff / kst
-                        elif fr < -ff:
-                            fr = -ff
-                            st[c, 9 + side] = dX + ff / kst
+                        fr, st[c, 9 + side] = slider(dX, st[c, 9 + side], CONN[c, C_KSTX], ff)
                         fx -= fr
                 else:
                     cyd = CONN[c, C_CY]
                     if cyd > 0.0:
-                        ks = CONN[c, C_KSY]
-                        if ks > 0.0:
-                            e = st[c, 2]
-                            fd = ks * (dY - e)
-                            st[c, 2] = dY - (dY - e) * math.exp(-ks * dt / cyd)
-                            fy -= fd
-                        else:
-                            fy -= cyd * vY
+                        fd, st[c, 2] = _damper(st[c, 2], vY, CONN[c, C_KSY], cyd, 0.0, emx[c, 3], 0.0, 0.0)
+                        fy -= fd
                     bsk = CONN[c, C_BSK]
                     if bsk > 0.0:
                         clr = CONN[c, C_BSCL]
@@ -242,37 +304,44 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
                             fy -= bsk * (dY - clr)
                         elif dY < -clr:
                             fy -= bsk * (dY + clr)
+                    fx = -CONN[c, C_KTR] * dX
                 # apply to child at (0, yo, zc) and the reaction to parent at (x, yo, zp)
                 F[ch, 0] += fy
                 F[ch, 1] += fz
                 F[ch, 2] += yo * fz - zc * fy
                 F[ch, 3] += zc * fx
                 F[ch, 4] += -yo * fx
+                F[ch, 5] += fx
                 F[p, 0] -= fy
                 F[p, 1] -= fz
                 F[p, 2] -= yo * fz - zp * fy
                 F[p, 3] -= zp * fx - x * fz
                 F[p, 4] -= x * fy - yo * fx
+                F[p, 5] -= fx
                 Fq -= phif * fz
-            # yaw dampers (longitudinal, at +-b_yd)
+            # yaw dampers (longitudinal, at +-b_yd), with series stiffness and force limit
             cyd = CONN[c, C_CYD]
             if cyd > 0.0:
                 byd = CONN[c, C_BYD]
                 ks = CONN[c, C_KSYD]
+                flim = CONN[c, C_FYD]
                 for side in range(2):
                     yo = byd if side == 0 else -byd
-                    dX = (cth * zc - cps * yo) - (pth * zp - pps * yo)
-                    vX = (wth * zc - wps * yo) - (vth * zp - vps * yo)
-                    if ks > 0.0:
-                        e = st[c, 3 + side]
-                        fx = -ks * (dX - e)
-                        st[c, 3 + side] = dX - (dX - e) * math.exp(-ks * dt / cyd)
-                    else:
-                        fx = -cyd * vX
+                    vX = (wx + wth * zc - wps * yo) - (vx + vth * zp - vps * yo)
+                    fd, d1 = _damper(st[c, 3 + side], vX, ks, cyd, 0.0, emx[c, 4], 0.0, 0.0)
+                    if flim > 0.0 and abs(fd) > flim:
+                        # blow-off: the force stays at the limit, the dashpot takes the excess stroke
+                        fd = flim if fd > 0.0 else -flim
+                        if ks > 0.0:
+                            d1 = fd / ks
+                    st[c, 3 + side] = d1
+                    fx = -fd
                     F[ch, 3] += zc * fx
                     F[ch, 4] += -yo * fx
+                    F[ch, 5] += fx
                     F[p, 3] -= zp * fx
                     F[p, 4] -= -yo * fx
+                    F[p, 5] -= fx
             kr = CONN[c, C_KROLL]
             if kr > 0.0:
                 m = -kr * (cph - pph)
@@ -283,74 +352,101 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
                 m = -kpy * (cps - pps)
                 F[ch, 4] += m
                 F[p, 4] -= m
-            # static preload acting on rotated attachment points (destabilising, P-delta)
+            # static load w: up on the parent at its attachment point, down on the child at the
+            # same point (lateral/longitudinal weight shift and P-Δ of rolled/pitched bodies)
             w = CONN[c, C_W]
-            F[p, 2] += -w * zp * pph
-            F[p, 3] += -w * zp * pth
-            F[ch, 2] += w * zc * q[ch, 2]
-            F[ch, 3] += w * zc * q[ch, 3]
+            if w != 0.0:
+                F[p, 2] += -w * zp * pph
+                F[p, 3] += -w * zp * pth
+                F[ch, 2] += -w * ((py + pps * x - pph * zp) - cy_)
+                F[ch, 3] += w * ((px + pth * zp) - cx)
         # ---------------------------------------------------------------- wheel–rail contact
         for i in range(nw):
             k = ws_body[i]
-            s = sb[k]
-            yai = _interp(ya, s, s_arr0, inv_ds, ngrid)
-            gai = _interp(ga, s, s_arr0, inv_ds, ngrid)
-            yrel = q[k, 0] - yai - dtr[i]
+            i0 = bi[k]
+            w1 = bw[k]
+            w0 = 1.0 - w1
+            yai = TR[i0, T_YA] * w0 + TR[i0 + 1, T_YA] * w1
+            gai = TR[i0, T_GA] * w0 + TR[i0 + 1, T_GA] * w1
+            yw = q[k, 0] - yai
+            if not tflex:
+                # wheel loads at this step from the wheelset's vertical/roll equilibrium with the
+                # suspension forces of this step (lateral forces of the previous step in r0·ΣY)
+                sumdq = massd[k, 1] * ws_az[i] - F[k, 1]
+                difdq = (massd[k, 2] * ws_aphi[i] - F[k, 2] - r0 * (Yw[i, 0] + Yw[i, 1])) / b0
+                Qw[i, 0] = q0 + 0.5 * (sumdq + difdq)
+                Qw[i, 1] = q0 + 0.5 * (sumdq - difdq)
+            else:
+                # flexible track: wheel loads from the track springs at this step's positions
+                zr = TR[i0, T_ZV] * w0 + TR[i0 + 1, T_ZV] * w1
+                zr1 = v * (TR[i0, T_ZV1] * w0 + TR[i0 + 1, T_ZV1] * w1)
+                cr = 0.5 * (TR[i0, T_CL] * w0 + TR[i0 + 1, T_CL] * w1)
+                cr1 = 0.5 * v * (TR[i0, T_CL1] * w0 + TR[i0 + 1, T_CL1] * w1)
+                dQL = SC[KTZ] * (zr + cr - q[k, 1] - b0 * q[k, 2]) + SC[CTZ] * (zr1 + cr1 - u[k, 1] - b0 * u[k, 2])
+                dQR = SC[KTZ] * (zr - cr - q[k, 1] + b0 * q[k, 2]) + SC[CTZ] * (zr1 - cr1 - u[k, 1] + b0 * u[k, 2])
+                Qw[i, 0] = q0 + dQL
+                Qw[i, 1] = q0 + dQR
+            yrel = yw - 0.5 * (dtr[i, 0] + dtr[i, 1])
             eL = yrel - 0.5 * gai - SC[YFR]
             eR = -yrel - 0.5 * gai - SC[YFR]
             drL = SC[LAM] * yrel + (SC[LAM2] * eL if eL > 0.0 else 0.0)
             drR = -SC[LAM] * yrel + (SC[LAM2] * eR if eR > 0.0 else 0.0)
             xiL = -drL / r0 - b0 * u[k, 4] / v - b0 * kb[k]
             xiR = -drR / r0 + b0 * u[k, 4] / v + b0 * kb[k]
-            xiy = (u[k, 0] - dtrv[i]) / v - q[k, 4]
+            xiy = u[k, 0] / v - q[k, 4]
             QL = Qw[i, 0]
             QR = Qw[i, 1]
-            fL = (QL / SC[Q0]) ** (2.0 / 3.0) if QL > 0.0 else 0.0
-            fR = (QR / SC[Q0]) ** (2.0 / 3.0) if QR > 0.0 else 0.0
+            fL = np.cbrt(QL / q0) ** 2 if QL > 0.0 else 0.0
+            fR = np.cbrt(QR / q0) ** 2 if QR > 0.0 else 0.0
             fxL = -SC[F11] * fL * xiL
             fyL = -SC[F22] * fL * xiy
             fxR = -SC[F11] * fR * xiR
             fyR = -SC[F22] * fR * xiy
+            sL = 1.0
+            sR = 1.0
             if SC[SAT] > 0.0:
-                fxL, fyL = _sat(fxL, fyL, SC[MU] * max(QL, 0.0))
-                fxR, fyR = _sat(fxR, fyR, SC[MU] * max(QR, 0.0))
+                sL = _sat_factor(fxL, fyL, SC[MU] * max(QL, 0.0))
+                sR = _sat_factor(fxR, fyR, SC[MU] * max(QR, 0.0))
+                fxL *= sL
+                fyL *= sL
+                fxR *= sR
+                fyR *= sR
+            # creep damping coefficients (secant, saturation included), integrated exponentially
+            cimp[k, 0] = SC[F22] * (fL * sL + fR * sR) / v
+            cimp[k, 4] = SC[F11] * b0 * b0 * (fL * sL + fR * sR) / v
             YL = fyL - max(QL, 0.0) * (SC[GAM0] + SC[EPSG] * yrel)
             YR = fyR + max(QR, 0.0) * (SC[GAM0] - SC[EPSG] * yrel)
-            kfl = SC[KFL]
-            if SC[TFLEX] > 0.0:
-                # flange contact in series with the rail's own lateral (head/fastening) stiffness
-                kfl = kfl * SC[KTY] / (kfl + SC[KTY])
-            dL = yrel - 0.5 * gai - SC[CLEAR]
+            if tflex:
+                # each rail deflects quasi-statically under its tread force (massless lateral track;
+                # the wheel pushes the rail with −Y: a rail deflects by −Y/k_rail); a second pass
+                # makes the normal-force component consistent with the deflection (contraction
+                # ≈ Q·ε/(b0·k)); the creep forces keep the first pass's rolling-radius difference
+                dtr[i, 0] = -YL / kty
+                dtr[i, 1] = -YR / kty
+                yrel = yw - 0.5 * (dtr[i, 0] + dtr[i, 1])
+                YL = fyL - max(QL, 0.0) * (SC[GAM0] + SC[EPSG] * yrel)
+                YR = fyR + max(QR, 0.0) * (SC[GAM0] - SC[EPSG] * yrel)
+                dtr[i, 0] = -YL / kty
+                dtr[i, 1] = -YR / kty
+            dL = (yw - dtr[i, 0]) - 0.5 * gai - SC[CLEAR]
             if dL > 0.0:
                 YL -= kfl * dL
-            dR = -yrel - 0.5 * gai - SC[CLEAR]
+            dR = -(yw - dtr[i, 1]) - 0.5 * gai - SC[CLEAR]
             if dR > 0.0:
                 YR += kfl * dR
             Yw[i, 0] = YL
             Yw[i, 1] = YR
             F[k, 0] += YL + YR
             F[k, 4] += -b0 * fxL + b0 * fxR
-            if SC[TFLEX] > 0.0:
-                # lateral track mass: m δ'' = -(Y_L + Y_R) - 2 k_rail δ - c δ'
-                a_t = (-(YL + YR) - 2.0 * SC[KTY] * dtr[i] - SC[CTY] * dtrv[i]) / SC[MTY]
-                dtrv[i] += dt * a_t
-                dtr[i] += dt * dtrv[i]
-                zr = _interp(zv, s, s_arr0, inv_ds, ngrid)
-                zr1 = v * _interp(zv1, s, s_arr0, inv_ds, ngrid)
-                cr = 0.5 * _interp(cl, s, s_arr0, inv_ds, ngrid)
-                cr1 = 0.5 * v * _interp(cl1, s, s_arr0, inv_ds, ngrid)
-                dQL = SC[KTZ] * (zr + cr - q[k, 1] - b0 * q[k, 2]) + SC[CTZ] * (zr1 + cr1 - u[k, 1] - b0 * u[k, 2])
-                dQR = SC[KTZ] * (zr - cr - q[k, 1] + b0 * q[k, 2]) + SC[CTZ] * (zr1 - cr1 - u[k, 1] + b0 * u[k, 2])
-                F[k, 1] += dQL + dQR
-                F[k, 2] += b0 * (dQL - dQR) + r0 * (YL + YR)
-                Qw[i, 0] = SC[Q0] + dQL
-                Qw[i, 1] = SC[Q0] + dQR
+            if tflex:
+                F[k, 1] += Qw[i, 0] + Qw[i, 1] - 2.0 * q0
+                F[k, 2] += b0 * (Qw[i, 0] - Qw[i, 1]) + r0 * (YL + YR)
             else:
                 # rigid track: rail forces from the wheelset's vertical and roll equilibrium
                 sumdq = massd[k, 1] * ws_az[i] - F[k, 1]
                 difdq = (massd[k, 2] * ws_aphi[i] - F[k, 2] - r0 * (YL + YR)) / b0
-                Qw[i, 0] = SC[Q0] + 0.5 * (sumdq + difdq)
-                Qw[i, 1] = SC[Q0] + 0.5 * (sumdq - difdq)
+                Qw[i, 0] = q0 + 0.5 * (sumdq + difdq)
+                Qw[i, 1] = q0 + 0.5 * (sumdq - difdq)
         # flexible car body: first vertical bending mode
         if SC[FLEX] > 0.0:
             w0 = SC[FLEX_W]
@@ -361,11 +457,20 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
             aq = 0.0
         # ---------------------------------------------------------------- integrate
         for k in range(nbody):
-            for j in range(5):
+            for j in range(NDOF):
                 if free[k, j]:
-                    a = F[k, j] / massd[k, j]
+                    ci = cimp[k, j]
+                    if ci > 0.0:
+                        # exponential update: exact for the damping term −c·u with the other forces
+                        # held over the step
+                        ee = math.exp(-ci * dt / massd[k, j])
+                        un = u[k, j] * ee + (F[k, j] + ci * u[k, j]) / ci * (1.0 - ee)
+                        a = (un - u[k, j]) / dt
+                        u[k, j] = un
+                    else:
+                        a = F[k, j] / massd[k, j]
+                        u[k, j] += dt * a
                     acc[k, j] = a
-                    u[k, j] += dt * a
                     q[k, j] += dt * u[k, j]
         # ---------------------------------------------------------------- outputs
         col = 0
@@ -380,7 +485,9 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
             xs = SC[XS1] if si == 0 else SC[XS2]
             phs = SC[PHI_S1] if si == 0 else SC[PHI_S2]
             ss = s_cb + xs
-            aqs = v * v * _interp(kap, ss, s_arr0, inv_ds, ngrid) - g * _interp(phit, ss, s_arr0, inv_ds, ngrid)
+            i0, w1 = _locate(ss, s_arr0, inv_ds, ngrid)
+            aqs = (v * v * (TR[i0, T_KAP] * (1.0 - w1) + TR[i0 + 1, T_KAP] * w1)
+                   - g * (TR[i0, T_PHI] * (1.0 - w1) + TR[i0 + 1, T_PHI] * w1))
             acc_blk[col + si] += acc[0, 0] + xs * acc[0, 4] - zs * acc[0, 2] + aqs + g * q[0, 2]
             acc_blk[col + 2 + si] += acc[0, 1] - xs * acc[0, 3] + phs * aq
         col += 4
@@ -393,6 +500,9 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, kap
                 acc_blk[ncol_std + i] += q[ws_body[i], 0]
             acc_blk[ncol_std + nw] += q[0, 1]
             acc_blk[ncol_std + nw + 1] += q[0, 3]
+            acc_blk[ncol_std + nw + 2] += q[0, 0]
+            for j in range(nb):
+                acc_blk[ncol_std + nw + 3 + j] += q[bogie_body[j], 0]
         cnt += 1
         if cnt == decim:
             if k_out < out.shape[0]:

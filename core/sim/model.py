@@ -34,7 +34,6 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from railval.core.errors import InvalidParameter
 from railval.core.sim import kernel as K
 from railval.core.sim.effects import resolve_effects
@@ -46,9 +45,7 @@ H_SECONDARY = 0.9  # m above rail: secondary spring / yaw damper attachment heig
 H_LEAF = 0.8  # m above rail: leaf spring attachment (wagon)
 LAMBDA_FLANGE_ROOT = 1.5  # additional rolling-radius slope near the flange (-)
 FLANGE_ROOT_ONSET = 0.002  # m before flange contact where the flange-root term starts
-TRACK_CZ = 50e3  # N*s/m per wheel, vertical track damping (track_flexibility)
-TRACK_CY = 100e3  # N*s/m per wheelset, lateral track damping
-TRACK_MY = 1200.0  # kg per wheelset, lateral track participating mass
+TRACK_CZ = 50e3  # N*s/m per wheel, vertical track damping (track_flexibility; assumption)
 K_STICK_Z = 2.0e6  # N/m stick stiffness of the vertical friction element (coach)
 K_STICK_Y = 1.0e6  # N/m stick stiffness of the lateral friction element (coach)
 BETA_L, SIGMA_FF = 4.730040745, 0.982502215  # free–free beam, first bending mode
@@ -101,18 +98,19 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
     nb, nw = vehicle.n_bogies, vehicle.n_wheelsets
     nbody = 1 + nb + nw
     m = vehicle.masses()
-    massd = np.ones((nbody, 5))
-    free = np.zeros((nbody, 5), dtype=np.bool_)
+    massd = np.ones((nbody, K.NDOF))
+    free = np.zeros((nbody, K.NDOF), dtype=np.bool_)
     xabs = np.zeros(nbody)
     tflex = "track_flexibility" in ef
     if vehicle.template == "coach":
-        massd[0] = [m["carbody"], m["carbody"], p["I_roll_carbody"], p["I_pitch_carbody"], p["I_yaw_carbody"]]
+        massd[0] = [m["carbody"], m["carbody"], p["I_roll_carbody"], p["I_pitch_carbody"], p["I_yaw_carbody"],
+                    m["carbody"]]
         hcb = p["h_carbody"]
     else:
         mb = m["carbody"]
         # box body of length L, width 2.8 m, height 2.5 m (uniform), payload included
         lx, wy, hz = p["L_carbody"], 2.8, 2.5
-        massd[0] = [mb, mb, mb * (wy**2 + hz**2) / 12, mb * (lx**2 + hz**2) / 12, mb * (lx**2 + wy**2) / 12]
+        massd[0] = [mb, mb, mb * (wy**2 + hz**2) / 12, mb * (lx**2 + hz**2) / 12, mb * (lx**2 + wy**2) / 12, mb]
         hcb = p["h_carbody"]
     free[0] = True
     xw = vehicle.wheelset_x()
@@ -131,7 +129,8 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
         a = p["wheelbase"] / 2
         for j, xb in enumerate((c, -c)):
             k = 1 + j
-            massd[k] = [p["m_bogie"], p["m_bogie"], p["I_roll_bogie"], p["I_pitch_bogie"], p["I_yaw_bogie"]]
+            massd[k] = [p["m_bogie"], p["m_bogie"], p["I_roll_bogie"], p["I_pitch_bogie"], p["I_yaw_bogie"],
+                        p["m_bogie"]]
             free[k] = True
             xabs[k] = xb
             rows.append(_conn_row(
@@ -139,7 +138,8 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
                 kx=p["k_secondary_x"], ky=p["k_secondary_y"], kz=p["k_secondary_z"], cz=p["c_secondary_z"],
                 cy=p["c_secondary_y"], byd=p["b_yaw_damper"], cyd=p["c_yaw_damper"], ksyd=kser, ksz=kser,
                 ksy=kser, kroll=p["k_antiroll"], kpyaw=kpy, bscl=bs_cl, bsk=bs_k, fz=fr, fy=fr,
-                kstz=K_STICK_Z, ksty=K_STICK_Y, asym=asym, w=m["carbody"] * G / 2))
+                kstz=K_STICK_Z, ksty=K_STICK_Y, asym=asym, w=m["carbody"] * G / 2,
+                ktr=p["k_traction"], fyd=p["yaw_damper_blowoff"]))
         for i, x in enumerate(xw):
             k = 1 + nb + i
             parent = 1 if i < 2 else 2
@@ -161,10 +161,10 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
                 kx=k_link_x, ky=k_link, kz=p["k_leaf_z"], kpyaw=kpy, bscl=bs_cl, bsk=bs_k,
                 fz=p["leaf_friction"] * w_spring + fr, fy=p["link_friction"] * w_spring + fr,
                 fx=p["link_friction"] * w_spring, kstz=3.0 * p["k_leaf_z"], ksty=3.0 * k_link,
-                w=m["carbody"] * G / 2))
+                kstx=3.0 * k_link_x, w=m["carbody"] * G / 2))
     for i in range(nw):
         k = 1 + nb + i
-        massd[k] = [m["wheelset"], m["wheelset"], p["I_roll_wheelset"], 1.0, p["I_yaw_wheelset"]]
+        massd[k] = [m["wheelset"], m["wheelset"], p["I_roll_wheelset"], 1.0, p["I_yaw_wheelset"], m["wheelset"]]
         free[k, 0] = True
         free[k, 4] = True
         if tflex:
@@ -197,8 +197,6 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
         SC[K.KTZ] = ef["track_flexibility"]["k_vertical_MN_m"] * 1e6
         SC[K.CTZ] = TRACK_CZ
         SC[K.KTY] = ef["track_flexibility"]["k_lateral_MN_m"] * 1e6
-        SC[K.CTY] = TRACK_CY
-        SC[K.MTY] = TRACK_MY
     xs = vehicle.sensor_x()
     SC[K.XS1], SC[K.XS2] = xs
     SC[K.ZSENS] = p["h_sensor"] - hcb
@@ -233,28 +231,67 @@ def channel_names(vehicle: VehicleModel) -> list[str]:
     return names
 
 
+#: accuracy limits of the step: ω·dt for the oscillatory (spring–mass) rates, r·dt for the
+#: explicitly integrated damping rates (checked by tests/test_sim_numerics.py: halving the step
+#: moves none of the 12 EN 14363 quantities by more than 2 %, every effect at both bounds)
+OMEGA_DT = 0.5
+RATE_DT = 0.5
+#: with track flexibility the wheelsets bounce and roll on the track springs and the flange
+#: contact couples into their roll (r0·Y): measured first-order step error ≈ 3 % at ω·dt = 0.5
+#: (Y_qst at k_lateral = 200 MN/m), hence the finer limit for these track oscillators
+OMEGA_DT_TRACK = 0.18
+#: the step also resolves the track input: 2π·(v/λ_min)·dt ≤ INPUT_DT with λ_min = 3 m, the
+#: shortest irregularity wavelength (EN 13848-1 D1 band) — the wheelsets follow it through the
+#: creep forces, and the first-order error of the scheme in their response scales with it
+INPUT_DT = 0.1
+LAMBDA_MIN_INPUT = 3.0
+
+
 def choose_substeps(asm: Assembly, fs_out: float) -> int:
-    """Integer number of steps per output sample so that every explicit rate (creep damping,
-    flange and track springs, dampers) satisfies rate·dt ≤ 0.8 (stability of semi-implicit Euler
-    needs ω·dt < 2 and c·dt/m < 2)."""
+    """Integer number of steps per output sample so that the step resolves every stiff element
+    for ACCURACY (not only stability): ω·dt ≤ ``OMEGA_DT`` for every spring on the mass it moves
+    (flange contact in series with the lateral rail stiffness, vertical track springs, bump stops,
+    friction stick springs, suspension springs, traction rods), r·dt ≤ ``RATE_DT`` for every
+    explicitly integrated damping rate (suspension and yaw dampers c/m, vertical track damping)
+    and for a Maxwell element the smaller of its relaxation rate k/c and its spring's ω (at
+    high k/c it acts as a dashpot, the exponential update is exact; at low k/c as a spring).
+    The wheelsets' creep damping is integrated exponentially and sets no limit; the track input
+    sets ``INPUT_DT`` (the response to the shortest wavelengths). Semi-implicit Euler
+    is stable for ω·dt < 2 (Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2006,
+    §I.1); its frequency error is ≈ (ω·dt)²/24, 1 % at ω·dt = 0.5."""
     SC = asm.SC
-    v = SC[K.V]
     mw = asm.massd[asm.ws_body[0], 0]
-    iw = asm.massd[asm.ws_body[0], 4]
-    f11, f22, b0 = SC[K.F11] * 1.6, SC[K.F22] * 1.6, SC[K.B0]  # 1.6: (Q/Q0)^(2/3) headroom
-    rates = [2 * f22 / (v * mw), 2 * f11 * b0**2 / (v * iw), math.sqrt(SC[K.KFL] / mw)]
+    osc = [math.sqrt(SC[K.KFL] / mw)]
+    rates = []
+    osc_track = []
     if SC[K.TFLEX]:
-        mred = mw * SC[K.MTY] / (mw + SC[K.MTY])
-        rates += [2 * f22 / (v * mred), math.sqrt(2 * SC[K.KTZ] / mw), 2 * SC[K.CTZ] / mw]
+        iw_roll = asm.massd[asm.ws_body[0], 2]
+        kfl_s = SC[K.KFL] * SC[K.KTY] / (SC[K.KFL] + SC[K.KTY])
+        osc_track += [math.sqrt(2 * SC[K.KTZ] / mw), math.sqrt(2 * SC[K.KTZ] * SC[K.B0] ** 2 / iw_roll),
+                      math.sqrt(kfl_s / mw)]
+        rates += [2 * SC[K.CTZ] / mw]
     for r in asm.CONN:
-        for kk in (K.C_KX, K.C_KY, K.C_KZ):
-            rates.append(math.sqrt(r[kk] / asm.massd[int(r[K.C_C]), 0]))
-        rates.append(2 * r[K.C_CZ] / asm.massd[int(r[K.C_C]), 0])
-        for kk in (K.C_BSK, K.C_KSTZ, K.C_KSTY):
-            rates.append(math.sqrt(r[kk] / asm.massd[int(r[K.C_C]), 0]))
-        rates.append(2 * r[K.C_CYD] * r[K.C_BYD] ** 2 / asm.massd[int(r[K.C_C]), 4])
-        rates.append(2 * r[K.C_CYD] * r[K.C_BYD] ** 2 / asm.massd[int(r[K.C_P]), 4])
-    dt_max = 0.8 / max(rates)
+        mc = asm.massd[int(r[K.C_C]), 0]
+        mp = asm.massd[int(r[K.C_P]), 0]
+        mred = mc * mp / (mc + mp)
+        for kk in (K.C_KX, K.C_KY, K.C_KZ, K.C_BSK, K.C_KSTZ, K.C_KSTY, K.C_KSTX):
+            osc.append(math.sqrt(2 * r[kk] / mred))
+        osc.append(math.sqrt(r[K.C_KTR] / mred))
+        for kc, ks, n in ((K.C_CZ, K.C_KSZ, 2), (K.C_CY, K.C_KSY, 1)):
+            c = n * r[kc]
+            if c > 0:
+                rates.append(min(c / mred, r[ks] / r[kc]) if r[ks] > 0 else c / mred)
+        iz_c = asm.massd[int(r[K.C_C]), 4]
+        iz_p = asm.massd[int(r[K.C_P]), 4]
+        cyaw = 2 * r[K.C_CYD] * r[K.C_BYD] ** 2
+        if cyaw > 0:
+            ryaw = cyaw * (1 / iz_c + 1 / iz_p)
+            rates.append(min(ryaw, r[K.C_KSYD] / r[K.C_CYD]) if r[K.C_KSYD] > 0 else ryaw)
+    dt_input = INPUT_DT * LAMBDA_MIN_INPUT / (2 * math.pi * SC[K.V])
+    # with track flexibility every oscillator gets the finer limit (measured: limiting only the
+    # track oscillators leaves 3 % step error at k_vertical = 10 MN/m)
+    omega_dt = OMEGA_DT_TRACK if osc_track else OMEGA_DT
+    dt_max = min(omega_dt / max(osc + osc_track), RATE_DT / max(rates) if rates else math.inf, dt_input)
     return max(2, math.ceil(1.0 / (fs_out * dt_max)))
 
 
@@ -275,7 +312,7 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
                      effects: Mapping[str, Mapping[str, float]] | None = None, *, fs_out: float = 200.0,
                      seed: int | None = None, parameters: Mapping[str, float] | None = None,
                      channels: Sequence[str] | None = None, nuisance: Mapping[str, float] | None = None,
-                     speed_factor: float = 1.0) -> SignalSet:
+                     speed_factor: float = 1.0, refine: int = 1) -> SignalSet:
     """Simulate one section; return a :class:`railval.core.types.SignalSet` at ``fs_out`` Hz.
 
     ``effects``: ``{effect id: {param: value}}`` (see :mod:`railval.core.sim.effects`; defaults filled,
@@ -283,7 +320,8 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
     section's seed (``seed`` overrides it) unless ``measured_irregularities`` is on and the
     section carries measured ones. ``parameters``: vehicle template overrides (``model.NAME``
     or ``NAME``). ``nuisance`` and ``speed_factor`` are used by the synthetic-data generator
-    (truth model) only. Distance axis = car body centre position from the section start (m).
+    (truth model) only. ``refine`` multiplies the number of integration steps (accuracy
+    checks). Distance axis = car body centre position from the section start (m).
     """
     veh = VehicleModel.from_any(vehicle, parameters)
     ef = resolve_effects(dict(effects or {}))
@@ -298,7 +336,7 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
     scale = ef["measured_irregularities"]["scale"] if use_meas else 1.0
     v = section.speed_ms * float(speed_factor)
     asm = assemble(veh, ef, v, nuisance)
-    ss, _ = run_assembled(asm, veh, section, fs_out=fs_out, use_measured=use_meas, scale=scale)
+    ss, _ = run_assembled(asm, veh, section, fs_out=fs_out, use_measured=use_meas, scale=scale, refine=refine)
     if channels is not None:
         want = set(channels)
         ss.channels = {k: x for k, x in ss.channels.items() if k in want}
@@ -307,24 +345,26 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
 
 def run_assembled(asm: Assembly, veh: VehicleModel, section: TrackSection, *, fs_out: float = 200.0,
                   use_measured: bool = False, scale: float = 1.0, states: bool = False,
-                  duration_s: float | None = None) -> tuple[SignalSet, np.ndarray | None]:
+                  duration_s: float | None = None, refine: int = 1) -> tuple[SignalSet, np.ndarray | None]:
     """Run the kernel for an assembled model. ``states=True`` also returns the wheelsets' lateral
-    displacements and the car body's vertical displacement and pitch (columns, per output
-    sample) for verification tests."""
+    displacements, the car body's vertical displacement, pitch and lateral displacement and the
+    bogies' lateral displacements (columns, per output sample) for verification tests.
+    ``refine`` multiplies the number of steps per output sample (step-halving checks)."""
     tr = _track_arrays(section, veh, use_measured, scale)
     v = asm.SC[K.V]
-    decim = choose_substeps(asm, fs_out)
+    decim = choose_substeps(asm, fs_out) * int(refine)
     dt = 1.0 / (fs_out * decim)
     duration = section.length_m / v if duration_s is None else duration_s
     n_out = int(duration * fs_out)
     n_steps = n_out * decim
     names = channel_names(veh)
-    extra = veh.n_wheelsets + 2 if states else 0
+    extra = veh.n_wheelsets + 3 + veh.n_bogies if states else 0
     out = np.zeros((n_out, len(names) + extra))
+    TR = np.ascontiguousarray(np.column_stack([tr["kap"], tr["phit"], tr["zv"], tr["zv1"], tr["zv2"], tr["cl"],
+                                               tr["cl1"], tr["cl2"], tr["ya"], tr["ga"]]))
     K.run_kernel(asm.SC, asm.massd, asm.free, asm.xabs, asm.CONN, asm.ws_body, asm.bogie_body,
-                 tr["s0"], DS, tr["kap"], tr["phit"], tr["zv"], tr["zv1"], tr["zv2"], tr["cl"], tr["cl1"],
-                 tr["cl2"], tr["ya"], tr["ga"], n_steps, dt, decim, out)
-    t = np.arange(n_out) / fs_out + (decim + 1) / 2 * dt
+                 tr["s0"], DS, TR, n_steps, dt, decim, out)
+    t = np.arange(n_out) / fs_out + (decim - 1) / 2 * dt
     chans = {n: np.ascontiguousarray(out[:, j]) for j, n in enumerate(names)}
     ss = SignalSet(fs=float(fs_out), time_s=t, distance_m=asm.SC[K.S_START] + v * t, channels=chans)
     return ss, (out[:, len(names):] if states else None)

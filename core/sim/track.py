@@ -27,7 +27,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from railval.core.errors import InvalidParameter
 
 G = 9.81

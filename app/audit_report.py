@@ -1,0 +1,129 @@
+"""The assessor's audit report, HTML and PDF (same builder style as :mod:`railval.app.report`).
+
+Contents: the chain status (``railval audit verify`` without decoding blobs or recomputing
+the validation — run the CLI for the full check), every sign-off with its printed name, UTC
+time, meaning, decision, evidence hash and status (valid / stale, with what changed), the
+timeline of changes per configuration, and who did what (actions per actor). Self-contained
+HTML, every user-entered text escaped; the PDF is the HTML printed by headless Chromium.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+from collections import Counter, defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from railval.app.report import CSS, ReportError, _esc, html_to_pdf
+
+
+@dataclass
+class AuditReport:
+    html: str
+    chain_status: str
+    generated_at: str
+    signoffs: int
+    stale: int
+
+    def write(self, path: str | os.PathLike) -> Path:
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix in (".html", ".htm"):
+            path.write_text(self.html, encoding="utf-8")
+        elif suffix == ".pdf":
+            path.write_bytes(html_to_pdf(self.html))
+        else:
+            raise ReportError(f"audit report file {path}: extension must be .html or .pdf")
+        return path
+
+    def pdf_bytes(self) -> bytes:
+        return html_to_pdf(self.html)
+
+
+def signoff_rows_html(items: list[tuple[dict[str, Any], Any]]) -> str:
+    """The sign-off table (escaped) used by this report and the validation report."""
+    if not items:
+        return "<p class='note'>No sign-off.</p>"
+    rows = []
+    for d, st in items:
+        cls = "pass" if st.status == "valid" else "fail"
+        why = "<br>".join(_esc(r) for r in st.reasons[:5])
+        rows.append(
+            f"<tr><td>{d['id']}</td><td class='l'>{_esc(d['campaign'])} / {_esc(d['configuration'])}</td>"
+            f"<td class='l {cls}'>{_esc(st.status)}</td><td class='l'>{_esc(d['decision_text'])}</td>"
+            f"<td class='l'>{_esc(d['printed_name'])} ({_esc(d['username'])})</td>"
+            f"<td class='l'>{_esc(d['signed_at_utc'])}</td>"
+            f"<td class='l'>{_esc(d['meaning'])}</td>"
+            f"<td class='l'>{_esc(d['restrictions'] or '–')}</td><td class='l'>{_esc(d['statement'] or '–')}</td>"
+            f"<td class='l' style='font-family:monospace;font-size:10px'>{_esc(d['evidence_sha256'])}</td>"
+            f"<td class='l'>{why}</td></tr>")
+    return ("<table><tr><th>id</th><th class='l'>configuration</th><th class='l'>status</th>"
+            "<th class='l'>decision</th><th class='l'>signed by</th><th class='l'>UTC</th>"
+            "<th class='l'>meaning</th><th class='l'>restrictions</th><th class='l'>statement</th>"
+            "<th class='l'>evidence SHA-256</th><th class='l'>changed since</th></tr>"
+            + "".join(rows) + "</table>")
+
+
+def build_audit_report(database) -> AuditReport:
+    """Build the report from the database (chain checked quickly, sign-off statuses)."""
+    from railval.app.services.audit import verify_database
+    from railval.app.services.signoff import statuses
+    from railval.db import audit
+    from railval.db import signoff as db_signoff
+
+    check = verify_database(database, signals=False, full=False)
+    chain_findings = [f for f in check.findings if f.kind in ("chain", "head")]
+    chain_status = ("intact" if not chain_findings else f"BROKEN — {chain_findings[0]}")
+    now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+    with database.session() as s:
+        items = [(db_signoff.as_dict(so), st) for so, st in statuses(s)]
+        rows = list(audit.iter_rows(s))
+    stale = sum(1 for _, st in items if st.status != "valid")
+    h: list[str] = [("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+                     f"<title>railval audit report</title><style>{CSS}</style></head><body>"),
+                    "<h1>Audit report</h1>",
+                    (f"<table class='meta'><tr><td>database</td><td>{_esc(database.safe_url)}</td></tr>"
+                     f"<tr><td>generated</td><td>{now}</td></tr>"
+                     f"<tr><td>audit rows</td><td>{check.rows}</td></tr>"
+                     f"<tr><td>head</td><td><code>{_esc(check.head_hash)}</code></td></tr></table>")]
+    ok = not chain_findings
+    h.append(f"<div class='verdict {'ok' if ok else 'no'}'>Hash chain: {_esc(chain_status)}</div>")
+    h.append("<p class='note'>This report checks the chain and each sign-off's evidence without "
+             "decoding the stored signals. The complete check is <code>railval audit verify "
+             "--checkpoint FILE</code>; offline: <code>railval audit verify --bundle DIR</code> "
+             "(docs/audit.md).</p>")
+    h.append(f"<h2>Sign-offs ({len(items)}, {stale} stale)</h2>")
+    h.append(signoff_rows_html(items))
+    # timeline per configuration
+    h.append("<h2>Timeline of changes per configuration</h2>")
+    per: dict[str, list[dict]] = defaultdict(list)
+    for r in rows:
+        if r["object"].startswith(("configuration:", "campaign:")):
+            per[r["object"]].append(r)
+    if not per:
+        h.append("<p class='note'>No data change recorded.</p>")
+    for obj in sorted(per):
+        h.append(f"<h3>{_esc(obj)}</h3><table><tr><th>seq</th><th class='l'>UTC</th>"
+                 "<th class='l'>actor</th><th class='l'>action</th><th class='l'>before</th>"
+                 "<th class='l'>after</th><th class='l'>reason</th></tr>")
+        for r in per[obj]:
+            h.append(f"<tr><td>{r['seq']}</td><td class='l'>{_esc(r['at_utc'])}</td>"
+                     f"<td class='l'>{_esc(r['actor'])}</td><td class='l'>{_esc(r['action'])}</td>"
+                     f"<td class='l'><code>{_esc((r['before_sha256'] or '–')[:16])}</code></td>"
+                     f"<td class='l'><code>{_esc((r['after_sha256'] or '–')[:16])}</code></td>"
+                     f"<td class='l'>{_esc(r['reason'])}</td></tr>")
+        h.append("</table>")
+    # who did what
+    h.append("<h2>Who did what</h2>")
+    counts: Counter = Counter((r["actor"], r["action"]) for r in rows)
+    actors = sorted({a for a, _ in counts})
+    actions = sorted({b for _, b in counts})
+    h.append("<table><tr><th class='l'>actor</th>" + "".join(f"<th>{_esc(a)}</th>" for a in actions)
+             + "</tr>" + "".join(
+                 f"<tr><td class='l'>{_esc(a)}</td>" + "".join(
+                     f"<td>{counts.get((a, b), '') or ''}</td>" for b in actions) + "</tr>"
+                 for a in actors) + "</table>")
+    h.append("</body></html>")
+    return AuditReport("".join(h), chain_status, now, len(items), stale)

@@ -1,0 +1,319 @@
+"""Sign-in for ``railval serve``: a Bokeh/Tornado auth provider on the user table (docs/security.md).
+
+* ``/login`` (GET form, POST check) verifies the argon2id hash (:func:`railval.db.users.authenticate`:
+  rate limited, every failure recorded in the audit trail) and sets a signed session cookie
+  ``railval_session`` = ``username|issued-at`` (HMAC with the cookie secret, HttpOnly,
+  SameSite=Lax). Panel's built-in ``--basic-auth`` is not used: it compares plain text.
+* Every page load and every websocket connection re-checks the cookie: signature, age below
+  :data:`SESSION_MAX_AGE_S`, the user still exists, is enabled and its password did not
+  change after the cookie was issued (a later ``user passwd`` or ``user disable`` ends the
+  session at the next request).
+* ``/logout`` clears the cookie. ``/invite?token=…`` shows the single-use invitation form and
+  creates the invitee's account.
+* With **no user** in the database the provider lets every request through as the local user
+  (open single-user mode) — :func:`check_startup` allows that only on a loopback address.
+
+The cookie secret comes from ``$RAILVAL_COOKIE_SECRET`` or the file named by
+``$RAILVAL_COOKIE_SECRET_FILE`` (or ``--cookie-secret-file``); without either a random secret
+is made at start (sessions then end when the server restarts).
+"""
+
+from __future__ import annotations
+
+import html
+import ipaddress
+import os
+import secrets
+import time
+from pathlib import Path
+from typing import Any
+
+from bokeh.server.auth_provider import AuthProvider
+from tornado.web import RequestHandler, decode_signed_value
+
+from railval.core.errors import RailvalError
+from railval.core.roles import Principal, open_principal
+from railval.db import users
+
+COOKIE = "railval_session"
+SESSION_MAX_AGE_S = 8 * 3600
+LOGIN_URL = "/login"
+LOGOUT_URL = "/logout"
+INVITE_URL = "/invite"
+
+
+class StartupRefused(RailvalError):
+    """``railval serve`` must not start (no users on a non-loopback address, bad secret)."""
+
+
+def is_loopback(address: str) -> bool:
+    if address in ("localhost", ""):
+        return address == "localhost"
+    try:
+        return ipaddress.ip_address(address).is_loopback
+    except ValueError:
+        return False
+
+
+def cookie_secret(path: str | None = None) -> tuple[str, str]:
+    """(secret, where it came from): ``$RAILVAL_COOKIE_SECRET``, a file, else a random one."""
+    env = os.environ.get("RAILVAL_COOKIE_SECRET")
+    path = path or os.environ.get("RAILVAL_COOKIE_SECRET_FILE")
+    if env:
+        secret, origin = env, "$RAILVAL_COOKIE_SECRET"
+    elif path:
+        try:
+            secret = Path(path).read_text(encoding="utf-8").strip()
+        except OSError as exc:
+            raise StartupRefused(f"cookie secret file {path}: {exc.strerror}") from None
+        origin = f"file {path}"
+    else:
+        return secrets.token_urlsafe(48), "random (sessions end when the server restarts)"
+    if len(secret) < 32:
+        raise StartupRefused(f"cookie secret from {origin} is {len(secret)} characters; "
+                             "use at least 32 random characters")
+    return secret, origin
+
+
+def check_startup(database, address: str) -> bool:
+    """True when the database holds users; raises :class:`StartupRefused` when there are none
+    and ``address`` is not a loopback address."""
+    with database.session() as s:
+        has = users.has_users(s)
+    if not has and not is_loopback(address):
+        raise StartupRefused(
+            f"refusing to serve on {address}: the database {database.safe_url} has no users, so "
+            "anyone reaching the server could act without signing in. Create the first admin "
+            "with `railval user add NAME --role admin` (then engineers, reviewers…), or serve "
+            "on 127.0.0.1 for open single-user mode.")
+    return has
+
+
+def _aware_ts(when) -> float:
+    return users._aware(when).timestamp() if when is not None else 0.0
+
+
+class RailvalAuth(AuthProvider):
+    """The auth provider: login/logout handlers and the per-request user check."""
+
+    def __init__(self, database, secret: str, *, max_age_s: int = SESSION_MAX_AGE_S):
+        self.database = database
+        self.secret = secret
+        self.max_age_s = max_age_s
+        super().__init__()
+
+    # -- cookie -------------------------------------------------------------------------
+    def issue(self, handler: RequestHandler, username: str) -> None:
+        value = f"{username}|{time.time():.3f}"
+        handler.set_signed_cookie(COOKIE, value, expires_days=None, httponly=True,
+                                  samesite="Lax", secure=handler.request.protocol == "https")
+        # Panel's pn.state.user reads the signed cookie "user" with the same secret
+        handler.set_signed_cookie("user", username, expires_days=None, httponly=True,
+                                  samesite="Lax", secure=handler.request.protocol == "https")
+
+    def principal_from_cookie(self, raw: str | None) -> Principal | None:
+        """The principal of a raw cookie value, or None when it is invalid, expired or the
+        user was disabled / changed password since; open mode when the database has no user."""
+        with self.database.session() as s:
+            if not users.has_users(s):
+                return open_principal()
+            if not raw:
+                return None
+            decoded = decode_signed_value(self.secret, COOKIE, raw, max_age_days=1)
+            if decoded is None:
+                return None
+            try:
+                username, issued = decoded.decode("utf-8").rsplit("|", 1)
+                issued_at = float(issued)
+            except ValueError:
+                return None
+            if time.time() - issued_at > self.max_age_s:
+                return None
+            user = users.find_user(s, username)
+            if user is None or user.disabled or user.password_hash is None:
+                return None
+            if users.password_changed_at(s, username) > issued_at:
+                return None
+            return users.principal(user)
+
+    @property
+    def get_user(self):
+        def get_user(handler: RequestHandler):
+            raw = handler.get_cookie(COOKIE)
+            p = self.principal_from_cookie(raw)
+            return None if p is None else p.username
+        return get_user
+
+    @property
+    def login_url(self):
+        return LOGIN_URL
+
+    @property
+    def login_handler(self):
+        provider = self
+
+        class Login(LoginHandler):
+            auth = provider
+        return Login
+
+    @property
+    def logout_url(self):
+        return LOGOUT_URL
+
+    @property
+    def logout_handler(self):
+        provider = self
+
+        class Logout(LogoutHandler):
+            auth = provider
+        return Logout
+
+    def extra_patterns(self) -> list[tuple[str, Any, dict]]:
+        return [(INVITE_URL, InviteHandler, {"auth": self})]
+
+
+# -- pages ---------------------------------------------------------------------------------
+_PAGE = """<!doctype html><html lang="en"><head><meta charset="utf-8">
+<title>railval — {title}</title>
+<style>
+body{{font-family:system-ui,sans-serif;background:#f4f6f8;margin:0}}
+.box{{max-width:380px;margin:8vh auto;background:#fff;padding:28px 32px;border-radius:8px;
+box-shadow:0 2px 8px rgba(0,0,0,.12)}}
+h1{{font-size:20px;color:#0b5394;margin:0 0 4px}} p.sub{{color:#555;margin:0 0 18px}}
+label{{display:block;margin:12px 0 4px;font-size:14px}}
+input{{width:100%;box-sizing:border-box;padding:8px;font-size:15px}}
+button{{margin-top:18px;width:100%;padding:9px;background:#0b5394;color:#fff;border:0;
+border-radius:4px;font-size:15px;cursor:pointer}}
+.msg{{background:#fdecea;color:#8a1f11;padding:9px;border-radius:4px;margin-bottom:8px}}
+.ok{{background:#e8f4ea;color:#1e5a2a;padding:9px;border-radius:4px;margin-bottom:8px}}
+</style></head><body><div class="box">{body}</div></body></html>"""
+
+
+def _page(title: str, body: str) -> str:
+    return _PAGE.format(title=html.escape(title), body=body)
+
+
+def _client(handler: RequestHandler) -> str:
+    return handler.request.remote_ip or ""
+
+
+class LoginHandler(RequestHandler):
+    auth: RailvalAuth
+
+    def _form(self, message: str = "", username: str = "", ok: str = "") -> None:
+        msg = f'<div class="msg" role="alert">{html.escape(message)}</div>' if message else ""
+        okm = f'<div class="ok">{html.escape(ok)}</div>' if ok else ""
+        nxt = html.escape(self.get_argument("next", "/app"), quote=True)
+        self.write(_page("sign in", f"""<h1>railval</h1><p class="sub">Sign in to continue</p>
+{msg}{okm}<form method="post" action="{LOGIN_URL}">
+<input type="hidden" name="next" value="{nxt}">
+<label for="username">User name</label>
+<input id="username" name="username" autocomplete="username" value="{html.escape(username, quote=True)}" autofocus>
+<label for="password">Password</label>
+<input id="password" name="password" type="password" autocomplete="current-password">
+<button type="submit" id="signin">Sign in</button></form>"""))
+
+    def get(self) -> None:
+        self.set_header("Cache-Control", "no-store")
+        self._form(ok="You are signed out." if self.get_argument("out", "") else "")
+
+    def post(self) -> None:
+        self.set_header("Cache-Control", "no-store")
+        username = self.get_argument("username", "")
+        password = self.get_argument("password", "")
+        with self.auth.database.session(actor=username or "(anonymous)") as s:
+            result = users.authenticate(s, username, password, source=_client(self))
+        if not result.ok:
+            self.set_status(403 if "disabled" in result.message else
+                            429 if "Too many" in result.message else 401)
+            self._form(result.message, username)
+            return
+        self.auth.issue(self, result.user.username)
+        nxt = self.get_argument("next", "/app")
+        self.redirect(nxt if nxt.startswith("/") and not nxt.startswith("//") else "/app")
+
+
+class LogoutHandler(RequestHandler):
+    auth: RailvalAuth
+
+    def get(self) -> None:
+        from railval.db import audit
+
+        p = self.auth.principal_from_cookie(self.get_cookie(COOKIE))
+        if p is not None and not p.open_mode:
+            with self.auth.database.session(actor=p.username) as s:
+                audit.record(s, p.username, "logout", f"user:{p.username}",
+                             detail={"source": _client(self)})
+        self.clear_cookie(COOKIE)
+        self.clear_cookie("user")
+        self.redirect(f"{LOGIN_URL}?out=1")
+
+
+class InviteHandler(RequestHandler):
+    """``/invite?token=…``: the invitee chooses a user name and password (single use)."""
+
+    def initialize(self, auth: RailvalAuth) -> None:
+        self.auth = auth
+
+    def _refuse(self, token: str, message: str) -> None:
+        with self.auth.database.session(actor="(anonymous)") as s:
+            users.record_refusal(s, token, message, source=_client(self))
+        self.set_status(403)
+        self.write(_page("invitation", f'<h1>railval</h1><div class="msg" role="alert">'
+                                       f'{html.escape(message)}</div>'
+                                       f'<p><a href="{LOGIN_URL}">Sign in</a></p>'))
+
+    def _form(self, token: str, inv, message: str = "", username: str = "",
+              display: str = "") -> None:
+        msg = f'<div class="msg" role="alert">{html.escape(message)}</div>' if message else ""
+        ws = (f" to workshop {html.escape(str(inv.workshop_ref))}" if inv.workshop_ref else "")
+        self.write(_page("invitation", f"""<h1>railval</h1>
+<p class="sub">You are invited as <b>{html.escape(inv.role)}</b>{ws}. Choose your sign-in.</p>
+{msg}<form method="post" action="{INVITE_URL}">
+<input type="hidden" name="token" value="{html.escape(token, quote=True)}">
+<label for="username">User name</label><input id="username" name="username" value="{html.escape(username, quote=True)}">
+<label for="display_name">Printed name</label><input id="display_name" name="display_name" value="{html.escape(display, quote=True)}">
+<label for="password">Password (at least {users.MIN_PASSWORD_LENGTH} characters)</label>
+<input id="password" name="password" type="password" autocomplete="new-password">
+<label for="password2">Repeat password</label>
+<input id="password2" name="password2" type="password" autocomplete="new-password">
+<button type="submit" id="join">Create account</button></form>"""))
+
+    def get(self) -> None:
+        self.set_header("Cache-Control", "no-store")
+        token = self.get_argument("token", "")
+        try:
+            with self.auth.database.session() as s:
+                inv = users.check_invitation(s, token)
+        except users.InvitationRefused as exc:
+            self._refuse(token, str(exc))
+            return
+        self._form(token, inv)
+
+    def post(self) -> None:
+        from railval.core.errors import InvalidParameter
+
+        self.set_header("Cache-Control", "no-store")
+        token = self.get_argument("token", "")
+        username = self.get_argument("username", "").strip()
+        display = self.get_argument("display_name", "").strip()
+        pw, pw2 = self.get_argument("password", ""), self.get_argument("password2", "")
+        try:
+            with self.auth.database.session(actor=username or "(anonymous)") as s:
+                inv = users.check_invitation(s, token)
+                if pw != pw2:
+                    raise InvalidParameter("the two passwords differ")
+                user = users.redeem_invitation(s, token, username=username, password=pw,
+                                               display_name=display)
+                name = user.username
+        except users.InvitationRefused as exc:
+            self._refuse(token, str(exc))
+            return
+        except InvalidParameter as exc:
+            with self.auth.database.session() as s:
+                inv = users.check_invitation(s, token)
+            self.set_status(400)
+            self._form(token, inv, str(exc), username, display)
+            return
+        self.auth.issue(self, name)
+        self.redirect("/app")

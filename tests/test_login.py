@@ -1,0 +1,196 @@
+"""Sign-in of the served app over HTTP: each refusal has a clear message and an audit row.
+
+Real server (``railval.app.main.served``) on loopback, real HTTP requests (no browser:
+the pages are plain forms). SQLite and PostgreSQL.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import http.cookiejar
+import time
+import urllib.error
+import urllib.parse
+import urllib.request
+
+import pytest
+
+from railval.app.auth import StartupRefused, check_startup, is_loopback
+from railval.app.main import served
+from railval.db import audit, users
+from railval.db.models import Invitation
+
+SECRET = "s" * 40
+
+
+class Client:
+    """A cookie-keeping HTTP client that never raises on 4xx (returns status, body)."""
+
+    def __init__(self, base: str):
+        self.base = base
+        self.jar = http.cookiejar.CookieJar()
+        self.opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(self.jar))
+
+    def get(self, path: str) -> tuple[int, str, str]:
+        return self._open(urllib.request.Request(self.base + path))
+
+    def post(self, path: str, **form: str) -> tuple[int, str, str]:
+        data = urllib.parse.urlencode(form).encode()
+        return self._open(urllib.request.Request(self.base + path, data=data))
+
+    def _open(self, req) -> tuple[int, str, str]:
+        try:
+            with self.opener.open(req, timeout=60) as r:
+                return r.status, r.read().decode("utf-8", "replace"), r.geturl()
+        except urllib.error.HTTPError as e:
+            return e.code, e.read().decode("utf-8", "replace"), e.geturl()
+
+
+@pytest.fixture
+def server(database, monkeypatch):
+    monkeypatch.setenv("RAILVAL_COOKIE_SECRET", SECRET)
+    with database.session() as s:
+        users.create_user(s, "eng", display_name="Eng One", password="engineer pw",
+                          roles=["engineer"])
+        users.create_user(s, "gone", password="disabled pw", roles=["engineer"])
+        users.disable(s, "gone")
+    with served(database) as url:
+        yield database, url.rsplit("/app", 1)[0]
+
+
+def rows(database, action):
+    with database.session() as s:
+        return list(audit.iter_rows(s, action=action))
+
+
+def test_unauthenticated_request_is_sent_to_the_login_page(server):
+    database, base = server
+    status, body, final = Client(base).get("/app")
+    assert status == 200 and "/login" in final and 'name="password"' in body
+
+
+def test_right_password_signs_in_and_logout_ends_the_session(server):
+    database, base = server
+    c = Client(base)
+    status, body, final = c.post("/login", username="eng", password="engineer pw", next="/app")
+    assert status == 200 and final.endswith("/app"), final
+    assert "railval" in body
+    assert [r["object"] for r in rows(database, "login.ok")] == ["user:eng"]
+    assert c.get("/logout")[2].endswith("/login?out=1")
+    assert "/login" in c.get("/app")[2]
+    assert [r["actor"] for r in rows(database, "logout")] == ["eng"]
+
+
+def test_wrong_password_is_refused_and_recorded(server):
+    database, base = server
+    status, body, _ = Client(base).post("/login", username="eng", password="guess")
+    assert status == 401 and "Wrong user name or password." in body
+    (row,) = rows(database, "login.failed")
+    assert row["object"] == "user:eng" and row["detail"]["source"] == "127.0.0.1"
+
+
+def test_disabled_user_is_refused_and_recorded(server):
+    database, base = server
+    status, body, _ = Client(base).post("/login", username="gone", password="disabled pw")
+    assert status == 403 and "This account is disabled; ask an administrator." in body
+    assert rows(database, "login.failed")[0]["reason"] == "account disabled"
+
+
+def test_brute_force_hits_the_rate_limit(server):
+    database, base = server
+    c = Client(base)
+    for i in range(users.MAX_FAILURES_PER_USER):
+        assert c.post("/login", username="eng", password=f"guess {i}")[0] == 401
+    status, body, _ = c.post("/login", username="eng", password="engineer pw")
+    assert status == 429 and "Too many failed sign-ins; try again in 15 minutes." in body
+    assert len(rows(database, "login.failed")) == users.MAX_FAILURES_PER_USER
+    assert len(rows(database, "login.refused")) == 1
+
+
+def test_invitation_single_use_and_expiry(server):
+    database, base = server
+    with database.session() as s:
+        _inv, token = users.create_invitation(s, workshop_ref="W1", actor="eng")
+        old, old_token = users.create_invitation(s, actor="eng")
+        s.query(Invitation).filter_by(id=old.id).update(
+            {"expires_at": dt.datetime.now(dt.UTC) - dt.timedelta(hours=1)})
+    c = Client(base)
+    status, body, _ = c.get(f"/invite?token={token}")
+    assert status == 200 and "reviewer" in body and "workshop W1" in body
+    status, body, final = c.post("/invite", token=token, username="rev1", display_name="R. One",
+                                 password="reviewer pw", password2="reviewer pw")
+    assert status == 200 and final.endswith("/app")
+    status, body, _ = Client(base).get(f"/invite?token={token}")
+    assert status == 403 and "already been used" in body
+    status, body, _ = Client(base).post("/invite", token=token, username="rev2",
+                                        password="reviewer pw", password2="reviewer pw")
+    assert status == 403 and "already been used" in body
+    status, body, _ = Client(base).get(f"/invite?token={old_token}")
+    assert status == 403 and "expired" in body
+    refused = rows(database, "invitation.refused")
+    assert len(refused) == 3 and all(r["reason"] for r in refused)
+    with database.session() as s:
+        assert users.get_user(s, "rev1").role_names == ["reviewer"]
+        assert users.find_user(s, "rev2") is None
+
+
+def test_session_ends_when_the_password_changes(server):
+    database, base = server
+    c = Client(base)
+    c.post("/login", username="eng", password="engineer pw")
+    assert c.get("/app")[2].endswith("/app")
+    time.sleep(0.01)
+    with database.session() as s:
+        users.set_password(s, "eng", "a new password")
+    assert "/login" in c.get("/app")[2]
+
+
+def test_no_users_open_mode_on_loopback_only(db_url):
+    from railval.db.engine import connect
+
+    database = connect(db_url)
+    database.init()
+    assert is_loopback("127.0.0.1") and is_loopback("::1") and is_loopback("localhost")
+    assert not is_loopback("0.0.0.0") and not is_loopback("192.168.1.5")
+    assert check_startup(database, "127.0.0.1") is False
+    with pytest.raises(StartupRefused, match="has no users.*railval user add NAME --role admin"):
+        check_startup(database, "0.0.0.0")
+    from railval.app.cli import main
+
+    assert main(["--db", db_url, "serve", "--address", "0.0.0.0", "--no-demo"]) == 2
+    with database.session() as s:
+        users.create_user(s, "admin", password="admin password", roles=["admin"])
+    assert check_startup(database, "0.0.0.0") is True
+    database.dispose()
+
+
+def test_behind_proxy_the_rate_limit_counts_the_forwarded_client(database, monkeypatch):
+    monkeypatch.setenv("RAILVAL_COOKIE_SECRET", SECRET)
+    with database.session() as s:
+        users.create_user(s, "eng", password="engineer pw", roles=["engineer"])
+    with served(database, behind_proxy=True) as url:
+        req = urllib.request.Request(url.rsplit("/app", 1)[0] + "/login",
+                                     data=b"username=eng&password=nope",
+                                     headers={"X-Forwarded-For": "203.0.113.7"})
+        with pytest.raises(urllib.error.HTTPError) as err:
+            urllib.request.urlopen(req, timeout=60)
+        assert err.value.code == 401
+    assert rows(database, "login.failed")[0]["detail"]["source"] == "203.0.113.7"
+
+
+def test_session_cookie_expires_and_forged_cookies_are_refused(database):
+    from tornado.web import create_signed_value
+
+    from railval.app.auth import COOKIE, RailvalAuth
+
+    with database.session() as s:
+        users.create_user(s, "eng", password="engineer pw", roles=["engineer"])
+    auth = RailvalAuth(database, SECRET, max_age_s=60)
+    fresh = create_signed_value(SECRET, COOKIE, f"eng|{time.time():.3f}").decode()
+    old = create_signed_value(SECRET, COOKIE, f"eng|{time.time() - 61:.3f}").decode()
+    forged = create_signed_value("y" * 40, COOKIE, f"eng|{time.time():.3f}").decode()
+    assert auth.principal_from_cookie(fresh).roles == frozenset({"engineer"})
+    assert auth.principal_from_cookie(old) is None  # older than the session lifetime
+    assert auth.principal_from_cookie(forged) is None  # signed with another secret
+    assert auth.principal_from_cookie(None) is None
+    assert auth.principal_from_cookie("eng|0") is None  # unsigned
