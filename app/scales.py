@@ -64,7 +64,7 @@ def norm_ticks(top: float, signed: bool) -> list[float]:
     """Ticks of a normalised-value axis [−top or 0, top]: nice steps plus the limit 1.0 (and
     −1.0 when signed), always labelled."""
     lo = -top if signed else 0.0
-    ticks = set(round(t, 9) for t in nice_ticks(lo, top)) | {1.0} | ({-1.0} if signed else set())
+    ticks = {round(t, 9) for t in nice_ticks(lo, top)} | {1.0} | ({-1.0} if signed else set())
     return sorted(ticks)
 
 

@@ -66,8 +66,6 @@ def test_diagnosis_is_stored_and_reused(synth_demo, monkeypatch):
 
 
 def test_metrics_are_stored_reused_and_recomputed_when_inputs_change(demo, monkeypatch):
-    from railval.db import repo
-
     args = ("demo", "baseline", ["S02"], ["Y_w1L", "ay_cb_b1"])
     with demo.session() as s:
         first = metrics_service.metrics_for_configuration(s, *args, families=["sprague_geers"])

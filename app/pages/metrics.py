@@ -118,7 +118,7 @@ def metric_headers(columns) -> dict[str, str]:
     ("signal": the unit column of the row)."""
     out = {}
     for c in columns:
-        base = c[:-5] if c.endswith("_sync") else c
+        base = c.removesuffix("_sync")
         if base in METRICS:
             m = METRICS[base]
             unit = {"-": "", "signal": " [signal unit]"}.get(m.unit, f" [{m.unit}]")
