@@ -20,9 +20,11 @@ TABLE_STYLE = {"font-size": "13px"}
 #: button groups (time/distance, processing, scope): the selected button is filled in the
 #: app's blue with white text, the others white with a blue outline, so the choice is obvious
 TOGGLE_CSS = """
-:host .bk-btn-group .bk-btn { background: #ffffff; color: #0b5394; border: 1px solid #0b5394; }
-:host .bk-btn-group .bk-btn.bk-active { background: #0b5394; color: #ffffff; font-weight: 600;
-                                        box-shadow: none; }
+.bk-btn, .bk-btn.bk-btn-default { background: #ffffff !important; background-image: none !important;
+                                  color: #0b5394 !important; border: 1px solid #0b5394 !important; }
+.bk-btn.bk-active, .bk-btn.bk-btn-default.bk-active { background: #0b5394 !important;
+                                                      color: #ffffff !important; font-weight: 600;
+                                                      box-shadow: none !important; }
 """
 
 
