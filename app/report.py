@@ -129,9 +129,12 @@ def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: s
     """Line chart as SVG: ``traces`` = [(label, x, y, colour)], first drawn first (beneath);
     ``marks`` = [(label, y, colour)]: dashed horizontal lines across ``shade`` (the evaluated
     range) or the whole width, e.g. the evaluated statistic of each side."""
-    ml, mr, mt, mb = 70, 14, 30, 46
-    w, h = width - ml - mr, height - mt - mb
     marks = [m for m in (marks or []) if math.isfinite(m[1])]
+    # with marks the legend goes below the plot (two columns), clear of the traces
+    legend_rows = math.ceil((len(traces) + len(marks)) / 2) if marks else 0
+    height += 18 * legend_rows + 12 if legend_rows else 0
+    ml, mr, mt, mb = 70, 14, 30, 46 + (18 * legend_rows + 12 if legend_rows else 0)
+    w, h = width - ml - mr, height - mt - mb
     xs = np.concatenate([t[1] for t in traces]) if traces else np.array([0.0, 1.0])
     ys = np.concatenate([t[2] for t in traces] + [np.array([m[1] for m in marks])]) if traces \
         else np.array([0.0, 1.0])
@@ -160,18 +163,24 @@ def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: s
         pts = " ".join(f"{a:.1f},{b:.1f}" for a, b in zip(px(x), py(y), strict=True))
         out.append(f'<polyline fill="none" stroke="{color}" stroke-width="{1.4 if i == 0 else 1.1}" '
                    f'points="{pts}"/>')
-        out.append(f'<rect x="{ml + w - 200}" y="{mt + 6 + 16 * i}" width="14" height="3" fill="{color}"/>'
-                   f'<text x="{ml + w - 180}" y="{mt + 11 + 16 * i}">{_esc(label)}</text>')
+        if marks:
+            lx, ly = ml + (i % 2) * w / 2, mt + h + 52 + 18 * (i // 2)
+            out.append(f'<rect x="{lx:.1f}" y="{ly - 5}" width="14" height="3" fill="{color}"/>'
+                       f'<text x="{lx + 20:.1f}" y="{ly}">{_esc(label)}</text>')
+        else:
+            out.append(f'<rect x="{ml + w - 200}" y="{mt + 6 + 16 * i}" width="14" height="3" fill="{color}"/>'
+                       f'<text x="{ml + w - 180}" y="{mt + 11 + 16 * i}">{_esc(label)}</text>')
     for j, (label, yv, color) in enumerate(marks):
         a, b = (max(shade[0], x0), min(shade[1], x1)) if shade is not None else (x0, x1)
         out.append(f'<line class="mark" x1="{px(a):.1f}" x2="{px(b):.1f}" y1="{py(yv):.1f}" y2="{py(yv):.1f}" '
                    f'stroke="{color}" stroke-width="1.6" stroke-dasharray="7,3"><title>{_esc(label)}</title></line>')
         k = len(traces) + j
-        out.append(f'<line x1="{ml + w - 200}" x2="{ml + w - 186}" y1="{mt + 8 + 16 * k}" y2="{mt + 8 + 16 * k}" '
+        lx, ly = ml + (k % 2) * w / 2, mt + h + 52 + 18 * (k // 2)
+        out.append(f'<line x1="{lx:.1f}" x2="{lx + 14:.1f}" y1="{ly - 4}" y2="{ly - 4}" '
                    f'stroke="{color}" stroke-width="1.6" stroke-dasharray="4,2"/>'
-                   f'<text x="{ml + w - 180}" y="{mt + 11 + 16 * k}">{_esc(label)}</text>')
+                   f'<text x="{lx + 20:.1f}" y="{ly}">{_esc(label)}</text>')
     out.append(f'<rect x="{ml}" y="{mt}" width="{w}" height="{h}" fill="none" stroke="#000"/>')
-    out.append(f'<text x="{ml + w / 2}" y="{height - 8}" text-anchor="middle">{_esc(xlabel)}</text>')
+    out.append(f'<text x="{ml + w / 2}" y="{mt + h + 32}" text-anchor="middle">{_esc(xlabel)}</text>')
     out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
     out.append("</svg>")
     return "".join(out)
@@ -457,14 +466,17 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
             for stat, v in trace.marks.items():
                 marks.append((f"{label}: {stat} = {v:.4g}", v, color))
         unit = unit_label(q.unit if q.unit != "-" else "")
-        what = (f"{trace.signal_label}, 2 m sliding mean" if trace.sliding_means is not None
-                else trace.signal_label)
+        short = {"YQ": f"Y/Q {r.position}", "SumY": f"ΣY {r.position}"}.get(q.signal, names[0])
+        sliding = trace.sliding_means is not None
         title = (f"{r.quantity} at {r.position}, section {r.section} (zone {r.zone}): "
                  f"D_v/limit = {r.D_norm:+.2f}")
+        caption = (f"Plotted: {trace.signal_label}{', 2 m sliding mean every 0.5 m' if sliding else ''}; "
+                   f"statistic: {q.processing_text} over the evaluated range (shaded).")
         out.append("<div class='worst'>" + svg_lines(
             traces, title=title, xlabel="distance (m)",
-            ylabel=f"{what}{f' ({unit})' if unit else ''}",
-            shade=(sec.eval_start_m, sec.eval_end_m), marks=marks) + "</div>")
+            ylabel=f"{short}{' (2 m mean)' if sliding else ''}{f' ({unit})' if unit else ' (–)'}",
+            shade=(sec.eval_start_m, sec.eval_end_m), marks=marks)
+            + f"<p class='note'>{_esc(caption)}</p></div>")
     return out
 
 

@@ -169,8 +169,9 @@ def test_worst_case_plots_show_the_quantity_of_the_row(demo_db):
     out = _worst_case_plots(backend, "demo", "baseline", types.SimpleNamespace(pairs=pairs), ov, 3)
     assert len(out) == 3
     labels = [re.search(r'rotate\(-90\)" text-anchor="middle">([^<]+)<', svg).group(1) for svg in out]
-    assert labels[0].startswith("Y/Q w1L") and labels[1].startswith("Y_w1L")
-    assert labels[2].startswith("ΣY ws1 = Y_w1L + Y_w1R") and "2 m sliding mean" in labels[2]
+    assert labels == ["Y/Q w1L (–)", "Y_w1L (kN)", "ΣY ws1 (2 m mean) (kN)"]
+    assert "Y/Q sample-wise" in out[0] and "ΣY ws1 = Y_w1L + Y_w1R" in out[2]
+    assert "2 m sliding mean every 0.5 m" in out[2] and "0.15 % / 99.85 % values" in out[2]
     polylines = [re.findall(r'<polyline[^>]*points="([^"]+)"', svg) for svg in out]
     assert polylines[0][0] != polylines[1][0]  # not the same Y trace twice
     assert out[0].count('class="mark"') == 2 and "50 % value" in out[0]  # median, both sides

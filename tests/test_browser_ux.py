@@ -62,7 +62,7 @@ def test_metrics_persist_across_sessions_with_human_headers(page, app_url, conte
     main2 = other_tab.locator(".rv-main")
     main2.locator(".tabulator-col-title", has_text="Sprague–Geers M").first.wait_for(timeout=TIMEOUT_MS)
     assert main2.locator(".rv-metrics .tabulator-row").count() >= 12
-    assert "Stored metrics runs of this configuration (1)" in main2.inner_text()
+    main2.get_by_text("Stored metrics runs of this configuration (1)").wait_for(timeout=TIMEOUT_MS)
     screenshot(other_tab, "ux-metrics-second-tab")
     other_tab.close()
 
@@ -78,7 +78,7 @@ def test_dashboard_table_headers_units_and_red_fail(page, app_url):
     for header in ("what it is", "unit", "mean D_v", "std D_v (n−1)", "mean limit", "mean / limit", "verdict"):
         assert header in titles, titles
     assert not {"mean_norm", "std_norm", "pass"} & set(titles)
-    assert "quasi-static guiding force" in table.inner_text()
+    table.get_by_text("quasi-static guiding force").first.wait_for(timeout=TIMEOUT_MS)
     fails = table.locator(".tabulator-cell[tabulator-field='verdict']", has_text="FAIL")
     passes = table.locator(".tabulator-cell[tabulator-field='verdict']", has_text="pass")
     assert fails.count() + passes.count() > 0

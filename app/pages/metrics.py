@@ -35,10 +35,11 @@ class MetricsPage(PageBase):
         super().__init__(app, **params)
         self.state = MetricsState(app)
         self.state.param.watch(lambda *e: self._on_app_change(), ["view", "frame"])
-        self.view = toggle_group(self.state.param.view, "Signals")
-        self.scope = toggle_group(self.state.param.scope, "Scope")
+        self.view = toggle_group(self.state.param.view, "Signals", width=380, sizing_mode="fixed")
+        self.scope = toggle_group(self.state.param.scope, "Scope", width=250, sizing_mode="fixed")
         self.iso = pn.widgets.Checkbox.from_param(self.state.param.include_iso,
-                                                  name="include ISO/TS 18571 rating (slow)", width=230)
+                                                  name="include ISO/TS 18571 rating (slow)", width=260,
+                                                  margin=(8, 10))
         self.state.param.watch(lambda *e: self._on_app_change(), ["include_iso"])
         self.section = pn.widgets.Select.from_param(app.param.section, name="Section", width=160)
         self.compute_btn = pn.widgets.Button(label="Compute metrics", color="primary", width=180)
@@ -47,9 +48,9 @@ class MetricsPage(PageBase):
         app.param.watch(lambda e: setattr(self.compute_btn, "disabled", bool(e.new)), ["busy"])
 
     def refresh(self) -> None:
-        controls = pn.Row(self.section, self.scope, self.view,
-                          pn.Column(pn.Spacer(height=30), self.iso),
-                          pn.Column(pn.Spacer(height=30), self.compute_btn))
+        controls = pn.FlexBox(self.section, self.scope, self.view,
+                              pn.Column(pn.Spacer(height=22), self.iso),
+                              pn.Column(pn.Spacer(height=30), self.compute_btn))
         df = self.state.table()
         if (df is None or self.state.computed_for != self.state.key()) and self.state.load_stored():
             return  # the stored run is shown (setting the frame redrew the page)
@@ -96,7 +97,8 @@ class MetricsPage(PageBase):
             df["lag_reliable"] = df["lag_reliable"].map({True: "yes", False: "NO (at the bound)"})
         df = df.rename(columns=metric_headers(df.columns))
         text_cols = [c for c in ("section", "channel", "unit") if c in df.columns]
-        tab = table(df, height=560, pagination="local", page_size=50, frozen_columns=text_cols[:2],
+        tab = table(df, height=min(560, 110 + 30 * len(df)), pagination="local", page_size=50,
+                    frozen_columns=text_cols[:2],
                     layout="fit_data_fill", css_classes=["rv-metrics"],
                     header_filters={c: {"type": "input", "func": "like", "placeholder": "filter"}
                                     for c in text_cols})
