@@ -65,7 +65,8 @@ def summary_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
     df = pd.DataFrame(rows)
     if "quantity" in df:
         df["name"] = [QUANTITIES[q].name if q in QUANTITIES else "" for q in df["quantity"]]
-        df["unit"] = [unit_label(QUANTITIES[q].unit) if q in QUANTITIES else "" for q in df["quantity"]]
+        df["unit"] = [unit_label(QUANTITIES[q].unit).replace("-", "–") if q in QUANTITIES else ""
+                      for q in df["quantity"]]
     cols = [c for c in SUMMARY_COLUMNS if c in df.columns]
     df = df[cols].copy()
     for c in ("mean", "std", "mean_limit", "std_limit", "mean_norm", "std_norm"):
@@ -74,6 +75,9 @@ def summary_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
     if "pass" in df:
         df["pass"] = df["pass"].map({True: "pass", False: "FAIL"})
     return df.rename(columns=SUMMARY_HEADERS)
+
+
+WRAP_HEADERS_CSS = ".tabulator-col-title { white-space: normal !important; }"
 
 
 def verdict_style(value: Any) -> str:
@@ -88,7 +92,11 @@ def verdict_style(value: Any) -> str:
 def summary_table(rows: list[dict[str, Any]]) -> pn.widgets.Tabulator:
     """The quantity table: human headers, FAIL coloured, columns fitted to their content."""
     df = summary_frame(rows)
-    tab = table(df, height=40 + 32 * len(df), layout="fit_data_fill", css_classes=["rv-summary"])
+    # every column inside the page width: headers wrap, the name column takes the rest
+    widths = {c: 84 for c in df.columns}
+    widths.update({"quantity": 92, "what it is": 250, "unit": 56, "pairs n": 64, "verdict": 76})
+    tab = table(df, height=64 + 32 * len(df), layout="fit_columns", widths=widths, css_classes=["rv-summary"],
+                stylesheets=[":host {font-size: 13px;}", WRAP_HEADERS_CSS])
     if "verdict" in df:
         tab.style.map(verdict_style, subset=["verdict"])
     return tab
