@@ -93,8 +93,8 @@ def summary_table(rows: list[dict[str, Any]]) -> pn.widgets.Tabulator:
     """The quantity table: human headers, FAIL coloured, columns fitted to their content."""
     df = summary_frame(rows)
     # every column inside the page width: headers wrap, the name column takes the rest
-    widths = {c: 62 for c in df.columns}  # 870 px in all: fits the main area at 1280 px
-    widths.update({"quantity": 96, "what it is": 210, "unit": 56, "pairs n": 60, "verdict": 76})
+    widths = {c: 72 for c in df.columns}  # 892 px in all: fits the main area at 1280 px
+    widths.update({"quantity": 90, "what it is": 170, "unit": 60, "pairs n": 60, "verdict": 80})
     tab = table(df, height=80 + 40 * len(df), layout="fit_columns", widths=widths, css_classes=["rv-summary"],
                 formatters={"what it is": {"type": "textarea"}},  # long names wrap, never cut
                 stylesheets=[":host {font-size: 13px;}", WRAP_HEADERS_CSS])
