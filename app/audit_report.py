@@ -14,9 +14,8 @@ import os
 from collections import Counter, defaultdict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-from railval.app.report import CSS, ReportError, _esc, html_to_pdf
+from railval.app.report import CSS, ReportError, _esc, html_to_pdf, signoff_rows_html
 
 
 @dataclass
@@ -40,30 +39,6 @@ class AuditReport:
 
     def pdf_bytes(self) -> bytes:
         return html_to_pdf(self.html)
-
-
-def signoff_rows_html(items: list[tuple[dict[str, Any], Any]]) -> str:
-    """The sign-off table (escaped) used by this report and the validation report."""
-    if not items:
-        return "<p class='note'>No sign-off.</p>"
-    rows = []
-    for d, st in items:
-        cls = "pass" if st.status == "valid" else "fail"
-        why = "<br>".join(_esc(r) for r in st.reasons[:5])
-        rows.append(
-            f"<tr><td>{d['id']}</td><td class='l'>{_esc(d['campaign'])} / {_esc(d['configuration'])}</td>"
-            f"<td class='l {cls}'>{_esc(st.status)}</td><td class='l'>{_esc(d['decision_text'])}</td>"
-            f"<td class='l'>{_esc(d['printed_name'])} ({_esc(d['username'])})</td>"
-            f"<td class='l'>{_esc(d['signed_at_utc'])}</td>"
-            f"<td class='l'>{_esc(d['meaning'])}</td>"
-            f"<td class='l'>{_esc(d['restrictions'] or '–')}</td><td class='l'>{_esc(d['statement'] or '–')}</td>"
-            f"<td class='l' style='font-family:monospace;font-size:10px'>{_esc(d['evidence_sha256'])}</td>"
-            f"<td class='l'>{why}</td></tr>")
-    return ("<table><tr><th>id</th><th class='l'>configuration</th><th class='l'>status</th>"
-            "<th class='l'>decision</th><th class='l'>signed by</th><th class='l'>UTC</th>"
-            "<th class='l'>meaning</th><th class='l'>restrictions</th><th class='l'>statement</th>"
-            "<th class='l'>evidence SHA-256</th><th class='l'>changed since</th></tr>"
-            + "".join(rows) + "</table>")
 
 
 def build_audit_report(database) -> AuditReport:

@@ -1,7 +1,9 @@
 """The engineers' web app: template, navigation, pages (docs/design.md §1, §3–§7).
 
 ``build_app(database)`` returns one session's Panel template (each browser session gets its
-own :class:`railval.app.state.AppState`); ``serve(database, ...)`` serves it with ``pn.serve``.
+own :class:`railval.app.state.AppState`); ``serve(database, ...)`` serves it with ``pn.serve``,
+together with the review-workshop pages (``/workshops``, ``/review/…``) of
+:mod:`railval.app.workshop_web` as plain Tornado handlers.
 Pages are one module each under ``app/pages``; their state lives in ``app/state/`` (one module per page).
 """
 
@@ -18,6 +20,7 @@ from typing import Any
 
 import panel as pn
 
+from railval.app import security
 from railval.app.pages.compare import ComparePage
 from railval.app.pages.dashboard import DashboardPage
 from railval.app.pages.diagnose import DiagnosePage
@@ -33,6 +36,7 @@ STATIC = Path(__file__).resolve().parent.parent / "static"
 CSS_FILE = STATIC / "railval.css"
 ACCENT = "#0b5394"
 
+security.use_local_fonts()
 pn.extension("tabulator", notifications=False, design="native", sizing_mode="stretch_width")
 
 PAGE_CLASSES = {
@@ -77,11 +81,15 @@ def status_area(app: AppState) -> pn.Column:
     bar = pn.indicators.Progress(value=0, max=100, sizing_mode="stretch_width", visible=False,
                                  css_classes=["rv-progress"], bar_color="info")
 
+    cancel = pn.widgets.Button(name="Cancel job", button_type="warning", visible=False,
+                               width=120, css_classes=["rv-cancel"])
+    cancel.on_click(lambda _: app.cancel_job())
+
     def sync(*_):
-        bar.visible = app.busy
+        bar.visible = cancel.visible = app.busy
         bar.value = round(app.progress * 100)
     app.param.watch(sync, ["busy", "progress"])
-    return pn.Column(pn.bind(alert, app.param.status, app.param.status_level), bar,
+    return pn.Column(pn.bind(alert, app.param.status, app.param.status_level), bar, cancel,
                      sizing_mode="stretch_width")
 
 
@@ -194,20 +202,34 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     :class:`railval.app.auth.StartupRefused` when the database has no users and ``address``
     is not a loopback address. ``behind_proxy``: take the client address from the proxy's
     X-Forwarded-For / X-Real-Ip headers (Tornado ``xheaders``), so the sign-in rate limit per
-    address counts clients, not the proxy; only behind a proxy that sets these headers."""
+    address counts clients, not the proxy; only behind a proxy that sets these headers.
+    Every response carries the security headers of :mod:`railval.app.security`; Bokeh
+    session ids are signed (a forged one is refused); websockets are accepted only from
+    ``allow_websocket_origin`` — never from any origin (``*``)."""
     from railval.app.auth import SESSION_MAX_AGE_S, RailvalAuth, check_startup, cookie_secret
 
+    origins = allow_websocket_origin or [f"{address}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
+    if any(o.strip() == "*" or o.strip().startswith("*:") for o in origins):
+        # checked before anything else starts: '*' lets any web site drive a session
+        from railval.core.errors import InvalidParameter
+
+        raise InvalidParameter("--allow-websocket-origin '*' would let any web site drive a "
+                               "session (cross-site websocket hijacking); name the host[:port] "
+                               "the users' browsers connect to")
     check_startup(database, address)
     secret, _origin = cookie_secret(cookie_secret_file)
     auth = RailvalAuth(database, secret, max_age_s=session_max_age_s or SESSION_MAX_AGE_S)
-    origins = allow_websocket_origin or [f"{address}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
+    from railval.app.workshop_web import routes
+
+    extra = list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database, auth)
     if behind_proxy:
         kw["http_server_kwargs"] = {**kw.get("http_server_kwargs", {}), "xheaders": True}
     return pn.serve({"app": lambda: build_app(database, auth=auth)}, port=port, address=address,
                     show=show, threaded=threaded, title="railval", allow_websocket_origin=origins,
                     static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {},
                     auth_provider=auth, cookie_secret=secret,
-                    extra_patterns=auth.extra_patterns(), **kw)
+                    extra_patterns=extra, transforms=security.transforms(),
+                    sign_sessions=True, secret_key=security.session_secret().encode(), **kw)
 
 
 def free_port() -> int:

@@ -35,16 +35,24 @@ from bokeh.models import (
 )
 from bokeh.plotting import figure
 from holoviews.operation.downsample import downsample1d
-from tsdownsample import MinMaxLTTBDownsampler
 
-from railval.app.scales import MEASURED_COLOR, SIM_COLORS, nice_limits, norm_axis_top, norm_ticks, unit_label
+from railval.app.scales import (
+    FAIL_COLOR,
+    LIMIT_COLOR,
+    MEASURED_COLOR,
+    PASS_COLOR,
+    SIM_COLORS,
+    downsample_xy,
+    nice_limits,
+    norm_axis_top,
+    norm_ticks,
+    passes,
+    unit_label,
+)
 from railval.app.state.compare import CompareData
 
 hv.extension("bokeh", logo=False)
 
-PASS_COLOR = "#2e7d32"
-FAIL_COLOR = "#c62828"
-LIMIT_COLOR = "#000000"
 FONTS = {"title": "13pt", "labels": "12pt", "xticks": "11pt", "yticks": "11pt", "legend": "11pt"}
 #: signals longer than this are downsampled on the server
 DOWNSAMPLE_ABOVE = 2000
@@ -108,30 +116,6 @@ def compare_plot(data: CompareData, height: int = 330, downsample: bool = True,
         if ylim is not None:
             opts["ylim"] = ylim
     return overlay.opts(hv.opts.Overlay(**opts))
-
-
-def downsample_xy(x: np.ndarray, y: np.ndarray, n_out: int = FIGURE_POINTS,
-                  x_range: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """At most ``n_out`` points of ``(x, y)`` within ``x_range`` (inclusive, plus one
-    neighbour each side so lines reach the window edges), chosen by min-max LTTB
-    (tsdownsample ``MinMaxLTTBDownsampler``: per-bucket min/max preselection, then
-    largest-triangle-three-buckets, Steinarsson 2013; the first and last point kept).
-
-    ``x`` must be increasing. Non-finite samples are dropped before selection.
-    """
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    if x_range is not None and x.size:
-        i0 = max(int(np.searchsorted(x, x_range[0], side="left")) - 1, 0)
-        i1 = min(int(np.searchsorted(x, x_range[1], side="right")) + 1, x.size)
-        x, y = x[i0:i1], y[i0:i1]
-    ok = np.isfinite(x) & np.isfinite(y)
-    if not ok.all():
-        x, y = x[ok], y[ok]
-    if x.size <= n_out:
-        return x, y
-    idx = MinMaxLTTBDownsampler().downsample(np.ascontiguousarray(x), np.ascontiguousarray(y), n_out=n_out)
-    return x[idx], y[idx]
 
 
 class CompareFigure:
@@ -253,8 +237,7 @@ def _bars(rows: list[dict[str, Any]], key: str, ci_key: str | None, title: str,
           ylabel: str, signed: bool, height: int) -> tuple[hv.Overlay, hv.Bars]:
     quantities = [r["quantity"] for r in rows]
     values = [float("nan") if r.get(key) is None else float(r[key]) for r in rows]
-    passed = [math.isfinite(v) and abs(v) <= 1.0 for v in values]
-    status = ["pass" if p else "fail" for p in passed]
+    status = ["pass" if passes(v) else "fail" for v in values]
     bars = hv.Bars(
         {"quantity": quantities, "value": values, "verdict": status},
         kdims=[hv.Dimension("quantity", label="EN 14363 quantity")],

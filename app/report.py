@@ -18,6 +18,7 @@ from __future__ import annotations
 import datetime as dt
 import hashlib
 import html
+import json
 import math
 import os
 import platform
@@ -32,16 +33,16 @@ from typing import Any
 import numpy as np
 
 from railval.app.scales import (
+    FAIL_COLOR,
     MEASURED_COLOR,
+    PASS_COLOR,
     SIM_COLORS,
-    nice_limits,
-    nice_ticks,
-    norm_axis_top,
-    norm_ticks,
+    downsample_xy,
     unit_label,
 )
-from railval.core.errors import RailvalError
+from railval.app.svg_charts import svg_bars, svg_lines
 from railval.core.diagnosis import where_grid
+from railval.core.errors import RailvalError
 from railval.core.en14363 import quantity_trace
 from railval.core.quantities import QUANTITIES
 
@@ -50,6 +51,8 @@ CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "goo
 CHROMIUM_ARGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync")
 PDF_TIMEOUT_S = 120
+#: points per trace of the report's line charts
+SVG_POINTS = 1200
 
 
 class ReportError(RailvalError):
@@ -74,126 +77,6 @@ def _fmt(x: Any, digits: int = 3) -> str:
     if not math.isfinite(v):
         return "–"
     return f"{v:.{digits}g}" if abs(v) >= 1e4 or (v != 0 and abs(v) < 1e-3) else f"{v:.{digits}f}"
-
-
-# ----------------------------------------------------------------------------- SVG charts
-def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
-             limits: tuple[float, ...] = (1.0,), intervals: list | None = None,
-             width: int = 560, height: int = 300) -> str:
-    """Vertical bar chart as SVG; bars beyond ±1 red, others green; dashed limit lines."""
-    ml, mr, mt, mb = 62, 12, 30, 92
-    w, h = width - ml - mr, height - mt - mb
-    ends = [b for c in (intervals or []) if c for b in c]
-    top = norm_axis_top([*values, *ends])  # the dashboard's axis: ±2 unless exceeded
-    signed = any(lim < 0 for lim in limits)
-    lo = -top if signed else 0.0
-
-    def y(v: float) -> float:
-        return mt + h * (top - v) / (top - lo)
-
-    out = [(f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
-           f'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">'),
-           f'<text x="{width / 2}" y="18" text-anchor="middle" font-size="14" font-weight="bold">{_esc(title)}</text>']
-    for t in norm_ticks(top, signed):  # nice steps and the limit 1.0
-        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{y(t):.1f}" y2="{y(t):.1f}" stroke="#e0e0e0"/>'
-                   f'<text x="{ml - 6}" y="{y(t) + 4:.1f}" text-anchor="end" class="tick">{t:g}</text>')
-    n = max(1, len(labels))
-    bw = w / n
-    for i, (lab, v) in enumerate(zip(labels, values, strict=True)):
-        x0 = ml + i * bw
-        if v is not None and math.isfinite(v):
-            color = "#c62828" if abs(v) > 1.0 else "#2e7d32"
-            y0, y1 = sorted((y(0.0), y(v)))
-            out.append(f'<rect x="{x0 + bw * 0.15:.1f}" y="{y0:.1f}" width="{bw * 0.7:.1f}" '
-                       f'height="{max(y1 - y0, 0.5):.1f}" fill="{color}"><title>{_esc(lab)}: {v:.3f}</title></rect>')
-            if intervals and intervals[i] and None not in intervals[i]:
-                a, b = intervals[i]
-                xc = x0 + bw / 2
-                out.append(f'<line x1="{xc:.1f}" x2="{xc:.1f}" y1="{y(a):.1f}" y2="{y(b):.1f}" stroke="#000" '
-                           f'stroke-width="1.3"/>')
-        out.append(f'<text transform="translate({x0 + bw / 2:.1f},{mt + h + 8}) rotate(45)" '
-                   f'font-size="11">{_esc(lab)}</text>')
-    for lim in limits:
-        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{y(lim):.1f}" y2="{y(lim):.1f}" stroke="#000" '
-                   f'stroke-dasharray="6,4" stroke-width="1.4"/>')
-    out.append(f'<line x1="{ml}" x2="{ml}" y1="{mt}" y2="{mt + h}" stroke="#000"/>'
-               f'<line x1="{ml}" x2="{ml + w}" y1="{y(max(lo, 0.0)):.1f}" y2="{y(max(lo, 0.0)):.1f}" stroke="#000"/>')
-    out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
-    out.append("</svg>")
-    return "".join(out)
-
-
-def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: str, xlabel: str,
-              ylabel: str, shade: tuple[float, float] | None = None, width: int = 760,
-              height: int = 280, marks: list[tuple[str, float, str]] | None = None) -> str:
-    """Line chart as SVG: ``traces`` = [(label, x, y, colour)], first drawn first (beneath);
-    ``marks`` = [(label, y, colour)]: dashed horizontal lines across ``shade`` (the evaluated
-    range) or the whole width, e.g. the evaluated statistic of each side."""
-    marks = [m for m in (marks or []) if math.isfinite(m[1])]
-    # with marks the legend goes below the plot (two columns), clear of the traces
-    legend_rows = math.ceil((len(traces) + len(marks)) / 2) if marks else 0
-    height += 18 * legend_rows + 12 if legend_rows else 0
-    ml, mr, mt, mb = 70, 14, 30, 46 + (18 * legend_rows + 12 if legend_rows else 0)
-    w, h = width - ml - mr, height - mt - mb
-    xs = np.concatenate([t[1] for t in traces]) if traces else np.array([0.0, 1.0])
-    ys = np.concatenate([t[2] for t in traces] + [np.array([m[1] for m in marks])]) if traces \
-        else np.array([0.0, 1.0])
-    x0, x1 = nice_limits(float(np.min(xs)), float(np.max(xs)))
-    y0, y1 = nice_limits(float(np.min(ys)), float(np.max(ys)))
-
-    def px(v):
-        return ml + w * (np.asarray(v) - x0) / (x1 - x0)
-
-    def py(v):
-        return mt + h * (y1 - np.asarray(v)) / (y1 - y0)
-
-    out = [(f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
-           f'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">'),
-           f'<text x="{width / 2}" y="18" text-anchor="middle" font-size="13" font-weight="bold">{_esc(title)}</text>']
-    if shade is not None:
-        a, b = max(shade[0], x0), min(shade[1], x1)
-        out.append(f'<rect x="{px(a):.1f}" y="{mt}" width="{max(px(b) - px(a), 0):.1f}" height="{h}" '
-                   f'fill="#f2c14e" fill-opacity="0.2"/>')
-    for t in nice_ticks(y0, y1):
-        out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{py(t):.1f}" y2="{py(t):.1f}" stroke="#e6e6e6"/>'
-                   f'<text x="{ml - 6}" y="{py(t) + 4:.1f}" text-anchor="end">{t:.4g}</text>')
-    for t in nice_ticks(x0, x1):
-        out.append(f'<text x="{px(t):.1f}" y="{mt + h + 16}" text-anchor="middle">{t:.4g}</text>')
-    for i, (label, x, y, color) in enumerate(traces):
-        pts = " ".join(f"{a:.1f},{b:.1f}" for a, b in zip(px(x), py(y), strict=True))
-        out.append(f'<polyline fill="none" stroke="{color}" stroke-width="{1.4 if i == 0 else 1.1}" '
-                   f'points="{pts}"/>')
-        if marks:
-            lx, ly = ml + (i % 2) * w / 2, mt + h + 52 + 18 * (i // 2)
-            out.append(f'<rect x="{lx:.1f}" y="{ly - 5}" width="14" height="3" fill="{color}"/>'
-                       f'<text x="{lx + 20:.1f}" y="{ly}">{_esc(label)}</text>')
-        else:
-            out.append(f'<rect x="{ml + w - 200}" y="{mt + 6 + 16 * i}" width="14" height="3" fill="{color}"/>'
-                       f'<text x="{ml + w - 180}" y="{mt + 11 + 16 * i}">{_esc(label)}</text>')
-    for j, (label, yv, color) in enumerate(marks):
-        a, b = (max(shade[0], x0), min(shade[1], x1)) if shade is not None else (x0, x1)
-        out.append(f'<line class="mark" x1="{px(a):.1f}" x2="{px(b):.1f}" y1="{py(yv):.1f}" y2="{py(yv):.1f}" '
-                   f'stroke="{color}" stroke-width="1.6" stroke-dasharray="7,3"><title>{_esc(label)}</title></line>')
-        k = len(traces) + j
-        lx, ly = ml + (k % 2) * w / 2, mt + h + 52 + 18 * (k // 2)
-        out.append(f'<line x1="{lx:.1f}" x2="{lx + 14:.1f}" y1="{ly - 4}" y2="{ly - 4}" '
-                   f'stroke="{color}" stroke-width="1.6" stroke-dasharray="4,2"/>'
-                   f'<text x="{lx + 20:.1f}" y="{ly}">{_esc(label)}</text>')
-    out.append(f'<rect x="{ml}" y="{mt}" width="{w}" height="{h}" fill="none" stroke="#000"/>')
-    out.append(f'<text x="{ml + w / 2}" y="{mt + h + 32}" text-anchor="middle">{_esc(xlabel)}</text>')
-    out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
-    out.append("</svg>")
-    return "".join(out)
-
-
-def _thin(x: np.ndarray, y: np.ndarray, n_out: int = 1200) -> tuple[np.ndarray, np.ndarray]:
-    """Min-max LTTB downsampling (tsdownsample) for the SVG plots; short signals unchanged."""
-    if x.size <= n_out:
-        return x, y
-    from tsdownsample import MinMaxLTTBDownsampler
-
-    idx = MinMaxLTTBDownsampler().downsample(x, y, n_out=n_out)
-    return x[idx], y[idx]
 
 
 # ----------------------------------------------------------------------------- report
@@ -274,15 +157,15 @@ h1 { font-size: 22px; margin-bottom: 4px; } h2 { font-size: 17px; margin-top: 26
   border-bottom: 1px solid #ccc; padding-bottom: 3px; } h3 { font-size: 14px; }
 table { border-collapse: collapse; margin: 8px 0; } th, td { border: 1px solid #ccc; padding: 3px 7px;
   text-align: right; } th { background: #f0f2f5; } td.l, th.l { text-align: left; }
-.pass { color: #2e7d32; font-weight: bold; } .fail { color: #c62828; font-weight: bold; }
+.pass { color: {pass_}; font-weight: bold; } .fail { color: {fail}; font-weight: bold; }
 .verdict { padding: 10px 14px; border-radius: 4px; font-size: 15px; margin: 10px 0; }
-.verdict.ok { background: #e8f5e9; border: 1px solid #2e7d32; }
-.verdict.no { background: #ffebee; border: 1px solid #c62828; }
+.verdict.ok { background: #e8f5e9; border: 1px solid {pass_}; }
+.verdict.no { background: #ffebee; border: 1px solid {fail}; }
 .meta td { text-align: left; border: none; padding: 1px 10px 1px 0; }
 .hashes td { font-family: 'DejaVu Sans Mono', monospace; font-size: 10px; }
 .charts { display: flex; flex-wrap: wrap; gap: 12px; } .note { color: #555; }
 @media print { h2 { page-break-after: avoid; } .worst { page-break-inside: avoid; } }
-"""
+""".replace("{pass_}", PASS_COLOR).replace("{fail}", FAIL_COLOR)
 
 
 def diverging_color(value: float, limit: float = 2.0) -> str:
@@ -316,12 +199,55 @@ def where_table(grid: Any, limit: float = 2.0) -> str:
     return "".join(out)
 
 
+def signoff_rows_html(items: list[tuple[dict[str, Any], Any]]) -> str:
+    """The sign-off table (escaped) of the validation report and the audit report
+    (:mod:`railval.app.audit_report`)."""
+    if not items:
+        return "<p class='note'>No sign-off.</p>"
+    rows = []
+    for d, st in items:
+        cls = "pass" if st.status == "valid" else "fail"
+        why = "<br>".join(_esc(r) for r in st.reasons[:5])
+        rows.append(
+            f"<tr><td>{d['id']}</td><td class='l'>{_esc(d['campaign'])} / {_esc(d['configuration'])}</td>"
+            f"<td class='l {cls}'>{_esc(st.status)}</td><td class='l'>{_esc(d['decision_text'])}</td>"
+            f"<td class='l'>{_esc(d['printed_name'])} ({_esc(d['username'])})</td>"
+            f"<td class='l'>{_esc(d['signed_at_utc'])}</td>"
+            f"<td class='l'>{_esc(d['meaning'])}</td>"
+            f"<td class='l'>{_esc(d['restrictions'] or '–')}</td><td class='l'>{_esc(d['statement'] or '–')}</td>"
+            f"<td class='l' style='font-family:monospace;font-size:10px'>{_esc(d['evidence_sha256'])}</td>"
+            f"<td class='l'>{why}</td></tr>")
+    return ("<table><tr><th>id</th><th class='l'>configuration</th><th class='l'>status</th>"
+            "<th class='l'>decision</th><th class='l'>signed by</th><th class='l'>UTC</th>"
+            "<th class='l'>meaning</th><th class='l'>restrictions</th><th class='l'>statement</th>"
+            "<th class='l'>evidence SHA-256</th><th class='l'>changed since</th></tr>"
+            + "".join(rows) + "</table>")
+
+
+def _verdict_document(d: dict) -> dict:
+    """The parts of a validation result the evidence digest covers: verdict, coverage and
+    every quantity's values, limits, intervals and section pairs (no time stamps)."""
+    def clean(x):
+        if isinstance(x, float):
+            return repr(x) if not math.isfinite(x) else x
+        if isinstance(x, dict):
+            return {str(k): clean(v) for k, v in x.items()}
+        if isinstance(x, list | tuple):
+            return [clean(v) for v in x]
+        return x
+    return clean({k: d.get(k) for k in ("validated", "coverage", "quantities")})
+
+
 def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3) -> Report:
     """Build the report of ``configuration`` of ``campaign`` from the database.
 
     ``backend`` is an :class:`railval.app.state.backend.Backend` (or anything with its methods); the validation comes from
     ``railval.app.services.validation`` through it, exactly as the dashboard shows it.
     """
+    from railval.db import repo
+
+    with backend.database.session() as s:  # every blob against its hash and seal first
+        repo.require_evidence(s, campaign, configuration, blobs=True)
     result = backend.validation(campaign, configuration)
     d = result.to_dict()
     rows = d["quantities"]
@@ -352,6 +278,14 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
     h.append(f"<div class='verdict {'ok' if ok else 'no'}'><b>{'VALIDATED' if ok else 'NOT VALIDATED'}</b>"
              + ("" if ok else f" — failing quantities: {_esc(', '.join(failing) or 'none')}"
                 + ("" if cov.get("ok", True) else "; coverage not met")) + "</div>")
+    info = d.get("info") or {}
+    if info.get("in_sample"):
+        held = info.get("held_out_sections") or []
+        h.append("<div class='verdict insample'><b>In-sample</b> — "
+                 f"{_esc(', '.join(info.get('calibrated_in') or []))} was calibrated on "
+                 f"{len(info.get('fit_sections') or [])} of these sections, so this verdict is partly on the "
+                 "data the fit used" + (f"; held out: {_esc(', '.join(held))}" if held else
+                                         "; no section was held out") + ".</div>")
 
     # quantities
     h.append("<h2>Quantities (Polach & Böttcher 2014 §5, EN 14363)</h2><table><tr><th class='l'>quantity</th><th>unit</th>"
@@ -403,7 +337,6 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
     # independent sign-offs of this configuration, with their status
     session = getattr(backend, "session", None)
     if session is not None:
-        from railval.app.audit_report import signoff_rows_html
         from railval.app.services.signoff import statuses
         from railval.db import signoff as db_signoff
 
@@ -426,7 +359,11 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
             digest.update(f"{sid}\t{ch}\t{a}\t{b}\n".encode())
             hrows.append(f"<tr><td class='l'>{_esc(sid)}</td><td class='l'>{_esc(ch)}</td><td class='l'>{a}</td>"
                          f"<td class='l'>{b}</td></tr>")
-    h.append(f"<p>Evidence digest (SHA-256 over every line below): <code>{digest.hexdigest()}</code></p>")
+    # the digest covers the verdict and every value it rests on, not only the inputs' hashes
+    digest.update(json.dumps(_verdict_document(d), sort_keys=True, allow_nan=False,
+                             default=str).encode())
+    h.append(f"<p>Evidence digest (SHA-256 over every line below, then the verdict and the "
+             f"values of every quantity): <code>{digest.hexdigest()}</code></p>")
     h.append("<table class='hashes'><tr><th class='l'>section</th><th class='l'>channel</th>"
              "<th class='l'>measurement</th><th class='l'>simulation</th></tr>" + "".join(hrows) + "</table>")
 
@@ -461,7 +398,8 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
             if trace.sliding_means is not None:  # the 2 m sliding means are what is evaluated
                 x, y = trace.sliding_centres_m, trace.sliding_means
             else:
-                x, y = _thin(trace.distance_m, trace.values)
+                x, y = downsample_xy(np.asarray(trace.distance_m, float), np.asarray(trace.values, float),
+                                     n_out=SVG_POINTS)
             traces.append((label, np.asarray(x, float), np.asarray(y, float), color))
             for stat, v in trace.marks.items():
                 marks.append((f"{label}: {stat} = {v:.4g}", v, color))

@@ -48,7 +48,9 @@ Hyndman, R.J. & Fan, Y. (1996) Sample quantiles in statistical packages, Am. Sta
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import hashlib
+import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,7 +67,7 @@ from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows, settling_check
 from railval.core.quantities import QUANTITIES, WHEELSET_POSITIONS
 from railval.core.supplementary import BOGIE_KINDS, PSD_KINDS, SUPPLEMENTARY, psd_band_values
-from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
+from railval.core.types import CHANNELS, WHEEL_POSITIONS, SectionInfo, SignalSet, channel_name
 
 #: bump whenever the numbers this module produces can change (enters result-cache keys)
 PROCESSING_VERSION = "en14363/2"
@@ -75,6 +77,9 @@ P_LOW = 0.0015
 P_MEDIAN = 0.5
 P_HIGH = 0.9985
 WINDOW_M = 2.0
+#: largest sample magnitude processed: squares and filter states of larger values overflow
+#: float64 (±1.8e308) and turn statistics into inf or NaN
+MAX_ABS_SAMPLE = 1e100
 STEP_M = 0.5
 PERCENTILES = (P_LOW, P_MEDIAN, P_HIGH)
 #: the reading that differs from the chosen one only in the percentile method
@@ -244,6 +249,14 @@ def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
         if np.shape(arr) != (n,):
             raise InvalidSignal(
                 f"section {sec.id}: channel {name} has shape {np.shape(arr)}, expected ({n},)")
+        peak = float(np.max(np.abs(arr))) if n else 0.0
+        if not np.isfinite(peak):
+            raise InvalidSignal(f"section {sec.id}: channel {name} holds non-finite values "
+                                f"({peak:g})")
+        if not peak <= MAX_ABS_SAMPLE:
+            raise InvalidSignal(
+                f"section {sec.id}: channel {name} holds {peak:g}; samples must be finite and "
+                f"within ±{MAX_ABS_SAMPLE:g} (MAX_ABS_SAMPLE)")
     if not sec.eval_start_m < sec.eval_end_m:
         raise InvalidSignal(
             f"section {sec.id}: evaluated range start {sec.eval_start_m} m must be below end "
@@ -264,12 +277,18 @@ class _Plan:
     bp_rows: slice
 
 
+#: channel kinds the EN chain processes: those the validation quantities are formed from
+#: (Polach & Böttcher 2014 Table 2), then the supplementary bogie-frame accelerations
+EN_CHAIN_KINDS = ("Y", "Q", "ay_cb", "az_cb", *BOGIE_KINDS)
+
+
 def _needed_channels(ss: SignalSet) -> tuple[list[str], list[str]]:
+    """The channels of :data:`EN_CHAIN_KINDS` present, split by their EN filter
+    (:data:`railval.core.types.CHANNELS`): (low-pass, band-pass), in channel-kind order."""
     names = set(ss.channels)
-    lp = [f"{k}_{p}" for k in ("Y", "Q") for p in WHEEL_POSITIONS if f"{k}_{p}" in names]
-    bp = [f"{k}_{p}" for k in ("ay_cb", "az_cb") + BOGIE_KINDS for p in BODY_POSITIONS
-          if f"{k}_{p}" in names]
-    return lp, bp
+    present = [(CHANNELS[k].en_filter, channel_name(k, p)) for k in EN_CHAIN_KINDS
+               for p in CHANNELS[k].positions if channel_name(k, p) in names]
+    return ([c for f, c in present if f == "lowpass"], [c for f, c in present if f == "bandpass"])
 
 
 def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionInfo], *,
@@ -577,3 +596,50 @@ def quantity_trace(signalset: SignalSet, section: SectionInfo, quantity: str, po
     return QuantityTrace(quantity, position, label, q.unit, d, sig,
                          (float(section.eval_start_m), float(section.eval_end_m)),
                          centres, means, marks, value)
+
+
+def evaluate_present(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo], *,
+                     order: int = DEFAULT_ORDER) -> dict[str, SectionValues]:
+    """:func:`evaluate_batch` of the sections of ``sections`` that ``signalsets`` holds
+    (section id → SignalSet), keyed by section id in the order of ``sections``."""
+    present = [s for s in sections if s.id in signalsets]
+    values = evaluate_batch([signalsets[s.id] for s in present], present, order=order)
+    return {s.id: v for s, v in zip(present, values, strict=True)}
+
+
+def section_cache_key(section: SectionInfo, fs: float, n: int, distance_sha: str,
+                      channel_hashes: Mapping[str, str], order: int) -> str:
+    """Key of the processed values of one section of one source: SHA-256 over the processing
+    version, filter order, section id, evaluated range, fs, n, the distance-axis hash and the
+    sorted (channel, content hash) pairs. Any change of samples, axis, range, order or
+    processing code changes the key."""
+    h = hashlib.sha256()
+    parts = [PROCESSING_VERSION, f"order={int(order)}", f"section={section.id}",
+             f"eval={section.eval_start_m!r}:{section.eval_end_m!r}", f"fs={float(fs)!r}",
+             f"n={int(n)}", f"distance={distance_sha}"]
+    parts += [f"{c}={channel_hashes[c]}" for c in sorted(channel_hashes)]
+    h.update("\n".join(parts).encode())
+    return "en14363:" + h.hexdigest()
+
+
+def pack_values(values: SectionValues) -> bytes:
+    """A section's values, warnings, values under the alternative readings and supplementary
+    values as JSON bytes (the cached form; provenance not kept)."""
+    return json.dumps({
+        "values": [[q, p, float(v)] for (q, p), v in values.items()],
+        "warnings": values.warnings,
+        "alternatives": {rid: [[q, p, float(v) if np.isfinite(v) else None]
+                               for (q, p), v in vals.items()]
+                         for rid, vals in values.alternatives.items()},
+        "supplementary": [[q, p, float(v)] for (q, p), v in values.supplementary.items()],
+    }, allow_nan=False).encode()
+
+
+def unpack_values(section_id: str, blob: bytes) -> SectionValues:
+    """The inverse of :func:`pack_values`."""
+    doc = json.loads(blob)
+    alts = {rid: {(q, p): (float("nan") if v is None else v) for q, p, v in vals}
+            for rid, vals in doc.get("alternatives", {}).items()}
+    return SectionValues(section_id, {(q, p): v for q, p, v in doc["values"]},
+                         warnings=doc["warnings"], alternatives=alts,
+                         supplementary={(q, p): v for q, p, v in doc.get("supplementary", [])})

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from railval.core.errors import InvalidParameter
-from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS
+from railval.core.types import BODY_POSITIONS, EN_FILTER_LABELS, WHEEL_POSITIONS, channel_kind
 
 SOURCE = "Polach & Böttcher 2014, §5, Table 2"
 
@@ -52,7 +52,8 @@ class Quantity:
     """One validation quantity of Table 2.
 
     ``signal``: the processed signal family (``Y``, ``Q``, ``YQ``, ``SumY``, ``ay``, ``az``);
-    ``filter``: ``"lowpass"`` (20 Hz) or ``"bandpass"`` (0.4–10 Hz), see :mod:`railval.core.filters`;
+    ``filter`` (derived from the channel registry): ``"lowpass"`` (20 Hz) or ``"bandpass"``
+    (0.4–10 Hz), see :mod:`railval.core.filters`;
     ``sliding_mean``: True when the 2 m sliding mean (0.5 m step, along distance) precedes the
     statistic; ``level``: what one position is (wheel, wheelset, carbody);
     ``std_limit_base``: Table 2 std limit (for Q quantities the factor multiplying
@@ -64,7 +65,6 @@ class Quantity:
     symbol: str
     unit: str
     signal: str
-    filter: str
     processing: str
     sliding_mean: bool
     level: str
@@ -77,7 +77,13 @@ class Quantity:
     def filtering_text(self) -> str:
         if self.sliding_mean:
             return "low-pass 20 Hz, then sliding mean (2 m window, step 0.5 m)"
-        return "low-pass 20 Hz" if self.filter == "lowpass" else "band-pass 0.4–10 Hz"
+        return EN_FILTER_LABELS[self.filter]
+
+    @property
+    def filter(self) -> str:
+        """The EN filter of the channels this quantity is formed from (the channel registry,
+        :data:`railval.core.types.CHANNELS`): ``"lowpass"`` or ``"bandpass"``."""
+        return channel_kind(self.channels(self.positions()[0])[0]).en_filter
 
     @property
     def processing_text(self) -> str:
@@ -151,30 +157,29 @@ class Quantity:
 
 _Q = Quantity
 QUANTITIES: dict[str, Quantity] = {q.id: q for q in (
-    _Q("Y_qst", "quasi-static guiding force", "Y_qst", "kN", "Y", "lowpass", "median", False,
+    _Q("Y_qst", "quasi-static guiding force", "Y_qst", "kN", "Y", "median", False,
        "wheel", 5.0),
-    _Q("Q_qst", "quasi-static vertical wheel force", "Q_qst", "kN", "Q", "lowpass", "median",
+    _Q("Q_qst", "quasi-static vertical wheel force", "Q_qst", "kN", "Q", "median",
        False, "wheel", 4.0, q0_scaled=True),
-    _Q("YQ_qst", "quasi-static ratio Y/Q", "(Y/Q)_qst", "-", "YQ", "lowpass", "median", False,
+    _Q("YQ_qst", "quasi-static ratio Y/Q", "(Y/Q)_qst", "-", "YQ", "median", False,
        "wheel", 0.07),
-    _Q("SumY_qst", "quasi-static sum of guiding forces", "ΣY_qst", "kN", "SumY", "lowpass",
+    _Q("SumY_qst", "quasi-static sum of guiding forces", "ΣY_qst", "kN", "SumY",
        "median", False, "wheelset", 6.0),
-    _Q("Y_max", "guiding force, maximum", "Y_max", "kN", "Y", "lowpass", "maxabs", False,
+    _Q("Y_max", "guiding force, maximum", "Y_max", "kN", "Y", "maxabs", False,
        "wheel", 9.0),
-    _Q("Q_max", "vertical wheel force, maximum", "Q_max", "kN", "Q", "lowpass", "p99.85",
+    _Q("Q_max", "vertical wheel force, maximum", "Q_max", "kN", "Q", "p99.85",
        False, "wheel", 6.0, q0_scaled=True),
-    _Q("YQ_max", "ratio Y/Q, maximum", "(Y/Q)_max", "-", "YQ", "lowpass", "maxabs", True,
+    _Q("YQ_max", "ratio Y/Q, maximum", "(Y/Q)_max", "-", "YQ", "maxabs", True,
        "wheel", 0.10),
-    _Q("SumY_max", "sum of guiding forces, maximum", "ΣY_max", "kN", "SumY", "lowpass",
+    _Q("SumY_max", "sum of guiding forces, maximum", "ΣY_max", "kN", "SumY",
        "maxabs", True, "wheelset", 9.0),
-    _Q("ay_rms", "car body lateral acceleration, rms", "ÿ*_rms", "m/s^2", "ay", "bandpass",
+    _Q("ay_rms", "car body lateral acceleration, rms", "ÿ*_rms", "m/s^2", "ay",
        "rms", False, "carbody", 0.15, acceleration=True),
-    _Q("az_rms", "car body vertical acceleration, rms", "z̈*_rms", "m/s^2", "az", "bandpass",
+    _Q("az_rms", "car body vertical acceleration, rms", "z̈*_rms", "m/s^2", "az",
        "rms", False, "carbody", 0.15, acceleration=True),
-    _Q("ay_max", "car body lateral acceleration, maximum", "ÿ*_max", "m/s^2", "ay", "bandpass",
+    _Q("ay_max", "car body lateral acceleration, maximum", "ÿ*_max", "m/s^2", "ay",
        "maxabs", False, "carbody", 0.40, acceleration=True),
-    _Q("az_max", "car body vertical acceleration, maximum", "z̈*_max", "m/s^2", "az",
-       "bandpass", "maxabs", False, "carbody", 0.40, acceleration=True),
+    _Q("az_max", "car body vertical acceleration, maximum", "z̈*_max", "m/s^2", "az", "maxabs", False, "carbody", 0.40, acceleration=True),
 )}
 
 QUANTITY_IDS: tuple[str, ...] = tuple(QUANTITIES)

@@ -80,7 +80,7 @@ CLI_ACTIONS: dict[str, str | None] = {
     "list": "data.read", "metrics": "data.read", "report": "report.download",
     "import": "data.import", "synth": "data.import", "export": "data.export",
     "simulate": "simulate", "diagnose": "diagnose", "calibrate": "calibrate",
-    "modal": "calibrate", "validate": "validate",
+    "modal": "calibrate", "validate": "validate", "verify": "audit.read",
     "user add": "user.manage", "user list": "user.manage", "user disable": "user.manage",
     "user enable": "user.manage", "user passwd": "user.manage", "user role": "user.manage",
     "user invite": "user.manage",
@@ -88,6 +88,12 @@ CLI_ACTIONS: dict[str, str | None] = {
     "signoff show": "signoff.read",
     "audit verify": "audit.read", "audit export": "audit.read", "audit report": "audit.read",
     "audit checkpoint": "audit.checkpoint", "audit log": "audit.read",
+    "workshop kinds": None,
+    "workshop create": "workshop.run", "workshop invite": "workshop.run",
+    "workshop status": "workshop.run", "workshop close": "workshop.run",
+    "workshop reopen": "workshop.run", "workshop import-answers": "workshop.run",
+    "workshop plots": "workshop.results", "workshop export": "workshop.results",
+    "workshop analyse": "workshop.results",
 }
 
 #: the identity of open single-user mode (no users in the database, loopback only): it may

@@ -55,7 +55,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from railval.core.diagnosis import DEFAULT_BANDS_HZ, Pattern
+from railval.core.diagnosis import DEFAULT_BANDS_HZ, Component, Pattern
 from railval.core.errors import InvalidParameter
 from railval.core.psd import welch_rows
 from railval.core.types import BODY_POSITIONS
@@ -246,6 +246,5 @@ def supplementary_pattern(pairs: Iterable[Mapping], kinds: Sequence[str] = BOGIE
             continue
         acc[(q.id, str(r["position"]))].append(2.0 * v)
     keys = sorted(acc, key=lambda k: (SUPPLEMENTARY_IDS.index(k[0]), k[1]))
-    return Pattern([f"supp {q} {p}" for q, p in keys],
-                   [f"bogie {SUPPLEMENTARY[q].kind.split('_')[0]}" for q, _ in keys],
-                   np.array([float(np.mean(acc[k])) for k in keys]))
+    return Pattern.of([Component.supplementary(q, p, SUPPLEMENTARY[q].kind) for q, p in keys],
+                      np.array([float(np.mean(acc[k])) for k in keys]))

@@ -28,19 +28,25 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+WHEEL_POSITIONS = tuple(f"w{n}{s}" for n in range(1, 5) for s in "LR")
+BODY_POSITIONS = ("b1", "b2")
+
+
 @dataclass(frozen=True)
 class ChannelKind:
     """One kind of raw channel: its canonical unit and the EN 14363 processing filter it gets.
 
     ``en_filter`` is a filter kind of :mod:`railval.core.filters` (EN 14363:2005 on-track
     tests: wheel–rail forces low-pass 20 Hz, car body accelerations band-pass 0.4–10 Hz; the
-    bogie frame accelerations, shown but not validated, low-pass 20 Hz).
+    bogie frame accelerations, supplementary quantities of :mod:`railval.core.supplementary`,
+    the same band-pass).
     """
 
     kind: str
     unit: str
     en_filter: str
     meaning: str
+    positions: tuple[str, ...]
 
     @property
     def filter_label(self) -> str:
@@ -53,12 +59,12 @@ EN_FILTER_LABELS: dict[str, str] = {"lowpass": "low-pass 20 Hz", "bandpass": "ba
 
 #: THE channel registry (kind → unit, EN filter, meaning); every layer reads this one.
 CHANNELS: dict[str, ChannelKind] = {c.kind: c for c in (
-    ChannelKind("Y", "kN", "lowpass", "lateral wheel–rail (guiding) force of one wheel"),
-    ChannelKind("Q", "kN", "lowpass", "vertical wheel–rail force of one wheel"),
-    ChannelKind("ay_cb", "m/s^2", "bandpass", "car body lateral acceleration"),
-    ChannelKind("az_cb", "m/s^2", "bandpass", "car body vertical acceleration"),
-    ChannelKind("ay_bg", "m/s^2", "lowpass", "bogie frame lateral acceleration"),
-    ChannelKind("az_bg", "m/s^2", "lowpass", "bogie frame vertical acceleration"),
+    ChannelKind("Y", "kN", "lowpass", "lateral wheel–rail (guiding) force of one wheel", WHEEL_POSITIONS),
+    ChannelKind("Q", "kN", "lowpass", "vertical wheel–rail force of one wheel", WHEEL_POSITIONS),
+    ChannelKind("ay_cb", "m/s^2", "bandpass", "car body lateral acceleration", BODY_POSITIONS),
+    ChannelKind("az_cb", "m/s^2", "bandpass", "car body vertical acceleration", BODY_POSITIONS),
+    ChannelKind("ay_bg", "m/s^2", "bandpass", "bogie frame lateral acceleration", BODY_POSITIONS),
+    ChannelKind("az_bg", "m/s^2", "bandpass", "bogie frame vertical acceleration", BODY_POSITIONS),
 )}
 
 #: channel kind → canonical unit (a view of :data:`CHANNELS`)
@@ -69,9 +75,6 @@ def channel_kind(name: str) -> ChannelKind | None:
     """The registry entry of a channel name (``"ay_cb_b1"`` → ay_cb), None for an unknown kind."""
     return CHANNELS.get(split_channel(name)[0])
 
-
-WHEEL_POSITIONS = tuple(f"w{n}{s}" for n in range(1, 5) for s in "LR")
-BODY_POSITIONS = ("b1", "b2")
 
 ZONES = (1, 2, 3, 4)
 

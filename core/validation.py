@@ -37,16 +37,20 @@ interval).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from railval.core.definitions import CHOSEN, READINGS, alternatives_for
+from railval.core.en14363 import evaluate_present
 from railval.core.errors import InvalidParameter
+from railval.core.filters import DEFAULT_ORDER
 from railval.core.quantities import QUANTITIES, QUANTITY_IDS, VEHICLE_KINDS
 from railval.core.supplementary import supplementary_results
-from railval.core.types import ZONES, SectionInfo
+from railval.core.types import ZONES, SectionInfo, SignalSet
 
 MIN_SECTIONS = 12
 MIN_SECTIONS_PER_ZONE = 3
@@ -461,3 +465,38 @@ def _alternatives(qid: str, res: QuantityResult, rec: list, measured_values, sim
             "flips": passed is not None and passed != res.passed,
         })
     return out
+
+
+def source_warnings(label: str, values: Mapping[str, Any]) -> list[str]:
+    """The processing warnings of one source's section values (``SectionValues.warnings``),
+    each prefixed with ``label`` ("measurement", "configuration X"), sections in id order."""
+    return [f"{label}: {w}" for sid in sorted(values) for w in values[sid].warnings]
+
+
+def validate_signalsets(measured: Mapping[str, SignalSet], simulated: Mapping[str, SignalSet],
+                        sections: Sequence[SectionInfo], vehicle, *, order: int = DEFAULT_ORDER,
+                        n_boot: int = 1000, seed: int = 0) -> ValidationResult:
+    """:func:`validate` of in-memory signal sets (section id → SignalSet on each side),
+    processed with :func:`railval.core.en14363.evaluate_present`. ``vehicle``: a
+    :class:`Vehicle` or a mapping with ``kind``, ``secondary_suspension``, ``Q0_kN``. Sections
+    missing on either side are skipped (and show up in the coverage)."""
+    m_values = evaluate_present(measured, sections, order=order)
+    s_values = evaluate_present(simulated, sections, order=order)
+    warnings = source_warnings("measurement", m_values) + source_warnings("simulation", s_values)
+    return validate(m_values, s_values, sections, vehicle, n_boot=n_boot, seed=seed, warnings=warnings)
+
+
+def normalised_errors(result: ValidationResult) -> dict[str, Any]:
+    """How far a configuration is from validated, per quantity and overall: each quantity's
+    ``mean_norm`` (mean D_v / mean limit), ``std_norm`` (std D_v / std limit) and
+    ``error`` = max(|mean_norm|, std_norm) (Polach & Böttcher 2014 §5: validated when every
+    error ≤ 1); ``max_error`` the largest (None when nothing is finite) and ``validated``.
+    The lineage of a configuration (root → it) is drawn from these."""
+    def finite(x: float | None) -> float | None:
+        return float(x) if x is not None and math.isfinite(x) else None
+
+    quantities = {q: {"mean_norm": finite(r.mean_norm), "std_norm": finite(r.std_norm),
+                      "error": finite(max(abs(r.mean_norm), abs(r.std_norm)))}
+                  for q, r in result.quantities.items()}
+    worst = max((v["error"] for v in quantities.values() if v["error"] is not None), default=None)
+    return {"validated": bool(result.validated), "max_error": worst, "quantities": quantities}

@@ -61,6 +61,9 @@ def check_recording(
         a = np.asarray(values)
         if a.ndim != 1:
             raise RecordingProblem(name, f"column {name!r} has shape {a.shape}, expected 1-D")
+        if a.dtype.kind == "b":
+            raise RecordingProblem(name, f"column {name!r} holds booleans (true/false), "
+                                   "expected numbers")
         if a.dtype.kind not in "fiu":
             raise RecordingProblem(name, f"column {name!r} has dtype {a.dtype}, expected numbers")
         if a.shape[0] == 0:
@@ -103,3 +106,75 @@ def check_recording(
             f"{TIME_JITTER_FRACTION:.0%} of a period)",
         )
     return fs
+
+
+# -- plausibility of magnitudes (units) ----------------------------------------------------
+#: largest magnitude any stored sample may have, in canonical units (kN, m/s²): beyond it
+#: the EN 14363 filters overflow, and no wheel force or acceleration comes near it
+MAX_ABS_VALUE = 1e9
+#: the mean of the vertical wheel forces Q of a recording must lie within this factor of the
+#: vehicle's static wheel force Q0 (the mean over all wheels of a vehicle is Q0 on any track;
+#: a factor 1000 off means N declared for kN data or the reverse)
+Q_MEAN_FACTOR = 3.0
+#: 99th percentile of |a| in m/s² above which an acceleration is implausible, per kind:
+#: car body accelerations stay well below 0.5 g in service, bogie frames below 5 g
+#: (EN 14363 limits the bogie frame to about 8 m/s² and the car body to about 2.5 m/s²;
+#: data in m/s² declared as g are 9.81 times too large and land above these bounds)
+ACC_P99_BOUND = {"ay_cb": 0.5 * 9.80665, "az_cb": 0.5 * 9.80665,
+                 "ay_bg": 5 * 9.80665, "az_bg": 5 * 9.80665}
+
+
+def check_magnitudes(channels: Mapping[str, np.ndarray], units: Mapping[str, str]) -> None:
+    """Every sample within ±:data:`MAX_ABS_VALUE` (after any unit conversion); ``units``
+    names the unit each channel was declared in (for the message)."""
+    for name, values in channels.items():
+        a = np.asarray(values, dtype=np.float64)
+        bad = ~(np.abs(a) <= MAX_ABS_VALUE)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise RecordingProblem(
+                name, f"column {name!r} holds {a[i]:g} at sample {i} after conversion from "
+                f"{units.get(name, '?')}; samples must lie within ±{MAX_ABS_VALUE:g} "
+                "(MAX_ABS_VALUE)")
+
+
+def check_units_plausible(channels: Mapping[str, np.ndarray], declared: Mapping[str, str],
+                          q0_kn: float, skip: Iterable[str] = ()) -> None:
+    """Magnitudes consistent with the declared units (values already in canonical units).
+
+    * Q: the mean over all Q channels lies within a factor :data:`Q_MEAN_FACTOR` of Q0;
+    * accelerations: the 99th percentile of |a| stays below :data:`ACC_P99_BOUND`.
+
+    ``skip``: channel names whose check the manifest switched off (``check_unit: false``).
+    """
+    skip = set(skip)
+    q_names = [n for n in channels if n.startswith("Q_") and n not in skip]
+    if q_names and q0_kn > 0:
+        mean = float(np.mean([np.mean(np.asarray(channels[n], dtype=np.float64))
+                              for n in q_names]))
+        if not (q0_kn / Q_MEAN_FACTOR <= mean <= q0_kn * Q_MEAN_FACTOR):
+            units = sorted({declared.get(n, "?") for n in q_names})
+            ratio = q0_kn / mean if mean else float("inf")
+            hint = ""
+            if 300 < abs(ratio) < 3000:
+                hint = " — the data look like kN declared as N"
+            elif 1 / 3000 < abs(ratio) < 1 / 300:
+                hint = " — the data look like N declared as kN"
+            raise RecordingProblem(
+                q_names[0], f"mean vertical wheel force Q is {mean:.4g} kN (unit declared "
+                f"{', '.join(units)}) but the vehicle's Q0 is {q0_kn:g} kN{hint}; fix the "
+                "unit, or set \"check_unit\": false on the channel if the values are right")
+    for name, values in channels.items():
+        kind = name.rpartition("_")[0]
+        bound = ACC_P99_BOUND.get(kind)
+        if bound is None or name in skip:
+            continue
+        p99 = float(np.percentile(np.abs(np.asarray(values, dtype=np.float64)), 99))
+        if p99 > bound:
+            hint = (" — the data look like m/s² declared as g"
+                    if declared.get(name) == "g" and p99 / 9.80665 < bound else "")
+            raise RecordingProblem(
+                name, f"99 % of |{name}| reach {p99:.4g} m/s² (unit declared "
+                f"{declared.get(name, '?')}), above the plausible {bound:.4g} m/s² for "
+                f"{kind}{hint}; fix the unit, or set \"check_unit\": false on the channel if "
+                "the values are right")

@@ -12,7 +12,8 @@ else the embedded SQLite file ``sqlite:///railval.db`` in the working directory.
   to mean the same driver.
 
 ``Database.session()`` is one unit of work: it commits when the block ends normally and
-rolls back when it raises. ``Database.init()`` migrates the schema to the newest Alembic
+rolls back when it raises; ``session(write=True)`` is a unit of work that writes (on SQLite
+it takes the write lock at ``BEGIN IMMEDIATE``, so concurrent writers wait their turn). ``Database.init()`` migrates the schema to the newest Alembic
 revision (idempotent); ``ensure_initialised()`` is the cheap check the CLI runs first.
 """
 
@@ -87,7 +88,13 @@ def _sqlite_pragmas(dbapi_conn, _record) -> None:
 
 
 def _sqlite_begin(conn) -> None:
-    conn.exec_driver_sql("BEGIN")
+    # A unit of work that will write takes the write lock at BEGIN (BEGIN IMMEDIATE): it
+    # waits up to the busy timeout for another writer and then reads a fresh snapshot. A
+    # deferred transaction that reads and then writes cannot wait — SQLite refuses its
+    # upgrade at once with "database is locked" when another writer got in between
+    # (SQLAlchemy docs, "Serializable isolation / Savepoints / Transactional DDL" of pysqlite).
+    write = conn.get_execution_options().get("railval_write", False)
+    conn.exec_driver_sql("BEGIN IMMEDIATE" if write else "BEGIN")
 
 
 class Database:
@@ -97,6 +104,8 @@ class Database:
         self.url = url
         self.engine = engine
         self._sessions = sessionmaker(engine, expire_on_commit=False)
+        self._write_sessions = sessionmaker(engine.execution_options(railval_write=True),
+                                            expire_on_commit=False)
         self._initialised = False
         #: who the audit trail names for changes made through :meth:`session` when the
         #: caller names nobody (the CLI sets ``cli:<OS user>``, the web app the signed-in user)
@@ -107,13 +116,16 @@ class Database:
         return self.engine.dialect.name
 
     @contextmanager
-    def session(self, actor: str | None = None) -> Iterator[Session]:
+    def session(self, actor: str | None = None, *, write: bool = False) -> Iterator[Session]:
         """One unit of work: commit on success, roll back on any exception.
 
         ``actor`` (else the one set by :func:`acting_as`, else :attr:`actor`) is kept in ``session.info["actor"]``: the audit rows
         written in this unit of work name it (:func:`railval.db.audit.actor_of`).
+        ``write=True`` for a unit of work that writes: on SQLite it starts with
+        ``BEGIN IMMEDIATE`` so concurrent writers queue (up to the 30 s busy timeout)
+        instead of failing; on PostgreSQL it is the same as a read session.
         """
-        session = self._sessions()
+        session = (self._write_sessions if write else self._sessions)()
         session.info["actor"] = actor or _current_actor.get() or self.actor
         try:
             yield session
@@ -190,12 +202,26 @@ class Database:
         return f"Database({self.safe_url!r})"
 
 
+def _create_private(path: Path) -> None:
+    """Create a new SQLite file readable and writable by its owner only (0600); SQLite gives
+    its ``-wal`` and ``-shm`` files the same permissions. An existing file is left as is."""
+    if path.exists() or not path.parent.is_dir():
+        return
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:  # created by a concurrent process meanwhile
+        return
+    os.close(fd)
+
+
 def connect(url: str | None = None, *, echo: bool = False) -> Database:
     """Connect to the database at ``url`` (else ``$RAILVAL_DB``, else ``sqlite:///railval.db``)."""
     url = resolve_url(url)
     parsed = make_url(url)
     if parsed.get_backend_name() == "sqlite":
         kwargs: dict = {"connect_args": {"timeout": SQLITE_BUSY_TIMEOUT_MS / 1000}}
+        if parsed.database not in (None, "", ":memory:") and not parsed.database.startswith("file:"):
+            _create_private(Path(parsed.database))
         if parsed.database in (None, "", ":memory:"):
             # one shared connection, else every pooled connection sees its own empty DB
             kwargs["poolclass"] = StaticPool

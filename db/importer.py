@@ -19,6 +19,7 @@ import datetime as dt
 import hashlib
 import json
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,10 +31,16 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from railval.core.errors import CampaignFormatError, InvalidParameter
+from railval.core.names import NAME_PATTERN, name_problem
 from railval.core.types import BODY_POSITIONS, CHANNEL_KINDS, WHEEL_POSITIONS
 from railval.core.zones import zone_for_radius
-from railval.db import audit, codec
-from railval.db.checks import RecordingProblem, check_recording
+from railval.db import audit, codec, integrity
+from railval.db.checks import (
+    RecordingProblem,
+    check_magnitudes,
+    check_recording,
+    check_units_plausible,
+)
 from railval.db.io import read_table
 from railval.db.models import Campaign, Channel, Configuration, Recording, Section, Signal, Vehicle
 
@@ -93,6 +100,100 @@ def _json_path(path) -> str:
     return out or "(top level)"
 
 
+#: limits of the manifest parser (each named in its error message)
+MANIFEST_MAX_BYTES = 16 * 1024 * 1024
+MANIFEST_MAX_DEPTH = 64
+NUMBER_MAX_CHARS = 40
+
+_JSON_TOKEN = re.compile(
+    r'"(?:[^"\\]|\\.)*"'  # a string (skipped)
+    r"|(?P<open>[\[{])|(?P<close>[\]}])"
+    r"|(?P<const>-?Infinity|NaN)"
+    r"|(?P<number>-?\d+(?:\.\d+)?(?:[eE][+-]?\d+)?)"
+)
+
+
+def _position(text: str, offset: int) -> str:
+    line = text.count("\n", 0, offset) + 1
+    col = offset - (text.rfind("\n", 0, offset) + 1) + 1
+    return f"line {line}, column {col}"
+
+
+def _scan_json(text: str) -> None:
+    """Refuse what ``json.loads`` would accept silently or choke on: NaN/Infinity literals,
+    numbers that overflow a float (``1e400``) or are absurdly long, and nesting deeper than
+    :data:`MANIFEST_MAX_DEPTH`. Errors name line and column."""
+    depth = 0
+    for m in _JSON_TOKEN.finditer(text):
+        kind = m.lastgroup
+        if kind is None:
+            continue
+        if kind == "open":
+            depth += 1
+            if depth > MANIFEST_MAX_DEPTH:
+                raise CampaignFormatError(
+                    f"nesting deeper than {MANIFEST_MAX_DEPTH} levels at "
+                    f"{_position(text, m.start())} (limit MANIFEST_MAX_DEPTH)", file=MANIFEST)
+        elif kind == "close":
+            depth -= 1
+        elif kind == "const":
+            raise CampaignFormatError(
+                f"{m.group()} at {_position(text, m.start())} is not a number JSON allows; "
+                "write a finite number (or null where the format allows it)", file=MANIFEST)
+        else:
+            token = m.group()
+            if len(token) > NUMBER_MAX_CHARS:
+                raise CampaignFormatError(
+                    f"number of {len(token)} characters at {_position(text, m.start())} "
+                    f"(limit NUMBER_MAX_CHARS = {NUMBER_MAX_CHARS})", file=MANIFEST)
+            if not math.isfinite(float(token)):
+                raise CampaignFormatError(
+                    f"number {token} at {_position(text, m.start())} is beyond the float "
+                    "range (±1.8e308); write a finite number", file=MANIFEST)
+
+
+def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise CampaignFormatError(
+                f"duplicate key {key!r} in one JSON object (keys there: "
+                f"{[k for k, _ in pairs][:10]}); a key may appear once", file=MANIFEST)
+        out[key] = value
+    return out
+
+
+def _check_strings(value: Any, path: list) -> None:
+    """No NUL anywhere (keys included): PostgreSQL text and JSON cannot hold it."""
+    if isinstance(value, str):
+        if "\x00" in value:
+            raise CampaignFormatError("text holds a NUL character (U+0000)", file=MANIFEST,
+                                      field=_json_path(path))
+    elif isinstance(value, dict):
+        for k, v in value.items():
+            if "\x00" in k:
+                raise CampaignFormatError(f"key {k!r} holds a NUL character (U+0000)",
+                                          file=MANIFEST, field=_json_path(path))
+            _check_strings(v, [*path, k])
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _check_strings(v, [*path, i])
+
+
+def _schema_message(err) -> str:
+    pattern = err.schema.get("pattern") if isinstance(err.schema, dict) else None
+    if err.validator == "pattern" and pattern == NAME_PATTERN:
+        return f"{err.instance!r} {name_problem(err.instance)}"
+    if err.validator == "pattern":
+        bad = next((ch for ch in str(err.instance) if ord(ch) < 32 or ord(ch) == 127), None)
+        if bad is not None:
+            return f"{err.instance!r} holds the control character U+{ord(bad):04X}"
+    if err.validator == "maxLength":
+        return (f"text of {len(err.instance)} characters is longer than the limit "
+                f"{err.validator_value} (the size of its database column)")
+    return err.message
+
+
 def load_manifest(folder: Path) -> dict[str, Any]:
     """Parse and schema-check ``campaign.json``; errors name the file and the JSON path."""
     from jsonschema import Draft202012Validator
@@ -103,17 +204,27 @@ def load_manifest(folder: Path) -> dict[str, Any]:
         raise CampaignFormatError("campaign folder does not exist", file=str(folder))
     if not path.is_file():
         raise CampaignFormatError("manifest missing", file=str(path))
+    size = path.stat().st_size
+    if size > MANIFEST_MAX_BYTES:
+        raise CampaignFormatError(f"manifest is {size} bytes, the limit MANIFEST_MAX_BYTES is "
+                                  f"{MANIFEST_MAX_BYTES}", file=MANIFEST)
     try:
-        manifest = json.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise CampaignFormatError(f"not UTF-8 text: {exc}", file=MANIFEST) from None
+    _scan_json(text)
+    try:
+        manifest = json.loads(text, object_pairs_hook=_no_duplicate_keys)
     except json.JSONDecodeError as exc:
         raise CampaignFormatError(f"malformed JSON at line {exc.lineno}, column {exc.colno}: "
                                   f"{exc.msg}", file=MANIFEST) from None
-    except UnicodeDecodeError as exc:
-        raise CampaignFormatError(f"not UTF-8 text: {exc}", file=MANIFEST) from None
+    except (ValueError, RecursionError) as exc:  # e.g. an integer beyond Python's digit limit
+        raise CampaignFormatError(f"cannot parse the manifest: {exc}", file=MANIFEST) from None
+    _check_strings(manifest, [])
     errors = list(Draft202012Validator(_schema()).iter_errors(manifest))
     if errors:
         err = best_match(errors)
-        raise CampaignFormatError(f"schema violation: {err.message}", file=MANIFEST,
+        raise CampaignFormatError(f"schema violation: {_schema_message(err)}", file=MANIFEST,
                                   field=_json_path(err.absolute_path))
     return manifest
 
@@ -153,6 +264,7 @@ def _check_manifest(manifest: dict[str, Any], folder: Path) -> None:
             zone_for_radius(s.get("radius_m") or 0.0, boundary, s.get("zone"))
         except InvalidParameter as exc:
             raise bad(f"sections[{i}].radius_m", str(exc)) from None
+        _check_layout(s, i)
         _data_path(folder, s["measured"], f"sections[{i}].measured")
     confs = manifest.get("configurations", [])
     cnames: dict[str, int] = {}
@@ -179,6 +291,40 @@ def _check_manifest(manifest: dict[str, Any], folder: Path) -> None:
             _data_path(folder, rel, f"configurations[{i}].files.{sid}")
 
 
+LAYOUT_KEYS = ("straight_in_m", "transition_in_m", "curve_m", "transition_out_m",
+               "straight_out_m")
+#: share of the evaluated range that must lie on the layout's constant-curvature part
+EVALUATED_ON_CURVE_MIN = 0.5
+
+
+def _check_layout(s: dict, i: int) -> None:
+    """A layout's lengths are finite numbers ≥ 0; in a curve, the evaluated range lies
+    (at least :data:`EVALUATED_ON_CURVE_MIN` of it) on the constant-curvature part."""
+    layout = s.get("layout")
+    if not layout:
+        return
+    fld = f"sections[{i}].layout"
+    lengths = {}
+    for key in LAYOUT_KEYS:
+        v = layout.get(key, 0.0)
+        if isinstance(v, bool) or not isinstance(v, int | float) or not (0 <= v < math.inf):
+            raise CampaignFormatError(f"{key} must be a length ≥ 0 m, got {v!r}",
+                                      file=MANIFEST, field=f"{fld}.{key}")
+        lengths[key] = float(v)
+    if not s.get("radius_m"):
+        return
+    lo = lengths["straight_in_m"] + lengths["transition_in_m"]
+    hi = lo + lengths["curve_m"]
+    ev = s["evaluated"]
+    overlap = max(0.0, min(hi, ev["end_m"]) - max(lo, ev["start_m"]))
+    if overlap < EVALUATED_ON_CURVE_MIN * (ev["end_m"] - ev["start_m"]):
+        raise CampaignFormatError(
+            f"evaluated range {ev['start_m']}–{ev['end_m']} m lies on the transitions or "
+            f"straights of the layout: only {overlap:g} m of it on the constant-curvature part "
+            f"{lo:g}–{hi:g} m (at least {EVALUATED_ON_CURVE_MIN:.0%} required)",
+            file=MANIFEST, field=f"sections[{i}].evaluated")
+
+
 def _data_path(folder: Path, rel: str, fld: str) -> Path:
     path = (folder / rel).resolve()
     if not path.is_relative_to(folder.resolve()):
@@ -193,7 +339,8 @@ def _data_path(folder: Path, rel: str, fld: str) -> Path:
 # -- data files --------------------------------------------------------------------------
 def _read_recording(folder: Path, rel: str, section: dict, configuration: str | None,
                     units: dict[str, tuple[str, str, float]],
-                    allowed: set[str], stamp: str) -> ValidatedRecording:
+                    allowed: set[str], stamp: str, q0_kn: float,
+                    skip: set[str]) -> ValidatedRecording:
     table = read_table(folder / rel)
     for required in ("time_s", "distance_m"):
         if required not in table:
@@ -212,6 +359,18 @@ def _read_recording(folder: Path, rel: str, section: dict, configuration: str | 
         fs = check_recording(table["time_s"], table["distance_m"], chans, allowed)
     except RecordingProblem as exc:
         raise CampaignFormatError(str(exc), file=rel, field=exc.field) from None
+    converted = {}
+    for name, values in chans.items():
+        factor = units[name][2]
+        a = np.asarray(values, dtype=np.float64)
+        with np.errstate(over="ignore"):  # overflow → inf, refused just below
+            converted[name] = a * factor if factor != 1.0 else a
+    declared = {name: units[name][0] for name in chans}
+    try:
+        check_magnitudes(converted, declared)
+        check_units_plausible(converted, declared, q0_kn, skip)
+    except RecordingProblem as exc:
+        raise CampaignFormatError(str(exc), file=rel, field=exc.field) from None
     if configuration is None:
         d = table["distance_m"]
         ev = section["evaluated"]
@@ -226,11 +385,8 @@ def _read_recording(folder: Path, rel: str, section: dict, configuration: str | 
         t0=float(table["time_s"][0]), n=int(table["time_s"].shape[0]),
         distance_blob=dblob, distance_sha256=dsha,
     )
-    for name, values in chans.items():
+    for name, a in converted.items():
         unit_in, unit, factor = units[name]
-        a = np.asarray(values, dtype=np.float64)
-        if factor != 1.0:
-            a = a * factor
         blob, sha = codec.encode(a)
         prov: dict[str, Any] = {"source": "import", "file": rel, "column": name,
                                 "imported_at": stamp, "unit": unit}
@@ -249,6 +405,7 @@ def validate_campaign_folder(folder: str | Path, progress: Progress | None = Non
     for ch in manifest["channels"]:
         canonical, factor = UNITS_BY_KIND[ch["kind"]][ch["unit"]]
         units[ch["name"]] = (ch["unit"], canonical, factor)
+    skip = {ch["name"] for ch in manifest["channels"] if ch.get("check_unit") is False}
     stamp = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
     jobs: list[tuple[str, dict, str | None]] = [(s["measured"], s, None) for s in manifest["sections"]]
     by_id = {s["id"]: s for s in manifest["sections"]}
@@ -258,7 +415,8 @@ def validate_campaign_folder(folder: str | Path, progress: Progress | None = Non
     measured_channels: dict[str, set[str]] = {}
     for k, (rel, section, conf) in enumerate(jobs):
         allowed = set(units) if conf is None else measured_channels[section["id"]]
-        rec = _read_recording(folder, rel, section, conf, units, allowed, stamp)
+        rec = _read_recording(folder, rel, section, conf, units, allowed, stamp,
+                              float(manifest["vehicle"]["Q0_kN"]), skip)
         if conf is None:
             measured_channels[section["id"]] = set(rec.signals)
         out.recordings.append(rec)
@@ -321,9 +479,12 @@ def write_validated(session: Session, vc: ValidatedCampaign) -> Campaign:
         session.add(rec)
         recs.append(rec)
     session.flush()
+    secret = integrity.session_secret(session)
     rows = [
         {"recording_id": rec.id, "channel_id": chans[name].id, "blob": blob, "dtype": "<f8",
-         "sha256": sha, "provenance": prov}
+         "sha256": sha,
+         "provenance": {**prov, "seal": integrity.seal_signal(
+             secret, rec.id, chans[name].id, sha, rec.distance_sha256, rec.fs, rec.t0, rec.n)}}
         for rec, r in zip(recs, vc.recordings, strict=True)
         for name, (blob, sha, prov) in r.signals.items()
     ]
@@ -351,9 +512,12 @@ def import_campaign(database_or_session: Any, folder: str | Path,
         if isinstance(database_or_session, Session):
             write_validated(database_or_session, vc)
         else:
-            with database_or_session.session() as session:
+            with database_or_session.session(write=True) as session:
                 write_validated(session, vc)
-    except IntegrityError as exc:  # a concurrent import of the same name won the race
-        raise CampaignFormatError(f"database rejected the campaign: {exc.orig}",
-                                  file=MANIFEST, field="name") from None
+    except IntegrityError:
+        # a concurrent import of the same name committed first (PostgreSQL; on SQLite the
+        # write lock taken at BEGIN makes the second import see the first): same message
+        # as the check in write_validated
+        raise CampaignFormatError(f"a campaign named {vc.name!r} already exists in the "
+                                  "database", file=MANIFEST, field="name") from None
     return vc.name

@@ -154,6 +154,10 @@ class Configuration(Base):
     effects: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     parameters: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     description: Mapped[str] = mapped_column(Text, default="")
+    #: how a calibrated configuration was fitted: ``{"fit_sections": [...], "held_out_sections":
+    #: [...], "parameters": [...]}`` (NULL for configurations that were not calibrated); a
+    #: validation on fitted sections is in-sample (docs/diagnosis.md)
+    calibration: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True, default=None)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
     campaign: Mapped[Campaign] = relationship(back_populates="configurations")
@@ -381,3 +385,112 @@ class AnalysisRun(Base):
     seconds: Mapped[float] = mapped_column(Float, default=0.0)
     actor: Mapped[str] = mapped_column(String(200), default="")
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+# -- review workshops (docs/workshops.md) -------------------------------------------------
+class Workshop(Base):
+    """An expert review workshop on a campaign: its plot set, scaling, reviewers, answers.
+
+    ``settings``: what the plot set was built from (configurations, sections, kinds, filter,
+    seeds); ``scales``: the one axis scaling of each plot kind ({kind: {x, y}}).
+    ``status``: ``open`` (reviewers may answer) or ``closed``. Deleting the campaign is
+    refused while a workshop refers to it (answers are user input and are never dropped
+    silently); configuration and section names are kept as text on the plots.
+    """
+
+    __tablename__ = "workshop"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200), unique=True)
+    campaign_id: Mapped[int] = mapped_column(ForeignKey("campaign.id", ondelete="RESTRICT"),
+                                             index=True)
+    status: Mapped[str] = mapped_column(String(20), default="open")
+    blind: Mapped[bool] = mapped_column(default=False)
+    repeat_share: Mapped[float] = mapped_column(Float, default=0.1)
+    auto_share: Mapped[float] = mapped_column(Float, default=0.0)
+    settings: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    scales: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_by: Mapped[int | None] = mapped_column(
+        ForeignKey("app_user.id", ondelete="SET NULL"), nullable=True)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    campaign: Mapped[Campaign] = relationship()
+
+
+class WorkshopPlot(Base):
+    """One review plot: a static PNG rendered once, its render parameters and SHA-256.
+
+    ``scaling``: ``fixed`` (the kind's scaling) or ``auto`` (the presentation experiment's
+    per-plot automatic scaling; ``twin_id`` is then the fixed plot of the same signal).
+    ``deviation``: largest |D_v| / std limit of the EN quantities of the signal (NULL when
+    the signal has none); ``sg_c``: Sprague–Geers C of simulation against measurement.
+    """
+
+    __tablename__ = "workshop_plot"
+    __table_args__ = (Index("ix_workshop_plot_workshop", "workshop_id", "id"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    workshop_id: Mapped[int] = mapped_column(ForeignKey("workshop.id", ondelete="CASCADE"))
+    kind: Mapped[str] = mapped_column(String(40))
+    section: Mapped[str] = mapped_column(String(100))
+    configuration: Mapped[str] = mapped_column(String(200))
+    channel: Mapped[str] = mapped_column(String(100))
+    scaling: Mapped[str] = mapped_column(String(10), default="fixed")
+    twin_id: Mapped[int | None] = mapped_column(
+        ForeignKey("workshop_plot.id", ondelete="SET NULL"), nullable=True)
+    deviation: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sg_c: Mapped[float | None] = mapped_column(Float, nullable=True)
+    render: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    image_sha256: Mapped[str] = mapped_column(String(64))
+    image: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+
+
+class WorkshopReviewer(Base):
+    """A reviewer's participation: personal link (only the SHA-256 of its token stored),
+    order seed and the sequence of plots shown (``sequence``: [[plot id, repeat], …])."""
+
+    __tablename__ = "workshop_reviewer"
+    __table_args__ = (UniqueConstraint("workshop_id", "user_id"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    workshop_id: Mapped[int] = mapped_column(ForeignKey("workshop.id", ondelete="CASCADE"))
+    user_id: Mapped[int] = mapped_column(ForeignKey("app_user.id", ondelete="RESTRICT"),
+                                         index=True)
+    seed: Mapped[int] = mapped_column(Integer)
+    sequence: Mapped[list[Any]] = mapped_column(JSON, default=list)
+    token_sha256: Mapped[str | None] = mapped_column(String(64), unique=True, nullable=True)
+    invited_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True),
+                                                           nullable=True)
+    finished_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True),
+                                                            nullable=True)
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+    user: Mapped[AppUser] = relationship()
+
+
+class WorkshopAnswer(Base):
+    """One answer at one place of a reviewer's sequence (unique per place: a repeated
+    submission updates, never duplicates). ``submission`` is the client's id of the last
+    accepted submission (a resent one is recognised and ignored); ``seconds`` the time
+    spent on the plot over all visits; ``source``: ``web`` or ``import``."""
+
+    __tablename__ = "workshop_answer"
+    __table_args__ = (
+        UniqueConstraint("reviewer_id", "position"),
+        Index("ix_workshop_answer_plot", "plot_id"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    reviewer_id: Mapped[int] = mapped_column(
+        ForeignKey("workshop_reviewer.id", ondelete="CASCADE"))
+    plot_id: Mapped[int] = mapped_column(ForeignKey("workshop_plot.id", ondelete="CASCADE"))
+    position: Mapped[int] = mapped_column(Integer)
+    repeat: Mapped[bool] = mapped_column(default=False)
+    answer: Mapped[bool] = mapped_column()
+    comment: Mapped[str] = mapped_column(Text, default="")
+    seconds: Mapped[float] = mapped_column(Float, default=0.0)
+    changes: Mapped[int] = mapped_column(Integer, default=0)
+    submission: Mapped[str] = mapped_column(String(64), default="")
+    source: Mapped[str] = mapped_column(String(10), default="web")
+    answered_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    updated_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)

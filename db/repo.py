@@ -12,17 +12,21 @@ channels, and :func:`signal_hashes` reads hashes without touching the blobs.
 from __future__ import annotations
 
 import datetime as dt
-from collections.abc import Callable, Mapping
+import hmac
+import logging
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from sqlalchemy import String, cast, delete, func, insert, literal, null, select, union_all
+from sqlalchemy import String, cast, delete, func, insert, literal, null, or_, select, union_all
 from sqlalchemy.orm import Session
 
 from railval.core.errors import InvalidSignal, NotFound
+from railval.core.names import check_name
 from railval.core.types import SectionInfo, SignalSet
 from railval.core.zones import zone_for_radius
-from railval.db import audit, codec
+from railval.db import audit, codec, integrity
 from railval.db.checks import RecordingProblem, check_recording
 from railval.db.models import (
     Campaign,
@@ -36,12 +40,20 @@ from railval.db.models import (
     utcnow,
 )
 
+_log = logging.getLogger(__name__)
+
 __all__ = [
+    "CampaignRef",
+    "ConfigRef",
     "add_recordings",
+    "cache_delete",
     "cache_get",
+    "cache_get_many",
     "cache_put",
     "cache_put_many",
+    "campaign_summary",
     "channels",
+    "check_new_configuration",
     "configuration_state",
     "delete_campaign",
     "delete_configuration",
@@ -52,13 +64,56 @@ __all__ = [
     "list_campaigns",
     "list_configurations",
     "load_signalsets",
+    "recording_meta",
+    "resolve",
     "section_infos",
     "signal_hashes",
     "source_hashes",
     "store_configuration",
+    "stored_blobs",
     "vehicle_info",
+    "verify_database",
+    "verify_evidence",
     "verify_signals",
 ]
+
+
+# -- references --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CampaignRef:
+    """A campaign resolved once at the entrance (:func:`resolve`): its id and name. Every
+    function of this module takes it where it takes a campaign, without another lookup."""
+
+    id: int
+    name: str
+
+
+@dataclass(frozen=True)
+class ConfigRef:
+    """A configuration of a campaign resolved once (:func:`resolve`). Functions that take a
+    configuration name (``config``) take this too, without another lookup."""
+
+    campaign: CampaignRef
+    id: int
+    name: str
+
+
+def resolve(session: Session, campaign: Campaign | CampaignRef | str | int,
+            config: str | ConfigRef | None = None) -> tuple[CampaignRef, ConfigRef | None]:
+    """The campaign (and configuration ``config``, when given) as references; raises
+    :class:`NotFound` naming what is available."""
+    c = get_campaign(session, campaign)
+    ref = CampaignRef(c.id, c.name)
+    if config is None:
+        return ref, None
+    if isinstance(config, ConfigRef):
+        return ref, config
+    conf = get_configuration(session, c, config)
+    return ref, ConfigRef(ref, conf.id, conf.name)
+
+
+def _config_name(config: str | ConfigRef | None) -> str | None:
+    return config.name if isinstance(config, ConfigRef) else config
 
 
 # -- campaigns ---------------------------------------------------------------------------
@@ -67,25 +122,29 @@ def list_campaigns(session: Session) -> list[Campaign]:
     return list(session.scalars(select(Campaign).order_by(Campaign.name)))
 
 
-def get_campaign(session: Session, name_or_id: Campaign | str | int) -> Campaign:
-    """The campaign with this name (or, failing that, this numeric id).
+def get_campaign(session: Session, name_or_id: Campaign | CampaignRef | str | int) -> Campaign:
+    """The campaign with this name (or, failing that, this numeric id; or a :class:`CampaignRef`).
 
-    Raises :class:`railval.core.errors.NotFound` listing the available names.
+    Raises :class:`railval.core.errors.NotFound` saying how to list the campaigns (it does
+    not list them: whoever mistyped a name is not shown the others).
     """
     if isinstance(name_or_id, Campaign):
         return name_or_id
+    if isinstance(name_or_id, CampaignRef):
+        return session.get(Campaign, name_or_id.id)
     found = session.scalar(select(Campaign).where(Campaign.name == str(name_or_id)))
     if found is None and str(name_or_id).strip().isdigit():
         found = session.get(Campaign, int(name_or_id))
     if found is None:
-        names = list(session.scalars(select(Campaign.name).order_by(Campaign.name)))
-        raise NotFound(
-            f"campaign {name_or_id!r} not found; available: {', '.join(names) or '(none)'}"
-        )
+        # the names of the other campaigns are not shown to whoever typed a wrong one
+        raise NotFound(f"campaign {name_or_id!r} not found; list the campaigns with "
+                       "`railval list`")
     return found
 
 
-def _campaign_id(session: Session, campaign: Campaign | str | int) -> int:
+def _campaign_id(session: Session, campaign: Campaign | CampaignRef | str | int) -> int:
+    if isinstance(campaign, (Campaign, CampaignRef)):
+        return campaign.id
     return get_campaign(session, campaign).id
 
 
@@ -155,8 +214,11 @@ def list_configurations(session: Session, campaign: Campaign | str | int) -> lis
     )
 
 
-def get_configuration(session: Session, campaign: Campaign | str | int, name: str) -> Configuration:
+def get_configuration(session: Session, campaign: Campaign | CampaignRef | str | int,
+                      name: str | ConfigRef) -> Configuration:
     """The configuration ``name``; :class:`NotFound` lists the available ones."""
+    if isinstance(name, ConfigRef):
+        return session.get(Configuration, name.id)
     c = get_campaign(session, campaign)
     found = session.scalar(
         select(Configuration).where(Configuration.campaign_id == c.id, Configuration.name == name)
@@ -203,6 +265,7 @@ def add_recordings(
         session.add(rec)
         recs.append(rec)
     session.flush()
+    secret = integrity.session_secret(session)
     rows = []
     for rec, (_section, _conf, ss, prov) in zip(recs, items, strict=True):
         ss.hashes = {}
@@ -210,11 +273,33 @@ def add_recordings(
             a = np.asarray(values, dtype=np.float64)
             blob, sha = codec.encode(a)
             ss.hashes[name] = sha
-            rows.append({"recording_id": rec.id, "channel_id": channel_rows[name].id,
+            cid = channel_rows[name].id
+            seal = integrity.seal_signal(secret, rec.id, cid, sha, rec.distance_sha256, rec.fs,
+                                         rec.t0, rec.n)
+            rows.append({"recording_id": rec.id, "channel_id": cid,
                          "blob": blob, "dtype": a.dtype.str, "sha256": sha,
-                         "provenance": dict(prov.get(name, {}))})
+                         "provenance": {**dict(prov.get(name, {})), "seal": seal}})
     if rows:
         session.execute(insert(Signal), rows)
+
+
+def check_new_configuration(session: Session, campaign: Campaign | str | int, name: str, *,
+                            replace: bool = False) -> Configuration | None:
+    """Check that configuration ``name`` may be stored: a safe name
+    (:func:`railval.core.names.check_name`) that does not exist yet unless ``replace``.
+    Returns the existing configuration (when replacing) or ``None``. Callers that compute
+    for minutes call it before computing, so a clash is reported at once."""
+    from railval.core.errors import InvalidParameter
+
+    check_name(name, "configuration name")
+    c = get_campaign(session, campaign)
+    existing = session.scalar(
+        select(Configuration).where(Configuration.campaign_id == c.id, Configuration.name == name)
+    )
+    if existing is not None and not replace:
+        raise InvalidParameter(f"configuration {name!r} already exists in campaign {c.name!r}; "
+                               "choose another name, or overwrite it with --replace")
+    return existing
 
 
 def store_configuration(
@@ -228,6 +313,7 @@ def store_configuration(
     description: str,
     signalsets: Mapping[str, SignalSet],
     replace: bool = False,
+    calibration: dict[str, Any] | None = None,
 ) -> Configuration:
     """Store a configuration (e.g. a simulation result) with its signals.
 
@@ -236,11 +322,13 @@ def store_configuration(
     known sections and channels, equal lengths, finite values, equally spaced time at the
     set's ``fs``, strictly increasing distance. ``replace=True`` overwrites an existing
     configuration of that name in place (its id and children are kept). Fills each set's
-    ``hashes``. Raises :class:`InvalidSignal`, :class:`NotFound` or
-    :class:`railval.core.errors.InvalidParameter`.
+    ``hashes``. ``calibration``: how a calibrated configuration was fitted (fit and held-out
+    section ids, fitted parameters), stored in ``Configuration.calibration``. Raises
+    :class:`InvalidSignal`, :class:`NotFound` or :class:`railval.core.errors.InvalidParameter`.
     """
     from railval.core.errors import InvalidParameter
 
+    check_name(name, "configuration name")
     c = get_campaign(session, campaign)
     if not signalsets:
         raise InvalidSignal(f"configuration {name!r}: no signal sets given")
@@ -261,12 +349,7 @@ def store_configuration(
             raise InvalidSignal(f"configuration {name!r}, section {sid!r}: fs is {ss.fs} Hz but "
                                 f"time_s is sampled at {fs} Hz")
     parent_row = get_configuration(session, c, parent) if parent is not None else None
-    existing = session.scalar(
-        select(Configuration).where(Configuration.campaign_id == c.id, Configuration.name == name)
-    )
-    if existing is not None and not replace:
-        raise InvalidParameter(f"configuration {name!r} already exists in campaign {c.name!r}; "
-                               "pass replace=True to overwrite it")
+    existing = check_new_configuration(session, c, name, replace=replace)
     if parent_row is not None and existing is not None:
         ids = {x.id for x in lineage(session, c, parent_row.name)}
         if existing.id in ids:
@@ -279,11 +362,13 @@ def store_configuration(
         conf = existing
         conf.parent_id = parent_row.id if parent_row is not None else None
         conf.effects, conf.parameters, conf.description = dict(effects), dict(parameters), description
+        conf.calibration = dict(calibration) if calibration is not None else None
         conf.created_at = utcnow()
     else:
         conf = Configuration(
             campaign_id=c.id, name=name, parent_id=parent_row.id if parent_row else None,
             effects=dict(effects), parameters=dict(parameters), description=description,
+            calibration=dict(calibration) if calibration is not None else None,
         )
         session.add(conf)
     stamp = dt.datetime.now(dt.UTC).isoformat()
@@ -377,9 +462,11 @@ def delete_campaign(session: Session, campaign: Campaign | str | int, *, reason:
 
 
 # -- signals -----------------------------------------------------------------------------
-def _source_filter(session: Session, cid: int, config: str | None):
+def _source_filter(session: Session, cid: int, config: str | ConfigRef | None):
     if config is None:
         return Recording.configuration_id.is_(None)
+    if isinstance(config, ConfigRef):
+        return Recording.configuration_id == config.id
     sub = (
         select(Configuration.id)
         .where(Configuration.campaign_id == cid, Configuration.name == config)
@@ -461,19 +548,27 @@ def fetch_signalsets(
             chans.append(r[5])
     _check_requested(session, c, config, present, sections, channels)
 
+    cname = c.name
+
     def decode_all() -> dict[str, SignalSet]:
         out: dict[str, SignalSet] = {}
         decode = codec.decode
         for sid, _rid, fs, t0, n, chan, blob, sha, is_signal in rows:
-            if not is_signal:
-                dist = decode(blob, sha if verify else None)
-                out[sid] = SignalSet(fs=float(fs),
-                                     time_s=t0 + np.arange(n, dtype=np.float64) / fs,
-                                     distance_m=dist)
-            else:
-                ss = out[sid]
-                ss.channels[chan] = decode(blob, sha if verify else None)
-                ss.hashes[chan] = sha
+            try:
+                if not is_signal:
+                    dist = decode(blob, sha if verify else None)
+                    out[sid] = SignalSet(fs=float(fs),
+                                         time_s=t0 + np.arange(n, dtype=np.float64) / fs,
+                                         distance_m=dist)
+                else:
+                    ss = out[sid]
+                    ss.channels[chan] = decode(blob, sha if verify else None)
+                    ss.hashes[chan] = sha
+            except InvalidSignal as exc:
+                src = "measurement" if config is None else f"configuration {config!r}"
+                raise InvalidSignal(f"campaign {cname!r}, {src}, section {sid!r}, "
+                                    f"{chan or 'distance_m'}: {exc}; check the database with "
+                                    "`railval verify`") from None
         return out
 
     return decode_all
@@ -489,7 +584,7 @@ def _check_requested(session: Session, c: Campaign, config: str | None,
         missing = [s for s in sections if s not in out]
         if missing:
             known = [s.id for s in section_infos(session, c)]
-            src = "the measurement" if config is None else f"configuration {config!r}"
+            src = "the measurement" if config is None else f"configuration {_config_name(config)!r}"
             unknown = [s for s in missing if s not in known]
             what = (f"unknown section(s) {unknown}; sections: {known}" if unknown
                     else f"{src} has no recording of section(s) {missing}")
@@ -558,6 +653,121 @@ def verify_signals(session: Session, campaign: Campaign | str | int) -> list[dic
     return problems
 
 
+def _source_problems(session: Session, c: Campaign, config: str | None | bool,
+                     secret: bytes, blobs: bool) -> list[dict[str, Any]]:
+    """Seal (and with ``blobs`` content-hash) problems of one source of ``c``;
+    ``config=True`` means every source of the campaign."""
+    names = {x.id: x.name for x in list_configurations(session, c)}
+    rec_q = (select(Recording.id, Section.section_id, Recording.configuration_id,
+                    Recording.distance_sha256, Recording.fs, Recording.t0, Recording.n)
+             .join(Section, Recording.section_id == Section.id)
+             .where(Section.campaign_id == c.id).order_by(Recording.id))
+    if config is not True:
+        rec_q = rec_q.where(_source_filter(session, c.id, config))
+    recs = session.execute(rec_q).all()
+    problems: list[dict[str, Any]] = []
+    by_rec: dict[int, list] = {}
+    if not blobs:  # seals only: one query for every signal row of the source
+        meta_q = (select(Signal.recording_id, Channel.name, Signal.channel_id, Signal.sha256,
+                         Signal.provenance)
+                  .join(Channel, Signal.channel_id == Channel.id)
+                  .join(Recording, Signal.recording_id == Recording.id)
+                  .join(Section, Recording.section_id == Section.id)
+                  .where(Section.campaign_id == c.id).order_by(Signal.recording_id, Channel.id))
+        if config is not True:
+            meta_q = meta_q.where(_source_filter(session, c.id, config))
+        for r in session.execute(meta_q):
+            by_rec.setdefault(r[0], []).append(tuple(r[1:]))
+    for rid, sid, conf_id, dsha, fs, t0, n in recs:
+        where = {"section": sid, "configuration": names.get(conf_id) if conf_id else None}
+        if blobs:
+            rows = session.execute(
+                select(Channel.name, Signal.channel_id, Signal.sha256, Signal.provenance,
+                       Signal.blob)
+                .join(Channel, Signal.channel_id == Channel.id)
+                .where(Signal.recording_id == rid).order_by(Channel.id)).all()
+        else:
+            rows = by_rec.get(rid, [])
+        if blobs:
+            dblob = session.scalar(select(Recording.distance_blob).where(Recording.id == rid))
+            try:
+                a = codec.decode(dblob, dsha)
+                if a.shape != (n,):
+                    raise InvalidSignal(f"holds shape {a.shape}, the recording has n = {n}")
+            except InvalidSignal as exc:
+                problems.append({**where, "channel": "distance_m", "error": str(exc)})
+        for row in rows:
+            name, cid, sha, prov = row[0], row[1], row[2], row[3] or {}
+            expected = integrity.seal_signal(secret, rid, cid, sha, dsha, fs, t0, n)
+            seal = prov.get("seal") if isinstance(prov, dict) else None
+            if seal is None:
+                problems.append({**where, "channel": name, "error": "has no seal (stored "
+                                 "outside railval, or before seals existed)"})
+            elif not hmac.compare_digest(str(seal), expected):
+                problems.append({**where, "channel": name, "error": "fails its seal: the "
+                                 "samples, their hash or the recording were changed outside "
+                                 "railval"})
+            if blobs:
+                try:
+                    a = codec.decode(row[4], sha)
+                    if a.shape != (n,):
+                        raise InvalidSignal(f"holds shape {a.shape}, the recording has n = {n}")
+                except InvalidSignal as exc:
+                    problems.append({**where, "channel": name, "error": str(exc)})
+    return problems
+
+
+def verify_evidence(session: Session, campaign: Campaign | str | int, config: str, *,
+                    blobs: bool = True) -> list[dict[str, Any]]:
+    """Check what a verdict on configuration ``config`` rests on — the measurement's and the
+    configuration's signals: every seal (:mod:`railval.db.integrity`) and, with ``blobs``,
+    every content hash. Returns one record per problem (``section``, ``configuration``,
+    ``channel``, ``error``); empty when the evidence is intact. Reports and sign-offs call it
+    before they state a verdict."""
+    c = get_campaign(session, campaign)
+    get_configuration(session, c, config)
+    secret = integrity.session_secret(session)
+    return (_source_problems(session, c, None, secret, blobs)
+            + _source_problems(session, c, config, secret, blobs))
+
+
+def require_evidence(session: Session, campaign: Campaign | str | int, config: str, *,
+                     blobs: bool = True) -> None:
+    """:func:`verify_evidence`, raising :class:`railval.db.integrity.IntegrityError` that names
+    the first problems and how many there are."""
+    problems = verify_evidence(session, campaign, config, blobs=blobs)
+    if problems:
+        first = "; ".join(f"section {p['section']}, "
+                          f"{'configuration ' + repr(p['configuration']) if p['configuration'] else 'measurement'}, "
+                          f"{p['channel']}: {p['error']}" for p in problems[:3])
+        raise integrity.IntegrityError(
+            f"the evidence of {config!r} is not intact ({len(problems)} problem(s)): {first}; "
+            "check the database with `railval verify`")
+
+
+def verify_database(session: Session, *, blobs: bool = True) -> dict[str, Any]:
+    """Check a whole database: every signal's seal and (``blobs``) content hash, every
+    distance axis, and every result-cache entry's seal. Returns ``{"ok", "campaigns":
+    {name: [problem, ...]}, "signals": n, "cache_entries": n, "cache_unauthentic": [keys]}``.
+    An unauthentic cache entry is never used (it is recomputed); it is listed because
+    someone wrote it without the server secret."""
+    secret = integrity.session_secret(session)
+    out: dict[str, Any] = {"campaigns": {}, "signals": 0}
+    for c in list_campaigns(session):
+        out["campaigns"][c.name] = _source_problems(session, c, True, secret, blobs)
+    out["signals"] = int(session.scalar(select(func.count(Signal.id))) or 0)
+    bad: list[str] = []
+    n = 0
+    for k, v in session.execute(select(ResultCache.key, ResultCache.value)):
+        n += 1
+        if integrity.open_cache_value(secret, k, bytes(v)) is None:
+            bad.append(k)
+    out["cache_entries"] = n
+    out["cache_unauthentic"] = bad
+    out["ok"] = not bad and not any(out["campaigns"].values())
+    return out
+
+
 def count_signals(session: Session, campaign: Campaign | str | int) -> int:
     """Number of stored arrays of the campaign (signals plus distance axes)."""
     cid = _campaign_id(session, campaign)
@@ -583,14 +793,54 @@ def row_counts(session: Session) -> dict[str, int]:
 
 # -- result cache ------------------------------------------------------------------------
 def cache_get(session: Session, key: str) -> bytes | None:
-    """The cached bytes under ``key``, or ``None``."""
-    value = session.scalar(select(ResultCache.value).where(ResultCache.key == key))
-    return bytes(value) if value is not None else None
+    """The cached bytes under ``key``, or ``None`` (also when the stored value fails its
+    seal: :mod:`railval.db.integrity`)."""
+    return cache_get_many(session, [key]).get(key)
+
+
+def cache_get_many(session: Session, keys: list[str], chunk: int = 500) -> dict[str, bytes]:
+    """``key → bytes`` of the keys present and authentic (one query per ``chunk`` keys).
+
+    A value whose seal does not match (copied from another key, edited, or written without
+    the server secret) is left out, so the caller computes it again; it is logged.
+    """
+    secret = integrity.session_secret(session)
+    out: dict[str, bytes] = {}
+    bad = 0
+    for i in range(0, len(keys), chunk):
+        part = list(keys[i:i + chunk])
+        for k, v in session.execute(select(ResultCache.key, ResultCache.value)
+                                    .where(ResultCache.key.in_(part))):
+            payload = integrity.open_cache_value(secret, k, bytes(v))
+            if payload is None:
+                bad += 1
+            else:
+                out[k] = payload
+    if bad:
+        _log.warning("%d result-cache entries failed their seal and are recomputed", bad)
+    return out
 
 
 def cache_put(session: Session, key: str, value: bytes) -> None:
     """Insert or overwrite ``key`` (one atomic upsert on SQLite and PostgreSQL)."""
     cache_put_many(session, {key: value})
+
+
+def cache_delete(session: Session, *, keys: Sequence[str] | None = None, prefix: str | None = None) -> int:
+    """Delete the cached entries under ``keys`` and/or whose key starts with ``prefix``
+    (e.g. ``"en14363:"``, every processed section); returns how many were deleted."""
+    conditions = []
+    if keys is not None:
+        conditions.append(ResultCache.key.in_(list(keys)))
+    if prefix is not None:
+        conditions.append(ResultCache.key.startswith(prefix, autoescape=True))
+    if not conditions:
+        return 0
+    return int(session.execute(delete(ResultCache).where(or_(*conditions))).rowcount or 0)
+
+
+#: keys per bulk cache read (SQL IN list)
+CACHE_CHUNK = 500
 
 
 def cache_put_many(session: Session, items: Mapping[str, bytes]) -> None:
@@ -610,6 +860,65 @@ def cache_put_many(session: Session, items: Mapping[str, bytes]) -> None:
         set_={"value": stmt.excluded.value, "created_at": stmt.excluded.created_at},
     )
     now = utcnow()
-    session.connection().execute(
-        stmt, [{"key": k, "value": bytes(v), "created_at": now} for k, v in items.items()]
-    )
+    secret = integrity.session_secret(session)
+    rows = [{"key": k, "value": integrity.seal_cache_value(secret, k, bytes(v)), "created_at": now}
+            for k, v in items.items()]
+    if dialect == "sqlite" and not session.get_bind().get_execution_options().get("railval_write"):
+        # a read unit of work that caches what it computed: on SQLite its deferred
+        # transaction cannot wait for another writer, and a cache entry is worth no error —
+        # skip it (it is computed again next time)
+        from sqlalchemy.exc import OperationalError
+
+        try:
+            session.connection().execute(stmt, rows)
+        except OperationalError as exc:
+            if "locked" not in str(exc.orig) and "busy" not in str(exc.orig):
+                raise
+            _log.info("result cache not written (database busy): %d entries", len(rows))
+        return
+    session.connection().execute(stmt, rows)
+
+
+# -- summaries ---------------------------------------------------------------------------
+def stored_blobs(session: Session) -> list[tuple[bytes, str]]:
+    """Every stored signal blob with its SHA-256 content hash (storage benchmarks)."""
+    return [(bytes(b), h) for b, h in session.execute(select(Signal.blob, Signal.sha256))]
+
+
+def recording_meta(session: Session, campaign: Campaign | CampaignRef | str | int,
+                   config: str | ConfigRef | None = None) -> dict[str, tuple[str, float, int]]:
+    """Section id → (distance-axis SHA-256, fs, n) of the recordings of the measurement
+    (``config=None``) or a configuration; no blob is read."""
+    cid = _campaign_id(session, campaign)
+    q = (select(Section.section_id, Recording.distance_sha256, Recording.fs, Recording.n)
+         .join(Section, Recording.section_id == Section.id)
+         .where(Section.campaign_id == cid, _source_filter(session, cid, config)))
+    return {sid: (sha, float(fs), int(n)) for sid, sha, fs, n in session.execute(q)}
+
+
+def campaign_summary(session: Session, campaign: Campaign | CampaignRef | str | int) -> dict[str, Any]:
+    """A campaign at a glance (``railval list``): name, id, description, vehicle, sections
+    with zones, channels, configurations with parent and effects, number of stored signals."""
+    c = get_campaign(session, campaign)
+    infos = section_infos(session, c)
+    n_signals = session.scalar(
+        select(func.count(Signal.id)).join(Recording).join(Section).where(Section.campaign_id == c.id))
+    confs = list_configurations(session, c)
+    parent = {x.id: x.name for x in confs}
+    zones: dict[int, int] = {}
+    for i in infos:
+        zones[i.zone] = zones.get(i.zone, 0) + 1
+    return {
+        "name": c.name,
+        "id": c.id,
+        "description": c.description,
+        "vehicle": vehicle_info(session, c),
+        "n_sections": len(infos),
+        "zones": {str(z): n for z, n in sorted(zones.items())},
+        "sections": [{"id": i.id, "zone": i.zone, "radius_m": i.radius_m,
+                      "speed_kmh": i.speed_kmh} for i in infos],
+        "channels": [ch.name for ch in channels(session, c)],
+        "configurations": [{"name": x.name, "parent": parent.get(x.parent_id),
+                            "effects": sorted(x.effects)} for x in confs],
+        "n_signals": int(n_signals or 0),
+    }

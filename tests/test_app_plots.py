@@ -185,12 +185,16 @@ def test_signature_chart_of_a_candidate():
 
 
 def test_pattern_grids_average_positions_per_quantity_zone_and_psd_band():
-    from railval.app.state import pattern_grids
+    from railval.core.diagnosis import Component, pattern_grids
 
-    labels = ["Y_qst zone 4 w1L", "Y_qst zone 4 w2L", "Y_qst zone 1 w1L", "az_rms zone 2 b1",
-              "psd az_cb_b1 5-10 Hz", "psd az_cb_b2 5-10 Hz", "psd ay_cb_b1 0.4-1 Hz"]
+    components = [Component.pair("Y_qst", 4, "w1L"), Component.pair("Y_qst", 4, "w2L"),
+                  Component.pair("Y_qst", 1, "w1L"), Component.pair("az_rms", 2, "b1"),
+                  Component.psd("az_cb_b1", (5, 10)), Component.psd("az_cb_b2", (5, 10)),
+                  Component.psd("ay_cb_b1", (0.4, 1))]
+    assert [c.label for c in components][-3:] == ["psd az_cb_b1 5-10 Hz", "psd az_cb_b2 5-10 Hz",
+                                                  "psd ay_cb_b1 0.4-1 Hz"]
     values = [-1.0, -2.0, 0.5, 0.25, 1.0, 0.0, -0.5]
-    q, p = pattern_grids(labels, values)
+    q, p = pattern_grids(components, values)
     assert q.rows == ["Y_qst", "az_rms"] and q.cols == ["zone 1", "zone 2", "zone 3", "zone 4"]
     np.testing.assert_array_equal(q.values, [[0.5, np.nan, np.nan, -1.5], [np.nan, 0.25, np.nan, np.nan]])
     assert p.rows == ["ay", "az"] and p.cols == ["0.4-1 Hz", "5-10 Hz"]  # bands by frequency
@@ -198,7 +202,7 @@ def test_pattern_grids_average_positions_per_quantity_zone_and_psd_band():
 
 
 def test_pattern_heatmap_fixed_symmetric_scale_and_cell_values():
-    from railval.app.state import PatternGrid
+    from railval.core.diagnosis import PatternGrid
 
     grid = PatternGrid(["Y_qst", "Q_qst"], ["zone 1", "zone 2"], np.array([[0.2, -1.8], [np.nan, 0.0]]))
     fig = hv.render(plots.pattern_heatmap(grid, "now", 2.0, "D_v / limit (–)", "EN 14363 test zone"),

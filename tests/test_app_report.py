@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import re
 
@@ -95,6 +96,10 @@ def test_report_holds_verdict_quantities_coverage_hashes_and_versions(demo_db, r
     for sid in sorted(set(meas) | set(sim)):
         for ch in sorted(set(meas.get(sid, {})) | set(sim.get(sid, {}))):
             h.update(f"{sid}\t{ch}\t{meas.get(sid, {}).get(ch, '')}\t{sim.get(sid, {}).get(ch, '')}\n".encode())
+    # … then the verdict and every quantity's values (a forged verdict changes the digest)
+    d = result.to_dict()
+    h.update(json.dumps({k: d.get(k) for k in ("validated", "coverage", "quantities")},
+                        sort_keys=True, default=str).encode())
     assert report.digest == h.hexdigest() and report.digest in html
     n_signals = sum(len(v) for v in meas.values())
     assert len(re.findall(r"<td class='l'>[0-9a-f]{64}</td>", html)) == 2 * n_signals

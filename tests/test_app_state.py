@@ -164,12 +164,21 @@ def test_run_job_success_progress_and_result(app):
 
 
 def test_run_job_error_lands_in_status(app):
+    from railval.core.errors import InvalidParameter
+
     def fail(progress):
-        raise ValueError("bad parameter k = -1, must be > 0")
+        raise InvalidParameter("bad parameter k = -1, must be > 0")
     app.run_job("calibration", fail, background=False)
     assert app.status_level == "error"
-    assert "calibration failed: ValueError: bad parameter k = -1, must be > 0" == app.status
+    assert "calibration failed: bad parameter k = -1, must be > 0" == app.status
     assert app.busy is False
+
+    # an error that is not railval's own shows only its kind (details: server log)
+    def crash(progress):
+        raise ValueError("internal detail /srv/x.py SELECT secret FROM t")
+    app.run_job("calibration", crash, background=False)
+    assert app.status == ("calibration failed: internal error (ValueError); the details are "
+                          "in the server log")
 
 
 def test_run_job_in_thread_refuses_a_second_job(app):

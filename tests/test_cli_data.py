@@ -7,6 +7,7 @@ import json
 import pytest
 
 from railval.app.cli import main
+
 from tests.factories import write_demo_campaign
 
 
@@ -47,7 +48,8 @@ def test_init_import_list_export(db_url, tmp_path, capsys):
     code, _, err = _run(capsys, "--db", db_url, "import", str(tmp_path / "e"))
     assert code == 2 and "campaign named 'demo' already exists" in err
     code, _, err = _run(capsys, "--db", db_url, "export", "nope", str(tmp_path / "x"))
-    assert code == 2 and "'nope' not found; available: demo" in err
+    assert code == 2 and "'nope' not found; list the campaigns with `railval list`" in err
+    assert "demo" not in err
 
 
 def test_import_reports_bad_folder(tmp_path, capsys):

@@ -14,6 +14,7 @@ from railval.core.types import SignalSet
 from railval.db import codec, repo
 from railval.db.importer import import_campaign
 from railval.db.io import read_table
+
 from tests.factories import CHANNELS, Q0_KN
 
 
@@ -66,8 +67,10 @@ def test_campaign_lookup(demo):
         assert repo.get_campaign(s, c.id).name == "demo"
         assert repo.get_campaign(s, str(c.id)) is c
         assert [x.name for x in repo.list_campaigns(s)] == ["demo"]
-        with pytest.raises(NotFound, match="'nope' not found; available: demo"):
+        with pytest.raises(NotFound, match="'nope' not found; list the campaigns with "
+                           "`railval list`") as info:
             repo.get_campaign(s, "nope")
+        assert "demo" not in str(info.value)
 
 
 def test_section_infos_cover_the_four_zones(demo, demo_campaign_dir):

@@ -241,13 +241,13 @@ def test_cli_marks_definition_sensitive_quantities():
 
 
 def test_result_cache_keeps_alternatives_and_supplementary():
-    from railval.app.services.validation import _pack, _unpack
+    from railval.core.en14363 import pack_values, unpack_values
 
     rid = Reading("linear", "first_sample", "samples_closed").id
     v = SectionValues("S1", {("SumY_max", "ws1"): 3.0}, warnings=["w"],
                       alternatives={rid: {("SumY_max", "ws1"): math.nan}},
                       supplementary={("ay_bg_rms", "b1"): 0.25})
-    back = _unpack("S1", _pack(v))
+    back = unpack_values("S1", pack_values(v))
     assert dict(back) == dict(v) and back.warnings == ["w"]
     assert math.isnan(back.value_under(rid, ("SumY_max", "ws1")))
     assert back.value_under(CHOSEN.id, ("SumY_max", "ws1")) == 3.0

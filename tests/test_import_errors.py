@@ -18,6 +18,7 @@ from railval.db import repo
 from railval.db.engine import connect
 from railval.db.importer import import_campaign, validate_campaign_folder, write_validated
 from railval.db.io import read_table, write_table
+
 from tests.factories import write_demo_campaign
 
 
@@ -254,4 +255,223 @@ def test_failure_while_writing_rolls_back_everything(good_db, folder):
     before = _snapshot(good_db)
     with pytest.raises(KeyError), good_db.session() as s:
         write_validated(s, vc)
+    assert _snapshot(good_db) == before
+
+
+# -- hostile or clumsy manifests (parser limits, names, units, layout) -------------------
+def _save_text(folder, manifest, placeholder, literal):
+    """Write the manifest with the JSON string ``placeholder`` replaced by raw ``literal``."""
+    text = json.dumps(manifest, indent=1)
+    assert json.dumps(placeholder) in text
+    (folder / "campaign.json").write_text(text.replace(json.dumps(placeholder), literal, 1))
+
+
+@pytest.mark.parametrize("literal,match", [
+    ("NaN", r"NaN at line \d+, column \d+ is not a number JSON allows"),
+    ("Infinity", "Infinity at line .* is not a number JSON allows"),
+    ("-Infinity", "-Infinity at line .* is not a number JSON allows"),
+    ("1e400", "number 1e400 at line .* is beyond the float range"),
+    ("9" * 5000, "number of 5000 characters at line .* NUMBER_MAX_CHARS = 40"),
+])
+def test_number_literals_refused(good_db, folder, literal, match):
+    m = _manifest(folder)
+    m["sections"][0]["radius_m"] = "@@"
+    _save_text(folder, m, "@@", literal)
+    _expect(good_db, folder, "campaign.json", None, match)
+
+
+def test_deep_nesting_refused(good_db, folder):
+    m = _manifest(folder)
+    m["vehicle"]["parameters"] = {"deep": "@@"}
+    _save_text(folder, m, "@@", "[" * 100_000 + "]" * 100_000)
+    _expect(good_db, folder, "campaign.json", None, "nesting deeper than 64 levels at line")
+
+
+def test_duplicate_json_key_refused(good_db, folder):
+    m = _manifest(folder)
+    m["vehicle"]["Q0_kN"] = "@@"
+    _save_text(folder, m, "@@", '77.3, "Q0_kN": 7.73')
+    _expect(good_db, folder, "campaign.json", None, "duplicate key 'Q0_kN' in one JSON object")
+
+
+@pytest.mark.parametrize("path,value,field,match", [
+    (["name"], "bad\x00name", "name", "NUL character"),
+    (["description"], "text\x00", "description", "NUL character"),
+    (["configurations", 0, "name"], "base\tline", "configurations[0].name",
+     r"holds the character '\\t' \(U\+0009\)"),
+    (["name"], '"><img src=x onerror=alert(1)>', "name", "holds the character '\"'"),
+    (["configurations", 0, "name"], "<script>", "configurations[0].name",
+     "holds the character '<'"),
+    (["name"], "x" * 201, "name", "201 characters is longer than the limit 200"),
+    (["sections", 0, "id"], "S" * 101, "sections[0].id",
+     "101 characters is longer than the limit 100"),
+    (["vehicle", "name"], "v" * 201, "vehicle.name", "longer than the limit 200"),
+    (["sections", 0, "country"], "D\x07E", "sections[0].country", r"control character U\+0007"),
+])
+def test_names_and_text_refused(good_db, folder, path, value, field, match):
+    m = _manifest(folder)
+    _set(path, value)(m)
+    _save(folder, m)
+    _expect(good_db, folder, "campaign.json", field, match)
+
+
+def test_evaluated_range_on_transitions_refused(good_db, folder):
+    m = _manifest(folder)
+    sec = m["sections"][1]
+    lay = sec["layout"]
+    assert sec["radius_m"] > 0 and lay["transition_in_m"] > 10
+    start = lay["straight_in_m"]
+    sec["evaluated"] = {"start_m": start, "end_m": start + lay["transition_in_m"]}
+    _save(folder, m)
+    _expect(good_db, folder, "campaign.json", "sections[1].evaluated",
+            "lies on the transitions or straights of the layout: only 0 m")
+
+
+def _declare_unit(folder, kind_prefix, unit, check=None):
+    m = _manifest(folder)
+    for ch in m["channels"]:
+        if ch["name"].startswith(kind_prefix):
+            ch["unit"] = unit
+            if check is not None:
+                ch["check_unit"] = check
+    _save(folder, m)
+
+
+def test_unit_newton_on_kilonewton_data_refused(good_db, folder):
+    _declare_unit(folder, "Q_", "N")
+    _expect(good_db, folder, "measured/S01.csv", "Q_w1L",
+            "mean vertical wheel force Q is 0.07.* kN .*unit declared N.* look like kN "
+            "declared as N")
+
+
+def test_unit_g_on_ms2_data_refused(good_db, folder):
+    _declare_unit(folder, "ay_cb_", "g")
+    _expect(good_db, folder, "measured/S01.csv", "ay_cb_b1",
+            "unit declared g.*look like m/s² declared as g")
+
+
+def test_unit_check_override_imports_as_declared(good_db, folder):
+    _declare_unit(folder, "ay_cb_", "g", check=False)
+    vc = validate_campaign_folder(folder)
+    raw = read_table(folder / "measured" / "S01.csv")["ay_cb_b1"]
+    from railval.db import codec
+
+    stored = codec.decode(vc.recordings[0].signals["ay_cb_b1"][0])
+    assert np.array_equal(stored, raw * 9.80665)
+
+
+def test_value_beyond_float_range_after_conversion_refused(good_db, folder):
+    _declare_unit(folder, "az_cb_", "g", check=False)
+
+    def spoil(cols):
+        cols["az_cb_b2"][77] = 1e308
+    _edit_table(folder / "measured" / "S02.csv", spoil)
+    _expect(good_db, folder, "measured/S02.csv", "az_cb_b2",
+            "holds inf at sample 77 after conversion from g")
+
+
+def test_huge_finite_value_refused(good_db, folder):
+    def spoil(cols):
+        cols["Y_w1R"][5] = 1e308
+    _edit_table(folder / "sim" / "baseline" / "S01.csv", spoil)
+    _expect(good_db, folder, "sim/baseline/S01.csv", "Y_w1R",
+            r"holds 1e\+308 at sample 5 .*MAX_ABS_VALUE")
+
+
+def test_boolean_csv_column_refused(good_db, folder):
+    path = folder / "measured" / "S01.csv"
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")
+    k = [h.strip('"') for h in header].index("Y_w2L")
+    out = [lines[0]]
+    for i, line in enumerate(lines[1:]):
+        cells = line.split(",")
+        cells[k] = "true" if i % 2 else "false"
+        out.append(",".join(cells))
+    path.write_text("\n".join(out) + "\n")
+    _expect(good_db, folder, str(path), "Y_w2L", "column 'Y_w2L' is boolean")
+
+
+def test_boolean_parquet_column_refused(good_db, folder):
+    cols = read_table(folder / "measured" / "S01.csv")
+    cols["Y_w2L"] = cols["Y_w2L"] > 0
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    pq.write_table(pa.table(cols), folder / "measured" / "S01.parquet")
+    m = _manifest(folder)
+    m["sections"][0]["measured"] = "measured/S01.parquet"
+    _save(folder, m)
+    _expect(good_db, folder, "measured/S01.parquet", "Y_w2L", "holds booleans")
+
+
+def test_semicolon_csv_named(good_db, folder):
+    path = folder / "measured" / "S01.csv"
+    path.write_text(path.read_text().replace(",", ";"))
+    _expect(good_db, folder, str(path), "time_s", "separates columns with ';'")
+
+
+def test_decimal_comma_csv_named(good_db, folder):
+    path = folder / "measured" / "S01.csv"
+    lines = path.read_text().splitlines()
+    body = [ln.replace(",", ";").replace(".", ",").replace(";", ",") for ln in lines[1:]]
+    path.write_text("\n".join([lines[0], *body]) + "\n")
+    _expect(good_db, folder, str(path), None, "decimal comma")
+
+
+def test_duplicate_parquet_column_named(good_db, folder):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    cols = read_table(folder / "measured" / "S01.csv")
+    names = list(cols) + ["Y_w1L"]
+    arrays = [pa.array(cols[n]) for n in names]
+    pq.write_table(pa.Table.from_arrays(arrays, names=names), folder / "measured" / "S01.parquet")
+    m = _manifest(folder)
+    m["sections"][0]["measured"] = "measured/S01.parquet"
+    _save(folder, m)
+    err = _expect(good_db, folder, str(folder / "measured" / "S01.parquet"), "Y_w1L",
+                  "column 'Y_w1L' appears twice")
+    assert len(str(err).splitlines()) == 1
+
+
+def test_hdf5_declaring_huge_dataset_refused_before_reading(good_db, folder):
+    import time
+
+    import h5py
+
+    path = folder / "measured" / "S01.h5"
+    cols = read_table(folder / "measured" / "S01.csv")
+    with h5py.File(path, "w") as fh:
+        for k, v in cols.items():
+            fh.create_dataset(k, data=v)
+        del fh["Y_w1L"]
+        fh.create_dataset("Y_w1L", shape=(300_000_000,), dtype="f8", chunks=(100_000,),
+                          compression="gzip", fillvalue=1.0)
+    assert path.stat().st_size < 2_000_000
+    m = _manifest(folder)
+    m["sections"][0]["measured"] = "measured/S01.h5"
+    _save(folder, m)
+    t = time.perf_counter()
+    _expect(good_db, folder, str(path), "Y_w1L",
+            "declares 300000000 samples, more than the limit MAX_SAMPLES = 20000000")
+    assert time.perf_counter() - t < 10
+
+
+@pytest.mark.parametrize("ext", ["parquet", "mf4", "tdms", "mat"])
+def test_declared_size_cap_other_formats(good_db, folder, ext, monkeypatch):
+    from railval.db.io import formats
+
+    cols = read_table(folder / "measured" / "S01.csv")
+    write_table(folder / "measured" / f"S01.{ext}", cols)
+    m = _manifest(folder)
+    m["sections"][0]["measured"] = f"measured/S01.{ext}"
+    _save(folder, m)
+    monkeypatch.setattr(formats, "MAX_SAMPLES", 1000)
+    before = _snapshot(good_db)
+    with pytest.raises(CampaignFormatError,
+                       match="declares .* samples, more than the limit MAX_SAMPLES = 1000") as info:
+        import_campaign(good_db, folder)
+    assert info.value.file == str(folder / "measured" / f"S01.{ext}")
+    assert info.value.field in cols
     assert _snapshot(good_db) == before

@@ -194,3 +194,23 @@ def test_session_cookie_expires_and_forged_cookies_are_refused(database):
     assert auth.principal_from_cookie(forged) is None  # signed with another secret
     assert auth.principal_from_cookie(None) is None
     assert auth.principal_from_cookie("eng|0") is None  # unsigned
+
+
+def test_app_sign_in_reaches_the_workshop_pages_with_their_role_check(server):
+    """One sign-in for the whole server: a user signed in to the app opens the organiser
+    pages without a second sign-in when the role allows it, and is refused (403) when not;
+    after logout the workshop pages ask for a sign-in again."""
+    database, base = server
+    with database.session() as s:
+        users.create_user(s, "org", password="organiser pw", roles=["organiser"])
+    org = Client(base)
+    assert org.post("/login", username="org", password="organiser pw", next="/app")[0] == 200
+    status, body, final = org.get("/workshops")
+    assert status == 200 and final.endswith("/workshops") and "Sign in" not in body
+    eng = Client(base)
+    assert eng.post("/login", username="eng", password="engineer pw", next="/app")[0] == 200
+    status, body, _ = eng.get("/workshops/new")
+    assert status == 403 and "may not open" in body
+    org.get("/logout")
+    status, body, final = org.get("/workshops")
+    assert "/workshops/login" in final and "name='password'" in body

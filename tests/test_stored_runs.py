@@ -32,11 +32,9 @@ def synth_demo(database):
     return database
 
 
-class _NoSimulation:
-    """Stands in for the batch executor: any simulation fails the test."""
-
-    def __init__(self, *a, **k):
-        raise AssertionError("the stored diagnosis should have been reused, not simulated")
+def _no_simulation(*a, **k):
+    """Stands in for the simulating diagnosis: any call fails the test."""
+    raise AssertionError("the stored diagnosis should have been reused, not simulated")
 
 
 def test_diagnosis_is_stored_and_reused(synth_demo, monkeypatch):
@@ -44,7 +42,7 @@ def test_diagnosis_is_stored_and_reused(synth_demo, monkeypatch):
     kw = {"effects": ["conicity"], "values_per_parameter": 2, "workers": 1}
     first = diagnosis_service.diagnose(demo, "demo", "baseline", **kw)
     assert first.extra["run"]["reused"] is False and first.extra["run"]["current"] is True
-    monkeypatch.setattr(diagnosis_service, "BatchExecutor", _NoSimulation)
+    monkeypatch.setattr(diagnosis_service, "diagnose_evidence_service", _no_simulation)
     again = diagnosis_service.diagnose(demo, "demo", "baseline", **kw)
     assert again.extra["run"]["reused"] is True
     assert again.extra["run"]["id"] == first.extra["run"]["id"]

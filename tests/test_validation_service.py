@@ -9,7 +9,9 @@ import pytest
 
 from railval.app.services import validation as service
 from railval.core import en14363
+from railval.core.en14363 import section_cache_key
 from railval.core.errors import NotFound
+from railval.core.validation import validate_signalsets
 from railval.db import repo
 from railval.db.importer import import_campaign
 from tests.factories import write_demo_campaign
@@ -80,7 +82,7 @@ def test_service_equals_in_memory_path(database, campaign_folder):
         vehicle = repo.vehicle_info(s, "demo")
         measured = repo.load_signalsets(s, "demo", None)
         simulated = repo.load_signalsets(s, "demo", "baseline")
-    mem = service.evaluate_signalsets(measured, simulated, sections, vehicle, n_boot=100, seed=3)
+    mem = validate_signalsets(measured, simulated, sections, vehicle, n_boot=100, seed=3)
     a, b = db_result.to_dict(), mem.to_dict()
     a.pop("info")
     assert a == b
@@ -91,16 +93,16 @@ def test_cache_key_changes_with_content_and_range():
     from railval.core.types import SectionInfo
 
     sec = SectionInfo("S1", 0, 0, 100, 1, 10.0, 90.0)
-    base = service.section_cache_key(sec, 200.0, 1000, "d" * 64, {"Y_w1L": "a", "Q_w1L": "b"}, 4)
-    assert base == service.section_cache_key(sec, 200.0, 1000, "d" * 64,
-                                             {"Q_w1L": "b", "Y_w1L": "a"}, 4)
+    base = section_cache_key(sec, 200.0, 1000, "d" * 64, {"Y_w1L": "a", "Q_w1L": "b"}, 4)
+    assert base == section_cache_key(sec, 200.0, 1000, "d" * 64,
+                                     {"Q_w1L": "b", "Y_w1L": "a"}, 4)
     variants = [
-        service.section_cache_key(sec, 200.0, 1000, "d" * 64, {"Y_w1L": "c", "Q_w1L": "b"}, 4),
-        service.section_cache_key(sec, 200.0, 1000, "e" * 64, {"Y_w1L": "a", "Q_w1L": "b"}, 4),
-        service.section_cache_key(SectionInfo("S1", 0, 0, 100, 1, 10.0, 91.0), 200.0, 1000,
-                                  "d" * 64, {"Y_w1L": "a", "Q_w1L": "b"}, 4),
-        service.section_cache_key(sec, 200.0, 1000, "d" * 64, {"Y_w1L": "a", "Q_w1L": "b"}, 6),
-        service.section_cache_key(sec, 250.0, 1000, "d" * 64, {"Y_w1L": "a", "Q_w1L": "b"}, 4),
+        section_cache_key(sec, 200.0, 1000, "d" * 64, {"Y_w1L": "c", "Q_w1L": "b"}, 4),
+        section_cache_key(sec, 200.0, 1000, "e" * 64, {"Y_w1L": "a", "Q_w1L": "b"}, 4),
+        section_cache_key(SectionInfo("S1", 0, 0, 100, 1, 10.0, 91.0), 200.0, 1000,
+                          "d" * 64, {"Y_w1L": "a", "Q_w1L": "b"}, 4),
+        section_cache_key(sec, 200.0, 1000, "d" * 64, {"Y_w1L": "a", "Q_w1L": "b"}, 6),
+        section_cache_key(sec, 250.0, 1000, "d" * 64, {"Y_w1L": "a", "Q_w1L": "b"}, 4),
     ]
     assert len({base, *variants}) == 6
 

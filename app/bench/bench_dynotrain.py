@@ -172,8 +172,6 @@ def _cpu_seconds() -> float:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from sqlalchemy import delete
-
     from railval.app.services.validation import (
         source_cache_keys,
         validate_configuration,
@@ -181,7 +179,6 @@ def run(args: argparse.Namespace) -> dict:
     )
     from railval.db import repo
     from railval.db.engine import connect
-    from railval.db.models import ResultCache
 
     data = Path(args.data)
     record = build(data, args.configs, args.sections, args.samples, args.fs)
@@ -191,7 +188,7 @@ def run(args: argparse.Namespace) -> dict:
     load_before = os.getloadavg()[0]
     if not only_new:
         with database.session() as session:
-            session.execute(delete(ResultCache).where(ResultCache.key.like("en14363:%")))
+            repo.cache_delete(session, prefix="en14363:")
         load_before = os.getloadavg()[0]
         cpu0 = _cpu_seconds()
         t0 = time.perf_counter()
@@ -231,7 +228,7 @@ def run(args: argparse.Namespace) -> dict:
                                         order=5).values(),
                      *source_cache_keys(session, "dynotrain-bench", None, secs,
                                         order=5).values()]
-            session.execute(delete(ResultCache).where(ResultCache.key.in_(stale)))
+            repo.cache_delete(session, keys=stale)
         loads.append(os.getloadavg()[0])
         t0 = time.perf_counter()
         with database.session() as session:

@@ -72,12 +72,9 @@ def write_campaign(folder: Path, sections: int, seconds: float, fs: float, fmt: 
 
 
 def run(args: argparse.Namespace) -> dict:
-    from sqlalchemy import select
-
     from railval.db import codec, repo
     from railval.db.engine import connect
     from railval.db.importer import import_campaign, validate_campaign_folder
-    from railval.db.models import Signal
 
     with tempfile.TemporaryDirectory(prefix="railval-bench-io-") as tmp:
         root = Path(tmp)
@@ -96,7 +93,7 @@ def run(args: argparse.Namespace) -> dict:
         t_import = time.perf_counter() - t
 
         with database.session() as s:
-            blobs = [(b, h) for b, h in s.execute(select(Signal.blob, Signal.sha256))]
+            blobs = repo.stored_blobs(s)
         arrays = [codec.decode(b) for b, _ in blobs]
         npy = []
         for k, a in enumerate(arrays):

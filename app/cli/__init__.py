@@ -12,8 +12,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import logging
+import os
 import pkgutil
 import sys
+import traceback
 
 from railval.core.errors import RailvalError
 
@@ -35,6 +38,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="the user you act as when the database holds users (default $RAILVAL_USER); "
         "the verb needs a role of that user (docs/security.md)",
     )
+    parser.add_argument("--debug", action="store_true",
+                        help="print the traceback of an error (also RAILVAL_DEBUG=1)")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     sub.required = True
     package = importlib.import_module(__name__)
@@ -59,6 +64,49 @@ def _json_default(value: object) -> object:
     if isinstance(value, np.ndarray):
         return value.tolist()
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+class Progress:
+    """Progress of a long verb on stderr: ``progress(stage, fraction, info)``.
+
+    On a terminal one bar redrawn in place (``\\r``); otherwise (a log file, a pipe, CI) one
+    plain line when the stage changes and at most every ``interval_s`` seconds, never a
+    carriage return.
+    """
+
+    def __init__(self, interval_s: float = 5.0, stream=None):
+        self.stream = stream if stream is not None else sys.stderr
+        self.interval_s = interval_s
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._last = float("-inf")
+        self._stage: str | None = None
+
+    def __call__(self, stage: str, fraction: float, info: dict | None = None) -> None:
+        import time
+
+        info = info or {}
+        extra = ""
+        if "best" in info:
+            extra = f" best objective {info['best']:.4g}"
+        elif "done" in info and "total" in info:
+            extra = f" {info['done']}/{info['total']}"
+        if self.tty:
+            width = 30
+            filled = round(width * fraction)
+            print(f"\r[{'#' * filled}{'.' * (width - filled)}] {fraction * 100:5.1f} % "
+                  f"{stage}{extra}   ", end="\n" if fraction >= 1.0 else "", file=self.stream,
+                  flush=True)
+            return
+        now = time.monotonic()
+        if stage != self._stage or fraction >= 1.0 or now - self._last >= self.interval_s:
+            print(f"[{fraction * 100:5.1f} %] {stage}{extra}", file=self.stream, flush=True)
+            self._last, self._stage = now, stage
+
+
+def _database_message(exc: Exception) -> str:
+    from railval.app.security import database_message
+
+    return database_message(exc)
 
 
 def verb_name(args: argparse.Namespace) -> str:
@@ -116,14 +164,46 @@ def _has_user_table(database) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one verb. Errors print one line ``railval VERB: error: …`` on stderr (exit 2 for
+    bad input, 1 for anything else); ``--debug`` (or ``RAILVAL_DEBUG=1``) adds the
+    traceback. Output piped into a reader that stops early (``| head``) ends quietly."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    debug = bool(args.debug) or os.environ.get("RAILVAL_DEBUG") == "1"
+    if debug:
+        logging.basicConfig(level=logging.INFO, stream=sys.stderr)
+    code = 1
     try:
         authorize(args)
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()
+        return code
+    except BrokenPipeError:
+        # the reader of stdout went away: send the rest of the output nowhere, no traceback
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return code
+    except KeyboardInterrupt:
+        print(f"railval {verb_name(args)}: interrupted", file=sys.stderr)
+        return 130
     except RailvalError as exc:
-        print(f"railval {verb_name(args)}: error: {exc}", file=sys.stderr)
-        return 2
+        error, message, code = exc, str(exc), 2
+    except Exception as exc:  # noqa: BLE001 - the one place that turns any error into a message
+        from sqlalchemy.exc import SQLAlchemyError
+
+        error = exc
+        if isinstance(exc, SQLAlchemyError):
+            message = _database_message(exc)
+        elif isinstance(exc, OSError) and exc.strerror:
+            message = f"{exc.strerror}" + (f": {exc.filename}" if exc.filename else "")
+        else:
+            message = (f"internal error ({type(exc).__name__}); run `railval --debug "
+                       f"{verb_name(args)} …` for the details")
+        code = 1
+    if debug:
+        traceback.print_exception(error, file=sys.stderr)
+    print(f"railval {verb_name(args)}: error: {message}", file=sys.stderr)
+    return code
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -24,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--address", default="127.0.0.1", help="listen address (default 127.0.0.1)")
     p.add_argument("--no-demo", action="store_true", help="do not seed the demo campaign into an empty database")
     p.add_argument("--allow-websocket-origin", action="append", default=None, metavar="HOST[:PORT]",
-                   help="extra allowed websocket origin (repeatable; '*' for any, behind a proxy)")
+                   help="extra allowed websocket origin: the host[:port] users' browsers connect "
+                   "to, e.g. behind a proxy (repeatable; '*' is refused)")
     p.add_argument("--show", action="store_true", help="open a browser tab")
     p.add_argument("--cookie-secret-file", metavar="FILE", default=None,
                    help="file holding the session cookie secret (else $RAILVAL_COOKIE_SECRET, "

@@ -4,21 +4,22 @@
     create or upgrade the database schema to the newest revision (idempotent).
 ``railval import DIR [--json]``
     validate the campaign folder DIR completely, then store it in one transaction
-    (progress bar on stderr for imports of more than a few files).
+    (progress on stderr for imports of more than a few files).
 ``railval export NAME DIR [--format parquet|csv|h5|mat|mf4|tdms]``
     write a stored campaign as a campaign folder (re-importable, identical hashes).
 ``railval list [--json]``
     the campaigns with their sections, zones and configurations.
+``railval verify [--no-blobs] [--json]``
+    check every signal's content hash and seal and every cached result's seal
+    (exit 3 when something is not intact).
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from collections import Counter
 
-from railval.app.cli import emit_json
+from railval.app.cli import Progress, emit_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -40,6 +41,18 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="data file format (default parquet)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("verify", help="check every stored signal and cached result against "
+                       "its content hash and seal",
+                       description="Check the whole database: every signal's and distance "
+                       "axis's SHA-256 content hash, every signal's seal and every result-cache "
+                       "entry's seal (HMAC-SHA256 with the server secret; docs/database.md, "
+                       "Integrity). Exit code 0 when everything is intact, 3 when problems "
+                       "were found.")
+    p.add_argument("--no-blobs", action="store_true",
+                   help="check the seals only, without decoding the samples (faster)")
+    p.add_argument("--json", action="store_true", help="print one JSON document")
+    p.set_defaults(func=cmd_verify)
 
     p = sub.add_parser("list", help="list campaigns with sections, zones and configurations")
     p.add_argument("--json", action="store_true", help="print one JSON document")
@@ -73,25 +86,15 @@ def cmd_import(args: argparse.Namespace) -> int:
     from railval.db.importer import import_campaign
 
     database = _database(args)
-    bar = None
+    bar = Progress()
 
     def progress(done: int, total: int, what: str) -> None:
-        nonlocal bar
         if args.no_progress or total < 4:
             return
-        if bar is None:
-            from tqdm import tqdm
-
-            bar = tqdm(total=total, unit="file", desc="reading", file=sys.stderr, leave=True)
-        bar.update(done - bar.n)
-        bar.set_postfix_str(what, refresh=False)
+        bar("reading", done / total, {"done": done, "total": total})
 
     t = time.perf_counter()
-    try:
-        name = import_campaign(database, args.folder, progress=progress)
-    finally:
-        if bar is not None:
-            bar.close()
+    name = import_campaign(database, args.folder, progress=progress)
     elapsed = time.perf_counter() - t
     doc = _summary(database, name)
     doc["seconds"] = round(elapsed, 3)
@@ -118,34 +121,10 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def _summary(database, name_or_campaign) -> dict:
-    from sqlalchemy import func, select
-
     from railval.db import repo
-    from railval.db.models import Recording, Section, Signal
 
     with database.session() as s:
-        c = repo.get_campaign(s, name_or_campaign)
-        infos = repo.section_infos(s, c)
-        n_signals = s.scalar(
-            select(func.count(Signal.id)).join(Recording).join(Section)
-            .where(Section.campaign_id == c.id)
-        )
-        confs = repo.list_configurations(s, c)
-        parent = {x.id: x.name for x in confs}
-        return {
-            "name": c.name,
-            "id": c.id,
-            "description": c.description,
-            "vehicle": repo.vehicle_info(s, c),
-            "n_sections": len(infos),
-            "zones": {str(z): n for z, n in sorted(Counter(i.zone for i in infos).items())},
-            "sections": [{"id": i.id, "zone": i.zone, "radius_m": i.radius_m,
-                          "speed_kmh": i.speed_kmh} for i in infos],
-            "channels": [ch.name for ch in repo.channels(s, c)],
-            "configurations": [{"name": x.name, "parent": parent.get(x.parent_id),
-                                "effects": sorted(x.effects)} for x in confs],
-            "n_signals": int(n_signals or 0),
-        }
+        return repo.campaign_summary(s, name_or_campaign)
 
 
 def _zones_text(zones: dict[str, int]) -> str:
@@ -172,3 +151,30 @@ def cmd_list(args: argparse.Namespace) -> int:
               f"{_zones_text(d['zones'])}; vehicle {d['vehicle']['name'] or d['vehicle']['kind']} "
               f"Q0 {d['vehicle']['Q0_kN']:g} kN; configurations: {lineage}")
     return 0
+
+
+def cmd_verify(args: argparse.Namespace) -> int:
+    from railval.db import repo
+
+    database = _database(args, upgrade=False)
+    t = time.perf_counter()
+    with database.session() as s:
+        doc = repo.verify_database(s, blobs=not args.no_blobs)
+    doc["seconds"] = round(time.perf_counter() - t, 3)
+    doc["database"] = database.safe_url
+    if args.json:
+        emit_json(doc)
+        return 0 if doc["ok"] else 3
+    n_problems = sum(len(v) for v in doc["campaigns"].values())
+    for name, problems in doc["campaigns"].items():
+        for p in problems:
+            source = (f"configuration {p['configuration']!r}" if p["configuration"]
+                      else "measurement")
+            print(f"{name}: section {p['section']}, {source}, {p['channel']}: {p['error']}")
+    for key in doc["cache_unauthentic"]:
+        print(f"result cache entry {key}: fails its seal (never used; recomputed when needed)")
+    print(f"{database.safe_url}: {doc['signals']} signals in {len(doc['campaigns'])} "
+          f"campaign(s), {doc['cache_entries']} cached results checked in {doc['seconds']:.1f} s: "
+          + ("intact" if doc["ok"] else f"{n_problems} signal problem(s), "
+             f"{len(doc['cache_unauthentic'])} unauthentic cache entr(ies)"))
+    return 0 if doc["ok"] else 3

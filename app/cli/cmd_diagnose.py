@@ -1,9 +1,13 @@
 """CLI verbs ``diagnose``, ``calibrate`` and ``modal`` (docs/design.md §7, §8).
 
-``railval diagnose CAMPAIGN --config NAME [--json] [--scheduler ADDR]``
-    rank the effects missing from a configuration by the share of its residual they explain.
-``railval calibrate CAMPAIGN --config NAME --effect E [--effect …] --as NEW [--params P …]``
-    add and fit effects, store NEW (parent NAME) and print its validation and the lineage.
+``railval diagnose CAMPAIGN --config NAME [--json] [--scheduler ADDR] [--candidates E|model.P …]``
+    rank the effects missing from a configuration and the template parameters that may be
+    mis-set by the share of its residual they explain on held-out sections; verdict
+    cause / uncertain / none against the noise floor; the next step.
+``railval calibrate CAMPAIGN --config NAME --effect E|model.P [--effect …] --as NEW [--params P …]
+[--fit-sections S … | --holdout S … | --split]``
+    add and fit effects or parameters, store NEW (parent NAME) and print its validation (in-sample
+    or on held-out sections), plausibility flags, the lineage and the next step.
 ``railval modal CAMPAIGN [--section S …] [--calibrate PARAM …] [--json]``
     SSI-COV car body modes and [ref 3] modal calibration (before/after frequency errors).
 
@@ -13,19 +17,8 @@ Progress goes to stderr; ``--json`` prints one JSON document on stdout.
 from __future__ import annotations
 
 import argparse
-import sys
-from typing import Any
 
-from railval.app.cli import emit_json
-
-
-def _progress(stage: str, fraction: float, info: dict[str, Any]) -> None:
-    extra = ""
-    if "best" in info:
-        extra = f" best objective {info['best']:.4g}"
-    elif "done" in info:
-        extra = f" {info['done']}/{info['total']}"
-    print(f"[{fraction * 100:5.1f} %] {stage}{extra}", file=sys.stderr, flush=True)
+from railval.app.cli import Progress, emit_json
 
 
 def _db(args: argparse.Namespace):
@@ -39,19 +32,27 @@ def _db(args: argparse.Namespace):
 def _cmd_diagnose(args: argparse.Namespace) -> int:
     from railval.app.services.diagnosis import diagnose
 
-    res = diagnose(_db(args), args.campaign, args.config, progress=_progress, scheduler=args.scheduler,
-                   values_per_parameter=args.values, effects=args.candidates)
+    res = diagnose(_db(args), args.campaign, args.config, progress=Progress(), scheduler=args.scheduler,
+                   values_per_parameter=args.values, effects=args.candidates,
+                   **({"include_parameters": False} if args.no_parameters else {}))
+    d = res.to_dict()
     if args.json:
-        emit_json(res.to_dict())
+        emit_json(d)
         return 0
-    print(f"diagnosis of {args.campaign}/{args.config}: {res.note}")
-    print(f"{'rank':>4}  {'effect':<26} {'explained':>9}  parameters / fixes / worsens")
+    print(f"diagnosis of {args.campaign}/{args.config}: verdict {d['verdict'].upper()} — {res.note}")
+    print(f"noise floor (share of pure section scatter the candidates explain, 95 %): {d['noise_floor']:.2f}")
+    print(f"{'rank':>4}  {'candidate':<28} {'kind':<9} {'held-out':>8} {'explained':>9}  fitted")
     for k, c in enumerate(res.candidates, 1):
-        params = ", ".join(f"{n}={v:.4g}" for n, v in c.parameters.items())
-        print(f"{k:>4}  {c.effect:<26} {c.explained:9.2f}  {params}")
-        print(f"{'':>42}fixes {', '.join(c.fixes) or '-'}; worsens {', '.join(c.worsens) or '-'}")
-    if not res.separable:
-        print("not separable; evidence: " + "; ".join(e["component"] for e in res.evidence))
+        print(f"{k:>4}  {c.name:<28} {c.kind:<9} {c.held_out_explained:8.2f} {c.explained:9.2f}  {c.summary}")
+        print(f"{'':>6}fixes {', '.join(c.fixes) or '-'}; worsens {', '.join(c.worsens) or '-'}")
+        for f in c.flags:
+            print(f"{'':>6}! {f}")
+    if d["verdict"] == "none" and d.get("unexplained"):
+        print("unexplained (largest components): " + "; ".join(
+            f"{u['component']} {u['residual']:+.2f}" for u in d["unexplained"]))
+    nxt = d.get("next") or {}
+    if nxt.get("text"):
+        print(f"next: {nxt['text']}")
     return 0
 
 
@@ -65,11 +66,11 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         if not (sep and dot):
             from railval.core.errors import InvalidParameter
 
-            raise InvalidParameter(f"--start expects EFFECT.PARAM=VALUE, got {item!r}")
+            raise InvalidParameter(f"--start expects EFFECT.PARAM=VALUE or model.NAME=VALUE, got {item!r}")
         start.setdefault(effect, {})[pname] = float(value)
     res = calibrate(_db(args), args.campaign, args.config, args.effect, args.new_name, params=args.params,
-                    progress=_progress, scheduler=args.scheduler, seed=args.seed, replace=args.replace,
-                    start=start or None)
+                    progress=Progress(), scheduler=args.scheduler, seed=args.seed, replace=args.replace,
+                    start=start or None, fit_sections=args.fit_sections, holdout=args.holdout, split=args.split)
     d = res.to_dict()
     if args.json:
         emit_json(d)
@@ -80,7 +81,18 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         print(f"  {k} = {v:.5g} {d['units'].get(k, '')}")
     print("lineage (largest normalised error): " + " → ".join(
         f"{x['configuration']} {x['max_error']:.2f}" for x in d["lineage"] if x["max_error"] is not None))
-    print(f"validated: {d['validation']['validated']}")
+    if d["held_out_sections"]:
+        print(f"fitted on {len(d['fit_sections'])} sections, held out {', '.join(d['held_out_sections'])}")
+        last = d["lineage"][-1].get("held_out") or {}
+        if last.get("max_error") is not None:
+            parent = last.get("parent_max_error")
+            print("held-out sections: largest normalised error "
+                  + (f"{parent:.2f} → " if parent is not None else "") + f"{last['max_error']:.2f}")
+    print(f"validated: {d['validation']['validated']}" + (" (in-sample)" if d["in_sample"] else ""))
+    print(f"plausible: {d['plausible']}")
+    for f in d["flags"]:
+        print(f"  ! {f}")
+    print(f"next: {d['next']['text']}")
     return 0
 
 
@@ -88,7 +100,7 @@ def _cmd_modal(args: argparse.Namespace) -> int:
     from railval.app.services.modal import modal
 
     d = modal(_db(args), args.campaign, sections=args.section, calibrate_params=args.calibrate,
-              progress=_progress)
+              progress=Progress())
     if args.json:
         emit_json(d)
         return 0
@@ -116,14 +128,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="Dask scheduler address (default: local process pool, 2 workers)")
     p.add_argument("--values", type=int, default=3, help="simulated values per effect parameter besides its default (default 3)")
     p.add_argument("--candidates", nargs="+", default=None, metavar="E",
-                   help="consider only these effects (default: every effect of the library not in NAME)")
+                   help="consider only these candidates: effect ids and model.PARAM template parameters "
+                        "(default: every effect of the library not in NAME and the template's parameters)")
+    p.add_argument("--no-parameters", action="store_true",
+                   help="try the effects only, not the vehicle template's parameters")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_diagnose)
 
     c = subparsers.add_parser("calibrate", help="add effects, fit their parameters, store a new configuration")
     c.add_argument("campaign")
     c.add_argument("--config", required=True, metavar="NAME", help="parent configuration")
-    c.add_argument("--effect", action="append", required=True, metavar="E")
+    c.add_argument("--effect", action="append", required=True, metavar="E",
+                   help="effect id, or model.PARAM for a template parameter candidate (as diagnose names it)")
     c.add_argument("--as", dest="new_name", required=True, metavar="NEW")
     c.add_argument("--params", nargs="+", default=None, metavar="P",
                    help="calibrate only these (effect.param, param or model.NAME)")
@@ -131,11 +147,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--replace", action="store_true", help="overwrite NEW if it exists")
     c.add_argument("--start", nargs="+", default=None, metavar="EFFECT.PARAM=VALUE",
-                   help="start values of the search (e.g. the values diagnose fitted)")
+                   help="start values of the search (e.g. the values diagnose fitted; model.PARAM=VALUE too)")
+    split = c.add_mutually_exclusive_group()
+    split.add_argument("--fit-sections", nargs="+", default=None, metavar="S",
+                       help="fit on these sections only; validate on the others (held-out)")
+    split.add_argument("--holdout", nargs="+", default=None, metavar="S",
+                       help="hold these sections out of the fit and validate on them")
+    split.add_argument("--split", action="store_true",
+                       help="hold out one section per zone and fold (every zone on both sides where possible)")
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=_cmd_calibrate)
 
-    m = subparsers.add_parser("modal", help="SSI-COV car body modes and modal calibration ([ref 3])")
+    m = subparsers.add_parser("modal", help="SSI-COV car body modes and modal calibration: model frequencies fitted to "
+                                   "the identified modes, paired by MAC (docs/design.md §7)")
     m.add_argument("campaign")
     m.add_argument("--section", action="append", default=None, metavar="S")
     m.add_argument("--calibrate", nargs="+", default=None, metavar="PARAM",

@@ -12,19 +12,9 @@ Progress goes to stderr; ``--json`` prints one JSON document on stdout.
 from __future__ import annotations
 
 import argparse
-import sys
-from typing import Any
 
-from railval.app.cli import emit_json
+from railval.app.cli import Progress, emit_json
 from railval.core.errors import InvalidParameter
-
-
-def _progress(stage: str, fraction: float, info: dict[str, Any]) -> None:
-    width = 30
-    filled = round(width * fraction)
-    extra = f" {info['done']}/{info['total']}" if "done" in info else ""
-    print(f"\r[{'#' * filled}{'.' * (width - filled)}] {fraction * 100:5.1f} % {stage}{extra}   ",
-          end="\n" if fraction >= 1.0 else "", file=sys.stderr, flush=True)
 
 
 def _db(args: argparse.Namespace):
@@ -67,7 +57,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     params = dict(parse_param(p) for p in args.param or [])
     res = simulate_configuration(_db(args), args.campaign, args.config, parent=args.parent, effects=effects,
                                  parameters=params, replace=args.replace, workers=args.workers,
-                                 progress=_progress)
+                                 progress=Progress())
     if args.json:
         emit_json(res)
     else:
@@ -80,7 +70,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
     from railval.app.services.synth import synth
 
     res = synth(_db(args), name=args.name, template=args.vehicle, hidden=args.hidden, seed=args.seed,
-                n_sections=args.sections, out=args.out, reveal=args.reveal, progress=_progress)
+                n_sections=args.sections, out=args.out, reveal=args.reveal, progress=Progress())
     if args.json:
         emit_json(res)
     else:

@@ -121,6 +121,10 @@ def format_result(doc: dict) -> str:
     verdict = "VALIDATED" if doc["validated"] else "NOT VALIDATED"
     if defs.get("verdict_sensitive"):
         verdict += " (definition-sensitive: another reading gives the opposite verdict)"
+    if doc.get("in_sample"):
+        info = doc.get("info", {})
+        verdict += (f" (in-sample: {', '.join(info.get('calibrated_in', []))} was calibrated on "
+                    f"{len(info.get('fit_sections', []))} of these sections)")
     lines.append(verdict)
     return "\n".join(lines)
 
@@ -152,6 +156,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
         result = validate_configuration(session, args.campaign, args.config, order=args.order,
                                         n_boot=args.boot, seed=args.seed)
     doc = result.to_dict()
+    doc["in_sample"] = bool(result.info.get("in_sample", False))
     if args.json:
         emit_json(doc)
     else:

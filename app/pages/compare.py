@@ -9,6 +9,8 @@ only replaces their data sources (docs/design.md §9: p95 ≤ 300 ms server-side
 
 from __future__ import annotations
 
+import html
+
 import numpy as np
 import panel as pn
 
@@ -67,8 +69,7 @@ class ComparePage(PageBase):
         self.controls = pn.FlexBox(
             pn.widgets.Select.from_param(app.param.section, name="Section", width=160),
             pn.widgets.Select.from_param(app.param.channel, name="Channel", width=160),
-            pn.widgets.MultiChoice.from_param(self.state.param.configurations, name="Configurations",
-                                              width=360, max_items=4),
+            self._configuration_choice(),
             toggle_group(self.state.param.axis, "Axis", width=180, sizing_mode="fixed",
                          margin=(2, 10, 5, 10)),
             pn.widgets.Select.from_param(self.state.param.processing, name="Processing", width=190),
@@ -80,6 +81,22 @@ class ComparePage(PageBase):
         self.series_panes = [pn.pane.Bokeh(f.fig, sizing_mode="stretch_width") for f in self.view.series]
         self.psd_pane = pn.pane.Bokeh(self.view.psd.fig, sizing_mode="stretch_width")
         self.note = pn.pane.Markdown("", sizing_mode="stretch_width", styles={"color": "#555"})
+
+
+    def _configuration_choice(self) -> pn.widgets.MultiChoice:
+        """The configurations to overlay. Bokeh's MultiChoice (Choices.js) renders option
+        labels as HTML, so every label is escaped here: a name is always shown as text."""
+        st = self.state
+        widget = pn.widgets.MultiChoice(name="Configurations", width=360, max_items=4)
+
+        def options(*_):
+            widget.options = {html.escape(n): n for n in st.param.configurations.objects}
+            widget.value = [v for v in st.configurations if v in st.param.configurations.objects]
+
+        options()
+        st.param.watch(options, ["configurations"], what="objects")
+        widget.link(st, value="configurations", bidirectional=True)
+        return widget
 
     def refresh(self) -> None:
         if self.app.section is None or self.app.channel is None:

@@ -13,6 +13,7 @@ import panel as pn
 from railval.app import plots
 from railval.app.pages._common import PageBase, message, table, where_map
 from railval.app.state import AppState, DashboardState, unit_label
+from railval.app.security import plain_message
 from railval.app.state.dashboard import definition_rows, supplementary_rows
 from railval.core.quantities import QUANTITIES
 
@@ -31,6 +32,16 @@ def coverage_lines(coverage: Any) -> tuple[bool, list[str]]:
     return bool(coverage), []
 
 
+def in_sample_note(summary: dict[str, Any]) -> str:
+    """" (in-sample: … was calibrated on n of these sections)" when the verdict includes
+    sections a calibration of the lineage was fitted to, else ""."""
+    info = summary.get("info") or (summary.get("raw") or {}).get("info") or {}
+    if not info.get("in_sample"):
+        return ""
+    return (f" (in-sample: {html.escape(', '.join(info.get('calibrated_in') or []))} was calibrated on "
+            f"{len(info.get('fit_sections') or [])} of these sections)")
+
+
 def verdict_panel(summary: dict[str, Any], config: str) -> pn.pane.Alert:
     ok_cov, lines = coverage_lines(summary["coverage"])
     failing = [r["quantity"] for r in summary["quantities"] if not r.get("pass", False)]
@@ -39,15 +50,17 @@ def verdict_panel(summary: dict[str, Any], config: str) -> pn.pane.Alert:
     note = ("" if not sensitive else " — definition-sensitive: " + ", ".join(html.escape(q) for q in sensitive)
             + (" (another reading gives the opposite verdict)" if defs.get("verdict_sensitive") else ""))
     if summary["validated"]:
-        return pn.pane.Alert(f"<b>{html.escape(config)}: VALIDATED</b> — every quantity within its "
-                             "limits and coverage holds." + note, alert_type="success", sizing_mode="stretch_width")
+        return pn.pane.Alert(f"<b>{html.escape(config)}: VALIDATED</b>{in_sample_note(summary)} — every quantity "
+                             "within its limits and coverage holds." + note, alert_type="success",
+                             sizing_mode="stretch_width")
     parts = []
     if failing:
         parts.append(f"{len(failing)} of {len(summary['quantities'])} quantities exceed their limits: "
                      + ", ".join(html.escape(q) for q in failing))
     if not ok_cov:
         parts.append("coverage: " + "; ".join(html.escape(x) for x in lines))
-    return pn.pane.Alert(f"<b>{html.escape(config)}: NOT VALIDATED</b> — " + " — ".join(parts or ["see table"]) + note,
+    return pn.pane.Alert(f"<b>{html.escape(config)}: NOT VALIDATED</b>{in_sample_note(summary)} — "
+                         + " — ".join(parts or ["see table"]) + note,
                          alert_type="danger", sizing_mode="stretch_width")
 
 
@@ -248,7 +261,8 @@ class DashboardPage(PageBase):
         try:
             self._rows = self.state.drilldown()
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            self.drill_box.objects = [message(f"drill-down of {self.state.quantity} not available: {exc}",
+            self.drill_box.objects = [message(f"drill-down of {self.state.quantity} not available: "
+                                         f"{plain_message(exc, 'drill-down')}",
                                               "danger")]
             return
         df = pd.DataFrame(self._rows)

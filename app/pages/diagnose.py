@@ -17,6 +17,7 @@ import panel as pn
 from railval.app import plots
 from railval.app.pages._common import PageBase, bounded_input, make_dispatch, message, table, where_map
 from railval.app.pages.dashboard import validation_view
+from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 
 
@@ -77,7 +78,9 @@ class DiagnosePage(PageBase):
                 bounded_input(st.param.popsize, "Population per parameter", app, width=170),
                 bounded_input(st.param.maxiter, "Generations (at most)", app, width=170),
                 bounded_input(st.param.polish_maxfev, "Polish simulations (at most)", app, width=190),
-                bounded_input(st.param.seed, "Seed", app, width=110)),
+                bounded_input(st.param.seed, "Seed", app, width=110),
+                pn.widgets.Checkbox.from_param(st.param.split, name="Hold out one section per zone "
+                                               "(judge the fit on sections it has not seen)", width=420)),
             self.cal_estimate, title="Calibration settings (differential evolution + local polish)",
             collapsed=True, sizing_mode="stretch_width", css_classes=["rv-cal-settings"])
         st.param.watch(lambda e: self._show_estimates(), ["candidate_effects", "values_per_parameter",
@@ -110,7 +113,7 @@ class DiagnosePage(PageBase):
             available = self.state.available_effects()
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
             catalogue, available = {}, []
-            self.app.set_status(str(exc), "warning")
+            self.app.set_status(plain_message(exc, "diagnose"), "warning")
         self._catalogue = catalogue
         ranked = [c["effect"] for c in self.state.candidates]
         self.state.param.effect.objects = ranked + [e for e in available if e not in ranked]
@@ -143,10 +146,11 @@ class DiagnosePage(PageBase):
             n_diag = self.state.diagnosis_simulations()
             n_cal = self.state.calibration_simulations()
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            self.diag_estimate.object = f"cost not known: {html.escape(str(exc))}"
+            self.diag_estimate.object = f"cost not known: {html.escape(plain_message(exc, 'cost'))}"
             return
-        self.diag_estimate.object = (f"**Run diagnosis** simulates the campaign {n_diag} times "
-                                     "(each candidate parameter over its bounds).")
+        self.diag_estimate.object = (f"**Run diagnosis** simulates the campaign {n_diag} times at most "
+                                     "(each candidate effect parameter over its bounds, one linearised "
+                                     "simulation per model parameter, a few refinements).")
         self.cal_estimate.object = (f"**Calibrate** simulates the campaign at most {n_cal} times "
                                     "(start point, population × generations, polish, final run).")
 
@@ -156,16 +160,30 @@ class DiagnosePage(PageBase):
             self.candidates_box.objects = [pn.pane.Markdown("*No diagnosis yet — press **Run diagnosis**.*")]
             return
         df = pd.DataFrame([{
-            "rank": i + 1, "effect": c["effect"], "explained (%)": round(100 * float(c["explained"]), 1),
+            "rank": i + 1, "candidate": c["effect"], "kind": c.get("kind", "effect"),
+            "held-out (%)": round(100 * float(c.get("held_out_explained", c["explained"])), 1),
+            "explained (%)": round(100 * float(c["explained"]), 1),
+            "plausible": "yes" if c.get("plausible", True) else "no", "flags": len(c.get("flags") or []),
             "fitted parameters": ", ".join(f"{k} = {v:.4g}" for k, v in (c.get("parameters") or {}).items()),
             "fixes": ", ".join(c.get("fixes", [])), "worsens": ", ".join(c.get("worsens", [])),
         } for i, c in enumerate(cands)])
         extra = []
         note = self.state.diagnosis_note
-        if note:
+        verdict = self.state.verdict
+        if verdict:
+            nf = self.state.noise_floor
+            head = {"cause": "Cause found", "uncertain": "Uncertain",
+                    "none": "No candidate explains the residual"}.get(verdict, verdict)
+            text = f"{head}: {note}" + (f" (noise floor {nf:.2f})" if nf is not None else "")
+            extra.append(message(text, {"cause": "success", "uncertain": "warning"}.get(verdict, "danger")))
+            if verdict == "none" and self.state.unexplained:
+                extra.append(message("Unexplained: " + "; ".join(
+                    f"{u['component']} {u['residual']:+.2f}" for u in self.state.unexplained), "info"))
+        elif note:
             extra.append(message(note, "info" if self.state.separable else "warning"))
         self.candidates_box.objects = [
-            pn.pane.Markdown("#### Ranked candidate effects"), *self._run_line(),
+            pn.pane.Markdown("#### Ranked candidates (effects and model parameters), by the share "
+                             "explained on held-out sections"), *self._run_line(),
             table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"]), *extra,
             *self._earlier_runs(), self.candidate_box,
         ]
@@ -182,7 +200,7 @@ class DiagnosePage(PageBase):
         st = run.get("settings", {})
         text = (f"Stored diagnosis of {run.get('created_at', '').replace('T', ' ')} UTC "
                 f"({st.get('values_per_parameter')} values per parameter, "
-                f"{len(st.get('effects') or [])} candidate effects; computed in {run.get('seconds', 0):.0f} s"
+                f"{_candidates_text(st)}; computed in {run.get('seconds', 0):.0f} s"
                 f"{', reused without simulating' if run.get('reused') else ''}).")
         if run.get("current") is False:
             return [message(text + " The signals or sections changed since: run the diagnosis again.", "warning")]
@@ -196,7 +214,7 @@ class DiagnosePage(PageBase):
         df = pd.DataFrame([{
             "time (UTC)": r["created_at"].replace("T", " "),
             "values per parameter": r["settings"].get("values_per_parameter"),
-            "candidates": len(r["settings"].get("effects") or []),
+            "candidates": _candidates_text(r["settings"]),
             "top candidate": r["top"],
             "explained (%)": round(100 * float(r["explained"]), 1) if r["explained"] is not None else None,
             "separable": "yes" if r["separable"] else "no",
@@ -219,6 +237,7 @@ class DiagnosePage(PageBase):
                              f"{100 * float(cand['explained']):.1f} % of the residual"),
             pn.pane.Markdown(f"**Why {html.escape(cand['effect'])}?** {html.escape(cand.get('explanation', ''))}",
                              sizing_mode="stretch_width"),
+            *[message(str(f), "warning") for f in (cand.get("flags") or [])],
             pn.pane.HoloViews(signature_chart(cand), sizing_mode="stretch_width"),
         ]
         where = self.state.where(cand["effect"])
@@ -271,7 +290,7 @@ class DiagnosePage(PageBase):
         try:
             lineage = self.state.lineage_errors(config)
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            self.result_box.objects = [message(f"lineage not available: {exc}", "danger")]
+            self.result_box.objects = [message(f"lineage not available: {plain_message(exc, 'lineage')}", "danger")]
             return
         items: list[Any] = []
         summary = self._last_result_text(config)
@@ -302,6 +321,24 @@ class DiagnosePage(PageBase):
         start = r.get("objective_start")
         obj = (f"at the start values {start:.3g}, fitted {r['objective']:.3g}" if start is not None
                else f"fitted {r['objective']:.3g}")
-        return (f"{config}: {r['effect']} calibrated from {r['parent']}: {fitted}. Objective (Σ over "
+        text = (f"{config}: {r['effect']} calibrated from {r['parent']}: {fitted}. Objective (Σ over "
                 f"quantities of the squared worst normalised error) {obj}; "
                 f"{r.get('n_evaluations', 0) + 2} campaign simulations.")
+        if r.get("in_sample"):
+            text += " Its verdict is in-sample (fitted on all sections)."
+        elif r.get("held_out_sections"):
+            text += f" Fitted without sections {', '.join(r['held_out_sections'])} (held out)."
+            held = ((r.get("lineage") or [{}])[-1] or {}).get("held_out") or {}
+            if held.get("max_error") is not None and held.get("parent_max_error") is not None:
+                text += (f" On the held-out sections the largest normalised error went from "
+                         f"{held['parent_max_error']:.2f} to {held['max_error']:.2f}.")
+        for f in r.get("flags") or []:
+            if not str(f).startswith("in-sample"):
+                text += f" Warning: {f}."
+        return text + f" Next: diagnose {config} — press **Run diagnosis**."
+
+
+def _candidates_text(settings: dict) -> str:
+    """The candidates a stored diagnosis tried, as a reader sees them."""
+    eff = settings.get("effects")
+    return "every candidate" if eff is None else f"{len(eff)} chosen candidate{'s' if len(eff) != 1 else ''}"

@@ -10,6 +10,7 @@ import panel as pn
 
 from railval.app import plots
 from railval.app.pages._common import PageBase, html_table, message
+from railval.app.security import no_external_images
 from railval.app.state import CampaignOverview, unit_label
 
 
@@ -63,7 +64,7 @@ class OverviewPage(PageBase):
         zone_plot = pn.pane.Bokeh(plots.zone_coverage(ov.zone_counts()), sizing_mode="stretch_width")
         tree = pn.pane.HTML(lineage_tree_html(ov, self.app.configuration), sizing_mode="stretch_width",
                             stylesheets=[TREE_CSS])
-        desc = pn.pane.Markdown(f"### {html.escape(ov.name)}\n{html.escape(ov.description)}\n\n{vehicle_md}",
+        desc = pn.pane.Markdown(f"### {html.escape(ov.name)}\n{no_external_images(html.escape(ov.description))}\n\n{vehicle_md}",
                                 sizing_mode="stretch_width")
         self.body.objects = [
             desc, cov,

@@ -9,6 +9,8 @@ import io
 import panel as pn
 
 from railval.app.pages._common import PageBase, bounded_input
+from railval.app.pages._common import PageBase
+from railval.app.security import plain_message
 from railval.app.state import AppState, ReportState
 
 
@@ -48,7 +50,7 @@ class ReportPage(PageBase):
         try:
             return io.BytesIO(rep.pdf_bytes())
         except Exception as exc:
-            self.app.set_status(f"PDF failed: {exc}", "error")
+            self.app.set_status(f"PDF failed: {plain_message(exc, 'PDF')}", "error")
             raise
 
     def refresh(self) -> None:

@@ -3,7 +3,8 @@ optimiser candidate) on a local process pool or on a Dask distributed cluster.
 
 * default: ``concurrent.futures.ProcessPoolExecutor`` with 2 workers (the 2-core machines of
   the deployment), started with the ``forkserver`` method so it is safe to use from the
-  Panel app's background threads;
+  Panel app's background threads; its workers end when the process that started them ends
+  (:mod:`railval.core.workers`), even when it is killed;
 * ``scheduler="serial"`` (or ``workers=1``): in the calling process, no pickling — for
   debugging and for tiny jobs;
 * ``scheduler="tcp://host:8786"``: a ``dask.distributed.Client`` connected to that scheduler
@@ -26,6 +27,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, Self
 
 from railval.core.errors import InvalidParameter
+from railval.core.workers import pool_kwargs
 
 DEFAULT_WORKERS = 2
 
@@ -98,7 +100,8 @@ class BatchExecutor:
     def _process_pool(self) -> ProcessPoolExecutor:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(max_workers=self.workers,
-                                             mp_context=multiprocessing.get_context("forkserver"))
+                                             mp_context=multiprocessing.get_context("forkserver"),
+                                             **pool_kwargs())
         return self._pool
 
     # -- work

@@ -1,11 +1,13 @@
-"""Service: add effects to a configuration, fit their parameters to the validation objective
-and store the result as a new configuration (docs/design.md §7, :mod:`railval.core.calibration`).
+"""Service: add effects (or template-parameter candidates ``model.NAME``) to a configuration,
+fit their parameters to the validation objective — on all sections or on a split, with the
+held-out sections validated apart — and store the result as a new configuration with the
+sections the fit used (docs/design.md §7, docs/diagnosis.md, :mod:`railval.core.calibration`).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from railval.app.services.batch import BatchExecutor
@@ -20,6 +22,7 @@ from railval.app.services.campaign_context import (
     section_values,
     session_of,
     simulate_context,
+    validate_values,
 )
 from railval.core.calibration import (
     COACH_MODAL_DEFAULTS,
@@ -31,7 +34,7 @@ from railval.core.calibration import (
 from railval.core.calibration import calibrate as fit_parameters
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import EFFECTS
-from railval.core.validation import validate
+from railval.core.validation import normalised_errors, validate
 from railval.db import repo
 
 
@@ -54,7 +57,7 @@ class _Objective:
     def __call__(self, params: Mapping[str, float]) -> float:
         effects, model = self.split(params)
         vals, _ = evaluate_effects((self.ctx, effects, model))
-        vr = validate(self.ctx.measured_values, vals, self.ctx.sections, self.ctx.vehicle, n_boot=0)
+        vr = validate_values(self.ctx, vals)
         return validation_objective({q: r.mean_norm for q, r in vr.quantities.items()},
                                     {q: r.std_norm for q, r in vr.quantities.items()})
 
@@ -63,20 +66,42 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
               params: list[str] | None = None, progress: Progress | None = None, scheduler: Any = None,
               seed: int = 0, popsize: int = 5, maxiter: int = 5, polish_maxfev: int = 20,
               workers: int | None = None,
-              start: Mapping[str, Mapping[str, float]] | None = None, replace: bool = False) -> CalibrationResult:
-    """Add ``effects`` to configuration ``config``, fit their parameters (all of them, or only
-    ``params`` — names ``"effect.param"``/``"param"`` of the effects, or ``"model.NAME"`` for
-    a vehicle-template parameter) to the validation objective
+              start: Mapping[str, Mapping[str, float]] | None = None, replace: bool = False,
+              fit_sections: Sequence[str] | None = None, holdout: Sequence[str] | None = None,
+              split: bool = False) -> CalibrationResult:
+    """Add ``effects`` to configuration ``config`` (effect ids, or ``"model.NAME"`` for a
+    vehicle-template parameter candidate as :func:`diagnose` names it), fit their parameters
+    (all of them, or only ``params`` — names ``"effect.param"``/``"param"`` of the effects, or
+    ``"model.NAME"``) to the validation objective
     (:func:`railval.core.calibration.validation_objective`) with differential evolution and a local
     polish (``start``: the start point of the fitted parameters and the value of those not
     fitted), store the result as configuration ``new_name`` (parent ``config``) with its
     simulated signals, and return the :class:`CalibrationResult` whose ``to_dict()`` holds the
     new configuration's ``validation`` and the ``lineage`` (root → new, normalised error of
-    every quantity)."""
+    every quantity).
+
+    Sections: ``fit_sections`` (fit on these, validate on the others), ``holdout`` (fit on all
+    but these) or ``split=True`` (hold out one section per zone and fold, every zone on both
+    sides where the campaign has ≥ 2 sections per zone: :func:`railval.core.diagnosis.zone_folds`).
+    The result and the stored configuration record which sections the fit used
+    (``Configuration.calibration``); the result carries ``validation`` (all sections),
+    ``validation_held_out`` (held-out sections), ``in_sample`` and plain-language ``flags`` with
+    ``plausible`` (fitted values inside their plausible ranges and off the search bounds)."""
     report(progress, "load", 0.0, campaign=campaign, config=config)
     with session_of(database) as s:
+        from railval.db import repo as _repo
+
+        _repo.check_new_configuration(s, campaign, new_name, replace=replace)  # before fitting
         ctx = load_context(s, campaign)
         conf_effects, conf_params, _ = configuration_of(s, campaign, config)
+    model_candidates = [e for e in effects if e.startswith("model.")]
+    effects = [e for e in effects if not e.startswith("model.")]
+    start = {k: dict(v) for k, v in (start or {}).items()}
+    for key in [k for k in start if k.startswith("model.")]:  # {"model.P": {"P": v}} as the app sends it
+        value = start.pop(key)
+        if value:
+            start.setdefault("model", {})[key[6:]] = float(value.get(key[6:], next(iter(value.values()))))
+    fit_ids, held_ids = _calibration_split(ctx, fit_sections, holdout, split)
     registry = EFFECTS
     for e in effects:
         if e not in registry:
@@ -84,7 +109,7 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     base_effects = {k: dict(v) for k, v in conf_effects.items()}
     specs: list[ParameterSpec] = []
     targets: list[tuple[str, str]] = []
-    wanted = set(params or [])
+    wanted = set(params or []) | set(model_candidates)
     for e in effects:
         eparams = effect_parameters(registry[e])
         # a parameter left out of ``params`` keeps its ``start`` value (else its default)
@@ -98,7 +123,12 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
                                        min(max(float(st), p["lower"]), p["upper"]), log=p["log"]))
             targets.append((e, pname))
     for name in sorted(w for w in wanted if w.startswith("model.")):
-        specs.append(_model_spec(name[6:], ctx, conf_params))
+        spec = _model_spec(name[6:], ctx, conf_params)
+        st = (start.get("model") or {}).get(name[6:])
+        if st is not None:
+            spec = ParameterSpec(spec.name, spec.lower, spec.upper, spec.unit,
+                                 min(max(float(st), spec.lower), spec.upper), log=spec.log)
+        specs.append(spec)
         targets.append(("model", name[6:]))
     if params:
         matched = {s.name for s in specs} | {s.name.split(".", 1)[1] for s in specs}
@@ -108,7 +138,8 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
                                    f"(use effect.param or model.NAME)")
     if not specs:
         raise InvalidParameter(f"nothing to calibrate for effects {effects} and params {params}")
-    objective = _Objective(ctx, base_effects, conf_params, targets)
+    ctx_fit = _restrict(ctx, fit_ids) if held_ids else ctx
+    objective = _Objective(ctx_fit, base_effects, conf_params, targets)
     with BatchExecutor(scheduler, workers) as ex:
         res = fit_parameters(objective, specs, seed=seed, popsize=popsize, maxiter=maxiter,
                             polish_maxfev=polish_maxfev,
@@ -118,21 +149,118 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     report(progress, "store", 0.92)
     sets = simulate_context(ctx, eff, model)
     vals = section_values(sets, ctx.sections)
-    vr_full = validate(ctx.measured_values, vals, ctx.sections, ctx.vehicle)
+    vr_full = validate_values(ctx, vals, n_boot=1000)
+    record = {"fit_sections": fit_ids, "held_out_sections": held_ids, "parameters": [s.name for s in specs]}
+    vr_held = None
+    if held_ids:
+        held = _restrict(ctx, held_ids)
+        vr_held = validate(held.measured_values, {k: v for k, v in vals.items() if k in held_ids}, held.sections,
+                           ctx.vehicle)
+    plausible, flags = _calibration_flags(ctx, specs, res.parameters, vr_full, vr_held)
     with session_of(database) as s:
         repo.store_configuration(
             s, campaign, new_name, parent=config, effects=eff, parameters=model,
-            description=f"calibrated {', '.join(effects)} from {config} (objective {res.objective:.3g})",
-            signalsets=sets, replace=replace)
+            description=f"calibrated {', '.join(effects + model_candidates)} from {config} "
+                        f"(objective {res.objective:.3g})",
+            signalsets=sets, replace=replace, calibration=record)
         s.flush()
         res.extra["lineage"] = lineage_errors(s, ctx, new_name, {new_name: vr_full})
     res.extra.update({"configuration": new_name, "parent": config, "effects": eff,
-                      "model_parameters": model, "validation": vr_full.to_dict()})
+                      "model_parameters": model, "validation": vr_full.to_dict(),
+                      "validation_held_out": vr_held.to_dict() if vr_held is not None else None,
+                      "fit_sections": fit_ids, "held_out_sections": held_ids, "in_sample": not held_ids,
+                      "plausible": plausible, "flags": flags,
+                      "next": {"action": "diagnose", "command": f"railval diagnose {campaign} --config {new_name}",
+                               "text": f"diagnose the child next: railval diagnose {campaign} --config {new_name}"}})
     report(progress, "done", 1.0)
     return res
 
 
+def _restrict(ctx: CampaignContext, ids: Sequence[str]) -> CampaignContext:
+    """The campaign context on a subset of its sections."""
+    from dataclasses import replace
+
+    keep = set(ids)
+    return replace(ctx, sections=[s for s in ctx.sections if s.id in keep],
+                   measured_values={k: v for k, v in ctx.measured_values.items() if k in keep})
+
+
+def _calibration_split(ctx: CampaignContext, fit_sections: Sequence[str] | None, holdout: Sequence[str] | None,
+                       split: bool) -> tuple[list[str], list[str]]:
+    """(fit section ids, held-out section ids) from the user's choice; unknown ids name the
+    known ones. ``split``: the first zone-stratified fold of :func:`railval.core.diagnosis.zone_folds`
+    is held out (one section per zone and fold, every zone on both sides where it has ≥ 2)."""
+    from railval.core.diagnosis import zone_folds
+
+    ids = [s.id for s in ctx.sections]
+    given = [*(fit_sections or []), *(holdout or [])]
+    bad = [x for x in given if x not in ids]
+    if bad:
+        raise InvalidParameter(f"unknown section(s) {bad} in campaign {ctx.campaign!r}; known: {ids}")
+    if sum(bool(x) for x in (fit_sections, holdout, split)) > 1:
+        raise InvalidParameter("give only one of --fit-sections, --holdout and --split")
+    if fit_sections:
+        fit = [i for i in ids if i in set(fit_sections)]
+    elif holdout:
+        fit = [i for i in ids if i not in set(holdout)]
+    elif split:
+        masks = zone_folds([int(s.zone) for s in ctx.sections], 3)
+        fit = [i for i, m in zip(ids, masks[0], strict=True) if m == 0]
+    else:
+        return ids, []
+    if not fit:
+        raise InvalidParameter("the calibration needs at least one section to fit on")
+    held = [i for i in ids if i not in set(fit)]
+    return fit, held
+
+
+def _calibration_flags(ctx: CampaignContext, specs: Sequence[ParameterSpec], values: Mapping[str, float],
+                       vr_full: Any, vr_held: Any) -> tuple[bool, list[str]]:
+    """Plausibility of the fitted values (plausible range from the parameter registry, or at a
+    search bound) and the in-sample / held-out caveats of the verdict."""
+    from railval.app.services.diagnosis_evidence import plausible_range, template_param
+    from railval.core.diagnosis import plausibility_flags
+
+    registry = EFFECTS
+    template = str(ctx.vehicle.get("template") or "coach")
+    ok_all, flags = True, []
+    for sp in specs:
+        owner, pname = sp.name.split(".", 1)
+        try:
+            pobj = (template_param(template, pname) if owner == "model"
+                    else next(p for p in (registry[owner].parameters.values()) if p.name == pname))
+            plaus, source = plausible_range(pobj)
+        except (InvalidParameter, StopIteration, KeyError, AttributeError):
+            plaus, source = None, ""
+        ok, fl = plausibility_flags(sp.name, float(values[sp.name]), bounds=(sp.lower, sp.upper),
+                                    plausible=plaus, source=source, unit=sp.unit)
+        ok_all &= ok
+        flags += fl
+    if vr_held is None:
+        flags.append("in-sample: validated on the sections the calibration was fitted to; calibrate with "
+                     "--split (or --holdout) to judge it on sections it has not seen")
+    else:
+        worst = lambda vr: max((max(abs(r.mean_norm), r.std_norm) for r in vr.quantities.values()
+                                if math.isfinite(r.mean_norm) and math.isfinite(r.std_norm)), default=math.nan)
+        e_full, e_held = worst(vr_full), worst(vr_held)
+        if e_held > 1.0 and bool(vr_full.validated):
+            flags.append(f"passes on all sections but the largest normalised error on the held-out sections is "
+                         f"{e_held:.2f} (> 1): the fit does not carry over; the model may be compensating for "
+                         "something else")
+        elif e_held > 1.5 * e_full and e_held > 0.5:
+            flags.append(f"held-out sections fit worse (largest normalised error {e_held:.2f} vs {e_full:.2f} on all)")
+    return ok_all, flags
+
+
 def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float]) -> ParameterSpec:
+    """Search box of a template parameter: the diagnosis's box for its parameter candidates
+    (log scale), else the modal box ([ref 3]) or ±30 %."""
+    from railval.app.services.diagnosis_evidence import parameter_plan
+
+    plan = {p["parameter"]: p for p in parameter_plan(ctx, conf_params)}
+    if name in plan:
+        p = plan[name]
+        return ParameterSpec(f"model.{name}", p["bounds"][0], p["bounds"][1], p["unit"], p["reference"], log=True)
     value = conf_params.get(name, ctx.vehicle.get("parameters", {}).get(name, COACH_MODAL_DEFAULTS.get(name)))
     if value is None:
         raise InvalidParameter(f"model parameter {name!r} has no value in the vehicle template or configuration")
@@ -143,21 +271,47 @@ def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float
 
 def lineage_errors(session: Any, ctx: CampaignContext, name: str, known: Mapping[str, Any] | None = None) -> list[dict]:
     """Root → ``name``: per configuration its effects and every quantity's normalised error
-    max(|mean_norm|, std_norm) (with both parts), so the UI can draw the error falling."""
+    (:func:`railval.core.validation.normalised_errors`), so the UI can draw the error falling.
+    ``known``: validation results already at hand, by configuration name.
+
+    A calibrated configuration also carries ``fit_sections``, ``held_out_sections``,
+    ``in_sample`` (its verdict is on sections the calibration was fitted to) and, when it was
+    calibrated with held-out sections, ``held_out`` — the largest normalised error of it and
+    of its parent on those sections and the improvement (parent − child): the step's
+    held-out evidence."""
     out = []
+    prev_vals = None
     for conf in repo.lineage(session, ctx.campaign, name):
         vr = (known or {}).get(conf.name)
-        if vr is None:
+        sets = None
+        if vr is None or (conf.calibration or {}).get("held_out_sections"):
             sets = repo.load_signalsets(session, ctx.campaign, conf.name)
-            vr = validate(ctx.measured_values, section_values(sets, ctx.sections), ctx.sections, ctx.vehicle, n_boot=0)
-        q = {k: {"mean_norm": _finite(r.mean_norm), "std_norm": _finite(r.std_norm),
-                 "error": _finite(max(abs(r.mean_norm), r.std_norm))} for k, r in vr.quantities.items()}
-        worst = max((v["error"] for v in q.values() if v["error"] is not None), default=None)
-        out.append({"configuration": conf.name, "effects": dict(conf.effects or {}),
-                    "validated": bool(vr.validated), "max_error": worst, "quantities": q})
+        vals = section_values(sets, ctx.sections) if sets is not None else None
+        if vr is None:
+            vr = validate_values(ctx, vals)
+        cal_rec = conf.calibration or {}
+        held = list(cal_rec.get("held_out_sections") or [])
+        item = {"configuration": conf.name, "effects": dict(conf.effects or {}),
+                "parameters": dict(conf.parameters or {}), **normalised_errors(vr),
+                "fit_sections": cal_rec.get("fit_sections"), "held_out_sections": held or None,
+                "in_sample": bool(cal_rec) and not held}
+        if held and vals is not None:
+            sub = _restrict(ctx, held)
+            child = _max_error(validate(sub.measured_values, {k: v for k, v in vals.items() if k in held},
+                                        sub.sections, ctx.vehicle, n_boot=0))
+            parent = None
+            if prev_vals is not None:
+                parent = _max_error(validate(sub.measured_values, {k: v for k, v in prev_vals.items() if k in held},
+                                             sub.sections, ctx.vehicle, n_boot=0))
+            item["held_out"] = {"max_error": child, "parent_max_error": parent,
+                                "improvement": (parent - child) if parent is not None and child is not None else None}
+        out.append(item)
+        if vals is None:
+            vals = section_values(repo.load_signalsets(session, ctx.campaign, conf.name), ctx.sections)
+        prev_vals = vals
     return out
 
 
-def _finite(x: float) -> float | None:
-    return float(x) if x is not None and math.isfinite(x) else None
+def _max_error(vr: Any) -> float | None:
+    return normalised_errors(vr)["max_error"]
 

@@ -18,8 +18,14 @@ import numpy as np
 from sqlalchemy.orm import Session
 
 from railval.app.services.simulation import simulation_inputs
-from railval.core.diagnosis import DEFAULT_BANDS_HZ, Pattern, band_powers, band_ratio_pattern, pattern_from_pairs
-from railval.core.en14363 import evaluate_batch
+from railval.core.diagnosis import (
+    DEFAULT_BANDS_HZ,
+    Pattern,
+    band_powers,
+    band_ratio_pattern,
+    pattern_from_pairs,
+)
+from railval.core.en14363 import evaluate_present
 from railval.core.errors import NotFound
 from railval.core.sim import simulate_campaign
 from railval.core.sim.effects import Effect
@@ -78,11 +84,9 @@ def band_sums(signalsets: Mapping[str, SignalSet], bands) -> dict[str, np.ndarra
 
 
 def section_values(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo]) -> dict[str, dict]:
-    """EN 14363 values (:func:`railval.core.en14363.evaluate_batch`) of the sections present."""
-    secs = [s for s in sections if s.id in signalsets]
-    vals = evaluate_batch([signalsets[s.id] for s in secs], secs)
-    # SectionValues (a dict) keep the supplementary values the residual pattern uses
-    return {s.id: v for s, v in zip(secs, vals, strict=True)}
+    """EN 14363 values (:func:`railval.core.en14363.evaluate_present`) of the sections present;
+    the SectionValues (a dict) keep the supplementary values the residual pattern uses."""
+    return evaluate_present(signalsets, sections)
 
 
 def load_context(session: Any, campaign: str) -> CampaignContext:

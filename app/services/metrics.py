@@ -22,10 +22,10 @@ import numpy as np
 import pandas as pd
 
 from railval.core.errors import InvalidParameter, NotFound
-from railval.core.metrics import compare_signalsets, lowpass, metric_names
+from railval.core.metrics import compare_signalsets, cut_evaluated, metric_names
 from railval.core.metrics.compare import DEFAULT_LOWPASS_HZ
 from railval.core.metrics.sync import DEFAULT_MAX_LAG_S
-from railval.core.types import CHANNEL_KINDS, SectionInfo, SignalSet, split_channel
+from railval.core.types import CHANNEL_KINDS, split_channel
 
 PARTS = ("section", "evaluated")
 
@@ -64,22 +64,6 @@ def _run_settings(sections, channels, lowpass_hz, max_lag_s, families, part, sub
 def channel_unit(channel: str) -> str:
     """Unit of a channel from the channel vocabulary (``railval.core.types.CHANNEL_KINDS``)."""
     return CHANNEL_KINDS.get(split_channel(channel)[0], "")
-
-
-def _cut_evaluated(ss: SignalSet, info: SectionInfo, lowpass_hz: float | None) -> SignalSet:
-    names = list(ss.channels)
-    data = np.vstack([np.asarray(ss.channels[c], dtype=np.float64) for c in names]) if names else None
-    if data is not None and lowpass_hz is not None:
-        data = lowpass(data, ss.fs, lowpass_hz)
-    keep = (ss.distance_m >= info.eval_start_m) & (ss.distance_m <= info.eval_end_m)
-    idx = np.flatnonzero(keep)
-    if idx.size < 16:
-        raise NotFound(f"section {info.id}: evaluated range {info.eval_start_m:g}–{info.eval_end_m:g} m "
-                       f"holds {idx.size} samples, need at least 16")
-    lo, hi = int(idx[0]), int(idx[-1]) + 1
-    chans = {c: data[i, lo:hi] for i, c in enumerate(names)} if data is not None else {}
-    return SignalSet(fs=ss.fs, time_s=ss.time_s[lo:hi] - ss.time_s[lo], distance_m=ss.distance_m[lo:hi],
-                     channels=chans, hashes=dict(ss.hashes))
 
 
 def metrics_for_configuration(session: Any, campaign: Any, config: str,
@@ -196,7 +180,7 @@ def _compute(session: Any, campaign: Any, config: str, infos: dict[str, SectionI
         m, c = measured[sid], simulated[sid]
         filt: float | None = lowpass_hz
         if part == "evaluated":
-            m, c = _cut_evaluated(m, info, lowpass_hz), _cut_evaluated(c, info, lowpass_hz)
+            m, c = cut_evaluated(m, info, lowpass_hz), cut_evaluated(c, info, lowpass_hz)
             filt = None  # already filtered over the whole section
         df = compare_signalsets(m, c, ch, lowpass_hz=filt, max_lag_s=max_lag_s,
                                 families=families, subsample=subsample)

@@ -11,7 +11,12 @@ from typing import Any
 import numpy as np
 
 from railval.app.services.campaign_context import Progress, report, session_of
-from railval.core.calibration import COACH_MODAL_PARAMETERS, ParameterSpec, calibrate_modal, coach_modal_base
+from railval.core.calibration import (
+    COACH_MODAL_PARAMETERS,
+    ParameterSpec,
+    calibrate_modal,
+    coach_modal_base,
+)
 from railval.core.errors import InvalidParameter, NotFound
 from railval.core.modal import decimated_records, ssi_cov
 from railval.db import repo

@@ -37,6 +37,7 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
 
     with database.session() as s:
         camp = repo.get_campaign(s, campaign)
+        repo.check_new_configuration(s, camp, name, replace=replace)  # before simulating
         vehicle = repo.vehicle_info(s, camp)
         sections = repo.section_infos(s, camp)
         layouts = repo.section_layouts(s, camp)
@@ -66,7 +67,7 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
     if progress:
         progress("store", 0.95, {})
     desc = description or ("built-in simulator: " + (", ".join(sorted(eff)) or "no effects"))
-    with database.session() as s:
+    with database.session(write=True) as s:
         repo.store_configuration(s, camp_name, name, parent=parent, effects=eff, parameters=par,
                                  description=desc, signalsets=sets, replace=replace)
     if progress:

@@ -13,6 +13,7 @@ The truth goes to ``reveal`` (a separate JSON file) only when asked.
 from __future__ import annotations
 
 import json
+import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -75,6 +76,27 @@ def write_folder(sc: SynthCampaign, folder: str | Path, *, ext: str = "parquet")
     return folder
 
 
+#: prefix of synth's temporary campaign folders: ``railval-synth-<pid>-<random>``
+TEMP_PREFIX = "railval-synth-"
+
+
+def remove_stale_folders(base: str | Path | None = None) -> list[Path]:
+    """Remove the temporary folders of synth runs whose process no longer exists (a run
+    killed with SIGKILL cannot remove its own, ≈ 70 MB each); returns the removed paths.
+    Called at the start of every synth run."""
+    import shutil
+
+    from railval.core.workers import process_alive
+
+    removed = []
+    for path in Path(base or tempfile.gettempdir()).glob(f"{TEMP_PREFIX}*-*"):
+        pid = path.name[len(TEMP_PREFIX):].split("-", 1)[0]
+        if path.is_dir() and pid.isdigit() and int(pid) != os.getpid() and not process_alive(int(pid)):
+            shutil.rmtree(path, ignore_errors=True)
+            removed.append(path)
+    return removed
+
+
 def synth(database: Any, *, name: str = "synth", template: str = "coach", hidden: list[str] | None = None,
           seed: int = 1, n_sections: int = 12, out: str | Path | None = None, reveal: str | Path | None = None,
           progress: Progress | None = None) -> dict:
@@ -90,10 +112,20 @@ def synth(database: Any, *, name: str = "synth", template: str = "coach", hidden
         if progress:
             progress(stage, frac, info)
 
+    from railval.core.errors import CampaignFormatError
+    from railval.core.names import check_name
+    from railval.db import repo
+
+    check_name(name, "campaign name")
+    with database.session() as s:  # before minutes of simulation, not after
+        if any(c.name == name for c in repo.list_campaigns(s)):
+            raise CampaignFormatError(f"a campaign named {name!r} already exists in the "
+                                      "database", field="name")
     hid = parse_hidden(hidden or ["friction_damping"], template)
     sc = build_campaign(name=name, template=template, hidden=hid, seed=seed, n_sections=n_sections,
                         progress=lambda d, t: rep("simulate", 0.85 * d / t, done=d, total=t))
-    with tempfile.TemporaryDirectory(prefix="railval-synth-") as tmp:
+    remove_stale_folders()
+    with tempfile.TemporaryDirectory(prefix=f"{TEMP_PREFIX}{os.getpid()}-") as tmp:
         folder = Path(out) if out else Path(tmp) / name
         rep("write", 0.87)
         write_folder(sc, folder)

@@ -9,15 +9,17 @@ which calls directly). Errors land in ``AppState.status`` with level ``"error"``
 from __future__ import annotations
 
 import math
+import os
 import threading
-import traceback
 from collections.abc import Callable
 from typing import Any
 
 import param
 
+from railval.app.security import plain_message
 from railval.app.state.backend import Backend, CampaignOverview
 from railval.core.quantities import derived_signals
+from railval.core.errors import RailvalError
 from railval.core.roles import ACTIONS, PAGE_ACTIONS, Principal, allowed, open_principal
 
 PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report", "signoff", "audit")
@@ -31,6 +33,20 @@ PAGE_TITLES = {
     "signoff": "Sign-off",
     "audit": "Audit trail",
 }
+
+
+
+class JobCancelled(RailvalError):
+    """The user cancelled a background job."""
+
+#: jobs (simulation, calibration, diagnosis, metrics) running at once in this server, over
+#: all browser sessions (``$RAILVAL_MAX_JOBS``, default 1: one calibration already keeps the
+#: two cores of the deployment busy); further jobs wait in line with a "queued" status
+MAX_JOBS = max(1, int(os.environ.get("RAILVAL_MAX_JOBS", "1")))
+_JOB_SLOTS = threading.BoundedSemaphore(MAX_JOBS)
+#: most campaign simulations one job may run (``$RAILVAL_MAX_JOB_SIMULATIONS``); a larger
+#: diagnosis or calibration is refused with its cost shown, before it starts
+MAX_JOB_SIMULATIONS = max(1, int(os.environ.get("RAILVAL_MAX_JOB_SIMULATIONS", "1000")))
 
 
 class AppState(param.Parameterized):
@@ -86,7 +102,7 @@ class AppState(param.Parameterized):
         try:
             names = self.backend.campaigns()
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            self.set_status(f"cannot list campaigns: {exc}", "error")
+            self.set_status(f"cannot list campaigns: {plain_message(exc, 'campaigns')}", "error")
             names = []
         self.param.campaign.objects = names
         if names and self.campaign not in names:
@@ -101,7 +117,8 @@ class AppState(param.Parameterized):
         try:
             ov = self.backend.overview(self.campaign)
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            self.set_status(f"cannot open campaign {self.campaign!r}: {exc}", "error")
+            self.set_status(f"cannot open campaign {self.campaign!r}: "
+                            f"{plain_message(exc, 'campaign')}", "error")
             return
         self.overview = ov
         configs = [c.name for c in ov.configurations]
@@ -161,11 +178,14 @@ class AppState(param.Parameterized):
             self.set_status(f"{title}: another job is still running — wait for it to finish", "warning")
             return None
         call = dispatch or (lambda f: f())
+        cancel = self._cancel = threading.Event()
         self.busy = True
         self.progress = 0.0
         self.set_status(f"{title}: started", "info")
 
         def progress(fraction: float, message: str = "") -> None:
+            if cancel.is_set():  # the job stops at its next progress report
+                raise JobCancelled(f"{title}: cancelled")
             frac = float(min(1.0, max(0.0, fraction if math.isfinite(fraction) else 0.0)))
 
             def apply():
@@ -176,17 +196,32 @@ class AppState(param.Parameterized):
         def body():
             from railval.db.engine import acting_as
 
+            if not _JOB_SLOTS.acquire(blocking=False):
+                call(lambda: self.set_status(
+                    f"{title}: queued — {MAX_JOBS} job(s) of this server are running; it starts "
+                    "when one has finished", "info"))
+                _JOB_SLOTS.acquire()
             try:
+                if cancel.is_set():
+                    raise JobCancelled(f"{title}: cancelled before it started")
                 with acting_as(self.principal.username):
                     result = work(progress)
             except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-                detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+                if isinstance(exc, JobCancelled):
+                    def cancelled(msg=str(exc)):
+                        self.busy = False
+                        self.set_status(msg, "warning")
+                    call(cancelled)
+                    return
+                detail = plain_message(exc, title)
 
                 def fail():
                     self.busy = False
                     self.set_status(f"{title} failed: {detail}", "error")
                 call(fail)
                 return
+            finally:
+                _JOB_SLOTS.release()
 
             def done():
                 self.busy = False
@@ -196,7 +231,8 @@ class AppState(param.Parameterized):
                     try:
                         on_done(result)
                     except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-                        self.set_status(f"{title}: finished but showing the result failed: {exc}", "error")
+                        self.set_status(f"{title}: finished but showing the result failed: "
+                                        f"{plain_message(exc, title)}", "error")
             call(done)
 
         if not background:
@@ -205,6 +241,24 @@ class AppState(param.Parameterized):
         self._job = threading.Thread(target=body, name=f"railval-job-{title}", daemon=True)
         self._job.start()
         return self._job
+
+    def within_cost_cap(self, title: str, simulations: int) -> bool:
+        """``True`` when a job of ``simulations`` campaign simulations may run; else the
+        status says the cost and the cap and ``False`` is returned."""
+        if simulations > MAX_JOB_SIMULATIONS:
+            self.set_status(f"{title} refused: it would simulate the campaign {simulations} times, "
+                            f"more than the limit of {MAX_JOB_SIMULATIONS} per job — choose fewer "
+                            "candidates, values or generations", "error")
+            return False
+        return True
+
+    def cancel_job(self) -> None:
+        """Ask the running job to stop: it ends at its next progress report (a simulation
+        or calibration step), or before it starts when it is still queued."""
+        cancel = getattr(self, "_cancel", None)
+        if self.busy and cancel is not None:
+            cancel.set()
+            self.set_status("cancelling — the job stops after its current step", "warning")
 
     def wait(self, timeout: float | None = None) -> None:
         if self._job is not None:

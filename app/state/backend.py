@@ -20,6 +20,7 @@ from railval.core.types import SectionInfo
 from railval.core.validation import MIN_POSITIONS, MIN_SECTIONS, MIN_SECTIONS_PER_ZONE
 from railval.db import repo
 
+
 @dataclass
 class ConfigInfo:
     name: str

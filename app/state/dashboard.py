@@ -115,9 +115,3 @@ def supplementary_rows(doc: dict[str, Any]) -> list[dict[str, Any]]:
     """The supplementary results (bogie-frame and PSD-band quantities) of a validation
     document, one row each (core.supplementary); they never change the verdict."""
     return [dict(r) for r in (doc.get("supplementary") or {}).get("quantities", [])]
-
-
-def finite_or_nan(x: Any) -> float:
-    return float("nan") if x is None else float(x)
-
-

@@ -10,9 +10,9 @@ import param
 
 from railval.app.services.diagnosis import diagnosis_simulations
 from railval.app.state.app import AppState
-from railval.app.state.dashboard import finite_or_nan, quantity_rows
 from railval.core.calibration import max_evaluations
-from railval.core.diagnosis import PatternGrid, pattern_grids
+from railval.core.diagnosis import Component, PatternGrid, pattern_grids
+from railval.core.validation import normalised_errors
 
 
 class DiagnoseState(param.Parameterized):
@@ -31,6 +31,9 @@ class DiagnoseState(param.Parameterized):
     stored_run = param.Dict(default={}, doc=(
         "the stored run the shown diagnosis comes from (time, settings, reused, current)"))
     runs = param.List(default=[], doc="stored diagnoses of the configuration, newest first")
+    verdict = param.String(default="", doc="verdict of the last diagnosis: cause, uncertain or none")
+    noise_floor = param.Number(default=None, allow_None=True, doc="noise floor of the last diagnosis")
+    unexplained = param.List(default=[], doc="what the best candidate leaves unexplained (verdict none)")
     # diagnosis settings (app.services.diagnosis.diagnose)
     candidate_effects = param.ListSelector(default=[], objects=[], doc=(
         "effects the diagnosis tries; none chosen = every effect the configuration lacks"))
@@ -43,6 +46,9 @@ class DiagnoseState(param.Parameterized):
     maxiter = param.Integer(default=5, bounds=(1, 200), doc="differential evolution: generations at most")
     polish_maxfev = param.Integer(default=20, bounds=(0, 1000), doc="local polish: simulations at most")
     seed = param.Integer(default=0, bounds=(0, None), doc="random seed of the global search")
+    split = param.Boolean(default=False, doc=(
+        "fit on part of the sections and validate on the others (one section per zone and fold held "
+        "out); otherwise the verdict on the campaign is in-sample"))
 
     def __init__(self, app: AppState, **params):
         super().__init__(**params)
@@ -98,11 +104,12 @@ class DiagnoseState(param.Parameterized):
         effect = effect or self.effect
         cand = next((c for c in self.candidates if c["effect"] == effect), None)
         res = self.residual
-        if cand is None or "values" not in res or "signature" not in cand:
+        if cand is None or "components" not in res or "signature" not in cand:
             return {}
+        components = [Component.from_dict(c) for c in res["components"]]
         now = np.asarray(res["values"], float)
         after = now - np.asarray(cand["signature"]["values"], float)
-        return {"now": pattern_grids(res["labels"], now), "after": pattern_grids(res["labels"], after)}
+        return {"now": pattern_grids(components, now), "after": pattern_grids(components, after)}
 
     def _effect_changed(self) -> None:
         eff = next((e for e in self.effect_catalogue() if e["name"] == self.effect), None)
@@ -119,11 +126,15 @@ class DiagnoseState(param.Parameterized):
         self.candidate_effects = [e for e in self.candidate_effects if e in available]
 
     def diagnosis_simulations(self) -> int:
-        """Campaign simulations the diagnosis will run with the current settings."""
+        """Campaign simulations the diagnosis will run with the current settings (at most: the
+        refinement of parameter candidates runs only where needed). Chosen candidate effects
+        restrict the diagnosis to them; none chosen = every effect lacking and the template's
+        parameters."""
         effects = self.candidate_effects or self.available_effects()
         ov = self.app.overview
         template = str(ov.vehicle.get("template") or "coach") if ov else None
-        return diagnosis_simulations(effects, self.values_per_parameter, template)
+        return diagnosis_simulations(effects, self.values_per_parameter, template,
+                                     parameters=not self.candidate_effects)
 
     def calibration_simulations(self) -> int:
         """Upper bound of the campaign simulations a calibration runs: the optimiser's
@@ -158,6 +169,8 @@ class DiagnoseState(param.Parameterized):
 
         settings = {"values_per_parameter": self.values_per_parameter,
                     "effects": list(self.candidate_effects) or None}
+        if not app.within_cost_cap("diagnosis", self.diagnosis_simulations()):
+            return None
 
         def work(progress):
             return app.backend.diagnose(campaign, config, progress=progress, **settings)
@@ -178,6 +191,9 @@ class DiagnoseState(param.Parameterized):
             note = "the two best candidates explain nearly the same; see the evidence"
         self.diagnosis_note = note
         self.separable = bool(d.get("separable", True))
+        self.verdict = str(d.get("verdict") or "")
+        self.noise_floor = d.get("noise_floor")
+        self.unexplained = list(d.get("unexplained") or [])
         self.diagnosis_run = {k: d.get(k) for k in ("simulations", "values_per_parameter", "configuration")}
         self.stored_run = dict(d.get("run") or {})
         names = self.available_effects() if cands else []
@@ -198,12 +214,19 @@ class DiagnoseState(param.Parameterized):
         # a name the user did not type always names the effect that is added
         name = self.new_name if (self.name_edited and self.new_name.strip()) else self.suggested_name()
         params = dict(self.parameters)
+        if effect is not None and effect.startswith("model."):  # a parameter candidate: start at its fitted value
+            cand = next((c for c in self.candidates if c.get("name") == effect), None)
+            params = {effect[6:]: float(cand["fitted"])} if cand and cand.get("fitted") is not None else {}
         if effect is None:
             app.set_status("choose an effect to add first", "warning")
             return None
 
         settings = {"popsize": self.popsize, "maxiter": self.maxiter, "polish_maxfev": self.polish_maxfev,
-                    "seed": self.seed, "params": [f"{effect}.{p}" for p in self.fit_parameters] or None}
+                    "seed": self.seed, **({"split": True} if self.split else {}),
+                    "params": ([f"{effect}.{p}" for p in self.fit_parameters] or None)
+                    if not (effect or "").startswith("model.") else None}
+        if calibrate and not app.within_cost_cap("calibration", self.calibration_simulations()):
+            return None
 
         def work(progress):
             if calibrate:
@@ -222,18 +245,15 @@ class DiagnoseState(param.Parameterized):
                            action="calibrate" if calibrate else "simulate")
 
     def lineage_errors(self, config: str | None = None) -> list[dict[str, Any]]:
-        """Along the lineage root → config: the largest normalised error (max over quantities
-        of |mean|/mean limit and std/std limit) and whether the configuration is validated."""
+        """Along the lineage root → config: the largest normalised error ``max_norm``
+        (:func:`railval.core.validation.normalised_errors`, NaN when none is finite) and whether
+        the configuration is validated."""
         app = self.app
         config = config or app.configuration
         out = []
         for name in app.backend.lineage(app.campaign, config):
-            res = app.backend.validation(app.campaign, name)
-            d = res.to_dict() if hasattr(res, "to_dict") else res
-            rows = quantity_rows(res)
-            worst = max((max(abs(finite_or_nan(r["mean_norm"])), abs(finite_or_nan(r["std_norm"]))) for r in rows),
-                        default=float("nan"))
-            out.append({"configuration": name, "max_norm": worst, "validated": bool(d.get("validated"))})
+            err = normalised_errors(app.backend.validation(app.campaign, name))
+            out.append({"configuration": name,
+                        "max_norm": float("nan") if err["max_error"] is None else err["max_error"],
+                        "validated": err["validated"]})
         return out
-
-

@@ -14,7 +14,13 @@ Modules: ``sprague_geers``, ``russell``, ``distribution`` (KS, n_eff, area, AD),
 (with the numba DTW), ``sync``, ``grid``, ``registry``, ``compare``.
 """
 
-from railval.core.metrics.compare import ComparisonResult, compare, compare_signalsets, lowpass
+from railval.core.metrics.compare import (
+    ComparisonResult,
+    compare,
+    compare_signalsets,
+    cut_evaluated,
+    lowpass,
+)
 from railval.core.metrics.distribution import (
     ADResult,
     KSResult,
@@ -27,7 +33,13 @@ from railval.core.metrics.distribution import (
 )
 from railval.core.metrics.grid import CommonGrid, common_grid
 from railval.core.metrics.iso18571 import ISOParameters, ISORating, grade, iso18571
-from railval.core.metrics.registry import FAMILIES, METRICS, MetricInfo, metric_names, registry_table
+from railval.core.metrics.registry import (
+    FAMILIES,
+    METRICS,
+    MetricInfo,
+    metric_names,
+    registry_table,
+)
 from railval.core.metrics.russell import Russell, russell
 from railval.core.metrics.sprague_geers import SpragueGeers, sprague_geers
 from railval.core.metrics.sync import SyncResult, apply_lag, estimate_lag
@@ -52,6 +64,7 @@ __all__ = [
     "common_grid",
     "compare",
     "compare_signalsets",
+    "cut_evaluated",
     "effective_sample_size",
     "estimate_lag",
     "grade",

@@ -23,7 +23,7 @@ from railval.core.metrics.grid import common_grid
 from railval.core.metrics.iso18571 import ISOParameters
 from railval.core.metrics.registry import FAMILIES, METRICS, metric_names, resolve_families
 from railval.core.metrics.sync import DEFAULT_MAX_LAG_S, SyncResult, apply_lag, estimate_lag
-from railval.core.types import SignalSet
+from railval.core.types import SectionInfo, SignalSet
 
 DEFAULT_LOWPASS_HZ = 20.0
 
@@ -215,3 +215,23 @@ def compare_signalsets(measured: SignalSet, simulated: SignalSet, channels: Iter
                 row[f"{name}_sync"] = res.synced[name]
         rows.append(row)
     return pd.DataFrame(rows, columns=columns)
+
+
+def cut_evaluated(ss: SignalSet, info: SectionInfo, lowpass_hz: float | None) -> SignalSet:
+    """The evaluated (constant-curvature) range of a section's signals on their own distance
+    axis, after filtering the whole section (:func:`lowpass` at ``lowpass_hz``, none when
+    None) so the cut carries no filter transient; time restarts at 0. Raises
+    :class:`NotFound` when the range holds fewer than 16 samples."""
+    names = list(ss.channels)
+    data = np.vstack([np.asarray(ss.channels[c], dtype=np.float64) for c in names]) if names else None
+    if data is not None and lowpass_hz is not None:
+        data = lowpass(data, ss.fs, lowpass_hz)
+    keep = (ss.distance_m >= info.eval_start_m) & (ss.distance_m <= info.eval_end_m)
+    idx = np.flatnonzero(keep)
+    if idx.size < 16:
+        raise NotFound(f"section {info.id}: evaluated range {info.eval_start_m:g}–{info.eval_end_m:g} m "
+                       f"holds {idx.size} samples, need at least 16")
+    lo, hi = int(idx[0]), int(idx[-1]) + 1
+    chans = {c: data[i, lo:hi] for i, c in enumerate(names)} if data is not None else {}
+    return SignalSet(fs=ss.fs, time_s=ss.time_s[lo:hi] - ss.time_s[lo], distance_m=ss.distance_m[lo:hi],
+                     channels=chans, hashes=dict(ss.hashes))

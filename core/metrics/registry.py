@@ -17,7 +17,11 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from railval.core.errors import InvalidParameter
-from railval.core.metrics.distribution import anderson_darling, area_validation_metric, kolmogorov_smirnov
+from railval.core.metrics.distribution import (
+    anderson_darling,
+    area_validation_metric,
+    kolmogorov_smirnov,
+)
 from railval.core.metrics.iso18571 import ISOParameters, iso18571
 from railval.core.metrics.russell import russell
 from railval.core.metrics.sprague_geers import sprague_geers

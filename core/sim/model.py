@@ -37,6 +37,7 @@ import numpy as np
 from railval.core.errors import InvalidParameter
 from railval.core.sim import kernel as K
 from railval.core.sim.effects import resolve_effects
+from railval.core.workers import pool_kwargs
 from railval.core.sim.track import DS, TrackSection
 from railval.core.sim.vehicles import G, VehicleModel
 from railval.core.types import SignalSet
@@ -382,7 +383,8 @@ def _pool(workers: int) -> ProcessPoolExecutor:
         if _POOL is not None:
             _POOL.shutdown(wait=False, cancel_futures=True)
         method = "fork" if threading.active_count() == 1 and "fork" in mp.get_all_start_methods() else "forkserver"
-        _POOL = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(method))
+        _POOL = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(method),
+                                    **pool_kwargs())
         _POOL_WORKERS = workers
     return _POOL
 

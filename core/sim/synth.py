@@ -218,17 +218,48 @@ def _apply_sensor_nuisance(ss: SignalSet, rng: np.random.Generator, nz: dict, ga
     return SignalSet(fs=ss.fs, time_s=ss.time_s - ss.time_s[0], distance_m=ss.distance_m, channels=chans)
 
 
+def _apply_channel_faults(ss: SignalSet, faults: dict) -> SignalSet:
+    """Causes outside the effect library in the measurement chain: ``gain`` ``{channel: factor}``
+    (a mis-calibrated sensor) and ``shift_samples`` ``{channel: n}`` (a channel recorded n
+    samples late against the others)."""
+    chans = dict(ss.channels)
+    for ch, g in (faults.get("gain") or {}).items():
+        if ch in chans:
+            chans[ch] = chans[ch] * float(g)
+    for ch, n in (faults.get("shift_samples") or {}).items():
+        if ch in chans and int(n) > 0:
+            x, n = chans[ch], int(n)
+            y = np.empty_like(x)
+            y[n:] = x[:-n]
+            y[:n] = x[0]
+            chans[ch] = y
+    return SignalSet(fs=ss.fs, time_s=ss.time_s, distance_m=ss.distance_m, channels=chans)
+
+
 def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict | None = None,
                    seed: int = 1, n_sections: int = 12, fs: float = 200.0,
-                   nuisance: dict | None = None, progress=None) -> SynthCampaign:
+                   nuisance: dict | None = None, progress=None, truth_parameters: dict | None = None,
+                   oversample: int = 1, channel_faults: dict | None = None,
+                   require_cause: bool = True) -> SynthCampaign:
     """Build the whole synthetic campaign in memory (measured + baseline signals, manifest data
     and the truth). ``hidden``: ``{effect: {param: value}}`` (checked), default
-    ``{"friction_damping": HIDDEN_DEFAULTS[...]}``. ``progress(done, total)`` per simulation."""
+    ``{"friction_damping": HIDDEN_DEFAULTS[...]}``. ``progress(done, total)`` per simulation.
+
+    Truth-model options (a truth structurally unlike the candidate models, docs/diagnosis.md
+    "test bench"): ``truth_parameters`` — vehicle-template values of the truth only (the
+    baseline keeps the template's); ``oversample`` — the truth is simulated at ``oversample``
+    × ``fs`` and averaged over blocks of ``oversample`` samples (the simulator takes ≥ 2
+    integration steps per output sample, so this is a finer step: coach at 200 Hz 1.67 ms,
+    at 4 × 200 Hz 0.625 ms); ``channel_faults`` — see :func:`_apply_channel_faults`; ``require_cause=False``
+    allows a campaign with no hidden cause at all (``hidden={}``)."""
     veh = VehicleModel(template)
+    truth_veh = VehicleModel(template, dict(truth_parameters or {}))
+    if int(oversample) < 1:
+        raise InvalidParameter(f"oversample must be an integer ≥ 1, got {oversample!r}")
     hidden = resolve_effects(hidden if hidden is not None else {"friction_damping": HIDDEN_DEFAULTS["friction_damping"]})
     if template not in TRUE_TRACK_TEMPLATES:
         raise InvalidParameter(f"vehicle template {template!r} is unknown; known: {sorted(TRUE_TRACK_TEMPLATES)}")
-    if not hidden:
+    if not hidden and require_cause and not truth_parameters and not channel_faults:
         raise InvalidParameter("synth needs at least one hidden effect")
     for e in hidden:
         if template not in EFFECTS[e].templates:
@@ -274,11 +305,19 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
         true_track = TrackSection(**{**sec.track.__dict__, "irregularities": sec.true_irregularities})
         sf = float(1.0 + rng.normal(0.0, nz["speed_sigma"]))
         speed_factors[sec.track.id] = sf
-        ss = simulate_section(veh, true_track, truth_effects, fs_out=fs, speed_factor=sf,
+        k = int(oversample)
+        ss = simulate_section(truth_veh, true_track, truth_effects, fs_out=fs * k, speed_factor=sf,
                               nuisance={"damper_asymmetry": nz["damper_asymmetry"]})
+        if k > 1:  # block means of k samples: the kernel's own output averaging at fs
+            n = ss.time_s.size // k * k
+            blk = lambda x, n=n, k=k: np.ascontiguousarray(x[:n].reshape(-1, k).mean(axis=1))
+            ss = SignalSet(fs=float(fs), time_s=blk(ss.time_s), distance_m=blk(ss.distance_m),
+                           channels={c: blk(x) for c, x in ss.channels.items()})
         for ch in ss.channels:
             gains.setdefault(ch, float(1.0 + rng.normal(0.0, nz["gain_sigma"])))
         measured[sec.track.id] = _apply_sensor_nuisance(ss, rng, nz, gains)
+        if channel_faults:
+            measured[sec.track.id] = _apply_channel_faults(measured[sec.track.id], channel_faults)
         done += 1
         if progress:
             progress(done, total)
@@ -289,6 +328,8 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
     truth = {"hidden_effects": hidden, "truth_effects": truth_effects,
              "nuisances": {**nz, "speed_factors": speed_factors, "channel_gains": gains},
              "baseline_effects": baseline_effects, "seed": seed, "template": template,
+             "truth_parameters": dict(truth_parameters or {}), "oversample": int(oversample),
+             "channel_faults": dict(channel_faults or {}),
              "note": "measurements = baseline template + hidden effects on the true track "
                      "(stored irregularities = recording gain x true + noise) + nuisances"}
     return SynthCampaign(name, veh, sections, measured, baseline, baseline_effects, truth,

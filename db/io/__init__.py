@@ -80,7 +80,7 @@ def read_table(path: str | Path) -> dict[str, np.ndarray]:
         a = np.asarray(values)
         if a.ndim != 1:
             a = a.reshape(-1) if a.size == max(a.shape, default=0) else a
-        if a.dtype.kind in "fiub":
+        if a.dtype.kind in "fiu":  # booleans stay booleans and are refused by the checks
             a = a.astype(np.float64, copy=False)
         out[str(name)] = a
     return out

@@ -8,16 +8,49 @@ import numpy as np
 
 from railval.core.errors import CampaignFormatError
 
+#: largest number of samples a column may declare; checked against the file's own metadata
+#: (HDF5 dataset shape, Parquet row count, MDF cycle count, TDMS channel length, MAT
+#: header) before any sample is read, so a small file declaring a huge array is refused at
+#: once. 20 million samples are 28 h at 200 Hz, 160 MB per float64 column.
+MAX_SAMPLES = 20_000_000
+#: largest number of columns (datasets, channels, variables) a data file may hold
+MAX_COLUMNS = 512
+
+
+def _check_declared(path: Path, name: str, n: int) -> None:
+    if n > MAX_SAMPLES:
+        raise CampaignFormatError(
+            f"column {name!r} declares {n} samples, more than the limit MAX_SAMPLES = "
+            f"{MAX_SAMPLES}", file=str(path), field=str(name))
+
+
+def _check_columns(path: Path, names: list[str]) -> None:
+    if len(names) > MAX_COLUMNS:
+        raise CampaignFormatError(f"file holds {len(names)} columns, more than the limit "
+                                  f"MAX_COLUMNS = {MAX_COLUMNS}", file=str(path))
+    seen: set[str] = set()
+    for name in names:
+        if name in seen:
+            raise CampaignFormatError(f"column {name!r} appears twice", file=str(path),
+                                      field=str(name))
+        seen.add(name)
+
 
 # -- CSV ---------------------------------------------------------------------------------
 def read_csv(path: Path) -> dict[str, np.ndarray]:
+    import pyarrow as pa
     import pyarrow.csv as pacsv
 
+    _check_csv_dialect(path)
     # pyarrow parses decimal floats exactly (the shortest repr written below reads back
     # bit-identical) and is several times faster than a Python-level parser
-    table = pacsv.read_csv(path)
+    try:
+        table = pacsv.read_csv(path)
+    except pa.ArrowInvalid as exc:
+        raise CampaignFormatError(f"cannot read .csv file ({exc})", file=str(path)) from None
     if table.num_columns == 0:
         raise CampaignFormatError("CSV file has no columns", file=str(path))
+    _check_columns(path, table.column_names)
     if table.num_rows == 0:
         raise CampaignFormatError("CSV file holds a header but no samples", file=str(path),
                                   field=table.column_names[0])
@@ -25,16 +58,44 @@ def read_csv(path: Path) -> dict[str, np.ndarray]:
     for name in table.column_names:
         col = table.column(name)
         if not (pa_is_numeric(col.type)):
-            raise CampaignFormatError(f"column {name!r} is not numeric (type {col.type})",
+            what = ("boolean (true/false)" if str(col.type) == "bool"
+                    else f"not numeric (type {col.type})")
+            raise CampaignFormatError(f"column {name!r} is {what}; expected numbers",
                                       file=str(path), field=str(name))
         out[name] = col.to_numpy()
     return out
 
 
+def _check_csv_dialect(path: Path) -> None:
+    """Name the two usual spreadsheet dialects instead of a column-count error: ``;`` as the
+    separator, and decimal commas (``0,5``), which split every number into two columns."""
+    with path.open("rb") as fh:
+        head = fh.read(64 * 1024).decode("utf-8", errors="replace").splitlines()
+    lines = [ln for ln in head[:-1] or head if ln.strip()][:6]
+    if not lines:
+        return
+    header, rows = lines[0], lines[1:]
+    if ";" in header and header.count(";") >= header.count(","):
+        raise CampaignFormatError(
+            f"the header separates columns with ';' ({header.count(';') + 1} fields); railval "
+            "reads CSV with ',' as the separator and '.' as the decimal mark — export the "
+            "file with commas", file=str(path), field=header.split(";")[0].strip().strip('"') or None)
+    if rows:
+        n_head = header.count(",") + 1
+        n_row = rows[0].count(",") + 1
+        import re
+
+        if n_row > n_head and re.search(r"(^|[,;])-?\d+,\d", rows[0]):
+            raise CampaignFormatError(
+                f"line 2 has {n_row} comma-separated fields but the header has {n_head}: "
+                "the numbers use a decimal comma (e.g. '0,5'); write them with a decimal "
+                "point ('0.5')", file=str(path))
+
+
 def pa_is_numeric(dtype) -> bool:
     import pyarrow.types as pat
 
-    return pat.is_floating(dtype) or pat.is_integer(dtype) or pat.is_boolean(dtype)
+    return pat.is_floating(dtype) or pat.is_integer(dtype)
 
 
 def write_csv(path: Path, columns: dict[str, np.ndarray]) -> None:
@@ -49,6 +110,11 @@ def write_csv(path: Path, columns: dict[str, np.ndarray]) -> None:
 def read_parquet(path: Path) -> dict[str, np.ndarray]:
     import pyarrow.parquet as pq
 
+    meta = pq.ParquetFile(path).metadata
+    names = [meta.schema.column(i).name for i in range(meta.num_columns)]
+    _check_columns(path, names)
+    for name in names:
+        _check_declared(path, name, meta.num_rows)
     table = pq.read_table(path)
     return {name: table.column(name).to_numpy() for name in table.column_names}
 
@@ -66,9 +132,12 @@ def read_h5(path: Path) -> dict[str, np.ndarray]:
 
     out = {}
     with h5py.File(path, "r") as fh:
-        for name, item in fh.items():
-            if isinstance(item, h5py.Dataset):
-                out[name] = item[()]
+        datasets = [(name, item) for name, item in fh.items() if isinstance(item, h5py.Dataset)]
+        _check_columns(path, [name for name, _ in datasets])
+        for name, item in datasets:
+            _check_declared(path, name, int(np.prod(item.shape, dtype=np.int64)))
+        for name, item in datasets:
+            out[name] = item[()]
     return out
 
 
@@ -82,8 +151,12 @@ def write_h5(path: Path, columns: dict[str, np.ndarray]) -> None:
 
 # -- MATLAB ------------------------------------------------------------------------------
 def read_mat(path: Path) -> dict[str, np.ndarray]:
-    from scipy.io import loadmat
+    from scipy.io import loadmat, whosmat
 
+    declared = whosmat(path)
+    _check_columns(path, [name for name, _shape, _cls in declared])
+    for name, shape, _cls in declared:
+        _check_declared(path, name, int(np.prod(shape, dtype=np.int64)))
     raw = loadmat(path, squeeze_me=False)
     return {k: np.asarray(v).reshape(-1) for k, v in raw.items() if not k.startswith("__")}
 
@@ -101,6 +174,13 @@ def read_mdf(path: Path) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     time = None
     with MDF(path) as mdf:
+        names = [ch.name for g, grp in enumerate(mdf.groups) for c, ch in enumerate(grp.channels)
+                 if mdf.masters_db.get(g) != c]
+        _check_columns(path, names)
+        for g, grp in enumerate(mdf.groups):
+            for c, ch in enumerate(grp.channels):
+                name = "time_s" if mdf.masters_db.get(g) == c else ch.name
+                _check_declared(path, name, int(grp.channel_group.cycles_nr))
         for sig in mdf.iter_channels(skip_master=True):
             out[sig.name] = np.asarray(sig.samples)
             if time is None:
@@ -128,6 +208,12 @@ def write_mdf(path: Path, columns: dict[str, np.ndarray]) -> None:
 def read_tdms(path: Path) -> dict[str, np.ndarray]:
     from nptdms import TdmsFile
 
+    meta = TdmsFile.read_metadata(path)
+    if len(meta.groups()) == 1:
+        chans = meta.groups()[0].channels()
+        _check_columns(path, [ch.name for ch in chans])
+        for ch in chans:
+            _check_declared(path, ch.name, len(ch))
     tdms = TdmsFile.read(path)
     groups = tdms.groups()
     if len(groups) != 1:

@@ -1,0 +1,222 @@
+"""A test bench for the diagnosis without the inverse crime (docs/diagnosis.md "Trust bench").
+
+The "measurements" come from a truth model that differs in structure from every candidate
+model the diagnosis simulates:
+
+* a finer integration step (the truth is simulated at 4 × the output rate and averaged,
+  :func:`railval.core.sim.synth.build_campaign` ``oversample``), the true track (the stored
+  irregularities are a recording of it with gain 0.96 and noise), asymmetric secondary dampers,
+  speed scatter, per-channel gain errors, sensor noise and time offsets (the synth nuisances);
+* one hidden cause drawn from four classes:
+
+  (a) a library effect at a value other than the synth default (inside its plausible range),
+  (b) a vehicle-template parameter error (a diagnosis candidate parameter),
+  (c) a cause outside the library and outside the candidate parameters: one sensor's gain,
+      a time shift of one wheelset's vertical force channels, an unsprung-mass error, a
+      profile shape (contact angle parameter at unchanged conicity), the centre-of-gravity height,
+  (d) nothing.
+
+Every case is synthesised (:func:`~railval.core.sim.synth.build_campaign`), written and
+imported (:func:`railval.app.services.synth.write_folder`, :func:`railval.db.importer.import_campaign`)
+into a temporary SQLite database and diagnosed with the public service
+(:func:`railval.app.services.diagnosis.diagnose`). The report: top-1 accuracy per class, the
+share of ``none``/``uncertain`` verdicts on (c) and (d), the share of confident wrong claims
+(verdict ``cause`` with a wrong candidate, or any ``cause`` on (c)/(d); and "explained ≥ 0.5
+and wrong"), and — with ``--calibrate-wrong`` — whether a wrong candidate's calibration that
+passes validation is flagged (plausibility or held-out check).
+
+``railval bench diagnosis-trust [--cases N] [--classes a b c d] [--workers 2] [--calibrate-wrong]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+#: the cases, per class: (label, build_campaign keyword arguments, the right answer or None)
+CASES: dict[str, list[tuple[str, dict[str, Any], str | None]]] = {
+    "a": [
+        ("friction_damping 2.2 kN", {"hidden": {"friction_damping": {"force_kN": 2.2}}}, "friction_damping"),
+        ("conicity 0.45", {"hidden": {"conicity": {"conicity": 0.45}}}, "conicity"),
+        ("wheel_rail_friction mu 0.15", {"hidden": {"wheel_rail_friction": {"mu": 0.15}}}, "wheel_rail_friction"),
+        ("parasitic_yaw_stiffness 1800", {"hidden": {"parasitic_yaw_stiffness": {"k_yaw_kNm_rad": 1800.0}}},
+         "parasitic_yaw_stiffness"),
+        ("lateral_bumpstop 10 mm 3 kN/mm", {"hidden": {"lateral_bumpstop": {"clearance_mm": 10.0,
+                                                                         "stiffness_kN_mm": 3.0}}},
+         "lateral_bumpstop"),
+        ("track_flexibility 22/8 MN/m", {"hidden": {"track_flexibility": {"k_vertical_MN_m": 22.0,
+                                                                           "k_lateral_MN_m": 8.0}}},
+         "track_flexibility"),
+        ("friction_damping 3.0 kN", {"hidden": {"friction_damping": {"force_kN": 3.0}}}, "friction_damping"),
+        ("carbody_flexibility 7 Hz", {"hidden": {"carbody_flexibility": {"frequency_Hz": 7.0,
+                                                                          "damping_ratio": 0.01}}},
+         "carbody_flexibility"),
+        ("damper_series_stiffness 2 MN/m", {"hidden": {"damper_series_stiffness": {"k_series_MN_m": 2.0}}},
+         "damper_series_stiffness"),
+        ("conicity 0.5", {"hidden": {"conicity": {"conicity": 0.5}}}, "conicity"),
+    ],
+    "b": [
+        ("secondary vertical damping x0.6", {"truth_parameters": {"c_secondary_z": 12000.0}}, "model.c_secondary_z"),
+        ("secondary lateral damping x0.4", {"truth_parameters": {"c_secondary_y": 12800.0}}, "model.c_secondary_y"),
+        ("secondary lateral stiffness x1.8", {"truth_parameters": {"k_secondary_y": 288000.0}}, "model.k_secondary_y"),
+        ("secondary vertical stiffness x0.6", {"truth_parameters": {"k_secondary_z": 258000.0}}, "model.k_secondary_z"),
+        ("yaw damper x0.45", {"truth_parameters": {"c_yaw_damper": 112500.0}}, "model.c_yaw_damper"),
+        ("primary lateral stiffness x0.55", {"truth_parameters": {"k_primary_y": 2.14e6}}, "model.k_primary_y"),
+        ("car body mass x1.3", {"truth_parameters": {"m_carbody": 41600.0}}, "model.m_carbody"),
+        ("primary longitudinal stiffness x0.3", {"truth_parameters": {"k_primary_x": 9.4e6}}, "model.k_primary_x"),
+        ("secondary vertical damping x2.2", {"truth_parameters": {"c_secondary_z": 44000.0}}, "model.c_secondary_z"),
+        ("primary vertical stiffness x0.55", {"truth_parameters": {"k_primary_z": 660000.0}}, "model.k_primary_z"),
+    ],
+    "c": [
+        ("gain of sensor ay_cb_b1 x1.4", {"channel_faults": {"gain": {"ay_cb_b1": 1.4}}}, None),
+        ("Q of wheelset 1 recorded 0.1 s late", {"channel_faults": {"shift_samples": {"Q_w1L": 20, "Q_w1R": 20}}},
+         None),
+        ("wheelset mass x1.35", {"truth_parameters": {"m_wheelset": 2447.0}}, None),
+        ("profile shape: contact angle parameter 2 -> 10", {"truth_parameters": {"contact_angle_parameter": 10.0}},
+         None),
+        ("centre of gravity height 1.8 -> 2.3 m", {"truth_parameters": {"h_carbody": 2.3}}, None),
+        ("gain of sensor Y_w1L x1.25", {"channel_faults": {"gain": {"Y_w1L": 1.25}}}, None),
+        ("gain of sensor az_cb_b2 x0.7", {"channel_faults": {"gain": {"az_cb_b2": 0.7}}}, None),
+        ("Y of wheelset 3 recorded 0.05 s late", {"channel_faults": {"shift_samples": {"Y_w3L": 10, "Y_w3R": 10}}},
+         None),
+        ("anti-roll bar x0.3", {"truth_parameters": {"k_antiroll": 6.0e5}}, None),
+        ("bogie yaw inertia x1.8", {"truth_parameters": {"I_yaw_bogie": 5520.0}}, None),
+    ],
+    "d": [(f"nothing (seed {s})", {"seed": s}, None) for s in (11, 12, 13, 14, 15, 16, 17, 18, 19, 20)],
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cases", type=int, default=10, help="cases per class (default 10, at most 10)")
+    parser.add_argument("--classes", nargs="+", default=["a", "b", "c", "d"], choices=["a", "b", "c", "d"])
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--values", type=int, default=3, help="diagnose: values per effect parameter")
+    parser.add_argument("--oversample", type=int, default=4, help="truth simulated at this × the rate (default 4)")
+    parser.add_argument("--calibrate-wrong", action="store_true",
+                        help="calibrate the top candidate where it is wrong (short search, --split) and "
+                             "check a pass is flagged")
+
+
+def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str, Any], truth: str | None, *,
+             workers: int = 2, values: int = 3, oversample: int = 4, calibrate_wrong: bool = False,
+             candidates: list[str] | None = None, n_sections: int = 12) -> dict:
+    """Synthesise, import and diagnose one case; return its record. ``candidates``: restrict
+    the diagnosis (effect ids and ``model.PARAM``; the CI subset uses a few)."""
+    from railval.app.services.calibration import calibrate
+    from railval.app.services.diagnosis import diagnose
+    from railval.app.services.synth import write_folder
+    from railval.core.sim.synth import build_campaign
+    from railval.db.importer import import_campaign
+
+    kw = {"seed": 3, "hidden": {}, **kwargs}
+    t0 = time.perf_counter()
+    sc = build_campaign(name=name, oversample=oversample, require_cause=False, n_sections=n_sections, **kw)
+    with tempfile.TemporaryDirectory(prefix="railval-trust-") as tmp:
+        write_folder(sc, Path(tmp) / name)
+        import_campaign(database, Path(tmp) / name)
+    t_synth = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    res = diagnose(database, name, "baseline", workers=workers, values_per_parameter=values, effects=candidates)
+    t_diag = time.perf_counter() - t0
+    d = res.to_dict()
+    top = d["candidates"][0] if d["candidates"] else None
+    right = bool(truth is not None and top is not None and top["name"] == truth)
+    rec = {"diagnosis": d, "class": klass, "case": label, "truth": truth, "verdict": d["verdict"], "noise_floor": d["noise_floor"],
+           "top": top["name"] if top else None, "top_explained": top["explained"] if top else 0.0,
+           "top_held_out": top["held_out_explained"] if top else 0.0, "top_plausible": top["plausible"] if top else None,
+           "right": right, "baseline_validated": d["validated"], "simulations": d["simulations"],
+           "synth_s": round(t_synth, 1), "diagnose_s": round(t_diag, 1),
+           "truth_rank": next((i + 1 for i, c in enumerate(d["candidates"]) if c["name"] == truth), None)}
+    rec["confident_wrong"] = d["verdict"] == "cause" and not right
+    rec["explained_wrong"] = bool(top and top["explained"] >= 0.5 and not right)
+    if calibrate_wrong and top is not None and not right:
+        cal = calibrate(database, name, "baseline", [top["name"]], "calibrated", split=True, popsize=3, maxiter=2,
+                        polish_maxfev=5, workers=workers, replace=True,
+                        start=({top["name"]: top["parameters"]} if top["kind"] == "effect"
+                               else {"model": {top["parameter"]: top["fitted"]}}))
+        cd = cal.to_dict()
+        rec["wrong_calibration_passes"] = bool(cd["validation"]["validated"])
+        held = cd.get("validation_held_out") or {}
+        rec["wrong_calibration_flagged"] = bool(cd["flags"] and (not cd["plausible"] or any(
+            "held-out" in f or "compensating" in f for f in cd["flags"])))
+        rec["wrong_calibration_held_out_validated"] = held.get("validated")
+    return rec
+
+
+def summarise(records: list[dict]) -> dict:
+    """Confusion figures of the bench (module docstring)."""
+    out: dict[str, Any] = {"cases": len(records)}
+    for k in "abcd":
+        rs = [r for r in records if r["class"] == k]
+        if not rs:
+            continue
+        item = {"n": len(rs), "verdicts": {v: sum(r["verdict"] == v for r in rs) for v in ("cause", "uncertain", "none")}}
+        if k in "ab":
+            item["top1"] = sum(r["right"] for r in rs) / len(rs)
+        else:
+            item["none_or_uncertain"] = sum(r["verdict"] in ("none", "uncertain") for r in rs) / len(rs)
+        item["tops"] = sorted({r["top"] for r in rs if r["top"]})
+        out[k] = item
+    out["confident_wrong"] = sum(r["confident_wrong"] for r in records) / max(1, len(records))
+    out["explained_ge_0_5_and_wrong"] = sum(r["explained_wrong"] for r in records) / max(1, len(records))
+    passes = [r for r in records if r.get("wrong_calibration_passes")]
+    if passes:
+        out["wrong_calibrations_passing"] = len(passes)
+        out["of_those_flagged"] = sum(r["wrong_calibration_flagged"] for r in passes) / len(passes)
+    return out
+
+
+def format_table(records: list[dict], summary: dict) -> str:
+    lines = [(f"{'cls':<3} {'case':<44} {'verdict':<9} {'top candidate':<26} {'expl':>5} {'held':>5} "
+              f"{'nf':>5} {'ok':>3}")]
+    for r in records:
+        lines.append(f"{r['class']:<3} {r['case'][:44]:<44} {r['verdict']:<9} {str(r['top'])[:26]:<26} "
+                     f"{r['top_explained']:5.2f} {r['top_held_out']:5.2f} {r['noise_floor']:5.2f} "
+                     f"{('yes' if r['right'] else '-') if r['truth'] else '':>3}")
+    lines.append("")
+    for k in "abcd":
+        if k in summary:
+            s = summary[k]
+            fig = (f"top-1 {100 * s['top1']:.0f} %" if "top1" in s
+                   else f"none/uncertain {100 * s['none_or_uncertain']:.0f} %")
+            lines.append(f"class ({k}) n={s['n']}: {fig}; verdicts {s['verdicts']}")
+    lines.append(f"confident wrong (verdict cause and wrong): {100 * summary['confident_wrong']:.0f} %; "
+                 f"explained ≥ 0.5 and wrong: {100 * summary['explained_ge_0_5_and_wrong']:.0f} %")
+    if "wrong_calibrations_passing" in summary:
+        lines.append(f"wrong calibrations that pass: {summary['wrong_calibrations_passing']}, flagged "
+                     f"{100 * summary['of_those_flagged']:.0f} %")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace, progress=None) -> dict:
+    from railval.db.engine import connect
+
+    n = max(1, min(int(getattr(args, "cases", 10)), 10))
+    classes = list(getattr(args, "classes", ["a", "b", "c", "d"]))
+    records = []
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="railval-bench-trust-") as tmp:
+        database = connect(f"sqlite:///{Path(tmp) / 'bench.db'}")
+        database.init()
+        todo = [(k, i, case) for k in classes for i, case in enumerate(CASES[k][:n])]
+        for j, (k, i, (label, kwargs, truth)) in enumerate(todo):
+            rec = run_case(database, f"trust_{k}{i}", k, label, kwargs, truth,
+                           workers=getattr(args, "workers", 2), values=getattr(args, "values", 3),
+                           oversample=getattr(args, "oversample", 4),
+                           calibrate_wrong=getattr(args, "calibrate_wrong", False))
+            records.append(rec)
+            if progress is not None:
+                progress(j + 1, len(todo), rec)
+            else:
+                import sys
+
+                print(f"[{j + 1}/{len(todo)}] ({k}) {label}: {rec['verdict']}, top {rec['top']} "
+                      f"explained {rec['top_explained']:.2f} held-out {rec['top_held_out']:.2f} "
+                      f"(noise floor {rec['noise_floor']:.2f}; {rec['diagnose_s']} s)", file=sys.stderr, flush=True)
+        database.dispose()
+    summary = summarise(records)
+    summary["elapsed_s"] = round(time.perf_counter() - t0, 1)
+    return {"records": records, "summary": summary, "table": format_table(records, summary)}

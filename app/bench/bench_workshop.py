@@ -1,0 +1,272 @@
+"""Review workshop under load: N concurrent reviewers × M answers against `railval serve`.
+
+Set-up: a database holding the demo campaign (``railval.app.services.synth.ensure_demo``, or
+``--url URL`` of an existing one with ``--campaign``), one workshop of ``--plots`` plots
+rendered once (its creation time is reported), ``--reviewers`` invited reviewers. Then
+``railval serve --no-demo`` is started as a separate process on a free loopback port and
+every reviewer runs in its own thread with its own keep-alive HTTP connection, as the
+review page does: load the page and its state, then for every place of the sequence fetch
+the plot image ("next plot shown": request → last byte of the PNG) and post the answer
+("answer round trip": request → the server's confirmation that the row is committed).
+``--resend`` of the answers are posted a second time with the same submission id (a
+client retry), which must change nothing.
+
+Figures: answers expected / stored / lost / duplicated (from the database afterwards),
+answer round trip and next plot shown p50/p95/max in ms, answers per second, server
+resident memory (VmRSS of the server process) before the first and after the last answer,
+analysis time of all answers (``railval.core.review.analyse``). With ``--url`` of a database
+that already holds the workshop ``bench``, it is reused (new reviewers) instead of rendered
+again. ``--think`` adds a reviewer's look at each plot before the answer.
+"""
+
+from __future__ import annotations
+
+import argparse
+import http.client
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--reviewers", type=int, default=50, help="concurrent reviewers (default 50)")
+    parser.add_argument("--plots", type=int, default=120,
+                        help="places per reviewer = plots of the workshop, no repeats (default 120)")
+    parser.add_argument("--resend", type=float, default=0.05,
+                        help="share of answers posted twice with the same submission id (default 0.05)")
+    parser.add_argument("--url", default=None, help="database URL (default: a fresh SQLite file)")
+    parser.add_argument("--campaign", default=None, help="campaign (default: the demo campaign)")
+    parser.add_argument("--think", type=float, default=0.0,
+                        help="mean seconds a reviewer looks at a plot before answering "
+                             "(uniform 0.5–1.5 × this; default 0: back-to-back requests)")
+    parser.add_argument("--keep", action="store_true", help="keep the temporary folder")
+
+
+def _rss_kib(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    return 0
+
+
+def _pct(values: list[float], p: float) -> float:
+    s = sorted(values)
+    return s[min(len(s) - 1, max(0, round(p / 100 * (len(s) - 1))))]
+
+
+def _summary(ms: list[float]) -> dict[str, float]:
+    return {"n": len(ms), "p50_ms": round(_pct(ms, 50), 1), "p95_ms": round(_pct(ms, 95), 1),
+            "max_ms": round(max(ms), 1), "mean_ms": round(statistics.fmean(ms), 1)}
+
+
+def _setup(url: str, campaign: str | None, n_plots: int, n_reviewers: int) -> dict[str, Any]:
+    from railval.app.services import workshops as ws
+    from railval.db import workshops as wsdb
+    from railval.db.engine import connect
+    from railval.db.models import Workshop
+    from sqlalchemy import select
+
+    db = connect(url)
+    db.init()
+    if campaign is None:
+        from railval.app.services.synth import DEMO_NAME, ensure_demo
+
+        ensure_demo(db)
+        campaign = DEMO_NAME
+    tag = f"{int(time.time()) % 100000:05d}"
+    with db.session() as s:
+        existing = s.scalar(select(Workshop).where(Workshop.name == "bench"))
+        if existing is not None:  # reuse the rendered workshop, new reviewers
+            n = len(wsdb.plots(s, existing))
+            tokens = {f"bench{tag}-{i:02d}": wsdb.invite(s, existing, f"bench{tag}-{i:02d}", seed=i)
+                      for i in range(n_reviewers)}
+            return {"tokens": tokens, "plots": n, "create_s": None, "campaign": campaign,
+                    "planned": n}
+        planned = ws.plan(s, campaign)
+    if len(planned) < n_plots:
+        raise SystemExit(f"campaign {campaign} gives only {len(planned)} plots, {n_plots} asked")
+    # the first n plots in plan order: whole (configuration, section) plot sets
+    chosen = planned[:n_plots]
+    sections = sorted({p.section for p in chosen})
+    configs = sorted({p.configuration for p in chosen})
+    kinds = sorted({p.kind for p in chosen})
+    with db.session() as s:
+        n_all = len(ws.plan(s, campaign, configs, sections, kinds))
+    t0 = time.perf_counter()
+    summary = ws.create(db, "bench", campaign, configurations=configs, sections=sections,
+                        kinds=kinds, repeats=0.0)
+    create_s = time.perf_counter() - t0
+    tokens = {}
+    with db.session() as s:
+        w = wsdb.get_workshop(s, "bench")
+        for i in range(n_reviewers):
+            tokens[f"bench{tag}-{i:02d}"] = wsdb.invite(s, w, f"bench{tag}-{i:02d}", seed=i)
+    db.dispose()
+    return {"tokens": tokens, "plots": summary["plots"], "create_s": create_s,
+            "campaign": campaign, "planned": n_all}
+
+
+class _Reviewer(threading.Thread):
+    def __init__(self, port: int, name: str, token: str, index: int, resend: float, think: float,
+                 start: threading.Event):
+        super().__init__(daemon=True)
+        self.port, self.token, self.index, self.resend = port, token, index, resend
+        self.name, self.think = name, think
+        self.start_event = start
+        self.answer_ms: list[float] = []
+        self.image_ms: list[float] = []
+        self.sent: dict[int, bool] = {}
+        self.errors: list[str] = []
+
+    def _req(self, conn, method: str, path: str, body: bytes | None = None) -> tuple[int, bytes]:
+        headers = {"Content-Type": "application/json"} if body is not None else {}
+        conn.request(method, path, body=body, headers=headers)
+        resp = conn.getresponse()
+        return resp.status, resp.read()
+
+    def run(self) -> None:
+        import random
+
+        rng = random.Random(self.index)
+        base = f"/review/{self.token}"
+        conn = http.client.HTTPConnection("127.0.0.1", self.port, timeout=60)
+        self.start_event.wait()
+        try:
+            status, _ = self._req(conn, "GET", base)
+            status, raw = self._req(conn, "GET", f"{base}/state")
+            total = json.loads(raw)["total"]
+            for pos in range(total):
+                t = time.perf_counter()
+                status, img = self._req(conn, "GET", f"{base}/image/{pos}")
+                self.image_ms.append(1000 * (time.perf_counter() - t))
+                if status != 200 or not img.startswith(b"\x89PNG"):
+                    self.errors.append(f"image {pos}: HTTP {status}")
+                if self.think > 0:
+                    time.sleep(self.think * rng.uniform(0.5, 1.5))
+                yes = rng.random() < 0.3 + 0.4 * (self.index % 5) / 4
+                body = json.dumps({"position": pos, "answer": "yes" if yes else "no",
+                                   "seconds": 1.0, "comment": "",
+                                   "submission": f"{self.token[:8]}-{pos}"}).encode()
+                t = time.perf_counter()
+                status, raw = self._req(conn, "POST", f"{base}/answer", body)
+                self.answer_ms.append(1000 * (time.perf_counter() - t))
+                if status != 200:
+                    self.errors.append(f"answer {pos}: HTTP {status} {raw[:100]!r}")
+                    continue
+                self.sent[pos] = yes
+                if rng.random() < self.resend:
+                    status, raw = self._req(conn, "POST", f"{base}/answer", body)
+                    if status != 200 or json.loads(raw)["stored"] != "repeated":
+                        self.errors.append(f"resend {pos}: {status} {raw[:100]!r}")
+        except Exception as exc:  # noqa: BLE001 - reported as a figure
+            self.errors.append(f"{type(exc).__name__}: {exc}")
+        finally:
+            conn.close()
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from railval.app.main import free_port
+
+    folder = Path(tempfile.mkdtemp(prefix="railval-bench-ws-"))
+    url = args.url or f"sqlite:///{folder / 'bench.db'}"
+    setup = _setup(url, args.campaign, args.plots, args.reviewers)
+    port = free_port()
+    log = open(folder / "serve.log", "wb")  # noqa: SIM115 - closed below
+    proc = subprocess.Popen([sys.executable, "-m", "railval.app", "--db", url, "serve",
+                             "--no-demo", "--port", str(port)], stdout=log, stderr=log)
+    try:
+        deadline = time.monotonic() + 300
+        while True:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/workshops/login", timeout=10):
+                    break
+            except OSError:
+                if proc.poll() is not None or time.monotonic() > deadline:
+                    raise SystemExit(f"railval serve did not start: {folder / 'serve.log'}") from None
+                time.sleep(0.3)
+        rss_before = _rss_kib(proc.pid)
+        go = threading.Event()
+        threads = [_Reviewer(port, name, tok, i, args.resend, args.think, go)
+                   for i, (name, tok) in enumerate(setup["tokens"].items())]
+        for t in threads:
+            t.start()
+        t0 = time.perf_counter()
+        go.set()
+        for t in threads:
+            t.join()
+        wall = time.perf_counter() - t0
+        rss_after = _rss_kib(proc.pid)
+    finally:
+        proc.terminate()
+        proc.wait(30)
+        log.close()
+    stored, lost, duplicated, wrong = _check(url, threads)
+    answer_ms = [x for t in threads for x in t.answer_ms]
+    image_ms = [x for t in threads for x in t.image_ms]
+    t = time.perf_counter()
+    from railval.app.services.workshops import analyse
+    from railval.db.engine import connect
+
+    db = connect(url)
+    doc = analyse(db, "bench")  # every answer of the workshop (earlier runs included)
+    analyse_s = time.perf_counter() - t
+    db.dispose()
+    out = {
+        "reviewers": args.reviewers, "places_per_reviewer": setup["plots"],
+        "workshop_create_s": None if setup["create_s"] is None else round(setup["create_s"], 1),
+        "think_s": args.think, "database": url.split(":")[0],
+        "answers_expected": args.reviewers * setup["plots"], "answers_stored": stored,
+        "lost": lost, "duplicated": duplicated, "wrong_value": wrong,
+        "errors": sum(len(t.errors) for t in threads),
+        "first_errors": [e for t in threads for e in t.errors][:5],
+        "answer_round_trip": _summary(answer_ms), "next_plot_shown": _summary(image_ms),
+        "wall_s": round(wall, 1), "answers_per_s": round(len(answer_ms) / wall, 1),
+        "server_rss_mib_before": round(rss_before / 1024, 1),
+        "server_rss_mib_after": round(rss_after / 1024, 1),
+        "analyse_s": round(analyse_s, 2), "analysed_reviewers": len(doc["reviewers"]),
+        "cpu_count": os.cpu_count(), "loadavg_1min": round(os.getloadavg()[0], 2),
+    }
+    if not args.keep and args.url is None:
+        import shutil
+
+        shutil.rmtree(folder, ignore_errors=True)
+    else:
+        out["folder"] = str(folder)
+    return out
+
+
+def _check(url: str, threads: list[_Reviewer]) -> tuple[int, int, int, int]:
+    """(stored, lost, duplicated, wrong value) from the database against what was sent."""
+    from railval.db.engine import connect
+    from railval.db.models import AppUser, WorkshopAnswer, WorkshopReviewer
+    from sqlalchemy import select
+
+    db = connect(url)
+    with db.session() as s:
+        rows = s.execute(select(AppUser.username, WorkshopAnswer.position, WorkshopAnswer.answer)
+                         .join(WorkshopReviewer, WorkshopAnswer.reviewer_id == WorkshopReviewer.id)
+                         .join(AppUser, WorkshopReviewer.user_id == AppUser.id)).all()
+    db.dispose()
+    names = {t.name for t in threads}
+    rows = [r for r in rows if r[0] in names]
+    seen: dict[tuple[str, int], list[bool]] = {}
+    for u, pos, ans in rows:
+        seen.setdefault((u, pos), []).append(bool(ans))
+    duplicated = sum(len(v) - 1 for v in seen.values())
+    lost = wrong = 0
+    for t in threads:
+        for pos, yes in t.sent.items():
+            got = seen.get((t.name, pos))
+            if not got:
+                lost += 1
+            elif got[0] != yes:
+                wrong += 1
+    return len(rows), lost, duplicated, wrong

@@ -1,0 +1,259 @@
+"""CLI verbs ``workshop …`` — expert review workshops (docs/workshops.md).
+
+``railval workshop create NAME --campaign C [--configurations …] [--sections …] [--kinds …]
+[--blind] [--repeats 0.1] [--auto-share 0] [--seed 0] [--dry-run] [--json]``
+    build the plot set, render every plot once and store it (``--dry-run``: only count).
+``railval workshop kinds [--json]``          the plot kinds (registry).
+``railval workshop plots NAME --json``       ``plots``: id, kind, section, configuration,
+                                             channel, deviation, image_sha256 (and sg_c,
+                                             scaling, twin).
+``railval workshop invite NAME --reviewer R [--base-url URL]``  a personal link.
+``railval workshop status NAME [--json]``    progress per reviewer.
+``railval workshop close|reopen NAME``
+``railval workshop import-answers NAME FILE.csv`` / ``export NAME FILE.csv``
+``railval workshop analyse NAME --json``
+
+Permissions (:data:`railval.core.roles.CLI_ACTIONS`) are checked for the user named by
+``railval --as USER`` once the database has users; every change is recorded in the audit
+trail under that name.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from railval.app.cli import emit_json
+
+
+def _actor() -> str:
+    """The acting user of this command (``--as`` / ``$RAILVAL_USER``, checked by the CLI),
+    else ``cli:<OS user>``: the name in the audit trail."""
+    from railval.db import engine
+
+    return engine.default_actor
+
+
+def _list(text: str | None) -> list[str] | None:
+    if text is None:
+        return None
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    w = sub.add_parser("workshop", help="expert review workshops (plot sets, reviewers, answers)")
+    wsub = w.add_subparsers(dest="subverb", metavar="ACTION")
+    wsub.required = True
+
+    c = wsub.add_parser("create", help="create a workshop from a campaign (renders every plot once)")
+    c.add_argument("name")
+    c.add_argument("--campaign", required=True)
+    c.add_argument("--configurations", nargs="+", default=None, metavar="NAME",
+                   help="configurations (default: all; names may also be comma-separated)")
+    c.add_argument("--sections", nargs="+", default=None, metavar="ID", help="sections (default: all)")
+    c.add_argument("--kinds", nargs="+", default=None, metavar="KIND",
+                   help="plot kinds (default: all; see `railval workshop kinds`)")
+    c.add_argument("--blind", action="store_true", help="no vehicle, configuration or section names")
+    c.add_argument("--repeats", type=float, default=0.1, help="share of hidden repeats (default 0.1)")
+    c.add_argument("--auto-share", type=float, default=0.0,
+                   help="share of plots also shown with per-plot automatic scaling (default 0)")
+    c.add_argument("--seed", type=int, default=0, help="seed of the automatic-scaling choice")
+    c.add_argument("--dry-run", action="store_true", help="only count the plots, store nothing")
+    c.add_argument("--json", action="store_true")
+    c.set_defaults(func=_create)
+
+    k = wsub.add_parser("kinds", help="list the plot kinds")
+    k.add_argument("--json", action="store_true")
+    k.set_defaults(func=_kinds)
+
+    p = wsub.add_parser("plots", help="list a workshop's plots")
+    p.add_argument("name")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_plots)
+
+    i = wsub.add_parser("invite", help="a personal review link for a reviewer")
+    i.add_argument("name")
+    i.add_argument("--reviewer", required=True, help="user name (created as reviewer when new)")
+    i.add_argument("--base-url", default="http://127.0.0.1:5006",
+                   help="address of `railval serve` as reviewers reach it")
+    i.add_argument("--json", action="store_true")
+    i.set_defaults(func=_invite)
+
+    s = wsub.add_parser("status", help="progress per reviewer")
+    s.add_argument("name")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=_status)
+
+    for verb, status in (("close", "closed"), ("reopen", "open")):
+        x = wsub.add_parser(verb, help=f"{verb} a workshop")
+        x.add_argument("name")
+        x.set_defaults(func=_set_status, status=status)
+
+    im = wsub.add_parser("import-answers", help="import answers from a CSV (all rows or none)")
+    im.add_argument("name")
+    im.add_argument("file")
+    im.add_argument("--json", action="store_true")
+    im.set_defaults(func=_import)
+
+    ex = wsub.add_parser("export", help="export every answer to a CSV")
+    ex.add_argument("name")
+    ex.add_argument("file")
+    ex.set_defaults(func=_export)
+
+    a = wsub.add_parser("analyse", help="reviewer strictness, agreement, threshold, Table 1")
+    a.add_argument("name")
+    a.add_argument("--json", action="store_true")
+    a.set_defaults(func=_analyse)
+
+
+def _database(url: str | None):
+    from railval.db.engine import connect
+
+    database = connect(url)
+    database.ensure_initialised()
+    return database
+
+
+def _flat(values: list[str] | None) -> list[str] | None:
+    if values is None:
+        return None
+    return [x for v in values for x in _list(v) or []]
+
+
+def _create(args: argparse.Namespace) -> int:
+    from railval.app.services import workshops as ws
+
+    database = _database(args.db)
+    configs, sections, kinds = _flat(args.configurations), _flat(args.sections), _flat(args.kinds)
+    with database.session() as session:
+        planned = ws.plan(session, args.campaign, configs, sections, kinds)
+    counts = ws.count_by_kind(planned)
+    if args.dry_run:
+        doc = {"name": args.name, "campaign": args.campaign, "plots": len(planned),
+               "by_kind": counts, "stored": False}
+        if args.json:
+            emit_json(doc)
+        else:
+            print(f"workshop {args.name}: {len(planned)} plots would be created "
+                  f"({', '.join(f'{k} {n}' for k, n in counts.items())}); nothing stored")
+        return 0
+    if not args.json:
+        print(f"creating workshop {args.name}: {len(planned)} plots "
+              f"({', '.join(f'{k} {n}' for k, n in counts.items())})", file=sys.stderr, flush=True)
+    out = ws.create(database, args.name, args.campaign, configurations=configs,
+                    sections=sections, kinds=kinds, blind=args.blind, repeats=args.repeats,
+                    auto_share=args.auto_share, seed=args.seed, actor=_actor())
+    if args.json:
+        emit_json({**out, "stored": True})
+    else:
+        print(f"workshop {out['name']} created: {out['plots']} plots "
+              f"({out['auto_plots']} with automatic scaling), blind={out['blind']}")
+    return 0
+
+
+def _kinds(args: argparse.Namespace) -> int:
+    from railval.app.services.workshops import describe_kinds
+
+    kinds = describe_kinds()
+    if args.json:
+        emit_json({"kinds": kinds})
+    else:
+        for k in kinds:
+            print(f"{k['id']:12s} {k['domain']:5s} {k['label']} — positions {', '.join(k['positions'])}")
+    return 0
+
+
+def _plots(args: argparse.Namespace) -> int:
+    from railval.app.services.workshops import plots_document
+
+    with _database(args.db).session() as session:
+        doc = plots_document(session, args.name)
+    if args.json:
+        emit_json(doc)
+    else:
+        for p in doc["plots"]:
+            dev = "—" if p["deviation"] is None else f"{p['deviation']:.2f}"
+            print(f"{p['id']:6d} {p['kind']:12s} {p['configuration']:12s} {p['section']:8s} "
+                  f"{p['channel']:10s} deviation {dev:>6s} {p['scaling']:5s} {p['image_sha256'][:12]}")
+    return 0
+
+
+def _invite(args: argparse.Namespace) -> int:
+    from railval.app.services.workshops import review_link
+    from railval.db import workshops as wsdb
+
+    database = _database(args.db)
+    with database.session() as session:
+        w = wsdb.get_workshop(session, args.name)
+        token = wsdb.invite(session, w, args.reviewer, actor=_actor())
+    link = review_link(args.base_url, token)
+    if args.json:
+        emit_json({"workshop": args.name, "reviewer": args.reviewer, "link": link})
+    else:
+        print(link)
+    return 0
+
+
+def _status(args: argparse.Namespace) -> int:
+    from railval.app.services.workshops import status_document
+
+    with _database(args.db).session() as session:
+        doc = status_document(session, args.name)
+    if args.json:
+        emit_json(doc)
+    else:
+        print(f"workshop {doc['workshop']} ({doc['status']}, campaign {doc['campaign']}, "
+              f"{doc['plots']} plots, {doc['answers']} answers)")
+        for r in doc["reviewers"]:
+            state = "finished" if r["finished"] else f"{r['answered']} of {r['total']}"
+            print(f"  {r['reviewer']:20s} {state:>12s}  last answer {r['last_answer_at'] or '—'}")
+    return 0
+
+
+def _set_status(args: argparse.Namespace) -> int:
+    from railval.db import workshops as wsdb
+
+    database = _database(args.db)
+    with database.session() as session:
+        w = wsdb.set_status(session, wsdb.get_workshop(session, args.name), args.status,
+                            actor=_actor())
+        print(f"workshop {w.name} is {w.status}")
+    return 0
+
+
+def _import(args: argparse.Namespace) -> int:
+    from railval.app.services.workshops import import_answers
+
+    out = import_answers(_database(args.db), args.name, args.file, actor=_actor())
+    if args.json:
+        emit_json({"workshop": args.name, **out})
+    else:
+        print(f"imported {out['answers']} answers of {out['reviewers']} reviewers "
+              f"({out['new_users']} new reviewer users) into {args.name}")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from railval.app.services.workshops import export_answers
+
+    n = export_answers(_database(args.db), args.name, args.file)
+    print(f"{n} answers of {args.name} written to {args.file}")
+    return 0
+
+
+def _analyse(args: argparse.Namespace) -> int:
+    from railval.app.services.workshops import analyse
+
+    doc = analyse(_database(args.db), args.name)
+    if args.json:
+        emit_json(doc)
+    else:
+        for row in doc.get("table1", []):
+            print(f"{row['kind']:14s} plots {row['plots']:4d}  share of Yes "
+                  f"{100 * row['min_yes']:5.1f} % … {100 * row['max_yes']:5.1f} %")
+        thr = doc.get("threshold") or {}
+        if thr.get("deviation_at_50") is not None:
+            lo, hi = thr.get("ci") or (None, None)
+            print(f"deviation at which a typical reviewer says Yes half of the time: "
+                  f"{thr['deviation_at_50']:.2f} (interval {lo:.2f} … {hi:.2f}; limit 1.0)")
+    return 0

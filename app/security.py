@@ -1,0 +1,133 @@
+"""HTTP hardening of the served web app: security headers on every response, no external
+requests, signed session ids.
+
+* :class:`SecurityHeaders` is a Tornado output transform (``tornado.web.Application``'s
+  ``transforms``) that adds to every response of the Bokeh/Panel server:
+
+  - ``Content-Security-Policy`` :data:`CSP`: scripts, styles, fonts and connections only
+    from the app's own origin (``'self'``; ``ws:``/``wss:`` to the same host for Bokeh's
+    websocket); images only from the app or ``data:``/``blob:`` URLs (Bokeh draws its
+    toolbar icons and exports from them), so a Markdown image pointing elsewhere is never
+    requested; ``frame-ancestors 'none'`` (no framing: clickjacking); ``object-src 'none'``;
+    ``base-uri 'self'``. Bokeh and Panel write inline ``<script>`` blocks (the document
+    model) and evaluate model code, so ``'unsafe-inline'`` and ``'unsafe-eval'`` stay on for
+    scripts; user text is escaped where it is shown (``railval.core.names`` keeps names to
+    a safe set in the first place).
+  - ``X-Content-Type-Options: nosniff``, ``X-Frame-Options: DENY`` (older browsers),
+    ``Referrer-Policy: no-referrer``.
+
+* :func:`use_local_fonts` removes the Fast design's Google Fonts stylesheet: the page uses the system sans-serif fonts (``static/railval.css``) and makes no request
+  to another host.
+
+* :func:`session_secret` reads ``$BOKEH_SECRET_KEY`` (else ``$RAILVAL_SESSION_SECRET``)
+  for ``railval serve``: Bokeh then signs session ids and refuses a forged one
+  (``--session-ids signed``; Bokeh docs "Deployment: security"). Without it the server
+  generates a random secret at start (sessions of a single server process only).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import secrets
+
+CSP = ("default-src 'self'; "
+       "script-src 'self' 'unsafe-inline' 'unsafe-eval'; "
+       "style-src 'self' 'unsafe-inline'; "
+       "img-src 'self' data: blob:; "
+       "font-src 'self' data:; "
+       "connect-src 'self' ws: wss:; "
+       "frame-ancestors 'none'; object-src 'none'; base-uri 'self'; form-action 'self'")
+
+HEADERS = {
+    "Content-Security-Policy": CSP,
+    "X-Content-Type-Options": "nosniff",
+    "X-Frame-Options": "DENY",
+    "Referrer-Policy": "no-referrer",
+}
+
+
+class SecurityHeaders:
+    """Tornado output transform adding :data:`HEADERS` to every response."""
+
+    def __init__(self, request) -> None:
+        self.request = request
+
+    def transform_first_chunk(self, status_code, headers, chunk, finishing):
+        for name, value in HEADERS.items():
+            headers[name] = value
+        return status_code, headers, chunk
+
+    def transform_chunk(self, chunk, finishing):
+        return chunk
+
+
+def transforms() -> list:
+    """The server's output transforms: Tornado's default gzip, then the security headers."""
+    from tornado.web import GZipContentEncoding
+
+    return [GZipContentEncoding, SecurityHeaders]
+
+
+def use_local_fonts() -> None:
+    """Drop the Google Fonts stylesheet from Panel's Fast design (the FastListTemplate's):
+    the page then uses the system fonts of ``static/railval.css``. (Panel resolves a design's
+    resources by its class name, so a subclass cannot simply leave the font out.)"""
+    from panel.theme.fast import Fast
+
+    Fast._resources = {k: v for k, v in Fast._resources.items() if k != "font"}
+
+
+def session_secret() -> str:
+    """Secret for signing Bokeh session ids: ``$BOKEH_SECRET_KEY``, ``$RAILVAL_SESSION_SECRET``
+    or a random one for this server process."""
+    return (os.environ.get("BOKEH_SECRET_KEY") or os.environ.get("RAILVAL_SESSION_SECRET")
+            or secrets.token_urlsafe(32))
+
+
+_log = logging.getLogger("railval.app")
+
+
+def database_message(exc: BaseException) -> str:
+    """A plain sentence for a database driver error: no SQL, no parameters, no paths."""
+    orig = getattr(exc, "orig", None) or exc
+    text = str(orig).strip()
+    first = text.splitlines()[0] if text else type(orig).__name__
+    if "locked" in first or "busy" in first:
+        return ("the database is busy: another process held its write lock for longer than "
+                "the 30 s wait; try again when it has finished")
+    if "could not connect" in first or "Connection refused" in first or "unable to open" in first:
+        return f"cannot open the database ({first})"
+    return f"database error ({type(orig).__name__}: {first[:200]})"
+
+
+def plain_message(exc: BaseException, context: str = "") -> str:
+    """What the status area shows of an error: railval's own message (it names the input at
+    fault), a plain sentence for database errors, else only the error's kind. The full
+    error with its traceback goes to the server log (logger ``railval.app``)."""
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from railval.core.errors import RailvalError
+
+    _log.error("%s%s", f"{context}: " if context else "", type(exc).__name__, exc_info=exc)
+    if isinstance(exc, RailvalError):
+        return str(exc)
+    if isinstance(exc, SQLAlchemyError):
+        return database_message(exc)
+    return f"internal error ({type(exc).__name__}); the details are in the server log"
+
+
+_MD_IMAGE = re.compile(r"!\[([^\]]*)\]\(\s*<?([^)\s>]+)>?[^)]*\)")
+
+
+def no_external_images(markdown: str) -> str:
+    """Markdown with every image that points to another host (``http:``, ``https:``, ``//``)
+    replaced by its alt text: the page never requests a tracking pixel. (The CSP's
+    ``img-src`` blocks such requests too; this keeps the text readable.)"""
+    def repl(m: re.Match) -> str:
+        alt, url = m.group(1), m.group(2)
+        if re.match(r"(?i)(https?:)?//", url):
+            return f"[image not shown: {alt or 'external'}]"
+        return m.group(0)
+    return _MD_IMAGE.sub(repl, markdown)

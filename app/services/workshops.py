@@ -1,0 +1,499 @@
+"""Review workshops: build the plot set, render it once, invite reviewers, take answers,
+import/export answers, analyse (docs/workshops.md).
+
+* :func:`plan` — the plots a choice of configurations × sections × kinds gives (count shown
+  before creating; no signal is read).
+* :func:`create` — read the signals, low-pass 20 Hz, choose each kind's one scaling from
+  the whole workshop's data (:func:`railval.core.workshop.kind_scale`), compute every plot's
+  objective deviation (EN 14363 values through the validation service's result cache) and
+  Sprague–Geers C, render each plot once (:mod:`railval.app.services.workshop_render`) and
+  store everything in one transaction.
+* :func:`parse_answers_csv` / :func:`import_answers` / :func:`export_answers`.
+* :func:`analyse` — the answers and plots as tables for
+  :func:`railval.core.review.analyse`.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import random
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from railval.core.errors import InvalidParameter, InvalidSignal
+from railval.core.filters import filtfilt_rows
+from railval.core.metrics.grid import common_grid
+from railval.core.metrics.sprague_geers import sprague_geers
+from railval.core.psd import welch_psd
+from railval.core.quantities import QUANTITIES
+from railval.core.roles import Principal, require
+from railval.core.workshop import (
+    LOWPASS_HZ,
+    PLOT_KIND_IDS,
+    PLOT_KINDS,
+    PSD_MAX_HZ,
+    PSD_SEGMENT_S,
+    Extent,
+    Scale,
+    dv_over_limit,
+    get_kind,
+    kind_scale,
+    plot_deviation,
+    plots_for,
+)
+
+DEFAULT_REPEATS = 0.1
+CSV_COLUMNS = ("reviewer", "plot", "answer", "seconds", "comment")
+EXPORT_COLUMNS = (*CSV_COLUMNS, "answered_at", "updated_at", "position", "repeat", "scaling",
+                  "kind", "source", "changes")
+_POSITION_TEXT = {"w1L": "wheelset 1 left wheel", "w1R": "wheelset 1 right wheel",
+                  "w3L": "wheelset 3 left wheel", "w3R": "wheelset 3 right wheel",
+                  "b1": "above bogie 1", "b2": "above bogie 2"}
+
+
+@dataclass(frozen=True)
+class PlannedPlot:
+    configuration: str
+    section: str
+    kind: str
+    position: str
+
+    @property
+    def channel(self) -> str:
+        return PLOT_KINDS[self.kind].channel(self.position)
+
+
+def _check_choice(label: str, chosen: Sequence[str] | None, known: Sequence[str]) -> list[str]:
+    if not chosen:
+        return list(known)
+    unknown = [c for c in chosen if c not in known]
+    if unknown:
+        raise InvalidParameter(f"unknown {label} {', '.join(map(repr, unknown))}; "
+                               f"known: {', '.join(known) or '(none)'}")
+    return [k for k in known if k in set(chosen)]
+
+
+def plan(session, campaign: str, configurations: Sequence[str] | None = None,
+         sections: Sequence[str] | None = None,
+         kinds: Sequence[str] | None = None) -> list[PlannedPlot]:
+    """Every plot of the choice (default: all configurations, sections and kinds), in
+    configuration → section → kind → position order. Reads channel names only."""
+    from railval.db import repo
+
+    camp = repo.get_campaign(session, campaign)
+    configs = _check_choice("configuration(s)", configurations,
+                            [c.name for c in repo.list_configurations(session, camp)])
+    secs = _check_choice("section(s)", sections, [s.id for s in repo.section_infos(session, camp)])
+    kinds = _check_choice("plot kind(s)", kinds, list(PLOT_KIND_IDS))
+    measured = repo.signal_hashes(session, camp, None)
+    out = []
+    for cname in configs:
+        simulated = repo.signal_hashes(session, camp, cname)
+        for sid in secs:
+            both = set(measured.get(sid, {})) & set(simulated.get(sid, {}))
+            out += [PlannedPlot(cname, sid, k, p) for k, p in plots_for(kinds, both)]
+    return out
+
+
+def count_by_kind(planned: Sequence[PlannedPlot]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for p in planned:
+        out[p.kind] = out.get(p.kind, 0) + 1
+    return out
+
+
+# ------------------------------------------------------------------------- signals
+@dataclass
+class _Curve:
+    """One side of one plot: x (distance in m or frequency in Hz) and y."""
+
+    x: np.ndarray
+    y: np.ndarray
+
+
+def _filtered(ss, names: set[str]) -> dict[str, np.ndarray]:
+    names = sorted(n for n in names if n in ss.channels)
+    if not names:
+        return {}
+    rows = filtfilt_rows([ss.channels[n] for n in names], ss.fs, "lowpass")
+    return dict(zip(names, rows, strict=True))
+
+
+def _signal(kind, position: str, filt: dict[str, np.ndarray]) -> np.ndarray:
+    if kind.signal == "YQ":
+        y, q = filt[f"Y_{position}"], filt[f"Q_{position}"]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = np.where(np.abs(q) > 1e-9, y / q, np.nan)
+        return r
+    return filt[kind.channel(position)]
+
+
+def _curve(kind, sig: np.ndarray, ss) -> _Curve:
+    if kind.domain == "psd":
+        psd = welch_psd(np.nan_to_num(sig), ss.fs, PSD_SEGMENT_S)
+        keep = psd.frequency_hz <= PSD_MAX_HZ
+        return _Curve(psd.frequency_hz[keep], psd.density[keep])
+    dist = ss.distance_m - ss.distance_m[0]
+    return _Curve(dist, sig)
+
+
+def _extent(kind, c: _Curve) -> Extent:
+    y = c.y[np.isfinite(c.y)]
+    if kind.domain == "psd":
+        pos = y[(y > 0) & (c.x > 0)] if y.size == c.x.size else y[y > 0]
+        return Extent(0.0, PSD_MAX_HZ, float(pos.min()) if pos.size else 0.0,
+                      float(y.max()) if y.size else 1.0)
+    return Extent(float(np.nanmin(c.x)), float(np.nanmax(c.x)),
+                  float(y.min()) if y.size else 0.0, float(y.max()) if y.size else 1.0)
+
+
+def _sg_c(m_sig: np.ndarray, m_ss, s_sig: np.ndarray, s_ss) -> float | None:
+    """Sprague–Geers C (Polach & Böttcher 2014 eq. 3) of the low-passed signals on one grid."""
+    try:
+        g = common_grid(np.nan_to_num(m_sig), np.nan_to_num(s_sig), m_ss.fs, s_ss.fs,
+                        t0_measured=float(m_ss.time_s[0]), t0_simulated=float(s_ss.time_s[0]))
+        c = sprague_geers(g.measured, g.simulated).C
+    except (InvalidSignal, InvalidParameter):
+        return None
+    return float(c) if math.isfinite(c) else None
+
+
+def _title(kind, position: str, *, blind: bool, vehicle: str, configuration: str,
+           section: str) -> str:
+    what = f"{kind.label[:1].upper()}{kind.label[1:]}, {_POSITION_TEXT.get(position, position)}"
+    if blind:
+        return what
+    return f"{what} — {vehicle}, configuration {configuration}, section {section}"
+
+
+# ------------------------------------------------------------------------- create
+def create(database, name: str, campaign: str, *, configurations: Sequence[str] | None = None,
+           sections: Sequence[str] | None = None, kinds: Sequence[str] | None = None,
+           blind: bool = False, repeats: float = DEFAULT_REPEATS, auto_share: float = 0.0,
+           seed: int = 0, actor: Principal | str = "system",
+           progress: Callable[[str, float], None] | None = None) -> dict[str, Any]:
+    """Build, render and store a workshop; returns its summary (``name, plots, by_kind,
+    scales``). ``auto_share``: share of the fixed plots also rendered with per-plot
+    automatic scaling (the presentation experiment), chosen with ``seed``."""
+    from railval.app.services.validation import source_values
+    from railval.app.services.workshop_render import render_parameters, render_png
+    from railval.core.workshop import nice_range
+    from railval.db import repo
+    from railval.db import workshops as wsdb
+
+    if isinstance(actor, Principal):
+        require(actor, "workshop.run")
+    if not (0.0 <= repeats <= 0.5):
+        raise InvalidParameter(f"--repeats must be between 0 and 0.5, got {repeats!r}")
+    if not (0.0 <= auto_share <= 1.0):
+        raise InvalidParameter(f"automatic-scaling share must be between 0 and 1, got {auto_share!r}")
+    with database.session() as session:
+        if session.scalar(_exists_query(name)) is not None:
+            raise InvalidParameter(f"workshop {name!r} already exists; choose another name")
+        camp = repo.get_campaign(session, campaign)
+        planned = plan(session, camp.name, configurations, sections, kinds)
+        if not planned:
+            raise InvalidParameter("this choice of configurations, sections and kinds gives no plot "
+                                   "(no section has the channels of the chosen kinds on both sides)")
+        infos = {s.id: s for s in repo.section_infos(session, camp)}
+        vehicle = repo.vehicle_info(session, camp)
+        std_limits = {q: QUANTITIES[q].std_limit(vehicle["Q0_kN"], vehicle["kind"],
+                                                 vehicle["secondary_suspension"])
+                      for q in QUANTITIES}
+        used_secs = sorted({p.section for p in planned}, key=list(infos).index)
+        used_cfgs = list(dict.fromkeys(p.configuration for p in planned))
+        sec_list = [infos[s] for s in used_secs]
+        en_meas = source_values(session, camp, None, sec_list)
+        en_sim = {c: source_values(session, camp, c, sec_list) for c in used_cfgs}
+        curves: list[tuple[_Curve, _Curve]] = []
+        facts: list[dict[str, Any]] = []
+        for si, sid in enumerate(used_secs):
+            todo = [p for p in planned if p.section == sid]
+            need = {c for p in todo for c in PLOT_KINDS[p.kind].source_channels(p.position)}
+            m_ss = repo.load_signalsets(session, camp, None, sections=[sid],
+                                        channels=sorted(need))[sid]
+            m_filt = _filtered(m_ss, need)
+            for cname in used_cfgs:
+                mine = [p for p in todo if p.configuration == cname]
+                if not mine:
+                    continue
+                s_need = {c for p in mine for c in PLOT_KINDS[p.kind].source_channels(p.position)}
+                s_ss = repo.load_signalsets(session, camp, cname, sections=[sid],
+                                            channels=sorted(s_need))[sid]
+                s_filt = _filtered(s_ss, s_need)
+                dv = dv_over_limit(en_meas.get(sid, {}), en_sim[cname].get(sid, {}), std_limits)
+                for p in mine:
+                    k = PLOT_KINDS[p.kind]
+                    m_sig, s_sig = _signal(k, p.position, m_filt), _signal(k, p.position, s_filt)
+                    curves.append((_curve(k, m_sig, m_ss), _curve(k, s_sig, s_ss)))
+                    facts.append({"kind": p.kind, "section": sid, "configuration": cname,
+                                  "channel": p.channel, "position": p.position,
+                                  "deviation": plot_deviation(k, p.position, dv),
+                                  "sg_c": _sg_c(m_sig, m_ss, s_sig, s_ss)})
+            if progress is not None:
+                progress("reading and filtering signals", 0.5 * (si + 1) / len(used_secs))
+        extents: dict[str, list[Extent]] = {}
+        for f, (cm, cs) in zip(facts, curves, strict=True):
+            k = PLOT_KINDS[f["kind"]]
+            extents.setdefault(k.id, []).extend([_extent(k, cm), _extent(k, cs)])
+        scales = {kid: kind_scale(PLOT_KINDS[kid].domain, ex) for kid, ex in extents.items()}
+        rng = random.Random(seed)
+        n_auto = round(auto_share * len(facts))
+        auto_idx = sorted(rng.sample(range(len(facts)), n_auto)) if n_auto else []
+        rows: list[dict[str, Any]] = []
+        jobs = [(i, "fixed") for i in range(len(facts))] + [(i, "auto") for i in auto_idx]
+        for j, (i, scaling) in enumerate(jobs):
+            f, (cm, cs) = facts[i], curves[i]
+            k = PLOT_KINDS[f["kind"]]
+            if scaling == "fixed":
+                scale = scales[k.id]
+            else:
+                own = kind_scale(k.domain, [_extent(k, cm), _extent(k, cs)])
+                if k.domain == "time":
+                    own = Scale(nice_range(min(cm.x.min(), cs.x.min()), max(cm.x.max(), cs.x.max())),
+                                own.y)
+                scale = own
+            title = _title(k, f["position"], blind=blind, vehicle=vehicle["name"] or camp.name,
+                           configuration=f["configuration"], section=f["section"])
+            image = render_png(cm.x, cm.y, cs.x, cs.y, scale, title=title, x_label=k.x_label,
+                               y_label=k.y_label)
+            params = render_parameters(k.to_dict(), scale, scaling=scaling, title=title,
+                                       x_label=k.x_label, y_label=k.y_label,
+                                       extra={"lowpass_hz": LOWPASS_HZ,
+                                              "psd_segment_s": PSD_SEGMENT_S if k.domain == "psd" else None,
+                                              "blind": bool(blind)})
+            rows.append({**f, "scaling": scaling, "render": params, "image": image,
+                         "twin": i if scaling == "auto" else None})
+            if progress is not None:
+                progress("rendering plots", 0.5 + 0.5 * (j + 1) / len(jobs))
+        settings = {"campaign": camp.name, "configurations": used_cfgs, "sections": used_secs,
+                    "kinds": sorted({f["kind"] for f in facts}, key=PLOT_KIND_IDS.index),
+                    "lowpass_hz": LOWPASS_HZ, "seed": seed, "blind": bool(blind),
+                    "repeats": repeats, "auto_share": auto_share,
+                    "objective": "largest |D_v| / std limit (Polach & Böttcher 2014 eq. 4, Table 2)"}
+        w = wsdb.create_workshop(session, name, camp.id, blind=blind, repeat_share=repeats,
+                                 auto_share=auto_share, settings=settings,
+                                 scales={k: s.to_dict() for k, s in scales.items()},
+                                 plots=rows, actor=actor)
+        return {"name": w.name, "campaign": camp.name, "plots": len(rows),
+                "fixed_plots": len(facts), "auto_plots": len(auto_idx),
+                "by_kind": count_by_kind([PlannedPlot(f["configuration"], f["section"], f["kind"],
+                                                      f["position"]) for f in facts]),
+                "blind": bool(blind), "repeats": repeats,
+                "scales": {k: s.to_dict() for k, s in scales.items()}}
+
+
+def _exists_query(name: str):
+    from railval.db.models import Workshop
+    from sqlalchemy import select
+
+    return select(Workshop.id).where(Workshop.name == name)
+
+
+def plots_document(session, name: str) -> dict[str, Any]:
+    """The ``workshop plots NAME --json`` document."""
+    from railval.db import workshops as wsdb
+
+    w = wsdb.get_workshop(session, name)
+    return {"workshop": w.name, "plots": [
+        {"id": p.id, "kind": p.kind, "section": p.section, "configuration": p.configuration,
+         "channel": p.channel, "deviation": p.deviation, "sg_c": p.sg_c, "scaling": p.scaling,
+         "twin": p.twin_id, "image_sha256": p.image_sha256}
+        for p in wsdb.plots(session, w)]}
+
+
+def status_document(session, name: str) -> dict[str, Any]:
+    from railval.db import workshops as wsdb
+
+    w = wsdb.get_workshop(session, name)
+    prog = wsdb.progress(session, w)
+    return {"workshop": w.name, "campaign": w.campaign.name, "status": w.status,
+            "blind": bool(w.blind), "plots": len(wsdb.plots(session, w)),
+            "repeats": w.repeat_share, "reviewers": prog,
+            "answers": sum(r["answered"] for r in prog)}
+
+
+def review_link(base_url: str, token: str) -> str:
+    return f"{base_url.rstrip('/')}/review/{token}"
+
+
+# ------------------------------------------------------------------------- CSV
+_YES = {"yes": True, "no": False}
+
+
+def parse_answers_csv(text: str, source_name: str = "FILE") -> list[dict[str, Any]]:
+    """Check an answers CSV (columns ``reviewer,plot,answer,seconds,comment``; an optional
+    ``repeat`` column as written by the export; other export columns are ignored). Every
+    problem names the line and the column; duplicate (reviewer, plot, repeat) rows are
+    refused naming both lines."""
+    reader = csv.reader(io.StringIO(text))
+    try:
+        header = next(reader)
+    except StopIteration:
+        raise InvalidParameter(f"{source_name}: the file is empty; expected the header "
+                               f"{','.join(CSV_COLUMNS)}") from None
+    header = [h.strip().lower() for h in header]
+    missing = [c for c in CSV_COLUMNS if c not in header]
+    if missing:
+        raise InvalidParameter(f"{source_name} line 1: missing column(s) {', '.join(missing)}; "
+                               f"expected {','.join(CSV_COLUMNS)}")
+    unknown = [h for h in header if h not in EXPORT_COLUMNS]
+    if unknown:
+        raise InvalidParameter(f"{source_name} line 1: unknown column(s) {', '.join(unknown)}; "
+                               f"expected {','.join(CSV_COLUMNS)} (and optionally repeat)")
+    col = {h: i for i, h in enumerate(header)}
+    rows: list[dict[str, Any]] = []
+    seen: dict[tuple[str, int, bool], int] = {}
+    for line_no, cells in enumerate(reader, start=2):
+        if not cells or all(not c.strip() for c in cells):
+            continue
+        if len(cells) != len(header):
+            raise InvalidParameter(f"{source_name} line {line_no}: {len(cells)} fields, the header "
+                                   f"has {len(header)}")
+
+        def cell(name: str, cells: list[str] = cells) -> str:
+            return cells[col[name]].strip()
+
+        def bad(name: str, why: str, line_no: int = line_no) -> InvalidParameter:
+            return InvalidParameter(f"{source_name} line {line_no}, column {name}: {why}")
+
+        reviewer = cell("reviewer")
+        if not reviewer:
+            raise bad("reviewer", "empty; give the reviewer's user name")
+        try:
+            plot = int(cell("plot"))
+        except ValueError:
+            raise bad("plot", f"{cell('plot')!r} is not a plot id (a whole number)") from None
+        ans = cell("answer").lower()
+        if ans not in _YES:
+            raise bad("answer", f"{cell('answer')!r}; answer must be yes or no")
+        sec_text = cell("seconds")
+        try:
+            seconds = float(sec_text) if sec_text else 0.0
+        except ValueError:
+            raise bad("seconds", f"{sec_text!r} is not a number") from None
+        if not (math.isfinite(seconds) and seconds >= 0):
+            raise bad("seconds", f"{sec_text!r}; seconds must be ≥ 0")
+        repeat = False
+        if "repeat" in col:
+            rt = cell("repeat").lower()
+            if rt not in ("", "true", "false", "1", "0", "yes", "no"):
+                raise bad("repeat", f"{cell('repeat')!r}; use true or false")
+            repeat = rt in ("true", "1", "yes")
+        key = (reviewer, plot, repeat)
+        if key in seen:
+            raise InvalidParameter(
+                f"{source_name} line {line_no}, column plot: duplicate row — reviewer {reviewer!r} "
+                f"answered plot {plot} already on line {seen[key]}")
+        seen[key] = line_no
+        rows.append({"line": line_no, "reviewer": reviewer, "plot": plot,
+                     "answer": _YES[ans], "seconds": seconds,
+                     "comment": cells[col["comment"]], "repeat": repeat})
+    if not rows:
+        raise InvalidParameter(f"{source_name}: no answer rows after the header")
+    return rows
+
+
+def import_answers(database, name: str, path: str | Path, *,
+                   actor: Principal | str = "system") -> dict[str, int]:
+    """Import an answers CSV into workshop ``name``: all rows or none."""
+    from railval.db import workshops as wsdb
+
+    if isinstance(actor, Principal):
+        require(actor, "workshop.run")
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except OSError as exc:
+        raise InvalidParameter(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise InvalidParameter(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    rows = parse_answers_csv(text, str(path))
+    with database.session() as session:
+        w = wsdb.get_workshop(session, name)
+        return wsdb.import_answers(session, w, rows, actor=actor, source_name=str(path))
+
+
+def export_answers(database, name: str, path: str | Path) -> int:
+    """Write every answer of workshop ``name`` to a CSV (:data:`EXPORT_COLUMNS`)."""
+    from railval.db import workshops as wsdb
+
+    with database.session() as session:
+        rows = wsdb.answer_rows(session, wsdb.get_workshop(session, name))
+    path = Path(path)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        wr = csv.writer(fh)
+        wr.writerow(EXPORT_COLUMNS)
+        for r in rows:
+            wr.writerow([str(r[c]).lower() if isinstance(r[c], bool) else r[c]
+                         for c in EXPORT_COLUMNS])
+    return len(rows)
+
+
+# ------------------------------------------------------------------------- analysis
+def analysis_frames(session, name: str):
+    """``(answers_df, plots_df)`` of workshop ``name`` for :func:`railval.core.review.analyse`.
+
+    answers: ``reviewer, plot, answer`` (bool), ``repeat, scaling, seconds, position``; an
+    answer on an automatic-scaling plot is reported on its fixed twin with ``scaling`` =
+    ``auto`` (the pairing the scaling effect needs). plots: the fixed plots, ``plot, kind,
+    deviation, sg_c`` (NaN where none).
+    """
+    import pandas as pd
+    from railval.db import workshops as wsdb
+
+    w = wsdb.get_workshop(session, name)
+    rows = wsdb.answer_rows(session, w)
+    answers = pd.DataFrame(
+        [{"reviewer": r["reviewer"],
+          "plot": r["twin"] if r["scaling"] == "auto" and r["twin"] is not None else r["plot"],
+          "answer": r["answer"] == "yes", "repeat": r["repeat"], "scaling": r["scaling"],
+          "seconds": r["seconds"], "position": r["position"]} for r in rows],
+        columns=["reviewer", "plot", "answer", "repeat", "scaling", "seconds", "position"])
+    answers = answers[~((answers["scaling"] == "auto") & answers["repeat"])]
+    plots = pd.DataFrame(
+        [{"plot": p.id, "kind": p.kind,
+          "deviation": float("nan") if p.deviation is None else p.deviation,
+          "sg_c": float("nan") if p.sg_c is None else p.sg_c}
+         for p in wsdb.plots(session, w) if p.scaling == "fixed"],
+        columns=["plot", "kind", "deviation", "sg_c"])
+    return answers.reset_index(drop=True), plots
+
+
+def analyse(database, name: str, *, actor: Principal | str = "system",
+            with_plots: bool = False) -> dict[str, Any]:
+    """The ``workshop analyse NAME --json`` document (railval.core.review.analyse);
+    ``with_plots`` adds the per-plot rows (share of Yes, objective values) for the page."""
+    from railval.core.review import analyse as core_analyse
+
+    if isinstance(actor, Principal):
+        require(actor, "workshop.results")
+    with database.session() as session:
+        answers, plots = analysis_frames(session, name)
+    if answers.empty:
+        raise InvalidParameter(f"workshop {name!r} has no answers yet")
+    result = core_analyse(answers, plots)
+    doc = {"workshop": name, **result.to_dict()}
+    if with_plots:
+        doc["plots"] = result.plots
+    return doc
+
+
+def kind_labels() -> dict[str, str]:
+    return {k: PLOT_KINDS[k].label for k in PLOT_KIND_IDS}
+
+
+def describe_kinds() -> list[dict[str, Any]]:
+    return [{"id": k.id, "label": k.label, "domain": k.domain, "positions": list(k.positions),
+             "quantities": list(k.quantities), "table1": k.table1} for k in PLOT_KINDS.values()]
+
+
+__all__ = ["CSV_COLUMNS", "EXPORT_COLUMNS", "PlannedPlot", "analyse", "analysis_frames",
+           "count_by_kind", "create", "describe_kinds", "export_answers", "get_kind",
+           "import_answers", "kind_labels", "parse_answers_csv", "plan", "plots_document",
+           "review_link", "status_document"]

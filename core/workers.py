@@ -1,0 +1,67 @@
+"""Worker processes that end with the process that started them.
+
+A process pool's workers (and the ``forkserver`` that forks them) outlive a parent that is
+killed with SIGKILL: nothing tells them, and each keeps its memory (≈ 300 MB for a
+simulation worker) until the machine restarts. :func:`pool_initializer` is passed as the
+``initializer`` of every :class:`concurrent.futures.ProcessPoolExecutor` railval starts
+(``initializer=exit_with_parent, initargs=(os.getpid(),)``); it makes the worker exit as
+soon as that parent is gone:
+
+* on Linux, ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (proc(5), prctl(2)) — the kernel kills the
+  worker when its direct parent (the forkserver, or the main process under ``fork``) ends;
+* everywhere, a daemon thread that checks every :data:`WATCH_INTERVAL_S` seconds whether
+  the main process still exists (``os.kill(pid, 0)``) and ends the worker with
+  ``os._exit`` when it does not — this covers a forkserver that outlives the main process.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+#: seconds between two checks of the watch thread
+WATCH_INTERVAL_S = 0.5
+_PR_SET_PDEATHSIG = 1
+_SIGKILL = 9
+
+
+def _set_parent_death_signal() -> None:
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, _SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux: the watch thread alone does the job
+        pass
+
+
+def process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else (pid reused): treat as gone
+        return False
+    return True
+
+
+def _watch(pid: int) -> None:
+    while True:
+        if not process_alive(pid) or os.getppid() == 1:
+            os._exit(1)
+        time.sleep(WATCH_INTERVAL_S)
+
+
+def exit_with_parent(parent_pid: int) -> None:
+    """Worker initializer: end this process when ``parent_pid`` (the pool's owner) ends."""
+    _set_parent_death_signal()
+    if not process_alive(parent_pid):
+        os._exit(1)
+    threading.Thread(target=_watch, args=(parent_pid,), name="railval-exit-with-parent",
+                     daemon=True).start()
+
+
+def pool_kwargs() -> dict:
+    """``initializer``/``initargs`` for a ProcessPoolExecutor started by this process."""
+    return {"initializer": exit_with_parent, "initargs": (os.getpid(),)}

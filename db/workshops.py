@@ -1,0 +1,419 @@
+"""Storage and queries of review workshops (docs/workshops.md).
+
+Tables (:mod:`railval.db.models`): ``workshop``, ``workshop_plot`` (PNG bytes, render
+parameters, SHA-256), ``workshop_reviewer`` (a reviewer's participation: personal link
+stored as the SHA-256 of its token, order seed, sequence of plots) and ``workshop_answer``
+(one row per place of a reviewer's sequence).
+
+Answers are written the moment they are given, one short transaction each
+(:func:`record_answer`): the unique (reviewer, place) key makes a repeated submission an
+update, never a second row, and the client's submission id makes a resent submission a
+no-op. Organiser actions (create, invite, close, reopen, import) append an audit row
+(:func:`railval.db.audit.record`) in the same transaction; single answers do not (each is a
+time-stamped row of its own).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import secrets
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from railval.core.errors import InvalidParameter, NotFound, RailvalError
+from railval.core.roles import Principal
+from railval.core.workshop import review_order
+from railval.db import audit, users
+from railval.db.models import (
+    AppUser,
+    Workshop,
+    WorkshopAnswer,
+    WorkshopPlot,
+    WorkshopReviewer,
+    utcnow,
+)
+from sqlalchemy import case, func, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+STATUSES = ("open", "closed")
+
+
+class WorkshopClosed(RailvalError):
+    """The workshop is closed (or the reviewer has finished): answers are refused."""
+
+
+def token_hash(token: str) -> str:
+    return hashlib.sha256((token or "").encode("utf-8")).hexdigest()
+
+
+def _aware(when: dt.datetime | None) -> dt.datetime | None:
+    if when is not None and when.tzinfo is None:
+        return when.replace(tzinfo=dt.UTC)
+    return when
+
+
+def utc_text(when: dt.datetime | None) -> str:
+    """ISO 8601 UTC time stamp with a ``Z`` (empty for None)."""
+    when = _aware(when)
+    return "" if when is None else when.astimezone(dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+# -- workshops ---------------------------------------------------------------------------
+def list_workshops(session: Session) -> list[Workshop]:
+    return list(session.scalars(select(Workshop).order_by(Workshop.name)))
+
+
+def get_workshop(session: Session, name: str) -> Workshop:
+    """The workshop called ``name``; :class:`NotFound` lists the existing names."""
+    w = session.scalar(select(Workshop).where(Workshop.name == str(name)))
+    if w is None:
+        names = list(session.scalars(select(Workshop.name).order_by(Workshop.name)))
+        raise NotFound(f"workshop {name!r} not found; workshops: {', '.join(names) or '(none)'}")
+    return w
+
+
+def create_workshop(session: Session, name: str, campaign_id: int, *, blind: bool,
+                    repeat_share: float, auto_share: float, settings: Mapping[str, Any],
+                    scales: Mapping[str, Any], plots: Sequence[Mapping[str, Any]],
+                    actor: Any = "system") -> Workshop:
+    """Store a workshop and its rendered plots in ``session``'s transaction.
+
+    ``plots``: dicts with ``kind, section, configuration, channel, scaling, deviation, sg_c,
+    render, image`` and optionally ``twin`` (index into ``plots`` of the fixed plot an
+    ``auto`` plot repeats). The image's SHA-256 is computed here from the bytes stored.
+    """
+    name = (name or "").strip()
+    if not name or len(name) > 200:
+        raise InvalidParameter(f"workshop name {name!r}: give 1–200 characters")
+    if session.scalar(select(Workshop.id).where(Workshop.name == name)) is not None:
+        raise InvalidParameter(f"workshop {name!r} already exists; choose another name")
+    if not plots:
+        raise InvalidParameter(f"workshop {name!r} would have no plots")
+    creator = users.find_user(session, getattr(actor, "username", str(actor)))
+    w = Workshop(name=name, campaign_id=campaign_id, status="open", blind=bool(blind),
+                 repeat_share=float(repeat_share), auto_share=float(auto_share),
+                 settings=dict(settings), scales=dict(scales),
+                 created_by=creator.id if creator else None, created_at=utcnow())
+    session.add(w)
+    session.flush()
+    rows: list[WorkshopPlot] = []
+    for p in plots:
+        row = WorkshopPlot(workshop_id=w.id, kind=p["kind"], section=p["section"],
+                           configuration=p["configuration"], channel=p["channel"],
+                           scaling=p.get("scaling", "fixed"), deviation=p.get("deviation"),
+                           sg_c=p.get("sg_c"), render=dict(p["render"]), image=p["image"],
+                           image_sha256=hashlib.sha256(p["image"]).hexdigest())
+        rows.append(row)
+    session.add_all(rows)
+    session.flush()
+    for row, p in zip(rows, plots, strict=True):
+        if p.get("twin") is not None:
+            row.twin_id = rows[int(p["twin"])].id
+    session.flush()
+    audit.record(session, actor, "workshop.create", f"workshop:{name}", None,
+                 {"campaign_id": campaign_id, "settings": dict(settings),
+                  "images": sorted(r.image_sha256 for r in rows)},
+                 detail={"plots": len(rows), "blind": bool(blind)})
+    return w
+
+
+def set_status(session: Session, workshop: Workshop, status: str, *, actor: Any = "system") -> Workshop:
+    if status not in STATUSES:
+        raise InvalidParameter(f"workshop status must be one of {STATUSES}, got {status!r}")
+    before = workshop.status
+    workshop.status = status
+    session.flush()
+    audit.record(session, actor, "workshop.close" if status == "closed" else "workshop.reopen",
+                 f"workshop:{workshop.name}", {"status": before}, {"status": status})
+    return workshop
+
+
+def plots(session: Session, workshop: Workshop) -> list[WorkshopPlot]:
+    """The workshop's plots in creation order (image bytes not loaded)."""
+    return list(session.scalars(select(WorkshopPlot).where(WorkshopPlot.workshop_id == workshop.id)
+                                .order_by(WorkshopPlot.id)))
+
+
+def plot_image(session: Session, workshop_id: int, plot_id: int) -> tuple[bytes, str]:
+    """``(PNG bytes, SHA-256)`` of a plot of this workshop; :class:`NotFound` otherwise."""
+    row = session.execute(select(WorkshopPlot.image, WorkshopPlot.image_sha256)
+                          .where(WorkshopPlot.id == plot_id,
+                                 WorkshopPlot.workshop_id == workshop_id)).first()
+    if row is None:
+        raise NotFound(f"plot {plot_id} is not part of this workshop")
+    return bytes(row[0]), row[1]
+
+
+# -- reviewers ---------------------------------------------------------------------------
+def _reviewer_user(session: Session, username: str, actor: Any) -> AppUser:
+    user = users.find_user(session, username)
+    if user is None:
+        return users.create_user(session, username, roles=["reviewer"], actor=actor,
+                                 reason="workshop reviewer")
+    if "reviewer" not in user.role_names:
+        raise InvalidParameter(
+            f"user {username!r} holds the roles {', '.join(user.role_names) or '(none)'}, not "
+            "reviewer; give them the reviewer role first")
+    if user.disabled:
+        raise InvalidParameter(f"user {username!r} is disabled")
+    return user
+
+
+def participation(session: Session, workshop: Workshop, username: str, *,
+                  actor: Any = "system", seed: int | None = None) -> WorkshopReviewer:
+    """The reviewer's participation in ``workshop``, created when missing (the user too, as
+    a reviewer without password): a random seed (stored) and the sequence it gives."""
+    user = _reviewer_user(session, username, actor)
+    r = session.scalar(select(WorkshopReviewer).where(WorkshopReviewer.workshop_id == workshop.id,
+                                                      WorkshopReviewer.user_id == user.id))
+    if r is not None:
+        return r
+    plot_ids = [p.id for p in plots(session, workshop)]
+    seed = secrets.randbits(31) if seed is None else int(seed)
+    seq = [[plot_ids[i], rep] for i, rep in review_order(len(plot_ids), seed,
+                                                         workshop.repeat_share)]
+    r = WorkshopReviewer(workshop_id=workshop.id, user_id=user.id, seed=seed, sequence=seq,
+                         created_at=utcnow())
+    session.add(r)
+    session.flush()
+    return r
+
+
+def invite(session: Session, workshop: Workshop, username: str, *, actor: Any = "system",
+           seed: int | None = None) -> str:
+    """A new personal link token for ``username`` (returned once; only its SHA-256 is
+    stored; an earlier link of the same reviewer stops working)."""
+    r = participation(session, workshop, username, actor=actor, seed=seed)
+    token = secrets.token_urlsafe(32)
+    r.token_sha256 = token_hash(token)
+    r.invited_at = utcnow()
+    session.flush()
+    audit.record(session, actor, "workshop.invite", f"workshop:{workshop.name}",
+                 detail={"reviewer": username})
+    return token
+
+
+@dataclass(frozen=True)
+class ReviewerContext:
+    """Who a personal link belongs to (plain values, usable after the session closed)."""
+
+    reviewer_id: int
+    workshop_id: int
+    workshop_name: str
+    workshop_status: str
+    blind: bool
+    username: str
+    principal: Principal
+    sequence: tuple[tuple[int, bool], ...]
+    finished: bool
+
+
+def reviewer_by_token(session: Session, token: str) -> ReviewerContext | None:
+    """The participation a personal link token opens, or None for an unknown token."""
+    if not token or len(token) > 200:
+        return None
+    row = session.execute(
+        select(WorkshopReviewer, Workshop, AppUser)
+        .join(Workshop, WorkshopReviewer.workshop_id == Workshop.id)
+        .join(AppUser, WorkshopReviewer.user_id == AppUser.id)
+        .where(WorkshopReviewer.token_sha256 == token_hash(token))).first()
+    if row is None:
+        return None
+    r, w, u = row
+    return ReviewerContext(r.id, w.id, w.name, w.status, bool(w.blind), u.username,
+                           users.principal(u), tuple((int(p), bool(rep)) for p, rep in r.sequence),
+                           r.finished_at is not None)
+
+
+def reviewers(session: Session, workshop: Workshop) -> list[WorkshopReviewer]:
+    return list(session.scalars(select(WorkshopReviewer)
+                                .where(WorkshopReviewer.workshop_id == workshop.id)
+                                .order_by(WorkshopReviewer.id)))
+
+
+def own_answers(session: Session, reviewer_id: int) -> dict[int, WorkshopAnswer]:
+    """place → answer of one reviewer."""
+    return {a.position: a for a in session.scalars(
+        select(WorkshopAnswer).where(WorkshopAnswer.reviewer_id == reviewer_id))}
+
+
+def record_answer(session: Session, ctx: ReviewerContext, position: int, answer: bool, *,
+                  seconds: float, comment: str = "", submission: str = "") -> str:
+    """Store the reviewer's answer at ``position`` of their sequence; returns ``"new"``,
+    ``"changed"`` or ``"repeated"`` (the same submission seen before: nothing written).
+
+    Refused (:class:`WorkshopClosed`) when the workshop is closed or the reviewer has
+    finished; :class:`InvalidParameter` for a position outside the sequence.
+
+    Call it as the first statement of its unit of work (``ctx`` read in an earlier one): its
+    first statement is a write, so on SQLite the transaction takes the write lock at once
+    (waiting up to the busy timeout) instead of failing to upgrade a read snapshot that a
+    concurrent answer has made stale.
+    """
+    if ctx.workshop_status != "open":
+        raise WorkshopClosed(f"workshop {ctx.workshop_name!r} is closed; answers are not taken")
+    if not (0 <= position < len(ctx.sequence)):
+        raise InvalidParameter(f"place {position} is outside this reviewer's {len(ctx.sequence)} plots")
+    if not (seconds >= 0 and seconds < 1e7):
+        raise InvalidParameter(f"seconds must be ≥ 0, got {seconds!r}")
+    comment = (comment or "")[:2000]
+    submission = (submission or "")[:64]
+    plot_id, rep = ctx.sequence[position]
+    now = utcnow()
+    where = [WorkshopAnswer.reviewer_id == ctx.reviewer_id, WorkshopAnswer.position == position]
+
+    def change() -> str | None:
+        # one atomic UPDATE (row lock / write lock): concurrent changes of one place never
+        # lose an increment; a resent submission matches no row
+        cond = [*where, WorkshopAnswer.submission != submission] if submission else where
+        n = session.execute(
+            update(WorkshopAnswer).where(*cond).values(
+                answer=bool(answer), comment=comment,
+                seconds=WorkshopAnswer.seconds + float(seconds),
+                changes=WorkshopAnswer.changes + 1, submission=submission, updated_at=now)
+            .execution_options(synchronize_session=False)).rowcount
+        if n:
+            return "changed"
+        if session.scalar(select(WorkshopAnswer.id).where(*where)) is not None:
+            return "repeated"
+        return None
+
+    outcome = change()
+    if outcome is None:
+        try:
+            with session.begin_nested():
+                session.add(WorkshopAnswer(
+                    reviewer_id=ctx.reviewer_id, plot_id=plot_id, position=position, repeat=rep,
+                    answer=bool(answer), comment=comment, seconds=float(seconds),
+                    submission=submission, source="web", answered_at=now, updated_at=now))
+            outcome = "new"
+        except IntegrityError:  # a concurrent first submission of the same place won
+            outcome = change() or "repeated"
+    # the stored state decides, not ``ctx`` (which a caller may have cached): checked after
+    # the write, inside the same transaction, so a refusal rolls the write back
+    status, finished = session.execute(
+        select(Workshop.status, WorkshopReviewer.finished_at)
+        .join(WorkshopReviewer, WorkshopReviewer.workshop_id == Workshop.id)
+        .where(WorkshopReviewer.id == ctx.reviewer_id)).one()
+    if status != "open":
+        raise WorkshopClosed(f"workshop {ctx.workshop_name!r} is closed; answers are not taken")
+    if finished is not None:
+        raise WorkshopClosed("you have finished this review; answers are final")
+    return outcome
+
+
+def finish(session: Session, ctx: ReviewerContext) -> None:
+    """Mark the reviewer finished (their answers are final); every place must be answered."""
+    n = session.scalar(select(func.count()).select_from(WorkshopAnswer)
+                       .where(WorkshopAnswer.reviewer_id == ctx.reviewer_id))
+    if n < len(ctx.sequence):
+        raise InvalidParameter(f"{len(ctx.sequence) - n} plots are not answered yet")
+    r = session.get(WorkshopReviewer, ctx.reviewer_id)
+    if r.finished_at is None:
+        r.finished_at = utcnow()
+
+
+def progress(session: Session, workshop: Workshop) -> list[dict[str, Any]]:
+    """Per reviewer: ``reviewer, answered, total, yes, finished, last_answer_at``."""
+    counts = {rid: (n, yes, last) for rid, n, yes, last in session.execute(
+        select(WorkshopAnswer.reviewer_id, func.count(),
+               func.sum(case((WorkshopAnswer.answer, 1), else_=0)),
+               func.max(WorkshopAnswer.updated_at))
+        .join(WorkshopReviewer, WorkshopAnswer.reviewer_id == WorkshopReviewer.id)
+        .where(WorkshopReviewer.workshop_id == workshop.id)
+        .group_by(WorkshopAnswer.reviewer_id))}
+    out = []
+    for r, username in session.execute(
+            select(WorkshopReviewer, AppUser.username)
+            .join(AppUser, WorkshopReviewer.user_id == AppUser.id)
+            .where(WorkshopReviewer.workshop_id == workshop.id).order_by(AppUser.username)):
+        n, yes, last = counts.get(r.id, (0, 0, None))
+        out.append({"reviewer": username, "answered": int(n), "total": len(r.sequence),
+                    "yes": int(yes or 0), "finished": r.finished_at is not None,
+                    "invited": r.token_sha256 is not None,
+                    "last_answer_at": utc_text(last) if last else None})
+    return out
+
+
+def answer_rows(session: Session, workshop: Workshop) -> list[dict[str, Any]]:
+    """Every answer of the workshop with its plot's facts (export and analysis)."""
+    q = (select(AppUser.username, WorkshopAnswer, WorkshopPlot.kind, WorkshopPlot.scaling,
+                WorkshopPlot.twin_id)
+         .join(WorkshopReviewer, WorkshopAnswer.reviewer_id == WorkshopReviewer.id)
+         .join(AppUser, WorkshopReviewer.user_id == AppUser.id)
+         .join(WorkshopPlot, WorkshopAnswer.plot_id == WorkshopPlot.id)
+         .where(WorkshopReviewer.workshop_id == workshop.id)
+         .order_by(AppUser.username, WorkshopAnswer.position))
+    return [{"reviewer": u, "plot": a.plot_id, "answer": "yes" if a.answer else "no",
+             "seconds": float(a.seconds), "comment": a.comment,
+             "answered_at": utc_text(a.answered_at), "updated_at": utc_text(a.updated_at),
+             "position": a.position, "repeat": bool(a.repeat), "scaling": scaling,
+             "twin": twin, "kind": kind, "source": a.source, "changes": int(a.changes)}
+            for u, a, kind, scaling, twin in session.execute(q)]
+
+
+def import_answers(session: Session, workshop: Workshop,
+                   rows: Iterable[Mapping[str, Any]], *, actor: Any = "system",
+                   source_name: str = "") -> dict[str, int]:
+    """Store answers gathered elsewhere: ``rows`` are checked dicts ``reviewer, plot,
+    answer (bool), seconds, comment, repeat (bool), line``. Unknown reviewers become
+    reviewer users without password. A plot a reviewer already answered in the workshop is
+    refused with the line. Everything happens in ``session``'s transaction: the caller's
+    unit of work stores all rows or none."""
+    rows = list(rows)
+    plot_ids = {p.id for p in plots(session, workshop)}
+    by_reviewer: dict[str, list[Mapping[str, Any]]] = {}
+    for row in rows:
+        if row["plot"] not in plot_ids:
+            raise InvalidParameter(f"{source_name} line {row['line']}, column plot: plot "
+                                   f"{row['plot']} is not part of workshop {workshop.name!r}")
+        by_reviewer.setdefault(row["reviewer"], []).append(row)
+    created = 0
+    for username, items in by_reviewer.items():
+        if users.find_user(session, username) is None:
+            created += 1
+        try:
+            user = _reviewer_user(session, username, actor)
+        except InvalidParameter as exc:
+            raise InvalidParameter(f"{source_name} line {items[0]['line']}, column reviewer: "
+                                   f"{exc}") from None
+        r = session.scalar(select(WorkshopReviewer).where(
+            WorkshopReviewer.workshop_id == workshop.id, WorkshopReviewer.user_id == user.id))
+        done: dict[tuple[int, bool], int] = {}
+        if r is None:
+            r = WorkshopReviewer(workshop_id=workshop.id, user_id=user.id, seed=0, sequence=[],
+                                 created_at=utcnow())
+            session.add(r)
+            session.flush()
+        else:
+            for a in own_answers(session, r.id).values():
+                done[(a.plot_id, bool(a.repeat))] = a.position
+        seq = [list(x) for x in r.sequence]
+        now = utcnow()
+        for row in items:
+            key = (row["plot"], bool(row["repeat"]))
+            if key in done:
+                raise InvalidParameter(
+                    f"{source_name} line {row['line']}, column plot: reviewer {username!r} has "
+                    f"already answered plot {row['plot']}{' (repeat)' if row['repeat'] else ''} "
+                    "in this workshop")
+            pos = next((i for i, (p, rep) in enumerate(seq)
+                        if p == row["plot"] and bool(rep) == bool(row["repeat"])), None)
+            if pos is None:
+                seq.append([row["plot"], bool(row["repeat"])])
+                pos = len(seq) - 1
+            done[key] = pos
+            session.add(WorkshopAnswer(
+                reviewer_id=r.id, plot_id=row["plot"], position=pos, repeat=bool(row["repeat"]),
+                answer=bool(row["answer"]), comment=row.get("comment", "") or "",
+                seconds=float(row.get("seconds") or 0.0), submission="", source="import",
+                answered_at=now, updated_at=now))
+        r.sequence = seq
+    session.flush()
+    audit.record(session, actor, "workshop.import", f"workshop:{workshop.name}",
+                 detail={"answers": len(rows), "reviewers": len(by_reviewer),
+                         "new_users": created, "file": source_name[:200]})
+    return {"answers": len(rows), "reviewers": len(by_reviewer), "new_users": created}

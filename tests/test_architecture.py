@@ -1,0 +1,246 @@
+"""The architecture of docs/design.md held against the source, read with ``ast`` (nothing is
+imported or run):
+
+* ``railval.core`` is pure computation: it imports neither ``railval.db`` nor ``railval.app``
+  nor storage/UI libraries; ``railval.db`` does not import ``railval.app``; the services of
+  ``railval.app.services`` import no UI library;
+* no import loop among railval's modules (every import counts, also those inside functions);
+* no module in ``app/`` above :data:`MAX_APP_LINES` lines unless its docstring says why
+  (a paragraph starting ``Length:``);
+* every package folder (a folder with ``__init__.py``) is installed (pyproject's package list);
+* no file cites documents that are not in the repository.
+"""
+
+from __future__ import annotations
+
+import ast
+import itertools
+import re
+import tomllib
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+#: repository folder → installed package
+FOLDERS = {"core": "railval.core", "db": "railval.db", "app": "railval.app"}
+MAX_APP_LINES = 500
+UI_LIBRARIES = ("panel", "param", "bokeh", "holoviews")
+STORAGE_LIBRARIES = ("sqlalchemy", "alembic")
+
+
+def _modules() -> dict[str, Path]:
+    """Installed module name → source file, for every ``.py`` of the source folders."""
+    out = {}
+    for folder, package in FOLDERS.items():
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            rel = path.relative_to(ROOT / folder).with_suffix("")
+            parts = [p for p in rel.parts if p != "__init__"]
+            out[".".join([package, *parts])] = path
+    return out
+
+
+MODULES = _modules()
+
+
+def _is_package(name: str) -> bool:
+    return MODULES.get(name, Path()).name == "__init__.py"
+
+
+def _imports(name: str, path: Path) -> Iterator[tuple[str, int]]:
+    """(imported module, line) of every import statement in a module, relative imports resolved;
+    ``from package import submodule`` names the submodule."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    package = name if _is_package(name) else name.rpartition(".")[0]
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, node.lineno
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")
+                anchor = anchor[: len(anchor) - (node.level - 1)]
+                base = ".".join([*anchor, base] if base else anchor)
+            subs = [f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in MODULES]
+            if subs:
+                yield from ((s, node.lineno) for s in subs)
+                if len(subs) < len(node.names):
+                    yield base, node.lineno
+            else:
+                yield base, node.lineno
+
+
+def _railval_target(imported: str) -> str | None:
+    """The railval module an import loads (its nearest existing module), None outside railval."""
+    parts = imported.split(".")
+    while parts:
+        candidate = ".".join(parts)
+        if candidate in MODULES:
+            return candidate
+        parts.pop()
+    return None
+
+
+def import_graph() -> dict[str, dict[str, int]]:
+    """railval module → {railval module it imports: first line of that import}."""
+    graph: dict[str, dict[str, int]] = {}
+    for name, path in MODULES.items():
+        edges = graph.setdefault(name, {})
+        for imported, line in _imports(name, path):
+            target = _railval_target(imported)
+            if target is not None and target != name:
+                edges.setdefault(target, line)
+    return graph
+
+
+def find_cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
+    """One cycle per strongly connected component of more than one module (Tarjan's algorithm),
+    each as a closed path ``[a, b, …, a]``."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    components: list[list[str]] = []
+
+    def strongconnect(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, {}):
+            if w not in index:
+                strongconnect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                components.append(comp)
+
+    for v in sorted(graph):
+        if v not in index:
+            strongconnect(v)
+    cycles = []
+    for comp in components:
+        members = set(comp)
+        start = min(comp)
+        # breadth-first search for the shortest way back to ``start`` inside the component
+        prev: dict[str, str] = {}
+        frontier = [start]
+        found = None
+        while frontier and found is None:
+            nxt = []
+            for v in frontier:
+                for w in sorted(graph.get(v, {})):
+                    if w == start:
+                        found = v
+                        break
+                    if w in members and w not in prev:
+                        prev[w] = v
+                        nxt.append(w)
+                if found:
+                    break
+            frontier = nxt
+        path = [start]
+        v = found
+        while v is not None and v != start:
+            path.append(v)
+            v = prev.get(v)
+        cycles.append([start, *reversed(path[1:]), start])
+    return cycles
+
+
+def _describe(cycle: list[str], graph: dict[str, dict[str, int]]) -> str:
+    return " → ".join(f"{a} (line {graph[a][b]})" for a, b in itertools.pairwise(cycle)) + f" → {cycle[-1]}"
+
+
+def _violations(prefix: str, forbidden: tuple[str, ...]) -> list[str]:
+    out = []
+    for name, path in MODULES.items():
+        if name != prefix and not name.startswith(prefix + "."):
+            continue
+        for imported, line in _imports(name, path):
+            if any(imported == f or imported.startswith(f + ".") for f in forbidden):
+                out.append(f"{path.relative_to(ROOT)}:{line} imports {imported}")
+    return out
+
+
+def test_core_is_pure_computation():
+    assert _violations("railval.core", ("railval.db", "railval.app", *STORAGE_LIBRARIES, *UI_LIBRARIES)) == []
+
+
+def test_db_does_not_import_the_app():
+    assert _violations("railval.db", ("railval.app", *UI_LIBRARIES)) == []
+
+
+def test_services_import_no_ui_library():
+    assert _violations("railval.app.services", UI_LIBRARIES) == []
+
+
+def test_no_import_loop():
+    graph = import_graph()
+    assert sum(len(e) for e in graph.values()) > 100  # the graph was read (railval imports railval)
+    cycles = find_cycles(graph)
+    assert [_describe(c, graph) for c in cycles] == []
+
+
+def test_cycle_finder_reports_a_loop():
+    graph = {"a": {"b": 3}, "b": {"c": 7}, "c": {"a": 1}, "d": {"a": 2}}
+    assert find_cycles(graph) == [["a", "b", "c", "a"]]
+    assert _describe(["a", "b", "c", "a"], graph) == "a (line 3) → b (line 7) → c (line 1) → a"
+    assert find_cycles({"a": {"b": 1}, "b": {}}) == []
+
+
+def test_relative_and_submodule_imports_resolve(tmp_path):
+    name = "railval.app.state.compare"
+    targets = {_railval_target(i) for i, _ in _imports(name, MODULES[name])}
+    assert "railval.app.state.app" in targets and "railval.core.types" in targets
+
+
+@pytest.mark.parametrize("name", sorted(n for n in MODULES if n.startswith("railval.app")))
+def test_app_modules_are_small_or_say_why(name):
+    path = MODULES[name]
+    text = path.read_text(encoding="utf-8")
+    lines = text.count("\n")
+    if lines > MAX_APP_LINES:
+        doc = ast.get_docstring(ast.parse(text)) or ""
+        assert re.search(r"^Length:\s*\S", doc, re.MULTILINE), (
+            f"{path.relative_to(ROOT)} has {lines} lines (> {MAX_APP_LINES}); split it or state why "
+            "in a docstring paragraph starting 'Length:'")
+
+
+def test_every_package_folder_is_installed():
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    folders = {n for n in MODULES if _is_package(n)}
+    assert sorted(folders - listed) == [], "package folders missing from pyproject [tool.setuptools] packages"
+    assert sorted(listed - folders) == [], "pyproject lists packages that have no folder"
+
+
+#: citations of documents that are not in the repository (written in pieces so this file does
+#: not match itself)
+OUTSIDE = re.compile("|".join([r"\bDESIGN(\.md|\s*§)", r"\bSTYLE(\.md|\s+habit)", "NOTES" + "-stack",
+                               r"\.\./" + "shared"]))
+TEXT_SUFFIXES = {".py", ".md", ".toml", ".ini", ".mako", ".html", ".css", ".sh", ".cfg", ".txt", ".yml", ".yaml"}
+
+
+def test_no_citation_of_documents_outside_the_repository():
+    skip = {".git", ".venv", "node_modules", "test-artifacts", ".ruff_cache"}
+    hits = []
+    for path in ROOT.rglob("*"):
+        rel = path.relative_to(ROOT)
+        if any(p in skip or p.endswith(".egg-info") for p in rel.parts) or not path.is_file():
+            continue
+        if path.suffix not in TEXT_SUFFIXES and path.parent.name != ".ci":
+            continue
+        for i, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+            if OUTSIDE.search(line):
+                hits.append(f"{rel}:{i}: {line.strip()[:100]}")
+    assert hits == []

@@ -1,0 +1,202 @@
+"""Tests of the trustworthy diagnosis (core.diagnosis.diagnose_evidence) on per-section data
+whose causes are known by construction: a linear toy "simulator" with section scatter."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from railval.core.diagnosis import (
+    CandidateFamily,
+    band_ratio_pattern,
+    component_parts,
+    diagnose_evidence,
+    pattern_from_pairs,
+    plausibility_flags,
+    section_evidence,
+    zone_bootstrap,
+    zone_folds,
+)
+
+QUANTITIES = ("Y_qst", "Q_max", "az_rms", "ay_rms")
+POSITIONS = ("p1", "p2")
+SECTIONS = [(f"S{i:02d}", 1 + i // 3) for i in range(12)]  # 3 sections in each of 4 zones
+KEYS = [(q, p) for q in QUANTITIES for p in POSITIONS]
+
+
+def _direction(seed):
+    g = np.random.default_rng(seed)
+    return {(q, z, p): float(g.normal()) for q in QUANTITIES for z in (1, 2, 3, 4) for p in POSITIONS}
+
+
+A, B, C = _direction(11), _direction(12), _direction(13)
+SCATTER = np.random.default_rng(5)
+NOISE = {(s, q, p): float(SCATTER.normal(0, 0.15)) for s, _ in SECTIONS for q, p in KEYS}
+
+
+def _evidence(offset, like=None, scale=1.0):
+    """Evidence of a model whose per-section normalised difference is offset(q, z, p) +
+    section scatter; band powers: measured 1, simulated 2**(offset of the az_rms p1 component)."""
+    pairs, sim_b, meas_b = [], {}, {}
+    for s, z in SECTIONS:
+        for q, p in KEYS:
+            pairs.append({"section": s, "zone": z, "quantity": q, "position": p,
+                          "norm": offset(q, z, p) + scale * NOISE[(s, q, p)]})
+        sim_b[s] = {"az_cb_b1": np.full(4, 2.0 ** offset("az_rms", z, "p1"))}
+        meas_b[s] = {"az_cb_b1": np.ones(4)}
+    return section_evidence(pairs, sim_b, meas_b, SECTIONS, like=like), pairs, sim_b, meas_b
+
+
+def _setup(truth_a=1.0, extra=0.0):
+    """Residual truth_a·A + extra·C (+ scatter); candidate A at v leaves (truth_a − v)·A + extra·C,
+    candidate B at v leaves truth_a·A − v·B + extra·C."""
+    rest = lambda q, z, p: extra * C[(q, z, p)]
+    base, *_ = _evidence(lambda q, z, p: truth_a * A[(q, z, p)] + rest(q, z, p))
+    values = [0.0, 0.5, 1.0, 1.5, 2.0]
+    ev_a = [_evidence(lambda q, z, p, v=v: (truth_a - v) * A[(q, z, p)] + rest(q, z, p), like=base)[0]
+            for v in values]
+    ev_b = [_evidence(lambda q, z, p, v=v: truth_a * A[(q, z, p)] - v * B[(q, z, p)] + rest(q, z, p), like=base)[0]
+            for v in values]
+    return base, [CandidateFamily("effect", "A", "x", values, ev_a, (0.0, 2.0)),
+                  CandidateFamily("effect", "B", "x", values, ev_b, (0.0, 2.0))]
+
+
+def test_section_evidence_with_all_sections_equals_the_campaign_pattern():
+    ev, pairs, sim_b, meas_b = _evidence(lambda q, z, p: A[(q, z, p)])
+    p_pairs = pattern_from_pairs(pairs)
+    tot = lambda d: {"az_cb_b1": sum(x["az_cb_b1"] for x in d.values())}
+    p_band = band_ratio_pattern(tot(sim_b), tot(meas_b))
+    pat = ev.pattern()
+    assert pat.labels == p_pairs.labels + p_band.labels
+    np.testing.assert_allclose(pat.values, np.concatenate([p_pairs.values, p_band.values]), atol=1e-12)
+    # a subset: only zone 4's sections → the zone 1–3 components have no data (0)
+    mask = np.array([1.0 if z == 4 else 0.0 for _, z in SECTIONS])
+    sub = ev.values(mask)
+    zone4 = pattern_from_pairs([r for r in pairs if r["zone"] == 4])
+    for lab, v in zip(zone4.labels, zone4.values, strict=True):
+        assert sub[pat.labels.index(lab)] == pytest.approx(v)
+    assert sub[pat.labels.index("Y_qst zone 1 p1")] == 0.0
+
+
+def test_zone_folds_and_bootstrap_keep_every_zone():
+    zones = [z for _, z in SECTIONS]
+    masks = zone_folds(zones, 3)
+    assert len(masks) == 3
+    np.testing.assert_array_equal(sum(masks), np.ones(12))  # every section tested once
+    for m in masks:
+        for z in (1, 2, 3, 4):
+            idx = [i for i, zz in enumerate(zones) if zz == z]
+            assert 0 < m[idx].sum() < len(idx)  # every zone on both sides
+    W = zone_bootstrap(zones, 50, seed=1)
+    for z in (1, 2, 3, 4):
+        idx = [i for i, zz in enumerate(zones) if zz == z]
+        np.testing.assert_array_equal(W[:, idx].sum(axis=1), 3.0)
+
+
+def test_true_cause_is_claimed_with_held_out_evidence():
+    base, fams = _setup(1.0)
+    res = diagnose_evidence(base, fams, n_boot=60)
+    d = res.to_dict()
+    first = d["candidates"][0]
+    assert first["name"] == "A" and first["kind"] == "effect" and first["effect"] == "A"
+    assert first["parameters"]["x"] == pytest.approx(1.0, abs=0.02)
+    assert first["explained"] > 0.9 and first["held_out_explained"] > 0.9
+    assert first["plausible"] and first["significant"]
+    assert d["verdict"] == "cause"
+    assert 0.0 <= d["noise_floor"] < 0.5
+    assert d["candidates"][1]["held_out_explained"] < 0.2
+
+
+def test_scatter_alone_gives_no_cause():
+    base, fams = _setup(0.0)
+    res = diagnose_evidence(base, fams, n_boot=60)
+    assert res.extra["verdict"] == "none"
+    assert "no candidate explains the residual" in res.note
+    assert res.extra["unexplained"]  # what stays unexplained is shown
+    assert {"quantity", "zone", "position"} <= set(res.extra["unexplained"][0])
+
+
+def test_cause_outside_the_candidates_is_not_claimed():
+    # the residual is along C, which no candidate produces
+    base, fams = _setup(0.0, extra=1.0)
+    res = diagnose_evidence(base, fams, n_boot=60)
+    assert res.extra["verdict"] in ("none", "uncertain")
+    assert all(c.held_out_explained < 0.5 for c in res.candidates)
+
+
+def test_candidates_that_explain_alike_are_uncertain_with_advice():
+    base, fams = _setup(1.0)
+    # A2 acts like A except in one component
+    A2 = dict(A)
+    A2[("Q_max", 3, "p2")] += 1.5
+    fams.append(CandidateFamily("parameter", "model.k2", "k2", [0.0, 2.0],
+                                [_evidence(lambda q, z, p, v=v: A[(q, z, p)] - v * A2[(q, z, p)], like=base)[0]
+                                 for v in (0.0, 2.0)], (0.0, 2.0), reference=1.0, unit="N/m",
+                                title="test stiffness"))
+    res = diagnose_evidence(base, fams, n_boot=40)
+    names = [c.name for c in res.candidates[:2]]
+    assert set(names) == {"A", "model.k2"}
+    assert res.extra["verdict"] == "uncertain" and not res.separable
+    alike = res.extra["alike"][0]
+    assert alike["evidence"][0]["component"] == "Q_max zone 3 p2"
+    assert alike["evidence"][0]["zone"] == 3 and alike["evidence"][0]["quantity"] == "Q_max"
+    assert "zone 3" in alike["advice"]
+    k2 = next(c for c in res.candidates if c.name == "model.k2")
+    assert k2.kind == "parameter" and "of the model's value" in k2.summary
+    assert any("explains alike" in f for f in k2.flags)
+
+
+def test_implausible_fit_is_flagged_and_not_claimed():
+    base, fams = _setup(1.0)
+    fams[0].plausible = (0.0, 0.5)
+    fams[0].plausible_source = "toy range"
+    res = diagnose_evidence(base, fams, n_boot=30)
+    first = res.candidates[0]
+    assert first.name == "A" and not first.plausible
+    assert any("plausible range" in f and "compensating" in f and "toy range" in f for f in first.flags)
+    assert res.extra["verdict"] == "uncertain"
+
+
+def test_plausibility_flags_at_bound_and_inside():
+    ok, flags = plausibility_flags("model.c", 5.0, bounds=(1.0, 10.0), plausible=(2.0, 8.0))
+    assert ok and flags == []
+    ok, flags = plausibility_flags("model.c", 10.0, bounds=(1.0, 10.0), plausible=None)
+    assert not ok and "bound" in flags[0]
+
+
+def test_component_parts():
+    assert component_parts("Y_qst zone 4 w1L", "Y_qst") == {"quantity": "Y_qst", "zone": 4, "position": "w1L",
+                                                            "channel": None, "band": None}
+    c = component_parts("psd az_cb_b1 5-10 Hz", "psd az")
+    assert c["channel"] == "az_cb_b1" and c["band"] == "5-10 Hz" and c["quantity"] == "psd az"
+
+
+def test_linearised_parameter_candidate_extrapolates_over_its_bounds():
+    # the truth is at 0.3 × the model value; the sensitivity simulated at 0.5 × only
+    base, *_ = _evidence(lambda q, z, p: np.log(1 / 0.3) * B[(q, z, p)], scale=0.2)
+    ev = [_evidence(lambda q, z, p, v=v: np.log(v / 0.3) * B[(q, z, p)], like=base, scale=0.2)[0] for v in (1.0, 0.5)]
+    fam = CandidateFamily("parameter", "model.c", "c", [1.0, 0.5], ev, (0.1, 4.0), log=True, extrapolate=True,
+                          reference=1.0, unit="N*s/m", title="damping")
+    res = diagnose_evidence(base, [fam], n_boot=30)
+    c = res.candidates[0]
+    assert c.fitted == pytest.approx(0.3, rel=0.03)
+    assert "30 % of the model's value" in c.summary
+    assert c.parameters == {"c": pytest.approx(0.3, rel=0.03)}
+
+
+def test_closed_form_segment_minimum_matches_a_fine_grid():
+    from railval.core.diagnosis import _Curve, _fit, _min_cost
+
+    rng = np.random.default_rng(3)
+    base, *_ = _evidence(lambda q, z, p: A[(q, z, p)])
+    ev = [base, base, base]
+    for extrapolate, log in ((False, False), (True, True)):
+        fam = CandidateFamily("parameter", "model.k", "k", [1.0, 0.4, 2.0], ev, (0.1, 4.0), log=log,
+                              extrapolate=extrapolate)
+        curve = _Curve(fam, n_fine=20001)
+        P = rng.normal(size=(5, 3, 7))
+        w = rng.uniform(0.5, 1.5, 7)
+        exact = _min_cost(curve, P, w)
+        for b in range(5):
+            _, grid, _ = _fit(curve, P[b], w)
+            assert exact[b] <= grid + 1e-12
+            assert exact[b] == pytest.approx(grid, rel=1e-5, abs=1e-9)

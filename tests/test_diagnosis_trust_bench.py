@@ -1,0 +1,117 @@
+"""The fast subset of the diagnosis trust bench (app/bench/bench_diagnosis_trust.py): one case
+per class, measurements from a structurally different truth model (finer integration step,
+nuisances), a restricted candidate list so that it fits in CI; plus the calibration split,
+its flags and the in-sample marking through the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from railval.app.bench.bench_diagnosis_trust import CASES, run_case, summarise
+from railval.db.engine import connect
+
+#: a few candidates: the right one of classes (a)/(b), wrong effects and wrong parameters
+CANDIDATES = ["friction_damping", "conicity", "lateral_bumpstop", "model.c_secondary_z", "model.k_secondary_y"]
+
+
+@pytest.fixture(scope="module")
+def database(tmp_path_factory):
+    db = connect(f"sqlite:///{tmp_path_factory.mktemp('trust') / 'trust.db'}")
+    db.init()
+    yield db
+    db.dispose()
+
+
+def _case(klass, label):
+    return next(c for c in CASES[klass] if c[0] == label)
+
+
+def test_class_a_library_effect_is_claimed(database):
+    label, kw, truth = _case("a", "friction_damping 2.2 kN")
+    rec = run_case(database, "ta", "a", label, kw, truth, candidates=CANDIDATES)
+    d = rec["diagnosis"]
+    assert rec["top"] == "friction_damping" and rec["right"]
+    assert d["verdict"] == "cause"
+    first = d["candidates"][0]
+    assert first["kind"] == "effect" and first["effect"] == "friction_damping"
+    assert first["held_out_explained"] > d["noise_floor"] and first["plausible"]
+    assert 1.6 < first["parameters"]["force_kN"] < 2.8
+    assert {"kind", "name", "held_out_explained", "plausible", "flags"} <= set(first)
+
+
+def test_class_b_parameter_error_is_diagnosed_calibrated_on_a_split_and_flagged_in_sample(database, tmp_path, capsys):
+    from railval.app.cli import main
+    from railval.app.services.calibration import calibrate
+
+    label, kw, truth = _case("b", "secondary vertical damping x0.6")
+    rec = run_case(database, "tb", "b", label, kw, truth, candidates=CANDIDATES)
+    d = rec["diagnosis"]
+    assert rec["top"] == "model.c_secondary_z", d["note"]
+    first = d["candidates"][0]
+    assert first["kind"] == "parameter" and "of the model's value" in first["summary"]
+    assert 0.35 < first["fitted"] / first["reference"] < 0.85
+    assert "calibrate" in d["next"]["command"] and "model.c_secondary_z" in d["next"]["command"]
+    # calibrate the parameter candidate by its diagnosis name on a zone-stratified split
+    cal = calibrate(database, "tb", "baseline", ["model.c_secondary_z"], "tb+c", split=True, popsize=2, maxiter=1,
+                    polish_maxfev=2, start={"model": {"c_secondary_z": first["fitted"]}})
+    cd = cal.to_dict()
+    assert len(cd["held_out_sections"]) == 4 and len(cd["fit_sections"]) == 8
+    assert not cd["in_sample"] and isinstance(cd["plausible"], bool) and isinstance(cd["flags"], list)
+    assert cd["next"]["command"] == "railval diagnose tb --config tb+c"
+    step = cd["lineage"][-1]
+    assert step["held_out"]["parent_max_error"] is not None and step["held_out"]["improvement"] is not None
+    # validate --json marks the verdict in-sample (the child was fitted on 8 of the sections)
+    url = database.url
+    main(["--db", url, "validate", "tb", "--config", "tb+c", "--boot", "20", "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["in_sample"] is True and doc["info"]["held_out_sections"] == sorted(cd["held_out_sections"])
+    main(["--db", url, "validate", "tb", "--config", "baseline", "--boot", "20", "--json"])
+    assert json.loads(capsys.readouterr().out)["in_sample"] is False
+    # the report and the dashboard say so too
+    from railval.app.pages.dashboard import in_sample_note
+    from railval.app.report import build_report
+    from railval.app.state import Backend
+
+    backend = Backend(database)
+    assert "In-sample" in build_report(backend, "tb", "tb+c", worst_cases=1).html
+    assert "In-sample" not in build_report(backend, "tb", "baseline", worst_cases=1).html
+    summary = {"raw": backend.validation("tb", "tb+c").to_dict()}
+    assert "in-sample: tb+c was calibrated on 8 of these sections" in in_sample_note(summary)
+
+
+def test_class_c_cause_outside_the_library_is_not_claimed(database):
+    label, kw, truth = _case("c", "gain of sensor ay_cb_b1 x1.4")
+    rec = run_case(database, "tc", "c", label, kw, truth, candidates=CANDIDATES)
+    assert rec["verdict"] in ("none", "uncertain"), rec["diagnosis"]["note"]
+
+
+def test_class_d_nothing_gives_no_cause(database):
+    label, kw, truth = _case("d", "nothing (seed 11)")
+    rec = run_case(database, "td", "d", label, kw, truth, candidates=CANDIDATES)
+    d = rec["diagnosis"]
+    assert rec["verdict"] in ("none", "uncertain"), d["note"]
+    s = summarise([rec])
+    assert s["d"]["none_or_uncertain"] == 1.0 and s["confident_wrong"] == 0.0
+
+
+def test_calibration_split_choices_and_errors():
+    from types import SimpleNamespace
+
+    from railval.app.services.calibration import _calibration_split
+    from railval.core.errors import InvalidParameter
+
+    ctx = SimpleNamespace(campaign="c", sections=[SimpleNamespace(id=f"S{i:02d}", zone=1 + i // 3) for i in range(12)])
+    fit, held = _calibration_split(ctx, None, None, False)
+    assert len(fit) == 12 and held == []
+    fit, held = _calibration_split(ctx, None, None, True)
+    assert len(held) == 4 and sorted({1 + int(h[1:]) // 3 for h in held}) == [1, 2, 3, 4]  # one per zone
+    fit, held = _calibration_split(ctx, None, ["S01", "S05"], False)
+    assert held == ["S01", "S05"] and len(fit) == 10
+    fit, held = _calibration_split(ctx, ["S00", "S03"], None, False)
+    assert fit == ["S00", "S03"] and len(held) == 10
+    with pytest.raises(InvalidParameter, match="S99"):
+        _calibration_split(ctx, ["S99"], None, False)
+    with pytest.raises(InvalidParameter, match="only one"):
+        _calibration_split(ctx, ["S00"], ["S01"], False)

@@ -1,0 +1,244 @@
+"""Review workshops end to end below the browser: creation (plot set, one scaling per kind,
+deterministic images with stored SHA-256), answers (idempotent), CSV import (bad input
+leaves nothing stored) and export, analysis, the CLI contracts."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+
+import pytest
+from railval.app.cli import main as cli
+from railval.app.services import workshops as ws
+from railval.core.errors import InvalidParameter
+from railval.core.workshop import PLOT_KINDS
+from railval.db import workshops as wsdb
+from railval.db.models import AppUser, WorkshopAnswer, WorkshopReviewer
+from sqlalchemy import func, select
+
+KINDS = ["Y_time", "ay_cb_time", "ay_cb_psd"]
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory):
+    """A demo database with one workshop (2 sections × 2 configurations × 3 kinds, a share
+    with automatic scaling)."""
+    from tests.browser_support import demo_database
+
+    folder = tmp_path_factory.mktemp("ws")
+    db = demo_database(folder, n_configs=2)
+    summary = ws.create(db, "W", "demo", sections=["S01", "S05"], kinds=KINDS, repeats=0.2,
+                        auto_share=0.25, seed=3)
+    from railval.db import users
+
+    with db.session() as s:  # the CLI's acting user once the database has users
+        users.create_user(s, "orga", password="organiser-pass", roles=["organiser"])
+        users.create_user(s, "revx", roles=["reviewer"])
+    yield db, summary, folder
+    db.dispose()
+
+
+def _count(db, model) -> int:
+    with db.session() as s:
+        return s.scalar(select(func.count()).select_from(model))
+
+
+def test_plan_counts_before_creating(made):
+    db, summary, _ = made
+    with db.session() as s:
+        planned = ws.plan(s, "demo", None, ["S01", "S05"], KINDS)
+        assert len(planned) == summary["fixed_plots"] == 2 * 2 * (2 + 2 + 2)
+        with pytest.raises(InvalidParameter, match="unknown plot kind"):
+            ws.plan(s, "demo", None, None, ["Y_time", "wobble"])
+        with pytest.raises(InvalidParameter, match="unknown section"):
+            ws.plan(s, "demo", None, ["S99"], None)
+
+
+def test_plots_contract_and_one_scaling_per_kind(made):
+    db, _, _ = made
+    with db.session() as s:
+        doc = ws.plots_document(s, "W")
+        w = wsdb.get_workshop(s, "W")
+        rows = wsdb.plots(s, w)
+        for p in doc["plots"]:
+            assert {"id", "kind", "section", "configuration", "channel", "deviation",
+                    "image_sha256"} <= set(p)
+            img, sha = wsdb.plot_image(s, w.id, p["id"])
+            assert hashlib.sha256(img).hexdigest() == sha == p["image_sha256"]
+            assert img[:8] == b"\x89PNG\r\n\x1a\n"
+        fixed = [r for r in rows if r.scaling == "fixed"]
+        auto = [r for r in rows if r.scaling == "auto"]
+        assert len(auto) == round(0.25 * len(fixed)) and all(a.twin_id for a in auto)
+        for kind in KINDS:
+            scales = {json.dumps(r.render["scale"], sort_keys=True) for r in fixed if r.kind == kind}
+            assert len(scales) == 1, kind
+            assert json.loads(scales.pop()) == w.scales[kind]
+            styles = {json.dumps(r.render["style"], sort_keys=True) for r in rows if r.kind == kind}
+            assert len(styles) == 1
+        # objective values: EN signals have a deviation, PSDs take their signal's
+        by = {(r.kind, r.section, r.configuration, r.channel.split("_")[-1]): r for r in fixed}
+        for (kind, sec, cfg, pos), r in by.items():
+            assert r.deviation is not None and r.deviation >= 0
+            if kind == "ay_cb_psd":
+                assert r.deviation == by[("ay_cb_time", sec, cfg, pos)].deviation
+            if kind.endswith("_time"):
+                assert r.sg_c is not None and r.sg_c >= 0
+
+
+def test_rendering_is_deterministic(made):
+    import numpy as np
+    from railval.app.services.workshop_render import render_png
+    from railval.core.workshop import Extent, kind_scale
+
+    x = np.linspace(0, 100, 500)
+    y = np.sin(x / 7)
+    sc = kind_scale("time", [Extent(0, 100, -1, 1)])
+    a = render_png(x, y, x, 0.9 * y, sc, title="t", x_label="x", y_label="y")
+    b = render_png(x, y, x, 0.9 * y, sc, title="t", x_label="x", y_label="y")
+    assert a == b and b"Software" not in a and b"Creation" not in a
+
+
+def test_answers_are_idempotent_and_refused_when_closed(made):
+    db, _, _ = made
+    with db.session() as s:
+        w = wsdb.get_workshop(s, "W")
+        wsdb.invite(s, w, "idem", seed=5)
+    with db.session() as s:
+        r = s.scalar(select(WorkshopReviewer).join(AppUser).where(AppUser.username == "idem"))
+        token = wsdb.invite(s, wsdb.get_workshop(s, "W"), "idem")
+    with db.session() as s:
+        ctx = wsdb.reviewer_by_token(s, token)
+        assert ctx.reviewer_id == r.id and len(ctx.sequence) > 0
+        assert wsdb.record_answer(s, ctx, 0, True, seconds=3.0, submission="a1") == "new"
+        assert wsdb.record_answer(s, ctx, 0, True, seconds=3.0, submission="a1") == "repeated"
+        assert wsdb.record_answer(s, ctx, 0, False, seconds=2.0, submission="a2") == "changed"
+        with pytest.raises(InvalidParameter, match="outside"):
+            wsdb.record_answer(s, ctx, 10_000, True, seconds=1.0)
+    with db.session() as s:
+        a = s.scalars(select(WorkshopAnswer).where(WorkshopAnswer.reviewer_id == r.id)).all()
+        assert len(a) == 1 and a[0].answer is False and a[0].seconds == 5.0 and a[0].changes == 1
+        wsdb.set_status(s, wsdb.get_workshop(s, "W"), "closed")
+    with db.session() as s:
+        ctx = wsdb.reviewer_by_token(s, token)
+        with pytest.raises(wsdb.WorkshopClosed):
+            wsdb.record_answer(s, ctx, 1, True, seconds=1.0)
+        wsdb.set_status(s, wsdb.get_workshop(s, "W"), "open")
+    with db.session() as s:
+        assert wsdb.reviewer_by_token(s, "not-a-token-" + "x" * 30) is None
+
+
+def _write(path, rows, header=("reviewer", "plot", "answer", "seconds", "comment")):
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(rows)
+    return path
+
+
+@pytest.mark.parametrize(("rows", "message"), [
+    ([("imp1", "{p0}", "yes", "3", ""), ("imp1", "999999", "no", "2", "")],
+     r"line 3, column plot: plot 999999 is not part of workshop"),
+    ([("imp1", "{p0}", "yes", "3", ""), ("imp1", "{p1}", "maybe", "2", "")],
+     r"line 3, column answer: 'maybe'; answer must be yes or no"),
+    ([("imp1", "{p0}", "yes", "3", ""), ("imp2", "{p1}", "no", "2", ""), ("imp1", "{p0}", "no", "1", "")],
+     r"line 4, column plot: duplicate row .* already on line 2"),
+    ([("imp1", "{p0}", "yes", "-3", "")], r"line 2, column seconds"),
+    ([("imp1", "abc", "yes", "3", "")], r"line 2, column plot: 'abc' is not a plot id"),
+    ([("", "{p0}", "yes", "3", "")], r"line 2, column reviewer: empty"),
+    ([("bad name!", "{p0}", "yes", "3", "")], r"line 2, column reviewer: .*user name"),
+])
+def test_import_bad_rows_store_nothing(made, tmp_path, rows, message):
+    db, _, _ = made
+    with db.session() as s:
+        ids = [p.id for p in wsdb.plots(s, wsdb.get_workshop(s, "W"))]
+    rows = [tuple(c.format(p0=ids[0], p1=ids[1]) for c in r) for r in rows]
+    path = _write(tmp_path / "answers.csv", rows)
+    before = (_count(db, WorkshopAnswer), _count(db, WorkshopReviewer), _count(db, AppUser))
+    with pytest.raises(InvalidParameter, match=message):
+        ws.import_answers(db, "W", path)
+    assert (_count(db, WorkshopAnswer), _count(db, WorkshopReviewer), _count(db, AppUser)) == before
+
+
+def test_import_bad_header_and_cli_error(made, tmp_path, capsys):
+    db, _, _ = made
+    path = _write(tmp_path / "a.csv", [("x", "1", "yes", "1")], header=("reviewer", "plot", "answer", "seconds"))
+    with pytest.raises(InvalidParameter, match="line 1: missing column"):
+        ws.import_answers(db, "W", path)
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "import-answers", "W", str(path)]) == 2
+    assert "missing column(s) comment" in capsys.readouterr().err
+
+
+def test_import_export_and_analyse_round_trip(made, tmp_path, capsys):
+    db, _, _ = made
+    from railval.core.review import simulate_answers  # noqa: F401 - the statistics core is present
+
+    with db.session() as s:
+        plots = [p for p in wsdb.plots(s, wsdb.get_workshop(s, "W")) if p.scaling == "fixed"]
+    rows = []
+    for i, name in enumerate(["paper1", "paper2", "paper3", "paper4"]):
+        for p in plots:
+            yes = (p.deviation or 0) < 0.3 + 0.3 * i
+            rows.append((name, str(p.id), "yes" if yes else "no", f"{4 + i}", "on paper, \"quoted\""))
+    path = _write(tmp_path / "paper.csv", rows)
+    before_users = _count(db, AppUser)
+    out = ws.import_answers(db, "W", path)
+    assert out == {"answers": len(rows), "reviewers": 4, "new_users": 4}
+    assert _count(db, AppUser) == before_users + 4
+    with db.session() as s:
+        u = s.scalar(select(AppUser).where(AppUser.username == "paper1"))
+        assert u.password_hash is None and u.role_names == ["reviewer"]
+    # importing the same file again is refused (already answered), nothing stored
+    n = _count(db, WorkshopAnswer)
+    with pytest.raises(InvalidParameter, match="line 2, column plot: reviewer 'paper1' has already"):
+        ws.import_answers(db, "W", path)
+    assert _count(db, WorkshopAnswer) == n
+    exp = tmp_path / "export.csv"
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "export", "W", str(exp)]) == 0
+    got = list(csv.DictReader(exp.open(encoding="utf-8")))
+    assert set(ws.EXPORT_COLUMNS) == set(got[0])
+    paper = [r for r in got if r["reviewer"].startswith("paper")]
+    assert len(paper) == len(rows)
+    assert {(r["reviewer"], r["plot"], r["answer"], float(r["seconds"]), r["comment"]) for r in paper} == \
+        {(a, b, c, float(d), e) for a, b, c, d, e in rows}
+    assert all(r["answered_at"].endswith("Z") and r["repeat"] == "false" and r["scaling"] == "fixed"
+               for r in paper)
+    capsys.readouterr()
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "analyse", "W", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert {"table1", "reviewers", "agreement", "threshold", "scaling_effect"} <= set(doc)
+    assert {r["kind"] for r in doc["table1"]} == set(KINDS)
+    assert {"fleiss_kappa", "krippendorff_alpha", "gwet_ac1"} <= set(doc["agreement"])
+    shares = {r["reviewer"]: r["yes_share"] for r in doc["reviewers"]}
+    assert shares["paper1"] <= shares["paper2"] <= shares["paper3"] <= shares["paper4"]
+    assert "deviation_at_50" in doc["threshold"] and "ci" in doc["threshold"]
+
+
+def test_cli_create_dry_run_plots_invite_status(made, capsys):
+    db, _, _ = made
+    # a reviewer may not run organiser verbs
+    assert cli(["--db", db.url, "--as", "cli-rev0", "workshop", "status", "W"]) == 2
+    assert "no such user" in capsys.readouterr().err
+    for verb in (["analyse", "W", "--json"], ["invite", "W", "--reviewer", "x"], ["close", "W"]):
+        assert cli(["--db", db.url, "--as", "revx", "workshop", *verb]) == 2
+        assert "revx (reviewer) may not" in capsys.readouterr().err
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "create", "X", "--campaign", "demo", "--sections", "S01",
+                "--configurations", "baseline", "--kinds", "Y_time", "ay_bg_time", "--dry-run", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    # the demo campaign records no bogie frame channels: only the 2 Y plots (w1L, w1R)
+    assert doc["plots"] == 2 and doc["by_kind"] == {"Y_time": 2} and doc["stored"] is False
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "plots", "W", "--json"]) == 0
+    plots = json.loads(capsys.readouterr().out)["plots"]
+    assert all(PLOT_KINDS[p["kind"]] for p in plots)
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "invite", "W", "--reviewer", "cli-rev",
+                "--base-url", "http://h:1"]) == 0
+    link = capsys.readouterr().out.strip()
+    assert link.startswith("http://h:1/review/") and len(link) > 40
+    with db.session() as s:
+        ctx = wsdb.reviewer_by_token(s, link.rsplit("/", 1)[1])
+        assert ctx.username == "cli-rev"
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "status", "W", "--json"]) == 0
+    st = json.loads(capsys.readouterr().out)
+    assert "cli-rev" in {r["reviewer"] for r in st["reviewers"]}
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "plots", "nope", "--json"]) == 2
+    assert "workshop 'nope' not found" in capsys.readouterr().err
