@@ -371,12 +371,24 @@ class Candidate:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Candidate:
         """Inverse of :meth:`to_dict` with ``with_signature=True``."""
-        return cls(effect=d["effect"], explained=float(d["explained"]),
-                   parameters={k: float(v) for k, v in d["parameters"].items()},
-                   fixes=list(d["fixes"]), worsens=list(d["worsens"]), explanation=d["explanation"],
-                   signature=Pattern.from_dict(d["signature"]), residual_after=float(d["residual_after"]),
-                   group_change={g: (float(v["before"]), float(v["after"]))
-                                 for g, v in d.get("quantities", {}).items()})
+        def num(v: Any) -> float:
+            return float("nan") if v is None else float(v)  # NaN is stored as null
+
+        base = dict(effect=d["effect"], explained=num(d["explained"]),
+                    parameters={k: num(v) for k, v in d["parameters"].items()},
+                    fixes=list(d["fixes"]), worsens=list(d["worsens"]), explanation=d["explanation"],
+                    signature=Pattern.from_dict(d["signature"]), residual_after=num(d["residual_after"]),
+                    group_change={g: (num(v["before"]), num(v["after"]))
+                                  for g, v in d.get("quantities", {}).items()})
+        if "held_out_explained" not in d:
+            return cls(**base)
+        ci = d.get("explained_ci") or (0.0, 0.0)
+        return TrustedCandidate(
+            **base, kind=d.get("kind", "effect"), name=d.get("name", d["effect"]),
+            held_out_explained=num(d["held_out_explained"]), explained_ci=(num(ci[0]), num(ci[1])),
+            significant=bool(d.get("significant")), plausible=bool(d.get("plausible", True)),
+            at_bound=bool(d.get("at_bound")), flags=list(d.get("flags") or []), summary=d.get("summary", ""),
+            reference=d.get("reference"), fitted=num(d.get("fitted")), parameter=d.get("parameter", ""))
 
 
 @dataclass
