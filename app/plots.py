@@ -42,9 +42,10 @@ from railval.app.scales import (
     MEASURED_COLOR,
     PASS_COLOR,
     SIM_COLORS,
-    bar_top,
     downsample_xy,
     nice_limits,
+    norm_axis_top,
+    norm_ticks,
     passes,
     unit_label,
 )
@@ -254,10 +255,16 @@ def _bars(rows: list[dict[str, Any]], key: str, ci_key: str | None, title: str,
     if signed:
         layers.append(hv.HLine(-1.0).opts(color=LIMIT_COLOR, line_dash="dashed", line_width=1.5))
         layers.append(hv.HLine(0.0).opts(color="#888888", line_width=0.8))
-    top = bar_top(values, cis)  # bars and their intervals stay inside
+    extent = [abs(v) for v in values if math.isfinite(v)]
+    extent += [abs(float(b)) for c in cis if isinstance(c, (list, tuple)) for b in c
+               if b is not None and math.isfinite(float(b))]
+    # one axis for every configuration (±2 like the heat map), wider only when a bar or its
+    # interval exceeds it; bars and intervals stay inside
+    top = norm_axis_top(extent)
     ylim = (-top, top) if signed else (0.0, top)
     overlay = hv.Overlay(layers).opts(
         title=title, responsive=True, height=height, fontsize=FONTS, ylim=ylim,
+        yticks=norm_ticks(top, signed),
         xrotation=45, show_grid=True, show_legend=False,
     )
     return overlay, bars

@@ -43,9 +43,8 @@ from railval.app.scales import (
 from railval.app.svg_charts import svg_bars, svg_lines
 from railval.core.diagnosis import where_grid
 from railval.core.errors import RailvalError
-from railval.core.filters import filtfilt_rows
-from railval.core.quantities import channel_for
-from railval.core.types import channel_kind
+from railval.core.en14363 import quantity_trace
+from railval.core.quantities import QUANTITIES
 
 CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "google-chrome")
 #: flags that let Debian's Chromium run headless in containers and CI
@@ -384,25 +383,38 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
     secs = {s.id: s for s in ov.sections}
     out = []
     for r in order.itertuples(index=False):
-        ch = channel_for(r.quantity, r.position, channels)
-        if ch is None:
+        q = QUANTITIES.get(r.quantity)
+        sec = secs.get(r.section)
+        if q is None or sec is None or r.position not in q.positions():
             continue
-        entry = channel_kind(ch)
-        fkind, flabel = (entry.en_filter, entry.filter_label) if entry else ("lowpass", "low-pass 20 Hz")
-        traces = []
+        names = [c for c in q.channels(r.position) if c in channels]
+        if len(names) < len(q.channels(r.position)):
+            continue
+        traces, marks, trace = [], [], None
         for label, cfg, color in (("measurement", None, MEASURED_COLOR),
                                   (configuration, configuration, SIM_COLORS[0])):
-            ss = backend.signals(campaign, cfg, r.section, [ch])
-            y = filtfilt_rows(np.asarray(ss.channels[ch], float)[None, :], float(ss.fs), fkind)[0]
-            x, y = downsample_xy(np.asarray(ss.distance_m, float), y, n_out=SVG_POINTS)
-            traces.append((label, x, y, color))
-        sec = secs.get(r.section)
-        unit = unit_label(entry.unit if entry else "")
+            ss = backend.signals(campaign, cfg, r.section, names)
+            trace = quantity_trace(ss, sec, r.quantity, r.position)
+            if trace.sliding_means is not None:  # the 2 m sliding means are what is evaluated
+                x, y = trace.sliding_centres_m, trace.sliding_means
+            else:
+                x, y = downsample_xy(np.asarray(trace.distance_m, float), np.asarray(trace.values, float),
+                                     n_out=SVG_POINTS)
+            traces.append((label, np.asarray(x, float), np.asarray(y, float), color))
+            for stat, v in trace.marks.items():
+                marks.append((f"{label}: {stat} = {v:.4g}", v, color))
+        unit = unit_label(q.unit if q.unit != "-" else "")
+        short = {"YQ": f"Y/Q {r.position}", "SumY": f"ΣY {r.position}"}.get(q.signal, names[0])
+        sliding = trace.sliding_means is not None
         title = (f"{r.quantity} at {r.position}, section {r.section} (zone {r.zone}): "
                  f"D_v/limit = {r.D_norm:+.2f}")
+        caption = (f"Plotted: {trace.signal_label}{', 2 m sliding mean every 0.5 m' if sliding else ''}; "
+                   f"statistic: {q.processing_text} over the evaluated range (shaded).")
         out.append("<div class='worst'>" + svg_lines(
-            traces, title=title, xlabel="distance (m)", ylabel=f"{ch} ({unit}), {flabel}",
-            shade=(sec.eval_start_m, sec.eval_end_m) if sec else None) + "</div>")
+            traces, title=title, xlabel="distance (m)",
+            ylabel=f"{short}{' (2 m mean)' if sliding else ''}{f' ({unit})' if unit else ' (–)'}",
+            shade=(sec.eval_start_m, sec.eval_end_m), marks=marks)
+            + f"<p class='note'>{_esc(caption)}</p></div>")
     return out
 
 

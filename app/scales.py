@@ -53,6 +53,31 @@ def nice_ticks(lo: float, hi: float) -> list[float]:
     return [k * step for k in range(first, math.floor(hi / step + 1e-9) + 1)]
 
 
+#: half-height of the normalised-value axes (mean / limit, std / limit) of the dashboard and the
+#: report, the same as the "where it fails" heat map's colour scale: every configuration is
+#: drawn on the same axis so they compare at a glance (docs/design.md §5)
+NORM_AXIS = 2.0
+
+
+def norm_axis_top(values, base: float = NORM_AXIS) -> float:
+    """Upper end of a normalised-value axis: ``base`` unless a finite |value| (bars and their
+    interval ends) exceeds it, then the next nice value above it with a 5 % margin, so a
+    bar or error bar never touches the edge."""
+    finite = [abs(float(v)) for v in values if v is not None and math.isfinite(float(v))]
+    m = max(finite, default=0.0)
+    if m <= base:
+        return float(base)
+    return float(nice_limits(0.0, m * 1.05)[1])
+
+
+def norm_ticks(top: float, signed: bool) -> list[float]:
+    """Ticks of a normalised-value axis [−top or 0, top]: nice steps plus the limit 1.0 (and
+    −1.0 when signed), always labelled."""
+    lo = -top if signed else 0.0
+    ticks = {round(t, 9) for t in nice_ticks(lo, top)} | {1.0} | ({-1.0} if signed else set())
+    return sorted(ticks)
+
+
 def unit_label(unit: str) -> str:
     """A stored unit as shown to a reader: ``m/s^2`` → ``m/s²``, ``kN*m/rad`` → ``kN·m/rad``."""
     return unit.replace("m/s^2", "m/s²").replace("*", "·")

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from railval.app.scales import bar_top, nice_limits, nice_ticks, verdict_color
+from railval.app.scales import nice_limits, nice_ticks, norm_axis_top, norm_ticks, verdict_color
 
 
 def _esc(x: Any) -> str:
@@ -23,7 +23,8 @@ def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
     """Vertical bar chart as SVG; bars beyond ±1 red, others green; dashed limit lines."""
     ml, mr, mt, mb = 62, 12, 30, 92
     w, h = width - ml - mr, height - mt - mb
-    top = bar_top(values)
+    ends = [b for c in (intervals or []) if c for b in c]
+    top = norm_axis_top([*values, *ends])  # the dashboard's axis: ±2 unless exceeded
     signed = any(lim < 0 for lim in limits)
     lo = -top if signed else 0.0
 
@@ -33,9 +34,9 @@ def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
     out = [(f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
            f'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">'),
            f'<text x="{width / 2}" y="18" text-anchor="middle" font-size="14" font-weight="bold">{_esc(title)}</text>']
-    for t in np.linspace(lo, top, 5):
+    for t in norm_ticks(top, signed):  # nice steps and the limit 1.0
         out.append(f'<line x1="{ml}" x2="{ml + w}" y1="{y(t):.1f}" y2="{y(t):.1f}" stroke="#e0e0e0"/>'
-                   f'<text x="{ml - 6}" y="{y(t) + 4:.1f}" text-anchor="end">{t:.2f}</text>')
+                   f'<text x="{ml - 6}" y="{y(t) + 4:.1f}" text-anchor="end" class="tick">{t:g}</text>')
     n = max(1, len(labels))
     bw = w / n
     for i, (lab, v) in enumerate(zip(labels, values, strict=True)):
@@ -64,12 +65,19 @@ def svg_bars(labels: list[str], values: list[float], *, title: str, ylabel: str,
 
 def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: str, xlabel: str,
               ylabel: str, shade: tuple[float, float] | None = None, width: int = 760,
-              height: int = 280) -> str:
-    """Line chart as SVG: ``traces`` = [(label, x, y, colour)], first drawn first (beneath)."""
-    ml, mr, mt, mb = 70, 14, 30, 46
+              height: int = 280, marks: list[tuple[str, float, str]] | None = None) -> str:
+    """Line chart as SVG: ``traces`` = [(label, x, y, colour)], first drawn first (beneath);
+    ``marks`` = [(label, y, colour)]: dashed horizontal lines across ``shade`` (the evaluated
+    range) or the whole width, e.g. the evaluated statistic of each side."""
+    marks = [m for m in (marks or []) if math.isfinite(m[1])]
+    # with marks the legend goes below the plot (two columns), clear of the traces
+    legend_rows = math.ceil((len(traces) + len(marks)) / 2) if marks else 0
+    height += 18 * legend_rows + 12 if legend_rows else 0
+    ml, mr, mt, mb = 70, 14, 30, 46 + (18 * legend_rows + 12 if legend_rows else 0)
     w, h = width - ml - mr, height - mt - mb
     xs = np.concatenate([t[1] for t in traces]) if traces else np.array([0.0, 1.0])
-    ys = np.concatenate([t[2] for t in traces]) if traces else np.array([0.0, 1.0])
+    ys = np.concatenate([t[2] for t in traces] + [np.array([m[1] for m in marks])]) if traces \
+        else np.array([0.0, 1.0])
     x0, x1 = nice_limits(float(np.min(xs)), float(np.max(xs)))
     y0, y1 = nice_limits(float(np.min(ys)), float(np.max(ys)))
 
@@ -95,10 +103,26 @@ def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: s
         pts = " ".join(f"{a:.1f},{b:.1f}" for a, b in zip(px(x), py(y), strict=True))
         out.append(f'<polyline fill="none" stroke="{color}" stroke-width="{1.4 if i == 0 else 1.1}" '
                    f'points="{pts}"/>')
-        out.append(f'<rect x="{ml + w - 200}" y="{mt + 6 + 16 * i}" width="14" height="3" fill="{color}"/>'
-                   f'<text x="{ml + w - 180}" y="{mt + 11 + 16 * i}">{_esc(label)}</text>')
+        if marks:
+            lx, ly = ml + (i % 2) * w / 2, mt + h + 52 + 18 * (i // 2)
+            out.append(f'<rect x="{lx:.1f}" y="{ly - 5}" width="14" height="3" fill="{color}"/>'
+                       f'<text x="{lx + 20:.1f}" y="{ly}">{_esc(label)}</text>')
+        else:
+            out.append(f'<rect x="{ml + w - 200}" y="{mt + 6 + 16 * i}" width="14" height="3" fill="{color}"/>'
+                       f'<text x="{ml + w - 180}" y="{mt + 11 + 16 * i}">{_esc(label)}</text>')
+    for j, (label, yv, color) in enumerate(marks):
+        a, b = (max(shade[0], x0), min(shade[1], x1)) if shade is not None else (x0, x1)
+        out.append(f'<line class="mark" x1="{px(a):.1f}" x2="{px(b):.1f}" y1="{py(yv):.1f}" y2="{py(yv):.1f}" '
+                   f'stroke="{color}" stroke-width="1.6" stroke-dasharray="7,3"><title>{_esc(label)}</title></line>')
+        k = len(traces) + j
+        lx, ly = ml + (k % 2) * w / 2, mt + h + 52 + 18 * (k // 2)
+        out.append(f'<line x1="{lx:.1f}" x2="{lx + 14:.1f}" y1="{ly - 4}" y2="{ly - 4}" '
+                   f'stroke="{color}" stroke-width="1.6" stroke-dasharray="4,2"/>'
+                   f'<text x="{lx + 20:.1f}" y="{ly}">{_esc(label)}</text>')
     out.append(f'<rect x="{ml}" y="{mt}" width="{w}" height="{h}" fill="none" stroke="#000"/>')
-    out.append(f'<text x="{ml + w / 2}" y="{height - 8}" text-anchor="middle">{_esc(xlabel)}</text>')
+    out.append(f'<text x="{ml + w / 2}" y="{mt + h + 32}" text-anchor="middle">{_esc(xlabel)}</text>')
     out.append(f'<text transform="translate(16,{mt + h / 2}) rotate(-90)" text-anchor="middle">{_esc(ylabel)}</text>')
     out.append("</svg>")
     return "".join(out)
+
+

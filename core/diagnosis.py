@@ -235,6 +235,11 @@ class Pattern:
             d["components"] = [c.to_dict() for c in self.components]
         return d
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Pattern:
+        """Inverse of :meth:`to_dict` (a stored run read back)."""
+        return cls(list(d["labels"]), list(d["groups"]), np.asarray(d["values"], dtype=float))
+
 
 def pattern_from_pairs(pairs: Iterable[Mapping[str, Any]], *, value_key: str = "norm") -> Pattern:
     """Aggregate per-pair normalised differences into the quantity × zone × position pattern.
@@ -363,6 +368,28 @@ class Candidate:
             d["signature"] = self.signature.to_dict()
         return d
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Candidate:
+        """Inverse of :meth:`to_dict` with ``with_signature=True``."""
+        def num(v: Any) -> float:
+            return float("nan") if v is None else float(v)  # NaN is stored as null
+
+        base = dict(effect=d["effect"], explained=num(d["explained"]),
+                    parameters={k: num(v) for k, v in d["parameters"].items()},
+                    fixes=list(d["fixes"]), worsens=list(d["worsens"]), explanation=d["explanation"],
+                    signature=Pattern.from_dict(d["signature"]), residual_after=num(d["residual_after"]),
+                    group_change={g: (num(v["before"]), num(v["after"]))
+                                  for g, v in d.get("quantities", {}).items()})
+        if "held_out_explained" not in d:
+            return cls(**base)
+        ci = d.get("explained_ci") or (0.0, 0.0)
+        return TrustedCandidate(
+            **base, kind=d.get("kind", "effect"), name=d.get("name", d["effect"]),
+            held_out_explained=num(d["held_out_explained"]), explained_ci=(num(ci[0]), num(ci[1])),
+            significant=bool(d.get("significant")), plausible=bool(d.get("plausible", True)),
+            at_bound=bool(d.get("at_bound")), flags=list(d.get("flags") or []), summary=d.get("summary", ""),
+            reference=d.get("reference"), fitted=num(d.get("fitted")), parameter=d.get("parameter", ""))
+
 
 @dataclass
 class DiagnosisResult:
@@ -387,6 +414,16 @@ class DiagnosisResult:
              "residual": residual}
         d.update(self.extra)
         return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> DiagnosisResult:
+        """Inverse of :meth:`to_dict` with ``with_signatures=True`` (a stored run read back);
+        the keys beyond the ranked result go to ``extra``."""
+        own = {"candidates", "separable", "evidence", "note", "residual"}
+        return cls(residual=Pattern.from_dict(d["residual"]),
+                   candidates=[Candidate.from_dict(c) for c in d["candidates"]],
+                   separable=bool(d["separable"]), evidence=list(d["evidence"]), note=d.get("note", ""),
+                   extra={k: v for k, v in d.items() if k not in own})
 
     def to_pandas(self):
         import pandas as pd

@@ -517,6 +517,87 @@ def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: f
                 alternative(reading, key, float("nan") if undefined[r] else float(vals[r]))
 
 
+@dataclass
+class QuantityTrace:
+    """The processed signal one EN 14363 quantity is evaluated on, with its statistic.
+
+    ``distance_m``/``values``: the filtered signal of the quantity over the whole section
+    (Y/Q formed sample-wise from the low-pass filtered Y and Q, ΣY = Y_L + Y_R of the
+    low-pass filtered forces, band-pass for accelerations); ``sliding_centres_m``/
+    ``sliding_means``: the 2 m sliding means over the evaluated range where the quantity uses
+    them (else None); ``marks``: the evaluated statistic(s) by name (``"50 % value"``,
+    ``"0.15 % value"``, ``"99.85 % value"``, ``"rms value"``), in the quantity's unit;
+    ``value``: the quantity's value in the section (as :func:`evaluate_section` gives it).
+    """
+
+    quantity: str
+    position: str
+    signal_label: str
+    unit: str
+    distance_m: np.ndarray
+    values: np.ndarray
+    eval_range_m: tuple[float, float]
+    sliding_centres_m: np.ndarray | None
+    sliding_means: np.ndarray | None
+    marks: dict[str, float]
+    value: float
+
+
+def quantity_trace(signalset: SignalSet, section: SectionInfo, quantity: str, position: str, *,
+                   order: int = DEFAULT_ORDER) -> QuantityTrace:
+    """The signal quantity ``quantity`` at ``position`` is evaluated on and its statistic, for
+    plotting what a row of the validation is about (Polach & Böttcher 2014 Table 2; EN 14363).
+
+    Uses this module's processing: :func:`railval.core.filters.filtfilt_rows` over the whole
+    section, the quantity's derivation (Y/Q, ΣY), :func:`sliding_mean_distance` where the
+    quantity uses the 2 m sliding mean, the evaluated range cut by distance and
+    :func:`percentile` / :func:`maxabs` / :func:`rms` as in :func:`evaluate_section`.
+    """
+    if quantity not in QUANTITIES:
+        raise InvalidParameter(f"unknown quantity {quantity!r}; known: {', '.join(QUANTITIES)}")
+    q = QUANTITIES[quantity]
+    names = q.channels(position)
+    missing = [c for c in names if c not in signalset.channels]
+    if missing:
+        raise InvalidSignal(f"section {section.id}: {quantity} at {position} needs channel(s) {missing}")
+    fs = float(signalset.fs)
+    data = np.vstack([np.asarray(signalset.channels[c], dtype=np.float64) for c in names])
+    filt = filtfilt_rows(data, fs, q.filter, order)
+    if q.signal == "YQ":
+        sig = filt[0] / filt[1]
+        label = f"Y/Q {position} ({design(fs, q.filter, order).label}, Y/Q sample-wise)"
+    elif q.signal == "SumY":
+        sig = filt[0] + filt[1]
+        label = f"ΣY {position} = {names[0]} + {names[1]} ({design(fs, q.filter, order).label})"
+    else:
+        sig = filt[0]
+        label = f"{names[0]} ({design(fs, q.filter, order).label})"
+    d = np.asarray(signalset.distance_m, dtype=np.float64)
+    mask = (d >= section.eval_start_m) & (d <= section.eval_end_m)
+    if int(mask.sum()) < 2:
+        raise InvalidSignal(f"section {section.id}: evaluated range {section.eval_start_m}–"
+                            f"{section.eval_end_m} m holds {int(mask.sum())} samples, needs at least 2")
+    centres = means = None
+    src = sig[mask]
+    if q.sliding_mean:
+        centres, means = sliding_mean_distance(sig, d, section.eval_start_m, section.eval_end_m)
+        src = means
+    if q.processing == "rms":
+        value = float(rms(src))
+        marks = {"rms value": value}
+    else:
+        lo, med, hi = (float(v) for v in percentile(src, PERCENTILES))
+        if q.processing == "median":
+            value, marks = med, {"50 % value": med}
+        elif q.processing == "p99.85":
+            value, marks = hi, {"99.85 % value": hi}
+        else:
+            value, marks = float(maxabs(lo, hi)), {"0.15 % value": lo, "99.85 % value": hi}
+    return QuantityTrace(quantity, position, label, q.unit, d, sig,
+                         (float(section.eval_start_m), float(section.eval_end_m)),
+                         centres, means, marks, value)
+
+
 def evaluate_present(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo], *,
                      order: int = DEFAULT_ORDER) -> dict[str, SectionValues]:
     """:func:`evaluate_batch` of the sections of ``sections`` that ``signalsets`` holds

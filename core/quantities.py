@@ -32,6 +32,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from railval.core.errors import InvalidParameter
 from railval.core.types import BODY_POSITIONS, EN_FILTER_LABELS, WHEEL_POSITIONS, channel_kind
 
@@ -215,3 +217,31 @@ def channel_for(quantity: str | None, position: str | None, channels: Sequence[s
             if c in channels:
                 return c
     return channels[0] if channels else None
+
+
+#: signals formed from raw channels that the EN quantities are evaluated on (Table 2):
+#: family → (quantity whose channels form it, how, unit)
+DERIVED_SIGNALS: dict[str, tuple[str, str, str]] = {
+    "YQ": ("YQ_qst", "ratio", "-"),    # Y/Q formed sample-wise from the low-pass filtered Y and Q
+    "SumY": ("SumY_qst", "sum", "kN"),  # ΣY = Y_L + Y_R of a wheelset, low-pass filtered forces
+}
+
+
+def derived_signals(channel_names) -> dict[str, tuple[str, ...]]:
+    """Derived signal name → the raw channels forming it, for the channels present:
+    ``YQ_w1L`` → (``Y_w1L``, ``Q_w1L``), ``SumY_ws1`` → (``Y_w1L``, ``Y_w1R``)."""
+    names = list(channel_names)
+    out: dict[str, tuple[str, ...]] = {}
+    for fam, (qid, _, _) in DERIVED_SIGNALS.items():
+        q = QUANTITIES[qid]
+        for p in q.available_positions(names):
+            out[f"{fam}_{p}"] = tuple(q.channels(p))
+    return out
+
+
+def combine_derived(name: str, rows) -> np.ndarray:
+    """The derived signal ``name`` (:func:`derived_signals`) from its component rows (in the
+    order :func:`derived_signals` gives): Y/Q sample-wise or ΣY = Y_L + Y_R."""
+    fam = name.split("_", 1)[0]
+    how = DERIVED_SIGNALS[fam][1]
+    return rows[0] / rows[1] if how == "ratio" else rows[0] + rows[1]

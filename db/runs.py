@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from typing import Any
 
 from sqlalchemy import select
@@ -28,6 +29,20 @@ def inputs_digest(inputs: Any) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
+def json_safe(value: Any) -> Any:
+    """A copy that every JSON column accepts (PostgreSQL rejects NaN): non-finite floats and
+    numpy scalars become None/plain numbers, tuples lists."""
+    if hasattr(value, "item") and not isinstance(value, (list, tuple, dict)):
+        value = value.item()  # numpy scalar
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    return value
+
+
 def _check_kind(kind: str) -> None:
     if kind not in RUN_KINDS:
         raise ValueError(f"run kind {kind!r} is not one of {', '.join(RUN_KINDS)}")
@@ -36,10 +51,11 @@ def _check_kind(kind: str) -> None:
 def store_run(session: Session, *, campaign_id: int, configuration_id: int, kind: str,
               inputs_sha256: str, settings: dict[str, Any], result: dict[str, Any],
               seconds: float = 0.0, actor: str = "") -> AnalysisRun:
-    """Append one run; returns the stored row (its ``id`` set)."""
+    """Append one run; returns the stored row (its ``id`` set). Non-finite numbers in
+    ``settings``/``result`` are stored as null (:func:`json_safe`)."""
     _check_kind(kind)
     run = AnalysisRun(campaign_id=campaign_id, configuration_id=configuration_id, kind=kind,
-                      inputs_sha256=inputs_sha256, settings=settings, result=result,
+                      inputs_sha256=inputs_sha256, settings=json_safe(settings), result=json_safe(result),
                       seconds=float(seconds), actor=actor)
     session.add(run)
     session.flush()

@@ -9,6 +9,7 @@ import pytest
 from bokeh.models import GlyphRenderer, Span
 
 from railval.app import plots
+from railval.app.scales import norm_axis_top, norm_ticks
 from railval.app.state import CompareData, Trace
 
 
@@ -140,8 +141,8 @@ def test_validation_bars_colour_by_limit_and_limit_lines():
     mean_ov, mean_bars, std_ov, _std_bars = plots.validation_bars(_rows())
     fig = hv.render(mean_ov, backend="bokeh")
     assert _spans(fig) == [-1.0, 0.0, 1.0]  # ±limit and zero
-    # the axis holds the largest bar or interval end (|−1.9|) with 10 % room: ±2.09
-    assert fig.y_range.start == pytest.approx(-2.09) and fig.y_range.end == pytest.approx(2.09)
+    # the fixed axis ±2 (the heat map's scale) holds the largest bar or interval end (|−1.9|)
+    assert fig.y_range.start == pytest.approx(-2.0) and fig.y_range.end == pytest.approx(2.0)
     verdicts = list(mean_bars.dimension_values("verdict"))
     assert verdicts == ["pass", "fail", "fail"]  # |−1.6| > 1; a missing value is not a pass
     fig_s = hv.render(std_ov, backend="bokeh")
@@ -234,3 +235,25 @@ def test_measurement_and_simulation_colours_stay_distinct_in_greyscale():
     assert abs(luminance(SIM_COLORS[0]) - luminance(MEASURED_COLOR)) >= 0.15
     okabe_ito = {"#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "#CC79A7"}
     assert set(SIM_COLORS) <= okabe_ito
+
+
+def test_mean_chart_axis_is_the_same_for_every_configuration():
+    """Configurations compare at a glance: ±2 whatever the values within it (a configuration
+    with |mean/limit| ≤ 0.6 and one reaching 1.9 get the same axis), wider only beyond it,
+    then nice-rounded; the limit 1.0 is always a tick."""
+    def axis(values, cis=None):
+        rows = [{"quantity": f"q{i}", "mean_norm": v, "std_norm": abs(v),
+                 "mean_norm_ci": (cis[i] if cis else None), "std_norm_ci": None}
+                for i, v in enumerate(values)]
+        mean_ov, _, std_ov, _ = plots.validation_bars(rows)
+        fig = hv.render(mean_ov, backend="bokeh")
+        return (fig.y_range.start, fig.y_range.end), hv.render(std_ov, backend="bokeh")
+    (lo_a, hi_a), std_a = axis([0.3, -0.6])
+    (lo_b, hi_b), _ = axis([1.9, -0.2])
+    assert (lo_a, hi_a) == (lo_b, hi_b) == (-2.0, 2.0)
+    assert (std_a.y_range.start, std_a.y_range.end) == (0.0, 2.0)
+    (lo_c, hi_c), _ = axis([0.5, 0.2], cis=[(0.1, 2.7), (0.0, 0.4)])  # an interval beyond ±2
+    assert (lo_c, hi_c) == (-3.0, 3.0)  # 2.7 · 1.05 = 2.835 → next nice value 3
+    assert norm_axis_top([4.3]) == 5.0 and norm_axis_top([9.8]) == 12.5  # 10.29 → step 2.5
+    assert 1.0 in norm_ticks(12.5, False) and -1.0 in norm_ticks(12.5, True)
+    assert norm_ticks(2.0, True) == [-2.0, -1.0, 0.0, 1.0, 2.0]

@@ -49,6 +49,26 @@ def test_svg_bars_colours_escapes_and_limit_lines():
     assert svg.count('stroke-dasharray="6,4"') == 2
 
 
+def test_svg_bars_nice_ticks_with_the_limit_and_whole_error_bars():
+    """Ticks are nice numbers including the limit 1.0 (not 0.93, 1.86); an error bar
+    reaching beyond the bars stays inside the plot area."""
+    import re
+
+    svg = svg_bars(["a", "b"], [0.6, 1.5], title="T", ylabel="y", limits=(1.0,),
+                   intervals=[(0.2, 1.1), (0.9, 2.6)])
+    ticks = [float(t) for t in re.findall(r'class="tick">([^<]+)<', svg)]
+    assert 1.0 in ticks and ticks == sorted(ticks) and ticks[0] == 0.0
+    assert all(abs(t * 2 - round(t * 2)) < 1e-9 for t in ticks)  # multiples of 0.5: nice
+    assert ticks[-1] >= 2.6
+    ys = [float(v) for v in re.findall(r'<line x1="[\d.]+" x2="[\d.]+" y1="[\d.]+" y2="([\d.]+)" stroke="#000" '
+                                       r'stroke-width="1.3"', svg)]
+    top_px = 30  # the plot area's top margin
+    assert len(ys) == 2 and min(ys) >= top_px  # the error bar's upper end is not clipped
+    # the same fixed axis as the dashboard: values within ±2 → ticks up to 2
+    small = svg_bars(["a"], [0.4], title="T", ylabel="y", limits=(1.0,))
+    assert [float(t) for t in re.findall(r'class="tick">([^<]+)<', small)][-1] == 2.0
+
+
 def test_svg_lines_measurement_first():
     import numpy as np
 
@@ -131,3 +151,33 @@ def test_cli_report_html_and_errors(demo_db, tmp_path, capsys):
     assert main(["--db", demo_db.url, "report", "demo", "--config", "nope", "--out", str(out)]) == 2
     assert "configuration 'nope' not found" in capsys.readouterr().err
     assert main(["--db", demo_db.url, "report", "demo", "--config", "baseline", "--out", "x.txt"]) == 2
+
+
+def test_worst_case_plots_show_the_quantity_of_the_row(demo_db):
+    """Y/Q, Y and ΣY rows at the same place plot three different signals: Y/Q formed from
+    the filtered Y and Q, Y itself, the 2 m sliding means of ΣY per wheelset; each with its
+    evaluated statistic marked for both sides."""
+    import types
+
+    import pandas as pd
+
+    from railval.app.report import _worst_case_plots
+    from railval.app.state import Backend
+
+    backend = Backend(demo_db)
+    ov = backend.overview("demo")
+    sid = ov.sections[0].id
+    pairs = pd.DataFrame([
+        {"quantity": "YQ_qst", "position": "w1L", "section": sid, "zone": 1, "D_norm": 3.0},
+        {"quantity": "Y_qst", "position": "w1L", "section": sid, "zone": 1, "D_norm": 2.0},
+        {"quantity": "SumY_max", "position": "ws1", "section": sid, "zone": 1, "D_norm": 1.0}])
+    out = _worst_case_plots(backend, "demo", "baseline", types.SimpleNamespace(pairs=pairs), ov, 3)
+    assert len(out) == 3
+    labels = [re.search(r'rotate\(-90\)" text-anchor="middle">([^<]+)<', svg).group(1) for svg in out]
+    assert labels == ["Y/Q w1L (–)", "Y_w1L (kN)", "ΣY ws1 (2 m mean) (kN)"]
+    assert "Y/Q sample-wise" in out[0] and "ΣY ws1 = Y_w1L + Y_w1R" in out[2]
+    assert "2 m sliding mean every 0.5 m" in out[2] and "0.15 % / 99.85 % values" in out[2]
+    polylines = [re.findall(r'<polyline[^>]*points="([^"]+)"', svg) for svg in out]
+    assert polylines[0][0] != polylines[1][0]  # not the same Y trace twice
+    assert out[0].count('class="mark"') == 2 and "50 % value" in out[0]  # median, both sides
+    assert out[2].count('class="mark"') == 4 and "99.85 % value" in out[2] and "0.15 % value" in out[2]

@@ -309,3 +309,30 @@ def test_dashboard_where_map_keeps_its_own_row_order_beside_the_bar_charts(demo_
     (heat,) = [m for m in doc.models if isinstance(m, Plot) and "mean D_v" in (m.title.text or "")]
     factors = [str(f) for f in heat.y_range.factors]  # Bokeh lists categories bottom → top
     assert factors[-1] == "Y_qst" and factors[0] == "az_max"
+
+
+def test_compare_shows_derived_signals_yq_and_sumy(app):
+    """Y/Q and ΣY are entries of the channel selector; EN-filtered they are formed from the
+    low-pass filtered components exactly as the EN evaluation forms them."""
+    from railval.core.en14363 import quantity_trace
+
+    objs = app.param.channel.objects
+    assert {"YQ_w1L", "SumY_ws1"} <= set(objs) and objs.index("YQ_w1L") >= len(app.overview.channels)
+    cmp = CompareState(app)
+    cmp.axis = "distance"
+    sec = next(s for s in app.overview.sections if s.id == app.section)
+    meas = app.backend.signals(app.campaign, None, app.section, ["Y_w1L", "Q_w1L", "Y_w1R"])
+    for ch, quantity, pos in (("YQ_w1L", "YQ_qst", "w1L"), ("SumY_ws1", "SumY_qst", "ws1")):
+        app.channel = ch
+        data = cmp.series("EN-filtered")
+        trace = next(t for t in data.traces if t.measured)
+        expected = quantity_trace(meas, sec, quantity, pos)
+        np.testing.assert_allclose(trace.y, expected.values, rtol=1e-10, atol=1e-12)
+        assert data.y_label.startswith(ch)
+    raw = cmp.series("raw")
+    m = next(t for t in raw.traces if t.measured)
+    np.testing.assert_allclose(m.y, np.asarray(meas.channels["Y_w1L"]) + np.asarray(meas.channels["Y_w1R"]))
+    assert raw.y_label == "SumY_ws1 (kN)"
+    # a Y/Q drill-down row opens the derived signal it is about
+    DashboardState(app).open_row({"quantity": "YQ_max", "position": "w1L", "section": app.section})
+    assert app.page == "compare" and app.channel == "YQ_w1L"

@@ -125,7 +125,7 @@ def test_metrics_report_and_workshop_pages(page, app_url):
     _wait_page(page, "Curve metrics")
     main = page.locator(".rv-main")
     main.get_by_role("button", name="Compute metrics").click()
-    main.locator(".tabulator-col-title", has_text="sg_M").first.wait_for(timeout=PAGE_TIMEOUT_MS)
+    main.locator(".tabulator-col-title", has_text="Sprague–Geers M").first.wait_for(timeout=PAGE_TIMEOUT_MS)
     assert main.locator(".tabulator-row").count() >= 12  # one section × its channels
     screenshot(page, "metrics")
 

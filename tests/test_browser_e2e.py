@@ -66,6 +66,18 @@ def test_baseline_fails_diagnose_calibrate_then_passes(page, demo_url):
     new_name = f"baseline+{top}"
     assert main.locator(".rv-new-name input").input_value() == new_name
     screenshot(page, "e2e-2-diagnosis")
+    # the diagnosis is stored: a second tab (a new session) shows it without running it again
+    other = page.context.new_page()
+    open_app(other, demo_url)
+    nav(other, "Diagnose & model workshop")
+    _page(other, "Diagnose & model workshop")
+    other_rows = other.locator(".rv-main .rv-candidates .tabulator-row")
+    other_rows.first.wait_for(timeout=PAGE_MS)
+    assert other_rows.first.locator(".tabulator-cell[tabulator-field='effect']").inner_text().strip() == top
+    other.locator(".rv-main").get_by_text(re.compile(r"Stored diagnosis of .* UTC")).wait_for(timeout=PAGE_MS)
+    assert not other.locator(".rv-main").get_by_text("No diagnosis yet").count()
+    screenshot(other, "ux-diagnose-second-tab")
+    other.close()
     # the chosen candidate: why, signature, and where the residual lies now / with it
     main.get_by_text(f"Candidate 1: {top}").wait_for(timeout=PAGE_MS)
     main.locator(".rv-where canvas").nth(1).wait_for(state="attached", timeout=PAGE_MS)

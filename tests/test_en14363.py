@@ -268,3 +268,29 @@ def test_invalid_inputs_raise(mutate, match):
     ss, sec = mutate(_random_set(5, 4000), SectionInfo("E", 0, 0, 1, 1, 150.0, 300.0))
     with pytest.raises(InvalidSignal, match=match):
         evaluate_section(ss, sec)
+
+
+def test_quantity_trace_is_the_signal_each_quantity_is_evaluated_on():
+    """The plotted trace of a quantity: Y/Q formed from filtered Y and Q, ΣY per wheelset,
+    the 2 m sliding means where used; its marked statistic equals the evaluation's value."""
+    from railval.core.en14363 import quantity_trace
+
+    ss = _random_set(1, 6000)
+    sec = SectionInfo("R1", 500.0, 120.0, 72.0, 3, 200.0, 380.0)
+    got = evaluate_section(ss, sec)
+    for (quantity, position), value in got.items():
+        tr = quantity_trace(ss, sec, quantity, position)
+        assert tr.value == pytest.approx(value, rel=1e-9, abs=1e-12), (quantity, position)
+        assert (tr.sliding_means is not None) == (quantity in ("YQ_max", "SumY_max"))
+    yq = quantity_trace(ss, sec, "YQ_qst", "w1L")
+    y = quantity_trace(ss, sec, "Y_qst", "w1L")
+    q = quantity_trace(ss, sec, "Q_qst", "w1L")
+    np.testing.assert_allclose(yq.values, y.values / q.values, rtol=1e-12)
+    assert set(yq.marks) == {"50 % value"}
+    sumy = quantity_trace(ss, sec, "SumY_max", "ws1")
+    yr = quantity_trace(ss, sec, "Y_qst", "w1R")
+    np.testing.assert_allclose(sumy.values, y.values + yr.values, rtol=1e-12)
+    assert set(sumy.marks) == {"0.15 % value", "99.85 % value"}
+    assert max(abs(v) for v in sumy.marks.values()) == pytest.approx(sumy.value)
+    assert sumy.sliding_centres_m[0] == pytest.approx(201.0)  # first 2 m window centre
+    assert "ΣY ws1" in sumy.signal_label and "Y/Q w1L" in yq.signal_label

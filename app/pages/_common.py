@@ -20,9 +20,11 @@ TABLE_STYLE = {"font-size": "13px"}
 #: button groups (time/distance, processing, scope): the selected button is filled in the
 #: app's blue with white text, the others white with a blue outline, so the choice is obvious
 TOGGLE_CSS = """
-:host .bk-btn-group .bk-btn { background: #ffffff; color: #0b5394; border: 1px solid #0b5394; }
-:host .bk-btn-group .bk-btn.bk-active { background: #0b5394; color: #ffffff; font-weight: 600;
-                                        box-shadow: none; }
+.bk-btn, .bk-btn.bk-btn-default { background: #ffffff !important; background-image: none !important;
+                                  color: #0b5394 !important; border: 1px solid #0b5394 !important; }
+.bk-btn.bk-active, .bk-btn.bk-btn-default.bk-active { background: #0b5394 !important;
+                                                      color: #ffffff !important; font-weight: 600;
+                                                      box-shadow: none !important; }
 """
 
 
@@ -34,6 +36,34 @@ def toggle_group(parameter: param.Parameter, label: str, **kw: Any) -> pn.Column
     caption = pn.pane.HTML(f"<label class='rv-label'>{html.escape(label)}</label>",
                            margin=(5, 10, 0, 10), styles={"font-size": "13px"})
     return pn.Column(caption, widget, margin=0)
+
+
+def bounded_input(parameter: param.Parameter, label: str, app: Any, **kw: Any) -> pn.widgets.Widget:
+    """A number input for a bounded Integer/Number parameter that never takes a value outside
+    its bounds silently: a value outside is refused with a message in the status area naming
+    the field, the value and the allowed range, and the field shows the kept value again."""
+    owner, name = parameter.owner, parameter.name
+    lo, hi = parameter.bounds or (None, None)
+    integer = isinstance(parameter, param.Integer)
+    cls = pn.widgets.IntInput if integer else pn.widgets.FloatInput
+    widget = cls(name=label, value=getattr(owner, name), **kw)
+
+    def text(v: float | None) -> str:
+        return "no limit" if v is None else f"{v:g}"
+
+    def typed(event) -> None:
+        v = event.new
+        if v is None or (lo is not None and v < lo) or (hi is not None and v > hi):
+            kept = getattr(owner, name)
+            app.set_status(f"{label}: {text(v) if v is not None else 'empty'} is outside the allowed range "
+                           f"{text(lo)} … {text(hi)}; kept {kept:g}", "warning")
+            widget.value = kept
+            return
+        setattr(owner, name, int(v) if integer else float(v))
+
+    widget.param.watch(typed, ["value"])
+    owner.param.watch(lambda e: setattr(widget, "value", e.new), [name])
+    return widget
 
 
 def make_dispatch() -> Callable[[Callable[[], None]], None]:

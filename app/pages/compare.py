@@ -15,7 +15,7 @@ import numpy as np
 import panel as pn
 
 from railval.app import plots
-from railval.app.pages._common import PageBase, message, toggle_group
+from railval.app.pages._common import PageBase, bounded_input, message, toggle_group
 from railval.app.state import AppState, CompareState
 
 
@@ -73,7 +73,8 @@ class ComparePage(PageBase):
             toggle_group(self.state.param.axis, "Axis", width=180, sizing_mode="fixed",
                          margin=(2, 10, 5, 10)),
             pn.widgets.Select.from_param(self.state.param.processing, name="Processing", width=190),
-            pn.widgets.FloatInput.from_param(self.state.param.psd_segment_s, name="PSD segment (s)", width=120),
+            bounded_input(self.state.param.psd_segment_s, "PSD segment (s)", app, width=120,
+                          css_classes=["rv-psd-segment"]),
         )
         # Bokeh figures built once; the series share one x range (linked zoom)
         self.view = CompareView()

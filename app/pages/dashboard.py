@@ -12,11 +12,13 @@ import panel as pn
 
 from railval.app import plots
 from railval.app.pages._common import PageBase, message, table, where_map
+from railval.app.state import AppState, DashboardState, unit_label
 from railval.app.security import plain_message
-from railval.app.state import AppState, DashboardState
 from railval.app.state.dashboard import definition_rows, supplementary_rows
+from railval.core.quantities import QUANTITIES
 
-SUMMARY_COLUMNS = ["quantity", "n", "mean", "std", "mean_limit", "std_limit", "mean_norm", "std_norm", "pass"]
+SUMMARY_COLUMNS = ["quantity", "name", "unit", "n", "mean", "std", "mean_limit", "std_limit", "mean_norm",
+                   "std_norm", "pass"]
 
 
 def coverage_lines(coverage: Any) -> tuple[bool, list[str]]:
@@ -62,8 +64,22 @@ def verdict_panel(summary: dict[str, Any], config: str) -> pn.pane.Alert:
                          alert_type="danger", sizing_mode="stretch_width")
 
 
+#: the summary table's headers as a reader sees them (field → header)
+SUMMARY_HEADERS = {"quantity": "quantity", "name": "what it is", "unit": "unit", "n": "pairs n",
+                   "mean": "mean D_v", "std": "std D_v (n−1)", "mean_limit": "mean limit",
+                   "std_limit": "std limit", "mean_norm": "mean / limit", "std_norm": "std / limit",
+                   "pass": "verdict"}
+
+
 def summary_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
+    """The quantity table with human headers: the quantity's name and unit from the quantity
+    registry (``railval.core.quantities.QUANTITIES``), D_v statistics and limits in that unit,
+    normalised values dimensionless, verdict ``pass``/``FAIL``."""
     df = pd.DataFrame(rows)
+    if "quantity" in df:
+        df["name"] = [QUANTITIES[q].name if q in QUANTITIES else "" for q in df["quantity"]]
+        df["unit"] = [unit_label(QUANTITIES[q].unit).replace("-", "–") if q in QUANTITIES else ""
+                      for q in df["quantity"]]
     cols = [c for c in SUMMARY_COLUMNS if c in df.columns]
     df = df[cols].copy()
     for c in ("mean", "std", "mean_limit", "std_limit", "mean_norm", "std_norm"):
@@ -71,7 +87,33 @@ def summary_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
             df[c] = df[c].astype(float).round(4)
     if "pass" in df:
         df["pass"] = df["pass"].map({True: "pass", False: "FAIL"})
-    return df
+    return df.rename(columns=SUMMARY_HEADERS)
+
+
+WRAP_HEADERS_CSS = ".tabulator-col-title { white-space: normal !important; }"
+
+
+def verdict_style(value: Any) -> str:
+    """Cell style of a verdict: FAIL red and bold, pass green."""
+    if value == "FAIL":
+        return "color: #b71c1c; background-color: #fdecea; font-weight: bold"
+    if value == "pass":
+        return "color: #1b5e20"
+    return ""
+
+
+def summary_table(rows: list[dict[str, Any]]) -> pn.widgets.Tabulator:
+    """The quantity table: human headers, FAIL coloured, columns fitted to their content."""
+    df = summary_frame(rows)
+    # every column inside the page width: headers wrap, the name column takes the rest
+    widths = {c: 72 for c in df.columns}  # 892 px in all: fits the main area at 1280 px
+    widths.update({"quantity": 90, "what it is": 170, "unit": 60, "pairs n": 60, "verdict": 80})
+    tab = table(df, height=80 + 40 * len(df), layout="fit_columns", widths=widths, css_classes=["rv-summary"],
+                formatters={"what it is": {"type": "textarea"}},  # long names wrap, never cut
+                stylesheets=[":host {font-size: 13px;}", WRAP_HEADERS_CSS])
+    if "verdict" in df:
+        tab.style.map(verdict_style, subset=["verdict"])
+    return tab
 
 
 def _range(r: Any) -> str:
@@ -185,7 +227,7 @@ class DashboardPage(PageBase):
                              "position) pairs, divided by the EN 14363 limits (dashed line 1.0). "
                              "std is the sample standard deviation (n − 1). Click a bar for its "
                              "drill-down.", styles={"color": "#555"}),
-            table(summary_frame(summary["quantities"]), height=40 + 32 * len(qs)),
+            summary_table(summary["quantities"]),
             definition_block(summary["raw"]),
             self._where(config),
             supplementary_block(summary["raw"]),
@@ -227,7 +269,7 @@ class DashboardPage(PageBase):
         show = [c for c in ("section", "zone", "position", "channel", "M_v", "S_v", "D_v", "norm")
                 if c in df.columns and not df[c].isna().all()]
         df = df[show].round(4) if len(df) else df
-        self.drill_table = table(df, height=min(420, 40 + 32 * max(1, len(df))),
+        self.drill_table = table(df, height=min(420, 40 + 32 * max(1, len(df))), layout="fit_data_fill",
                                  selectable=False, css_classes=["rv-drilldown"])
         self.drill_table.on_click(self._row_clicked)
         self.drill_box.objects = [self.drill_table]

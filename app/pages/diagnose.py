@@ -15,7 +15,7 @@ import pandas as pd
 import panel as pn
 
 from railval.app import plots
-from railval.app.pages._common import PageBase, make_dispatch, message, table, where_map
+from railval.app.pages._common import PageBase, bounded_input, make_dispatch, message, table, where_map
 from railval.app.pages.dashboard import validation_view
 from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
@@ -67,8 +67,7 @@ class DiagnosePage(PageBase):
             pn.Row(pn.widgets.MultiChoice.from_param(st.param.candidate_effects,
                                                      name="Candidate effects (none chosen: every missing effect)",
                                                      width=480, css_classes=["rv-candidate-effects"]),
-                   pn.widgets.IntInput.from_param(st.param.values_per_parameter, name="Scan values per parameter",
-                                                  width=200)),
+                   bounded_input(st.param.values_per_parameter, "Scan values per parameter", app, width=200)),
             self.diag_estimate, title="Diagnosis settings", collapsed=True, sizing_mode="stretch_width",
             css_classes=["rv-diag-settings"])
         self.cal_settings = pn.Card(
@@ -76,11 +75,10 @@ class DiagnosePage(PageBase):
                 pn.widgets.MultiChoice.from_param(st.param.fit_parameters,
                                                   name="Parameters to fit (none chosen: all; others keep the values set)",
                                                   width=420),
-                pn.widgets.IntInput.from_param(st.param.popsize, name="Population per parameter", width=170),
-                pn.widgets.IntInput.from_param(st.param.maxiter, name="Generations (at most)", width=170),
-                pn.widgets.IntInput.from_param(st.param.polish_maxfev, name="Polish simulations (at most)",
-                                               width=190),
-                pn.widgets.IntInput.from_param(st.param.seed, name="Seed", width=110),
+                bounded_input(st.param.popsize, "Population per parameter", app, width=170),
+                bounded_input(st.param.maxiter, "Generations (at most)", app, width=170),
+                bounded_input(st.param.polish_maxfev, "Polish simulations (at most)", app, width=190),
+                bounded_input(st.param.seed, "Seed", app, width=110),
                 pn.widgets.Checkbox.from_param(st.param.split, name="Hold out one section per zone "
                                                "(judge the fit on sections it has not seen)", width=420)),
             self.cal_estimate, title="Calibration settings (differential evolution + local polish)",
@@ -185,14 +183,45 @@ class DiagnosePage(PageBase):
             extra.append(message(note, "info" if self.state.separable else "warning"))
         self.candidates_box.objects = [
             pn.pane.Markdown("#### Ranked candidates (effects and model parameters), by the share "
-                             "explained on held-out sections"),
+                             "explained on held-out sections"), *self._run_line(),
             table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"]), *extra,
-            self.candidate_box,
+            *self._earlier_runs(), self.candidate_box,
         ]
         ranked = [c["effect"] for c in cands]
         rest = [e for e in self.state.param.effect.objects if e not in ranked]
         self.state.param.effect.objects = ranked + rest
         self._show_candidate()
+
+    def _run_line(self) -> list:
+        """Which stored run is shown: when, with which settings, how long it took."""
+        run = self.state.stored_run
+        if not run:
+            return []
+        st = run.get("settings", {})
+        text = (f"Stored diagnosis of {run.get('created_at', '').replace('T', ' ')} UTC "
+                f"({st.get('values_per_parameter')} values per parameter, "
+                f"{_candidates_text(st)}; computed in {run.get('seconds', 0):.0f} s"
+                f"{', reused without simulating' if run.get('reused') else ''}).")
+        if run.get("current") is False:
+            return [message(text + " The signals or sections changed since: run the diagnosis again.", "warning")]
+        return [pn.pane.Markdown(html.escape(text), css_classes=["rv-stored-run"])]
+
+    def _earlier_runs(self) -> list:
+        """Every stored diagnosis of the configuration (newest first)."""
+        rows = self.state.runs
+        if len(rows) < 2:
+            return []
+        df = pd.DataFrame([{
+            "time (UTC)": r["created_at"].replace("T", " "),
+            "values per parameter": r["settings"].get("values_per_parameter"),
+            "candidates": _candidates_text(r["settings"]),
+            "top candidate": r["top"],
+            "explained (%)": round(100 * float(r["explained"]), 1) if r["explained"] is not None else None,
+            "separable": "yes" if r["separable"] else "no",
+            "data current": "yes" if r.get("current") else "no (signals changed)",
+            "seconds": round(r["seconds"], 1)} for r in rows])
+        return [pn.pane.Markdown("#### Earlier diagnoses of this configuration"),
+                table(df, height=40 + 32 * min(len(df), 8), css_classes=["rv-diagnosis-runs"])]
 
     def _show_candidate(self) -> None:
         """The chosen effect (the top candidate unless another is chosen): why, its signature
@@ -307,3 +336,9 @@ class DiagnosePage(PageBase):
             if not str(f).startswith("in-sample"):
                 text += f" Warning: {f}."
         return text + f" Next: diagnose {config} — press **Run diagnosis**."
+
+
+def _candidates_text(settings: dict) -> str:
+    """The candidates a stored diagnosis tried, as a reader sees them."""
+    eff = settings.get("effects")
+    return "every candidate" if eff is None else f"{len(eff)} chosen candidate{'s' if len(eff) != 1 else ''}"

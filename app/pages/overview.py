@@ -72,7 +72,8 @@ class OverviewPage(PageBase):
                    pn.Column(pn.pane.Markdown("#### Configurations and lineage"), tree,
                              sizing_mode="stretch_width"), sizing_mode="stretch_width"),
             pn.pane.Markdown("#### Sections (by zone)"), html_table(sec_df, "rv-sections", max_height=520),
-            pn.pane.Markdown("#### Channels"), html_table(ch_df, "rv-channels", max_height=360),
+            # every channel shown (no inner scroll hiding half of them), the count in the heading
+            pn.pane.Markdown(f"#### Channels ({len(ch_df)})"), html_table(ch_df, "rv-channels"),
         ]
 
 

@@ -8,6 +8,7 @@ import io
 
 import panel as pn
 
+from railval.app.pages._common import PageBase, bounded_input
 from railval.app.pages._common import PageBase
 from railval.app.security import plain_message
 from railval.app.state import AppState, ReportState
@@ -23,8 +24,7 @@ class ReportPage(PageBase):
     def __init__(self, app: AppState, **params):
         super().__init__(app, **params)
         self.state = ReportState(app)
-        self.worst = pn.widgets.IntInput.from_param(self.state.param.worst_cases, name="Worst cases plotted",
-                                                    width=160)
+        self.worst = bounded_input(self.state.param.worst_cases, "Worst cases plotted", app, width=160)
         self.html_dl = pn.widgets.FileDownload(callback=self._html_bytes, filename="report.html",
                                                label="Download HTML", color="primary", width=200)
         self.pdf_dl = pn.widgets.FileDownload(callback=self._pdf_bytes, filename="report.pdf",

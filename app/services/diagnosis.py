@@ -14,16 +14,24 @@ modal identification of [ref 3] in :mod:`railval.app.services.modal`.
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Sequence
 from typing import Any
 
-from railval.app.services.campaign_context import Progress
+from railval.app.services.campaign_context import Progress, session_of
 from railval.app.services.diagnosis_evidence import diagnose as diagnose_evidence_service
 from railval.app.services.diagnosis_evidence import scan_points
+from railval.app.services.stored_runs import data_inputs, digests, run_info
 from railval.core.diagnosis import PARAMETER_CANDIDATES, DiagnosisResult
+from railval.core.en14363 import PROCESSING_VERSION
 from railval.core.sim.effects import EFFECTS
+from railval.db import repo, runs
 
-__all__ = ["diagnose", "diagnosis_simulations", "scan_points"]
+#: version of the diagnosis procedure in the stored runs' digest (with the EN processing
+#: version): a change of the procedure computes afresh instead of reusing an older run
+DIAGNOSIS_VERSION = f"diagnosis/2+{PROCESSING_VERSION}"
+
+__all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnosis_runs", "diagnosis_simulations", "latest_diagnosis", "scan_points"]
 
 
 def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3,
@@ -44,19 +52,80 @@ def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3,
 
 def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
              scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
-             workers: int | None = None, **options: Any) -> DiagnosisResult:
+             workers: int | None = None, refresh: bool = False, store: bool = True, actor: str = "",
+             **options: Any) -> DiagnosisResult:
     """Rank the causes of the residual of configuration ``config``: the effects it lacks and
     the vehicle-template parameters that may be mis-set, by the share of the residual they
     explain on held-out sections, with noise floor, plausibility, identifiability and a
     verdict (:func:`railval.app.services.diagnosis_evidence.diagnose`). ``effects``: candidate
     names — effect ids and ``model.NAME`` parameters; given without any ``model.`` name, only
-    those effects are tried."""
+    those effects are tried.
+
+    A stored run with the same inputs (signal content hashes of both sides, section records,
+    configuration, candidates, ``values_per_parameter``, options, :data:`DIAGNOSIS_VERSION`)
+    is returned without simulating unless ``refresh``; every computed run is stored
+    (``store``). ``result.extra["run"]`` describes the stored run
+    (:func:`railval.app.services.stored_runs.run_info`)."""
+    settings = {"values_per_parameter": int(values_per_parameter),
+                "effects": sorted(effects) if effects is not None else None,
+                "options": {k: options[k] for k in sorted(options)}}
+    with session_of(database_or_session) as s:
+        conf = repo.get_configuration(s, campaign, config)
+        data_sha, inputs_sha = digests(data_inputs(s, campaign, config), settings, DIAGNOSIS_VERSION)
+        stored = None if refresh else runs.latest_run(s, conf.id, "diagnosis", inputs_sha)
+        if stored is not None:
+            res = DiagnosisResult.from_dict(stored.result)
+            res.extra["run"] = run_info(stored, reused=True, current_data_sha256=data_sha)
+            if progress is not None:
+                progress("done", 1.0, {"stored_run": stored.id})
+            return res
+        ids = (conf.campaign_id, conf.id)
+    started = time.perf_counter()
     if effects is not None:
         names = list(effects)
         params = [n for n in names if n.startswith("model.")]
         options.setdefault("parameters", params or None)
         options.setdefault("include_parameters", bool(params))
         effects = [n for n in names if not n.startswith("model.")]
-    return diagnose_evidence_service(database_or_session, campaign, config, progress=progress, scheduler=scheduler,
-                                     values_per_parameter=values_per_parameter, effects=effects, workers=workers,
-                                     **options)
+    res = diagnose_evidence_service(database_or_session, campaign, config, progress=progress, scheduler=scheduler,
+                                    values_per_parameter=values_per_parameter, effects=effects, workers=workers,
+                                    **options)
+    if store:
+        with session_of(database_or_session) as s:
+            row = runs.store_run(s, campaign_id=ids[0], configuration_id=ids[1], kind="diagnosis",
+                                 inputs_sha256=inputs_sha,
+                                 settings={**settings, "data_sha256": data_sha, "version": DIAGNOSIS_VERSION},
+                                 result=res.to_dict(with_signatures=True),
+                                 seconds=time.perf_counter() - started, actor=actor)
+            res.extra["run"] = run_info(row, reused=False, current_data_sha256=data_sha)
+    return res
+
+
+def diagnosis_runs(session: Any, campaign: str, config: str) -> list[dict[str, Any]]:
+    """Stored diagnoses of ``config``, newest first: :func:`run_info` plus the top candidate,
+    the share it explains and whether the two best are told apart; ``current`` is false
+    when the signals or sections changed since the run."""
+    conf = repo.get_configuration(session, campaign, config)
+    data_sha, _ = digests(data_inputs(session, campaign, config), {}, DIAGNOSIS_VERSION)
+    out = []
+    for r in runs.list_runs(session, conf.id, "diagnosis"):
+        cands = (r.result or {}).get("candidates") or []
+        out.append({**run_info(r, reused=True, current_data_sha256=data_sha),
+                    "top": cands[0]["effect"] if cands else "",
+                    "explained": cands[0]["explained"] if cands else None,
+                    "separable": bool((r.result or {}).get("separable", True))})
+    return out
+
+
+def latest_diagnosis(session: Any, campaign: str, config: str) -> DiagnosisResult | None:
+    """The newest stored diagnosis of ``config`` (any settings), ``extra["run"]`` saying
+    whether its data are still current; None when never diagnosed."""
+    conf = repo.get_configuration(session, campaign, config)
+    row = runs.latest_run(session, conf.id, "diagnosis")
+    if row is None:
+        return None
+    data_sha, _ = digests(data_inputs(session, campaign, config), {}, DIAGNOSIS_VERSION)
+    res = DiagnosisResult.from_dict(row.result)
+    res.extra["run"] = run_info(row, reused=True, current_data_sha256=data_sha)
+    return res
+

@@ -14,6 +14,7 @@ both cut records starting at time 0 so the remaining offset is left to synchroni
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -28,6 +29,37 @@ from railval.core.types import CHANNEL_KINDS, split_channel
 
 PARTS = ("section", "evaluated")
 
+#: version of the metric computation in the stored runs' digest: a change of the metrics
+#: computes afresh instead of reusing an older stored run
+METRICS_VERSION = "metrics/1"
+
+
+def frame_to_json(df: pd.DataFrame) -> dict[str, Any]:
+    """A metrics frame as JSON (columns, rows, dtypes); NaN becomes null when stored."""
+    return {"columns": [str(c) for c in df.columns], "dtypes": {str(c): str(t) for c, t in df.dtypes.items()},
+            "data": df.astype(object).where(pd.notna(df), None).values.tolist()}
+
+
+def frame_from_json(d: dict[str, Any]) -> pd.DataFrame:
+    """Inverse of :func:`frame_to_json` (null numbers back to NaN, dtypes restored)."""
+    df = pd.DataFrame(d["data"], columns=d["columns"])
+    for c, t in d.get("dtypes", {}).items():
+        if t.startswith("float"):
+            df[c] = pd.to_numeric(df[c], errors="coerce").astype(float)
+        elif t.startswith("int") and df[c].notna().all():
+            df[c] = df[c].astype(t)
+        elif t == "bool" and df[c].notna().all():
+            df[c] = df[c].astype(bool)
+    return df
+
+
+def _run_settings(sections, channels, lowpass_hz, max_lag_s, families, part, subsample) -> dict[str, Any]:
+    return {"sections": sorted(sections) if sections is not None else None,
+            "channels": sorted(channels) if channels is not None else None,
+            "lowpass_hz": lowpass_hz, "max_lag_s": float(max_lag_s),
+            "families": sorted(families) if families is not None else None,
+            "part": part, "subsample": bool(subsample)}
+
 
 def channel_unit(channel: str) -> str:
     """Unit of a channel from the channel vocabulary (``railval.core.types.CHANNEL_KINDS``)."""
@@ -41,12 +73,20 @@ def metrics_for_configuration(session: Any, campaign: Any, config: str,
                               max_lag_s: float = DEFAULT_MAX_LAG_S,
                               families: Sequence[str] | None = None,
                               part: str = "section",
-                              subsample: bool = False) -> pd.DataFrame:
+                              subsample: bool = False,
+                              refresh: bool = False, store: bool = True,
+                              actor: str = "") -> pd.DataFrame:
     """Metrics of configuration ``config`` against the measurement: one row per
     (section, channel) with ``section``, ``zone``, ``unit`` and the columns of
     :func:`railval.core.metrics.compare_signalsets` (``<metric>`` raw, ``<metric>_sync``, ``lag_s`` …).
+
+    A stored run with the same inputs (signal content hashes of both sides for these
+    sections and channels, section records, settings, :data:`METRICS_VERSION`) is returned
+    without computing unless ``refresh``; every computed run is stored (``store``).
+    ``df.attrs["run"]`` describes the stored run (:func:`railval.app.services.stored_runs.run_info`).
     """
-    from railval.db import repo
+    from railval.app.services.stored_runs import data_inputs, digests, run_info
+    from railval.db import repo, runs
 
     if part not in PARTS:
         raise InvalidParameter(f"part must be one of {PARTS}, got {part!r}")
@@ -55,6 +95,76 @@ def metrics_for_configuration(session: Any, campaign: Any, config: str,
         missing = [s for s in sections if s not in infos]
         if missing:
             raise NotFound(f"section(s) {missing} not in campaign {campaign!r}; has {sorted(infos)}")
+    conf = repo.get_configuration(session, campaign, config)
+    settings = _run_settings(sections, channels, lowpass_hz, max_lag_s, families, part, subsample)
+    data_sha, inputs_sha = digests(data_inputs(session, campaign, config, sections, channels),
+                                   settings, METRICS_VERSION)
+    stored = None if refresh else runs.latest_run(session, conf.id, "metrics", inputs_sha)
+    if stored is not None:
+        df = frame_from_json(stored.result["frame"])
+        df.attrs["run"] = run_info(stored, reused=True, current_data_sha256=data_sha)
+        return df
+    started = time.perf_counter()
+    df = _compute(session, campaign, config, infos, sections, channels, lowpass_hz, max_lag_s,
+                  families, part, subsample)
+    if store:
+        row = runs.store_run(session, campaign_id=conf.campaign_id, configuration_id=conf.id, kind="metrics",
+                             inputs_sha256=inputs_sha,
+                             settings={**settings, "data_sha256": data_sha, "version": METRICS_VERSION},
+                             result={"frame": frame_to_json(df), "rows": len(df)},
+                             seconds=time.perf_counter() - started,
+                             actor=actor or str(session.info.get("actor") or ""))
+        df.attrs["run"] = run_info(row, reused=False, current_data_sha256=data_sha)
+    return df
+
+
+def stored_metrics(session: Any, campaign: str, config: str, sections: Sequence[str] | None = None,
+                   channels: Sequence[str] | None = None, *,
+                   lowpass_hz: float | None = DEFAULT_LOWPASS_HZ, max_lag_s: float = DEFAULT_MAX_LAG_S,
+                   families: Sequence[str] | None = None, part: str = "section",
+                   subsample: bool = False) -> pd.DataFrame | None:
+    """The stored metrics of exactly these inputs (as :func:`metrics_for_configuration`
+    would return them), or None when they were never computed: nothing is computed."""
+    from railval.app.services.stored_runs import data_inputs, digests, run_info
+    from railval.db import repo, runs
+
+    conf = repo.get_configuration(session, campaign, config)
+    settings = _run_settings(sections, channels, lowpass_hz, max_lag_s, families, part, subsample)
+    data_sha, inputs_sha = digests(data_inputs(session, campaign, config, sections, channels),
+                                   settings, METRICS_VERSION)
+    stored = runs.latest_run(session, conf.id, "metrics", inputs_sha)
+    if stored is None:
+        return None
+    df = frame_from_json(stored.result["frame"])
+    df.attrs["run"] = run_info(stored, reused=True, current_data_sha256=data_sha)
+    return df
+
+
+def metrics_runs(session: Any, campaign: str, config: str) -> list[dict[str, Any]]:
+    """Stored metrics runs of ``config``, newest first (:func:`run_info` plus the rows);
+    ``current`` is false when the signals or sections it read changed since."""
+    from railval.app.services.stored_runs import data_inputs, digests, run_info
+    from railval.db import repo, runs
+
+    conf = repo.get_configuration(session, campaign, config)
+    data_sha: dict[str, str] = {}
+    out = []
+    for r in runs.list_runs(session, conf.id, "metrics"):
+        st = r.settings or {}
+        key = repr((st.get("sections"), st.get("channels")))
+        if key not in data_sha:
+            data_sha[key] = digests(data_inputs(session, campaign, config, st.get("sections"),
+                                                st.get("channels")), {}, METRICS_VERSION)[0]
+        out.append({**run_info(r, reused=True, current_data_sha256=data_sha[key]),
+                    "rows": int((r.result or {}).get("rows", 0))})
+    return out
+
+
+def _compute(session: Any, campaign: Any, config: str, infos: dict[str, SectionInfo],
+             sections: Sequence[str] | None, channels: Sequence[str] | None,
+             lowpass_hz: float | None, max_lag_s: float, families: Sequence[str] | None,
+             part: str, subsample: bool) -> pd.DataFrame:
+    from railval.db import repo
     ch = list(channels) if channels is not None else None
     sec = list(sections) if sections is not None else None
     measured = repo.load_signalsets(session, campaign, None, sec, ch)

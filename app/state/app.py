@@ -18,6 +18,7 @@ import param
 
 from railval.app.security import plain_message
 from railval.app.state.backend import Backend, CampaignOverview
+from railval.core.quantities import derived_signals
 from railval.core.errors import RailvalError
 from railval.core.roles import ACTIONS, PAGE_ACTIONS, Principal, allowed, open_principal
 
@@ -122,7 +123,9 @@ class AppState(param.Parameterized):
         self.overview = ov
         configs = [c.name for c in ov.configurations]
         sections = [s.id for s in ov.sections]
-        chans = [c["name"] for c in ov.channels]
+        raw = [c["name"] for c in ov.channels]
+        # the Compare page also shows the derived signals the quantities use (Y/Q, ΣY)
+        chans = raw + list(derived_signals(raw))
         with param.parameterized.batch_call_watchers(self):
             self.param.configuration.objects = configs
             self.param.section.objects = sections

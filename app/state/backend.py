@@ -157,13 +157,38 @@ class Backend:
                 return validation_service.validate_configuration(s, campaign, config)
         return self._cached(key, make)
 
-    def metrics(self, campaign: str, config: str, sections: list[str] | None = None):
-        """DataFrame of ``railval.app.services.metrics.metrics_for_configuration`` (cached)."""
+    def metrics(self, campaign: str, config: str, sections: list[str] | None = None,
+                families: list[str] | None = None):
+        """DataFrame of ``railval.app.services.metrics.metrics_for_configuration`` (stored in
+        the database with its inputs' hashes; cached in memory too)."""
 
         def make():
             with self.session() as s:
-                return metrics_service.metrics_for_configuration(s, campaign, config, sections=sections)
-        return self._cached(("metrics", campaign, config, tuple(sections or ())), make)
+                return metrics_service.metrics_for_configuration(s, campaign, config, sections=sections,
+                                                                 families=families)
+        return self._cached(("metrics", campaign, config, tuple(sections or ()), tuple(families or ())), make)
+
+    def stored_metrics(self, campaign: str, config: str, sections: list[str] | None = None,
+                       families: list[str] | None = None):
+        """The stored metrics of these sections with the current data and default settings,
+        or None (nothing computed)."""
+        with self.session() as s:
+            return metrics_service.stored_metrics(s, campaign, config, sections=sections, families=families)
+
+    def metrics_runs(self, campaign: str, config: str) -> list[dict[str, Any]]:
+        """Stored metrics runs of the configuration, newest first."""
+        with self.session() as s:
+            return metrics_service.metrics_runs(s, campaign, config)
+
+    def latest_diagnosis(self, campaign: str, config: str):
+        """The newest stored diagnosis of the configuration (DiagnosisResult) or None."""
+        with self.session() as s:
+            return diagnosis_service.latest_diagnosis(s, campaign, config)
+
+    def diagnosis_runs(self, campaign: str, config: str) -> list[dict[str, Any]]:
+        """Stored diagnoses of the configuration, newest first (time, settings, top candidate)."""
+        with self.session() as s:
+            return diagnosis_service.diagnosis_runs(s, campaign, config)
 
     def effects(self) -> list[dict[str, Any]]:
         """The effect registry (``railval.core.sim.effects``) as plain dicts for the UI."""

@@ -14,6 +14,7 @@ from railval.app.state.app import AppState
 from railval.core.errors import NotFound
 from railval.core.filters import filtfilt_rows
 from railval.core.psd import welch_psd
+from railval.core.quantities import DERIVED_SIGNALS, combine_derived, derived_signals
 from railval.core.types import SectionInfo, channel_kind
 
 MEASURED = "measurement"
@@ -80,8 +81,44 @@ class CompareState(param.Parameterized):
         if key not in cache:
             if len(cache) >= self.CACHE_SIZE:
                 cache.pop(next(iter(cache)))
-            cache[key] = app.backend.signals(app.campaign, config, app.section, [app.channel])
+            cache[key] = self._fetch(config)
         return cache[key]
+
+    def _components(self) -> tuple[str, ...] | None:
+        """The raw channels of a derived signal (Y/Q, ΣY), None for a raw channel."""
+        ov = self.app.overview
+        return derived_signals([c["name"] for c in ov.channels] if ov else []).get(self.app.channel)
+
+    def _fetch(self, config: str | None):
+        """The SignalSet of the channel; a derived signal is carried as its components and
+        formed in :meth:`_values` (after filtering them, as the EN evaluation does)."""
+        app = self.app
+        parts = self._components()
+        return app.backend.signals(app.campaign, config, app.section, list(parts or [app.channel]))
+
+    def _has(self, ss) -> bool:
+        parts = self._components()
+        return all(c in ss.channels for c in parts) if parts else self.app.channel in ss.channels
+
+    def _values(self, ss, processing: str) -> np.ndarray:
+        """The channel as shown: raw or EN-filtered; a derived signal formed from its
+        components (EN-filtered: from the low-pass filtered components, as
+        ``railval.core.en14363`` forms Y/Q and ΣY)."""
+        parts = self._components()
+        if not parts:
+            return self._process(ss, np.asarray(ss.channels[self.app.channel], dtype=float), processing)
+        rows = np.vstack([np.asarray(ss.channels[c], dtype=float) for c in parts])
+        if processing != "raw":
+            rows = filtfilt_rows(rows, float(ss.fs), "lowpass")
+        return combine_derived(self.app.channel, rows)
+
+    def _unit_and_filter(self) -> tuple[str, str]:
+        ch = self.app.channel
+        if self._components():
+            fam = ch.split("_", 1)[0]
+            return DERIVED_SIGNALS[fam][2].replace("-", ""), "low-pass 20 Hz (components)"
+        entry = channel_kind(ch)
+        return (entry.unit if entry else ""), (entry.filter_label if entry else "filtered")
 
     def _process(self, sigset, values: np.ndarray, processing: str) -> np.ndarray:
         """``values`` as shown: raw, or EN-filtered (``railval.core.filters.filtfilt_rows``); the
@@ -120,14 +157,13 @@ class CompareState(param.Parameterized):
         processing = processing or self.processings()[0]
         sec = self._section_info()
         ch = self.app.channel
-        entry = channel_kind(ch)
-        unit = entry.unit if entry else ""
+        unit, filter_label = self._unit_and_filter()
         traces = []
         eval_range = None
         for label, ss in sources or self.sources():
-            if ch not in ss.channels:
+            if not self._has(ss):
                 continue
-            y = self._process(ss, np.asarray(ss.channels[ch], dtype=float), processing)
+            y = self._values(ss, processing)
             if self.axis == "time":
                 x = np.asarray(ss.time_s, dtype=float)
                 if label == MEASURED:
@@ -138,11 +174,11 @@ class CompareState(param.Parameterized):
                 x = np.asarray(ss.distance_m, dtype=float)
                 eval_range = (sec.eval_start_m, sec.eval_end_m)
             traces.append(Trace(label, x, y, measured=(label == MEASURED)))
-        proc_label = "raw" if processing == "raw" else (entry.filter_label if entry else "filtered")
+        proc_label = "raw" if processing == "raw" else filter_label
         return CompareData(
             title=f"{ch} — section {sec.id} (zone {sec.zone}) — {proc_label}",
             x_label="time (s)" if self.axis == "time" else "distance (m)",
-            y_label=f"{ch} ({unit_label(unit)})",
+            y_label=f"{ch} ({unit_label(unit)})" if unit else f"{ch} (–)",
             traces=traces, eval_range=eval_range,
         )
 
@@ -150,13 +186,12 @@ class CompareState(param.Parameterized):
         """Welch PSD (core.psd) of the evaluated part, EN-filtered, every source alike."""
         sec = self._section_info()
         ch = self.app.channel
-        entry = channel_kind(ch)
-        unit = entry.unit if entry else ""
+        unit, filter_label = self._unit_and_filter()
         traces = []
         for label, ss in sources or self.sources():
-            if ch not in ss.channels:
+            if not self._has(ss):
                 continue
-            y = self._process(ss, np.asarray(ss.channels[ch], dtype=float), "EN-filtered")
+            y = self._values(ss, "EN-filtered")
             d = np.asarray(ss.distance_m, dtype=float)
             mask = (d >= sec.eval_start_m) & (d <= sec.eval_end_m)
             part = y[mask] if mask.sum() >= 64 else y
@@ -165,8 +200,7 @@ class CompareState(param.Parameterized):
             traces.append(Trace(label, p.frequency_hz[keep], np.maximum(p.density[keep], 1e-30),
                                 measured=(label == MEASURED)))
         return CompareData(
-            title=f"PSD of {ch} — section {sec.id}, evaluated range, "
-                  f"{entry.filter_label if entry else 'filtered'}",
+            title=f"PSD of {ch} — section {sec.id}, evaluated range, {filter_label}",
             x_label="frequency (Hz)", y_label=f"PSD ({unit_label(unit)})²/Hz",
             traces=traces, eval_range=None, log_axes=True,
             note=f"Welch, Hann window, {self.psd_segment_s:g} s segments, 50 % overlap",

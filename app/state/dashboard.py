@@ -9,7 +9,7 @@ import param
 
 from railval.app.state.app import AppState
 from railval.core.diagnosis import PatternGrid, where_grid
-from railval.core.quantities import channel_for
+from railval.core.quantities import DERIVED_SIGNALS, QUANTITIES, channel_for
 
 
 def quantity_rows(result: Any) -> list[dict[str, Any]]:
@@ -64,7 +64,11 @@ class DashboardState(param.Parameterized):
         return where_grid(self.result(config).pairs)
 
     def open_row(self, row: dict[str, Any]) -> None:
-        channel = channel_for(row.get("quantity"), row.get("position"), self.app.param.channel.objects)
+        objs = self.app.param.channel.objects
+        q = QUANTITIES.get(row.get("quantity") or "")
+        derived = f"{q.signal}_{row.get('position')}" if q is not None and q.signal in DERIVED_SIGNALS else None
+        # a Y/Q or ΣY row opens the derived signal it is about, other rows their raw channel
+        channel = derived if derived in objs else channel_for(row.get("quantity"), row.get("position"), objs)
         self.app.open_compare(row["section"], channel)
 
 

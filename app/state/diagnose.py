@@ -28,6 +28,9 @@ class DiagnoseState(param.Parameterized):
     residual = param.Dict(default={}, doc="residual pattern of the diagnosed configuration (labels, values)")
     diagnosis_note = param.String(default="", doc="separability note of the diagnosis")
     separable = param.Boolean(default=True, doc="the two best candidates are told apart")
+    stored_run = param.Dict(default={}, doc=(
+        "the stored run the shown diagnosis comes from (time, settings, reused, current)"))
+    runs = param.List(default=[], doc="stored diagnoses of the configuration, newest first")
     verdict = param.String(default="", doc="verdict of the last diagnosis: cause, uncertain or none")
     noise_floor = param.Number(default=None, allow_None=True, doc="noise floor of the last diagnosis")
     unexplained = param.List(default=[], doc="what the best candidate leaves unexplained (verdict none)")
@@ -54,14 +57,30 @@ class DiagnoseState(param.Parameterized):
         self.app.param.watch(lambda e: self._reset(), ["campaign", "configuration"])
         self.param.watch(lambda e: self._effect_changed(), ["effect"])
         self.param.watch(self._name_typed, ["new_name"])
+        self.load_stored()
+
+    def load_stored(self) -> None:
+        """Show the newest stored diagnosis of the configuration (a reload, a second tab or
+        another user sees it) and list the earlier ones."""
+        app = self.app
+        if not app.campaign or not app.configuration:
+            return
+        self.runs = app.backend.diagnosis_runs(app.campaign, app.configuration)
+        latest = app.backend.latest_diagnosis(app.campaign, app.configuration) if self.runs else None
+        if latest is not None:
+            self.show_diagnosis(latest)
 
     def _reset(self) -> None:
         self.candidates = []
         self.residual = {}
+        self.stored_run = {}
+        self.diagnosis_run = {}
+        self.runs = []
         if self.effect is not None and self.effect not in self.available_effects():
             self.effect = None  # already part of the newly selected configuration
         self.name_edited = False
         self._suggest_name()
+        self.load_stored()
 
     def _name_typed(self, event) -> None:
         if not self._naming:  # a change that did not come from _suggest_name: the user typed it
@@ -157,27 +176,33 @@ class DiagnoseState(param.Parameterized):
             return app.backend.diagnose(campaign, config, progress=progress, **settings)
 
         def done(result):
-            d = result.to_dict(with_signatures=True) if hasattr(result, "to_dict") else result
-            cands = list(d.get("candidates", []))
-            self.residual = dict(d.get("residual") or {})
-            note = d.get("note") or ""
-            if not d.get("separable", True) and not note:
-                note = "the two best candidates explain nearly the same; see the evidence"
-            self.diagnosis_note = note
-            self.separable = bool(d.get("separable", True))
-            self.verdict = str(d.get("verdict") or "")
-            self.noise_floor = d.get("noise_floor")
-            self.unexplained = list(d.get("unexplained") or [])
-            self.diagnosis_run = {k: d.get(k) for k in ("simulations", "values_per_parameter", "configuration")}
-            names = self.available_effects() if cands else []
-            order = [c["effect"] for c in cands] + [n for n in names if n not in {c["effect"] for c in cands}]
-            self.param.effect.objects = order
-            if order:  # the top candidate chosen before the ranking is shown
-                self.effect = order[0]
-                self._suggest_name()
-            self.candidates = cands
+            self.runs = app.backend.diagnosis_runs(campaign, config)  # before the view redraws
+            self.show_diagnosis(result)
         return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background,
                            action="diagnose")
+
+    def show_diagnosis(self, result) -> None:
+        """Show a diagnosis (computed now or stored): ranked candidates, residual, verdict."""
+        d = result.to_dict(with_signatures=True) if hasattr(result, "to_dict") else result
+        cands = list(d.get("candidates", []))
+        self.residual = dict(d.get("residual") or {})
+        note = d.get("note") or ""
+        if not d.get("separable", True) and not note:
+            note = "the two best candidates explain nearly the same; see the evidence"
+        self.diagnosis_note = note
+        self.separable = bool(d.get("separable", True))
+        self.verdict = str(d.get("verdict") or "")
+        self.noise_floor = d.get("noise_floor")
+        self.unexplained = list(d.get("unexplained") or [])
+        self.diagnosis_run = {k: d.get(k) for k in ("simulations", "values_per_parameter", "configuration")}
+        self.stored_run = dict(d.get("run") or {})
+        names = self.available_effects() if cands else []
+        order = [c["effect"] for c in cands] + [n for n in names if n not in {c["effect"] for c in cands}]
+        self.param.effect.objects = order
+        if order:  # the top candidate chosen before the ranking is shown
+            self.effect = order[0]
+            self._suggest_name()
+        self.candidates = cands
 
     def run_calibration(self, dispatch=None, background=True, calibrate: bool = True):
         """Add ``effect`` to the configuration, calibrate it (or use ``parameters``),
