@@ -238,7 +238,9 @@ class Pattern:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Pattern:
         """Inverse of :meth:`to_dict` (a stored run read back)."""
-        return cls(list(d["labels"]), list(d["groups"]), np.asarray(d["values"], dtype=float))
+        comps = d.get("components")
+        return cls(list(d["labels"]), list(d["groups"]), np.asarray(d["values"], dtype=float),
+                   None if comps is None else [Component.from_dict(c) for c in comps])
 
 
 def pattern_from_pairs(pairs: Iterable[Mapping[str, Any]], *, value_key: str = "norm") -> Pattern:

@@ -73,7 +73,7 @@ def test_baseline_fails_diagnose_calibrate_then_passes(page, demo_url):
     _page(other, "Diagnose & model workshop")
     other_rows = other.locator(".rv-main .rv-candidates .tabulator-row")
     other_rows.first.wait_for(timeout=PAGE_MS)
-    assert other_rows.first.locator(".tabulator-cell[tabulator-field='effect']").inner_text().strip() == top
+    assert other_rows.first.locator(".tabulator-cell[tabulator-field='candidate']").inner_text().strip() == top
     other.locator(".rv-main").get_by_text(re.compile(r"Stored diagnosis of .* UTC")).wait_for(timeout=PAGE_MS)
     assert not other.locator(".rv-main").get_by_text("No diagnosis yet").count()
     screenshot(other, "ux-diagnose-second-tab")
