@@ -269,17 +269,23 @@ def record_answer(session: Session, ctx: ReviewerContext, position: int, answer:
         # one atomic UPDATE (row lock / write lock): concurrent changes of one place never
         # lose an increment; a resent submission matches no row
         cond = [*where, WorkshopAnswer.submission != submission] if submission else where
-        n = session.execute(
-            update(WorkshopAnswer).where(*cond).values(
-                answer=bool(answer), comment=comment,
-                seconds=WorkshopAnswer.seconds + float(seconds),
-                changes=WorkshopAnswer.changes + 1, submission=submission, updated_at=now)
-            .execution_options(synchronize_session=False)).rowcount
-        if n:
-            return "changed"
-        if session.scalar(select(WorkshopAnswer.id).where(*where)) is not None:
-            return "repeated"
-        return None
+        for _ in range(3):
+            n = session.execute(
+                update(WorkshopAnswer).where(*cond).values(
+                    answer=bool(answer), comment=comment,
+                    seconds=WorkshopAnswer.seconds + float(seconds),
+                    changes=WorkshopAnswer.changes + 1, submission=submission, updated_at=now)
+                .execution_options(synchronize_session=False)).rowcount
+            if n:
+                return "changed"
+            stored = session.execute(select(WorkshopAnswer.submission).where(*where)).first()
+            if stored is None:
+                return None
+            if submission and stored[0] == submission:
+                return "repeated"
+            # the row was committed by a concurrent first submission between the UPDATE and
+            # this read (read committed): update it now instead of dropping this answer
+        return "repeated"
 
     outcome = change()
     if outcome is None:
