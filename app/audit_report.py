@@ -15,7 +15,7 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
-from railval.app.report import CSS, ReportError, _esc, html_to_pdf, signoff_rows_html
+from railval.app.report import CSS, _esc, html_to_pdf, signoff_rows_html, write_html_or_pdf
 
 
 @dataclass
@@ -27,15 +27,7 @@ class AuditReport:
     stale: int
 
     def write(self, path: str | os.PathLike) -> Path:
-        path = Path(path)
-        suffix = path.suffix.lower()
-        if suffix in (".html", ".htm"):
-            path.write_text(self.html, encoding="utf-8")
-        elif suffix == ".pdf":
-            path.write_bytes(html_to_pdf(self.html))
-        else:
-            raise ReportError(f"audit report file {path}: extension must be .html or .pdf")
-        return path
+        return write_html_or_pdf(self.html, path, "audit report")
 
     def pdf_bytes(self) -> bytes:
         return html_to_pdf(self.html)

@@ -99,18 +99,24 @@ class Report:
 
     def write(self, path: str | os.PathLike) -> Path:
         """Write ``.html`` or ``.pdf`` (by extension)."""
-        path = Path(path)
-        suffix = path.suffix.lower()
-        if suffix in (".html", ".htm"):
-            path.write_text(self.html, encoding="utf-8")
-        elif suffix == ".pdf":
-            path.write_bytes(html_to_pdf(self.html))
-        else:
-            raise ReportError(f"report file {path}: extension must be .html or .pdf, got {suffix or '(none)'}")
-        return path
+        return write_html_or_pdf(self.html, path, "report")
 
     def pdf_bytes(self) -> bytes:
         return html_to_pdf(self.html)
+
+
+def write_html_or_pdf(document: str, path: str | os.PathLike, what: str = "report") -> Path:
+    """Write an HTML document as ``.html`` or, printed by headless Chromium, as ``.pdf``
+    (chosen by the extension); the one writer of the validation and audit reports."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix in (".html", ".htm"):
+        path.write_text(document, encoding="utf-8")
+    elif suffix == ".pdf":
+        path.write_bytes(html_to_pdf(document))
+    else:
+        raise ReportError(f"{what} file {path}: extension must be .html or .pdf, got {suffix or '(none)'}")
+    return path
 
 
 def find_chromium() -> str:
