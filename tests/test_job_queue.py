@@ -97,3 +97,34 @@ def test_job_over_the_cost_cap_is_refused_with_its_cost(tmp_path):
     assert app.status.startswith(f"calibration refused: it would simulate the campaign {cost} "
                                  f"times, more than the limit of {app_module.MAX_JOB_SIMULATIONS}")
     db.dispose()
+
+
+def test_a_queued_job_reserves_its_configuration_name(sqlite_database):
+    """Two sessions submitting jobs that would store the same configuration: the second is
+    refused when it is submitted (while the first still waits or runs), not at store time;
+    after the first ends the name is free again."""
+    backend = Backend(sqlite_database)
+    first, second, third = AppState(backend), AppState(backend), AppState(backend)
+    release = threading.Event()
+    ran: list[str] = []
+
+    def blocking(progress):
+        ran.append("first")
+        assert release.wait(60)
+        return "first"
+
+    first.run_job("calibration", blocking, reserves=("demo", "base+fd"))
+    # the first job holds the only slot; a job for another name queues, one for the same name is refused
+    assert second.run_job("calibration", lambda p: ran.append("same"), reserves=("demo", "base+fd")) is None
+    assert second.status_level == "error" and "'base+fd'" in second.status and "another job" in second.status
+    assert not second.busy
+    third.run_job("calibration", lambda p: ran.append("other"), reserves=("demo", "base+other"))
+    release.set()
+    first.wait(30)
+    third.wait(30)
+    assert ran == ["first", "other"]
+    # released at the end: the same name may be submitted again
+    second.run_job("calibration", lambda p: ran.append("again"), reserves=("demo", "base+fd"))
+    second.wait(30)
+    assert ran[-1] == "again" and second.status == "calibration: done"
+    assert not app_module._RESERVED

@@ -47,6 +47,24 @@ _JOB_SLOTS = threading.BoundedSemaphore(MAX_JOBS)
 #: most campaign simulations one job may run (``$RAILVAL_MAX_JOB_SIMULATIONS``); a larger
 #: diagnosis or calibration is refused with its cost shown, before it starts
 MAX_JOB_SIMULATIONS = max(1, int(os.environ.get("RAILVAL_MAX_JOB_SIMULATIONS", "1000")))
+#: (campaign, configuration) names that a running or queued job of this server will store:
+#: a second job for the same name is refused when it is submitted, not at store time
+_RESERVED: set[tuple[str, str]] = set()
+_RESERVED_LOCK = threading.Lock()
+
+
+def reserve_name(campaign: str, name: str) -> bool:
+    """Reserve ``name`` in ``campaign`` for one job; ``False`` when another job holds it."""
+    with _RESERVED_LOCK:
+        if (campaign, name) in _RESERVED:
+            return False
+        _RESERVED.add((campaign, name))
+        return True
+
+
+def release_name(campaign: str, name: str) -> None:
+    with _RESERVED_LOCK:
+        _RESERVED.discard((campaign, name))
 
 
 class AppState(param.Parameterized):
@@ -166,17 +184,29 @@ class AppState(param.Parameterized):
     def run_job(self, title: str, work: Callable[[Callable[[float, str], None]], Any],
                 on_done: Callable[[Any], None] | None = None,
                 dispatch: Callable[[Callable[[], None]], None] | None = None,
-                background: bool = True, action: str | None = None) -> threading.Thread | None:
+                background: bool = True, action: str | None = None,
+                reserves: tuple[str, str] | None = None) -> threading.Thread | None:
         """Run ``work(progress)`` in a thread; ``progress(fraction, message)`` updates the
         progress bar and status; ``on_done(result)`` runs through ``dispatch`` afterwards.
         Refuses (status warning) while another job runs so the page never double-submits,
         and (status error) when the session's user may not do ``action``. The job's database
-        changes are recorded in the audit trail as that user."""
+        changes are recorded in the audit trail as that user. ``reserves=(campaign, name)``
+        holds the configuration name the job will store from submission (also while queued)
+        to its end: a second job for that name is refused at once."""
         if action is not None and not self.guard(action):
             return None
         if self.busy:
             self.set_status(f"{title}: another job is still running — wait for it to finish", "warning")
             return None
+        if reserves is not None:
+            if reserves[1] in (self.param.configuration.objects or []):
+                self.set_status(f"{title} refused: configuration {reserves[1]!r} already exists in "
+                                f"{reserves[0]!r} — choose another name", "error")
+                return None
+            if not reserve_name(*reserves):
+                self.set_status(f"{title} refused: another job is already computing configuration "
+                                f"{reserves[1]!r} in {reserves[0]!r} — choose another name", "error")
+                return None
         call = dispatch or (lambda f: f())
         cancel = self._cancel = threading.Event()
         self.busy = True
@@ -222,6 +252,8 @@ class AppState(param.Parameterized):
                 return
             finally:
                 _JOB_SLOTS.release()
+                if reserves is not None:
+                    release_name(*reserves)
 
             def done():
                 self.busy = False

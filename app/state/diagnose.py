@@ -242,7 +242,7 @@ class DiagnoseState(param.Parameterized):
             app.reload_configurations(select=name)
         return app.run_job("calibration" if calibrate else "re-simulation", work, done,
                            dispatch=dispatch, background=background,
-                           action="calibrate" if calibrate else "simulate")
+                           action="calibrate" if calibrate else "simulate", reserves=(campaign, name))
 
     def lineage_errors(self, config: str | None = None) -> list[dict[str, Any]]:
         """Along the lineage root → config: the largest normalised error ``max_norm``
