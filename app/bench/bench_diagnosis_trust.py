@@ -95,6 +95,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--values", type=int, default=3, help="diagnose: values per effect parameter")
     parser.add_argument("--oversample", type=int, default=4, help="truth simulated at this × the rate (default 4)")
+    parser.add_argument("--out", default=None,
+                        help="append each case's record to this JSON-lines file as soon as it is done")
     parser.add_argument("--calibrate-wrong", action="store_true",
                         help="calibrate the top candidate where it is wrong (short search, --split) and "
                              "check a pass is flagged")
@@ -208,6 +210,11 @@ def run(args: argparse.Namespace, progress=None) -> dict:
                            oversample=getattr(args, "oversample", 4),
                            calibrate_wrong=getattr(args, "calibrate_wrong", False))
             records.append(rec)
+            if getattr(args, "out", None):
+                import json
+
+                with open(args.out, "a", encoding="utf-8") as fh:
+                    fh.write(json.dumps(rec, default=str) + "\n")
             if progress is not None:
                 progress(j + 1, len(todo), rec)
             else:
