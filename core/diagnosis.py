@@ -695,6 +695,7 @@ class _Curve:
         if u.size < 2 or np.any(np.diff(u) <= 0):
             raise InvalidParameter(f"candidate {fam.name}: needs ≥ 2 distinct simulated values, got {fam.values}")
         lo, hi = (fam.bounds if fam.extrapolate else (self.v[0], self.v[-1]))
+        self.range = (float(lo), float(hi))
         self.fine = np.linspace(float(_u(lo, fam.log)), float(_u(hi, fam.log)), n_fine)
         idx = np.clip(np.searchsorted(u, self.fine, side="right") - 1, 0, u.size - 2)
         self.idx = idx
@@ -707,8 +708,13 @@ class _Curve:
         return P[self.idx] * (1 - self.t)[:, None] + P[self.idx + 1] * self.t[:, None]
 
     def value(self, k: int) -> float:
+        """The value at fine-grid point ``k``: the range's ends exactly at the ends, inside the
+        range elsewhere (exp(log(bound)) may round past the bound by one ulp, which a later
+        simulation would refuse)."""
+        if k in (0, self.fine.size - 1, -1):
+            return self.range[0] if k == 0 else self.range[1]
         x = float(self.fine[k])
-        return float(np.exp(x)) if self.log else x
+        return float(min(max(float(np.exp(x)) if self.log else x, self.range[0]), self.range[1]))
 
 
 def _min_cost(curve: _Curve, P: np.ndarray, w: np.ndarray) -> np.ndarray:

@@ -49,7 +49,7 @@ def test_summary_frame_has_human_headers_units_and_names():
             {"quantity": "az_max", "n": 24, "mean": 0.1, "std": 0.9, "mean_limit": 0.2, "std_limit": 0.3,
              "mean_norm": 0.5, "std_norm": 3.0, "pass": False}]
     df = summary_frame(rows)
-    assert list(df.columns) == ["quantity", "what it is", "unit", "pairs n", "mean D_v", "std D_v (n−1)",
+    assert list(df.columns) == ["quantity", "what it is", "unit", "pairs", "mean D_v", "std D_v (n−1)",
                                 "mean limit", "std limit", "mean / limit", "std / limit", "verdict"]
     assert df.loc[0, "what it is"] == "quasi-static guiding force" and df.loc[0, "unit"] == "kN"
     assert df.loc[1, "unit"] == "m/s²" and list(df["verdict"]) == ["pass", "FAIL"]

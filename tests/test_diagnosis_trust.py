@@ -200,3 +200,17 @@ def test_closed_form_segment_minimum_matches_a_fine_grid():
             _, grid, _ = _fit(curve, P[b], w)
             assert exact[b] <= grid + 1e-12
             assert exact[b] == pytest.approx(grid, rel=1e-5, abs=1e-9)
+
+
+def test_fitted_value_at_a_log_bound_stays_inside_the_bounds():
+    """exp(log(5e5)) = 499999.99999999994: a fit at the lower bound of a log-scaled parameter
+    must return the bound itself (a simulation refuses values outside the bounds; the trust
+    bench stopped on exactly this)."""
+    from railval.core.diagnosis import _Curve
+
+    base, *_ = _evidence(lambda q, z, p: A[(q, z, p)])
+    fam = CandidateFamily("parameter", "model.k_primary_y", "k_primary_y", [3.884e6, 1.942e6], [base, base],
+                          (5e5, 2e7), log=True, extrapolate=True)
+    curve = _Curve(fam)
+    assert float(np.exp(curve.fine[0])) < 5e5  # the rounding the clamp exists for
+    assert curve.value(0) == 5e5 and curve.value(curve.fine.size - 1) == 2e7

@@ -97,6 +97,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--oversample", type=int, default=4, help="truth simulated at this × the rate (default 4)")
     parser.add_argument("--out", default=None,
                         help="append each case's record to this JSON-lines file as soon as it is done")
+    parser.add_argument("--resume", action="store_true",
+                        help="take the cases already in --out from there and run only the others")
     parser.add_argument("--calibrate-wrong", action="store_true",
                         help="calibrate the top candidate where it is wrong (short search, --split) and "
                              "check a pass is flagged")
@@ -148,6 +150,16 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
     return rec
 
 
+def _records_in(path: str | None) -> dict[tuple[str, str], dict]:
+    """The finished (not failed) cases of an earlier run's JSON-lines file, by (class, case)."""
+    import json
+
+    if not path or not Path(path).is_file():
+        return {}
+    recs = [json.loads(line) for line in Path(path).read_text(encoding="utf-8").splitlines() if line.strip()]
+    return {(r["class"], r["case"]): r for r in recs if r.get("verdict") != "error"}
+
+
 def summarise(records: list[dict]) -> dict:
     """Confusion figures of the bench (module docstring)."""
     out: dict[str, Any] = {"cases": len(records)}
@@ -155,7 +167,8 @@ def summarise(records: list[dict]) -> dict:
         rs = [r for r in records if r["class"] == k]
         if not rs:
             continue
-        item = {"n": len(rs), "verdicts": {v: sum(r["verdict"] == v for r in rs) for v in ("cause", "uncertain", "none")}}
+        item = {"n": len(rs), "verdicts": {v: sum(r["verdict"] == v for r in rs)
+                                           for v in ("cause", "uncertain", "none", "error")}}
         if k in "ab":
             item["top1"] = sum(r["right"] for r in rs) / len(rs)
         else:
@@ -204,11 +217,20 @@ def run(args: argparse.Namespace, progress=None) -> dict:
         database = connect(f"sqlite:///{Path(tmp) / 'bench.db'}")
         database.init()
         todo = [(k, i, case) for k in classes for i, case in enumerate(CASES[k][:n])]
+        done = _records_in(getattr(args, "out", None)) if getattr(args, "resume", False) else {}
         for j, (k, i, (label, kwargs, truth)) in enumerate(todo):
-            rec = run_case(database, f"trust_{k}{i}", k, label, kwargs, truth,
-                           workers=getattr(args, "workers", 2), values=getattr(args, "values", 3),
-                           oversample=getattr(args, "oversample", 4),
-                           calibrate_wrong=getattr(args, "calibrate_wrong", False))
+            if (k, label) in done:  # --resume: measured in an earlier run of the same bench
+                records.append(done[(k, label)])
+                continue
+            try:
+                rec = run_case(database, f"trust_{k}{i}", k, label, kwargs, truth,
+                               workers=getattr(args, "workers", 2), values=getattr(args, "values", 3),
+                               oversample=getattr(args, "oversample", 4),
+                               calibrate_wrong=getattr(args, "calibrate_wrong", False))
+            except Exception as exc:  # noqa: BLE001 - one failing case is a finding, not the end of the bench
+                rec = {"class": k, "case": label, "truth": truth, "verdict": "error", "error": str(exc),
+                       "noise_floor": 0.0, "top": None, "top_explained": 0.0, "top_held_out": 0.0,
+                       "right": False, "confident_wrong": False, "explained_wrong": False, "diagnose_s": 0.0}
             records.append(rec)
             if getattr(args, "out", None):
                 import json

@@ -65,7 +65,7 @@ def verdict_panel(summary: dict[str, Any], config: str) -> pn.pane.Alert:
 
 
 #: the summary table's headers as a reader sees them (field → header)
-SUMMARY_HEADERS = {"quantity": "quantity", "name": "what it is", "unit": "unit", "n": "pairs n",
+SUMMARY_HEADERS = {"quantity": "quantity", "name": "what it is", "unit": "unit", "n": "pairs",
                    "mean": "mean D_v", "std": "std D_v (n−1)", "mean_limit": "mean limit",
                    "std_limit": "std limit", "mean_norm": "mean / limit", "std_norm": "std / limit",
                    "pass": "verdict"}
@@ -107,7 +107,7 @@ def summary_table(rows: list[dict[str, Any]]) -> pn.widgets.Tabulator:
     df = summary_frame(rows)
     # every column inside the page width: headers wrap, the name column takes the rest
     widths = {c: 72 for c in df.columns}  # 892 px in all: fits the main area at 1280 px
-    widths.update({"quantity": 90, "what it is": 170, "unit": 60, "pairs n": 60, "verdict": 80})
+    widths.update({"quantity": 90, "what it is": 170, "unit": 60, "pairs": 64, "verdict": 80})
     tab = table(df, height=80 + 40 * len(df), layout="fit_columns", widths=widths, css_classes=["rv-summary"],
                 formatters={"what it is": {"type": "textarea"}},  # long names wrap, never cut
                 stylesheets=[":host {font-size: 13px;}", WRAP_HEADERS_CSS])

@@ -131,7 +131,7 @@ class DiagnosePage(PageBase):
         self.body.objects = [
             pn.pane.Markdown(f"Configuration under study: **{html.escape(str(self.app.configuration))}**. "
                              "Diagnosis compares its residual pattern with the signature of every "
-                             "effect it lacks.", sizing_mode="stretch_width"),
+                             "effect it lacks and of each vehicle-model parameter set differently.", sizing_mode="stretch_width"),
             self.diagnose_btn, self.diag_settings, self.candidates_box,
             pn.pane.Markdown("#### Add an effect"),
             pn.Row(self.effect_select, self.name_input),
@@ -160,12 +160,11 @@ class DiagnosePage(PageBase):
             self.candidates_box.objects = [pn.pane.Markdown("*No diagnosis yet — press **Run diagnosis**.*")]
             return
         df = pd.DataFrame([{
-            "rank": i + 1, "candidate": c["effect"], "kind": c.get("kind", "effect"),
-            "held-out (%)": round(100 * float(c.get("held_out_explained", c["explained"])), 1),
-            "explained (%)": round(100 * float(c["explained"]), 1),
+            "#": i + 1, "candidate": c["effect"], "kind": c.get("kind", "effect"),
+            "held-out %": round(100 * float(c.get("held_out_explained", c["explained"])), 1),
+            "explained %": round(100 * float(c["explained"]), 1),
             "plausible": "yes" if c.get("plausible", True) else "no", "flags": len(c.get("flags") or []),
             "fitted parameters": ", ".join(f"{k} = {v:.4g}" for k, v in (c.get("parameters") or {}).items()),
-            "fixes": ", ".join(c.get("fixes", [])), "worsens": ", ".join(c.get("worsens", [])),
         } for i, c in enumerate(cands)])
         extra = []
         note = self.state.diagnosis_note
@@ -181,10 +180,15 @@ class DiagnosePage(PageBase):
                     f"{u['component']} {u['residual']:+.2f}" for u in self.state.unexplained), "info"))
         elif note:
             extra.append(message(note, "info" if self.state.separable else "warning"))
+        # the verdict first: a reader must not scroll past 20 candidates to learn how sure it is
+        # 890 px in all: fits the main area at 1280 px (what it fixes and worsens: below, per candidate)
+        widths = {"#": 40, "candidate": 175, "kind": 85, "held-out %": 100, "explained %": 105,
+                  "plausible": 85, "flags": 60, "fitted parameters": 240}
         self.candidates_box.objects = [
             pn.pane.Markdown("#### Ranked candidates (effects and model parameters), by the share "
-                             "explained on held-out sections"), *self._run_line(),
-            table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"]), *extra,
+                             "explained on held-out sections"), *self._run_line(), *extra,
+            table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"], widths=widths,
+                  layout="fit_columns"),
             *self._earlier_runs(), self.candidate_box,
         ]
         ranked = [c["effect"] for c in cands]
@@ -236,6 +240,10 @@ class DiagnosePage(PageBase):
             pn.pane.Markdown(f"#### Candidate {rank}: {html.escape(cand['effect'])} — explains "
                              f"{100 * float(cand['explained']):.1f} % of the residual"),
             pn.pane.Markdown(f"**Why {html.escape(cand['effect'])}?** {html.escape(cand.get('explanation', ''))}",
+                             sizing_mode="stretch_width"),
+            pn.pane.Markdown(f"**Fixes** (quantity groups whose residual falls by a fifth or more): "
+                             f"{html.escape(', '.join(cand.get('fixes') or []) or 'none')}. **Worsens**: "
+                             f"{html.escape(', '.join(cand.get('worsens') or []) or 'none')}.",
                              sizing_mode="stretch_width"),
             *[message(str(f), "warning") for f in (cand.get("flags") or [])],
             pn.pane.HoloViews(signature_chart(cand), sizing_mode="stretch_width"),
