@@ -390,7 +390,9 @@ class Candidate:
             held_out_explained=num(d["held_out_explained"]), explained_ci=(num(ci[0]), num(ci[1])),
             significant=bool(d.get("significant")), plausible=bool(d.get("plausible", True)),
             at_bound=bool(d.get("at_bound")), flags=list(d.get("flags") or []), summary=d.get("summary", ""),
-            reference=d.get("reference"), fitted=num(d.get("fitted")), parameter=d.get("parameter", ""))
+            reference=d.get("reference"), fitted=num(d.get("fitted")), parameter=d.get("parameter", ""),
+            fitted_ci=tuple(num(x) for x in (d.get("fitted_ci") or (None, None))),  # older runs: unknown
+            clearly_implausible=bool(d.get("clearly_implausible", not d.get("plausible", True))))
 
 
 @dataclass
@@ -717,15 +719,17 @@ class _Curve:
         return float(min(max(float(np.exp(x)) if self.log else x, self.range[0]), self.range[1]))
 
 
-def _min_cost(curve: _Curve, P: np.ndarray, w: np.ndarray) -> np.ndarray:
+def _min_cost(curve: _Curve, P: np.ndarray, w: np.ndarray, argmin: bool = False):
     """min over the curve's range of ‖w·P(u)‖² for many node sets at once: ``P`` (B, K, n) in
     family order → (B,). Exact on each linear segment (a quadratic in the segment parameter,
     minimised in closed form and clipped to the segment; the first and last segments extend
-    to the ends of the range when the family extrapolates)."""
+    to the ends of the range when the family extrapolates). ``argmin=True``: also the values
+    (in the parameter's unit, inside the range) where the minima lie."""
     P = P[:, curve.order, :] * w
     u = curve.u
     lo_end, hi_end = float(curve.fine[0]), float(curve.fine[-1])
     best = np.full(P.shape[0], np.inf)
+    where = np.full(P.shape[0], lo_end)
     for j in range(u.size - 1):
         du = u[j + 1] - u[j]
         t_lo = (lo_end - u[j]) / du if j == 0 else 0.0
@@ -739,8 +743,13 @@ def _min_cost(curve: _Curve, P: np.ndarray, w: np.ndarray) -> np.ndarray:
             t = np.where(dd > 0, -ad / dd, t_lo)
         t = np.clip(t, t_lo, t_hi)
         cost = np.sum((a + t[:, None] * d) ** 2, axis=1)
+        better = cost < best
+        where = np.where(better, u[j] + t * du, where)
         best = np.minimum(best, cost)
-    return best
+    if not argmin:
+        return best
+    vals = np.exp(where) if curve.log else where
+    return best, np.clip(vals, curve.range[0], curve.range[1])
 
 
 def _fit(curve: _Curve, P: np.ndarray, w: np.ndarray) -> tuple[int, float, np.ndarray]:
@@ -799,6 +808,10 @@ class TrustedCandidate(Candidate):
     reference: float | None = None
     fitted: float = float("nan")
     parameter: str = ""
+    #: 5–95 % bootstrap interval of the fitted value (refit on every resample of the sections)
+    fitted_ci: tuple[float, float] = (float("nan"), float("nan"))
+    #: the whole interval lies outside the plausible range (or the value sits at a search bound)
+    clearly_implausible: bool = False
 
     def remaining(self, residual: Pattern) -> np.ndarray:
         """The residual left after this candidate at its fitted value, r − s."""
@@ -812,23 +825,35 @@ class TrustedCandidate(Candidate):
                   "explained_ci": list(self.explained_ci), "significant": self.significant,
                   "plausible": self.plausible, "at_bound": self.at_bound, "flags": list(self.flags),
                   "summary": self.summary, "parameter": self.parameter, "fitted": self.fitted,
+                  "fitted_ci": list(self.fitted_ci), "clearly_implausible": self.clearly_implausible,
                   "reference": self.reference})
         return d
 
 
 def plausibility_flags(name: str, value: float, *, bounds: tuple[float, float] | None,
                        plausible: tuple[float, float] | None, source: str = "", unit: str = "",
-                       at_bound: bool | None = None) -> tuple[bool, list[str]]:
+                       at_bound: bool | None = None, interval: tuple[float, float] | None = None,
+                       kind: str = "effect") -> tuple[bool, list[str]]:
     """(plausible, flags) of a fitted value: outside the physically plausible range, or at a
-    bound of the search box, is flagged ("the model may be compensating for something else")."""
+    bound of the search box, is flagged ("the model may be compensating for something else").
+    ``interval``: the value's bootstrap interval, said in the flag (whether it reaches into the
+    plausible range); ``kind="parameter"``: a vehicle part outside the range of serviceable
+    parts may also be worn or failed — the flag says to check the vehicle."""
     flags: list[str] = []
     ok = True
     if plausible is not None and not (plausible[0] <= value <= plausible[1]):
         ok = False
+        spread = ""
+        if interval is not None and np.all(np.isfinite(interval)):
+            lo, hi = min(interval[0], value), max(interval[1], value)
+            reaches = not (hi < plausible[0] or lo > plausible[1])
+            spread = (f" (bootstrap interval {lo:.4g}–{hi:.4g} {unit}, "
+                      + ("reaching into the range)" if reaches else "entirely outside it)"))
+        part = (" — check the vehicle (a worn or failed part) or" if kind == "parameter" else ":")
         flags.append(f"{name} = {value:.4g} {unit} is outside the physically plausible range "
                      f"[{plausible[0]:.4g}, {plausible[1]:.4g}] {unit}"
-                     + (f" ({source})" if source else "")
-                     + ": the model may be compensating for something else")
+                     + (f" ({source})" if source else "") + spread
+                     + f"{part} the model may be compensating for something else")
     if at_bound is None and bounds is not None:
         span = bounds[1] - bounds[0]
         at_bound = bool(span > 0 and min(abs(value - bounds[0]), abs(bounds[1] - value)) <= 1e-3 * span)
@@ -900,7 +925,10 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
     * ``verdict``: ``none`` (residual within the section scatter, nothing significant, or the
       configuration passes and nothing explains ≥ ``strong`` on held-out sections),
       ``uncertain`` (the best explains < ``strong`` held-out, explains alike with another,
-      is implausible or at a bound, or loses > 0.25 from in-sample to held-out) or ``cause``.
+      is clearly implausible — its whole bootstrap interval of fitted values outside the
+      plausible range — or at a bound, or loses > 0.25 from in-sample to held-out) or
+      ``cause`` (a fitted value just outside the plausible range, with an interval reaching
+      into it, is flagged but does not make the answer uncertain).
 
     References: Efron & Tibshirani 1993 ch. 6/§8.2 (bootstrap, stratified), Hastie, Tibshirani
     & Friedman 2009 §7.10 (k-fold cross-validation); docs/diagnosis.md.
@@ -938,11 +966,13 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
         held = float(np.clip(1 - num / den, 0.0, 1.0)) if den > 0 else 0.0
         # bootstrap: refit on resampled sections; and the share of pure scatter it explains
         boot: list[float] = []
+        v_ci = (v, v)
         if n_boot:
             P_boot = np.stack([e.values(Wb) for e in fam.evidence], axis=1)  # (B, K, n), family order
             rb2 = np.sum((w * R_boot) ** 2, axis=1)
-            cb = _min_cost(curve, P_boot, w)
+            cb, vb = _min_cost(curve, P_boot, w, argmin=True)
             boot = [1 - c / d if d > 0 else 0.0 for c, d in zip(cb, rb2, strict=True)]
+            v_ci = (float(np.percentile(vb, 5)), float(np.percentile(vb, 95)))
             # the candidate's change P(v) − r added to pure scatter n_b: nodes P_k − r + n_b
             cn = _min_cost(curve, P_full[None, :, :] - r_full[None, None, :] + noise[:, None, :], w)
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -957,7 +987,9 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
         at_edge = k in (0, curve.fine.size - 1)
         ok, flags = plausibility_flags(f"{fam.name}.{fam.parameter}" if fam.kind == "effect" else fam.name, v,
                                        bounds=bounds, plausible=fam.plausible, source=fam.plausible_source,
-                                       unit=fam.unit, at_bound=at_edge)
+                                       unit=fam.unit, at_bound=at_edge, interval=v_ci, kind=fam.kind)
+        lo_ci, hi_ci = min(v_ci[0], v), max(v_ci[1], v)
+        clearly = at_edge or (fam.plausible is not None and (hi_ci < fam.plausible[0] or lo_ci > fam.plausible[1]))
         params = {**fam.defaults, fam.parameter: v} if fam.kind == "effect" else {fam.parameter: v}
         summary = _family_summary(fam, v)
         expl = summary + (": " + fam.explanation if fam.explanation and fam.kind == "effect" else
@@ -968,7 +1000,8 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
             Pattern(residual.labels, residual.groups, r_full - Pk, residual.components), math.sqrt(cost),
             {g: (before[g], after[g]) for g in before}, kind=fam.kind, name=fam.name,
             held_out_explained=held, explained_ci=ci, plausible=ok, at_bound=at_edge, flags=flags,
-            summary=summary, reference=fam.reference, fitted=v, parameter=fam.parameter))
+            summary=summary, reference=fam.reference, fitted=v, parameter=fam.parameter,
+            fitted_ci=(lo_ci, hi_ci), clearly_implausible=bool(clearly)))
     noise_floor = float(np.percentile(noise_share.max(axis=0), 95)) if n_boot and families else 0.0
     within_noise = bool(n_boot and r2 <= float(np.percentile(noise2, 95)))
     for c in cands:
@@ -1012,7 +1045,7 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
                                      f"on held-out sections ({best.explained:.2f} in-sample)")
     elif alike:
         verdict, why = "uncertain", "; ".join(x["advice"] for x in alike)
-    elif not best.plausible:
+    elif not best.plausible and best.clearly_implausible:
         verdict, why = "uncertain", "; ".join(best.flags[:1])
     elif best.explained - best.held_out_explained > 0.25:
         verdict, why = "uncertain", f"{best.name} does not hold on held-out sections"

@@ -214,3 +214,52 @@ def test_fitted_value_at_a_log_bound_stays_inside_the_bounds():
     curve = _Curve(fam)
     assert float(np.exp(curve.fine[0])) < 5e5  # the rounding the clamp exists for
     assert curve.value(0) == 5e5 and curve.value(curve.fine.size - 1) == 2e7
+
+
+def test_fitted_value_interval_decides_whether_implausibility_makes_the_answer_uncertain():
+    """A fitted value outside the plausible range is always flagged; the answer becomes
+    ``uncertain`` only when its whole bootstrap interval lies outside the range."""
+    import dataclasses
+
+    base, fams = _setup(truth_a=1.0)
+    verdicts = {}
+    for upper in (0.99, 0.5, 2.0):
+        fam = dataclasses.replace(fams[0], plausible=(0.0, upper), plausible_source="test range")
+        res = diagnose_evidence(base, [fam, fams[1]], n_boot=100)
+        c = res.candidates[0]
+        assert c.name == "A" and c.fitted == pytest.approx(1.0, abs=0.03)
+        lo, hi = c.fitted_ci
+        assert lo <= c.fitted <= hi and hi - lo < 0.2
+        verdicts[upper] = (res.extra["verdict"], c.plausible, c.clearly_implausible, c.flags)
+    assert lo < 0.99  # the interval reaches into [0, 0.99]: the premise of the first case
+    v, ok, clearly, flags = verdicts[0.99]
+    assert (v, ok, clearly) == ("cause", False, False)
+    assert "reaching into the range" in flags[0]
+    v, ok, clearly, flags = verdicts[0.5]
+    assert (v, ok, clearly) == ("uncertain", False, True) and "entirely outside it" in flags[0]
+    assert verdicts[2.0][:3] == ("cause", True, False) and not verdicts[2.0][3]
+
+
+def test_bootstrap_argmin_matches_a_fine_grid():
+    from railval.core.diagnosis import _Curve, _min_cost
+
+    rng = np.random.default_rng(4)
+    base, *_ = _evidence(lambda q, z, p: A[(q, z, p)])
+    for log in (False, True):
+        fam = CandidateFamily("parameter", "model.k", "k", [1.0, 0.4, 2.0], [base] * 3, (0.1, 4.0), log=log,
+                              extrapolate=True)
+        curve = _Curve(fam, n_fine=40001)
+        P = rng.normal(size=(6, 3, 9))
+        w = rng.uniform(0.5, 1.5, 9)
+        cost, where = _min_cost(curve, P, w, argmin=True)
+        grid = np.sum((np.stack([curve.patterns(P[b]) for b in range(6)]) * w) ** 2, axis=2)
+        k = np.argmin(grid, axis=1)
+        expect = np.array([curve.value(int(i)) for i in k])
+        assert np.allclose(cost, grid.min(axis=1), rtol=1e-6)
+        assert np.allclose(where, expect, rtol=2e-3)
+
+
+def test_parameter_flag_says_check_the_vehicle():
+    ok, flags = plausibility_flags("model.c_secondary_z", 6000.0, bounds=(0.0, 1e5), plausible=(1e4, 5e4),
+                                   unit="N*s/m", kind="parameter", interval=(5500.0, 6600.0), at_bound=False)
+    assert not ok and "worn or failed part" in flags[0] and "entirely outside it" in flags[0]

@@ -11,6 +11,7 @@ import html
 from typing import Any
 
 import holoviews as hv
+import numpy as np
 import pandas as pd
 import panel as pn
 
@@ -241,6 +242,11 @@ class DiagnosePage(PageBase):
                              f"{100 * float(cand['explained']):.1f} % of the residual"),
             pn.pane.Markdown(f"**Why {html.escape(cand['effect'])}?** {html.escape(cand.get('explanation', ''))}",
                              sizing_mode="stretch_width"),
+            *([pn.pane.Markdown(f"**Fitted value** {cand['fitted']:.4g} (bootstrap over sections, 5–95 %: "
+                                f"{cand['fitted_ci'][0]:.4g}–{cand['fitted_ci'][1]:.4g})"
+                                + (f"; the model's value {cand['reference']:.4g}" if cand.get("reference") else ""),
+                                sizing_mode="stretch_width")]
+              if cand.get("fitted_ci") and all(np.isfinite(cand["fitted_ci"])) else []),
             pn.pane.Markdown(f"**Fixes** (quantity groups whose residual falls by a fifth or more): "
                              f"{html.escape(', '.join(cand.get('fixes') or []) or 'none')}. **Worsens**: "
                              f"{html.escape(', '.join(cand.get('worsens') or []) or 'none')}.",
