@@ -203,6 +203,19 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR,
     # flange contact in series with the rail's lateral stiffness (track_flexibility): counted once,
     # the tread forces deflect the rail by Y/k_rail (dtr), the flange force through the series spring
     kfl = SC[KFL] * kty / (SC[KFL] + kty) if tflex else SC[KFL]
+    if tflex:
+        # wheelsets start ON the rails (vertical and roll at the track input of their start
+        # position): starting at zero on stiff track springs (300 MN/m per wheel) under 1–2 mm
+        # of initial irregularity gave wheel-load jumps of ±400 kN and, with soft lateral rails,
+        # a non-finite run from the first sample
+        for i in range(nw):
+            k = ws_body[i]
+            i0, w1 = _locate(SC[S_START] + xabs[k], s_arr0, inv_ds, ngrid)
+            w0 = 1.0 - w1
+            q[k, 1] = TR[i0, T_ZV] * w0 + TR[i0 + 1, T_ZV] * w1
+            u[k, 1] = v * (TR[i0, T_ZV1] * w0 + TR[i0 + 1, T_ZV1] * w1)
+            q[k, 2] = (TR[i0, T_CL] * w0 + TR[i0 + 1, T_CL] * w1) / (2.0 * b0)
+            u[k, 2] = v * (TR[i0, T_CL1] * w0 + TR[i0 + 1, T_CL1] * w1) / (2.0 * b0)
     for step in range(n_steps):
         s_cb = SC[S_START] + v * step * dt
         for k in range(nbody):
