@@ -60,6 +60,10 @@ def test_class_b_parameter_error_is_diagnosed_calibrated_on_a_split_and_flagged_
     assert len(cd["held_out_sections"]) == 4 and len(cd["fit_sections"]) == 8
     assert not cd["in_sample"] and isinstance(cd["plausible"], bool) and isinstance(cd["flags"], list)
     assert cd["next"]["command"] == "railval diagnose tb --config tb+c"
+    # a real cause: the held-out sections improve, so no held-out caveat (the baseline of this
+    # case passes already: the note says so)
+    assert not any("no held-out evidence" in f for f in cd["flags"]), cd["flags"]
+    assert any("already passed validation" in f for f in cd["flags"]) == bool(rec["baseline_validated"])
     step = cd["lineage"][-1]
     assert step["held_out"]["parent_max_error"] is not None and step["held_out"]["improvement"] is not None
     # validate --json marks the verdict in-sample (the child was fitted on 8 of the sections)
@@ -89,11 +93,16 @@ def test_class_c_cause_outside_the_library_is_not_claimed(database):
 
 def test_class_d_nothing_gives_no_cause(database):
     label, kw, truth = _case("d", "nothing (seed 11)")
-    rec = run_case(database, "td", "d", label, kw, truth, candidates=CANDIDATES)
+    rec = run_case(database, "td", "d", label, kw, truth, candidates=CANDIDATES, calibrate_wrong=True)
     d = rec["diagnosis"]
     assert rec["verdict"] in ("none", "uncertain"), d["note"]
     s = summarise([rec])
     assert s["d"]["none_or_uncertain"] == 1.0 and s["confident_wrong"] == 0.0
+    # calibrating the (wrong) top candidate anyway passes — the baseline already passed — and
+    # the result says that nothing required the change and the held-out sections gained nothing
+    assert rec["baseline_validated"] and rec["wrong_calibration_passes"]
+    assert rec["wrong_calibration_flagged"], rec.get("wrong_calibration_flags")
+    assert s["of_those_flagged"] == 1.0
 
 
 def test_calibration_split_choices_and_errors():

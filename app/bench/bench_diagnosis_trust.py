@@ -147,6 +147,7 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
         rec["wrong_calibration_flagged"] = bool(cd["flags"] and (not cd["plausible"] or any(
             "held-out" in f or "compensating" in f for f in cd["flags"])))
         rec["wrong_calibration_held_out_validated"] = held.get("validated")
+        rec["wrong_calibration_flags"] = list(cd["flags"])
     return rec
 
 

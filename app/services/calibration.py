@@ -94,6 +94,8 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
         _repo.check_new_configuration(s, campaign, new_name, replace=replace)  # before fitting
         ctx = load_context(s, campaign)
         conf_effects, conf_params, _ = configuration_of(s, campaign, config)
+        # the parent's own evidence, to judge what the calibration adds on sections it has not seen
+        parent_vals = section_values(_repo.load_signalsets(s, campaign, config), ctx.sections)
     model_candidates = [e for e in effects if e.startswith("model.")]
     effects = [e for e in effects if not e.startswith("model.")]
     start = {k: dict(v) for k, v in (start or {}).items()}
@@ -151,12 +153,16 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     vals = section_values(sets, ctx.sections)
     vr_full = validate_values(ctx, vals, n_boot=1000)
     record = {"fit_sections": fit_ids, "held_out_sections": held_ids, "parameters": [s.name for s in specs]}
-    vr_held = None
+    vr_held = vr_parent_held = None
     if held_ids:
         held = _restrict(ctx, held_ids)
         vr_held = validate(held.measured_values, {k: v for k, v in vals.items() if k in held_ids}, held.sections,
                            ctx.vehicle)
+        vr_parent_held = validate(held.measured_values, {k: v for k, v in parent_vals.items() if k in held_ids},
+                                  held.sections, ctx.vehicle)
+    vr_parent = validate_values(ctx, parent_vals)
     plausible, flags = _calibration_flags(ctx, specs, res.parameters, vr_full, vr_held)
+    flags += _parent_flags(vr_parent, vr_parent_held, vr_held)
     with session_of(database) as s:
         repo.store_configuration(
             s, campaign, new_name, parent=config, effects=eff, parameters=model,
@@ -250,6 +256,34 @@ def _calibration_flags(ctx: CampaignContext, specs: Sequence[ParameterSpec], val
         elif e_held > 1.5 * e_full and e_held > 0.5:
             flags.append(f"held-out sections fit worse (largest normalised error {e_held:.2f} vs {e_full:.2f} on all)")
     return ok_all, flags
+
+
+#: a calibration must lower the held-out objective by at least this share to count as evidence
+HELD_OUT_GAIN = 0.2
+
+
+def _objective_of(vr: Any) -> float:
+    return validation_objective({q: r.mean_norm for q, r in vr.quantities.items()},
+                                {q: r.std_norm for q, r in vr.quantities.items()})
+
+
+def _parent_flags(vr_parent: Any, vr_parent_held: Any, vr_held: Any) -> list[str]:
+    """What the calibration adds over its parent (the configuration it started from): a note
+    when the parent already passed; on held-out sections the DynoTRAIN objective
+    Σ max(|mean_norm|, std_norm)² (:func:`railval.core.calibration.validation_objective`) must
+    fall by ``HELD_OUT_GAIN`` or more — otherwise the fitted change is not evidence of a cause
+    (held-out check, docs/diagnosis.md "Calibration")."""
+    flags = []
+    if bool(vr_parent.validated):
+        flags.append("note: the parent configuration already passed validation; this calibration changes a "
+                     "model that was acceptable — keep it only if it also improves the held-out sections")
+    if vr_parent_held is not None and vr_held is not None:
+        before, after = _objective_of(vr_parent_held), _objective_of(vr_held)
+        if not after <= (1.0 - HELD_OUT_GAIN) * before:
+            flags.append(f"on the held-out sections the calibration improves the validation objective by less than "
+                         f"{HELD_OUT_GAIN:.0%} ({before:.3g} → {after:.3g}): no held-out evidence that this candidate "
+                         "is a cause; the model may be compensating for something else")
+    return flags
 
 
 def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float]) -> ParameterSpec:
