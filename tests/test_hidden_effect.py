@@ -1,15 +1,22 @@
 """THE end-to-end test of docs/design.md §7: a synthetic campaign with a hidden effect (sensor noise,
 gain errors, time offsets and speed scatter on) → the baseline fails validation → diagnosis
-ranks the hidden effect first → calibrating it passes every quantity (or halves the largest
-normalised error) and recovers the hidden value within 20 % (read from ``--reveal``).
+ranks the hidden effect first among all candidates (effects and template parameters
+``model.*``) → calibrating it passes every quantity (or halves the largest normalised error)
+and recovers the hidden value within 20 % (read from ``--reveal``).
 
-CI runs the fast variant (one effect, diagnosis among four candidates). The full sweep — every
-effect of the library on the coach, every wagon-applicable effect on the wagon, two effects
+CI runs the fast variant (one effect, diagnosis among four candidate effects). The full sweep —
+every effect of the library on the coach, every wagon-applicable effect on the wagon, two effects
 hidden at once, and a baseline with mis-set parameters — is marked slow::
 
     pytest -m slow tests/test_hidden_effect.py
 
-Its measured results are tabulated in docs/diagnosis.md.
+Each story runs at the explicit value of :data:`STORY_VALUES`: the plausible hidden default
+where it fails the baseline; where no plausible value does (the simulator's corrections of
+this round: exact Maxwell update, realistic true track per speed band, …) a measured failing
+value labelled "outside the plausible range — an identifiability check only". Where no value
+inside the search bounds fails (:data:`BASELINE_PASSES`) the slow test asserts that the
+baseline passes, the documented claim. Measured results: docs/diagnosis.md; the scan of
+values: docs/simulator.md "Synthetic campaigns".
 """
 
 from __future__ import annotations
@@ -243,7 +250,7 @@ def test_baseline_passes_where_no_value_fails(tmp_path, case):
 @pytest.mark.slow
 def test_two_hidden_effects_both_in_top_three(tmp_path):
     database, _ = make_campaign(tmp_path, ["conicity", "friction_damping"])
-    diag = diagnose(database, "hidden", "baseline")
+    diag = diagnose(database, "hidden", "baseline", workers=1)
     top3 = [c.effect for c in diag.candidates[:3]]
     assert {"conicity", "friction_damping"} <= set(top3), top3
 
@@ -267,5 +274,5 @@ def test_mis_set_baseline_still_ranks_hidden_effect_first(tmp_path, factor):
     with database.session() as s:
         repo.store_configuration(s, "hidden", "misset", parent="baseline", effects=effects,
                                  parameters=params, description="mis-set", signalsets=sets)
-    diag = diagnose(database, "hidden", "misset")
+    diag = diagnose(database, "hidden", "misset", workers=1)
     assert diag.candidates[0].effect == "parasitic_yaw_stiffness", [c.effect for c in diag.candidates]
