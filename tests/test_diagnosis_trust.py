@@ -200,3 +200,14 @@ def test_closed_form_segment_minimum_matches_a_fine_grid():
             _, grid, _ = _fit(curve, P[b], w)
             assert exact[b] <= grid + 1e-12
             assert exact[b] == pytest.approx(grid, rel=1e-5, abs=1e-9)
+
+
+def test_refinement_value_stays_inside_the_parameter_bounds():
+    """The refinement re-simulates a parameter candidate at its fitted value; a log-space fit
+    that lands a rounding error below the lower bound (measured: k_primary_y 499999.9999999997
+    for the bound 5e5, hidden conicity + friction) is clipped instead of rejected."""
+    from railval.app.services.diagnosis_evidence import refine_value
+
+    assert refine_value(499999.9999999997, (5e5, 2e7)) == 5e5
+    assert refine_value(2.0000000001e7, (5e5, 2e7)) == 2e7
+    assert refine_value(3.884e6, (5e5, 2e7)) == 3.884e6

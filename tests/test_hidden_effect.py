@@ -252,6 +252,8 @@ def test_two_hidden_effects_both_in_top_three(tmp_path):
     database, _ = make_campaign(tmp_path, ["conicity", "friction_damping"])
     diag = diagnose(database, "hidden", "baseline", workers=1)
     top3 = [c.effect for c in diag.candidates[:3]]
+    print(json.dumps({"top3": top3, "explained": [c.explained for c in diag.candidates[:3]],
+                      "verdict": diag.extra.get("verdict")}))
     assert {"conicity", "friction_damping"} <= set(top3), top3
 
 
@@ -275,4 +277,5 @@ def test_mis_set_baseline_still_ranks_hidden_effect_first(tmp_path, factor):
         repo.store_configuration(s, "hidden", "misset", parent="baseline", effects=effects,
                                  parameters=params, description="mis-set", signalsets=sets)
     diag = diagnose(database, "hidden", "misset", workers=1)
+    print(json.dumps({"factor": factor, "top3": [c.effect for c in diag.candidates[:3]]}))
     assert diag.candidates[0].effect == "parasitic_yaw_stiffness", [c.effect for c in diag.candidates]
