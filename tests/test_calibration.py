@@ -215,3 +215,25 @@ def test_start_on_the_bounds_is_accepted():
     specs = [ParameterSpec("a", 5.0, 16.0, start=5.0), ParameterSpec("b", 0.005, 0.1, start=0.005)]
     res = calibrate(lambda p: (p["a"] - 5.0) ** 2 + (p["b"] - 0.005) ** 2, specs, seed=0, maxiter=3)
     assert res.objective_start == pytest.approx(0.0) and res.objective <= 1e-12
+
+
+def test_service_objective_is_inf_where_the_simulation_diverges(monkeypatch):
+    """A diverged simulation (non-finite channel) is the search's worst point, not an abort;
+    any other signal error still raises."""
+    from railval.app.services import calibration as svc
+    from railval.core.errors import InvalidSignal
+
+    obj = svc._Objective(ctx=None, base_effects={}, base_params={}, targets=[("conicity", "conicity")])
+
+    def diverged(task):
+        raise InvalidSignal("section S09: channel Y_w1L holds non-finite values (nan)")
+
+    monkeypatch.setattr(svc, "evaluate_effects", diverged)
+    assert obj({"conicity.conicity": 0.3}) == math.inf
+
+    def broken(task):
+        raise InvalidSignal("section S09: distance_m must be strictly increasing")
+
+    monkeypatch.setattr(svc, "evaluate_effects", broken)
+    with pytest.raises(InvalidSignal):
+        obj({"conicity.conicity": 0.3})

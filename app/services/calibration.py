@@ -32,7 +32,7 @@ from railval.core.calibration import (
     validation_objective,
 )
 from railval.core.calibration import calibrate as fit_parameters
-from railval.core.errors import InvalidParameter
+from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.sim.effects import EFFECTS
 from railval.core.validation import normalised_errors, validate
 from railval.db import repo
@@ -55,8 +55,17 @@ class _Objective:
         return effects, model
 
     def __call__(self, params: Mapping[str, float]) -> float:
+        """The objective; ``inf`` where the simulation diverges (a channel holds non-finite
+        values), which the search treats as its worst point (core.calibration penalty) instead
+        of aborting the whole calibration — observed for the coach with track_flexibility at
+        k_vertical 300 MN/m and k_lateral ≤ 2 MN/m (docs/diagnosis.md "The hidden-effect test")."""
         effects, model = self.split(params)
-        vals, _ = evaluate_effects((self.ctx, effects, model))
+        try:
+            vals, _ = evaluate_effects((self.ctx, effects, model))
+        except InvalidSignal as exc:
+            if "non-finite" not in str(exc):
+                raise
+            return math.inf
         vr = validate_values(self.ctx, vals)
         return validation_objective({q: r.mean_norm for q, r in vr.quantities.items()},
                                     {q: r.std_norm for q, r in vr.quantities.items()})
