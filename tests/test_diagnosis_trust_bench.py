@@ -63,6 +63,7 @@ def test_class_b_parameter_error_is_diagnosed_calibrated_on_a_split_and_flagged_
     # a real cause: the held-out sections improve, so no held-out caveat (the baseline of this
     # case passes already: the note says so)
     assert not any("no held-out evidence" in f for f in cd["flags"]), cd["flags"]
+    assert not any("no diagnostic evidence" in f for f in cd["flags"]), cd["flags"]  # diagnosed as the cause
     assert any("already passed validation" in f for f in cd["flags"]) == bool(rec["baseline_validated"])
     step = cd["lineage"][-1]
     assert step["held_out"]["parent_max_error"] is not None and step["held_out"]["improvement"] is not None
@@ -102,6 +103,8 @@ def test_class_d_nothing_gives_no_cause(database):
     # the result says that nothing required the change and the held-out sections gained nothing
     assert rec["baseline_validated"] and rec["wrong_calibration_passes"]
     assert rec["wrong_calibration_flagged"], rec.get("wrong_calibration_flags")
+    # the parent's stored diagnosis answered "none": the calibration says it has no support
+    assert any("verdict none" in f and "no diagnostic evidence" in f for f in rec["wrong_calibration_flags"])
     assert s["of_those_flagged"] == 1.0
 
 

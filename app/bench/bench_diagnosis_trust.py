@@ -144,11 +144,18 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
         cd = cal.to_dict()
         rec["wrong_calibration_passes"] = bool(cd["validation"]["validated"])
         held = cd.get("validation_held_out") or {}
-        rec["wrong_calibration_flagged"] = bool(cd["flags"] and (not cd["plausible"] or any(
-            "held-out" in f or "compensating" in f for f in cd["flags"])))
+        rec["wrong_calibration_flagged"] = flagged(cd)
         rec["wrong_calibration_held_out_validated"] = held.get("validated")
         rec["wrong_calibration_flags"] = list(cd["flags"])
     return rec
+
+
+def flagged(calibration: dict) -> bool:
+    """A calibration result warns that its candidate may be wrong: a fitted value implausible
+    or at a bound, or a warning (not a ``note:``) from the held-out check or the parent's
+    diagnosis ("… the model may be compensating for something else", "… held-out …")."""
+    warnings = [f for f in calibration.get("flags") or [] if not f.startswith("note:")]
+    return (not calibration.get("plausible", True)) or any("held-out" in f or "compensating" in f for f in warnings)
 
 
 def _records_in(path: str | None) -> dict[tuple[str, str], dict]:

@@ -105,6 +105,7 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
         conf_effects, conf_params, _ = configuration_of(s, campaign, config)
         # the parent's own evidence, to judge what the calibration adds on sections it has not seen
         parent_vals = section_values(_repo.load_signalsets(s, campaign, config), ctx.sections)
+        support = _diagnosis_flags(s, campaign, config, list(effects))
     model_candidates = [e for e in effects if e.startswith("model.")]
     effects = [e for e in effects if not e.startswith("model.")]
     start = {k: dict(v) for k, v in (start or {}).items()}
@@ -171,7 +172,7 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
                                   held.sections, ctx.vehicle)
     vr_parent = validate_values(ctx, parent_vals)
     plausible, flags = _calibration_flags(ctx, specs, res.parameters, vr_full, vr_held)
-    flags += _parent_flags(vr_parent, vr_parent_held, vr_held)
+    flags += _parent_flags(vr_parent, vr_parent_held, vr_held) + support
     with session_of(database) as s:
         repo.store_configuration(
             s, campaign, new_name, parent=config, effects=eff, parameters=model,
@@ -293,6 +294,39 @@ def _parent_flags(vr_parent: Any, vr_parent_held: Any, vr_held: Any) -> list[str
                          f"{HELD_OUT_GAIN:.0%} ({before:.3g} → {after:.3g}): no held-out evidence that this candidate "
                          "is a cause; the model may be compensating for something else")
     return flags
+
+
+def _diagnosis_flags(session: Any, campaign: str, config: str, candidates: Sequence[str]) -> list[str]:
+    """Whether the newest stored diagnosis of the parent supports calibrating ``candidates``
+    (effect ids or ``model.NAME``): no flag when its verdict is ``cause`` for one of them; a
+    flag when it answered ``none`` or ``uncertain`` or named another cause; a note when the
+    parent was never diagnosed (docs/diagnosis.md "Calibration")."""
+    from railval.app.services.diagnosis import latest_diagnosis
+
+    diag = latest_diagnosis(session, campaign, config)
+    names = ", ".join(candidates)
+    if diag is None:
+        return [f"note: {config} has no stored diagnosis, so nothing here shows that {names} is the "
+                f"cause; run railval diagnose {campaign} --config {config}"]
+    d = diag.to_dict()
+    verdict = d.get("verdict") or ""
+    cands = d.get("candidates") or []
+    top = cands[0].get("name", cands[0].get("effect")) if cands else ""
+    run = d.get("run") or {}
+    when = f" of {run['created_at']}" if run.get("created_at") else ""
+    stale = " (computed on data that have changed since)" if run.get("current") is False else ""
+    if verdict == "cause" and top in candidates:
+        return []
+    if verdict == "none":
+        why = "found no cause beyond the section-to-section scatter (verdict none)"
+    elif verdict == "uncertain":
+        why = f"could not single out a cause (verdict uncertain, best {top})"
+    elif verdict == "cause":
+        why = f"named {top}, not {names}, as the cause"
+    else:  # a diagnosis stored before verdicts existed
+        return []
+    return [f"the diagnosis of {config}{when}{stale} {why}: no diagnostic evidence that {names} is a cause; "
+            "the model may be compensating for something else"]
 
 
 def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float]) -> ParameterSpec:
