@@ -55,14 +55,6 @@ def scan_points(effect: Effect, values_per_parameter: int) -> Iterator[tuple[str
             yield pname, v, {**defaults, pname: v}, p
 
 
-def refine_value(fitted: float, bounds: tuple[float, float]) -> float:
-    """The value a parameter candidate is re-simulated at in the refinement: its fitted value
-    clipped to the parameter's bounds (a fit extrapolated in log(value) can land a rounding
-    error outside a bound, e.g. 499999.9999999997 for a lower bound of 5e5, which the template
-    would reject)."""
-    return min(max(float(fitted), float(bounds[0])), float(bounds[1]))
-
-
 # --------------------------------------------------------------------------- registry accessors
 def plausible_range(param: Any) -> tuple[tuple[float, float] | None, str]:
     """The physically plausible range of a simulator parameter and its source, from the
@@ -249,7 +241,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                 if c.kind != "parameter" or len(redo) >= refine:
                     continue
                 fam = next(f for f in fams if f.name == c.name)
-                v = refine_value(c.fitted, fam.bounds)
+                v = c.fitted  # inside the bounds: core.diagnosis._Curve.value clamps it
                 if min(abs(math.log(v / x)) for x in fam.values) > math.log(1.1):
                     redo.append((fam, v))
             if redo:
