@@ -347,7 +347,10 @@ class DiagnosePage(PageBase):
                 text += (f" On the held-out sections the largest normalised error went from "
                          f"{held['parent_max_error']:.2f} to {held['max_error']:.2f}.")
         for f in r.get("flags") or []:
-            if not str(f).startswith("in-sample"):
+            f = str(f)
+            if f.startswith("note:"):
+                text += f" Note: {f[5:].strip()}."
+            elif not f.startswith("in-sample"):
                 text += f" Warning: {f}."
         return text + f" Next: diagnose {config} — press **Run diagnosis**."
 
