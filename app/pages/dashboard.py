@@ -107,7 +107,7 @@ def summary_table(rows: list[dict[str, Any]]) -> pn.widgets.Tabulator:
     df = summary_frame(rows)
     # every column inside the page width: headers wrap, the name column takes the rest
     widths = {c: 72 for c in df.columns}  # 892 px in all: fits the main area at 1280 px
-    widths.update({"quantity": 90, "what it is": 170, "unit": 60, "pairs": 64, "verdict": 80})
+    widths.update({"quantity": 90, "what it is": 154, "unit": 60, "pairs": 80, "verdict": 80})
     tab = table(df, height=80 + 40 * len(df), layout="fit_columns", widths=widths, css_classes=["rv-summary"],
                 formatters={"what it is": {"type": "textarea"}},  # long names wrap, never cut
                 stylesheets=[":host {font-size: 13px;}", WRAP_HEADERS_CSS])
