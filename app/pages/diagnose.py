@@ -162,8 +162,8 @@ class DiagnosePage(PageBase):
             return
         df = pd.DataFrame([{
             "#": i + 1, "candidate": c["effect"], "kind": c.get("kind", "effect"),
-            "held-out %": round(100 * float(c.get("held_out_explained", c["explained"])), 1),
-            "explained %": round(100 * float(c["explained"]), 1),
+            "held-out": round(100 * float(c.get("held_out_explained", c["explained"])), 1),
+            "in-sample": round(100 * float(c["explained"]), 1),
             "plausible": "yes" if c.get("plausible", True) else "no", "flags": len(c.get("flags") or []),
             "fitted parameters": ", ".join(f"{k} = {v:.4g}" for k, v in (c.get("parameters") or {}).items()),
         } for i, c in enumerate(cands)])
@@ -183,11 +183,14 @@ class DiagnosePage(PageBase):
             extra.append(message(note, "info" if self.state.separable else "warning"))
         # the verdict first: a reader must not scroll past 20 candidates to learn how sure it is
         # 890 px in all: fits the main area at 1280 px (what it fixes and worsens: below, per candidate)
-        widths = {"#": 40, "candidate": 175, "kind": 85, "held-out %": 100, "explained %": 105,
-                  "plausible": 85, "flags": 60, "fitted parameters": 240}
+        widths = {"#": 40, "candidate": 165, "kind": 85, "held-out": 100, "in-sample": 105,
+                  "plausible": 100, "flags": 70, "fitted parameters": 225}
         self.candidates_box.objects = [
             pn.pane.Markdown("#### Ranked candidates (effects and model parameters), by the share "
-                             "explained on held-out sections"), *self._run_line(), *extra,
+                             "explained on held-out sections"),
+            pn.pane.Markdown("Shares of the residual explained, in %: on held-out sections (the "
+                             "ranking) and in-sample (all sections).", sizing_mode="stretch_width"),
+            *self._run_line(), *extra,
             table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"], widths=widths,
                   layout="fit_columns"),
             *self._earlier_runs(), self.candidate_box,
