@@ -24,6 +24,7 @@ from typing import Any, ClassVar
 
 from sqlalchemy import (
     JSON,
+    Boolean,
     DateTime,
     Float,
     ForeignKey,
@@ -34,6 +35,7 @@ from sqlalchemy import (
     String,
     Text,
     UniqueConstraint,
+    false,
     text,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
@@ -355,6 +357,10 @@ class Signoff(Base):
     decision: Mapped[str] = mapped_column(String(20))
     restrictions: Mapped[str] = mapped_column(Text, default="")
     statement: Mapped[str] = mapped_column(Text, default="")
+    justification: Mapped[str] = mapped_column(Text, default="", server_default="")
+    contrary_to_objective: Mapped[bool] = mapped_column(
+        Boolean, default=False, server_default=false()
+    )
     evidence_sha256: Mapped[str] = mapped_column(String(64))
     manifest: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     software_version: Mapped[str] = mapped_column(String(40))

@@ -124,3 +124,26 @@ def test_resolve_url(monkeypatch):
     assert resolve_url("sqlite:///x.db") == "sqlite:///x.db"
     with pytest.raises(RailvalError, match="unsupported backend"):
         connect("mysql://u@h/db")
+
+
+def test_migration_file_names_follow_the_revision_chain():
+    """The files of db/migrations/versions, sorted by name, are the chain from base to head:
+    a reader who opens them in name order reads the schema's history in the order it runs."""
+    import importlib.util
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[1] / "db" / "migrations" / "versions"
+    files = sorted(p for p in folder.glob("[0-9][0-9][0-9][0-9]_*.py"))
+    revisions = {}
+    for path in files:
+        spec = importlib.util.spec_from_file_location(path.stem, path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        revisions[path.name] = (module.revision, module.down_revision)
+    chain, parent = [], None
+    by_parent = {down: (name, rev) for name, (rev, down) in revisions.items()}
+    assert len(by_parent) == len(revisions), "two migrations revise the same parent"
+    while parent in by_parent:
+        name, parent = by_parent[parent]
+        chain.append(name)
+    assert chain == [p.name for p in files]
