@@ -33,3 +33,45 @@ def test_readme_links_resolve():
     assert "docs/design.md" in links
     missing = [link for link in links if not (ROOT / link).exists()]
     assert not missing, missing
+
+
+# A repository path as the docs write it: a top-level folder of the repository, then at least
+# one more component (``app/pages/``, ``core/diagnosis.py``, ``tests/test_docs.py::name``).
+_PATH = re.compile(r"(?<![\w./-])((?:app|core|db|tests|tools|deploy|docs|static|\.ci)/[\w./*-]*[\w*/])")
+
+
+def _named_paths(text: str) -> set[str]:
+    paths = set()
+    for m in _PATH.finditer(text):
+        path = m.group(1).split("::")[0].rstrip("/.")
+        if "*" in path or "<" in path:
+            continue
+        paths.add(path)
+    return paths
+
+
+def _exists(path: str) -> bool:
+    """A path named in prose exists as file or folder; ``tests/factories`` also counts as the
+    module ``tests/factories.py``, and ``db/repo.delete_campaign`` names a function of
+    ``db/repo.py``."""
+    if (ROOT / path).exists() or (ROOT / f"{path}.py").exists():
+        return True
+    module, dot, _attribute = path.rpartition(".")  # ``db/repo.store_configuration``
+    return bool(dot) and "/" in module and (ROOT / f"{module}.py").exists()
+
+
+def test_every_repository_path_named_in_the_docs_exists():
+    missing = []
+    for doc in sorted((ROOT / "docs").glob("*.md")) + [ROOT / "README.md"]:
+        for path in sorted(_named_paths(doc.read_text(encoding="utf-8"))):
+            if not _exists(path):
+                missing.append(f"{doc.relative_to(ROOT)}: {path}")
+    assert not missing, "docs name paths that do not exist:\n" + "\n".join(missing)
+
+
+def test_the_docs_path_check_catches_a_missing_path():
+    assert _named_paths("see `app/workshop_web.py` and core/diagnosis.py.") == {
+        "app/workshop_web.py", "core/diagnosis.py"}
+    assert not _exists("app/workshop_web.py")
+    assert _exists("tests/factories")
+    assert _exists("db/repo.delete_campaign") and not _exists("db/nothere.delete_campaign")
