@@ -149,14 +149,17 @@ def plot_image(session: Session, workshop_id: int, plot_id: int) -> tuple[bytes,
 
 # -- reviewers ---------------------------------------------------------------------------
 def _reviewer_user(session: Session, username: str, actor: Any) -> AppUser:
+    """The workshop participant ``username``: created as a panelist (no password) when
+    missing; an existing user must hold the role ``panelist``."""
     user = users.find_user(session, username)
     if user is None:
-        return users.create_user(session, username, roles=["reviewer"], actor=actor,
-                                 reason="workshop reviewer")
-    if "reviewer" not in user.role_names:
+        return users.create_user(session, username, roles=["panelist"], actor=actor,
+                                 reason="workshop panelist")
+    if "panelist" not in user.role_names:
         raise InvalidParameter(
             f"user {username!r} holds the roles {', '.join(user.role_names) or '(none)'}, not "
-            "reviewer; give them the reviewer role first")
+            f"panelist; give them the panelist role first (`railval user role {username} "
+            f"{' '.join([*user.role_names, 'panelist'])}`)")
     if user.disabled:
         raise InvalidParameter(f"user {username!r} is disabled")
     return user
@@ -165,7 +168,7 @@ def _reviewer_user(session: Session, username: str, actor: Any) -> AppUser:
 def participation(session: Session, workshop: Workshop, username: str, *,
                   actor: Any = "system", seed: int | None = None) -> WorkshopReviewer:
     """The reviewer's participation in ``workshop``, created when missing (the user too, as
-    a reviewer without password): a random seed (stored) and the sequence it gives."""
+    a panelist without password): a random seed (stored) and the sequence it gives."""
     user = _reviewer_user(session, username, actor)
     r = session.scalar(select(WorkshopReviewer).where(WorkshopReviewer.workshop_id == workshop.id,
                                                       WorkshopReviewer.user_id == user.id))
@@ -366,7 +369,7 @@ def import_answers(session: Session, workshop: Workshop,
                    source_name: str = "") -> dict[str, int]:
     """Store answers gathered elsewhere: ``rows`` are checked dicts ``reviewer, plot,
     answer (bool), seconds, comment, repeat (bool), line``. Unknown reviewers become
-    reviewer users without password. A plot a reviewer already answered in the workshop is
+    panelist users without password. A plot a reviewer already answered in the workshop is
     refused with the line. Everything happens in ``session``'s transaction: the caller's
     unit of work stores all rows or none."""
     rows = list(rows)

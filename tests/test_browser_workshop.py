@@ -82,7 +82,7 @@ def env(tmp_path_factory):
     tokens = {}
     with db.session() as s:
         users.create_user(s, "orga", password="organiser-pass", roles=["organiser"])
-        users.create_user(s, "rpw", password="reviewer-pass", roles=["reviewer"])
+        users.create_user(s, "rpw", password="reviewer-pass", roles=["panelist"])
         bw, bb = wsdb.get_workshop(s, "BW"), wsdb.get_workshop(s, "BB")
         for i, name in enumerate(("ra", "rb", "rc", "rd", "re", "rpw")):
             tokens[name] = wsdb.invite(s, bw, name, seed=100 + i)

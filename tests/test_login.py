@@ -116,7 +116,7 @@ def test_invitation_single_use_and_expiry(server):
             {"expires_at": dt.datetime.now(dt.UTC) - dt.timedelta(hours=1)})
     c = Client(base)
     status, body, _ = c.get(f"/invite?token={token}")
-    assert status == 200 and "reviewer" in body and "workshop W1" in body
+    assert status == 200 and "panelist" in body and "workshop W1" in body
     status, body, final = c.post("/invite", token=token, username="rev1", display_name="R. One",
                                  password="reviewer pw", password2="reviewer pw")
     assert status == 200 and final.endswith("/app")
@@ -130,7 +130,7 @@ def test_invitation_single_use_and_expiry(server):
     refused = rows(database, "invitation.refused")
     assert len(refused) == 3 and all(r["reason"] for r in refused)
     with database.session() as s:
-        assert users.get_user(s, "rev1").role_names == ["reviewer"]
+        assert users.get_user(s, "rev1").role_names == ["panelist"]
         assert users.find_user(s, "rev2") is None
 
 
