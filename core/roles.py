@@ -90,7 +90,7 @@ CLI_ACTIONS: dict[str, str | None] = {
     "user enable": "user.manage", "user passwd": "user.manage", "user role": "user.manage",
     "user invite": "user.manage",
     "signoff create": "signoff.create", "signoff list": "signoff.read",
-    "signoff show": "signoff.read",
+    "signoff show": "signoff.read", "signoff summary": "data.read",
     "audit verify": "audit.read", "audit export": "audit.read", "audit report": "audit.read",
     "audit checkpoint": "audit.checkpoint", "audit log": "audit.read",
     "workshop kinds": None,

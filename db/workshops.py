@@ -426,3 +426,27 @@ def import_answers(session: Session, workshop: Workshop,
                  detail={"answers": len(rows), "reviewers": len(by_reviewer),
                          "new_users": created, "file": source_name[:200]})
     return {"answers": len(rows), "reviewers": len(by_reviewer), "new_users": created}
+
+
+def configuration_results(session: Session, campaign_id: int, configuration: str
+                          ) -> list[dict[str, Any]]:
+    """Per workshop of the campaign with plots of ``configuration``: name, status, blind,
+    plots of the configuration, answers on them and the share of Yes (first showings with
+    the fixed scaling; hidden repeats and automatic-scaling plots left out)."""
+    out = []
+    for w in session.scalars(select(Workshop).where(Workshop.campaign_id == campaign_id)
+                             .order_by(Workshop.name)):
+        n_plots = session.scalar(select(func.count()).select_from(WorkshopPlot).where(
+            WorkshopPlot.workshop_id == w.id, WorkshopPlot.configuration == configuration))
+        if not n_plots:
+            continue
+        n, yes = session.execute(
+            select(func.count(), func.coalesce(func.sum(case((WorkshopAnswer.answer, 1), else_=0)), 0))
+            .select_from(WorkshopAnswer)
+            .join(WorkshopPlot, WorkshopAnswer.plot_id == WorkshopPlot.id)
+            .where(WorkshopPlot.workshop_id == w.id, WorkshopPlot.configuration == configuration,
+                   WorkshopPlot.scaling == "fixed", WorkshopAnswer.repeat.is_(False))).one()
+        out.append({"workshop": w.name, "status": w.status, "blind": bool(w.blind),
+                    "plots": int(n_plots), "answers": int(n), "yes": int(yes),
+                    "yes_share": (int(yes) / int(n)) if n else None})
+    return out
