@@ -450,3 +450,34 @@ def configuration_results(session: Session, campaign_id: int, configuration: str
                     "plots": int(n_plots), "answers": int(n), "yes": int(yes),
                     "yes_share": (int(yes) / int(n)) if n else None})
     return out
+
+
+def participations(session: Session, username: str) -> list[dict[str, Any]]:
+    """The workshops ``username`` takes part in: ``workshop, status, blind, answered, total,
+    finished, invited`` (a panelist's "my workshops")."""
+    rows = session.execute(
+        select(WorkshopReviewer, Workshop).join(Workshop, WorkshopReviewer.workshop_id == Workshop.id)
+        .join(AppUser, WorkshopReviewer.user_id == AppUser.id)
+        .where(AppUser.username == username).order_by(Workshop.name)).all()
+    out = []
+    for r, w in rows:
+        n = session.scalar(select(func.count()).select_from(WorkshopAnswer)
+                           .where(WorkshopAnswer.reviewer_id == r.id))
+        out.append({"workshop": w.name, "status": w.status, "blind": bool(w.blind),
+                    "answered": int(n), "total": len(r.sequence),
+                    "finished": r.finished_at is not None, "invited": r.invited_at is not None})
+    return out
+
+
+def own_link(session: Session, workshop_name: str, username: str) -> str:
+    """A new personal link token for ``username``'s existing participation in the workshop
+    (the signed-in panelist opening it from "my workshops"; the earlier link stops
+    working). :class:`NotFound` when they take no part in it."""
+    w = get_workshop(session, workshop_name)
+    took_part = session.scalar(
+        select(func.count()).select_from(WorkshopReviewer)
+        .join(AppUser, WorkshopReviewer.user_id == AppUser.id)
+        .where(WorkshopReviewer.workshop_id == w.id, AppUser.username == username))
+    if not took_part:
+        raise NotFound(f"{username} takes no part in workshop {workshop_name!r}")
+    return invite(session, w, username, actor=username)
