@@ -145,7 +145,7 @@ def areas_box(principal: Principal) -> pn.pane.HTML:
     links = "".join(f"<li><a class='rv-area' href='{html.escape(e.href, quote=True)}'>"
                     f"{html.escape(e.title)}</a></li>"
                     for e in entries(principal) if e.kind == "area")
-    return pn.pane.HTML(f"<div class='rv-areas' style='font-size:14px'><b>Workshops</b>"
+    return pn.pane.HTML(f"<div class='rv-areas' style='font-size:14px'><b>Workshop pages</b>"
                         f"<ul style='margin:4px 0;padding-left:18px'>{links}</ul></div>"
                         if links else "", sizing_mode="stretch_width", margin=(0, 10))
 

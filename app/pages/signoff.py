@@ -133,8 +133,9 @@ def summary_html(summ: dict) -> str:
             f"top candidate {e(dg['top'] or '–')} explains {_n(dg['explained'], '.2f')}"
             + ("" if dg.get("current", True) else " — <b>the data changed since this run</b>"))
     ws = "".join(f"<li>workshop <b>{e(w['workshop'])}</b> ({e(w['status'])}{', blind' if w['blind'] else ''}): "
-                 f"{w['plots']} plots of this configuration, {w['answers']} answers, "
-                 f"{'–' if w['yes_share'] is None else format(w['yes_share'], '.0%')} “validated”</li>"
+                 f"{w['plots']} plots of this configuration, {w['answers']} answers"
+                 + ("" if w["yes_share"] is None else f", {w['yes_share']:.0%} “validated”")
+                 + "</li>"
                  for w in summ["workshops"]) or "<li>no workshop shows this configuration</li>"
     links = " · ".join(f"<a class='rv-evidence-link' href='{e(url, quote=True)}' target='_blank' "
                        f"rel='noopener'>{e(PAGE_TITLES.get(name, name))}</a>"
