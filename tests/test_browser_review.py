@@ -128,6 +128,17 @@ def test_reviewer_sees_what_is_signed_and_a_contrary_decision_needs_a_justificat
     banner = page.locator(".rv-signoff-banner")
     banner.wait_for(timeout=TIMEOUT_MS)
     assert "CONTRARY TO THE OBJECTIVE VERDICT" in banner.inner_text() and why in banner.inner_text()
+    # … and the report the reviewer opens (any campaign's evidence is theirs to read)
+    page.locator(".rv-nav").get_by_role("button", name="Compare signals", exact=True).click()
+    page.locator(".rv-main h2", has_text="Compare signals").wait_for(timeout=TIMEOUT_MS)
+    page.locator(".rv-nav").get_by_role("button", name="Report", exact=True).click()
+    frame = page.frame_locator("iframe[title='report preview']")
+    label = frame.locator(".rv-contrary").first
+    label.wait_for(timeout=TIMEOUT_MS)
+    row = frame.locator("tr", has=frame.locator(".rv-contrary")).first
+    assert why in row.inner_text() and "VALIDATED" in row.inner_text()
+    label.scroll_into_view_if_needed()
+    screenshot(page, "review-report-contrary")
 
 
 def test_one_navigation_between_the_app_and_the_workshops(page, app):

@@ -317,7 +317,7 @@ class MyWorkshops(_OrganiserBase):
             + "</td></tr>" for r in rows)
         body = ("<h2>My workshops</h2>"
                 + (f"<table id='mine'><tr><th>workshop</th><th>status</th><th>answered</th>"
-                   f"<th></th><th></th></tr>{trs}</table>" if rows else
+                   f"<th>state</th><th></th></tr>{trs}</table>" if rows else
                    "<p>You take part in no workshop yet; the organiser invites you.</p>")
                 + "<p class='muted'>Opening a review here replaces the personal link you were "
                   "sent; your answers stay.</p>"
