@@ -111,6 +111,7 @@ def test_cli_contract_reviewer_panelist_contrary(demo, capsys, monkeypatch, tmp_
                          stdin=PW["rev"] + "\n")
     assert code == 0, err
     doc = json.loads(out)
+    assert "objective verdict  NOT VALIDATED" in err  # the summary, read before the password
     assert doc["contrary_to_objective"] is False and doc["summary"]["objective"]["verdict"] == "NOT VALIDATED"
     assert len(doc["summary"]["quantities"]) == 12 and doc["summary"]["signoffs"][0]["id"] == 1
     code, out, _ = run(capsys, monkeypatch, "--db", url, "--as", "rev", "signoff", "list", "--json")

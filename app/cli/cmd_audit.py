@@ -253,8 +253,10 @@ def _cmd_signoff_create(args) -> int:
     database = _database(args)
     username = _signer(args)
     summ = _summary(args)
-    if not args.json:
-        print("\n".join(summary_lines(summ)), flush=True)
+    # read before the password is asked; with --json on stderr (stdout holds one document,
+    # which carries the summary as "summary")
+    print("\n".join(summary_lines(summ)), file=sys.stderr if args.json else sys.stdout,
+          flush=True)
     contrary = summ["contrary_if"][args.decision]
     if contrary and not args.justification.strip():
         raise RailvalError(f"{contrary}: a decision contrary to the objective verdict needs "
