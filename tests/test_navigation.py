@@ -68,3 +68,12 @@ def test_with_xsrf_fills_every_post_form_and_the_meta():
     assert out.count(hidden) == 2
     assert "<form method='get' action='/c'></form>" in out
     assert '<head><meta name="xsrf-token" content="tok&quot;&lt;en">' in out
+
+
+@pytest.mark.parametrize("name", ["mine", "new", "Plan"])
+def test_workshop_names_of_pages_are_refused(name):
+    from railval.app.services import workshops as ws
+    from railval.core.errors import InvalidParameter
+
+    with pytest.raises(InvalidParameter, match="reserved"):
+        ws.create(None, name, "demo")
