@@ -62,6 +62,18 @@ def utc_text(when: dt.datetime | None) -> str:
 
 
 # -- workshops ---------------------------------------------------------------------------
+#: path segments of the workshop pages (``/workshops/new``, ``/workshops/mine`` …): no
+#: workshop may be called so, or its page could not be reached
+RESERVED_NAMES = ("new", "plan", "mine", "login", "logout")
+
+
+def check_name(name: str) -> None:
+    """Refuse a workshop name that is one of :data:`RESERVED_NAMES`."""
+    if str(name).strip().lower() in RESERVED_NAMES:
+        raise InvalidParameter(f"workshop name {name!r} is reserved (a page /workshops/{name} "
+                               "exists); choose another name")
+
+
 def list_workshops(session: Session) -> list[Workshop]:
     return list(session.scalars(select(Workshop).order_by(Workshop.name)))
 

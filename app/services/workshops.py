@@ -48,9 +48,6 @@ from railval.core.workshop import (
 )
 
 DEFAULT_REPEATS = 0.1
-#: path segments of the workshop pages (``/workshops/new``, ``/workshops/mine`` …): no
-#: workshop may be called so, or its page could not be reached
-RESERVED_NAMES = ("new", "plan", "mine", "login", "logout")
 CSV_COLUMNS = ("reviewer", "plot", "answer", "seconds", "comment")
 EXPORT_COLUMNS = (*CSV_COLUMNS, "answered_at", "updated_at", "position", "repeat", "scaling",
                   "kind", "source", "changes")
@@ -191,9 +188,7 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
 
     if isinstance(actor, Principal):
         require(actor, "workshop.run")
-    if str(name).strip().lower() in RESERVED_NAMES:
-        raise InvalidParameter(f"workshop name {name!r} is reserved (a page /workshops/{name} "
-                               "exists); choose another name")
+    wsdb.check_name(name)
     if not (0.0 <= repeats <= 0.5):
         raise InvalidParameter(f"--repeats must be between 0 and 0.5, got {repeats!r}")
     if not (0.0 <= auto_share <= 1.0):
