@@ -65,6 +65,27 @@ def test_cli_contract_reviewer_panelist_contrary(demo, capsys, monkeypatch, tmp_
     code, out, _ = run(capsys, monkeypatch, "--db", url, "--as", "eng", "validate", "demo",
                        "--config", "baseline", "--json")
     assert code == 0 and json.loads(out)["validated"] is False
+    # a stored diagnosis run shows in the summary (its data are current: same signals)
+    from railval.app.services.diagnosis import DIAGNOSIS_VERSION
+    from railval.app.services.stored_runs import data_inputs, digests
+    from railval.db import repo, runs
+
+    with db.session() as s:
+        conf = repo.get_configuration(s, "demo", "baseline")
+        data_sha, _ = digests(data_inputs(s, "demo", "baseline"), {}, DIAGNOSIS_VERSION)
+        run_id = runs.store_run(s, campaign_id=conf.campaign_id, configuration_id=conf.id,
+                                kind="diagnosis", inputs_sha256="0" * 64,
+                                settings={"data_sha256": data_sha},
+                                result={"verdict": "cause", "separable": True, "candidates": [
+                                    {"effect": "friction_damping", "explained": 0.81}]}).id
+    code, out, _ = run(capsys, monkeypatch, "--db", url, "--as", "rev", "signoff", "summary",
+                       "demo", "--config", "baseline", "--json")
+    summ = json.loads(out)
+    assert code == 0 and summ["diagnosis"] == {
+        "run": run_id, "created_at": summ["diagnosis"]["created_at"], "top": "friction_damping",
+        "explained": 0.81, "separable": True, "current": True, "verdict": "cause"}
+    assert summ["objective"]["coverage"]["ok"] is False and summ["contrary_if"]["not-validated"] is None
+    assert summ["links"]["report"] == "/app?campaign=demo&configuration=baseline&page=report"
     # a panelist cannot sign off (refused before the password is asked)
     code, out, err = run(capsys, monkeypatch, "--db", url, "--as", "pan", "signoff", "create",
                          "demo", "--config", "baseline", "--decision", "not-validated",
@@ -90,6 +111,7 @@ def test_cli_contract_reviewer_panelist_contrary(demo, capsys, monkeypatch, tmp_
     assert code == 2, err
     assert "needs --justification TEXT" in err and "NOT VALIDATED" in err
     assert "objective verdict  NOT VALIDATED" in out and "Y_qst" in out and "az_max" in out
+    assert f"newest diagnosis   run {run_id}" in out and "cause, top friction_damping" in out
     assert _signoffs(db) == 0
     # with the justification it is signed and marked
     why = "track geometry of zone 4 was measured with a faulty trolley; see memo 17"

@@ -298,8 +298,7 @@ def signing_summary(session: Session, campaign: str, configuration: str) -> dict
     diagnosis = None if newest is None else {
         "run": newest["id"], "created_at": newest["created_at"], "top": newest["top"],
         "explained": newest["explained"], "separable": newest["separable"],
-        "current": newest.get("current"),
-        "verdict": _diagnosis_verdict(session, newest["id"])}
+        "current": newest.get("current"), "verdict": newest["verdict"]}
     so_items = []
     for so, st in statuses(session, camp.name, conf.name):
         rec = db_signoff.as_dict(so)
@@ -333,10 +332,3 @@ def signing_summary(session: Session, campaign: str, configuration: str) -> dict
         "settings": dict(SETTINGS),
     }
 
-
-def _diagnosis_verdict(session: Session, run_id: int) -> str | None:
-    """``cause``, ``uncertain`` or ``none`` of a stored diagnosis run."""
-    from railval.db.models import AnalysisRun
-
-    row = session.get(AnalysisRun, run_id)
-    return None if row is None else (row.result or {}).get("verdict")
