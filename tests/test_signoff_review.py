@@ -278,3 +278,32 @@ def test_migration_turns_workshop_only_reviewers_into_panelists(db_url, tmp_path
     # not the configuration's evidence)
     assert {f.kind for f in report.findings} <= {"signoff"}, report.findings
     db.dispose()
+
+
+def test_validated_decision_on_an_in_sample_verdict_is_contrary(sqlite_database, tmp_path, capsys,
+                                                                monkeypatch):
+    """The configuration passes, but it was calibrated on sections the verdict evaluates:
+    accepting it needs a justification, rejecting it does not."""
+    db = sqlite_database
+    monkeypatch.delenv("RAILVAL_USER", raising=False)
+    write_demo_campaign(tmp_path / "demo", n_sections=12, fs=100.0, n_configs=1)
+    import_campaign(db, tmp_path / "demo")
+    with db.session() as s:
+        users.create_user(s, "rev", password=PW["rev"], roles=["reviewer"])
+    with db.engine.begin() as conn:  # as `railval calibrate` records the fit's sections
+        conn.execute(text("UPDATE configuration SET calibration = :c WHERE name = 'baseline'"),
+                     {"c": json.dumps({"fit_sections": ["S01", "S02"],
+                                       "held_out_sections": ["S03"]})})
+    code, out, _ = run(capsys, monkeypatch, "--db", db.url, "--as", "rev", "signoff", "summary",
+                       "demo", "--config", "baseline", "--json")
+    summ = json.loads(out)
+    assert summ["objective"]["validated"] is True and summ["objective"]["in_sample"] is True
+    assert summ["objective"]["fit_sections"] == ["S01", "S02"]
+    assert "in-sample" in summ["contrary_if"]["validated"] and summ["contrary_if"]["not-validated"]
+    args = ["--db", db.url, "--as", "rev", "signoff", "create", "demo", "--config", "baseline",
+            "--decision", "validated", "--statement", "ok", "--password-stdin"]
+    code, out, err = run(capsys, monkeypatch, *args, stdin=PW["rev"] + "\n")
+    assert code == 2 and "accepts an in-sample verdict" in err and "IN-SAMPLE" in out
+    code, out, err = run(capsys, monkeypatch, *args, "--justification", "held-out S03 passes too",
+                         "--json", stdin=PW["rev"] + "\n")
+    assert code == 0 and json.loads(out)["contrary_to_objective"] is True, err
