@@ -8,7 +8,10 @@
   :data:`SESSION_MAX_AGE_S`, the user still exists, is enabled and its password did not
   change after the cookie was issued (a later ``user passwd`` or ``user disable`` ends the
   session at the next request).
-* ``/logout`` clears the cookie. ``/invite?token=…`` shows the single-use invitation form and
+* ``/logout`` clears the cookie (``POST``; ``GET`` asks to confirm).
+* Every state-changing request (``POST``) carries Tornado's anti-forgery token
+  (``xsrf_cookies``; the forms hold it as ``_xsrf``, scripts send ``X-XSRFToken``); a
+  request from another site — another port of the same host included — is refused 403. ``/invite?token=…`` shows the single-use invitation form and
   creates the invitee's account.
 * With **no user** in the database the provider lets every request through as the local user
   (open single-user mode) — :func:`check_startup` allows that only on a loopback address.
@@ -205,7 +208,7 @@ class LoginHandler(RequestHandler):
         okm = f'<div class="ok">{html.escape(ok)}</div>' if ok else ""
         nxt = html.escape(self.get_argument("next", "/app"), quote=True)
         self.write(_page("sign in", f"""<h1>railval</h1><p class="sub">Sign in to continue</p>
-{msg}{okm}<form method="post" action="{LOGIN_URL}">
+{msg}{okm}<form method="post" action="{LOGIN_URL}">{self.xsrf_form_html()}
 <input type="hidden" name="next" value="{nxt}">
 <label for="username">User name</label>
 <input id="username" name="username" autocomplete="username" value="{html.escape(username, quote=True)}" autofocus>
@@ -230,13 +233,27 @@ class LoginHandler(RequestHandler):
             return
         self.auth.issue(self, result.user.username)
         nxt = self.get_argument("next", "/app")
-        self.redirect(nxt if nxt.startswith("/") and not nxt.startswith("//") else "/app")
+        if nxt in ("/app", "/", "") or not nxt.startswith("/") or nxt.startswith("//"):
+            from railval.app.navigation import landing
+
+            nxt = landing(users.principal(result.user))
+        self.redirect(nxt)
 
 
 class LogoutHandler(RequestHandler):
+    """``GET /logout`` asks to confirm (a form with the anti-forgery token); ``POST``
+    signs out. A link or a page elsewhere cannot sign a user out."""
+
     auth: RailvalAuth
 
     def get(self) -> None:
+        self.set_header("Cache-Control", "no-store")
+        self.write(_page("sign out", f"""<h1>railval</h1><p class="sub">Sign out of railval?</p>
+<form method="post" action="{LOGOUT_URL}">{self.xsrf_form_html()}
+<button type="submit" id="signout">Sign out</button></form>
+<p style="margin-top:14px"><a href="/app">Back to the app</a></p>"""))
+
+    def post(self) -> None:
         from railval.db import audit
 
         p = self.auth.principal_from_cookie(self.get_cookie(COOKIE))
@@ -269,7 +286,7 @@ class InviteHandler(RequestHandler):
         ws = (f" to workshop {html.escape(str(inv.workshop_ref))}" if inv.workshop_ref else "")
         self.write(_page("invitation", f"""<h1>railval</h1>
 <p class="sub">You are invited as <b>{html.escape(inv.role)}</b>{ws}. Choose your sign-in.</p>
-{msg}<form method="post" action="{INVITE_URL}">
+{msg}<form method="post" action="{INVITE_URL}">{self.xsrf_form_html()}
 <input type="hidden" name="token" value="{html.escape(token, quote=True)}">
 <label for="username">User name</label><input id="username" name="username" value="{html.escape(username, quote=True)}">
 <label for="display_name">Printed name</label><input id="display_name" name="display_name" value="{html.escape(display, quote=True)}">
@@ -316,4 +333,7 @@ class InviteHandler(RequestHandler):
             self._form(token, inv, str(exc), username, display)
             return
         self.auth.issue(self, name)
-        self.redirect("/app")
+        from railval.app.navigation import landing
+
+        with self.auth.database.session() as s:
+            self.redirect(landing(users.principal(users.get_user(s, name))))

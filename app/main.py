@@ -137,6 +137,39 @@ def user_box(app: AppState) -> pn.pane.HTML:
         f"<a href='/logout' class='rv-logout'>Sign out</a></div>", sizing_mode="stretch_width")
 
 
+def areas_box(principal: Principal) -> pn.pane.HTML:
+    """Links to the web areas outside the Panel pages the user may open (the workshop pages;
+    :mod:`railval.app.navigation`), or nothing."""
+    from railval.app.navigation import entries
+
+    links = "".join(f"<li><a class='rv-area' href='{html.escape(e.href, quote=True)}'>"
+                    f"{html.escape(e.title)}</a></li>"
+                    for e in entries(principal) if e.kind == "area")
+    return pn.pane.HTML(f"<div class='rv-areas' style='font-size:14px'><b>Workshop pages</b>"
+                        f"<ul style='margin:4px 0;padding-left:18px'>{links}</ul></div>"
+                        if links else "", sizing_mode="stretch_width", margin=(0, 10))
+
+
+def _session_args() -> dict[str, str]:
+    """The query arguments of the session's page request (``/app?page=…&campaign=…``)."""
+    args = getattr(pn.state, "session_args", None) or {}
+    return {k: (v[0].decode("utf-8", "replace") if isinstance(v[0], bytes) else str(v[0]))
+            for k, v in args.items() if v}
+
+
+def select_from_query(app: AppState, args: Mapping[str, str]) -> None:
+    """Open the page and select the campaign/configuration named in the URL's query, when
+    they exist and the page is allowed (links of the navigation and the sign-off summary);
+    anything else is ignored."""
+    camp, conf, page = args.get("campaign"), args.get("configuration"), args.get("page")
+    if camp and camp in (app.param.campaign.objects or []):
+        app.campaign = camp
+    if conf and conf in (app.param.configuration.objects or []):
+        app.configuration = conf
+    if page and page in PAGE_CLASSES and app.page_allowed(page):
+        app.page = page
+
+
 def session_principal(auth: Any) -> Principal | None:
     """The principal of the current Bokeh session, from its request's session cookie."""
     from railval.app.auth import COOKIE
@@ -160,8 +193,12 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
     app = AppState(Backend(database), principal=principal)
     if page != "overview":
         app.page = page
+    select_from_query(app, _session_args())
     pages = Pages(app)
     allowed_pages = app.pages_allowed()
+    if not allowed_pages:  # e.g. a panelist: no app page, only their workshop areas
+        return pn.Column(user_box(app), areas_box(app.principal),
+                         css_classes=["rv-no-pages"], sizing_mode="stretch_width")
     nav = pn.widgets.RadioButtonGroup(
         options={PAGE_TITLES[p]: p for p in allowed_pages}, value=app.page, orientation="vertical",
         color="light", sizing_mode="stretch_width", css_classes=["rv-nav"])
@@ -180,6 +217,7 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
         pn.widgets.Select.from_param(app.param.configuration, name="Configuration"),
         pn.pane.Markdown("**Pages**", margin=(10, 10, 0, 10)),
         nav,
+        areas_box(app.principal),
         pn.layout.Divider(),
         status_area(app),
     ]
@@ -203,7 +241,9 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     is not a loopback address. ``behind_proxy``: take the client address from the proxy's
     X-Forwarded-For / X-Real-Ip headers (Tornado ``xheaders``), so the sign-in rate limit per
     address counts clients, not the proxy; only behind a proxy that sets these headers.
-    Every response carries the security headers of :mod:`railval.app.security`; Bokeh
+    Every response carries the security headers of :mod:`railval.app.security`; every
+    ``POST`` of the sign-in and workshop pages must carry the anti-forgery token (Tornado
+    ``xsrf_cookies``; :data:`railval.app.security.XSRF_COOKIE`); Bokeh
     session ids are signed (a forged one is refused); websockets are accepted only from
     ``allow_websocket_origin`` — never from any origin (``*``)."""
     from railval.app.auth import SESSION_MAX_AGE_S, RailvalAuth, check_startup, cookie_secret
@@ -229,7 +269,8 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
                     static_dirs={"railval-static": str(STATIC)} if STATIC.exists() else {},
                     auth_provider=auth, cookie_secret=secret,
                     extra_patterns=extra, transforms=security.transforms(),
-                    sign_sessions=True, secret_key=security.session_secret().encode(), **kw)
+                    sign_sessions=True, secret_key=security.session_secret().encode(),
+                    xsrf_cookies=True, xsrf_cookie_kwargs=security.XSRF_COOKIE, **kw)
 
 
 def free_port() -> int:

@@ -205,6 +205,16 @@ def where_table(grid: Any, limit: float = 2.0) -> str:
     return "".join(out)
 
 
+def contrary_html(d: dict[str, Any]) -> str:
+    """The objective verdict a sign-off was bound to and, for a contrary decision, the
+    label and the written justification (escaped)."""
+    verdict = _esc(d.get("objective_verdict") or "–")
+    if not d.get("contrary_to_objective"):
+        return f"objective {verdict}; decision agrees"
+    return (f"<b class='fail rv-contrary'>CONTRARY TO THE OBJECTIVE VERDICT</b> ({verdict})<br>"
+            f"justification: {_esc(d.get('justification') or '–')}")
+
+
 def signoff_rows_html(items: list[tuple[dict[str, Any], Any]]) -> str:
     """The sign-off table (escaped) of the validation report and the audit report
     (:mod:`railval.app.audit_report`)."""
@@ -221,11 +231,13 @@ def signoff_rows_html(items: list[tuple[dict[str, Any], Any]]) -> str:
             f"<td class='l'>{_esc(d['signed_at_utc'])}</td>"
             f"<td class='l'>{_esc(d['meaning'])}</td>"
             f"<td class='l'>{_esc(d['restrictions'] or '–')}</td><td class='l'>{_esc(d['statement'] or '–')}</td>"
+            f"<td class='l'>{contrary_html(d)}</td>"
             f"<td class='l' style='font-family:monospace;font-size:10px'>{_esc(d['evidence_sha256'])}</td>"
             f"<td class='l'>{why}</td></tr>")
     return ("<table><tr><th>id</th><th class='l'>configuration</th><th class='l'>status</th>"
             "<th class='l'>decision</th><th class='l'>signed by</th><th class='l'>UTC</th>"
             "<th class='l'>meaning</th><th class='l'>restrictions</th><th class='l'>statement</th>"
+            "<th class='l'>against the objective verdict</th>"
             "<th class='l'>evidence SHA-256</th><th class='l'>changed since</th></tr>"
             + "".join(rows) + "</table>")
 

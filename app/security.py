@@ -16,6 +16,16 @@ requests, signed session ids.
   - ``X-Content-Type-Options: nosniff``, ``X-Frame-Options: DENY`` (older browsers),
     ``Referrer-Policy: no-referrer``.
 
+* Cross-site request forgery: ``railval serve`` turns on Tornado's ``xsrf_cookies``, so
+  every ``POST`` (sign-in, sign-out, invitation, workshop forms, the reviewer's answers)
+  must carry the token of the ``_xsrf`` cookie as the form field ``_xsrf`` or the header
+  ``X-XSRFToken``. The cookie is :data:`XSRF_COOKIE` (HttpOnly, SameSite=Strict); pages
+  hand the token to their forms and scripts (:func:`with_xsrf`). A page of another origin —
+  also another port of the same host, which browsers count as the same *site* and so send
+  SameSite cookies to — cannot read the token: its requests are refused with 403 before
+  any handler runs. Panel's own callbacks travel over the websocket, whose Origin is
+  checked against ``--allow-websocket-origin``.
+
 * :func:`use_local_fonts` removes the Fast design's Google Fonts stylesheet: the page uses the system sans-serif fonts (``static/railval.css``) and makes no request
   to another host.
 
@@ -46,6 +56,25 @@ HEADERS = {
     "X-Frame-Options": "DENY",
     "Referrer-Policy": "no-referrer",
 }
+
+
+#: Tornado ``xsrf_cookie_kwargs``: the token cookie is never read by scripts (pages carry the
+#: token themselves) and never sent with a request another site starts
+XSRF_COOKIE = {"httponly": True, "samesite": "Strict"}
+
+_POST_FORM = re.compile(r"(<form\b[^>]*\bmethod\s*=\s*['\"]?post['\"]?[^>]*>)", re.IGNORECASE)
+
+
+def with_xsrf(page_html: str, token: str) -> str:
+    """``page_html`` with the anti-forgery token in every ``POST`` form (hidden field
+    ``_xsrf``) and in ``<meta name="xsrf-token">`` for scripts (they send it as
+    ``X-XSRFToken``). ``token`` is Tornado's ``RequestHandler.xsrf_token``."""
+    import html as _html
+
+    tok = _html.escape(token, quote=True)
+    out = _POST_FORM.sub(lambda m: m.group(1) + f'<input type="hidden" name="_xsrf" value="{tok}">',
+                         page_html)
+    return out.replace("<head>", f'<head><meta name="xsrf-token" content="{tok}">', 1)
 
 
 class SecurityHeaders:

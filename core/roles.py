@@ -6,11 +6,14 @@ and CLI verbs all ask :func:`allowed` / :func:`require` with one of the :data:`A
 names — there is no second list anywhere.
 
 * **admin** — manages users, roles and invitations; reads everything.
-* **organiser** — runs review workshops (creates them, invites reviewers, closes them).
+* **organiser** — runs review workshops (creates them, invites panelists, closes them).
 * **engineer** — imports campaigns, runs simulate / diagnose / calibrate / validate, stores
   and deletes configurations, writes reports.
-* **reviewer** — takes part in the workshops they are invited to (sees only that workshop's
-  plots and their own answers) and signs off a configuration as the independent reviewer.
+* **panelist** — takes part in the workshops they are invited to (sees only that workshop's
+  plots and their own answers); nothing else, no sign-off.
+* **reviewer** — the independent reviewer: reads all the evidence of every campaign (data,
+  results, reports, diagnoses, workshop results, earlier sign-offs), changes nothing and
+  signs off a configuration.
 * **assessor** — reads everything (data, results, reports, sign-offs, the audit trail) and
   changes nothing.
 
@@ -29,7 +32,8 @@ ROLES: dict[str, str] = {
     "admin": "manages users, roles and invitations",
     "organiser": "runs review workshops",
     "engineer": "imports data, runs simulate / diagnose / calibrate / validate",
-    "reviewer": "answers in own workshops; signs off a configuration independently",
+    "panelist": "answers in the own workshops only (expert panel); no sign-off",
+    "reviewer": "independent reviewer: reads all evidence, changes nothing, signs off",
     "assessor": "reads everything, changes nothing; verifies the audit trail",
 }
 
@@ -44,7 +48,7 @@ ACTIONS: dict[str, str] = {
     "calibrate": "calibrate and store a configuration",
     "validate": "run (and cache) the validation of a configuration",
     "report.download": "write or download a validation report",
-    "workshop.run": "create, open, close workshops and invite reviewers",
+    "workshop.run": "create, open, close workshops and invite panelists",
     "workshop.answer": "see the own workshop's plots and give own answers",
     "workshop.results": "see all answers of a workshop",
     "signoff.create": "sign off a configuration (independent reviewer)",
@@ -62,7 +66,8 @@ PERMISSIONS: dict[str, frozenset[str]] = {
     "organiser": frozenset({*_READ_ALL, "workshop.run", "workshop.results"}),
     "engineer": frozenset({*_READ_ALL, "data.import", "data.delete", "data.export", "simulate",
                            "diagnose", "calibrate", "validate"}),
-    "reviewer": frozenset({"workshop.answer", "signoff.create", "signoff.read"}),
+    "panelist": frozenset({"workshop.answer"}),
+    "reviewer": frozenset({*_READ_ALL, "workshop.results", "signoff.create"}),
     "assessor": frozenset({*_READ_ALL, "workshop.results", "audit.read", "audit.checkpoint"}),
 }
 
@@ -85,7 +90,7 @@ CLI_ACTIONS: dict[str, str | None] = {
     "user enable": "user.manage", "user passwd": "user.manage", "user role": "user.manage",
     "user invite": "user.manage",
     "signoff create": "signoff.create", "signoff list": "signoff.read",
-    "signoff show": "signoff.read",
+    "signoff show": "signoff.read", "signoff summary": "data.read",
     "audit verify": "audit.read", "audit export": "audit.read", "audit report": "audit.read",
     "audit checkpoint": "audit.checkpoint", "audit log": "audit.read",
     "workshop kinds": None,

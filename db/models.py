@@ -281,7 +281,7 @@ class Invitation(Base):
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     token_sha256: Mapped[str] = mapped_column(String(64), unique=True)
-    role: Mapped[str] = mapped_column(String(20), default="reviewer")
+    role: Mapped[str] = mapped_column(String(20), default="panelist")
     #: the workshop the invitee joins (filled by the workshop feature; free-form reference)
     workshop_ref: Mapped[str | None] = mapped_column(String(100), nullable=True, index=True)
     note: Mapped[str] = mapped_column(String(200), default="")

@@ -28,17 +28,48 @@ DECISIONS: dict[str, str] = {
 }
 
 
-def meaning(decision: str, campaign: str, configuration: str, evidence_sha256: str) -> str:
+#: decisions that accept the model (with or without restrictions)
+ACCEPTING = ("validated", "restricted")
+
+
+def contrary_reason(decision: str, validated: bool, in_sample: bool) -> str | None:
+    """Why ``decision`` contradicts the objective verdict, or None when it does not.
+
+    Contrary: accepting (``validated`` or ``restricted``) while the DynoTRAIN verdict is NOT
+    VALIDATED; ``not-validated`` while it is VALIDATED; accepting an in-sample verdict (the
+    configuration, or an ancestor, was calibrated on sections the verdict evaluates, so the
+    verdict is not an independent test; docs/validation.md). Such a decision needs a written
+    justification and is stored with ``contrary_to_objective`` (docs/audit.md)."""
+    if decision in ACCEPTING and not validated:
+        return "the decision accepts the model while the objective verdict is NOT VALIDATED"
+    if decision == "not-validated" and validated:
+        return "the decision rejects the model while the objective verdict is VALIDATED"
+    if decision in ACCEPTING and in_sample:
+        return ("the decision accepts an in-sample verdict (the configuration was calibrated "
+                "on sections the verdict evaluates)")
+    return None
+
+
+def meaning(decision: str, campaign: str, configuration: str, evidence_sha256: str,
+            contrary: str | None = None) -> str:
     """The meaning of the signature (21 CFR 11.50(a)(3)), stored and shown with it."""
-    return (f"Independent review and approval: I have reviewed the validation evidence "
+    text = (f"Independent review and approval: I have reviewed the validation evidence "
             f"SHA-256 {evidence_sha256} of configuration {configuration!r} of campaign "
             f"{campaign!r} and I decide: {DECISIONS[decision]}.")
+    if contrary:
+        text += (f" This decision is CONTRARY TO THE OBJECTIVE VERDICT ({contrary}); my "
+                 "written justification is part of this signature.")
+    return text
 
 
 def create(session: Session, *, user: AppUser, campaign: str, configuration: str,
            decision: str, restrictions: str, statement: str, manifest: dict[str, Any],
-           software_version: str) -> Signoff:
-    """Append a sign-off bound to ``manifest``; audited as ``signoff.create``."""
+           software_version: str, justification: str = "", in_sample: bool = False) -> Signoff:
+    """Append a sign-off bound to ``manifest``; audited as ``signoff.create``.
+
+    The objective verdict is ``manifest["result"]["validated"]``; a decision contrary to it
+    (:func:`contrary_reason`) is refused without ``justification`` and stored with
+    ``contrary_to_objective``."""
     if decision not in DECISIONS:
         raise InvalidParameter(f"decision {decision!r}: choose one of {', '.join(DECISIONS)}")
     restrictions = (restrictions or "").strip()
@@ -48,20 +79,29 @@ def create(session: Session, *, user: AppUser, campaign: str, configuration: str
     if decision != "restricted" and restrictions:
         raise InvalidParameter(f"restrictions: only the decision 'restricted' takes "
                                f"restrictions (decision is {decision!r})")
+    justification = (justification or "").strip()
+    contrary = contrary_reason(decision, bool((manifest.get("result") or {}).get("validated")),
+                               in_sample)
+    if contrary and not justification:
+        raise InvalidParameter(f"justification: {contrary}; a decision contrary to the "
+                               "objective verdict needs a written justification "
+                               "(--justification TEXT)")
     h = evidence_hash(manifest)
     so = Signoff(campaign=campaign, configuration=configuration, user_id=user.id,
                  username=user.username, printed_name=user.display_name or user.username,
-                 signed_at_utc=audit.utc_stamp(), meaning=meaning(decision, campaign,
-                                                                  configuration, h),
+                 signed_at_utc=audit.utc_stamp(),
+                 meaning=meaning(decision, campaign, configuration, h, contrary),
                  decision=decision, restrictions=restrictions,
-                 statement=(statement or "").strip(), evidence_sha256=h, manifest=manifest,
-                 software_version=software_version)
+                 statement=(statement or "").strip(), justification=justification,
+                 contrary_to_objective=contrary is not None, evidence_sha256=h,
+                 manifest=manifest, software_version=software_version)
     session.add(so)
     session.flush()
     audit.record(session, user.username, "signoff.create",
                  f"configuration:{campaign}/{configuration}", None, h,
                  statement[:2000] if statement else "",
-                 detail={"signoff": so.id, "decision": decision})
+                 detail={"signoff": so.id, "decision": decision,
+                         "contrary_to_objective": contrary is not None})
     return so
 
 
@@ -82,6 +122,14 @@ def get(session: Session, signoff_id: int) -> Signoff:
     return so
 
 
+def _objective(manifest: dict[str, Any] | None) -> str | None:
+    """The objective verdict the sign-off was bound to (from its manifest)."""
+    result = (manifest or {}).get("result") or {}
+    if "validated" not in result:
+        return None
+    return "VALIDATED" if result["validated"] else "NOT VALIDATED"
+
+
 def as_dict(so: Signoff) -> dict[str, Any]:
     """A sign-off as a plain record (bundle export, JSON output), manifest included."""
     return {"id": so.id, "campaign": so.campaign, "configuration": so.configuration,
@@ -89,5 +137,8 @@ def as_dict(so: Signoff) -> dict[str, Any]:
             "signed_at_utc": so.signed_at_utc, "meaning": so.meaning, "decision": so.decision,
             "decision_text": DECISIONS.get(so.decision, so.decision),
             "restrictions": so.restrictions, "statement": so.statement,
+            "justification": so.justification or "",
+            "contrary_to_objective": bool(so.contrary_to_objective),
+            "objective_verdict": _objective(so.manifest),
             "evidence_sha256": so.evidence_sha256, "software_version": so.software_version,
             "manifest": so.manifest}

@@ -42,6 +42,7 @@ __all__ = [
     "disable",
     "enable",
     "get_user",
+    "has_admin",
     "has_users",
     "list_users",
     "principal",
@@ -105,6 +106,13 @@ def user_state(user: AppUser) -> dict[str, Any]:
 def has_users(session: Session) -> bool:
     """True when at least one user exists (then the web app requires sign-in)."""
     return session.scalar(select(func.count()).select_from(AppUser)) > 0
+
+
+def has_admin(session: Session) -> bool:
+    """True when an enabled user holds the role ``admin`` (someone can manage users)."""
+    return session.scalar(
+        select(func.count()).select_from(AppUser).join(UserRole, UserRole.user_id == AppUser.id)
+        .where(UserRole.role == "admin", AppUser.disabled.is_(False))) > 0
 
 
 def list_users(session: Session) -> list[AppUser]:
@@ -289,7 +297,7 @@ def token_hash(token: str) -> str:
     return hashlib.sha256((token or "").encode("utf-8")).hexdigest()
 
 
-def create_invitation(session: Session, *, role: str = "reviewer", workshop_ref: str | int | None = None,
+def create_invitation(session: Session, *, role: str = "panelist", workshop_ref: str | int | None = None,
                       valid_for: dt.timedelta = INVITATION_VALIDITY, note: str = "",
                       actor: Any = "system") -> tuple[Invitation, str]:
     """A new single-use invitation → (row, token). The token is returned once, never stored."""

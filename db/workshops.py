@@ -62,6 +62,18 @@ def utc_text(when: dt.datetime | None) -> str:
 
 
 # -- workshops ---------------------------------------------------------------------------
+#: path segments of the workshop pages (``/workshops/new``, ``/workshops/mine`` …): no
+#: workshop may be called so, or its page could not be reached
+RESERVED_NAMES = ("new", "plan", "mine", "login", "logout")
+
+
+def check_name(name: str) -> None:
+    """Refuse a workshop name that is one of :data:`RESERVED_NAMES`."""
+    if str(name).strip().lower() in RESERVED_NAMES:
+        raise InvalidParameter(f"workshop name {name!r} is reserved (a page /workshops/{name} "
+                               "exists); choose another name")
+
+
 def list_workshops(session: Session) -> list[Workshop]:
     return list(session.scalars(select(Workshop).order_by(Workshop.name)))
 
@@ -149,14 +161,17 @@ def plot_image(session: Session, workshop_id: int, plot_id: int) -> tuple[bytes,
 
 # -- reviewers ---------------------------------------------------------------------------
 def _reviewer_user(session: Session, username: str, actor: Any) -> AppUser:
+    """The workshop participant ``username``: created as a panelist (no password) when
+    missing; an existing user must hold the role ``panelist``."""
     user = users.find_user(session, username)
     if user is None:
-        return users.create_user(session, username, roles=["reviewer"], actor=actor,
-                                 reason="workshop reviewer")
-    if "reviewer" not in user.role_names:
+        return users.create_user(session, username, roles=["panelist"], actor=actor,
+                                 reason="workshop panelist")
+    if "panelist" not in user.role_names:
         raise InvalidParameter(
             f"user {username!r} holds the roles {', '.join(user.role_names) or '(none)'}, not "
-            "reviewer; give them the reviewer role first")
+            f"panelist; give them the panelist role first (`railval user role {username} "
+            f"{' '.join([*user.role_names, 'panelist'])}`)")
     if user.disabled:
         raise InvalidParameter(f"user {username!r} is disabled")
     return user
@@ -165,7 +180,7 @@ def _reviewer_user(session: Session, username: str, actor: Any) -> AppUser:
 def participation(session: Session, workshop: Workshop, username: str, *,
                   actor: Any = "system", seed: int | None = None) -> WorkshopReviewer:
     """The reviewer's participation in ``workshop``, created when missing (the user too, as
-    a reviewer without password): a random seed (stored) and the sequence it gives."""
+    a panelist without password): a random seed (stored) and the sequence it gives."""
     user = _reviewer_user(session, username, actor)
     r = session.scalar(select(WorkshopReviewer).where(WorkshopReviewer.workshop_id == workshop.id,
                                                       WorkshopReviewer.user_id == user.id))
@@ -366,7 +381,7 @@ def import_answers(session: Session, workshop: Workshop,
                    source_name: str = "") -> dict[str, int]:
     """Store answers gathered elsewhere: ``rows`` are checked dicts ``reviewer, plot,
     answer (bool), seconds, comment, repeat (bool), line``. Unknown reviewers become
-    reviewer users without password. A plot a reviewer already answered in the workshop is
+    panelist users without password. A plot a reviewer already answered in the workshop is
     refused with the line. Everything happens in ``session``'s transaction: the caller's
     unit of work stores all rows or none."""
     rows = list(rows)
@@ -423,3 +438,58 @@ def import_answers(session: Session, workshop: Workshop,
                  detail={"answers": len(rows), "reviewers": len(by_reviewer),
                          "new_users": created, "file": source_name[:200]})
     return {"answers": len(rows), "reviewers": len(by_reviewer), "new_users": created}
+
+
+def configuration_results(session: Session, campaign_id: int, configuration: str
+                          ) -> list[dict[str, Any]]:
+    """Per workshop of the campaign with plots of ``configuration``: name, status, blind,
+    plots of the configuration, answers on them and the share of Yes (first showings with
+    the fixed scaling; hidden repeats and automatic-scaling plots left out)."""
+    out = []
+    for w in session.scalars(select(Workshop).where(Workshop.campaign_id == campaign_id)
+                             .order_by(Workshop.name)):
+        n_plots = session.scalar(select(func.count()).select_from(WorkshopPlot).where(
+            WorkshopPlot.workshop_id == w.id, WorkshopPlot.configuration == configuration))
+        if not n_plots:
+            continue
+        n, yes = session.execute(
+            select(func.count(), func.coalesce(func.sum(case((WorkshopAnswer.answer, 1), else_=0)), 0))
+            .select_from(WorkshopAnswer)
+            .join(WorkshopPlot, WorkshopAnswer.plot_id == WorkshopPlot.id)
+            .where(WorkshopPlot.workshop_id == w.id, WorkshopPlot.configuration == configuration,
+                   WorkshopPlot.scaling == "fixed", WorkshopAnswer.repeat.is_(False))).one()
+        out.append({"workshop": w.name, "status": w.status, "blind": bool(w.blind),
+                    "plots": int(n_plots), "answers": int(n), "yes": int(yes),
+                    "yes_share": (int(yes) / int(n)) if n else None})
+    return out
+
+
+def participations(session: Session, username: str) -> list[dict[str, Any]]:
+    """The workshops ``username`` takes part in: ``workshop, status, blind, answered, total,
+    finished, invited`` (a panelist's "my workshops")."""
+    rows = session.execute(
+        select(WorkshopReviewer, Workshop).join(Workshop, WorkshopReviewer.workshop_id == Workshop.id)
+        .join(AppUser, WorkshopReviewer.user_id == AppUser.id)
+        .where(AppUser.username == username).order_by(Workshop.name)).all()
+    out = []
+    for r, w in rows:
+        n = session.scalar(select(func.count()).select_from(WorkshopAnswer)
+                           .where(WorkshopAnswer.reviewer_id == r.id))
+        out.append({"workshop": w.name, "status": w.status, "blind": bool(w.blind),
+                    "answered": int(n), "total": len(r.sequence),
+                    "finished": r.finished_at is not None, "invited": r.invited_at is not None})
+    return out
+
+
+def own_link(session: Session, workshop_name: str, username: str) -> str:
+    """A new personal link token for ``username``'s existing participation in the workshop
+    (the signed-in panelist opening it from "my workshops"; the earlier link stops
+    working). :class:`NotFound` when they take no part in it."""
+    w = get_workshop(session, workshop_name)
+    took_part = session.scalar(
+        select(func.count()).select_from(WorkshopReviewer)
+        .join(AppUser, WorkshopReviewer.user_id == AppUser.id)
+        .where(WorkshopReviewer.workshop_id == w.id, AppUser.username == username))
+    if not took_part:
+        raise NotFound(f"{username} takes no part in workshop {workshop_name!r}")
+    return invite(session, w, username, actor=username)

@@ -35,8 +35,10 @@ def signed_db(tmp_path_factory):
         users.create_user(s, "ass", password="assessor pw", roles=["assessor"], actor="admin")
     sign(db, "rev", "reviewer pw", "demo", "baseline", decision="validated",
          statement="fine")
+    # variant1 passes the objective limits: rejecting it is contrary and needs a justification
     sign(db, "rev", "reviewer pw", "demo", "variant1", decision="not-validated",
-         statement="yaw damper & <b>lateral</b> mismatch")
+         statement="yaw damper & <b>lateral</b> mismatch",
+         justification="workshop <i>panel</i> rejected the lateral plots")
     with db.session() as s:  # the engineer changes variant1's parameters afterwards
         conf = repo.get_configuration(s, "demo", "variant1")
         params = {**(conf.parameters or {}), "changed_after_signing": 1.0}
@@ -53,6 +55,8 @@ def test_audit_report_lists_signoffs_with_status_timeline_and_actors(signed_db):
     assert "Hash chain: intact" in h
     assert "Rita &lt;Reviewer&gt;" in h and "<Reviewer>" not in h
     assert "yaw damper &amp; &lt;b&gt;lateral&lt;/b&gt; mismatch" in h
+    assert h.count("rv-contrary") == 1  # the label (the meaning says it too)
+    assert "justification: workshop &lt;i&gt;panel&lt;/i&gt; rejected the lateral plots" in h
     assert "class='l pass'>valid<" in h and "class='l fail'>stale<" in h
     assert "configuration_record.parameters" in h
     assert "<h3>campaign:demo</h3>" in h and "configuration:demo/variant1" in h

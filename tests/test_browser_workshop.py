@@ -82,7 +82,7 @@ def env(tmp_path_factory):
     tokens = {}
     with db.session() as s:
         users.create_user(s, "orga", password="organiser-pass", roles=["organiser"])
-        users.create_user(s, "rpw", password="reviewer-pass", roles=["reviewer"])
+        users.create_user(s, "rpw", password="reviewer-pass", roles=["panelist"])
         bw, bb = wsdb.get_workshop(s, "BW"), wsdb.get_workshop(s, "BB")
         for i, name in enumerate(("ra", "rb", "rc", "rd", "re", "rpw")):
             tokens[name] = wsdb.invite(s, bw, name, seed=100 + i)
@@ -284,8 +284,8 @@ def test_reviewer_reaches_neither_other_answers_nor_the_analysis(browser, env):
         {p: a for p, a, _ in own}
     # no way from a reviewer's page to the organiser or analysis pages: sign-in asked
     page.goto(f"{base}/workshops/BW/analysis")
-    assert "/workshops/login" in page.url
-    # a reviewer who can sign in is refused the analysis and the organiser pages
+    assert "/login?next=" in page.url  # the app's one sign-in
+    # a panelist who can sign in is refused the analysis and the organiser pages
     page.fill("input[name=username]", "rpw")
     page.fill("input[name=password]", "reviewer-pass")
     page.get_by_role("button", name="Sign in").click()
@@ -293,8 +293,10 @@ def test_reviewer_reaches_neither_other_answers_nor_the_analysis(browser, env):
     for path in ("/workshops/BW/analysis", "/workshops/BW", "/workshops/BW/status", "/workshops"):
         resp = page.request.get(f"{base}{path}")
         assert resp.status == 403, path
-    resp = page.request.post(f"{base}/workshops/BW/status", form={"status": "close"})
-    assert resp.status == 403
+    # with a valid anti-forgery token, the role check itself refuses
+    xsrf = page.locator("meta[name=xsrf-token]").get_attribute("content")
+    resp = page.request.post(f"{base}/workshops/BW/status", form={"status": "close", "_xsrf": xsrf})
+    assert resp.status == 403 and "may not open this page" in resp.text()
     # another reviewer's link is not guessable from one's own; a wrong token is refused
     assert _status(f"{base}/review/{'x' * 43}/state") == 404
     assert _status(f"{base}/review/{env['tokens']['rb']}/image/999") == 404
@@ -328,8 +330,10 @@ def test_organiser_page_live_progress_invite_close_and_analysis(browser, env):
     page.get_by_role("button", name="Reopen workshop").wait_for(timeout=TIMEOUT_MS)
     rpage.reload()
     rpage.get_by_text("This workshop is closed").wait_for(timeout=TIMEOUT_MS)
+    xsrf = rpage.locator("meta[name=xsrf-token]").get_attribute("content")
     resp = rpage.request.post(f"{link.rsplit('/review/', 1)[0]}/review/{env['tokens']['rpw']}/answer",
-                              data=json.dumps({"position": 1, "answer": "yes", "seconds": 1}))
+                              data=json.dumps({"position": 1, "answer": "yes", "seconds": 1}),
+                              headers={"Content-Type": "application/json", "X-XSRFToken": xsrf})
     assert resp.status == 409
     page.get_by_role("button", name="Reopen workshop").click()
     page.get_by_role("button", name="Close workshop").wait_for(timeout=TIMEOUT_MS)

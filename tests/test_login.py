@@ -34,9 +34,22 @@ class Client:
     def get(self, path: str) -> tuple[int, str, str]:
         return self._open(urllib.request.Request(self.base + path))
 
-    def post(self, path: str, **form: str) -> tuple[int, str, str]:
+    def post(self, path: str, *, forged: bool = False, **form: str) -> tuple[int, str, str]:
+        """POST a form with the anti-forgery token of the ``_xsrf`` cookie (as the app's
+        own forms do); ``forged``: without it, as a page of another site would."""
+        if not forged:
+            form = {"_xsrf": self.xsrf(), **form}
         data = urllib.parse.urlencode(form).encode()
         return self._open(urllib.request.Request(self.base + path, data=data))
+
+    def xsrf(self) -> str:
+        """The ``_xsrf`` cookie's token (fetched with the sign-in page when missing)."""
+        for _ in range(2):
+            tok = next((c.value for c in self.jar if c.name == "_xsrf"), None)
+            if tok:
+                return tok
+            self.get("/login")
+        raise AssertionError("the sign-in page set no _xsrf cookie")
 
     def _open(self, req) -> tuple[int, str, str]:
         try:
@@ -76,7 +89,9 @@ def test_right_password_signs_in_and_logout_ends_the_session(server):
     assert status == 200 and final.endswith("/app"), final
     assert "railval" in body
     assert [r["object"] for r in rows(database, "login.ok")] == ["user:eng"]
-    assert c.get("/logout")[2].endswith("/login?out=1")
+    status, body, final = c.get("/logout")  # a link only asks to confirm
+    assert status == 200 and 'id="signout"' in body and c.get("/app")[2].endswith("/app")
+    assert c.post("/logout")[2].endswith("/login?out=1")
     assert "/login" in c.get("/app")[2]
     assert [r["actor"] for r in rows(database, "logout")] == ["eng"]
 
@@ -116,10 +131,11 @@ def test_invitation_single_use_and_expiry(server):
             {"expires_at": dt.datetime.now(dt.UTC) - dt.timedelta(hours=1)})
     c = Client(base)
     status, body, _ = c.get(f"/invite?token={token}")
-    assert status == 200 and "reviewer" in body and "workshop W1" in body
+    assert status == 200 and "panelist" in body and "workshop W1" in body
     status, body, final = c.post("/invite", token=token, username="rev1", display_name="R. One",
                                  password="reviewer pw", password2="reviewer pw")
-    assert status == 200 and final.endswith("/app")
+    # a panelist lands on their workshops (no app page is theirs)
+    assert status == 200 and final.endswith("/workshops/mine") and "My workshops" in body
     status, body, _ = Client(base).get(f"/invite?token={token}")
     assert status == 403 and "already been used" in body
     status, body, _ = Client(base).post("/invite", token=token, username="rev2",
@@ -130,7 +146,7 @@ def test_invitation_single_use_and_expiry(server):
     refused = rows(database, "invitation.refused")
     assert len(refused) == 3 and all(r["reason"] for r in refused)
     with database.session() as s:
-        assert users.get_user(s, "rev1").role_names == ["reviewer"]
+        assert users.get_user(s, "rev1").role_names == ["panelist"]
         assert users.find_user(s, "rev2") is None
 
 
@@ -169,12 +185,11 @@ def test_behind_proxy_the_rate_limit_counts_the_forwarded_client(database, monke
     with database.session() as s:
         users.create_user(s, "eng", password="engineer pw", roles=["engineer"])
     with served(database, behind_proxy=True) as url:
-        req = urllib.request.Request(url.rsplit("/app", 1)[0] + "/login",
-                                     data=b"username=eng&password=nope",
+        c = Client(url.rsplit("/app", 1)[0])
+        req = urllib.request.Request(c.base + "/login",
+                                     data=f"username=eng&password=nope&_xsrf={c.xsrf()}".encode(),
                                      headers={"X-Forwarded-For": "203.0.113.7"})
-        with pytest.raises(urllib.error.HTTPError) as err:
-            urllib.request.urlopen(req, timeout=60)
-        assert err.value.code == 401
+        assert c._open(req)[0] == 401
     assert rows(database, "login.failed")[0]["detail"]["source"] == "203.0.113.7"
 
 
@@ -211,6 +226,8 @@ def test_app_sign_in_reaches_the_workshop_pages_with_their_role_check(server):
     assert eng.post("/login", username="eng", password="engineer pw", next="/app")[0] == 200
     status, body, _ = eng.get("/workshops/new")
     assert status == 403 and "may not open" in body
-    org.get("/logout")
+    org.post("/logout")
     status, body, final = org.get("/workshops")
-    assert "/workshops/login" in final and "name='password'" in body
+    assert "/login?next=" in final and 'name="password"' in body
+    # the workshop pages' sign-in is the app's
+    assert Client(base).get("/workshops/login?next=/workshops")[2].endswith("/login?next=/workshops")

@@ -112,7 +112,7 @@ def test_invitation_is_single_use_hashed_and_expires(database):
     with database.session() as s:
         user = users.redeem_invitation(s, token, username="rev1", password="reviewer pw",
                                        display_name="Reviewer One")
-        assert user.role_names == ["reviewer"]
+        assert user.role_names == ["panelist"]
     with database.session() as s:
         with pytest.raises(users.InvitationRefused, match="already been used"):
             users.redeem_invitation(s, token, username="rev2", password="reviewer pw")
@@ -132,7 +132,7 @@ def test_invitation_is_single_use_hashed_and_expires(database):
 
 
 def test_role_registry_is_the_one_list():
-    assert list(ROLES) == ["admin", "organiser", "engineer", "reviewer", "assessor"]
+    assert list(ROLES) == ["admin", "organiser", "engineer", "panelist", "reviewer", "assessor"]
     assessor = Principal("a", frozenset({"assessor"}))
     assert allowed(assessor, "audit.read") and not allowed(assessor, "calibrate")
     with pytest.raises(PermissionDenied, match="a \\(assessor\\) may not calibrate.*engineer"):

@@ -34,7 +34,7 @@ def made(tmp_path_factory):
 
     with db.session() as s:  # the CLI's acting user once the database has users
         users.create_user(s, "orga", password="organiser-pass", roles=["organiser"])
-        users.create_user(s, "revx", roles=["reviewer"])
+        users.create_user(s, "revx", roles=["panelist"])
     yield db, summary, folder
     db.dispose()
 
@@ -187,7 +187,7 @@ def test_import_export_and_analyse_round_trip(made, tmp_path, capsys):
     assert _count(db, AppUser) == before_users + 4
     with db.session() as s:
         u = s.scalar(select(AppUser).where(AppUser.username == "paper1"))
-        assert u.password_hash is None and u.role_names == ["reviewer"]
+        assert u.password_hash is None and u.role_names == ["panelist"]
     # importing the same file again is refused (already answered), nothing stored
     n = _count(db, WorkshopAnswer)
     with pytest.raises(InvalidParameter, match="line 2, column plot: reviewer 'paper1' has already"):
@@ -221,7 +221,7 @@ def test_cli_create_dry_run_plots_invite_status(made, capsys):
     assert "no such user" in capsys.readouterr().err
     for verb in (["analyse", "W", "--json"], ["invite", "W", "--reviewer", "x"], ["close", "W"]):
         assert cli(["--db", db.url, "--as", "revx", "workshop", *verb]) == 2
-        assert "revx (reviewer) may not" in capsys.readouterr().err
+        assert "revx (panelist) may not" in capsys.readouterr().err
     assert cli(["--db", db.url, "--as", "orga", "workshop", "create", "X", "--campaign", "demo", "--sections", "S01",
                 "--configurations", "baseline", "--kinds", "Y_time", "ay_bg_time", "--dry-run", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)

@@ -125,12 +125,24 @@ class _Reviewer(threading.Thread):
         self.image_ms: list[float] = []
         self.sent: dict[int, bool] = {}
         self.errors: list[str] = []
+        self.xsrf: dict[str, str] = {}  # the review page's anti-forgery cookie and token
 
     def _req(self, conn, method: str, path: str, body: bytes | None = None) -> tuple[int, bytes]:
         headers = {"Content-Type": "application/json"} if body is not None else {}
+        if method == "POST" and self.xsrf:  # as the review page's script sends it
+            headers.update({"Cookie": f"_xsrf={self.xsrf['cookie']}",
+                            "X-XSRFToken": self.xsrf["token"]})
         conn.request(method, path, body=body, headers=headers)
         resp = conn.getresponse()
-        return resp.status, resp.read()
+        raw = resp.read()
+        if method == "GET" and not self.xsrf:
+            import re
+
+            cookie = re.search(r"_xsrf=([^;]+)", resp.getheader("Set-Cookie") or "")
+            token = re.search(rb'name="xsrf-token" content="([^"]+)"', raw)
+            if cookie and token:
+                self.xsrf = {"cookie": cookie.group(1), "token": token.group(1).decode()}
+        return resp.status, raw
 
     def run(self) -> None:
         import random

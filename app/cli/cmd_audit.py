@@ -10,8 +10,11 @@
 ``railval audit report --out FILE.html|FILE.pdf``  the assessor's audit report
 
 ``railval signoff create CAMPAIGN --config NAME --decision validated|restricted|not-validated
-[--restrictions TEXT] --statement TEXT [--password-stdin | --password-file F]``
-    sign as ``--as USER`` (asks the password again)
+[--restrictions TEXT] --statement TEXT [--justification TEXT] [--password-stdin | --password-file F]``
+    sign as ``--as USER``: prints what is signed (verdict, 12 quantities, coverage, marks,
+    diagnosis, workshops, earlier sign-offs), then asks the password again; a decision
+    contrary to the objective verdict needs ``--justification`` (else exit 2, nothing asked)
+``railval signoff summary CAMPAIGN --config NAME [--json]``  what a sign-off would bind
 ``railval signoff list [CAMPAIGN] [--config NAME] [--json]`` / ``railval signoff show ID``
 """
 
@@ -65,11 +68,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                     choices=["validated", "restricted", "not-validated"])
     cr.add_argument("--restrictions", default="", help="required with --decision restricted")
     cr.add_argument("--statement", required=True, help="the reviewer's statement")
+    cr.add_argument("--justification", default="",
+                    help="written justification; required when the decision is contrary to "
+                    "the objective verdict (validated while NOT VALIDATED, not validated while "
+                    "VALIDATED, validated on an in-sample verdict)")
     g = cr.add_mutually_exclusive_group()
     g.add_argument("--password-stdin", action="store_true")
     g.add_argument("--password-file", metavar="FILE")
     cr.add_argument("--json", action="store_true")
     cr.set_defaults(func=_cmd_signoff_create)
+    sm = so.add_parser("summary", help="what a sign-off of the configuration would bind "
+                       "(verdict, quantities, coverage, diagnosis, workshops, sign-offs)")
+    sm.add_argument("campaign")
+    sm.add_argument("--config", required=True)
+    sm.add_argument("--json", action="store_true")
+    sm.set_defaults(func=_cmd_signoff_summary)
     sl = so.add_parser("list", help="list sign-offs with their status (valid / stale)")
     sl.add_argument("campaign", nargs="?")
     sl.add_argument("--config", default=None)
@@ -170,33 +183,109 @@ def _signer(args) -> str:
     return who
 
 
+def _summary(args) -> dict:
+    from railval.app.services.signoff import signing_summary
+
+    with _database(args).session() as s:
+        return signing_summary(s, args.campaign, args.config)
+
+
+def _num(v, fmt: str = "+.3f") -> str:
+    return "–" if v is None else format(v, fmt)
+
+
+def summary_lines(summ: dict) -> list[str]:
+    """The summary of what is signed, as plain text lines (``signoff create``/``summary``)."""
+    o = summ["objective"]
+    marks = []
+    if o["in_sample"]:
+        marks.append(f"IN-SAMPLE (calibrated on sections {', '.join(o['fit_sections'])})")
+    if o["definition_sensitive"]:
+        marks.append("DEFINITION-SENSITIVE (another reading of the open definitions flips it)")
+    lines = [f"what is signed: {summ['campaign']}/{summ['configuration']}",
+             f"  objective verdict  {o['verdict']}" + (f"  [{'; '.join(marks)}]" if marks else ""),
+             "  coverage           " + ("complete" if o["coverage"]["ok"] else
+                                        "SHORT: " + "; ".join(o["coverage"]["shortfalls"])),
+             f"  {'quantity':<9} {'n':>4} {'mean/limit':>10} {'std/limit':>10}  verdict "
+             f"(std with n-{o['std_ddof']})"]
+    for q in summ["quantities"]:
+        flag = "pass" if q["pass"] else "FAIL"
+        if q.get("definition_sensitive"):
+            flag += " (definition-sensitive)"
+        lines.append(f"  {q['quantity']:<9} {q['n']:>4} {_num(q['mean_norm']):>10} "
+                     f"{_num(q['std_norm'], '.3f'):>10}  {flag}")
+    if summ["supplementary"]:
+        lines.append("  supplementary (no limits, not in the verdict): " + ", ".join(
+            f"{q['quantity']} mean {_num(q['mean'], '.3g')} {q['unit']}"
+            for q in summ["supplementary"]))
+    dg = summ["diagnosis"]
+    lines.append("  newest diagnosis   " + ("none run" if dg is None else
+                 f"run {dg['run']} at {dg['created_at']}: {dg['verdict'] or '?'}, top "
+                 f"{dg['top'] or '–'} ({_num(dg['explained'], '.2f')} explained)"
+                 + ("" if dg.get("current", True) else " — data changed since")))
+    for w in summ["workshops"]:
+        share = "–" if w["yes_share"] is None else f"{w['yes_share']:.0%}"
+        lines.append(f"  workshop {w['workshop']} ({w['status']}): {w['plots']} plots, "
+                     f"{w['answers']} answers, {share} yes")
+    if not summ["workshops"]:
+        lines.append("  workshops          none on this configuration")
+    for so in summ["signoffs"]:
+        lines.append(f"  earlier sign-off {so['id']} [{so['status'].upper()}] "
+                     f"{so['decision_text']} by {so['printed_name']} at {so['signed_at_utc'][:19]}Z"
+                     + ("  CONTRARY TO OBJECTIVE VERDICT" if so["contrary_to_objective"] else ""))
+    lines.append("  evidence pages     " + "  ".join(summ["links"].values()))
+    return lines
+
+
+def _cmd_signoff_summary(args) -> int:
+    summ = _summary(args)
+    if args.json:
+        emit_json(summ)
+    else:
+        print("\n".join(summary_lines(summ)))
+    return 0
+
+
 def _cmd_signoff_create(args) -> int:
     from railval.app.cli.cmd_user import read_password
     from railval.app.services.signoff import sign
 
     database = _database(args)
     username = _signer(args)
+    summ = _summary(args)
+    # read before the password is asked; with --json on stderr (stdout holds one document,
+    # which carries the summary as "summary")
+    print("\n".join(summary_lines(summ)), file=sys.stderr if args.json else sys.stdout,
+          flush=True)
+    contrary = summ["contrary_if"][args.decision]
+    if contrary and not args.justification.strip():
+        raise RailvalError(f"{contrary}: a decision contrary to the objective verdict needs "
+                           "--justification TEXT; nothing was signed")
     password = read_password(args, confirm=False, prompt=f"Password of {username} (signature): ")
     rec = sign(database, username, password, args.campaign, args.config,
                decision=args.decision, restrictions=args.restrictions,
-               statement=args.statement, source="cli")
+               statement=args.statement, justification=args.justification, source="cli")
     if args.json:
         rec = {k: v for k, v in rec.items() if k != "manifest"}
-        emit_json(rec)
+        emit_json({**rec, "summary": summ})
     else:
         _print_signoff(rec, "valid", [])
     return 0
 
 
 def _print_signoff(rec: dict, status: str, reasons: list[str]) -> None:
+    contrary = "  CONTRARY TO OBJECTIVE VERDICT" if rec.get("contrary_to_objective") else ""
     print(f"sign-off {rec['id']}: {rec['campaign']}/{rec['configuration']} — "
-          f"{rec['decision_text'].upper()}  [{status.upper()}]")
+          f"{rec['decision_text'].upper()}  [{status.upper()}]{contrary}")
     print(f"  signed by   {rec['printed_name']} ({rec['username']})")
     print(f"  at          {rec['signed_at_utc']} (UTC)")
     print(f"  meaning     {rec['meaning']}")
+    print(f"  objective   {rec.get('objective_verdict') or '–'}")
     if rec["restrictions"]:
         print(f"  restrictions {rec['restrictions']}")
     print(f"  statement   {rec['statement']}")
+    if rec.get("justification"):
+        print(f"  justification {rec['justification']}")
     print(f"  evidence    SHA-256 {rec['evidence_sha256']} (railval {rec['software_version']})")
     for r in reasons:
         print(f"  stale: {r}")
@@ -218,7 +307,8 @@ def _cmd_signoff_list(args) -> int:
     for d, st in items:
         print(f"{d['id']:>4}  {st.status.upper():<5}  {d['campaign']}/{d['configuration']}  "
               f"{d['decision_text']}  by {d['printed_name']} at {d['signed_at_utc'][:19]}Z  "
-              f"evidence {d['evidence_sha256'][:16]}…")
+              f"evidence {d['evidence_sha256'][:16]}…"
+              + ("  CONTRARY TO OBJECTIVE VERDICT" if d["contrary_to_objective"] else ""))
     return 0
 
 

@@ -5,7 +5,7 @@
 ``railval user disable NAME [--reason TEXT]`` / ``railval user enable NAME``
 ``railval user passwd NAME [--password-stdin | --password-file F]``
 ``railval user role NAME ROLE [ROLE ...]`` (replaces the user's roles)
-``railval user invite [--role reviewer] [--workshop REF] [--days 7] [--base-url URL]``
+``railval user invite [--role panelist] [--workshop REF] [--days 7] [--base-url URL]``
 
 Passwords are never command-line arguments (they would stay in the shell history and the
 process list): they come from a prompt (asked twice), one line of standard input
@@ -100,7 +100,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.set_defaults(func=_cmd_role)
 
     inv = us.add_parser("invite", help="create a single-use invitation link")
-    inv.add_argument("--role", default="reviewer", choices=list(ROLES))
+    inv.add_argument("--role", default="panelist", choices=list(ROLES),
+                     help="role of the invitee (default panelist: a workshop participant)")
     inv.add_argument("--workshop", default=None, help="workshop reference the invitee joins")
     inv.add_argument("--days", type=float, default=7.0, help="validity in days (default 7)")
     inv.add_argument("--base-url", default="http://127.0.0.1:5006",

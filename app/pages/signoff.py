@@ -1,10 +1,16 @@
 """Sign-off page: sign-offs of the campaign with their status; the reviewer's signing form.
 
 Every sign-off shows its printed name, UTC time, meaning, decision, restrictions, statement
-and evidence hash, and whether it is still *valid* (the evidence is unchanged) or *stale*
-(docs/audit.md). A reviewer signs the selected configuration: decision, restrictions,
-statement and the password again (21 CFR 11.200(a)); the check and the signing run on the
-server (:func:`railval.app.services.signoff.sign`). User text is shown as text.
+and evidence hash, whether it is still *valid* (the evidence is unchanged) or *stale*
+(docs/audit.md), and — for a decision contrary to the objective verdict — that label with
+the written justification. Before the form the reviewer sees what is signed
+(:func:`railval.app.services.signoff.signing_summary`): the objective verdict with its 12
+quantities against the limits, coverage, definition-sensitive and in-sample marks,
+supplementary results, the newest diagnosis, workshop results on the configuration, links to
+dashboard, compare and report, and earlier sign-offs. A reviewer signs the selected
+configuration: decision, restrictions, statement, justification (required when contrary)
+and the password again (21 CFR 11.200(a)); the check and the signing run on the server
+(:func:`railval.app.services.signoff.sign`). User text is shown as text.
 """
 
 from __future__ import annotations
@@ -15,8 +21,14 @@ import pandas as pd
 import panel as pn
 
 from railval.app.pages._common import PageBase, html_table, make_dispatch, message
-from railval.app.state import AppState
+from railval.app.state import PAGE_TITLES, AppState
 from railval.db import signoff as db_signoff
+
+
+#: the label of a decision contrary to the objective verdict (cards, banner, table)
+CONTRARY_TAG = ("<span class='rv-contrary' style='background:#b3261e;color:#fff;padding:1px 6px;"
+                "border-radius:3px;margin-left:8px;font-size:12px'>CONTRARY TO THE OBJECTIVE "
+                "VERDICT</span>")
 
 
 def signoff_card(rec: dict, status: str, reasons: list[str]) -> pn.pane.HTML:
@@ -29,6 +41,9 @@ def signoff_card(rec: dict, status: str, reasons: list[str]) -> pn.pane.HTML:
             ("Decision", rec["decision_text"]),
             ("Restrictions", rec["restrictions"] or "–"),
             ("Statement", rec["statement"] or "–"),
+            ("Objective verdict", rec.get("objective_verdict") or "–"),
+            *([("Contrary to the objective verdict", "YES — justification: "
+                + (rec.get("justification") or "–"))] if rec.get("contrary_to_objective") else []),
             ("Evidence SHA-256", rec["evidence_sha256"]),
             ("Software", f"railval {rec['software_version']}")]
     body = "".join(f"<tr><th>{e(k)}</th><td class='rv-so-{e(k.split()[0].lower())}'>{e(str(v))}</td></tr>"
@@ -38,7 +53,8 @@ def signoff_card(rec: dict, status: str, reasons: list[str]) -> pn.pane.HTML:
         f"<div class='rv-signoff' style='border-left:4px solid {colour};padding:4px 10px;margin:6px 0'>"
         f"<b>Sign-off {rec['id']}: {e(rec['campaign'])} / {e(rec['configuration'])} — "
         f"<span class='rv-signoff-status' style='color:{colour}'>{e(status.upper())}</span></b>"
-        f"<table style='font-size:13px'>{body}</table>"
+        + (CONTRARY_TAG if rec.get("contrary_to_objective") else "")
+        + f"<table style='font-size:13px'>{body}</table>"
         + (f"<div>Evidence changed since signing:<ul>{stale}</ul></div>" if stale else "")
         + "</div>", sizing_mode="stretch_width")
 
@@ -60,9 +76,90 @@ def signoff_banner(app: AppState, config: str | None) -> pn.pane.HTML:
         lines.append(f"<div style='border-left:4px solid {colour};padding:2px 8px;margin:2px 0'>"
                      f"Sign-off {d['id']} <b style='color:{colour}'>{e(st.status.upper())}</b>: "
                      f"{e(d['decision_text'])} by {e(d['printed_name'])}, {e(d['signed_at_utc'])} "
-                     f"UTC, evidence {e(d['evidence_sha256'][:16])}…{why}</div>")
+                     f"UTC, evidence {e(d['evidence_sha256'][:16])}…{why}"
+                     + (f"{CONTRARY_TAG} justification: {e(d['justification'])}"
+                        if d["contrary_to_objective"] else "") + "</div>")
     return pn.pane.HTML("<div class='rv-signoff-banner' style='font-size:13px'>" + "".join(lines)
                         + "</div>", sizing_mode="stretch_width")
+
+
+def _n(v, fmt: str) -> str:
+    return "–" if v is None else format(v, fmt)
+
+
+def summary_html(summ: dict) -> str:
+    """What is signed, as escaped HTML: verdict and marks, the 12 quantities against their
+    limits, coverage, supplementary results, newest diagnosis, workshops, evidence links and
+    earlier sign-offs (the same document as ``railval signoff summary --json``)."""
+    e = html.escape
+    o = summ["objective"]
+    ok = o["validated"]
+    colour = "#1e7b34" if ok else "#b3261e"
+    marks = []
+    if o["in_sample"]:
+        marks.append("<span class='rv-mark rv-in-sample'>IN-SAMPLE</span> calibrated on sections "
+                     + e(", ".join(o["fit_sections"])) + " — the verdict is not an independent test")
+    if o["definition_sensitive"]:
+        marks.append("<span class='rv-mark rv-definition'>DEFINITION-SENSITIVE</span> another "
+                     "reading of the open definitions flips the verdict ("
+                     + e(", ".join(o["sensitive_quantities"])) + ")")
+    cov = o["coverage"]
+    cov_txt = ("complete: {} sections, per zone {}".format(
+        cov["sections"], ", ".join(f"{z}: {n}" for z, n in (cov["zones"] or {}).items()))
+        if cov["ok"] else "SHORT — " + "; ".join(cov["shortfalls"]))
+    rows = []
+    for q in summ["quantities"]:
+        cls = "pass" if q["pass"] else "fail"
+        flag = "pass" if q["pass"] else "FAIL"
+        if q.get("definition_sensitive"):
+            flag += " · definition-sensitive"
+        rows.append(f"<tr><td>{e(q['quantity'])}</td><td>{e(q['unit'] or '–')}</td><td class='n'>{q['n']}</td>"
+                    f"<td class='n'>{_n(q['mean'], '+.3g')}</td><td class='n'>{_n(q['mean_limit'], '.3g')}</td>"
+                    f"<td class='n'>{_n(q['mean_norm'], '+.2f')}</td>"
+                    f"<td class='n'>{_n(q['std'], '.3g')}</td><td class='n'>{_n(q['std_limit'], '.3g')}</td>"
+                    f"<td class='n'>{_n(q['std_norm'], '.2f')}</td>"
+                    f"<td class='rv-q-{cls}' style='color:{'#1e7b34' if q['pass'] else '#b3261e'};"
+                    f"font-weight:600'>{e(flag)}</td></tr>")
+    qtable = ("<table class='rv-summary-q'><tr><th>quantity</th><th>unit</th><th>n</th>"
+              "<th>mean D<sub>v</sub></th><th>mean limit</th><th>mean / limit</th>"
+              f"<th>std D<sub>v</sub> (n−{o['std_ddof']})</th><th>std limit</th><th>std / limit</th>"
+              "<th>verdict</th></tr>" + "".join(rows) + "</table>")
+    supp = "".join(f"<li>{e(q['quantity'])} ({e(q['name'] or '')}): mean {_n(q['mean'], '+.3g')} "
+                   f"{e(q['unit'] or '')}, std {_n(q['std'], '.3g')}, n {q['n']}</li>"
+                   for q in summ["supplementary"])
+    dg = summ["diagnosis"]
+    diag = ("never run" if dg is None else
+            f"run {dg['run']} ({e(dg['created_at'])} UTC): <b>{e(str(dg['verdict'] or '?'))}</b>, "
+            f"top candidate {e(dg['top'] or '–')} explains {_n(dg['explained'], '.2f')}"
+            + ("" if dg.get("current", True) else " — <b>the data changed since this run</b>"))
+    ws = "".join(f"<li>workshop <b>{e(w['workshop'])}</b> ({e(w['status'])}{', blind' if w['blind'] else ''}): "
+                 f"{w['plots']} plots of this configuration, {w['answers']} answers"
+                 + ("" if w["yes_share"] is None else f", {w['yes_share']:.0%} “validated”")
+                 + "</li>"
+                 for w in summ["workshops"]) or "<li>no workshop shows this configuration</li>"
+    links = " · ".join(f"<a class='rv-evidence-link' href='{e(url, quote=True)}' target='_blank' "
+                       f"rel='noopener'>{e(PAGE_TITLES.get(name, name))}</a>"
+                       for name, url in summ["links"].items())
+    earlier = "".join(
+        f"<li>sign-off {so['id']} <b>{e(so['status'].upper())}</b>: {e(so['decision_text'])} by "
+        f"{e(so['printed_name'])}, {e(so['signed_at_utc'])} UTC"
+        + (CONTRARY_TAG if so["contrary_to_objective"] else "") + "</li>"
+        for so in summ["signoffs"]) or "<li>none</li>"
+    return (
+        "<div class='rv-summary' style='font-size:13px'>"
+        "<style>.rv-summary table{border-collapse:collapse}.rv-summary td,.rv-summary th{border:1px solid #ccd;"
+        "padding:2px 6px}.rv-summary th{background:#eef1f6}.rv-summary td.n{text-align:right;"
+        "font-variant-numeric:tabular-nums}.rv-mark{background:#e0a030;color:#1b1b1b;padding:1px 5px;"
+        "border-radius:3px;font-weight:600}</style>"
+        f"<h3 style='margin:4px 0'>What you sign: {e(summ['campaign'])} / {e(summ['configuration'])}</h3>"
+        f"<div class='rv-objective' style='font-size:16px'>Objective verdict (DynoTRAIN, EN 14363): "
+        f"<b style='color:{colour}'>{e(o['verdict'])}</b></div>"
+        + "".join(f"<div>{m}</div>" for m in marks)
+        + f"<div>Coverage: {e(cov_txt)}</div>{qtable}"
+        + (f"<div>Supplementary results (no limits, not part of the verdict):<ul>{supp}</ul></div>" if supp else "")
+        + f"<div>Newest diagnosis: {diag}</div><div>Workshops:<ul>{ws}</ul></div>"
+        f"<div>Evidence pages: {links}</div><div>Earlier sign-offs of this configuration:<ul>{earlier}</ul></div>"
+        "</div>")
 
 
 class SignoffPage(PageBase):
@@ -77,11 +174,26 @@ class SignoffPage(PageBase):
                                                      height=70, css_classes=["rv-restrictions"])
         self.statement = pn.widgets.TextAreaInput(name="Statement", height=90,
                                                   css_classes=["rv-statement"])
+        self.justification = pn.widgets.TextAreaInput(
+            name="Justification (required when the decision contradicts the objective verdict)",
+            height=90, css_classes=["rv-justification"])
+        self.contrary_note = pn.pane.HTML("", sizing_mode="stretch_width",
+                                          css_classes=["rv-contrary-note"])
         self.password = pn.widgets.PasswordInput(name="Your password (signature)", width=260,
                                                  css_classes=["rv-sign-password"])
         self.sign_btn = pn.widgets.Button(name="Sign", button_type="primary", width=160,
                                           css_classes=["rv-sign"])
         self.sign_btn.on_click(lambda e: self.sign(dispatch=make_dispatch()))
+        self.summary: dict | None = None
+        self.decision.param.watch(lambda e: self._show_contrary(), ["value"])
+
+    def _show_contrary(self) -> None:
+        reason = (self.summary or {}).get("contrary_if", {}).get(self.decision.value)
+        self.contrary_note.object = (
+            f"<div class='rv-contrary-warning' style='background:#fdecea;color:#8a1f11;padding:6px 8px;"
+            f"border-radius:4px'><b>Contrary to the objective verdict</b>: {html.escape(reason)}. "
+            "Write your justification; the sign-off is stored and shown with this mark.</div>"
+            if reason else "")
 
     def sign(self, dispatch=None, background: bool = True):
         """Run the signing as a background job (the validation may take seconds)."""
@@ -90,8 +202,9 @@ class SignoffPage(PageBase):
             return None
         password, self.password.value = self.password.value, ""
         campaign, config = app.campaign, app.configuration
-        decision, restrictions, statement = (self.decision.value, self.restrictions.value,
-                                             self.statement.value)
+        decision, restrictions, statement, justification = (
+            self.decision.value, self.restrictions.value, self.statement.value,
+            self.justification.value)
         username = app.principal.username
         database = app.backend.database
 
@@ -100,13 +213,16 @@ class SignoffPage(PageBase):
 
             progress(0.1, "checking the password and building the evidence")
             return sign(database, username, password, campaign, config, decision=decision,
-                        restrictions=restrictions, statement=statement, source="web")
+                        restrictions=restrictions, statement=statement,
+                        justification=justification, source="web")
 
         def done(rec):
             self.restrictions.value = ""
             self.statement.value = ""
+            self.justification.value = ""
+            mark = " — CONTRARY TO THE OBJECTIVE VERDICT" if rec["contrary_to_objective"] else ""
             app.set_status(f"sign-off {rec['id']} recorded: {campaign}/{config} "
-                           f"{rec['decision_text']}", "success")
+                           f"{rec['decision_text']}{mark}", "success")
             self._stale = True
             self.safe_refresh()
         return app.run_job("sign-off", work, done, dispatch=dispatch, background=background,
@@ -118,10 +234,22 @@ class SignoffPage(PageBase):
         with self.app.backend.session() as s:
             return [(db_signoff.as_dict(so), st) for so, st in statuses(s, self.app.campaign)]
 
+    def load_summary(self) -> dict | None:
+        from railval.app.services.signoff import signing_summary
+
+        if self.app.campaign is None or self.app.configuration is None:
+            return None
+        with self.app.backend.session() as s:
+            return signing_summary(s, self.app.campaign, self.app.configuration)
+
     def refresh(self) -> None:
         items = self.items()
         objs: list = []
         if self.app.allowed("signoff.create") and self.app.configuration is not None:
+            self.summary = self.load_summary()
+            self._show_contrary()
+            objs.append(pn.pane.HTML(summary_html(self.summary), sizing_mode="stretch_width",
+                                     css_classes=["rv-signoff-summary"]))
             if self.app.principal.open_mode:
                 objs.append(message("Signing needs a user account (identity and password); "
                                     "this server runs in open single-user mode.", "warning"))
@@ -132,13 +260,16 @@ class SignoffPage(PageBase):
                     "to the SHA-256 of the evidence (every signal hash of both sides, the "
                     "configuration's effects and parameters, processing version and settings, "
                     "the validation result, the software version).", sizing_mode="stretch_width"),
-                    pn.Row(self.decision, self.password),
-                    self.restrictions, self.statement, self.sign_btn]
+                    self.decision, self.contrary_note,
+                    self.restrictions, self.statement, self.justification,
+                    pn.Row(self.password, self.sign_btn)]
         if not items:
             objs.append(message(f"No sign-off of campaign {self.app.campaign!r} yet."))
         else:
             df = pd.DataFrame([{"id": d["id"], "configuration": d["configuration"],
                                 "status": st.status, "decision": d["decision_text"],
+                                "against objective": ("CONTRARY" if d["contrary_to_objective"]
+                                                      else "agrees"),
                                 "signed by": d["printed_name"], "UTC": d["signed_at_utc"],
                                 "evidence": d["evidence_sha256"][:16] + "…"} for d, st in items])
             objs.append(html_table(df, "rv-signoff-table"))

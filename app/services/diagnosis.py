@@ -103,7 +103,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
 
 def diagnosis_runs(session: Any, campaign: str, config: str) -> list[dict[str, Any]]:
     """Stored diagnoses of ``config``, newest first: :func:`run_info` plus the top candidate,
-    the share it explains and whether the two best are told apart; ``current`` is false
+    the share it explains, whether the two best are told apart and the run's verdict
+    (``cause`` / ``uncertain`` / ``none``); ``current`` is false
     when the signals or sections changed since the run."""
     conf = repo.get_configuration(session, campaign, config)
     data_sha, _ = digests(data_inputs(session, campaign, config), {}, DIAGNOSIS_VERSION)
@@ -113,7 +114,8 @@ def diagnosis_runs(session: Any, campaign: str, config: str) -> list[dict[str, A
         out.append({**run_info(r, reused=True, current_data_sha256=data_sha),
                     "top": cands[0]["effect"] if cands else "",
                     "explained": cands[0]["explained"] if cands else None,
-                    "separable": bool((r.result or {}).get("separable", True))})
+                    "separable": bool((r.result or {}).get("separable", True)),
+                    "verdict": (r.result or {}).get("verdict")})
     return out
 
 

@@ -31,7 +31,7 @@ from typing import Any
 from sqlalchemy.orm import Session
 
 from railval.core.en14363 import PROCESSING_VERSION
-from railval.core.errors import NotFound, RailvalError
+from railval.core.errors import InvalidParameter, NotFound, RailvalError
 from railval.core.filters import DEFAULT_ORDER
 from railval.core.integrity import evidence_hash
 from railval.core.roles import PermissionDenied, require
@@ -216,9 +216,13 @@ def independence_problem(session: Session, username: str, campaign: str,
 
 
 def sign(database, username: str, password: str, campaign: str, configuration: str, *,
-         decision: str, restrictions: str = "", statement: str = "", source: str = "") -> dict:
+         decision: str, restrictions: str = "", statement: str = "", justification: str = "",
+         source: str = "") -> dict:
     """Verify the password again (21 CFR 11.200(a)(1)), check role and independence, build
     the evidence manifest and append the sign-off; returns it as a record.
+
+    A decision contrary to the objective verdict (:func:`railval.db.signoff.contrary_reason`)
+    is refused without ``justification`` and stored marked ``contrary_to_objective``.
 
     A wrong password is recorded (``login.failed``) and counts towards the sign-in rate
     limit. Raises :class:`SignoffRefused` or :class:`PermissionDenied`.
@@ -240,8 +244,91 @@ def sign(database, username: str, password: str, campaign: str, configuration: s
         if problem:
             raise SignoffRefused(f"sign-off refused: {problem}")
         manifest = evidence_manifest(s, camp.name, conf.name)
-        so = db_signoff.create(s, user=user, campaign=camp.name, configuration=conf.name,
-                               decision=decision, restrictions=restrictions,
-                               statement=statement, manifest=manifest,
-                               software_version=software_version())
+        try:
+            so = db_signoff.create(s, user=user, campaign=camp.name, configuration=conf.name,
+                                   decision=decision, restrictions=restrictions,
+                                   statement=statement, manifest=manifest,
+                                   software_version=software_version(),
+                                   justification=justification,
+                                   in_sample=_in_sample(s, camp, conf.name))
+        except InvalidParameter as exc:
+            raise SignoffRefused(f"sign-off refused: {exc}") from None
         return db_signoff.as_dict(so)
+
+
+def _in_sample(session: Session, campaign, configuration: str) -> bool:
+    from railval.app.services.validation import calibration_provenance
+
+    return bool(calibration_provenance(session, campaign, configuration)["in_sample"])
+
+
+# -- what is signed ----------------------------------------------------------------------
+#: app pages a signer opens from the summary (``/app?page=…``)
+EVIDENCE_PAGES = ("dashboard", "compare", "report", "diagnose")
+
+
+def signing_summary(session: Session, campaign: str, configuration: str) -> dict[str, Any]:
+    """What a signer sees before the password (the sign-off page and ``signoff create``):
+    the objective verdict with its 12 quantities (normalised mean and std against the
+    limits), coverage, definition-sensitive and in-sample marks, supplementary results, the
+    newest diagnosis run, workshop results on this configuration, earlier sign-offs with
+    their status, links to the evidence pages, and per decision whether it would be
+    contrary to the objective verdict. Computed with the settings the signature binds
+    (:data:`SETTINGS`)."""
+    from urllib.parse import urlencode
+
+    from railval.app.services.diagnosis import diagnosis_runs
+    from railval.app.services.validation import validate_configuration
+    from railval.db import workshops as wsdb
+
+    camp = repo.get_campaign(session, campaign)
+    conf = repo.get_configuration(session, camp, configuration)
+    res = validate_configuration(session, camp.name, conf.name, order=SETTINGS["filter_order"],
+                                 n_boot=SETTINGS["n_boot"], seed=SETTINGS["seed"])
+    d = _plain({k: v for k, v in res.to_dict().items() if k != "info"})
+    info = res.info
+    quantities = [{k: q.get(k) for k in ("quantity", "unit", "n", "mean", "std", "mean_limit",
+                                         "std_limit", "mean_norm", "std_norm", "pass",
+                                         "robust", "definition_sensitive")}
+                  for q in d["quantities"]]
+    cov = d["coverage"]
+    in_sample = bool(info.get("in_sample"))
+    runs = diagnosis_runs(session, camp.name, conf.name)
+    newest = runs[0] if runs else None
+    diagnosis = None if newest is None else {
+        "run": newest["id"], "created_at": newest["created_at"], "top": newest["top"],
+        "explained": newest["explained"], "separable": newest["separable"],
+        "current": newest.get("current"), "verdict": newest["verdict"]}
+    so_items = []
+    for so, st in statuses(session, camp.name, conf.name):
+        rec = db_signoff.as_dict(so)
+        so_items.append({k: rec[k] for k in ("id", "decision", "decision_text", "printed_name",
+                                             "username", "signed_at_utc", "evidence_sha256",
+                                             "contrary_to_objective", "justification")}
+                        | {"status": st.status})
+    query = {"campaign": camp.name, "configuration": conf.name}
+    return {
+        "campaign": camp.name, "configuration": conf.name,
+        "objective": {
+            "validated": bool(d["validated"]),
+            "verdict": "VALIDATED" if d["validated"] else "NOT VALIDATED",
+            "coverage": {k: cov.get(k) for k in ("ok", "sections", "zones", "shortfalls")},
+            "definition_sensitive": d["definitions"]["verdict_sensitive"],
+            "sensitive_quantities": d["definitions"]["sensitive_quantities"],
+            "in_sample": in_sample, "fit_sections": info.get("fit_sections", []),
+            "calibrated_in": info.get("calibrated_in", []),
+            "std_ddof": d["std_ddof"], "warnings": d["warnings"],
+        },
+        "quantities": quantities,
+        "supplementary": [{k: q.get(k) for k in ("quantity", "name", "unit", "n", "mean",
+                                                 "std", "mean_rel", "std_rel")}
+                          for q in (d.get("supplementary") or {}).get("quantities", [])],
+        "diagnosis": diagnosis,
+        "workshops": wsdb.configuration_results(session, camp.id, conf.name),
+        "signoffs": so_items,
+        "links": {p: f"/app?{urlencode({**query, 'page': p})}" for p in EVIDENCE_PAGES},
+        "contrary_if": {dec: db_signoff.contrary_reason(dec, bool(d["validated"]), in_sample)
+                        for dec in db_signoff.DECISIONS},
+        "settings": dict(SETTINGS),
+    }
+

@@ -188,6 +188,7 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
 
     if isinstance(actor, Principal):
         require(actor, "workshop.run")
+    wsdb.check_name(name)
     if not (0.0 <= repeats <= 0.5):
         raise InvalidParameter(f"--repeats must be between 0 and 0.5, got {repeats!r}")
     if not (0.0 <= auto_share <= 1.0):

@@ -21,11 +21,21 @@ Organiser (signed-in user with ``workshop.run``; analysis needs ``workshop.resul
 
 * ``/workshops`` list, ``/workshops/new`` create form (count before creating),
   ``/workshops/{name}`` progress, links, close/reopen, ``/workshops/{name}/analysis``,
-  ``/workshops/login``, ``/workshops/logout``.
+  ``/workshops/login``, ``/workshops/logout`` (served with the app: redirects to the app's
+  ``/login`` and ``/logout`` — one sign-in).
 
-Roles come from :mod:`railval.core.roles` and are checked on every request. Sign-in uses
-:func:`railval.db.users.authenticate` (argon2id, rate-limited, audited) and an HMAC-signed
-cookie (secret ``$RAILVAL_COOKIE_SECRET`` or a random one per server process). Open
+Panelist (signed in, ``workshop.answer``): ``/workshops/mine`` lists the own workshops;
+``POST /workshops/mine/{name}/open`` issues a fresh personal link and opens it.
+
+Every page carries the app's one navigation (:mod:`railval.app.navigation`) and every
+``POST`` (forms and the reviewer's JSON answers) the anti-forgery token
+(:func:`railval.app.security.with_xsrf`; Tornado ``xsrf_cookies``).
+
+Roles come from :mod:`railval.core.roles` and are checked on every request. Served with the
+app, the app's sign-in cookie identifies the user; on their own (no ``auth``) the pages keep
+a sign-in of their own: :func:`railval.db.users.authenticate` (argon2id, rate-limited,
+audited) and an HMAC-signed cookie (secret ``$RAILVAL_COOKIE_SECRET`` or a random one per
+server process). Open
 single-user mode (no user can sign in because none has a password, request from the
 loopback interface without proxy headers) acts as :func:`railval.core.roles.open_principal`.
 All user text is escaped.
@@ -36,9 +46,12 @@ Modules: ``common`` (page frame, sign-in, base handlers), ``reviewer``, ``organi
 
 from __future__ import annotations
 
+from tornado.web import RedirectHandler
+
 from railval.app.workshop_web.analysis import WorkshopAnalysis, analysis_html, threshold_png
 from railval.app.workshop_web.common import Login, Logout
 from railval.app.workshop_web.organiser import (
+    MyWorkshops,
     WorkshopList,
     WorkshopNew,
     WorkshopPage,
@@ -63,15 +76,20 @@ def routes(database, auth=None) -> list[tuple]:
     kw = {"database": database, "auth": auth}
     tok = r"([A-Za-z0-9_\-]{20,100})"
     name = r"([^/]+)"
+    sign_in = ([(r"/workshops/login", Login, kw), (r"/workshops/logout", Logout, kw)]
+               if auth is None else  # one sign-in for the whole app: the app's pages
+               [(r"/workshops/login", _ToAppLogin), (r"/workshops/logout", RedirectHandler,
+                                                     {"url": "/logout"})])
     return [
         (rf"/review/{tok}/?", ReviewPage, kw),
         (rf"/review/{tok}/state", ReviewState, kw),
         (rf"/review/{tok}/image/(\d+)", ReviewImage, kw),
         (rf"/review/{tok}/answer", ReviewAnswer, kw),
         (rf"/review/{tok}/finish", ReviewFinish, kw),
-        (r"/workshops/login", Login, kw),
-        (r"/workshops/logout", Logout, kw),
+        *sign_in,
         (r"/workshops/?", WorkshopList, kw),
+        (r"/workshops/mine", MyWorkshops, kw),
+        (rf"/workshops/mine/{name}/open", MyWorkshops, kw),
         (r"/workshops/new", WorkshopNew, kw),
         (r"/workshops/plan", WorkshopPlan, kw),
         (rf"/workshops/{name}/status", _StatusOrPost, kw),
@@ -89,3 +107,14 @@ class _StatusOrPost(WorkshopStatus):
 class _InvitePost(WorkshopPage):
     async def post(self, name: str) -> None:  # type: ignore[override]
         await WorkshopPage.post(self, name, "invite")
+
+
+class _ToAppLogin(RedirectHandler):
+    """``/workshops/login?next=…`` → the app's ``/login?next=…`` (one sign-in)."""
+
+    def initialize(self) -> None:  # type: ignore[override]
+        super().initialize(url="/login{0}")
+
+    def get(self, *args: str) -> None:
+        query = self.request.query
+        self.redirect(f"/login{'?' + query if query else ''}")

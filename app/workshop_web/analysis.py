@@ -88,9 +88,9 @@ class WorkshopAnalysis(_OrganiserBase):
         try:
             doc = await run(_analysis, self.database, name, p)
         except RailvalError as exc:
-            self.finish(page(f"Analysis {name}", f"<p class='err'>{esc(exc)}</p>", user=p.username))
+            self.finish(page(f"Analysis {name}", f"<p class='err'>{esc(exc)}</p>", user=p))
             return
-        self.finish(page(f"Analysis {name}", analysis_html(doc), user=p.username))
+        self.finish(page(f"Analysis {name}", analysis_html(doc), user=p))
 
 
 def _pct(x: Any) -> str:

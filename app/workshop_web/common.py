@@ -29,8 +29,11 @@ _POOL = ThreadPoolExecutor(max_workers=4, thread_name_prefix="railval-workshop")
 
 _CSS = """
 body{font-family:'DejaVu Sans',Arial,sans-serif;margin:0;background:#f6f7f9;color:#1b1b1b}
-header{background:#0b5394;color:#fff;padding:10px 20px;display:flex;gap:20px;align-items:center}
-header a{color:#fff} main{padding:16px 24px;max-width:1200px;margin:auto}
+header{background:#0b5394;color:#fff;padding:10px 20px;display:flex;gap:20px;align-items:center;flex-wrap:wrap}
+header a{color:#fff} header .rv-home{text-decoration:none;font-size:18px}
+.rv-nav{display:flex;gap:4px;flex-wrap:wrap}.rv-nav a{text-decoration:none;padding:3px 8px;border-radius:4px;font-size:14px}
+.rv-nav a:hover{background:rgba(255,255,255,.18)}.rv-nav a.rv-current{background:#fff;color:#0b5394}
+.rv-who{font-size:14px} main{padding:16px 24px;max-width:1200px;margin:auto}
 table{border-collapse:collapse;background:#fff} td,th{border:1px solid #ccd;padding:4px 8px;text-align:left}
 th{background:#eef1f6} .num{text-align:right;font-variant-numeric:tabular-nums}
 button,.btn{font-size:16px;padding:8px 18px;border-radius:4px;border:1px solid #889;background:#fff;cursor:pointer}
@@ -47,13 +50,36 @@ def esc(value: Any) -> str:
     return html.escape("" if value is None else str(value), quote=True)
 
 
-def page(title: str, body: str, *, user: str = "", script: str = "") -> str:
-    who = (f'<span>{esc(user)}</span> <a href="/workshops/logout">sign out</a>' if user else "")
+def nav_html(principal: Principal | None, current: str = "") -> str:
+    """The one navigation (:mod:`railval.app.navigation`) as header links, the signed-in
+    user and the sign-out link; empty without a principal (a reviewer's personal link)."""
+    if principal is None:
+        return ""
+    from railval.app.navigation import entries
+
+    links = "".join(
+        f"<a class='rv-nav-link{' rv-current' if e.href == current else ''}' "
+        f"href='{esc(e.href)}'>{esc(e.title)}</a>" for e in entries(principal))
+    who = ("open single-user mode" if principal.open_mode else
+           f"{principal.printed_name} ({', '.join(sorted(principal.roles)) or 'no role'})")
+    out = "" if principal.open_mode else " <a class='rv-logout' href='/logout'>Sign out</a>"
+    return (f"<nav class='rv-nav'>{links}</nav>"
+            f"<span class='rv-who' style='margin-left:auto'>{esc(who)}{out}</span>")
+
+
+def page(title: str, body: str, *, user: Principal | str = "", script: str = "",
+         current: str = "") -> str:
+    """A workshop page in the app's frame: the same header colour, title and navigation
+    as the Panel app (:func:`nav_html` when ``user`` is a principal), then ``body``."""
+    if isinstance(user, Principal):
+        head = nav_html(user, current)
+    else:
+        head = (f"<span style='margin-left:auto'>{esc(user)}</span>" if user else "")
     return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'>"
             f"<meta name='viewport' content='width=device-width,initial-scale=1'>"
-            f"<title>{esc(title)}</title><style>{_CSS}</style></head><body>"
-            f"<header><strong>railval</strong><span>{esc(title)}</span>"
-            f"<span style='margin-left:auto'>{who}</span></header><main>{body}</main>"
+            f"<title>railval — {esc(title)}</title><style>{_CSS}</style></head><body>"
+            f"<header><a class='rv-home' href='/app'><strong>railval</strong></a>"
+            f"<span class='rv-title'>{esc(title)}</span>{head}</header><main>{body}</main>"
             f"{'<script>' + script + '</script>' if script else ''}</body></html>")
 
 
@@ -131,8 +157,28 @@ class _Base(tornado.web.RequestHandler):
         self.set_header("Cache-Control", "no-store")
         self.finish(json.dumps(doc, allow_nan=False))
 
-    def check_xsrf_cookie(self) -> None:  # SameSite=Strict cookie; reviewer token in the URL
-        return None
+    def finish(self, chunk: Any = None):
+        """Finish the response; an HTML page gets the anti-forgery token in its ``POST``
+        forms and for its scripts (:func:`railval.app.security.with_xsrf`)."""
+        if isinstance(chunk, str) and chunk.startswith("<!doctype html>"):
+            from railval.app.security import with_xsrf
+
+            chunk = with_xsrf(chunk, self.xsrf_token.decode("ascii"))
+        return super().finish(chunk)
+
+    def write_error(self, status_code: int, **kwargs: Any) -> None:
+        """A refused forgery (403 from the token check) answers in the request's language:
+        JSON for scripts, a page for forms; other errors as Tornado does."""
+        exc = kwargs.get("exc_info", (None, None))[1]
+        if status_code == 403 and "XSRF" in str(getattr(exc, "log_message", "") or ""):
+            msg = ("refused: this request did not come from a railval page (anti-forgery "
+                   "token missing or wrong); reload the page and try again")
+            if "json" in (self.request.headers.get("Content-Type") or ""):
+                self.json({"error": msg}, 403)
+            else:
+                self.finish(page("Refused", f"<p class='err'>{esc(msg)}</p>"))
+            return
+        super().write_error(status_code, **kwargs)
 
 
 class _OrganiserBase(_Base):
@@ -153,15 +199,18 @@ class _OrganiserBase(_Base):
         name = _unsign(self.get_cookie(COOKIE))
         return await run(_principal_for, self.database, name, _is_local(self))
 
-    async def require(self, action: str) -> Principal | None:
+    async def require(self, action: str, *alternatives: str) -> Principal | None:
+        """The principal when it may do ``action`` (or one of ``alternatives``); else the
+        sign-in redirect or a 403 page, and None."""
         p = await self.principal()
         if p is None:
-            self.redirect(f"/workshops/login?next={quote(self.request.uri or '/workshops')}")
+            login = "/login" if self.auth is not None else "/workshops/login"
+            self.redirect(f"{login}?next={quote(self.request.uri or '/workshops')}")
             return None
-        if not allowed(p, action):
+        if not any(allowed(p, a) for a in (action, *alternatives)):
             self.set_status(403)
             self.finish(page("Not allowed", f"<p class='err'>{esc(p.username)} may not open "
-                             f"this page (needs permission {esc(action)}).</p>", user=p.username))
+                             f"this page (needs permission {esc(action)}).</p>", user=p))
             return None
         return p
 

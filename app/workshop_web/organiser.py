@@ -36,19 +36,22 @@ def _list_doc(database) -> list[dict[str, Any]]:
 
 class WorkshopList(_OrganiserBase):
     async def get(self) -> None:
-        p = await self.require("workshop.run")
+        p = await self.require("workshop.run", "workshop.results")
         if p is None:
             return
         rows = await run(_list_doc, self.database)
+        runs = allowed(p, "workshop.run")  # else results only: the analysis pages
+        tail = "" if runs else "/analysis"
         trs = "".join(
-            f"<tr><td><a href='/workshops/{quote(r['name'], safe='')}'>{esc(r['name'])}</a></td>"
+            f"<tr><td><a href='/workshops/{quote(r['name'], safe='')}{tail}'>{esc(r['name'])}</a></td>"
             f"<td>{esc(r['campaign'])}</td><td>{esc(r['status'])}</td>"
             f"<td>{'yes' if r['blind'] else 'no'}</td><td class='num'>{r['reviewers']}</td>"
             f"<td class='num'>{r['answers']}</td></tr>" for r in rows)
-        body = (f"<p><a class='btn' href='/workshops/new'>New workshop</a></p>"
+        new = "<p><a class='btn' href='/workshops/new'>New workshop</a></p>" if runs else ""
+        body = (f"{new}"
                 f"<table><tr><th>workshop</th><th>campaign</th><th>status</th><th>blind</th>"
                 f"<th>reviewers</th><th>answers</th></tr>{trs}</table>")
-        self.finish(page("Workshops", body, user=p.username))
+        self.finish(page("Workshops", body, user=p, current="/workshops"))
 
 
 def _form_choices(database) -> dict[str, Any]:
@@ -137,7 +140,7 @@ section names)</label> <label>hidden repeats <input name='repeats' value='0.1' s
 <p><button id='create' type='submit'>Create workshop</button></p>
 <p class='err'>{esc(message)}</p></form>
 <script type='application/json' id='choices'>{choices_json}</script>"""
-        self.finish(page("New workshop", body, user=p.username, script=_NEW_JS))
+        self.finish(page("New workshop", body, user=p, script=_NEW_JS))
 
     async def post(self) -> None:
         from railval.app.services import workshops as ws
@@ -230,7 +233,7 @@ class WorkshopPage(_OrganiserBase):
             d = await run(_status_doc, self.database, name)
         except NotFound as exc:
             self.set_status(404)
-            self.finish(page("Workshop", f"<p class='err'>{esc(exc)}</p>", user=p.username))
+            self.finish(page("Workshop", f"<p class='err'>{esc(exc)}</p>", user=p))
             return
         q = quote(name, safe="")
         toggle = ("close", "Close workshop") if d["status"] == "open" else ("reopen", "Reopen workshop")
@@ -255,7 +258,7 @@ answers <strong id='nanswers'>{d['answers']}</strong></p>
 <button type='submit' id='invite'>Create personal link</button></form>
 {link_html}<p class='err'>{esc(message)}</p>
 <p class='muted'>A new link replaces the reviewer's earlier one. Answers stay with the reviewer.</p>"""
-        html_page = page(f"Workshop {name}", body, user=p.username, script=_STATUS_JS)
+        html_page = page(f"Workshop {name}", body, user=p, script=_STATUS_JS)
         self.finish(html_page.replace("<body>", f"<body data-workshop='{esc(name)}'>", 1))
 
     async def post(self, name: str, action: str) -> None:
@@ -278,3 +281,58 @@ answers <strong id='nanswers'>{d['answers']}</strong></p>
             await WorkshopPage.get(self, name, message=str(exc))
             return
         self.redirect(f"/workshops/{quote(name, safe='')}")
+
+
+# -------------------------------------------------------------------------- my workshops
+def _mine(database, username: str) -> list[dict[str, Any]]:
+    from railval.db import workshops as wsdb
+
+    with database.session() as s:
+        return wsdb.participations(s, username)
+
+
+def _own_link(database, name: str, username: str) -> str:
+    from railval.db import workshops as wsdb
+
+    with database.session() as s:
+        return wsdb.own_link(s, name, username)
+
+
+class MyWorkshops(_OrganiserBase):
+    """``/workshops/mine``: a signed-in panelist's workshops with their progress; "Open"
+    (a ``POST``) issues a fresh personal link of the own participation and opens it."""
+
+    async def get(self, message: str = "") -> None:
+        p = await self.require("workshop.answer")
+        if p is None:
+            return
+        rows = await run(_mine, self.database, p.username)
+        trs = "".join(
+            f"<tr><td>{esc(r['workshop'])}</td><td>{esc(r['status'])}</td>"
+            f"<td class='num'>{r['answered']} of {r['total']}</td>"
+            f"<td>{'finished' if r['finished'] else ''}</td><td>"
+            + (f"<form method='post' action='/workshops/mine/{quote(r['workshop'], safe='')}/open'>"
+               f"<button type='submit' class='rv-open-review'>Open review</button></form>"
+               if r["status"] == "open" and not r["finished"] else "")
+            + "</td></tr>" for r in rows)
+        body = ("<h2>My workshops</h2>"
+                + (f"<table id='mine'><tr><th>workshop</th><th>status</th><th>answered</th>"
+                   f"<th>state</th><th></th></tr>{trs}</table>" if rows else
+                   "<p>You take part in no workshop yet; the organiser invites you.</p>")
+                + "<p class='muted'>Opening a review here replaces the personal link you were "
+                  "sent; your answers stay.</p>"
+                + (f"<p class='err'>{esc(message)}</p>" if message else ""))
+        self.finish(page("My workshops", body, user=p, current="/workshops/mine"))
+
+    async def post(self, name: str) -> None:
+        p = await self.require("workshop.answer")
+        if p is None:
+            return
+        try:
+            token = await run(_own_link, self.database, name, p.username)
+        except RailvalError as exc:
+            self.set_status(404 if isinstance(exc, NotFound) else 400)
+            await self.get(message=str(exc))
+            return
+        clear_contexts()
+        self.redirect(f"/review/{token}")

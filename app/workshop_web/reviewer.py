@@ -116,7 +116,8 @@ $('plot').addEventListener('load', () => { shownAt = performance.now(); });
 async function post(path, body) {
   for (let attempt = 0; ; attempt++) {
     try {
-      const r = await fetch(base + path, {method: 'POST', headers: {'Content-Type': 'application/json'},
+      const r = await fetch(base + path, {method: 'POST', headers: {'Content-Type': 'application/json',
+                                          'X-XSRFToken': document.querySelector('meta[name=xsrf-token]').content},
                                           body: JSON.stringify(body)});
       const doc = await r.json();
       if (r.ok) { $('msg').textContent = ''; return doc; }
