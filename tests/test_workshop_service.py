@@ -212,6 +212,8 @@ def test_import_export_and_analyse_round_trip(made, tmp_path, capsys):
     shares = {r["reviewer"]: r["yes_share"] for r in doc["reviewers"]}
     assert shares["paper1"] <= shares["paper2"] <= shares["paper3"] <= shares["paper4"]
     assert "deviation_at_50" in doc["threshold"] and "ci" in doc["threshold"]
+    assert doc["threshold"]["method"].startswith("isotonic")
+    assert {"chosen", "links", "relative_spread"} <= set(doc["threshold"]["link_sensitivity"])
 
 
 def test_cli_create_dry_run_plots_invite_status(made, capsys):

@@ -253,7 +253,8 @@ def _analyse(args: argparse.Namespace) -> int:
                   f"{100 * row['min_yes']:5.1f} % … {100 * row['max_yes']:5.1f} %")
         thr = doc.get("threshold") or {}
         if thr.get("deviation_at_50") is not None:
-            lo, hi = thr.get("ci") or (None, None)
+            ci = thr.get("ci")
+            interval = f"interval {ci[0]:.2f} … {ci[1]:.2f}; " if ci else ""
             print(f"deviation at which a typical reviewer says Yes half of the time: "
-                  f"{thr['deviation_at_50']:.2f} (interval {lo:.2f} … {hi:.2f}; limit 1.0)")
+                  f"{thr['deviation_at_50']:.2f} ({interval}limit 1.0; {thr.get('method', '').split(':')[0]})")
     return 0

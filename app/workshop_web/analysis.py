@@ -33,6 +33,16 @@ def _fmt(x: Any, digits: int = 2) -> str:
         return esc(x)
 
 
+def _sensitivity_html(sens: dict | None) -> str:
+    """One sentence: the 50 % deviation under every parametric link and their spread."""
+    if not sens:
+        return ""
+    links = ", ".join(f"{esc(r['link'])} {_fmt(r.get('at_50'))}" for r in sens.get("links", []))
+    spread = sens.get("relative_spread")
+    return (f"Link sensitivity (logistic fits): {links}; likeliest {esc(sens.get('chosen'))}; spread "
+            f"{'—' if spread is None else f'{100 * spread:.0f} %'} of the reported value.")
+
+
 def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | None) -> str:
     """The answers against an objective value (``deviation`` or ``sg_c``): each plot's share
     of Yes (points), the fitted curve of a typical reviewer
@@ -57,8 +67,9 @@ def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | N
                    label="share of Yes of one plot", zorder=2)
     if fit.get("intercept") is not None and fit.get("slope") is not None:
         xs = np.linspace(top / 400, top * 1.05, 400)
-        ax.plot(xs, yes_curve(xs, fit["intercept"], fit["slope"]), color="#0072B2",
-                label="fitted P(Yes), typical reviewer", zorder=3)
+        ax.plot(xs, yes_curve(xs, fit["intercept"], fit["slope"], power=fit.get("power") or 0.0),
+                color="#0072B2", label=f"fitted P(Yes), typical reviewer ({fit.get('link', 'log')} link)",
+                zorder=3)
     if at50 is not None:
         if ci and None not in ci:
             ax.errorbar([at50], [0.5], xerr=[[at50 - ci[0]], [ci[1] - at50]], fmt="o",
@@ -156,6 +167,7 @@ def analysis_html(doc: dict[str, Any]) -> str:
 <h3>Threshold</h3>
 <p>Deviation at which a typical reviewer says Yes half of the time:
 <strong>{_fmt(thr.get('deviation_at_50'))}</strong> (interval {_fmt(thr.get('ci'))}); the
-validation limit is 1.0.</p>{charts}
+validation limit is 1.0.</p>
+<p>Method: {esc(thr.get('method', ''))}. {_sensitivity_html(thr.get('link_sensitivity'))}</p>{charts}
 <h3>Scaling effect (same reviewer, same plot: fixed against automatic scaling)</h3>{_scaling_html(sc)}
 """
