@@ -13,6 +13,7 @@ from railval.app.cli import main as cli
 from railval.app.services import workshops as ws
 from railval.core.errors import InvalidParameter
 from railval.core.workshop import PLOT_KINDS
+from railval.db import repo
 from railval.db import workshops as wsdb
 from railval.db.models import AppUser, WorkshopAnswer, WorkshopReviewer
 from sqlalchemy import func, select
@@ -70,10 +71,15 @@ def test_plots_contract_and_one_scaling_per_kind(made):
         fixed = [r for r in rows if r.scaling == "fixed"]
         auto = [r for r in rows if r.scaling == "auto"]
         assert len(auto) == round(0.25 * len(fixed)) and all(a.twin_id for a in auto)
+        assert w.settings["scaling"] == "zone" == ws.workshop_scaling(w.settings)
+        zones = {sec.id: sec.zone for sec in repo.section_infos(s, w.campaign)}
         for kind in KINDS:
-            scales = {json.dumps(r.render["scale"], sort_keys=True) for r in fixed if r.kind == kind}
-            assert len(scales) == 1, kind
-            assert json.loads(scales.pop()) == w.scales[kind]
+            for zone in {zones[r.section] for r in fixed if r.kind == kind}:
+                group = [r for r in fixed if r.kind == kind and zones[r.section] == zone]
+                scales = {json.dumps(r.render["scale"], sort_keys=True) for r in group}
+                assert len(scales) == 1, (kind, zone)       # one range per kind within a zone
+                assert {r.render["scale_key"] for r in group} == {f"{kind} zone {zone}"}
+                assert json.loads(scales.pop()) == w.scales[f"{kind} zone {zone}"]
             styles = {json.dumps(r.render["style"], sort_keys=True) for r in rows if r.kind == kind}
             assert len(styles) == 1
         # objective values: EN signals have a deviation, PSDs take their signal's
@@ -84,6 +90,64 @@ def test_plots_contract_and_one_scaling_per_kind(made):
                 assert r.deviation == by[("ay_cb_time", sec, cfg, pos)].deviation
             if kind.endswith("_time"):
                 assert r.sg_c is not None and r.sg_c >= 0
+
+
+def test_zone_scaling_keeps_straight_track_readable(made, capsys):
+    """The two consistent scalings on the same plots (S01 straight track, zone 1; S04 a
+    300 m curve, zone 4): by zone, each kind's range covers only its zone's plots, so fewer
+    plots are flat lines than with one range over the whole workshop; the preview and
+    ``create --json`` agree; a workshop made before the choice reads as ``workshop``."""
+    from railval.core.workshop import FLAT_SPAN, Extent, is_flat, nice_range, span_share
+
+    db, summary, _ = made
+    assert summary["scaling"] == "zone" and set(summary["flat_share"]) == set(KINDS)
+    kinds = ["Y_time", "ay_cb_time"]
+    preview = ws.scaling_preview(db, "demo", ["baseline"], ["S01", "S04"], kinds)
+    assert preview["plots"] == 2 * (2 + 2) and preview["default"] == "zone"
+    zone, whole = preview["scalings"]["zone"], preview["scalings"]["workshop"]
+    assert {(r["kind"], r["zone"]) for r in zone["ranges"]} == {(k, z) for k in kinds for z in (1, 4)}
+    assert {(r["kind"], r["zone"]) for r in whole["ranges"]} == {(k, None) for k in kinds}
+    for r in zone["ranges"]:                 # a zone's range lies inside the workshop's
+        w_r = next(x for x in whole["ranges"] if x["kind"] == r["kind"])
+        assert w_r["y"][0] <= r["y"][0] and r["y"][1] <= w_r["y"][1] and r["plots"] == 2
+    assert all(zone["flat_share"][k] <= whole["flat_share"][k] for k in kinds)
+    # guiding force on straight track (±3 kN) is lost in the range a tight curve needs (±60 kN)
+    import numpy as np
+    from railval.core.types import SectionInfo
+
+    x = np.linspace(0.0, 1000.0, 2001)
+    infos = {"S": SectionInfo("S", 0.0, 0.0, 160.0, 1, 0.0, 1000.0),
+             "T": SectionInfo("T", 300.0, 150.0, 75.0, 4, 0.0, 1000.0)}
+    sig = {"S": 3.0 * np.sin(x / 50.0), "T": 58.0 * np.sin(x / 300.0)}
+    facts = [{"kind": "Y_time", "section": sec} for sec in ("S", "T")]
+    curves = [(ws._Curve(x, sig[sec]), ws._Curve(x, 0.9 * sig[sec])) for sec in ("S", "T")]
+    for scaling, flat in (("workshop", 0.5), ("zone", 0.0)):
+        keys, scales, groups = ws._scaled(facts, curves, infos, scaling)
+        assert ws.flat_share(groups) == {"Y_time": flat}
+    assert keys == ["Y_time zone 1", "Y_time zone 4"] and scales["Y_time zone 1"].y.hi == 4.0
+    # the flat test by hand: −60…60 kN rounds to −75…75 (step 25); ±2 kN spans 4/150 < 10 %,
+    # ±8 kN 16/150 > 10 %
+    y = nice_range(-60, 60)
+    assert (y.lo, y.hi) == (-75.0, 75.0)
+    assert span_share(Extent(0, 1, -2, 2), y) == pytest.approx(4 / 150)
+    assert is_flat(Extent(0, 1, -2, 2), y) and not is_flat(Extent(0, 1, -8, 8), y)
+    assert FLAT_SPAN == 0.1
+    capsys.readouterr()
+    for name, extra, expect in (("WZ", [], "zone"), ("WW", ["--scaling", "workshop"], "workshop")):
+        assert cli(["--db", db.url, "--as", "orga", "workshop", "create", name, "--campaign", "demo",
+                    "--configurations", "baseline", "--sections", "S01", "S04", "--kinds", *kinds,
+                    "--repeats", "0", *extra, "--json"]) == 0
+        out = json.loads(capsys.readouterr().out)
+        assert out["scaling"] == expect and out["flat_share"] == preview["scalings"][expect]["flat_share"]
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "create", "WX", "--campaign", "demo",
+                "--scaling", "lane"]) == 2
+    assert "scaling must be one of zone, workshop" in capsys.readouterr().err
+    with db.session() as s:
+        w = wsdb.get_workshop(s, "WW")
+        assert set(w.scales) == set(kinds) and w.settings["scaling"] == "workshop"
+        assert set(wsdb.get_workshop(s, "WZ").scales) == {f"{k} zone {z}" for k in kinds for z in (1, 4)}
+        assert ws.workshop_scaling({k: v for k, v in w.settings.items() if k != "scaling"}) == "workshop"
+        assert "WX" not in {x.name for x in wsdb.list_workshops(s)}
 
 
 def test_rendering_is_deterministic(made):

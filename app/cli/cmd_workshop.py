@@ -1,8 +1,10 @@
 """CLI verbs ``workshop …`` — expert review workshops (docs/workshops.md).
 
 ``railval workshop create NAME --campaign C [--configurations …] [--sections …] [--kinds …]
-[--blind] [--repeats 0.1] [--auto-share 0] [--seed 0] [--dry-run] [--json]``
-    build the plot set, render every plot once and store it (``--dry-run``: only count).
+[--scaling zone|workshop] [--blind] [--repeats 0.1] [--auto-share 0] [--seed 0] [--dry-run] [--json]``
+    build the plot set, render every plot once and store it (``--dry-run``: only count);
+    ``--json`` reports per kind ``flat_share``, the share of plots whose filtered signal
+    spans less than 10 % of its y range.
 ``railval workshop kinds [--json]``          the plot kinds (registry).
 ``railval workshop plots NAME --json``       ``plots``: id, kind, section, configuration,
                                              channel, deviation, image_sha256 (and sg_c,
@@ -53,6 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--sections", nargs="+", default=None, metavar="ID", help="sections (default: all)")
     c.add_argument("--kinds", nargs="+", default=None, metavar="KIND",
                    help="plot kinds (default: all; see `railval workshop kinds`)")
+    c.add_argument("--scaling", default=None, metavar="zone|workshop",
+                   help="one y range per plot kind within each EN 14363 test zone (zone, the default) "
+                        "or over the whole workshop (workshop)")
     c.add_argument("--blind", action="store_true", help="no vehicle, configuration or section names")
     c.add_argument("--repeats", type=float, default=0.1, help="share of hidden repeats (default 0.1)")
     c.add_argument("--auto-share", type=float, default=0.0,
@@ -122,7 +127,9 @@ def _flat(values: list[str] | None) -> list[str] | None:
 
 def _create(args: argparse.Namespace) -> int:
     from railval.app.services import workshops as ws
+    from railval.core.workshop import DEFAULT_SCALING, check_scaling
 
+    scaling = check_scaling(args.scaling or DEFAULT_SCALING)
     database = _database(args.db)
     configs, sections, kinds = _flat(args.configurations), _flat(args.sections), _flat(args.kinds)
     with database.session() as session:
@@ -142,12 +149,14 @@ def _create(args: argparse.Namespace) -> int:
               f"({', '.join(f'{k} {n}' for k, n in counts.items())})", file=sys.stderr, flush=True)
     out = ws.create(database, args.name, args.campaign, configurations=configs,
                     sections=sections, kinds=kinds, blind=args.blind, repeats=args.repeats,
-                    auto_share=args.auto_share, seed=args.seed, actor=_actor())
+                    auto_share=args.auto_share, seed=args.seed, scaling=scaling, actor=_actor())
     if args.json:
         emit_json({**out, "stored": True})
     else:
         print(f"workshop {out['name']} created: {out['plots']} plots "
-              f"({out['auto_plots']} with automatic scaling), blind={out['blind']}")
+              f"({out['auto_plots']} with automatic scaling), blind={out['blind']}, scaling {scaling}")
+        for kind, share in out["flat_share"].items():
+            print(f"  {kind:12s} flat plots (signal < 10 % of the y range): {100 * share:.0f} %")
     return 0
 
 
