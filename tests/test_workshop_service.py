@@ -308,3 +308,62 @@ def test_cli_create_dry_run_plots_invite_status(made, capsys):
     assert "cli-rev" in {r["reviewer"] for r in st["reviewers"]}
     assert cli(["--db", db.url, "--as", "orga", "workshop", "plots", "nope", "--json"]) == 2
     assert "workshop 'nope' not found" in capsys.readouterr().err
+
+
+def test_plot_cards_reuse_validate_and_metrics_and_show_both_groups(made, tmp_path, capsys):
+    """Cards of two workshops over the same plots (partners, experts): EN values are the
+    pairs `railval validate` evaluates, Sprague–Geers the numbers of `railval metrics`,
+    each card shows both groups' shares of Yes (counted here by hand from the CSVs)."""
+    from railval.app.services.validation import validate_configuration
+
+    db, _, _ = made
+    for name in ("CP", "CE"):
+        ws.create(db, name, "demo", configurations=["baseline"], sections=["S01", "S04"],
+                  kinds=["Y_time", "YQ_time", "ay_cb_psd"], repeats=0.0)
+    with db.session() as s:
+        plots = {n: {(p.kind, p.section, p.channel): p.id for p in wsdb.plots(s, wsdb.get_workshop(s, n))}
+                 for n in ("CP", "CE")}
+    keys = sorted(plots["CP"])
+    # partners: 3 reviewers, Yes on every other plot for the first; experts: 2 reviewers, all No
+    part = [(f"cp{r}", plots["CP"][k], "yes" if (r + i) % 2 == 0 else "no", 5, "")
+            for r in range(3) for i, k in enumerate(keys)]
+    expt = [(f"ce{r}", plots["CE"][k], "no", 4, "") for r in range(2) for k in keys]
+    ws.import_answers(db, "CP", _write(tmp_path / "cp.csv", part))
+    ws.import_answers(db, "CE", _write(tmp_path / "ce.csv", expt))
+    capsys.readouterr()
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "cards", "CP", "--groups", "CE", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["groups"] == ["CP", "CE"] and len(doc["cards"]) == len(keys)
+    with db.session() as s:
+        pairs = validate_configuration(s, "demo", "baseline", n_boot=0).pairs
+    capsys.readouterr()
+    assert cli(["--db", db.url, "--as", "orga", "metrics", "demo", "--config", "baseline", "--section", "S01", "--section", "S04",
+                "--json"]) == 0
+    metrics = {(r["section"], r["channel"]): r for r in json.loads(capsys.readouterr().out)["rows"]}
+    for c in doc["cards"]:
+        assert {"plot", "kind", "section", "zone", "configuration", "en", "yes_share", "answers",
+                "sg", "deviation"} <= set(c)
+        assert c["zone"] == {"S01": 1, "S04": 4}[c["section"]]
+        i = keys.index((c["kind"], c["section"], c["channel"]))
+        assert c["answers"] == 3 and c["yes_share"] == pytest.approx(sum((r + i) % 2 == 0 for r in range(3)) / 3,
+                                                                    abs=1e-4)
+        assert c["groups"] == [{"workshop": "CP", "yes_share": c["yes_share"], "answers": 3},
+                               {"workshop": "CE", "yes_share": 0.0, "answers": 2}]
+        pos = c["channel"].split("_")[-1]
+        want = pairs[(pairs["section"] == c["section"]) & (pairs["position"] == pos)
+                     & pairs["quantity"].isin(PLOT_KINDS[c["kind"]].quantities)]
+        assert len(c["en"]) == len(want) > 0
+        for e in c["en"]:
+            row = want[want["quantity"] == e["quantity"]].iloc[0]
+            assert (e["measured"], e["simulated"]) == (row["M"], row["S"])
+            assert e["abs_diff"] == pytest.approx(row["S"] - row["M"])
+            assert e["rel_diff"] == pytest.approx((row["S"] - row["M"]) / abs(row["M"]))
+        if c["kind"] == "YQ_time":
+            assert c["sg"] is None              # Y/Q is not a recorded channel
+        else:
+            chan = PLOT_KINDS[c["kind"]].channel(pos)
+            m = metrics[(c["section"], chan)]
+            assert c["sg"] == {"M": pytest.approx(m["sg_M"]), "P": pytest.approx(m["sg_P"]),
+                               "C": pytest.approx(m["sg_C"])}
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "cards", "CP", "--groups", "CP"]) == 2
+    assert cli(["--db", db.url, "--as", "revx", "workshop", "cards", "CP"]) == 2

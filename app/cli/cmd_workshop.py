@@ -14,6 +14,9 @@
 ``railval workshop close|reopen NAME``
 ``railval workshop import-answers NAME FILE.csv`` / ``export NAME FILE.csv``
 ``railval workshop analyse NAME --json``
+``railval workshop cards NAME [--groups W2 …] --json``  the plot cards (EN values of measurement and
+                                             simulation, shares of Yes per reviewer group,
+                                             Sprague–Geers M, P, C, deviation).
 
 Permissions (:data:`railval.core.roles.CLI_ACTIONS`) are checked for the user named by
 ``railval --as USER`` once the database has users; every change is recorded in the audit
@@ -104,6 +107,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     ex.add_argument("name")
     ex.add_argument("file")
     ex.set_defaults(func=_export)
+
+    cd = wsub.add_parser("cards", help="the plot cards: EN values, shares of Yes, Sprague–Geers errors per plot")
+    cd.add_argument("name")
+    cd.add_argument("--groups", nargs="+", default=[], metavar="WORKSHOP",
+                    help="further workshops over the same plots (other reviewer groups)")
+    cd.add_argument("--json", action="store_true")
+    cd.set_defaults(func=_cards)
 
     a = wsub.add_parser("analyse", help="reviewer strictness, agreement, threshold, Table 1")
     a.add_argument("name")
@@ -247,6 +257,25 @@ def _export(args: argparse.Namespace) -> int:
 
     n = export_answers(_database(args.db), args.name, args.file)
     print(f"{n} answers of {args.name} written to {args.file}")
+    return 0
+
+
+def _cards(args: argparse.Namespace) -> int:
+    from railval.app.services.workshops import cards
+
+    doc = cards(_database(args.db), args.name, groups=_flat(args.groups) or [], actor=_actor())
+    if args.json:
+        emit_json(doc)
+        return 0
+    for c in doc["cards"]:
+        shares = ", ".join(f"{g['workshop']} " + ("—" if g["yes_share"] is None else f"{100 * g['yes_share']:.0f} %")
+                           for g in c["groups"])
+        sg = c["sg"] or {}
+        print(f"{c['plot']:5d} {c['kind']:11s} {c['section']:6s} zone {c['zone']} {c['configuration']:10s} "
+              f"{c['channel']:9s} Yes: {shares}; SG C {sg.get('C') if sg.get('C') is None else round(sg['C'], 3)}")
+        for e in c["en"]:
+            print(f"        {e['quantity']:8s} M {e['measured']:9.3f}  S {e['simulated']:9.3f}  "
+                  f"S−M {e['abs_diff']:+9.3f}")
     return 0
 
 

@@ -43,6 +43,7 @@ from railval.app.workshop_web.organiser import (
     WorkshopNew,
     WorkshopPage,
     WorkshopPlan,
+    WorkshopScalingPreview,
     WorkshopStatus,
 )
 from railval.app.workshop_web.reviewer import (
@@ -74,6 +75,7 @@ def routes(database, auth=None) -> list[tuple]:
         (r"/workshops/?", WorkshopList, kw),
         (r"/workshops/new", WorkshopNew, kw),
         (r"/workshops/plan", WorkshopPlan, kw),
+        (r"/workshops/scaling-preview", WorkshopScalingPreview, kw),
         (rf"/workshops/{name}/status", _StatusOrPost, kw),
         (rf"/workshops/{name}/invite", _InvitePost, kw),
         (rf"/workshops/{name}/analysis", WorkshopAnalysis, kw),
