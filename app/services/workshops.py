@@ -249,7 +249,8 @@ def _scaled(facts, curves, infos, scaling: str) -> tuple[list[str], dict[str, Sc
                                     else infos[f["section"]].zone,
                                     "x": [scales[key].x.lo, scales[key].x.hi],
                                     "y": [scales[key].y.lo, scales[key].y.hi],
-                                    "log": scales[key].y.log, "unit": k.y_label, "plots": 0, "flat": 0})
+                                    "log": scales[key].y.log, "y_label": k.y_label,
+                                    "x_label": k.x_label, "plots": 0, "flat": 0})
         g["plots"] += 1
         g["flat"] += bool(is_flat(_plot_extent(k, cm, cs), scales[key].y))
     return keys, scales, groups
@@ -664,7 +665,8 @@ def cards(database, name: str, *, groups: Sequence[str] = (), actor: Principal |
                     continue
                 m, s_ = en[(p.configuration, p.section, position, q)]
                 rows.append({"quantity": q, "measured": m, "simulated": s_, "abs_diff": s_ - m,
-                             "rel_diff": (s_ - m) / abs(m) if m != 0 else None})
+                             "rel_diff": (s_ - m) / abs(m) if m != 0 else None,
+                             "unit": QUANTITIES[q].unit})
             key = (p.kind, p.section, p.configuration, p.channel)
             own = mine[key]
             card = {"plot": p.id, "kind": p.kind, "section": p.section, "zone": infos[p.section].zone,

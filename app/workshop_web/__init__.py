@@ -36,7 +36,12 @@ Modules: ``common`` (page frame, sign-in, base handlers), ``reviewer``, ``organi
 
 from __future__ import annotations
 
-from railval.app.workshop_web.analysis import WorkshopAnalysis, analysis_html, threshold_png
+from railval.app.workshop_web.analysis import (
+    WorkshopAnalysis,
+    WorkshopPlotImage,
+    analysis_html,
+    threshold_png,
+)
 from railval.app.workshop_web.common import Login, Logout
 from railval.app.workshop_web.organiser import (
     WorkshopList,
@@ -79,6 +84,7 @@ def routes(database, auth=None) -> list[tuple]:
         (rf"/workshops/{name}/status", _StatusOrPost, kw),
         (rf"/workshops/{name}/invite", _InvitePost, kw),
         (rf"/workshops/{name}/analysis", WorkshopAnalysis, kw),
+        (rf"/workshops/{name}/plot/(\d+)", WorkshopPlotImage, kw),
         (rf"/workshops/{name}", WorkshopPage, kw),
     ]
 

@@ -91,17 +91,152 @@ def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | N
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
+def _cards(database, name: str, groups: list[str], actor) -> dict[str, Any]:
+    from railval.app.services.workshops import cards
+    from railval.db import workshops as wsdb
+
+    doc = cards(database, name, groups=groups, actor=actor)
+    with database.session() as s:
+        w = wsdb.get_workshop(s, name)
+        doc["others"] = [x.name for x in wsdb.list_workshops(s)
+                         if x.campaign_id == w.campaign_id and x.name != name]
+    return doc
+
+
 class WorkshopAnalysis(_OrganiserBase):
     async def get(self, name: str) -> None:
         p = await self.require("workshop.results")
         if p is None:
             return
+        groups = [g for g in self.get_arguments("groups") if g]
         try:
             doc = await run(_analysis, self.database, name, p)
+            card_doc = await run(_cards, self.database, name, groups, p)
         except RailvalError as exc:
             self.finish(page(f"Analysis {name}", f"<p class='err'>{esc(exc)}</p>", user=p.username))
             return
-        self.finish(page(f"Analysis {name}", analysis_html(doc), user=p.username))
+        self.finish(page(f"Analysis {name}", analysis_html(doc) + cards_html(card_doc),
+                         user=p.username, script=_CARDS_JS))
+
+
+class WorkshopPlotImage(_OrganiserBase):
+    """A stored plot image for the organiser's and assessor's cards (exactly the reviewed bytes)."""
+
+    async def get(self, name: str, plot_id: str) -> None:
+        p = await self.require("workshop.results")
+        if p is None:
+            return
+        try:
+            data, sha = await run(_plot_image, self.database, name, int(plot_id))
+        except RailvalError:
+            self.set_status(404)
+            self.finish("no such plot")
+            return
+        self.set_header("Content-Type", "image/png")
+        self.set_header("X-Image-SHA256", sha)
+        self.set_header("Cache-Control", "private, max-age=86400")
+        self.finish(data)
+
+
+def _plot_image(database, name: str, plot_id: int) -> tuple[bytes, str]:
+    from railval.db import workshops as wsdb
+
+    with database.session() as s:
+        return wsdb.plot_image(s, wsdb.get_workshop(s, name).id, plot_id)
+
+
+#: the cards' filters: show a card when it matches every chosen value
+_CARDS_JS = r"""
+const filters = document.querySelectorAll('#cardfilter select');
+function apply() {
+  let shown = 0;
+  for (const c of document.querySelectorAll('.card')) {
+    let ok = true;
+    for (const f of filters) if (f.value && c.dataset[f.name] !== f.value) ok = false;
+    c.style.display = ok ? '' : 'none'; if (ok) shown++;
+  }
+  document.getElementById('cardcount').textContent = shown;
+}
+for (const f of filters) f.onchange = apply;
+apply();
+"""
+
+
+def agreement_of(card: dict[str, Any]) -> str:
+    """Whether the majority of the reviewers agrees with the objective verdict of the plot
+    (deviation ≤ 1.0 ↔ Yes): ``agree``, ``disagree``, ``split`` (exactly half) or ``n/a``
+    (no answers or no objective value)."""
+    share, dev = card.get("yes_share"), card.get("deviation")
+    if share is None or dev is None:
+        return "n/a"
+    if share == 0.5:
+        return "split"
+    return "agree" if (share > 0.5) == (dev <= 1.0) else "disagree"
+
+
+_AGREEMENT_TEXT = {"agree": "reviewers agree with the limit", "disagree": "reviewers disagree with the limit",
+                   "split": "reviewers split half and half", "n/a": "no answers or no objective value"}
+
+
+def card_html(c: dict[str, Any], workshop: str, labels: dict[str, str]) -> str:
+    """One plot card (Polach & Böttcher 2014 Figs. 3–5): the stored plot, beside it the EN
+    values with their differences, the shares of Yes of every group and the Sprague–Geers
+    errors. ``workshop``: whose image route serves the plot."""
+    from urllib.parse import quote
+
+    en = "".join(f"<tr><td>{esc(e['quantity'])} <span class='muted'>({esc(e.get('unit', ''))})</span></td><td class='num'>{_fmt(e['measured'])}</td>"
+                 f"<td class='num'>{_fmt(e['simulated'])}</td><td class='num'>{_fmt(e['abs_diff'])}</td>"
+                 f"<td class='num'>{_pct(e['rel_diff'])}</td></tr>" for e in c["en"]) \
+        or "<tr><td colspan='5' class='muted'>no EN 14363 quantity for this signal</td></tr>"
+    groups = "".join(f"<tr><td>{esc(g['workshop'])}</td><td class='num'>{_pct(g['yes_share'])}</td>"
+                     f"<td class='num'>{g['answers']}</td></tr>" for g in c["groups"])
+    sg = c.get("sg") or {}
+    sg_txt = ("not computed (Y/Q is not a recorded channel)" if not sg else
+              f"M {_fmt(sg.get('M'), 3)}, P {_fmt(sg.get('P'), 3)}, C {_fmt(sg.get('C'), 3)}")
+    agree = agreement_of(c)
+    src = f"/workshops/{quote(workshop, safe='')}/plot/{int(c['plot'])}"
+    return (f"<div class='card' data-kind='{esc(c['kind'])}' data-zone='{c['zone']}' "
+            f"data-configuration='{esc(c['configuration'])}' data-agreement='{agree}'>"
+            f"<img loading='lazy' alt='plot {int(c['plot'])}' src='{src}'>"
+            f"<div><h4>{esc(labels.get(c['kind'], c['kind']))}, {esc(c['channel'])} — section "
+            f"{esc(c['section'])} (zone {c['zone']}), configuration {esc(c['configuration'])}</h4>"
+            f"<table><tr><th>EN 14363 value</th><th>measurement</th><th>simulation</th>"
+            f"<th>S − M</th><th>(S − M)/|M|</th></tr>{en}</table>"
+            f"<table><tr><th>reviewer group</th><th>share of Yes</th><th>answers</th></tr>{groups}</table>"
+            f"<p>Sprague–Geers: {sg_txt}<br>normalised deviation (largest |D_v| / std limit): "
+            f"{_fmt(c.get('deviation'))} — {_AGREEMENT_TEXT[agree]}</p></div></div>")
+
+
+def cards_html(doc: dict[str, Any]) -> str:
+    """The plot cards with their filters (kind, zone, configuration, agreement) and the
+    choice of a second reviewer group (a GET form: it changes nothing)."""
+    from railval.app.services.workshops import kind_labels
+
+    labels = kind_labels()
+    cards = doc.get("cards", [])
+
+    def select(name: str, label: str, values, text=None) -> str:
+        opts = "".join(f"<option value='{esc(v)}'>{esc(text(v) if text else v)}</option>" for v in values)
+        return f"<label>{label} <select name='{name}'><option value=''>all</option>{opts}</select></label> "
+
+    kinds = list(dict.fromkeys(c["kind"] for c in cards))
+    zones = sorted({c["zone"] for c in cards})
+    cfgs = list(dict.fromkeys(c["configuration"] for c in cards))
+    agrees = [a for a in _AGREEMENT_TEXT if any(agreement_of(c) == a for c in cards)]
+    chosen = set(doc.get("groups", [])[1:])
+    others = "".join(f"<label><input type='checkbox' name='groups' value='{esc(o)}'"
+                     f"{' checked' if o in chosen else ''}> {esc(o)}</label> " for o in doc.get("others", []))
+    compare = (f"<form method='get' id='groupform'>Other reviewer groups (workshops over the same plots): "
+               f"{others}<button type='submit'>Show their shares</button></form>") if others else ""
+    body = "".join(card_html(c, doc["workshop"], labels) for c in cards)
+    return (f"<h3>Plot cards</h3>"
+            f"<style>.card{{display:flex;gap:16px;align-items:flex-start;border-top:1px solid #ccc;"
+            f"padding:10px 0}}.card img{{width:560px;max-width:55%;height:auto;border:1px solid #ddd}}"
+            f".card h4{{margin:0 0 6px}}.card table{{margin-bottom:8px}}</style>{compare}"
+            f"<p id='cardfilter'>{select('kind', 'plot kind', kinds, lambda k: labels.get(k, k))}"
+            f"{select('zone', 'test zone', zones)}{select('configuration', 'configuration', cfgs)}"
+            f"{select('agreement', 'agreement', agrees, lambda a: _AGREEMENT_TEXT[a])}"
+            f"— <span id='cardcount'>{len(cards)}</span> of {len(cards)} cards</p>{body}")
 
 
 def _pct(x: Any) -> str:

@@ -93,10 +93,10 @@ async function preview() {
   let html = '';
   for (const [sc, v] of Object.entries(d.scalings)) {
     html += '<h4>' + (sc === 'zone' ? 'by test zone' : 'whole workshop') + (sc === d.default ? ' (default)' : '') + '</h4>';
-    html += '<table class="preview" data-scaling="' + sc + '"><tr><th>plot kind</th><th>zone</th><th>y range</th><th>x range</th><th>plots</th><th>flat (signal &lt; 10 % of the y range)</th></tr>';
+    html += '<table class="preview" data-scaling="' + sc + '"><tr><th>plot kind</th><th>zone</th><th>y axis</th><th>y range</th><th>x range</th><th>plots</th><th>flat (signal &lt; 10 % of the y range)</th></tr>';
     for (const g of v.ranges) {
-      html += '<tr><td>' + kl[g.kind] + '</td><td>' + (g.zone === null ? 'all' : g.zone) + '</td><td class="num">' +
-        fmt(g.y[0]) + ' … ' + fmt(g.y[1]) + ' ' + (g.log ? '(log) ' : '') + '</td><td class="num">' + fmt(g.x[0]) + ' … ' + fmt(g.x[1]) +
+      html += '<tr><td>' + kl[g.kind] + '</td><td>' + (g.zone === null ? 'all' : g.zone) + '</td><td>' + g.y_label + '</td><td class="num">' +
+        fmt(g.y[0]) + ' … ' + fmt(g.y[1]) + ' ' + (g.log ? '(log) ' : '') + '</td><td class="num">' + fmt(g.x[0]) + ' … ' + fmt(g.x[1]) + ' ' + (g.x_label.includes(' in ') ? g.x_label.split(' in ').pop() : '') +
         '</td><td class="num">' + g.plots + '</td><td class="num">' + g.flat + '</td></tr>'; }
     html += '</table><p>Share of flat plots per kind: ' + Object.entries(v.flat_share).map(([k, s]) =>
       k + ' ' + Math.round(100 * s) + ' %').join(', ') + '</p>'; }
