@@ -403,3 +403,29 @@ def test_organiser_page_live_progress_invite_close_and_analysis(browser, env):
         actions = set(s.scalars(select(AuditEvent.action)))
         assert {"workshop.create", "workshop.invite", "workshop.close", "workshop.reopen"} <= actions
         assert s.scalar(select(func.count()).select_from(AuditEvent)) > 0
+
+
+def test_validation_report_shows_the_chosen_cards(browser, env, tmp_path):
+    """Two cards chosen into the report of the configuration: shown in Chromium with their
+    embedded images (the reviewed bytes) beside the EN values and both groups' shares."""
+    from railval.app.report import build_report
+    from railval.app.services.workshops import report_cards
+    from railval.app.state.backend import Backend
+    from railval.db import workshops as wsdb
+
+    with env["db"].session() as s:
+        ids = [p.id for p in wsdb.plots(s, wsdb.get_workshop(s, "BW")) if p.scaling == "fixed"][:2]
+    cards = report_cards(env["db"], "BW", "baseline", ids, groups=["BX"])
+    path = build_report(Backend(env["db"]), "demo", "baseline", worst_cases=0, cards=cards).write(
+        tmp_path / "report.html")
+    ctx = browser.new_context(viewport=VIEWPORT)
+    page = ctx.new_page()
+    page.goto(path.as_uri())
+    cards_el = page.locator(".card")
+    assert cards_el.count() == 2
+    page.wait_for_function("Array.from(document.querySelectorAll('.card img')).every("
+                           "i => i.complete && i.naturalWidth === 1000)", timeout=TIMEOUT_MS)
+    assert "BX" in cards_el.first.inner_text()
+    page.get_by_text("Expert review: plot cards").scroll_into_view_if_needed()
+    element_screenshot(page.locator(".card").first, "report-card")
+    ctx.close()

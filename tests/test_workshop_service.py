@@ -367,3 +367,35 @@ def test_plot_cards_reuse_validate_and_metrics_and_show_both_groups(made, tmp_pa
                                "C": pytest.approx(m["sg_C"])}
     assert cli(["--db", db.url, "--as", "orga", "workshop", "cards", "CP", "--groups", "CP"]) == 2
     assert cli(["--db", db.url, "--as", "revx", "workshop", "cards", "CP"]) == 2
+
+
+def test_chosen_cards_go_into_the_validation_report(made, tmp_path, capsys):
+    """`railval report --workshop W --cards …`: the chosen cards of this configuration, with
+    the reviewed image bytes and their SHA-256; a card of another configuration or an
+    unknown plot is refused by name and no file is written; a reviewer may not."""
+    import base64
+    import re
+
+    db, _, _ = made
+    with db.session() as s:
+        w = wsdb.get_workshop(s, "W")
+        fixed = [p for p in wsdb.plots(s, w) if p.scaling == "fixed"]
+        base = [p for p in fixed if p.configuration == "baseline"][:2]
+        other = next(p for p in fixed if p.configuration != "baseline")
+        img = wsdb.plot_image(s, w.id, base[0].id)
+    out = tmp_path / "r.html"
+    assert cli(["--db", db.url, "--as", "orga", "report", "demo", "--config", "baseline", "--out", str(out),
+                "--worst", "0", "--workshop", "W", "--cards", str(base[0].id), str(base[1].id)]) == 0
+    html = out.read_text(encoding="utf-8")
+    assert "Expert review: plot cards" in html and html.count("class='card'") == 2
+    assert img[1] in html and base64.b64encode(img[0]).decode() in html
+    assert re.search(r"reviewer group</th>", html)
+    capsys.readouterr()
+    bad = tmp_path / "bad.html"
+    assert cli(["--db", db.url, "--as", "orga", "report", "demo", "--config", "baseline", "--out", str(bad),
+                "--workshop", "W", "--cards", str(other.id)]) == 2
+    assert f"plot {other.id} of workshop 'W' shows configuration" in capsys.readouterr().err
+    assert cli(["--db", db.url, "--as", "orga", "report", "demo", "--config", "baseline", "--out", str(bad),
+                "--workshop", "W", "--cards", "999999"]) == 2
+    assert "plot 999999 is not a plot of workshop 'W'" in capsys.readouterr().err
+    assert not bad.exists()

@@ -683,6 +683,35 @@ def cards(database, name: str, *, groups: Sequence[str] = (), actor: Principal |
     return {"workshop": name, "campaign": camp.name, "groups": [name, *groups], "cards": out}
 
 
+def report_cards(database, name: str, configuration: str, plot_ids: Sequence[int], *,
+                 groups: Sequence[str] = (), actor: Principal | str = "system") -> list[dict[str, Any]]:
+    """The chosen cards of workshop ``name`` for the validation report of ``configuration``:
+    each card of :func:`cards` with ``image_png`` (the stored, reviewed bytes) and
+    ``image_sha256``. A plot id that is not a fixed plot of the workshop, or belongs to
+    another configuration, is refused by name; nothing else is read then."""
+    import base64
+
+    from railval.db import workshops as wsdb
+
+    doc = cards(database, name, groups=groups, actor=actor)
+    by_id = {c["plot"]: c for c in doc["cards"]}
+    out = []
+    with database.session() as session:
+        w = wsdb.get_workshop(session, name)
+        for pid in plot_ids:
+            c = by_id.get(int(pid))
+            if c is None:
+                raise InvalidParameter(f"--cards: plot {pid} is not a plot of workshop {name!r} "
+                                       f"(see `railval workshop cards {name} --json`)")
+            if c["configuration"] != configuration:
+                raise InvalidParameter(f"--cards: plot {pid} of workshop {name!r} shows configuration "
+                                       f"{c['configuration']!r}, not {configuration!r}")
+            data, sha = wsdb.plot_image(session, w.id, int(pid))
+            out.append({**c, "workshop": name,
+                        "image_png": base64.b64encode(data).decode(), "image_sha256": sha})
+    return out
+
+
 def _finite(x) -> float | None:
     return float(x) if x is not None and math.isfinite(float(x)) else None
 
@@ -699,5 +728,5 @@ def describe_kinds() -> list[dict[str, Any]]:
 __all__ = ["CSV_COLUMNS", "EXPORT_COLUMNS", "PlannedPlot", "analyse", "analysis_frames",
            "count_by_kind", "create", "describe_kinds", "export_answers", "get_kind",
            "flat_share", "import_answers", "kind_labels", "parse_answers_csv", "plan", "plots_document",
-           "cards", "scaling_preview", "workshop_scaling",
+           "cards", "report_cards", "scaling_preview", "workshop_scaling",
            "review_link", "status_document"]

@@ -162,6 +162,12 @@ apply();
 """
 
 
+#: the layout of a card: image left, tables right (also used by the validation report)
+CARD_CSS = (".card{display:flex;gap:16px;align-items:flex-start;border-top:1px solid #ccc;padding:10px 0;"
+            "break-inside:avoid}.card img{width:560px;max-width:55%;height:auto;border:1px solid #ddd}"
+            ".card h4{margin:0 0 6px}.card table{margin-bottom:8px}")
+
+
 def agreement_of(card: dict[str, Any]) -> str:
     """Whether the majority of the reviewers agrees with the objective verdict of the plot
     (deviation ≤ 1.0 ↔ Yes): ``agree``, ``disagree``, ``split`` (exactly half) or ``n/a``
@@ -178,12 +184,11 @@ _AGREEMENT_TEXT = {"agree": "reviewers agree with the limit", "disagree": "revie
                    "split": "reviewers split half and half", "n/a": "no answers or no objective value"}
 
 
-def card_html(c: dict[str, Any], workshop: str, labels: dict[str, str]) -> str:
-    """One plot card (Polach & Böttcher 2014 Figs. 3–5): the stored plot, beside it the EN
-    values with their differences, the shares of Yes of every group and the Sprague–Geers
-    errors. ``workshop``: whose image route serves the plot."""
-    from urllib.parse import quote
-
+def card_html(c: dict[str, Any], src: str, labels: dict[str, str], *, lazy: bool = True) -> str:
+    """One plot card (Polach & Böttcher 2014 Figs. 3–5): the stored plot (``src``: its URL
+    or data URL), beside it the EN values with their differences, the shares of Yes of every
+    group and the Sprague–Geers errors (all text escaped). ``lazy``: the browser loads the
+    image when it scrolls into view (the page; a printed report needs every image now)."""
     en = "".join(f"<tr><td>{esc(e['quantity'])} <span class='muted'>({esc(e.get('unit', ''))})</span></td><td class='num'>{_fmt(e['measured'])}</td>"
                  f"<td class='num'>{_fmt(e['simulated'])}</td><td class='num'>{_fmt(e['abs_diff'])}</td>"
                  f"<td class='num'>{_pct(e['rel_diff'])}</td></tr>" for e in c["en"]) \
@@ -194,10 +199,9 @@ def card_html(c: dict[str, Any], workshop: str, labels: dict[str, str]) -> str:
     sg_txt = ("not computed (Y/Q is not a recorded channel)" if not sg else
               f"M {_fmt(sg.get('M'), 3)}, P {_fmt(sg.get('P'), 3)}, C {_fmt(sg.get('C'), 3)}")
     agree = agreement_of(c)
-    src = f"/workshops/{quote(workshop, safe='')}/plot/{int(c['plot'])}"
     return (f"<div class='card' data-kind='{esc(c['kind'])}' data-zone='{c['zone']}' "
             f"data-configuration='{esc(c['configuration'])}' data-agreement='{agree}'>"
-            f"<img loading='lazy' alt='plot {int(c['plot'])}' src='{src}'>"
+            f"<img{' loading=lazy' if lazy else ''} alt='plot {int(c['plot'])}' src='{src}'>"
             f"<div><h4>{esc(labels.get(c['kind'], c['kind']))}, {esc(c['channel'])} — section "
             f"{esc(c['section'])} (zone {c['zone']}), configuration {esc(c['configuration'])}</h4>"
             f"<table><tr><th>EN 14363 value</th><th>measurement</th><th>simulation</th>"
@@ -228,11 +232,11 @@ def cards_html(doc: dict[str, Any]) -> str:
                      f"{' checked' if o in chosen else ''}> {esc(o)}</label> " for o in doc.get("others", []))
     compare = (f"<form method='get' id='groupform'>Other reviewer groups (workshops over the same plots): "
                f"{others}<button type='submit'>Show their shares</button></form>") if others else ""
-    body = "".join(card_html(c, doc["workshop"], labels) for c in cards)
-    return (f"<h3>Plot cards</h3>"
-            f"<style>.card{{display:flex;gap:16px;align-items:flex-start;border-top:1px solid #ccc;"
-            f"padding:10px 0}}.card img{{width:560px;max-width:55%;height:auto;border:1px solid #ddd}}"
-            f".card h4{{margin:0 0 6px}}.card table{{margin-bottom:8px}}</style>{compare}"
+    from urllib.parse import quote
+
+    base = f"/workshops/{quote(doc['workshop'], safe='')}/plot/"
+    body = "".join(card_html(c, f"{base}{int(c['plot'])}", labels) for c in cards)
+    return (f"<h3>Plot cards</h3><style>{CARD_CSS}</style>{compare}"
             f"<p id='cardfilter'>{select('kind', 'plot kind', kinds, lambda k: labels.get(k, k))}"
             f"{select('zone', 'test zone', zones)}{select('configuration', 'configuration', cfgs)}"
             f"{select('agreement', 'agreement', agrees, lambda a: _AGREEMENT_TEXT[a])}"
