@@ -399,3 +399,24 @@ def test_chosen_cards_go_into_the_validation_report(made, tmp_path, capsys):
                 "--workshop", "W", "--cards", "999999"]) == 2
     assert "plot 999999 is not a plot of workshop 'W'" in capsys.readouterr().err
     assert not bad.exists()
+
+
+def test_zone_scaling_and_cards_on_each_backend(database, tmp_path):
+    """SQLite and PostgreSQL: the stored scaling and per-zone ranges read back as written,
+    and the cards of a workshop with answers come from the stored rows."""
+    from railval.db.importer import import_campaign
+    from tests.factories import write_demo_campaign
+
+    manifest = write_demo_campaign(tmp_path / "demo", n_sections=4, n_configs=1, name="demo")
+    import_campaign(database, manifest.parent)
+    out = ws.create(database, "PZ", "demo", sections=["S01", "S04"], kinds=["Y_time"], repeats=0.0)
+    assert out["scaling"] == "zone" and set(out["scales"]) == {"Y_time zone 1", "Y_time zone 4"}
+    with database.session() as s:
+        w = wsdb.get_workshop(s, "PZ")
+        assert w.settings["scaling"] == "zone" and w.scales == out["scales"]
+        ids = [p.id for p in wsdb.plots(s, w)]
+    ws.import_answers(database, "PZ", _write(tmp_path / "a.csv", [("pg1", i, "yes", 2, "") for i in ids]))
+    doc = ws.cards(database, "PZ")
+    assert [c["plot"] for c in doc["cards"]] == ids
+    assert all(c["yes_share"] == 1.0 and c["answers"] == 1 and c["en"] and c["sg"]["C"] is not None
+               for c in doc["cards"])
