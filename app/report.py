@@ -346,7 +346,9 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
         h.extend(_worst_case_plots(backend, campaign, configuration, result, ov, worst_cases))
 
     if cards:
-        h.append(cards_html(cards))
+        from railval.app.workshop_web.cards import report_section
+
+        h.append(report_section(cards))
 
     # independent sign-offs of this configuration, with their status
     session = getattr(backend, "session", None)
@@ -385,23 +387,6 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
         f"<tr><td class='l'>{_esc(k)}</td><td class='l'>{_esc(val)}</td></tr>" for k, val in versions.items())
         + "</table></body></html>")
     return Report(campaign, configuration, "".join(h), ok, now, versions, digest.hexdigest())
-
-
-def cards_html(cards: list[dict[str, Any]]) -> str:
-    """The chosen workshop plot cards (Polach & Böttcher 2014 Figs. 3–5), self-contained."""
-    from railval.app.services.workshops import kind_labels
-    from railval.app.workshop_web.analysis import CARD_CSS, card_html
-
-    labels = kind_labels()
-    out = [f"<h2>Expert review: plot cards</h2><style>{CARD_CSS}</style>"
-           "<p class='note'>Plots as the reviewers saw them (workshop, plot id and SHA-256 of the "
-           "image below each); EN 14363 values of measurement and simulation in the evaluated part, "
-           "the share of Yes of each reviewer group, Sprague–Geers errors of the whole section.</p>"]
-    for c in cards:
-        out.append(card_html(c, f"data:image/png;base64,{c['image_png']}", labels, lazy=False))
-        out.append(f"<p class='note'>workshop {_esc(c['workshop'])}, plot {int(c['plot'])}, "
-                   f"image SHA-256 <code>{_esc(c['image_sha256'])}</code></p>")
-    return "".join(out)
 
 
 def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: Any, ov: Any,

@@ -409,7 +409,7 @@ def test_validation_report_shows_the_chosen_cards(browser, env, tmp_path):
     """Two cards chosen into the report of the configuration: shown in Chromium with their
     embedded images (the reviewed bytes) beside the EN values and both groups' shares."""
     from railval.app.report import build_report
-    from railval.app.services.workshops import report_cards
+    from railval.app.services.workshop_cards import report_cards
     from railval.app.state.backend import Backend
     from railval.db import workshops as wsdb
 

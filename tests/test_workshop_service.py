@@ -10,6 +10,7 @@ import json
 
 import pytest
 from railval.app.cli import main as cli
+from railval.app.services import workshop_cards
 from railval.app.services import workshops as ws
 from railval.core.errors import InvalidParameter
 from railval.core.workshop import PLOT_KINDS
@@ -337,8 +338,8 @@ def test_plot_cards_reuse_validate_and_metrics_and_show_both_groups(made, tmp_pa
     with db.session() as s:
         pairs = validate_configuration(s, "demo", "baseline", n_boot=0).pairs
     capsys.readouterr()
-    assert cli(["--db", db.url, "--as", "orga", "metrics", "demo", "--config", "baseline", "--section", "S01", "--section", "S04",
-                "--json"]) == 0
+    assert cli(["--db", db.url, "--as", "orga", "metrics", "demo", "--config", "baseline",
+                "--section", "S01", "--section", "S04", "--json"]) == 0
     metrics = {(r["section"], r["channel"]): r for r in json.loads(capsys.readouterr().out)["rows"]}
     for c in doc["cards"]:
         assert {"plot", "kind", "section", "zone", "configuration", "en", "yes_share", "answers",
@@ -416,7 +417,7 @@ def test_zone_scaling_and_cards_on_each_backend(database, tmp_path):
         assert w.settings["scaling"] == "zone" and w.scales == out["scales"]
         ids = [p.id for p in wsdb.plots(s, w)]
     ws.import_answers(database, "PZ", _write(tmp_path / "a.csv", [("pg1", i, "yes", 2, "") for i in ids]))
-    doc = ws.cards(database, "PZ")
+    doc = workshop_cards.cards(database, "PZ")
     assert [c["plot"] for c in doc["cards"]] == ids
     assert all(c["yes_share"] == 1.0 and c["answers"] == 1 and c["en"] and c["sg"]["C"] is not None
                for c in doc["cards"])

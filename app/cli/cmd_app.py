@@ -108,7 +108,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     database = _database(args.db, upgrade=False)
     cards = None
     if args.cards or args.workshop:
-        from railval.app.services.workshops import report_cards
+        from railval.app.services.workshop_cards import report_cards
         from railval.core.errors import InvalidParameter
         from railval.db import engine, users
 

@@ -261,7 +261,7 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _cards(args: argparse.Namespace) -> int:
-    from railval.app.services.workshops import cards
+    from railval.app.services.workshop_cards import cards
 
     doc = cards(_database(args.db), args.name, groups=_flat(args.groups) or [], actor=_actor())
     if args.json:
