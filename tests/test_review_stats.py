@@ -476,7 +476,10 @@ def test_monotone_threshold_hand_examples():
     the block [0, 0], so the crossing lies between v = 0.5 (a = 2) and v = 4 (a = −2): √2 again."""
     v = np.array([0.5, 1.0, 2.0, 4.0])
     assert monotone_threshold(v, np.array([2.0, 1.0, -1.0, -2.0]), n_boot=0).at_50 == pytest.approx(np.sqrt(2))
-    assert monotone_threshold(v, np.array([2.0, -1.0, 1.0, -2.0]), n_boot=0).at_50 == pytest.approx(np.sqrt(2))
+    pooled = monotone_threshold(v, np.array([2.0, -1.0, 1.0, -2.0]), n_boot=0)
+    assert pooled.at_50 == pytest.approx(np.sqrt(2))
+    assert pooled.curve_value == tuple(v)
+    assert pooled.curve_yes == pytest.approx(scipy.special.expit([2.0, 0.0, 0.0, -2.0]))
     # order of the input does not matter; a fit that never crosses has no value
     assert monotone_threshold(v[::-1], np.array([-2.0, -1.0, 1.0, 2.0]), n_boot=0).at_50 == pytest.approx(np.sqrt(2))
     assert monotone_threshold(v, np.array([2.0, 1.0, 1.0, 0.5]), n_boot=50).at_50 is None

@@ -37,9 +37,10 @@ def _sensitivity_html(sens: dict | None) -> str:
 
 def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | None) -> str:
     """The answers against an objective value (``deviation`` or ``sg_c``): each plot's share
-    of Yes (points), the fitted curve of a typical reviewer
-    (:func:`railval.core.review.yes_curve`), the value at 50 % with its interval, and the
-    limit; returned as a PNG data URL."""
+    of Yes (points), the monotone fit of a typical reviewer that gives the reported value
+    (solid), the likeliest logistic link's curve (:func:`railval.core.review.yes_curve`,
+    dashed: the sensitivity), the value at 50 % with its interval, and the limit; returned
+    as a PNG data URL."""
     import numpy as np
     from matplotlib.figure import Figure
 
@@ -57,11 +58,15 @@ def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | N
     if pts:
         ax.scatter([x for x, _ in pts], [y for _, y in pts], s=14, color="#999999",
                    label="share of Yes of one plot", zorder=2)
+    curve = thr.get(f"{column}_curve") or {}
+    if curve.get("value"):
+        ax.plot(curve["value"], curve["yes"], color="#0072B2", linewidth=2,
+                label="monotone fit, typical reviewer (reported)", zorder=3)
     if fit.get("intercept") is not None and fit.get("slope") is not None:
         xs = np.linspace(top / 400, top * 1.05, 400)
         ax.plot(xs, yes_curve(xs, fit["intercept"], fit["slope"], power=fit.get("power") or 0.0),
-                color="#0072B2", label=f"fitted P(Yes), typical reviewer ({fit.get('link', 'log')} link)",
-                zorder=3)
+                color="#56B4E9", linestyle="--",
+                label=f"logistic fit, {fit.get('link', 'log')} link (sensitivity)", zorder=3)
     if at50 is not None:
         if ci and None not in ci:
             ax.errorbar([at50], [0.5], xerr=[[at50 - ci[0]], [ci[1] - at50]], fmt="o",

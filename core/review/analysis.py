@@ -375,6 +375,8 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
         best, sens = link_sensitivity(vals[fp], fy, fnames, fp, reference=mono.at_50, confidence=CONFIDENCE)
         threshold[key] = _f(mono.at_50)
         threshold[ci_key] = _interval(*mono.ci) if mono.ci else None
+        threshold[f"{col}_curve"] = {"value": [_f(x) for x in mono.curve_value],
+                                     "yes": [_f(x) for x in mono.curve_yes]}
         threshold[f"{col}_fit"] = {k: (_f(v) if isinstance(v, float) else v) for k, v in best.to_dict().items()
                                    if k not in ("at_50", "ci")}
         threshold["link_sensitivity" if col == "deviation" else "sg_c_link_sensitivity"] = {

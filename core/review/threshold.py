@@ -262,6 +262,10 @@ class MonotoneThreshold:
     plots: int
     boot_valid: int
     n_boot: int
+    #: the monotone fit on the full data: sorted values and P(Yes) of a typical reviewer
+    #: there, ``expit(fitted a_p)`` (a step curve; empty without a fit)
+    curve_value: tuple[float, ...] = ()
+    curve_yes: tuple[float, ...] = ()
 
 
 def _crossing(v: np.ndarray, a: np.ndarray, w: np.ndarray | None) -> float | None:
@@ -303,6 +307,8 @@ def monotone_threshold(value, acceptability, *, n_boot: int = DEFAULT_BOOT,
     if n < 3 or np.unique(v).size < 2:
         return MonotoneThreshold(None, None, n, 0, int(n_boot))
     at50 = _crossing(v, a, None)
+    fit = scipy.optimize.isotonic_regression(a, increasing=False).x
+    curve = (tuple(float(x) for x in v), tuple(float(x) for x in scipy.special.expit(fit)))
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     draws = []
     for _ in range(int(n_boot)):
@@ -316,7 +322,7 @@ def monotone_threshold(value, acceptability, *, n_boot: int = DEFAULT_BOOT,
         q = (1.0 - confidence) / 2.0
         lo, hi = np.quantile(np.asarray(draws), [q, 1.0 - q])
         ci = (float(lo), float(hi))
-    return MonotoneThreshold(at50, ci, n, len(draws), int(n_boot))
+    return MonotoneThreshold(at50, ci, n, len(draws), int(n_boot), *curve)
 
 
 def link_sensitivity(value, answer, reviewer, plot, *, powers=LINKS, reference: float | None = None,
