@@ -149,6 +149,8 @@ def test_zone_scaling_keeps_straight_track_readable(made, capsys):
         assert set(wsdb.get_workshop(s, "WZ").scales) == {f"{k} zone {z}" for k in kinds for z in (1, 4)}
         assert ws.workshop_scaling({k: v for k, v in w.settings.items() if k != "scaling"}) == "workshop"
         assert "WX" not in {x.name for x in wsdb.list_workshops(s)}
+        assert ws.status_document(s, "WW")["scaling"] == "workshop"
+        assert ws.status_document(s, "WZ")["scaling"] == "zone"
 
 
 def test_rendering_is_deterministic(made):

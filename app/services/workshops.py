@@ -419,7 +419,7 @@ def status_document(session, name: str) -> dict[str, Any]:
     prog = wsdb.progress(session, w)
     return {"workshop": w.name, "campaign": w.campaign.name, "status": w.status,
             "blind": bool(w.blind), "plots": len(wsdb.plots(session, w)),
-            "repeats": w.repeat_share, "reviewers": prog,
+            "repeats": w.repeat_share, "scaling": workshop_scaling(w.settings), "reviewers": prog,
             "answers": sum(r["answered"] for r in prog)}
 
 

@@ -289,7 +289,8 @@ class WorkshopPage(_OrganiserBase):
         body = f"""
 <h2>{esc(d['workshop'])}</h2>
 <p>Campaign {esc(d['campaign'])} · {d['plots']} plots · blind: {'yes' if d['blind'] else 'no'} ·
-hidden repeats {100 * d['repeats']:.0f} % · status <strong id='wstatus'>{esc(d['status'])}</strong> ·
+hidden repeats {100 * d['repeats']:.0f} % · scaling: {'by test zone' if d.get('scaling') == 'zone'
+else 'whole workshop'} · status <strong id='wstatus'>{esc(d['status'])}</strong> ·
 answers <strong id='nanswers'>{d['answers']}</strong></p>
 <div class='row'><form method='post' action='/workshops/{q}/status'>
 <input type='hidden' name='status' value='{toggle[0]}'><button type='submit' id='toggle'>{toggle[1]}</button></form>
