@@ -275,6 +275,9 @@ def kind_scale(domain: str, extents: Sequence[Extent]) -> Scale:
 #: one range per kind over the whole workshop (the scaling of workshops made before the choice).
 SCALINGS = ("zone", "workshop")
 DEFAULT_SCALING = "zone"
+#: How the presentation experiment's twin of a plot is scaled: per-plot automatic ranges, or
+#: the other consistent scaling (pairs zone against workshop scaling on the same plot).
+TWIN_SCALINGS = ("auto", *SCALINGS)
 #: A plot is *flat* when its filtered signal spans less than this share of its y range.
 FLAT_SPAN = 0.10
 

@@ -93,7 +93,7 @@ def test_plots_contract_and_one_scaling_per_kind(made):
                 assert r.sg_c is not None and r.sg_c >= 0
 
 
-def test_zone_scaling_keeps_straight_track_readable(made, capsys):
+def test_zone_scaling_keeps_straight_track_readable(made, capsys, tmp_path):
     """The two consistent scalings on the same plots (S01 straight track, zone 1; S04 a
     300 m curve, zone 4): by zone, each kind's range covers only its zone's plots, so fewer
     plots are flat lines than with one range over the whole workshop; the preview and
@@ -143,6 +143,28 @@ def test_zone_scaling_keeps_straight_track_readable(made, capsys):
     assert cli(["--db", db.url, "--as", "orga", "workshop", "create", "WX", "--campaign", "demo",
                 "--scaling", "lane"]) == 2
     assert "scaling must be one of zone, workshop" in capsys.readouterr().err
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "create", "WX", "--campaign", "demo",
+                "--twin-scaling", "zone"]) == 2
+    assert "--twin-scaling must be auto or the scaling other than 'zone'" in capsys.readouterr().err
+    # the presentation experiment pairs the two scalings on the same plot
+    assert cli(["--db", db.url, "--as", "orga", "workshop", "create", "WT", "--campaign", "demo",
+                "--configurations", "baseline", "--sections", "S01", "S04", "--kinds", *kinds,
+                "--repeats", "0", "--auto-share", "0.5", "--twin-scaling", "workshop", "--json"]) == 0
+    capsys.readouterr()
+    with db.session() as s:
+        whole_scales = wsdb.get_workshop(s, "WW").scales
+        rows = wsdb.plots(s, wsdb.get_workshop(s, "WT"))
+        twins = [r for r in rows if r.scaling == "workshop"]
+        assert len(twins) == 4 and all(r.twin_id for r in twins)
+        for r in twins:
+            assert r.render["scale"] == whole_scales[r.kind] and r.render["scale_key"] == r.kind
+        answers = [("tw", r.id, "yes", 2, "") for r in rows]
+    ws.import_answers(db, "WT", _write(tmp_path / "wt.csv", answers))
+    with db.session() as s:
+        frame, _ = ws.analysis_frames(s, "WT")
+    assert sorted(frame["scaling"].unique()) == ["auto", "fixed"]
+    assert set(frame.loc[frame["scaling"] == "auto", "plot"]) == {r.twin_id for r in twins}
+    assert ws.analyse(db, "WT")["scaling_effect"]["pairs"] == 4
     with db.session() as s:
         w = wsdb.get_workshop(s, "WW")
         assert set(w.scales) == set(kinds) and w.settings["scaling"] == "workshop"

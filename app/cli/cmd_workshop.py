@@ -1,7 +1,8 @@
 """CLI verbs ``workshop …`` — expert review workshops (docs/workshops.md).
 
 ``railval workshop create NAME --campaign C [--configurations …] [--sections …] [--kinds …]
-[--scaling zone|workshop] [--blind] [--repeats 0.1] [--auto-share 0] [--seed 0] [--dry-run] [--json]``
+[--scaling zone|workshop] [--blind] [--repeats 0.1] [--auto-share 0] [--twin-scaling auto|zone|workshop]
+[--seed 0] [--dry-run] [--json]``
     build the plot set, render every plot once and store it (``--dry-run``: only count);
     ``--json`` reports per kind ``flat_share``, the share of plots whose filtered signal
     spans less than 10 % of its y range.
@@ -65,6 +66,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--repeats", type=float, default=0.1, help="share of hidden repeats (default 0.1)")
     c.add_argument("--auto-share", type=float, default=0.0,
                    help="share of plots also shown with per-plot automatic scaling (default 0)")
+    c.add_argument("--twin-scaling", default="auto", metavar="auto|zone|workshop",
+                   help="how the --auto-share twins are scaled: per plot (auto, default) or with the "
+                        "other consistent scaling (pairs zone and workshop scaling on the same plot)")
     c.add_argument("--seed", type=int, default=0, help="seed of the automatic-scaling choice")
     c.add_argument("--dry-run", action="store_true", help="only count the plots, store nothing")
     c.add_argument("--json", action="store_true")
@@ -159,7 +163,8 @@ def _create(args: argparse.Namespace) -> int:
               f"({', '.join(f'{k} {n}' for k, n in counts.items())})", file=sys.stderr, flush=True)
     out = ws.create(database, args.name, args.campaign, configurations=configs,
                     sections=sections, kinds=kinds, blind=args.blind, repeats=args.repeats,
-                    auto_share=args.auto_share, seed=args.seed, scaling=scaling, actor=_actor())
+                    auto_share=args.auto_share, seed=args.seed, scaling=scaling,
+                    twin_scaling=args.twin_scaling, actor=_actor())
     if args.json:
         emit_json({**out, "stored": True})
     else:

@@ -48,6 +48,7 @@ from railval.core.workshop import (
     PSD_MAX_HZ,
     PSD_SEGMENT_S,
     SCALINGS,
+    TWIN_SCALINGS,
     Extent,
     Scale,
     check_scaling,
@@ -301,13 +302,17 @@ def scaling_preview(database, campaign: str, configurations: Sequence[str] | Non
 def create(database, name: str, campaign: str, *, configurations: Sequence[str] | None = None,
            sections: Sequence[str] | None = None, kinds: Sequence[str] | None = None,
            blind: bool = False, repeats: float = DEFAULT_REPEATS, auto_share: float = 0.0,
-           seed: int = 0, scaling: str = DEFAULT_SCALING, actor: Principal | str = "system",
+           seed: int = 0, scaling: str = DEFAULT_SCALING, twin_scaling: str = "auto",
+           actor: Principal | str = "system",
            progress: Callable[[str, float], None] | None = None) -> dict[str, Any]:
     """Build, render and store a workshop; returns its summary (``name, plots, by_kind,
     scaling, scales, flat_share``). ``scaling``: ``zone`` (one range per kind within each
     EN 14363 test zone, the default) or ``workshop`` (one range per kind over the whole
     workshop); ``auto_share``: share of the fixed plots also rendered with per-plot
-    automatic scaling (the presentation experiment), chosen with ``seed``."""
+    automatic scaling (the presentation experiment), chosen with ``seed``; ``twin_scaling``:
+    how those twins are scaled — ``auto`` (per-plot ranges) or the other consistent scaling
+    (``workshop`` beside ``zone`` or the reverse: the two scalings paired on the same plot;
+    the twin's ``scaling`` is then that name)."""
     from railval.app.services.workshop_render import render_parameters, render_png
     from railval.core.workshop import nice_range
     from railval.db import repo
@@ -316,6 +321,9 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
     if isinstance(actor, Principal):
         require(actor, "workshop.run")
     check_scaling(scaling)
+    if twin_scaling not in TWIN_SCALINGS or twin_scaling == scaling:
+        raise InvalidParameter(f"--twin-scaling must be auto or the scaling other than {scaling!r}, "
+                               f"got {twin_scaling!r}")
     if not (0.0 <= repeats <= 0.5):
         raise InvalidParameter(f"--repeats must be between 0 and 0.5, got {repeats!r}")
     if not (0.0 <= auto_share <= 1.0):
@@ -338,16 +346,20 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
         used_secs = list(dict.fromkeys(f["section"] for f in facts))
         used_cfgs = list(dict.fromkeys(f["configuration"] for f in facts))
         keys, scales, groups = _scaled(facts, curves, infos, scaling)
+        if twin_scaling != "auto":
+            twin_keys, twin_scales, _ = _scaled(facts, curves, infos, twin_scaling)
         rng = random.Random(seed)
         n_auto = round(auto_share * len(facts))
         auto_idx = sorted(rng.sample(range(len(facts)), n_auto)) if n_auto else []
         rows: list[dict[str, Any]] = []
-        jobs = [(i, "fixed") for i in range(len(facts))] + [(i, "auto") for i in auto_idx]
+        jobs = [(i, "fixed") for i in range(len(facts))] + [(i, twin_scaling) for i in auto_idx]
         for j, (i, plot_scaling) in enumerate(jobs):
             f, (cm, cs) = facts[i], curves[i]
             k = PLOT_KINDS[f["kind"]]
             if plot_scaling == "fixed":
                 scale = scales[keys[i]]
+            elif plot_scaling != "auto":
+                scale = twin_scales[twin_keys[i]]
             else:
                 own = kind_scale(k.domain, [_extent(k, cm), _extent(k, cs)])
                 if k.domain == "time":
@@ -358,20 +370,23 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
                            configuration=f["configuration"], section=f["section"])
             image = render_png(cm.x, cm.y, cs.x, cs.y, scale, title=title, x_label=k.x_label,
                                y_label=k.y_label)
+            key = (keys[i] if plot_scaling == "fixed" else None if plot_scaling == "auto"
+                   else twin_keys[i])
             params = render_parameters(k.to_dict(), scale, scaling=plot_scaling, title=title,
                                        x_label=k.x_label, y_label=k.y_label,
                                        extra={"lowpass_hz": LOWPASS_HZ,
                                               "psd_segment_s": PSD_SEGMENT_S if k.domain == "psd" else None,
-                                              "blind": bool(blind), "scale_key": keys[i],
+                                              "blind": bool(blind), "scale_key": key,
                                               "zone": infos[f["section"]].zone})
             rows.append({**f, "scaling": plot_scaling, "render": params, "image": image,
-                         "twin": i if plot_scaling == "auto" else None})
+                         "twin": i if plot_scaling != "fixed" else None})
             if progress is not None:
                 progress("rendering plots", 0.5 + 0.5 * (j + 1) / len(jobs))
         settings = {"campaign": camp.name, "configurations": used_cfgs, "sections": used_secs,
                     "kinds": sorted({f["kind"] for f in facts}, key=PLOT_KIND_IDS.index),
                     "lowpass_hz": LOWPASS_HZ, "seed": seed, "blind": bool(blind),
                     "repeats": repeats, "auto_share": auto_share, "scaling": scaling,
+                    "twin_scaling": twin_scaling,
                     "objective": "largest |D_v| / std limit (Polach & Böttcher 2014 eq. 4, Table 2)"}
         w = wsdb.create_workshop(session, name, camp.id, blind=blind, repeat_share=repeats,
                                  auto_share=auto_share, settings=settings,
@@ -545,8 +560,8 @@ def analysis_frames(session, name: str):
     """``(answers_df, plots_df)`` of workshop ``name`` for :func:`railval.core.review.analyse`.
 
     answers: ``reviewer, plot, answer`` (bool), ``repeat, scaling, seconds, position``; an
-    answer on an automatic-scaling plot is reported on its fixed twin with ``scaling`` =
-    ``auto`` (the pairing the scaling effect needs). plots: the fixed plots, ``plot, kind,
+    answer on a twin (automatic scaling, or the other consistent scaling) is reported on its
+    fixed plot with ``scaling`` = ``auto`` (the pairing the scaling effect needs). plots: the fixed plots, ``plot, kind,
     deviation, sg_c`` (NaN where none).
     """
     import pandas as pd
@@ -556,8 +571,9 @@ def analysis_frames(session, name: str):
     rows = wsdb.answer_rows(session, w)
     answers = pd.DataFrame(
         [{"reviewer": r["reviewer"],
-          "plot": r["twin"] if r["scaling"] == "auto" and r["twin"] is not None else r["plot"],
-          "answer": r["answer"] == "yes", "repeat": r["repeat"], "scaling": r["scaling"],
+          "plot": r["twin"] if r["scaling"] != "fixed" and r["twin"] is not None else r["plot"],
+          "answer": r["answer"] == "yes", "repeat": r["repeat"],
+          "scaling": "fixed" if r["scaling"] == "fixed" else "auto",
           "seconds": r["seconds"], "position": r["position"]} for r in rows],
         columns=["reviewer", "plot", "answer", "repeat", "scaling", "seconds", "position"])
     answers = answers[~((answers["scaling"] == "auto") & answers["repeat"])]
