@@ -445,3 +445,30 @@ def test_zone_scaling_and_cards_on_each_backend(database, tmp_path):
     assert [c["plot"] for c in doc["cards"]] == ids
     assert all(c["yes_share"] == 1.0 and c["answers"] == 1 and c["en"] and c["sg"]["C"] is not None
                for c in doc["cards"])
+
+
+def test_report_page_offers_this_configurations_cards_and_embeds_the_chosen(made):
+    """The Report page's state: the choice lists only fixed plots of workshops on the
+    campaign showing this configuration, to users with workshop.results; the chosen cards
+    are in the built report; an engineer without workshop.results is offered none."""
+    from railval.app.state import AppState, ReportState
+    from railval.app.state.backend import Backend
+    from railval.core.roles import Principal
+
+    db, _, _ = made
+    app = AppState(Backend(db))
+    app.configuration = "baseline"
+    state = ReportState(app)
+    choices = state.card_choices()
+    with db.session() as s:
+        want = {p.id for p in wsdb.plots(s, wsdb.get_workshop(s, "W"))
+                if p.scaling == "fixed" and p.configuration == "baseline"}
+    assert {pid for name, pid in choices.values() if name == "W"} == want
+    picked = [label for label, (name, _) in choices.items() if name == "W"][:2]
+    state.cards = picked
+    state.worst_cases = 0
+    html = state.build().html
+    assert html.count("class='card'") == 2 and "Expert review: plot cards" in html
+    engineer = AppState(Backend(db), principal=Principal("eng", frozenset({"engineer"})))
+    engineer.configuration = "baseline"
+    assert ReportState(engineer).card_choices() == {}

@@ -121,6 +121,36 @@ def cards(database, name: str, *, groups: Sequence[str] = (), actor: Principal |
     return {"workshop": name, "campaign": camp.name, "groups": [name, *groups], "cards": out}
 
 
+def card_choices(database, campaign: str, configuration: str) -> dict[str, tuple[str, int]]:
+    """Every fixed plot of the workshops on ``campaign`` that shows ``configuration``, as
+    ``{label: (workshop, plot id)}`` for the report page's choice (labels such as
+    ``"W · plot 12 · Y_time S01 Y_w1L"``); reads plot rows only, no image."""
+    from railval.db import workshops as wsdb
+
+    out: dict[str, tuple[str, int]] = {}
+    with database.session() as session:
+        for w in wsdb.list_workshops(session):
+            if w.campaign.name != campaign:
+                continue
+            for p in wsdb.plots(session, w):
+                if p.scaling == "fixed" and p.configuration == configuration:
+                    out[f"{w.name} · plot {p.id} · {p.kind} {p.section} {p.channel}"] = (w.name, p.id)
+    return out
+
+
+def chosen_cards(database, configuration: str, chosen: Sequence[tuple[str, int]], *,
+                 actor: Principal | str = "system") -> list[dict[str, Any]]:
+    """:func:`report_cards` of (workshop, plot id) pairs from several workshops, in the
+    order chosen."""
+    by_workshop: dict[str, list[int]] = {}
+    for name, pid in chosen:
+        by_workshop.setdefault(name, []).append(int(pid))
+    got = {(c["workshop"], c["plot"]): c
+           for name, ids in by_workshop.items()
+           for c in report_cards(database, name, configuration, ids, actor=actor)}
+    return [got[(name, int(pid))] for name, pid in chosen]
+
+
 def report_cards(database, name: str, configuration: str, plot_ids: Sequence[int], *,
                  groups: Sequence[str] = (), actor: Principal | str = "system") -> list[dict[str, Any]]:
     """The chosen cards of workshop ``name`` for the validation report of ``configuration``:
@@ -154,4 +184,4 @@ def _finite(x) -> float | None:
     return float(x) if x is not None and math.isfinite(float(x)) else None
 
 
-__all__ = ["cards", "report_cards"]
+__all__ = ["card_choices", "cards", "chosen_cards", "report_cards"]
