@@ -6,8 +6,10 @@
     empty database unless ``--no-demo``, and serve the web app until interrupted. With users in
     the database every page needs sign-in (:mod:`railval.app.auth`); without users it serves
     open single-user mode on a loopback address only and refuses any other address.
-``railval report CAMPAIGN --config NAME --out FILE.html|FILE.pdf [--worst N] [--json]``
-    write the validation report of a configuration (the same builder as the Report page).
+``railval report CAMPAIGN --config NAME --out FILE.html|FILE.pdf [--worst N] [--json]
+[--workshop W --cards PLOT … [--groups W2 …]]``
+    write the validation report of a configuration (the same builder as the Report page),
+    optionally with chosen plot cards of an expert review workshop (docs/workshops.md).
 """
 
 from __future__ import annotations
