@@ -256,8 +256,13 @@ def _verdict_document(d: dict) -> dict:
     return clean({k: d.get(k) for k in ("validated", "coverage", "quantities")})
 
 
-def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3) -> Report:
+def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3,
+                 cards: list[dict[str, Any]] | None = None) -> Report:
     """Build the report of ``configuration`` of ``campaign`` from the database.
+
+    ``cards``: plot cards of an expert review workshop chosen for this report
+    (:func:`railval.app.services.workshops.report_cards`), shown after the worst cases with
+    the reviewed image embedded and its SHA-256.
 
     ``backend`` is an :class:`railval.app.state.backend.Backend` (or anything with its methods); the validation comes from
     ``railval.app.services.validation`` through it, exactly as the dashboard shows it.
@@ -351,6 +356,11 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
                  "quantities; EN-filtered signals on the distance axis, measurement (grey) beneath the "
                  "simulation (blue), evaluated range shaded.</p>")
         h.extend(_worst_case_plots(backend, campaign, configuration, result, ov, worst_cases))
+
+    if cards:
+        from railval.app.workshop_web.cards import report_section
+
+        h.append(report_section(cards))
 
     # independent sign-offs of this configuration, with their status
     session = getattr(backend, "session", None)

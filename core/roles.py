@@ -98,7 +98,7 @@ CLI_ACTIONS: dict[str, str | None] = {
     "workshop status": "workshop.run", "workshop close": "workshop.run",
     "workshop reopen": "workshop.run", "workshop import-answers": "workshop.run",
     "workshop plots": "workshop.results", "workshop export": "workshop.results",
-    "workshop analyse": "workshop.results",
+    "workshop analyse": "workshop.results", "workshop cards": "workshop.results",
 }
 
 #: the identity of open single-user mode (no users in the database, loopback only): it may

@@ -270,6 +270,55 @@ def kind_scale(domain: str, extents: Sequence[Extent]) -> Scale:
     return Scale(x, nice_range(y_lo, y_hi))
 
 
+#: The consistent scalings an organiser chooses between (docs/workshops.md "Scaling"):
+#: ``zone`` — one range per kind within each EN 14363 test zone (the default); ``workshop`` —
+#: one range per kind over the whole workshop (the scaling of workshops made before the choice).
+SCALINGS = ("zone", "workshop")
+DEFAULT_SCALING = "zone"
+#: How the presentation experiment's twin of a plot is scaled: per-plot automatic ranges, or
+#: the other consistent scaling (pairs zone against workshop scaling on the same plot).
+TWIN_SCALINGS = ("auto", *SCALINGS)
+#: A plot is *flat* when its filtered signal spans less than this share of its y range.
+FLAT_SPAN = 0.10
+
+
+def check_scaling(scaling: str) -> str:
+    if scaling not in SCALINGS:
+        raise InvalidParameter(f"scaling must be one of {', '.join(SCALINGS)}, got {scaling!r}")
+    return scaling
+
+
+def scale_key(kind: str, zone: int | None, scaling: str) -> str:
+    """The key of the range a plot of ``kind`` in test ``zone`` shares: the kind itself for
+    ``workshop`` scaling, ``"KIND zone Z"`` for ``zone`` scaling."""
+    check_scaling(scaling)
+    return kind if scaling == "workshop" else f"{kind} zone {int(zone)}"
+
+
+def span_share(extent: Extent, y: AxisRange) -> float:
+    """How much of the y range ``y`` a plot's own extent covers (0–1): linear on a linear
+    axis, in decades on a logarithmic one."""
+    if y.log:
+        lo, hi = max(extent.y_lo, y.lo), max(extent.y_hi, y.lo)
+        return (math.log10(hi) - math.log10(lo)) / (math.log10(y.hi) - math.log10(y.lo))
+    return (extent.y_hi - extent.y_lo) / (y.hi - y.lo)
+
+
+def is_flat(extent: Extent, y: AxisRange) -> bool:
+    """The plot's signal spans less than :data:`FLAT_SPAN` of the y range: a flat line on
+    which no reviewer can judge the shape."""
+    return span_share(extent, y) < FLAT_SPAN
+
+
+def group_scales(domains: Mapping[str, str], extents: Sequence[tuple[str, Extent]]) -> dict[str, Scale]:
+    """One :func:`kind_scale` per scale key: ``extents`` is a sequence of (key, extent of one
+    plot), ``domains`` maps each key to its domain."""
+    grouped: dict[str, list[Extent]] = {}
+    for key, e in extents:
+        grouped.setdefault(key, []).append(e)
+    return {key: kind_scale(domains[key], ex) for key, ex in grouped.items()}
+
+
 # ------------------------------------------------------------------------- objective value
 def plot_deviation(kind: PlotKind | str, position: str,
                    dv_over_limit: Mapping[tuple[str, str], float]) -> float | None:

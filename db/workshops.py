@@ -64,7 +64,7 @@ def utc_text(when: dt.datetime | None) -> str:
 # -- workshops ---------------------------------------------------------------------------
 #: path segments of the workshop pages (``/workshops/new``, ``/workshops/mine`` …): no
 #: workshop may be called so, or its page could not be reached
-RESERVED_NAMES = ("new", "plan", "mine", "login", "logout")
+RESERVED_NAMES = ("new", "plan", "mine", "login", "logout", "scaling-preview")
 
 
 def check_name(name: str) -> None:

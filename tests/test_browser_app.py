@@ -36,6 +36,11 @@ def app_url(tmp_path_factory):
     from tests.browser_support import demo_database
 
     db = demo_database(tmp_path_factory.mktemp("browser"))
+    from railval.app.services import workshops as ws
+
+    # a small review workshop: its plot cards can be chosen into the report
+    ws.create(db, "RW", "demo", configurations=["baseline"], sections=["S01"], kinds=["Y_time"],
+              repeats=0.0)
     with served_app(db) as url:
         yield url
     db.dispose()
@@ -135,6 +140,13 @@ def test_metrics_report_and_workshop_pages(page, app_url):
     frame.locator("h1", has_text="Validation report: baseline").wait_for(timeout=PAGE_TIMEOUT_MS)
     assert main.get_by_role("button", name="Download PDF").is_visible()
     screenshot(page, "report")
+    # a workshop plot card chosen into the report
+    main.locator(".choices").first.click()
+    page.locator(".choices__item--choice", has_text="RW · plot").first.click()
+    frame.locator("h2", has_text="Expert review: plot cards").wait_for(timeout=PAGE_TIMEOUT_MS)
+    assert frame.locator(".card").count() == 1
+    frame.locator(".card").scroll_into_view_if_needed()
+    screenshot(page, "report-with-card")
 
     nav(page, "Diagnose & model workshop")
     _wait_page(page, "Diagnose & model workshop")

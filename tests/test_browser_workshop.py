@@ -19,7 +19,7 @@ import urllib.request
 import pytest
 from sqlalchemy import func, select
 
-from tests.browser_support import ARTIFACTS, VIEWPORT, require_browser, screenshot
+from tests.browser_support import ARTIFACTS, VIEWPORT, element_screenshot, require_browser, screenshot
 
 pytestmark = [pytest.mark.browser]
 TIMEOUT_MS = 60_000
@@ -79,6 +79,14 @@ def env(tmp_path_factory):
     db = demo_database(folder, n_configs=1)
     ws.create(db, "BW", "demo", sections=["S01", "S02"], kinds=KINDS, repeats=0.25)
     ws.create(db, "BB", "demo", sections=["S01"], kinds=["Y_time"], blind=True, repeats=0.0)
+    # a second reviewer group over the same plots (the cards show both shares)
+    ws.create(db, "BX", "demo", sections=["S01", "S02"], kinds=KINDS, repeats=0.0)
+    with db.session() as s:
+        bx = [p.id for p in wsdb.plots(s, wsdb.get_workshop(s, "BX"))]
+    answers = folder / "bx.csv"
+    answers.write_text("reviewer,plot,answer,seconds,comment\n"
+                       + "".join(f"expert{r},{p},{'yes' if r == 0 else 'no'},3,\n" for r in range(2) for p in bx))
+    ws.import_answers(db, "BX", answers)
     tokens = {}
     with db.session() as s:
         users.create_user(s, "orga", password="organiser-pass", roles=["organiser"])
@@ -223,10 +231,11 @@ def test_axis_ranges_of_a_kind_identical_and_images_are_the_stored_bytes(browser
     with env["db"].session() as s:
         w = wsdb.get_workshop(s, "BW")
         plots = {p.id: p for p in wsdb.plots(s, w)}
-        for kind in KINDS:
-            ranges = {json.dumps(p.render["scale"], sort_keys=True) for p in plots.values()
-                      if p.kind == kind}
-            assert len(ranges) == 1 and json.loads(ranges.pop()) == w.scales[kind]
+        for kind in KINDS:            # zone scaling: S01 in zone 1, S02 in zone 2
+            for sec, zone in (("S01", 1), ("S02", 2)):
+                ranges = {json.dumps(p.render["scale"], sort_keys=True) for p in plots.values()
+                          if p.kind == kind and p.section == sec}
+                assert len(ranges) == 1 and json.loads(ranges.pop()) == w.scales[f"{kind} zone {zone}"]
     seq = _sequence(env, "rc")
     ctx, page = _open(browser, _link(env, "rc"))  # rc answered everything: the end screen
     page.get_by_role("button", name="← go back").click()
@@ -343,6 +352,34 @@ def test_organiser_page_live_progress_invite_close_and_analysis(browser, env):
     assert page.locator("table").first.locator("tr").count() == 1 + len(KINDS)
     assert page.get_by_text("validation limit is 1.0").is_visible()
     screenshot(page, "workshop-analysis")
+    # the plot cards: one per fixed plot, the stored image, filters, a second reviewer group
+    with env["db"].session() as s:
+        from railval.db import workshops as wsdb
+
+        fixed = [p for p in wsdb.plots(s, wsdb.get_workshop(s, "BW")) if p.scaling == "fixed"]
+    cards = page.locator(".card")
+    assert cards.count() == len(fixed)
+    first = cards.first.locator("img")
+    first.scroll_into_view_if_needed()
+    page.wait_for_function("document.querySelector('.card img').complete && "
+                           "document.querySelector('.card img').naturalWidth === 1000", timeout=TIMEOUT_MS)
+    page.select_option("#cardfilter select[name=kind]", "ay_cb_psd")
+    n_psd = sum(p.kind == "ay_cb_psd" for p in fixed)
+    assert page.locator("#cardcount").inner_text() == str(n_psd)
+    assert page.locator(".card:visible").count() == n_psd
+    page.select_option("#cardfilter select[name=kind]", "")
+    page.select_option("#cardfilter select[name=zone]", "2")
+    assert page.locator(".card:visible").count() == sum(p.section == "S02" for p in fixed)
+    page.select_option("#cardfilter select[name=zone]", "")
+    page.check("#groupform input[value=BX]")
+    page.get_by_role("button", name="Show their shares").click()
+    page.get_by_text("Plot cards").wait_for(timeout=120_000)
+    card = page.locator(".card[data-kind=Y_time]").first
+    assert "BX" in card.inner_text() and "50.0 %" in card.inner_text()   # the experts: 1 of 2 Yes
+    assert "Sprague–Geers: M" in card.inner_text() and "Y_qst" in card.inner_text()
+    card.scroll_into_view_if_needed()
+    element_screenshot(page.locator(".card").nth(0), "workshop-card")
+    screenshot(page, "workshop-analysis-cards")
     page.goto(f"{base}/workshops/new")
     page.wait_for_function("/^\\d+ plots/.test(document.getElementById('count').textContent)",
                            timeout=TIMEOUT_MS)
@@ -352,6 +389,16 @@ def test_organiser_page_live_progress_invite_close_and_analysis(browser, env):
         n_all = len(ws.plan(s, "demo"))
     assert page.locator("#count").inner_text().startswith(f"{n_all} plots")
     screenshot(page, "workshop-new")
+    # the scaling preview: ranges per kind and zone, the share of flat plots, both scalings
+    for box in page.locator("#secs input").all()[4:]:
+        box.uncheck()
+    page.get_by_role("button", name="Preview ranges").click()
+    page.wait_for_selector("table.preview[data-scaling=workshop]", timeout=120_000)
+    assert page.locator("table.preview[data-scaling=zone] tr").count() > \
+        page.locator("table.preview[data-scaling=workshop] tr").count()
+    assert "Share of flat plots per kind" in page.locator("#preview").inner_text()
+    assert page.locator("select[name=scaling]").input_value() == "zone"
+    screenshot(page, "workshop-new-preview")
     ctx.close()
     assert (ARTIFACTS / "workshop-analysis.png").exists()
     with env["db"].session() as s:
@@ -360,3 +407,29 @@ def test_organiser_page_live_progress_invite_close_and_analysis(browser, env):
         actions = set(s.scalars(select(AuditEvent.action)))
         assert {"workshop.create", "workshop.invite", "workshop.close", "workshop.reopen"} <= actions
         assert s.scalar(select(func.count()).select_from(AuditEvent)) > 0
+
+
+def test_validation_report_shows_the_chosen_cards(browser, env, tmp_path):
+    """Two cards chosen into the report of the configuration: shown in Chromium with their
+    embedded images (the reviewed bytes) beside the EN values and both groups' shares."""
+    from railval.app.report import build_report
+    from railval.app.services.workshop_cards import report_cards
+    from railval.app.state.backend import Backend
+    from railval.db import workshops as wsdb
+
+    with env["db"].session() as s:
+        ids = [p.id for p in wsdb.plots(s, wsdb.get_workshop(s, "BW")) if p.scaling == "fixed"][:2]
+    cards = report_cards(env["db"], "BW", "baseline", ids, groups=["BX"])
+    path = build_report(Backend(env["db"]), "demo", "baseline", worst_cases=0, cards=cards).write(
+        tmp_path / "report.html")
+    ctx = browser.new_context(viewport=VIEWPORT)
+    page = ctx.new_page()
+    page.goto(path.as_uri())
+    cards_el = page.locator(".card")
+    assert cards_el.count() == 2
+    page.wait_for_function("Array.from(document.querySelectorAll('.card img')).every("
+                           "i => i.complete && i.naturalWidth === 1000)", timeout=TIMEOUT_MS)
+    assert "BX" in cards_el.first.inner_text()
+    page.get_by_text("Expert review: plot cards").scroll_into_view_if_needed()
+    element_screenshot(page.locator(".card").first, "report-card")
+    ctx.close()

@@ -128,3 +128,27 @@ def test_review_order_each_plot_once_and_repeats_later():
     assert review_order(10, 1, 0.0) == [(p, False) for p, _ in review_order(10, 1, 0.0)]
     with pytest.raises(InvalidParameter):
         review_order(10, 1, 1.5)
+
+
+def test_scale_keys_group_scales_and_flat_plots():
+    """Zone scaling: one range per (kind, zone); workshop scaling: one per kind. A PSD is
+    flat when it spans less than a tenth of its decades."""
+    from railval.core.workshop import (
+        AxisRange,
+        check_scaling,
+        group_scales,
+        is_flat,
+        scale_key,
+        span_share,
+    )
+
+    assert scale_key("Y_time", 3, "zone") == "Y_time zone 3" and scale_key("Y_time", 3, "workshop") == "Y_time"
+    with pytest.raises(InvalidParameter, match="scaling must be one of zone, workshop"):
+        check_scaling("auto")
+    ex = [("a", Extent(0, 500, -2, 3)), ("a", Extent(0, 800, -1, 1)), ("b", Extent(0, 300, -40, 55))]
+    sc = group_scales({"a": "time", "b": "time"}, ex)
+    assert (sc["a"].y.lo, sc["a"].y.hi, sc["a"].x.hi) == (-2.0, 3.0, 800.0)
+    assert (sc["b"].y.lo, sc["b"].y.hi) == (-40.0, 60.0)
+    decades = AxisRange(1e-6, 1e-1, 10.0, log=True)          # 5 decades
+    assert span_share(Extent(0, 20, 1e-4, 1e-3), decades) == pytest.approx(0.2)
+    assert is_flat(Extent(0, 20, 1e-4, 2e-4), decades) and not is_flat(Extent(0, 20, 1e-4, 1e-3), decades)

@@ -57,8 +57,9 @@ def run(args: argparse.Namespace) -> dict:
     w = simulate_workshop(int(args.reviewers), int(args.plots), seed=0, strictness_sd=1.5,
                           repeat_share=float(args.repeats), auto_share=float(args.auto), auto_shift=0.5)
     answers, plots = w.answers, w.plots
-    full = _best(lambda: analyse(answers, plots, n_boot=int(args.boot)), rep)
-    no_boot = _best(lambda: analyse(answers, plots, n_boot=0), rep)
+    full = _best(lambda: analyse(answers, plots, n_boot=int(args.boot),
+                                 threshold_boot=int(args.boot)), rep)
+    no_boot = _best(lambda: analyse(answers, plots, n_boot=0, threshold_boot=0), rep)
 
     first = answers[~answers["repeat"] & (answers["scaling"] == "fixed")]
     r_idx = np.unique(first["reviewer"].to_numpy(), return_inverse=True)[1]

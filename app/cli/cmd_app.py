@@ -6,8 +6,10 @@
     empty database unless ``--no-demo``, and serve the web app until interrupted. With users in
     the database every page needs sign-in (:mod:`railval.app.auth`); without users it serves
     open single-user mode on a loopback address only and refuses any other address.
-``railval report CAMPAIGN --config NAME --out FILE.html|FILE.pdf [--worst N] [--json]``
-    write the validation report of a configuration (the same builder as the Report page).
+``railval report CAMPAIGN --config NAME --out FILE.html|FILE.pdf [--worst N] [--json]
+[--workshop W --cards PLOT … [--groups W2 …]]``
+    write the validation report of a configuration (the same builder as the Report page),
+    optionally with chosen plot cards of an expert review workshop (docs/workshops.md).
 """
 
 from __future__ import annotations
@@ -39,6 +41,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--config", required=True, help="configuration name")
     r.add_argument("--out", required=True, help="output file, .html or .pdf")
     r.add_argument("--worst", type=int, default=3, help="worst cases plotted (default 3)")
+    r.add_argument("--workshop", default=None, metavar="NAME",
+                   help="expert review workshop whose plot cards go into the report (with --cards)")
+    r.add_argument("--cards", nargs="+", type=int, default=[], metavar="PLOT",
+                   help="plot ids of the cards (`railval workshop cards NAME --json`)")
+    r.add_argument("--groups", nargs="+", default=[], metavar="WORKSHOP",
+                   help="further reviewer groups (workshops over the same plots) shown on the cards")
     r.add_argument("--json", action="store_true", help="print the report metadata as JSON")
     r.set_defaults(func=_cmd_report)
 
@@ -100,7 +108,21 @@ def _cmd_report(args: argparse.Namespace) -> int:
     if Path(args.out).suffix.lower() not in (".html", ".htm", ".pdf"):
         raise ReportError(f"--out {args.out}: extension must be .html or .pdf")
     database = _database(args.db, upgrade=False)
-    rep = build_report(Backend(database), args.campaign, args.config, worst_cases=args.worst)
+    cards = None
+    if args.cards or args.workshop:
+        from railval.app.services.workshop_cards import report_cards
+        from railval.core.errors import InvalidParameter
+        from railval.db import engine, users
+
+        if not (args.cards and args.workshop):
+            raise InvalidParameter("--workshop and --cards go together: the workshop and its plot ids")
+        actor = engine.default_actor
+        with database.session() as s:  # the cards show answers: the workshop.results permission
+            if users.has_users(s) and (u := users.find_user(s, actor)) is not None:
+                actor = users.principal(u)
+        cards = report_cards(database, args.workshop, args.config, args.cards, groups=args.groups,
+                             actor=actor)
+    rep = build_report(Backend(database), args.campaign, args.config, worst_cases=args.worst, cards=cards)
     path = rep.write(args.out)
     if args.json:
         emit_json({**rep.to_dict(), "file": str(path)})

@@ -1,8 +1,11 @@
 """CLI verbs ``workshop …`` — expert review workshops (docs/workshops.md).
 
 ``railval workshop create NAME --campaign C [--configurations …] [--sections …] [--kinds …]
-[--blind] [--repeats 0.1] [--auto-share 0] [--seed 0] [--dry-run] [--json]``
-    build the plot set, render every plot once and store it (``--dry-run``: only count).
+[--scaling zone|workshop] [--blind] [--repeats 0.1] [--auto-share 0] [--twin-scaling auto|zone|workshop]
+[--seed 0] [--dry-run] [--json]``
+    build the plot set, render every plot once and store it (``--dry-run``: only count);
+    ``--json`` reports per kind ``flat_share``, the share of plots whose filtered signal
+    spans less than 10 % of its y range.
 ``railval workshop kinds [--json]``          the plot kinds (registry).
 ``railval workshop plots NAME --json``       ``plots``: id, kind, section, configuration,
                                              channel, deviation, image_sha256 (and sg_c,
@@ -12,6 +15,9 @@
 ``railval workshop close|reopen NAME``
 ``railval workshop import-answers NAME FILE.csv`` / ``export NAME FILE.csv``
 ``railval workshop analyse NAME --json``
+``railval workshop cards NAME [--groups W2 …] --json``  the plot cards (EN values of measurement and
+                                             simulation, shares of Yes per reviewer group,
+                                             Sprague–Geers M, P, C, deviation).
 
 Permissions (:data:`railval.core.roles.CLI_ACTIONS`) are checked for the user named by
 ``railval --as USER`` once the database has users; every change is recorded in the audit
@@ -53,10 +59,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--sections", nargs="+", default=None, metavar="ID", help="sections (default: all)")
     c.add_argument("--kinds", nargs="+", default=None, metavar="KIND",
                    help="plot kinds (default: all; see `railval workshop kinds`)")
+    c.add_argument("--scaling", default=None, metavar="zone|workshop",
+                   help="one y range per plot kind within each EN 14363 test zone (zone, the default) "
+                        "or over the whole workshop (workshop)")
     c.add_argument("--blind", action="store_true", help="no vehicle, configuration or section names")
     c.add_argument("--repeats", type=float, default=0.1, help="share of hidden repeats (default 0.1)")
     c.add_argument("--auto-share", type=float, default=0.0,
                    help="share of plots also shown with per-plot automatic scaling (default 0)")
+    c.add_argument("--twin-scaling", default="auto", metavar="auto|zone|workshop",
+                   help="how the --auto-share twins are scaled: per plot (auto, default) or with the "
+                        "other consistent scaling (pairs zone and workshop scaling on the same plot)")
     c.add_argument("--seed", type=int, default=0, help="seed of the automatic-scaling choice")
     c.add_argument("--dry-run", action="store_true", help="only count the plots, store nothing")
     c.add_argument("--json", action="store_true")
@@ -100,6 +112,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     ex.add_argument("file")
     ex.set_defaults(func=_export)
 
+    cd = wsub.add_parser("cards", help="the plot cards: EN values, shares of Yes, Sprague–Geers errors per plot")
+    cd.add_argument("name")
+    cd.add_argument("--groups", nargs="+", default=[], metavar="WORKSHOP",
+                    help="further workshops over the same plots (other reviewer groups)")
+    cd.add_argument("--json", action="store_true")
+    cd.set_defaults(func=_cards)
+
     a = wsub.add_parser("analyse", help="reviewer strictness, agreement, threshold, Table 1")
     a.add_argument("name")
     a.add_argument("--json", action="store_true")
@@ -122,7 +141,9 @@ def _flat(values: list[str] | None) -> list[str] | None:
 
 def _create(args: argparse.Namespace) -> int:
     from railval.app.services import workshops as ws
+    from railval.core.workshop import DEFAULT_SCALING, check_scaling
 
+    scaling = check_scaling(args.scaling or DEFAULT_SCALING)
     database = _database(args.db)
     configs, sections, kinds = _flat(args.configurations), _flat(args.sections), _flat(args.kinds)
     with database.session() as session:
@@ -142,12 +163,15 @@ def _create(args: argparse.Namespace) -> int:
               f"({', '.join(f'{k} {n}' for k, n in counts.items())})", file=sys.stderr, flush=True)
     out = ws.create(database, args.name, args.campaign, configurations=configs,
                     sections=sections, kinds=kinds, blind=args.blind, repeats=args.repeats,
-                    auto_share=args.auto_share, seed=args.seed, actor=_actor())
+                    auto_share=args.auto_share, seed=args.seed, scaling=scaling,
+                    twin_scaling=args.twin_scaling, actor=_actor())
     if args.json:
         emit_json({**out, "stored": True})
     else:
         print(f"workshop {out['name']} created: {out['plots']} plots "
-              f"({out['auto_plots']} with automatic scaling), blind={out['blind']}")
+              f"({out['auto_plots']} with automatic scaling), blind={out['blind']}, scaling {scaling}")
+        for kind, share in out["flat_share"].items():
+            print(f"  {kind:12s} flat plots (signal < 10 % of the y range): {100 * share:.0f} %")
     return 0
 
 
@@ -241,6 +265,25 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cards(args: argparse.Namespace) -> int:
+    from railval.app.services.workshop_cards import cards
+
+    doc = cards(_database(args.db), args.name, groups=_flat(args.groups) or [], actor=_actor())
+    if args.json:
+        emit_json(doc)
+        return 0
+    for c in doc["cards"]:
+        shares = ", ".join(f"{g['workshop']} " + ("—" if g["yes_share"] is None else f"{100 * g['yes_share']:.0f} %")
+                           for g in c["groups"])
+        sg = c["sg"] or {}
+        print(f"{c['plot']:5d} {c['kind']:11s} {c['section']:6s} zone {c['zone']} {c['configuration']:10s} "
+              f"{c['channel']:9s} Yes: {shares}; SG C {sg.get('C') if sg.get('C') is None else round(sg['C'], 3)}")
+        for e in c["en"]:
+            print(f"        {e['quantity']:8s} M {e['measured']:9.3f}  S {e['simulated']:9.3f}  "
+                  f"S−M {e['abs_diff']:+9.3f}")
+    return 0
+
+
 def _analyse(args: argparse.Namespace) -> int:
     from railval.app.services.workshops import analyse
 
@@ -253,7 +296,8 @@ def _analyse(args: argparse.Namespace) -> int:
                   f"{100 * row['min_yes']:5.1f} % … {100 * row['max_yes']:5.1f} %")
         thr = doc.get("threshold") or {}
         if thr.get("deviation_at_50") is not None:
-            lo, hi = thr.get("ci") or (None, None)
+            ci = thr.get("ci")
+            interval = f"interval {ci[0]:.2f} … {ci[1]:.2f}; " if ci else ""
             print(f"deviation at which a typical reviewer says Yes half of the time: "
-                  f"{thr['deviation_at_50']:.2f} (interval {lo:.2f} … {hi:.2f}; limit 1.0)")
+                  f"{thr['deviation_at_50']:.2f} ({interval}limit 1.0; {thr.get('method', '').split(':')[0]})")
     return 0

@@ -30,7 +30,11 @@ class ReportPage(PageBase):
         self.pdf_dl = pn.widgets.FileDownload(callback=self._pdf_bytes, filename="report.pdf",
                                               label="Download PDF", color="primary", width=200)
         self.preview = pn.pane.HTML("", sizing_mode="stretch_width", height=900)
-        self.state.param.watch(lambda *e: self._on_app_change(), ["worst_cases"])
+        self.cards = pn.widgets.MultiChoice(name="Workshop plot cards in the report", options=[],
+                                            placeholder="choose plots of this configuration's workshops",
+                                            width=620)
+        self.cards.param.watch(lambda e: setattr(self.state, "cards", list(e.new)), "value")
+        self.state.param.watch(lambda *e: self._on_app_change(), ["worst_cases", "cards"])
         self._report = None
 
     def _build(self):
@@ -54,6 +58,12 @@ class ReportPage(PageBase):
             raise
 
     def refresh(self) -> None:
+        choices = list(self.state.card_choices())
+        if self.cards.options != choices:
+            self.cards.options = choices
+            kept = [c for c in self.state.cards if c in choices]
+            if kept != list(self.cards.value):
+                self.cards.value = kept
         rep = self._build()
         stem = f"railval-{_slug(rep.campaign)}-{_slug(rep.configuration)}"
         self.html_dl.filename = f"{stem}.html"
@@ -63,6 +73,7 @@ class ReportPage(PageBase):
                                'style="width:100%;height:880px;border:1px solid #ccc;background:#fff"></iframe>')
         self.body.objects = [
             pn.Row(self.worst, self.html_dl, self.pdf_dl),
+            *([self.cards] if self.cards.options else []),
             pn.pane.Markdown(f"Evidence digest `{rep.digest[:16]}…` — generated {rep.generated_at}.",
                              styles={"color": "#555"}),
             self.preview,

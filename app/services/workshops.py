@@ -8,9 +8,17 @@ import/export answers, analyse (docs/workshops.md).
   objective deviation (EN 14363 values through the validation service's result cache) and
   Sprague–Geers C, render each plot once (:mod:`railval.app.services.workshop_render`) and
   store everything in one transaction.
+* :func:`scaling_preview` — the ranges of both scalings and the share of flat plots.
 * :func:`parse_answers_csv` / :func:`import_answers` / :func:`export_answers`.
 * :func:`analyse` — the answers and plots as tables for
   :func:`railval.core.review.analyse`.
+
+The plot cards are :mod:`railval.app.services.workshop_cards`.
+
+Length: one workshop's life from plan to analysis in one place — the plot facts that
+:func:`create` builds (kind, section, configuration, channel, scale key) are the ones the
+CSV import/export and the analysis frames read back; splitting would spread that one
+record over several modules.
 """
 
 from __future__ import annotations
@@ -33,18 +41,25 @@ from railval.core.psd import welch_psd
 from railval.core.quantities import QUANTITIES
 from railval.core.roles import Principal, require
 from railval.core.workshop import (
+    DEFAULT_SCALING,
     LOWPASS_HZ,
     PLOT_KIND_IDS,
     PLOT_KINDS,
     PSD_MAX_HZ,
     PSD_SEGMENT_S,
+    SCALINGS,
+    TWIN_SCALINGS,
     Extent,
     Scale,
+    check_scaling,
     dv_over_limit,
     get_kind,
+    group_scales,
+    is_flat,
     kind_scale,
     plot_deviation,
     plots_for,
+    scale_key,
 )
 
 DEFAULT_REPEATS = 0.1
@@ -172,15 +187,132 @@ def _title(kind, position: str, *, blind: bool, vehicle: str, configuration: str
 
 
 # ------------------------------------------------------------------------- create
+def _collect(session, camp, planned: Sequence[PlannedPlot], infos, *, objective: bool,
+             std_limits=None, progress=None) -> tuple[list[dict[str, Any]], list[tuple[_Curve, _Curve]]]:
+    """Read and low-pass every planned plot's signals: per plot its facts (kind, section,
+    zone, configuration, channel, position and — with ``objective`` — deviation and
+    Sprague–Geers C) and its two curves."""
+    from railval.app.services.validation import source_values
+    from railval.db import repo
+
+    used_secs = sorted({p.section for p in planned}, key=list(infos).index)
+    used_cfgs = list(dict.fromkeys(p.configuration for p in planned))
+    if objective:
+        sec_list = [infos[s] for s in used_secs]
+        en_meas = source_values(session, camp, None, sec_list)
+        en_sim = {c: source_values(session, camp, c, sec_list) for c in used_cfgs}
+    curves: list[tuple[_Curve, _Curve]] = []
+    facts: list[dict[str, Any]] = []
+    for si, sid in enumerate(used_secs):
+        todo = [p for p in planned if p.section == sid]
+        need = {c for p in todo for c in PLOT_KINDS[p.kind].source_channels(p.position)}
+        m_ss = repo.load_signalsets(session, camp, None, sections=[sid], channels=sorted(need))[sid]
+        m_filt = _filtered(m_ss, need)
+        for cname in used_cfgs:
+            mine = [p for p in todo if p.configuration == cname]
+            if not mine:
+                continue
+            s_need = {c for p in mine for c in PLOT_KINDS[p.kind].source_channels(p.position)}
+            s_ss = repo.load_signalsets(session, camp, cname, sections=[sid], channels=sorted(s_need))[sid]
+            s_filt = _filtered(s_ss, s_need)
+            dv = (dv_over_limit(en_meas.get(sid, {}), en_sim[cname].get(sid, {}), std_limits)
+                  if objective else {})
+            for p in mine:
+                k = PLOT_KINDS[p.kind]
+                m_sig, s_sig = _signal(k, p.position, m_filt), _signal(k, p.position, s_filt)
+                curves.append((_curve(k, m_sig, m_ss), _curve(k, s_sig, s_ss)))
+                fact = {"kind": p.kind, "section": sid, "configuration": cname,
+                        "channel": p.channel, "position": p.position}
+                if objective:
+                    fact["deviation"] = plot_deviation(k, p.position, dv)
+                    fact["sg_c"] = _sg_c(m_sig, m_ss, s_sig, s_ss)
+                facts.append(fact)
+        if progress is not None:
+            progress("reading and filtering signals", 0.5 * (si + 1) / len(used_secs))
+    return facts, curves
+
+
+def _plot_extent(kind, cm: _Curve, cs: _Curve) -> Extent:
+    """The extent of one plot: both curves together."""
+    a, b = _extent(kind, cm), _extent(kind, cs)
+    return Extent(min(a.x_lo, b.x_lo), max(a.x_hi, b.x_hi), min(a.y_lo, b.y_lo), max(a.y_hi, b.y_hi))
+
+
+def _scaled(facts, curves, infos, scaling: str) -> tuple[list[str], dict[str, Scale], dict[str, dict[str, Any]]]:
+    """Per plot its scale key, the scale of every key (:func:`railval.core.workshop.
+    group_scales`) and per key its summary: kind, zone (``None`` for workshop scaling),
+    ranges, number of plots and of flat plots."""
+    keys, ext, domains = [], [], {}
+    for f, (cm, cs) in zip(facts, curves, strict=True):
+        k = PLOT_KINDS[f["kind"]]
+        key = scale_key(k.id, infos[f["section"]].zone, scaling)
+        keys.append(key)
+        domains[key] = k.domain
+        ext.append((key, _extent(k, cm)))
+        ext.append((key, _extent(k, cs)))
+    scales = group_scales(domains, ext)
+    groups: dict[str, dict[str, Any]] = {}
+    for key, f, (cm, cs) in zip(keys, facts, curves, strict=True):
+        k = PLOT_KINDS[f["kind"]]
+        g = groups.setdefault(key, {"kind": k.id, "zone": None if scaling == "workshop"
+                                    else infos[f["section"]].zone,
+                                    "x": [scales[key].x.lo, scales[key].x.hi],
+                                    "y": [scales[key].y.lo, scales[key].y.hi],
+                                    "log": scales[key].y.log, "y_label": k.y_label,
+                                    "x_label": k.x_label, "plots": 0, "flat": 0})
+        g["plots"] += 1
+        g["flat"] += bool(is_flat(_plot_extent(k, cm, cs), scales[key].y))
+    return keys, scales, groups
+
+
+def flat_share(groups: dict[str, dict[str, Any]]) -> dict[str, float]:
+    """Per kind the share of plots whose filtered signal spans less than 10 % of its y range
+    (:func:`railval.core.workshop.is_flat`)."""
+    n: dict[str, list[int]] = {}
+    for g in groups.values():
+        c = n.setdefault(g["kind"], [0, 0])
+        c[0] += g["flat"]
+        c[1] += g["plots"]
+    return {k: round(f / t, 4) for k, (f, t) in n.items()}
+
+
+def scaling_preview(database, campaign: str, configurations: Sequence[str] | None = None,
+                    sections: Sequence[str] | None = None, kinds: Sequence[str] | None = None,
+                    *, actor: Principal | str = "system") -> dict[str, Any]:
+    """What each scaling would give, before anything is rendered: per scaling the ranges per
+    kind (and zone) and the share of flat plots per kind (the organiser's form)."""
+    from railval.db import repo
+
+    if isinstance(actor, Principal):
+        require(actor, "workshop.run")
+    with database.session() as session:
+        camp = repo.get_campaign(session, campaign)
+        planned = plan(session, camp.name, configurations, sections, kinds)
+        if not planned:
+            return {"plots": 0, "scalings": {}}
+        infos = {s.id: s for s in repo.section_infos(session, camp)}
+        facts, curves = _collect(session, camp, planned, infos, objective=False)
+    out = {}
+    for scaling in SCALINGS:
+        _, _, groups = _scaled(facts, curves, infos, scaling)
+        out[scaling] = {"ranges": list(groups.values()), "flat_share": flat_share(groups)}
+    return {"plots": len(facts), "default": DEFAULT_SCALING, "scalings": out}
+
+
 def create(database, name: str, campaign: str, *, configurations: Sequence[str] | None = None,
            sections: Sequence[str] | None = None, kinds: Sequence[str] | None = None,
            blind: bool = False, repeats: float = DEFAULT_REPEATS, auto_share: float = 0.0,
-           seed: int = 0, actor: Principal | str = "system",
+           seed: int = 0, scaling: str = DEFAULT_SCALING, twin_scaling: str = "auto",
+           actor: Principal | str = "system",
            progress: Callable[[str, float], None] | None = None) -> dict[str, Any]:
     """Build, render and store a workshop; returns its summary (``name, plots, by_kind,
-    scales``). ``auto_share``: share of the fixed plots also rendered with per-plot
-    automatic scaling (the presentation experiment), chosen with ``seed``."""
-    from railval.app.services.validation import source_values
+    scaling, scales, flat_share``). ``scaling``: ``zone`` (one range per kind within each
+    EN 14363 test zone, the default) or ``workshop`` (one range per kind over the whole
+    workshop); ``auto_share``: share of the fixed plots also rendered with per-plot
+    automatic scaling (the presentation experiment), chosen with ``seed``; ``twin_scaling``:
+    how those twins are scaled — ``auto`` (per-plot ranges) or the other consistent scaling
+    (``workshop`` beside ``zone`` or the reverse: the two scalings paired on the same plot;
+    the twin's ``scaling`` is then that name)."""
     from railval.app.services.workshop_render import render_parameters, render_png
     from railval.core.workshop import nice_range
     from railval.db import repo
@@ -189,6 +321,10 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
     if isinstance(actor, Principal):
         require(actor, "workshop.run")
     wsdb.check_name(name)
+    check_scaling(scaling)
+    if twin_scaling not in TWIN_SCALINGS or twin_scaling == scaling:
+        raise InvalidParameter(f"--twin-scaling must be auto or the scaling other than {scaling!r}, "
+                               f"got {twin_scaling!r}")
     if not (0.0 <= repeats <= 0.5):
         raise InvalidParameter(f"--repeats must be between 0 and 0.5, got {repeats!r}")
     if not (0.0 <= auto_share <= 1.0):
@@ -206,53 +342,25 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
         std_limits = {q: QUANTITIES[q].std_limit(vehicle["Q0_kN"], vehicle["kind"],
                                                  vehicle["secondary_suspension"])
                       for q in QUANTITIES}
-        used_secs = sorted({p.section for p in planned}, key=list(infos).index)
-        used_cfgs = list(dict.fromkeys(p.configuration for p in planned))
-        sec_list = [infos[s] for s in used_secs]
-        en_meas = source_values(session, camp, None, sec_list)
-        en_sim = {c: source_values(session, camp, c, sec_list) for c in used_cfgs}
-        curves: list[tuple[_Curve, _Curve]] = []
-        facts: list[dict[str, Any]] = []
-        for si, sid in enumerate(used_secs):
-            todo = [p for p in planned if p.section == sid]
-            need = {c for p in todo for c in PLOT_KINDS[p.kind].source_channels(p.position)}
-            m_ss = repo.load_signalsets(session, camp, None, sections=[sid],
-                                        channels=sorted(need))[sid]
-            m_filt = _filtered(m_ss, need)
-            for cname in used_cfgs:
-                mine = [p for p in todo if p.configuration == cname]
-                if not mine:
-                    continue
-                s_need = {c for p in mine for c in PLOT_KINDS[p.kind].source_channels(p.position)}
-                s_ss = repo.load_signalsets(session, camp, cname, sections=[sid],
-                                            channels=sorted(s_need))[sid]
-                s_filt = _filtered(s_ss, s_need)
-                dv = dv_over_limit(en_meas.get(sid, {}), en_sim[cname].get(sid, {}), std_limits)
-                for p in mine:
-                    k = PLOT_KINDS[p.kind]
-                    m_sig, s_sig = _signal(k, p.position, m_filt), _signal(k, p.position, s_filt)
-                    curves.append((_curve(k, m_sig, m_ss), _curve(k, s_sig, s_ss)))
-                    facts.append({"kind": p.kind, "section": sid, "configuration": cname,
-                                  "channel": p.channel, "position": p.position,
-                                  "deviation": plot_deviation(k, p.position, dv),
-                                  "sg_c": _sg_c(m_sig, m_ss, s_sig, s_ss)})
-            if progress is not None:
-                progress("reading and filtering signals", 0.5 * (si + 1) / len(used_secs))
-        extents: dict[str, list[Extent]] = {}
-        for f, (cm, cs) in zip(facts, curves, strict=True):
-            k = PLOT_KINDS[f["kind"]]
-            extents.setdefault(k.id, []).extend([_extent(k, cm), _extent(k, cs)])
-        scales = {kid: kind_scale(PLOT_KINDS[kid].domain, ex) for kid, ex in extents.items()}
+        facts, curves = _collect(session, camp, planned, infos, objective=True,
+                                 std_limits=std_limits, progress=progress)
+        used_secs = list(dict.fromkeys(f["section"] for f in facts))
+        used_cfgs = list(dict.fromkeys(f["configuration"] for f in facts))
+        keys, scales, groups = _scaled(facts, curves, infos, scaling)
+        if twin_scaling != "auto":
+            twin_keys, twin_scales, _ = _scaled(facts, curves, infos, twin_scaling)
         rng = random.Random(seed)
         n_auto = round(auto_share * len(facts))
         auto_idx = sorted(rng.sample(range(len(facts)), n_auto)) if n_auto else []
         rows: list[dict[str, Any]] = []
-        jobs = [(i, "fixed") for i in range(len(facts))] + [(i, "auto") for i in auto_idx]
-        for j, (i, scaling) in enumerate(jobs):
+        jobs = [(i, "fixed") for i in range(len(facts))] + [(i, twin_scaling) for i in auto_idx]
+        for j, (i, plot_scaling) in enumerate(jobs):
             f, (cm, cs) = facts[i], curves[i]
             k = PLOT_KINDS[f["kind"]]
-            if scaling == "fixed":
-                scale = scales[k.id]
+            if plot_scaling == "fixed":
+                scale = scales[keys[i]]
+            elif plot_scaling != "auto":
+                scale = twin_scales[twin_keys[i]]
             else:
                 own = kind_scale(k.domain, [_extent(k, cm), _extent(k, cs)])
                 if k.domain == "time":
@@ -263,19 +371,23 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
                            configuration=f["configuration"], section=f["section"])
             image = render_png(cm.x, cm.y, cs.x, cs.y, scale, title=title, x_label=k.x_label,
                                y_label=k.y_label)
-            params = render_parameters(k.to_dict(), scale, scaling=scaling, title=title,
+            key = (keys[i] if plot_scaling == "fixed" else None if plot_scaling == "auto"
+                   else twin_keys[i])
+            params = render_parameters(k.to_dict(), scale, scaling=plot_scaling, title=title,
                                        x_label=k.x_label, y_label=k.y_label,
                                        extra={"lowpass_hz": LOWPASS_HZ,
                                               "psd_segment_s": PSD_SEGMENT_S if k.domain == "psd" else None,
-                                              "blind": bool(blind)})
-            rows.append({**f, "scaling": scaling, "render": params, "image": image,
-                         "twin": i if scaling == "auto" else None})
+                                              "blind": bool(blind), "scale_key": key,
+                                              "zone": infos[f["section"]].zone})
+            rows.append({**f, "scaling": plot_scaling, "render": params, "image": image,
+                         "twin": i if plot_scaling != "fixed" else None})
             if progress is not None:
                 progress("rendering plots", 0.5 + 0.5 * (j + 1) / len(jobs))
         settings = {"campaign": camp.name, "configurations": used_cfgs, "sections": used_secs,
                     "kinds": sorted({f["kind"] for f in facts}, key=PLOT_KIND_IDS.index),
                     "lowpass_hz": LOWPASS_HZ, "seed": seed, "blind": bool(blind),
-                    "repeats": repeats, "auto_share": auto_share,
+                    "repeats": repeats, "auto_share": auto_share, "scaling": scaling,
+                    "twin_scaling": twin_scaling,
                     "objective": "largest |D_v| / std limit (Polach & Böttcher 2014 eq. 4, Table 2)"}
         w = wsdb.create_workshop(session, name, camp.id, blind=blind, repeat_share=repeats,
                                  auto_share=auto_share, settings=settings,
@@ -285,8 +397,16 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
                 "fixed_plots": len(facts), "auto_plots": len(auto_idx),
                 "by_kind": count_by_kind([PlannedPlot(f["configuration"], f["section"], f["kind"],
                                                       f["position"]) for f in facts]),
-                "blind": bool(blind), "repeats": repeats,
-                "scales": {k: s.to_dict() for k, s in scales.items()}}
+                "blind": bool(blind), "repeats": repeats, "scaling": scaling,
+                "flat_share": flat_share(groups),
+                "scales": {k: s.to_dict() for k, s in scales.items()},
+                "ranges": list(groups.values())}
+
+
+def workshop_scaling(settings: dict[str, Any] | None) -> str:
+    """The scaling a stored workshop was rendered with; workshops made before the choice
+    existed kept one range per kind over the whole workshop."""
+    return (settings or {}).get("scaling", "workshop")
 
 
 def _exists_query(name: str):
@@ -315,7 +435,7 @@ def status_document(session, name: str) -> dict[str, Any]:
     prog = wsdb.progress(session, w)
     return {"workshop": w.name, "campaign": w.campaign.name, "status": w.status,
             "blind": bool(w.blind), "plots": len(wsdb.plots(session, w)),
-            "repeats": w.repeat_share, "reviewers": prog,
+            "repeats": w.repeat_share, "scaling": workshop_scaling(w.settings), "reviewers": prog,
             "answers": sum(r["answered"] for r in prog)}
 
 
@@ -441,8 +561,8 @@ def analysis_frames(session, name: str):
     """``(answers_df, plots_df)`` of workshop ``name`` for :func:`railval.core.review.analyse`.
 
     answers: ``reviewer, plot, answer`` (bool), ``repeat, scaling, seconds, position``; an
-    answer on an automatic-scaling plot is reported on its fixed twin with ``scaling`` =
-    ``auto`` (the pairing the scaling effect needs). plots: the fixed plots, ``plot, kind,
+    answer on a twin (automatic scaling, or the other consistent scaling) is reported on its
+    fixed plot with ``scaling`` = ``auto`` (the pairing the scaling effect needs). plots: the fixed plots, ``plot, kind,
     deviation, sg_c`` (NaN where none).
     """
     import pandas as pd
@@ -452,8 +572,9 @@ def analysis_frames(session, name: str):
     rows = wsdb.answer_rows(session, w)
     answers = pd.DataFrame(
         [{"reviewer": r["reviewer"],
-          "plot": r["twin"] if r["scaling"] == "auto" and r["twin"] is not None else r["plot"],
-          "answer": r["answer"] == "yes", "repeat": r["repeat"], "scaling": r["scaling"],
+          "plot": r["twin"] if r["scaling"] != "fixed" and r["twin"] is not None else r["plot"],
+          "answer": r["answer"] == "yes", "repeat": r["repeat"],
+          "scaling": "fixed" if r["scaling"] == "fixed" else "auto",
           "seconds": r["seconds"], "position": r["position"]} for r in rows],
         columns=["reviewer", "plot", "answer", "repeat", "scaling", "seconds", "position"])
     answers = answers[~((answers["scaling"] == "auto") & answers["repeat"])]
@@ -496,5 +617,6 @@ def describe_kinds() -> list[dict[str, Any]]:
 
 __all__ = ["CSV_COLUMNS", "EXPORT_COLUMNS", "PlannedPlot", "analyse", "analysis_frames",
            "count_by_kind", "create", "describe_kinds", "export_answers", "get_kind",
-           "import_answers", "kind_labels", "parse_answers_csv", "plan", "plots_document",
+           "flat_share", "import_answers", "kind_labels", "parse_answers_csv", "plan", "plots_document",
+           "scaling_preview", "workshop_scaling",
            "review_link", "status_document"]

@@ -48,7 +48,12 @@ from __future__ import annotations
 
 from tornado.web import RedirectHandler
 
-from railval.app.workshop_web.analysis import WorkshopAnalysis, analysis_html, threshold_png
+from railval.app.workshop_web.analysis import (
+    WorkshopAnalysis,
+    WorkshopPlotImage,
+    analysis_html,
+    threshold_png,
+)
 from railval.app.workshop_web.common import Login, Logout
 from railval.app.workshop_web.organiser import (
     MyWorkshops,
@@ -56,6 +61,7 @@ from railval.app.workshop_web.organiser import (
     WorkshopNew,
     WorkshopPage,
     WorkshopPlan,
+    WorkshopScalingPreview,
     WorkshopStatus,
 )
 from railval.app.workshop_web.reviewer import (
@@ -92,9 +98,11 @@ def routes(database, auth=None) -> list[tuple]:
         (rf"/workshops/mine/{name}/open", MyWorkshops, kw),
         (r"/workshops/new", WorkshopNew, kw),
         (r"/workshops/plan", WorkshopPlan, kw),
+        (r"/workshops/scaling-preview", WorkshopScalingPreview, kw),
         (rf"/workshops/{name}/status", _StatusOrPost, kw),
         (rf"/workshops/{name}/invite", _InvitePost, kw),
         (rf"/workshops/{name}/analysis", WorkshopAnalysis, kw),
+        (rf"/workshops/{name}/plot/(\d+)", WorkshopPlotImage, kw),
         (rf"/workshops/{name}", WorkshopPage, kw),
     ]
 

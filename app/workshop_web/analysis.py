@@ -6,8 +6,11 @@ import base64
 import io
 from typing import Any
 
+from railval.app.workshop_web.cards import CARDS_JS, cards_html
 from railval.app.workshop_web.common import (
+    _fmt,
     _OrganiserBase,
+    _pct,
     esc,
     page,
     run,
@@ -22,22 +25,22 @@ def _analysis(database, name: str, actor) -> dict[str, Any]:
     return analyse(database, name, actor=actor, with_plots=True)
 
 
-def _fmt(x: Any, digits: int = 2) -> str:
-    if x is None:
-        return "—"
-    if isinstance(x, (list, tuple)) and len(x) == 2:
-        return f"{_fmt(x[0], digits)} … {_fmt(x[1], digits)}"
-    try:
-        return f"{float(x):.{digits}f}"
-    except (TypeError, ValueError):
-        return esc(x)
+def _sensitivity_html(sens: dict | None) -> str:
+    """One sentence: the 50 % deviation under every parametric link and their spread."""
+    if not sens:
+        return ""
+    links = ", ".join(f"{esc(r['link'])} {_fmt(r.get('at_50'))}" for r in sens.get("links", []))
+    spread = sens.get("relative_spread")
+    return (f"Link sensitivity (logistic fits): {links}; likeliest {esc(sens.get('chosen'))}; spread "
+            f"{'—' if spread is None else f'{100 * spread:.0f} %'} of the reported value.")
 
 
 def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | None) -> str:
     """The answers against an objective value (``deviation`` or ``sg_c``): each plot's share
-    of Yes (points), the fitted curve of a typical reviewer
-    (:func:`railval.core.review.yes_curve`), the value at 50 % with its interval, and the
-    limit; returned as a PNG data URL."""
+    of Yes (points), the monotone fit of a typical reviewer that gives the reported value
+    (solid), the likeliest logistic link's curve (:func:`railval.core.review.yes_curve`,
+    dashed: the sensitivity), the value at 50 % with its interval, and the limit; returned
+    as a PNG data URL."""
     import numpy as np
     from matplotlib.figure import Figure
 
@@ -55,10 +58,15 @@ def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | N
     if pts:
         ax.scatter([x for x, _ in pts], [y for _, y in pts], s=14, color="#999999",
                    label="share of Yes of one plot", zorder=2)
+    curve = thr.get(f"{column}_curve") or {}
+    if curve.get("value"):
+        ax.plot(curve["value"], curve["yes"], color="#0072B2", linewidth=2,
+                label="monotone fit, typical reviewer (reported)", zorder=3)
     if fit.get("intercept") is not None and fit.get("slope") is not None:
         xs = np.linspace(top / 400, top * 1.05, 400)
-        ax.plot(xs, yes_curve(xs, fit["intercept"], fit["slope"]), color="#0072B2",
-                label="fitted P(Yes), typical reviewer", zorder=3)
+        ax.plot(xs, yes_curve(xs, fit["intercept"], fit["slope"], power=fit.get("power") or 0.0),
+                color="#56B4E9", linestyle="--",
+                label=f"logistic fit, {fit.get('link', 'log')} link (sensitivity)", zorder=3)
     if at50 is not None:
         if ci and None not in ci:
             ax.errorbar([at50], [0.5], xerr=[[at50 - ci[0]], [ci[1] - at50]], fmt="o",
@@ -80,21 +88,58 @@ def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | N
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
+def _cards(database, name: str, groups: list[str], actor) -> dict[str, Any]:
+    from railval.app.services.workshop_cards import cards
+    from railval.db import workshops as wsdb
+
+    doc = cards(database, name, groups=groups, actor=actor)
+    with database.session() as s:
+        w = wsdb.get_workshop(s, name)
+        doc["others"] = [x.name for x in wsdb.list_workshops(s)
+                         if x.campaign_id == w.campaign_id and x.name != name]
+    return doc
+
+
 class WorkshopAnalysis(_OrganiserBase):
     async def get(self, name: str) -> None:
         p = await self.require("workshop.results")
         if p is None:
             return
+        groups = [g for g in self.get_arguments("groups") if g]
         try:
             doc = await run(_analysis, self.database, name, p)
+            card_doc = await run(_cards, self.database, name, groups, p)
         except RailvalError as exc:
             self.finish(page(f"Analysis {name}", f"<p class='err'>{esc(exc)}</p>", user=p))
             return
-        self.finish(page(f"Analysis {name}", analysis_html(doc), user=p))
+        self.finish(page(f"Analysis {name}", analysis_html(doc) + cards_html(card_doc),
+                         user=p, script=CARDS_JS))
 
 
-def _pct(x: Any) -> str:
-    return "—" if x is None else f"{100 * float(x):.1f} %"
+class WorkshopPlotImage(_OrganiserBase):
+    """A stored plot image for the organiser's and assessor's cards (exactly the reviewed bytes)."""
+
+    async def get(self, name: str, plot_id: str) -> None:
+        p = await self.require("workshop.results")
+        if p is None:
+            return
+        try:
+            data, sha = await run(_plot_image, self.database, name, int(plot_id))
+        except RailvalError:
+            self.set_status(404)
+            self.finish("no such plot")
+            return
+        self.set_header("Content-Type", "image/png")
+        self.set_header("X-Image-SHA256", sha)
+        self.set_header("Cache-Control", "private, max-age=86400")
+        self.finish(data)
+
+
+def _plot_image(database, name: str, plot_id: int) -> tuple[bytes, str]:
+    from railval.db import workshops as wsdb
+
+    with database.session() as s:
+        return wsdb.plot_image(s, wsdb.get_workshop(s, name).id, plot_id)
 
 
 def _pct_ci(ci: Any) -> str:
@@ -156,6 +201,7 @@ def analysis_html(doc: dict[str, Any]) -> str:
 <h3>Threshold</h3>
 <p>Deviation at which a typical reviewer says Yes half of the time:
 <strong>{_fmt(thr.get('deviation_at_50'))}</strong> (interval {_fmt(thr.get('ci'))}); the
-validation limit is 1.0.</p>{charts}
+validation limit is 1.0.</p>
+<p>Method: {esc(thr.get('method', ''))}. {_sensitivity_html(thr.get('link_sensitivity'))}</p>{charts}
 <h3>Scaling effect (same reviewer, same plot: fixed against automatic scaling)</h3>{_scaling_html(sc)}
 """

@@ -50,6 +50,23 @@ def esc(value: Any) -> str:
     return html.escape("" if value is None else str(value), quote=True)
 
 
+def _fmt(x: Any, digits: int = 2) -> str:
+    """A number with ``digits`` decimals, a pair as ``a … b``, ``—`` for none (escaped)."""
+    if x is None:
+        return "—"
+    if isinstance(x, (list, tuple)) and len(x) == 2:
+        return f"{_fmt(x[0], digits)} … {_fmt(x[1], digits)}"
+    try:
+        return f"{float(x):.{digits}f}"
+    except (TypeError, ValueError):
+        return esc(x)
+
+
+def _pct(x: Any) -> str:
+    """A share in [0, 1] as per cent with one decimal, ``—`` for none."""
+    return "—" if x is None else f"{100 * float(x):.1f} %"
+
+
 def nav_html(principal: Principal | None, current: str = "") -> str:
     """The one navigation (:mod:`railval.app.navigation`) as header links, the signed-in
     user and the sign-out link; empty without a principal (a reviewer's personal link)."""

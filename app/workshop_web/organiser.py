@@ -85,6 +85,27 @@ async function count() {
 }
 const kl = {}; for (const k of choices.kinds) kl[k.id] = k.label + ' (' + k.domain + ')';
 boxes('kinds', 'kinds', choices.kinds.map(k => k.id), kl);
+function fmt(x) { return Math.abs(x) >= 1e4 || (x !== 0 && Math.abs(x) < 1e-2) ? x.toExponential(0) : String(x); }
+async function preview() {
+  const out = document.getElementById('preview'); out.textContent = 'reading and filtering the signals…';
+  const q = new URLSearchParams(new FormData(form));
+  const r = await fetch('/workshops/scaling-preview?' + q.toString());
+  const d = await r.json();
+  if (!r.ok) { out.textContent = d.error; return; }
+  if (!d.plots) { out.textContent = 'no plot'; return; }
+  let html = '';
+  for (const [sc, v] of Object.entries(d.scalings)) {
+    html += '<h4>' + (sc === 'zone' ? 'by test zone' : 'whole workshop') + (sc === d.default ? ' (default)' : '') + '</h4>';
+    html += '<table class="preview" data-scaling="' + sc + '"><tr><th>plot kind</th><th>zone</th><th>y axis</th><th>y range</th><th>x range</th><th>plots</th><th>flat (signal &lt; 10 % of the y range)</th></tr>';
+    for (const g of v.ranges) {
+      html += '<tr><td>' + kl[g.kind] + '</td><td>' + (g.zone === null ? 'all' : g.zone) + '</td><td>' + g.y_label + '</td><td class="num">' +
+        fmt(g.y[0]) + ' … ' + fmt(g.y[1]) + ' ' + (g.log ? '(log) ' : '') + '</td><td class="num">' + fmt(g.x[0]) + ' … ' + fmt(g.x[1]) + ' ' + (g.x_label.includes(' in ') ? g.x_label.split(' in ').pop() : '') +
+        '</td><td class="num">' + g.plots + '</td><td class="num">' + g.flat + '</td></tr>'; }
+    html += '</table><p>Share of flat plots per kind: ' + Object.entries(v.flat_share).map(([k, s]) =>
+      k + ' ' + Math.round(100 * s) + ' %').join(', ') + '</p>'; }
+  out.innerHTML = html;
+}
+document.getElementById('previewbtn').onclick = preview;
 form.campaign.onchange = fill; form.onsubmit = () => { document.getElementById('create').disabled = true;
   document.getElementById('count').textContent += ' — rendering, please wait…'; };
 fill();
@@ -118,6 +139,28 @@ class WorkshopPlan(_OrganiserBase):
             self.json({"error": str(exc)}, 400)
 
 
+def _preview_doc(database, args: dict[str, list[str]], actor) -> dict[str, Any]:
+    from railval.app.services import workshops as ws
+
+    if not all(args.get(g) for g in ("configurations", "sections", "kinds")):
+        return {"plots": 0, "scalings": {}}
+    return ws.scaling_preview(database, (args.get("campaign") or [""])[0], args["configurations"],
+                              args["sections"], args["kinds"], actor=actor)
+
+
+class WorkshopScalingPreview(_OrganiserBase):
+    """The ranges each scaling would give and the share of flat plots (the form's preview)."""
+
+    async def get(self) -> None:
+        p = await self.require("workshop.run")
+        if p is None:
+            return
+        try:
+            self.json(await run(_preview_doc, self.database, _args(self), p))
+        except RailvalError as exc:
+            self.json({"error": str(exc)}, 400)
+
+
 class WorkshopNew(_OrganiserBase):
     async def get(self, message: str = "") -> None:
         p = await self.require("workshop.run")
@@ -136,6 +179,10 @@ class WorkshopNew(_OrganiserBase):
 <p><label><input type='checkbox' name='blind' value='1'> blind (no vehicle, configuration or
 section names)</label> <label>hidden repeats <input name='repeats' value='0.1' size='4'></label>
 <label>share also shown with automatic scaling <input name='auto_share' value='0' size='4'></label></p>
+<p><label>Scaling <select name='scaling'><option value='zone' selected>same range per kind within each
+EN 14363 test zone</option><option value='workshop'>same range per kind over the whole workshop</option></select></label>
+<button id='previewbtn' type='button'>Preview ranges</button></p>
+<div id='preview'></div>
 <p>Count: <strong id='count'>…</strong></p>
 <p><button id='create' type='submit'>Create workshop</button></p>
 <p class='err'>{esc(message)}</p></form>
@@ -156,7 +203,8 @@ section names)</label> <label>hidden repeats <input name='repeats' value='0.1' s
                       sections=a.get("sections") or ["(none chosen)"],
                       kinds=a.get("kinds") or ["(none chosen)"], blind=bool(a.get("blind")),
                       repeats=float((a.get("repeats") or ["0.1"])[0]),
-                      auto_share=float((a.get("auto_share") or ["0"])[0]), actor=p)
+                      auto_share=float((a.get("auto_share") or ["0"])[0]),
+                      scaling=(a.get("scaling") or ["zone"])[0], actor=p)
         except (RailvalError, ValueError) as exc:
             self.set_status(400)
             await self.get(message=str(exc))
@@ -244,7 +292,8 @@ class WorkshopPage(_OrganiserBase):
         body = f"""
 <h2>{esc(d['workshop'])}</h2>
 <p>Campaign {esc(d['campaign'])} · {d['plots']} plots · blind: {'yes' if d['blind'] else 'no'} ·
-hidden repeats {100 * d['repeats']:.0f} % · status <strong id='wstatus'>{esc(d['status'])}</strong> ·
+hidden repeats {100 * d['repeats']:.0f} % · scaling: {'by test zone' if d.get('scaling') == 'zone'
+else 'whole workshop'} · status <strong id='wstatus'>{esc(d['status'])}</strong> ·
 answers <strong id='nanswers'>{d['answers']}</strong></p>
 <div class='row'><form method='post' action='/workshops/{q}/status'>
 <input type='hidden' name='status' value='{toggle[0]}'><button type='submit' id='toggle'>{toggle[1]}</button></form>

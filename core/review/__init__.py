@@ -9,7 +9,8 @@ Table 1). This package turns the answers into:
 * :mod:`~railval.core.review.rasch` — each reviewer's strictness on a latent scale
   (Rasch-type logistic model);
 * :mod:`~railval.core.review.threshold` — the objective value (normalised deviation,
-  Sprague–Geers C) at which a typical reviewer says Yes half of the time;
+  Sprague–Geers C) at which a typical reviewer says Yes half of the time, model-free in the
+  link, and its sensitivity to the link;
 * :mod:`~railval.core.review.analysis` — :func:`analyse`, the whole analysis of one workshop;
 * :mod:`~railval.core.review.simulate` — simulated reviewers of known strictness.
 
@@ -32,9 +33,17 @@ from railval.core.review.simulate import (
     simulate_workshop,
     yes_probability,
 )
-from railval.core.review.threshold import ThresholdFit, fit_threshold, yes_curve
+from railval.core.review.threshold import (
+    MonotoneThreshold,
+    ThresholdFit,
+    fit_threshold,
+    link_sensitivity,
+    monotone_threshold,
+    yes_curve,
+)
 
 __all__ = [
+    "MonotoneThreshold",
     "RaschFit",
     "SimulatedWorkshop",
     "ThresholdFit",
@@ -46,7 +55,9 @@ __all__ = [
     "gwet_ac1",
     "gwet_ac1_two_raters",
     "krippendorff_alpha_nominal",
+    "link_sensitivity",
     "mcnemar_exact",
+    "monotone_threshold",
     "simulate_answers",
     "simulate_workshop",
     "wilson_interval",

@@ -11,8 +11,9 @@ returns a :class:`WorkshopAnalysis`; ``to_dict()`` is the JSON of ``railval work
 * ``agreement`` — Fleiss κ, Krippendorff α and Gwet AC1, each with a percentile bootstrap
   interval over plots;
 * ``threshold`` — the normalised deviation (and the Sprague–Geers C) at which a typical
-  reviewer says Yes half of the time, with a cluster-robust delta-method interval
-  (:mod:`.threshold`);
+  reviewer says Yes half of the time, model-free in the link (isotonic regression of the
+  reviewer-adjusted acceptability, bootstrap interval over plots), with ``method`` and the
+  ``link_sensitivity`` of the parametric links (:mod:`.threshold`);
 * ``scaling_effect`` — the paired comparison of the same reviewer's answers on the same plot
   at the workshop's fixed scaling and at automatic scaling (exact McNemar test), or ``None``.
 
@@ -52,7 +53,7 @@ from railval.core.review.agreement import (
     wilson_interval,
 )
 from railval.core.review.rasch import fit_rasch
-from railval.core.review.threshold import fit_threshold
+from railval.core.review.threshold import DEFAULT_BOOT, link_sensitivity, monotone_threshold
 
 __all__ = ["ANSWER_COLUMNS", "PLOT_COLUMNS", "SCALINGS", "WorkshopAnalysis", "analyse"]
 
@@ -60,6 +61,9 @@ ANSWER_COLUMNS = ("reviewer", "plot", "answer", "repeat", "scaling", "seconds")
 PLOT_COLUMNS = ("plot", "kind", "deviation", "sg_c")
 SCALINGS = ("fixed", "auto")
 CONFIDENCE = 0.95
+#: ``threshold.method`` of the JSON: how the 50 % values are estimated (:mod:`.threshold`).
+THRESHOLD_METHOD = ("isotonic: falling isotonic regression (pooled adjacent violators) of the reviewer-adjusted "
+                    "acceptability on the objective value, crossing 0; percentile bootstrap over plots")
 
 
 @dataclass(frozen=True)
@@ -267,7 +271,8 @@ def _agreement(y: np.ndarray, names: list[str], n_boot: int, rng: np.random.Gene
 
 
 # --------------------------------------------------------------------------- analyse
-def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, seed: int = 0) -> WorkshopAnalysis:
+def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, seed: int = 0,
+            threshold_boot: int = DEFAULT_BOOT) -> WorkshopAnalysis:
     """Analyse one workshop (module docstring).
 
     ``answers``: one row per answer given, columns ``reviewer`` (str), ``plot`` (plot id),
@@ -276,13 +281,16 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
     ``plots``: one row per plot, columns ``plot`` (id), ``kind``, ``deviation`` (normalised
     |D_v| / std limit, NaN if none) and ``sg_c`` (Sprague–Geers C, NaN if none).
     ``n_boot``: bootstrap replicates for the agreement intervals (0 = none);
-    ``seed``: their random seed (the result is reproducible).
+    ``seed``: their random seed (the result is reproducible); ``threshold_boot``: bootstrap
+    replicates of the 50 % values' intervals (over plots; 0 = no interval).
 
     Raises :class:`~railval.core.errors.InvalidParameter` naming the row and column of a bad
     value, an answer on an unknown plot or a second first answer of one reviewer on one plot.
     """
     if int(n_boot) < 0:
         raise InvalidParameter(f"n_boot: must be ≥ 0, got {n_boot!r}")
+    if int(threshold_boot) < 0:
+        raise InvalidParameter(f"threshold_boot: must be ≥ 0, got {threshold_boot!r}")
     a, p = _prepare(answers, plots)
     rng = np.random.default_rng(seed)
     first = a[~a["repeat"] & (a["scaling"] == "fixed")]
@@ -356,16 +364,27 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
     # ---- agreement
     agreement = _agreement(y, names, int(n_boot), rng)
 
-    # ---- threshold: answers against the objective values (linear logistic test model)
-    threshold: dict = {}
+    # ---- threshold: the objective value at which a typical reviewer says Yes half of the time,
+    # model-free in the link (isotonic on the reviewer-adjusted acceptability), with the
+    # parametric links beside it (link sensitivity; the drawn curve is the likeliest link)
+    threshold: dict = {"method": THRESHOLD_METHOD}
     fnames = first["reviewer"].to_numpy()
     for col, key, ci_key in (("deviation", "deviation_at_50", "ci"), ("sg_c", "sg_c_at_50", "sg_c_ci")):
-        vals = p[col].to_numpy()[fp]
-        fit_t = fit_threshold(vals, fy, fnames, fp, confidence=CONFIDENCE)
-        threshold[key] = _f(fit_t.at_50)
-        threshold[ci_key] = _interval(*fit_t.ci) if fit_t.ci else None
-        threshold[f"{col}_fit"] = {k: (_f(v) if isinstance(v, float) else v) for k, v in fit_t.to_dict().items()
+        vals = p[col].to_numpy()
+        mono = monotone_threshold(vals, accept, n_boot=int(threshold_boot), seed=rng, confidence=CONFIDENCE)
+        best, sens = link_sensitivity(vals[fp], fy, fnames, fp, reference=mono.at_50, confidence=CONFIDENCE)
+        threshold[key] = _f(mono.at_50)
+        threshold[ci_key] = _interval(*mono.ci) if mono.ci else None
+        threshold[f"{col}_curve"] = {"value": [_f(x) for x in mono.curve_value],
+                                     "yes": [_f(x) for x in mono.curve_yes]}
+        threshold[f"{col}_fit"] = {k: (_f(v) if isinstance(v, float) else v) for k, v in best.to_dict().items()
                                    if k not in ("at_50", "ci")}
+        threshold["link_sensitivity" if col == "deviation" else "sg_c_link_sensitivity"] = {
+            **sens, "relative_spread": _f(sens["relative_spread"]),
+            "links": [{k: (_f(v) if isinstance(v, float) and k != "power" else v) for k, v in row.items()}
+                      for row in sens["links"]],
+            "boot_valid": mono.boot_valid, "n_boot": mono.n_boot,
+        }
 
     # ---- scaling effect (presentation experiment)
     auto = a[a["scaling"] == "auto"]

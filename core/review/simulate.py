@@ -6,7 +6,11 @@ model of :mod:`railval.core.review.rasch`: Yes with probability ``expit(a_p − 
 
     a_p = slope · (log d_p − log d₅₀) + u_p,   u_p ~ N(0, plot_sd²),   slope < 0
 
-so a typical reviewer (strictness 0) says Yes half of the time at ``d₅₀`` — by the symmetry
+(``response="log"``, the default), or — reviewers who answer on the deviation itself or on
+a hard limit with noise — ``response="linear"``: ``a_p = slope/d₅₀ · (d_p − d₅₀) + u_p`` (the
+same local slope at ``d₅₀``), ``response="step"``: ``a_p = −slope · sign(d₅₀ − d_p)·½ + u_p``
+(a step of height ``|slope|`` logits at ``d₅₀``). In every case a typical reviewer
+(strictness 0) says Yes half of the time at ``d₅₀`` — by the symmetry
 of ``u_p`` also on average over plots. True strictness values are centred to mean 0 exactly,
 which is the scale the analysis reports. Deviations are log-normal around 1
 (``exp(N(0, deviation_spread²))``). Hidden repeats are answered again by the same model
@@ -24,11 +28,14 @@ import scipy.special
 
 from railval.core.errors import InvalidParameter
 
-__all__ = ["DEFAULT_KINDS", "SimulatedWorkshop", "simulate_answers", "simulate_workshop",
+__all__ = ["DEFAULT_KINDS", "RESPONSES", "SimulatedWorkshop", "simulate_answers", "simulate_workshop",
            "yes_probability"]
 
 #: Plot kinds of the DynoTRAIN workshop (Polach & Böttcher 2014 Table 1), cycled over the plots.
 DEFAULT_KINDS = ("Y", "Q", "Y/Q", "bogie acceleration", "car body acceleration", "PSD")
+
+#: Response curves of :func:`simulate_workshop` (module docstring).
+RESPONSES = ("log", "linear", "step")
 
 
 def yes_probability(acceptability, strictness):
@@ -107,7 +114,7 @@ def simulate_workshop(n_reviewers: int = 20, n_plots: int = 120, *, seed: int = 
                       strictness_sd: float = 1.0, repeat_share: float = 0.1,
                       auto_share: float = 0.0, auto_shift: float = 0.0,
                       kinds: Sequence[str] = DEFAULT_KINDS, no_deviation_share: float = 0.0,
-                      answer_share: float = 1.0) -> SimulatedWorkshop:
+                      answer_share: float = 1.0, response: str = "log") -> SimulatedWorkshop:
     """A whole simulated workshop (module docstring).
 
     Reviewers are named ``"r01"`` …, plots ``"p001"`` …; plot kinds cycle through ``kinds``.
@@ -119,11 +126,20 @@ def simulate_workshop(n_reviewers: int = 20, n_plots: int = 120, *, seed: int = 
     if not slope < 0 or not deviation_at_50 > 0:
         raise InvalidParameter(f"simulate_workshop: need slope < 0 and deviation_at_50 > 0, "
                                f"got {slope!r}, {deviation_at_50!r}")
+    if response not in RESPONSES:
+        raise InvalidParameter(f"simulate_workshop: response must be one of {', '.join(RESPONSES)}, "
+                               f"got {response!r}")
     rng = np.random.default_rng(seed)
     s = rng.normal(0.0, strictness_sd, n_reviewers)
     s -= s.mean()
     d = np.exp(rng.normal(0.0, deviation_spread, n_plots))
-    a = slope * (np.log(d) - np.log(deviation_at_50)) + rng.normal(0.0, plot_sd, n_plots)
+    if response == "log":
+        centre = slope * (np.log(d) - np.log(deviation_at_50))
+    elif response == "linear":
+        centre = slope / deviation_at_50 * (d - deviation_at_50)
+    else:
+        centre = -0.5 * slope * np.sign(deviation_at_50 - d)
+    a = centre + rng.normal(0.0, plot_sd, n_plots)
     sg_c = 0.25 * d * np.exp(rng.normal(0.0, 0.2, n_plots))
     hidden = rng.random(n_plots) < no_deviation_share
     plot_ids = [f"p{i + 1:03d}" for i in range(n_plots)]

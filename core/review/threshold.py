@@ -28,6 +28,29 @@ No finite; ``ridge = 0`` gives plain maximum likelihood). ``v ≤ 0`` is clipped
 :data:`MIN_VALUE` before the log; answers on plots without a value (NaN) stay out.
 
 ``v₅₀`` exists only for a falling curve (β < 0); otherwise it is reported as ``None``.
+
+**The link is not known.** A real panel's response curve is unknown: reviewers may answer on
+the deviation itself (logit linear in ``v``) rather than on its log, and fitting the wrong
+one biases ``v₅₀`` (measured: 9–16 % low with an interval excluding the truth, for reviewers
+linear in ``v``). The reported ``v₅₀`` is therefore model-free in the link
+(:func:`monotone_threshold`): each plot's reviewer-adjusted acceptability ``a_p`` (the Rasch
+fit of :mod:`.rasch`, on the scale where a typical reviewer says Yes with probability ½ at
+``a_p = 0``) is regressed on ``v`` under the only assumption that it does not rise with
+``v`` — isotonic regression by pooled adjacent violators (Ayer, Brunk, Ewing, Reid &
+Silverman 1955, Ann. Math. Stat. 26:641–647; Barlow, Bartholomew, Bremner & Brunk 1972,
+Statistical Inference under Order Restrictions) — and ``v₅₀`` is where that monotone fit
+crosses 0, linearly interpolated between the adjacent blocks (the isotonic estimate of a
+target quantile of Stylianou & Flournoy 2002, Biometrics 58:171–177; here in ``log v``).
+Its interval is a percentile bootstrap over plots, the clusters of the answers (Davison &
+Hinkley 1997, Bootstrap Methods and their Application, §3.8). The reviewers stay fixed
+effects: the estimand is this panel's typical reviewer.
+
+The link sensitivity (:func:`link_sensitivity`) fits the parametric model above with
+``log v`` replaced by the Box–Cox power ``x_λ(v) = (v^λ − 1)/λ`` (``log v`` at λ = 0) for
+λ = 0, ½, 1 — the transformation of the independent variable of Box & Tidwell 1962
+(Technometrics 4:531–550) on a grid, compared by likelihood (same number of parameters, so
+also by AIC) — and reports each link's ``v₅₀`` and their spread relative to the reported
+value; the curve drawn for a typical reviewer is the link with the largest likelihood.
 """
 
 from __future__ import annotations
@@ -35,16 +58,46 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.optimize
 import scipy.special
 import scipy.stats
 
 from railval.core.errors import InvalidParameter
 from railval.core.review.rasch import DEFAULT_RIDGE
 
-__all__ = ["MIN_VALUE", "ThresholdFit", "fit_threshold", "yes_curve"]
+__all__ = ["LINKS", "MIN_VALUE", "MonotoneThreshold", "ThresholdFit", "fit_threshold",
+           "link_name", "link_sensitivity", "monotone_threshold", "transform", "yes_curve"]
 
 #: Objective values are clipped to at least this before taking the log (a thousandth of the limit).
 MIN_VALUE = 1e-3
+
+#: Box–Cox powers λ of the links compared by :func:`link_sensitivity` (0 = log v, 1 = v).
+LINKS = (0.0, 0.5, 1.0)
+
+#: Bootstrap replicates of :func:`monotone_threshold` by default.
+DEFAULT_BOOT = 1000
+
+_LINK_NAMES = {0.0: "log", 0.5: "sqrt", 1.0: "linear"}
+
+
+def link_name(power: float) -> str:
+    """``"log"``, ``"sqrt"``, ``"linear"`` or ``"power λ"`` for the Box–Cox power ``λ``."""
+    return _LINK_NAMES.get(float(power), f"power {power:g}")
+
+
+def transform(values, power: float = 0.0) -> np.ndarray:
+    """Box–Cox transform ``x_λ(v) = (v^λ − 1)/λ`` (``log v`` at λ = 0) of ``v`` clipped to
+    :data:`MIN_VALUE` (Box & Cox 1964)."""
+    v = np.maximum(np.asarray(values, dtype=float), MIN_VALUE)
+    return np.log(v) if power == 0 else (v ** power - 1.0) / power
+
+
+def _inverse(x: float, power: float) -> float | None:
+    """``v`` with ``x_λ(v) = x``; ``None`` if no positive ``v`` has it."""
+    if power == 0:
+        return float(np.exp(x)) if np.isfinite(np.exp(x)) else None
+    base = 1.0 + power * x
+    return float(base ** (1.0 / power)) if base > 0 else None
 
 
 @dataclass(frozen=True)
@@ -53,9 +106,11 @@ class ThresholdFit:
 
     ``at_50``: the value at which a typical reviewer says Yes with probability ½ (``None``
     if the fitted curve does not fall); ``ci``: its interval ``(low, high)`` or ``None``;
-    ``slope``: β (per unit of ``log v``); ``intercept``: ``−s̄``, so that a typical
-    reviewer's curve is ``expit(intercept + slope · log v)``; ``strictness``: each reviewer's
-    ``s_r − s̄`` (reviewer → value); ``plots``/``answers``: how many entered the fit."""
+    ``slope``: β (per unit of ``x_λ(v)``, ``log v`` by default); ``intercept``: ``−s̄``, so
+    that a typical reviewer's curve is ``expit(intercept + slope · x_λ(v))``; ``strictness``:
+    each reviewer's ``s_r − s̄`` (reviewer → value); ``plots``/``answers``: how many entered
+    the fit; ``power``: the link's λ; ``loglik``: the log-likelihood of the answers at the fit
+    (without the ridge term; ``None`` without a fit)."""
 
     at_50: float | None
     ci: tuple[float, float] | None
@@ -64,32 +119,28 @@ class ThresholdFit:
     strictness: dict
     plots: int
     answers: int
+    power: float = 0.0
+    loglik: float | None = None
 
     def to_dict(self) -> dict:
         return {
             "at_50": self.at_50, "ci": list(self.ci) if self.ci is not None else None,
             "intercept": self.intercept, "slope": self.slope, "plots": self.plots,
-            "answers": self.answers,
+            "answers": self.answers, "link": link_name(self.power), "power": self.power,
+            "loglik": self.loglik,
         }
 
 
-def yes_curve(values, intercept: float, slope: float, strictness: float = 0.0) -> np.ndarray:
+def yes_curve(values, intercept: float, slope: float, strictness: float = 0.0,
+              power: float = 0.0) -> np.ndarray:
     """P(Yes) at objective ``values`` of a reviewer ``strictness`` logits stricter than the
-    typical one: ``expit(intercept + slope · log v − strictness)`` with ``intercept = −s̄``
-    and ``slope = β`` of a :class:`ThresholdFit` — the fitted curve to draw beside the limit
-    1.0."""
-    v = np.maximum(np.asarray(values, dtype=float), MIN_VALUE)
-    return scipy.special.expit(intercept + slope * np.log(v) - strictness)
+    typical one: ``expit(intercept + slope · x_λ(v) − strictness)`` with ``intercept = −s̄``,
+    ``slope = β`` and ``power = λ`` of a :class:`ThresholdFit` — the fitted curve to draw
+    beside the limit 1.0."""
+    return scipy.special.expit(intercept + slope * transform(values, power) - strictness)
 
 
-def fit_threshold(value, answer, reviewer, plot, *, ridge: float = DEFAULT_RIDGE,
-                  confidence: float = 0.95, tol: float = 1e-9, max_iter: int = 100) -> ThresholdFit:
-    """Fit the model of the module docstring; ``v₅₀`` with its interval.
-
-    ``value`` (objective value of the answer's plot), ``answer`` (True = Yes), ``reviewer``
-    (who answered, any hashable id) and ``plot`` (the answer's plot, the cluster) are
-    per-answer arrays of equal length; answers whose value is NaN are dropped. Needs at
-    least 3 plots with two distinct values and both answers present."""
+def _prepare(value, answer, reviewer, plot, ridge):
     v = np.asarray(value, dtype=float)
     y = np.asarray(answer, dtype=float)
     rv = np.asarray(reviewer)
@@ -102,32 +153,36 @@ def fit_threshold(value, answer, reviewer, plot, *, ridge: float = DEFAULT_RIDGE
     v, y, rv, pl = v[keep], y[keep], rv[keep], pl[keep]
     names, ri = np.unique(rv, return_inverse=True)
     _, gi = np.unique(pl, return_inverse=True)
-    n_r, n_g = names.size, int(gi.max()) + 1 if gi.size else 0
-    empty = ThresholdFit(None, None, None, None, {}, n_g, int(y.size))
-    if n_g < 3 or np.unique(v).size < 2 or y.min(initial=1) == y.max(initial=0):
-        return empty
-    x = np.log(np.maximum(v, MIN_VALUE))
+    n_g = int(gi.max()) + 1 if gi.size else 0
+    usable = n_g >= 3 and np.unique(v).size >= 2 and y.min(initial=1) != y.max(initial=0)
+    return v, y, names, ri, gi, n_g, usable
+
+
+def _newton(x, y, ri, n_r, wt, ridge, start, tol, max_iter):
+    """Penalised (weighted) maximum likelihood of ``logit P = b·x − s[ri]`` by Newton's
+    method through the Schur complement of the diagonal reviewer block, with step halving.
+    Returns ``(b, s, converged)``."""
 
     def nll(b: float, s: np.ndarray) -> float:
         eta = b * x - s[ri]
-        return float(np.sum(np.logaddexp(0.0, eta) - y * eta) + 0.5 * ridge * s @ s)
+        return float(wt @ (np.logaddexp(0.0, eta) - y * eta) + 0.5 * ridge * s @ s)
 
-    def blocks(b: float, s: np.ndarray):
-        pi = scipy.special.expit(b * x - s[ri])
-        w = pi * (1.0 - pi)
-        return pi, float(w @ (x * x)), -np.bincount(ri, w * x, n_r), np.bincount(ri, w, n_r) + ridge
-
-    share = np.clip(np.bincount(ri, y, n_r) / np.bincount(ri, None, n_r), 0.05, 0.95)
-    b, s = 0.0, -scipy.special.logit(share)
+    if start is None:
+        share = np.clip(np.bincount(ri, wt * y, n_r) / np.maximum(np.bincount(ri, wt, n_r), 1e-12), 0.05, 0.95)
+        b, s = 0.0, -scipy.special.logit(share)
+    else:
+        b, s = start[0], start[1].copy()
     f = nll(b, s)
-    converged = False
     for _ in range(max_iter):
-        pi, h_bb, h_bs, d_s = blocks(b, s)
-        g_b = -float((y - pi) @ x)
-        g_s = np.bincount(ri, y - pi, n_r) + ridge * s
+        pi = scipy.special.expit(b * x - s[ri])
+        w = wt * pi * (1.0 - pi)
+        h_bb, h_bs, d_s = float(w @ (x * x)), -np.bincount(ri, w * x, n_r), np.bincount(ri, w, n_r) + ridge
+        r = wt * (y - pi)
+        g_b = -float(r @ x)
+        g_s = np.bincount(ri, r, n_r) + ridge * s
         schur = h_bb - float(h_bs @ (h_bs / d_s))
-        if not schur > 0:
-            return empty
+        if not schur > 0 or not np.all(d_s > 0):
+            return b, s, False
         db = (g_b - float(h_bs @ (g_s / d_s))) / schur
         ds = (g_s - h_bs * db) / d_s
         t = 1.0
@@ -139,18 +194,45 @@ def fit_threshold(value, answer, reviewer, plot, *, ridge: float = DEFAULT_RIDGE
             t *= 0.5
         b, s, f = cb, cs, fc
         if max(abs(t * db), float(np.max(np.abs(t * ds)))) < tol:
-            converged = True
-            break
-    if not converged or not np.isfinite(b) or not np.all(np.isfinite(s)):
+            return b, s, bool(np.isfinite(b) and np.all(np.isfinite(s)))
+    return b, s, False
+
+
+def _loglik(x, y, ri, b, s, wt=None) -> float:
+    eta = b * x - s[ri]
+    ll = y * eta - np.logaddexp(0.0, eta)
+    return float(ll.sum() if wt is None else wt @ ll)
+
+
+def fit_threshold(value, answer, reviewer, plot, *, ridge: float = DEFAULT_RIDGE,
+                  confidence: float = 0.95, tol: float = 1e-9, max_iter: int = 100,
+                  power: float = 0.0) -> ThresholdFit:
+    """Fit the model of the module docstring for one link; ``v₅₀`` with its interval.
+
+    ``value`` (objective value of the answer's plot), ``answer`` (True = Yes), ``reviewer``
+    (who answered, any hashable id) and ``plot`` (the answer's plot, the cluster) are
+    per-answer arrays of equal length; answers whose value is NaN are dropped. Needs at
+    least 3 plots with two distinct values and both answers present. ``power``: the
+    Box–Cox λ of the link (0 = ``log v``, the default; 1 = ``v``)."""
+    v, y, names, ri, gi, n_g, usable = _prepare(value, answer, reviewer, plot, ridge)
+    n_r = names.size
+    empty = ThresholdFit(None, None, None, None, {}, n_g, int(y.size), float(power))
+    if not usable:
+        return empty
+    x = transform(v, power)
+    b, s, converged = _newton(x, y, ri, n_r, np.ones_like(y), ridge, None, tol, max_iter)
+    if not converged:
         return empty
     s_bar = float(s.mean())
+    loglik = _loglik(x, y, ri, b, s)
     strict = {str(n): float(v_) for n, v_ in zip(names.tolist(), (s - s_bar).tolist(), strict=True)}
     if not b < 0:
-        return ThresholdFit(None, None, -s_bar, b, strict, n_g, int(y.size))
+        return ThresholdFit(None, None, -s_bar, b, strict, n_g, int(y.size), float(power), loglik)
     # cluster-robust covariance of (β, s_1 … s_R): c · H⁻¹ (Σ_g u_g u_gᵀ) H⁻¹
-    pi, h_bb, h_bs, d_s = blocks(b, s)
-    hess = np.diag(np.concatenate([[h_bb], d_s]))
-    hess[0, 1:] = hess[1:, 0] = h_bs
+    pi = scipy.special.expit(b * x - s[ri])
+    w = pi * (1.0 - pi)
+    hess = np.diag(np.concatenate([[float(w @ (x * x))], np.bincount(ri, w, n_r) + ridge]))
+    hess[0, 1:] = hess[1:, 0] = -np.bincount(ri, w * x, n_r)
     resid = y - pi
     scores = np.empty((n_g, n_r + 1))
     scores[:, 0] = -np.bincount(gi, resid * x, n_g)
@@ -159,9 +241,111 @@ def fit_threshold(value, answer, reviewer, plot, *, ridge: float = DEFAULT_RIDGE
     k = n_r + 1
     factor = n_g / (n_g - 1.0) * (y.size - 1.0) / (y.size - k)
     cov = factor * bread @ (scores.T @ scores) @ bread
-    log50 = s_bar / b
+    x50 = s_bar / b
     grad = np.concatenate([[-s_bar / (b * b)], np.full(n_r, 1.0 / (n_r * b))])
     se = float(np.sqrt(max(grad @ cov @ grad, 0.0)))
     z = scipy.stats.norm.ppf(1.0 - (1.0 - confidence) / 2.0)
-    ci = (float(np.exp(log50 - z * se)), float(np.exp(log50 + z * se)))
-    return ThresholdFit(float(np.exp(log50)), ci, -s_bar, b, strict, n_g, int(y.size))
+    at50 = _inverse(x50, power)
+    lo, hi = _inverse(x50 - z * se, power), _inverse(x50 + z * se, power)
+    ci = (lo if lo is not None else 0.0, hi) if hi is not None else None
+    return ThresholdFit(at50, ci, -s_bar, b, strict, n_g, int(y.size), float(power), loglik)
+
+
+@dataclass(frozen=True)
+class MonotoneThreshold:
+    """Result of :func:`monotone_threshold`: ``at_50`` (``None`` if the monotone fit does
+    not cross 0), its percentile ``ci`` (``None`` if fewer than 20 replicates cross), the
+    number of ``plots`` used, ``boot_valid`` replicates that crossed out of ``n_boot``."""
+
+    at_50: float | None
+    ci: tuple[float, float] | None
+    plots: int
+    boot_valid: int
+    n_boot: int
+    #: the monotone fit on the full data: sorted values and P(Yes) of a typical reviewer
+    #: there, ``expit(fitted a_p)`` (a step curve; empty without a fit)
+    curve_value: tuple[float, ...] = ()
+    curve_yes: tuple[float, ...] = ()
+
+
+def _crossing(v: np.ndarray, a: np.ndarray, w: np.ndarray | None) -> float | None:
+    """Where the falling isotonic fit of ``a`` on sorted ``v`` crosses 0, interpolated
+    linearly in ``log v`` between the weighted centres of the last block above and the first
+    block below 0 (Stylianou & Flournoy 2002)."""
+    fit = scipy.optimize.isotonic_regression(a, weights=w, increasing=False).x
+    above, below = np.flatnonzero(fit > 0), np.flatnonzero(fit < 0)
+    if not above.size or not below.size:
+        return None
+    i, j = above.max(), below.min()
+    lv = np.log(v)
+    ww = np.ones_like(a) if w is None else w
+    bi, bj = fit == fit[i], fit == fit[j]
+    xi, xj = np.average(lv[bi], weights=ww[bi]), np.average(lv[bj], weights=ww[bj])
+    return float(np.exp(xi + (xj - xi) * fit[i] / (fit[i] - fit[j])))
+
+
+def monotone_threshold(value, acceptability, *, n_boot: int = DEFAULT_BOOT,
+                       seed: int | np.random.Generator = 0, confidence: float = 0.95) -> MonotoneThreshold:
+    """``v₅₀`` without a link (module docstring, last part): per plot its objective
+    ``value`` and its reviewer-adjusted ``acceptability`` (the Rasch fit's ``a_p``, on the
+    scale where a typical reviewer says Yes with probability ½ at ``a_p = 0``). The falling
+    isotonic regression of ``a_p`` on ``v`` (pooled adjacent violators) crosses 0 at
+    ``v₅₀``; the interval resamples the plots (``n_boot`` replicates, the multiplicities as
+    weights). Plots whose value or acceptability is not finite stay out; ``v ≤ 0`` is
+    clipped to :data:`MIN_VALUE`."""
+    if int(n_boot) < 0:
+        raise InvalidParameter(f"monotone_threshold: n_boot must be ≥ 0, got {n_boot!r}")
+    v = np.asarray(value, dtype=float)
+    a = np.asarray(acceptability, dtype=float)
+    if v.shape != a.shape or v.ndim != 1:
+        raise InvalidParameter("monotone_threshold: value and acceptability must be 1-D of equal length")
+    keep = np.isfinite(v) & np.isfinite(a)
+    v, a = np.maximum(v[keep], MIN_VALUE), a[keep]
+    order = np.argsort(v, kind="stable")
+    v, a = v[order], a[order]
+    n = v.size
+    if n < 3 or np.unique(v).size < 2:
+        return MonotoneThreshold(None, None, n, 0, int(n_boot))
+    at50 = _crossing(v, a, None)
+    fit = scipy.optimize.isotonic_regression(a, increasing=False).x
+    curve = (tuple(float(x) for x in v), tuple(float(x) for x in scipy.special.expit(fit)))
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    draws = []
+    for _ in range(int(n_boot)):
+        wt = np.bincount(rng.integers(0, n, n), minlength=n).astype(float)
+        k = wt > 0
+        c = _crossing(v[k], a[k], wt[k])
+        if c is not None:
+            draws.append(c)
+    ci = None
+    if len(draws) >= 20:
+        q = (1.0 - confidence) / 2.0
+        lo, hi = np.quantile(np.asarray(draws), [q, 1.0 - q])
+        ci = (float(lo), float(hi))
+    return MonotoneThreshold(at50, ci, n, len(draws), int(n_boot), *curve)
+
+
+def link_sensitivity(value, answer, reviewer, plot, *, powers=LINKS, reference: float | None = None,
+                     ridge: float = DEFAULT_RIDGE, confidence: float = 0.95) -> tuple[ThresholdFit, dict]:
+    """Fit :func:`fit_threshold` under every link of ``powers``; return the fit with the
+    largest likelihood and ``{"chosen", "links": [{link, power, at_50, ci, loglik}],
+    "relative_spread"}`` — the spread (largest − smallest ``v₅₀`` over the links) relative
+    to ``reference`` (the reported ``v₅₀``; default the chosen link's), ``None`` if a link
+    has no ``v₅₀``."""
+    if not powers:
+        raise InvalidParameter("link_sensitivity: powers must name at least one link")
+    fits = [fit_threshold(value, answer, reviewer, plot, ridge=ridge, confidence=confidence,
+                          power=float(p)) for p in powers]
+    valid = [f for f in fits if f.loglik is not None]
+    best = max(valid, key=lambda f: f.loglik) if valid else fits[0]
+    ref = best.at_50 if reference is None else reference
+    values = [f.at_50 for f in fits]
+    spread = None
+    if ref and all(x is not None for x in values):
+        spread = (max(values) - min(values)) / ref
+    return best, {
+        "chosen": link_name(best.power) if valid else None,
+        "links": [{"link": link_name(f.power), "power": f.power, "at_50": f.at_50,
+                   "ci": list(f.ci) if f.ci else None, "loglik": f.loglik} for f in fits],
+        "relative_spread": spread,
+    }
