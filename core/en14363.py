@@ -59,12 +59,14 @@ from railval.core.definitions import (
     CHOSEN,
     SLIDING_VARIANTS,
     Reading,
+    percentile_ranks,
+    percentiles_from_order,
     sample_window_means,
-    sorted_percentiles,
     window_centres,
 )
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows, settling_check
+from railval.core.orderstat import order_statistics
 from railval.core.quantities import QUANTITIES, WHEELSET_POSITIONS
 from railval.core.supplementary import BOGIE_KINDS, PSD_KINDS, SUPPLEMENTARY, psd_band_values
 from railval.core.types import CHANNELS, WHEEL_POSITIONS, SectionInfo, SignalSet, channel_name
@@ -155,9 +157,17 @@ def percentile(x: np.ndarray, p, axis: int = -1) -> np.ndarray:
 def _row_percentiles(rows: np.ndarray, methods: tuple[str, ...] = (QUANTILE_METHOD,)
                      ) -> list[np.ndarray]:
     """(0.15 %, 50 %, 99.85 %) values of every row under each percentile method, each of shape
-    (n_rows, 3); one sort serves all methods."""
-    srt = np.sort(rows, axis=-1)
-    return [sorted_percentiles(srt, PERCENTILES, m) for m in methods]
+    (n_rows, 3): the order statistics the methods read are selected once for all of them
+    (:func:`railval.core.orderstat.order_statistics`, exact, no sort of the rows) and the
+    percentiles formed from them as :func:`railval.core.definitions.sorted_percentiles`
+    forms them from a sorted row."""
+    rows = np.atleast_2d(rows)
+    n = rows.shape[-1]
+    ranks = sorted({r for m in methods for r in percentile_ranks(n, PERCENTILES, m)})
+    stats = order_statistics(rows, ranks)
+    column = {r: c for c, r in enumerate(ranks)}
+    return [percentiles_from_order(lambda i: stats[:, column[i]], n, PERCENTILES, m)
+            for m in methods]
 
 
 def maxabs(p_low: np.ndarray | float, p_high: np.ndarray | float):
