@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -259,7 +260,7 @@ def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
         if np.shape(arr) != (n,):
             raise InvalidSignal(
                 f"section {sec.id}: channel {name} has shape {np.shape(arr)}, expected ({n},)")
-        peak = float(np.max(np.abs(arr))) if n else 0.0
+        peak = max(float(np.max(arr)), -float(np.min(arr))) if n else 0.0
         if not np.isfinite(peak):
             raise InvalidSignal(f"section {sec.id}: channel {name} holds non-finite values "
                                 f"({peak:g})")
@@ -301,15 +302,41 @@ def _needed_channels(ss: SignalSet) -> tuple[list[str], list[str]]:
     return ([c for f, c in present if f == "lowpass"], [c for f, c in present if f == "bandpass"])
 
 
+class _Clock:
+    """Wall time per stage of :func:`evaluate_batch` (``lap(stage)`` adds the time since the
+    previous lap to ``stage``) into the caller's dict; no-op without one."""
+
+    def __init__(self, into: dict[str, float] | None):
+        self.into = into
+        self.last = time.perf_counter() if into is not None else 0.0
+
+    def lap(self, stage: str) -> None:
+        if self.into is not None:
+            now = time.perf_counter()
+            self.into[stage] = self.into.get(stage, 0.0) + (now - self.last)
+            self.last = now
+
+
 def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionInfo], *,
-                   order: int = DEFAULT_ORDER) -> list[SectionValues]:
+                   order: int = DEFAULT_ORDER, alternatives: bool = True,
+                   supplementary: bool = True,
+                   timings: dict[str, float] | None = None) -> list[SectionValues]:
     """Process many sections at once (vectorised path); returns one SectionValues each.
 
     Sections with equal sampling rate and length are filtered together (one compiled
-    zero-phase call per filter kind over all their channels); each section's statistics come
-    from one row-wise sort of all its evaluated rows. Results equal :func:`evaluate_section`
-    on each section alone.
+    zero-phase call per filter kind over all their channels, 16 channels in lockstep, the
+    cores sharing the blocks); each section's percentiles come from the order statistics
+    selected once for all its evaluated rows (:mod:`railval.core.orderstat`). Results equal
+    :func:`evaluate_section` on each section alone.
+
+    ``alternatives=False`` leaves out the values under the other readings of the open
+    definitions and ``supplementary=False`` the PSD band values of the supplementary values
+    (the bogie-frame rms and maximum come with the band-pass call regardless; both for timing the
+    chosen reading alone: ``railval bench en``); ``timings``, when given, receives the wall
+    time in s of each stage: ``checks``, ``filter``, ``statistics``, ``alternatives``,
+    ``supplementary``.
     """
+    clock = _Clock(timings)
     check_order(order)
     if len(signalsets) != len(sections):
         raise InvalidParameter(
@@ -323,6 +350,7 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
         plans.append(_Plan(lp, bp, slice(0, 0), slice(0, 0)))
         groups.setdefault((float(ss.fs), len(ss)), []).append(i)
 
+    clock.lap("checks")
     filtered_lp: dict[int, np.ndarray] = {}
     filtered_bp: dict[int, np.ndarray] = {}
     for (fs, n), members in groups.items():
@@ -330,20 +358,18 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
                                   ("bandpass", "bp_names", filtered_bp)):
             rows = [np.asarray(signalsets[i].channels[c], dtype=np.float64)
                     for i in members for c in getattr(plans[i], attr)]
-            if not rows:
+            if not rows:  # (non-finite samples were refused by _check_signalset)
                 continue
-            if not all(np.isfinite(r.sum()) for r in rows):
-                bad = [(sections[i].id, c) for i in members for c in getattr(plans[i], attr)
-                       if not np.all(np.isfinite(signalsets[i].channels[c]))]
-                raise InvalidSignal(f"non-finite samples (NaN/inf) in section/channel {bad[0]}")
             out = filtfilt_rows(rows, fs, kind, order)
             pos = 0
             for i in members:
                 k = len(getattr(plans[i], attr))
                 store[i] = out[pos:pos + k]
                 pos += k
+    clock.lap("filter")
     return [_section_stats(signalsets[i], sections[i], plans[i], filtered_lp.get(i),
-                           filtered_bp.get(i), order) for i in range(len(signalsets))]
+                           filtered_bp.get(i), order, alternatives, supplementary, clock)
+            for i in range(len(signalsets))]
 
 
 def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,
@@ -358,7 +384,10 @@ def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,
 
 
 def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray | None,
-                   bp: np.ndarray | None, order: int) -> SectionValues:
+                   bp: np.ndarray | None, order: int, with_alternatives: bool = True,
+                   with_supplementary: bool = True, clock: _Clock | None = None
+                   ) -> SectionValues:
+    clock = clock or _Clock(None)
     d = np.asarray(ss.distance_m, dtype=np.float64)
     mask = (d >= sec.eval_start_m) & (d <= sec.eval_end_m)
     n_eval = int(mask.sum())
@@ -377,11 +406,12 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
     warnings: list[str] = []
     alts: dict[str, dict[tuple[str, str], float]] = {}
     supp: dict[tuple[str, str], float] = {}
-    methods = (QUANTILE_METHOD, _LINEAR.percentile)
+    methods = ((QUANTILE_METHOD, _LINEAR.percentile) if with_alternatives
+               else (QUANTILE_METHOD,))
 
     def alternative(reading: Reading, key: tuple[str, str], value: float) -> None:
         # kept only where the reading changes the value (NaN: undefined under the reading)
-        if value != values[key]:  # True for NaN as well
+        if with_alternatives and value != values[key]:  # True for NaN as well
             alts.setdefault(reading.id, {})[key] = float(value)
 
     if lp is not None and lp.shape[0]:
@@ -418,8 +448,9 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
             r += 1
         rows[r:r + len(wheels_yq)] = ratio[:, inner]
         rows[r + len(wheels_yq):] = sumy[:, inner]
-        pct, pct_lin = (_row_percentiles(rows, methods) if rows.shape[0]
-                        else (np.empty((0, 3)), np.empty((0, 3))))
+        both = (_row_percentiles(rows, methods) if rows.shape[0]
+                else [np.empty((0, 3))] * len(methods))
+        pct, pct_lin = both[0], both[-1]
         r = 0
         for fam, positions in (("Y", wheels_y), ("Q", wheels_q), ("YQ", wheels_yq),
                                ("SumY", wsets)):
@@ -461,15 +492,19 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
                           "filtered forces")
                 prov[key] = (lp_label, derive, slide_text,
                              "max(|0.15 % value|, |99.85 % value|)", pct_text)
-            _sliding_alternatives(slide_rows, d_wide, d[cut.start], sec, slide_keys,
-                                  means, methods, alternative)
+            clock.lap("statistics")
+            if with_alternatives:
+                _sliding_alternatives(slide_rows, d_wide, d[cut.start], sec, slide_keys,
+                                      means, methods, alternative)
+            clock.lap("alternatives")
 
     if bp is not None and bp.shape[0]:
         bp_label = design(fs, "bandpass", order).label + ", whole section"
         warnings += [w.message for w in settling_check(ss.time_s, mask, fs, "bandpass", order,
                                                        sec.id)]
         rows = bp[:, cut]
-        pct, pct_lin = _row_percentiles(rows, methods)
+        both = _row_percentiles(rows, methods)
+        pct, pct_lin = both[0], both[-1]
         rmsv = rms(rows)
         for r, name in enumerate(plan.bp_names):
             kind, _, pos = name.rpartition("_")
@@ -485,9 +520,12 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
                                        "max(|0.15 % value|, |99.85 % value|)", pct_text)
             alternative(_LINEAR, (f"{q}_max", pos), maxabs(pct_lin[r, 0], pct_lin[r, 2]))
 
-    raw_acc = {name: np.asarray(arr, dtype=np.float64)[cut] for name, arr in ss.channels.items()
-               if name.rpartition("_")[0] in PSD_KINDS}
-    supp.update(psd_band_values(raw_acc, fs))
+    clock.lap("statistics")
+    if with_supplementary:
+        raw_acc = {name: np.asarray(arr, dtype=np.float64)[cut]
+                   for name, arr in ss.channels.items() if name.rpartition("_")[0] in PSD_KINDS}
+        supp.update(psd_band_values(raw_acc, fs))
+    clock.lap("supplementary")
 
     order_keys = [(q, p) for q, quantity in QUANTITIES.items() for p in quantity.positions()]
     ordered = {k: values[k] for k in order_keys if k in values}

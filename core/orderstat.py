@@ -133,6 +133,7 @@ def order_statistics(rows: np.ndarray, ranks) -> np.ndarray:
     uniq, back = np.unique(order, return_inverse=True)
     out = np.empty((arr.shape[0], uniq.size))
     if arr.shape[0] and uniq.size:
+        # a part of at least ~200 000 samples: smaller ones cost more to hand over than to do
         split_rows(lambda a, b: _order_statistics_kernel(arr, uniq, out, a, b), arr.shape[0],
-                   min_rows=4)
+                   min_rows=max(1, 200_000 // max(n, 1)))
     return out[:, back]
