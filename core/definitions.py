@@ -47,6 +47,7 @@ Hyndman, R.J. & Fan, Y. (1996) Sample quantiles in statistical packages, Am. Sta
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 
@@ -160,9 +161,19 @@ def sorted_percentiles(srt: np.ndarray, ps, method: str) -> np.ndarray:
 def percentile_ranks(n: int, ps, method: str) -> list[int]:
     """The 0-based positions in the sorted sample of size ``n`` that :func:`sorted_percentiles`
     reads for ``ps`` under ``method`` (a percentile needs only these order statistics)."""
-    out: list[int] = []
-    percentiles_from_order(lambda i: out.append(i) or np.zeros(1), n, ps, method)
-    return sorted(set(out))
+    return list(_percentile_ranks(int(n), tuple(float(p) for p in ps), method))
+
+
+@functools.lru_cache(maxsize=1024)
+def _percentile_ranks(n: int, ps: tuple[float, ...], method: str) -> tuple[int, ...]:
+    read: list[int] = []
+
+    def take(i: int) -> np.ndarray:  # records which order statistic the formula reads
+        read.append(i)
+        return np.zeros(1)
+
+    percentiles_from_order(take, n, ps, method)
+    return tuple(sorted(set(read)))
 
 
 def percentiles_from_order(take, n: int, ps, method: str) -> np.ndarray:

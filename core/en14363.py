@@ -205,6 +205,14 @@ def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: f
     one_d = v.ndim == 1
     if one_d:
         v = v[np.newaxis, :]
+    _check_sliding_range(d, start_m, end_m, window_m, step_m)
+    (centres, means), = _interpolant_means(
+        v, d, start_m, end_m, window_m, step_m, [start_m if origin_m is None else origin_m])
+    return centres, (means[0] if one_d else means)
+
+
+def _check_sliding_range(d: np.ndarray, start_m: float, end_m: float, window_m: float,
+                         step_m: float) -> None:
     if window_m <= 0 or step_m <= 0:
         raise InvalidParameter(
             f"window_m and step_m must be > 0 m, got window_m={window_m}, step_m={step_m}")
@@ -216,9 +224,6 @@ def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: f
         raise InvalidSignal(
             f"evaluated range {start_m}–{end_m} m exceeds the distance axis "
             f"{d[0]:.3f}–{d[-1]:.3f} m")
-    (centres, means), = _interpolant_means(
-        v, d, start_m, end_m, window_m, step_m, [start_m if origin_m is None else origin_m])
-    return centres, (means[0] if one_d else means)
 
 
 def _interpolant_means(v: np.ndarray, d: np.ndarray, start_m: float, end_m: float,
@@ -227,9 +232,13 @@ def _interpolant_means(v: np.ndarray, d: np.ndarray, start_m: float, end_m: floa
     ``origins``; the cumulative integral is formed once for all of them."""
     half = window_m / 2.0
     h = np.diff(d)
-    # cumulative trapezoid at the samples, per row
-    cum = np.zeros_like(v)
-    np.cumsum(0.5 * (v[:, 1:] + v[:, :-1]) * h, axis=1, out=cum[:, 1:])
+    # cumulative trapezoid at the samples, per row (in place: one array, contiguous cumsum)
+    cum = np.empty_like(v)
+    cum[:, 0] = 0.0
+    np.add(v[:, 1:], v[:, :-1], out=cum[:, 1:])
+    cum[:, 1:] *= 0.5
+    cum[:, 1:] *= h
+    np.cumsum(cum, axis=1, out=cum)
 
     def integral_at(x):
         j = np.clip(np.searchsorted(d, x, side="right") - 1, 0, d.size - 2)
@@ -478,8 +487,13 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
             slide_keys = ([("YQ_max", p) for p in wheels_yq] +
                           [("SumY_max", w) for w in wsets])
             d_wide = d[wide]
-            _, means = sliding_mean_distance(slide_rows, d_wide, sec.eval_start_m,
-                                             sec.eval_end_m)
+            # the chosen grid (from the section start) and, for the alternative readings, the
+            # grid from the first evaluated sample: one cumulative integral for both
+            _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
+            origins = [sec.eval_start_m] + ([float(d[cut.start])] if with_alternatives else [])
+            interp = _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
+                                        WINDOW_M, STEP_M, origins)
+            means = interp[0][1]
             spct, = _row_percentiles(means)
             slide_text = (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
                           f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "
@@ -495,7 +509,7 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
             clock.lap("statistics")
             if with_alternatives:
                 _sliding_alternatives(slide_rows, d_wide, d[cut.start], sec, slide_keys,
-                                      means, methods, alternative)
+                                      means, interp[1][1], methods, alternative)
             clock.lap("alternatives")
 
     if bp is not None and bp.shape[0]:
@@ -536,15 +550,16 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
 
 def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: float,
                           sec: SectionInfo, keys: list[tuple[str, str]], chosen_means: np.ndarray,
-                          methods: tuple[str, ...], alternative) -> None:
+                          first_interp: np.ndarray, methods: tuple[str, ...],
+                          alternative) -> None:
     """Values of the sliding-mean maxima under every other reading (grid alignment × window
     mean × percentile method, :mod:`railval.core.definitions`) from the same derived rows;
     the prefix sums and the cumulative integral are formed once for all readings."""
     origins = {"section_start": sec.eval_start_m, "first_sample": float(first_m)}
-    (_, first_interp), = _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
-                                            WINDOW_M, STEP_M, [origins["first_sample"]])
-    prefix = np.zeros((slide_rows.shape[0], slide_rows.shape[1] + 1))
-    np.cumsum(slide_rows, axis=1, out=prefix[:, 1:])
+    prefix = np.empty((slide_rows.shape[0], slide_rows.shape[1] + 1))
+    prefix[:, 0] = 0.0
+    prefix[:, 1:] = slide_rows
+    np.cumsum(prefix, axis=1, out=prefix)  # in place: the same sums, a contiguous cumsum
     for grid, window in SLIDING_VARIANTS:
         if (grid, window) == CHOSEN.sliding:
             means = chosen_means
