@@ -237,7 +237,7 @@ def filtfilt_rows(data, fs: float, kind: str, order: int = DEFAULT_ORDER) -> np.
         n = rows[0].shape[0]
         if any(r.shape != (n,) for r in rows):
             raise InvalidSignal("filtfilt_rows: all signals must be 1-D and equally long")
-        arr = np.stack(rows)
+        arr = None  # staged block by block (no copy of all rows at once)
         one_d = False
     else:
         arr = np.asarray(data, dtype=np.float64)
@@ -249,7 +249,7 @@ def filtfilt_rows(data, fs: float, kind: str, order: int = DEFAULT_ORDER) -> np.
         if arr.shape[0] == 0:
             return np.empty((0, 0))
         arr = np.ascontiguousarray(arr)
-    n = arr.shape[1]
+    n = arr.shape[1] if arr is not None else rows[0].shape[0]
     if n <= d.edge:
         raise InvalidSignal(
             f"signal length {n} samples must exceed the filter padding {d.edge} "
@@ -257,10 +257,24 @@ def filtfilt_rows(data, fs: float, kind: str, order: int = DEFAULT_ORDER) -> np.
         )
     from railval.core.workers import split_rows
 
-    out = np.empty(arr.shape, dtype=np.float64)
-    split_rows(lambda a, b: _filtfilt_rows_kernel(d.sos, d.zi, d.edge, arr, out, a, b),
-               arr.shape[0], min_rows=_BLOCK, align=_BLOCK)
-    return out[0] if one_d else out
+    if arr is not None:
+        out = np.empty(arr.shape, dtype=np.float64)
+        split_rows(lambda a, b: _filtfilt_rows_kernel(d.sos, d.zi, d.edge, arr, out, a, b),
+                   arr.shape[0], min_rows=_BLOCK, align=_BLOCK)
+        return out[0] if one_d else out
+    out = np.empty((len(rows), n), dtype=np.float64)
+
+    def part(a: int, b: int) -> None:
+        # the rows of one block copied into a buffer reused from block to block
+        buf = np.empty((_BLOCK, n))
+        for s in range(a, b, _BLOCK):
+            e = min(s + _BLOCK, b)
+            for k in range(s, e):
+                buf[k - s] = rows[k]
+            _filtfilt_rows_kernel(d.sos, d.zi, d.edge, buf, out[s:e], 0, e - s)
+
+    split_rows(part, len(rows), min_rows=_BLOCK, align=_BLOCK)
+    return out
 
 
 @dataclass(frozen=True)
