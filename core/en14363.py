@@ -313,16 +313,22 @@ def _needed_channels(ss: SignalSet) -> tuple[list[str], list[str]]:
 
 class _Clock:
     """Wall time per stage of :func:`evaluate_batch` (``lap(stage)`` adds the time since the
-    previous lap to ``stage``) into the caller's dict; no-op without one."""
+    previous lap to ``stage``) into the caller's dict, else into the active stage collector
+    (:mod:`railval.core.stages`); no-op without either."""
 
     def __init__(self, into: dict[str, float] | None):
-        self.into = into
-        self.last = time.perf_counter() if into is not None else 0.0
+        from railval.core import stages
+
+        collector = stages.current() if into is None else None
+        self.add = (None if into is None and collector is None
+                    else collector.add if collector is not None
+                    else lambda k, v: into.__setitem__(k, into.get(k, 0.0) + v))
+        self.last = time.perf_counter() if self.add is not None else 0.0
 
     def lap(self, stage: str) -> None:
-        if self.into is not None:
+        if self.add is not None:
             now = time.perf_counter()
-            self.into[stage] = self.into.get(stage, 0.0) + (now - self.last)
+            self.add(stage, now - self.last)
             self.last = now
 
 
