@@ -73,6 +73,18 @@ _THREAD_POOL = None
 _THREAD_POOL_LOCK = threading.Lock()
 
 
+def _forget_thread_pool() -> None:
+    """In a forked child: the parent's pool threads do not exist there, so its pool must not
+    be used (tasks would wait forever); the child makes its own on first use."""
+    global _THREAD_POOL, _THREAD_POOL_LOCK
+    _THREAD_POOL = None
+    _THREAD_POOL_LOCK = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_thread_pool)
+
+
 def thread_count() -> int:
     """Threads for row-parallel compiled kernels: ``$RAILVAL_THREADS`` if set (≥ 1), else the
     cores this process may run on (at most 8)."""

@@ -102,3 +102,16 @@ def test_lockstep_filter_equals_scipy(kind, threads, monkeypatch):
         x = 70 + 5 * rng.standard_normal((rows, 3000))
         ref = scipy.signal.sosfiltfilt(design(500.0, kind, 4).sos, x, axis=-1)
         np.testing.assert_allclose(filtfilt_rows(x, 500.0, kind), ref, rtol=1e-13, atol=1e-12)
+
+
+def test_a_forked_child_filters_with_its_own_threads(monkeypatch):
+    """A process forked after the row threads exist (a process pool under ``fork``) must not
+    use the parent's pool, whose threads it does not have (it waited forever before)."""
+    import multiprocessing as mp
+
+    monkeypatch.setenv("RAILVAL_THREADS", "2")
+    x = 70 + 5 * np.random.default_rng(3).standard_normal((64, 2000))
+    ref = filtfilt_rows(x, 500.0, "lowpass")  # creates the parent's pool (64 rows: 2 parts)
+    with mp.get_context("fork").Pool(1) as pool:
+        got = pool.apply_async(filtfilt_rows, (x, 500.0, "lowpass")).get(timeout=120)
+    np.testing.assert_array_equal(got, ref)
