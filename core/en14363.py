@@ -54,6 +54,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from railval.core.definitions import (
@@ -232,25 +233,46 @@ def _interpolant_means(v: np.ndarray, d: np.ndarray, start_m: float, end_m: floa
     ``origins``; the cumulative integral is formed once for all of them."""
     half = window_m / 2.0
     h = np.diff(d)
-    # cumulative trapezoid at the samples, per row (in place: one array, contiguous cumsum)
-    cum = np.empty_like(v)
-    cum[:, 0] = 0.0
-    np.add(v[:, 1:], v[:, :-1], out=cum[:, 1:])
-    cum[:, 1:] *= 0.5
-    cum[:, 1:] *= h
-    np.cumsum(cum, axis=1, out=cum)
-
-    def integral_at(x):
-        j = np.clip(np.searchsorted(d, x, side="right") - 1, 0, d.size - 2)
-        u = x - d[j]
-        slope = (v[:, j + 1] - v[:, j]) / h[j]
-        return cum[:, j] + v[:, j] * u + 0.5 * slope * u * u
-
-    out = []
+    grids = []
     for origin in origins:
         centres = window_centres(start_m, end_m, origin, window_m, step_m)
-        out.append((centres, (integral_at(centres + half) - integral_at(centres - half)) / window_m))
+        ends = []
+        for x in (centres - half, centres + half):
+            j = np.clip(np.searchsorted(d, x, side="right") - 1, 0, d.size - 2)
+            ends.append((j, x - d[j]))
+        grids.append((centres, ends))
+    j_all = np.concatenate([e[0] for _, ends in grids for e in ends])
+    u_all = np.concatenate([e[1] for _, ends in grids for e in ends])
+    at = np.empty((v.shape[0], j_all.size))
+    _integral_at(np.ascontiguousarray(v), h, j_all, u_all, at)
+    out = []
+    pos = 0
+    for centres, _ in grids:
+        k = centres.size
+        out.append((centres, (at[:, pos + k:pos + 2 * k] - at[:, pos:pos + k]) / window_m))
+        pos += 2 * k
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _integral_at(v, h, j, u, out):  # pragma: no cover - compiled
+    """``out[r, k]`` = C(x_k) of row r, the integral of the piecewise-linear signal from the
+    first sample to ``x_k = d[j[k]] + u[k]``: the cumulative trapezoid at the samples
+    (``C_0 = 0``, ``C_i = C_{i−1} + 0.5·(v_i + v_{i−1})·h_{i−1}``, summed in order as numpy's
+    cumsum sums) plus the quadratic of the interval ``[d_j, d_{j+1}]``:
+    ``C_j + v_j·u + 0.5·slope·u²`` with ``slope = (v_{j+1} − v_j)/h_j`` — the same operations
+    in the same order as the former numpy expression, so the same numbers."""
+    rows, n = v.shape
+    cum = np.empty(n)
+    for r in range(rows):
+        cum[0] = 0.0
+        for i in range(1, n):
+            cum[i] = cum[i - 1] + (v[r, i] + v[r, i - 1]) * 0.5 * h[i - 1]
+        for k in range(j.shape[0]):
+            jj = j[k]
+            uu = u[k]
+            slope = (v[r, jj + 1] - v[r, jj]) / h[jj]
+            out[r, k] = cum[jj] + v[r, jj] * uu + 0.5 * slope * uu * uu
 
 
 # --------------------------------------------------------------------------- validation
