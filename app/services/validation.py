@@ -30,6 +30,7 @@ The campaign and configuration names are resolved once at the entrance
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from typing import Any
@@ -114,10 +115,15 @@ def _decode_and_evaluate(decode, sections: list[SectionInfo],
 
 
 def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
-                    sections: list[SectionInfo], order: int) -> tuple[list[bytes], dict]:
+                    sections: list[SectionInfo], order: int,
+                    threads: int | None = None) -> tuple[list[bytes], dict]:
     """Worker task: load and process some sections of one source; returns packed values and
     the seconds per stage it spent (:mod:`railval.core.stages`).
-    ``db_or_url``: a :class:`railval.db.engine.Database` (in-process) or its URL (worker process)."""
+    ``db_or_url``: a :class:`railval.db.engine.Database` (in-process) or its URL (worker
+    process); ``threads``: row threads of the EN chain in this worker process (the workers
+    share the cores, so each takes its part instead of all of them)."""
+    if threads:
+        os.environ["RAILVAL_THREADS"] = str(threads)
     with collect() as stages:
         with stage("database"):
             database = _worker_database(db_or_url) if isinstance(db_or_url, str) else db_or_url
@@ -193,11 +199,13 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
                      {"done": len(computed)})
 
     if workers > 1 and len(chunks) > 1:
-        from railval.core.workers import pool_kwargs
+        from railval.core.workers import pool_kwargs, thread_count
 
+        threads = max(1, thread_count() // workers)
         with ProcessPoolExecutor(max_workers=workers, **pool_kwargs()) as pool:
             futures = [(c, pool.submit(_evaluate_chunk, database.url, name, c[0],
-                                       [by_id[s] for s in c[1]], order)) for c in chunks]
+                                       [by_id[s] for s in c[1]], order, threads))
+                       for c in chunks]
             for chunk, fut in futures:
                 collect_chunk(chunk, fut.result())
     else:
