@@ -47,6 +47,7 @@ Hyndman, R.J. & Fan, Y. (1996) Sample quantiles in statistical packages, Am. Sta
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 
@@ -154,23 +155,46 @@ def sorted_percentiles(srt: np.ndarray, ps, method: str) -> np.ndarray:
     (rank 1 for n·p < 1); ``linear``: numpy's type-7 interpolation at h = (n − 1)·p with
     numpy's own lerp, so the result equals ``numpy.quantile(x, p, method=...)`` bit for bit."""
     srt = np.atleast_2d(srt)
-    n = srt.shape[-1]
+    return percentiles_from_order(lambda i: srt[:, i], srt.shape[-1], ps, method)
+
+
+def percentile_ranks(n: int, ps, method: str) -> list[int]:
+    """The 0-based positions in the sorted sample of size ``n`` that :func:`sorted_percentiles`
+    reads for ``ps`` under ``method`` (a percentile needs only these order statistics)."""
+    return list(_percentile_ranks(int(n), tuple(float(p) for p in ps), method))
+
+
+@functools.lru_cache(maxsize=1024)
+def _percentile_ranks(n: int, ps: tuple[float, ...], method: str) -> tuple[int, ...]:
+    read: list[int] = []
+
+    def take(i: int) -> np.ndarray:  # records which order statistic the formula reads
+        read.append(i)
+        return np.zeros(1)
+
+    percentiles_from_order(take, n, ps, method)
+    return tuple(sorted(set(read)))
+
+
+def percentiles_from_order(take, n: int, ps, method: str) -> np.ndarray:
+    """:func:`sorted_percentiles` from the order statistics alone: ``take(i)`` gives the
+    samples of 0-based rank ``i`` of every row (shape (rows,)), ``n`` the row length."""
     ps = [float(p) for p in ps]
     if method == "inverted_cdf":
         idx = [min(max(int(np.ceil(n * p - 1e-12)) - 1, 0), n - 1) for p in ps]
-        return srt[:, idx]
+        return np.stack([take(i) for i in idx], axis=-1)
     if method == "linear":
-        out = np.empty((srt.shape[0], len(ps)))
-        for k, p in enumerate(ps):
+        cols = []
+        for p in ps:
             h = (n - 1) * p
             lo = min(int(np.floor(h)), n - 1)
             hi = min(lo + 1, n - 1)
             g = h - lo
-            a, b = srt[:, lo], srt[:, hi]
+            a, b = take(lo), take(hi)
             diff = b - a
             # numpy's _lerp: a + diff·g, from the upper end for g ≥ 0.5 (monotone, exact ends)
-            out[:, k] = b - diff * (1.0 - g) if g >= 0.5 else a + diff * g
-        return out
+            cols.append(b - diff * (1.0 - g) if g >= 0.5 else a + diff * g)
+        return np.stack(cols, axis=-1)
     raise InvalidParameter(f"percentile method must be one of {PERCENTILE_METHODS}, got {method!r}")
 
 

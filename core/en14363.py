@@ -50,21 +50,25 @@ from __future__ import annotations
 
 import hashlib
 import json
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from railval.core.definitions import (
     CHOSEN,
     SLIDING_VARIANTS,
     Reading,
+    percentile_ranks,
+    percentiles_from_order,
     sample_window_means,
-    sorted_percentiles,
     window_centres,
 )
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows, settling_check
+from railval.core.orderstat import order_statistics
 from railval.core.quantities import QUANTITIES, WHEELSET_POSITIONS
 from railval.core.supplementary import BOGIE_KINDS, PSD_KINDS, SUPPLEMENTARY, psd_band_values
 from railval.core.types import CHANNELS, WHEEL_POSITIONS, SectionInfo, SignalSet, channel_name
@@ -155,9 +159,17 @@ def percentile(x: np.ndarray, p, axis: int = -1) -> np.ndarray:
 def _row_percentiles(rows: np.ndarray, methods: tuple[str, ...] = (QUANTILE_METHOD,)
                      ) -> list[np.ndarray]:
     """(0.15 %, 50 %, 99.85 %) values of every row under each percentile method, each of shape
-    (n_rows, 3); one sort serves all methods."""
-    srt = np.sort(rows, axis=-1)
-    return [sorted_percentiles(srt, PERCENTILES, m) for m in methods]
+    (n_rows, 3): the order statistics the methods read are selected once for all of them
+    (:func:`railval.core.orderstat.order_statistics`, exact, no sort of the rows) and the
+    percentiles formed from them as :func:`railval.core.definitions.sorted_percentiles`
+    forms them from a sorted row."""
+    rows = np.atleast_2d(rows)
+    n = rows.shape[-1]
+    ranks = sorted({r for m in methods for r in percentile_ranks(n, PERCENTILES, m)})
+    stats = order_statistics(rows, ranks)
+    column = {r: c for c, r in enumerate(ranks)}
+    return [percentiles_from_order(lambda i: stats[:, column[i]], n, PERCENTILES, m)
+            for m in methods]
 
 
 def maxabs(p_low: np.ndarray | float, p_high: np.ndarray | float):
@@ -194,6 +206,14 @@ def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: f
     one_d = v.ndim == 1
     if one_d:
         v = v[np.newaxis, :]
+    _check_sliding_range(d, start_m, end_m, window_m, step_m)
+    (centres, means), = _interpolant_means(
+        v, d, start_m, end_m, window_m, step_m, [start_m if origin_m is None else origin_m])
+    return centres, (means[0] if one_d else means)
+
+
+def _check_sliding_range(d: np.ndarray, start_m: float, end_m: float, window_m: float,
+                         step_m: float) -> None:
     if window_m <= 0 or step_m <= 0:
         raise InvalidParameter(
             f"window_m and step_m must be > 0 m, got window_m={window_m}, step_m={step_m}")
@@ -205,9 +225,6 @@ def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: f
         raise InvalidSignal(
             f"evaluated range {start_m}–{end_m} m exceeds the distance axis "
             f"{d[0]:.3f}–{d[-1]:.3f} m")
-    (centres, means), = _interpolant_means(
-        v, d, start_m, end_m, window_m, step_m, [start_m if origin_m is None else origin_m])
-    return centres, (means[0] if one_d else means)
 
 
 def _interpolant_means(v: np.ndarray, d: np.ndarray, start_m: float, end_m: float,
@@ -216,21 +233,46 @@ def _interpolant_means(v: np.ndarray, d: np.ndarray, start_m: float, end_m: floa
     ``origins``; the cumulative integral is formed once for all of them."""
     half = window_m / 2.0
     h = np.diff(d)
-    # cumulative trapezoid at the samples, per row
-    cum = np.zeros_like(v)
-    np.cumsum(0.5 * (v[:, 1:] + v[:, :-1]) * h, axis=1, out=cum[:, 1:])
-
-    def integral_at(x):
-        j = np.clip(np.searchsorted(d, x, side="right") - 1, 0, d.size - 2)
-        u = x - d[j]
-        slope = (v[:, j + 1] - v[:, j]) / h[j]
-        return cum[:, j] + v[:, j] * u + 0.5 * slope * u * u
-
-    out = []
+    grids = []
     for origin in origins:
         centres = window_centres(start_m, end_m, origin, window_m, step_m)
-        out.append((centres, (integral_at(centres + half) - integral_at(centres - half)) / window_m))
+        ends = []
+        for x in (centres - half, centres + half):
+            j = np.clip(np.searchsorted(d, x, side="right") - 1, 0, d.size - 2)
+            ends.append((j, x - d[j]))
+        grids.append((centres, ends))
+    j_all = np.concatenate([e[0] for _, ends in grids for e in ends])
+    u_all = np.concatenate([e[1] for _, ends in grids for e in ends])
+    at = np.empty((v.shape[0], j_all.size))
+    _integral_at(np.ascontiguousarray(v), h, j_all, u_all, at)
+    out = []
+    pos = 0
+    for centres, _ in grids:
+        k = centres.size
+        out.append((centres, (at[:, pos + k:pos + 2 * k] - at[:, pos:pos + k]) / window_m))
+        pos += 2 * k
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _integral_at(v, h, j, u, out):  # pragma: no cover - compiled
+    """``out[r, k]`` = C(x_k) of row r, the integral of the piecewise-linear signal from the
+    first sample to ``x_k = d[j[k]] + u[k]``: the cumulative trapezoid at the samples
+    (``C_0 = 0``, ``C_i = C_{i−1} + 0.5·(v_i + v_{i−1})·h_{i−1}``, summed in order as numpy's
+    cumsum sums) plus the quadratic of the interval ``[d_j, d_{j+1}]``:
+    ``C_j + v_j·u + 0.5·slope·u²`` with ``slope = (v_{j+1} − v_j)/h_j`` — the same operations
+    in the same order as the former numpy expression, so the same numbers."""
+    rows, n = v.shape
+    cum = np.empty(n)
+    for r in range(rows):
+        cum[0] = 0.0
+        for i in range(1, n):
+            cum[i] = cum[i - 1] + (v[r, i] + v[r, i - 1]) * 0.5 * h[i - 1]
+        for k in range(j.shape[0]):
+            jj = j[k]
+            uu = u[k]
+            slope = (v[r, jj + 1] - v[r, jj]) / h[jj]
+            out[r, k] = cum[jj] + v[r, jj] * uu + 0.5 * slope * uu * uu
 
 
 # --------------------------------------------------------------------------- validation
@@ -249,7 +291,7 @@ def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
         if np.shape(arr) != (n,):
             raise InvalidSignal(
                 f"section {sec.id}: channel {name} has shape {np.shape(arr)}, expected ({n},)")
-        peak = float(np.max(np.abs(arr))) if n else 0.0
+        peak = max(float(np.max(arr)), -float(np.min(arr))) if n else 0.0
         if not np.isfinite(peak):
             raise InvalidSignal(f"section {sec.id}: channel {name} holds non-finite values "
                                 f"({peak:g})")
@@ -291,15 +333,47 @@ def _needed_channels(ss: SignalSet) -> tuple[list[str], list[str]]:
     return ([c for f, c in present if f == "lowpass"], [c for f, c in present if f == "bandpass"])
 
 
+class _Clock:
+    """Wall time per stage of :func:`evaluate_batch` (``lap(stage)`` adds the time since the
+    previous lap to ``stage``) into the caller's dict, else into the active stage collector
+    (:mod:`railval.core.stages`); no-op without either."""
+
+    def __init__(self, into: dict[str, float] | None):
+        from railval.core import stages
+
+        collector = stages.current() if into is None else None
+        self.add = (None if into is None and collector is None
+                    else collector.add if collector is not None
+                    else lambda k, v: into.__setitem__(k, into.get(k, 0.0) + v))
+        self.last = time.perf_counter() if self.add is not None else 0.0
+
+    def lap(self, stage: str) -> None:
+        if self.add is not None:
+            now = time.perf_counter()
+            self.add(stage, now - self.last)
+            self.last = now
+
+
 def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionInfo], *,
-                   order: int = DEFAULT_ORDER) -> list[SectionValues]:
+                   order: int = DEFAULT_ORDER, alternatives: bool = True,
+                   supplementary: bool = True,
+                   timings: dict[str, float] | None = None) -> list[SectionValues]:
     """Process many sections at once (vectorised path); returns one SectionValues each.
 
     Sections with equal sampling rate and length are filtered together (one compiled
-    zero-phase call per filter kind over all their channels); each section's statistics come
-    from one row-wise sort of all its evaluated rows. Results equal :func:`evaluate_section`
-    on each section alone.
+    zero-phase call per filter kind over all their channels, 16 channels in lockstep, the
+    cores sharing the blocks); each section's percentiles come from the order statistics
+    selected once for all its evaluated rows (:mod:`railval.core.orderstat`). Results equal
+    :func:`evaluate_section` on each section alone.
+
+    ``alternatives=False`` leaves out the values under the other readings of the open
+    definitions and ``supplementary=False`` the PSD band values of the supplementary values
+    (the bogie-frame rms and maximum come with the band-pass call regardless; both for timing the
+    chosen reading alone: ``railval bench en``); ``timings``, when given, receives the wall
+    time in s of each stage: ``checks``, ``filter``, ``statistics``, ``alternatives``,
+    ``supplementary``.
     """
+    clock = _Clock(timings)
     check_order(order)
     if len(signalsets) != len(sections):
         raise InvalidParameter(
@@ -313,6 +387,7 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
         plans.append(_Plan(lp, bp, slice(0, 0), slice(0, 0)))
         groups.setdefault((float(ss.fs), len(ss)), []).append(i)
 
+    clock.lap("checks")
     filtered_lp: dict[int, np.ndarray] = {}
     filtered_bp: dict[int, np.ndarray] = {}
     for (fs, n), members in groups.items():
@@ -320,20 +395,18 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
                                   ("bandpass", "bp_names", filtered_bp)):
             rows = [np.asarray(signalsets[i].channels[c], dtype=np.float64)
                     for i in members for c in getattr(plans[i], attr)]
-            if not rows:
+            if not rows:  # (non-finite samples were refused by _check_signalset)
                 continue
-            if not all(np.isfinite(r.sum()) for r in rows):
-                bad = [(sections[i].id, c) for i in members for c in getattr(plans[i], attr)
-                       if not np.all(np.isfinite(signalsets[i].channels[c]))]
-                raise InvalidSignal(f"non-finite samples (NaN/inf) in section/channel {bad[0]}")
             out = filtfilt_rows(rows, fs, kind, order)
             pos = 0
             for i in members:
                 k = len(getattr(plans[i], attr))
                 store[i] = out[pos:pos + k]
                 pos += k
+    clock.lap("filter")
     return [_section_stats(signalsets[i], sections[i], plans[i], filtered_lp.get(i),
-                           filtered_bp.get(i), order) for i in range(len(signalsets))]
+                           filtered_bp.get(i), order, alternatives, supplementary, clock)
+            for i in range(len(signalsets))]
 
 
 def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,
@@ -348,7 +421,10 @@ def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,
 
 
 def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray | None,
-                   bp: np.ndarray | None, order: int) -> SectionValues:
+                   bp: np.ndarray | None, order: int, with_alternatives: bool = True,
+                   with_supplementary: bool = True, clock: _Clock | None = None
+                   ) -> SectionValues:
+    clock = clock or _Clock(None)
     d = np.asarray(ss.distance_m, dtype=np.float64)
     mask = (d >= sec.eval_start_m) & (d <= sec.eval_end_m)
     n_eval = int(mask.sum())
@@ -367,11 +443,12 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
     warnings: list[str] = []
     alts: dict[str, dict[tuple[str, str], float]] = {}
     supp: dict[tuple[str, str], float] = {}
-    methods = (QUANTILE_METHOD, _LINEAR.percentile)
+    methods = ((QUANTILE_METHOD, _LINEAR.percentile) if with_alternatives
+               else (QUANTILE_METHOD,))
 
     def alternative(reading: Reading, key: tuple[str, str], value: float) -> None:
         # kept only where the reading changes the value (NaN: undefined under the reading)
-        if value != values[key]:  # True for NaN as well
+        if with_alternatives and value != values[key]:  # True for NaN as well
             alts.setdefault(reading.id, {})[key] = float(value)
 
     if lp is not None and lp.shape[0]:
@@ -408,8 +485,9 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
             r += 1
         rows[r:r + len(wheels_yq)] = ratio[:, inner]
         rows[r + len(wheels_yq):] = sumy[:, inner]
-        pct, pct_lin = (_row_percentiles(rows, methods) if rows.shape[0]
-                        else (np.empty((0, 3)), np.empty((0, 3))))
+        both = (_row_percentiles(rows, methods) if rows.shape[0]
+                else [np.empty((0, 3))] * len(methods))
+        pct, pct_lin = both[0], both[-1]
         r = 0
         for fam, positions in (("Y", wheels_y), ("Q", wheels_q), ("YQ", wheels_yq),
                                ("SumY", wsets)):
@@ -437,8 +515,13 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
             slide_keys = ([("YQ_max", p) for p in wheels_yq] +
                           [("SumY_max", w) for w in wsets])
             d_wide = d[wide]
-            _, means = sliding_mean_distance(slide_rows, d_wide, sec.eval_start_m,
-                                             sec.eval_end_m)
+            # the chosen grid (from the section start) and, for the alternative readings, the
+            # grid from the first evaluated sample: one cumulative integral for both
+            _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
+            origins = [sec.eval_start_m] + ([float(d[cut.start])] if with_alternatives else [])
+            interp = _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
+                                        WINDOW_M, STEP_M, origins)
+            means = interp[0][1]
             spct, = _row_percentiles(means)
             slide_text = (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
                           f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "
@@ -451,15 +534,19 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
                           "filtered forces")
                 prov[key] = (lp_label, derive, slide_text,
                              "max(|0.15 % value|, |99.85 % value|)", pct_text)
-            _sliding_alternatives(slide_rows, d_wide, d[cut.start], sec, slide_keys,
-                                  means, methods, alternative)
+            clock.lap("statistics")
+            if with_alternatives:
+                _sliding_alternatives(slide_rows, d_wide, d[cut.start], sec, slide_keys,
+                                      means, interp[1][1], methods, alternative)
+            clock.lap("alternatives")
 
     if bp is not None and bp.shape[0]:
         bp_label = design(fs, "bandpass", order).label + ", whole section"
         warnings += [w.message for w in settling_check(ss.time_s, mask, fs, "bandpass", order,
                                                        sec.id)]
         rows = bp[:, cut]
-        pct, pct_lin = _row_percentiles(rows, methods)
+        both = _row_percentiles(rows, methods)
+        pct, pct_lin = both[0], both[-1]
         rmsv = rms(rows)
         for r, name in enumerate(plan.bp_names):
             kind, _, pos = name.rpartition("_")
@@ -475,9 +562,12 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
                                        "max(|0.15 % value|, |99.85 % value|)", pct_text)
             alternative(_LINEAR, (f"{q}_max", pos), maxabs(pct_lin[r, 0], pct_lin[r, 2]))
 
-    raw_acc = {name: np.asarray(arr, dtype=np.float64)[cut] for name, arr in ss.channels.items()
-               if name.rpartition("_")[0] in PSD_KINDS}
-    supp.update(psd_band_values(raw_acc, fs))
+    clock.lap("statistics")
+    if with_supplementary:
+        raw_acc = {name: np.asarray(arr, dtype=np.float64)[cut]
+                   for name, arr in ss.channels.items() if name.rpartition("_")[0] in PSD_KINDS}
+        supp.update(psd_band_values(raw_acc, fs))
+    clock.lap("supplementary")
 
     order_keys = [(q, p) for q, quantity in QUANTITIES.items() for p in quantity.positions()]
     ordered = {k: values[k] for k in order_keys if k in values}
@@ -488,15 +578,16 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
 
 def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: float,
                           sec: SectionInfo, keys: list[tuple[str, str]], chosen_means: np.ndarray,
-                          methods: tuple[str, ...], alternative) -> None:
+                          first_interp: np.ndarray, methods: tuple[str, ...],
+                          alternative) -> None:
     """Values of the sliding-mean maxima under every other reading (grid alignment × window
     mean × percentile method, :mod:`railval.core.definitions`) from the same derived rows;
     the prefix sums and the cumulative integral are formed once for all readings."""
     origins = {"section_start": sec.eval_start_m, "first_sample": float(first_m)}
-    (_, first_interp), = _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
-                                            WINDOW_M, STEP_M, [origins["first_sample"]])
-    prefix = np.zeros((slide_rows.shape[0], slide_rows.shape[1] + 1))
-    np.cumsum(slide_rows, axis=1, out=prefix[:, 1:])
+    prefix = np.empty((slide_rows.shape[0], slide_rows.shape[1] + 1))
+    prefix[:, 0] = 0.0
+    prefix[:, 1:] = slide_rows
+    np.cumsum(prefix, axis=1, out=prefix)  # in place: the same sums, a contiguous cumsum
     for grid, window in SLIDING_VARIANTS:
         if (grid, window) == CHOSEN.sliding:
             means = chosen_means

@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from railval.core.stages import stage
 from railval.core.definitions import CHOSEN, READINGS, alternatives_for
 from railval.core.en14363 import evaluate_present
 from railval.core.errors import InvalidParameter
@@ -386,8 +387,9 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
         mean = float(d.mean()) if n else float("nan")
         std = float(d.std(ddof=STD_DDOF)) if n >= 2 else float("nan")
         rng = np.random.default_rng([seed, qi])
-        mci, sci = bootstrap_norm_ci(d, mean_limit, std_limit, n_boot=n_boot, rng=rng,
-                                     ci_level=ci_level)
+        with stage("bootstrap"):
+            mci, sci = bootstrap_norm_ci(d, mean_limit, std_limit, n_boot=n_boot, rng=rng,
+                                         ci_level=ci_level)
         d_norm = d / std_limit
         ss = float(np.sum(d * d))
         order = np.argsort(-np.abs(d_norm), kind="stable")[:top]

@@ -65,3 +65,66 @@ def exit_with_parent(parent_pid: int) -> None:
 def pool_kwargs() -> dict:
     """``initializer``/``initargs`` for a ProcessPoolExecutor started by this process."""
     return {"initializer": exit_with_parent, "initargs": (os.getpid(),)}
+
+
+# -- threads for compiled kernels that release the GIL ------------------------------------
+
+_THREAD_POOL = None
+_THREAD_POOL_LOCK = threading.Lock()
+
+
+def _forget_thread_pool() -> None:
+    """In a forked child: the parent's pool threads do not exist there, so its pool must not
+    be used (tasks would wait forever); the child makes its own on first use."""
+    global _THREAD_POOL, _THREAD_POOL_LOCK
+    _THREAD_POOL = None
+    _THREAD_POOL_LOCK = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_thread_pool)
+
+
+def thread_count() -> int:
+    """Threads for row-parallel compiled kernels: ``$RAILVAL_THREADS`` if set (≥ 1), else the
+    cores this process may run on (at most 8)."""
+    env = os.environ.get("RAILVAL_THREADS", "").strip()
+    if env:
+        try:
+            return max(1, int(env))
+        except ValueError:
+            pass
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, 8))
+
+
+def split_rows(fn, n_rows: int, *, min_rows: int = 1, align: int = 1) -> None:
+    """Run ``fn(start, stop)`` over contiguous parts of ``range(n_rows)`` on up to
+    :func:`thread_count` threads, the caller's thread doing the last part; ``fn`` must release
+    the GIL (a numba ``nogil`` kernel) for the parts to run at once. Parts hold at least
+    ``min_rows`` rows and start at multiples of ``align``. Exceptions of a part propagate."""
+    global _THREAD_POOL
+    parts = min(thread_count(), max(1, n_rows // max(1, min_rows)))
+    if parts <= 1:
+        fn(0, n_rows)
+        return
+    step = -(-n_rows // parts)
+    step = -(-step // align) * align
+    bounds = [(a, min(a + step, n_rows)) for a in range(0, n_rows, step)]
+    if len(bounds) == 1:
+        fn(0, n_rows)
+        return
+    with _THREAD_POOL_LOCK:
+        if _THREAD_POOL is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            _THREAD_POOL = ThreadPoolExecutor(max_workers=max(1, thread_count() - 1),
+                                              thread_name_prefix="railval-rows")
+        pool = _THREAD_POOL
+    futures = [pool.submit(fn, a, b) for a, b in bounds[:-1]]
+    fn(*bounds[-1])
+    for f in futures:
+        f.result()

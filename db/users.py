@@ -17,6 +17,7 @@ is recorded.
 from __future__ import annotations
 
 import datetime as dt
+import functools
 import hashlib
 import re
 import secrets
@@ -60,8 +61,14 @@ INVITATION_VALIDITY = dt.timedelta(days=7)
 _USERNAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.@-]{0,99}$")
 
 _hasher = PasswordHasher()  # argon2id, RFC 9106 defaults
-#: verified against for unknown user names, so that their answer takes as long as a real one
-_DUMMY_HASH = _hasher.hash(secrets.token_hex(16))
+
+
+@functools.cache
+def _dummy_hash() -> str:
+    """Verified against for unknown user names, so that their answer takes as long as a real
+    one; made on first use (an argon2 hash costs a third of a second, too much for every start
+    of the command line)."""
+    return _hasher.hash(secrets.token_hex(16))
 
 
 class InvitationRefused(RailvalError):
@@ -213,7 +220,7 @@ def verify_password(session: Session, username: str, password: str) -> AppUser |
     user = find_user(session, username)
     stored = user.password_hash if user is not None else None
     try:
-        _hasher.verify(stored or _DUMMY_HASH, password or "")
+        _hasher.verify(stored or _dummy_hash(), password or "")
     except (VerifyMismatchError, VerificationError, InvalidHashError):
         return None
     if user is None or stored is None or user.disabled:

@@ -5,6 +5,14 @@ Every verb lives in its own module ``app/cli/cmd_<group>.py`` exposing
 ``func=callable(args) -> int`` on each. This module only discovers the verbs, adds the global
 options and dispatches. Global options: ``--db URL`` (else ``$RAILVAL_DB``, else the embedded
 SQLite file ``railval.db`` in the working directory).
+
+Start-up stays short (``railval --help``, ``railval list``): every ``cmd_*`` module is imported
+to register its verbs, so a module's top level and its ``register`` import only the standard
+library and light railval modules; a verb imports what it computes with (scipy, pandas,
+numba, the services, the database layer) inside its function, when it runs. A registration
+that needs a registry of a heavy module (argparse ``choices``) passes :class:`LazyChoices`,
+which reads the registry only when that verb's arguments are parsed or its help is printed.
+tests/test_cli_startup.py checks this in a fresh interpreter for every verb.
 """
 
 from __future__ import annotations
@@ -48,6 +56,31 @@ def build_parser() -> argparse.ArgumentParser:
             module = importlib.import_module(f"{__name__}.{info.name}")
             module.register(sub)
     return parser
+
+
+class LazyChoices:
+    """argparse ``choices`` taken from a registry on first use (``loader()`` returns the
+    allowed values). Give the argument a ``metavar`` (argparse builds the default metavar from
+    the choices when the argument is added); ``%(choices)s`` in its help lists the values when
+    the help is printed."""
+
+    def __init__(self, loader):
+        self._loader = loader
+        self._values: list | None = None
+
+    def _get(self) -> list:
+        if self._values is None:
+            self._values = list(self._loader())
+        return self._values
+
+    def __contains__(self, value: object) -> bool:
+        return value in self._get()
+
+    def __iter__(self):
+        return iter(self._get())
+
+    def __len__(self) -> int:
+        return len(self._get())
 
 
 def emit_json(document: object) -> None:

@@ -17,7 +17,7 @@ import argparse
 import math
 from typing import Any
 
-from railval.app.cli import emit_json
+from railval.app.cli import LazyChoices, emit_json
 
 #: headline columns of the text table: (metric, width, format)
 _TABLE = (("sg_M", "SG M", 6, "+.3f"), ("sg_P", "SG P", 5, ".3f"), ("sg_C", "SG C", 5, ".3f"),
@@ -108,9 +108,13 @@ def _cmd_metrics(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def _families() -> list[str]:
     from railval.core.metrics import FAMILIES
 
+    return sorted(FAMILIES)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "metrics", help="curve-comparison metrics (Sprague–Geers, Russell, KS, area, AD, ISO 18571)",
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -118,8 +122,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--config", help="configuration name")
     p.add_argument("--section", action="append", metavar="S", help="section id (repeatable; default all)")
     p.add_argument("--channel", action="append", metavar="C", help="channel (repeatable; default all)")
-    p.add_argument("--family", action="append", choices=sorted(FAMILIES),
-                   help="metric family (repeatable; default all)")
+    p.add_argument("--family", action="append", choices=LazyChoices(_families), metavar="FAMILY",
+                   help="metric family: %(choices)s (repeatable; default all)")
     p.add_argument("--max-lag", type=float, default=2.0, metavar="SECONDS",
                    help="synchronisation window ±SECONDS (default 2)")
     p.add_argument("--subsample", action="store_true", help="refine the lag below one sample")

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 
 from railval.app.cli import emit_json
-from railval.core.quantities import QUANTITIES
 
 BAR_CELLS = 20  # cells for 0 … 2 × limit
 _BLOCKS = " ▏▎▍▌▋▊▉█"
@@ -66,6 +65,8 @@ def _fmt(x: float | None, spec: str = ".3g") -> str:
 
 def format_result(doc: dict) -> str:
     """Human-readable table of a :meth:`ValidationResult.to_dict` document."""
+    from railval.core.quantities import QUANTITIES
+
     lines = []
     info = doc.get("info", {})
     head = f"validation of {info.get('campaign', '?')} / {info.get('configuration', '?')}"

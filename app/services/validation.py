@@ -30,6 +30,7 @@ The campaign and configuration names are resolved once at the entrance
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from typing import Any
@@ -39,6 +40,8 @@ from sqlalchemy.orm import Session
 from railval.core import en14363
 from railval.core.en14363 import pack_values, section_cache_key, unpack_values
 from railval.core.filters import DEFAULT_ORDER, check_order
+from railval.core.stages import collect, in_context, stage
+from railval.core.stages import current as current_stages
 from railval.core.types import SectionInfo
 from railval.core.validation import ValidationResult, source_warnings, validate
 from railval.db import repo
@@ -67,12 +70,14 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
     """Processed values of every section of one source (``config=None``: the measurement),
     from the result cache where possible. ``stats`` (optional dict) receives
     ``{"cached": n, "computed": n}``."""
-    camp, conf = repo.resolve(session, campaign, config)
-    source = conf if config is not None else None
-    by_id = {s.id: s for s in sections}
-    keys = source_cache_keys(session, camp, source, sections, order=order)
-    cached = repo.cache_get_many(session, list(keys.values()))
-    out = {sid: unpack_values(sid, cached[k]) for sid, k in keys.items() if k in cached}
+    with stage("database"):
+        camp, conf = repo.resolve(session, campaign, config)
+        source = conf if config is not None else None
+        by_id = {s.id: s for s in sections}
+        keys = source_cache_keys(session, camp, source, sections, order=order)
+        cached = repo.cache_get_many(session, list(keys.values()))
+    with stage("cache_unpack"):
+        out = {sid: unpack_values(sid, cached[k]) for sid, k in keys.items() if k in cached}
     missing = [sid for sid in keys if sid not in out]
     if missing:
         # pipeline: this thread reads the blobs of chunk k+1 (the caller's session stays in
@@ -83,16 +88,19 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
         pending = []
         with ThreadPoolExecutor(max_workers=1) as pool:
             for chunk in chunks:
-                decode = repo.fetch_signalsets(session, camp, source, sections=chunk,
-                                               verify=True)
-                pending.append((chunk, pool.submit(_decode_and_evaluate, decode,
+                with stage("database"):
+                    decode = repo.fetch_signalsets(session, camp, source, sections=chunk,
+                                                   verify=True)
+                pending.append((chunk, pool.submit(in_context(_decode_and_evaluate), decode,
                                                    [by_id[s] for s in chunk], order)))
             new: dict[str, bytes] = {}
             for chunk, fut in pending:
                 for sid, vals in zip(chunk, fut.result(), strict=True):
-                    new[keys[sid]] = pack_values(vals)
+                    with stage("cache_pack"):
+                        new[keys[sid]] = pack_values(vals)
                     out[sid] = vals
-        repo.cache_put_many(session, new)
+        with stage("database"):
+            repo.cache_put_many(session, new)
     if stats is not None:
         stats.update({"cached": len(keys) - len(missing), "computed": len(missing)})
     return out
@@ -100,20 +108,33 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
 
 def _decode_and_evaluate(decode, sections: list[SectionInfo],
                          order: int) -> list[en14363.SectionValues]:
-    values = en14363.evaluate_present(decode(), sections, order=order)
+    with stage("decode"):
+        signalsets = decode()
+    values = en14363.evaluate_present(signalsets, sections, order=order)
     return [values[s.id] for s in sections]
 
 
 def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
-                    sections: list[SectionInfo], order: int) -> list[bytes]:
-    """Worker task: load and process some sections of one source; returns packed values.
-    ``db_or_url``: a :class:`railval.db.engine.Database` (in-process) or its URL (worker process)."""
-    database = _worker_database(db_or_url) if isinstance(db_or_url, str) else db_or_url
-    with database.session() as session:
-        decode = repo.fetch_signalsets(session, campaign, config, sections=[s.id for s in sections],
-                                       verify=True)
-        vals = _decode_and_evaluate(decode, sections, order)
-    return [pack_values(v) for v in vals]
+                    sections: list[SectionInfo], order: int,
+                    threads: int | None = None) -> tuple[list[bytes], dict]:
+    """Worker task: load and process some sections of one source; returns packed values and
+    the seconds per stage it spent (:mod:`railval.core.stages`).
+    ``db_or_url``: a :class:`railval.db.engine.Database` (in-process) or its URL (worker
+    process); ``threads``: row threads of the EN chain in this worker process (the workers
+    share the cores, so each takes its part instead of all of them)."""
+    if threads:
+        os.environ["RAILVAL_THREADS"] = str(threads)
+    with collect() as stages:
+        with stage("database"):
+            database = _worker_database(db_or_url) if isinstance(db_or_url, str) else db_or_url
+        with database.session() as session:
+            with stage("database"):
+                decode = repo.fetch_signalsets(session, campaign, config,
+                                               sections=[s.id for s in sections], verify=True)
+            vals = _decode_and_evaluate(decode, sections, order)
+        with stage("cache_pack"):
+            packed = [pack_values(v) for v in vals]
+    return packed, stages.seconds
 
 
 _WORKER_DB: dict[str, Any] = {}
@@ -163,7 +184,12 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
               for i in range(0, len(sids), chunk_sections)]
     computed: dict[tuple[str | None, str], bytes] = {}
 
-    def collect(chunk, packed):
+    outer = current_stages()
+
+    def collect_chunk(chunk, done):
+        packed, seconds = done
+        if outer is not None:
+            outer.merge(seconds)
         source, sids = chunk
         for sid, blob in zip(sids, packed, strict=True):
             computed[(source, sid)] = blob
@@ -173,27 +199,30 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
                      {"done": len(computed)})
 
     if workers > 1 and len(chunks) > 1:
-        from railval.core.workers import pool_kwargs
+        from railval.core.workers import pool_kwargs, thread_count
 
+        threads = max(1, thread_count() // workers)
         with ProcessPoolExecutor(max_workers=workers, **pool_kwargs()) as pool:
             futures = [(c, pool.submit(_evaluate_chunk, database.url, name, c[0],
-                                       [by_id[s] for s in c[1]], order)) for c in chunks]
+                                       [by_id[s] for s in c[1]], order, threads))
+                       for c in chunks]
             for chunk, fut in futures:
-                collect(chunk, fut.result())
+                collect_chunk(chunk, fut.result())
     else:
         for chunk in chunks:
-            collect(chunk, _evaluate_chunk(database, name, chunk[0],
-                                           [by_id[s] for s in chunk[1]], order))
+            collect_chunk(chunk, _evaluate_chunk(database, name, chunk[0],
+                                                 [by_id[s] for s in chunk[1]], order))
     if computed:
-        with database.session(write=True) as session:
+        with stage("database"), database.session(write=True) as session:
             repo.cache_put_many(session, {keys[k]: blob for k, blob in computed.items()})
     measured = values[None]
     out = {}
     for cname in names:
         warnings = source_warnings("measurement", measured) + source_warnings(f"configuration {cname}",
                                                                               values[cname])
-        res = validate(measured, values[cname], sections, vehicle, n_boot=n_boot, seed=seed,
-                       warnings=warnings)
+        with stage("aggregation"):
+            res = validate(measured, values[cname], sections, vehicle, n_boot=n_boot,
+                           seed=seed, warnings=warnings)
         res.info.update({"campaign": name, "configuration": cname, "filter_order": order,
                          **provenance[cname]})
         out[cname] = res
@@ -235,21 +264,25 @@ def validate_configuration(session: Session, campaign_name: str, config_name: st
     verdict. Raises :class:`railval.core.errors.NotFound` for unknown names.
     """
     check_order(order)
-    camp, conf = repo.resolve(session, campaign_name, config_name)
-    if check_seals:
-        repo.require_evidence(session, camp, config_name, blobs=False)
-    sections = repo.section_infos(session, camp)
-    vehicle = repo.vehicle_info(session, camp)
+    with stage("database"):
+        camp, conf = repo.resolve(session, campaign_name, config_name)
+        if check_seals:
+            repo.require_evidence(session, camp, config_name, blobs=False)
+        sections = repo.section_infos(session, camp)
+        vehicle = repo.vehicle_info(session, camp)
     m_stats: dict[str, int] = {}
     s_stats: dict[str, int] = {}
     measured = source_values(session, camp, None, sections, order=order, stats=m_stats)
     simulated = source_values(session, camp, conf, sections, order=order, stats=s_stats)
     warnings = source_warnings("measurement", measured) + source_warnings(f"configuration {conf.name}",
                                                                           simulated)
-    result = validate(measured, simulated, sections, vehicle, n_boot=n_boot, seed=seed,
-                      warnings=warnings)
+    with stage("aggregation"):
+        result = validate(measured, simulated, sections, vehicle, n_boot=n_boot, seed=seed,
+                          warnings=warnings)
+    with stage("database"):
+        provenance = calibration_provenance(session, camp, config_name)
     result.info.update({"campaign": camp.name, "configuration": conf.name,
                         "filter_order": order,
                         "sections_measured": m_stats, "sections_simulated": s_stats,
-                        **calibration_provenance(session, camp, config_name)})
+                        **provenance})
     return result

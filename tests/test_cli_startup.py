@@ -1,0 +1,83 @@
+"""The command line starts without the heavy libraries: ``railval --help``, ``railval list``
+and every ``railval VERB --help`` run in a fresh interpreter without importing scipy.signal,
+pandas or numba (app/cli/__init__.py, start-up; docs/app.md). An import check, not a timing."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from railval.app.cli import build_parser, main
+
+from tests.factories import write_demo_campaign
+
+HEAVY = ("scipy.signal", "pandas", "numba")
+
+#: runs one command line in this interpreter, then reports what it imported
+_PROBE = """
+import json, sys
+from railval.app.cli import main
+try:
+    code = main(sys.argv[1:])
+except SystemExit as exc:
+    code = exc.code
+sys.stdout.flush()
+heavy = sorted(m for m in {heavy!r} if m in sys.modules)
+sys.stderr.write("\\nPROBE " + json.dumps({{"code": code, "heavy": heavy}}) + "\\n")
+""".format(heavy=HEAVY)
+
+
+def _probe(*argv: str) -> tuple[dict, str]:
+    proc = subprocess.run([sys.executable, "-c", _PROBE, *argv], capture_output=True,
+                          text=True, timeout=120)
+    line = [x for x in proc.stderr.splitlines() if x.startswith("PROBE ")]
+    assert line, proc.stderr
+    return json.loads(line[-1][len("PROBE "):]), proc.stdout
+
+
+def _verbs() -> list[str]:
+    sub = next(a for a in build_parser()._actions if a.dest == "verb")
+    return sorted(sub.choices)
+
+
+def test_help_imports_no_heavy_library():
+    report, out = _probe("--help")
+    assert report == {"code": 0, "heavy": []}
+    assert "list" in out and "validate" in out
+
+
+#: verbs whose help lists the values of a registry (LazyChoices), read when the help prints
+LISTS_A_REGISTRY = {"metrics": "numba"}
+
+
+@pytest.mark.parametrize("verb", _verbs())
+def test_every_verb_help_imports_no_heavy_library(verb):
+    report, out = _probe(verb, "--help")
+    assert report["code"] == 0 and f"railval {verb}" in out
+    if verb in LISTS_A_REGISTRY:  # the metric families listed: the registry was read
+        assert LISTS_A_REGISTRY[verb] in report["heavy"] and "sprague_geers" in out
+    else:
+        assert report["heavy"] == [], verb
+
+
+def test_list_imports_no_heavy_library(db_url, tmp_path, capsys):
+    assert main(["--db", db_url, "init"]) == 0
+    write_demo_campaign(tmp_path / "c", n_sections=4, fmt="csv")
+    assert main(["--db", db_url, "import", str(tmp_path / "c"), "--no-progress"]) == 0
+    capsys.readouterr()
+    report, out = _probe("--db", db_url, "list")
+    assert report == {"code": 0, "heavy": []}
+    assert "demo (id" in out
+    report, out = _probe("--db", db_url, "list", "--json")
+    assert report == {"code": 0, "heavy": []}
+    assert [c["name"] for c in json.loads(out)["campaigns"]] == ["demo"]
+
+
+def test_the_probe_sees_a_heavy_import():
+    """The check can fail: a verb that computes (metrics --list reads the metric registry,
+    which compiles with numba) is reported."""
+    report, _ = _probe("metrics", "--list")
+    assert report["code"] == 0 and "numba" in report["heavy"]
