@@ -9,7 +9,17 @@
 3. every stored **signal blob** against its SHA-256 content hash;
 4. every **sign-off**: its manifest still hashes to its evidence hash, its ``signoff.create``
    audit row names that hash, and the evidence rebuilt from the database today (validation
-   recomputed) has the same hash — otherwise the sign-off is stale.
+   recomputed) has the same hash — otherwise the sign-off is stale;
+5. the **signatures** (Ed25519, public key only): every row's signed head and every
+   sign-off's signed record; sign-offs ↔ ``signoff.create`` rows **both ways** (an edited,
+   deleted or inserted sign-off is named);
+6. the **witness file** kept beside the signing key: every signed head it holds is still in
+   the chain with the same hash (a removed tail or a rewritten chain is found without a
+   hand-made checkpoint).
+
+Rows and sign-offs written before signing was enabled are reported as *notes* ("unsigned,
+written before signing was enabled"), not as failures; ``railval audit seal`` signs the
+then-current head over them.
 
 ``railval audit export DIR`` (:func:`export_bundle`) writes the bundle that
 :func:`verify_bundle` checks without the database: ``audit.jsonl`` (every row),
@@ -21,57 +31,23 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from railval.app.services.audit_checks import (
+    Finding,
+    VerifyReport,
+    _check_chain,
+    _check_row_signatures,
+    _check_signoffs,
+    _check_witness,
+)
 from railval.core.errors import RailvalError
-from railval.core.integrity import check_checkpoint, evidence_hash, verify_chain
-from railval.db import audit, repo
+from railval.core.integrity import key_fingerprint, public_key_from_hex, public_key_hex
+from railval.db import audit, integrity, repo
 from railval.db import signoff as db_signoff
 
 BUNDLE_FORMAT = "railval-audit-bundle/1"
-
-
-@dataclass
-class Finding:
-    """One thing that does not hold: what, where, expected vs found."""
-
-    kind: str  # chain | head | checkpoint | signal | signoff
-    where: str
-    expected: str
-    found: str
-
-    def __str__(self) -> str:
-        return f"{self.kind}: {self.where}: expected {self.expected}, found {self.found}"
-
-    def to_dict(self) -> dict[str, str]:
-        return {"kind": self.kind, "where": self.where, "expected": self.expected,
-                "found": self.found}
-
-
-@dataclass
-class VerifyReport:
-    rows: int = 0
-    head_seq: int = 0
-    head_hash: str = ""
-    signals: int = 0
-    signoffs: int = 0
-    findings: list[Finding] = field(default_factory=list)
-    seconds: float = 0.0
-    source: str = "database"
-
-    @property
-    def ok(self) -> bool:
-        return not self.findings
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"ok": self.ok, "source": self.source, "rows": self.rows,
-                "head": {"seq": self.head_seq, "row_hash": self.head_hash},
-                "signals_checked": self.signals, "signoffs_checked": self.signoffs,
-                "findings": [f.to_dict() for f in self.findings],
-                "seconds": round(self.seconds, 3)}
 
 
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
@@ -98,58 +74,62 @@ def write_checkpoint(database, path: str | Path) -> dict[str, Any]:
     return doc
 
 
-def _check_chain(rows: Iterable[dict[str, Any]], report: VerifyReport,
-                 checkpoint: dict[str, Any] | None) -> dict[int, str]:
-    by_seq: dict[int, str] = {}
-
-    def tap():
-        for r in rows:
-            by_seq[int(r["seq"])] = r["row_hash"]
-            yield r
-
-    n, head_hash, brk = verify_chain(tap())
-    report.rows = len(by_seq)
-    report.head_seq, report.head_hash = n, head_hash
-    if brk is not None:
-        report.findings.append(Finding(
-            "chain", f"row seq {brk.seq}, object {brk.object!r}, field {brk.field}",
-            brk.expected, brk.found))
-    if checkpoint is not None:
-        cbrk = check_checkpoint(by_seq, max(by_seq) if by_seq else 0, checkpoint)
-        if cbrk is not None:
-            where = (f"checkpoint row seq {cbrk.seq}" if cbrk.seq is not None
-                     else "checkpoint: chain length")
-            report.findings.append(Finding("checkpoint", where, cbrk.expected, cbrk.found))
-    return by_seq
+def trusted_keys(database, public_key: str | None = None) -> dict[str, Any]:
+    """fingerprint → public key the verifier trusts: ``public_key`` (hex, or a file holding
+    it) alone when given, else the server's signing key and its retired keys."""
+    if public_key:
+        p = Path(public_key)
+        text = p.read_text(encoding="utf-8") if p.is_file() else public_key
+        try:
+            doc = json.loads(text)
+            text = doc["public_key"] if isinstance(doc, dict) else text
+        except (ValueError, KeyError):
+            pass
+        try:
+            pk = public_key_from_hex(text.strip())
+        except ValueError as exc:
+            raise RailvalError(f"--public-key {public_key[:60]}: {exc}") from None
+        return {key_fingerprint(pk): pk}
+    return integrity.trusted_public_keys(database.url)
 
 
-def _check_signoff_binding(sod: dict[str, Any], by_seq_rows: dict[int, dict[str, Any]],
-                           report: VerifyReport) -> None:
-    """The manifest hashes to the evidence hash and the chain recorded that hash."""
-    where = (f"sign-off {sod['id']} ({sod['campaign']}/{sod['configuration']}, "
-             f"{sod['printed_name']}, {sod['signed_at_utc']})")
-    found = evidence_hash(sod["manifest"])
-    if found != sod["evidence_sha256"]:
-        report.findings.append(Finding("signoff", where + ": manifest",
-                                       sod["evidence_sha256"], found))
-        return
-    rows = [r for r in by_seq_rows.values() if r["action"] == "signoff.create"
-            and (r.get("detail") or {}).get("signoff") == sod["id"]]
-    if not rows:
-        report.findings.append(Finding("signoff", where + ": audit row signoff.create",
-                                       "a row naming this sign-off", "none"))
-    elif rows[0]["after_sha256"] != sod["evidence_sha256"]:
-        report.findings.append(Finding("signoff", where + f": audit row {rows[0]['seq']}",
-                                       sod["evidence_sha256"], str(rows[0]["after_sha256"])))
+def key_info(database) -> dict[str, Any]:
+    """The public signing key, its fingerprint, the key and witness files (``audit key``)."""
+    pk = integrity.signing_key(database.url).public_key()
+    witness = integrity.witness_path(database.url)
+    return {"format": "railval-public-key/1", "algorithm": "Ed25519",
+            "public_key": public_key_hex(pk), "fingerprint": key_fingerprint(pk),
+            "retired": [k for k in integrity.trusted_public_keys(database.url)
+                        if k != key_fingerprint(pk)],
+            "key_file": str(integrity.signing_key_path(database.url) or "(in memory)"),
+            "witness_file": str(witness) if witness else None}
+
+
+def _witness_lines(path: Path | None, report: VerifyReport) -> list[dict[str, Any]] | None:
+    if path is None or not path.is_file():
+        report.notes.append(
+            f"no witness file ({path or 'in-memory database'}): a removed tail is found only "
+            "with a checkpoint (`--checkpoint`)")
+        return None
+    try:
+        return integrity.read_witness(path)
+    except integrity.IntegrityError as exc:
+        report.findings.append(Finding("witness", str(path), "signed heads, one per line",
+                                       str(exc)))
+        return None
 
 
 def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
-                    signals: bool = True, full: bool = True) -> VerifyReport:
-    """Verify chain, checkpoint, signal blobs and sign-offs (module docstring)."""
+                    signals: bool = True, full: bool = True, witness: str | None = None,
+                    use_witness: bool = True, public_key: str | None = None) -> VerifyReport:
+    """Verify chain, checkpoint, signatures, witness, signal blobs and sign-offs (module
+    docstring). ``witness``: another witness file than the default beside the key."""
     from railval.app.services import signoff as svc
 
     t0 = time.perf_counter()
     report = VerifyReport(source=database.safe_url)
+    keys = trusted_keys(database, public_key)
+    report.keys = list(keys)
     with database.session() as s:
         rows = {}
 
@@ -158,7 +138,13 @@ def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
                 rows[int(r["seq"])] = r
                 yield r
 
-        _check_chain(collect(), report, checkpoint)
+        by_seq = _check_chain(collect(), report, checkpoint)
+        _check_row_signatures(rows, keys, report)
+        if use_witness:
+            wpath = Path(witness) if witness else integrity.witness_path(database.url)
+            lines = _witness_lines(wpath, report)
+            if lines is not None:
+                _check_witness(by_seq, lines, str(wpath), keys, report)
         head_seq, head_hash = audit.head(s)
         if not report.findings and (head_seq, head_hash) != (report.head_seq, report.head_hash):
             report.findings.append(Finding(
@@ -174,12 +160,11 @@ def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
                     report.findings.append(Finding(
                         "signal", f"campaign {camp.name!r}, {src}, section {p['section']}, "
                         f"channel {p['channel']}", "its stored SHA-256", p["error"]))
-        for so in db_signoff.list_signoffs(s):
+        sos = db_signoff.list_signoffs(s)
+        bad_ids = _check_signoffs([db_signoff.as_dict(so) for so in sos], rows, keys, report)
+        for so in sos:
             report.signoffs += 1
-            sod = db_signoff.as_dict(so)
-            n_before = len(report.findings)
-            _check_signoff_binding(sod, rows, report)
-            if len(report.findings) > n_before:
+            if so.id in bad_ids:
                 continue
             bad = sorted(f"{'measurement' if src is None else src} section {sec} {ch}"
                          for camp_name, src, sec, ch in broken if camp_name == so.campaign
@@ -237,16 +222,38 @@ def export_bundle(database, folder: str | Path) -> dict[str, Any]:
             "exported_at_utc": audit.utc_stamp(), "database": database.safe_url,
             "software_version": svc.software_version()}
     (out / "head.json").write_text(json.dumps(head, indent=2) + "\n", encoding="utf-8")
+    (out / "key.json").write_text(json.dumps(key_info(database), indent=2) + "\n",
+                                  encoding="utf-8")
+    wpath = integrity.witness_path(database.url)
+    if wpath is not None and wpath.is_file():
+        (out / "witness.jsonl").write_bytes(wpath.read_bytes())
     return head
 
 
-def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None) -> VerifyReport:
-    """Verify an exported bundle without the database (chain, checkpoint, sign-offs)."""
+def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, *,
+                  public_key: str | None = None) -> VerifyReport:
+    """Verify an exported bundle without the database (chain, checkpoint, signatures,
+    witness, sign-offs both ways). ``public_key``: the hex key (or a file holding it) the
+    assessor obtained from the server's owner; without it the bundle's ``key.json`` is
+    trusted and a note says to compare its fingerprint."""
     from railval.app.services.signoff import manifest_differences
 
     t0 = time.perf_counter()
     root = Path(folder)
     report = VerifyReport(source=str(root))
+    if public_key:
+        keys = trusted_keys(None, public_key)
+    elif (root / "key.json").is_file():
+        kdoc = json.loads((root / "key.json").read_text(encoding="utf-8"))
+        pk = public_key_from_hex(kdoc["public_key"])
+        keys = {key_fingerprint(pk): pk}
+        report.notes.append(f"trusting the public key in the bundle (fingerprint "
+                            f"{key_fingerprint(pk)}); compare it with the fingerprint the "
+                            "server's owner published (`railval audit key`), or pass "
+                            "--public-key")
+    else:
+        raise RailvalError(f"audit bundle {root}: key.json is missing; pass --public-key")
+    report.keys = list(keys)
     for name in ("audit.jsonl", "signoffs.json", "current-evidence.json", "head.json"):
         if not (root / name).is_file():
             raise RailvalError(f"audit bundle {root}: {name} is missing")
@@ -263,7 +270,12 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None) 
                 rows[int(r["seq"])] = r
                 yield r
 
-    _check_chain(read(), report, checkpoint)
+    by_seq = _check_chain(read(), report, checkpoint)
+    _check_row_signatures(rows, keys, report)
+    if (root / "witness.jsonl").is_file():
+        lines = _witness_lines(root / "witness.jsonl", report)
+        if lines is not None:
+            _check_witness(by_seq, lines, "witness.jsonl", keys, report)
     head = json.loads((root / "head.json").read_text(encoding="utf-8"))
     if not report.findings and (int(head["seq"]), head["row_hash"]) != (report.head_seq,
                                                                         report.head_hash):
@@ -271,11 +283,11 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None) 
                                        f"seq {report.head_seq} hash {report.head_hash}",
                                        f"seq {head['seq']} hash {head['row_hash']}"))
     current = json.loads((root / "current-evidence.json").read_text(encoding="utf-8"))
-    for sod in json.loads((root / "signoffs.json").read_text(encoding="utf-8")):
+    sods = json.loads((root / "signoffs.json").read_text(encoding="utf-8"))
+    bad_ids = _check_signoffs(sods, rows, keys, report)
+    for sod in sods:
         report.signoffs += 1
-        n_before = len(report.findings)
-        _check_signoff_binding(sod, rows, report)
-        if len(report.findings) > n_before:
+        if int(sod["id"]) in bad_ids:
             continue
         now = current.get(f"{sod['campaign']}/{sod['configuration']}") or {}
         if "missing" in now:
