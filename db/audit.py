@@ -30,11 +30,13 @@ from sqlalchemy.orm import Session
 
 from railval.core.integrity import (
     GENESIS,
+    SIGNOFF_RECORD_FIELDS,
     chain_hash,
     content_hash,
     head_message,
     key_fingerprint,
     sign,
+    signoff_record_hash,
 )
 from railval.db import integrity
 from railval.db.models import AuditEvent, AuditHead
@@ -141,11 +143,18 @@ def _witness_after_rollback(session: Session) -> None:
 
 def seal(session: Session, actor: Any, reason: str = "") -> AuditEvent:
     """Append a signed ``audit.seal`` row: it signs the head over every earlier row (those
-    written before signing was enabled included) and is kept in the witness file."""
+    written before signing was enabled included) and is kept in the witness file. Its
+    detail names the record hash of every unsigned sign-off, binding their decisions too."""
+    from railval.db.models import Signoff
+
     unsigned = int(session.scalar(select(func.count()).select_from(AuditEvent)
                                   .where(AuditEvent.signature.is_(None))) or 0)
+    legacy = {str(so.id): signoff_record_hash({k: getattr(so, k) for k in SIGNOFF_RECORD_FIELDS})
+              for so in session.scalars(select(Signoff).where(Signoff.signature.is_(None))
+                                        .order_by(Signoff.id))}
     return record(session, actor, "audit.seal", "audit:trail", None, None,
-                  reason or "seal the current head", detail={"unsigned_rows_before": unsigned})
+                  reason or "seal the current head",
+                  detail={"unsigned_rows_before": unsigned, "unsigned_signoffs": legacy})
 
 
 def actor_of(session: Session) -> str:

@@ -311,3 +311,57 @@ def test_offline_bundle_with_the_public_key_only(setup, capsys, tmp_path):
     assert main(["audit", "verify", "--bundle", str(tmp_path / "bundle"), "--public-key",
                  other]) == 1
     assert "a key this verifier trusts" in capsys.readouterr().out
+
+
+def _make_legacy(database) -> None:
+    """Turn the set-up into what a database written before signing looks like: no
+    signatures, the ``signoff.create`` row naming the evidence hash, no witness file."""
+    from railval.core.integrity import GENESIS, chain_hash
+    from railval.db import integrity
+
+    with raw(database) as (run, backend):
+        drop_triggers(run, backend)
+        run("UPDATE signoff SET signature = NULL, key_fingerprint = NULL, record_sha256 = NULL")
+        cols = [d[0] for d in run("SELECT * FROM audit_event").description]
+        rows = [dict(zip(cols, r, strict=True))
+                for r in run("SELECT * FROM audit_event ORDER BY seq").fetchall()]
+        (ev_hash,) = run("SELECT evidence_sha256 FROM signoff WHERE id = 1").fetchone()
+        prev = GENESIS
+        for r in rows:
+            r["detail"] = as_dict(r["detail"])
+            if r["action"] == "signoff.create":
+                r["after_sha256"] = ev_hash
+            h = chain_hash(prev, r)
+            run("UPDATE audit_event SET after_sha256 = ?, prev_hash = ?, row_hash = ?, "
+                "signature = NULL, key_fingerprint = NULL WHERE seq = ?",
+                (r["after_sha256"], "p" * 63 + str(r["seq"] % 10), "r" * 63 + str(r["seq"] % 10),
+                 r["seq"]))  # unique columns: move out of the way first
+            r["prev_hash"], r["row_hash"] = prev, h
+            prev = h
+        for r in rows:
+            run("UPDATE audit_event SET prev_hash = ?, row_hash = ? WHERE seq = ?",
+                (r["prev_hash"], r["row_hash"], r["seq"]))
+        run("UPDATE audit_head SET row_hash = ? WHERE id = 1", (prev,))
+    integrity.witness_path(database.url).unlink()
+
+
+def test_rows_and_signoffs_written_before_signing_are_reported_honestly(setup, capsys):
+    database, _cp = setup
+    _make_legacy(database)
+    rc, out = audit_verify(database, capsys)
+    assert rc == 0, out  # neither silently passed …
+    assert "note: no row is signed" in out and "run `railval audit seal`" in out
+    assert "sign-off 1 (demo/baseline) is unsigned, written before signing was enabled" in out
+    assert "not sealed" in out and "note: no witness file" in out
+    capsys.readouterr()
+    assert main(["--db", database.url, "--as", "admin", "audit", "seal", "--reason",
+                 "signing enabled"]) == 0
+    rc, out = audit_verify(database, capsys)
+    assert rc == 0, out  # … nor failed
+    assert "are unsigned, written before signing was enabled; the signed row seq" in out
+    assert "its record is bound by the seal" in out
+    with raw(database) as (run, backend):  # an edit after the seal is found
+        run("UPDATE signoff SET decision = 'validated' WHERE id = 1")
+    rc, out = audit_verify(database, capsys)
+    assert rc == 1 and "sign-off 1 (demo/baseline, validated" in out
+    assert "edited after the seal" in out

@@ -185,6 +185,11 @@ def _check_signoffs(sods: list[dict[str, Any]], rows: dict[int, dict[str, Any]],
             sid = (r.get("detail") or {}).get("signoff")
             if isinstance(sid, int):
                 created.setdefault(sid, []).append(r)
+    sealed: dict[int, tuple[int, str]] = {}  # unsigned sign-off → (seal row, record hash)
+    for r in rows.values():
+        if r["action"] == "audit.seal" and r.get("signature"):
+            for sid, h in ((r.get("detail") or {}).get("unsigned_signoffs") or {}).items():
+                sealed.setdefault(int(sid), (int(r["seq"]), str(h)))
     bad: set[int] = set()
 
     def find(sod, what, expected, found):
@@ -217,10 +222,22 @@ def _check_signoffs(sods: list[dict[str, Any]], rows: dict[int, dict[str, Any]],
             elif row["after_sha256"] != sod["evidence_sha256"]:
                 find(sod, f"audit row {row['seq']}", sod["evidence_sha256"],
                      str(row["after_sha256"]))
+            elif int(sod["id"]) in sealed:
+                seal_seq, h = sealed[int(sod["id"])]
+                if signoff_record_hash(sod) != h:
+                    find(sod, f"edited after the seal (audit row {seal_seq})", h,
+                         signoff_record_hash(sod))
+                else:
+                    report.notes.append(
+                        f"sign-off {sod['id']} ({sod['campaign']}/{sod['configuration']}) is "
+                        f"unsigned, written before signing was enabled (audit row "
+                        f"{row['seq']}); its record is bound by the seal, row {seal_seq}")
             else:
                 report.notes.append(
                     f"sign-off {sod['id']} ({sod['campaign']}/{sod['configuration']}) is "
-                    f"unsigned, written before signing was enabled (audit row {row['seq']})")
+                    f"unsigned, written before signing was enabled (audit row {row['seq']}), "
+                    "and not sealed: its decision and statement are bound to nothing; run "
+                    "`railval audit seal`")
             continue
         record_hash = signoff_record_hash(sod)
         pk = keys.get(str(sod.get("key_fingerprint")))
