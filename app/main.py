@@ -137,13 +137,18 @@ def user_box(app: AppState) -> pn.pane.HTML:
         f"<a href='/logout' class='rv-logout'>Sign out</a></div>", sizing_mode="stretch_width")
 
 
-def session_principal(auth: Any) -> Principal | None:
-    """The principal of the current Bokeh session, from its request's session cookie."""
+def _session_cookie() -> str | None:
+    """The raw session cookie of the current Bokeh session's request."""
     from railval.app.auth import COOKIE
 
     ctx = pn.state.curdoc.session_context if pn.state.curdoc is not None else None
     cookies = dict(getattr(getattr(ctx, "request", None), "cookies", None) or {})
-    return auth.principal_from_cookie(cookies.get(COOKIE))
+    return cookies.get(COOKIE)
+
+
+def session_principal(auth: Any) -> Principal | None:
+    """The principal of the current Bokeh session, from its request's session cookie."""
+    return auth.principal_from_cookie(_session_cookie())
 
 
 def build_app(database: Any, page: str = "overview", principal: Principal | None = None,
@@ -152,12 +157,17 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
     is built (:class:`Pages`), the others when first opened. ``auth``: the server's
     :class:`railval.app.auth.RailvalAuth` (the session's user comes from its cookie); else
     ``principal`` (tests), else open single-user mode."""
+    recheck = None
     if auth is not None:
         principal = session_principal(auth)
         if principal is None:  # the cookie expired between the page and its websocket
             return pn.Column(pn.pane.Alert("Your session has ended. <a href='/login'>Sign in</a>.",
                                            alert_type="warning"))
-    app = AppState(Backend(database), principal=principal)
+        cookie = _session_cookie()
+
+        def recheck():  # access ends at the next action (docs/security.md)
+            return auth.principal_from_cookie(cookie)
+    app = AppState(Backend(database), principal=principal, recheck=recheck)
     if page != "overview":
         app.page = page
     pages = Pages(app)
