@@ -9,6 +9,8 @@ Pages are one module each under ``app/pages``; their state lives in ``app/state/
 
 from __future__ import annotations
 
+import functools
+
 import html
 import socket
 import time
@@ -163,10 +165,8 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
         if principal is None:  # the cookie expired between the page and its websocket
             return pn.Column(pn.pane.Alert("Your session has ended. <a href='/login'>Sign in</a>.",
                                            alert_type="warning"))
-        cookie = _session_cookie()
-
-        def recheck():  # access ends at the next action (docs/security.md)
-            return auth.principal_from_cookie(cookie)
+        # access ends at the next action: the user is re-read from this cookie (docs/security.md)
+        recheck = functools.partial(auth.principal_from_cookie, _session_cookie())
     app = AppState(Backend(database), principal=principal, recheck=recheck)
     if page != "overview":
         app.page = page
