@@ -256,12 +256,15 @@ def session_url(session) -> str:
 
 
 def trusted_public_keys(url: str) -> dict[str, object]:
-    """fingerprint → public key: the current signing key and the retired ones."""
+    """fingerprint → public key: the current signing key and the retired ones. A key file
+    that does not exist is not created (verifying a copied database must not make a key)."""
     from railval.core.integrity import key_fingerprint, public_key_from_hex
 
-    current = signing_key(url).public_key()
-    keys = {key_fingerprint(current): current}
     path = signing_key_path(url)
+    keys = {}
+    if path is None or path.is_file() or str(path) in _keys:
+        current = signing_key(url).public_key()
+        keys[key_fingerprint(current)] = current
     retired = Path(str(path) + ".retired") if path is not None else None
     if retired is not None and retired.is_file():
         for line_no, line in enumerate(retired.read_text().splitlines(), 1):
@@ -277,16 +280,22 @@ def trusted_public_keys(url: str) -> dict[str, object]:
 
 
 def append_witness(path: Path, line: dict) -> None:
-    """Append one signed head to the witness file (one JSON line, one ``write``)."""
+    """Append one signed head to the witness file (one JSON line, one ``write``). Runs after
+    the commit: a failure is logged (the change is stored; the witness misses one head)."""
     import json
+    import logging
 
-    path.parent.mkdir(parents=True, exist_ok=True)
     data = (json.dumps(line, sort_keys=True, separators=(",", ":")) + "\n").encode()
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
     try:
-        os.write(fd, data)
-    finally:
-        os.close(fd)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
+        try:
+            os.write(fd, data)
+        finally:
+            os.close(fd)
+    except OSError as exc:
+        logging.getLogger("railval.db").error("witness file %s: cannot append signed head "
+                                              "seq %s: %s", path, line.get("seq"), exc)
 
 
 def read_witness(path: Path) -> list[dict]:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import pathlib
 import shutil
 import sqlite3
 import struct
@@ -365,3 +366,29 @@ def test_rows_and_signoffs_written_before_signing_are_reported_honestly(setup, c
     rc, out = audit_verify(database, capsys)
     assert rc == 1 and "sign-off 1 (demo/baseline, validated" in out
     assert "edited after the seal" in out
+
+
+def test_a_copy_is_verified_with_the_public_key_and_the_witness(setup, capsys, tmp_path,
+                                                                monkeypatch):
+    database, _cp = setup
+    url = make_url(database.url)
+    if url.get_backend_name() != "sqlite":
+        pytest.skip("a database file copy is an SQLite matter")
+    from railval.db import integrity
+
+    capsys.readouterr()
+    assert cli(database, "audit", "key", "--json") == 0
+    key = json.loads(capsys.readouterr().out)
+    copy = tmp_path / "copy" / "railval.db"
+    copy.parent.mkdir()
+    with sqlite3.connect(url.database) as src, sqlite3.connect(copy) as dst:
+        src.backup(dst)  # WAL included
+    copy_url = f"sqlite:///{copy}"
+    # the seal secret travels with the copy as the server's secret does (docs/database.md)
+    monkeypatch.setenv("RAILVAL_SECRET_KEY", (pathlib.Path(url.database + ".key")).read_text().strip())
+    capsys.readouterr()
+    assert main(["--db", copy_url, "--as", "ass", "audit", "verify", "--quick"]) == 1
+    assert "the public key to verify with" in capsys.readouterr().out
+    assert not integrity.signing_key_path(copy_url).exists()  # verifying made no key
+    assert main(["--db", copy_url, "--as", "ass", "audit", "verify", "--quick",
+                 "--public-key", key["public_key"], "--witness", key["witness_file"]]) == 0

@@ -130,6 +130,10 @@ def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
     report = VerifyReport(source=database.safe_url)
     keys = trusted_keys(database, public_key)
     report.keys = list(keys)
+    if not keys:
+        report.findings.append(Finding(
+            "signature", "signing key", "the public key to verify with (the server's key file "
+            f"{integrity.signing_key_path(database.url)}, or --public-key HEX|FILE)", "none"))
     with database.session() as s:
         rows = {}
 
