@@ -34,7 +34,6 @@ from railval.core.integrity import (
     chain_hash,
     content_hash,
     head_message,
-    key_fingerprint,
     sign,
     signoff_record_hash,
 )
@@ -113,14 +112,11 @@ def record(
         "detail": dict(detail or {}),
     }
     h = chain_hash(prev, row)
-    url = integrity.session_url(session)
-    key = integrity.signing_key(url)
-    fp = key_fingerprint(key.public_key())
+    key, fp, witness = integrity.signer_for(integrity.session_url(session))
     sig = sign(key, "audit-head", head_message(row["seq"], h))
     session.execute(insert(AuditEvent).values(**row, prev_hash=prev, row_hash=h,
                                               signature=sig, key_fingerprint=fp))
     session.execute(update(AuditHead).where(AuditHead.id == 1).values(row_hash=h))
-    witness = integrity.witness_path(url)
     if witness is not None:
         session.info["railval_witness"] = (witness, {
             "seq": row["seq"], "row_hash": h, "at_utc": row["at_utc"], "key_fingerprint": fp,

@@ -244,11 +244,31 @@ def signing_key(url: str):
         return _keys[cache_key]
 
 
+_signers: dict[tuple, tuple] = {}
+
+
+def signer_for(url: str) -> tuple:
+    """(private key, its fingerprint, witness path) for database ``url``, cached per URL and
+    key/witness settings (the per-row cost of signing is then the signature alone)."""
+    from railval.core.integrity import key_fingerprint
+
+    ck = (url, os.environ.get("RAILVAL_SIGNING_KEY_FILE"), os.environ.get("RAILVAL_WITNESS_FILE"),
+          os.environ.get("XDG_CONFIG_HOME"))
+    got = _signers.get(ck)
+    if got is None:
+        key = signing_key(url)
+        got = (key, key_fingerprint(key.public_key()), witness_path(url))
+        with _lock:
+            _signers[ck] = got
+    return got
+
+
 def forget_keys() -> None:
     """Drop cached keys (after a rotation, or in tests that change the key files)."""
     with _lock:
         _keys.clear()
         _secrets.clear()
+        _signers.clear()
 
 
 def session_url(session) -> str:

@@ -143,12 +143,12 @@ def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
                 yield r
 
         by_seq = _check_chain(collect(), report, checkpoint)
-        _check_row_signatures(rows, keys, report)
+        good = _check_row_signatures(rows, keys, report)
         if use_witness:
             wpath = Path(witness) if witness else integrity.witness_path(database.url)
             lines = _witness_lines(wpath, report)
             if lines is not None:
-                _check_witness(by_seq, lines, str(wpath), keys, report)
+                _check_witness(by_seq, lines, str(wpath), keys, report, rows, good)
         head_seq, head_hash = audit.head(s)
         if not report.findings and (head_seq, head_hash) != (report.head_seq, report.head_hash):
             report.findings.append(Finding(
@@ -279,11 +279,11 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, 
                 yield r
 
     by_seq = _check_chain(read(), report, checkpoint)
-    _check_row_signatures(rows, keys, report)
+    good = _check_row_signatures(rows, keys, report)
     if (root / "witness.jsonl").is_file():
         lines = _witness_lines(root / "witness.jsonl", report)
         if lines is not None:
-            _check_witness(by_seq, lines, "witness.jsonl", keys, report)
+            _check_witness(by_seq, lines, "witness.jsonl", keys, report, rows, good)
     head = json.loads((root / "head.json").read_text(encoding="utf-8"))
     if not report.findings and (int(head["seq"]), head["row_hash"]) != (report.head_seq,
                                                                         report.head_hash):

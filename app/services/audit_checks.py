@@ -97,8 +97,10 @@ def _check_chain(rows: Iterable[dict[str, Any]], report: VerifyReport,
 
 
 def _check_row_signatures(rows: dict[int, dict[str, Any]], keys: dict[str, Any],
-                          report: VerifyReport) -> None:
-    """Every row's signed head verifies; unsigned rows only before the first signed one."""
+                          report: VerifyReport) -> set[int]:
+    """Every row's signed head verifies; unsigned rows only before the first signed one.
+    Returns the seqs whose signature verified."""
+    good: set[int] = set()
     first_signed: int | None = None
     unsigned_before: list[int] = []
     bad = 0
@@ -134,6 +136,7 @@ def _check_row_signatures(rows: dict[int, dict[str, Any]], keys: dict[str, Any],
                     "an invalid one: the row was changed or written without the signing key"))
         else:
             report.signed_rows += 1
+            good.add(seq)
     if unsigned_before:
         lo, hi = unsigned_before[0], unsigned_before[-1]
         if first_signed is not None:
@@ -145,11 +148,17 @@ def _check_row_signatures(rows: dict[int, dict[str, Any]], keys: dict[str, Any],
                 f"no row is signed ({len(unsigned_before)} rows, written before signing was "
                 "enabled): anyone with write access could have rewritten them; run "
                 "`railval audit seal` to sign the current head")
+    return good
 
 
 def _check_witness(by_seq: dict[int, str], witness: list[dict[str, Any]], where_file: str,
-                   keys: dict[str, Any], report: VerifyReport) -> None:
-    """Every signed head in the witness file is still in the chain with the same hash."""
+                   keys: dict[str, Any], report: VerifyReport,
+                   rows: dict[int, dict[str, Any]] | None = None,
+                   verified: set[int] | None = None) -> None:
+    """Every signed head in the witness file is still in the chain with the same hash. A
+    line equal to a row whose signature already verified (``verified``) is not verified
+    twice."""
+    rows, verified = rows or {}, verified or set()
     report.witness = where_file
     report.witness_heads = len(witness)
     top = max(by_seq) if by_seq else 0
@@ -158,6 +167,11 @@ def _check_witness(by_seq: dict[int, str], witness: list[dict[str, Any]], where_
         seq, h = int(w["seq"]), str(w["row_hash"])
         pk = keys.get(str(w.get("key_fingerprint")))
         label = f"witness {where_file} line {i}: signed head seq {seq} ({w.get('at_utc', '')})"
+        same = (seq in verified and rows[seq]["row_hash"] == h
+                and rows[seq].get("signature") == w.get("signature")
+                and rows[seq].get("key_fingerprint") == w.get("key_fingerprint"))
+        if same:
+            continue
         if pk is None or not verify_signature(pk, "audit-head", head_message(seq, h),
                                               w.get("signature")):
             report.findings.append(Finding("witness", label, "a head signed by a trusted key",
