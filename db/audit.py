@@ -90,7 +90,8 @@ def record(
     ``after``: the content before and after the change, as a SHA-256 hex string or any
     JSON document (hashed canonically); None when there is no such state. ``reason``: free
     text. ``detail``: small JSON facts kept in clear (e.g. the client address of a failed
-    login); never secrets.
+    login); never secrets. The row is signed; its signed head goes to the witness file when
+    the transaction commits — call this outside any savepoint that may roll back alone.
     """
     actor_name = _actor_name(actor)
     if not action or not object:
