@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import json
 import pathlib
+import re
 import shutil
 import sqlite3
 import struct
@@ -392,3 +393,17 @@ def test_a_copy_is_verified_with_the_public_key_and_the_witness(setup, capsys, t
     assert not integrity.signing_key_path(copy_url).exists()  # verifying made no key
     assert main(["--db", copy_url, "--as", "ass", "audit", "verify", "--quick",
                  "--public-key", key["public_key"], "--witness", key["witness_file"]]) == 0
+
+
+def test_stripping_every_signature_does_not_pass_as_written_before_signing(setup, capsys):
+    """Signatures removed from every row and sign-off, then a forged sign-off appended
+    unsigned: the witness shows signing was on, so nothing passes as 'before signing'."""
+    database, _cp = setup
+    with raw(database) as (run, backend):
+        drop_triggers(run, backend)
+        run("UPDATE audit_event SET signature = NULL, key_fingerprint = NULL")
+        run("UPDATE signoff SET signature = NULL, key_fingerprint = NULL, record_sha256 = NULL")
+    rc, out = audit_verify(database, capsys)
+    assert rc == 1
+    assert re.search(r"expected a signature \(rows are signed from seq \d\), found none", out)
+    assert "sign-off 1 (demo/baseline" in out and "written without the signing key" in out

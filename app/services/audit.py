@@ -41,6 +41,7 @@ from railval.app.services.audit_checks import (
     _check_row_signatures,
     _check_signoffs,
     _check_witness,
+    witness_signed_from,
 )
 from railval.core.errors import RailvalError
 from railval.core.integrity import key_fingerprint, public_key_from_hex, public_key_hex
@@ -143,12 +144,13 @@ def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
                 yield r
 
         by_seq = _check_chain(collect(), report, checkpoint)
-        good = _check_row_signatures(rows, keys, report)
+        lines = None
         if use_witness:
             wpath = Path(witness) if witness else integrity.witness_path(database.url)
             lines = _witness_lines(wpath, report)
-            if lines is not None:
-                _check_witness(by_seq, lines, str(wpath), keys, report, rows, good)
+        good = _check_row_signatures(rows, keys, report, witness_signed_from(lines, keys))
+        if lines is not None:
+            _check_witness(by_seq, lines, str(wpath), keys, report, rows, good)
         head_seq, head_hash = audit.head(s)
         if not report.findings and (head_seq, head_hash) != (report.head_seq, report.head_hash):
             report.findings.append(Finding(
@@ -279,11 +281,11 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, 
                 yield r
 
     by_seq = _check_chain(read(), report, checkpoint)
-    good = _check_row_signatures(rows, keys, report)
-    if (root / "witness.jsonl").is_file():
-        lines = _witness_lines(root / "witness.jsonl", report)
-        if lines is not None:
-            _check_witness(by_seq, lines, "witness.jsonl", keys, report, rows, good)
+    lines = (_witness_lines(root / "witness.jsonl", report)
+             if (root / "witness.jsonl").is_file() else None)
+    good = _check_row_signatures(rows, keys, report, witness_signed_from(lines, keys))
+    if lines is not None:
+        _check_witness(by_seq, lines, "witness.jsonl", keys, report, rows, good)
     head = json.loads((root / "head.json").read_text(encoding="utf-8"))
     if not report.findings and (int(head["seq"]), head["row_hash"]) != (report.head_seq,
                                                                         report.head_hash):

@@ -54,6 +54,7 @@ class VerifyReport:
     keys: list[str] = field(default_factory=list)
     witness: str | None = None
     witness_heads: int = 0
+    signed_from: int | None = None
     seconds: float = 0.0
     source: str = "database"
 
@@ -96,12 +97,31 @@ def _check_chain(rows: Iterable[dict[str, Any]], report: VerifyReport,
     return by_seq
 
 
+def witness_signed_from(witness: list[dict[str, Any]] | None,
+                        keys: dict[str, Any]) -> int | None:
+    """The lowest seq of a correctly signed head in the witness: signing was enabled there,
+    so no row from it on may lack a signature (stripping every signature does not turn the
+    trail into one "written before signing")."""
+    best = None
+    for w in witness or []:
+        seq = int(w["seq"])
+        if best is not None and seq >= best:
+            continue
+        pk = keys.get(str(w.get("key_fingerprint")))
+        if pk is not None and verify_signature(pk, "audit-head",
+                                               head_message(seq, str(w["row_hash"])),
+                                               w.get("signature")):
+            best = seq
+    return best
+
+
 def _check_row_signatures(rows: dict[int, dict[str, Any]], keys: dict[str, Any],
-                          report: VerifyReport) -> set[int]:
-    """Every row's signed head verifies; unsigned rows only before the first signed one.
-    Returns the seqs whose signature verified."""
+                          report: VerifyReport, signed_from: int | None = None) -> set[int]:
+    """Every row's signed head verifies; unsigned rows only before the first signed one (or
+    before ``signed_from``, the first head in the witness). Returns the seqs whose signature
+    verified; sets ``report.signed_from``."""
     good: set[int] = set()
-    first_signed: int | None = None
+    first_signed: int | None = signed_from
     unsigned_before: list[int] = []
     bad = 0
     for seq in sorted(rows):
@@ -109,7 +129,7 @@ def _check_row_signatures(rows: dict[int, dict[str, Any]], keys: dict[str, Any],
         where = f"row seq {seq} ({r['action']}, object {r['object']!r})"
         sig, fp = r.get("signature"), r.get("key_fingerprint")
         if not sig:
-            if first_signed is None:
+            if first_signed is None or seq < first_signed:
                 unsigned_before.append(seq)
             elif bad < 20:
                 bad += 1
@@ -117,7 +137,7 @@ def _check_row_signatures(rows: dict[int, dict[str, Any]], keys: dict[str, Any],
                     "signature", where, f"a signature (rows are signed from seq {first_signed})",
                     "none: the row was written without the signing key"))
             continue
-        if first_signed is None:
+        if first_signed is None or seq < first_signed:
             first_signed = seq
         pk = keys.get(str(fp))
         if pk is None:
@@ -137,6 +157,7 @@ def _check_row_signatures(rows: dict[int, dict[str, Any]], keys: dict[str, Any],
         else:
             report.signed_rows += 1
             good.add(seq)
+    report.signed_from = first_signed
     if unsigned_before:
         lo, hi = unsigned_before[0], unsigned_before[-1]
         if first_signed is not None:
@@ -229,7 +250,8 @@ def _check_signoffs(sods: list[dict[str, Any]], rows: dict[int, dict[str, Any]],
             if row is None:
                 find(sod, "inserted", "a signoff.create audit row and a signature",
                      "neither: the sign-off was written outside railval")
-            elif row.get("signature"):
+            elif row.get("signature") or (report.signed_from is not None
+                                          and int(row["seq"]) >= report.signed_from):
                 find(sod, f"inserted (audit row {row['seq']})",
                      "a signature (the trail was signed when its audit row was written)",
                      "none: the sign-off was written without the signing key")
