@@ -407,3 +407,37 @@ def test_stripping_every_signature_does_not_pass_as_written_before_signing(setup
     assert rc == 1
     assert re.search(r"expected a signature \(rows are signed from seq \d\), found none", out)
     assert "sign-off 1 (demo/baseline" in out and "written without the signing key" in out
+
+
+def test_key_rotation_as_documented_keeps_old_rows_verifiable(setup, capsys, tmp_path):
+    """docs/audit.md, "Key rotation": the old public key goes to ``<key file>.retired``, a
+    new key signs from the seal on; old rows, the old sign-off and the witness still verify,
+    online and offline from the bundle with `audit key --json` of the new key."""
+    database, _cp = setup
+    from railval.db import integrity
+
+    capsys.readouterr()
+    assert cli(database, "audit", "key", "--json") == 0
+    old = json.loads(capsys.readouterr().out)
+    key_file = pathlib.Path(old["key_file"])
+    with open(str(key_file) + ".retired", "a") as fh:
+        fh.write(f"# retired at rotation\n{old['public_key']}\n")
+    key_file.rename(tmp_path / "old-key.pem")  # kept offline
+    integrity.forget_keys()
+    assert main(["--db", database.url, "--as", "admin", "audit", "seal", "--reason",
+                 "key rotation"]) == 0
+    capsys.readouterr()
+    assert cli(database, "audit", "key", "--json") == 0
+    new = json.loads(capsys.readouterr().out)
+    assert new["fingerprint"] != old["fingerprint"] and new["retired"] == [old["fingerprint"]]
+    rc, out = audit_verify(database, capsys)
+    assert rc == 0, out
+    (tmp_path / "key.json").write_text(json.dumps(new))
+    assert cli(database, "audit", "export", str(tmp_path / "bundle")) == 0
+    capsys.readouterr()
+    assert main(["audit", "verify", "--bundle", str(tmp_path / "bundle"), "--public-key",
+                 str(tmp_path / "key.json")]) == 0, capsys.readouterr().out
+    # the new public key alone: the assessor sees the rows signed by the old key named
+    assert main(["audit", "verify", "--bundle", str(tmp_path / "bundle"), "--public-key",
+                 new["public_key"]]) == 1
+    assert f"key {old['fingerprint'][:16]}" in capsys.readouterr().out

@@ -81,16 +81,21 @@ def trusted_keys(database, public_key: str | None = None) -> dict[str, Any]:
     if public_key:
         p = Path(public_key)
         text = p.read_text(encoding="utf-8") if p.is_file() else public_key
+        hexes = [text]
         try:
             doc = json.loads(text)
-            text = doc["public_key"] if isinstance(doc, dict) else text
+            if isinstance(doc, dict):  # `railval audit key --json`: current and retired keys
+                hexes = [doc["public_key"], *doc.get("retired_public_keys", [])]
         except (ValueError, KeyError):
             pass
-        try:
-            pk = public_key_from_hex(text.strip())
-        except ValueError as exc:
-            raise RailvalError(f"--public-key {public_key[:60]}: {exc}") from None
-        return {key_fingerprint(pk): pk}
+        keys = {}
+        for h in hexes:
+            try:
+                pk = public_key_from_hex(str(h).strip())
+            except ValueError as exc:
+                raise RailvalError(f"--public-key {public_key[:60]}: {exc}") from None
+            keys[key_fingerprint(pk)] = pk
+        return keys
     return integrity.trusted_public_keys(database.url)
 
 
@@ -98,10 +103,12 @@ def key_info(database) -> dict[str, Any]:
     """The public signing key, its fingerprint, the key and witness files (``audit key``)."""
     pk = integrity.signing_key(database.url).public_key()
     witness = integrity.witness_path(database.url)
+    retired = [k for fp, k in integrity.trusted_public_keys(database.url).items()
+               if fp != key_fingerprint(pk)]
     return {"format": "railval-public-key/1", "algorithm": "Ed25519",
             "public_key": public_key_hex(pk), "fingerprint": key_fingerprint(pk),
-            "retired": [k for k in integrity.trusted_public_keys(database.url)
-                        if k != key_fingerprint(pk)],
+            "retired": [key_fingerprint(k) for k in retired],
+            "retired_public_keys": [public_key_hex(k) for k in retired],
             "key_file": str(integrity.signing_key_path(database.url) or "(in memory)"),
             "witness_file": str(witness) if witness else None}
 
@@ -254,11 +261,9 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, 
     if public_key:
         keys = trusted_keys(None, public_key)
     elif (root / "key.json").is_file():
-        kdoc = json.loads((root / "key.json").read_text(encoding="utf-8"))
-        pk = public_key_from_hex(kdoc["public_key"])
-        keys = {key_fingerprint(pk): pk}
-        report.notes.append(f"trusting the public key in the bundle (fingerprint "
-                            f"{key_fingerprint(pk)}); compare it with the fingerprint the "
+        keys = trusted_keys(None, str(root / "key.json"))
+        report.notes.append(f"trusting the public key(s) in the bundle (fingerprint "
+                            f"{', '.join(keys)}); compare with the fingerprint the "
                             "server's owner published (`railval audit key`), or pass "
                             "--public-key")
     else:
