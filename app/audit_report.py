@@ -35,13 +35,15 @@ class AuditReport:
 
 def build_audit_report(database) -> AuditReport:
     """Build the report from the database (chain checked quickly, sign-off statuses)."""
-    from railval.app.services.audit import verify_database
+    from railval.app.services.audit import key_info, verify_database
     from railval.app.services.signoff import statuses
     from railval.db import audit
     from railval.db import signoff as db_signoff
 
     check = verify_database(database, signals=False, full=False)
-    chain_findings = [f for f in check.findings if f.kind in ("chain", "head")]
+    chain_findings = [f for f in check.findings
+                      if f.kind in ("chain", "head", "signature", "witness")]
+    key = key_info(database)
     chain_status = ("intact" if not chain_findings else f"BROKEN — {chain_findings[0]}")
     now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     with database.session() as s:
@@ -54,9 +56,17 @@ def build_audit_report(database) -> AuditReport:
                     (f"<table class='meta'><tr><td>database</td><td>{_esc(database.safe_url)}</td></tr>"
                      f"<tr><td>generated</td><td>{now}</td></tr>"
                      f"<tr><td>audit rows</td><td>{check.rows}</td></tr>"
-                     f"<tr><td>head</td><td><code>{_esc(check.head_hash)}</code></td></tr></table>")]
+                     f"<tr><td>head</td><td><code>{_esc(check.head_hash)}</code></td></tr>"
+                     f"<tr><td>signing key (Ed25519)</td><td><code>{_esc(key['public_key'])}"
+                     f"</code></td></tr><tr><td>key fingerprint (SHA-256)</td><td><code>"
+                     f"{_esc(key['fingerprint'])}</code></td></tr>"
+                     f"<tr><td>signed rows</td><td>{check.signed_rows} of {check.rows}"
+                     f"</td></tr></table>")]
     ok = not chain_findings
-    h.append(f"<div class='verdict {'ok' if ok else 'no'}'>Hash chain: {_esc(chain_status)}</div>")
+    h.append(f"<div class='verdict {'ok' if ok else 'no'}'>Hash chain and signatures: "
+             f"{_esc(chain_status)}</div>")
+    for note in check.notes:
+        h.append(f"<p class='note'>{_esc(note)}</p>")
     h.append("<p class='note'>This report checks the chain and each sign-off's evidence without "
              "decoding the stored signals. The complete check is <code>railval audit verify "
              "--checkpoint FILE</code>; offline: <code>railval audit verify --bundle DIR</code> "

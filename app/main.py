@@ -9,6 +9,8 @@ Pages are one module each under ``app/pages``; their state lives in ``app/state/
 
 from __future__ import annotations
 
+import functools
+
 import html
 import socket
 import time
@@ -170,13 +172,18 @@ def select_from_query(app: AppState, args: Mapping[str, str]) -> None:
         app.page = page
 
 
-def session_principal(auth: Any) -> Principal | None:
-    """The principal of the current Bokeh session, from its request's session cookie."""
+def _session_cookie() -> str | None:
+    """The raw session cookie of the current Bokeh session's request."""
     from railval.app.auth import COOKIE
 
     ctx = pn.state.curdoc.session_context if pn.state.curdoc is not None else None
     cookies = dict(getattr(getattr(ctx, "request", None), "cookies", None) or {})
-    return auth.principal_from_cookie(cookies.get(COOKIE))
+    return cookies.get(COOKIE)
+
+
+def session_principal(auth: Any) -> Principal | None:
+    """The principal of the current Bokeh session, from its request's session cookie."""
+    return auth.principal_from_cookie(_session_cookie())
 
 
 def build_app(database: Any, page: str = "overview", principal: Principal | None = None,
@@ -185,12 +192,15 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
     is built (:class:`Pages`), the others when first opened. ``auth``: the server's
     :class:`railval.app.auth.RailvalAuth` (the session's user comes from its cookie); else
     ``principal`` (tests), else open single-user mode."""
+    recheck = None
     if auth is not None:
         principal = session_principal(auth)
         if principal is None:  # the cookie expired between the page and its websocket
             return pn.Column(pn.pane.Alert("Your session has ended. <a href='/login'>Sign in</a>.",
                                            alert_type="warning"))
-    app = AppState(Backend(database), principal=principal)
+        # access ends at the next action: the user is re-read from this cookie (docs/security.md)
+        recheck = functools.partial(auth.principal_from_cookie, _session_cookie())
+    app = AppState(Backend(database), principal=principal, recheck=recheck)
     if page != "overview":
         app.page = page
     select_from_query(app, _session_args())

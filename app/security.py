@@ -26,6 +26,12 @@ requests, signed session ids.
   any handler runs. Panel's own callbacks travel over the websocket, whose Origin is
   checked against ``--allow-websocket-origin``.
 
+* :class:`NoAutoload` refuses Bokeh's ``<app>/autoload.js`` (404, no body from Bokeh):
+  railval is never embedded in another page, and that script — which another page may
+  include with ``<script src>``, the browser sending the SameSite=Lax session cookie along
+  to a same-site page — would carry a Bokeh session token whose payload holds the request's
+  cookies, the HttpOnly ``railval_session`` among them (docs/security.md, threat model).
+
 * :func:`use_local_fonts` removes the Fast design's Google Fonts stylesheet: the page uses the system sans-serif fonts (``static/railval.css``) and makes no request
   to another host.
 
@@ -92,11 +98,37 @@ class SecurityHeaders:
         return chunk
 
 
+AUTOLOAD_REFUSED = (b"// railval is not embeddable: autoload.js is not served "
+                    b"(docs/security.md)\n")
+
+
+class NoAutoload:
+    """Tornado output transform replacing every ``*/autoload.js`` response by a 404 whose
+    body is :data:`AUTOLOAD_REFUSED` (the session token Bokeh wrote never leaves)."""
+
+    def __init__(self, request) -> None:
+        self.refuse = request.path.rstrip("/").endswith("/autoload.js")
+
+    def transform_first_chunk(self, status_code, headers, chunk, finishing):
+        if not self.refuse:
+            return status_code, headers, chunk
+        for name in ("Etag", "Content-Encoding", "Set-Cookie"):
+            headers.pop(name, None)
+        headers["Content-Type"] = "text/javascript; charset=utf-8"
+        headers["Content-Length"] = str(len(AUTOLOAD_REFUSED))
+        headers["Cache-Control"] = "no-store"
+        return 404, headers, AUTOLOAD_REFUSED
+
+    def transform_chunk(self, chunk, finishing):
+        return b"" if self.refuse else chunk
+
+
 def transforms() -> list:
-    """The server's output transforms: Tornado's default gzip, then the security headers."""
+    """The server's output transforms: autoload.js refused, Tornado's default gzip, then
+    the security headers."""
     from tornado.web import GZipContentEncoding
 
-    return [GZipContentEncoding, SecurityHeaders]
+    return [NoAutoload, GZipContentEncoding, SecurityHeaders]
 
 
 def use_local_fonts() -> None:

@@ -17,6 +17,13 @@ compute the very same bytes.
 * **Evidence hash** (:func:`evidence_hash`): SHA-256 of the canonical JSON of an evidence
   manifest (21 CFR 11.70: the signature is linked to its record so that it cannot be moved
   to other evidence).
+* **Signatures** (:func:`sign`, :func:`verify_signature`): Ed25519 (RFC 8032) through the
+  ``cryptography`` package over a domain-separated message ``b"railval/<kind>/1\\0" ‖
+  canonical JSON``. Three kinds: a sign-off's canonical record (:func:`signoff_record`), an
+  audit row's signed head ``{seq, row_hash}`` (:func:`head_message`) — the signed tree head
+  of Certificate Transparency (RFC 9162 §4.10) reduced to a hash chain — and nothing else.
+  The public key alone verifies, offline; its fingerprint is the SHA-256 of the raw 32-byte
+  public key in hex (:func:`key_fingerprint`).
 """
 
 from __future__ import annotations
@@ -138,6 +145,89 @@ def check_checkpoint(rows_by_seq: Mapping[int, str], head_seq: int,
     if found != want:
         return ChainBreak(seq, "", "row_hash (checkpoint)", want, str(found))
     return None
+
+
+#: the fields of a sign-off that its signature covers (21 CFR 11.50, 11.70)
+SIGNOFF_RECORD_FIELDS = ("id", "campaign", "configuration", "username", "printed_name",
+                         "signed_at_utc", "meaning", "decision", "restrictions", "statement",
+                         "justification", "contrary_to_objective", "evidence_sha256",
+                         "software_version")
+
+
+def signoff_record(signoff: Mapping[str, Any]) -> dict[str, Any]:
+    """The canonical record of a sign-off that its signature covers.
+
+    ``contrary_to_objective`` enters as a JSON boolean, ``justification`` as text ("" when
+    absent) so that a database's 0/1 and ``NULL`` read the same everywhere.
+    """
+    rec = {k: signoff.get(k) for k in SIGNOFF_RECORD_FIELDS}
+    rec["id"] = int(rec["id"])
+    rec["contrary_to_objective"] = bool(rec["contrary_to_objective"])
+    rec["justification"] = rec["justification"] or ""
+    rec["restrictions"] = rec["restrictions"] or ""
+    rec["statement"] = rec["statement"] or ""
+    return {"format": "railval-signoff/1", **rec}
+
+
+def signoff_record_hash(signoff: Mapping[str, Any]) -> str:
+    """SHA-256 of the canonical JSON of :func:`signoff_record` (kept in the audit row)."""
+    return content_hash(signoff_record(signoff))
+
+
+def head_message(seq: int, row_hash: str) -> dict[str, Any]:
+    """What the signature of an audit row (a signed head of the chain) covers."""
+    return {"format": "railval-audit-head/1", "seq": int(seq), "row_hash": str(row_hash)}
+
+
+def _message(kind: str, doc: Any) -> bytes:
+    return b"railval/" + kind.encode("ascii") + b"/1\0" + canonical_json(doc)
+
+
+def key_fingerprint(public_key: Any) -> str:
+    """SHA-256 (hex) of the raw 32-byte Ed25519 public key."""
+    from cryptography.hazmat.primitives import serialization
+
+    raw = public_key.public_bytes(serialization.Encoding.Raw, serialization.PublicFormat.Raw)
+    return sha256_hex(raw)
+
+
+def public_key_from_hex(text: str) -> Any:
+    """An Ed25519 public key from its 64 hexadecimal characters (raw 32 bytes)."""
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+
+    text = str(text).strip().lower()
+    try:
+        raw = bytes.fromhex(text)
+    except ValueError:
+        raise ValueError(f"public key {text[:20]!r}…: not hexadecimal") from None
+    if len(raw) != 32:
+        raise ValueError(f"public key: {len(raw)} bytes, an Ed25519 public key has 32")
+    return Ed25519PublicKey.from_public_bytes(raw)
+
+
+def public_key_hex(public_key: Any) -> str:
+    from cryptography.hazmat.primitives import serialization
+
+    return public_key.public_bytes(serialization.Encoding.Raw,
+                                   serialization.PublicFormat.Raw).hex()
+
+
+def sign(private_key: Any, kind: str, doc: Any) -> str:
+    """Hex Ed25519 signature of ``doc`` of ``kind`` (``signoff`` or ``audit-head``)."""
+    return private_key.sign(_message(kind, doc)).hex()
+
+
+def verify_signature(public_key: Any, kind: str, doc: Any, signature: str | None) -> bool:
+    """True when ``signature`` (hex) is ``public_key``'s signature of ``doc`` of ``kind``."""
+    from cryptography.exceptions import InvalidSignature
+
+    if not signature:
+        return False
+    try:
+        public_key.verify(bytes.fromhex(str(signature)), _message(kind, doc))
+    except (InvalidSignature, ValueError):
+        return False
+    return True
 
 
 def evidence_hash(manifest: Mapping[str, Any]) -> str:

@@ -10,6 +10,12 @@ one-row ``audit_head`` table (a row lock on PostgreSQL, the write lock on SQLite
 ``prev_hash`` is unique, so two writers can never fork the chain. The database refuses
 UPDATE and DELETE on ``audit_event`` and ``signoff`` (triggers created by migration
 ``0002_users_audit``).
+
+Each row is also **signed** (Ed25519, :mod:`railval.db.integrity`): its ``signature`` covers
+``{seq, row_hash}`` — a signed head of the chain up to that row — so nobody without the
+signing key can extend the chain or rewrite it. After the transaction commits, its last
+signed head is appended to the **witness file** kept beside the key (outside the database):
+a removed tail or a rewritten chain is found by comparing with it (docs/audit.md).
 """
 
 from __future__ import annotations
@@ -19,10 +25,19 @@ import re
 from collections.abc import Iterator
 from typing import Any
 
-from sqlalchemy import func, insert, select, update
+from sqlalchemy import event, func, insert, select, update
 from sqlalchemy.orm import Session
 
-from railval.core.integrity import GENESIS, chain_hash, content_hash
+from railval.core.integrity import (
+    GENESIS,
+    SIGNOFF_RECORD_FIELDS,
+    chain_hash,
+    content_hash,
+    head_message,
+    sign,
+    signoff_record_hash,
+)
+from railval.db import integrity
 from railval.db.models import AuditEvent, AuditHead
 
 __all__ = ["GENESIS", "actor_of", "head", "iter_rows", "record", "row_dict", "utc_stamp"]
@@ -75,7 +90,8 @@ def record(
     ``after``: the content before and after the change, as a SHA-256 hex string or any
     JSON document (hashed canonically); None when there is no such state. ``reason``: free
     text. ``detail``: small JSON facts kept in clear (e.g. the client address of a failed
-    login); never secrets.
+    login); never secrets. The row is signed; its signed head goes to the witness file when
+    the transaction commits — call this outside any savepoint that may roll back alone.
     """
     actor_name = _actor_name(actor)
     if not action or not object:
@@ -97,9 +113,45 @@ def record(
         "detail": dict(detail or {}),
     }
     h = chain_hash(prev, row)
-    session.execute(insert(AuditEvent).values(**row, prev_hash=prev, row_hash=h))
+    key, fp, witness = integrity.signer_for(integrity.session_url(session))
+    sig = sign(key, "audit-head", head_message(row["seq"], h))
+    session.execute(insert(AuditEvent).values(**row, prev_hash=prev, row_hash=h,
+                                              signature=sig, key_fingerprint=fp))
     session.execute(update(AuditHead).where(AuditHead.id == 1).values(row_hash=h))
+    if witness is not None:
+        session.info["railval_witness"] = (witness, {
+            "seq": row["seq"], "row_hash": h, "at_utc": row["at_utc"], "key_fingerprint": fp,
+            "signature": sig})
     return session.scalar(select(AuditEvent).where(AuditEvent.seq == int(seq)))
+
+
+@event.listens_for(Session, "after_commit")
+def _witness_after_commit(session: Session) -> None:
+    """Append the committed transaction's signed head to the witness file."""
+    pending = session.info.pop("railval_witness", None)
+    if pending is not None:
+        integrity.append_witness(*pending)
+
+
+@event.listens_for(Session, "after_rollback")
+def _witness_after_rollback(session: Session) -> None:
+    session.info.pop("railval_witness", None)
+
+
+def seal(session: Session, actor: Any, reason: str = "") -> AuditEvent:
+    """Append a signed ``audit.seal`` row: it signs the head over every earlier row (those
+    written before signing was enabled included) and is kept in the witness file. Its
+    detail names the record hash of every unsigned sign-off, binding their decisions too."""
+    from railval.db.models import Signoff
+
+    unsigned = int(session.scalar(select(func.count()).select_from(AuditEvent)
+                                  .where(AuditEvent.signature.is_(None))) or 0)
+    legacy = {str(so.id): signoff_record_hash({k: getattr(so, k) for k in SIGNOFF_RECORD_FIELDS})
+              for so in session.scalars(select(Signoff).where(Signoff.signature.is_(None))
+                                        .order_by(Signoff.id))}
+    return record(session, actor, "audit.seal", "audit:trail", None, None,
+                  reason or "seal the current head",
+                  detail={"unsigned_rows_before": unsigned, "unsigned_signoffs": legacy})
 
 
 def actor_of(session: Session) -> str:
@@ -119,7 +171,8 @@ def row_dict(ev: AuditEvent) -> dict[str, Any]:
         "seq": ev.seq, "at_utc": ev.at_utc, "actor": ev.actor, "action": ev.action,
         "object": ev.object, "before_sha256": ev.before_sha256, "after_sha256": ev.after_sha256,
         "reason": ev.reason, "detail": dict(ev.detail or {}), "prev_hash": ev.prev_hash,
-        "row_hash": ev.row_hash,
+        "row_hash": ev.row_hash, "signature": ev.signature,
+        "key_fingerprint": ev.key_fingerprint,
     }
 
 

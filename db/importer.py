@@ -484,7 +484,8 @@ def write_validated(session: Session, vc: ValidatedCampaign) -> Campaign:
         {"recording_id": rec.id, "channel_id": chans[name].id, "blob": blob, "dtype": "<f8",
          "sha256": sha,
          "provenance": {**prov, "seal": integrity.seal_signal(
-             secret, rec.id, chans[name].id, sha, rec.distance_sha256, rec.fs, rec.t0, rec.n)}}
+             secret, rec.id, chans[name].id, sha, rec.distance_sha256, rec.fs, rec.t0, rec.n,
+             names=(camp.name, r.section_id, r.configuration or "", name))}}
         for rec, r in zip(recs, vc.recordings, strict=True)
         for name, (blob, sha, prov) in r.signals.items()
     ]

@@ -17,6 +17,22 @@ rows onto another's. Two seals, both HMAC-SHA256 (RFC 2104, FIPS 198-1) with a s
   content hashes) of what a report or a sign-off rests on; :func:`railval.db.repo.verify_database`
   checks a whole database (``railval verify``).
 
+**Signing key** (:func:`signing_key`): an Ed25519 private key (RFC 8032, ``cryptography``)
+that signs every audit row's head and every sign-off's canonical record
+(:mod:`railval.core.integrity`), so an assessor verifies with the public key alone. In this
+order: the PEM file named by ``$RAILVAL_SIGNING_KEY_FILE``; for an SQLite file ``railval.db``
+the file ``railval.db.signing-key.pem`` beside it; otherwise
+``$XDG_CONFIG_HOME/railval/signing-key.pem`` (created 0600 on first use). Public keys of
+earlier (rotated) keys that still verify old rows: ``<key file>.retired``, one hex key a line.
+The **witness file** (:func:`witness_path`) keeps every signed head outside the database:
+``$RAILVAL_WITNESS_FILE``, else ``<key file without .pem>.witness.jsonl`` for SQLite, else
+``$XDG_CONFIG_HOME/railval/witness-<SHA-256 of the database URL, 16 hex>.jsonl``.
+
+Signal seals, version 2, also bind the **names**: campaign, section, configuration (empty for
+the measurement) and channel, so data moved to another section, configuration or campaign
+fails even when the row ids stay. Seals of version 1 (hex without prefix, written before)
+are still checked with their own formula.
+
 The secret, in this order: ``$RAILVAL_SECRET_KEY`` (any text of at least 32 characters); for
 an SQLite file ``railval.db``, the file ``railval.db.key`` beside it (created 0600 with 32
 random bytes on first use); otherwise ``$XDG_CONFIG_HOME/railval/secret.key`` (default
@@ -114,9 +130,208 @@ def open_cache_value(secret: bytes, key: str, stored: bytes) -> bytes | None:
     return payload
 
 
+SEAL_V2 = "v2:"
+
+
 def seal_signal(secret: bytes, recording_id: int, channel_id: int, sha256: str,
-                distance_sha256: str, fs: float, t0: float, n: int) -> str:
-    """Hex seal of one signal row (see the module docstring)."""
-    return _mac(secret, b"signal", str(int(recording_id)).encode(), str(int(channel_id)).encode(),
-                sha256.encode(), distance_sha256.encode(), repr(float(fs)).encode(),
-                repr(float(t0)).encode(), str(int(n)).encode()).hex()
+                distance_sha256: str, fs: float, t0: float, n: int, *,
+                names: tuple[str, str, str, str] | None = None) -> str:
+    """Seal of one signal row (see the module docstring).
+
+    ``names``: (campaign, section id, configuration name or "" for the measurement,
+    channel name) — given, the seal is version 2 (``v2:`` + hex) and binds them too;
+    ``None`` computes the version 1 seal of rows written before.
+    """
+    parts = [str(int(recording_id)).encode(), str(int(channel_id)).encode(),
+             sha256.encode(), distance_sha256.encode(), repr(float(fs)).encode(),
+             repr(float(t0)).encode(), str(int(n)).encode()]
+    if names is None:
+        return _mac(secret, b"signal", *parts).hex()
+    name_bytes = [str(x).encode("utf-8").replace(b"\\", b"\\\\").replace(b"\0", b"\\0")
+                  for x in names]
+    return SEAL_V2 + _mac(secret, b"signal2", *parts, *name_bytes).hex()
+
+
+def check_signal_seal(secret: bytes, seal: str, recording_id: int, channel_id: int,
+                      sha256: str, distance_sha256: str, fs: float, t0: float, n: int,
+                      names: tuple[str, str, str, str]) -> bool:
+    """Does ``seal`` (version 1 or 2) match the row?"""
+    seal = str(seal)
+    v2 = seal.startswith(SEAL_V2)
+    expected = seal_signal(secret, recording_id, channel_id, sha256, distance_sha256, fs, t0,
+                           n, names=names if v2 else None)
+    return hmac.compare_digest(seal, expected)
+
+
+# -- signing key and witness -------------------------------------------------------------
+_keys: dict[str, object] = {}
+
+
+def _config_dir() -> Path:
+    return Path(os.environ.get("XDG_CONFIG_HOME") or Path.home() / ".config") / "railval"
+
+
+def signing_key_path(url: str) -> Path | None:
+    """The PEM file of the signing key for database ``url`` (``None``: in-memory SQLite)."""
+    env = os.environ.get("RAILVAL_SIGNING_KEY_FILE")
+    if env:
+        return Path(env)
+    parsed = make_url(url)
+    if parsed.get_backend_name() == "sqlite":
+        if parsed.database in (None, "", ":memory:") or str(parsed.database).startswith("file:"):
+            return None
+        return Path(str(parsed.database) + ".signing-key.pem")
+    return _config_dir() / "signing-key.pem"
+
+
+def witness_path(url: str) -> Path | None:
+    """The witness file of database ``url`` (see the module docstring)."""
+    env = os.environ.get("RAILVAL_WITNESS_FILE")
+    if env:
+        return Path(env)
+    parsed = make_url(url)
+    key = signing_key_path(url)
+    if key is None:
+        return None
+    if parsed.get_backend_name() == "sqlite" and not os.environ.get("RAILVAL_SIGNING_KEY_FILE"):
+        return Path(str(parsed.database) + ".witness.jsonl")
+    ident = hashlib.sha256(parsed.render_as_string(hide_password=True).encode()).hexdigest()
+    return key.parent / f"witness-{ident[:16]}.jsonl"
+
+
+def _load_or_create_key(path: Path):
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import (
+        Ed25519PrivateKey,
+    )
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        data = path.read_bytes()
+        try:
+            key = serialization.load_pem_private_key(data, password=None)
+        except (ValueError, TypeError) as exc:
+            raise IntegrityError(f"signing key file {path}: not an unencrypted PEM private "
+                                 f"key: {exc}") from None
+        if not isinstance(key, Ed25519PrivateKey):
+            raise IntegrityError(f"signing key file {path}: holds a {type(key).__name__}, "
+                                 "railval signs with Ed25519") from None
+        return key
+    key = Ed25519PrivateKey.generate()
+    pem = key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                            serialization.NoEncryption())
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(pem)
+    return key
+
+
+def signing_key(url: str):
+    """The Ed25519 private key that signs for database ``url`` (created on first use)."""
+    path = signing_key_path(url)
+    cache_key = str(path) if path is not None else f"memory:{url}"
+    with _lock:
+        if cache_key not in _keys:
+            if path is None:
+                from cryptography.hazmat.primitives.asymmetric.ed25519 import (
+                    Ed25519PrivateKey,
+                )
+
+                _keys[cache_key] = Ed25519PrivateKey.generate()
+            else:
+                _keys[cache_key] = _load_or_create_key(path)
+        return _keys[cache_key]
+
+
+_signers: dict[tuple, tuple] = {}
+
+
+def signer_for(url: str) -> tuple:
+    """(private key, its fingerprint, witness path) for database ``url``, cached per URL and
+    key/witness settings (the per-row cost of signing is then the signature alone)."""
+    from railval.core.integrity import key_fingerprint
+
+    ck = (url, os.environ.get("RAILVAL_SIGNING_KEY_FILE"), os.environ.get("RAILVAL_WITNESS_FILE"),
+          os.environ.get("XDG_CONFIG_HOME"))
+    got = _signers.get(ck)
+    if got is None:
+        key = signing_key(url)
+        got = (key, key_fingerprint(key.public_key()), witness_path(url))
+        with _lock:
+            _signers[ck] = got
+    return got
+
+
+def forget_keys() -> None:
+    """Drop cached keys (after a rotation, or in tests that change the key files)."""
+    with _lock:
+        _keys.clear()
+        _secrets.clear()
+        _signers.clear()
+
+
+def session_url(session) -> str:
+    return session.get_bind().url.render_as_string(hide_password=False)
+
+
+def trusted_public_keys(url: str) -> dict[str, object]:
+    """fingerprint → public key: the current signing key and the retired ones. A key file
+    that does not exist is not created (verifying a copied database must not make a key)."""
+    from railval.core.integrity import key_fingerprint, public_key_from_hex
+
+    path = signing_key_path(url)
+    keys = {}
+    if path is None or path.is_file() or str(path) in _keys:
+        current = signing_key(url).public_key()
+        keys[key_fingerprint(current)] = current
+    retired = Path(str(path) + ".retired") if path is not None else None
+    if retired is not None and retired.is_file():
+        for line_no, line in enumerate(retired.read_text().splitlines(), 1):
+            text = line.split("#", 1)[0].strip()
+            if not text:
+                continue
+            try:
+                pk = public_key_from_hex(text)
+            except ValueError as exc:
+                raise IntegrityError(f"{retired} line {line_no}: {exc}") from None
+            keys[key_fingerprint(pk)] = pk
+    return keys
+
+
+def append_witness(path: Path, line: dict) -> None:
+    """Append one signed head to the witness file (one JSON line, one ``write``). Runs after
+    the commit: a failure is logged (the change is stored; the witness misses one head)."""
+    import json
+    import logging
+
+    data = (json.dumps(line, sort_keys=True, separators=(",", ":")) + "\n").encode()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
+        try:
+            os.write(fd, data)
+        finally:
+            os.close(fd)
+    except OSError as exc:
+        logging.getLogger("railval.db").error("witness file %s: cannot append signed head "
+                                              "seq %s: %s", path, line.get("seq"), exc)
+
+
+def read_witness(path: Path) -> list[dict]:
+    """The signed heads of a witness file, in file order; a damaged line raises."""
+    import json
+
+    out = []
+    with path.open(encoding="utf-8") as fh:
+        for line_no, line in enumerate(fh, 1):
+            if not line.strip():
+                continue
+            try:
+                doc = json.loads(line)
+                int(doc["seq"]), str(doc["row_hash"])
+            except (ValueError, KeyError, TypeError) as exc:
+                raise IntegrityError(f"witness file {path} line {line_no}: not a signed head: "
+                                     f"{exc}") from None
+            out.append(doc)
+    return out

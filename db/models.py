@@ -322,6 +322,10 @@ class AuditEvent(Base):
     detail: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     prev_hash: Mapped[str] = mapped_column(String(64), unique=True)
     row_hash: Mapped[str] = mapped_column(String(64), unique=True)
+    #: Ed25519 signature (hex) of ``{seq, row_hash}`` and its key's fingerprint; NULL for
+    #: rows written before signing was enabled (migration ``0008_signatures``)
+    signature: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    key_fingerprint: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
 class AuditHead(Base):
@@ -364,6 +368,11 @@ class Signoff(Base):
     evidence_sha256: Mapped[str] = mapped_column(String(64))
     manifest: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     software_version: Mapped[str] = mapped_column(String(40))
+    #: SHA-256 of the canonical record (:func:`railval.core.integrity.signoff_record`), its
+    #: Ed25519 signature (hex) and the key's fingerprint; NULL before signing was enabled
+    record_sha256: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    signature: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    key_fingerprint: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
 
 class AnalysisRun(Base):

@@ -12,7 +12,6 @@ channels, and :func:`signal_hashes` reads hashes without touching the blobs.
 from __future__ import annotations
 
 import datetime as dt
-import hmac
 import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -267,15 +266,17 @@ def add_recordings(
     session.flush()
     secret = integrity.session_secret(session)
     rows = []
-    for rec, (_section, _conf, ss, prov) in zip(recs, items, strict=True):
+    for rec, (section, conf, ss, prov) in zip(recs, items, strict=True):
         ss.hashes = {}
         for name, values in ss.channels.items():
             a = np.asarray(values, dtype=np.float64)
             blob, sha = codec.encode(a)
             ss.hashes[name] = sha
             cid = channel_rows[name].id
-            seal = integrity.seal_signal(secret, rec.id, cid, sha, rec.distance_sha256, rec.fs,
-                                         rec.t0, rec.n)
+            seal = integrity.seal_signal(
+                secret, rec.id, cid, sha, rec.distance_sha256, rec.fs, rec.t0, rec.n,
+                names=(section.campaign.name, section.section_id,
+                       conf.name if conf is not None else "", name))
             rows.append({"recording_id": rec.id, "channel_id": cid,
                          "blob": blob, "dtype": a.dtype.str, "sha256": sha,
                          "provenance": {**dict(prov.get(name, {})), "seal": seal}})
@@ -698,14 +699,16 @@ def _source_problems(session: Session, c: Campaign, config: str | None | bool,
                 problems.append({**where, "channel": "distance_m", "error": str(exc)})
         for row in rows:
             name, cid, sha, prov = row[0], row[1], row[2], row[3] or {}
-            expected = integrity.seal_signal(secret, rid, cid, sha, dsha, fs, t0, n)
             seal = prov.get("seal") if isinstance(prov, dict) else None
             if seal is None:
                 problems.append({**where, "channel": name, "error": "has no seal (stored "
                                  "outside railval, or before seals existed)"})
-            elif not hmac.compare_digest(str(seal), expected):
+            elif not integrity.check_signal_seal(
+                    secret, seal, rid, cid, sha, dsha, fs, t0, n,
+                    (c.name, sid, where["configuration"] or "", name)):
                 problems.append({**where, "channel": name, "error": "fails its seal: the "
-                                 "samples, their hash or the recording were changed outside "
+                                 "samples, their hash, the recording or its place (campaign, "
+                                 "section, configuration, channel) were changed outside "
                                  "railval"})
             if blobs:
                 try:

@@ -4,6 +4,13 @@ A sign-off stores the signer's printed name, the UTC time, the meaning of the si
 (21 CFR 11.50(a)), the decision, restrictions and statement, and the evidence it is bound to:
 the canonical manifest and its SHA-256 (21 CFR 11.70). The database refuses UPDATE and
 DELETE on the table; :func:`create` appends the row and its audit record in one transaction.
+
+Each sign-off is **signed**: the Ed25519 signature (:mod:`railval.db.integrity` key) of its
+canonical record (:func:`railval.core.integrity.signoff_record`: id, campaign,
+configuration, signer, printed name, time, meaning, decision, restrictions, statement,
+justification, contrary mark, evidence hash, software version); the record's SHA-256 is kept
+in the row and in its ``signoff.create`` audit row, so ``railval audit verify`` checks the
+pair both ways.
 Building the manifest (which needs the validation) is the application's part:
 :mod:`railval.app.services.signoff`.
 """
@@ -12,13 +19,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import func, select, text, update
 from sqlalchemy.orm import Session
 
 from railval.core.errors import InvalidParameter, NotFound
-from railval.core.integrity import evidence_hash
-from railval.db import audit
-from railval.db.models import AppUser, Signoff
+from railval.core.integrity import evidence_hash, key_fingerprint, sign, signoff_record_hash
+from railval.core.integrity import signoff_record as canonical_record
+from railval.db import audit, integrity
+from railval.db.models import AppUser, AuditHead, Signoff
 
 #: decision → the words printed with the signature
 DECISIONS: dict[str, str] = {
@@ -65,7 +73,7 @@ def meaning(decision: str, campaign: str, configuration: str, evidence_sha256: s
 def create(session: Session, *, user: AppUser, campaign: str, configuration: str,
            decision: str, restrictions: str, statement: str, manifest: dict[str, Any],
            software_version: str, justification: str = "", in_sample: bool = False) -> Signoff:
-    """Append a sign-off bound to ``manifest``; audited as ``signoff.create``.
+    """Append a signed sign-off bound to ``manifest``; audited as ``signoff.create``.
 
     The objective verdict is ``manifest["result"]["validated"]``; a decision contrary to it
     (:func:`contrary_reason`) is refused without ``justification`` and stored with
@@ -87,20 +95,33 @@ def create(session: Session, *, user: AppUser, campaign: str, configuration: str
                                "objective verdict needs a written justification "
                                "(--justification TEXT)")
     h = evidence_hash(manifest)
-    so = Signoff(campaign=campaign, configuration=configuration, user_id=user.id,
-                 username=user.username, printed_name=user.display_name or user.username,
-                 signed_at_utc=audit.utc_stamp(),
-                 meaning=meaning(decision, campaign, configuration, h, contrary),
-                 decision=decision, restrictions=restrictions,
-                 statement=(statement or "").strip(), justification=justification,
-                 contrary_to_objective=contrary is not None, evidence_sha256=h,
-                 manifest=manifest, software_version=software_version)
+    # The id is part of the signed record, so it is chosen before the INSERT, under the
+    # audit head's lock that serialises every appender (the audit row below takes it too).
+    session.execute(update(AuditHead).where(AuditHead.id == 1).values(seq=AuditHead.seq))
+    new_id = int(session.scalar(select(func.coalesce(func.max(Signoff.id), 0))) or 0) + 1
+    fields = dict(id=new_id, campaign=campaign, configuration=configuration,
+                  username=user.username, printed_name=user.display_name or user.username,
+                  signed_at_utc=audit.utc_stamp(),
+                  meaning=meaning(decision, campaign, configuration, h, contrary),
+                  decision=decision,
+                  restrictions=restrictions, statement=(statement or "").strip(),
+                  justification=justification,
+                  contrary_to_objective=contrary is not None, evidence_sha256=h,
+                  software_version=software_version)
+    key = integrity.signing_key(integrity.session_url(session))
+    record_hash = signoff_record_hash(fields)
+    so = Signoff(**fields, user_id=user.id, manifest=manifest, record_sha256=record_hash,
+                 signature=sign(key, "signoff", canonical_record(fields)),
+                 key_fingerprint=key_fingerprint(key.public_key()))
     session.add(so)
     session.flush()
+    if session.get_bind().dialect.name == "postgresql":  # keep the serial in step
+        session.execute(text("SELECT setval(pg_get_serial_sequence('signoff', 'id'), :v)"),
+                        {"v": new_id})
     audit.record(session, user.username, "signoff.create",
-                 f"configuration:{campaign}/{configuration}", None, h,
+                 f"configuration:{campaign}/{configuration}", None, record_hash,
                  statement[:2000] if statement else "",
-                 detail={"signoff": so.id, "decision": decision,
+                 detail={"signoff": so.id, "decision": decision, "evidence_sha256": h,
                          "contrary_to_objective": contrary is not None})
     return so
 
@@ -141,4 +162,5 @@ def as_dict(so: Signoff) -> dict[str, Any]:
             "contrary_to_objective": bool(so.contrary_to_objective),
             "objective_verdict": _objective(so.manifest),
             "evidence_sha256": so.evidence_sha256, "software_version": so.software_version,
-            "manifest": so.manifest}
+            "record_sha256": so.record_sha256, "signature": so.signature,
+            "key_fingerprint": so.key_fingerprint, "manifest": so.manifest}

@@ -52,7 +52,7 @@ def test_audit_report_lists_signoffs_with_status_timeline_and_actors(signed_db):
     rep = build_audit_report(signed_db)
     assert rep.chain_status == "intact" and (rep.signoffs, rep.stale) == (2, 1)
     h = rep.html
-    assert "Hash chain: intact" in h
+    assert "Hash chain and signatures: intact" in h and "key fingerprint (SHA-256)" in h
     assert "Rita &lt;Reviewer&gt;" in h and "<Reviewer>" not in h
     assert "yaw damper &amp; &lt;b&gt;lateral&lt;/b&gt; mismatch" in h
     assert h.count("rv-contrary") == 1  # the label (the meaning says it too)

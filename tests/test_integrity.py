@@ -160,3 +160,22 @@ def test_secret_key_file_is_private(tmp_path):
     assert path.read_text().strip().encode() == secret
     assert (path.stat().st_mode & 0o777) == 0o600
     assert np.unique(list(secret)).size > 8
+
+
+def test_signal_seal_binds_names_and_keeps_version_1():
+    """Version 2 seals cover campaign, section, configuration and channel names; a version 1
+    seal (ids only, written before) is still checked with its own formula."""
+    from railval.db.integrity import check_signal_seal, seal_signal
+
+    secret = b"k" * 32
+    row = (7, 3, "a" * 64, "b" * 64, 200.0, 0.0, 6000)
+    names = ("demo", "S01", "", "Y_w1L")
+    v2 = seal_signal(secret, *row, names=names)
+    assert v2.startswith("v2:") and check_signal_seal(secret, v2, *row, names)
+    for moved in (("other", "S01", "", "Y_w1L"), ("demo", "S02", "", "Y_w1L"),
+                  ("demo", "S01", "baseline", "Y_w1L"), ("demo", "S01", "", "Q_w1L"),
+                  ("demo", "S0", "1", "Y_w1L")):  # no ambiguity across the separators
+        assert not check_signal_seal(secret, v2, *row, moved), moved
+    v1 = seal_signal(secret, *row)
+    assert not v1.startswith("v2:") and check_signal_seal(secret, v1, *row, ("x", "y", "z", "w"))
+    assert not check_signal_seal(b"j" * 32, v2, *row, names)

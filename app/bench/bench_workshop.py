@@ -14,7 +14,9 @@ client retry), which must change nothing.
 Figures: answers expected / stored / lost / duplicated (from the database afterwards),
 answer round trip and next plot shown p50/p95/max in ms, answers per second, server
 resident memory (VmRSS of the server process) before the first and after the last answer,
-analysis time of all answers (``railval.core.review.analyse``). With ``--url`` of a database
+analysis time of all answers (``railval.core.review.analyse``), and ``railval audit verify
+--quick`` of the trail afterwards (every answer is a signed audit row: its time, rows, signed
+rows and whether it holds). With ``--url`` of a database
 that already holds the workshop ``bench``, it is reused (new reviewers) instead of rendered
 again. ``--think`` adds a reviewer's look at each plot before the answer.
 """
@@ -230,6 +232,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     db = connect(url)
     doc = analyse(db, "bench")  # every answer of the workshop (earlier runs included)
     analyse_s = time.perf_counter() - t
+    from railval.app.services.audit import verify_database
+
+    check = verify_database(db, signals=False, full=False)  # every answer is a signed row
     db.dispose()
     out = {
         "reviewers": args.reviewers, "places_per_reviewer": setup["plots"],
@@ -244,6 +249,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "server_rss_mib_before": round(rss_before / 1024, 1),
         "server_rss_mib_after": round(rss_after / 1024, 1),
         "analyse_s": round(analyse_s, 2), "analysed_reviewers": len(doc["reviewers"]),
+        "audit_verify_quick_s": round(check.seconds, 2), "audit_rows": check.rows,
+        "audit_signed_rows": check.signed_rows, "audit_ok": check.ok,
         "cpu_count": os.cpu_count(), "loadavg_1min": round(os.getloadavg()[0], 2),
     }
     if not args.keep and args.url is None:

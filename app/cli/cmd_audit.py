@@ -5,6 +5,10 @@
     recompute the chain, every signal blob's SHA-256 and every sign-off's evidence hash (or
     check an exported bundle without the database); names the first break; exit 0 only
     when everything holds, 1 when something does not
+    [--witness FILE | --no-witness] [--public-key HEX|FILE]: the signed heads of the witness
+    file beside the signing key are compared by default
+``railval audit key [--json]``  the public signing key and its fingerprint
+``railval audit seal [--reason TEXT]``  sign the current head (rows written before signing)
 ``railval audit export DIR``  the offline bundle
 ``railval audit log [--object PREFIX] [--actor NAME] [--json]``  the trail, oldest first
 ``railval audit report --out FILE.html|FILE.pdf``  the assessor's audit report
@@ -43,6 +47,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="skip decoding the signal blobs and recomputing the validation")
     v.add_argument("--json", action="store_true", help="print the result as JSON")
     v.set_defaults(func=_cmd_verify)
+
+    v.add_argument("--witness", metavar="FILE",
+                   help="witness file of signed heads (default: the one beside the signing key)")
+    v.add_argument("--no-witness", action="store_true", help="do not compare with a witness file")
+    v.add_argument("--public-key", metavar="HEX|FILE",
+                   help="trust only this Ed25519 public key (hex, or a file from `audit key "
+                   "--json`); default: the server's signing key")
+
+    k = au.add_parser("key", help="print the public signing key and its fingerprint")
+    k.add_argument("--json", action="store_true")
+    k.set_defaults(func=_cmd_key)
+
+    sl_ = au.add_parser("seal", help="append a signed row that seals the current head")
+    sl_.add_argument("--reason", default="", help="why (e.g. 'signing enabled')")
+    sl_.set_defaults(func=_cmd_seal)
 
     e = au.add_parser("export", help="write the offline audit bundle to a new folder")
     e.add_argument("dir")
@@ -115,25 +134,62 @@ def _cmd_verify(args) -> int:
 
     checkpoint = svc.read_checkpoint(args.checkpoint) if args.checkpoint else None
     if args.bundle:
-        report = svc.verify_bundle(args.bundle, checkpoint)
+        report = svc.verify_bundle(args.bundle, checkpoint, public_key=args.public_key)
     else:
         report = svc.verify_database(_database(args), checkpoint, signals=not args.quick,
-                                     full=not args.quick)
+                                     full=not args.quick, witness=args.witness,
+                                     use_witness=not args.no_witness,
+                                     public_key=args.public_key)
     if args.json:
         emit_json(report.to_dict())
     else:
         print(f"audit verify {report.source}: {report.rows} audit rows, head seq "
               f"{report.head_seq} {report.head_hash[:16]}…, {report.signals} stored arrays, "
               f"{report.signoffs} sign-offs ({report.seconds:.2f} s)")
+        print(f"  signatures: {report.signed_rows} signed rows, key "
+              + ", ".join(k[:16] + "…" for k in report.keys)
+              + (f"; witness {report.witness}: {report.witness_heads} signed heads"
+                 if report.witness else ""))
+        for note in report.notes:
+            print(f"  note: {note}")
         if report.ok:
-            print("OK: the chain, " + ("the checkpoint, " if checkpoint else "")
+            print("OK: the chain, the signatures, " + ("the witness, " if report.witness else "")
+                  + ("the checkpoint, " if checkpoint else "")
                   + ("every stored array, " if report.signals else "")
-                  + "and every sign-off's evidence hash hold")
+                  + "and every sign-off's record and evidence hash hold")
         else:
             print(f"FAILED: first break: {report.findings[0]}")
             for f in report.findings[1:]:
                 print(f"  also: {f}")
     return 0 if report.ok else 1
+
+
+def _cmd_key(args) -> int:
+    from railval.app.services.audit import key_info
+
+    info = key_info(_database(args))
+    if args.json:
+        emit_json(info)
+        return 0
+    print(f"Ed25519 public key  {info['public_key']}")
+    print(f"fingerprint SHA-256 {info['fingerprint']}")
+    print(f"key file            {info['key_file']}")
+    print(f"witness file        {info['witness_file']}")
+    for fp in info["retired"]:
+        print(f"retired key         {fp}")
+    return 0
+
+
+def _cmd_seal(args) -> int:
+    from railval.db import audit, engine
+
+    database = _database(args)
+    with database.session(write=True) as s:
+        ev = audit.seal(s, engine.default_actor, args.reason)
+        seq, h, n = ev.seq, ev.row_hash, (ev.detail or {}).get("unsigned_rows_before", 0)
+    print(f"sealed: signed head seq {seq} {h} (over {n} unsigned earlier rows); "
+          "kept in the witness file")
+    return 0
 
 
 def _cmd_export(args) -> int:

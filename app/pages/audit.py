@@ -55,13 +55,15 @@ class AuditPage(PageBase):
         from railval.db import audit
 
         check = verify_database(self.app.backend.database, signals=False, full=False)
-        chain = [f for f in check.findings if f.kind in ("chain", "head")]
+        chain = [f for f in check.findings if f.kind in ("chain", "head", "signature", "witness")]
         with self.app.backend.session() as s:
             n = audit.count(s)
             rows = list(audit.iter_rows(s))[-ROWS_SHOWN:]
-        objs = [message(f"Hash chain intact: {check.rows} rows, head {check.head_hash[:16]}…"
+        objs = [message(f"Hash chain intact: {check.rows} rows, head {check.head_hash[:16]}…, "
+                        f"{check.signed_rows} signed (key {', '.join(k[:16] for k in check.keys)}…)"
                         if not chain else f"Hash chain BROKEN: {chain[0]}",
                         "success" if not chain else "danger")]
+        objs += [message(note, "info") for note in check.notes]
         stale = [f for f in check.findings if f.kind == "signoff"]
         if stale:
             objs.append(message(f"{len(stale)} sign-off(s) stale or unbound: {stale[0]}", "warning"))

@@ -9,7 +9,17 @@
 3. every stored **signal blob** against its SHA-256 content hash;
 4. every **sign-off**: its manifest still hashes to its evidence hash, its ``signoff.create``
    audit row names that hash, and the evidence rebuilt from the database today (validation
-   recomputed) has the same hash — otherwise the sign-off is stale.
+   recomputed) has the same hash — otherwise the sign-off is stale;
+5. the **signatures** (Ed25519, public key only): every row's signed head and every
+   sign-off's signed record; sign-offs ↔ ``signoff.create`` rows **both ways** (an edited,
+   deleted or inserted sign-off is named);
+6. the **witness file** kept beside the signing key: every signed head it holds is still in
+   the chain with the same hash (a removed tail or a rewritten chain is found without a
+   hand-made checkpoint).
+
+Rows and sign-offs written before signing was enabled are reported as *notes* ("unsigned,
+written before signing was enabled"), not as failures; ``railval audit seal`` signs the
+then-current head over them.
 
 ``railval audit export DIR`` (:func:`export_bundle`) writes the bundle that
 :func:`verify_bundle` checks without the database: ``audit.jsonl`` (every row),
@@ -21,57 +31,24 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from railval.app.services.audit_checks import (
+    Finding,
+    VerifyReport,
+    _check_chain,
+    _check_row_signatures,
+    _check_signoffs,
+    _check_witness,
+    witness_signed_from,
+)
 from railval.core.errors import RailvalError
-from railval.core.integrity import check_checkpoint, evidence_hash, verify_chain
-from railval.db import audit, repo
+from railval.core.integrity import key_fingerprint, public_key_from_hex, public_key_hex
+from railval.db import audit, integrity, repo
 from railval.db import signoff as db_signoff
 
 BUNDLE_FORMAT = "railval-audit-bundle/1"
-
-
-@dataclass
-class Finding:
-    """One thing that does not hold: what, where, expected vs found."""
-
-    kind: str  # chain | head | checkpoint | signal | signoff
-    where: str
-    expected: str
-    found: str
-
-    def __str__(self) -> str:
-        return f"{self.kind}: {self.where}: expected {self.expected}, found {self.found}"
-
-    def to_dict(self) -> dict[str, str]:
-        return {"kind": self.kind, "where": self.where, "expected": self.expected,
-                "found": self.found}
-
-
-@dataclass
-class VerifyReport:
-    rows: int = 0
-    head_seq: int = 0
-    head_hash: str = ""
-    signals: int = 0
-    signoffs: int = 0
-    findings: list[Finding] = field(default_factory=list)
-    seconds: float = 0.0
-    source: str = "database"
-
-    @property
-    def ok(self) -> bool:
-        return not self.findings
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"ok": self.ok, "source": self.source, "rows": self.rows,
-                "head": {"seq": self.head_seq, "row_hash": self.head_hash},
-                "signals_checked": self.signals, "signoffs_checked": self.signoffs,
-                "findings": [f.to_dict() for f in self.findings],
-                "seconds": round(self.seconds, 3)}
 
 
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
@@ -98,58 +75,73 @@ def write_checkpoint(database, path: str | Path) -> dict[str, Any]:
     return doc
 
 
-def _check_chain(rows: Iterable[dict[str, Any]], report: VerifyReport,
-                 checkpoint: dict[str, Any] | None) -> dict[int, str]:
-    by_seq: dict[int, str] = {}
+def trusted_keys(database, public_key: str | None = None) -> dict[str, Any]:
+    """fingerprint → public key the verifier trusts: ``public_key`` (hex, or a file holding
+    it) alone when given, else the server's signing key and its retired keys."""
+    if public_key:
+        p = Path(public_key)
+        text = p.read_text(encoding="utf-8") if p.is_file() else public_key
+        hexes = [text]
+        try:
+            doc = json.loads(text)
+            if isinstance(doc, dict):  # `railval audit key --json`: current and retired keys
+                hexes = [doc["public_key"], *doc.get("retired_public_keys", [])]
+        except (ValueError, KeyError):
+            pass
+        keys = {}
+        for h in hexes:
+            try:
+                pk = public_key_from_hex(str(h).strip())
+            except ValueError as exc:
+                raise RailvalError(f"--public-key {public_key[:60]}: {exc}") from None
+            keys[key_fingerprint(pk)] = pk
+        return keys
+    return integrity.trusted_public_keys(database.url)
 
-    def tap():
-        for r in rows:
-            by_seq[int(r["seq"])] = r["row_hash"]
-            yield r
 
-    n, head_hash, brk = verify_chain(tap())
-    report.rows = len(by_seq)
-    report.head_seq, report.head_hash = n, head_hash
-    if brk is not None:
-        report.findings.append(Finding(
-            "chain", f"row seq {brk.seq}, object {brk.object!r}, field {brk.field}",
-            brk.expected, brk.found))
-    if checkpoint is not None:
-        cbrk = check_checkpoint(by_seq, max(by_seq) if by_seq else 0, checkpoint)
-        if cbrk is not None:
-            where = (f"checkpoint row seq {cbrk.seq}" if cbrk.seq is not None
-                     else "checkpoint: chain length")
-            report.findings.append(Finding("checkpoint", where, cbrk.expected, cbrk.found))
-    return by_seq
+def key_info(database) -> dict[str, Any]:
+    """The public signing key, its fingerprint, the key and witness files (``audit key``)."""
+    pk = integrity.signing_key(database.url).public_key()
+    witness = integrity.witness_path(database.url)
+    retired = [k for fp, k in integrity.trusted_public_keys(database.url).items()
+               if fp != key_fingerprint(pk)]
+    return {"format": "railval-public-key/1", "algorithm": "Ed25519",
+            "public_key": public_key_hex(pk), "fingerprint": key_fingerprint(pk),
+            "retired": [key_fingerprint(k) for k in retired],
+            "retired_public_keys": [public_key_hex(k) for k in retired],
+            "key_file": str(integrity.signing_key_path(database.url) or "(in memory)"),
+            "witness_file": str(witness) if witness else None}
 
 
-def _check_signoff_binding(sod: dict[str, Any], by_seq_rows: dict[int, dict[str, Any]],
-                           report: VerifyReport) -> None:
-    """The manifest hashes to the evidence hash and the chain recorded that hash."""
-    where = (f"sign-off {sod['id']} ({sod['campaign']}/{sod['configuration']}, "
-             f"{sod['printed_name']}, {sod['signed_at_utc']})")
-    found = evidence_hash(sod["manifest"])
-    if found != sod["evidence_sha256"]:
-        report.findings.append(Finding("signoff", where + ": manifest",
-                                       sod["evidence_sha256"], found))
-        return
-    rows = [r for r in by_seq_rows.values() if r["action"] == "signoff.create"
-            and (r.get("detail") or {}).get("signoff") == sod["id"]]
-    if not rows:
-        report.findings.append(Finding("signoff", where + ": audit row signoff.create",
-                                       "a row naming this sign-off", "none"))
-    elif rows[0]["after_sha256"] != sod["evidence_sha256"]:
-        report.findings.append(Finding("signoff", where + f": audit row {rows[0]['seq']}",
-                                       sod["evidence_sha256"], str(rows[0]["after_sha256"])))
+def _witness_lines(path: Path | None, report: VerifyReport) -> list[dict[str, Any]] | None:
+    if path is None or not path.is_file():
+        report.notes.append(
+            f"no witness file ({path or 'in-memory database'}): a removed tail is found only "
+            "with a checkpoint (`--checkpoint`)")
+        return None
+    try:
+        return integrity.read_witness(path)
+    except integrity.IntegrityError as exc:
+        report.findings.append(Finding("witness", str(path), "signed heads, one per line",
+                                       str(exc)))
+        return None
 
 
 def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
-                    signals: bool = True, full: bool = True) -> VerifyReport:
-    """Verify chain, checkpoint, signal blobs and sign-offs (module docstring)."""
+                    signals: bool = True, full: bool = True, witness: str | None = None,
+                    use_witness: bool = True, public_key: str | None = None) -> VerifyReport:
+    """Verify chain, checkpoint, signatures, witness, signal blobs and sign-offs (module
+    docstring). ``witness``: another witness file than the default beside the key."""
     from railval.app.services import signoff as svc
 
     t0 = time.perf_counter()
     report = VerifyReport(source=database.safe_url)
+    keys = trusted_keys(database, public_key)
+    report.keys = list(keys)
+    if not keys:
+        report.findings.append(Finding(
+            "signature", "signing key", "the public key to verify with (the server's key file "
+            f"{integrity.signing_key_path(database.url)}, or --public-key HEX|FILE)", "none"))
     with database.session() as s:
         rows = {}
 
@@ -158,28 +150,35 @@ def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
                 rows[int(r["seq"])] = r
                 yield r
 
-        _check_chain(collect(), report, checkpoint)
+        by_seq = _check_chain(collect(), report, checkpoint)
+        lines = None
+        if use_witness:
+            wpath = Path(witness) if witness else integrity.witness_path(database.url)
+            lines = _witness_lines(wpath, report)
+        good = _check_row_signatures(rows, keys, report, witness_signed_from(lines, keys))
+        if lines is not None:
+            _check_witness(by_seq, lines, str(wpath), keys, report, rows, good)
         head_seq, head_hash = audit.head(s)
         if not report.findings and (head_seq, head_hash) != (report.head_seq, report.head_hash):
             report.findings.append(Finding(
                 "head", "audit_head", f"seq {report.head_seq} hash {report.head_hash}",
                 f"seq {head_seq} hash {head_hash} (rows after {report.head_seq} removed?)"))
         broken: set[tuple[str, str | None, str, str]] = set()
+        doc = repo.verify_database(s, blobs=signals)  # seals always, samples unless quick
         if signals:
-            for camp in repo.list_campaigns(s):
-                report.signals += repo.count_signals(s, camp)
-                for p in repo.verify_signals(s, camp):
-                    broken.add((camp.name, p["configuration"], p["section"], p["channel"]))
-                    src = p["configuration"] or "measurement"
-                    report.findings.append(Finding(
-                        "signal", f"campaign {camp.name!r}, {src}, section {p['section']}, "
-                        f"channel {p['channel']}", "its stored SHA-256", p["error"]))
-        for so in db_signoff.list_signoffs(s):
+            report.signals = sum(repo.count_signals(s, c) for c in repo.list_campaigns(s))
+        for camp_name, problems in doc["campaigns"].items():
+            for p in problems:
+                broken.add((camp_name, p["configuration"], p["section"], p["channel"]))
+                src = p["configuration"] or "measurement"
+                report.findings.append(Finding(
+                    "signal", f"campaign {camp_name!r}, {src}, section {p['section']}, "
+                    f"channel {p['channel']}", "its stored SHA-256 and seal", p["error"]))
+        sos = db_signoff.list_signoffs(s)
+        bad_ids = _check_signoffs([db_signoff.as_dict(so) for so in sos], rows, keys, report)
+        for so in sos:
             report.signoffs += 1
-            sod = db_signoff.as_dict(so)
-            n_before = len(report.findings)
-            _check_signoff_binding(sod, rows, report)
-            if len(report.findings) > n_before:
+            if so.id in bad_ids:
                 continue
             bad = sorted(f"{'measurement' if src is None else src} section {sec} {ch}"
                          for camp_name, src, sec, ch in broken if camp_name == so.campaign
@@ -191,7 +190,10 @@ def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
                     "longer match their hashes", f"evidence {so.evidence_sha256}",
                     "; ".join(bad[:5])))
                 continue
-            st = svc.status(s, so, full=full)
+            try:
+                st = svc.status(s, so, full=full)
+            except RailvalError as exc:
+                st = svc.SignoffStatus(so.id, "stale", [str(exc)])
             if not st.valid:
                 report.findings.append(Finding(
                     "signoff", f"sign-off {so.id} ({so.campaign}/{so.configuration}, "
@@ -237,16 +239,36 @@ def export_bundle(database, folder: str | Path) -> dict[str, Any]:
             "exported_at_utc": audit.utc_stamp(), "database": database.safe_url,
             "software_version": svc.software_version()}
     (out / "head.json").write_text(json.dumps(head, indent=2) + "\n", encoding="utf-8")
+    (out / "key.json").write_text(json.dumps(key_info(database), indent=2) + "\n",
+                                  encoding="utf-8")
+    wpath = integrity.witness_path(database.url)
+    if wpath is not None and wpath.is_file():
+        (out / "witness.jsonl").write_bytes(wpath.read_bytes())
     return head
 
 
-def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None) -> VerifyReport:
-    """Verify an exported bundle without the database (chain, checkpoint, sign-offs)."""
+def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, *,
+                  public_key: str | None = None) -> VerifyReport:
+    """Verify an exported bundle without the database (chain, checkpoint, signatures,
+    witness, sign-offs both ways). ``public_key``: the hex key (or a file holding it) the
+    assessor obtained from the server's owner; without it the bundle's ``key.json`` is
+    trusted and a note says to compare its fingerprint."""
     from railval.app.services.signoff import manifest_differences
 
     t0 = time.perf_counter()
     root = Path(folder)
     report = VerifyReport(source=str(root))
+    if public_key:
+        keys = trusted_keys(None, public_key)
+    elif (root / "key.json").is_file():
+        keys = trusted_keys(None, str(root / "key.json"))
+        report.notes.append(f"trusting the public key(s) in the bundle (fingerprint "
+                            f"{', '.join(keys)}); compare with the fingerprint the "
+                            "server's owner published (`railval audit key`), or pass "
+                            "--public-key")
+    else:
+        raise RailvalError(f"audit bundle {root}: key.json is missing; pass --public-key")
+    report.keys = list(keys)
     for name in ("audit.jsonl", "signoffs.json", "current-evidence.json", "head.json"):
         if not (root / name).is_file():
             raise RailvalError(f"audit bundle {root}: {name} is missing")
@@ -263,7 +285,12 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None) 
                 rows[int(r["seq"])] = r
                 yield r
 
-    _check_chain(read(), report, checkpoint)
+    by_seq = _check_chain(read(), report, checkpoint)
+    lines = (_witness_lines(root / "witness.jsonl", report)
+             if (root / "witness.jsonl").is_file() else None)
+    good = _check_row_signatures(rows, keys, report, witness_signed_from(lines, keys))
+    if lines is not None:
+        _check_witness(by_seq, lines, "witness.jsonl", keys, report, rows, good)
     head = json.loads((root / "head.json").read_text(encoding="utf-8"))
     if not report.findings and (int(head["seq"]), head["row_hash"]) != (report.head_seq,
                                                                         report.head_hash):
@@ -271,11 +298,11 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None) 
                                        f"seq {report.head_seq} hash {report.head_hash}",
                                        f"seq {head['seq']} hash {head['row_hash']}"))
     current = json.loads((root / "current-evidence.json").read_text(encoding="utf-8"))
-    for sod in json.loads((root / "signoffs.json").read_text(encoding="utf-8")):
+    sods = json.loads((root / "signoffs.json").read_text(encoding="utf-8"))
+    bad_ids = _check_signoffs(sods, rows, keys, report)
+    for sod in sods:
         report.signoffs += 1
-        n_before = len(report.findings)
-        _check_signoff_binding(sod, rows, report)
-        if len(report.findings) > n_before:
+        if int(sod["id"]) in bad_ids:
             continue
         now = current.get(f"{sod['campaign']}/{sod['configuration']}") or {}
         if "missing" in now:

@@ -33,9 +33,9 @@ from sqlalchemy.orm import Session
 from railval.core.en14363 import PROCESSING_VERSION
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
 from railval.core.filters import DEFAULT_ORDER
-from railval.core.integrity import evidence_hash
+from railval.core.integrity import evidence_hash, signoff_record, verify_signature
 from railval.core.roles import PermissionDenied, require
-from railval.db import audit, repo, users
+from railval.db import audit, integrity, repo, users
 from railval.db import signoff as db_signoff
 from railval.db.models import Signoff
 
@@ -170,10 +170,25 @@ def manifest_differences(signed: dict[str, Any], now: dict[str, Any], *,
     return out
 
 
+def _signature_holds(session: Session, so: Signoff) -> bool:
+    """Does the sign-off's signature verify with a key the server trusts? (True when no key
+    is at hand, e.g. a copied database: ``railval audit verify --public-key`` decides.)"""
+    keys = integrity.trusted_public_keys(integrity.session_url(session))
+    if not keys:
+        return True
+    pk = keys.get(str(so.key_fingerprint))
+    return pk is not None and verify_signature(pk, "signoff",
+                                               signoff_record(db_signoff.as_dict(so)),
+                                               so.signature)
+
+
 def status(session: Session, so: Signoff, *, full: bool = False) -> SignoffStatus:
     """Is the sign-off still bound to the current evidence? (``full``: recompute the result.)"""
     reasons: list[str] = []
     stored = dict(so.manifest or {})
+    if so.signature and not _signature_holds(session, so):
+        reasons.append("the sign-off's record does not match its signature: it was edited "
+                       "outside railval (run `railval audit verify`)")
     if evidence_hash(stored) != so.evidence_sha256:
         reasons.append(f"stored manifest does not hash to the signed evidence hash "
                        f"{so.evidence_sha256} (found {evidence_hash(stored)})")

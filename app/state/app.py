@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import os
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -34,6 +35,11 @@ PAGE_TITLES = {
     "audit": "Audit trail",
 }
 
+#: a session's user is re-read from the database at most this long after the last check
+#: (page reads); every action (store, calibrate, simulate, sign) re-reads it at once
+ACCESS_RECHECK_S = 2.0
+ACCESS_ENDED = ("Your access has ended: the account was disabled, its password changed or "
+                "the sign-in expired. Sign in again at /login.")
 
 
 class JobCancelled(RailvalError):
@@ -81,11 +87,17 @@ class AppState(param.Parameterized):
     progress = param.Number(default=0.0, bounds=(0.0, 1.0))
     revision = param.Integer(default=0, doc="bumped when the database changed (new configuration)")
 
-    def __init__(self, backend: Backend, principal: Principal | None = None, **params):
+    def __init__(self, backend: Backend, principal: Principal | None = None, *,
+                 recheck: Callable[[], Principal | None] | None = None, **params):
         super().__init__(**params)
         self.backend = backend
         #: who acts in this browser session (server side; open mode without users)
         self.principal = principal or open_principal()
+        #: re-reads the session's user from the database (cookie → user, enabled, roles,
+        #: password unchanged, not expired); ``None`` in tests that fix the principal
+        self._recheck = recheck
+        self._checked_at = time.monotonic()
+        self.access_ended = False
         self._job: threading.Thread | None = None
         if not self.page_allowed(self.page):
             permitted = self.pages_allowed()
@@ -93,8 +105,28 @@ class AppState(param.Parameterized):
         self.refresh_campaigns()
 
     # -- authorization (core/roles.py is the registry)
-    def allowed(self, action: str) -> bool:
-        return allowed(self.principal, action)
+    def current_principal(self, *, fresh: bool = False) -> Principal | None:
+        """The session's user as the database has it now (re-read when ``fresh`` or after
+        :data:`ACCESS_RECHECK_S`); ``None`` once access has ended (disabled, password
+        changed, cookie expired) — for good: the tab can do nothing more."""
+        if self.access_ended:
+            return None
+        if self._recheck is None:
+            return self.principal
+        now = time.monotonic()
+        if fresh or now - self._checked_at >= ACCESS_RECHECK_S:
+            p = self._recheck()
+            self._checked_at = now
+            if p is None:
+                self.access_ended = True
+                self.set_status(ACCESS_ENDED, "error")
+                return None
+            self.principal = p
+        return self.principal
+
+    def allowed(self, action: str, *, fresh: bool = False) -> bool:
+        p = self.current_principal(fresh=fresh)
+        return p is not None and allowed(p, action)
 
     def page_allowed(self, page: str) -> bool:
         return page in PAGE_ACTIONS and self.allowed(PAGE_ACTIONS[page])
@@ -109,10 +141,11 @@ class AppState(param.Parameterized):
                 f"{ACTIONS[action]}.")
 
     def guard(self, action: str) -> bool:
-        """True when allowed; otherwise an error in the status area and False."""
-        if self.allowed(action):
+        """True when allowed (the user re-read from the database first); otherwise an error
+        in the status area and False."""
+        if self.allowed(action, fresh=True):
             return True
-        self.set_status(self.denial(action), "error")
+        self.set_status(ACCESS_ENDED if self.access_ended else self.denial(action), "error")
         return False
 
     # -- selections

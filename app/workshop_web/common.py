@@ -111,7 +111,7 @@ def _sign(value: str) -> str:
     return base64.urlsafe_b64encode(f"{value}|{mac}".encode()).decode()
 
 
-def _unsign(cookie: str | None) -> str | None:
+def _unsign(cookie: str | None) -> tuple[str, float] | None:
     if not cookie:
         return None
     try:
@@ -127,7 +127,7 @@ def _unsign(cookie: str | None) -> str | None:
             return None
     except ValueError:
         return None
-    return username
+    return username, float(expiry) - COOKIE_DAYS * 86400  # (user, issued at)
 
 
 def _is_local(handler: tornado.web.RequestHandler) -> bool:
@@ -139,16 +139,20 @@ def _is_local(handler: tornado.web.RequestHandler) -> bool:
         return False
 
 
-def _principal_for(database, username: str | None, local: bool) -> Principal | None:
+def _principal_for(database, signed: tuple[str, float] | None, local: bool) -> Principal | None:
+    """The user of a workshop cookie (user, issued at), re-read from the database on every
+    request: disabled, or password changed after the cookie was issued → nobody."""
     from sqlalchemy import func, select
 
     from railval.db import users
     from railval.db.models import AppUser
 
     with database.session() as s:
-        if username:
+        if signed:
+            username, issued = signed
             user = users.find_user(s, username)
-            if user is not None and not user.disabled:
+            if (user is not None and not user.disabled
+                    and users.password_changed_at(s, username) <= issued):
                 return users.principal(user)
         if local:
             n_pw = s.scalar(select(func.count()).select_from(AppUser)
@@ -213,8 +217,8 @@ class _OrganiserBase(_Base):
                 p = await run(self.auth.principal_from_cookie, raw)
                 if p is not None:
                     return p
-        name = _unsign(self.get_cookie(COOKIE))
-        return await run(_principal_for, self.database, name, _is_local(self))
+        signed = _unsign(self.get_cookie(COOKIE))
+        return await run(_principal_for, self.database, signed, _is_local(self))
 
     async def require(self, action: str, *alternatives: str) -> Principal | None:
         """The principal when it may do ``action`` (or one of ``alternatives``); else the

@@ -1,0 +1,308 @@
+"""The checks of ``railval audit verify`` on plain rows (docs/audit.md): the chain and a
+checkpoint, every row's signed head, the witness file, and sign-offs ↔ ``signoff.create``
+rows both ways. Shared by the database check and the offline bundle check
+(:mod:`railval.app.services.audit`); each check appends :class:`Finding` s to a
+:class:`VerifyReport`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+from railval.core.integrity import (
+    check_checkpoint,
+    evidence_hash,
+    head_message,
+    signoff_record,
+    signoff_record_hash,
+    verify_chain,
+    verify_signature,
+)
+
+__all__ = ["Finding", "VerifyReport"]
+
+
+@dataclass
+class Finding:
+    """One thing that does not hold: what, where, expected vs found."""
+
+    kind: str  # chain | head | checkpoint | signature | witness | signal | signoff
+    where: str
+    expected: str
+    found: str
+
+    def __str__(self) -> str:
+        return f"{self.kind}: {self.where}: expected {self.expected}, found {self.found}"
+
+    def to_dict(self) -> dict[str, str]:
+        return {"kind": self.kind, "where": self.where, "expected": self.expected,
+                "found": self.found}
+
+
+@dataclass
+class VerifyReport:
+    rows: int = 0
+    head_seq: int = 0
+    head_hash: str = ""
+    signals: int = 0
+    signoffs: int = 0
+    findings: list[Finding] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    signed_rows: int = 0
+    keys: list[str] = field(default_factory=list)
+    witness: str | None = None
+    witness_heads: int = 0
+    signed_from: int | None = None
+    seconds: float = 0.0
+    source: str = "database"
+
+    @property
+    def ok(self) -> bool:
+        return not self.findings
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"ok": self.ok, "source": self.source, "rows": self.rows,
+                "head": {"seq": self.head_seq, "row_hash": self.head_hash},
+                "signals_checked": self.signals, "signoffs_checked": self.signoffs,
+                "signed_rows": self.signed_rows, "trusted_keys": self.keys,
+                "witness": self.witness, "witness_heads": self.witness_heads,
+                "findings": [f.to_dict() for f in self.findings], "notes": self.notes,
+                "seconds": round(self.seconds, 3)}
+
+
+def _check_chain(rows: Iterable[dict[str, Any]], report: VerifyReport,
+                 checkpoint: dict[str, Any] | None) -> dict[int, str]:
+    by_seq: dict[int, str] = {}
+
+    def tap():
+        for r in rows:
+            by_seq[int(r["seq"])] = r["row_hash"]
+            yield r
+
+    n, head_hash, brk = verify_chain(tap())
+    report.rows = len(by_seq)
+    report.head_seq, report.head_hash = n, head_hash
+    if brk is not None:
+        report.findings.append(Finding(
+            "chain", f"row seq {brk.seq}, object {brk.object!r}, field {brk.field}",
+            brk.expected, brk.found))
+    if checkpoint is not None:
+        cbrk = check_checkpoint(by_seq, max(by_seq) if by_seq else 0, checkpoint)
+        if cbrk is not None:
+            where = (f"checkpoint row seq {cbrk.seq}" if cbrk.seq is not None
+                     else "checkpoint: chain length")
+            report.findings.append(Finding("checkpoint", where, cbrk.expected, cbrk.found))
+    return by_seq
+
+
+def witness_signed_from(witness: list[dict[str, Any]] | None,
+                        keys: dict[str, Any]) -> int | None:
+    """The lowest seq of a correctly signed head in the witness: signing was enabled there,
+    so no row from it on may lack a signature (stripping every signature does not turn the
+    trail into one "written before signing")."""
+    best = None
+    for w in witness or []:
+        seq = int(w["seq"])
+        if best is not None and seq >= best:
+            continue
+        pk = keys.get(str(w.get("key_fingerprint")))
+        if pk is not None and verify_signature(pk, "audit-head",
+                                               head_message(seq, str(w["row_hash"])),
+                                               w.get("signature")):
+            best = seq
+    return best
+
+
+def _check_row_signatures(rows: dict[int, dict[str, Any]], keys: dict[str, Any],
+                          report: VerifyReport, signed_from: int | None = None) -> set[int]:
+    """Every row's signed head verifies; unsigned rows only before the first signed one (or
+    before ``signed_from``, the first head in the witness). Returns the seqs whose signature
+    verified; sets ``report.signed_from``."""
+    good: set[int] = set()
+    first_signed: int | None = signed_from
+    unsigned_before: list[int] = []
+    bad = 0
+    for seq in sorted(rows):
+        r = rows[seq]
+        where = f"row seq {seq} ({r['action']}, object {r['object']!r})"
+        sig, fp = r.get("signature"), r.get("key_fingerprint")
+        if not sig:
+            if first_signed is None or seq < first_signed:
+                unsigned_before.append(seq)
+            elif bad < 20:
+                bad += 1
+                report.findings.append(Finding(
+                    "signature", where, f"a signature (rows are signed from seq {first_signed})",
+                    "none: the row was written without the signing key"))
+            continue
+        if first_signed is None or seq < first_signed:
+            first_signed = seq
+        pk = keys.get(str(fp))
+        if pk is None:
+            if bad < 20:
+                bad += 1
+                report.findings.append(Finding(
+                    "signature", where, "a key this verifier trusts ("
+                    + ", ".join(k[:16] + "…" for k in keys) + ")",
+                    f"key {str(fp)[:16]}…"))
+        elif not verify_signature(pk, "audit-head", head_message(seq, r["row_hash"]), sig):
+            report.signed_rows += 1
+            if bad < 20:
+                bad += 1
+                report.findings.append(Finding(
+                    "signature", where, "a valid Ed25519 signature of {seq, row_hash}",
+                    "an invalid one: the row was changed or written without the signing key"))
+        else:
+            report.signed_rows += 1
+            good.add(seq)
+    report.signed_from = first_signed
+    if unsigned_before:
+        lo, hi = unsigned_before[0], unsigned_before[-1]
+        if first_signed is not None:
+            report.notes.append(
+                f"rows seq {lo}–{hi} ({len(unsigned_before)}) are unsigned, written before "
+                f"signing was enabled; the signed row seq {first_signed} chains over them")
+        else:
+            report.notes.append(
+                f"no row is signed ({len(unsigned_before)} rows, written before signing was "
+                "enabled): anyone with write access could have rewritten them; run "
+                "`railval audit seal` to sign the current head")
+    return good
+
+
+def _check_witness(by_seq: dict[int, str], witness: list[dict[str, Any]], where_file: str,
+                   keys: dict[str, Any], report: VerifyReport,
+                   rows: dict[int, dict[str, Any]] | None = None,
+                   verified: set[int] | None = None) -> None:
+    """Every signed head in the witness file is still in the chain with the same hash. A
+    line equal to a row whose signature already verified (``verified``) is not verified
+    twice."""
+    rows, verified = rows or {}, verified or set()
+    report.witness = where_file
+    report.witness_heads = len(witness)
+    top = max(by_seq) if by_seq else 0
+    bad = 0
+    for i, w in enumerate(witness, 1):
+        seq, h = int(w["seq"]), str(w["row_hash"])
+        pk = keys.get(str(w.get("key_fingerprint")))
+        label = f"witness {where_file} line {i}: signed head seq {seq} ({w.get('at_utc', '')})"
+        same = (seq in verified and rows[seq]["row_hash"] == h
+                and rows[seq].get("signature") == w.get("signature")
+                and rows[seq].get("key_fingerprint") == w.get("key_fingerprint"))
+        if same:
+            continue
+        if pk is None or not verify_signature(pk, "audit-head", head_message(seq, h),
+                                              w.get("signature")):
+            report.findings.append(Finding("witness", label, "a head signed by a trusted key",
+                                           "an unsigned or wrongly signed line"))
+            bad += 1
+        elif seq > top:
+            report.findings.append(Finding(
+                "witness", label, f"the chain to hold at least {seq} rows",
+                f"{top} rows: the rows after seq {top} were removed"))
+            bad += 1
+        elif by_seq.get(seq) != h:
+            report.findings.append(Finding(
+                "witness", label, h, f"{by_seq.get(seq)} (the chain was rewritten)"))
+            bad += 1
+        if bad >= 3:
+            break
+
+
+def _check_signoffs(sods: list[dict[str, Any]], rows: dict[int, dict[str, Any]],
+                    keys: dict[str, Any], report: VerifyReport) -> set[int]:
+    """Sign-offs ↔ ``signoff.create`` rows both ways; returns the ids with findings."""
+    created: dict[int, list[dict[str, Any]]] = {}
+    for r in rows.values():
+        if r["action"] == "signoff.create":
+            sid = (r.get("detail") or {}).get("signoff")
+            if isinstance(sid, int):
+                created.setdefault(sid, []).append(r)
+    sealed: dict[int, tuple[int, str]] = {}  # unsigned sign-off → (seal row, record hash)
+    for r in rows.values():
+        if r["action"] == "audit.seal" and r.get("signature"):
+            for sid, h in ((r.get("detail") or {}).get("unsigned_signoffs") or {}).items():
+                sealed.setdefault(int(sid), (int(r["seq"]), str(h)))
+    bad: set[int] = set()
+
+    def find(sod, what, expected, found):
+        where = (f"sign-off {sod['id']} ({sod['campaign']}/{sod['configuration']}, "
+                 f"{sod.get('decision_text') or sod['decision']}, by {sod['printed_name']}, "
+                 f"{sod['signed_at_utc']})")
+        report.findings.append(Finding("signoff", f"{where}: {what}", expected, found))
+        bad.add(int(sod["id"]))
+
+    ids = set()
+    for sod in sods:
+        ids.add(int(sod["id"]))
+        found = evidence_hash(sod["manifest"])
+        if found != sod["evidence_sha256"]:
+            find(sod, "manifest", sod["evidence_sha256"], found)
+            continue
+        audit_rows = created.get(int(sod["id"]), [])
+        row = audit_rows[0] if audit_rows else None
+        if len(audit_rows) > 1:
+            find(sod, "audit rows " + ", ".join(str(r["seq"]) for r in audit_rows),
+                 "one signoff.create row", f"{len(audit_rows)}: a row was inserted")
+        if not sod.get("signature"):
+            if row is None:
+                find(sod, "inserted", "a signoff.create audit row and a signature",
+                     "neither: the sign-off was written outside railval")
+            elif row.get("signature") or (report.signed_from is not None
+                                          and int(row["seq"]) >= report.signed_from):
+                find(sod, f"inserted (audit row {row['seq']})",
+                     "a signature (the trail was signed when its audit row was written)",
+                     "none: the sign-off was written without the signing key")
+            elif row["after_sha256"] != sod["evidence_sha256"]:
+                find(sod, f"audit row {row['seq']}", sod["evidence_sha256"],
+                     str(row["after_sha256"]))
+            elif int(sod["id"]) in sealed:
+                seal_seq, h = sealed[int(sod["id"])]
+                if signoff_record_hash(sod) != h:
+                    find(sod, f"edited after the seal (audit row {seal_seq})", h,
+                         signoff_record_hash(sod))
+                else:
+                    report.notes.append(
+                        f"sign-off {sod['id']} ({sod['campaign']}/{sod['configuration']}) is "
+                        f"unsigned, written before signing was enabled (audit row "
+                        f"{row['seq']}); its record is bound by the seal, row {seal_seq}")
+            else:
+                report.notes.append(
+                    f"sign-off {sod['id']} ({sod['campaign']}/{sod['configuration']}) is "
+                    f"unsigned, written before signing was enabled (audit row {row['seq']}), "
+                    "and not sealed: its decision and statement are bound to nothing; run "
+                    "`railval audit seal`")
+            continue
+        record_hash = signoff_record_hash(sod)
+        pk = keys.get(str(sod.get("key_fingerprint")))
+        hint = ""
+        if row is not None:
+            was = (row.get("detail") or {}).get("decision")
+            if was is not None and was != sod["decision"]:
+                hint = f"; decision: signed {was!r}, now {sod['decision']!r}"
+        if pk is None:
+            find(sod, "signature", "a key this verifier trusts",
+                 f"key {str(sod.get('key_fingerprint'))[:16]}…")
+        elif not verify_signature(pk, "signoff", signoff_record(sod), sod["signature"]):
+            find(sod, "edited or forged: its signature does not verify",
+                 f"the signed record {sod.get('record_sha256')}", f"record {record_hash}{hint}")
+        elif row is None:
+            find(sod, "audit row signoff.create", "a row naming this sign-off",
+                 "none: the audit row was removed")
+        elif row["after_sha256"] != record_hash:
+            find(sod, f"audit row {row['seq']}", str(row["after_sha256"]),
+                 f"{record_hash}{hint}")
+    for sid, audit_rows in sorted(created.items()):
+        if sid not in ids:
+            r = audit_rows[0]
+            d = r.get("detail") or {}
+            report.findings.append(Finding(
+                "signoff", f"sign-off {sid} ({r['object'].removeprefix('configuration:')}, "
+                f"{d.get('decision', '?')}, by {r['actor']}, {r['at_utc']}; audit row "
+                f"{r['seq']})", "the sign-off this audit row records",
+                "none: the sign-off was deleted"))
+    return bad
+
+
