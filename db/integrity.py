@@ -272,7 +272,11 @@ def forget_keys() -> None:
 
 
 def session_url(session) -> str:
-    return session.get_bind().url.render_as_string(hide_password=False)
+    """The database URL of ``session``, also when it is bound to a connection (a migration
+    writes its audit rows through the migration's connection)."""
+    bind = session.get_bind()
+    engine = getattr(bind, "engine", bind)
+    return engine.url.render_as_string(hide_password=False)
 
 
 def trusted_public_keys(url: str) -> dict[str, object]:

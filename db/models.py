@@ -323,7 +323,7 @@ class AuditEvent(Base):
     prev_hash: Mapped[str] = mapped_column(String(64), unique=True)
     row_hash: Mapped[str] = mapped_column(String(64), unique=True)
     #: Ed25519 signature (hex) of ``{seq, row_hash}`` and its key's fingerprint; NULL for
-    #: rows written before signing was enabled (migration ``0008_signatures``)
+    #: rows written before signing was enabled (migration ``0007_signatures``)
     signature: Mapped[str | None] = mapped_column(String(128), nullable=True)
     key_fingerprint: Mapped[str | None] = mapped_column(String(64), nullable=True)
 

@@ -66,7 +66,8 @@ def setup(database, campaign_dir, tmp_path, monkeypatch):
     database.actor = "eng"
     import_campaign(database, campaign_dir)
     sign(database, "rev", PW, "demo", "baseline", decision="not-validated",
-         statement="Zone 4 guiding forces are not reproduced.")
+         statement="Zone 4 guiding forces are not reproduced.",
+         justification="The limits pass, but the zone 4 guiding forces differ in shape.")
     cp = tmp_path / "cp.json"
     assert cli(database, "audit", "checkpoint", str(cp)) == 0
     yield database, cp

@@ -234,15 +234,16 @@ def test_app_sign_in_reaches_the_workshop_pages_with_their_role_check(server):
 
 
 def test_workshop_sign_in_ends_at_the_next_request_after_revocation(server):
-    """The workshop pages' own sign-in cookie: a role removed refuses at the next request, a
+    """The one sign-in's cookie on the workshop pages: a role removed refuses at the next request, a
     changed password or a disabled account sends the open session back to the sign-in."""
     database, base = server
     with database.session() as s:
         users.create_user(s, "org", password="organiser pw", roles=["organiser"])
         users.create_user(s, "org2", password="organiser2 pw", roles=["organiser"])
     org, org2 = Client(base), Client(base)
-    assert org.post("/workshops/login", username="org", password="organiser pw")[0] == 200
-    assert org2.post("/workshops/login", username="org2", password="organiser2 pw")[0] == 200
+    assert org.post("/login", username="org", password="organiser pw", next="/workshops")[0] == 200
+    assert org2.post("/login", username="org2", password="organiser2 pw",
+                     next="/workshops")[0] == 200
     assert org.get("/workshops/new")[0] == 200 and org2.get("/workshops/new")[0] == 200
     with database.session() as s:
         users.set_roles(s, "org", ["engineer"], actor="admin")
@@ -250,9 +251,9 @@ def test_workshop_sign_in_ends_at_the_next_request_after_revocation(server):
     status, body, _ = org.get("/workshops/new")
     assert status == 403 and "may not open" in body
     status, body, final = org2.get("/workshops/new")
-    assert "/workshops/login" in final and "name='password'" in body
+    assert "/login?next=" in final and 'name="password"' in body
     with database.session() as s:
         users.set_roles(s, "org", ["organiser"], actor="admin")
         users.disable(s, "org", actor="admin")
     status, body, final = org.get("/workshops/new")
-    assert "/workshops/login" in final
+    assert "/login?next=" in final

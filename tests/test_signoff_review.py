@@ -239,7 +239,7 @@ def test_migration_turns_workshop_only_reviewers_into_panelists(db_url, tmp_path
     cfg = db._alembic_config()
     with db.engine.begin() as conn:
         cfg.attributes["connection"] = conn
-        command.upgrade(cfg, "0006_signoff_review")
+        command.upgrade(cfg, "0007_signatures")  # the revision before panelists
     write_demo_campaign(tmp_path / "demo", n_sections=12, fs=100.0, n_configs=1)
     import_campaign(db, tmp_path / "demo")
     _workshop(db, tmp_path)
@@ -270,7 +270,7 @@ def test_migration_turns_workshop_only_reviewers_into_panelists(db_url, tmp_path
         ("user.roles", "user:only_ws"), ("user.roles", "user:signer_ws"),
         ("invitation.role", f"invitation:{inv_id}")]
     assert rows[0]["detail"] == {"roles": ["panelist"], "was": ["reviewer"], "kept_reviewer": False}
-    assert all("0007_panelists" in r["reason"] for r in rows)
+    assert all("0008_panelists" in r["reason"] for r in rows)
     from railval.app.services.audit import verify_database
 
     report = verify_database(db, None, signals=False, full=False)

@@ -10,7 +10,7 @@ NULL: ``railval audit verify`` reports them as written before signing was enable
 Columns are added with ``ALTER TABLE ... ADD COLUMN`` (not a batch copy) so that the
 append-only triggers of ``signoff`` and ``audit_event`` stay in place on SQLite.
 
-Revision ID: 0008_signatures
+Revision ID: 0007_signatures
 Revises: 0006_signoff_review
 """
 from collections.abc import Sequence
@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import sqlalchemy as sa
 from alembic import op
 
-revision: str = "0008_signatures"
+revision: str = "0007_signatures"
 down_revision: str | Sequence[str] | None = "0006_signoff_review"
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None

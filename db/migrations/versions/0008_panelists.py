@@ -17,21 +17,21 @@ reason naming this revision), so ``railval audit log --actor migration`` lists w
 changed. The user's before/after state hashes the same fields as
 :func:`railval.db.users.user_state`.
 
-Revision ID: 0007_panelists
-Revises: 0006_signoff_review
+Revision ID: 0008_panelists
+Revises: 0007_signatures
 """
 from collections.abc import Sequence
 
 import sqlalchemy as sa
 from alembic import op
 
-revision: str = "0007_panelists"
-down_revision: str | Sequence[str] | None = "0006_signoff_review"
+revision: str = "0008_panelists"
+down_revision: str | Sequence[str] | None = "0007_signatures"
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 
 ACTOR = "migration"
-REASON = ("migration 0007_panelists: workshop participants hold the role panelist; reviewer "
+REASON = ("migration 0008_panelists: workshop participants hold the role panelist; reviewer "
           "is the independent signer")
 
 
