@@ -196,7 +196,7 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
 def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: bool = False,
           threaded: bool = False, allow_websocket_origin: list[str] | None = None,
           cookie_secret_file: str | None = None, session_max_age_s: int | None = None,
-          behind_proxy: bool = False, **kw: Any):
+          behind_proxy: bool = False, admin: bool = False, **kw: Any):
     """Serve the app at ``http://address:port/`` (``pn.serve``) behind the sign-in of
     :mod:`railval.app.auth`; returns the server. Raises
     :class:`railval.app.auth.StartupRefused` when the database has no users and ``address``
@@ -205,7 +205,9 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     address counts clients, not the proxy; only behind a proxy that sets these headers.
     Every response carries the security headers of :mod:`railval.app.security`; Bokeh
     session ids are signed (a forged one is refused); websockets are accepted only from
-    ``allow_websocket_origin`` — never from any origin (``*``)."""
+    ``allow_websocket_origin`` — never from any origin (``*``). ``GET /health`` reports whether
+    this process reaches its database; ``admin``: Panel's admin page at ``/admin``, for users
+    with the ``admin`` role only (:mod:`railval.app.health`)."""
     from railval.app.auth import SESSION_MAX_AGE_S, RailvalAuth, check_startup, cookie_secret
 
     origins = allow_websocket_origin or [f"{address}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
@@ -221,7 +223,13 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     auth = RailvalAuth(database, secret, max_age_s=session_max_age_s or SESSION_MAX_AGE_S)
     from railval.app.workshop_web import routes
 
-    extra = list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database, auth)
+    from railval.app.health import HealthHandler, admin_only
+
+    extra = (list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database, auth)
+             + [(r"/health", HealthHandler, {"database": database})])
+    if admin:
+        pn.config.authorize_callback = admin_only(auth)
+        kw["admin"] = True
     if behind_proxy:
         kw["http_server_kwargs"] = {**kw.get("http_server_kwargs", {}), "xheaders": True}
     return pn.serve({"app": lambda: build_app(database, auth=auth)}, port=port, address=address,

@@ -17,7 +17,8 @@ rows onto another's. Two seals, both HMAC-SHA256 (RFC 2104, FIPS 198-1) with a s
   content hashes) of what a report or a sign-off rests on; :func:`railval.db.repo.verify_database`
   checks a whole database (``railval verify``).
 
-The secret, in this order: ``$RAILVAL_SECRET_KEY`` (any text of at least 32 characters); for
+The secret, in this order: ``$RAILVAL_SECRET_KEY`` or the file ``$RAILVAL_SECRET_KEY_FILE``
+(any text of at least 32 characters; :mod:`railval.db.settings`); for
 an SQLite file ``railval.db``, the file ``railval.db.key`` beside it (created 0600 with 32
 random bytes on first use); otherwise ``$XDG_CONFIG_HOME/railval/secret.key`` (default
 ``~/.config/railval``, created likewise). Whoever can read the secret can forge seals: keep
@@ -75,7 +76,9 @@ def secret_path(url: str) -> Path | None:
 
 def secret_for(url: str) -> bytes:
     """The server secret for database ``url`` (see the module docstring)."""
-    env = os.environ.get("RAILVAL_SECRET_KEY")
+    from railval.db.settings import setting
+
+    env = setting("RAILVAL_SECRET_KEY")
     if env is not None:
         if len(env) < MIN_SECRET_CHARS:
             raise IntegrityError(f"RAILVAL_SECRET_KEY holds {len(env)} characters, at least "
