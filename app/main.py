@@ -24,6 +24,7 @@ from railval.app import security
 from railval.app.pages.compare import ComparePage
 from railval.app.pages.dashboard import DashboardPage
 from railval.app.pages.diagnose import DiagnosePage
+from railval.app.pages.importer import ImportPage
 from railval.app.pages.metrics import MetricsPage
 from railval.app.pages.overview import OverviewPage
 from railval.app.pages.audit import AuditPage
@@ -42,7 +43,7 @@ pn.extension("tabulator", notifications=False, design="native", sizing_mode="str
 PAGE_CLASSES = {
     "overview": OverviewPage, "compare": ComparePage, "dashboard": DashboardPage,
     "metrics": MetricsPage, "diagnose": DiagnosePage, "report": ReportPage,
-    "signoff": SignoffPage, "audit": AuditPage,
+    "signoff": SignoffPage, "audit": AuditPage, "import": ImportPage,
 }
 
 
@@ -230,6 +231,10 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     if admin:
         pn.config.authorize_callback = admin_only(auth)
         kw["admin"] = True
+    from railval.app.services.web_import import MAX_UPLOAD_MB
+
+    # the Import page's zip travels base64-encoded in one websocket message (4/3 of its size)
+    kw.setdefault("websocket_max_message_size", (MAX_UPLOAD_MB * 4 // 3 + 8) * 1024 * 1024)
     if behind_proxy:
         kw["http_server_kwargs"] = {**kw.get("http_server_kwargs", {}), "xheaders": True}
     return pn.serve({"app": lambda: build_app(database, auth=auth)}, port=port, address=address,

@@ -72,7 +72,7 @@ PERMISSIONS: dict[str, frozenset[str]] = {
 PAGE_ACTIONS: dict[str, str] = {
     "overview": "data.read", "compare": "data.read", "dashboard": "data.read",
     "metrics": "data.read", "diagnose": "data.read", "report": "data.read",
-    "signoff": "signoff.read", "audit": "audit.read",
+    "signoff": "signoff.read", "audit": "audit.read", "import": "data.import",
 }
 
 #: CLI verb (``railval VERB`` or ``railval VERB SUBVERB``) → the action it needs when the
