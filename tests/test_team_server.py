@@ -163,3 +163,44 @@ def test_sticky_sessions_failover_and_no_answer_lost(team, browser):
     print(f"answers {len(results)}, repeated after a refused connection {retried}")
     ctx1.close()
     ctx2.close()
+
+
+def test_upload_through_the_proxy_equals_cli_import(team, browser, tmp_path):
+    """An engineer uploads a campaign zip on the Import page through nginx; the stored signals
+    are identical (content hashes per section, configuration and channel) to the same folder
+    imported by ``railval import``, and the audit row names the engineer."""
+    from railval.app.cli import main
+    from railval.db.engine import connect
+    from railval.db.models import AuditEvent
+    from tests.factories import write_demo_campaign
+    from tests.test_web_import import signal_hashes, zip_folder
+
+    topo, db, _ = team
+    folder = tmp_path / "upl"
+    write_demo_campaign(folder, n_sections=4, fs=50.0, n_configs=2, name="upl", seed=3)
+    archive = tmp_path / "upl.zip"
+    archive.write_bytes(zip_folder(folder, "upl"))
+
+    ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 1000})
+    page = _sign_in(ctx, topo.url, "eng", "engineer password")
+    page.locator(".rv-nav").get_by_role("button", name="Import", exact=True).click()
+    page.get_by_text("Largest upload: 100 MB").wait_for(timeout=TIMEOUT_MS)
+    page.locator(".rv-import-file input[type=file]").set_input_files(str(archive))
+    page.wait_for_timeout(500)  # the file reaches the server over the websocket
+    page.locator(".rv-import-go button").click()
+    page.locator(".rv-import-ok").wait_for(timeout=TIMEOUT_MS)
+    from tests.browser_support import screenshot
+
+    screenshot(page, "team-import-page")
+    ctx.close()
+
+    cli_url = f"sqlite:///{tmp_path / 'cli.db'}"
+    assert main(["--db", cli_url, "import", str(folder), "--no-progress"]) == 0
+    cli = connect(cli_url)
+    try:
+        assert signal_hashes(db, "upl") == signal_hashes(cli, "upl")
+    finally:
+        cli.dispose()
+    with db.session() as s:
+        ev = s.scalars(select(AuditEvent).where(AuditEvent.object == "campaign:upl")).one()
+        assert ev.actor == "eng" and ev.action == "campaign.import"
