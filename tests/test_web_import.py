@@ -136,3 +136,92 @@ def test_size_cap_is_stated_and_enforced(tmp_path):
         zf.writestr("b/campaign.json", "{}")
     with pytest.raises(CampaignFormatError, match="no campaign.json at the top of the zip"):
         unpack(buf.getvalue(), tmp_path / "e")
+
+
+def configuration_folder(campaign_dir: Path, dest: Path, name: str = "mbs1",
+                         parent: str | None = "baseline") -> Path:
+    """A configuration upload: the variant1 files of the demo folder as configuration ``name``."""
+    import shutil
+
+    m = json.loads((campaign_dir / "campaign.json").read_text())
+    (entry,) = [c for c in m["configurations"] if c["name"] == "variant1"]
+    dest.mkdir(parents=True)
+    for rel in entry["files"].values():
+        (dest / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(campaign_dir / rel, dest / rel)
+    (dest / "configuration.json").write_text(json.dumps({**entry, "name": name, "parent": parent}))
+    return dest
+
+
+def test_configuration_upload_equals_cli_and_checks(campaign_dir, tmp_path, capsys):
+    from railval.app.services.web_import import import_configuration_zip
+    from railval.db import repo
+    from railval.db.models import AuditEvent
+    from tests.factories import write_demo_campaign
+
+    base = tmp_path / "base"
+    write_demo_campaign(base, n_sections=4, fs=50.0, n_configs=1)
+    conf = configuration_folder(campaign_dir, tmp_path / "conf")
+    urls = {k: f"sqlite:///{tmp_path / f'{k}.db'}" for k in ("web", "cli")}
+    for url in urls.values():
+        assert main(["--db", url, "import", str(base), "--no-progress"]) == 0
+    assert main(["--db", urls["cli"], "import", str(conf), "--into", "demo"]) == 0
+    web = connect(urls["web"])
+    assert import_configuration_zip(web, ENGINEER, "demo", zip_folder(conf, "mbs1")) == "mbs1"
+    cli = connect(urls["cli"])
+    try:
+        assert signal_hashes(web) == signal_hashes(cli)
+        assert {h for h in signal_hashes(web) if h[1] == "mbs1"}
+        with web.session() as s:
+            assert repo.get_configuration(s, "demo", "mbs1").parent.name == "baseline"
+            ev = s.scalars(select(AuditEvent).where(AuditEvent.action == "configuration.import")).one()
+            assert ev.actor == "eng" and ev.object == "configuration:demo/mbs1"
+            assert repo.verify_database(s)["ok"]
+        # the same name again, an unknown parent, kN guiding forces declared in N: refused,
+        # nothing stored
+        before = _count(web)
+        with pytest.raises(CampaignFormatError, match="field name: campaign 'demo' already has"):
+            import_configuration_zip(web, ENGINEER, "demo", zip_folder(conf, None))
+        other = configuration_folder(campaign_dir, tmp_path / "c2", "mbs2", parent="nope")
+        with pytest.raises(CampaignFormatError, match="field parent: unknown parent configuration 'nope'"):
+            import_configuration_zip(web, ENGINEER, "demo", zip_folder(other, None))
+        assert _count(web) == before
+    finally:
+        web.dispose()
+        cli.dispose()
+
+
+def test_import_page_adds_a_configuration_to_the_selected_campaign(campaign_dir, tmp_path):
+    """The Import page's state and job without a browser (the browser upload of a campaign is
+    in tests/test_team_server.py): configuration mode, progress, result, new selection;
+    a refusal lands in the status area and stores nothing."""
+    from railval.app.pages.importer import ImportPage
+    from railval.app.state import AppState, Backend
+    from tests.factories import write_demo_campaign
+
+    base = tmp_path / "base"
+    write_demo_campaign(base, n_sections=4, fs=50.0, n_configs=1)
+    url = f"sqlite:///{tmp_path / 'page.db'}"
+    assert main(["--db", url, "import", str(base), "--no-progress"]) == 0
+    db = connect(url)
+    try:
+        app = AppState(Backend(db), principal=ENGINEER)
+        page = ImportPage(app)
+        page.safe_refresh()
+        page.kind.value = "configuration"
+        page.file.filename = "mbs1.zip"
+        page.file.value = zip_folder(configuration_folder(campaign_dir, tmp_path / "c"), None)
+        page.start()
+        app.wait(60)
+        assert app.status_level == "success", app.status
+        assert "configuration <b>mbs1</b> into campaign <b>demo</b>" in page.result.object
+        assert app.configuration == "mbs1"
+        n = _count(db)
+        page.file.filename = "again.zip"
+        page.file.value = zip_folder(tmp_path / "c", None)
+        page.start()
+        app.wait(60)
+        assert app.status_level == "error" and "already has a configuration named 'mbs1'" in app.status
+        assert _count(db) == n
+    finally:
+        db.dispose()

@@ -1,5 +1,6 @@
-"""Import page (engineers, ``data.import``): upload a campaign folder as a zip file; it is
-checked and stored by the code of ``railval import`` (:mod:`railval.app.services.web_import`).
+"""Import page (engineers, ``data.import``): upload a campaign folder as a zip file, or a
+configuration's simulated files for the selected campaign; they are checked and stored by
+the code of ``railval import`` (:mod:`railval.app.services.web_import`).
 
 The file travels over the session's websocket (Bokeh's signed session, origin-checked), not
 as a form post, so no cross-site form can submit it; the import runs as a background job of
@@ -24,6 +25,9 @@ class ImportPage(PageBase):
 
     def __init__(self, app: AppState, **params):
         super().__init__(app, **params)
+        self.kind = pn.widgets.RadioButtonGroup(
+            options={"A campaign": "campaign", "A configuration of the selected campaign":
+                     "configuration"}, value="campaign", css_classes=["rv-import-kind"])
         self.file = pn.widgets.FileInput(accept=".zip", multiple=False, css_classes=["rv-import-file"],
                                          width=420)
         self.button = pn.widgets.Button(label="Check and import", color="primary", width=200,
@@ -49,31 +53,50 @@ class ImportPage(PageBase):
                 "on the server. Everything is checked before anything is stored (the same checks "
                 "as `railval import`); a rejected upload stores nothing and the message names the "
                 "file, field or line.", css_classes=["rv-import-help"]),
+            pn.pane.Markdown(
+                "Or a **configuration's simulated files** for the campaign selected in the sidebar: "
+                "a zip holding `configuration.json` (one entry of campaign.json's "
+                "`configurations`; its `parent` names a stored configuration) and the data files "
+                "it lists — the same as `railval import DIR --into CAMPAIGN`."),
+            self.kind,
             pn.Row(self.file, self.button),
             self.result,
         ]
 
     def start(self) -> None:
-        from railval.app.services.web_import import import_zip
+        from railval.app.services.web_import import import_configuration_zip, import_zip
 
         data, name = self.file.value, self.file.filename or "upload.zip"
         if not data:
             self.app.set_status("Import: choose a zip file first", "warning")
             return
         principal, database = self.app.principal, self.app.backend.database
+        into = self.app.campaign if self.kind.value == "configuration" else None
+        if self.kind.value == "configuration" and into is None:
+            self.app.set_status("Import: no campaign selected to add the configuration to", "warning")
+            return
         self.result.object = ""
 
         def work(progress):
             def step(done: int, total: int, what: str) -> None:
                 progress(done / max(total, 1), f"checked {done}/{total} files ({what})")
-            return import_zip(database, principal, data, name, progress=step)
+            if into is not None:
+                return into, import_configuration_zip(database, principal, into, data, name,
+                                                      progress=step)
+            return import_zip(database, principal, data, name, progress=step), None
 
-        def done(campaign: str) -> None:
+        def done(result: tuple[str, str | None]) -> None:
+            campaign, conf = result
             self.file.value = None
-            self.result.object = (f"<div class='rv-import-ok'>Imported campaign "
-                                  f"<b>{html.escape(campaign)}</b> from {html.escape(name)}.</div>")
+            what = (f"configuration <b>{html.escape(conf)}</b> into campaign "
+                    f"<b>{html.escape(campaign)}</b>" if conf else
+                    f"campaign <b>{html.escape(campaign)}</b>")
+            self.result.object = (f"<div class='rv-import-ok'>Imported {what} from "
+                                  f"{html.escape(name)}.</div>")
             self.app.refresh_campaigns()
             self.app.campaign = campaign
+            if conf:
+                self.app.reload_configurations(select=conf)
 
         self.app.run_job(f"Import {name}", work, on_done=done, dispatch=make_dispatch(),
                          action="data.import")

@@ -1,7 +1,9 @@
 """Import through the browser (the Import page; docs/app.md, "Import page").
 
 An engineer uploads a zip file: a campaign folder (``campaign.json`` at the top of the zip,
-or in its single top-level folder). The zip is unpacked into a private temporary folder with
+or in its single top-level folder), or a configuration's simulated files for a stored
+campaign (``configuration.json`` — one entry of campaign.json's ``configurations``, its
+``parent`` naming a stored configuration — and the data files it lists). The zip is unpacked into a private temporary folder with
 every entry checked (no absolute paths, no ``..``, no links, at most :data:`MAX_ENTRIES`
 entries and :data:`MAX_UNPACKED_MB` unpacked) and then imported by exactly the code of
 ``railval import`` (:func:`railval.db.importer.import_campaign`): the same checks before
@@ -36,9 +38,10 @@ def _bad(entry: str, why: str) -> CampaignFormatError:
     return CampaignFormatError(why, file=entry)
 
 
-def unpack(data: bytes, dest: Path, name: str = "upload.zip") -> Path:
-    """Unpack the zip ``data`` into ``dest``; return the campaign folder (holding
-    ``campaign.json``). Raises :class:`CampaignFormatError` naming the zip or the entry."""
+def unpack(data: bytes, dest: Path, name: str = "upload.zip", manifest: str = "campaign.json") -> Path:
+    """Unpack the zip ``data`` into ``dest``; return the folder holding ``manifest``
+    (``campaign.json``, or ``configuration.json`` for a configuration upload). Raises
+    :class:`CampaignFormatError` naming the zip or the entry."""
     if len(data) > MAX_UPLOAD_MB * 1024 * 1024:
         raise _bad(name, f"{len(data) / 1048576:.1f} MB is larger than the upload limit "
                          f"{MAX_UPLOAD_MB} MB; import larger campaigns with `railval import`")
@@ -74,12 +77,12 @@ def unpack(data: bytes, dest: Path, name: str = "upload.zip") -> Path:
                     if written > info.file_size:  # a header that lies about the size
                         raise _bad(info.filename, "entry is larger than its zip header states")
                     out.write(block)
-    if (dest / "campaign.json").exists():
+    if (dest / manifest).exists():
         return dest
     tops = [p for p in dest.iterdir() if not p.name.startswith(("__MACOSX", "."))]
-    if len(tops) == 1 and (tops[0] / "campaign.json").exists():
+    if len(tops) == 1 and (tops[0] / manifest).exists():
         return tops[0]
-    raise _bad(name, "no campaign.json at the top of the zip or in its single top-level folder")
+    raise _bad(name, f"no {manifest} at the top of the zip or in its single top-level folder")
 
 
 def import_zip(database: Any, principal: Principal, data: bytes, name: str = "upload.zip",
@@ -94,3 +97,19 @@ def import_zip(database: Any, principal: Principal, data: bytes, name: str = "up
         folder = unpack(data, Path(tmp), name)
         with acting_as(principal.username):
             return import_campaign(database, folder, progress=progress)
+
+
+def import_configuration_zip(database: Any, principal: Principal, campaign: str, data: bytes,
+                             name: str = "upload.zip",
+                             progress: Callable[[int, int, str], None] | None = None) -> str:
+    """Unpack a configuration's files (``configuration.json`` + data files) and import them
+    into the stored ``campaign`` as ``principal`` (``railval import DIR --into CAMPAIGN``);
+    returns the configuration name."""
+    from railval.db.engine import acting_as
+    from railval.db.importer import CONFIGURATION_MANIFEST, import_configuration
+
+    require(principal, "data.import")
+    with tempfile.TemporaryDirectory(prefix="railval-upload-") as tmp:
+        folder = unpack(data, Path(tmp), name, CONFIGURATION_MANIFEST)
+        with acting_as(principal.username):
+            return import_configuration(database, campaign, folder, progress=progress)
