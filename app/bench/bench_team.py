@@ -1,0 +1,190 @@
+"""Team server under load: reviewers and engineers through nginx on two app processes.
+
+The production topology on loopback (:mod:`railval.app.bench.topology`): PostgreSQL (a fresh
+schema in ``--pg``), ``--apps`` ``railval serve`` processes behind real nginx with TLS and
+sticky sessions. Set-up: the synthetic campaign (``railval synth``, 12 sections), a workshop
+of its Y time plots, ``--reviewers`` invited reviewers, one engineer account.
+
+Phases:
+
+1. ``--engineers`` Panel sessions, one Chromium page each (all in one headless browser),
+   opened one after another and kept open: sign-in through the proxy, then the time until the
+   app's navigation shows ("first Panel page", ms);
+2. with those sessions open, every reviewer in its own thread posts ``--answers`` answers
+   through the proxy over its own keep-alive HTTPS connection ("answer round trip": request
+   → the server's confirmation that the row is committed); answers lost counted from the
+   database;
+3. the browser is closed; after ``--settle`` seconds (Bokeh discards a disconnected session
+   after ``unused-session-lifetime``, 15 s by default) the memory is read again.
+
+Memory: resident set (RSS) of every app process before phase 1, with all sessions open, and
+after they closed; "per Panel session" = (open − before) / engineers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import http.client
+import json
+import ssl
+import statistics
+import tempfile
+import threading
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--reviewers", type=int, default=50)
+    parser.add_argument("--engineers", type=int, default=20)
+    parser.add_argument("--answers", type=int, default=20, help="answers per reviewer")
+    parser.add_argument("--apps", type=int, default=2, help="app processes behind nginx")
+    parser.add_argument("--settle", type=float, default=25.0,
+                        help="seconds after the sessions closed before memory is read again")
+    parser.add_argument("--pg", default="postgresql://postgres@127.0.0.1:5432/test",
+                        help="PostgreSQL database in which a fresh schema is used")
+
+
+def _rss_mb(pids: list[int]) -> dict[int, float]:
+    import psutil
+
+    return {p: round(psutil.Process(p).memory_info().rss / 1048576, 1) for p in pids}
+
+
+def _pct(values: list[float], q: float) -> float:
+    return round(statistics.quantiles(values, n=100, method="inclusive")[int(q) - 1], 1) if len(values) > 1 else values[0]
+
+
+def _reviewer(host: str, port: int, token: str, n: int, out: list[float], errors: list[str]) -> None:
+    ctx = ssl._create_unverified_context()  # the run's self-signed certificate
+    conn = http.client.HTTPSConnection(host, port, context=ctx, timeout=30)
+    for i in range(n):
+        body = json.dumps({"position": i, "answer": "yes" if i % 2 else "no", "seconds": 1.0,
+                           "submission": uuid.uuid4().hex})
+        t0 = time.perf_counter()
+        for _attempt in range(5):
+            try:
+                conn.request("POST", f"/review/{token}/answer", body,
+                             {"Content-Type": "application/json"})
+                resp = conn.getresponse()
+                resp.read()
+                if resp.status == 200:
+                    out.append((time.perf_counter() - t0) * 1000)
+                    break
+                errors.append(f"HTTP {resp.status}")
+            except OSError as exc:
+                errors.append(type(exc).__name__)
+                conn.close()
+                conn = http.client.HTTPSConnection(host, port, context=ctx, timeout=30)
+    conn.close()
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    import psycopg
+    from sqlalchemy import func, select
+
+    from railval.app.bench.topology import Topology
+    from railval.app.cli import main
+    from railval.app.services import workshops as wsvc
+    from railval.db import users
+    from railval.db import workshops as wsdb
+    from railval.db.engine import connect
+    from railval.db.models import WorkshopAnswer
+
+    schema = f"bench_{uuid.uuid4().hex[:10]}"
+    with psycopg.connect(args.pg, autocommit=True) as conn:
+        conn.execute(f'CREATE SCHEMA "{schema}"')
+    url = f"{args.pg.replace('postgresql://', 'postgresql+psycopg://')}?options=-csearch_path%3D{schema}"
+    work = Path(tempfile.mkdtemp(prefix="railval-bench-team-"))
+    figures: dict[str, Any] = {"reviewers": args.reviewers, "engineers": args.engineers,
+                               "app_processes": args.apps, "answers_per_reviewer": args.answers}
+    topo = Topology(url, work / "site", n_apps=args.apps)
+    try:
+        topo.workdir.mkdir(parents=True)
+        topo._secrets()
+        import os
+
+        os.environ["RAILVAL_SECRET_KEY_FILE"] = str(topo.workdir / "secrets" / "railval_secret_key")
+        assert main(["--db", url, "init"]) == 0
+        assert main(["--db", url, "synth", "--name", "demo", "--sections", "12"]) == 0
+        db = connect(url)
+        with db.session() as s:
+            users.create_user(s, "eng", password="engineer password", roles=["engineer"])
+        wsvc.create(db, "W", "demo", kinds=["Y_time"], repeats=0.0)
+        with db.session() as s:
+            w = wsdb.get_workshop(s, "W")
+            tokens = [wsdb.invite(s, w, f"r{k}", seed=k) for k in range(args.reviewers)]
+            n_plots = len(wsdb.plots(s, w))
+        answers = min(args.answers, n_plots)
+        figures["answers_per_reviewer"] = answers
+        topo.start()
+        pids = [p.pid for p in topo.apps.values()]
+        before = _rss_mb(pids)
+
+        from playwright.sync_api import sync_playwright
+
+        from railval.app.report import CHROMIUM_ARGS
+
+        first_page: list[float] = []
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+            pages = []
+            for _ in range(args.engineers):
+                ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900})
+                page = ctx.new_page()
+                page.route("**/fonts.g*/**", lambda route: route.abort())
+                page.goto(f"{topo.url}/login")
+                page.fill("#username", "eng")
+                page.fill("#password", "engineer password")
+                t0 = time.perf_counter()
+                page.click("#signin")
+                page.locator(".rv-nav").wait_for(timeout=120_000)
+                first_page.append((time.perf_counter() - t0) * 1000)
+                pages.append(page)
+            per_process = {}
+            for page in pages:
+                pid = page.evaluate("() => fetch('/health').then(r => r.json()).then(d => d.process)")
+                per_process[pid] = per_process.get(pid, 0) + 1
+            open_rss = _rss_mb(pids)
+
+            rtt: list[float] = []
+            errors: list[str] = []
+            threads = [threading.Thread(target=_reviewer, args=("127.0.0.1", topo.port, t, answers,
+                                                                rtt, errors)) for t in tokens]
+            t0 = time.perf_counter()
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join()
+            wall = time.perf_counter() - t0
+            loaded_rss = _rss_mb(pids)
+            browser.close()
+        time.sleep(args.settle)
+        after = _rss_mb(pids)
+        with db.session() as s:
+            stored = s.scalar(select(func.count()).select_from(WorkshopAnswer))
+        db.dispose()
+        figures.update({
+            "first_panel_page_ms": {"p50": _pct(first_page, 50), "p95": _pct(first_page, 95),
+                                    "max": round(max(first_page), 1)},
+            "panel_sessions_per_process": sorted(per_process.values()),
+            "answer_round_trip_ms": {"p50": _pct(rtt, 50), "p95": _pct(rtt, 95),
+                                     "max": round(max(rtt), 1)},
+            "answers": {"sent": args.reviewers * answers, "confirmed": len(rtt), "stored": stored,
+                        "lost": args.reviewers * answers - stored, "retried_errors": len(errors)},
+            "answers_per_s": round(len(rtt) / wall, 1),
+            "rss_mb": {"before": sum(before.values()), "sessions_open": sum(open_rss.values()),
+                       "after_answers": sum(loaded_rss.values()),
+                       f"after_close_{args.settle:g}s": sum(after.values())},
+            "rss_per_panel_session_mb": round((sum(open_rss.values()) - sum(before.values()))
+                                              / max(1, args.engineers), 1),
+        })
+        with open("/proc/loadavg") as fh:
+            figures["loadavg_at_end"] = fh.read().split()[:3]
+    finally:
+        topo.stop()
+        with psycopg.connect(args.pg, autocommit=True) as conn:
+            conn.execute(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE')
+    return figures
