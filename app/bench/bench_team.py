@@ -107,8 +107,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         import os
 
         os.environ["RAILVAL_SECRET_KEY_FILE"] = str(topo.workdir / "secrets" / "railval_secret_key")
-        assert main(["--db", url, "init"]) == 0
-        assert main(["--db", url, "synth", "--name", "demo", "--sections", "12"]) == 0
+        import contextlib
+        import io
+
+        with contextlib.redirect_stdout(io.StringIO()):  # stdout is the figures' JSON
+            assert main(["--db", url, "init"]) == 0
+            assert main(["--db", url, "synth", "--name", "demo", "--sections", "12"]) == 0
         db = connect(url)
         with db.session() as s:
             users.create_user(s, "eng", password="engineer password", roles=["engineer"])
