@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from typing import Any
 
 from tornado.web import RequestHandler
@@ -47,15 +48,14 @@ class HealthHandler(RequestHandler):
         self.finish(json.dumps(doc))
 
 
-def admin_only(auth: Any):
-    """Panel ``authorize_callback``: ``/admin`` only for principals holding ``admin``."""
+def admin_only(principal_of: Callable[[], Any]):
+    """Panel ``authorize_callback``: ``/admin`` only when ``principal_of()`` (the principal of
+    the request's session cookie) holds the ``admin`` role."""
 
     def authorize(_user_info: Any, path: str) -> bool:
         if not path.rstrip("/").endswith("/admin"):
             return True
-        from railval.app.main import session_principal
-
-        principal = session_principal(auth)
+        principal = principal_of()
         return principal is not None and "admin" in principal.roles
 
     return authorize

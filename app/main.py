@@ -229,7 +229,7 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     extra = (list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database, auth)
              + [(r"/health", HealthHandler, {"database": database})])
     if admin:
-        pn.config.authorize_callback = admin_only(auth)
+        pn.config.authorize_callback = admin_only(lambda: session_principal(auth))
         kw["admin"] = True
     from railval.app.services.web_import import MAX_UPLOAD_MB
 
