@@ -14,8 +14,10 @@ Phases:
    through the proxy over its own keep-alive HTTPS connection ("answer round trip": request
    → the server's confirmation that the row is committed); answers lost counted from the
    database;
-3. the browser is closed; after ``--settle`` seconds (Bokeh discards a disconnected session
-   after ``unused-session-lifetime``, 15 s by default) the memory is read again.
+3. the sessions are closed; after ``--settle`` seconds (Bokeh discards a disconnected session
+   after ``unused-session-lifetime``, 15 s by default) the memory is read again;
+4. a second wave of as many sessions is opened: the memory it adds shows whether the first
+   wave's memory is reused.
 
 Memory: resident set (RSS) of every app process before phase 1, with one session open (the
 first loads modules, caches and the campaign's data once), with all sessions open, and after
@@ -84,6 +86,31 @@ def _reviewer(host: str, port: int, token: str, n: int, out: list[float], errors
     conn.close()
 
 
+def _open_sessions(browser, base: str, n: int, times: list[float]):
+    """``n`` engineer sessions, one browser context each, opened one after another; returns
+    the pages and the RSS after the first (modules, caches and campaign data loaded)."""
+    pages, warm = [], None
+    for _ in range(n):
+        ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900})
+        page = ctx.new_page()
+        page.route("**/fonts.g*/**", lambda route: route.abort())
+        page.goto(f"{base}/login")
+        page.fill("#username", "eng")
+        page.fill("#password", "engineer password")
+        t0 = time.perf_counter()
+        page.click("#signin")
+        page.locator(".rv-nav").wait_for(timeout=120_000)
+        times.append((time.perf_counter() - t0) * 1000)
+        pages.append(page)
+        if warm is None:
+            time.sleep(2.0)
+            warm = _rss_mb(_PIDS)
+    return pages, warm
+
+
+_PIDS: list[int] = []
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     import psycopg
     from sqlalchemy import func, select
@@ -128,6 +155,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         figures["answers_per_reviewer"] = answers
         topo.start()
         pids = [p.pid for p in topo.apps.values()]
+        _PIDS[:] = pids
         before = _rss_mb(pids)
 
         from playwright.sync_api import sync_playwright
@@ -137,23 +165,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         first_page: list[float] = []
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
-            pages = []
-            for _ in range(args.engineers):
-                ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900})
-                page = ctx.new_page()
-                page.route("**/fonts.g*/**", lambda route: route.abort())
-                page.goto(f"{topo.url}/login")
-                page.fill("#username", "eng")
-                page.fill("#password", "engineer password")
-                t0 = time.perf_counter()
-                page.click("#signin")
-                page.locator(".rv-nav").wait_for(timeout=120_000)
-                first_page.append((time.perf_counter() - t0) * 1000)
-                pages.append(page)
-                if len(pages) == 1:  # one session in: modules, caches, campaign data loaded
-                    time.sleep(2.0)
-                    warm = _rss_mb(pids)
-            per_process = {}
+            pages, warm = _open_sessions(browser, topo.url, args.engineers, first_page)
+            per_process: dict[int, int] = {}
             for page in pages:
                 pid = page.evaluate("() => fetch('/health').then(r => r.json()).then(d => d.process)")
                 per_process[pid] = per_process.get(pid, 0) + 1
@@ -170,9 +183,15 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 t.join()
             wall = time.perf_counter() - t0
             loaded_rss = _rss_mb(pids)
+            for page in pages:
+                page.context.close()
+            time.sleep(args.settle)
+            after = _rss_mb(pids)
+            # a second wave of the same number of sessions: is the memory reused?
+            second: list[float] = []
+            pages, _ = _open_sessions(browser, topo.url, args.engineers, second)
+            second_rss = _rss_mb(pids)
             browser.close()
-        time.sleep(args.settle)
-        after = _rss_mb(pids)
         with db.session() as s:
             stored = s.scalar(select(func.count()).select_from(WorkshopAnswer))
         db.dispose()
@@ -189,7 +208,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                        "one_session_open": round(sum(warm.values()), 1),
                        "sessions_open": round(sum(open_rss.values()), 1),
                        "after_answers": round(sum(loaded_rss.values()), 1),
-                       f"after_close_{args.settle:g}s": round(sum(after.values()), 1)},
+                       f"after_close_{args.settle:g}s": round(sum(after.values()), 1),
+                       "second_wave_open": round(sum(second_rss.values()), 1)},
             # the first session loads modules and caches once; the others cost this each
             "rss_per_further_panel_session_mb": round(
                 (sum(open_rss.values()) - sum(warm.values())) / max(1, args.engineers - 1), 1),
