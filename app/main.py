@@ -222,9 +222,8 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     check_startup(database, address)
     secret, _origin = cookie_secret(cookie_secret_file)
     auth = RailvalAuth(database, secret, max_age_s=session_max_age_s or SESSION_MAX_AGE_S)
-    from railval.app.workshop_web import routes
-
     from railval.app.health import HealthHandler, admin_only
+    from railval.app.workshop_web import routes
 
     extra = (list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database, auth)
              + [(r"/health", HealthHandler, {"database": database})])
@@ -258,7 +257,7 @@ def _trim() -> None:
         pass
 
 
-def release_memory(session_context: Any) -> None:  # noqa: ARG001 - Bokeh checks the name
+def release_memory(session_context: Any) -> None:
     """When a Bokeh session is destroyed: shortly afterwards (once its document is released)
     collect reference cycles and hand the freed heap back to the operating system (glibc
     ``malloc_trim``); without it a process's resident memory stays at its peak after sessions

@@ -77,7 +77,7 @@ def _pg_tool(name: str) -> str:
 
 
 def _run(cmd: list[str], env: dict[str, str]) -> None:
-    done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
     if done.returncode != 0:
         raise BackupError(f"{Path(cmd[0]).name} failed (exit {done.returncode}): "
                           f"{done.stderr.strip()[-2000:]}")
@@ -195,7 +195,7 @@ def restore(database, folder: str | Path, *, actor: Any = "system") -> dict[str,
     tables = inspect(database.engine).get_table_names()
     if tables:
         raise BackupError(f"{database.safe_url} is not empty ({len(tables)} tables, e.g. "
-                          f"{sorted(tables)[0]!r}); restore into a new database")
+                          f"{min(tables)!r}); restore into a new database")
     secret = (root / SECRET).read_bytes().strip()
     where = _install_secret(database, secret)
     src = root / FILES[backend]

@@ -44,7 +44,7 @@ def test_previous_release_database_migrates_on_start_with_nothing_lost(release_d
             assert [c.name for c in repo.list_campaigns(s)] == expected["campaigns"]
             assert len(wsdb.answer_rows(s, wsdb.get_workshop(s, "W1"))) == expected["answers"]
             assert len(s.scalars(select(AuditEvent.id)).all()) >= expected["audit_events"]
-            (so, st), = statuses(s)
+            (_so, st), = statuses(s)
             assert st.valid, st.to_dict()
             assert repo.verify_database(s)["ok"]
             assert users.verify_password(s, "rev", "reviewer password") is not None

@@ -26,6 +26,7 @@ import urllib.error
 import urllib.request
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Self
 
 REPO = Path(__file__).resolve().parents[2]
 TEMPLATE = REPO / "deploy" / "nginx" / "railval.conf.template"
@@ -180,7 +181,7 @@ class Topology:
                 os.killpg(proc.pid, signal.SIGKILL)
         self.apps.clear()
 
-    def __enter__(self) -> Topology:
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc) -> None:
