@@ -204,3 +204,21 @@ def test_upload_through_the_proxy_equals_cli_import(team, browser, tmp_path):
     with db.session() as s:
         ev = s.scalars(select(AuditEvent).where(AuditEvent.object == "campaign:upl")).one()
         assert ev.actor == "eng" and ev.action == "campaign.import"
+
+
+def test_batch_validation_on_a_dask_cluster_equals_local(team):
+    """The topology's batch side: a Dask LocalCluster (2 worker processes) validates the
+    campaign from the same PostgreSQL database; the verdict equals the local run's."""
+    distributed = pytest.importorskip("dask.distributed")
+    from railval.app.services.validation import validate_configurations
+    from railval.db.models import ResultCache
+
+    _, db, _ = team
+    local = validate_configurations(db, "demo", ["baseline"], n_boot=100)
+    with db.session(write=True) as s:  # the cluster computes everything again
+        s.query(ResultCache).delete()
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        dask = validate_configurations(db, "demo", ["baseline"], n_boot=100,
+                                       scheduler=cluster.scheduler_address, chunk_sections=2)
+    assert dask["baseline"].to_dict() == local["baseline"].to_dict()
