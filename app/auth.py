@@ -60,7 +60,7 @@ def is_loopback(address: str) -> bool:
 
 def cookie_secret(path: str | None = None) -> tuple[str, str]:
     """(secret, where it came from): ``$RAILVAL_COOKIE_SECRET``, a file, else a random one."""
-    env = os.environ.get("RAILVAL_COOKIE_SECRET")
+    env = os.environ.get("RAILVAL_COOKIE_SECRET")  # same names as railval.db.settings
     path = path or os.environ.get("RAILVAL_COOKIE_SECRET_FILE")
     if env:
         secret, origin = env, "$RAILVAL_COOKIE_SECRET"

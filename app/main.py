@@ -26,6 +26,7 @@ from railval.app import security
 from railval.app.pages.compare import ComparePage
 from railval.app.pages.dashboard import DashboardPage
 from railval.app.pages.diagnose import DiagnosePage
+from railval.app.pages.importer import ImportPage
 from railval.app.pages.metrics import MetricsPage
 from railval.app.pages.overview import OverviewPage
 from railval.app.pages.audit import AuditPage
@@ -44,7 +45,7 @@ pn.extension("tabulator", notifications=False, design="native", sizing_mode="str
 PAGE_CLASSES = {
     "overview": OverviewPage, "compare": ComparePage, "dashboard": DashboardPage,
     "metrics": MetricsPage, "diagnose": DiagnosePage, "report": ReportPage,
-    "signoff": SignoffPage, "audit": AuditPage,
+    "signoff": SignoffPage, "audit": AuditPage, "import": ImportPage,
 }
 
 
@@ -244,7 +245,7 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
 def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: bool = False,
           threaded: bool = False, allow_websocket_origin: list[str] | None = None,
           cookie_secret_file: str | None = None, session_max_age_s: int | None = None,
-          behind_proxy: bool = False, **kw: Any):
+          behind_proxy: bool = False, admin: bool = False, **kw: Any):
     """Serve the app at ``http://address:port/`` (``pn.serve``) behind the sign-in of
     :mod:`railval.app.auth`; returns the server. Raises
     :class:`railval.app.auth.StartupRefused` when the database has no users and ``address``
@@ -255,7 +256,9 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     ``POST`` of the sign-in and workshop pages must carry the anti-forgery token (Tornado
     ``xsrf_cookies``; :data:`railval.app.security.XSRF_COOKIE`); Bokeh
     session ids are signed (a forged one is refused); websockets are accepted only from
-    ``allow_websocket_origin`` — never from any origin (``*``)."""
+    ``allow_websocket_origin`` — never from any origin (``*``). ``GET /health`` reports whether
+    this process reaches its database; ``admin``: Panel's admin page at ``/admin``, for users
+    with the ``admin`` role only (:mod:`railval.app.health`)."""
     from railval.app.auth import SESSION_MAX_AGE_S, RailvalAuth, check_startup, cookie_secret
 
     origins = allow_websocket_origin or [f"{address}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
@@ -269,9 +272,20 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     check_startup(database, address)
     secret, _origin = cookie_secret(cookie_secret_file)
     auth = RailvalAuth(database, secret, max_age_s=session_max_age_s or SESSION_MAX_AGE_S)
+    from railval.app.health import HealthHandler, admin_only
     from railval.app.workshop_web import routes
 
-    extra = list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database, auth)
+    extra = (list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database, auth)
+             + [(r"/health", HealthHandler, {"database": database})])
+    if release_memory not in getattr(pn.state, "_on_session_destroyed", []):
+        pn.state.on_session_destroyed(release_memory)
+    if admin:
+        pn.config.authorize_callback = admin_only(lambda: session_principal(auth))
+        kw["admin"] = True
+    from railval.app.services.web_import import MAX_UPLOAD_MB
+
+    # the Import page's zip travels base64-encoded in one websocket message (4/3 of its size)
+    kw.setdefault("websocket_max_message_size", (MAX_UPLOAD_MB * 4 // 3 + 8) * 1024 * 1024)
     if behind_proxy:
         kw["http_server_kwargs"] = {**kw.get("http_server_kwargs", {}), "xheaders": True}
     return pn.serve({"app": lambda: build_app(database, auth=auth)}, port=port, address=address,
@@ -281,6 +295,30 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
                     extra_patterns=extra, transforms=security.transforms(),
                     sign_sessions=True, secret_key=security.session_secret().encode(),
                     xsrf_cookies=True, xsrf_cookie_kwargs=security.XSRF_COOKIE, **kw)
+
+
+def _trim() -> None:
+    import ctypes
+    import gc
+
+    gc.collect()
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc: nothing to trim
+        pass
+
+
+def release_memory(session_context: Any) -> None:
+    """When a Bokeh session is destroyed: shortly afterwards (once its document is released)
+    collect reference cycles and hand the freed heap back to the operating system (glibc
+    ``malloc_trim``); without it a process's resident memory stays at its peak after sessions
+    close (holoviz/panel #8189)."""
+    from tornado.ioloop import IOLoop
+
+    try:
+        IOLoop.current().call_later(2.0, _trim)
+    except RuntimeError:  # no event loop (tests calling it directly)
+        _trim()
 
 
 def free_port() -> int:

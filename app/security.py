@@ -141,9 +141,12 @@ def use_local_fonts() -> None:
 
 
 def session_secret() -> str:
-    """Secret for signing Bokeh session ids: ``$BOKEH_SECRET_KEY``, ``$RAILVAL_SESSION_SECRET``
-    or a random one for this server process."""
-    return (os.environ.get("BOKEH_SECRET_KEY") or os.environ.get("RAILVAL_SESSION_SECRET")
+    """Secret for signing Bokeh session ids: ``$BOKEH_SECRET_KEY`` (or the file
+    ``$BOKEH_SECRET_KEY_FILE``), ``$RAILVAL_SESSION_SECRET`` or a random one for this server
+    process. Several app processes behind one proxy need the same one."""
+    from railval.db.settings import setting
+
+    return (setting("BOKEH_SECRET_KEY") or os.environ.get("RAILVAL_SESSION_SECRET")
             or secrets.token_urlsafe(32))
 
 

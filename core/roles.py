@@ -56,13 +56,15 @@ ACTIONS: dict[str, str] = {
     "audit.read": "read the audit trail, verify it, export it, write the audit report",
     "audit.checkpoint": "write the audit head to a checkpoint file",
     "user.manage": "add users, change roles, disable users, invite",
+    "data.backup": "back up the whole database with its seal secret",
 }
 
 _READ_ALL = ("data.read", "report.download", "signoff.read")
 
 #: role → the actions it grants
 PERMISSIONS: dict[str, frozenset[str]] = {
-    "admin": frozenset({*_READ_ALL, "user.manage", "audit.read", "audit.checkpoint"}),
+    "admin": frozenset({*_READ_ALL, "user.manage", "audit.read", "audit.checkpoint",
+                        "data.backup"}),
     "organiser": frozenset({*_READ_ALL, "workshop.run", "workshop.results"}),
     "engineer": frozenset({*_READ_ALL, "data.import", "data.delete", "data.export", "simulate",
                            "diagnose", "calibrate", "validate"}),
@@ -75,13 +77,14 @@ PERMISSIONS: dict[str, frozenset[str]] = {
 PAGE_ACTIONS: dict[str, str] = {
     "overview": "data.read", "compare": "data.read", "dashboard": "data.read",
     "metrics": "data.read", "diagnose": "data.read", "report": "data.read",
-    "signoff": "signoff.read", "audit": "audit.read",
+    "signoff": "signoff.read", "audit": "audit.read", "import": "data.import",
 }
 
 #: CLI verb (``railval VERB`` or ``railval VERB SUBVERB``) → the action it needs when the
 #: database holds users; None = no data access checked (schema, server, benchmarks)
 CLI_ACTIONS: dict[str, str | None] = {
     "init": None, "serve": None, "bench": None,
+    "backup": "data.backup", "restore": None,  # restore: into an empty database only
     "list": "data.read", "metrics": "data.read", "report": "report.download",
     "import": "data.import", "synth": "data.import", "export": "data.export",
     "simulate": "simulate", "diagnose": "diagnose", "calibrate": "calibrate",

@@ -116,6 +116,13 @@ MAX_ABS_VALUE = 1e9
 #: vehicle's static wheel force Q0 (the mean over all wheels of a vehicle is Q0 on any track;
 #: a factor 1000 off means N declared for kN data or the reverse)
 Q_MEAN_FACTOR = 3.0
+#: the largest 99th percentile of |Y| over the guiding-force channels of a recording declared
+#: in N must reach this fraction of Q0: quasi-static curving forces, track irregularities and
+#: flange contact give every running wheelset lateral forces of a few kN (Y/Q of a few
+#: per cent on straight track, 0.2–0.8 in curves; EN 14363 §7.6); kN data declared as N land
+#: 1000 times lower, far below it (a simulation on ideal straight track with Y ≈ 0 is the
+#: honest exception: set "check_unit": false on its channels)
+Y_P99_MIN_FRACTION = 0.005
 #: 99th percentile of |a| in m/s² above which an acceleration is implausible, per kind:
 #: car body accelerations stay well below 0.5 g in service, bogie frames below 5 g
 #: (EN 14363 limits the bogie frame to about 8 m/s² and the car body to about 2.5 m/s²;
@@ -143,6 +150,8 @@ def check_units_plausible(channels: Mapping[str, np.ndarray], declared: Mapping[
     """Magnitudes consistent with the declared units (values already in canonical units).
 
     * Q: the mean over all Q channels lies within a factor :data:`Q_MEAN_FACTOR` of Q0;
+    * Y declared in N (values too small for their unit): the largest 99th percentile of |Y|
+      over the recording's Y channels reaches :data:`Y_P99_MIN_FRACTION` · Q0;
     * accelerations: the 99th percentile of |a| stays below :data:`ACC_P99_BOUND`.
 
     ``skip``: channel names whose check the manifest switched off (``check_unit: false``).
@@ -164,6 +173,21 @@ def check_units_plausible(channels: Mapping[str, np.ndarray], declared: Mapping[
                 q_names[0], f"mean vertical wheel force Q is {mean:.4g} kN (unit declared "
                 f"{', '.join(units)}) but the vehicle's Q0 is {q0_kn:g} kN{hint}; fix the "
                 "unit, or set \"check_unit\": false on the channel if the values are right")
+    y_names = [n for n in channels if n.startswith("Y_") and n not in skip
+               and declared.get(n) == "N"]
+    if y_names and q0_kn > 0:
+        p99 = {n: float(np.percentile(np.abs(np.asarray(channels[n], dtype=np.float64)), 99))
+               for n in y_names}
+        largest = max(p99, key=p99.get)
+        floor = Y_P99_MIN_FRACTION * q0_kn
+        if p99[largest] < floor:
+            hint = (" — the data look like kN declared as N"
+                    if floor <= p99[largest] * 1000 <= Q_MEAN_FACTOR * q0_kn else "")
+            raise RecordingProblem(
+                largest, f"99 % of |Y| stay below {p99[largest]:.4g} kN in every guiding-force "
+                f"channel (largest: {largest!r}, unit declared N), too small for a running "
+                f"wheelset: at least {floor:.4g} kN ({Y_P99_MIN_FRACTION:g}·Q0) expected{hint}; "
+                "fix the unit, or set \"check_unit\": false on the channel if the values are right")
     for name, values in channels.items():
         kind = name.rpartition("_")[0]
         bound = ACC_P99_BOUND.get(kind)

@@ -66,10 +66,18 @@ class DatabaseNotInitialised(RailvalError):
 
 
 def resolve_url(url: str | None = None) -> str:
-    """Argument, else ``$RAILVAL_DB``, else :data:`DEFAULT_URL`; normalises PostgreSQL URLs."""
-    url = url or os.environ.get("RAILVAL_DB") or DEFAULT_URL
+    """Argument, else ``$RAILVAL_DB`` (or its ``_FILE``), else :data:`DEFAULT_URL`; normalises
+    PostgreSQL URLs and adds ``$RAILVAL_DB_PASSWORD`` (or its ``_FILE``) to a URL without
+    password (:mod:`railval.db.settings`)."""
+    from railval.db.settings import setting
+
+    url = url or setting("RAILVAL_DB") or DEFAULT_URL
     if url.startswith(("postgresql://", "postgres://")):
         url = "postgresql+psycopg://" + url.split("://", 1)[1]
+    if url.startswith("postgresql") and make_url(url).password is None:
+        password = setting("RAILVAL_DB_PASSWORD")  # a secret file, never in the URL's source
+        if password:
+            url = make_url(url).set(password=password).render_as_string(hide_password=False)
     return url
 
 

@@ -479,26 +479,41 @@ def write_validated(session: Session, vc: ValidatedCampaign) -> Campaign:
         session.add(rec)
         recs.append(rec)
     session.flush()
+    rows = _insert_signals(session, camp.name, recs, vc.recordings, chans)
+    audit.record(session, audit.actor_of(session), "campaign.import", f"campaign:{m['name']}",
+                 None, _content_digest(m, rows),
+                 detail={"sections": len(sections), "configurations": sorted(confs),
+                         "signals": len(rows)})
+    return camp
+
+
+def _insert_signals(session: Session, campaign: str, recs: list[Recording],
+                    validated: list[ValidatedRecording],
+                    chans: dict[str, Channel]) -> list[dict[str, Any]]:
+    """Insert the signals of the flushed recordings ``recs`` (one per validated recording) of
+    ``campaign``, each sealed with its names (:func:`railval.db.integrity.seal_signal`);
+    returns the rows."""
     secret = integrity.session_secret(session)
     rows = [
         {"recording_id": rec.id, "channel_id": chans[name].id, "blob": blob, "dtype": "<f8",
          "sha256": sha,
          "provenance": {**prov, "seal": integrity.seal_signal(
              secret, rec.id, chans[name].id, sha, rec.distance_sha256, rec.fs, rec.t0, rec.n,
-             names=(camp.name, r.section_id, r.configuration or "", name))}}
-        for rec, r in zip(recs, vc.recordings, strict=True)
+             names=(campaign, r.section_id, r.configuration or "", name))}}
+        for rec, r in zip(recs, validated, strict=True)
         for name, (blob, sha, prov) in r.signals.items()
     ]
     if rows:
         session.execute(insert(Signal), rows)
-    digest = hashlib.sha256(json.dumps(m, sort_keys=True, default=str).encode("utf-8"))
+    return rows
+
+
+def _content_digest(manifest: dict[str, Any], rows: list[dict[str, Any]]) -> str:
+    """SHA-256 over the canonical manifest and every content hash (the audit row's 'after')."""
+    digest = hashlib.sha256(json.dumps(manifest, sort_keys=True, default=str).encode("utf-8"))
     for r in sorted(row["sha256"] for row in rows):
         digest.update(r.encode("ascii"))
-    audit.record(session, audit.actor_of(session), "campaign.import", f"campaign:{m['name']}",
-                 None, digest.hexdigest(),
-                 detail={"sections": len(sections), "configurations": sorted(confs),
-                         "signals": len(rows)})
-    return camp
+    return digest.hexdigest()
 
 
 def import_campaign(database_or_session: Any, folder: str | Path,
@@ -522,3 +537,133 @@ def import_campaign(database_or_session: Any, folder: str | Path,
         raise CampaignFormatError(f"a campaign named {vc.name!r} already exists in the "
                                   "database", file=MANIFEST, field="name") from None
     return vc.name
+
+
+# -- a configuration's simulated files for a stored campaign -------------------------------
+CONFIGURATION_MANIFEST = "configuration.json"
+
+
+def _configuration_entry(folder: Path, campaign_manifest: dict[str, Any]) -> dict[str, Any]:
+    """Parse ``configuration.json`` (one entry of campaign.json's ``configurations``) and
+    schema-check it as such; errors name the file and the field."""
+    from jsonschema import Draft202012Validator
+    from jsonschema.exceptions import best_match
+
+    path = folder / CONFIGURATION_MANIFEST
+    if not path.is_file():
+        raise CampaignFormatError("manifest missing (a configuration upload holds "
+                                  "configuration.json and its data files)", file=CONFIGURATION_MANIFEST)
+    if path.stat().st_size > MANIFEST_MAX_BYTES:
+        raise CampaignFormatError(f"manifest is larger than {MANIFEST_MAX_BYTES} bytes",
+                                  file=CONFIGURATION_MANIFEST)
+    try:
+        text = path.read_text(encoding="utf-8")
+        _scan_json(text)
+        entry = json.loads(text, object_pairs_hook=_no_duplicate_keys)
+    except UnicodeDecodeError as exc:
+        raise CampaignFormatError(f"not UTF-8 text: {exc}", file=CONFIGURATION_MANIFEST) from None
+    except CampaignFormatError as exc:
+        raise CampaignFormatError(str(exc).removeprefix(f"file {MANIFEST}: "),
+                                  file=CONFIGURATION_MANIFEST, field=exc.field) from None
+    except json.JSONDecodeError as exc:
+        raise CampaignFormatError(f"malformed JSON at line {exc.lineno}, column {exc.colno}: "
+                                  f"{exc.msg}", file=CONFIGURATION_MANIFEST) from None
+    except (ValueError, RecursionError) as exc:
+        raise CampaignFormatError(f"cannot parse the manifest: {exc}",
+                                  file=CONFIGURATION_MANIFEST) from None
+    _check_strings(entry, [])
+    parent = entry.get("parent") if isinstance(entry, dict) else None
+    probe = {**campaign_manifest, "configurations": [
+        {k: v for k, v in entry.items() if k != "parent"} if isinstance(entry, dict) else entry]}
+    errors = list(Draft202012Validator(_schema()).iter_errors(probe))
+    if errors:
+        err = best_match(errors)
+        where = _json_path(err.absolute_path).removeprefix("configurations[0]").lstrip(".")
+        raise CampaignFormatError(f"schema violation: {_schema_message(err)}",
+                                  file=CONFIGURATION_MANIFEST, field=where or None)
+    if parent is not None and not isinstance(parent, str):
+        raise CampaignFormatError("parent must be a configuration name or null",
+                                  file=CONFIGURATION_MANIFEST, field="parent")
+    return entry
+
+
+def validate_configuration_folder(session: Session, campaign: str, folder: str | Path,
+                                  progress: Progress | None = None
+                                  ) -> tuple[Campaign, dict[str, Any], list[ValidatedRecording]]:
+    """Check a configuration's files against the stored campaign ``campaign`` (its channels,
+    units, sections, the measured channels of each section, Q0) with the checks of a campaign
+    import. Writes nothing."""
+    from railval.db import repo
+
+    folder = Path(folder)
+    camp = repo.get_campaign(session, campaign)
+    m = camp.manifest
+    entry = _configuration_entry(folder, m)
+    name = entry["name"]
+    if any(c.name == name for c in camp.configurations):
+        raise CampaignFormatError(f"campaign {camp.name!r} already has a configuration named "
+                                  f"{name!r}", file=CONFIGURATION_MANIFEST, field="name")
+    parent = entry.get("parent")
+    if parent is not None and not any(c.name == parent for c in camp.configurations):
+        raise CampaignFormatError(
+            f"unknown parent configuration {parent!r}; campaign {camp.name!r} has "
+            f"{sorted(c.name for c in camp.configurations)}", file=CONFIGURATION_MANIFEST,
+            field="parent")
+    by_id = {s["id"]: s for s in m["sections"]}
+    measured: dict[str, set[str]] = {s.section_id: set() for s in camp.sections}
+    for sid, cname in session.execute(  # the channels each section's measurement holds
+            select(Section.section_id, Channel.name)
+            .join(Recording, Recording.section_id == Section.id)
+            .join(Signal, Signal.recording_id == Recording.id)
+            .join(Channel, Signal.channel_id == Channel.id)
+            .where(Section.campaign_id == camp.id, Recording.configuration_id.is_(None))):
+        measured[sid].add(cname)
+    units = {}
+    for ch in m["channels"]:
+        canonical, factor = UNITS_BY_KIND[ch["kind"]][ch["unit"]]
+        units[ch["name"]] = (ch["unit"], canonical, factor)
+    skip = {ch["name"] for ch in m["channels"] if ch.get("check_unit") is False}
+    stamp = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+    out = []
+    files = list(entry["files"].items())
+    for k, (sid, rel) in enumerate(files):
+        if sid not in by_id:
+            raise CampaignFormatError(f"unknown section {sid!r}; sections: {sorted(by_id)}",
+                                      file=CONFIGURATION_MANIFEST, field=f"files.{sid}")
+        _data_path(folder, rel, f"files.{sid}")
+        out.append(_read_recording(folder, rel, by_id[sid], name, units, measured[sid], stamp,
+                                   float(m["vehicle"]["Q0_kN"]), skip))
+        if progress is not None:
+            progress(k + 1, len(files), rel)
+    return camp, entry, out
+
+
+def import_configuration(database: Any, campaign: str, folder: str | Path,
+                         progress: Progress | None = None) -> str:
+    """Validate the configuration upload ``folder`` against the stored ``campaign`` and write
+    it in one transaction (signals hashed and sealed as in a campaign import; audit row
+    ``configuration.import``); returns the configuration name."""
+    with database.session(write=True) as session:
+        camp, entry, validated = validate_configuration_folder(session, campaign, folder, progress)
+        conf = Configuration(name=entry["name"], effects=entry.get("effects", {}),
+                             parameters=entry.get("parameters", {}),
+                             description=entry.get("description", ""))
+        if entry.get("parent") is not None:
+            conf.parent = next(c for c in camp.configurations if c.name == entry["parent"])
+        camp.configurations.append(conf)
+        sections = {s.section_id: s for s in camp.sections}
+        chans = {c.name: c for c in camp.channels}
+        recs = []
+        for r in validated:
+            rec = Recording(section=sections[r.section_id], configuration=conf, fs=r.fs, t0=r.t0,
+                            n=r.n, distance_blob=r.distance_blob,
+                            distance_sha256=r.distance_sha256, source_file=r.file)
+            session.add(rec)
+            recs.append(rec)
+        session.flush()
+        rows = _insert_signals(session, camp.name, recs, validated, chans)
+        audit.record(session, audit.actor_of(session), "configuration.import",
+                     f"configuration:{camp.name}/{conf.name}", None, _content_digest(entry, rows),
+                     detail={"sections": len(recs), "signals": len(rows),
+                             "parent": entry.get("parent")})
+        return conf.name

@@ -33,7 +33,8 @@ the measurement) and channel, so data moved to another section, configuration or
 fails even when the row ids stay. Seals of version 1 (hex without prefix, written before)
 are still checked with their own formula.
 
-The secret, in this order: ``$RAILVAL_SECRET_KEY`` (any text of at least 32 characters); for
+The secret, in this order: ``$RAILVAL_SECRET_KEY`` or the file ``$RAILVAL_SECRET_KEY_FILE``
+(any text of at least 32 characters; :mod:`railval.db.settings`); for
 an SQLite file ``railval.db``, the file ``railval.db.key`` beside it (created 0600 with 32
 random bytes on first use); otherwise ``$XDG_CONFIG_HOME/railval/secret.key`` (default
 ``~/.config/railval``, created likewise). Whoever can read the secret can forge seals: keep
@@ -91,7 +92,9 @@ def secret_path(url: str) -> Path | None:
 
 def secret_for(url: str) -> bytes:
     """The server secret for database ``url`` (see the module docstring)."""
-    env = os.environ.get("RAILVAL_SECRET_KEY")
+    from railval.db.settings import setting
+
+    env = setting("RAILVAL_SECRET_KEY")
     if env is not None:
         if len(env) < MIN_SECRET_CHARS:
             raise IntegrityError(f"RAILVAL_SECRET_KEY holds {len(env)} characters, at least "

@@ -292,7 +292,7 @@ def test_pages_are_built_on_first_view_and_refresh_when_shown(demo_db):
     tree = overview.body.objects[2][1][1].object  # lineage tree beside the zone chart
     assert f"<b class='rv-selected'>{other}</b>" in tree
     assert set(pages) == {"overview", "compare", "dashboard", "metrics", "diagnose", "report",
-                          "signoff", "audit"}
+                          "signoff", "audit", "import"}
     assert pages.built() == ["overview", "dashboard"]
 
 

@@ -32,7 +32,7 @@ READ = {"overview", "compare", "dashboard", "metrics", "diagnose", "report", "si
 PAGES_OF = {
     "admin": READ | {"audit"},
     "organiser": READ,
-    "engineer": READ,
+    "engineer": READ | {"import"},
     "panelist": set(),
     "reviewer": READ,
     "assessor": READ | {"audit"},

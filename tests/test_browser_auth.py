@@ -29,10 +29,10 @@ NAV = {
     "overview": "Campaign overview", "compare": "Compare signals",
     "dashboard": "Validation dashboard", "metrics": "Curve metrics",
     "diagnose": "Diagnose & model workshop", "report": "Report", "signoff": "Sign-off",
-    "audit": "Audit trail",
+    "audit": "Audit trail", "import": "Import",
 }
 READ = ["overview", "compare", "dashboard", "metrics", "diagnose", "report", "signoff"]
-EXPECTED_PAGES = {"admin": READ + ["audit"], "organiser": READ, "engineer": READ,
+EXPECTED_PAGES = {"admin": READ + ["audit"], "organiser": READ, "engineer": READ + ["import"],
                   "panelist": [], "reviewer": READ, "assessor": READ + ["audit"]}
 
 

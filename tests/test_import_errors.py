@@ -344,6 +344,23 @@ def test_unit_newton_on_kilonewton_data_refused(good_db, folder):
             "declared as N")
 
 
+def test_guiding_force_kilonewton_data_declared_newton_refused(good_db, folder):
+    """Y declared in N holding kN values would be stored ×0.001 (too small for their unit)."""
+    _declare_unit(folder, "Y_", "N")
+    _expect(good_db, folder, "measured/S01.csv", "Y_w2L",
+            r"99 % of \|Y\| stay below .* kN .*unit declared N.*too small.*look like kN "
+            "declared as N")
+
+
+def test_guiding_force_unit_check_override(good_db, folder):
+    _declare_unit(folder, "Y_", "N", check=False)
+    vc = validate_campaign_folder(folder)
+    raw = read_table(folder / "measured" / "S01.csv")["Y_w1L"]
+    from railval.db import codec
+
+    assert np.allclose(codec.decode(vc.recordings[0].signals["Y_w1L"][0]), raw * 1e-3)
+
+
 def test_unit_g_on_ms2_data_refused(good_db, folder):
     _declare_unit(folder, "ay_cb_", "g")
     _expect(good_db, folder, "measured/S01.csv", "ay_cb_b1",

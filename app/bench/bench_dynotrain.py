@@ -65,6 +65,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--boot", type=int, default=200,
                         help="bootstrap resamples in the all-configurations run")
     parser.add_argument("--data", default="bench-data", help="folder of the built data")
+    parser.add_argument("--dask", action="store_true",
+                        help="also run all configurations on a Dask LocalCluster (--scheduler "
+                        "path) and compare time and results with the process pool")
     parser.add_argument("--part", choices=["both", "new"], default="both",
                         help="'new': only the new-configuration figure (the measured side is "
                              "cached first if needed, untimed; the all-configurations run is "
@@ -190,6 +193,29 @@ def _split(seconds: dict[str, float]) -> dict[str, float]:
     return {k: round(seconds[k], 4) for k in names if k in seconds}
 
 
+def _dask_run(database, args: argparse.Namespace, pool_results: dict) -> dict:
+    """The all-configurations run again on a Dask ``LocalCluster`` of ``--workers`` worker
+    processes (``--scheduler`` path, cache emptied first), in the same run as the process
+    pool; the results must be equal."""
+    from dask.distributed import LocalCluster
+
+    from railval.app.services.validation import validate_configurations
+    from railval.db import repo
+
+    with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster:
+        with database.session() as session:
+            repo.cache_delete(session, prefix="en14363:")
+        load = os.getloadavg()[0]
+        t0 = time.perf_counter()
+        res = validate_configurations(database, "dynotrain-bench", list(pool_results),
+                                      n_boot=args.boot, scheduler=cluster.scheduler_address)
+        seconds = time.perf_counter() - t0
+    equal = all(res[k].to_dict() == pool_results[k].to_dict() for k in pool_results)
+    return {"seconds": round(seconds, 2), "workers": args.workers, "equal_to_pool": equal,
+            "load_average_before": round(load, 2)}
+
+
 def run(args: argparse.Namespace) -> dict:
     from railval.app.services.validation import (
         source_cache_keys,
@@ -219,6 +245,7 @@ def run(args: argparse.Namespace) -> dict:
         t_all = time.perf_counter() - t0
         cpu_all = _cpu_seconds() - cpu0
         comparisons = sum(q.n for r in results.values() for q in r.quantities.values())
+        dask_all = _dask_run(database, args, results) if getattr(args, "dask", False) else None
     else:
         # measured side cached (computed here, untimed, if an earlier run left it out) and
         # this process warmed as in a running app server
@@ -299,6 +326,8 @@ def run(args: argparse.Namespace) -> dict:
         },
         "new_config": new_config,
     }
+    if dask_all is not None:
+        out["all_dask"] = dask_all
     if comparisons >= TARGET_COMPARISONS:
         out["all"]["seconds_for_50000"] = round(t_all * TARGET_COMPARISONS / comparisons, 2)
         out["all"]["target_met"] = bool(out["all"]["seconds_for_50000"] <= 5.0)

@@ -1,7 +1,7 @@
 """CLI verbs ``serve`` and ``report`` (docs/design.md §1, §8).
 
 ``railval serve [--port 5006] [--address 127.0.0.1] [--no-demo] [--allow-websocket-origin H]
-[--cookie-secret-file FILE]``
+[--cookie-secret-file FILE] [--behind-proxy] [--admin]``
     migrate the database, seed the demo campaign (``railval.app.services.synth.ensure_demo``) into an
     empty database unless ``--no-demo``, and serve the web app until interrupted. With users in
     the database every page needs sign-in (:mod:`railval.app.auth`); without users it serves
@@ -34,6 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "$RAILVAL_COOKIE_SECRET_FILE, else a random one per start)")
     p.add_argument("--behind-proxy", action="store_true",
                    help="client addresses from the proxy's X-Forwarded-For header (rate limit per client)")
+    p.add_argument("--admin", action="store_true",
+                   help="Panel's admin page at /admin (sessions, memory, logs), admins only")
     p.set_defaults(func=_cmd_serve)
 
     r = sub.add_parser("report", help="write the HTML or PDF validation report of a configuration")
@@ -95,7 +97,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     print(f"railval serve: http://{args.address}:{args.port}/app (database {database.safe_url})",
           file=sys.stderr, flush=True)
     serve(database, port=args.port, address=args.address, show=args.show, allow_websocket_origin=origins,
-          cookie_secret_file=args.cookie_secret_file, behind_proxy=args.behind_proxy)
+          cookie_secret_file=args.cookie_secret_file, behind_proxy=args.behind_proxy,
+          admin=args.admin)
     return 0
 
 

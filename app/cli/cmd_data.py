@@ -5,6 +5,9 @@
 ``railval import DIR [--json]``
     validate the campaign folder DIR completely, then store it in one transaction
     (progress on stderr for imports of more than a few files).
+``railval import DIR --into CAMPAIGN``
+    add a configuration's simulated files (DIR holds ``configuration.json``: one entry of
+    campaign.json's ``configurations``) to a stored campaign, with the same checks.
 ``railval export NAME DIR [--format parquet|csv|h5|mat|mf4|tdms]``
     write a stored campaign as a campaign folder (re-importable, identical hashes).
 ``railval list [--json]``
@@ -28,7 +31,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_init)
 
     p = sub.add_parser("import", help="import a campaign folder (validated before writing)")
-    p.add_argument("folder", metavar="DIR", help="campaign folder holding campaign.json")
+    p.add_argument("folder", metavar="DIR", help="campaign folder holding campaign.json (or, "
+                   "with --into, a configuration folder holding configuration.json)")
+    p.add_argument("--into", metavar="CAMPAIGN", default=None,
+                   help="add a configuration's simulated files to this stored campaign")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=cmd_import)
@@ -94,6 +100,18 @@ def cmd_import(args: argparse.Namespace) -> int:
         bar("reading", done / total, {"done": done, "total": total})
 
     t = time.perf_counter()
+    if args.into:
+        from railval.db.importer import import_configuration
+
+        conf = import_configuration(database, args.into, args.folder, progress=progress)
+        doc = {"campaign": args.into, "configuration": conf,
+               "seconds": round(time.perf_counter() - t, 3)}
+        if args.json:
+            emit_json(doc)
+        else:
+            print(f"imported configuration {conf!r} into campaign {args.into!r} in "
+                  f"{doc['seconds']:.1f} s")
+        return 0
     name = import_campaign(database, args.folder, progress=progress)
     elapsed = time.perf_counter() - t
     doc = _summary(database, name)

@@ -57,7 +57,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     params = dict(parse_param(p) for p in args.param or [])
     res = simulate_configuration(_db(args), args.campaign, args.config, parent=args.parent, effects=effects,
                                  parameters=params, replace=args.replace, workers=args.workers,
-                                 progress=Progress())
+                                 scheduler=args.scheduler, progress=Progress())
     if args.json:
         emit_json(res)
     else:
@@ -94,6 +94,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--replace", action="store_true", help="overwrite an existing configuration NAME")
     p.add_argument("--workers", type=int, default=None,
                    help="processes (default: 2 for long runs above 1500 s simulated, else 1)")
+    p.add_argument("--scheduler", metavar="ADDR", default=None,
+                   help="simulate on the Dask scheduler at ADDR (tcp://host:8786); results equal "
+                   "the local run")
     p.add_argument("--json", action="store_true", help="print one JSON document")
     p.set_defaults(func=_cmd_simulate)
 

@@ -1,6 +1,6 @@
 """CLI verb ``validate`` (docs/design.md §3, §8).
 
-``railval validate CAMPAIGN --config NAME [--json] [--order N] [--boot N] [--seed N]``
+``railval validate CAMPAIGN --config NAME [--json] [--order N] [--boot N] [--seed N] [--scheduler ADDR]``
     EN 14363 processing of measurement and configuration, the DynoTRAIN verdict per quantity
     (mean and sample standard deviation of D_v against the Table 2 limits) and the coverage.
 
@@ -38,6 +38,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--boot", type=int, default=1000, metavar="N",
                    help="bootstrap resamples for the confidence intervals (default 1000; 0 off)")
     p.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    p.add_argument("--scheduler", metavar="ADDR", default=None,
+                   help="process the sections on the Dask scheduler at ADDR (tcp://host:8786); "
+                   "results equal the local run")
     p.set_defaults(func=cmd_validate)
 
 
@@ -153,9 +156,16 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
     database = connect(args.db)
     database.ensure_initialised()
-    with database.session() as session:
-        result = validate_configuration(session, args.campaign, args.config, order=args.order,
-                                        n_boot=args.boot, seed=args.seed)
+    if args.scheduler:
+        from railval.app.services.validation import validate_configurations
+
+        (result,) = validate_configurations(database, args.campaign, [args.config],
+                                            order=args.order, n_boot=args.boot, seed=args.seed,
+                                            scheduler=args.scheduler).values()
+    else:
+        with database.session() as session:
+            result = validate_configuration(session, args.campaign, args.config, order=args.order,
+                                            n_boot=args.boot, seed=args.seed)
     doc = result.to_dict()
     doc["in_sample"] = bool(result.info.get("in_sample", False))
     if args.json:

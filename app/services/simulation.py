@@ -28,11 +28,13 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
                            effects: Mapping[str, Mapping[str, float]] | None = None,
                            parameters: Mapping[str, float] | None = None, description: str | None = None,
                            replace: bool = False, workers: int | None = None,
-                           progress: Progress | None = None) -> dict:
+                           scheduler: str | None = None, progress: Progress | None = None) -> dict:
     """Simulate every section of ``campaign`` with ``effects`` (and vehicle ``parameters``
     overrides, ``model.NAME`` or ``NAME``), store the result as configuration ``name`` (parent
     ``parent``) and return a summary. With a ``parent``, its effects and parameters are the
-    starting point and ``effects``/``parameters`` are added on top."""
+    starting point and ``effects``/``parameters`` are added on top. ``scheduler``: the
+    address of a Dask scheduler that simulates the sections (results identical to a local run;
+    :class:`railval.app.services.batch.BatchExecutor`)."""
     from railval.db import repo
 
     with database.session() as s:
@@ -62,8 +64,15 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
         if progress:
             progress("simulate", 0.9 * done / total, {"done": done, "total": total})
 
-    sets = simulate_campaign(vehicle, secs, layouts=layouts, effects=eff, parameters=par, channels=channels,
-                             fs=fs, workers=workers, progress=cb)
+    if scheduler is not None:
+        from railval.app.services.batch import BatchExecutor
+
+        with BatchExecutor(scheduler) as ex:
+            sets = simulate_campaign(vehicle, secs, layouts=layouts, effects=eff, parameters=par,
+                                     channels=channels, fs=fs, workers=ex.map, progress=cb)
+    else:
+        sets = simulate_campaign(vehicle, secs, layouts=layouts, effects=eff, parameters=par,
+                                 channels=channels, fs=fs, workers=workers, progress=cb)
     if progress:
         progress("store", 0.95, {})
     desc = description or ("built-in simulator: " + (", ".join(sorted(eff)) or "no effects"))

@@ -137,6 +137,11 @@ def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
     return packed, stages.seconds
 
 
+def _evaluate_chunk_task(args: tuple) -> list[bytes]:
+    """:func:`_evaluate_chunk` for an executor's ``map`` (one argument)."""
+    return _evaluate_chunk(*args)
+
+
 _WORKER_DB: dict[str, Any] = {}
 
 
@@ -149,13 +154,17 @@ def _worker_database(url: str):
 def validate_configurations(database, campaign_name: str, configs: Sequence[str] | None = None,
                             *, order: int = DEFAULT_ORDER, n_boot: int = 1000, seed: int = 0,
                             workers: int = 1, chunk_sections: int = 8,
+                            scheduler: str | None = None,
                             progress=None) -> dict[str, ValidationResult]:
     """Validate many configurations (default: all) of a campaign; the DynoTRAIN-scale path.
 
     ``database``: a :class:`railval.db.engine.Database`. Sections not in the result cache are
     processed in chunks of ``chunk_sections`` sections of one source, by ``workers``
     processes (each opens its own connection), then written to the cache by this process.
-    ``progress(stage, fraction, info)`` is called after every chunk.
+    ``progress(stage, fraction, info)`` is called after every chunk. ``scheduler``: a Dask
+    scheduler address whose workers process the chunks instead (they read the database with
+    the URL without its password and take the password from their own
+    ``RAILVAL_DB_PASSWORD``/``_FILE`` setting — nothing secret crosses the Dask link).
     """
     check_order(order)
     with database.session() as session:
@@ -198,7 +207,18 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
             progress("processing sections", len(computed) / max(1, sum(map(len, todo.values()))),
                      {"done": len(computed)})
 
-    if workers > 1 and len(chunks) > 1:
+    if scheduler is not None and chunks:
+        from sqlalchemy.engine import make_url
+
+        from railval.app.services.batch import BatchExecutor
+
+        url = make_url(database.url).set(password=None).render_as_string(hide_password=False)
+        with BatchExecutor(scheduler) as ex:
+            packed = ex.map(_evaluate_chunk_task, [(url, name, c[0], [by_id[s] for s in c[1]], order)
+                                                   for c in chunks])
+        for chunk, blobs in zip(chunks, packed, strict=True):
+            collect_chunk(chunk, blobs)
+    elif workers > 1 and len(chunks) > 1:
         from railval.core.workers import pool_kwargs, thread_count
 
         threads = max(1, thread_count() // workers)

@@ -23,7 +23,8 @@ from railval.core.quantities import derived_signals
 from railval.core.errors import RailvalError
 from railval.core.roles import ACTIONS, PAGE_ACTIONS, Principal, allowed, open_principal
 
-PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report", "signoff", "audit")
+PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report", "signoff", "audit",
+         "import")
 PAGE_TITLES = {
     "overview": "Campaign overview",
     "compare": "Compare signals",
@@ -33,6 +34,7 @@ PAGE_TITLES = {
     "report": "Report",
     "signoff": "Sign-off",
     "audit": "Audit trail",
+    "import": "Import",
 }
 
 #: a session's user is re-read from the database at most this long after the last check

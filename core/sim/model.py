@@ -406,7 +406,8 @@ def simulate_campaign(vehicle, sections: Sequence, *, layouts: Mapping[str, dict
 
     ``workers``: processes (default: 2 in the main process when more than
     ``POOL_MIN_SIMULATED_S`` of simulated time are asked for, else 1; always 1 inside a worker
-    process — the diagnosis parallelises over candidates itself). Results are identical
+    process — the diagnosis parallelises over candidates itself), or a map-like callable
+    ``workers(func, tasks)`` returning the results in order (e.g. a Dask cluster's executor). Results are identical
     for any number of workers. ``progress(done, total)`` is called after each section.
     """
     veh = VehicleModel.from_any(vehicle, parameters)
@@ -422,6 +423,12 @@ def simulate_campaign(vehicle, sections: Sequence, *, layouts: Mapping[str, dict
         big = sim_s > POOL_MIN_SIMULATED_S and len(tasks) > 2
         workers = min(2, os.cpu_count() or 1) if (mp.current_process().name == "MainProcess" and big) else 1
     out: dict[str, SignalSet] = {}
+    if callable(workers):  # a map-like callable (scipy's ``workers`` convention), e.g. Dask
+        for i, (t, res) in enumerate(zip(tasks, workers(_run_one, tasks), strict=True)):
+            out[t[1].id] = res
+            if progress:
+                progress(i + 1, len(tasks))
+        return out
     if workers <= 1:
         for i, t in enumerate(tasks):
             out[t[1].id] = _run_one(t)

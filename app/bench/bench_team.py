@@ -1,0 +1,223 @@
+"""Team server under load: reviewers and engineers through nginx on two app processes.
+
+The production topology on loopback (:mod:`railval.app.bench.topology`): PostgreSQL (a fresh
+schema in ``--pg``), ``--apps`` ``railval serve`` processes behind real nginx with TLS and
+sticky sessions. Set-up: the synthetic campaign (``railval synth``, 12 sections), a workshop
+of its Y time plots, ``--reviewers`` invited reviewers, one engineer account.
+
+Phases:
+
+1. ``--engineers`` Panel sessions, one Chromium page each (all in one headless browser),
+   opened one after another and kept open: sign-in through the proxy, then the time until the
+   app's navigation shows ("first Panel page", ms);
+2. with those sessions open, every reviewer in its own thread posts ``--answers`` answers
+   through the proxy over its own keep-alive HTTPS connection ("answer round trip": request
+   → the server's confirmation that the row is committed); answers lost counted from the
+   database;
+3. the sessions are closed; after ``--settle`` seconds (Bokeh discards a disconnected session
+   after ``unused-session-lifetime``, 15 s by default) the memory is read again;
+4. a second wave of as many sessions is opened: the memory it adds shows whether the first
+   wave's memory is reused.
+
+Memory: resident set (RSS) of every app process before phase 1, with one session open (the
+first loads modules, caches and the campaign's data once), with all sessions open, and after
+they closed; "per further Panel session" = (all open − one open) / (engineers − 1). Closed
+sessions are discarded by Bokeh after ``unused-session-lifetime`` (15 s) at its next check
+(every 17 s); the app then collects and trims the heap (``railval.app.main.release_memory``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import http.client
+import json
+import ssl
+import statistics
+import tempfile
+import threading
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--reviewers", type=int, default=50)
+    parser.add_argument("--engineers", type=int, default=20)
+    parser.add_argument("--answers", type=int, default=20, help="answers per reviewer")
+    parser.add_argument("--apps", type=int, default=2, help="app processes behind nginx")
+    parser.add_argument("--settle", type=float, default=60.0,
+                        help="seconds after the sessions closed before memory is read again")
+    parser.add_argument("--pg", default="postgresql://postgres@127.0.0.1:5432/test",
+                        help="PostgreSQL database in which a fresh schema is used")
+
+
+def _rss_mb(pids: list[int]) -> dict[int, float]:
+    import psutil
+
+    return {p: round(psutil.Process(p).memory_info().rss / 1048576, 1) for p in pids}
+
+
+def _pct(values: list[float], q: float) -> float:
+    return round(statistics.quantiles(values, n=100, method="inclusive")[int(q) - 1], 1) if len(values) > 1 else values[0]
+
+
+def _reviewer(host: str, port: int, token: str, n: int, out: list[float], errors: list[str]) -> None:
+    ctx = ssl._create_unverified_context()  # the run's self-signed certificate
+    conn = http.client.HTTPSConnection(host, port, context=ctx, timeout=30)
+    for i in range(n):
+        body = json.dumps({"position": i, "answer": "yes" if i % 2 else "no", "seconds": 1.0,
+                           "submission": uuid.uuid4().hex})
+        t0 = time.perf_counter()
+        for _attempt in range(5):
+            try:
+                conn.request("POST", f"/review/{token}/answer", body,
+                             {"Content-Type": "application/json"})
+                resp = conn.getresponse()
+                resp.read()
+                if resp.status == 200:
+                    out.append((time.perf_counter() - t0) * 1000)
+                    break
+                errors.append(f"HTTP {resp.status}")
+            except OSError as exc:
+                errors.append(type(exc).__name__)
+                conn.close()
+                conn = http.client.HTTPSConnection(host, port, context=ctx, timeout=30)
+    conn.close()
+
+
+def _open_sessions(browser, base: str, n: int, times: list[float]):
+    """``n`` engineer sessions, one browser context each, opened one after another; returns
+    the pages and the RSS after the first (modules, caches and campaign data loaded)."""
+    pages, warm = [], None
+    for _ in range(n):
+        ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900})
+        page = ctx.new_page()
+        page.route("**/fonts.g*/**", lambda route: route.abort())
+        page.goto(f"{base}/login")
+        page.fill("#username", "eng")
+        page.fill("#password", "engineer password")
+        t0 = time.perf_counter()
+        page.click("#signin")
+        page.locator(".rv-nav").wait_for(timeout=120_000)
+        times.append((time.perf_counter() - t0) * 1000)
+        pages.append(page)
+        if warm is None:
+            time.sleep(2.0)
+            warm = _rss_mb(_PIDS)
+    return pages, warm
+
+
+_PIDS: list[int] = []
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    import psycopg
+    from sqlalchemy import func, select
+
+    from railval.app.bench.topology import Topology
+    from railval.app.cli import main
+    from railval.app.services import workshops as wsvc
+    from railval.db import users
+    from railval.db import workshops as wsdb
+    from railval.db.engine import connect
+    from railval.db.models import WorkshopAnswer
+
+    schema = f"bench_{uuid.uuid4().hex[:10]}"
+    with psycopg.connect(args.pg, autocommit=True) as conn:
+        conn.execute(f'CREATE SCHEMA "{schema}"')
+    url = f"{args.pg.replace('postgresql://', 'postgresql+psycopg://')}?options=-csearch_path%3D{schema}"
+    work = Path(tempfile.mkdtemp(prefix="railval-bench-team-"))
+    figures: dict[str, Any] = {"reviewers": args.reviewers, "engineers": args.engineers,
+                               "app_processes": args.apps, "answers_per_reviewer": args.answers}
+    topo = Topology(url, work / "site", n_apps=args.apps)
+    try:
+        topo.workdir.mkdir(parents=True)
+        topo._secrets()
+        import os
+
+        os.environ["RAILVAL_SECRET_KEY_FILE"] = str(topo.workdir / "secrets" / "railval_secret_key")
+        import contextlib
+        import io
+
+        with contextlib.redirect_stdout(io.StringIO()):  # stdout is the figures' JSON
+            assert main(["--db", url, "init"]) == 0
+            assert main(["--db", url, "synth", "--name", "demo", "--sections", "12"]) == 0
+        db = connect(url)
+        with db.session() as s:
+            users.create_user(s, "eng", password="engineer password", roles=["engineer"])
+        wsvc.create(db, "W", "demo", kinds=["Y_time"], repeats=0.0)
+        with db.session() as s:
+            w = wsdb.get_workshop(s, "W")
+            tokens = [wsdb.invite(s, w, f"r{k}", seed=k) for k in range(args.reviewers)]
+            n_plots = len(wsdb.plots(s, w))
+        answers = min(args.answers, n_plots)
+        figures["answers_per_reviewer"] = answers
+        topo.start()
+        pids = [p.pid for p in topo.apps.values()]
+        _PIDS[:] = pids
+        before = _rss_mb(pids)
+
+        from playwright.sync_api import sync_playwright
+
+        from railval.app.report import CHROMIUM_ARGS
+
+        first_page: list[float] = []
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+            pages, warm = _open_sessions(browser, topo.url, args.engineers, first_page)
+            per_process: dict[int, int] = {}
+            for page in pages:
+                pid = page.evaluate("() => fetch('/health').then(r => r.json()).then(d => d.process)")
+                per_process[pid] = per_process.get(pid, 0) + 1
+            open_rss = _rss_mb(pids)
+
+            rtt: list[float] = []
+            errors: list[str] = []
+            threads = [threading.Thread(target=_reviewer, args=("127.0.0.1", topo.port, t, answers,
+                                                                rtt, errors)) for t in tokens]
+            t0 = time.perf_counter()
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join()
+            wall = time.perf_counter() - t0
+            loaded_rss = _rss_mb(pids)
+            for page in pages:
+                page.context.close()
+            time.sleep(args.settle)
+            after = _rss_mb(pids)
+            # a second wave of the same number of sessions: is the memory reused?
+            second: list[float] = []
+            pages, _ = _open_sessions(browser, topo.url, args.engineers, second)
+            second_rss = _rss_mb(pids)
+            browser.close()
+        with db.session() as s:
+            stored = s.scalar(select(func.count()).select_from(WorkshopAnswer))
+        db.dispose()
+        figures.update({
+            "first_panel_page_ms": {"p50": _pct(first_page, 50), "p95": _pct(first_page, 95),
+                                    "max": round(max(first_page), 1)},
+            "panel_sessions_per_process": sorted(per_process.values()),
+            "answer_round_trip_ms": {"p50": _pct(rtt, 50), "p95": _pct(rtt, 95),
+                                     "max": round(max(rtt), 1)},
+            "answers": {"sent": args.reviewers * answers, "confirmed": len(rtt), "stored": stored,
+                        "lost": args.reviewers * answers - stored, "retried_errors": len(errors)},
+            "answers_per_s": round(len(rtt) / wall, 1),
+            "rss_mb": {"before": round(sum(before.values()), 1),
+                       "one_session_open": round(sum(warm.values()), 1),
+                       "sessions_open": round(sum(open_rss.values()), 1),
+                       "after_answers": round(sum(loaded_rss.values()), 1),
+                       f"after_close_{args.settle:g}s": round(sum(after.values()), 1),
+                       "second_wave_open": round(sum(second_rss.values()), 1)},
+            # the first session loads modules and caches once; the others cost this each
+            "rss_per_further_panel_session_mb": round(
+                (sum(open_rss.values()) - sum(warm.values())) / max(1, args.engineers - 1), 1),
+        })
+        with open("/proc/loadavg") as fh:
+            figures["loadavg_at_end"] = fh.read().split()[:3]
+    finally:
+        topo.stop()
+        with psycopg.connect(args.pg, autocommit=True) as conn:
+            conn.execute(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE')
+    return figures
