@@ -10,6 +10,10 @@ A backup is a folder:
 * ``secret.key`` (0600) — the secret that seals signals and cached results
   (:mod:`railval.db.integrity`). Without it a restored database holds signals whose seals no
   longer verify: the backup folder must be kept as securely as the key itself;
+* ``signing-key.pem`` (0600) — the Ed25519 key that signs audit rows and sign-offs, with
+  ``signing-key.pem.retired`` (public keys of rotated keys) and ``witness.jsonl`` (the signed
+  heads kept outside the database) when they exist; without them a restored trail would be
+  verified against a new key and an empty witness (docs/audit.md);
 * ``backup.json`` — format, backend, schema revision, audit head, signal count and the
   SHA-256 of each file (checked before a restore).
 
@@ -17,7 +21,10 @@ A backup is a folder:
 file; a PostgreSQL database or schema without railval tables), installs the secret
 (beside an SQLite file as ``FILE.key``, else where :func:`railval.db.integrity.secret_path`
 looks, unless ``$RAILVAL_SECRET_KEY`` already holds the same secret) and migrates to the
-newest schema revision. Both write an audit row (``database.backup`` before the copy, so the
+newest schema revision; the signing key, retired keys and witness are installed where
+:func:`railval.db.integrity.signing_key_path` and :func:`~railval.db.integrity.witness_path`
+look for the restored database (refused when another key or witness is already there). Both
+write an audit row (``database.backup`` before the copy, so the
 backup holds it; ``database.restore`` after).
 """
 
@@ -42,6 +49,9 @@ from railval.db import audit, integrity
 FORMAT = "railval-backup/1"
 MANIFEST = "backup.json"
 SECRET = "secret.key"
+SIGNING_KEY = "signing-key.pem"
+RETIRED = "signing-key.pem.retired"
+WITNESS = "witness.jsonl"
 FILES = {"sqlite": "database.sqlite", "postgresql": "database.pgdump"}
 
 
@@ -129,12 +139,58 @@ def backup(database, folder: str | Path, *, actor: Any = "system") -> dict[str, 
     fd = os.open(key, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     with os.fdopen(fd, "wb") as fh:
         fh.write(secret + b"\n")
+    files = [target, key, *_copy_signing_files(database.url, out)]
     manifest = {"format": FORMAT, "backend": backend, "revision": database.current_revision(),
                 "created_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
                 "source": database.safe_url, **facts,
-                "files": {p.name: _sha256(p) for p in (target, key)}}
+                "files": {p.name: _sha256(p) for p in files}}
     (out / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
     return manifest
+
+
+def _copy_signing_files(url: str, out: Path) -> list[Path]:
+    """Copy the signing key (made now if the database has none yet), its retired keys and
+    the witness of ``url`` into the backup folder ``out``; returns the copies."""
+    integrity.signing_key(url)
+    key_path = integrity.signing_key_path(url)
+    sources = {SIGNING_KEY: key_path, RETIRED: Path(f"{key_path}.retired") if key_path else None,
+               WITNESS: integrity.witness_path(url)}
+    copies = []
+    for name, src in sources.items():
+        if src is None or not src.is_file():
+            continue
+        dst = out / name
+        fd = os.open(dst, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(src.read_bytes())
+        copies.append(dst)
+    return copies
+
+
+def _install_signing_files(url: str, root: Path) -> None:
+    """Install the backup's signing key, retired keys and witness for the restored ``url``:
+    an existing file with other content is refused (it belongs to another database)."""
+    key_path = integrity.signing_key_path(url)
+    targets = {SIGNING_KEY: key_path, RETIRED: Path(f"{key_path}.retired") if key_path else None,
+               WITNESS: integrity.witness_path(url)}
+    for name, dst in targets.items():
+        src = root / name
+        if not src.is_file():
+            continue
+        if dst is None:
+            raise BackupError("an in-memory database cannot be restored into")
+        data = src.read_bytes()
+        if dst.exists():
+            if dst.read_bytes() != data:
+                raise BackupError(f"{dst} exists with other content; move it away or point "
+                                  f"RAILVAL_SIGNING_KEY_FILE / RAILVAL_WITNESS_FILE at the "
+                                  f"backup's {name}")
+            continue
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(dst, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+    integrity.forget_keys()
 
 
 def read_manifest(folder: str | Path) -> dict[str, Any]:
@@ -198,6 +254,7 @@ def restore(database, folder: str | Path, *, actor: Any = "system") -> dict[str,
                           f"{min(tables)!r}); restore into a new database")
     secret = (root / SECRET).read_bytes().strip()
     where = _install_secret(database, secret)
+    _install_signing_files(database.url, root)
     src = root / FILES[backend]
     if backend == "sqlite":
         database.engine.dispose()

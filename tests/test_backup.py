@@ -60,13 +60,18 @@ def test_backup_then_restore_into_empty_database(db_url, target_url, tmp_path, c
     with db.session(actor="adm") as s:
         users.create_user(s, "adm", password="admin password 1", roles=["admin"])
         users.create_user(s, "rev", password="reviewer password", roles=["reviewer"])
-    sign(db, "rev", "reviewer password", "demo", "baseline", decision="validated", statement="ok")
+    sign(db, "rev", "reviewer password", "demo", "baseline", decision="validated", statement="ok",
+         justification="Accepted for the straight-track zones; the curve results are known.")
     before = _state(db)
     db.dispose()
     bk = tmp_path / "backup"
     assert main(["--db", db_url, "--as", "adm", "backup", str(bk), "--json"]) == 0
     manifest = json.loads(capsys.readouterr().out)
     assert (bk / "secret.key").stat().st_mode & 0o777 == 0o600
+    # the signing key and the witness travel with it: the restored trail verifies against
+    # the same key and the same signed heads
+    assert (bk / "signing-key.pem").stat().st_mode & 0o777 == 0o600
+    assert {"signing-key.pem", "witness.jsonl"} <= set(manifest["files"])
     assert manifest["signals"] == len(before["signals"]) > 0
     # a non-empty target is refused, nothing written
     assert main(["--db", db_url, "restore", str(bk)]) != 0

@@ -61,7 +61,11 @@ def test_compose_topology_rules():
     for name, svc in services.items():
         for key, value in (svc.get("environment") or {}).items():
             assert key not in SECRET_NAMES, f"{name}: {key} holds a secret value"
-            if key.endswith("_FILE"):
+            if key == "RAILVAL_WITNESS_FILE":  # state, not a secret: on a named volume
+                mounts = {v.split(":")[1]: v.split(":")[0] for v in svc.get("volumes", [])}
+                assert str(Path(value).parent) in mounts, (name, key)
+                assert mounts[str(Path(value).parent)] in c["volumes"], (name, key)
+            elif key.endswith("_FILE"):
                 assert str(value).startswith("/run/secrets/"), (name, key)
                 assert Path(value).name in c["secrets"], (name, key)
     mount = services["proxy"]["volumes"][0].split(":")[0]

@@ -15,7 +15,7 @@ READ = ["overview", "compare", "dashboard", "metrics", "diagnose", "report", "si
 EXPECTED = {
     "admin": (READ + ["audit"], []),
     "organiser": (READ, ["workshops"]),
-    "engineer": (READ, []),
+    "engineer": (READ + ["import"], []),
     "panelist": ([], ["my-workshops"]),
     "reviewer": (READ, ["workshops"]),
     "assessor": (READ + ["audit"], ["workshops"]),
