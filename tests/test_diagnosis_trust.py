@@ -1,4 +1,4 @@
-"""Tests of the trustworthy diagnosis (core.diagnosis.diagnose_evidence) on per-section data
+"""Tests of the trustworthy diagnosis (core.diagnosis.engine.diagnose_evidence) on per-section data
 whose causes are known by construction: a linear toy "simulator" with section scatter."""
 
 from __future__ import annotations
@@ -184,7 +184,7 @@ def test_linearised_parameter_candidate_extrapolates_over_its_bounds():
 
 
 def test_closed_form_segment_minimum_matches_a_fine_grid():
-    from railval.core.diagnosis import _Curve, _fit, _min_cost
+    from railval.core.diagnosis.fit import _Curve, _fit, _min_cost
 
     rng = np.random.default_rng(3)
     base, *_ = _evidence(lambda q, z, p: A[(q, z, p)])
@@ -206,7 +206,7 @@ def test_fitted_value_at_a_log_bound_stays_inside_the_bounds():
     """exp(log(5e5)) = 499999.99999999994: a fit at the lower bound of a log-scaled parameter
     must return the bound itself (a simulation refuses values outside the bounds; the trust
     bench stopped on exactly this)."""
-    from railval.core.diagnosis import _Curve
+    from railval.core.diagnosis.fit import _Curve
 
     base, *_ = _evidence(lambda q, z, p: A[(q, z, p)])
     fam = CandidateFamily("parameter", "model.k_primary_y", "k_primary_y", [3.884e6, 1.942e6], [base, base],
@@ -241,7 +241,7 @@ def test_fitted_value_interval_decides_whether_implausibility_makes_the_answer_u
 
 
 def test_bootstrap_argmin_matches_a_fine_grid():
-    from railval.core.diagnosis import _Curve, _min_cost
+    from railval.core.diagnosis.fit import _Curve, _min_cost
 
     rng = np.random.default_rng(4)
     base, *_ = _evidence(lambda q, z, p: A[(q, z, p)])

@@ -241,7 +241,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                 if c.kind != "parameter" or len(redo) >= refine:
                     continue
                 fam = next(f for f in fams if f.name == c.name)
-                v = c.fitted  # inside the bounds: core.diagnosis._Curve.value clamps it
+                v = c.fitted  # inside the bounds: core.diagnosis.fit._Curve.value clamps it
                 if min(abs(math.log(v / x)) for x in fam.values) > math.log(1.1):
                     redo.append((fam, v))
             if redo:
