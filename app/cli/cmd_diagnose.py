@@ -47,6 +47,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         print(f"{'':>6}fixes {', '.join(c.fixes) or '-'}; worsens {', '.join(c.worsens) or '-'}")
         for f in c.flags:
             print(f"{'':>6}! {f}")
+    for s in d.get("skipped") or []:
+        print(f"left out: {s['name']} ({s['kind']}) — {s['reason']}")
     if d["verdict"] == "none" and d.get("unexplained"):
         print("unexplained (largest components): " + "; ".join(
             f"{u['component']} {u['residual']:+.2f}" for u in d["unexplained"]))

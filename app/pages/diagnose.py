@@ -157,7 +157,7 @@ class DiagnosePage(PageBase):
 
     def _show_candidates(self) -> None:
         cands = self.state.candidates
-        if not cands:
+        if not cands and not self.state.verdict:
             self.candidates_box.objects = [pn.pane.Markdown("*No diagnosis yet — press **Run diagnosis**.*")]
             return
         df = pd.DataFrame([{
@@ -181,6 +181,9 @@ class DiagnosePage(PageBase):
                     f"{u['component']} {u['residual']:+.2f}" for u in self.state.unexplained), "info"))
         elif note:
             extra.append(message(note, "info" if self.state.separable else "warning"))
+        if self.state.skipped:
+            extra.append(message("Left out (cannot apply to this campaign): " + "; ".join(
+                f"{s['name']} — {s['reason']}" for s in self.state.skipped), "info"))
         # the verdict first: a reader must not scroll past 20 candidates to learn how sure it is
         # 890 px in all: fits the main area at 1280 px (what it fixes and worsens: below, per candidate)
         widths = {"#": 40, "candidate": 165, "kind": 85, "held-out": 100, "in-sample": 105,
@@ -191,8 +194,8 @@ class DiagnosePage(PageBase):
             pn.pane.Markdown("Shares of the residual explained, in %: on held-out sections (the "
                              "ranking) and in-sample (all sections).", sizing_mode="stretch_width"),
             *self._run_line(), *extra,
-            table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"], widths=widths,
-                  layout="fit_columns"),
+            *([table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"], widths=widths,
+                     layout="fit_columns")] if cands else []),
             *self._earlier_runs(), self.candidate_box,
         ]
         ranked = [c["effect"] for c in cands]

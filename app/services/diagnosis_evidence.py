@@ -172,8 +172,9 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     if unknown:
         raise InvalidParameter(f"unknown effect(s) {unknown}; known: {sorted(registry)}")
     template = str(ctx.vehicle.get("template") or "coach")
+    skipped = inapplicable_effects(ctx, conf_effects, effects)
     todo = [e for e in (effects if effects is not None else registry) if e not in conf_effects
-            and template in registry[e].templates]
+            and template in registry[e].templates and e not in {x["name"] for x in skipped}]
     plan = parameter_plan(ctx, conf_params) if include_parameters else []
     if parameters:
         wanted = {p.removeprefix("model.") for p in parameters}
@@ -231,8 +232,12 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                     "parameter", name, pname, [pp["reference"], v], [base, evidence(k)], pp["bounds"], log=True,
                     extrapolate=True, reference=pp["reference"], plausible=pp["plausible"],
                     plausible_source=pp["source"], unit=pp["unit"], title=pp["title"])
+        blind = _without_effect(base, list(families.values()))
+        skipped += [{"name": f.name, "kind": f.kind, "reason": "changes none of the quantities the campaign "
+                     "measures at any simulated value"} for f in blind
+                    if not any(s["name"] == f.name for s in skipped)]
         # an effect with several parameters is one candidate: the parameter that explains most
-        fams = _best_per_effect(base, list(families.values()), vr.validated)
+        fams = _best_per_effect(base, [f for f in families.values() if f not in blind], vr.validated)
         n_sim = len(tasks)
         if plan and refine:
             first = diagnose_evidence(base, fams, validated=bool(vr.validated), n_boot=0, folds=folds, seed=seed)
@@ -258,10 +263,45 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                       "parameters_in_configuration": dict(conf_params),
                       "values_per_parameter": values_per_parameter, "simulations": n_sim,
                       "stored_residual_norm": math.sqrt(stored_residual.norm2()),
-                      "simulated_residual_norm": math.sqrt(res.residual.norm2())})
+                      "simulated_residual_norm": math.sqrt(res.residual.norm2()),
+                      "skipped": skipped})
+    if skipped and not fams:
+        res.note += "; left out: " + "; ".join(f"{s['name']} ({s['reason']})" for s in skipped)
     res.extra["next"] = next_step(res, campaign, config)
     _report(progress, "done", 1.0)
     return res
+
+
+def inapplicable_effects(ctx: Any, conf_effects: Mapping[str, Any], effects: Sequence[str] | None) -> list[dict]:
+    """The candidate effects that cannot apply to the campaign, each ``{"name", "kind":
+    "effect", "reason"}`` with a one-line reason (:func:`railval.core.sim.effects.unmet_requirement`:
+    track data the sections do not carry, quantities the campaign does not measure); effects
+    of another vehicle template are named only when asked for (``effects``)."""
+    from railval.core.sim.effects import EFFECTS, unmet_requirement
+
+    template = str(ctx.vehicle.get("template") or "coach")
+    measured = {q for values in ctx.measured_values.values() for q, _ in values}
+    out = []
+    for e in (effects if effects is not None else EFFECTS):
+        if e in conf_effects:
+            continue
+        if template not in EFFECTS[e].templates:
+            if effects is not None:
+                out.append({"name": e, "kind": "effect",
+                            "reason": f"applies to the {', '.join(EFFECTS[e].templates)} template only, "
+                                      f"the campaign's vehicle is a {template}"})
+            continue
+        reason = unmet_requirement(EFFECTS[e], ctx.layouts, measured)
+        if reason:
+            out.append({"name": e, "kind": "effect", "reason": reason})
+    return out
+
+
+def _without_effect(base: SectionEvidence, fams: Sequence[CandidateFamily]) -> list[CandidateFamily]:
+    """The families whose every simulated value leaves the campaign's pattern exactly as it is
+    (nothing the campaign measures moves): nothing to fit, nothing to rank."""
+    ref = base.values()
+    return [f for f in fams if all(np.array_equal(e.values(), ref) for e in f.evidence)]
 
 
 def _best_per_effect(base: SectionEvidence, fams: list[CandidateFamily], validated: bool) -> list[CandidateFamily]:

@@ -34,6 +34,8 @@ class DiagnoseState(param.Parameterized):
     verdict = param.String(default="", doc="verdict of the last diagnosis: cause, uncertain or none")
     noise_floor = param.Number(default=None, allow_None=True, doc="noise floor of the last diagnosis")
     unexplained = param.List(default=[], doc="what the best candidate leaves unexplained (verdict none)")
+    skipped = param.List(default=[], doc=(
+        "candidates left out because they cannot apply to the campaign: name, kind, one-line reason"))
     # diagnosis settings (app.services.diagnosis.diagnose)
     candidate_effects = param.ListSelector(default=[], objects=[], doc=(
         "effects the diagnosis tries; none chosen = every effect the configuration lacks"))
@@ -72,6 +74,8 @@ class DiagnoseState(param.Parameterized):
 
     def _reset(self) -> None:
         self.candidates = []
+        self.verdict = ""
+        self.skipped = []
         self.residual = {}
         self.stored_run = {}
         self.diagnosis_run = {}
@@ -194,6 +198,7 @@ class DiagnoseState(param.Parameterized):
         self.verdict = str(d.get("verdict") or "")
         self.noise_floor = d.get("noise_floor")
         self.unexplained = list(d.get("unexplained") or [])
+        self.skipped = list(d.get("skipped") or [])
         self.diagnosis_run = {k: d.get(k) for k in ("simulations", "values_per_parameter", "configuration")}
         self.stored_run = dict(d.get("run") or {})
         names = self.available_effects() if cands else []
@@ -203,6 +208,8 @@ class DiagnoseState(param.Parameterized):
             self.effect = order[0]
             self._suggest_name()
         self.candidates = cands
+        if not cands:  # a diagnosis with nothing to rank (every candidate left out): the page shows why
+            self.param.trigger("candidates")
 
     def run_calibration(self, dispatch=None, background=True, calibrate: bool = True):
         """Add ``effect`` to the configuration, calibrate it (or use ``parameters``),
