@@ -10,6 +10,7 @@ measured campaign from outside looks like — then imported (SQLite and PostgreS
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -90,6 +91,16 @@ def test_diagnosis_runs_on_what_the_campaign_holds(plain):
     assert d["verdict"] in ("cause", "uncertain", "none")
     # the hidden conicity is what this campaign's residual holds: found without the track data
     assert d["verdict"] == "cause" and d["candidates"][0]["held_out_explained"] > 0.5
+    # the cause set and the per-family results
+    assert [c["name"] for c in d["causes"]] == ["conicity"] and d["causes"][0]["held_out_share"] > 0.5
+    assert d["cause_set"]["held_out_explained"] == pytest.approx(d["causes"][0]["held_out_share"])
+    fams = {f["name"]: f for f in d["families"]}
+    assert {"guiding", "wheel", "carbody"} <= set(fams)
+    for f in fams.values():
+        assert f["verdict"] in ("cause", "uncertain", "none") and set(f["structural"]) == {
+            "flag", "quantities", "zones", "reason"}
+        assert all(c["name"] == "conicity" for c in f["top"])
+    assert sum(f["share"] for f in fams.values()) == pytest.approx(1.0)
     # stored with the run and read back
     with plain.session() as s:
         assert latest_diagnosis(s, NAME, "baseline").to_dict()["skipped"] == d["skipped"]
@@ -151,6 +162,9 @@ def test_diagnose_page_shows_the_candidates_left_out(tmp_path, plain_folder, pag
             rows.first.wait_for(timeout=120_000)
             assert rows.count() == 1
             assert rows.first.locator(".tabulator-cell[tabulator-field='candidate']").inner_text().strip() == "conicity"
+            main.get_by_text("Per quantity family").wait_for(timeout=120_000)
+            assert main.locator(".rv-families .tabulator-row").count() == 4
+            main.get_by_text(re.compile(r"Causes found together \(1; .*conicity \d+ %")).wait_for(timeout=120_000)
             element_screenshot(main, "diagnose-left-out")
     finally:
         db.dispose()

@@ -263,3 +263,73 @@ def test_parameter_flag_says_check_the_vehicle():
     ok, flags = plausibility_flags("model.c_secondary_z", 6000.0, bounds=(0.0, 1e5), plausible=(1e4, 5e4),
                                    unit="N*s/m", kind="parameter", interval=(5500.0, 6600.0), at_bound=False)
     assert not ok and "worn or failed part" in flags[0] and "entirely outside it" in flags[0]
+
+
+def test_families_name_a_structural_difference_and_still_find_the_cause_elsewhere():
+    """Residual: A in the guiding forces (Y_qst), removable only by candidate T at the end of
+    its search range, plus B in the car body accelerations, removed by candidate D at a
+    plausible value. Overall the answer is not a single cause; per family, the car body
+    family names D and the guiding family is flagged structural with its quantity and zones."""
+    from railval.core.diagnosis import diagnose_families
+
+    body = ("az_rms", "ay_rms")
+    a_y = lambda q, z, p: A[(q, z, p)] if q == "Y_qst" else 0.0
+    b_cb = lambda q, z, p: B[(q, z, p)] if q in body else 0.0
+    base, *_ = _evidence(lambda q, z, p: a_y(q, z, p) + b_cb(q, z, p))
+    t_vals, d_vals = [0.0, 0.3, 0.6], [0.0, 0.5, 1.0, 1.5, 2.0]
+    ev_t = [_evidence(lambda q, z, p, v=v: (1 - v) * a_y(q, z, p) + b_cb(q, z, p), like=base)[0] for v in t_vals]
+    ev_d = [_evidence(lambda q, z, p, v=v: a_y(q, z, p) + (1 - v) * b_cb(q, z, p), like=base)[0] for v in d_vals]
+    fams = [CandidateFamily("effect", "T", "k", t_vals, ev_t, (0.0, 0.6), plausible=(0.0, 0.3)),
+            CandidateFamily("effect", "D", "c", d_vals, ev_d, (0.0, 2.0), plausible=(0.5, 1.5))]
+    out = {f["name"]: f for f in diagnose_families(base, fams, n_boot=60)}
+    assert set(out) == {"guiding", "wheel", "carbody", "supplementary"}
+    cb = out["carbody"]
+    assert cb["verdict"] == "cause" and cb["top"][0]["name"] == "D"
+    assert cb["top"][0]["fitted"] == pytest.approx(1.0, abs=0.1) and not cb["structural"]["flag"]
+    g = out["guiding"]
+    assert g["quantities"] == ["Y_qst"] and g["top"][0]["name"] == "T" and g["top"][0]["at_bound"]
+    assert g["structural"]["flag"] and g["verdict"] == "uncertain"
+    assert g["structural"]["quantities"] == ["Y_qst"] and g["structural"]["zones"]
+    assert "differs structurally" in g["structural"]["reason"]
+    # the wheel forces hold only scatter: nothing claimed there
+    assert out["wheel"]["verdict"] == "none" and not out["wheel"]["structural"]["flag"]
+    shares = sum(f["share"] for f in out.values())
+    assert shares == pytest.approx(1.0)
+
+
+def _two_causes(truth_a, truth_b):
+    """Residual truth_a·A + truth_b·B (+ scatter); candidates A and B each remove their own
+    direction, C removes an unrelated one."""
+    off = lambda q, z, p, a=truth_a, b=truth_b: a * A[(q, z, p)] + b * B[(q, z, p)]
+    base, *_ = _evidence(off)
+    values = [0.0, 0.5, 1.0, 1.5, 2.0]
+    mk = lambda d: [_evidence(lambda q, z, p, v=v: off(q, z, p) - v * d[(q, z, p)], like=base)[0] for v in values]
+    return base, [CandidateFamily("effect", n, "x", values, mk(d), (0.0, 2.0), plausible=(0.0, 2.0))
+                  for n, d in (("A", A), ("B", B), ("C", C))]
+
+
+def test_cause_set_finds_both_of_two_causes_with_their_held_out_shares():
+    from railval.core.diagnosis.causes import cause_set
+
+    base, fams = _two_causes(1.0, 0.8)
+    out = cause_set(base, fams, n_boot=60)
+    names = [c["name"] for c in out["causes"]]
+    assert sorted(names) == ["A", "B"]
+    fitted = {c["name"]: c["fitted"] for c in out["causes"]}
+    assert fitted["A"] == pytest.approx(1.0, abs=0.1) and fitted["B"] == pytest.approx(0.8, abs=0.1)
+    assert all(c["held_out_share"] > 0.2 for c in out["causes"])
+    assert out["held_out_explained"] > 0.9 and "C" not in names
+    # the single best alone explains clearly less than the set
+    best = diagnose_evidence(base, fams, n_boot=0).candidates[0]
+    assert best.held_out_explained < out["held_out_explained"] - 0.2
+
+
+def test_cause_set_of_one_cause_or_of_scatter():
+    from railval.core.diagnosis.causes import cause_set
+
+    base, fams = _two_causes(1.0, 0.0)
+    out = cause_set(base, fams, n_boot=60)
+    assert [c["name"] for c in out["causes"]] == ["A"]
+    base, fams = _two_causes(0.0, 0.0)
+    out = cause_set(base, fams, n_boot=60)
+    assert out["causes"] == [] and out["held_out_explained"] == 0.0

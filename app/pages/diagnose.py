@@ -181,6 +181,14 @@ class DiagnosePage(PageBase):
                     f"{u['component']} {u['residual']:+.2f}" for u in self.state.unexplained), "info"))
         elif note:
             extra.append(message(note, "info" if self.state.separable else "warning"))
+        if self.state.causes:
+            together = (self.state.cause_set or {}).get("held_out_explained")
+            extra.append(message(
+                f"Causes found together ({len(self.state.causes)}; share of the residual each adds on held-out "
+                "sections): " + ", ".join(f"{c['name']} {100 * c['held_out_share']:.0f} %" for c in self.state.causes)
+                + (f"; together {100 * together:.0f} %" if together is not None else ""),
+                "success" if len(self.state.causes) > 1 else "info"))
+        extra += self._families()
         if self.state.skipped:
             extra.append(message("Left out (cannot apply to this campaign): " + "; ".join(
                 f"{s['name']} — {s['reason']}" for s in self.state.skipped), "info"))
@@ -202,6 +210,25 @@ class DiagnosePage(PageBase):
         rest = [e for e in self.state.param.effect.objects if e not in ranked]
         self.state.param.effect.objects = ranked + rest
         self._show_candidate()
+
+    def _families(self) -> list:
+        """Per quantity family: its share of the residual, verdict, best candidate and whether
+        its behaviour differs structurally (docs/diagnosis.md "Per family")."""
+        fams = self.state.families
+        if not fams:
+            return []
+        df = pd.DataFrame([{
+            "family": f["title"], "share of residual (%)": round(100 * float(f["share"]), 1),
+            "verdict": f["verdict"] + (" (structural)" if f["structural"]["flag"] else ""),
+            "best candidate": f["top"][0]["name"] if f["top"] else "",
+            "held-out (%)": round(100 * float(f["top"][0]["held_out_explained"]), 1) if f["top"] else None,
+            "where": (", ".join(f["structural"]["quantities"]) + "; zones "
+                      + ", ".join(map(str, f["structural"]["zones"]))) if f["structural"]["flag"] else "",
+        } for f in fams])
+        notes = [message(f"{f['title']}: {f['structural']['reason']}", "warning")
+                 for f in fams if f["structural"]["flag"]]
+        return [pn.pane.Markdown("#### Per quantity family"),
+                table(df, height=40 + 32 * len(df), css_classes=["rv-families"]), *notes]
 
     def _run_line(self) -> list:
         """Which stored run is shown: when, with which settings, how long it took."""

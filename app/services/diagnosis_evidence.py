@@ -35,9 +35,11 @@ from railval.core.diagnosis import (
     SectionEvidence,
     band_powers,
     diagnose_evidence,
+    diagnose_families,
     scan_values,
     section_evidence,
 )
+from railval.core.diagnosis.causes import cause_set
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import Effect
 
@@ -114,7 +116,12 @@ def _evaluate_sections(task: tuple[Any, dict, dict]) -> tuple[list[dict], dict[s
     """Worker task: simulate with ``effects`` and model ``parameters``; return the validation
     pairs (section, zone, quantity, position, D_norm) and the band powers per section and
     acceleration channel."""
-    from railval.app.services.campaign_context import ACC_CHANNELS, section_values, simulate_context, validate_values
+    from railval.app.services.campaign_context import (
+        ACC_CHANNELS,
+        section_values,
+        simulate_context,
+        validate_values,
+    )
 
     ctx, effects, parameters = task
     sets = simulate_context(ctx, effects, parameters)
@@ -258,6 +265,17 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                 n_sim += len(redo)
     _report(progress, "score", 0.9)
     res = diagnose_evidence(base, fams, validated=bool(vr.validated), n_boot=n_boot, folds=folds, seed=seed)
+    pool = [f for f in fams if any(c.name == f.name and c.significant for c in res.candidates)]
+    if res.extra["verdict"] == "none" or not pool:
+        cs = {"causes": [], "held_out_explained": 0.0, "remaining_within_noise": bool(res.extra["residual_within_noise"]),
+              "stopped": "no candidate explains more than the section scatter" if res.extra["verdict"] != "none"
+              else "verdict none: " + res.note}
+    else:
+        cs = cause_set(base, pool, folds=folds, n_boot=n_boot, seed=seed)
+    res.extra["causes"] = cs.pop("causes")
+    res.extra["cause_set"] = cs
+    res.extra["families"] = diagnose_families(base, fams, validated=bool(vr.validated), n_boot=n_boot,
+                                              folds=folds, seed=seed)
     res.extra.update({"campaign": ctx.campaign, "configuration": config, "validated": bool(vr.validated),
                       "effects_in_configuration": sorted(conf_effects),
                       "parameters_in_configuration": dict(conf_params),
@@ -331,6 +349,18 @@ def next_step(res: DiagnosisResult, campaign: str, config: str) -> dict[str, Any
     if verdict == "none" or not res.candidates:
         return {"action": "none", "text": "no candidate explains the residual; look at what stays unexplained "
                                           "(quantities, zones, bands) — data, sensors or physics outside the library"}
+    causes = res.extra.get("causes") or []
+    if len(causes) > 1:  # a set of causes: calibrate them together
+        byname = {c.name: c for c in res.candidates}
+        eff = " ".join(f"--effect {x['name']}" for x in causes)
+        start = " ".join(f"{x['name']}={x['fitted']:.4g}" if x["kind"] == "parameter" else
+                         " ".join(f"{x['name']}.{k}={v:.4g}" for k, v in byname[x["name"]].parameters.items())
+                         for x in causes)
+        new = config + "".join(f"+{x['parameter'] if x['kind'] == 'parameter' else x['name']}" for x in causes)
+        cmd = f"railval calibrate {campaign} --config {config} {eff} --as {new} --start {start}"
+        return {"action": "calibrate", "candidates": [x["name"] for x in causes], "command": cmd,
+                "text": f"calibrate the {len(causes)} causes together into a child configuration, then diagnose "
+                        f"the child: {cmd}"}
     c = res.candidates[0]
     if c.kind == "effect":
         start = " ".join(f"{c.name}.{k}={v:.4g}" for k, v in c.parameters.items())

@@ -34,6 +34,9 @@ class DiagnoseState(param.Parameterized):
     verdict = param.String(default="", doc="verdict of the last diagnosis: cause, uncertain or none")
     noise_floor = param.Number(default=None, allow_None=True, doc="noise floor of the last diagnosis")
     unexplained = param.List(default=[], doc="what the best candidate leaves unexplained (verdict none)")
+    causes = param.List(default=[], doc="the cause set: name, kind, parameter, fitted, held_out_share")
+    cause_set = param.Dict(default={}, doc="the cause set's held-out share, whether the rest is scatter, why it stopped")
+    families = param.List(default=[], doc="per quantity family: verdict, top candidates, structural flag")
     skipped = param.List(default=[], doc=(
         "candidates left out because they cannot apply to the campaign: name, kind, one-line reason"))
     # diagnosis settings (app.services.diagnosis.diagnose)
@@ -76,6 +79,8 @@ class DiagnoseState(param.Parameterized):
         self.candidates = []
         self.verdict = ""
         self.skipped = []
+        self.causes = []
+        self.families = []
         self.residual = {}
         self.stored_run = {}
         self.diagnosis_run = {}
@@ -199,6 +204,9 @@ class DiagnoseState(param.Parameterized):
         self.noise_floor = d.get("noise_floor")
         self.unexplained = list(d.get("unexplained") or [])
         self.skipped = list(d.get("skipped") or [])
+        self.causes = list(d.get("causes") or [])
+        self.cause_set = dict(d.get("cause_set") or {})
+        self.families = list(d.get("families") or [])
         self.diagnosis_run = {k: d.get(k) for k in ("simulations", "values_per_parameter", "configuration")}
         self.stored_run = dict(d.get("run") or {})
         names = self.available_effects() if cands else []

@@ -12,6 +12,8 @@ One module per concept:
   separates two candidates;
 * :mod:`~railval.core.diagnosis.result` — ranked candidates and the result as plain dicts;
 * :mod:`~railval.core.diagnosis.engine` — held-out ranking, noise floor and verdict;
+* :mod:`~railval.core.diagnosis.families` — the same per quantity family, structural
+  differences named;
 * :mod:`~railval.core.diagnosis.grids` — heat-map grids for the page and reports.
 
 References: Polach & Böttcher 2014 §5; Efron & Tibshirani 1993; Hastie, Tibshirani &
@@ -27,6 +29,7 @@ from railval.core.diagnosis.evidence import (
     zone_bootstrap,
     zone_folds,
 )
+from railval.core.diagnosis.families import QUANTITY_FAMILIES, diagnose_families, family_of
 from railval.core.diagnosis.fit import PARAMETER_CANDIDATES, CandidateFamily, scan_values
 from railval.core.diagnosis.grids import ZONE_COLUMNS, PatternGrid, pattern_grids, where_grid
 from railval.core.diagnosis.patterns import (
@@ -48,6 +51,7 @@ __all__ = [
     "ALIKE_MARGIN",
     "DEFAULT_BANDS_HZ",
     "PARAMETER_CANDIDATES",
+    "QUANTITY_FAMILIES",
     "STRONG",
     "ZONE_COLUMNS",
     "CandidateFamily",
@@ -61,7 +65,9 @@ __all__ = [
     "band_ratio_pattern",
     "component_parts",
     "diagnose_evidence",
+    "diagnose_families",
     "difference_pairs",
+    "family_of",
     "pattern_from_pairs",
     "pattern_grids",
     "plausibility_flags",
