@@ -168,3 +168,64 @@ def test_diagnose_page_shows_the_candidates_left_out(tmp_path, plain_folder, pag
             element_screenshot(main, "diagnose-left-out")
     finally:
         db.dispose()
+
+
+def test_gain_candidate_pairs_and_channels():
+    from railval.core.diagnosis.measurement import gain_channels, gain_pairs
+
+    pairs = [{"section": "S1", "zone": 1, "quantity": "az_rms", "position": "b1", "M": 0.4, "S": 0.5, "D_norm": 0.0},
+             {"section": "S1", "zone": 1, "quantity": "az_rms", "position": "b2", "M": 0.4, "S": 0.5, "D_norm": 0.0},
+             {"section": "S1", "zone": 1, "quantity": "Y_qst", "position": "w1L", "M": -10.0, "S": -12.0,
+              "D_norm": 0.4},
+             {"section": "S1", "zone": 1, "quantity": "YQ_max", "position": "w1L", "M": 0.3, "S": 0.3, "D_norm": 0.0}]
+    chans = gain_channels(pairs)
+    # az_cb_b1 forms az_rms at b1 alone; Y_w1L also enters Y/Q, so it is no gain candidate
+    assert chans == {"az_cb_b1": [("az_rms", "b1")], "az_cb_b2": [("az_rms", "b2")]}
+    out = gain_pairs(pairs, chans["az_cb_b1"], 2.0, {"az_rms": 0.1, "Y_qst": 5.0})
+    # the channel reads 2× the truth: M' = 0.2, D' = (0.5 − 0.2)·sign(0.2) = 0.3, /0.1
+    assert out[0]["M"] == pytest.approx(0.2) and out[0]["D_norm"] == pytest.approx(3.0)
+    assert out[1] == pairs[1] and out[2] == pairs[2]
+
+
+@pytest.fixture(scope="module")
+def gain_folder(plain_folder, tmp_path_factory):
+    """The campaign without track data whose car body accelerometer az_cb_b1 reads 1.3× too high."""
+    import shutil
+
+    import pandas as pd
+
+    folder = tmp_path_factory.mktemp("gain") / "gain"
+    shutil.copytree(plain_folder, folder)
+    manifest = json.loads((folder / "campaign.json").read_text())
+    manifest["name"] = "gain"
+    (folder / "campaign.json").write_text(json.dumps(manifest))
+    for s in manifest["sections"]:
+        path = folder / s["measured"]
+        df = pd.read_csv(path)
+        df["az_cb_b1"] *= 1.3
+        df.to_csv(path, index=False)
+    return folder
+
+
+def test_a_miscalibrated_accelerometer_is_named_beside_the_model_cause(plain, gain_folder):
+    from railval.db.importer import import_campaign
+
+    db = plain  # the same database, a second campaign
+    import_campaign(db, gain_folder)
+    res = diagnose(db, "gain", "baseline", effects=["conicity", "gain az_cb_b1", "gain az_cb_b2", "gain ay_cb_b1"],
+                   workers=2, n_boot=30)
+    d = res.to_dict()
+    kinds = {c["name"]: c["kind"] for c in d["candidates"]}
+    assert kinds == {"conicity": "effect", "gain az_cb_b1": "measurement", "gain az_cb_b2": "measurement",
+                     "gain ay_cb_b1": "measurement"}
+    causes = {c["name"]: c for c in d["causes"]}
+    assert set(causes) == {"conicity", "gain az_cb_b1"}
+    # the fitted gain also absorbs the model's error common to both car body ends (the synthetic
+    # truth's az differs from the baseline's at both ends); the redundant channel at the other
+    # end separates the sensor: b1 reads ≈ 1.3 × what b2 implies
+    gain = causes["gain az_cb_b1"]
+    assert gain["kind"] == "measurement" and gain["held_out_share"] > 0.05
+    assert gain["relative_gain"] == pytest.approx(1.3, rel=0.08)
+    assert "az_cb_b1 reads ≈" in d["next"]["text"] and "--effect gain" not in d["next"].get("command", "")
+    cand = next(c for c in d["candidates"] if c["name"] == "gain az_cb_b1")
+    assert "channel az_cb_b1 reads" in cand["summary"] and "(the redundant channel) implies" in cand["summary"]

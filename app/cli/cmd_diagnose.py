@@ -139,7 +139,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="Dask scheduler address (default: local process pool, 2 workers)")
     p.add_argument("--values", type=int, default=3, help="simulated values per effect parameter besides its default (default 3)")
     p.add_argument("--candidates", nargs="+", default=None, metavar="E",
-                   help="consider only these candidates: effect ids and model.PARAM template parameters "
+                   help="consider only these candidates: effect ids, model.PARAM template parameters and "
+                        "measurement gains 'gain CHANNEL' (one argument, quoted) "
                         "(default: every effect of the library not in NAME and the template's parameters)")
     p.add_argument("--no-parameters", action="store_true",
                    help="try the effects only, not the vehicle template's parameters")

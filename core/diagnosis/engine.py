@@ -33,6 +33,8 @@ ALIKE_CORRELATION = 0.8
 
 
 def _family_summary(fam: CandidateFamily, value: float) -> str:
+    if fam.kind == "measurement":
+        return f"{fam.title or fam.name} {value:.3g} × the true value ({fam.parameter} of the measurement)"
     if fam.kind == "parameter" and fam.reference:
         return (f"{fam.title or fam.parameter} ≈ {100 * value / fam.reference:.0f} % of the model's value "
                 f"({value:.4g} {fam.unit} instead of {fam.reference:.4g})")
@@ -128,7 +130,7 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
         clearly = at_edge or (fam.plausible is not None and (hi_ci < fam.plausible[0] or lo_ci > fam.plausible[1]))
         params = {**fam.defaults, fam.parameter: v} if fam.kind == "effect" else {fam.parameter: v}
         summary = _family_summary(fam, v)
-        expl = summary + (": " + fam.explanation if fam.explanation and fam.kind == "effect" else
+        expl = summary + (": " + fam.explanation if fam.explanation and fam.kind in ("effect", "measurement") else
                           ("; a model parameter error, not a missing effect" if fam.kind == "parameter" else ""))
         cands.append(TrustedCandidate(
             fam.name, explained, params, sorted(fixes, key=lambda g: after[g] - before[g]),
