@@ -333,3 +333,21 @@ def test_cause_set_of_one_cause_or_of_scatter():
     base, fams = _two_causes(0.0, 0.0)
     out = cause_set(base, fams, n_boot=60)
     assert out["causes"] == [] and out["held_out_explained"] == 0.0
+
+
+def test_fitted_interval_includes_the_values_fitted_on_every_fold():
+    base, fams = _setup(truth_a=1.0)
+    c = diagnose_evidence(base, fams, n_boot=60).candidates[0]
+    assert c.name == "A" and len(c.fold_values) == 3
+    lo, hi = c.fitted_ci
+    blo, bhi = c.fitted_ci_bootstrap
+    assert lo <= min(blo, *c.fold_values) and hi >= max(bhi, *c.fold_values)
+    assert lo == pytest.approx(min(blo, *c.fold_values)) and hi == pytest.approx(max(bhi, *c.fold_values))
+    # every fold's training sections fit near the truth: the folds see the same cause
+    assert all(abs(v - 1.0) < 0.15 for v in c.fold_values)
+    d = c.to_dict(with_signature=True)
+    from railval.core.diagnosis import TrustedCandidate
+
+    back = TrustedCandidate.from_dict(d)
+    assert back.fitted_ci_bootstrap == pytest.approx(c.fitted_ci_bootstrap) and back.fold_values == pytest.approx(
+        c.fold_values)

@@ -71,7 +71,8 @@ CASES: dict[str, list[tuple[str, dict[str, Any], str | None]]] = {
         ("primary vertical stiffness x0.55", {"truth_parameters": {"k_primary_z": 660000.0}}, "model.k_primary_z"),
     ],
     "c": [
-        ("gain of sensor ay_cb_b1 x1.4", {"channel_faults": {"gain": {"ay_cb_b1": 1.4}}}, None),
+        # a car body sensor gain is a measurement candidate now (its right answer); the others stay outside
+        ("gain of sensor ay_cb_b1 x1.4", {"channel_faults": {"gain": {"ay_cb_b1": 1.4}}}, "gain ay_cb_b1"),
         ("Q of wheelset 1 recorded 0.1 s late", {"channel_faults": {"shift_samples": {"Q_w1L": 20, "Q_w1R": 20}}},
          None),
         ("wheelset mass x1.35", {"truth_parameters": {"m_wheelset": 2447.0}}, None),
@@ -79,7 +80,7 @@ CASES: dict[str, list[tuple[str, dict[str, Any], str | None]]] = {
          None),
         ("centre of gravity height 1.8 -> 2.3 m", {"truth_parameters": {"h_carbody": 2.3}}, None),
         ("gain of sensor Y_w1L x1.25", {"channel_faults": {"gain": {"Y_w1L": 1.25}}}, None),
-        ("gain of sensor az_cb_b2 x0.7", {"channel_faults": {"gain": {"az_cb_b2": 0.7}}}, None),
+        ("gain of sensor az_cb_b2 x0.7", {"channel_faults": {"gain": {"az_cb_b2": 0.7}}}, "gain az_cb_b2"),
         ("Y of wheelset 3 recorded 0.05 s late", {"channel_faults": {"shift_samples": {"Y_w3L": 10, "Y_w3R": 10}}},
          None),
         ("anti-roll bar x0.3", {"truth_parameters": {"k_antiroll": 6.0e5}}, None),

@@ -275,7 +275,8 @@ class DiagnosePage(PageBase):
                              f"{100 * float(cand['explained']):.1f} % of the residual"),
             pn.pane.Markdown(f"**Why {html.escape(cand['effect'])}?** {html.escape(cand.get('explanation', ''))}",
                              sizing_mode="stretch_width"),
-            *([pn.pane.Markdown(f"**Fitted value** {cand['fitted']:.4g} (bootstrap over sections, 5–95 %: "
+            *([pn.pane.Markdown(f"**Fitted value** {cand['fitted']:.4g} (interval: bootstrap over sections 5–95 %, widened to the values fitted on "
+                                f"each held-out fold: "
                                 f"{cand['fitted_ci'][0]:.4g}–{cand['fitted_ci'][1]:.4g})"
                                 + (f"; the model's value {cand['reference']:.4g}" if cand.get("reference") else ""),
                                 sizing_mode="stretch_width")]

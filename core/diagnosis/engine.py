@@ -94,9 +94,11 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
         explained = float(np.clip(1 - cost / r2, 0.0, 1.0))
         # held-out
         num = den = 0.0
+        fold_values: list[float] = []
         for m in test_masks:
             P_tr = np.stack([e.values(1.0 - m) for e in fam.evidence])
             kt, _, _ = _fit(curve, P_tr, w)
+            fold_values.append(curve.value(kt))
             P_te = curve.patterns(np.stack([e.values(m) for e in fam.evidence]))[kt]
             r_te = base.values(m)
             num += float(np.sum((w * P_te) ** 2))
@@ -139,7 +141,8 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
             {g: (before[g], after[g]) for g in before}, kind=fam.kind, name=fam.name,
             held_out_explained=held, explained_ci=ci, plausible=ok, at_bound=at_edge, flags=flags,
             summary=summary, reference=fam.reference, fitted=v, parameter=fam.parameter,
-            fitted_ci=(lo_ci, hi_ci), clearly_implausible=bool(clearly)))
+            fitted_ci=(min(lo_ci, *fold_values), max(hi_ci, *fold_values)), fitted_ci_bootstrap=(lo_ci, hi_ci),
+            fold_values=fold_values, clearly_implausible=bool(clearly)))
     noise_floor = float(np.percentile(noise_share.max(axis=0), 95)) if n_boot and families else 0.0
     within_noise = bool(n_boot and r2 <= float(np.percentile(noise2, 95)))
     for c in cands:

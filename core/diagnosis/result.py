@@ -47,8 +47,14 @@ class TrustedCandidate:
     reference: float | None = None
     fitted: float = float("nan")
     parameter: str = ""
-    #: 5–95 % bootstrap interval of the fitted value (refit on every resample of the sections)
+    #: interval of the fitted value: the 5–95 % bootstrap interval (refit on every resample of
+    #: the sections) widened to the values fitted on the training sections of every held-out
+    #: fold (a spread that also reflects structural model error, not only section scatter)
     fitted_ci: tuple[float, float] = (float("nan"), float("nan"))
+    #: the bootstrap part alone (what decides ``clearly_implausible``)
+    fitted_ci_bootstrap: tuple[float, float] = (float("nan"), float("nan"))
+    #: the value fitted on the training sections of each held-out fold
+    fold_values: list[float] = field(default_factory=list)
     #: the whole interval lies outside the plausible range (or the value sits at a search bound)
     clearly_implausible: bool = False
 
@@ -68,7 +74,8 @@ class TrustedCandidate:
              "explained_ci": list(self.explained_ci), "significant": self.significant,
              "plausible": self.plausible, "at_bound": self.at_bound, "flags": list(self.flags),
              "summary": self.summary, "parameter": self.parameter, "fitted": self.fitted,
-             "fitted_ci": list(self.fitted_ci), "clearly_implausible": self.clearly_implausible,
+             "fitted_ci": list(self.fitted_ci), "fitted_ci_bootstrap": list(self.fitted_ci_bootstrap),
+             "fold_values": list(self.fold_values), "clearly_implausible": self.clearly_implausible,
              "reference": self.reference})
         return d
 
@@ -88,6 +95,9 @@ class TrustedCandidate:
             at_bound=bool(d.get("at_bound")), flags=list(d.get("flags") or []), summary=d.get("summary", ""),
             reference=d.get("reference"), fitted=_num(d.get("fitted")), parameter=d.get("parameter", ""),
             fitted_ci=tuple(_num(x) for x in (d.get("fitted_ci") or (None, None))),  # older runs: unknown
+            fitted_ci_bootstrap=tuple(_num(x) for x in (d.get("fitted_ci_bootstrap") or d.get("fitted_ci")
+                                                         or (None, None))),
+            fold_values=[_num(x) for x in d.get("fold_values") or []],
             clearly_implausible=bool(d.get("clearly_implausible", not d.get("plausible", True))))
 
 
