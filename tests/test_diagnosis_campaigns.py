@@ -229,3 +229,29 @@ def test_a_miscalibrated_accelerometer_is_named_beside_the_model_cause(plain, ga
     assert "az_cb_b1 reads ≈" in d["next"]["text"] and "--effect gain" not in d["next"].get("command", "")
     cand = next(c for c in d["candidates"] if c["name"] == "gain az_cb_b1")
     assert "channel az_cb_b1 reads" in cand["summary"] and "(the redundant channel) implies" in cand["summary"]
+
+
+def test_next_step_calibrates_a_cause_set_together_and_the_cli_accepts_it():
+    import argparse
+
+    from railval.app.cli.cmd_diagnose import register
+    from railval.app.services.diagnosis_evidence import next_step
+    from railval.core.diagnosis import DiagnosisResult, Pattern, TrustedCandidate
+
+    pat = Pattern(["Y_qst zone 1 w1L"], ["Y_qst"], [1.0])
+    mk = lambda name, kind, params, fitted, parameter: TrustedCandidate(
+        name, 0.5, params, [], [], "", pat, 0.5, kind=kind, name=name, fitted=fitted, parameter=parameter)
+    cands = [mk("conicity", "effect", {"conicity": 0.45}, 0.45, "conicity"),
+             mk("model.c_secondary_z", "parameter", {"c_secondary_z": 9000.0}, 9000.0, "c_secondary_z"),
+             mk("gain az_cb_b1", "measurement", {"gain": 1.3}, 1.3, "gain")]
+    res = DiagnosisResult(pat, cands, True, [], "", {"verdict": "cause", "causes": [
+        {"name": c.name, "kind": c.kind, "parameter": c.parameter, "fitted": c.fitted, "held_out_share": 0.3}
+        for c in cands]})
+    nxt = next_step(res, "camp", "baseline")
+    assert nxt["candidates"] == ["conicity", "model.c_secondary_z"]
+    assert "first check the measurement: az_cb_b1 reads ≈ 1.3 × the true value" in nxt["text"]
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    args = parser.parse_args(nxt["command"].split()[1:])
+    assert args.effect == ["conicity", "model.c_secondary_z"] and args.new_name == "baseline+conicity+c_secondary_z"
+    assert args.start == ["conicity.conicity=0.45", "model.c_secondary_z=9000"]
