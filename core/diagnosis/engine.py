@@ -141,7 +141,8 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
             {g: (before[g], after[g]) for g in before}, kind=fam.kind, name=fam.name,
             held_out_explained=held, explained_ci=ci, plausible=ok, at_bound=at_edge, flags=flags,
             summary=summary, reference=fam.reference, fitted=v, parameter=fam.parameter,
-            fitted_ci=(min(lo_ci, *fold_values), max(hi_ci, *fold_values)), fitted_ci_bootstrap=(lo_ci, hi_ci),
+            fitted_ci=_widened(lo_ci, hi_ci, fold_values, _lack_of_fit_range(curve, P_full, w, k, cost, residual)),
+            fitted_ci_bootstrap=(lo_ci, hi_ci),
             fold_values=fold_values, clearly_implausible=bool(clearly)))
     noise_floor = float(np.percentile(noise_share.max(axis=0), 95)) if n_boot and families else 0.0
     within_noise = bool(n_boot and r2 <= float(np.percentile(noise2, 95)))
@@ -204,6 +205,35 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
                       "alike": alike, "unexplained": unexplained, "folds": len(test_masks),
                       "bootstrap": n_boot})
     return res
+
+
+def _lack_of_fit_range(curve: _Curve, P: np.ndarray, w: np.ndarray, k: int, cost: float, residual: Pattern,
+                       level: float = 0.90) -> tuple[float, float]:
+    """Values whose remaining residual is within the lack-of-fit region of the best fit:
+    ‖P(v)‖²_W ≤ ‖P(v*)‖²_W·(1 + F_{1, n−1}(level)/(n − 1)) with n the number of quantity
+    groups (the components of one group are strongly correlated; each group carries weight 1,
+    so n is taken as the effective number of observations — an assumption). The region grows
+    with what the candidate leaves unexplained, so it reflects model error, not only section
+    scatter (Bates & Watts 1988 §6.1, likelihood region of a nonlinear least-squares fit)."""
+    from scipy.stats import f as f_dist
+
+    n = len(set(residual.groups))
+    if n < 3:
+        return curve.value(k), curve.value(k)
+    limit = cost * (1.0 + float(f_dist.ppf(level, 1, n - 1)) / (n - 1))
+    c = np.sum((curve.patterns(P) * w) ** 2, axis=1)
+    lo = k
+    while lo > 0 and c[lo - 1] <= limit:
+        lo -= 1
+    hi = k
+    while hi < c.size - 1 and c[hi + 1] <= limit:
+        hi += 1
+    return curve.value(lo), curve.value(hi)
+
+
+def _widened(lo: float, hi: float, folds: Sequence[float], lack: tuple[float, float]) -> tuple[float, float]:
+    """The fitted value's interval: bootstrap ∪ fold fits ∪ lack-of-fit region."""
+    return min(lo, *folds, lack[0]), max(hi, *folds, lack[1])
 
 
 def _unexplained(residual: Pattern, best: TrustedCandidate | None, n: int = 6) -> list[dict[str, Any]]:
