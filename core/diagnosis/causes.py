@@ -13,7 +13,8 @@ training sections and scored on the test sections, 1 − Σ_f ‖P_C,f‖² / Σ
 
 Greedy: start from the empty set; add the candidate whose joint refit raises the held-out
 share most; keep it only when the gain is at least ``min_gain``, its jointly fitted value is
-inside its search range (not at a bound) and not clearly implausible, and the residual left
+inside its search range (not at a bound) and, for an effect or a measurement candidate,
+inside its plausible range (a model parameter beyond it is a worn part), and the residual left
 before adding it is beyond the section scatter (95th percentile of the bootstrap deviation).
 At most ``max_causes``.
 
@@ -111,7 +112,9 @@ def cause_set(base: SectionEvidence, families: Sequence[CandidateFamily], *, fol
         k = ks[-1]
         v = c.value(k)
         at_edge = k in (0, c.fine.size - 1)
-        implausible = f.plausible is not None and not (f.plausible[0] <= v <= f.plausible[1])
+        # a model parameter outside the range of serviceable parts is a worn or failed part: a cause
+        implausible = (f.kind != "parameter" and f.plausible is not None
+                       and not (f.plausible[0] <= v <= f.plausible[1]))
         if held - current < min_gain:
             stopped = (f"the next candidate ({f.name}) adds {held - current:.2f} on held-out sections, "
                        f"less than {min_gain:.2f}")

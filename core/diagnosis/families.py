@@ -9,8 +9,10 @@ its quantities unchanged: each quantity's total weight 1); the candidates' simul
 is restricted likewise and :func:`railval.core.diagnosis.engine.diagnose_evidence` ranks them
 with the same held-out, noise-floor and plausibility rules. A family is *structural* when
 its residual is beyond the section scatter and every candidate that explains at least
-``strong`` of it on held-out sections does so only at a clearly implausible value or at a
-bound: the model's behaviour there differs in kind, not in a parameter value. The quantities
+``strong`` of it on held-out sections does so only at a search bound or, for an effect or a
+measurement candidate, at a clearly implausible value (a model parameter outside the range of
+serviceable parts is a worn or failed part, a cause): the model's behaviour there differs in
+kind, not in a parameter value. The quantities
 and EN 14363 test zones where its residual lies are named (zones whose residual RMS is at
 least half the largest).
 
@@ -130,8 +132,10 @@ def diagnose_families(base: SectionEvidence, families: Sequence[CandidateFamily]
             continue
         d = res.extra
         strong_ones = [c for c in res.candidates if c.held_out_explained >= strong and c.significant]
+        # a parameter outside the range of serviceable parts is a worn or failed part, not structure
         structural = bool(not d.get("residual_within_noise") and strong_ones
-                          and all(c.clearly_implausible or c.at_bound for c in strong_ones))
+                          and all(c.at_bound or (c.clearly_implausible and c.kind != "parameter")
+                                  for c in strong_ones))
         reason = ""
         if structural:
             names = ", ".join(f"{c.name} at {c.fitted:.4g}" for c in strong_ones[:3])
