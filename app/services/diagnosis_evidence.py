@@ -280,6 +280,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                 n_sim += len(redo)
     _report(progress, "score", 0.9)
     res = diagnose_evidence(base, fams, validated=bool(vr.validated), n_boot=n_boot, folds=folds, seed=seed)
+    res.extra["families"] = diagnose_families(base, fams, validated=bool(vr.validated), n_boot=n_boot,
+                                              folds=folds, seed=seed)
     _relative_gains(res)
     pool = [f for f in fams if any(c.name == f.name and c.significant for c in res.candidates)]
     if res.extra["verdict"] == "none" or not pool:
@@ -287,15 +289,14 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
               "stopped": "no candidate explains more than the section scatter" if res.extra["verdict"] != "none"
               else "verdict none: " + res.note}
     else:
-        cs = cause_set(base, pool, folds=folds, n_boot=n_boot, seed=seed)
+        later = {f["top"][0]["name"] for f in res.extra["families"] if f["top"]}
+        cs = cause_set(base, pool, folds=folds, n_boot=n_boot, seed=seed, later=sorted(later))
     rel = {c.name: c.parameters.get("relative_gain") for c in res.candidates}
     for x in cs["causes"]:
         if rel.get(x["name"]) is not None:
             x["relative_gain"] = rel[x["name"]]
     res.extra["causes"] = cs.pop("causes")
     res.extra["cause_set"] = cs
-    res.extra["families"] = diagnose_families(base, fams, validated=bool(vr.validated), n_boot=n_boot,
-                                              folds=folds, seed=seed)
     res.extra.update({"campaign": ctx.campaign, "configuration": config, "validated": bool(vr.validated),
                       "effects_in_configuration": sorted(conf_effects),
                       "parameters_in_configuration": dict(conf_params),

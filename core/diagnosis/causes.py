@@ -71,12 +71,16 @@ def _held_out(base: SectionEvidence, fams: Sequence[CandidateFamily], curves: Se
 
 
 def cause_set(base: SectionEvidence, families: Sequence[CandidateFamily], *, folds: int = 3, n_boot: int = 100,
-              seed: int = 0, min_gain: float = MIN_GAIN, max_causes: int = MAX_CAUSES) -> dict[str, Any]:
+              seed: int = 0, min_gain: float = MIN_GAIN, max_causes: int = MAX_CAUSES,
+              later: Sequence[str] | None = None) -> dict[str, Any]:
     """The greedy cause set (module docstring): ``causes`` — each ``name``, ``kind``,
     ``parameter``, ``fitted`` (joint fit on all sections), ``held_out_share`` (what adding it
     raised the set's held-out share by) — ``held_out_explained`` of the whole set,
     ``remaining_within_noise`` (the residual the set leaves is within the section scatter)
-    and ``stopped`` (why no further cause was added)."""
+    and ``stopped`` (why no further cause was added). ``later``: the names that may join after
+    the first cause (the service passes the best candidate of each quantity family: a further
+    cause must be what explains some family best, not only what soaks up a remainder — on the
+    trust bench a friction change otherwise joined to absorb a contact difference)."""
     r = base.values()
     w = base.pattern().weights()
     masks = zone_folds(base.zones, folds)
@@ -96,7 +100,7 @@ def cause_set(base: SectionEvidence, families: Sequence[CandidateFamily], *, fol
             break
         best = None
         for f in families:
-            if any(f is x for x in chosen):
+            if any(f is x for x in chosen) or (chosen and later is not None and f.name not in later):
                 continue
             trial = [*chosen, f]
             held = _held_out(base, trial, [curves[x.name] for x in trial], masks, w)
