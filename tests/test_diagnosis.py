@@ -1,4 +1,5 @@
-"""Tests of core.diagnosis on patterns whose effects are known by construction."""
+"""Tests of core.diagnosis (patterns, the fit along one parameter, the ranking) on patterns
+whose effects are known by construction."""
 
 from __future__ import annotations
 
@@ -8,17 +9,34 @@ import numpy as np
 import pytest
 
 from railval.core.diagnosis import (
-    ParameterScan,
+    CandidateFamily,
     Pattern,
-    diagnose_patterns,
-    fit_scan,
+    SectionEvidence,
+    diagnose_evidence,
     pattern_from_pairs,
     psd_band_pattern,
 )
+from railval.core.diagnosis.fit import _Curve, _fit
 from railval.core.errors import InvalidSignal
 
 LABELS = [f"{q} zone {z} p" for q in ("Y_qst", "Q_max", "az_rms") for z in (1, 4)]
 GROUPS = [lab.split()[0] for lab in LABELS]
+ZONES = [1, 1, 2, 2, 4, 4]  # six sections, two per zone
+
+
+def _constant(values) -> SectionEvidence:
+    """Evidence of a model whose every section shows the same pattern ``values`` (no scatter)."""
+    S = len(ZONES)
+    return SectionEvidence([f"S{i}" for i in range(S)], ZONES, LABELS, GROUPS, len(LABELS),
+                           np.tile(np.asarray(values, float), (S, 1)), np.ones((S, len(LABELS))),
+                           np.zeros((S, 0)), np.zeros((S, 0)))
+
+
+def _family(name, parameter, values, residual, direction, defaults=None, log=False):
+    """Candidate ``name``: at value v the model leaves ``residual − v·direction``."""
+    return CandidateFamily("effect", name, parameter, list(values),
+                           [_constant(residual - v * np.asarray(direction)) for v in values],
+                           (min(values), max(values)), log=log, defaults=dict(defaults or {}))
 
 
 def _toy(truth_v=0.6):
@@ -29,10 +47,15 @@ def _toy(truth_v=0.6):
     b = np.array([0.0, 0.0, 1.0, -1.0, 0.0, 0.0])
     r = truth_v * a
     vals = [0.0, 0.25, 0.5, 0.75, 1.0]
-    pat = lambda x: Pattern(LABELS, GROUPS, x)
-    scans = {"A": [ParameterScan("A", "k", vals, [pat(r - v * a) for v in vals], {"k": 0.0, "c": 3.0})],
-             "B": [ParameterScan("B", "mu", vals, [pat(r - v * b) for v in vals])]}
-    return pat(r), scans
+    return _constant(r), [_family("A", "k", vals, r, a, {"k": 0.0, "c": 3.0}), _family("B", "mu", vals, r, b)]
+
+
+def _fit_family(fam, residual):
+    """(v*, remaining ‖·‖²_W) of a family fitted to the whole campaign (as diagnose_evidence does)."""
+    curve = _Curve(fam)
+    w = residual.pattern().weights()
+    k, cost, _ = _fit(curve, np.stack([e.values() for e in fam.evidence]), w)
+    return curve.value(k), cost
 
 
 def test_weights_give_each_group_unit_total():
@@ -67,16 +90,17 @@ def test_psd_band_pattern_log2_power_ratio():
     assert p.labels[0] == "psd az_cb_b1 0.4-1 Hz" and set(p.groups) == {"psd az"}
 
 
-def test_fit_scan_interpolates_between_scanned_values():
-    r, scans = _toy(0.6)
-    v, cost, _ = fit_scan(r, scans["A"][0])
+def test_fit_interpolates_between_simulated_values():
+    base, fams = _toy(0.6)
+    v, cost = _fit_family(fams[0], base)
     assert v == pytest.approx(0.6, abs=0.005)  # exact linear model → exact within the grid step
     assert cost == pytest.approx(0.0, abs=1e-4)
 
 
 def test_diagnosis_ranks_the_true_effect_first():
-    r, scans = _toy(0.6)
-    res = diagnose_patterns(r, scans, explanations={"A": "friction in the suspension"})
+    base, fams = _toy(0.6)
+    fams[0].explanation = "friction in the suspension"
+    res = diagnose_evidence(base, fams, n_boot=20)
     first, second = res.candidates
     assert first.effect == "A" and first.explained == pytest.approx(1.0, abs=1e-3)
     assert first.parameters == {"k": pytest.approx(0.6, abs=0.005), "c": 3.0}
@@ -84,37 +108,38 @@ def test_diagnosis_ranks_the_true_effect_first():
     assert set(first.fixes) == {"Y_qst", "az_rms"} and first.worsens == []
     assert res.separable
     d = res.to_dict()
-    assert d["candidates"][0]["effect"] == "A" and d["candidates"][0]["explanation"]
+    assert d["candidates"][0]["effect"] == "A" and "friction in the suspension" in d["candidates"][0]["explanation"]
     assert len(res.to_pandas()) == 2
 
 
 def test_worsens_is_reported():
-    r, scans = _toy(0.6)
+    base, fams = _toy(0.6)
+    r = base.values()
     # an effect that fixes Y_qst but introduces a Q_max error
     c = np.array([1.0, 2.0, 1.5, 1.5, 0.0, 0.0])
-    vals = [0.0, 0.5, 1.0]
-    scans["C"] = [ParameterScan("C", "x", vals, [Pattern(LABELS, GROUPS, r.values - v * c) for v in vals])]
-    res = diagnose_patterns(r, scans)
+    fams.append(_family("C", "x", [0.0, 0.5, 1.0], r, c))
+    res = diagnose_evidence(base, fams, n_boot=0)
     cand = next(c for c in res.candidates if c.effect == "C")
     assert "Q_max" in cand.worsens and "Y_qst" in cand.fixes
 
 
 def test_indistinguishable_effects_are_flagged_with_evidence():
-    r, scans = _toy(0.6)
+    base, fams = _toy(0.6)
+    r = base.values()
     a = np.array([1.0, 2.0, 0.0, 0.0, 0.5, 0.5])
     a2 = a + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.3])  # differs only in "az_rms zone 4 p"
-    vals = [0.0, 0.5, 1.0]
-    scans["A2"] = [ParameterScan("A2", "k", vals, [Pattern(LABELS, GROUPS, r.values - v * a2) for v in vals])]
-    res = diagnose_patterns(r, scans)
+    fams.append(_family("A2", "k", [0.0, 0.5, 1.0], r, a2))
+    res = diagnose_evidence(base, fams, n_boot=0)
     assert [c.effect for c in res.candidates[:2]] == ["A", "A2"]
-    assert not res.separable
+    assert not res.separable and res.extra["verdict"] == "uncertain"
     assert res.evidence[0]["component"] == "az_rms zone 4 p"
     assert "A2" in res.note
 
 
 def test_zero_residual_is_rejected():
+    base, fams = _toy(0.0)
     with pytest.raises(InvalidSignal):
-        diagnose_patterns(Pattern(["a"], ["g"], [0.0]), {})
+        diagnose_evidence(base, fams)
 
 
 def test_difference_pairs_sign_convention_and_normalisation():
@@ -131,13 +156,14 @@ def test_difference_pairs_sign_convention_and_normalisation():
     assert by_q["Y_qst"]["zone"] == 4
 
 
-def test_fit_scan_log_interpolation_recovers_power_law_minimum():
-    # pattern linear in log(v): P(v) = ln(v / 0.3)·a, zero at v = 0.3, scanned on a log grid
+def test_fit_log_interpolation_recovers_power_law_minimum():
+    # pattern linear in log(v): P(v) = ln(v / 0.3)·a, zero at v = 0.3, simulated on a log grid
     a = np.ones(len(LABELS))
     vals = [0.2, 1.0, 5.0, 50.0]
-    pats = [Pattern(LABELS, GROUPS, math.log(v / 0.3) * a) for v in vals]
-    r = Pattern(LABELS, GROUPS, math.log(1 / 0.3) * a)
-    v, cost, _ = fit_scan(r, ParameterScan("E", "k", vals, pats, log=True))
+    base = _constant(math.log(1 / 0.3) * a)
+    ev = [_constant(math.log(v / 0.3) * a) for v in vals]
+    fit = lambda log: _fit_family(CandidateFamily("effect", "E", "k", vals, ev, (0.2, 50.0), log=log), base)
+    v, cost = fit(True)
     assert v == pytest.approx(0.3, rel=0.02) and cost == pytest.approx(0.0, abs=1e-3)
-    lin, _, _ = fit_scan(r, ParameterScan("E", "k", vals, pats, log=False))
+    lin, _ = fit(False)
     assert abs(lin - 0.3) > abs(v - 0.3)  # linear interpolation misplaces it

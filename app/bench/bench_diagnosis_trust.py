@@ -14,7 +14,13 @@ model the diagnosis simulates:
   (c) a cause outside the library and outside the candidate parameters: one sensor's gain,
       a time shift of one wheelset's vertical force channels, an unsprung-mass error, a
       profile shape (contact angle parameter at unchanged conicity), the centre-of-gravity height,
-  (d) nothing.
+  (d) nothing,
+  (e) a truth whose wheel–rail contact differs from the candidates' (softer flange contact,
+      lower creep coefficients; no candidate changes either), alone or with a cause on top
+      (worn dampers, a mass, a sensor gain), and two causes at once (two dampers; an effect
+      plus a parameter): scored by whether the cause(s) on top appear in the cause set or as
+      a family's cause, whether a family is flagged structural, and confident wrong claims
+      (a ``cause`` verdict with a wrong top, or a wrong name in the cause set).
 
 Every case is synthesised (:func:`~railval.core.sim.synth.build_campaign`), written and
 imported (:func:`railval.app.services.synth.write_folder`, :func:`railval.db.importer.import_campaign`)
@@ -35,6 +41,10 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
+#: the truth-only contact of class (e): flange contact stiffness ÷4, Kalker creep coefficients at
+#: the lower end of their range (a different wheel–rail contact than the candidates' model)
+_CONTACT = {"k_flange": 2.0e7, "kalker_c11": 3.0, "kalker_c22": 3.0}
 
 #: the cases, per class: (label, build_campaign keyword arguments, the right answer or None)
 CASES: dict[str, list[tuple[str, dict[str, Any], str | None]]] = {
@@ -71,7 +81,8 @@ CASES: dict[str, list[tuple[str, dict[str, Any], str | None]]] = {
         ("primary vertical stiffness x0.55", {"truth_parameters": {"k_primary_z": 660000.0}}, "model.k_primary_z"),
     ],
     "c": [
-        ("gain of sensor ay_cb_b1 x1.4", {"channel_faults": {"gain": {"ay_cb_b1": 1.4}}}, None),
+        # a car body sensor gain is a measurement candidate now (its right answer); the others stay outside
+        ("gain of sensor ay_cb_b1 x1.4", {"channel_faults": {"gain": {"ay_cb_b1": 1.4}}}, "gain ay_cb_b1"),
         ("Q of wheelset 1 recorded 0.1 s late", {"channel_faults": {"shift_samples": {"Q_w1L": 20, "Q_w1R": 20}}},
          None),
         ("wheelset mass x1.35", {"truth_parameters": {"m_wheelset": 2447.0}}, None),
@@ -79,19 +90,38 @@ CASES: dict[str, list[tuple[str, dict[str, Any], str | None]]] = {
          None),
         ("centre of gravity height 1.8 -> 2.3 m", {"truth_parameters": {"h_carbody": 2.3}}, None),
         ("gain of sensor Y_w1L x1.25", {"channel_faults": {"gain": {"Y_w1L": 1.25}}}, None),
-        ("gain of sensor az_cb_b2 x0.7", {"channel_faults": {"gain": {"az_cb_b2": 0.7}}}, None),
+        ("gain of sensor az_cb_b2 x0.7", {"channel_faults": {"gain": {"az_cb_b2": 0.7}}}, "gain az_cb_b2"),
         ("Y of wheelset 3 recorded 0.05 s late", {"channel_faults": {"shift_samples": {"Y_w3L": 10, "Y_w3R": 10}}},
          None),
         ("anti-roll bar x0.3", {"truth_parameters": {"k_antiroll": 6.0e5}}, None),
         ("bogie yaw inertia x1.8", {"truth_parameters": {"I_yaw_bogie": 5520.0}}, None),
     ],
     "d": [(f"nothing (seed {s})", {"seed": s}, None) for s in (11, 12, 13, 14, 15, 16, 17, 18, 19, 20)],
+    # (e) the truth's wheel–rail contact differs from every candidate model's (softer flange
+    # contact and lower creep coefficients in the truth only; no candidate changes either),
+    # alone or with causes on top; the right answer is the cause(s) on top ("+"-joined)
+    "e": [
+        ("contact differs, nothing on top", {"truth_parameters": _CONTACT}, None),
+        ("contact differs + secondary vertical dampers x0.5",
+         {"truth_parameters": {**_CONTACT, "c_secondary_z": 10000.0}}, "model.c_secondary_z"),
+        ("contact differs + car body mass x1.15", {"truth_parameters": {**_CONTACT, "m_carbody": 36800.0}},
+         "model.m_carbody"),
+        ("contact differs + sensor az_cb_b1 x1.3",
+         {"truth_parameters": _CONTACT, "channel_faults": {"gain": {"az_cb_b1": 1.3}}}, "gain az_cb_b1"),
+        ("two dampers: secondary vertical x0.5 + lateral x0.5",
+         {"truth_parameters": {"c_secondary_z": 10000.0, "c_secondary_y": 16000.0}},
+         "model.c_secondary_z+model.c_secondary_y"),
+        ("conicity 0.45 + car body mass x1.15",
+         {"hidden": {"conicity": {"conicity": 0.45}}, "truth_parameters": {"m_carbody": 36800.0}},
+         "conicity+model.m_carbody"),
+    ],
 }
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cases", type=int, default=10, help="cases per class (default 10, at most 10)")
-    parser.add_argument("--classes", nargs="+", default=["a", "b", "c", "d"], choices=["a", "b", "c", "d"])
+    parser.add_argument("--classes", nargs="+", default=["a", "b", "c", "d", "e"],
+                        choices=["a", "b", "c", "d", "e"])
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--values", type=int, default=3, help="diagnose: values per effect parameter")
     parser.add_argument("--oversample", type=int, default=4, help="truth simulated at this × the rate (default 4)")
@@ -127,14 +157,20 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
     t_diag = time.perf_counter() - t0
     d = res.to_dict()
     top = d["candidates"][0] if d["candidates"] else None
-    right = bool(truth is not None and top is not None and top["name"] == truth)
+    truths = truth.split("+") if truth else []
+    right = bool(truths and top is not None and top["name"] in truths)
     rec = {"diagnosis": d, "class": klass, "case": label, "truth": truth, "verdict": d["verdict"], "noise_floor": d["noise_floor"],
            "top": top["name"] if top else None, "top_explained": top["explained"] if top else 0.0,
            "top_held_out": top["held_out_explained"] if top else 0.0, "top_plausible": top["plausible"] if top else None,
            "right": right, "baseline_validated": d["validated"], "simulations": d["simulations"],
            "synth_s": round(t_synth, 1), "diagnose_s": round(t_diag, 1),
            "truth_rank": next((i + 1 for i, c in enumerate(d["candidates"]) if c["name"] == truth), None)}
-    rec["confident_wrong"] = d["verdict"] == "cause" and not right
+    causes = [c["name"] for c in d.get("causes") or []]
+    fam_causes = {f["top"][0]["name"] for f in d.get("families") or [] if f["verdict"] == "cause" and f["top"]}
+    rec["causes"] = causes
+    rec["cause_found"] = bool(truths) and all(x in causes or x in fam_causes for x in truths)
+    rec["structural_named"] = [f["name"] for f in d.get("families") or [] if f["structural"]["flag"]]
+    rec["confident_wrong"] = (d["verdict"] == "cause" and not right) or any(x not in truths for x in causes)
     rec["explained_wrong"] = bool(top and top["explained"] >= 0.5 and not right)
     if calibrate_wrong and top is not None and not right:
         cal = calibrate(database, name, "baseline", [top["name"]], "calibrated", split=True, popsize=3, maxiter=2,
@@ -171,7 +207,7 @@ def _records_in(path: str | None) -> dict[tuple[str, str], dict]:
 def summarise(records: list[dict]) -> dict:
     """Confusion figures of the bench (module docstring)."""
     out: dict[str, Any] = {"cases": len(records)}
-    for k in "abcd":
+    for k in "abcde":
         rs = [r for r in records if r["class"] == k]
         if not rs:
             continue
@@ -179,6 +215,10 @@ def summarise(records: list[dict]) -> dict:
                                            for v in ("cause", "uncertain", "none", "error")}}
         if k in "ab":
             item["top1"] = sum(r["right"] for r in rs) / len(rs)
+        elif k == "e":
+            on_top = [r for r in rs if r["truth"]]
+            item["cause_found"] = sum(r.get("cause_found", False) for r in on_top) / max(1, len(on_top))
+            item["structural_named"] = sum(bool(r.get("structural_named")) for r in rs) / len(rs)
         else:
             item["none_or_uncertain"] = sum(r["verdict"] in ("none", "uncertain") for r in rs) / len(rs)
         item["tops"] = sorted({r["top"] for r in rs if r["top"]})
@@ -200,10 +240,12 @@ def format_table(records: list[dict], summary: dict) -> str:
                      f"{r['top_explained']:5.2f} {r['top_held_out']:5.2f} {r['noise_floor']:5.2f} "
                      f"{('yes' if r['right'] else '-') if r['truth'] else '':>3}")
     lines.append("")
-    for k in "abcd":
+    for k in "abcde":
         if k in summary:
             s = summary[k]
-            fig = (f"top-1 {100 * s['top1']:.0f} %" if "top1" in s
+            fig = (f"top-1 {100 * s['top1']:.0f} %" if "top1" in s else
+                   f"cause on top found {100 * s['cause_found']:.0f} %, structural difference named "
+                   f"{100 * s['structural_named']:.0f} %" if k == "e"
                    else f"none/uncertain {100 * s['none_or_uncertain']:.0f} %")
             lines.append(f"class ({k}) n={s['n']}: {fig}; verdicts {s['verdicts']}")
     lines.append(f"confident wrong (verdict cause and wrong): {100 * summary['confident_wrong']:.0f} %; "

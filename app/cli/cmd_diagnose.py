@@ -47,6 +47,17 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         print(f"{'':>6}fixes {', '.join(c.fixes) or '-'}; worsens {', '.join(c.worsens) or '-'}")
         for f in c.flags:
             print(f"{'':>6}! {f}")
+    if d.get("causes"):
+        print("causes (greedy, joint refit; share added on held-out sections): " + ", ".join(
+            f"{c['name']} {c['held_out_share']:.2f}" for c in d["causes"])
+              + f" — together {d['cause_set']['held_out_explained']:.2f}")
+    for f in d.get("families") or []:
+        best = f["top"][0] if f["top"] else None
+        print(f"family {f['title']} ({f['share']:.0%} of the residual): {f['verdict']}"
+              + (f", best {best['name']} {best['held_out_explained']:.2f} held-out" if best else "")
+              + (f" — STRUCTURAL: {f['structural']['reason']}" if f["structural"]["flag"] else ""))
+    for s in d.get("skipped") or []:
+        print(f"left out: {s['name']} ({s['kind']}) — {s['reason']}")
     if d["verdict"] == "none" and d.get("unexplained"):
         print("unexplained (largest components): " + "; ".join(
             f"{u['component']} {u['residual']:+.2f}" for u in d["unexplained"]))
@@ -128,7 +139,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="Dask scheduler address (default: local process pool, 2 workers)")
     p.add_argument("--values", type=int, default=3, help="simulated values per effect parameter besides its default (default 3)")
     p.add_argument("--candidates", nargs="+", default=None, metavar="E",
-                   help="consider only these candidates: effect ids and model.PARAM template parameters "
+                   help="consider only these candidates: effect ids, model.PARAM template parameters and "
+                        "measurement gains 'gain CHANNEL' (one argument, quoted) "
                         "(default: every effect of the library not in NAME and the template's parameters)")
     p.add_argument("--no-parameters", action="store_true",
                    help="try the effects only, not the vehicle template's parameters")

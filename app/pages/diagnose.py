@@ -157,7 +157,7 @@ class DiagnosePage(PageBase):
 
     def _show_candidates(self) -> None:
         cands = self.state.candidates
-        if not cands:
+        if not cands and not self.state.verdict:
             self.candidates_box.objects = [pn.pane.Markdown("*No diagnosis yet — press **Run diagnosis**.*")]
             return
         df = pd.DataFrame([{
@@ -181,6 +181,17 @@ class DiagnosePage(PageBase):
                     f"{u['component']} {u['residual']:+.2f}" for u in self.state.unexplained), "info"))
         elif note:
             extra.append(message(note, "info" if self.state.separable else "warning"))
+        if self.state.causes:
+            together = (self.state.cause_set or {}).get("held_out_explained")
+            extra.append(message(
+                f"Causes found together ({len(self.state.causes)}; share of the residual each adds on held-out "
+                "sections): " + ", ".join(f"{c['name']} {100 * c['held_out_share']:.0f} %" for c in self.state.causes)
+                + (f"; together {100 * together:.0f} %" if together is not None else ""),
+                "success" if len(self.state.causes) > 1 else "info"))
+        extra += self._families()
+        if self.state.skipped:
+            extra.append(message("Left out (cannot apply to this campaign): " + "; ".join(
+                f"{s['name']} — {s['reason']}" for s in self.state.skipped), "info"))
         # the verdict first: a reader must not scroll past 20 candidates to learn how sure it is
         # 890 px in all: fits the main area at 1280 px (what it fixes and worsens: below, per candidate)
         widths = {"#": 40, "candidate": 165, "kind": 85, "held-out": 100, "in-sample": 105,
@@ -191,14 +202,33 @@ class DiagnosePage(PageBase):
             pn.pane.Markdown("Shares of the residual explained, in %: on held-out sections (the "
                              "ranking) and in-sample (all sections).", sizing_mode="stretch_width"),
             *self._run_line(), *extra,
-            table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"], widths=widths,
-                  layout="fit_columns"),
+            *([table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"], widths=widths,
+                     layout="fit_columns")] if cands else []),
             *self._earlier_runs(), self.candidate_box,
         ]
         ranked = [c["effect"] for c in cands]
         rest = [e for e in self.state.param.effect.objects if e not in ranked]
         self.state.param.effect.objects = ranked + rest
         self._show_candidate()
+
+    def _families(self) -> list:
+        """Per quantity family: its share of the residual, verdict, best candidate and whether
+        its behaviour differs structurally (docs/diagnosis.md "Per family")."""
+        fams = self.state.families
+        if not fams:
+            return []
+        df = pd.DataFrame([{
+            "family": f["title"], "share of residual (%)": round(100 * float(f["share"]), 1),
+            "verdict": f["verdict"] + (" (structural)" if f["structural"]["flag"] else ""),
+            "best candidate": f["top"][0]["name"] if f["top"] else "",
+            "held-out (%)": round(100 * float(f["top"][0]["held_out_explained"]), 1) if f["top"] else None,
+            "where": (", ".join(f["structural"]["quantities"]) + "; zones "
+                      + ", ".join(map(str, f["structural"]["zones"]))) if f["structural"]["flag"] else "",
+        } for f in fams])
+        notes = [message(f"{f['title']}: {f['structural']['reason']}", "warning")
+                 for f in fams if f["structural"]["flag"]]
+        return [pn.pane.Markdown("#### Per quantity family"),
+                table(df, height=40 + 32 * len(df), css_classes=["rv-families"]), *notes]
 
     def _run_line(self) -> list:
         """Which stored run is shown: when, with which settings, how long it took."""
@@ -245,7 +275,8 @@ class DiagnosePage(PageBase):
                              f"{100 * float(cand['explained']):.1f} % of the residual"),
             pn.pane.Markdown(f"**Why {html.escape(cand['effect'])}?** {html.escape(cand.get('explanation', ''))}",
                              sizing_mode="stretch_width"),
-            *([pn.pane.Markdown(f"**Fitted value** {cand['fitted']:.4g} (bootstrap over sections, 5–95 %: "
+            *([pn.pane.Markdown(f"**Fitted value** {cand['fitted']:.4g} (interval: bootstrap over sections 5–95 %, widened to the values fitted on "
+                                f"each held-out fold: "
                                 f"{cand['fitted_ci'][0]:.4g}–{cand['fitted_ci'][1]:.4g})"
                                 + (f"; the model's value {cand['reference']:.4g}" if cand.get("reference") else ""),
                                 sizing_mode="stretch_width")]

@@ -33,7 +33,7 @@ from railval.core.calibration import (
 )
 from railval.core.calibration import calibrate as fit_parameters
 from railval.core.errors import InvalidParameter, InvalidSignal
-from railval.core.sim.effects import EFFECTS
+from railval.core.sim.effects import EFFECTS, unmet_requirement
 from railval.core.validation import normalised_errors, validate
 from railval.db import repo
 
@@ -118,6 +118,9 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     for e in effects:
         if e not in registry:
             raise InvalidParameter(f"unknown effect {e!r}; known: {sorted(registry)}")
+        why = unmet_requirement(registry[e], ctx.layouts)
+        if why:  # before any simulation, and before anything is stored
+            raise InvalidParameter(f"effect {e!r} cannot apply to campaign {campaign!r}: {why}")
     base_effects = {k: dict(v) for k, v in conf_effects.items()}
     specs: list[ParameterSpec] = []
     targets: list[tuple[str, str]] = []

@@ -35,9 +35,12 @@ from railval.core.diagnosis import (
     SectionEvidence,
     band_powers,
     diagnose_evidence,
+    diagnose_families,
     scan_values,
     section_evidence,
 )
+from railval.core.diagnosis.causes import cause_set
+from railval.core.diagnosis.measurement import gain_channels, gain_family
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import Effect
 
@@ -114,12 +117,17 @@ def _evaluate_sections(task: tuple[Any, dict, dict]) -> tuple[list[dict], dict[s
     """Worker task: simulate with ``effects`` and model ``parameters``; return the validation
     pairs (section, zone, quantity, position, D_norm) and the band powers per section and
     acceleration channel."""
-    from railval.app.services.campaign_context import ACC_CHANNELS, section_values, simulate_context, validate_values
+    from railval.app.services.campaign_context import (
+        ACC_CHANNELS,
+        section_values,
+        simulate_context,
+        validate_values,
+    )
 
     ctx, effects, parameters = task
     sets = simulate_context(ctx, effects, parameters)
     vr = validate_values(ctx, section_values(sets, ctx.sections))
-    pairs = vr.pairs[["section", "zone", "quantity", "position", "D_norm"]].to_dict("records")
+    pairs = vr.pairs[["section", "zone", "quantity", "position", "D_norm", "M", "S"]].to_dict("records")
     bands = {sid: {ch: band_powers(ss.channels[ch], ss.fs, ctx.bands, 10.0) for ch in ACC_CHANNELS
                    if ch in ss.channels} for sid, ss in sets.items()}
     return pairs, bands
@@ -139,13 +147,16 @@ def measured_section_bands(session: Any, ctx: Any) -> dict[str, dict[str, np.nda
 def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
              scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
              parameters: Sequence[str] | None = None, include_parameters: bool = True,
+             measurement: bool | Sequence[str] = True,
              workers: int | None = None, n_boot: int = 100, folds: int = 3, refine: int = 3,
              seed: int = 0) -> DiagnosisResult:
     """Rank the effects missing from ``config`` and the template parameters that may be mis-set
     by the share of the residual they explain on held-out sections, with noise floor,
     plausibility, identifiability and a verdict (module docstring;
     :func:`railval.core.diagnosis.diagnose_evidence`). ``effects``/``parameters`` restrict the
-    candidates (``parameters``: template names or ``model.NAME``; ``include_parameters=False``:
+    candidates (``measurement``: the measurement-side candidates ``gain CHANNEL`` —
+    :mod:`railval.core.diagnosis.measurement` — all, none or those named;
+    ``parameters``: template names or ``model.NAME``; ``include_parameters=False``:
     effects only)."""
     from railval.app.services.batch import BatchExecutor
     from railval.app.services.campaign_context import (
@@ -172,8 +183,9 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     if unknown:
         raise InvalidParameter(f"unknown effect(s) {unknown}; known: {sorted(registry)}")
     template = str(ctx.vehicle.get("template") or "coach")
+    skipped = inapplicable_effects(ctx, conf_effects, effects)
     todo = [e for e in (effects if effects is not None else registry) if e not in conf_effects
-            and template in registry[e].templates]
+            and template in registry[e].templates and e not in {x["name"] for x in skipped}]
     plan = parameter_plan(ctx, conf_params) if include_parameters else []
     if parameters:
         wanted = {p.removeprefix("model.") for p in parameters}
@@ -231,8 +243,23 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                     "parameter", name, pname, [pp["reference"], v], [base, evidence(k)], pp["bounds"], log=True,
                     extrapolate=True, reference=pp["reference"], plausible=pp["plausible"],
                     plausible_source=pp["source"], unit=pp["unit"], title=pp["title"])
+        if measurement:
+            limits = {q: r.std_limit for q, r in vr.quantities.items()}
+            chans = gain_channels(results[0][0])
+            wanted_m = None if measurement is True else {m.removeprefix("gain ") for m in measurement}
+            for bad in sorted((wanted_m or set()) - set(chans)):
+                skipped.append({"name": f"gain {bad}", "kind": "measurement",
+                                "reason": "not a channel of this campaign whose quantities it forms alone"})
+            for ch, comps in chans.items():
+                if wanted_m is None or ch in wanted_m:
+                    families[f"gain {ch}"] = gain_family(base, results[0][0], results[0][1], meas_bands, sections, ch,
+                                                         comps, limits, bands=ctx.bands)
+        blind = _without_effect(base, list(families.values()))
+        skipped += [{"name": f.name, "kind": f.kind, "reason": "changes none of the quantities the campaign "
+                     "measures at any simulated value"} for f in blind
+                    if not any(s["name"] == f.name for s in skipped)]
         # an effect with several parameters is one candidate: the parameter that explains most
-        fams = _best_per_effect(base, list(families.values()), vr.validated)
+        fams = _best_per_effect(base, [f for f in families.values() if f not in blind], vr.validated)
         n_sim = len(tasks)
         if plan and refine:
             first = diagnose_evidence(base, fams, validated=bool(vr.validated), n_boot=0, folds=folds, seed=seed)
@@ -241,7 +268,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                 if c.kind != "parameter" or len(redo) >= refine:
                     continue
                 fam = next(f for f in fams if f.name == c.name)
-                v = c.fitted  # inside the bounds: core.diagnosis._Curve.value clamps it
+                v = c.fitted  # inside the bounds: core.diagnosis.fit._Curve.value clamps it
                 if min(abs(math.log(v / x)) for x in fam.values) > math.log(1.1):
                     redo.append((fam, v))
             if redo:
@@ -253,15 +280,91 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                 n_sim += len(redo)
     _report(progress, "score", 0.9)
     res = diagnose_evidence(base, fams, validated=bool(vr.validated), n_boot=n_boot, folds=folds, seed=seed)
+    res.extra["families"] = diagnose_families(base, fams, validated=bool(vr.validated), n_boot=n_boot,
+                                              folds=folds, seed=seed)
+    _relative_gains(res)
+    pool = [f for f in fams if any(c.name == f.name and c.significant for c in res.candidates)]
+    if res.extra["verdict"] == "none" or not pool:
+        cs = {"causes": [], "held_out_explained": 0.0, "remaining_within_noise": bool(res.extra["residual_within_noise"]),
+              "stopped": "no candidate explains more than the section scatter" if res.extra["verdict"] != "none"
+              else "verdict none: " + res.note}
+    else:
+        later = {f["top"][0]["name"] for f in res.extra["families"] if f["top"]}
+        cs = cause_set(base, pool, folds=folds, n_boot=n_boot, seed=seed, later=sorted(later))
+    rel = {c.name: c.parameters.get("relative_gain") for c in res.candidates}
+    for x in cs["causes"]:
+        if rel.get(x["name"]) is not None:
+            x["relative_gain"] = rel[x["name"]]
+    res.extra["causes"] = cs.pop("causes")
+    res.extra["cause_set"] = cs
     res.extra.update({"campaign": ctx.campaign, "configuration": config, "validated": bool(vr.validated),
                       "effects_in_configuration": sorted(conf_effects),
                       "parameters_in_configuration": dict(conf_params),
                       "values_per_parameter": values_per_parameter, "simulations": n_sim,
                       "stored_residual_norm": math.sqrt(stored_residual.norm2()),
-                      "simulated_residual_norm": math.sqrt(res.residual.norm2())})
+                      "simulated_residual_norm": math.sqrt(res.residual.norm2()),
+                      "skipped": skipped})
+    if skipped and not fams:
+        res.note += "; left out: " + "; ".join(f"{s['name']} ({s['reason']})" for s in skipped)
     res.extra["next"] = next_step(res, campaign, config)
     _report(progress, "done", 1.0)
     return res
+
+
+def _partner(channel: str) -> str | None:
+    """The redundant channel of a gain candidate: the same direction at the other car body
+    end (``az_cb_b1`` ↔ ``az_cb_b2``) or bogie."""
+    stem, _, end = channel.rpartition("_")
+    other = {"b1": "b2", "b2": "b1"}.get(end)
+    return f"{stem}_{other}" if stem and other else None
+
+
+def _relative_gains(res: DiagnosisResult) -> None:
+    """Use the campaign's redundancy: a gain candidate's fitted value also absorbs any model
+    error common to both ends; its ratio to the fitted gain of the redundant channel is what
+    the one sensor reads more than the other (``parameters["relative_gain"]``, said in the
+    summary)."""
+    by = {c.name: c for c in res.candidates if c.kind == "measurement"}
+    for c in by.values():
+        other = by.get(f"gain {_partner(c.name.removeprefix('gain '))}")
+        if other is None or not (other.fitted > 0):
+            continue
+        rel = c.fitted / other.fitted
+        c.parameters["relative_gain"] = rel
+        c.summary += (f"; {rel:.3g} × what {other.name.removeprefix('gain ')} (the redundant channel) implies "
+                      f"— what this sensor reads more than the other")
+
+
+def inapplicable_effects(ctx: Any, conf_effects: Mapping[str, Any], effects: Sequence[str] | None) -> list[dict]:
+    """The candidate effects that cannot apply to the campaign, each ``{"name", "kind":
+    "effect", "reason"}`` with a one-line reason (:func:`railval.core.sim.effects.unmet_requirement`:
+    track data the sections do not carry, quantities the campaign does not measure); effects
+    of another vehicle template are named only when asked for (``effects``)."""
+    from railval.core.sim.effects import EFFECTS, unmet_requirement
+
+    template = str(ctx.vehicle.get("template") or "coach")
+    measured = {q for values in ctx.measured_values.values() for q, _ in values}
+    out = []
+    for e in (effects if effects is not None else EFFECTS):
+        if e in conf_effects:
+            continue
+        if template not in EFFECTS[e].templates:
+            if effects is not None:
+                out.append({"name": e, "kind": "effect",
+                            "reason": f"applies to the {', '.join(EFFECTS[e].templates)} template only, "
+                                      f"the campaign's vehicle is a {template}"})
+            continue
+        reason = unmet_requirement(EFFECTS[e], ctx.layouts, measured)
+        if reason:
+            out.append({"name": e, "kind": "effect", "reason": reason})
+    return out
+
+
+def _without_effect(base: SectionEvidence, fams: Sequence[CandidateFamily]) -> list[CandidateFamily]:
+    """The families whose every simulated value leaves the campaign's pattern exactly as it is
+    (nothing the campaign measures moves): nothing to fit, nothing to rank."""
+    ref = base.values()
+    return [f for f in fams if all(np.array_equal(e.values(), ref) for e in f.evidence)]
 
 
 def _best_per_effect(base: SectionEvidence, fams: list[CandidateFamily], validated: bool) -> list[CandidateFamily]:
@@ -291,7 +394,30 @@ def next_step(res: DiagnosisResult, campaign: str, config: str) -> dict[str, Any
     if verdict == "none" or not res.candidates:
         return {"action": "none", "text": "no candidate explains the residual; look at what stays unexplained "
                                           "(quantities, zones, bands) — data, sensors or physics outside the library"}
+    all_causes = res.extra.get("causes") or []
+    sensors = [x for x in all_causes if x["kind"] == "measurement"]
+    check = ("; first check the measurement: " + "; ".join(
+        f"{x['name'].removeprefix('gain ')} reads ≈ {x['fitted']:.3g} × the true value" for x in sensors)) if sensors else ""
+    causes = [x for x in all_causes if x["kind"] != "measurement"]
+    if sensors and not causes:
+        return {"action": "check measurement", "candidates": [x["name"] for x in sensors],
+                "text": "the measurement, not the model" + check + " (sensor calibration, amplifier gain) — "
+                        "correct the channel and import the campaign again before touching the model"}
+    if len(causes) > 1:  # a set of causes: calibrate them together
+        byname = {c.name: c for c in res.candidates}
+        eff = " ".join(f"--effect {x['name']}" for x in causes)
+        start = " ".join(f"{x['name']}={x['fitted']:.4g}" if x["kind"] == "parameter" else
+                         " ".join(f"{x['name']}.{k}={v:.4g}" for k, v in byname[x["name"]].parameters.items())
+                         for x in causes)
+        new = config + "".join(f"+{x['parameter'] if x['kind'] == 'parameter' else x['name']}" for x in causes)
+        cmd = f"railval calibrate {campaign} --config {config} {eff} --as {new} --start {start}"
+        return {"action": "calibrate", "candidates": [x["name"] for x in causes], "command": cmd,
+                "text": f"calibrate the {len(causes)} causes together into a child configuration, then diagnose "
+                        f"the child: {cmd}" + check}
     c = res.candidates[0]
+    if c.kind == "measurement":
+        return {"action": "check measurement", "candidate": c.name,
+                "text": ("" if verdict == "cause" else "uncertain — ") + f"check the measurement first: {c.summary}"}
     if c.kind == "effect":
         start = " ".join(f"{c.name}.{k}={v:.4g}" for k, v in c.parameters.items())
         cmd = f"railval calibrate {campaign} --config {config} --effect {c.name} --as {config}+{c.name} --start {start}"
@@ -300,4 +426,4 @@ def next_step(res: DiagnosisResult, campaign: str, config: str) -> dict[str, Any
                f"--start {c.name}={c.fitted:.4g}")
     text = ("calibrate the cause into a child configuration, then diagnose the child: " if verdict == "cause" else
             "uncertain — if you calibrate the best candidate, check its flags and held-out result: ")
-    return {"action": "calibrate", "candidate": c.name, "command": cmd, "text": text + cmd}
+    return {"action": "calibrate", "candidate": c.name, "command": cmd, "text": text + cmd + check}

@@ -34,6 +34,11 @@ class DiagnoseState(param.Parameterized):
     verdict = param.String(default="", doc="verdict of the last diagnosis: cause, uncertain or none")
     noise_floor = param.Number(default=None, allow_None=True, doc="noise floor of the last diagnosis")
     unexplained = param.List(default=[], doc="what the best candidate leaves unexplained (verdict none)")
+    causes = param.List(default=[], doc="the cause set: name, kind, parameter, fitted, held_out_share")
+    cause_set = param.Dict(default={}, doc="the cause set's held-out share, whether the rest is scatter, why it stopped")
+    families = param.List(default=[], doc="per quantity family: verdict, top candidates, structural flag")
+    skipped = param.List(default=[], doc=(
+        "candidates left out because they cannot apply to the campaign: name, kind, one-line reason"))
     # diagnosis settings (app.services.diagnosis.diagnose)
     candidate_effects = param.ListSelector(default=[], objects=[], doc=(
         "effects the diagnosis tries; none chosen = every effect the configuration lacks"))
@@ -72,6 +77,10 @@ class DiagnoseState(param.Parameterized):
 
     def _reset(self) -> None:
         self.candidates = []
+        self.verdict = ""
+        self.skipped = []
+        self.causes = []
+        self.families = []
         self.residual = {}
         self.stored_run = {}
         self.diagnosis_run = {}
@@ -194,6 +203,10 @@ class DiagnoseState(param.Parameterized):
         self.verdict = str(d.get("verdict") or "")
         self.noise_floor = d.get("noise_floor")
         self.unexplained = list(d.get("unexplained") or [])
+        self.skipped = list(d.get("skipped") or [])
+        self.causes = list(d.get("causes") or [])
+        self.cause_set = dict(d.get("cause_set") or {})
+        self.families = list(d.get("families") or [])
         self.diagnosis_run = {k: d.get(k) for k in ("simulations", "values_per_parameter", "configuration")}
         self.stored_run = dict(d.get("run") or {})
         names = self.available_effects() if cands else []
@@ -203,6 +216,8 @@ class DiagnoseState(param.Parameterized):
             self.effect = order[0]
             self._suggest_name()
         self.candidates = cands
+        if not cands:  # a diagnosis with nothing to rank (every candidate left out): the page shows why
+            self.param.trigger("candidates")
 
     def run_calibration(self, dispatch=None, background=True, calibrate: bool = True):
         """Add ``effect`` to the configuration, calibrate it (or use ``parameters``),

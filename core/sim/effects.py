@@ -13,7 +13,9 @@ How each effect enters the equations is in :mod:`railval.core.sim.model` (``_app
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from railval.core.errors import InvalidParameter
 from railval.core.sim.params import Param, resolve
@@ -38,6 +40,9 @@ class Effect:
     source: str = ""
     notes: str = ""
     extra: dict = field(default_factory=dict)
+    #: what the effect needs from every section's layout record, as layout keys
+    #: (``"irregularities"``: measured track geometry recorded with the campaign)
+    requires_layout: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
         return {"id": self.id, "title": self.title, "explanation": self.explanation,
@@ -166,7 +171,8 @@ _LIST = [
                                   "(chord transfer function, EN 13848-2 accuracy class) of the order of ±10 %")),
         ("ay_rms", "az_rms", "ay_max", "az_max", "Q_max", "Y_max", "YQ_max", "SumY_max"), (1, 2, 3, 4),
         ((0.4, 10.0),),
-        source="layout['irregularities'] of each section (see docs/simulator.md)"),
+        source="layout['irregularities'] of each section (see docs/simulator.md)",
+        requires_layout=("irregularities",)),
     Effect(
         "parasitic_yaw_stiffness", "Bogie yaw resistance (parasitic yaw stiffness)",
         "Besides the secondary springs' shear, the bogie's rotation against the car body is "
@@ -208,6 +214,27 @@ def get_effect(effect_id: str) -> Effect:
         return EFFECTS[effect_id]
     except KeyError:
         raise InvalidParameter(f"unknown effect id {effect_id!r}; known: {list(EFFECT_IDS)}") from None
+
+
+def unmet_requirement(effect: Effect, layouts: Mapping[str, Mapping[str, Any] | None],
+                      measured_quantities: Iterable[str] | None = None) -> str | None:
+    """Why ``effect`` cannot apply to a campaign, in one line, or None when it can.
+
+    ``layouts``: the layout record of every section (section id → dict); an effect that
+    :attr:`Effect.requires_layout` a key needs it in every section (the simulator refuses a
+    section without it). ``measured_quantities``: the EN 14363 quantity ids the campaign
+    measures; an effect that moves none of them cannot be seen in its residual."""
+    for key in effect.requires_layout:
+        missing = sorted(sid for sid, lay in layouts.items() if not (lay or {}).get(key))
+        if missing:
+            where = ", ".join(missing[:3]) + (" …" if len(missing) > 3 else "")
+            return (f"needs layout['{key}'] in every section; {len(missing)} of {len(layouts)} sections "
+                    f"carry none ({where})")
+    if measured_quantities is not None:
+        measured = set(measured_quantities)
+        if not measured & set(effect.quantities):
+            return f"moves {', '.join(effect.quantities)}, none of which the campaign measures"
+    return None
 
 
 def resolve_effects(effects: dict | None) -> dict[str, dict[str, float]]:

@@ -1,0 +1,253 @@
+"""The diagnosis: rank candidate causes of a configuration's residual with the evidence needed
+to trust the answer — explained share in-sample and on held-out sections, bootstrap intervals,
+noise floor, plausibility, identifiability — and a verdict (docs/design.md §7, docs/diagnosis.md).
+
+A candidate *fixes* a quantity whose weighted residual falls by more than ``change`` (default
+20 %) and *worsens* one whose residual grows by more than that.
+
+References: Efron & Tibshirani 1993 ch. 6/§8.2 (bootstrap, stratified); Hastie, Tibshirani &
+Friedman 2009 §7.10 (k-fold cross-validation); Polach & Böttcher 2014 §5 (D_v, limits, zones).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from railval.core.diagnosis.evidence import SectionEvidence, zone_bootstrap, zone_folds
+from railval.core.diagnosis.fit import CandidateFamily, _Curve, _fit, _min_cost
+from railval.core.diagnosis.patterns import Pattern, component_parts
+from railval.core.diagnosis.plausibility import plausibility_flags, separating_evidence
+from railval.core.diagnosis.result import DiagnosisResult, TrustedCandidate
+from railval.core.errors import InvalidSignal
+
+#: Verdict thresholds: a cause must explain at least ``STRONG`` of the residual on held-out
+#: sections; two candidates "explain alike" when their held-out shares differ by less than
+#: ``ALIKE_MARGIN`` and their signatures correlate above ``ALIKE_CORRELATION``.
+STRONG = 0.5
+ALIKE_MARGIN = 0.15
+ALIKE_CORRELATION = 0.8
+
+
+def _family_summary(fam: CandidateFamily, value: float) -> str:
+    if fam.kind == "measurement":
+        return f"{fam.title or fam.name} {value:.3g} × the true value ({fam.parameter} of the measurement)"
+    if fam.kind == "parameter" and fam.reference:
+        return (f"{fam.title or fam.parameter} ≈ {100 * value / fam.reference:.0f} % of the model's value "
+                f"({value:.4g} {fam.unit} instead of {fam.reference:.4g})")
+    unit = "" if fam.unit in ("", "-") else f" {fam.unit}"
+    return f"{fam.title or fam.name}: {fam.parameter} ≈ {value:.4g}{unit}"
+
+
+def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily], *, validated: bool = False,
+                      n_boot: int = 100, folds: int = 3, seed: int = 0, change: float = 0.2,
+                      strong: float = STRONG, alike_margin: float = ALIKE_MARGIN,
+                      alike_correlation: float = ALIKE_CORRELATION) -> DiagnosisResult:
+    """Rank candidate causes (effects and model parameters) of the residual of ``base`` with
+    the evidence needed to trust the answer.
+
+    * explained share on all sections (:mod:`railval.core.diagnosis.fit`) and its stratified
+      bootstrap interval (refit on every resample of the sections, :func:`zone_bootstrap`);
+    * held-out share: k-fold over sections stratified by zone (:func:`zone_folds`); the
+      fitted value of the training sections scored on the test sections,
+      1 − Σ_f ‖P_f(v*_f)‖² / Σ_f ‖r_f‖²; candidates are ranked by it;
+    * noise floor: the share of pure section scatter n_b = r(w_b) − r (bootstrap deviation of
+      the residual) that the best candidate can explain, 95th percentile over the resamples —
+      what the candidates "explain" when there is nothing but scatter; a candidate is
+      significant when the lower end (5 %) of its bootstrap interval exceeds it;
+    * plausibility flags (:func:`plausibility_flags`), identifiability of the two best
+      (:func:`separating_evidence`);
+    * ``verdict``: ``none`` (residual within the section scatter, nothing significant, or the
+      configuration passes and nothing explains ≥ ``strong`` on held-out sections),
+      ``uncertain`` (the best explains < ``strong`` held-out, explains alike with another,
+      is clearly implausible — its whole bootstrap interval of fitted values outside the
+      plausible range — or at a bound, or loses > 0.25 from in-sample to held-out) or
+      ``cause`` (a fitted value just outside the plausible range, with an interval reaching
+      into it, is flagged but does not make the answer uncertain).
+
+    References: Efron & Tibshirani 1993 ch. 6/§8.2 (bootstrap, stratified), Hastie, Tibshirani
+    & Friedman 2009 §7.10 (k-fold cross-validation); docs/diagnosis.md.
+    """
+    S = len(base.sections)
+    r_full = base.values()
+    residual = base.pattern()
+    w = residual.weights()
+    r2 = float(np.sum((w * r_full) ** 2))
+    if not r2 > 0:
+        raise InvalidSignal("the residual pattern is zero: nothing to diagnose")
+    Wb = zone_bootstrap(base.zones, n_boot, seed) if n_boot > 0 else np.zeros((0, S))
+    test_masks = zone_folds(base.zones, folds)
+    R_boot = base.values(Wb) if n_boot > 0 else np.zeros((0, r_full.size))
+    noise = R_boot - r_full[None, :]
+    noise2 = np.sum((noise * w) ** 2, axis=1)
+    before = residual.group_norms()
+    cands: list[TrustedCandidate] = []
+    noise_share = np.zeros((len(families), n_boot))
+    for fi, fam in enumerate(families):
+        curve = _Curve(fam)
+        P_full = np.stack([e.values() for e in fam.evidence])
+        k, cost, Pk = _fit(curve, P_full, w)
+        v = curve.value(k)
+        explained = float(np.clip(1 - cost / r2, 0.0, 1.0))
+        # held-out
+        num = den = 0.0
+        fold_values: list[float] = []
+        for m in test_masks:
+            P_tr = np.stack([e.values(1.0 - m) for e in fam.evidence])
+            kt, _, _ = _fit(curve, P_tr, w)
+            fold_values.append(curve.value(kt))
+            P_te = curve.patterns(np.stack([e.values(m) for e in fam.evidence]))[kt]
+            r_te = base.values(m)
+            num += float(np.sum((w * P_te) ** 2))
+            den += float(np.sum((w * r_te) ** 2))
+        held = float(np.clip(1 - num / den, 0.0, 1.0)) if den > 0 else 0.0
+        # bootstrap: refit on resampled sections; and the share of pure scatter it explains
+        boot: list[float] = []
+        v_ci = (v, v)
+        if n_boot:
+            P_boot = np.stack([e.values(Wb) for e in fam.evidence], axis=1)  # (B, K, n), family order
+            rb2 = np.sum((w * R_boot) ** 2, axis=1)
+            cb, vb = _min_cost(curve, P_boot, w, argmin=True)
+            boot = [1 - c / d if d > 0 else 0.0 for c, d in zip(cb, rb2, strict=True)]
+            v_ci = (float(np.percentile(vb, 5)), float(np.percentile(vb, 95)))
+            # the candidate's change P(v) − r added to pure scatter n_b: nodes P_k − r + n_b
+            cn = _min_cost(curve, P_full[None, :, :] - r_full[None, None, :] + noise[:, None, :], w)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                share = np.where(noise2 > 0, 1 - cn / noise2, 0.0)
+            noise_share[fi] = np.maximum(share, 0.0)
+        ci = (float(np.clip(np.percentile(boot, 5), 0, 1)), float(np.clip(np.percentile(boot, 95), 0, 1))) \
+            if boot else (explained, explained)
+        after = residual.group_norms(Pk)
+        fixes = [g for g in before if after[g] < (1 - change) * before[g]]
+        worsens = [g for g in before if after[g] > (1 + change) * before[g] + 1e-12]
+        bounds = fam.bounds if fam.extrapolate else (float(curve.v[0]), float(curve.v[-1]))
+        at_edge = k in (0, curve.fine.size - 1)
+        ok, flags = plausibility_flags(f"{fam.name}.{fam.parameter}" if fam.kind == "effect" else fam.name, v,
+                                       bounds=bounds, plausible=fam.plausible, source=fam.plausible_source,
+                                       unit=fam.unit, at_bound=at_edge, interval=v_ci, kind=fam.kind)
+        lo_ci, hi_ci = min(v_ci[0], v), max(v_ci[1], v)
+        clearly = at_edge or (fam.plausible is not None and (hi_ci < fam.plausible[0] or lo_ci > fam.plausible[1]))
+        params = {**fam.defaults, fam.parameter: v} if fam.kind == "effect" else {fam.parameter: v}
+        summary = _family_summary(fam, v)
+        expl = summary + (": " + fam.explanation if fam.explanation and fam.kind in ("effect", "measurement") else
+                          ("; a model parameter error, not a missing effect" if fam.kind == "parameter" else ""))
+        cands.append(TrustedCandidate(
+            fam.name, explained, params, sorted(fixes, key=lambda g: after[g] - before[g]),
+            sorted(worsens, key=lambda g: before[g] - after[g]), expl,
+            Pattern(residual.labels, residual.groups, r_full - Pk, residual.components), math.sqrt(cost),
+            {g: (before[g], after[g]) for g in before}, kind=fam.kind, name=fam.name,
+            held_out_explained=held, explained_ci=ci, plausible=ok, at_bound=at_edge, flags=flags,
+            summary=summary, reference=fam.reference, fitted=v, parameter=fam.parameter,
+            fitted_ci=_widened(lo_ci, hi_ci, fold_values, _lack_of_fit_range(curve, P_full, w, k, cost, residual)),
+            fitted_ci_bootstrap=(lo_ci, hi_ci),
+            fold_values=fold_values, clearly_implausible=bool(clearly)))
+    noise_floor = float(np.percentile(noise_share.max(axis=0), 95)) if n_boot and families else 0.0
+    within_noise = bool(n_boot and r2 <= float(np.percentile(noise2, 95)))
+    for c in cands:
+        c.significant = c.explained_ci[0] > noise_floor and c.held_out_explained > noise_floor
+        if not c.significant:
+            c.flags.append(f"explains no more than the section-to-section scatter alone can produce "
+                           f"(noise floor {noise_floor:.2f}; explained {c.explained_ci[0]:.2f}–"
+                           f"{c.explained_ci[1]:.2f}, held-out {c.held_out_explained:.2f})")
+        if c.explained - c.held_out_explained > 0.25:
+            c.flags.append(f"explains {c.explained:.2f} of the residual on the sections it was fitted to but "
+                           f"only {c.held_out_explained:.2f} on held-out sections")
+    cands.sort(key=lambda c: (-c.held_out_explained, -c.explained))
+    separable, evidence, note, alike = True, [], "", []
+    if len(cands) >= 2:
+        a = cands[0]
+        for b in cands[1:3]:
+            sa, sb = a.signature.values * w, b.signature.values * w
+            den = float(np.linalg.norm(sa) * np.linalg.norm(sb))
+            corr = float(sa @ sb / den) if den > 0 else 0.0
+            ev, advice = separating_evidence(a, b, residual)
+            if b is cands[1]:
+                evidence = ev
+            if a.held_out_explained - b.held_out_explained < alike_margin and corr > alike_correlation:
+                alike.append({"candidates": [a.name, b.name], "correlation": corr, "evidence": ev, "advice": advice})
+                a.flags.append(f"explains alike with {b.name} (signature correlation {corr:.2f}): {advice}")
+                b.flags.append(f"explains alike with {a.name} (signature correlation {corr:.2f}): {advice}")
+        separable = not alike
+    unexplained = _unexplained(residual, cands[0] if cands else None)
+    best = cands[0] if cands else None
+    if best is None:
+        verdict, why = "none", "no candidate applies"
+    elif within_noise:
+        verdict, why = "none", "the residual is within the section-to-section scatter"
+    elif not best.significant:
+        verdict, why = "none", f"no candidate explains more than the noise floor ({noise_floor:.2f})"
+    elif validated and best.held_out_explained < strong:
+        verdict, why = "none", (f"the configuration passes and no candidate explains ≥ {strong:.1f} of the "
+                                f"rest on held-out sections (best {best.name} {best.held_out_explained:.2f})")
+    elif best.held_out_explained < strong or best.explained < strong:
+        verdict, why = "uncertain", (f"the best candidate {best.name} explains only {best.held_out_explained:.2f} "
+                                     f"on held-out sections ({best.explained:.2f} in-sample)")
+    elif alike:
+        verdict, why = "uncertain", "; ".join(x["advice"] for x in alike)
+    elif not best.plausible and best.clearly_implausible:
+        verdict, why = "uncertain", "; ".join(best.flags[:1])
+    elif best.explained - best.held_out_explained > 0.25:
+        verdict, why = "uncertain", f"{best.name} does not hold on held-out sections"
+    else:
+        verdict, why = "cause", (f"{best.summary} explains {best.held_out_explained:.2f} of the residual on "
+                                 f"held-out sections ({best.explained:.2f} in-sample; noise floor {noise_floor:.2f})")
+    if verdict == "none":
+        note = "no candidate explains the residual: " + why
+    elif verdict == "uncertain":
+        note = "uncertain: " + why
+    else:
+        note = why
+    res = DiagnosisResult(residual, list(cands), separable, evidence, note)
+    res.extra.update({"verdict": verdict, "noise_floor": noise_floor, "residual_within_noise": within_noise,
+                      "alike": alike, "unexplained": unexplained, "folds": len(test_masks),
+                      "bootstrap": n_boot})
+    return res
+
+
+def _lack_of_fit_range(curve: _Curve, P: np.ndarray, w: np.ndarray, k: int, cost: float, residual: Pattern,
+                       level: float = 0.90) -> tuple[float, float]:
+    """Values whose remaining residual is within the lack-of-fit region of the best fit:
+    ‖P(v)‖²_W ≤ ‖P(v*)‖²_W·(1 + F_{1, n−1}(level)/(n − 1)) with n the number of quantity
+    groups (the components of one group are strongly correlated; each group carries weight 1,
+    so n is taken as the effective number of observations — an assumption). The region grows
+    with what the candidate leaves unexplained, so it reflects model error, not only section
+    scatter (Bates & Watts 1988 §6.1, likelihood region of a nonlinear least-squares fit)."""
+    from scipy.stats import f as f_dist
+
+    n = len(set(residual.groups))
+    if n < 3:
+        return curve.value(k), curve.value(k)
+    limit = cost * (1.0 + float(f_dist.ppf(level, 1, n - 1)) / (n - 1))
+    c = np.sum((curve.patterns(P) * w) ** 2, axis=1)
+    lo = k
+    while lo > 0 and c[lo - 1] <= limit:
+        lo -= 1
+    hi = k
+    while hi < c.size - 1 and c[hi + 1] <= limit:
+        hi += 1
+    return curve.value(lo), curve.value(hi)
+
+
+def _widened(lo: float, hi: float, folds: Sequence[float], lack: tuple[float, float]) -> tuple[float, float]:
+    """The fitted value's interval: bootstrap ∪ fold fits ∪ lack-of-fit region."""
+    return min(lo, *folds, lack[0]), max(hi, *folds, lack[1])
+
+
+def _unexplained(residual: Pattern, best: TrustedCandidate | None, n: int = 6) -> list[dict[str, Any]]:
+    """The largest components left after the best candidate (or of the residual): quantity,
+    zone, position or PSD band with value before/after."""
+    w = residual.weights()
+    after = residual.values if best is None else best.remaining(residual)
+    out = []
+    for k in np.argsort(-np.abs(after * w))[:n]:
+        if after[k] == 0:
+            break
+        out.append({"component": residual.labels[k], **component_parts(residual.labels[k], residual.groups[k]),
+                    "residual": float(residual.values[k]), "after_best": float(after[k])})
+    return out
+
+
+# ----------------------------------------------------------------------------- grids

@@ -1,0 +1,257 @@
+"""Diagnosis on a campaign imported as a new user would, without measured track data
+(docs/diagnosis.md "Candidates that cannot apply"): candidates that cannot apply are left
+out with a one-line reason (``skipped`` in ``--json``, on the Diagnose page); the diagnosis,
+the calibration and the page do not abort for it.
+
+The campaign: a synthetic coach campaign (hidden conicity) written as a campaign folder whose
+sections carry no ``layout["irregularities"]`` and whose baseline holds no effect — what a
+measured campaign from outside looks like — then imported (SQLite and PostgreSQL)."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+from railval.app.services.diagnosis import diagnose, latest_diagnosis
+from railval.core.errors import InvalidParameter
+from railval.core.sim.effects import EFFECTS, unmet_requirement
+
+NAME = "plain"
+
+
+def _write_plain_campaign(folder):
+    from railval.app.services.synth import parse_hidden, write_folder
+    from railval.core.sim.synth import build_campaign
+
+    sc = build_campaign(name=NAME, template="coach", hidden=parse_hidden(["conicity"], "coach"), seed=1,
+                        n_sections=12)
+    folder = write_folder(sc, folder, ext="csv")
+    manifest = json.loads((folder / "campaign.json").read_text())
+    for s in manifest["sections"]:
+        s["layout"].pop("irregularities")
+    for c in manifest["configurations"]:
+        c["effects"] = {}
+    (folder / "campaign.json").write_text(json.dumps(manifest))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def plain_folder(tmp_path_factory):
+    return _write_plain_campaign(tmp_path_factory.mktemp("plain") / NAME)
+
+
+@pytest.fixture(scope="module")
+def plain(module_db_url, plain_folder):
+    from railval.db.engine import connect
+    from railval.db.importer import import_campaign
+
+    db = connect(module_db_url)
+    db.init()
+    import_campaign(db, plain_folder)
+    yield db
+    db.dispose()
+
+
+def test_unmet_requirement_names_the_missing_track_data_and_unmeasured_quantities():
+    mi = EFFECTS["measured_irregularities"]
+    layouts = {"S01": {"irregularities": {"s": [0.0]}}, "S02": {}, "S03": None}
+    assert unmet_requirement(mi, layouts) == ("needs layout['irregularities'] in every section; 2 of 3 sections "
+                                              "carry none (S02, S03)")
+    assert unmet_requirement(mi, {"S01": {"irregularities": {"s": [0.0]}}}) is None
+    # an effect that moves only car body accelerations, on a campaign measuring wheel forces only
+    fd = EFFECTS["friction_damping"]
+    assert set(fd.quantities) <= {"ay_rms", "az_rms", "ay_max", "az_max"}
+    why = unmet_requirement(fd, {"S01": {}}, measured_quantities=["Y_qst", "Q_max"])
+    assert why and "none of which the campaign measures" in why
+    assert unmet_requirement(fd, {"S01": {}}, measured_quantities=["az_rms"]) is None
+
+
+def test_default_candidates_leave_out_measured_irregularities_with_a_reason(plain):
+    from railval.app.services.campaign_context import load_context
+    from railval.app.services.diagnosis_evidence import inapplicable_effects
+
+    with plain.session() as s:
+        ctx = load_context(s, NAME)
+    out = inapplicable_effects(ctx, {}, None)
+    assert [x["name"] for x in out] == ["measured_irregularities"]
+    assert out[0]["kind"] == "effect" and "12 of 12 sections carry none" in out[0]["reason"]
+    # asked for by name: only those are judged
+    assert inapplicable_effects(ctx, {}, ["conicity"]) == []
+
+
+def test_diagnosis_runs_on_what_the_campaign_holds(plain):
+    res = diagnose(plain, NAME, "baseline", effects=["measured_irregularities", "conicity"], workers=2, n_boot=30)
+    d = res.to_dict()
+    assert [c["name"] for c in d["candidates"]] == ["conicity"]
+    assert d["skipped"] == [{"name": "measured_irregularities", "kind": "effect",
+                             "reason": "needs layout['irregularities'] in every section; 12 of 12 sections "
+                                       "carry none (S01, S02, S03 …)"}]
+    assert d["verdict"] in ("cause", "uncertain", "none")
+    # the hidden conicity is what this campaign's residual holds: found without the track data
+    assert d["verdict"] == "cause" and d["candidates"][0]["held_out_explained"] > 0.5
+    # the cause set and the per-family results
+    assert [c["name"] for c in d["causes"]] == ["conicity"] and d["causes"][0]["held_out_share"] > 0.5
+    assert d["cause_set"]["held_out_explained"] == pytest.approx(d["causes"][0]["held_out_share"])
+    fams = {f["name"]: f for f in d["families"]}
+    assert {"guiding", "wheel", "carbody"} <= set(fams)
+    for f in fams.values():
+        assert f["verdict"] in ("cause", "uncertain", "none") and set(f["structural"]) == {
+            "flag", "quantities", "zones", "reason"}
+        assert all(c["name"] == "conicity" for c in f["top"])
+    assert sum(f["share"] for f in fams.values()) == pytest.approx(1.0)
+    # stored with the run and read back
+    with plain.session() as s:
+        assert latest_diagnosis(s, NAME, "baseline").to_dict()["skipped"] == d["skipped"]
+
+
+def test_nothing_applicable_gives_verdict_none_with_the_reasons(plain, capsys):
+    from railval.app.cli import main
+
+    rc = main(["--db", plain.url, "diagnose", NAME,
+               "--config", "baseline", "--candidates", "measured_irregularities", "--json"])
+    assert rc == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["verdict"] == "none" and doc["candidates"] == []
+    assert doc["skipped"][0]["name"] == "measured_irregularities"
+    assert "left out: measured_irregularities (needs layout['irregularities']" in doc["note"]
+    main(["--db", plain.url, "diagnose", NAME, "--config", "baseline", "--candidates",
+          "measured_irregularities"])
+    out = capsys.readouterr().out
+    assert "verdict NONE" in out
+    assert "left out: measured_irregularities (effect) — needs layout['irregularities'] in every section" in out
+
+
+def test_calibrating_an_effect_that_cannot_apply_is_refused_before_anything_is_stored(plain):
+    from railval.app.services.calibration import calibrate
+    from railval.db import repo
+
+    with pytest.raises(InvalidParameter) as exc:
+        calibrate(plain, NAME, "baseline", ["measured_irregularities"], "baseline+mi")
+    msg = str(exc.value)
+    assert "'measured_irregularities' cannot apply to campaign 'plain'" in msg
+    assert "needs layout['irregularities'] in every section" in msg
+    with plain.session() as s:
+        assert "baseline+mi" not in [c.name for c in repo.list_configurations(s, NAME)]
+
+
+@pytest.mark.browser
+def test_diagnose_page_shows_the_candidates_left_out(tmp_path, plain_folder, page):
+    """The Diagnose page of the campaign without track data shows the stored diagnosis: the
+    verdict, the ranking of what applies, and the candidate left out with its reason."""
+    from railval.db.engine import connect
+    from railval.db.importer import import_campaign
+    from tests.browser_support import element_screenshot, nav, open_app, require_browser, served_app
+
+    require_browser()
+    db = connect(f"sqlite:///{tmp_path / 'page.db'}")
+    db.init()
+    import_campaign(db, plain_folder)
+    diagnose(db, NAME, "baseline", effects=["measured_irregularities", "conicity"], workers=2, n_boot=30)
+    try:
+        with served_app(db) as url:
+            open_app(page, url)
+            nav(page, "Diagnose & model workshop")
+            main = page.locator(".rv-main")
+            main.locator("h2", has_text="Diagnose & model workshop").wait_for(timeout=120_000)
+            left_out = main.get_by_text("Left out (cannot apply to this campaign): measured_irregularities — "
+                                        "needs layout['irregularities'] in every section")
+            left_out.wait_for(timeout=120_000)
+            rows = main.locator(".rv-candidates .tabulator-row")
+            rows.first.wait_for(timeout=120_000)
+            assert rows.count() == 1
+            assert rows.first.locator(".tabulator-cell[tabulator-field='candidate']").inner_text().strip() == "conicity"
+            main.get_by_text("Per quantity family").wait_for(timeout=120_000)
+            assert main.locator(".rv-families .tabulator-row").count() == 4
+            main.get_by_text(re.compile(r"Causes found together \(1; .*conicity \d+ %")).wait_for(timeout=120_000)
+            element_screenshot(main, "diagnose-left-out")
+    finally:
+        db.dispose()
+
+
+def test_gain_candidate_pairs_and_channels():
+    from railval.core.diagnosis.measurement import gain_channels, gain_pairs
+
+    pairs = [{"section": "S1", "zone": 1, "quantity": "az_rms", "position": "b1", "M": 0.4, "S": 0.5, "D_norm": 0.0},
+             {"section": "S1", "zone": 1, "quantity": "az_rms", "position": "b2", "M": 0.4, "S": 0.5, "D_norm": 0.0},
+             {"section": "S1", "zone": 1, "quantity": "Y_qst", "position": "w1L", "M": -10.0, "S": -12.0,
+              "D_norm": 0.4},
+             {"section": "S1", "zone": 1, "quantity": "YQ_max", "position": "w1L", "M": 0.3, "S": 0.3, "D_norm": 0.0}]
+    chans = gain_channels(pairs)
+    # az_cb_b1 forms az_rms at b1 alone; Y_w1L also enters Y/Q, so it is no gain candidate
+    assert chans == {"az_cb_b1": [("az_rms", "b1")], "az_cb_b2": [("az_rms", "b2")]}
+    out = gain_pairs(pairs, chans["az_cb_b1"], 2.0, {"az_rms": 0.1, "Y_qst": 5.0})
+    # the channel reads 2× the truth: M' = 0.2, D' = (0.5 − 0.2)·sign(0.2) = 0.3, /0.1
+    assert out[0]["M"] == pytest.approx(0.2) and out[0]["D_norm"] == pytest.approx(3.0)
+    assert out[1] == pairs[1] and out[2] == pairs[2]
+
+
+@pytest.fixture(scope="module")
+def gain_folder(plain_folder, tmp_path_factory):
+    """The campaign without track data whose car body accelerometer az_cb_b1 reads 1.3× too high."""
+    import shutil
+
+    import pandas as pd
+
+    folder = tmp_path_factory.mktemp("gain") / "gain"
+    shutil.copytree(plain_folder, folder)
+    manifest = json.loads((folder / "campaign.json").read_text())
+    manifest["name"] = "gain"
+    (folder / "campaign.json").write_text(json.dumps(manifest))
+    for s in manifest["sections"]:
+        path = folder / s["measured"]
+        df = pd.read_csv(path)
+        df["az_cb_b1"] *= 1.3
+        df.to_csv(path, index=False)
+    return folder
+
+
+def test_a_miscalibrated_accelerometer_is_named_beside_the_model_cause(plain, gain_folder):
+    from railval.db.importer import import_campaign
+
+    db = plain  # the same database, a second campaign
+    import_campaign(db, gain_folder)
+    res = diagnose(db, "gain", "baseline", effects=["conicity", "gain az_cb_b1", "gain az_cb_b2", "gain ay_cb_b1"],
+                   workers=2, n_boot=30)
+    d = res.to_dict()
+    kinds = {c["name"]: c["kind"] for c in d["candidates"]}
+    assert kinds == {"conicity": "effect", "gain az_cb_b1": "measurement", "gain az_cb_b2": "measurement",
+                     "gain ay_cb_b1": "measurement"}
+    causes = {c["name"]: c for c in d["causes"]}
+    assert set(causes) == {"conicity", "gain az_cb_b1"}
+    # the fitted gain also absorbs the model's error common to both car body ends (the synthetic
+    # truth's az differs from the baseline's at both ends); the redundant channel at the other
+    # end separates the sensor: b1 reads ≈ 1.3 × what b2 implies
+    gain = causes["gain az_cb_b1"]
+    assert gain["kind"] == "measurement" and gain["held_out_share"] > 0.05
+    assert gain["relative_gain"] == pytest.approx(1.3, rel=0.08)
+    assert "az_cb_b1 reads ≈" in d["next"]["text"] and "--effect gain" not in d["next"].get("command", "")
+    cand = next(c for c in d["candidates"] if c["name"] == "gain az_cb_b1")
+    assert "channel az_cb_b1 reads" in cand["summary"] and "(the redundant channel) implies" in cand["summary"]
+
+
+def test_next_step_calibrates_a_cause_set_together_and_the_cli_accepts_it():
+    import argparse
+
+    from railval.app.cli.cmd_diagnose import register
+    from railval.app.services.diagnosis_evidence import next_step
+    from railval.core.diagnosis import DiagnosisResult, Pattern, TrustedCandidate
+
+    pat = Pattern(["Y_qst zone 1 w1L"], ["Y_qst"], [1.0])
+    mk = lambda name, kind, params, fitted, parameter: TrustedCandidate(
+        name, 0.5, params, [], [], "", pat, 0.5, kind=kind, name=name, fitted=fitted, parameter=parameter)
+    cands = [mk("conicity", "effect", {"conicity": 0.45}, 0.45, "conicity"),
+             mk("model.c_secondary_z", "parameter", {"c_secondary_z": 9000.0}, 9000.0, "c_secondary_z"),
+             mk("gain az_cb_b1", "measurement", {"gain": 1.3}, 1.3, "gain")]
+    res = DiagnosisResult(pat, cands, True, [], "", {"verdict": "cause", "causes": [
+        {"name": c.name, "kind": c.kind, "parameter": c.parameter, "fitted": c.fitted, "held_out_share": 0.3}
+        for c in cands]})
+    nxt = next_step(res, "camp", "baseline")
+    assert nxt["candidates"] == ["conicity", "model.c_secondary_z"]
+    assert "first check the measurement: az_cb_b1 reads ≈ 1.3 × the true value" in nxt["text"]
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    args = parser.parse_args(nxt["command"].split()[1:])
+    assert args.effect == ["conicity", "model.c_secondary_z"] and args.new_name == "baseline+conicity+c_secondary_z"
+    assert args.start == ["conicity.conicity=0.45", "model.c_secondary_z=9000"]
