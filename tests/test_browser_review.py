@@ -145,6 +145,7 @@ def test_one_navigation_between_the_app_and_the_workshops(page, app):
     base = app["base"]
     sign_in(page, base, "org")
     areas = page.locator(".rv-areas a")
+    areas.filter(has_text="Workshops").first.wait_for(timeout=TIMEOUT_MS)
     assert [a.inner_text() for a in areas.all()] == ["Workshops"]
     screenshot(page, "navigation-app")
     areas.first.click()

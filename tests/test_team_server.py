@@ -19,6 +19,7 @@ import uuid
 import pytest
 from sqlalchemy import func, select
 
+from railval.app.bench.bench_workshop import xsrf_of
 from railval.app.bench.topology import Topology, insecure_context, nginx_binary
 from railval.db import users
 from tests.browser_support import block_fonts, require_browser
@@ -94,10 +95,24 @@ def _post_answer(base: str, token: str, position: int, answer: bool, submission:
     body = json.dumps({"position": position, "answer": "yes" if answer else "no",
                        "seconds": 1.0, "submission": submission}).encode()
     t0, attempts = time.perf_counter(), 0
+    xsrf = None
     while True:
         attempts += 1
+        try:
+            if xsrf is None:  # the review page hands out the anti-forgery token
+                with urllib.request.urlopen(f"{base}/review/{token}", timeout=20,
+                                            context=insecure_context()) as r:
+                    xsrf = xsrf_of(", ".join(r.headers.get_all("Set-Cookie") or []), r.read())
+                assert xsrf is not None, "the review page gave no anti-forgery token"
+        except (urllib.error.URLError, OSError):
+            if attempts > 50:
+                raise
+            time.sleep(0.1)
+            continue
         req = urllib.request.Request(f"{base}/review/{token}/answer", data=body, method="POST",
-                                     headers={"Content-Type": "application/json"})
+                                     headers={"Content-Type": "application/json",
+                                              "Cookie": f"_xsrf={xsrf['cookie']}",
+                                              "X-XSRFToken": xsrf["token"]})
         try:
             with urllib.request.urlopen(req, timeout=20, context=insecure_context()) as r:
                 doc = json.loads(r.read())

@@ -40,6 +40,8 @@ import uuid
 from pathlib import Path
 from typing import Any
 
+from railval.app.bench.bench_workshop import xsrf_of
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reviewers", type=int, default=50)
@@ -65,14 +67,21 @@ def _pct(values: list[float], q: float) -> float:
 def _reviewer(host: str, port: int, token: str, n: int, out: list[float], errors: list[str]) -> None:
     ctx = ssl._create_unverified_context()  # the run's self-signed certificate
     conn = http.client.HTTPSConnection(host, port, context=ctx, timeout=30)
+    conn.request("GET", f"/review/{token}")  # the page hands out the anti-forgery token
+    resp = conn.getresponse()
+    xsrf = xsrf_of(resp.getheader("Set-Cookie"), resp.read())
+    if xsrf is None:
+        errors.append(f"no anti-forgery token on /review/… (HTTP {resp.status})")
+        return
+    headers = {"Content-Type": "application/json", "Cookie": f"_xsrf={xsrf['cookie']}",
+               "X-XSRFToken": xsrf["token"]}
     for i in range(n):
         body = json.dumps({"position": i, "answer": "yes" if i % 2 else "no", "seconds": 1.0,
                            "submission": uuid.uuid4().hex})
         t0 = time.perf_counter()
         for _attempt in range(5):
             try:
-                conn.request("POST", f"/review/{token}/answer", body,
-                             {"Content-Type": "application/json"})
+                conn.request("POST", f"/review/{token}/answer", body, headers)
                 resp = conn.getresponse()
                 resp.read()
                 if resp.status == 200:

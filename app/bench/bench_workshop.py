@@ -116,6 +116,19 @@ def _setup(url: str, campaign: str | None, n_plots: int, n_reviewers: int) -> di
             "campaign": campaign, "planned": n_all}
 
 
+def xsrf_of(set_cookie: str | None, page: bytes) -> dict[str, str] | None:
+    """The anti-forgery cookie and token a review page hands out (its ``_xsrf`` cookie and the
+    ``xsrf-token`` meta element), as the page's script sends them with an answer: POST with
+    ``Cookie: _xsrf=<cookie>`` and ``X-XSRFToken: <token>``; ``None`` when either is missing."""
+    import re
+
+    cookie = re.search(r"_xsrf=([^;]+)", set_cookie or "")
+    token = re.search(rb'name="xsrf-token" content="([^"]+)"', page)
+    if cookie and token:
+        return {"cookie": cookie.group(1), "token": token.group(1).decode()}
+    return None
+
+
 class _Reviewer(threading.Thread):
     def __init__(self, port: int, name: str, token: str, index: int, resend: float, think: float,
                  start: threading.Event):
@@ -138,12 +151,7 @@ class _Reviewer(threading.Thread):
         resp = conn.getresponse()
         raw = resp.read()
         if method == "GET" and not self.xsrf:
-            import re
-
-            cookie = re.search(r"_xsrf=([^;]+)", resp.getheader("Set-Cookie") or "")
-            token = re.search(rb'name="xsrf-token" content="([^"]+)"', raw)
-            if cookie and token:
-                self.xsrf = {"cookie": cookie.group(1), "token": token.group(1).decode()}
+            self.xsrf = xsrf_of(resp.getheader("Set-Cookie"), raw) or {}
         return resp.status, raw
 
     def run(self) -> None:
