@@ -170,6 +170,74 @@ def test_diagnose_page_shows_the_candidates_left_out(tmp_path, plain_folder, pag
         db.dispose()
 
 
+MI_REASON = ("switched on in configuration 'baseline' but cannot apply: needs layout['irregularities'] in every "
+             "section; 12 of 12 sections carry none (S01, S02, S03 …); simulated without it")
+
+
+@pytest.fixture(scope="module")
+def mi(plain, plain_folder, tmp_path_factory):
+    """A second campaign like ``plain`` whose baseline configuration itself has
+    measured_irregularities switched on — its sections carry no irregularities."""
+    import shutil
+
+    from railval.db.importer import import_campaign
+
+    folder = tmp_path_factory.mktemp("mi") / "mi"
+    shutil.copytree(plain_folder, folder)
+    manifest = json.loads((folder / "campaign.json").read_text())
+    manifest["name"] = "mi"
+    for c in manifest["configurations"]:
+        c["effects"] = {"measured_irregularities": {"scale": 1.0}}
+    (folder / "campaign.json").write_text(json.dumps(manifest))
+    import_campaign(plain, folder)
+    return plain
+
+
+def test_a_configuration_effect_that_cannot_apply_is_left_out_of_the_simulation_with_its_reason(mi):
+    res = diagnose(mi, "mi", "baseline", effects=["conicity"], include_parameters=False, measurement=False,
+                   workers=2, n_boot=30)
+    d = res.to_dict()
+    assert d["skipped"] == [{"name": "measured_irregularities", "kind": "configuration", "reason": MI_REASON}]
+    assert d["effects_in_configuration"] == ["measured_irregularities"] and d["effects_simulated"] == []
+    assert "effect measured_irregularities " + MI_REASON in d["note"]
+    # what can run runs: the hidden conicity is found as on the campaign without the effect
+    assert [c["name"] for c in d["candidates"]] == ["conicity"]
+    assert d["verdict"] == "cause" and d["candidates"][0]["held_out_explained"] > 0.5
+
+
+def test_nothing_to_run_beside_a_configuration_effect_gives_verdict_none_not_a_traceback(mi, capsys):
+    from railval.app.cli import main
+
+    rc = main(["--db", mi.url, "diagnose", "mi", "--config", "baseline", "--candidates",
+               "measured_irregularities", "--json"])
+    assert rc == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["verdict"] == "none" and doc["candidates"] == []
+    assert [(x["name"], x["kind"]) for x in doc["skipped"]] == [("measured_irregularities", "configuration")]
+    assert doc["skipped"][0]["reason"] == MI_REASON and MI_REASON in doc["note"]
+    main(["--db", mi.url, "diagnose", "mi", "--config", "baseline", "--candidates", "measured_irregularities"])
+    out = capsys.readouterr().out
+    assert "verdict NONE" in out and "Traceback" not in out
+    assert "left out: measured_irregularities (configuration) — " + MI_REASON in out
+
+
+def test_calibration_runs_without_the_configuration_effect_and_says_so(mi):
+    from railval.app.services.calibration import calibrate
+    from railval.db import repo
+
+    res = calibrate(mi, "mi", "baseline", ["conicity", "measured_irregularities"], "baseline+conicity",
+                    popsize=2, maxiter=1, polish_maxfev=2, workers=2)
+    d = res.to_dict()
+    assert [(x["name"], x["kind"]) for x in d["skipped"]] == [("measured_irregularities", "configuration"),
+                                                             ("measured_irregularities", "effect")]
+    assert f"configuration effect measured_irregularities left out: {MI_REASON}" in d["flags"]
+    assert set(d["effects"]) == {"conicity"}
+    with mi.session() as s:
+        child = repo.get_configuration(s, "mi", "baseline+conicity")
+        assert set(child.effects) == {"conicity"}
+        assert "without measured_irregularities (cannot apply to this campaign)" in child.description
+
+
 def test_gain_candidate_pairs_and_channels():
     from railval.core.diagnosis.measurement import gain_channels, gain_pairs
 

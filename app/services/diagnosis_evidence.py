@@ -165,6 +165,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         effect_parameters,
         load_context,
         residual_pattern,
+        runnable_effects,
         section_values,
         session_of,
     )
@@ -184,6 +185,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         raise InvalidParameter(f"unknown effect(s) {unknown}; known: {sorted(registry)}")
     template = str(ctx.vehicle.get("template") or "coach")
     skipped = inapplicable_effects(ctx, conf_effects, effects)
+    # an effect of the configuration itself that cannot apply: simulated without it, said so
+    in_config, conf_skipped = runnable_effects(ctx, conf_effects, config)
     todo = [e for e in (effects if effects is not None else registry) if e not in conf_effects
             and template in registry[e].templates and e not in {x["name"] for x in skipped}]
     plan = parameter_plan(ctx, conf_params) if include_parameters else []
@@ -196,7 +199,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         plan = [p for p in parameter_plan(ctx, conf_params) if p["parameter"] in wanted]
     stored_residual, vr = residual_pattern(ctx, section_values(config_sets, ctx.sections),
                                            band_sums(config_sets, ctx.bands))
-    tasks: list[tuple] = [(ctx, conf_effects, conf_params)]
+    tasks: list[tuple] = [(ctx, in_config, conf_params)]
     index: list[tuple] = []
     unique: dict[str, int] = {}
     for e in todo:
@@ -204,14 +207,14 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         eparams = effect_parameters(spec)
         defaults = {k: float(q["default"]) for k, q in eparams.items()}
         for pname, v, point, _p in scan_points(spec, values_per_parameter):
-            key = json.dumps({**conf_effects, e: point}, sort_keys=True)
+            key = json.dumps({**in_config, e: point}, sort_keys=True)
             if key not in unique:
                 unique[key] = len(tasks)
-                tasks.append((ctx, {**conf_effects, e: point}, conf_params))
+                tasks.append((ctx, {**in_config, e: point}, conf_params))
             index.append(("effect", e, pname, v, defaults, unique[key]))
     for p in plan:
         index.append(("parameter", p["name"], p["parameter"], p["perturbed"], {}, len(tasks)))
-        tasks.append((ctx, conf_effects, {**conf_params, p["parameter"]: p["perturbed"]}))
+        tasks.append((ctx, in_config, {**conf_params, p["parameter"]: p["perturbed"]}))
     total = len(tasks) + (refine if plan else 0)
     _report(progress, "simulate", 0.05, tasks=total)
     with BatchExecutor(scheduler, workers) as ex:
@@ -272,7 +275,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                 if min(abs(math.log(v / x)) for x in fam.values) > math.log(1.1):
                     redo.append((fam, v))
             if redo:
-                more = ex.map(_evaluate_sections, [(ctx, conf_effects, {**conf_params, f.parameter: v}) for f, v in redo])
+                more = ex.map(_evaluate_sections, [(ctx, in_config, {**conf_params, f.parameter: v}) for f, v in redo])
                 for (fam, v), res in zip(redo, more, strict=True):
                     fam.values.append(v)
                     fam.evidence.append(section_evidence(res[0], res[1], meas_bands, sections, value_key="D_norm",
@@ -303,9 +306,11 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                       "values_per_parameter": values_per_parameter, "simulations": n_sim,
                       "stored_residual_norm": math.sqrt(stored_residual.norm2()),
                       "simulated_residual_norm": math.sqrt(res.residual.norm2()),
-                      "skipped": skipped})
+                      "effects_simulated": sorted(in_config), "skipped": conf_skipped + skipped})
     if skipped and not fams:
         res.note += "; left out: " + "; ".join(f"{s['name']} ({s['reason']})" for s in skipped)
+    if conf_skipped:
+        res.note += "; " + "; ".join(f"effect {s['name']} {s['reason']}" for s in conf_skipped)
     res.extra["next"] = next_step(res, campaign, config)
     _report(progress, "done", 1.0)
     return res
