@@ -175,12 +175,10 @@ MI_REASON = ("switched on in configuration 'baseline' but cannot apply: needs la
 
 
 @pytest.fixture(scope="module")
-def mi(plain, plain_folder, tmp_path_factory):
-    """A second campaign like ``plain`` whose baseline configuration itself has
+def mi_folder(plain_folder, tmp_path_factory):
+    """A campaign like ``plain`` whose baseline configuration itself has
     measured_irregularities switched on — its sections carry no irregularities."""
     import shutil
-
-    from railval.db.importer import import_campaign
 
     folder = tmp_path_factory.mktemp("mi") / "mi"
     shutil.copytree(plain_folder, folder)
@@ -189,7 +187,14 @@ def mi(plain, plain_folder, tmp_path_factory):
     for c in manifest["configurations"]:
         c["effects"] = {"measured_irregularities": {"scale": 1.0}}
     (folder / "campaign.json").write_text(json.dumps(manifest))
-    import_campaign(plain, folder)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def mi(plain, mi_folder):
+    from railval.db.importer import import_campaign
+
+    import_campaign(plain, mi_folder)
     return plain
 
 
@@ -236,6 +241,39 @@ def test_calibration_runs_without_the_configuration_effect_and_says_so(mi):
         child = repo.get_configuration(s, "mi", "baseline+conicity")
         assert set(child.effects) == {"conicity"}
         assert "without measured_irregularities (cannot apply to this campaign)" in child.description
+
+
+@pytest.mark.browser
+def test_diagnose_page_runs_a_configuration_whose_effect_cannot_apply(tmp_path, mi_folder, page):
+    """The Diagnose page of the configuration with measured_irregularities switched on and no
+    track data (its diagnosis stored by the service the page's Run diagnosis calls): the
+    verdict, the ranking, and the effect the configuration was simulated without, with its
+    reason — apart from the candidates left out."""
+    from railval.db.engine import connect
+    from railval.db.importer import import_campaign
+    from tests.browser_support import element_screenshot, nav, open_app, require_browser, served_app
+
+    require_browser()
+    db = connect(f"sqlite:///{tmp_path / 'page.db'}")
+    db.init()
+    import_campaign(db, mi_folder)
+    diagnose(db, "mi", "baseline", effects=["conicity"], include_parameters=False, measurement=False,
+             workers=2, n_boot=30)
+    try:
+        with served_app(db) as url:
+            open_app(page, url)
+            nav(page, "Diagnose & model workshop")
+            main = page.locator(".rv-main")
+            main.locator("h2", has_text="Diagnose & model workshop").wait_for(timeout=120_000)
+            main.get_by_text("Configuration simulated without (cannot apply to this campaign): "
+                             "measured_irregularities — " + MI_REASON).wait_for(timeout=120_000)
+            rows = main.locator(".rv-candidates .tabulator-row")
+            rows.first.wait_for(timeout=120_000)
+            assert rows.first.locator(".tabulator-cell[tabulator-field='candidate']").inner_text().strip() == "conicity"
+            assert main.get_by_text("Left out (cannot apply").count() == 0
+            element_screenshot(main, "diagnose-configuration-effect-left-out")
+    finally:
+        db.dispose()
 
 
 def test_gain_candidate_pairs_and_channels():
