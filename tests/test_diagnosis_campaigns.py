@@ -21,11 +21,11 @@ from railval.core.sim.effects import EFFECTS, unmet_requirement
 NAME = "plain"
 
 
-def _write_plain_campaign(folder):
+def _write_plain_campaign(folder, hidden=("conicity",), name=NAME):
     from railval.app.services.synth import parse_hidden, write_folder
     from railval.core.sim.synth import build_campaign
 
-    sc = build_campaign(name=NAME, template="coach", hidden=parse_hidden(["conicity"], "coach"), seed=1,
+    sc = build_campaign(name=name, template="coach", hidden=parse_hidden(list(hidden), "coach"), seed=1,
                         n_sections=12)
     folder = write_folder(sc, folder, ext="csv")
     manifest = json.loads((folder / "campaign.json").read_text())
@@ -361,3 +361,98 @@ def test_next_step_calibrates_a_cause_set_together_and_the_cli_accepts_it():
     args = parser.parse_args(nxt["command"].split()[1:])
     assert args.effect == ["conicity", "model.c_secondary_z"] and args.new_name == "baseline+conicity+c_secondary_z"
     assert args.start == ["conicity.conicity=0.45", "model.c_secondary_z=9000"]
+
+
+# ----------------------------------------------------------------------------- offsets
+OFFSET_CANDIDATES = ["offset Q_w1L", "offset Q_w1R", "offset Y_w1L", "offset az_cb_b1"]
+
+
+@pytest.fixture(scope="module")
+def offset_folders(plain_folder, tmp_path_factory):
+    """Two campaigns whose baseline holds the truth's hidden conicity (the model is right but
+    for the section scatter): ``right`` as measured, and ``offset`` whose wheel force channel
+    Q_w1L reads 8 kN too high and whose car body accelerometer az_cb_b1 reads 0.3 m/s² too
+    high."""
+    import shutil
+
+    import pandas as pd
+
+    from railval.core.sim.synth import parse_hidden
+
+    out = {}
+    for name, planted in (("right", {}), ("offset", {"Q_w1L": 8.0, "az_cb_b1": 0.3})):
+        folder = tmp_path_factory.mktemp(name) / name
+        shutil.copytree(plain_folder, folder)
+        manifest = json.loads((folder / "campaign.json").read_text())
+        manifest["name"] = name
+        for c in manifest["configurations"]:
+            c["effects"] = parse_hidden(["conicity"], "coach")
+        (folder / "campaign.json").write_text(json.dumps(manifest))
+        for s in manifest["sections"]:
+            df = pd.read_csv(folder / s["measured"])
+            for ch, c in planted.items():
+                df[ch] += c
+            df.to_csv(folder / s["measured"], index=False)
+        out[name] = folder
+    return out
+
+
+@pytest.fixture(scope="module")
+def offsets(plain, offset_folders):
+    from railval.db.importer import import_campaign
+
+    for folder in offset_folders.values():
+        import_campaign(plain, folder)
+    return plain
+
+
+def test_offset_measured_shifts_the_quasi_static_force_by_the_offset(offsets):
+    from railval.app.services.campaign_context import load_context
+    from railval.core.diagnosis.measurement import offset_blind, offset_components, offset_measured
+    from railval.db import repo
+
+    with offsets.session() as s:
+        ctx = load_context(s, "offset")
+        sets = repo.load_signalsets(s, "offset", None)
+    pairs = [{"quantity": q, "position": p} for v in ctx.measured_values.values() for q, p in v]
+    comps = offset_components(pairs, "Q_w1L")
+    assert ("Q_qst", "w1L") in comps and ("Y_qst", "w1L") not in comps
+    fixed = offset_measured(sets, ctx.sections, "Q_w1L", 8.0, comps)
+    # the low-pass keeps a constant and the median of the sliding mean shifts with it
+    for sid, v in ctx.measured_values.items():
+        assert fixed[(sid, "Q_qst", "w1L")] == pytest.approx(v[("Q_qst", "w1L")] - 8.0, abs=1e-6)
+    assert offset_blind("Q_w1L") is None and "band-pass 0.4–10 Hz" in offset_blind("az_cb_b1")
+
+
+def test_a_car_body_accelerometer_offset_changes_nothing_and_is_left_out(offsets):
+    """The planted 0.3 m/s² on az_cb_b1 leaves every measured value formed from it as it was
+    (the EN band-pass removes a constant): the offset candidate of that channel is left out
+    with that reason and nothing is claimed about it."""
+    from railval.app.services.campaign_context import load_context
+
+    with offsets.session() as s:
+        right, off = load_context(s, "right"), load_context(s, "offset")
+    for sid, v in right.measured_values.items():
+        for key in [k for k in v if k[1] == "b1" and k[0] in ("az_rms", "az_max")]:
+            assert off.measured_values[sid][key] == pytest.approx(v[key], rel=1e-9, abs=1e-12)
+    d = diagnose(offsets, "offset", "baseline", effects=["offset az_cb_b1"], workers=2, n_boot=30).to_dict()
+    assert d["candidates"] == [] and d["verdict"] == "none"
+    assert d["skipped"] == [{"name": "offset az_cb_b1", "kind": "measurement",
+                             "reason": "a constant offset is removed by the EN band-pass 0.4–10 Hz of every quantity "
+                                       "formed from this channel and by the mean removal of its band powers: it "
+                                       "changes nothing the validation sees"}]
+
+
+def test_a_planted_wheel_force_offset_is_named_and_nothing_is_claimed_without_it(offsets):
+    d = diagnose(offsets, "offset", "baseline", effects=OFFSET_CANDIDATES, workers=2, n_boot=30).to_dict()
+    best = d["candidates"][0]
+    assert best["name"] == "offset Q_w1L" and best["kind"] == "measurement" and best["significant"]
+    assert 5.0 < best["fitted"] < 10.0 and best["fitted_ci"][0] <= 8.0 <= best["fitted_ci"][1]
+    assert "channel Q_w1L reads the true value +" in best["summary"]
+    assert [c["name"] for c in d["causes"]] == ["offset Q_w1L"] and d["causes"][0]["kind"] == "measurement"
+    assert all(not c["significant"] for c in d["candidates"][1:])
+    assert "Q_w1L reads ≈ the true value +" in d["next"]["text"]
+    # the same campaign as measured: nothing claimed
+    d = diagnose(offsets, "right", "baseline", effects=OFFSET_CANDIDATES, workers=2, n_boot=30).to_dict()
+    assert d["verdict"] == "none" and d["causes"] == []
+    assert not any(c["significant"] for c in d["candidates"])

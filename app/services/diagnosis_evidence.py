@@ -179,6 +179,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         conf_effects, conf_params, _ = configuration_of(s, campaign, config)
         config_sets = repo.load_signalsets(s, campaign, config)
         meas_bands = measured_section_bands(s, ctx)
+        measured_sets = repo.load_signalsets(s, campaign, None) if measurement else {}  # offset candidates
     registry = EFFECTS
     unknown = [e for e in (effects or ()) if e not in registry]
     if unknown:
@@ -249,7 +250,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         if measurement:
             limits = {q: r.std_limit for q, r in vr.quantities.items()}
             chans = gain_channels(results[0][0])
-            wanted_m = None if measurement is True else {m.removeprefix("gain ") for m in measurement}
+            wanted_m = None if measurement is True else {m.removeprefix("gain ") for m in measurement
+                                                         if not m.startswith("offset ")}
             for bad in sorted((wanted_m or set()) - set(chans)):
                 skipped.append({"name": f"gain {bad}", "kind": "measurement",
                                 "reason": "not a channel of this campaign whose quantities it forms alone"})
@@ -257,6 +259,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                 if wanted_m is None or ch in wanted_m:
                     families[f"gain {ch}"] = gain_family(base, results[0][0], results[0][1], meas_bands, sections, ch,
                                                          comps, limits, bands=ctx.bands)
+            families.update(_offset_families(ctx, measured_sets, measurement, base, results[0], meas_bands, sections, limits,
+                                             skipped))
         blind = _without_effect(base, list(families.values()))
         skipped += [{"name": f.name, "kind": f.kind, "reason": "changes none of the quantities the campaign "
                      "measures at any simulated value"} for f in blind
@@ -314,6 +318,55 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     res.extra["next"] = next_step(res, campaign, config)
     _report(progress, "done", 1.0)
     return res
+
+
+def _offset_families(ctx: Any, sets: Mapping[str, Any], measurement: bool | Sequence[str], base: SectionEvidence,
+                     result: tuple, meas_bands: Mapping, sections: Sequence[tuple[str, int]], limits: Mapping[str, float],
+                     skipped: list[dict]) -> dict[str, CandidateFamily]:
+    """The ``offset CHANNEL`` candidates (:mod:`railval.core.diagnosis.measurement`): every
+    measured channel some measured quantity is formed from, or those named; a channel whose
+    offset the EN filter removes is left out with that reason. The measured statistics are
+    re-evaluated from the recorded signals at every offset node (no simulation)."""
+    from railval.core.diagnosis.measurement import (
+        OFFSET_NODES,
+        offset_blind,
+        offset_components,
+        offset_family,
+        offset_measured,
+        offset_scale,
+    )
+    from railval.core.types import channel_kind
+
+    pairs, sim_bands = result
+    used = {ch: offset_components(pairs, ch) for ch in ctx.channels}
+    used = {ch: comps for ch, comps in used.items() if comps}
+    if measurement is True:
+        wanted = sorted(used)
+    else:
+        wanted = sorted(m.removeprefix("offset ") for m in measurement if m.startswith("offset "))
+    out: dict[str, CandidateFamily] = {}
+    todo = []
+    for ch in wanted:
+        why = (offset_blind(ch) if ch in used else
+               "not a channel of this campaign that a measured quantity is formed from")
+        if why:
+            if measurement is not True or ch in used:
+                skipped.append({"name": f"offset {ch}", "kind": "measurement", "reason": why})
+        else:
+            todo.append(ch)
+    if not todo:
+        return out
+    for ch in todo:
+        scale = offset_scale(sets, ch)
+        if not scale > 0:
+            skipped.append({"name": f"offset {ch}", "kind": "measurement", "reason": "the channel is constant"})
+            continue
+        comps = used[ch]
+        measured = [(f * scale, offset_measured(sets, ctx.sections, ch, f * scale, comps)) for f in OFFSET_NODES]
+        kind = channel_kind(ch)
+        out[f"offset {ch}"] = offset_family(base, pairs, sim_bands, meas_bands, sections, ch,
+                                            kind.unit if kind else "", measured, limits, bands=ctx.bands)
+    return out
 
 
 def _partner(channel: str) -> str | None:
@@ -402,7 +455,9 @@ def next_step(res: DiagnosisResult, campaign: str, config: str) -> dict[str, Any
     all_causes = res.extra.get("causes") or []
     sensors = [x for x in all_causes if x["kind"] == "measurement"]
     check = ("; first check the measurement: " + "; ".join(
-        f"{x['name'].removeprefix('gain ')} reads ≈ {x['fitted']:.3g} × the true value" for x in sensors)) if sensors else ""
+        f"{x['name'].removeprefix('offset ')} reads ≈ the true value {x['fitted']:+.3g}" if x["parameter"] == "offset"
+        else f"{x['name'].removeprefix('gain ')} reads ≈ {x['fitted']:.3g} × the true value" for x in sensors)
+             ) if sensors else ""
     causes = [x for x in all_causes if x["kind"] != "measurement"]
     if sensors and not causes:
         return {"action": "check measurement", "candidates": [x["name"] for x in sensors],
