@@ -421,6 +421,11 @@ def test_offset_measured_shifts_the_quasi_static_force_by_the_offset(offsets):
     # the low-pass keeps a constant and the median of the sliding mean shifts with it
     for sid, v in ctx.measured_values.items():
         assert fixed[(sid, "Q_qst", "w1L")] == pytest.approx(v[("Q_qst", "w1L")] - 8.0, abs=1e-6)
+    # at offset 0 (only the channels the components use re-evaluated) the stored evaluation
+    zero = offset_measured(sets, ctx.sections, "Q_w1L", 0.0, comps)
+    assert len(zero) == len(comps) * len(ctx.measured_values)
+    for (sid, q, p), m in zero.items():
+        assert m == pytest.approx(ctx.measured_values[sid][(q, p)], rel=1e-12, abs=1e-12)
     assert offset_blind("Q_w1L") is None and "band-pass 0.4–10 Hz" in offset_blind("az_cb_b1")
 
 

@@ -144,8 +144,11 @@ def offset_measured(signalsets: Mapping[str, SignalSet], sections: Sequence[Sect
     from dataclasses import replace
 
     from railval.core.en14363 import evaluate_present
+    from railval.core.quantities import QUANTITIES
 
-    fixed = {sid: replace(ss, channels={**ss.channels, channel: np.asarray(ss.channels[channel], float) - offset})
+    need = {c for q, p in components for c in QUANTITIES[q].channels(p)}  # only what the components use
+    fixed = {sid: replace(ss, channels={c: (np.asarray(x, float) - offset if c == channel else x)
+                                        for c, x in ss.channels.items() if c in need})
              for sid, ss in signalsets.items() if channel in ss.channels}
     vals = evaluate_present(fixed, sections)
     return {(sid, q, p): float(v[(q, p)]) for sid, v in vals.items() for q, p in components if (q, p) in v}
