@@ -155,7 +155,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     plausibility, identifiability and a verdict (module docstring;
     :func:`railval.core.diagnosis.diagnose_evidence`). ``effects``/``parameters`` restrict the
     candidates (``measurement``: the measurement-side candidates ``gain CHANNEL`` —
-    :mod:`railval.core.diagnosis.measurement` — all, none or those named;
+    :mod:`railval.core.diagnosis.measurement` — all, none or those named; ``offset CHANNEL``
+    only when named;
     ``parameters``: template names or ``model.NAME``; ``include_parameters=False``:
     effects only)."""
     from railval.app.services.batch import BatchExecutor
@@ -179,7 +180,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         conf_effects, conf_params, _ = configuration_of(s, campaign, config)
         config_sets = repo.load_signalsets(s, campaign, config)
         meas_bands = measured_section_bands(s, ctx)
-        measured_sets = repo.load_signalsets(s, campaign, None) if measurement else {}  # offset candidates
+        named_offsets = measurement not in (True, False) and any(str(m).startswith("offset ") for m in measurement)
+        measured_sets = repo.load_signalsets(s, campaign, None) if named_offsets else {}  # offset candidates
     registry = EFFECTS
     unknown = [e for e in (effects or ()) if e not in registry]
     if unknown:
@@ -323,9 +325,9 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
 def _offset_families(ctx: Any, sets: Mapping[str, Any], measurement: bool | Sequence[str], base: SectionEvidence,
                      result: tuple, meas_bands: Mapping, sections: Sequence[tuple[str, int]], limits: Mapping[str, float],
                      skipped: list[dict]) -> dict[str, CandidateFamily]:
-    """The ``offset CHANNEL`` candidates (:mod:`railval.core.diagnosis.measurement`): every
-    measured channel some measured quantity is formed from, or those named; a channel whose
-    offset the EN filter removes is left out with that reason. The measured statistics are
+    """The ``offset CHANNEL`` candidates (:mod:`railval.core.diagnosis.measurement`) named in
+    ``measurement`` (not part of the default set); a channel whose offset the EN filter removes
+    is left out with that reason. The measured statistics are
     re-evaluated from the recorded signals at every offset node (no simulation)."""
     from railval.core.diagnosis.measurement import (
         OFFSET_NODES,
@@ -340,18 +342,16 @@ def _offset_families(ctx: Any, sets: Mapping[str, Any], measurement: bool | Sequ
     pairs, sim_bands = result
     used = {ch: offset_components(pairs, ch) for ch in ctx.channels}
     used = {ch: comps for ch, comps in used.items() if comps}
-    if measurement is True:
-        wanted = sorted(used)
-    else:
-        wanted = sorted(m.removeprefix("offset ") for m in measurement if m.startswith("offset "))
+    if measurement is True:  # by name only (docs/diagnosis.md: a gain of a wheel force channel,
+        return {}            # for which there is no candidate, is taken for an offset with confidence)
+    wanted = sorted(m.removeprefix("offset ") for m in measurement if m.startswith("offset "))
     out: dict[str, CandidateFamily] = {}
     todo = []
     for ch in wanted:
         why = (offset_blind(ch) if ch in used else
                "not a channel of this campaign that a measured quantity is formed from")
         if why:
-            if measurement is not True or ch in used:
-                skipped.append({"name": f"offset {ch}", "kind": "measurement", "reason": why})
+            skipped.append({"name": f"offset {ch}", "kind": "measurement", "reason": why})
         else:
             todo.append(ch)
     if not todo:
