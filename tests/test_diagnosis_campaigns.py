@@ -461,3 +461,35 @@ def test_a_planted_wheel_force_offset_is_named_and_nothing_is_claimed_without_it
     d = diagnose(offsets, "right", "baseline", effects=OFFSET_CANDIDATES, workers=2, n_boot=30).to_dict()
     assert d["verdict"] == "none" and d["causes"] == []
     assert not any(c["significant"] for c in d["candidates"])
+
+
+def test_a_wheel_force_gain_named_beside_its_offset(offsets, offset_folders, tmp_path_factory):
+    """A wheel force channel enters Y/Q and ΣY with a second one; named, its gain is judged on
+    the measurement re-evaluated from the signals. Planted Y_w1L × 1.25: the gain is fitted
+    near 1.25 and not outranked by an offset of the same channel."""
+    import shutil
+
+    import pandas as pd
+
+    from railval.db.importer import import_campaign
+
+    folder = tmp_path_factory.mktemp("ygain") / "ygain"
+    shutil.copytree(offset_folders["right"], folder)
+    manifest = json.loads((folder / "campaign.json").read_text())
+    manifest["name"] = "ygain"
+    (folder / "campaign.json").write_text(json.dumps(manifest))
+    for s in manifest["sections"]:
+        df = pd.read_csv(folder / s["measured"])
+        df["Y_w1L"] *= 1.25
+        df.to_csv(folder / s["measured"], index=False)
+    import_campaign(offsets, folder)
+    d = diagnose(offsets, "ygain", "baseline", effects=["gain Y_w1L", "offset Y_w1L", "gain Q_w1L"], workers=2,
+                 n_boot=30).to_dict()
+    by = {c["name"]: c for c in d["candidates"]}
+    assert set(by) == {"gain Y_w1L", "offset Y_w1L", "gain Q_w1L"} and d["skipped"] == []
+    assert d["candidates"][0]["name"] == "gain Y_w1L"
+    assert by["gain Y_w1L"]["fitted"] == pytest.approx(1.25, rel=0.1)
+    assert by["gain Y_w1L"]["held_out_explained"] > by["offset Y_w1L"]["held_out_explained"]
+    # no confident claim of the wrong fault: the offset is neither a cause nor in the cause set
+    assert "offset Y_w1L" not in [c["name"] for c in d["causes"]]
+    assert not (d["verdict"] == "cause" and d["candidates"][0]["name"] != "gain Y_w1L")

@@ -180,8 +180,9 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         conf_effects, conf_params, _ = configuration_of(s, campaign, config)
         config_sets = repo.load_signalsets(s, campaign, config)
         meas_bands = measured_section_bands(s, ctx)
-        named_offsets = measurement not in (True, False) and any(str(m).startswith("offset ") for m in measurement)
-        measured_sets = repo.load_signalsets(s, campaign, None) if named_offsets else {}  # offset candidates
+        named = measurement not in (True, False) and bool(measurement)
+        # named offsets and gains of shared channels re-evaluate the measurement from its signals
+        measured_sets = repo.load_signalsets(s, campaign, None) if named else {}
     registry = EFFECTS
     unknown = [e for e in (effects or ()) if e not in registry]
     if unknown:
@@ -255,8 +256,12 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
             wanted_m = None if measurement is True else {m.removeprefix("gain ") for m in measurement
                                                          if not m.startswith("offset ")}
             for bad in sorted((wanted_m or set()) - set(chans)):
-                skipped.append({"name": f"gain {bad}", "kind": "measurement",
-                                "reason": "not a channel of this campaign whose quantities it forms alone"})
+                fam = _shared_gain(ctx, measured_sets, bad, base, results[0], meas_bands, sections, limits)
+                if fam is not None:
+                    families[fam.name] = fam
+                else:
+                    skipped.append({"name": f"gain {bad}", "kind": "measurement", "reason": "not a channel of this "
+                                    "campaign whose quantities it forms alone, nor a low-pass channel they use"})
             for ch, comps in chans.items():
                 if wanted_m is None or ch in wanted_m:
                     families[f"gain {ch}"] = gain_family(base, results[0][0], results[0][1], meas_bands, sections, ch,
@@ -367,6 +372,30 @@ def _offset_families(ctx: Any, sets: Mapping[str, Any], measurement: bool | Sequ
         out[f"offset {ch}"] = offset_family(base, pairs, sim_bands, meas_bands, sections, ch,
                                             kind.unit if kind else "", measured, limits, bands=ctx.bands)
     return out
+
+
+def _shared_gain(ctx: Any, sets: Mapping[str, Any], channel: str, base: SectionEvidence, result: tuple,
+                 meas_bands: Mapping, sections: Sequence[tuple[str, int]], limits: Mapping[str, float]
+                 ) -> CandidateFamily | None:
+    """``gain CHANNEL`` named for a low-pass channel that shares its quantities (a wheel force):
+    the measurement re-evaluated from the signals at every gain node; None where the channel is
+    not one (:mod:`railval.core.diagnosis.measurement`)."""
+    from railval.core.diagnosis.measurement import (
+        GAIN_NODES,
+        offset_blind,
+        offset_components,
+        reevaluated_measurement,
+        shared_gain_family,
+    )
+
+    pairs, sim_bands = result
+    comps = offset_components(pairs, channel) if channel in ctx.channels else []
+    if not comps or offset_blind(channel) or not sets:
+        return None
+    measured = [(g, reevaluated_measurement(sets, ctx.sections, channel, lambda x, g=g: x / g, comps))
+                for g in GAIN_NODES]
+    return shared_gain_family(base, pairs, sim_bands, meas_bands, sections, channel, measured, limits,
+                              bands=ctx.bands)
 
 
 def _partner(channel: str) -> str | None:

@@ -135,23 +135,40 @@ def offset_scale(signalsets: Mapping[str, SignalSet], channel: str) -> float:
     return float(np.median(sd)) if sd else 0.0
 
 
-def offset_measured(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo], channel: str,
-                    offset: float, components: Sequence[tuple[str, str]]) -> dict[tuple[str, str, str], float]:
-    """The measurement's EN values of ``components`` with the offset removed from ``channel``
-    (the channel reads the truth + ``offset``): the statistics re-evaluated from the signals
-    (Y/Q, ΣY and the maxima are not shifted by the offset itself), ``(section, quantity,
-    position)`` → M'."""
+def reevaluated_measurement(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo], channel: str,
+                            correct: Callable[[np.ndarray], np.ndarray], components: Sequence[tuple[str, str]]
+                            ) -> dict[tuple[str, str, str], float]:
+    """The measurement's EN values of ``components`` with ``channel`` corrected by ``correct``
+    (the samples → the true samples), re-evaluated from the signals; only the channels the
+    components use are evaluated. ``(section, quantity, position)`` → M'."""
     from dataclasses import replace
 
     from railval.core.en14363 import evaluate_present
     from railval.core.quantities import QUANTITIES
 
     need = {c for q, p in components for c in QUANTITIES[q].channels(p)}  # only what the components use
-    fixed = {sid: replace(ss, channels={c: (np.asarray(x, float) - offset if c == channel else x)
+    fixed = {sid: replace(ss, channels={c: (correct(np.asarray(x, float)) if c == channel else x)
                                         for c, x in ss.channels.items() if c in need})
              for sid, ss in signalsets.items() if channel in ss.channels}
     vals = evaluate_present(fixed, sections)
     return {(sid, q, p): float(v[(q, p)]) for sid, v in vals.items() for q, p in components if (q, p) in v}
+
+
+def offset_measured(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo], channel: str,
+                    offset: float, components: Sequence[tuple[str, str]]) -> dict[tuple[str, str, str], float]:
+    """The measurement's EN values of ``components`` with the offset removed from ``channel``
+    (the channel reads the truth + ``offset``): the statistics re-evaluated from the signals
+    (Y/Q, ΣY and the maxima are not shifted by the offset itself; :func:`reevaluated_measurement`)."""
+    return reevaluated_measurement(signalsets, sections, channel, lambda x: x - offset, components)
+
+
+def _reevaluated_evidence(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]], sim_bands: Mapping,
+                          meas_bands: Mapping, sections: Sequence[tuple[str, int]],
+                          measured: Sequence[tuple[float, Mapping[tuple[str, str, str], float]]],
+                          std_limits: Mapping[str, float], bands: Sequence[tuple[float, float]]) -> list[SectionEvidence]:
+    return [section_evidence(corrected_pairs(pairs, lambda r, m=m: m.get(
+        (str(r["section"]), str(r["quantity"]), str(r["position"]))), std_limits), sim_bands, meas_bands, sections,
+        bands=bands, value_key="D_norm", like=base) for _, m in measured]
 
 
 def offset_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]],
@@ -164,9 +181,7 @@ def offset_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]],
     ``measured`` — (c, :func:`offset_measured` at c) per node — corrects the pairs
     (:func:`corrected_pairs`); the band powers are unchanged (the Welch segments remove the
     mean)."""
-    evidence = [section_evidence(corrected_pairs(pairs, lambda r, m=m: m.get(
-        (str(r["section"]), str(r["quantity"]), str(r["position"]))), std_limits), sim_bands, meas_bands, sections,
-        bands=bands, value_key="D_norm", like=base) for _, m in measured]
+    evidence = _reevaluated_evidence(base, pairs, sim_bands, meas_bands, sections, measured, std_limits, bands)
     values = [c for c, _ in measured]
     comps = sorted({(q, p) for _, m in measured for _, q, p in m})
     return CandidateFamily(
@@ -175,3 +190,22 @@ def offset_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]],
         explanation=(f"the measurement, not the model: channel {channel} reads the true value + c (a zero set "
                      f"wrong, a bridge out of balance); it changes {', '.join(sorted({q for q, _ in comps}))} "
                      "— the other wheel or wheelset measures what the model should match"))
+
+
+def shared_gain_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]], sim_bands: Mapping,
+                       meas_bands: Mapping, sections: Sequence[tuple[str, int]], channel: str,
+                       measured: Sequence[tuple[float, Mapping[tuple[str, str, str], float]]],
+                       std_limits: Mapping[str, float], *, bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ
+                       ) -> CandidateFamily:
+    """The candidate "``channel`` reads g × the true value" for a channel that enters its
+    quantities with a second one (a wheel force: Y/Q, ΣY), where M/g does not hold:
+    ``measured`` — (g, :func:`reevaluated_measurement` with x/g) per node of
+    :data:`GAIN_NODES`."""
+    evidence = _reevaluated_evidence(base, pairs, sim_bands, meas_bands, sections, measured, std_limits, bands)
+    comps = sorted({(q, p) for _, m in measured for _, q, p in m})
+    return CandidateFamily(
+        "measurement", f"gain {channel}", "gain", [g for g, _ in measured], evidence, GAIN_BOUNDS, log=True,
+        reference=1.0, unit="×", title=f"channel {channel} reads",
+        explanation=(f"the measurement, not the model: channel {channel} reads g × the true value (a sensor "
+                     f"sensitivity or amplifier gain set wrong); it changes {', '.join(sorted({q for q, _ in comps}))} "
+                     "(re-evaluated from the signals) — the other wheel or wheelset measures what the model should match"))
