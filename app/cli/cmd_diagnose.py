@@ -140,7 +140,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--values", type=int, default=3, help="simulated values per effect parameter besides its default (default 3)")
     p.add_argument("--candidates", nargs="+", default=None, metavar="E",
                    help="consider only these candidates: effect ids, model.PARAM template parameters and "
-                        "measurement gains 'gain CHANNEL' (one argument, quoted) "
+                        "measurement gains 'gain CHANNEL' and offsets 'offset CHANNEL' (one argument, quoted) "
                         "(default: every effect of the library not in NAME and the template's parameters)")
     p.add_argument("--no-parameters", action="store_true",
                    help="try the effects only, not the vehicle template's parameters")

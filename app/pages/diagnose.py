@@ -189,9 +189,14 @@ class DiagnosePage(PageBase):
                 + (f"; together {100 * together:.0f} %" if together is not None else ""),
                 "success" if len(self.state.causes) > 1 else "info"))
         extra += self._families()
-        if self.state.skipped:
+        in_config = [s for s in self.state.skipped if s["kind"] == "configuration"]
+        candidates = [s for s in self.state.skipped if s["kind"] != "configuration"]
+        if in_config:
+            extra.append(message("Configuration simulated without (cannot apply to this campaign): " + "; ".join(
+                f"{s['name']} — {s['reason']}" for s in in_config), "warning"))
+        if candidates:
             extra.append(message("Left out (cannot apply to this campaign): " + "; ".join(
-                f"{s['name']} — {s['reason']}" for s in self.state.skipped), "info"))
+                f"{s['name']} — {s['reason']}" for s in candidates), "info"))
         # the verdict first: a reader must not scroll past 20 candidates to learn how sure it is
         # 890 px in all: fits the main area at 1280 px (what it fixes and worsens: below, per candidate)
         widths = {"#": 40, "candidate": 165, "kind": 85, "held-out": 100, "in-sample": 105,

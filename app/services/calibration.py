@@ -19,6 +19,7 @@ from railval.app.services.campaign_context import (
     evaluate_effects,
     load_context,
     report,
+    runnable_effects,
     section_values,
     session_of,
     simulate_context,
@@ -118,10 +119,16 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     for e in effects:
         if e not in registry:
             raise InvalidParameter(f"unknown effect {e!r}; known: {sorted(registry)}")
-        why = unmet_requirement(registry[e], ctx.layouts)
-        if why:  # before any simulation, and before anything is stored
-            raise InvalidParameter(f"effect {e!r} cannot apply to campaign {campaign!r}: {why}")
-    base_effects = {k: dict(v) for k, v in conf_effects.items()}
+    # what cannot apply is left out with its reason; refused (before any simulation, before
+    # anything is stored) only when nothing is left to calibrate
+    skipped = [{"name": e, "kind": "effect", "reason": f"cannot apply to campaign {campaign!r}: {why}"}
+               for e in effects if (why := unmet_requirement(registry[e], ctx.layouts))]
+    if skipped and len(skipped) == len(effects) and not model_candidates:
+        raise InvalidParameter("; ".join(f"effect {x['name']!r} {x['reason']}" for x in skipped))
+    effects = [e for e in effects if e not in {x["name"] for x in skipped}]
+    in_config, conf_skipped = runnable_effects(ctx, conf_effects, config)
+    skipped = conf_skipped + skipped
+    base_effects = {k: dict(v) for k, v in in_config.items()}
     specs: list[ParameterSpec] = []
     targets: list[tuple[str, str]] = []
     wanted = set(params or []) | set(model_candidates)
@@ -176,11 +183,14 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     vr_parent = validate_values(ctx, parent_vals)
     plausible, flags = _calibration_flags(ctx, specs, res.parameters, vr_full, vr_held)
     flags += _parent_flags(vr_parent, vr_parent_held, vr_held) + support
+    flags += [f"{'configuration effect' if x['kind'] == 'configuration' else 'effect'} {x['name']} left out: "
+              f"{x['reason']}" for x in skipped]
     with session_of(database) as s:
         repo.store_configuration(
             s, campaign, new_name, parent=config, effects=eff, parameters=model,
             description=f"calibrated {', '.join(effects + model_candidates)} from {config} "
-                        f"(objective {res.objective:.3g})",
+                        f"(objective {res.objective:.3g})"
+                        + "".join(f"; without {x['name']} (cannot apply to this campaign)" for x in conf_skipped),
             signalsets=sets, replace=replace, calibration=record)
         s.flush()
         res.extra["lineage"] = lineage_errors(s, ctx, new_name, {new_name: vr_full})
@@ -188,7 +198,7 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
                       "model_parameters": model, "validation": vr_full.to_dict(),
                       "validation_held_out": vr_held.to_dict() if vr_held is not None else None,
                       "fit_sections": fit_ids, "held_out_sections": held_ids, "in_sample": not held_ids,
-                      "plausible": plausible, "flags": flags,
+                      "plausible": plausible, "flags": flags, "skipped": skipped,
                       "next": {"action": "diagnose", "command": f"railval diagnose {campaign} --config {new_name}",
                                "text": f"diagnose the child next: railval diagnose {campaign} --config {new_name}"}})
     report(progress, "done", 1.0)

@@ -28,7 +28,7 @@ from railval.core.diagnosis import (
 from railval.core.en14363 import evaluate_present
 from railval.core.errors import NotFound
 from railval.core.sim import simulate_campaign
-from railval.core.sim.effects import Effect
+from railval.core.sim.effects import EFFECTS, Effect, unmet_requirement
 from railval.core.types import SectionInfo, SignalSet
 from railval.core.validation import ValidationResult, validate
 from railval.db import repo
@@ -146,6 +146,25 @@ def configuration_of(session: Any, campaign: str, name: str) -> tuple[dict, dict
     """(effects, model parameters, row) of a stored configuration."""
     conf = repo.get_configuration(session, campaign, name)
     return dict(conf.effects or {}), dict(conf.parameters or {}), conf
+
+
+def runnable_effects(ctx: CampaignContext, effects: Mapping[str, Any], config: str) -> tuple[dict, list[dict]]:
+    """The effects switched on in configuration ``config`` that can apply to the campaign, and
+    for each that cannot (track data its sections do not carry:
+    :func:`railval.core.sim.effects.unmet_requirement`) ``{"name", "kind": "configuration",
+    "reason"}`` with a one-line reason naming the sections and the missing field. The
+    configuration is then simulated without it — the simulator would refuse every section —
+    and the result says so (docs/diagnosis.md "Candidates that cannot apply")."""
+    keep, out = {}, []
+    for e, params in effects.items():
+        why = unmet_requirement(EFFECTS[e], ctx.layouts) if e in EFFECTS else None
+        if why:
+            out.append({"name": e, "kind": "configuration",
+                        "reason": f"switched on in configuration {config!r} but cannot apply: {why}; "
+                                  f"simulated without it"})
+        else:
+            keep[e] = params
+    return keep, out
 
 
 def effect_parameters(effect: Effect) -> dict[str, dict[str, Any]]:

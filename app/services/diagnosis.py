@@ -29,7 +29,7 @@ from railval.db import repo, runs
 
 #: version of the diagnosis procedure in the stored runs' digest (with the EN processing
 #: version): a change of the procedure computes afresh instead of reusing an older run
-DIAGNOSIS_VERSION = f"diagnosis/3+{PROCESSING_VERSION}"  # 3: skipped, causes, families
+DIAGNOSIS_VERSION = f"diagnosis/4+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets
 
 __all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnosis_runs", "diagnosis_simulations", "latest_diagnosis", "scan_points"]
 
@@ -86,8 +86,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         params = [n for n in names if n.startswith("model.")]
         options.setdefault("parameters", params or None)
         options.setdefault("include_parameters", bool(params))
-        options.setdefault("measurement", [n for n in names if n.startswith("gain ")] or False)
-        effects = [n for n in names if not n.startswith(("model.", "gain "))]
+        options.setdefault("measurement", [n for n in names if n.startswith(("gain ", "offset "))] or False)
+        effects = [n for n in names if not n.startswith(("model.", "gain ", "offset "))]
     res = diagnose_evidence_service(database_or_session, campaign, config, progress=progress, scheduler=scheduler,
                                     values_per_parameter=values_per_parameter, effects=effects, workers=workers,
                                     **options)

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from railval.app.services.campaign_context import effect_parameters
+from railval.app.services.diagnosis_measurement import offset_families, relative_gains, shared_gain
 from railval.core.diagnosis import (
     PARAMETER_CANDIDATES,
     CandidateFamily,
@@ -155,7 +156,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     plausibility, identifiability and a verdict (module docstring;
     :func:`railval.core.diagnosis.diagnose_evidence`). ``effects``/``parameters`` restrict the
     candidates (``measurement``: the measurement-side candidates ``gain CHANNEL`` —
-    :mod:`railval.core.diagnosis.measurement` — all, none or those named;
+    :mod:`railval.core.diagnosis.measurement` — all, none or those named; ``offset CHANNEL``
+    only when named;
     ``parameters``: template names or ``model.NAME``; ``include_parameters=False``:
     effects only)."""
     from railval.app.services.batch import BatchExecutor
@@ -165,6 +167,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         effect_parameters,
         load_context,
         residual_pattern,
+        runnable_effects,
         section_values,
         session_of,
     )
@@ -178,12 +181,17 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         conf_effects, conf_params, _ = configuration_of(s, campaign, config)
         config_sets = repo.load_signalsets(s, campaign, config)
         meas_bands = measured_section_bands(s, ctx)
+        named = measurement not in (True, False) and bool(measurement)
+        # named offsets and gains of shared channels re-evaluate the measurement from its signals
+        measured_sets = repo.load_signalsets(s, campaign, None) if named else {}
     registry = EFFECTS
     unknown = [e for e in (effects or ()) if e not in registry]
     if unknown:
         raise InvalidParameter(f"unknown effect(s) {unknown}; known: {sorted(registry)}")
     template = str(ctx.vehicle.get("template") or "coach")
     skipped = inapplicable_effects(ctx, conf_effects, effects)
+    # an effect of the configuration itself that cannot apply: simulated without it, said so
+    in_config, conf_skipped = runnable_effects(ctx, conf_effects, config)
     todo = [e for e in (effects if effects is not None else registry) if e not in conf_effects
             and template in registry[e].templates and e not in {x["name"] for x in skipped}]
     plan = parameter_plan(ctx, conf_params) if include_parameters else []
@@ -196,7 +204,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         plan = [p for p in parameter_plan(ctx, conf_params) if p["parameter"] in wanted]
     stored_residual, vr = residual_pattern(ctx, section_values(config_sets, ctx.sections),
                                            band_sums(config_sets, ctx.bands))
-    tasks: list[tuple] = [(ctx, conf_effects, conf_params)]
+    tasks: list[tuple] = [(ctx, in_config, conf_params)]
     index: list[tuple] = []
     unique: dict[str, int] = {}
     for e in todo:
@@ -204,14 +212,14 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         eparams = effect_parameters(spec)
         defaults = {k: float(q["default"]) for k, q in eparams.items()}
         for pname, v, point, _p in scan_points(spec, values_per_parameter):
-            key = json.dumps({**conf_effects, e: point}, sort_keys=True)
+            key = json.dumps({**in_config, e: point}, sort_keys=True)
             if key not in unique:
                 unique[key] = len(tasks)
-                tasks.append((ctx, {**conf_effects, e: point}, conf_params))
+                tasks.append((ctx, {**in_config, e: point}, conf_params))
             index.append(("effect", e, pname, v, defaults, unique[key]))
     for p in plan:
         index.append(("parameter", p["name"], p["parameter"], p["perturbed"], {}, len(tasks)))
-        tasks.append((ctx, conf_effects, {**conf_params, p["parameter"]: p["perturbed"]}))
+        tasks.append((ctx, in_config, {**conf_params, p["parameter"]: p["perturbed"]}))
     total = len(tasks) + (refine if plan else 0)
     _report(progress, "simulate", 0.05, tasks=total)
     with BatchExecutor(scheduler, workers) as ex:
@@ -246,14 +254,21 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         if measurement:
             limits = {q: r.std_limit for q, r in vr.quantities.items()}
             chans = gain_channels(results[0][0])
-            wanted_m = None if measurement is True else {m.removeprefix("gain ") for m in measurement}
+            wanted_m = None if measurement is True else {m.removeprefix("gain ") for m in measurement
+                                                         if not m.startswith("offset ")}
             for bad in sorted((wanted_m or set()) - set(chans)):
-                skipped.append({"name": f"gain {bad}", "kind": "measurement",
-                                "reason": "not a channel of this campaign whose quantities it forms alone"})
+                fam = shared_gain(ctx, measured_sets, bad, base, results[0], meas_bands, sections, limits)
+                if fam is not None:
+                    families[fam.name] = fam
+                else:
+                    skipped.append({"name": f"gain {bad}", "kind": "measurement", "reason": "not a channel of this "
+                                    "campaign whose quantities it forms alone, nor a low-pass channel they use"})
             for ch, comps in chans.items():
                 if wanted_m is None or ch in wanted_m:
                     families[f"gain {ch}"] = gain_family(base, results[0][0], results[0][1], meas_bands, sections, ch,
                                                          comps, limits, bands=ctx.bands)
+            families.update(offset_families(ctx, measured_sets, measurement, base, results[0], meas_bands, sections, limits,
+                                             skipped))
         blind = _without_effect(base, list(families.values()))
         skipped += [{"name": f.name, "kind": f.kind, "reason": "changes none of the quantities the campaign "
                      "measures at any simulated value"} for f in blind
@@ -272,7 +287,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                 if min(abs(math.log(v / x)) for x in fam.values) > math.log(1.1):
                     redo.append((fam, v))
             if redo:
-                more = ex.map(_evaluate_sections, [(ctx, conf_effects, {**conf_params, f.parameter: v}) for f, v in redo])
+                more = ex.map(_evaluate_sections, [(ctx, in_config, {**conf_params, f.parameter: v}) for f, v in redo])
                 for (fam, v), res in zip(redo, more, strict=True):
                     fam.values.append(v)
                     fam.evidence.append(section_evidence(res[0], res[1], meas_bands, sections, value_key="D_norm",
@@ -282,7 +297,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     res = diagnose_evidence(base, fams, validated=bool(vr.validated), n_boot=n_boot, folds=folds, seed=seed)
     res.extra["families"] = diagnose_families(base, fams, validated=bool(vr.validated), n_boot=n_boot,
                                               folds=folds, seed=seed)
-    _relative_gains(res)
+    relative_gains(res)
     pool = [f for f in fams if any(c.name == f.name and c.significant for c in res.candidates)]
     if res.extra["verdict"] == "none" or not pool:
         cs = {"causes": [], "held_out_explained": 0.0, "remaining_within_noise": bool(res.extra["residual_within_noise"]),
@@ -303,36 +318,14 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                       "values_per_parameter": values_per_parameter, "simulations": n_sim,
                       "stored_residual_norm": math.sqrt(stored_residual.norm2()),
                       "simulated_residual_norm": math.sqrt(res.residual.norm2()),
-                      "skipped": skipped})
+                      "effects_simulated": sorted(in_config), "skipped": conf_skipped + skipped})
     if skipped and not fams:
         res.note += "; left out: " + "; ".join(f"{s['name']} ({s['reason']})" for s in skipped)
+    if conf_skipped:
+        res.note += "; " + "; ".join(f"effect {s['name']} {s['reason']}" for s in conf_skipped)
     res.extra["next"] = next_step(res, campaign, config)
     _report(progress, "done", 1.0)
     return res
-
-
-def _partner(channel: str) -> str | None:
-    """The redundant channel of a gain candidate: the same direction at the other car body
-    end (``az_cb_b1`` ↔ ``az_cb_b2``) or bogie."""
-    stem, _, end = channel.rpartition("_")
-    other = {"b1": "b2", "b2": "b1"}.get(end)
-    return f"{stem}_{other}" if stem and other else None
-
-
-def _relative_gains(res: DiagnosisResult) -> None:
-    """Use the campaign's redundancy: a gain candidate's fitted value also absorbs any model
-    error common to both ends; its ratio to the fitted gain of the redundant channel is what
-    the one sensor reads more than the other (``parameters["relative_gain"]``, said in the
-    summary)."""
-    by = {c.name: c for c in res.candidates if c.kind == "measurement"}
-    for c in by.values():
-        other = by.get(f"gain {_partner(c.name.removeprefix('gain '))}")
-        if other is None or not (other.fitted > 0):
-            continue
-        rel = c.fitted / other.fitted
-        c.parameters["relative_gain"] = rel
-        c.summary += (f"; {rel:.3g} × what {other.name.removeprefix('gain ')} (the redundant channel) implies "
-                      f"— what this sensor reads more than the other")
 
 
 def inapplicable_effects(ctx: Any, conf_effects: Mapping[str, Any], effects: Sequence[str] | None) -> list[dict]:
@@ -397,7 +390,9 @@ def next_step(res: DiagnosisResult, campaign: str, config: str) -> dict[str, Any
     all_causes = res.extra.get("causes") or []
     sensors = [x for x in all_causes if x["kind"] == "measurement"]
     check = ("; first check the measurement: " + "; ".join(
-        f"{x['name'].removeprefix('gain ')} reads ≈ {x['fitted']:.3g} × the true value" for x in sensors)) if sensors else ""
+        f"{x['name'].removeprefix('offset ')} reads ≈ the true value {x['fitted']:+.3g}" if x["parameter"] == "offset"
+        else f"{x['name'].removeprefix('gain ')} reads ≈ {x['fitted']:.3g} × the true value" for x in sensors)
+             ) if sensors else ""
     causes = [x for x in all_causes if x["kind"] != "measurement"]
     if sensors and not causes:
         return {"action": "check measurement", "candidates": [x["name"] for x in sensors],
