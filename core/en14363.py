@@ -54,38 +54,42 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from railval.core.definitions import (
     CHOSEN,
     SLIDING_VARIANTS,
     Reading,
-    percentile_ranks,
-    percentiles_from_order,
     sample_window_means,
     window_centres,
 )
+from railval.core.en_statistics import (  # noqa: F401 - the statistics of the chain, re-exported
+    P_HIGH,
+    P_LOW,
+    P_MEDIAN,
+    PERCENTILES,
+    QUANTILE_METHOD,
+    STEP_M,
+    WINDOW_M,
+    _check_sliding_range,
+    _interpolant_means,
+    _row_percentiles,
+    maxabs,
+    percentile,
+    rms,
+    sliding_mean_distance,
+)
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows, settling_check
-from railval.core.orderstat import order_statistics
 from railval.core.quantities import QUANTITIES, WHEELSET_POSITIONS
 from railval.core.supplementary import BOGIE_KINDS, PSD_KINDS, SUPPLEMENTARY, psd_band_values
 from railval.core.types import CHANNELS, WHEEL_POSITIONS, SectionInfo, SignalSet, channel_name
 
 #: bump whenever the numbers this module produces can change (enters result-cache keys)
 PROCESSING_VERSION = "en14363/2"
-#: numpy.quantile method used for every percentile (EN 14363 cumulative distribution)
-QUANTILE_METHOD = CHOSEN.percentile
-P_LOW = 0.0015
-P_MEDIAN = 0.5
-P_HIGH = 0.9985
-WINDOW_M = 2.0
 #: largest sample magnitude processed: squares and filter states of larger values overflow
 #: float64 (±1.8e308) and turn statistics into inf or NaN
 MAX_ABS_SAMPLE = 1e100
-STEP_M = 0.5
-PERCENTILES = (P_LOW, P_MEDIAN, P_HIGH)
 #: the reading that differs from the chosen one only in the percentile method
 _LINEAR = Reading("linear", CHOSEN.grid, CHOSEN.window)
 
@@ -143,136 +147,6 @@ class SectionValues(dict):
         return pd.DataFrame([{"section": self.section_id, "quantity": q, "position": p,
                               "value": float(v), "unit": QUANTITIES[q].unit}
                              for (q, p), v in self.items()])
-
-
-# --------------------------------------------------------------------------- statistics
-
-def percentile(x: np.ndarray, p, axis: int = -1) -> np.ndarray:
-    """EN 14363 percentile value(s) ``p`` (fractions, e.g. 0.9985) along ``axis``.
-
-    Inverse of the empirical cumulative distribution (``numpy.quantile`` with
-    ``method="inverted_cdf"``); see the module docstring.
-    """
-    return np.quantile(np.asarray(x, dtype=np.float64), p, axis=axis, method=QUANTILE_METHOD)
-
-
-def _row_percentiles(rows: np.ndarray, methods: tuple[str, ...] = (QUANTILE_METHOD,)
-                     ) -> list[np.ndarray]:
-    """(0.15 %, 50 %, 99.85 %) values of every row under each percentile method, each of shape
-    (n_rows, 3): the order statistics the methods read are selected once for all of them
-    (:func:`railval.core.orderstat.order_statistics`, exact, no sort of the rows) and the
-    percentiles formed from them as :func:`railval.core.definitions.sorted_percentiles`
-    forms them from a sorted row."""
-    rows = np.atleast_2d(rows)
-    n = rows.shape[-1]
-    ranks = sorted({r for m in methods for r in percentile_ranks(n, PERCENTILES, m)})
-    stats = order_statistics(rows, ranks)
-    column = {r: c for c, r in enumerate(ranks)}
-    return [percentiles_from_order(lambda i: stats[:, column[i]], n, PERCENTILES, m)
-            for m in methods]
-
-
-def maxabs(p_low: np.ndarray | float, p_high: np.ndarray | float):
-    """Larger magnitude of the 0.15 % and 99.85 % values (Polach & Böttcher 2014 Table 2, footnote a)."""
-    return np.maximum(np.abs(p_low), np.abs(p_high))
-
-
-def rms(x: np.ndarray, axis: int = -1) -> np.ndarray:
-    """Root mean square ``sqrt(mean(x²))`` along ``axis`` (unit of x)."""
-    x = np.asarray(x, dtype=np.float64)
-    return np.sqrt(np.mean(x * x, axis=axis))
-
-
-def sliding_mean_distance(values: np.ndarray, distance_m: np.ndarray, start_m: float,
-                          end_m: float, window_m: float = WINDOW_M,
-                          step_m: float = STEP_M, *,
-                          origin_m: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Sliding mean over ``window_m`` metres evaluated every ``step_m`` metres of distance.
-
-    The signal is taken as piecewise linear between samples on the distance axis (so variable
-    speed is handled exactly); its integral ``C(x) = ∫ s dx`` is the cumulative trapezoid at
-    the samples and a quadratic in between. The mean over the window centred at ``x`` is
-    ``(C(x + w/2) − C(x − w/2)) / w``. Centres are ``origin_m + w/2 + k·step_m`` up to
-    ``end_m − w/2`` with ``origin_m = start_m`` unless given (the alternative grid starts at
-    the first evaluated sample): every window lies inside the evaluated range.
-
-    ``values``: shape (n,) or (n_rows, n); ``distance_m``: strictly increasing, shape (n,), m.
-    Returns ``(centres_m, means)``, means shaped (n_rows, n_centres) (or (n_centres,)).
-
-    References: Polach & Böttcher 2014 Table 2 ("sliding mean, 2 m window, step 0.5 m"); EN 14363.
-    """
-    d = np.asarray(distance_m, dtype=np.float64)
-    v = np.asarray(values, dtype=np.float64)
-    one_d = v.ndim == 1
-    if one_d:
-        v = v[np.newaxis, :]
-    _check_sliding_range(d, start_m, end_m, window_m, step_m)
-    (centres, means), = _interpolant_means(
-        v, d, start_m, end_m, window_m, step_m, [start_m if origin_m is None else origin_m])
-    return centres, (means[0] if one_d else means)
-
-
-def _check_sliding_range(d: np.ndarray, start_m: float, end_m: float, window_m: float,
-                         step_m: float) -> None:
-    if window_m <= 0 or step_m <= 0:
-        raise InvalidParameter(
-            f"window_m and step_m must be > 0 m, got window_m={window_m}, step_m={step_m}")
-    if end_m - start_m < window_m:
-        raise InvalidSignal(
-            f"evaluated range {start_m}–{end_m} m is shorter than the {window_m} m sliding "
-            f"window")
-    if start_m < d[0] or end_m > d[-1]:
-        raise InvalidSignal(
-            f"evaluated range {start_m}–{end_m} m exceeds the distance axis "
-            f"{d[0]:.3f}–{d[-1]:.3f} m")
-
-
-def _interpolant_means(v: np.ndarray, d: np.ndarray, start_m: float, end_m: float,
-                       window_m: float, step_m: float, origins) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Distance-weighted window means of the rows of ``v`` for the grid of each origin in
-    ``origins``; the cumulative integral is formed once for all of them."""
-    half = window_m / 2.0
-    h = np.diff(d)
-    grids = []
-    for origin in origins:
-        centres = window_centres(start_m, end_m, origin, window_m, step_m)
-        ends = []
-        for x in (centres - half, centres + half):
-            j = np.clip(np.searchsorted(d, x, side="right") - 1, 0, d.size - 2)
-            ends.append((j, x - d[j]))
-        grids.append((centres, ends))
-    j_all = np.concatenate([e[0] for _, ends in grids for e in ends])
-    u_all = np.concatenate([e[1] for _, ends in grids for e in ends])
-    at = np.empty((v.shape[0], j_all.size))
-    _integral_at(np.ascontiguousarray(v), h, j_all, u_all, at)
-    out = []
-    pos = 0
-    for centres, _ in grids:
-        k = centres.size
-        out.append((centres, (at[:, pos + k:pos + 2 * k] - at[:, pos:pos + k]) / window_m))
-        pos += 2 * k
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _integral_at(v, h, j, u, out):  # pragma: no cover - compiled
-    """``out[r, k]`` = C(x_k) of row r, the integral of the piecewise-linear signal from the
-    first sample to ``x_k = d[j[k]] + u[k]``: the cumulative trapezoid at the samples
-    (``C_0 = 0``, ``C_i = C_{i−1} + 0.5·(v_i + v_{i−1})·h_{i−1}``, summed in order as numpy's
-    cumsum sums) plus the quadratic of the interval ``[d_j, d_{j+1}]``:
-    ``C_j + v_j·u + 0.5·slope·u²`` with ``slope = (v_{j+1} − v_j)/h_j`` — the same operations
-    in the same order as the former numpy expression, so the same numbers."""
-    rows, n = v.shape
-    cum = np.empty(n)
-    for r in range(rows):
-        cum[0] = 0.0
-        for i in range(1, n):
-            cum[i] = cum[i - 1] + (v[r, i] + v[r, i - 1]) * 0.5 * h[i - 1]
-        for k in range(j.shape[0]):
-            jj = j[k]
-            uu = u[k]
-            slope = (v[r, jj + 1] - v[r, jj]) / h[jj]
-            out[r, k] = cum[jj] + v[r, jj] * uu + 0.5 * slope * uu * uu
 
 
 # --------------------------------------------------------------------------- validation
