@@ -7,6 +7,7 @@ imported or run):
 * no import loop among railval's modules (every import counts, also those inside functions);
 * no module in ``app/`` above :data:`MAX_APP_LINES` lines unless its docstring says why
   (a paragraph starting ``Length:``);
+* no module in ``core/`` above :data:`MAX_CORE_LINES` lines (no exception: split by concept);
 * every package folder (a folder with ``__init__.py``) is installed (pyproject's package list);
 * no file cites documents that are not in the repository.
 """
@@ -26,6 +27,7 @@ ROOT = Path(__file__).resolve().parent.parent
 #: repository folder → installed package
 FOLDERS = {"core": "railval.core", "db": "railval.db", "app": "railval.app"}
 MAX_APP_LINES = 500
+MAX_CORE_LINES = 700
 UI_LIBRARIES = ("panel", "param", "bokeh", "holoviews")
 STORAGE_LIBRARIES = ("sqlalchemy", "alembic")
 
@@ -215,6 +217,13 @@ def test_app_modules_are_small_or_say_why(name):
         assert re.search(r"^Length:\s*\S", doc, re.MULTILINE), (
             f"{path.relative_to(ROOT)} has {lines} lines (> {MAX_APP_LINES}); split it or state why "
             "in a docstring paragraph starting 'Length:'")
+
+
+def test_core_modules_are_at_most_700_lines():
+    long = {str(p.relative_to(ROOT)): p.read_text(encoding="utf-8").count("\n")
+            for n, p in MODULES.items() if n.startswith("railval.core")}
+    assert long and not {k: v for k, v in long.items() if v > MAX_CORE_LINES}, \
+        {k: v for k, v in long.items() if v > MAX_CORE_LINES}
 
 
 def test_every_package_folder_is_installed():
