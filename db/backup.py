@@ -136,9 +136,7 @@ def backup(database, folder: str | Path, *, actor: Any = "system") -> dict[str, 
               f"--schema={schema}", f"--file={target}", f"--dbname={uri}"], env)
         facts["schema"] = schema
     key = out / SECRET
-    fd = os.open(key, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    with os.fdopen(fd, "wb") as fh:
-        fh.write(secret + b"\n")
+    _write_private(key, secret + b"\n")
     files = [target, key, *_copy_signing_files(database.url, out)]
     manifest = {"format": FORMAT, "backend": backend, "revision": database.current_revision(),
                 "created_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
@@ -146,6 +144,14 @@ def backup(database, folder: str | Path, *, actor: Any = "system") -> dict[str, 
                 "files": {p.name: _sha256(p) for p in files}}
     (out / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
     return manifest
+
+
+def _write_private(path: Path, data: bytes) -> None:
+    """Create ``path`` readable by its owner only (0600) and write ``data``; an existing file
+    is never overwritten."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
 
 
 def _copy_signing_files(url: str, out: Path) -> list[Path]:
@@ -160,9 +166,7 @@ def _copy_signing_files(url: str, out: Path) -> list[Path]:
         if src is None or not src.is_file():
             continue
         dst = out / name
-        fd = os.open(dst, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(src.read_bytes())
+        _write_private(dst, src.read_bytes())
         copies.append(dst)
     return copies
 
@@ -187,9 +191,7 @@ def _install_signing_files(url: str, root: Path) -> None:
                                   f"backup's {name}")
             continue
         dst.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(dst, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+        _write_private(dst, data)
     integrity.forget_keys()
 
 
@@ -234,9 +236,7 @@ def _install_secret(database, secret: bytes) -> str:
                               f"backup's {SECRET}")
         return str(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    with os.fdopen(fd, "wb") as fh:
-        fh.write(secret + b"\n")
+    _write_private(path, secret + b"\n")
     return str(path)
 
 
