@@ -157,3 +157,15 @@ def click_bar(page, title: str, factor: str, above_base_px: float = 4.0) -> None
     i = fr["factors"].index(factor)
     x = fr["left"] + (i + 0.5) / len(fr["factors"]) * (fr["right"] - fr["left"])
     page.mouse.click(x, fr["bottom"] - above_base_px)
+
+
+def sign_in(page, base: str, username: str, password: str, *, timeout_ms: int = 120_000) -> None:
+    """Sign in on the app's own sign-in page (fonts blocked, a 1280 × 1100 viewport) and wait
+    for the page navigation of the signed-in app."""
+    block_fonts(page)
+    page.set_viewport_size({"width": 1280, "height": 1100})
+    page.goto(f"{base}/app")
+    page.fill("#username", username)
+    page.fill("#password", password)
+    page.click("#signin")
+    page.locator(".rv-nav").wait_for(timeout=timeout_ms)

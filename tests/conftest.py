@@ -31,6 +31,17 @@ PG_SERVER_URL = os.environ.get(
 _pg_state: dict[str, str | None] = {}
 
 
+def require_program(path: str | None, hint: str) -> str:
+    """``path`` of an outside program a test drives (nginx, systemd-analyze); when it is
+    missing the test skips with ``hint`` — or fails under ``RAILVAL_REQUIRE_PROGRAMS=1`` (CI,
+    whose .ci/run installs them), so a missing program can never pass CI silently."""
+    if path is not None:
+        return path
+    if os.environ.get("RAILVAL_REQUIRE_PROGRAMS") == "1":
+        pytest.fail(f"RAILVAL_REQUIRE_PROGRAMS=1 but {hint}")
+    pytest.skip(hint)
+
+
 def _pg_unavailable() -> str | None:
     """``None`` when the PostgreSQL test server answers, else the reason it does not."""
     if "reason" not in _pg_state:

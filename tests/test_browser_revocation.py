@@ -19,7 +19,7 @@ import pytest
 from railval.app.cli import main
 from railval.db import audit, repo, users
 from railval.db import signoff as db_signoff
-from tests.browser_support import block_fonts, require_browser, screenshot, served_app
+from tests.browser_support import require_browser, screenshot, served_app, sign_in
 
 pytestmark = [pytest.mark.browser,
               pytest.mark.filterwarnings("ignore:reference already known:UserWarning")]
@@ -43,16 +43,6 @@ def app(tmp_path_factory):
         yield db, url.rsplit("/app", 1)[0]
     db.dispose()
     os.environ.pop("RAILVAL_COOKIE_SECRET", None)
-
-
-def sign_in(page, base: str, username: str, password: str) -> None:
-    block_fonts(page)
-    page.set_viewport_size({"width": 1280, "height": 1100})
-    page.goto(f"{base}/app")
-    page.fill("#username", username)
-    page.fill("#password", password)
-    page.click("#signin")
-    page.locator(".rv-nav").wait_for(timeout=TIMEOUT_MS)
 
 
 def cli(db, *argv) -> int:

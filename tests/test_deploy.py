@@ -16,6 +16,7 @@ import pytest
 import yaml
 
 from railval.app.bench.topology import TEMPLATE, nginx_binary, render, self_signed
+from tests.conftest import require_program
 
 DEPLOY = Path(__file__).resolve().parent.parent / "deploy"
 SECRET_NAMES = ("RAILVAL_DB_PASSWORD", "RAILVAL_SECRET_KEY", "RAILVAL_COOKIE_SECRET",
@@ -81,9 +82,7 @@ def test_image_bakes_in_no_secret():
 
 
 def test_nginx_template_with_the_compose_values_passes_nginx_t(tmp_path):
-    binary = nginx_binary()
-    if binary is None:
-        pytest.skip("nginx missing (apt-get install nginx-light)")
+    binary = require_program(nginx_binary(), "nginx missing (apt-get install nginx-light)")
     env = _compose()["services"]["proxy"]["environment"]
     cert, key = self_signed(tmp_path)
     values = {**{k: str(v) for k, v in env.items()},
@@ -107,9 +106,7 @@ def test_nginx_template_with_the_compose_values_passes_nginx_t(tmp_path):
 
 
 def test_systemd_units_verify(tmp_path):
-    exe = shutil.which("systemd-analyze")
-    if exe is None:
-        pytest.skip("systemd-analyze missing")
+    exe = require_program(shutil.which("systemd-analyze"), "systemd-analyze missing (apt-get install systemd)")
     units = []
     venv = str(Path(sys.executable).parent.parent)
     for unit in sorted((DEPLOY / "systemd").glob("railval*")):
@@ -126,3 +123,15 @@ def test_systemd_units_verify(tmp_path):
     bad = tmp_path / "railval-bad.service"
     bad.write_text("[Service]\nExecStart=relative/path\nRestart=sometimes\n")
     assert subprocess.run([exe, "verify", "--man=no", str(bad)], capture_output=True, check=False).returncode != 0
+
+
+def test_a_missing_program_fails_when_required(monkeypatch):
+    """Under CI (RAILVAL_REQUIRE_PROGRAMS=1) a missing nginx or systemd-analyze is a failure,
+    not a skip; outside CI a skip with the install hint."""
+    monkeypatch.setenv("RAILVAL_REQUIRE_PROGRAMS", "1")
+    with pytest.raises(pytest.fail.Exception, match="nginx missing"):
+        require_program(None, "nginx missing (apt-get install nginx-light)")
+    monkeypatch.setenv("RAILVAL_REQUIRE_PROGRAMS", "0")
+    with pytest.raises(pytest.skip.Exception, match="nginx missing"):
+        require_program(None, "nginx missing (apt-get install nginx-light)")
+    assert require_program("/usr/sbin/nginx", "unused") == "/usr/sbin/nginx"

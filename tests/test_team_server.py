@@ -23,7 +23,7 @@ from railval.app.bench.bench_workshop import xsrf_of
 from railval.app.bench.topology import Topology, insecure_context, nginx_binary
 from railval.db import users
 from tests.browser_support import block_fonts, require_browser
-from tests.conftest import backend_url
+from tests.conftest import backend_url, require_program
 
 pytestmark = [pytest.mark.browser, pytest.mark.postgres]
 TIMEOUT_MS = 60_000
@@ -33,10 +33,7 @@ REVIEWERS = 6
 @pytest.fixture(scope="module")
 def team(tmp_path_factory):
     require_browser()
-    if nginx_binary() is None:
-        if os.environ.get("RAILVAL_REQUIRE_BROWSER") == "1":
-            pytest.fail("nginx missing (apt-get install nginx-light; .ci/run installs it)")
-        pytest.skip("nginx missing (apt-get install nginx-light)")
+    require_program(nginx_binary(), "nginx missing (apt-get install nginx-light)")
     from railval.app.services import workshops as wsvc
     from railval.db import workshops as wsdb
     from railval.db.engine import connect
