@@ -157,6 +157,8 @@ def authorize(args: argparse.Namespace) -> None:
     --role admin`` runs for whoever can write the database (:func:`first_admin`), so no
     sequence of verbs leaves a database nobody can administer.
     """
+    if getattr(args, "authorizes_itself", False):  # `list`: checked in its verb (cmd_list)
+        return
     import getpass
     import os
 

@@ -62,7 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("list", help="list campaigns with sections, zones and configurations")
     p.add_argument("--json", action="store_true", help="print one JSON document")
-    p.set_defaults(func=cmd_list)
+    p.set_defaults(func=cmd_list, authorizes_itself=True)
 
 
 def _database(args: argparse.Namespace, *, upgrade: bool = True):
@@ -150,17 +150,33 @@ def _zones_text(zones: dict[str, int]) -> str:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    from railval.db import repo
+    """The catalogue, read with the database driver alone when the case is plain
+    (:mod:`railval.db.catalogue`: no SQLAlchemy, ORM or migrations imported), else through
+    the ordinary path: :func:`railval.app.cli.authorize` (skipped by ``main`` for this verb,
+    ``authorizes_itself``), migrations, :func:`railval.db.repo.campaign_summary`."""
+    import os
 
-    database = _database(args)
-    with database.session() as s:
-        ids = [c.id for c in repo.list_campaigns(s)]
-    docs = [_summary(database, cid) for cid in ids]
+    from railval.db import catalogue
+
+    url = catalogue.resolve_url(args.db)
+    docs = catalogue.read_catalogue(url, args.as_user or os.environ.get("RAILVAL_USER"))
+    safe_url = catalogue.safe_url(url)
+    if docs is None:
+        from railval.app.cli import authorize
+        from railval.db import repo
+
+        args.authorizes_itself = False
+        authorize(args)
+        database = _database(args)
+        with database.session() as s:
+            ids = [c.id for c in repo.list_campaigns(s)]
+        docs = [_summary(database, cid) for cid in ids]
+        safe_url = database.safe_url
     if args.json:
-        emit_json({"database": database.safe_url, "campaigns": docs})
+        emit_json({"database": safe_url, "campaigns": docs})
         return 0
     if not docs:
-        print(f"{database.safe_url}: no campaigns (import one with `railval import DIR`)")
+        print(f"{safe_url}: no campaigns (import one with `railval import DIR`)")
         return 0
     for d in docs:
         lineage = ", ".join(x["name"] + (f" ← {x['parent']}" if x["parent"] else "")
