@@ -31,7 +31,7 @@ from railval.core.roles import CLI_ACTIONS, Principal, allowed
 from railval.core.zones import zone_for_radius
 
 _VERSIONS = Path(__file__).with_name("migrations") / "versions"
-_REV = re.compile(r"^(down_revision|revision)\b[^=]*=\s*(?:['\"]([^'\"]*)['\"]|None)", re.M)
+_REV = re.compile(r"^(down_revision|revision)\b[^=]*=\s*(?:['\"]([^'\"]*)['\"]|None)", re.MULTILINE)
 
 
 def head_revision() -> str | None:
@@ -39,8 +39,8 @@ def head_revision() -> str | None:
     revisions: set[str] = set()
     parents: set[str] = set()
     for path in _VERSIONS.glob("*.py"):
-        found = dict((m.group(1), m.group(2)) for m in _REV.finditer(path.read_text("utf-8")))
-        if "revision" in found and found["revision"]:
+        found = {m.group(1): m.group(2) for m in _REV.finditer(path.read_text("utf-8"))}
+        if found.get("revision"):
             revisions.add(found["revision"])
             if found.get("down_revision"):
                 parents.add(found["down_revision"])
