@@ -294,12 +294,9 @@ def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,
     return evaluate_batch([signalset], [section_info], order=order)[0]
 
 
-def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray | None,
-                   bp: np.ndarray | None, order: int, with_alternatives: bool = True,
-                   with_supplementary: bool = True, clock: _Clock | None = None
-                   ) -> SectionValues:
-    clock = clock or _Clock(None)
-    d = np.asarray(ss.distance_m, dtype=np.float64)
+def _evaluated_cut(d: np.ndarray, sec: SectionInfo) -> tuple[np.ndarray, slice, int]:
+    """Step 3 of the chain: the samples with ``eval_start_m ≤ distance_m ≤ eval_end_m`` as a
+    mask and as the slice from the first to the last of them, and their number (≥ 2)."""
     mask = (d >= sec.eval_start_m) & (d <= sec.eval_end_m)
     n_eval = int(mask.sum())
     if n_eval < 2:
@@ -307,147 +304,214 @@ def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray 
             f"section {sec.id}: evaluated range {sec.eval_start_m}–{sec.eval_end_m} m holds "
             f"{n_eval} samples, needs at least 2")
     lo_idx, hi_idx = np.flatnonzero(mask)[[0, -1]]
-    cut = slice(int(lo_idx), int(hi_idx) + 1)
-    fs = float(ss.fs)
-    cut_text = (f"cut to evaluated range {sec.eval_start_m:g}–{sec.eval_end_m:g} m by distance "
-                f"({n_eval} samples)")
-    pct_text = f"percentiles: np.quantile method='{QUANTILE_METHOD}' (EN 14363 cumulative distribution)"
-    values: dict[tuple[str, str], float] = {}
-    prov: dict[tuple[str, str], tuple[str, ...]] = {}
-    warnings: list[str] = []
-    alts: dict[str, dict[tuple[str, str], float]] = {}
-    supp: dict[tuple[str, str], float] = {}
-    methods = ((QUANTILE_METHOD, _LINEAR.percentile) if with_alternatives
-               else (QUANTILE_METHOD,))
+    return mask, slice(int(lo_idx), int(hi_idx) + 1), n_eval
 
-    def alternative(reading: Reading, key: tuple[str, str], value: float) -> None:
-        # kept only where the reading changes the value (NaN: undefined under the reading)
-        if with_alternatives and value != values[key]:  # True for NaN as well
-            alts.setdefault(reading.id, {})[key] = float(value)
 
+def _statistic(processing: str, p_lo, p_med, p_hi, rms_value=None):
+    """Step 4: a quantity's value from the (0.15 %, 50 %, 99.85 %) values and the rms by the
+    registry's ``Quantity.processing`` (:mod:`railval.core.quantities`; Polach & Böttcher 2014
+    Table 2): ``median`` the 50 % value with sign, ``p99.85`` the 99.85 % value, ``maxabs``
+    the larger magnitude of the 0.15 % and 99.85 % values, ``rms`` the rms."""
+    if processing == "maxabs":
+        return maxabs(p_lo, p_hi)
+    return {"median": p_med, "p99.85": p_hi, "rms": rms_value}[processing]
+
+
+_DERIVE_TEXT = {"YQ": "Y/Q formed sample-wise from the low-pass filtered Y and Q",
+                "SumY": "ΣY = Y_L + Y_R formed from the low-pass filtered forces"}
+
+
+class _SectionState:
+    """One section's values while :func:`_section_stats` forms them: the evaluated cut, the
+    values, their provenance, warnings, values under the other readings and supplementary
+    values."""
+
+    def __init__(self, ss: SignalSet, sec: SectionInfo, order: int, with_alternatives: bool,
+                 clock: _Clock):
+        self.ss, self.sec, self.order, self.clock = ss, sec, order, clock
+        self.d = np.asarray(ss.distance_m, dtype=np.float64)
+        self.mask, self.cut, n_eval = _evaluated_cut(self.d, sec)
+        self.fs = float(ss.fs)
+        self.cut_text = (f"cut to evaluated range {sec.eval_start_m:g}–{sec.eval_end_m:g} m "
+                         f"by distance ({n_eval} samples)")
+        self.pct_text = (f"percentiles: np.quantile method='{QUANTILE_METHOD}' (EN 14363 "
+                         "cumulative distribution)")
+        self.values: dict[tuple[str, str], float] = {}
+        self.prov: dict[tuple[str, str], tuple[str, ...]] = {}
+        self.warnings: list[str] = []
+        self.alts: dict[str, dict[tuple[str, str], float]] = {}
+        self.supp: dict[tuple[str, str], float] = {}
+        self.with_alternatives = with_alternatives
+        self.methods = ((QUANTILE_METHOD, _LINEAR.percentile) if with_alternatives
+                        else (QUANTILE_METHOD,))
+
+    def alternative(self, reading: Reading, key: tuple[str, str], value: float) -> None:
+        """Keep ``value`` under ``reading`` where it differs from the chosen value (NaN:
+        undefined under the reading)."""
+        if self.with_alternatives and value != self.values[key]:  # True for NaN as well
+            self.alts.setdefault(reading.id, {})[key] = float(value)
+
+    def settle(self, kind: str) -> str:
+        """Settling warnings of filter ``kind``; returns the filter's provenance label."""
+        self.warnings += [w.message for w in settling_check(
+            self.ss.time_s, self.mask, self.fs, kind, self.order, self.sec.id)]
+        return design(self.fs, kind, self.order).label + ", whole section"
+
+    def result(self) -> SectionValues:
+        order_keys = [(q, p) for q, quantity in QUANTITIES.items() for p in quantity.positions()]
+        supp_keys = [(q, p) for q, sq in SUPPLEMENTARY.items() for p in sq.positions()]
+        return SectionValues(self.sec.id, {k: self.values[k] for k in order_keys
+                                           if k in self.values},
+                             self.prov, self.warnings, self.alts,
+                             {k: self.supp[k] for k in supp_keys if k in self.supp})
+
+
+def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray | None,
+                   bp: np.ndarray | None, order: int, with_alternatives: bool = True,
+                   with_supplementary: bool = True, clock: _Clock | None = None
+                   ) -> SectionValues:
+    """Steps 2–4 of the chain for one section from its filtered rows (``lp``/``bp`` in the
+    channel order of ``plan``)."""
+    st = _SectionState(ss, sec, order, with_alternatives, clock or _Clock(None))
     if lp is not None and lp.shape[0]:
-        lp_label = design(fs, "lowpass", order).label + ", whole section"
-        warnings += [w.message for w in settling_check(ss.time_s, mask, fs, "lowpass", order,
-                                                       sec.id)]
-        index = {c: r for r, c in enumerate(plan.lp_names)}
-        wheels_y = [p for p in WHEEL_POSITIONS if f"Y_{p}" in index]
-        wheels_q = [p for p in WHEEL_POSITIONS if f"Q_{p}" in index]
-        wheels_yq = [p for p in wheels_y if p in wheels_q]
-        wsets = [ws for ws in WHEELSET_POSITIONS
-                 if f"Y_w{ws[2:]}L" in index and f"Y_w{ws[2:]}R" in index]
-        # derived signals only where needed: the evaluated samples plus one on each side
-        # (the sliding-mean windows lie inside the evaluated range)
-        wide = slice(max(cut.start - 1, 0), min(cut.stop + 1, lp.shape[1]))
-        inner = slice(cut.start - wide.start, cut.stop - wide.start)
-        n_wide = wide.stop - wide.start
-        ratio = np.empty((len(wheels_yq), n_wide))
-        for r, p in enumerate(wheels_yq):
-            q = lp[index[f"Q_{p}"], wide]
-            if np.any(q[inner] == 0.0):
-                raise InvalidSignal(
-                    f"section {sec.id}: Q_{p} is exactly 0 kN inside the evaluated range; "
-                    f"Y/Q is undefined")
-            np.divide(lp[index[f"Y_{p}"], wide], q, out=ratio[r])
-        sumy = np.empty((len(wsets), n_wide))
-        for r, ws in enumerate(wsets):
-            np.add(lp[index[f"Y_w{ws[2:]}L"], wide], lp[index[f"Y_w{ws[2:]}R"], wide],
-                   out=sumy[r])
-        rows = np.empty((len(wheels_y) + len(wheels_q) + len(wheels_yq) + len(wsets), n_eval))
-        r = 0
-        for name in [f"Y_{p}" for p in wheels_y] + [f"Q_{p}" for p in wheels_q]:
-            rows[r] = lp[index[name], cut]
-            r += 1
-        rows[r:r + len(wheels_yq)] = ratio[:, inner]
-        rows[r + len(wheels_yq):] = sumy[:, inner]
-        both = (_row_percentiles(rows, methods) if rows.shape[0]
-                else [np.empty((0, 3))] * len(methods))
-        pct, pct_lin = both[0], both[-1]
-        r = 0
-        for fam, positions in (("Y", wheels_y), ("Q", wheels_q), ("YQ", wheels_yq),
-                               ("SumY", wsets)):
-            derive = {"YQ": "Y/Q formed sample-wise from the low-pass filtered Y and Q",
-                      "SumY": "ΣY = Y_L + Y_R formed from the low-pass filtered forces"}.get(fam)
-            base = (lp_label,) + ((derive,) if derive else ()) + (cut_text,)
-            for p in positions:
-                p_lo, p_med, p_hi = pct[r]
-                l_lo, l_med, l_hi = pct_lin[r]
-                r += 1
-                values[(f"{fam}_qst", p)] = float(p_med)
-                prov[(f"{fam}_qst", p)] = base + ("50 % value (median, with sign)", pct_text)
-                alternative(_LINEAR, (f"{fam}_qst", p), l_med)
-                if fam == "Y":
-                    values[("Y_max", p)] = float(maxabs(p_lo, p_hi))
-                    prov[("Y_max", p)] = base + (
-                        "max(|0.15 % value|, |99.85 % value|)", pct_text)
-                    alternative(_LINEAR, ("Y_max", p), maxabs(l_lo, l_hi))
-                elif fam == "Q":
-                    values[("Q_max", p)] = float(p_hi)
-                    prov[("Q_max", p)] = base + ("99.85 % value", pct_text)
-                    alternative(_LINEAR, ("Q_max", p), l_hi)
-        slide_rows = np.vstack([ratio, sumy])
-        if slide_rows.shape[0]:
-            slide_keys = ([("YQ_max", p) for p in wheels_yq] +
-                          [("SumY_max", w) for w in wsets])
-            d_wide = d[wide]
-            # the chosen grid (from the section start) and, for the alternative readings, the
-            # grid from the first evaluated sample: one cumulative integral for both
-            _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
-            origins = [sec.eval_start_m] + ([float(d[cut.start])] if with_alternatives else [])
-            interp = _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
-                                        WINDOW_M, STEP_M, origins)
-            means = interp[0][1]
-            spct, = _row_percentiles(means)
-            slide_text = (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
-                          f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "
-                          f"{means.shape[1]} values; exact integral of the linear interpolant)")
-            for r, key in enumerate(slide_keys):
-                fam = key[0].split("_")[0]
-                values[key] = float(maxabs(spct[r, 0], spct[r, 2]))
-                derive = ("Y/Q formed sample-wise from the low-pass filtered Y and Q"
-                          if fam == "YQ" else "ΣY = Y_L + Y_R formed from the low-pass "
-                          "filtered forces")
-                prov[key] = (lp_label, derive, slide_text,
-                             "max(|0.15 % value|, |99.85 % value|)", pct_text)
-            clock.lap("statistics")
-            if with_alternatives:
-                _sliding_alternatives(slide_rows, d_wide, d[cut.start], sec, slide_keys,
-                                      means, interp[1][1], methods, alternative)
-            clock.lap("alternatives")
-
+        _lowpass_values(st, plan, lp)
     if bp is not None and bp.shape[0]:
-        bp_label = design(fs, "bandpass", order).label + ", whole section"
-        warnings += [w.message for w in settling_check(ss.time_s, mask, fs, "bandpass", order,
-                                                       sec.id)]
-        rows = bp[:, cut]
-        both = _row_percentiles(rows, methods)
-        pct, pct_lin = both[0], both[-1]
-        rmsv = rms(rows)
-        for r, name in enumerate(plan.bp_names):
-            kind, _, pos = name.rpartition("_")
-            if kind in BOGIE_KINDS:  # supplementary: same filter call, same statistics
-                supp[(f"{kind}_rms", pos)] = float(rmsv[r])
-                supp[(f"{kind}_max", pos)] = float(maxabs(pct[r, 0], pct[r, 2]))
-                continue
-            q = kind.split("_")[0]
-            values[(f"{q}_rms", pos)] = float(rmsv[r])
-            prov[(f"{q}_rms", pos)] = (bp_label, cut_text, "rms value")
-            values[(f"{q}_max", pos)] = float(maxabs(pct[r, 0], pct[r, 2]))
-            prov[(f"{q}_max", pos)] = (bp_label, cut_text,
-                                       "max(|0.15 % value|, |99.85 % value|)", pct_text)
-            alternative(_LINEAR, (f"{q}_max", pos), maxabs(pct_lin[r, 0], pct_lin[r, 2]))
-
-    clock.lap("statistics")
+        _bandpass_values(st, plan, bp)
+    st.clock.lap("statistics")
     if with_supplementary:
-        raw_acc = {name: np.asarray(arr, dtype=np.float64)[cut]
+        raw_acc = {name: np.asarray(arr, dtype=np.float64)[st.cut]
                    for name, arr in ss.channels.items() if name.rpartition("_")[0] in PSD_KINDS}
-        supp.update(psd_band_values(raw_acc, fs))
-    clock.lap("supplementary")
+        st.supp.update(psd_band_values(raw_acc, st.fs))
+    st.clock.lap("supplementary")
+    return st.result()
 
-    order_keys = [(q, p) for q, quantity in QUANTITIES.items() for p in quantity.positions()]
-    ordered = {k: values[k] for k in order_keys if k in values}
-    supp_keys = [(q, p) for q, sq in SUPPLEMENTARY.items() for p in sq.positions()]
-    return SectionValues(sec.id, ordered, prov, warnings, alts,
-                         {k: supp[k] for k in supp_keys if k in supp})
+
+def _derived_rows(st: _SectionState, lp: np.ndarray, index: dict[str, int],
+                  wheels_yq: list[str], wsets: list[str]):
+    """Step 2: Y/Q per wheel and ΣY per wheelset, only where needed: the evaluated samples
+    plus one on each side (the sliding-mean windows lie inside the evaluated range). Returns
+    ``(ratio, sumy, wide, inner)``: the rows, their slice of the section and the evaluated
+    part within them."""
+    cut = st.cut
+    wide = slice(max(cut.start - 1, 0), min(cut.stop + 1, lp.shape[1]))
+    inner = slice(cut.start - wide.start, cut.stop - wide.start)
+    n_wide = wide.stop - wide.start
+    ratio = np.empty((len(wheels_yq), n_wide))
+    for r, p in enumerate(wheels_yq):
+        q = lp[index[f"Q_{p}"], wide]
+        if np.any(q[inner] == 0.0):
+            raise InvalidSignal(
+                f"section {st.sec.id}: Q_{p} is exactly 0 kN inside the evaluated range; "
+                f"Y/Q is undefined")
+        np.divide(lp[index[f"Y_{p}"], wide], q, out=ratio[r])
+    sumy = np.empty((len(wsets), n_wide))
+    for r, ws in enumerate(wsets):
+        np.add(lp[index[f"Y_w{ws[2:]}L"], wide], lp[index[f"Y_w{ws[2:]}R"], wide], out=sumy[r])
+    return ratio, sumy, wide, inner
+
+
+def _lowpass_values(st: _SectionState, plan: _Plan, lp: np.ndarray) -> None:
+    """The force quantities (Y, Q, Y/Q, ΣY: percentiles, then the sliding-mean maxima)."""
+    lp_label = st.settle("lowpass")
+    index = {c: r for r, c in enumerate(plan.lp_names)}
+    wheels_y = [p for p in WHEEL_POSITIONS if f"Y_{p}" in index]
+    wheels_q = [p for p in WHEEL_POSITIONS if f"Q_{p}" in index]
+    wheels_yq = [p for p in wheels_y if p in wheels_q]
+    wsets = [ws for ws in WHEELSET_POSITIONS
+             if f"Y_w{ws[2:]}L" in index and f"Y_w{ws[2:]}R" in index]
+    ratio, sumy, wide, inner = _derived_rows(st, lp, index, wheels_yq, wsets)
+    families = (("Y", wheels_y), ("Q", wheels_q), ("YQ", wheels_yq), ("SumY", wsets))
+    rows = np.empty((sum(len(p) for _, p in families), st.cut.stop - st.cut.start))
+    r = 0
+    for name in [f"Y_{p}" for p in wheels_y] + [f"Q_{p}" for p in wheels_q]:
+        rows[r] = lp[index[name], st.cut]
+        r += 1
+    rows[r:r + len(wheels_yq)] = ratio[:, inner]
+    rows[r + len(wheels_yq):] = sumy[:, inner]
+    both = (_row_percentiles(rows, st.methods) if rows.shape[0]
+            else [np.empty((0, 3))] * len(st.methods))
+    _force_percentile_values(st, families, both[0], both[-1], lp_label)
+    slide_rows = np.vstack([ratio, sumy])
+    if slide_rows.shape[0]:
+        keys = [("YQ_max", p) for p in wheels_yq] + [("SumY_max", w) for w in wsets]
+        _sliding_values(st, slide_rows, st.d[wide], keys, lp_label)
+
+
+#: the values a force family's percentiles give: (quantity, provenance of the statistic)
+_FORCE_PERCENTILE_QUANTITIES = {
+    "Y": (("Y_qst", "50 % value (median, with sign)"),
+          ("Y_max", "max(|0.15 % value|, |99.85 % value|)")),
+    "Q": (("Q_qst", "50 % value (median, with sign)"), ("Q_max", "99.85 % value")),
+    "YQ": (("YQ_qst", "50 % value (median, with sign)"),),
+    "SumY": (("SumY_qst", "50 % value (median, with sign)"),),
+}
+
+
+def _force_percentile_values(st: _SectionState, families, pct: np.ndarray,
+                             pct_lin: np.ndarray, lp_label: str) -> None:
+    """The percentile values of the force rows (in ``families`` order) under the chosen
+    reading (``pct``) and the linear one (``pct_lin``)."""
+    r = 0
+    for fam, positions in families:
+        derive = _DERIVE_TEXT.get(fam)
+        base = (lp_label,) + ((derive,) if derive else ()) + (st.cut_text,)
+        for p in positions:
+            for qid, text in _FORCE_PERCENTILE_QUANTITIES[fam]:
+                processing = QUANTITIES[qid].processing
+                st.values[(qid, p)] = float(_statistic(processing, *pct[r]))
+                st.prov[(qid, p)] = base + (text, st.pct_text)
+                st.alternative(_LINEAR, (qid, p), _statistic(processing, *pct_lin[r]))
+            r += 1
+
+
+def _sliding_values(st: _SectionState, slide_rows: np.ndarray, d_wide: np.ndarray,
+                    keys: list[tuple[str, str]], lp_label: str) -> None:
+    """``YQ_max`` and ``SumY_max``: the maxima of the 2 m sliding means (step 6 of
+    docs/validation.md), then, with the alternatives, their values under the other readings.
+    The chosen grid (from the section start) and the grid from the first evaluated sample
+    come from one cumulative integral."""
+    sec = st.sec
+    _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
+    origins = [sec.eval_start_m] + ([float(st.d[st.cut.start])] if st.with_alternatives else [])
+    interp = _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
+                                WINDOW_M, STEP_M, origins)
+    means = interp[0][1]
+    spct, = _row_percentiles(means)
+    slide_text = (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
+                  f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "
+                  f"{means.shape[1]} values; exact integral of the linear interpolant)")
+    for r, key in enumerate(keys):
+        st.values[key] = float(_statistic(QUANTITIES[key[0]].processing, *spct[r]))
+        st.prov[key] = (lp_label, _DERIVE_TEXT[key[0].split("_")[0]], slide_text,
+                        "max(|0.15 % value|, |99.85 % value|)", st.pct_text)
+    st.clock.lap("statistics")
+    if st.with_alternatives:
+        _sliding_alternatives(slide_rows, d_wide, st.d[st.cut.start], sec, keys,
+                              means, interp[1][1], st.methods, st.alternative)
+    st.clock.lap("alternatives")
+
+
+def _bandpass_values(st: _SectionState, plan: _Plan, bp: np.ndarray) -> None:
+    """The car body accelerations (rms, maximum) and, from the same filter call and
+    statistics, the supplementary bogie-frame values."""
+    bp_label = st.settle("bandpass")
+    rows = bp[:, st.cut]
+    both = _row_percentiles(rows, st.methods)
+    pct, pct_lin = both[0], both[-1]
+    rmsv = rms(rows)
+    for r, name in enumerate(plan.bp_names):
+        kind, _, pos = name.rpartition("_")
+        if kind in BOGIE_KINDS:  # supplementary: same filter call, same statistics
+            st.supp[(f"{kind}_rms", pos)] = float(rmsv[r])
+            st.supp[(f"{kind}_max", pos)] = float(maxabs(pct[r, 0], pct[r, 2]))
+            continue
+        q = kind.split("_")[0]
+        st.values[(f"{q}_rms", pos)] = float(rmsv[r])
+        st.prov[(f"{q}_rms", pos)] = (bp_label, st.cut_text, "rms value")
+        st.values[(f"{q}_max", pos)] = float(_statistic("maxabs", *pct[r]))
+        st.prov[(f"{q}_max", pos)] = (bp_label, st.cut_text,
+                                      "max(|0.15 % value|, |99.85 % value|)", st.pct_text)
+        st.alternative(_LINEAR, (f"{q}_max", pos), _statistic("maxabs", *pct_lin[r]))
 
 
 def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: float,
@@ -515,8 +579,10 @@ def quantity_trace(signalset: SignalSet, section: SectionInfo, quantity: str, po
 
     Uses this module's processing: :func:`railval.core.filters.filtfilt_rows` over the whole
     section, the quantity's derivation (Y/Q, ΣY), :func:`sliding_mean_distance` where the
-    quantity uses the 2 m sliding mean, the evaluated range cut by distance and
-    :func:`percentile` / :func:`maxabs` / :func:`rms` as in :func:`evaluate_section`.
+    quantity uses the 2 m sliding mean, and the evaluated cut and the statistic of
+    :func:`evaluate_section` (:func:`_evaluated_cut`, the order statistics of
+    :func:`railval.core.en_statistics._row_percentiles`, :func:`_statistic`): one home for
+    steps 3 and 4 of the chain.
     """
     if quantity not in QUANTITIES:
         raise InvalidParameter(f"unknown quantity {quantity!r}; known: {', '.join(QUANTITIES)}")
@@ -538,26 +604,17 @@ def quantity_trace(signalset: SignalSet, section: SectionInfo, quantity: str, po
         sig = filt[0]
         label = f"{names[0]} ({design(fs, q.filter, order).label})"
     d = np.asarray(signalset.distance_m, dtype=np.float64)
-    mask = (d >= section.eval_start_m) & (d <= section.eval_end_m)
-    if int(mask.sum()) < 2:
-        raise InvalidSignal(f"section {section.id}: evaluated range {section.eval_start_m}–"
-                            f"{section.eval_end_m} m holds {int(mask.sum())} samples, needs at least 2")
+    _, cut, _ = _evaluated_cut(d, section)
     centres = means = None
-    src = sig[mask]
+    src = sig[cut]
     if q.sliding_mean:
         centres, means = sliding_mean_distance(sig, d, section.eval_start_m, section.eval_end_m)
         src = means
-    if q.processing == "rms":
-        value = float(rms(src))
-        marks = {"rms value": value}
-    else:
-        lo, med, hi = (float(v) for v in percentile(src, PERCENTILES))
-        if q.processing == "median":
-            value, marks = med, {"50 % value": med}
-        elif q.processing == "p99.85":
-            value, marks = hi, {"99.85 % value": hi}
-        else:
-            value, marks = float(maxabs(lo, hi)), {"0.15 % value": lo, "99.85 % value": hi}
+    lo, med, hi = (float(v) for v in _row_percentiles(src)[0][0])
+    value = float(_statistic(q.processing, lo, med, hi, float(rms(src))))
+    marks = {"median": {"50 % value": med}, "p99.85": {"99.85 % value": hi},
+             "rms": {"rms value": value},
+             "maxabs": {"0.15 % value": lo, "99.85 % value": hi}}[q.processing]
     return QuantityTrace(quantity, position, label, q.unit, d, sig,
                          (float(section.eval_start_m), float(section.eval_end_m)),
                          centres, means, marks, value)
