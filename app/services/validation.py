@@ -33,6 +33,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from dataclasses import dataclass
 from typing import Any
 
 from sqlalchemy.orm import Session
@@ -151,62 +152,60 @@ def _worker_database(url: str):
     return _WORKER_DB[url]
 
 
-def validate_configurations(database, campaign_name: str, configs: Sequence[str] | None = None,
-                            *, order: int = DEFAULT_ORDER, n_boot: int = 1000, seed: int = 0,
-                            workers: int = 1, chunk_sections: int = 8,
-                            scheduler: str | None = None,
-                            progress=None) -> dict[str, ValidationResult]:
-    """Validate many configurations (default: all) of a campaign; the DynoTRAIN-scale path.
+@dataclass
+class _Plan:
+    """What a validation of several configurations reads before processing: the campaign,
+    its sections and vehicle, the configurations' lineage provenance, the result-cache key
+    of every (source, section) and the values found in the cache (``todo``: the sections of
+    each source still to process)."""
 
-    ``database``: a :class:`railval.db.engine.Database`. Sections not in the result cache are
-    processed in chunks of ``chunk_sections`` sections of one source, by ``workers``
-    processes (each opens its own connection), then written to the cache by this process.
-    ``progress(stage, fraction, info)`` is called after every chunk. ``scheduler``: a Dask
-    scheduler address whose workers process the chunks instead (they read the database with
-    the URL without its password and take the password from their own
-    ``RAILVAL_DB_PASSWORD``/``_FILE`` setting — nothing secret crosses the Dask link).
-    """
-    check_order(order)
-    with database.session() as session:
+    name: str
+    sections: list[SectionInfo]
+    vehicle: dict
+    names: list[str]
+    provenance: dict[str, dict]
+    keys: dict[tuple[str | None, str], str]
+    values: dict[str | None, dict[str, en14363.SectionValues]]
+    todo: dict[str | None, list[str]]
+
+
+def _plan(database, campaign_name: str, configs: Sequence[str] | None, order: int,
+          check_seals: bool) -> _Plan:
+    """Resolve names, check the seals of every configuration's evidence (as
+    :func:`validate_configuration` does) and read the result cache; no blob is read."""
+    with stage("database"), database.session() as session:
         camp, _ = repo.resolve(session, campaign_name)
-        name = camp.name
+        refs = {c.name: repo.ConfigRef(camp, c.id, c.name)
+                for c in repo.list_configurations(session, camp)}
+        names = (list(refs) if configs is None
+                 else [repo.resolve(session, camp, c)[1].name for c in configs])
+        if check_seals:
+            for cname in names:
+                repo.require_evidence(session, camp, cname, blobs=False)
         sections = repo.section_infos(session, camp)
-        vehicle = repo.vehicle_info(session, camp)
-        refs = {c.name: repo.ConfigRef(camp, c.id, c.name) for c in repo.list_configurations(session, camp)}
-        names = list(refs) if configs is None else [repo.resolve(session, camp, c)[1].name for c in configs]
-        provenance = {c: calibration_provenance(session, camp, c) for c in names}
-        by_id = {s.id: s for s in sections}
         keys: dict[tuple[str | None, str], str] = {}
         for source in [None, *names]:
-            for sid, key in source_cache_keys(session, camp, refs[source] if source else None, sections,
-                                              order=order).items():
+            for sid, key in source_cache_keys(session, camp, refs[source] if source else None,
+                                              sections, order=order).items():
                 keys[(source, sid)] = key
+        plan = _Plan(camp.name, sections, repo.vehicle_info(session, camp), names,
+                     {c: calibration_provenance(session, camp, c) for c in names}, keys,
+                     {s: {} for s in [None, *names]}, {})
         cached = repo.cache_get_many(session, list(keys.values()))
-    values: dict[str | None, dict[str, en14363.SectionValues]] = {s: {} for s in [None, *names]}
-    todo: dict[str | None, list[str]] = {}
-    for (source, sid), key in keys.items():
-        if key in cached:
-            values[source][sid] = unpack_values(sid, cached[key])
-        else:
-            todo.setdefault(source, []).append(sid)
-    chunks = [(source, sids[i:i + chunk_sections]) for source, sids in todo.items()
-              for i in range(0, len(sids), chunk_sections)]
-    computed: dict[tuple[str | None, str], bytes] = {}
+    with stage("cache_unpack"):
+        for (source, sid), key in keys.items():
+            if key in cached:
+                plan.values[source][sid] = unpack_values(sid, cached[key])
+            else:
+                plan.todo.setdefault(source, []).append(sid)
+    return plan
 
-    outer = current_stages()
 
-    def collect_chunk(chunk, done):
-        packed, seconds = done
-        if outer is not None:
-            outer.merge(seconds)
-        source, sids = chunk
-        for sid, blob in zip(sids, packed, strict=True):
-            computed[(source, sid)] = blob
-            values[source][sid] = unpack_values(sid, blob)
-        if progress is not None:
-            progress("processing sections", len(computed) / max(1, sum(map(len, todo.values()))),
-                     {"done": len(computed)})
-
+def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], order: int,
+             workers: int, scheduler, collect_chunk) -> None:
+    """Process the chunks on the chosen back end: a Dask scheduler, ``workers`` processes,
+    or this process; ``collect_chunk(chunk, (packed values, stage seconds))`` per chunk."""
+    by_id = {s.id: s for s in plan.sections}
     if scheduler is not None and chunks:
         from sqlalchemy.engine import make_url
 
@@ -214,7 +213,8 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
 
         url = make_url(database.url).set(password=None).render_as_string(hide_password=False)
         with BatchExecutor(scheduler) as ex:
-            packed = ex.map(_evaluate_chunk_task, [(url, name, c[0], [by_id[s] for s in c[1]], order)
+            packed = ex.map(_evaluate_chunk_task, [(url, plan.name, c[0],
+                                                    [by_id[s] for s in c[1]], order)
                                                    for c in chunks])
         for chunk, blobs in zip(chunks, packed, strict=True):
             collect_chunk(chunk, blobs)
@@ -223,30 +223,78 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
 
         threads = max(1, thread_count() // workers)
         with ProcessPoolExecutor(max_workers=workers, **pool_kwargs()) as pool:
-            futures = [(c, pool.submit(_evaluate_chunk, database.url, name, c[0],
+            futures = [(c, pool.submit(_evaluate_chunk, database.url, plan.name, c[0],
                                        [by_id[s] for s in c[1]], order, threads))
                        for c in chunks]
             for chunk, fut in futures:
                 collect_chunk(chunk, fut.result())
     else:
         for chunk in chunks:
-            collect_chunk(chunk, _evaluate_chunk(database, name, chunk[0],
+            collect_chunk(chunk, _evaluate_chunk(database, plan.name, chunk[0],
                                                  [by_id[s] for s in chunk[1]], order))
+
+
+def validate_configurations(database, campaign_name: str, configs: Sequence[str] | None = None,
+                            *, order: int = DEFAULT_ORDER, n_boot: int = 1000, seed: int = 0,
+                            workers: int = 1, chunk_sections: int = 8,
+                            scheduler: str | None = None, progress=None,
+                            check_seals: bool = True) -> dict[str, ValidationResult]:
+    """Validate many configurations (default: all) of a campaign; the DynoTRAIN-scale path.
+
+    The same pipeline as :func:`validate_configuration` — seals of the evidence checked
+    first (``check_seals``), result cache, EN chain, :func:`_verdict` — with the sections
+    not in the cache processed in chunks of ``chunk_sections`` sections of one source by
+    ``workers`` processes (each opens its own connection), then written to the cache by
+    this process. ``database``: a :class:`railval.db.engine.Database`.
+    ``progress(stage, fraction, info)`` is called after every chunk. ``scheduler``: a Dask
+    scheduler address whose workers process the chunks instead (they read the database with
+    the URL without its password and take the password from their own
+    ``RAILVAL_DB_PASSWORD``/``_FILE`` setting — nothing secret crosses the Dask link).
+    """
+    check_order(order)
+    plan = _plan(database, campaign_name, configs, order, check_seals)
+    chunks = [(source, sids[i:i + chunk_sections]) for source, sids in plan.todo.items()
+              for i in range(0, len(sids), chunk_sections)]
+    computed: dict[tuple[str | None, str], bytes] = {}
+    outer = current_stages()
+    n_todo = max(1, sum(map(len, plan.todo.values())))
+
+    def collect_chunk(chunk, done):
+        packed, seconds = done
+        if outer is not None:
+            outer.merge(seconds)
+        source, sids = chunk
+        for sid, blob in zip(sids, packed, strict=True):
+            computed[(source, sid)] = blob
+            plan.values[source][sid] = unpack_values(sid, blob)
+        if progress is not None:
+            progress("processing sections", len(computed) / n_todo, {"done": len(computed)})
+
+    _process(database, plan, chunks, order, workers, scheduler, collect_chunk)
     if computed:
         with stage("database"), database.session(write=True) as session:
-            repo.cache_put_many(session, {keys[k]: blob for k, blob in computed.items()})
-    measured = values[None]
-    out = {}
-    for cname in names:
-        warnings = source_warnings("measurement", measured) + source_warnings(f"configuration {cname}",
-                                                                              values[cname])
-        with stage("aggregation"):
-            res = validate(measured, values[cname], sections, vehicle, n_boot=n_boot,
-                           seed=seed, warnings=warnings)
-        res.info.update({"campaign": name, "configuration": cname, "filter_order": order,
-                         **provenance[cname]})
-        out[cname] = res
-    return out
+            repo.cache_put_many(session, {plan.keys[k]: blob for k, blob in computed.items()})
+    stats = {source: {"cached": len(plan.values[source]) - len(plan.todo.get(source, [])),
+                      "computed": len(plan.todo.get(source, []))} for source in plan.values}
+    return {cname: _verdict(plan.values[None], plan.values[cname], plan.sections,
+                            plan.vehicle, n_boot, seed,
+                            {"campaign": plan.name, "configuration": cname,
+                             "filter_order": order, "sections_measured": stats[None],
+                             "sections_simulated": stats[cname], **plan.provenance[cname]})
+            for cname in plan.names}
+
+
+def _verdict(measured, simulated, sections, vehicle, n_boot: int, seed: int,
+             info: dict) -> ValidationResult:
+    """The DynoTRAIN verdict on the processed values of both sides
+    (:func:`railval.core.validation.validate`), with the sources' warnings and ``info``."""
+    warnings = (source_warnings("measurement", measured)
+                + source_warnings(f"configuration {info['configuration']}", simulated))
+    with stage("aggregation"):
+        result = validate(measured, simulated, sections, vehicle, n_boot=n_boot, seed=seed,
+                          warnings=warnings)
+    result.info.update(info)
+    return result
 
 
 def calibration_provenance(session: Session, campaign, config_name: str) -> dict:
@@ -294,15 +342,9 @@ def validate_configuration(session: Session, campaign_name: str, config_name: st
     s_stats: dict[str, int] = {}
     measured = source_values(session, camp, None, sections, order=order, stats=m_stats)
     simulated = source_values(session, camp, conf, sections, order=order, stats=s_stats)
-    warnings = source_warnings("measurement", measured) + source_warnings(f"configuration {conf.name}",
-                                                                          simulated)
-    with stage("aggregation"):
-        result = validate(measured, simulated, sections, vehicle, n_boot=n_boot, seed=seed,
-                          warnings=warnings)
     with stage("database"):
         provenance = calibration_provenance(session, camp, config_name)
-    result.info.update({"campaign": camp.name, "configuration": conf.name,
-                        "filter_order": order,
-                        "sections_measured": m_stats, "sections_simulated": s_stats,
-                        **provenance})
-    return result
+    return _verdict(measured, simulated, sections, vehicle, n_boot, seed,
+                    {"campaign": camp.name, "configuration": conf.name, "filter_order": order,
+                     "sections_measured": m_stats, "sections_simulated": s_stats,
+                     **provenance})
