@@ -476,7 +476,10 @@ def _sliding_values(st: _SectionState, slide_rows: np.ndarray, d_wide: np.ndarra
     interp = _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
                                 WINDOW_M, STEP_M, origins)
     means = interp[0][1]
-    spct, = _row_percentiles(means)
+    # the order statistics of every percentile method in one selection (the linear
+    # reading's values of the chosen means are used by the alternatives)
+    chosen_pcts = _row_percentiles(means, st.methods)
+    spct = chosen_pcts[0]
     slide_text = (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
                   f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "
                   f"{means.shape[1]} values; exact integral of the linear interpolant)")
@@ -487,7 +490,7 @@ def _sliding_values(st: _SectionState, slide_rows: np.ndarray, d_wide: np.ndarra
     st.clock.lap("statistics")
     if st.with_alternatives:
         _sliding_alternatives(slide_rows, d_wide, st.d[st.cut.start], sec, keys,
-                              means, interp[1][1], st.methods, st.alternative)
+                              (means, chosen_pcts), interp[1][1], st.methods, st.alternative)
     st.clock.lap("alternatives")
 
 
@@ -515,20 +518,23 @@ def _bandpass_values(st: _SectionState, plan: _Plan, bp: np.ndarray) -> None:
 
 
 def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: float,
-                          sec: SectionInfo, keys: list[tuple[str, str]], chosen_means: np.ndarray,
+                          sec: SectionInfo, keys: list[tuple[str, str]], chosen: tuple,
                           first_interp: np.ndarray, methods: tuple[str, ...],
                           alternative) -> None:
     """Values of the sliding-mean maxima under every other reading (grid alignment × window
     mean × percentile method, :mod:`railval.core.definitions`) from the same derived rows;
-    the prefix sums and the cumulative integral are formed once for all readings."""
+    the prefix sums and the cumulative integral are formed once for all readings, and the
+    percentiles of the chosen means (``chosen``: means and their percentiles under each
+    method) are not selected again."""
     origins = {"section_start": sec.eval_start_m, "first_sample": float(first_m)}
     prefix = np.empty((slide_rows.shape[0], slide_rows.shape[1] + 1))
     prefix[:, 0] = 0.0
     prefix[:, 1:] = slide_rows
     np.cumsum(prefix, axis=1, out=prefix)  # in place: the same sums, a contiguous cumsum
     for grid, window in SLIDING_VARIANTS:
+        pcts = None
         if (grid, window) == CHOSEN.sliding:
-            means = chosen_means
+            means, pcts = chosen
         elif window == "interpolant":
             means = first_interp
         else:
@@ -537,7 +543,8 @@ def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: f
             means = sample_window_means(slide_rows, d_wide, centres, WINDOW_M,
                                         closed=(window == "samples_closed"), prefix=prefix)
         undefined = ~np.all(np.isfinite(means), axis=1)
-        for method, pct in zip(methods, _row_percentiles(means, methods), strict=True):
+        pcts = _row_percentiles(means, methods) if pcts is None else pcts
+        for method, pct in zip(methods, pcts, strict=True):
             reading = Reading(method, grid, window)
             if reading == CHOSEN:
                 continue
