@@ -67,14 +67,15 @@ class _Driver:
     def __init__(self, url: str):
         if url.startswith("sqlite:///"):
             import sqlite3
+            from urllib.parse import quote, unquote
 
-            path = url[len("sqlite:///"):]
+            path = unquote(url[len("sqlite:///"):])  # as SQLAlchemy's make_url reads it
             if not path or path == ":memory:" or path.startswith("file:") or "?" in path:
                 raise LookupError("not a plain SQLite file")
             if not Path(path).is_file():
                 raise LookupError("no such file")
-            self.conn = sqlite3.connect(f"file:{Path(path).resolve()}?mode=ro", uri=True,
-                                        timeout=30.0)
+            self.conn = sqlite3.connect(f"file:{quote(str(Path(path).resolve()))}?mode=ro",
+                                        uri=True, timeout=30.0)
             self.mark = "?"
         elif url.startswith("postgresql+psycopg://"):
             import psycopg
