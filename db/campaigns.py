@@ -111,7 +111,10 @@ def get_campaign(session: Session, name_or_id: CampaignArg) -> Campaign:
     if isinstance(name_or_id, Campaign):
         return name_or_id
     if isinstance(name_or_id, CampaignRef):
-        return session.get(Campaign, name_or_id.id)
+        found = session.get(Campaign, name_or_id.id)
+        if found is None:  # deleted since it was resolved
+            raise NotFound(f"campaign {name_or_id.name!r} no longer exists")
+        return found
     found = session.scalar(select(Campaign).where(Campaign.name == str(name_or_id)))
     if found is None and str(name_or_id).strip().isdigit():
         found = session.get(Campaign, int(name_or_id))
@@ -199,7 +202,11 @@ def get_configuration(session: Session, campaign: CampaignArg, config: ConfigArg
     """The row of configuration ``config`` of ``campaign`` (no lookup by name when ``config``
     is a :class:`ConfigRef`); :class:`NotFound` lists the available ones."""
     if isinstance(config, ConfigRef):
-        return session.get(Configuration, config.id)
+        found = session.get(Configuration, config.id)
+        if found is None:  # deleted since it was resolved
+            raise NotFound(f"configuration {config.name!r} of campaign {config.campaign.name!r} "
+                           "no longer exists")
+        return found
     c = get_campaign(session, campaign)
     found = session.scalar(
         select(Configuration).where(Configuration.campaign_id == c.id, Configuration.name == config)
