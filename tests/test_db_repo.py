@@ -336,7 +336,7 @@ def test_references_resolved_once_need_no_further_lookup(demo):
             with QueryCounter(demo.engine) as q:
                 by_ref[name] = call()
             assert len(q.statements) == 1, (name, q.statements)
-            assert all("configurations.name =" not in x and "campaigns.name =" not in x
+            assert all("configuration.name =" not in x and "campaign.name =" not in x
                        for x in q.statements), name
         assert by_ref["signal_hashes"] == by_name
         assert repo.recording_meta(s, "demo", "variant1") == by_ref["recording_meta"]
