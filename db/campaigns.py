@@ -102,25 +102,26 @@ def list_campaigns(session: Session) -> list[Campaign]:
     return list(session.scalars(select(Campaign).order_by(Campaign.name)))
 
 
-def get_campaign(session: Session, name_or_id: CampaignArg) -> Campaign:
-    """The campaign with this name (or, failing that, this numeric id; or a :class:`CampaignRef`).
+def get_campaign(session: Session, campaign: CampaignArg) -> Campaign:
+    """The row of ``campaign``: a :class:`CampaignRef` (by id), a row (returned as it is), or
+    a name (or, failing that, a numeric id).
 
     Raises :class:`railval.core.errors.NotFound` saying how to list the campaigns (it does
     not list them: whoever mistyped a name is not shown the others).
     """
-    if isinstance(name_or_id, Campaign):
-        return name_or_id
-    if isinstance(name_or_id, CampaignRef):
-        found = session.get(Campaign, name_or_id.id)
+    if isinstance(campaign, Campaign):
+        return campaign
+    if isinstance(campaign, CampaignRef):
+        found = session.get(Campaign, campaign.id)
         if found is None:  # deleted since it was resolved
-            raise NotFound(f"campaign {name_or_id.name!r} no longer exists")
+            raise NotFound(f"campaign {campaign.name!r} no longer exists")
         return found
-    found = session.scalar(select(Campaign).where(Campaign.name == str(name_or_id)))
-    if found is None and str(name_or_id).strip().isdigit():
-        found = session.get(Campaign, int(name_or_id))
+    found = session.scalar(select(Campaign).where(Campaign.name == str(campaign)))
+    if found is None and str(campaign).strip().isdigit():
+        found = session.get(Campaign, int(campaign))
     if found is None:
         # the names of the other campaigns are not shown to whoever typed a wrong one
-        raise NotFound(f"campaign {name_or_id!r} not found; list the campaigns with "
+        raise NotFound(f"campaign {campaign!r} not found; list the campaigns with "
                        "`railval list`")
     return found
 
