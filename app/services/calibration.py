@@ -203,7 +203,8 @@ def _plan(ctx: CampaignContext, conf: repo.ConfigRef, requested: Sequence[str], 
         for pname, p in eparams.items():
             if params and not ({pname, f"{e}.{pname}"} & wanted):
                 continue
-            st = start.get(e, {}).get(pname, base_effects[e].get(pname, p["default"]))
+            # its start: the given start value, else the configuration's value, else the default
+            st = next((src[pname] for src in (start.get(e, {}), base_effects[e]) if pname in src), p["default"])
             specs.append(ParameterSpec(f"{e}.{pname}", p["lower"], p["upper"], p["unit"],
                                        min(max(float(st), p["lower"]), p["upper"]), log=p["log"]))
             targets.append((e, pname))
