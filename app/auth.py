@@ -94,10 +94,6 @@ def check_startup(database, address: str) -> bool:
     return has
 
 
-def _aware_ts(when) -> float:
-    return users._aware(when).timestamp() if when is not None else 0.0
-
-
 class RailvalAuth(AuthProvider):
     """The auth provider: login/logout handlers and the per-request user check."""
 

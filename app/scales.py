@@ -6,7 +6,6 @@ rule of the normalised values, and the downsampling of long signals for display.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import numpy as np
 from tsdownsample import MinMaxLTTBDownsampler
@@ -91,15 +90,6 @@ def passes(value: float | None, limit: float = 1.0) -> bool:
 def verdict_color(value: float | None, limit: float = 1.0) -> str:
     """:data:`PASS_COLOR` for a value within ±``limit``, else :data:`FAIL_COLOR`."""
     return PASS_COLOR if passes(value, limit) else FAIL_COLOR
-
-
-def bar_top(values: Sequence[float | None], intervals: Sequence | None = None) -> float:
-    """Upper end of a normalised-value bar chart: 1.2 (the limit 1 with room), or 10 % above
-    the largest magnitude of the bars and their intervals, so everything stays inside."""
-    extent = [abs(float(v)) for v in values if v is not None and math.isfinite(v)]
-    extent += [abs(float(b)) for c in (intervals or []) if isinstance(c, (list, tuple)) for b in c
-               if b is not None and math.isfinite(float(b))]
-    return max([1.2] + [e * 1.1 for e in extent])
 
 
 def downsample_xy(x: np.ndarray, y: np.ndarray, n_out: int = 2000,

@@ -5,7 +5,6 @@
     RailvalError(Exception)
     ├── InvalidSignal(RailvalError, ValueError)      a signal violates a precondition
     ├── InvalidParameter(RailvalError, ValueError)   a parameter is unknown or out of bounds
-    ├── CoverageError(RailvalError)                  validation coverage rules not met
     ├── CampaignFormatError(RailvalError, ValueError) a campaign folder/manifest is invalid
     ├── NotFound(RailvalError, LookupError)          a campaign/configuration/section is absent
     └── CalibrationDidNotConverge(RailvalError, RuntimeError)
@@ -24,10 +23,6 @@ class InvalidSignal(RailvalError, ValueError):
 
 class InvalidParameter(RailvalError, ValueError):
     """A parameter is unknown, of the wrong type or outside its bounds."""
-
-
-class CoverageError(RailvalError):
-    """The validation coverage rules (sections, zones, signals) are not satisfied."""
 
 
 class CampaignFormatError(RailvalError, ValueError):

@@ -337,7 +337,7 @@ def _data_path(folder: Path, rel: str, fld: str) -> Path:
 
 
 # -- data files --------------------------------------------------------------------------
-def _read_recording(folder: Path, rel: str, section: dict, configuration: str | None,
+def _read_recording(folder: Path, rel: str, section: dict, config: str | None,
                     units: dict[str, tuple[str, str, float]],
                     allowed: set[str], stamp: str, q0_kn: float,
                     skip: set[str]) -> ValidatedRecording:
@@ -371,7 +371,7 @@ def _read_recording(folder: Path, rel: str, section: dict, configuration: str | 
         check_units_plausible(converted, declared, q0_kn, skip)
     except RecordingProblem as exc:
         raise CampaignFormatError(str(exc), file=rel, field=exc.field) from None
-    if configuration is None:
+    if config is None:
         d = table["distance_m"]
         ev = section["evaluated"]
         if ev["start_m"] < d[0] or ev["end_m"] > d[-1]:
@@ -381,7 +381,7 @@ def _read_recording(folder: Path, rel: str, section: dict, configuration: str | 
                 file=rel, field="distance_m")
     dblob, dsha = codec.encode(np.asarray(table["distance_m"], dtype=np.float64))
     rec = ValidatedRecording(
-        section_id=section["id"], configuration=configuration, file=rel, fs=fs,
+        section_id=section["id"], configuration=config, file=rel, fs=fs,
         t0=float(table["time_s"][0]), n=int(table["time_s"].shape[0]),
         distance_blob=dblob, distance_sha256=dsha,
     )

@@ -58,11 +58,11 @@ def contrary_reason(decision: str, validated: bool, in_sample: bool) -> str | No
     return None
 
 
-def meaning(decision: str, campaign: str, configuration: str, evidence_sha256: str,
+def meaning(decision: str, campaign: str, config: str, evidence_sha256: str,
             contrary: str | None = None) -> str:
     """The meaning of the signature (21 CFR 11.50(a)(3)), stored and shown with it."""
     text = (f"Independent review and approval: I have reviewed the validation evidence "
-            f"SHA-256 {evidence_sha256} of configuration {configuration!r} of campaign "
+            f"SHA-256 {evidence_sha256} of configuration {config!r} of campaign "
             f"{campaign!r} and I decide: {DECISIONS[decision]}.")
     if contrary:
         text += (f" This decision is CONTRARY TO THE OBJECTIVE VERDICT ({contrary}); my "
@@ -70,7 +70,7 @@ def meaning(decision: str, campaign: str, configuration: str, evidence_sha256: s
     return text
 
 
-def create(session: Session, *, user: AppUser, campaign: str, configuration: str,
+def create(session: Session, *, user: AppUser, campaign: str, config: str,
            decision: str, restrictions: str, statement: str, manifest: dict[str, Any],
            software_version: str, justification: str = "", in_sample: bool = False) -> Signoff:
     """Append a signed sign-off bound to ``manifest``; audited as ``signoff.create``.
@@ -99,15 +99,15 @@ def create(session: Session, *, user: AppUser, campaign: str, configuration: str
     # audit head's lock that serialises every appender (the audit row below takes it too).
     session.execute(update(AuditHead).where(AuditHead.id == 1).values(seq=AuditHead.seq))
     new_id = int(session.scalar(select(func.coalesce(func.max(Signoff.id), 0))) or 0) + 1
-    fields = dict(id=new_id, campaign=campaign, configuration=configuration,
-                  username=user.username, printed_name=user.display_name or user.username,
-                  signed_at_utc=audit.utc_stamp(),
-                  meaning=meaning(decision, campaign, configuration, h, contrary),
-                  decision=decision,
-                  restrictions=restrictions, statement=(statement or "").strip(),
-                  justification=justification,
-                  contrary_to_objective=contrary is not None, evidence_sha256=h,
-                  software_version=software_version)
+    fields = {"id": new_id, "campaign": campaign, "configuration": config,
+                  "username": user.username, "printed_name": user.display_name or user.username,
+                  "signed_at_utc": audit.utc_stamp(),
+                  "meaning": meaning(decision, campaign, config, h, contrary),
+                  "decision": decision,
+                  "restrictions": restrictions, "statement": (statement or "").strip(),
+                  "justification": justification,
+                  "contrary_to_objective": contrary is not None, "evidence_sha256": h,
+                  "software_version": software_version}
     key = integrity.signing_key(integrity.session_url(session))
     record_hash = signoff_record_hash(fields)
     so = Signoff(**fields, user_id=user.id, manifest=manifest, record_sha256=record_hash,
@@ -119,7 +119,7 @@ def create(session: Session, *, user: AppUser, campaign: str, configuration: str
         session.execute(text("SELECT setval(pg_get_serial_sequence('signoff', 'id'), :v)"),
                         {"v": new_id})
     audit.record(session, user.username, "signoff.create",
-                 f"configuration:{campaign}/{configuration}", None, record_hash,
+                 f"configuration:{campaign}/{config}", None, record_hash,
                  statement[:2000] if statement else "",
                  detail={"signoff": so.id, "decision": decision, "evidence_sha256": h,
                          "contrary_to_objective": contrary is not None})
@@ -127,12 +127,12 @@ def create(session: Session, *, user: AppUser, campaign: str, configuration: str
 
 
 def list_signoffs(session: Session, campaign: str | None = None,
-                  configuration: str | None = None) -> list[Signoff]:
+                  config: str | None = None) -> list[Signoff]:
     q = select(Signoff).order_by(Signoff.id)
     if campaign is not None:
         q = q.where(Signoff.campaign == campaign)
-    if configuration is not None:
-        q = q.where(Signoff.configuration == configuration)
+    if config is not None:
+        q = q.where(Signoff.configuration == config)
     return list(session.scalars(q))
 
 

@@ -22,6 +22,10 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from sqlalchemy import case, func, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
 from railval.core.roles import Principal
 from railval.core.workshop import review_order
@@ -34,9 +38,6 @@ from railval.db.models import (
     WorkshopReviewer,
     utcnow,
 )
-from sqlalchemy import case, func, select, update
-from sqlalchemy.exc import IntegrityError
-from sqlalchemy.orm import Session
 
 STATUSES = ("open", "closed")
 
@@ -440,23 +441,23 @@ def import_answers(session: Session, workshop: Workshop,
     return {"answers": len(rows), "reviewers": len(by_reviewer), "new_users": created}
 
 
-def configuration_results(session: Session, campaign_id: int, configuration: str
+def configuration_results(session: Session, campaign_id: int, config: str
                           ) -> list[dict[str, Any]]:
-    """Per workshop of the campaign with plots of ``configuration``: name, status, blind,
+    """Per workshop of the campaign with plots of configuration ``config``: name, status, blind,
     plots of the configuration, answers on them and the share of Yes (first showings with
     the fixed scaling; hidden repeats and automatic-scaling plots left out)."""
     out = []
     for w in session.scalars(select(Workshop).where(Workshop.campaign_id == campaign_id)
                              .order_by(Workshop.name)):
         n_plots = session.scalar(select(func.count()).select_from(WorkshopPlot).where(
-            WorkshopPlot.workshop_id == w.id, WorkshopPlot.configuration == configuration))
+            WorkshopPlot.workshop_id == w.id, WorkshopPlot.configuration == config))
         if not n_plots:
             continue
         n, yes = session.execute(
             select(func.count(), func.coalesce(func.sum(case((WorkshopAnswer.answer, 1), else_=0)), 0))
             .select_from(WorkshopAnswer)
             .join(WorkshopPlot, WorkshopAnswer.plot_id == WorkshopPlot.id)
-            .where(WorkshopPlot.workshop_id == w.id, WorkshopPlot.configuration == configuration,
+            .where(WorkshopPlot.workshop_id == w.id, WorkshopPlot.configuration == config,
                    WorkshopPlot.scaling == "fixed", WorkshopAnswer.repeat.is_(False))).one()
         out.append({"workshop": w.name, "status": w.status, "blind": bool(w.blind),
                     "plots": int(n_plots), "answers": int(n), "yes": int(yes),

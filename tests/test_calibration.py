@@ -237,3 +237,16 @@ def test_service_objective_is_inf_where_the_simulation_diverges(monkeypatch):
     monkeypatch.setattr(svc, "evaluate_effects", broken)
     with pytest.raises(InvalidSignal):
         obj({"conicity.conicity": 0.3})
+
+
+def test_start_values_put_a_parameter_candidate_under_model_and_name_a_malformed_one():
+    """The app sends a template-parameter candidate's start as ``{"model.P": {"P": v}}``, the
+    CLI as ``{"model": {"P": v}}``; both reach the fit as ``start["model"]["P"]``."""
+    from railval.app.services.calibration import _start_values
+
+    got = _start_values({"model.k_z": {"k_z": 2}, "friction_damping": {"mu": 0.3}})
+    assert got == {"friction_damping": {"mu": 0.3}, "model": {"k_z": 2.0}}
+    assert _start_values({"model": {"k_z": 1.5}}) == {"model": {"k_z": 1.5}}
+    assert _start_values(None) == {}
+    with pytest.raises(InvalidParameter, match="start value of 'model.k_z'.*got keys \\['x'\\]"):
+        _start_values({"model.k_z": {"x": 2.0}})

@@ -318,3 +318,54 @@ def test_verify_signals_finds_a_changed_sample(writable_demo):
         assert "differs from the expected" in problems[0]["error"]
         with pytest.raises(InvalidSignal, match="differs from the expected"):
             repo.load_signalsets(s, "demo", sections=["S03"], verify=True)
+
+
+def test_references_resolved_once_need_no_further_lookup(demo):
+    """docs/design.md §2: a request resolves campaign and configuration once; given the
+    references, each repository read is exactly its own query (no name lookup), and gives what
+    the names give."""
+    with demo.session() as s:
+        camp, conf = repo.resolve(s, "demo", "variant1")
+        assert (camp.name, conf.name, conf.campaign) == ("demo", "variant1", camp)
+        by_name = repo.signal_hashes(s, "demo", "variant1")
+        by_ref = {}
+        for name, call in (("signal_hashes", lambda: repo.signal_hashes(s, camp, conf)),
+                           ("recording_meta", lambda: repo.recording_meta(s, camp, conf)),
+                           ("fetch_signalsets", lambda: repo.fetch_signalsets(s, camp, conf, ["S03"])),
+                           ("list_configurations", lambda: repo.list_configurations(s, camp))):
+            with QueryCounter(demo.engine) as q:
+                by_ref[name] = call()
+            assert len(q.statements) == 1, (name, q.statements)
+            assert all("configuration.name =" not in x and "campaign.name =" not in x
+                       for x in q.statements), name
+        assert by_ref["signal_hashes"] == by_name
+        assert repo.recording_meta(s, "demo", "variant1") == by_ref["recording_meta"]
+        assert list(by_ref["fetch_signalsets"]()) == ["S03"]
+        assert [c.name for c in repo.lineage(s, camp, conf)] == ["baseline", "variant1"]
+        assert repo.resolve(s, camp, conf) == (camp, conf)
+        with pytest.raises(NotFound, match="'nope' not found in campaign 'demo'"):
+            repo.resolve(s, camp, "nope")
+
+
+def test_a_reference_to_a_deleted_configuration_is_not_found(writable_demo):
+    with writable_demo.session(write=True) as s:
+        camp, conf = repo.resolve(s, "demo", "variant1")
+        repo.delete_configuration(s, camp, conf)
+    with writable_demo.session() as s:
+        with pytest.raises(NotFound, match="configuration 'variant1' of campaign 'demo' no longer exists"):
+            repo.get_configuration(s, camp, conf)
+        with pytest.raises(NotFound, match="'variant1' not found in campaign 'demo'"):
+            repo.get_configuration(s, camp, "variant1")
+
+
+def test_repo_namespace_keeps_every_name_its_callers_use():
+    """``from railval.db import repo; repo.X`` for every X the repository's modules define and
+    the former names (``verify_database`` is :func:`repo.verify_storage`)."""
+    from railval.db import cache, campaigns, configurations, evidence, signals
+
+    for module in (cache, campaigns, configurations, evidence, signals):
+        public = [n for n, v in vars(module).items() if callable(v) and not n.startswith("_")
+                  and getattr(v, "__module__", "") == module.__name__]
+        assert public and all(getattr(repo, n) is getattr(module, n) for n in public), module.__name__
+    assert repo.verify_database is repo.verify_storage
+    assert all(hasattr(repo, n) for n in repo.__all__)

@@ -48,7 +48,7 @@ def test_copied_cache_rows_do_not_change_the_verdict(db):
             s.execute(update(ResultCache).where(ResultCache.key == key).values(value=value))
     assert _verdict(db) == honest
     with db.session() as s:
-        doc = repo.verify_database(s, blobs=False)
+        doc = repo.verify_storage(s, blobs=False)
     # the copied rows were recomputed and re-sealed by the validation above
     assert doc["ok"], doc
 
@@ -62,7 +62,7 @@ def test_cache_value_written_without_the_secret_is_not_used(db):
         s.execute(update(ResultCache).where(ResultCache.key == key).values(value=payload))
     with db.session() as s:
         assert repo.cache_get(s, key) is None
-        doc = repo.verify_database(s, blobs=False)
+        doc = repo.verify_storage(s, blobs=False)
     assert not doc["ok"] and doc["cache_unauthentic"] == [key]
 
 
@@ -86,7 +86,7 @@ def test_rescaled_signal_with_recomputed_hash_is_refused(db):
                        match="section S03, configuration 'baseline', Y_w1L: fails its seal"):
         _verdict(db)
     with db.session() as s:
-        doc = repo.verify_database(s, blobs=True)
+        doc = repo.verify_storage(s, blobs=True)
     assert not doc["ok"]
     assert [p["channel"] for p in doc["campaigns"]["demo"]] == ["Y_w1L"]
 

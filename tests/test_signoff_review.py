@@ -251,7 +251,7 @@ def test_migration_turns_workshop_only_reviewers_into_panelists(db_url, tmp_path
         wsdb.invite(s, w, "signer_ws")
         inv, _ = users.create_invitation(s, role="panelist", workshop_ref="W", actor="org")
         db_signoff.create(s, user=users.get_user(s, "signer_ws"), campaign="demo",
-                          configuration="baseline", decision="not-validated", restrictions="",
+                          config="baseline", decision="not-validated", restrictions="",
                           statement="old", manifest={"result": {"validated": False}},
                           software_version="old")
         inv_id = inv.id

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from railval.app.services.batch import BatchExecutor
@@ -96,57 +97,120 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     The result and the stored configuration record which sections the fit used
     (``Configuration.calibration``); the result carries ``validation`` (all sections),
     ``validation_held_out`` (held-out sections), ``in_sample`` and plain-language ``flags`` with
-    ``plausible`` (fitted values inside their plausible ranges and off the search bounds)."""
+    ``plausible`` (fitted values inside their plausible ranges and off the search bounds).
+
+    The campaign and configuration are resolved once here (docs/design.md §2); every step
+    below takes the references. Steps: load, plan (:func:`_plan`), fit, judge
+    (:func:`_judge`), store (:func:`_store`)."""
     report(progress, "load", 0.0, campaign=campaign, config=config)
     with session_of(database) as s:
-        from railval.db import repo as _repo
-
-        _repo.check_new_configuration(s, campaign, new_name, replace=replace)  # before fitting
-        ctx = load_context(s, campaign)
-        conf_effects, conf_params, _ = configuration_of(s, campaign, config)
+        camp, conf = repo.resolve(s, campaign, config)
+        repo.check_new_configuration(s, camp, new_name, replace=replace)  # before fitting
+        ctx = load_context(s, camp)
+        conf_effects, conf_params, _ = configuration_of(s, camp, conf)
         # the parent's own evidence, to judge what the calibration adds on sections it has not seen
-        parent_vals = section_values(_repo.load_signalsets(s, campaign, config), ctx.sections)
-        support = _diagnosis_flags(s, campaign, config, list(effects))
-    model_candidates = [e for e in effects if e.startswith("model.")]
-    effects = [e for e in effects if not e.startswith("model.")]
-    start = {k: dict(v) for k, v in (start or {}).items()}
-    for key in [k for k in start if k.startswith("model.")]:  # {"model.P": {"P": v}} as the app sends it
-        value = start.pop(key)
-        if value:
-            start.setdefault("model", {})[key[6:]] = float(value.get(key[6:], next(iter(value.values()))))
+        parent_vals = section_values(repo.load_signalsets(s, camp, conf), ctx.sections)
+        support = _diagnosis_flags(s, camp, conf, list(effects))
+    start_values = _start_values(start)
     fit_ids, held_ids = _calibration_split(ctx, fit_sections, holdout, split)
-    registry = EFFECTS
+    plan = _plan(ctx, conf, effects, params, start_values, conf_effects, conf_params)
+    objective = _Objective(_restrict(ctx, fit_ids) if held_ids else ctx, plan.base_effects, conf_params,
+                           plan.targets)
+    with BatchExecutor(scheduler, workers) as ex:
+        res = fit_parameters(objective, plan.specs, seed=seed, popsize=popsize, maxiter=maxiter,
+                            polish_maxfev=polish_maxfev,
+                            workers=ex if ex.backend != "serial" else None,
+                            progress=lambda st, f, i: report(progress, f"calibrate:{st}", 0.05 + 0.85 * f, **i))
+    eff, model = objective.split(res.parameters)
+    report(progress, "store", 0.92)
+    sets = simulate_context(ctx, eff, model)
+    vr_full, vr_held, plausible, flags = _judge(ctx, plan, res.parameters, sets, parent_vals, held_ids)
+    flags += support + [f"{'configuration effect' if x['kind'] == 'configuration' else 'effect'} {x['name']} "
+                        f"left out: {x['reason']}" for x in plan.skipped]
+    record = {"fit_sections": fit_ids, "held_out_sections": held_ids,
+              "parameters": [s.name for s in plan.specs]}
+    res.extra["lineage"] = _store(database, ctx, camp, conf, new_name, plan, res.objective, eff, model, sets,
+                                  record, replace, vr_full)
+    res.extra.update({"configuration": new_name, "parent": conf.name, "effects": eff,
+                      "model_parameters": model, "validation": vr_full.to_dict(),
+                      "validation_held_out": vr_held.to_dict() if vr_held is not None else None,
+                      "fit_sections": fit_ids, "held_out_sections": held_ids, "in_sample": not held_ids,
+                      "plausible": plausible, "flags": flags, "skipped": plan.skipped,
+                      "next": {"action": "diagnose",
+                               "command": f"railval diagnose {camp.name} --config {new_name}",
+                               "text": f"diagnose the child next: railval diagnose {camp.name} --config {new_name}"}})
+    report(progress, "done", 1.0)
+    return res
+
+
+@dataclass
+class _Plan:
+    """What a calibration fits: the search box of every fitted parameter (``specs``) and where
+    each value goes (``targets``: (effect or ``"model"``, parameter)), the effects simulated
+    (``base_effects``: the configuration's runnable effects plus the added ones at their start
+    values), the added effects and template-parameter candidates, and what was left out
+    (``skipped``; ``conf_skipped``: the configuration's own effects that cannot apply)."""
+
+    specs: list[ParameterSpec]
+    targets: list[tuple[str, str]]
+    base_effects: dict[str, dict[str, float]]
+    effects: list[str]
+    model_candidates: list[str]
+    skipped: list[dict[str, str]]
+    conf_skipped: list[dict[str, str]]
+
+
+def _start_values(start: Mapping[str, Mapping[str, float]] | None) -> dict[str, dict[str, float]]:
+    """``start`` with template parameters under ``"model"``: the app sends a parameter candidate
+    ``model.P`` as ``{"model.P": {"P": value}}``, the CLI as ``{"model": {"P": value}}``."""
+    out = {k: dict(v) for k, v in (start or {}).items()}
+    for key in [k for k in out if k.startswith("model.")]:
+        value, name = out.pop(key), key[6:]
+        if value:
+            if name not in value:
+                raise InvalidParameter(f"start value of {key!r} must be given as {{{name!r}: value}}, "
+                                       f"got keys {sorted(value)}")
+            out.setdefault("model", {})[name] = float(value[name])
+    return out
+
+
+def _plan(ctx: CampaignContext, conf: repo.ConfigRef, requested: Sequence[str], params: Sequence[str] | None,
+          start: Mapping[str, Mapping[str, float]], conf_effects: Mapping[str, Any],
+          conf_params: Mapping[str, float]) -> _Plan:
+    """The :class:`_Plan` of adding ``requested`` (effect ids or ``model.NAME``) to configuration
+    ``conf``: unknown effects are refused; effects that cannot apply to the campaign
+    (:func:`railval.core.sim.effects.unmet_requirement`) are left out with their reason, refused
+    (before any simulation, before anything is stored) only when nothing is left to calibrate; a
+    parameter left out of ``params`` keeps its ``start`` value (else its default)."""
+    model_candidates = [e for e in requested if e.startswith("model.")]
+    effects = [e for e in requested if not e.startswith("model.")]
     for e in effects:
-        if e not in registry:
-            raise InvalidParameter(f"unknown effect {e!r}; known: {sorted(registry)}")
-    # what cannot apply is left out with its reason; refused (before any simulation, before
-    # anything is stored) only when nothing is left to calibrate
-    skipped = [{"name": e, "kind": "effect", "reason": f"cannot apply to campaign {campaign!r}: {why}"}
-               for e in effects if (why := unmet_requirement(registry[e], ctx.layouts))]
+        if e not in EFFECTS:
+            raise InvalidParameter(f"unknown effect {e!r}; known: {sorted(EFFECTS)}")
+    skipped = [{"name": e, "kind": "effect", "reason": f"cannot apply to campaign {ctx.campaign!r}: {why}"}
+               for e in effects if (why := unmet_requirement(EFFECTS[e], ctx.layouts))]
     if skipped and len(skipped) == len(effects) and not model_candidates:
         raise InvalidParameter("; ".join(f"effect {x['name']!r} {x['reason']}" for x in skipped))
     effects = [e for e in effects if e not in {x["name"] for x in skipped}]
-    in_config, conf_skipped = runnable_effects(ctx, conf_effects, config)
-    skipped = conf_skipped + skipped
+    in_config, conf_skipped = runnable_effects(ctx, conf_effects, conf.name)
     base_effects = {k: dict(v) for k, v in in_config.items()}
     specs: list[ParameterSpec] = []
     targets: list[tuple[str, str]] = []
     wanted = set(params or []) | set(model_candidates)
     for e in effects:
-        eparams = effect_parameters(registry[e])
-        # a parameter left out of ``params`` keeps its ``start`` value (else its default)
-        base_effects.setdefault(e, {k: float((start or {}).get(e, {}).get(k, p["default"]))
-                                    for k, p in eparams.items()})
+        eparams = effect_parameters(EFFECTS[e])
+        base_effects.setdefault(e, {k: float(start.get(e, {}).get(k, p["default"])) for k, p in eparams.items()})
         for pname, p in eparams.items():
             if params and not ({pname, f"{e}.{pname}"} & wanted):
                 continue
-            st = (start or {}).get(e, {}).get(pname, base_effects[e].get(pname, p["default"]))
+            # its start: the given start value, else the configuration's value, else the default
+            st = next((src[pname] for src in (start.get(e, {}), base_effects[e]) if pname in src), p["default"])
             specs.append(ParameterSpec(f"{e}.{pname}", p["lower"], p["upper"], p["unit"],
                                        min(max(float(st), p["lower"]), p["upper"]), log=p["log"]))
             targets.append((e, pname))
     for name in sorted(w for w in wanted if w.startswith("model.")):
         spec = _model_spec(name[6:], ctx, conf_params)
-        st = (start.get("model") or {}).get(name[6:])
+        st = start.get("model", {}).get(name[6:])
         if st is not None:
             spec = ParameterSpec(spec.name, spec.lower, spec.upper, spec.unit,
                                  min(max(float(st), spec.lower), spec.upper), log=spec.log)
@@ -160,19 +224,17 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
                                    f"(use effect.param or model.NAME)")
     if not specs:
         raise InvalidParameter(f"nothing to calibrate for effects {effects} and params {params}")
-    ctx_fit = _restrict(ctx, fit_ids) if held_ids else ctx
-    objective = _Objective(ctx_fit, base_effects, conf_params, targets)
-    with BatchExecutor(scheduler, workers) as ex:
-        res = fit_parameters(objective, specs, seed=seed, popsize=popsize, maxiter=maxiter,
-                            polish_maxfev=polish_maxfev,
-                            workers=ex if ex.backend != "serial" else None,
-                            progress=lambda st, f, i: report(progress, f"calibrate:{st}", 0.05 + 0.85 * f, **i))
-    eff, model = objective.split(res.parameters)
-    report(progress, "store", 0.92)
-    sets = simulate_context(ctx, eff, model)
+    return _Plan(specs, targets, base_effects, effects, model_candidates, conf_skipped + skipped, conf_skipped)
+
+
+def _judge(ctx: CampaignContext, plan: _Plan, fitted: Mapping[str, float], sets: Mapping[str, Any],
+           parent_vals: Mapping[str, Mapping], held_ids: Sequence[str]) -> tuple[Any, Any, bool, list[str]]:
+    """(validation on all sections with 1000 bootstrap resamples, validation on the held-out
+    sections or ``None``, plausible, flags) of the calibrated simulation ``sets``: plausibility
+    of the fitted values, in-sample / held-out caveats (:func:`_calibration_flags`) and what
+    the calibration adds over its parent (:func:`_parent_flags`)."""
     vals = section_values(sets, ctx.sections)
     vr_full = validate_values(ctx, vals, n_boot=1000)
-    record = {"fit_sections": fit_ids, "held_out_sections": held_ids, "parameters": [s.name for s in specs]}
     vr_held = vr_parent_held = None
     if held_ids:
         held = _restrict(ctx, held_ids)
@@ -181,28 +243,25 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
         vr_parent_held = validate(held.measured_values, {k: v for k, v in parent_vals.items() if k in held_ids},
                                   held.sections, ctx.vehicle)
     vr_parent = validate_values(ctx, parent_vals)
-    plausible, flags = _calibration_flags(ctx, specs, res.parameters, vr_full, vr_held)
-    flags += _parent_flags(vr_parent, vr_parent_held, vr_held) + support
-    flags += [f"{'configuration effect' if x['kind'] == 'configuration' else 'effect'} {x['name']} left out: "
-              f"{x['reason']}" for x in skipped]
-    with session_of(database) as s:
-        repo.store_configuration(
-            s, campaign, new_name, parent=config, effects=eff, parameters=model,
-            description=f"calibrated {', '.join(effects + model_candidates)} from {config} "
-                        f"(objective {res.objective:.3g})"
-                        + "".join(f"; without {x['name']} (cannot apply to this campaign)" for x in conf_skipped),
-            signalsets=sets, replace=replace, calibration=record)
+    plausible, flags = _calibration_flags(ctx, plan.specs, fitted, vr_full, vr_held)
+    flags += _parent_flags(vr_parent, vr_parent_held, vr_held)
+    return vr_full, vr_held, plausible, flags
+
+
+def _store(database: Any, ctx: CampaignContext, camp: repo.CampaignRef, conf: repo.ConfigRef, new_name: str,
+           plan: _Plan, objective: float, eff: dict, model: dict, sets: Mapping[str, Any],
+           record: dict[str, Any], replace: bool, vr_full: Any) -> list[dict]:
+    """Store the calibrated configuration ``new_name`` (parent ``conf``) in one writing unit of
+    work and return its lineage errors (:func:`lineage_errors`)."""
+    description = (f"calibrated {', '.join(plan.effects + plan.model_candidates)} from {conf.name} "
+                   f"(objective {objective:.3g})"
+                   + "".join(f"; without {x['name']} (cannot apply to this campaign)" for x in plan.conf_skipped))
+    with session_of(database, write=True) as s:
+        repo.store_configuration(s, camp, new_name, parent=conf, effects=eff, parameters=model,
+                                 description=description, signalsets=sets, replace=replace,
+                                 calibration=record)
         s.flush()
-        res.extra["lineage"] = lineage_errors(s, ctx, new_name, {new_name: vr_full})
-    res.extra.update({"configuration": new_name, "parent": config, "effects": eff,
-                      "model_parameters": model, "validation": vr_full.to_dict(),
-                      "validation_held_out": vr_held.to_dict() if vr_held is not None else None,
-                      "fit_sections": fit_ids, "held_out_sections": held_ids, "in_sample": not held_ids,
-                      "plausible": plausible, "flags": flags, "skipped": skipped,
-                      "next": {"action": "diagnose", "command": f"railval diagnose {campaign} --config {new_name}",
-                               "text": f"diagnose the child next: railval diagnose {campaign} --config {new_name}"}})
-    report(progress, "done", 1.0)
-    return res
+        return lineage_errors(s, ctx, new_name, {new_name: vr_full})
 
 
 def _restrict(ctx: CampaignContext, ids: Sequence[str]) -> CampaignContext:
@@ -309,22 +368,24 @@ def _parent_flags(vr_parent: Any, vr_parent_held: Any, vr_held: Any) -> list[str
     return flags
 
 
-def _diagnosis_flags(session: Any, campaign: str, config: str, candidates: Sequence[str]) -> list[str]:
-    """Whether the newest stored diagnosis of the parent supports calibrating ``candidates``
-    (effect ids or ``model.NAME``): no flag when its verdict is ``cause`` for one of them; a
-    flag when it answered ``none`` or ``uncertain`` or named another cause; a note when the
-    parent was never diagnosed (docs/diagnosis.md "Calibration")."""
+def _diagnosis_flags(session: Any, camp: repo.CampaignRef, conf: repo.ConfigRef,
+                     candidates: Sequence[str]) -> list[str]:
+    """Whether the newest stored diagnosis of the parent ``conf`` supports calibrating
+    ``candidates`` (effect ids or ``model.NAME``): no flag when its verdict is ``cause`` for one
+    of them; a flag when it answered ``none`` or ``uncertain`` or named another cause; a note
+    when the parent was never diagnosed (docs/diagnosis.md "Calibration")."""
     from railval.app.services.diagnosis import latest_diagnosis
 
+    campaign, config = camp.name, conf.name
     diag = latest_diagnosis(session, campaign, config)
     names = ", ".join(candidates)
     if diag is None:
-        return [f"note: {config} has no stored diagnosis, so nothing here shows that {names} is the "
-                f"cause; run railval diagnose {campaign} --config {config}"]
+        return [(f"note: {config} has no stored diagnosis, so nothing here shows that {names} is the "
+                f"cause; run railval diagnose {campaign} --config {config}")]
     d = diag.to_dict()
     verdict = d.get("verdict") or ""
-    cands = d.get("candidates") or []
-    top = cands[0].get("name", cands[0].get("effect")) if cands else ""
+    # the best candidate: a parameter candidate's ``name`` (``model.NAME``), else its effect id
+    top = (diag.candidates[0].name or diag.candidates[0].effect) if diag.candidates else ""
     run = d.get("run") or {}
     when = f" of {run['created_at']}" if run.get("created_at") else ""
     stale = " (computed on data that have changed since)" if run.get("current") is False else ""
@@ -338,8 +399,8 @@ def _diagnosis_flags(session: Any, campaign: str, config: str, candidates: Seque
         why = f"named {top}, not {names}, as the cause"
     else:  # a diagnosis stored before verdicts existed
         return []
-    return [f"the diagnosis of {config}{when}{stale} {why}: no diagnostic evidence that {names} is a cause; "
-            "the model may be compensating for something else"]
+    return [(f"the diagnosis of {config}{when}{stale} {why}: no diagnostic evidence that {names} is a cause; "
+            "the model may be compensating for something else")]
 
 
 def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float]) -> ParameterSpec:
@@ -351,7 +412,9 @@ def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float
     if name in plan:
         p = plan[name]
         return ParameterSpec(f"model.{name}", p["bounds"][0], p["bounds"][1], p["unit"], p["reference"], log=True)
-    value = conf_params.get(name, ctx.vehicle.get("parameters", {}).get(name, COACH_MODAL_DEFAULTS.get(name)))
+    # its value: the configuration's, else the vehicle template's, else the modal default
+    sources = (conf_params, ctx.vehicle["parameters"], COACH_MODAL_DEFAULTS)
+    value = next((src[name] for src in sources if name in src), None)
     if value is None:
         raise InvalidParameter(f"model parameter {name!r} has no value in the vehicle template or configuration")
     lo, hi = (COACH_MODAL_PARAMETERS[name][:2] if name in COACH_MODAL_PARAMETERS
@@ -359,8 +422,8 @@ def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float
     return ParameterSpec(f"model.{name}", lo, hi, "", float(value))
 
 
-def lineage_errors(session: Any, ctx: CampaignContext, name: str, known: Mapping[str, Any] | None = None) -> list[dict]:
-    """Root → ``name``: per configuration its effects and every quantity's normalised error
+def lineage_errors(session: Any, ctx: CampaignContext, config: str, known: Mapping[str, Any] | None = None) -> list[dict]:
+    """Root → ``config``: per configuration its effects and every quantity's normalised error
     (:func:`railval.core.validation.normalised_errors`), so the UI can draw the error falling.
     ``known``: validation results already at hand, by configuration name.
 
@@ -371,11 +434,13 @@ def lineage_errors(session: Any, ctx: CampaignContext, name: str, known: Mapping
     held-out evidence."""
     out = []
     prev_vals = None
-    for conf in repo.lineage(session, ctx.campaign, name):
+    camp = ctx.ref or ctx.campaign
+    for conf in repo.lineage(session, camp, config):
         vr = (known or {}).get(conf.name)
         sets = None
+        src = repo.ConfigRef(camp, conf.id, conf.name) if isinstance(camp, repo.CampaignRef) else conf.name
         if vr is None or (conf.calibration or {}).get("held_out_sections"):
-            sets = repo.load_signalsets(session, ctx.campaign, conf.name)
+            sets = repo.load_signalsets(session, camp, src)
         vals = section_values(sets, ctx.sections) if sets is not None else None
         if vr is None:
             vr = validate_values(ctx, vals)
@@ -397,7 +462,7 @@ def lineage_errors(session: Any, ctx: CampaignContext, name: str, known: Mapping
                                 "improvement": (parent - child) if parent is not None and child is not None else None}
         out.append(item)
         if vals is None:
-            vals = section_values(repo.load_signalsets(session, ctx.campaign, conf.name), ctx.sections)
+            vals = section_values(repo.load_signalsets(session, camp, src), ctx.sections)
         prev_vals = vals
     return out
 

@@ -40,14 +40,16 @@ ACC_CHANNELS = ("ay_cb_b1", "ay_cb_b2", "az_cb_b1", "az_cb_b2")
 
 
 @contextmanager
-def session_of(database_or_session: Any) -> Iterator[Any]:
-    """Yield a session from a :class:`railval.db.engine.Database`, a URL string or a Session."""
+def session_of(database_or_session: Any, *, write: bool = False) -> Iterator[Any]:
+    """Yield a session from a :class:`railval.db.engine.Database`, a URL string or a Session
+    (used as it is: its owner commits). ``write=True`` for a unit of work that writes
+    (:meth:`railval.db.engine.Database.session`)."""
     if isinstance(database_or_session, Session):
         yield database_or_session
         return
     if database_or_session is None or isinstance(database_or_session, str):
         database_or_session = connect(database_or_session)
-    with database_or_session.session() as s:
+    with database_or_session.session(write=write) as s:
         yield s
 
 
@@ -59,7 +61,9 @@ def report(progress: Progress | None, stage: str, fraction: float, **info: Any) 
 
 @dataclass
 class CampaignContext:
-    """Everything a worker needs to simulate and evaluate the campaign (picklable)."""
+    """Everything a worker needs to simulate and evaluate the campaign (picklable).
+    ``campaign`` is its name (for messages), ``ref`` the campaign resolved once
+    (:func:`railval.db.repo.resolve`) that repository calls take."""
 
     campaign: str
     vehicle: dict[str, Any]
@@ -71,6 +75,7 @@ class CampaignContext:
     fs: dict[str, float]
     sim_inputs: dict[str, Any] = field(default_factory=dict)
     bands: tuple[tuple[float, float], ...] = DEFAULT_BANDS_HZ
+    ref: repo.CampaignRef | None = None
 
 
 def band_sums(signalsets: Mapping[str, SignalSet], bands) -> dict[str, np.ndarray]:
@@ -89,8 +94,10 @@ def section_values(signalsets: Mapping[str, SignalSet], sections: Sequence[Secti
     return evaluate_present(signalsets, sections)
 
 
-def load_context(session: Any, campaign: str) -> CampaignContext:
-    """Read the campaign's vehicle, sections and measurement; evaluate the measurement once."""
+def load_context(session: Any, campaign: repo.CampaignArg) -> CampaignContext:
+    """Read the campaign's vehicle, sections and measurement; evaluate the measurement once.
+    ``campaign``: a :class:`railval.db.repo.CampaignRef` resolved at the service's entrance
+    (or, for callers that have not resolved it, its name)."""
     camp = repo.get_campaign(session, campaign)
     sections = repo.section_infos(session, camp)
     vehicle = repo.vehicle_info(session, camp)
@@ -101,7 +108,8 @@ def load_context(session: Any, campaign: str) -> CampaignContext:
     ctx = CampaignContext(camp.name, vehicle, sections, layouts, section_values(measured, sections),
                           band_sums(measured, DEFAULT_BANDS_HZ),
                           sorted({c for ss in measured.values() for c in ss.channels}),
-                          {sid: ss.fs for sid, ss in measured.items()})
+                          {sid: ss.fs for sid, ss in measured.items()},
+                          ref=repo.CampaignRef(camp.id, camp.name))
     ctx.sim_inputs = dict(simulation_inputs(session, camp))
     return ctx
 
@@ -142,9 +150,10 @@ def evaluate_effects(task: tuple[CampaignContext, dict, dict]) -> tuple[dict, di
     return section_values(sets, ctx.sections), band_sums(sets, ctx.bands)
 
 
-def configuration_of(session: Any, campaign: str, name: str) -> tuple[dict, dict, Any]:
-    """(effects, model parameters, row) of a stored configuration."""
-    conf = repo.get_configuration(session, campaign, name)
+def configuration_of(session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg) -> tuple[dict, dict, Any]:
+    """(effects, model parameters, row) of stored configuration ``config`` (a
+    :class:`railval.db.repo.ConfigRef` or its name)."""
+    conf = repo.get_configuration(session, campaign, config)
     return dict(conf.effects or {}), dict(conf.parameters or {}), conf
 
 

@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from railval.app.services.campaign_context import Progress, session_of
-from railval.app.services.diagnosis_evidence import diagnose as diagnose_evidence_service
+from railval.app.services.diagnosis_evidence import rank_causes as diagnose_evidence_service
 from railval.app.services.diagnosis_evidence import scan_points
 from railval.app.services.stored_runs import data_inputs, digests, run_info
 from railval.core.diagnosis import PARAMETER_CANDIDATES, DiagnosisResult
@@ -57,7 +57,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     """Rank the causes of the residual of configuration ``config``: the effects it lacks and
     the vehicle-template parameters that may be mis-set, by the share of the residual they
     explain on held-out sections, with noise floor, plausibility, identifiability and a
-    verdict (:func:`railval.app.services.diagnosis_evidence.diagnose`). ``effects``: candidate
+    verdict (:func:`railval.app.services.diagnosis_evidence.rank_causes`). ``effects``: candidate
     names — effect ids and ``model.NAME`` parameters; given without any ``model.`` name, only
     those effects are tried.
 

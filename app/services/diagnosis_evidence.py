@@ -144,13 +144,13 @@ def measured_section_bands(session: Any, ctx: Any) -> dict[str, dict[str, np.nda
             for sid, ss in sets.items()}
 
 
-# --------------------------------------------------------------------------- diagnose
-def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
-             scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
-             parameters: Sequence[str] | None = None, include_parameters: bool = True,
-             measurement: bool | Sequence[str] = True,
-             workers: int | None = None, n_boot: int = 100, folds: int = 3, refine: int = 3,
-             seed: int = 0) -> DiagnosisResult:
+# --------------------------------------------------------------------------- rank_causes
+def rank_causes(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
+                scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
+                parameters: Sequence[str] | None = None, include_parameters: bool = True,
+                measurement: bool | Sequence[str] = True,
+                workers: int | None = None, n_boot: int = 100, folds: int = 3, refine: int = 3,
+                seed: int = 0) -> DiagnosisResult:
     """Rank the effects missing from ``config`` and the template parameters that may be mis-set
     by the share of the residual they explain on held-out sections, with noise floor,
     plausibility, identifiability and a verdict (module docstring;

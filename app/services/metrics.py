@@ -25,7 +25,8 @@ from railval.core.errors import InvalidParameter, NotFound
 from railval.core.metrics import compare_signalsets, cut_evaluated, metric_names
 from railval.core.metrics.compare import DEFAULT_LOWPASS_HZ
 from railval.core.metrics.sync import DEFAULT_MAX_LAG_S
-from railval.core.types import CHANNEL_KINDS, split_channel
+from railval.core.types import CHANNEL_KINDS, SectionInfo, split_channel
+from railval.db import repo
 
 PARTS = ("section", "evaluated")
 
@@ -66,7 +67,7 @@ def channel_unit(channel: str) -> str:
     return CHANNEL_KINDS.get(split_channel(channel)[0], "")
 
 
-def metrics_for_configuration(session: Any, campaign: Any, config: str,
+def metrics_for_configuration(session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg,
                               sections: Sequence[str] | None = None,
                               channels: Sequence[str] | None = None, *,
                               lowpass_hz: float | None = DEFAULT_LOWPASS_HZ,
@@ -84,17 +85,20 @@ def metrics_for_configuration(session: Any, campaign: Any, config: str,
     sections and channels, section records, settings, :data:`METRICS_VERSION`) is returned
     without computing unless ``refresh``; every computed run is stored (``store``).
     ``df.attrs["run"]`` describes the stored run (:func:`railval.app.services.stored_runs.run_info`).
+    Campaign and configuration are resolved once here (:func:`railval.db.repo.resolve`).
     """
     from railval.app.services.stored_runs import data_inputs, digests, run_info
-    from railval.db import repo, runs
+    from railval.db import runs
 
     if part not in PARTS:
         raise InvalidParameter(f"part must be one of {PARTS}, got {part!r}")
+    campaign, _ = repo.resolve(session, campaign)
     infos = {s.id: s for s in repo.section_infos(session, campaign)}
     if sections is not None:
         missing = [s for s in sections if s not in infos]
         if missing:
-            raise NotFound(f"section(s) {missing} not in campaign {campaign!r}; has {sorted(infos)}")
+            raise NotFound(f"section(s) {missing} not in campaign {campaign.name!r}; has {sorted(infos)}")
+    _, config = repo.resolve(session, campaign, config)
     conf = repo.get_configuration(session, campaign, config)
     settings = _run_settings(sections, channels, lowpass_hz, max_lag_s, families, part, subsample)
     data_sha, inputs_sha = digests(data_inputs(session, campaign, config, sections, channels),
@@ -118,7 +122,8 @@ def metrics_for_configuration(session: Any, campaign: Any, config: str,
     return df
 
 
-def stored_metrics(session: Any, campaign: str, config: str, sections: Sequence[str] | None = None,
+def stored_metrics(session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg,
+                   sections: Sequence[str] | None = None,
                    channels: Sequence[str] | None = None, *,
                    lowpass_hz: float | None = DEFAULT_LOWPASS_HZ, max_lag_s: float = DEFAULT_MAX_LAG_S,
                    families: Sequence[str] | None = None, part: str = "section",
@@ -126,8 +131,9 @@ def stored_metrics(session: Any, campaign: str, config: str, sections: Sequence[
     """The stored metrics of exactly these inputs (as :func:`metrics_for_configuration`
     would return them), or None when they were never computed: nothing is computed."""
     from railval.app.services.stored_runs import data_inputs, digests, run_info
-    from railval.db import repo, runs
+    from railval.db import runs
 
+    campaign, config = repo.resolve(session, campaign, config)
     conf = repo.get_configuration(session, campaign, config)
     settings = _run_settings(sections, channels, lowpass_hz, max_lag_s, families, part, subsample)
     data_sha, inputs_sha = digests(data_inputs(session, campaign, config, sections, channels),
@@ -140,12 +146,13 @@ def stored_metrics(session: Any, campaign: str, config: str, sections: Sequence[
     return df
 
 
-def metrics_runs(session: Any, campaign: str, config: str) -> list[dict[str, Any]]:
+def metrics_runs(session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg) -> list[dict[str, Any]]:
     """Stored metrics runs of ``config``, newest first (:func:`run_info` plus the rows);
     ``current`` is false when the signals or sections it read changed since."""
     from railval.app.services.stored_runs import data_inputs, digests, run_info
-    from railval.db import repo, runs
+    from railval.db import runs
 
+    campaign, config = repo.resolve(session, campaign, config)
     conf = repo.get_configuration(session, campaign, config)
     data_sha: dict[str, str] = {}
     out = []
@@ -160,11 +167,10 @@ def metrics_runs(session: Any, campaign: str, config: str) -> list[dict[str, Any
     return out
 
 
-def _compute(session: Any, campaign: Any, config: str, infos: dict[str, SectionInfo],
+def _compute(session: Any, campaign: repo.CampaignRef, config: repo.ConfigRef, infos: dict[str, SectionInfo],
              sections: Sequence[str] | None, channels: Sequence[str] | None,
              lowpass_hz: float | None, max_lag_s: float, families: Sequence[str] | None,
              part: str, subsample: bool) -> pd.DataFrame:
-    from railval.db import repo
     ch = list(channels) if channels is not None else None
     sec = list(sections) if sections is not None else None
     measured = repo.load_signalsets(session, campaign, None, sec, ch)
@@ -174,7 +180,7 @@ def _compute(session: Any, campaign: Any, config: str, infos: dict[str, SectionI
         info = infos[sid]
         if sid not in measured or sid not in simulated:
             if sections is not None:
-                side = "measurement" if sid not in measured else f"configuration {config!r}"
+                side = "measurement" if sid not in measured else f"configuration {config.name!r}"
                 raise NotFound(f"section {sid} has no recording in the {side}")
             continue
         m, c = measured[sid], simulated[sid]

@@ -260,7 +260,7 @@ def sign(database, username: str, password: str, campaign: str, configuration: s
             raise SignoffRefused(f"sign-off refused: {problem}")
         manifest = evidence_manifest(s, camp.name, conf.name)
         try:
-            so = db_signoff.create(s, user=user, campaign=camp.name, configuration=conf.name,
+            so = db_signoff.create(s, user=user, campaign=camp.name, config=conf.name,
                                    decision=decision, restrictions=restrictions,
                                    statement=statement, manifest=manifest,
                                    software_version=software_version(),

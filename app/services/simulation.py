@@ -34,19 +34,21 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
     ``parent``) and return a summary. With a ``parent``, its effects and parameters are the
     starting point and ``effects``/``parameters`` are added on top. ``scheduler``: the
     address of a Dask scheduler that simulates the sections (results identical to a local run;
-    :class:`railval.app.services.batch.BatchExecutor`)."""
+    :class:`railval.app.services.batch.BatchExecutor`). Campaign and parent are resolved once
+    here (:func:`railval.db.repo.resolve`)."""
     from railval.db import repo
 
     with database.session() as s:
-        camp = repo.get_campaign(s, campaign)
+        camp, _ = repo.resolve(s, campaign)
         repo.check_new_configuration(s, camp, name, replace=replace)  # before simulating
         vehicle = repo.vehicle_info(s, camp)
         sections = repo.section_infos(s, camp)
         layouts = repo.section_layouts(s, camp)
         measured = repo.load_signalsets(s, camp, None)
-        base_eff, base_par = {}, {}
+        base_eff, base_par, pref = {}, {}, None
         if parent is not None:
-            pconf = repo.get_configuration(s, camp, parent)
+            _, pref = repo.resolve(s, camp, parent)
+            pconf = repo.get_configuration(s, camp, pref)
             base_eff, base_par = dict(pconf.effects or {}), dict(pconf.parameters or {})
         camp_name = camp.name
     if not measured:
@@ -77,7 +79,7 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
         progress("store", 0.95, {})
     desc = description or ("built-in simulator: " + (", ".join(sorted(eff)) or "no effects"))
     with database.session(write=True) as s:
-        repo.store_configuration(s, camp_name, name, parent=parent, effects=eff, parameters=par,
+        repo.store_configuration(s, camp, name, parent=pref, effects=eff, parameters=par,
                                  description=desc, signalsets=sets, replace=replace)
     if progress:
         progress("done", 1.0, {})

@@ -30,11 +30,14 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def data_inputs(session: Any, campaign: str, config: str, sections: Sequence[str] | None = None,
+def data_inputs(session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg,
+                sections: Sequence[str] | None = None,
                 channels: Sequence[str] | None = None) -> dict[str, Any]:
     """What a run of ``config`` reads from the database: signal content hashes of the
     measurement and of the configuration (restricted to ``sections``/``channels`` when
-    given), the section records and the configuration's effects and parameters."""
+    given), the section records and the configuration's effects and parameters.
+    ``campaign``/``config``: the references of :func:`railval.db.repo.resolve` (or names,
+    resolved here once)."""
     keep_s = set(sections) if sections is not None else None
     keep_c = set(channels) if channels is not None else None
 
@@ -42,6 +45,7 @@ def data_inputs(session: Any, campaign: str, config: str, sections: Sequence[str
         return {sid: {c: v for c, v in chans.items() if keep_c is None or c in keep_c}
                 for sid, chans in h.items() if keep_s is None or sid in keep_s}
 
+    campaign, config = repo.resolve(session, campaign, config)
     conf = repo.get_configuration(session, campaign, config)
     infos = [dataclasses.asdict(s) for s in repo.section_infos(session, campaign)
              if keep_s is None or s.id in keep_s]

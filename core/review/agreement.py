@@ -45,6 +45,26 @@ def wilson_interval(successes, n, *, confidence: float = 0.95):
 
     ``successes`` and ``n`` may be scalars or arrays; returns ``(low, high)`` of the same
     shape. ``n`` must be ≥ 1 and ``0 ≤ successes ≤ n``.
+
+    Parameters
+    ----------
+    successes : int or array_like
+        Number of successes (Yes answers).
+    n : int or array_like
+        Number of trials (answers), ≥ 1.
+    confidence : float
+        Coverage of the interval, in (0, 1).
+
+    Returns
+    -------
+    tuple of (float, float) or of ndarray
+        ``(low, high)``, clipped to [0, 1].
+
+    Examples
+    --------
+    >>> low, high = wilson_interval(8, 10)
+    >>> round(low, 3), round(high, 3)
+    (0.49, 0.943)
     """
     k = np.asarray(successes, dtype=float)
     m = np.asarray(n, dtype=float)
@@ -68,7 +88,20 @@ def wilson_interval(successes, n, *, confidence: float = 0.95):
 def counts_table(data, categories: Sequence | None = None) -> tuple[np.ndarray, list]:
     """Units × categories table of counts from reliability data ``data`` (raters × units,
     ``NaN`` = no answer; the layout of the ``krippendorff`` package). ``categories``
-    defaults to the sorted distinct values present. Returns ``(counts, categories)``."""
+    defaults to the sorted distinct values present. Returns ``(counts, categories)``.
+
+    Parameters
+    ----------
+    data : array_like
+        Raters × units answers, ``NaN`` = no answer.
+    categories : sequence, optional
+        The answer scale.
+
+    Returns
+    -------
+    tuple of (ndarray, list)
+        Units × categories counts and the categories.
+    """
     arr = np.asarray(data, dtype=float)
     if arr.ndim != 2:
         raise InvalidParameter(f"reliability data: must be 2-D (raters × units), got shape {arr.shape}")
@@ -106,7 +139,20 @@ def fleiss_kappa_counts(counts: np.ndarray, weights=None) -> np.ndarray:
     ``p_j = Σ_i n_ij / (N n)``, ``P̄_e = Σ_j p_j²``, ``κ = (P̄ − P̄_e) / (1 − P̄_e)``.
 
     ``weights`` (replicates × subjects) turns the means into weighted means; returns one κ
-    per replicate (``NaN`` where ``P̄_e = 1``, i.e. every answer in one category)."""
+    per replicate (``NaN`` where ``P̄_e = 1``, i.e. every answer in one category).
+
+    Parameters
+    ----------
+    counts : ndarray
+        Subjects × categories counts, equal row sums.
+    weights : ndarray, optional
+        Replicates × subjects weights (bootstrap multiplicities).
+
+    Returns
+    -------
+    ndarray
+        κ per replicate (one value without ``weights``).
+    """
     c = np.asarray(counts, dtype=float)
     w = _weights(weights, c.shape[0])
     n = c.sum(axis=1)
@@ -122,7 +168,18 @@ def fleiss_kappa(table) -> float:
     """Fleiss κ (Fleiss 1971; see :func:`fleiss_kappa_counts`) of a subjects ×
     categories table of counts in which every subject was rated by the same number (≥ 2) of
     raters — the input of ``statsmodels.stats.inter_rater.fleiss_kappa``. Returns ``NaN``
-    when every answer falls in one category (κ undefined)."""
+    when every answer falls in one category (κ undefined).
+
+    Parameters
+    ----------
+    table : array_like
+        Subjects × categories counts, every row summing to the same number of raters.
+
+    Returns
+    -------
+    float
+        κ, or ``NaN``.
+    """
     c = np.asarray(table, dtype=float)
     if c.ndim != 2 or c.shape[0] < 1:
         raise InvalidParameter(f"Fleiss κ table: must be subjects × categories, got shape {c.shape}")
@@ -145,7 +202,20 @@ def krippendorff_alpha_counts(counts: np.ndarray, weights=None) -> np.ndarray:
     ``α = 1 − (n − 1) (n − Σ_c o_cc) / (n² − Σ_c n_c²)``
 
     (``1 − D_o/D_e`` with the nominal δ). One α per weight row; ``NaN`` where only one
-    category occurs (``D_e = 0``)."""
+    category occurs (``D_e = 0``).
+
+    Parameters
+    ----------
+    counts : ndarray
+        Units × categories counts (missing answers simply not counted).
+    weights : ndarray, optional
+        Replicates × units weights (bootstrap multiplicities).
+
+    Returns
+    -------
+    ndarray
+        α per replicate (one value without ``weights``).
+    """
     c = np.asarray(counts, dtype=float)
     m = c.sum(axis=1)
     keep = m >= 2
@@ -160,7 +230,20 @@ def krippendorff_alpha_counts(counts: np.ndarray, weights=None) -> np.ndarray:
 def krippendorff_alpha_nominal(data, categories: Sequence | None = None) -> float:
     """Krippendorff α, nominal level, of reliability data ``data`` (raters × units, ``NaN`` =
     missing; the layout of the ``krippendorff`` package). Krippendorff (2011); see
-    :func:`krippendorff_alpha_counts`. ``NaN`` when fewer than two categories occur."""
+    :func:`krippendorff_alpha_counts`. ``NaN`` when fewer than two categories occur.
+
+    Parameters
+    ----------
+    data : array_like
+        Raters × units answers, ``NaN`` = missing.
+    categories : sequence, optional
+        The answer scale (default: the values present).
+
+    Returns
+    -------
+    float
+        α, or ``NaN``.
+    """
     counts, _ = counts_table(data, categories)
     return float(krippendorff_alpha_counts(counts)[0])
 
@@ -178,7 +261,20 @@ def gwet_ac1_counts(counts: np.ndarray, weights=None) -> np.ndarray:
 
     With every unit rated by everyone this is Gwet's formula as published; with missing
     answers the two means run over the units that allow them (the rule stated above and in
-    docs/workshops.md). One AC1 per weight row."""
+    docs/workshops.md). One AC1 per weight row.
+
+    Parameters
+    ----------
+    counts : ndarray
+        Units × categories counts; its columns are the answer scale.
+    weights : ndarray, optional
+        Replicates × units weights (bootstrap multiplicities).
+
+    Returns
+    -------
+    ndarray
+        AC1 per replicate (one value without ``weights``).
+    """
     c = np.asarray(counts, dtype=float)
     q = c.shape[1]
     if q < 2:
@@ -198,7 +294,20 @@ def gwet_ac1_counts(counts: np.ndarray, weights=None) -> np.ndarray:
 def gwet_ac1(data, categories: Sequence | None = None) -> float:
     """Gwet's AC1 (Gwet 2008; see :func:`gwet_ac1_counts`) of reliability data ``data``
     (raters × units, ``NaN`` = missing). ``categories`` is the answer scale (for Yes/No
-    ``(0, 1)``); it defaults to the values present, which must then be at least two."""
+    ``(0, 1)``); it defaults to the values present, which must then be at least two.
+
+    Parameters
+    ----------
+    data : array_like
+        Raters × units answers, ``NaN`` = missing.
+    categories : sequence, optional
+        The answer scale, e.g. ``(0, 1)``.
+
+    Returns
+    -------
+    float
+        AC1.
+    """
     counts, _ = counts_table(data, categories)
     return float(gwet_ac1_counts(counts)[0])
 
@@ -210,7 +319,20 @@ def gwet_ac1_two_raters(a, b, categories: Sequence | None = None) -> float:
     ``p_a = Σ_k p_kk``, ``π_k = (p_k+ + p_+k) / 2``, ``p_e = Σ_k π_k (1 − π_k) / (q − 1)``,
     ``AC1 = (p_a − p_e) / (1 − p_e)``.
 
-    ``a`` and ``b`` are the two raters' answers on the same units (no missing answers)."""
+    ``a`` and ``b`` are the two raters' answers on the same units (no missing answers).
+
+    Parameters
+    ----------
+    a, b : array_like
+        The two raters' answers on the same units.
+    categories : sequence, optional
+        The answer scale (default: the values present).
+
+    Returns
+    -------
+    float
+        AC1.
+    """
     x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     if x.shape != y.shape or x.ndim != 1 or x.size == 0:
         raise InvalidParameter(f"Gwet AC1 (two raters): need two equal-length answer lists, got {x.shape}, {y.shape}")
@@ -232,7 +354,23 @@ def mcnemar_exact(table) -> tuple[float, float]:
     percentages", Psychometrika 12:153–157; exact form: the two-sided binomial test of
     ``b`` out of the ``b + c`` discordant pairs with p = ½, Agresti 2013, Categorical Data
     Analysis, 3rd ed., §11.1). Computed by ``statsmodels.stats.contingency_tables.mcnemar``
-    with ``exact=True``; returns ``(statistic, p_value)`` with statistic ``min(b, c)``."""
+    with ``exact=True``; returns ``(statistic, p_value)`` with statistic ``min(b, c)``.
+
+    Parameters
+    ----------
+    table : array_like
+        Paired 2×2 table of counts ``[[a, b], [c, d]]``.
+
+    Returns
+    -------
+    tuple of (float, float)
+        ``(statistic, p_value)``, statistic ``min(b, c)``.
+
+    Examples
+    --------
+    >>> mcnemar_exact([[10, 2], [8, 5]])
+    (2.0, 0.109375)
+    """
     t = np.asarray(table, dtype=float)
     if t.shape != (2, 2) or np.any(t < 0) or np.any(t != np.round(t)):
         raise InvalidParameter(f"McNemar table: must be a 2×2 table of counts, got {table!r}")

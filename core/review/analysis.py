@@ -275,14 +275,26 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
             threshold_boot: int = DEFAULT_BOOT) -> WorkshopAnalysis:
     """Analyse one workshop (module docstring).
 
-    ``answers``: one row per answer given, columns ``reviewer`` (str), ``plot`` (plot id),
-    ``answer`` (bool, True = Yes), ``repeat`` (bool, a hidden repeat showing), ``scaling``
-    (``"fixed"`` or ``"auto"``), ``seconds`` (time on the plot, float, may be NaN).
-    ``plots``: one row per plot, columns ``plot`` (id), ``kind``, ``deviation`` (normalised
-    |D_v| / std limit, NaN if none) and ``sg_c`` (Sprague–Geers C, NaN if none).
-    ``n_boot``: bootstrap replicates for the agreement intervals (0 = none);
-    ``seed``: their random seed (the result is reproducible); ``threshold_boot``: bootstrap
-    replicates of the 50 % values' intervals (over plots; 0 = no interval).
+    Parameters
+    ----------
+    answers : pandas.DataFrame
+        One row per answer given, columns ``reviewer`` (str), ``plot`` (plot id), ``answer``
+        (bool, True = Yes), ``repeat`` (bool, a hidden repeat showing), ``scaling``
+        (``"fixed"`` or ``"auto"``), ``seconds`` (time on the plot, float, may be NaN).
+    plots : pandas.DataFrame
+        One row per plot, columns ``plot`` (id), ``kind``, ``deviation`` (normalised
+        |D_v| / std limit, NaN if none) and ``sg_c`` (Sprague–Geers C, NaN if none).
+    n_boot : int
+        Bootstrap replicates for the agreement intervals (0 = none).
+    seed : int
+        Their random seed (the result is reproducible).
+    threshold_boot : int
+        Bootstrap replicates of the 50 % values' intervals (over plots; 0 = no interval).
+
+    Returns
+    -------
+    WorkshopAnalysis
+        Table 1, reviewers, agreement, threshold, scaling effect and per-plot rows.
 
     Raises :class:`~railval.core.errors.InvalidParameter` naming the row and column of a bad
     value, an answer on an unknown plot or a second first answer of one reviewer on one plot.
@@ -303,9 +315,29 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
     fy = first["answer"].to_numpy(dtype=float)
     y = np.full((len(names), len(plot_ids)), np.nan)
     y[fr, fp] = fy
-
-    # ---- Table 1 (Polach & Böttcher 2014 Table 1)
     kinds = p["kind"].to_numpy()
+    strict, accept = _rasch(y, fr, fp, fy)
+    reviewers = _reviewer_rows(a, first, names, y, strict)
+    agreement = _agreement(y, names, int(n_boot), rng)  # before the threshold: both draw from ``rng``
+    threshold = _threshold(p, accept[0], first["reviewer"].to_numpy(), fp, fy, int(threshold_boot), rng)
+    plot_rows = []
+    for j, q in enumerate(plot_ids):
+        col = y[:, j]
+        n = int((~np.isnan(col)).sum())
+        plot_rows.append({
+            "plot": q, "kind": kinds[j], "answers": n,
+            "yes_share": _f(np.nansum(col) / n) if n else None,
+            "acceptability": _f(accept[0][j]), "acceptability_ci": _interval(accept[1][j], accept[2][j]),
+            "deviation": _f(p["deviation"].iloc[j]), "sg_c": _f(p["sg_c"].iloc[j]),
+        })
+    return WorkshopAnalysis(_table1(y, kinds), reviewers, agreement, threshold, _scaling_effect(a, first),
+                            plot_rows)
+
+
+def _table1(y: np.ndarray, kinds: np.ndarray) -> list[dict]:
+    """Per plot kind: plots, reviewers and the smallest and largest share of Yes over the
+    reviewers, on the first answers ``y`` (reviewer × plot, NaN = none) — Polach & Böttcher
+    2014 §4.2, Table 1."""
     table1 = []
     for kind in dict.fromkeys(kinds.tolist()):
         cols = kinds == kind
@@ -316,31 +348,37 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
             "min_yes": _f(share.min()) if share.size else None,
             "max_yes": _f(share.max()) if share.size else None,
         })
+    return table1
 
-    # ---- Rasch-type model on the first answers
-    act_r = np.flatnonzero((~np.isnan(y)).any(axis=1))
-    act_p = np.flatnonzero((~np.isnan(y)).any(axis=0))
-    strict = np.full(len(names), np.nan)
-    strict_lo = np.full(len(names), np.nan)
-    strict_hi = np.full(len(names), np.nan)
-    accept = np.full(len(plot_ids), np.nan)
-    acc_lo = np.full(len(plot_ids), np.nan)
-    acc_hi = np.full(len(plot_ids), np.nan)
+
+def _rasch(y: np.ndarray, fr: np.ndarray, fp: np.ndarray,
+           fy: np.ndarray) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """((strictness, lower, upper) per reviewer, (acceptability, lower, upper) per plot) of the
+    Rasch-type model (:func:`railval.core.review.rasch.fit_rasch`) on the first answers
+    (``fr``, ``fp``, ``fy``: reviewer index, plot index, answer); NaN where a reviewer or a
+    plot has no first answer."""
+    n_r, n_p = y.shape
+    strict = tuple(np.full(n_r, np.nan) for _ in range(3))
+    accept = tuple(np.full(n_p, np.nan) for _ in range(3))
     if fy.size:
-        rr = np.searchsorted(act_r, fr)
-        pp = np.searchsorted(act_p, fp)
-        fit = fit_rasch(rr, pp, fy, n_reviewers=act_r.size, n_plots=act_p.size)
-        strict[act_r] = fit.strictness
-        strict_lo[act_r], strict_hi[act_r] = fit.strictness_ci(CONFIDENCE)
-        accept[act_p] = fit.acceptability
-        acc_lo[act_p], acc_hi[act_p] = fit.acceptability_ci(CONFIDENCE)
+        act_r = np.flatnonzero((~np.isnan(y)).any(axis=1))
+        act_p = np.flatnonzero((~np.isnan(y)).any(axis=0))
+        fit = fit_rasch(np.searchsorted(act_r, fr), np.searchsorted(act_p, fp), fy,
+                        n_reviewers=act_r.size, n_plots=act_p.size)
+        strict[0][act_r] = fit.strictness
+        strict[1][act_r], strict[2][act_r] = fit.strictness_ci(CONFIDENCE)
+        accept[0][act_p] = fit.acceptability
+        accept[1][act_p], accept[2][act_p] = fit.acceptability_ci(CONFIDENCE)
+    return strict, accept
 
-    # ---- hidden repeats → consistency
+
+def _reviewer_rows(a: pd.DataFrame, first: pd.DataFrame, names: list[str], y: np.ndarray,
+                   strict: tuple[np.ndarray, ...]) -> list[dict]:
+    """Per reviewer: first answers, share of Yes with its Wilson interval, strictness with its
+    interval, consistency on hidden repeats and median time per plot."""
     reps = a[a["repeat"] & (a["scaling"] == "fixed")]
     paired = reps.merge(first[["reviewer", "plot", "answer"]], on=["reviewer", "plot"], suffixes=("", "_first"))
     same = (paired["answer"] == paired["answer_first"]).groupby(paired["reviewer"]).agg(["sum", "count"])
-
-    # ---- reviewers
     reviewers = []
     for i, name in enumerate(names):
         row = y[i]
@@ -354,24 +392,26 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
             "reviewer": name, "answers": n,
             "yes_share": _f(k / n) if n else None,
             "yes_share_ci": _interval(*ci) if ci else None,
-            "strictness": _f(strict[i]),
-            "strictness_ci": _interval(strict_lo[i], strict_hi[i]),
+            "strictness": _f(strict[0][i]),
+            "strictness_ci": _interval(strict[1][i], strict[2][i]),
             "consistency": _f(same.loc[name, "sum"] / n_rep) if n_rep else None,
             "repeats": n_rep,
             "median_seconds": _f(np.median(secs)) if secs.size else None,
         })
+    return reviewers
 
-    # ---- agreement
-    agreement = _agreement(y, names, int(n_boot), rng)
 
-    # ---- threshold: the objective value at which a typical reviewer says Yes half of the time,
-    # model-free in the link (isotonic on the reviewer-adjusted acceptability), with the
-    # parametric links beside it (link sensitivity; the drawn curve is the likeliest link)
+def _threshold(p: pd.DataFrame, accept: np.ndarray, fnames: np.ndarray, fp: np.ndarray, fy: np.ndarray,
+               threshold_boot: int, rng: np.random.Generator) -> dict:
+    """The objective value at which a typical reviewer says Yes half of the time, model-free in
+    the link (isotonic on the reviewer-adjusted acceptability ``accept``,
+    :func:`railval.core.review.threshold.monotone_threshold`), with the parametric links beside
+    it (:func:`railval.core.review.threshold.link_sensitivity`; the drawn curve is the likeliest
+    link), for the normalised deviation and the Sprague–Geers C."""
     threshold: dict = {"method": THRESHOLD_METHOD}
-    fnames = first["reviewer"].to_numpy()
     for col, key, ci_key in (("deviation", "deviation_at_50", "ci"), ("sg_c", "sg_c_at_50", "sg_c_ci")):
         vals = p[col].to_numpy()
-        mono = monotone_threshold(vals, accept, n_boot=int(threshold_boot), seed=rng, confidence=CONFIDENCE)
+        mono = monotone_threshold(vals, accept, n_boot=threshold_boot, seed=rng, confidence=CONFIDENCE)
         best, sens = link_sensitivity(vals[fp], fy, fnames, fp, reference=mono.at_50, confidence=CONFIDENCE)
         threshold[key] = _f(mono.at_50)
         threshold[ci_key] = _interval(*mono.ci) if mono.ci else None
@@ -385,35 +425,28 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
                       for row in sens["links"]],
             "boot_valid": mono.boot_valid, "n_boot": mono.n_boot,
         }
+    return threshold
 
-    # ---- scaling effect (presentation experiment)
+
+def _scaling_effect(a: pd.DataFrame, first: pd.DataFrame) -> dict | None:
+    """The presentation experiment: each automatic-scaling showing paired with the same
+    reviewer's first answer on that plot, compared with the exact McNemar test
+    (:func:`railval.core.review.agreement.mcnemar_exact`); ``None`` without pairs."""
     auto = a[a["scaling"] == "auto"]
-    scaling_effect = None
-    if len(auto):
-        pair = auto.merge(first[["reviewer", "plot", "answer"]], on=["reviewer", "plot"], suffixes=("_auto", ""))
-        if len(pair):
-            fx, au = pair["answer"].to_numpy(), pair["answer_auto"].to_numpy()
-            table = np.array([[np.sum(fx & au), np.sum(fx & ~au)], [np.sum(~fx & au), np.sum(~fx & ~au)]])
-            stat, pval = mcnemar_exact(table)
-            changed = int(table[0, 1] + table[1, 0])
-            scaling_effect = {
-                "pairs": len(pair), "changed": changed,
-                "changed_share": _f(changed / len(pair)),
-                "changed_share_ci": _interval(*wilson_interval(changed, len(pair), confidence=CONFIDENCE)),
-                "fixed_yes_share": _f(fx.mean()), "auto_yes_share": _f(au.mean()),
-                "fixed_yes_auto_no": int(table[0, 1]), "fixed_no_auto_yes": int(table[1, 0]),
-                "statistic": _f(stat), "p_value": _f(pval), "test": "McNemar exact (binomial)",
-            }
-
-    # ---- per-plot extras for the page
-    plot_rows = []
-    for j, q in enumerate(plot_ids):
-        col = y[:, j]
-        n = int((~np.isnan(col)).sum())
-        plot_rows.append({
-            "plot": q, "kind": kinds[j], "answers": n,
-            "yes_share": _f(np.nansum(col) / n) if n else None,
-            "acceptability": _f(accept[j]), "acceptability_ci": _interval(acc_lo[j], acc_hi[j]),
-            "deviation": _f(p["deviation"].iloc[j]), "sg_c": _f(p["sg_c"].iloc[j]),
-        })
-    return WorkshopAnalysis(table1, reviewers, agreement, threshold, scaling_effect, plot_rows)
+    if not len(auto):
+        return None
+    pair = auto.merge(first[["reviewer", "plot", "answer"]], on=["reviewer", "plot"], suffixes=("_auto", ""))
+    if not len(pair):
+        return None
+    fx, au = pair["answer"].to_numpy(), pair["answer_auto"].to_numpy()
+    table = np.array([[np.sum(fx & au), np.sum(fx & ~au)], [np.sum(~fx & au), np.sum(~fx & ~au)]])
+    stat, pval = mcnemar_exact(table)
+    changed = int(table[0, 1] + table[1, 0])
+    return {
+        "pairs": len(pair), "changed": changed,
+        "changed_share": _f(changed / len(pair)),
+        "changed_share_ci": _interval(*wilson_interval(changed, len(pair), confidence=CONFIDENCE)),
+        "fixed_yes_share": _f(fx.mean()), "auto_yes_share": _f(au.mean()),
+        "fixed_yes_auto_no": int(table[0, 1]), "fixed_no_auto_yes": int(table[1, 0]),
+        "statistic": _f(stat), "p_value": _f(pval), "test": "McNemar exact (binomial)",
+    }

@@ -39,7 +39,25 @@ RESPONSES = ("log", "linear", "step")
 
 
 def yes_probability(acceptability, strictness):
-    """``P(Yes) = expit(acceptability − strictness)`` (the Rasch-type model)."""
+    """``P(Yes) = expit(acceptability − strictness)`` (the Rasch-type model).
+
+    Parameters
+    ----------
+    acceptability : float or array_like
+        Plot acceptability (logits).
+    strictness : float or array_like
+        Reviewer strictness (logits).
+
+    Returns
+    -------
+    float or ndarray
+        The probability of a Yes.
+
+    Examples
+    --------
+    >>> float(yes_probability(1.0, 1.0))
+    0.5
+    """
     return scipy.special.expit(np.asarray(acceptability, dtype=float) - np.asarray(strictness, dtype=float))
 
 
@@ -69,7 +87,26 @@ def simulate_answers(acceptability: Mapping[str, float], strictness: Mapping[str
     showings of a random ``auto_share`` (logit shifted by ``auto_shift``). Columns:
     ``reviewer, plot, answer, repeat, scaling, seconds`` (seconds log-normal around 8 s).
     Rows are in answering order per reviewer (first showings, then repeats and automatic
-    showings). Plot ids and reviewer names are the mapping keys (as str)."""
+    showings). Plot ids and reviewer names are the mapping keys (as str).
+
+    Parameters
+    ----------
+    acceptability : mapping of str to float
+        Plot id → acceptability (logits).
+    strictness : mapping of str to float
+        Reviewer name → strictness (logits).
+    seed : int or numpy.random.Generator
+        Random seed or generator.
+    repeat_share, auto_share, answer_share : float
+        Shares of hidden repeats, automatic-scaling showings and answered plots.
+    auto_shift : float
+        Logit shift of the automatic-scaling showings.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per answer, the columns of :func:`railval.core.review.analysis.analyse`.
+    """
     for name, share in (("repeat_share", repeat_share), ("auto_share", auto_share),
                         ("answer_share", answer_share)):
         if not 0.0 <= share <= 1.0:
@@ -120,7 +157,34 @@ def simulate_workshop(n_reviewers: int = 20, n_plots: int = 120, *, seed: int = 
     Reviewers are named ``"r01"`` …, plots ``"p001"`` …; plot kinds cycle through ``kinds``.
     A random ``no_deviation_share`` of the plots gets no deviation (NaN — a signal without
     an EN quantity); their acceptability is drawn around that of d = 1. ``sg_c`` (Sprague–
-    Geers C) is simulated as ``0.25 · d · exp(N(0, 0.2²))``."""
+    Geers C) is simulated as ``0.25 · d · exp(N(0, 0.2²))``.
+
+    Parameters
+    ----------
+    n_reviewers, n_plots : int
+        Numbers of reviewers and plots (≥ 1).
+    seed : int
+        Random seed.
+    deviation_at_50 : float
+        Normalised deviation at which a typical reviewer says Yes half of the time (> 0).
+    slope : float
+        Slope of the response in the deviation (< 0).
+    deviation_spread, plot_sd, strictness_sd : float
+        Spread of log deviation, of plot acceptability around the response, of strictness.
+    repeat_share, auto_share, auto_shift, answer_share : float
+        As in :func:`simulate_answers`.
+    kinds : sequence of str
+        Plot kinds, cycled.
+    no_deviation_share : float
+        Share of plots without a deviation.
+    response : str
+        ``"log"``, ``"linear"`` or ``"step"``: the response's shape in the deviation.
+
+    Returns
+    -------
+    SimulatedWorkshop
+        Answers, plots and the true strictness, acceptability, ``deviation_at_50`` and slope.
+    """
     if n_reviewers < 1 or n_plots < 1:
         raise InvalidParameter(f"simulate_workshop: need ≥ 1 reviewer and plot, got {n_reviewers}, {n_plots}")
     if not slope < 0 or not deviation_at_50 > 0:

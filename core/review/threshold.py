@@ -81,13 +81,42 @@ _LINK_NAMES = {0.0: "log", 0.5: "sqrt", 1.0: "linear"}
 
 
 def link_name(power: float) -> str:
-    """``"log"``, ``"sqrt"``, ``"linear"`` or ``"power λ"`` for the Box–Cox power ``λ``."""
+    """``"log"``, ``"sqrt"``, ``"linear"`` or ``"power λ"`` for the Box–Cox power ``λ``.
+
+    Parameters
+    ----------
+    power : float
+        Box–Cox λ.
+
+    Returns
+    -------
+    str
+        The link's name.
+
+    Examples
+    --------
+    >>> link_name(0.0), link_name(0.5), link_name(1.0)
+    ('log', 'sqrt', 'linear')
+    """
     return _LINK_NAMES.get(float(power), f"power {power:g}")
 
 
 def transform(values, power: float = 0.0) -> np.ndarray:
     """Box–Cox transform ``x_λ(v) = (v^λ − 1)/λ`` (``log v`` at λ = 0) of ``v`` clipped to
-    :data:`MIN_VALUE` (Box & Cox 1964)."""
+    :data:`MIN_VALUE` (Box & Cox 1964).
+
+    Parameters
+    ----------
+    values : array_like
+        Objective values.
+    power : float
+        Box–Cox λ.
+
+    Returns
+    -------
+    ndarray
+        The transformed values.
+    """
     v = np.maximum(np.asarray(values, dtype=float), MIN_VALUE)
     return np.log(v) if power == 0 else (v ** power - 1.0) / power
 
@@ -136,7 +165,24 @@ def yes_curve(values, intercept: float, slope: float, strictness: float = 0.0,
     """P(Yes) at objective ``values`` of a reviewer ``strictness`` logits stricter than the
     typical one: ``expit(intercept + slope · x_λ(v) − strictness)`` with ``intercept = −s̄``,
     ``slope = β`` and ``power = λ`` of a :class:`ThresholdFit` — the fitted curve to draw
-    beside the limit 1.0."""
+    beside the limit 1.0.
+
+    Parameters
+    ----------
+    values : array_like
+        Objective values.
+    intercept, slope : float
+        Of a :class:`ThresholdFit`.
+    strictness : float
+        The reviewer's strictness relative to the typical one (logits).
+    power : float
+        Box–Cox λ of the link.
+
+    Returns
+    -------
+    ndarray
+        P(Yes) at ``values``.
+    """
     return scipy.special.expit(intercept + slope * transform(values, power) - strictness)
 
 
@@ -213,7 +259,26 @@ def fit_threshold(value, answer, reviewer, plot, *, ridge: float = DEFAULT_RIDGE
     (who answered, any hashable id) and ``plot`` (the answer's plot, the cluster) are
     per-answer arrays of equal length; answers whose value is NaN are dropped. Needs at
     least 3 plots with two distinct values and both answers present. ``power``: the
-    Box–Cox λ of the link (0 = ``log v``, the default; 1 = ``v``)."""
+    Box–Cox λ of the link (0 = ``log v``, the default; 1 = ``v``).
+
+    Parameters
+    ----------
+    value, answer, reviewer, plot : array_like
+        Per-answer objective value, answer (True = Yes), reviewer id and plot id.
+    ridge : float
+        Ridge weight on the reviewer strictness.
+    confidence : float
+        Coverage of the interval of ``v₅₀``.
+    tol, max_iter
+        Newton convergence tolerance and step limit.
+    power : float
+        Box–Cox λ of the link.
+
+    Returns
+    -------
+    ThresholdFit
+        The fit, its ``v₅₀`` and interval.
+    """
     v, y, names, ri, gi, n_g, usable = _prepare(value, answer, reviewer, plot, ridge)
     n_r = names.size
     empty = ThresholdFit(None, None, None, None, {}, n_g, int(y.size), float(power))
@@ -292,7 +357,24 @@ def monotone_threshold(value, acceptability, *, n_boot: int = DEFAULT_BOOT,
     isotonic regression of ``a_p`` on ``v`` (pooled adjacent violators) crosses 0 at
     ``v₅₀``; the interval resamples the plots (``n_boot`` replicates, the multiplicities as
     weights). Plots whose value or acceptability is not finite stay out; ``v ≤ 0`` is
-    clipped to :data:`MIN_VALUE`."""
+    clipped to :data:`MIN_VALUE`.
+
+    Parameters
+    ----------
+    value, acceptability : array_like
+        Per plot its objective value and its Rasch acceptability.
+    n_boot : int
+        Bootstrap replicates (0 = no interval).
+    seed : int or numpy.random.Generator
+        Random seed or generator of the bootstrap.
+    confidence : float
+        Coverage of the interval.
+
+    Returns
+    -------
+    MonotoneThreshold
+        ``v₅₀``, its interval and the fitted falling curve.
+    """
     if int(n_boot) < 0:
         raise InvalidParameter(f"monotone_threshold: n_boot must be ≥ 0, got {n_boot!r}")
     v = np.asarray(value, dtype=float)
@@ -331,7 +413,24 @@ def link_sensitivity(value, answer, reviewer, plot, *, powers=LINKS, reference: 
     largest likelihood and ``{"chosen", "links": [{link, power, at_50, ci, loglik}],
     "relative_spread"}`` — the spread (largest − smallest ``v₅₀`` over the links) relative
     to ``reference`` (the reported ``v₅₀``; default the chosen link's), ``None`` if a link
-    has no ``v₅₀``."""
+    has no ``v₅₀``.
+
+    Parameters
+    ----------
+    value, answer, reviewer, plot : array_like
+        As in :func:`fit_threshold`.
+    powers : sequence of float
+        Box–Cox λ of the links compared.
+    reference : float, optional
+        The reported ``v₅₀`` the spread is relative to.
+    ridge, confidence : float
+        As in :func:`fit_threshold`.
+
+    Returns
+    -------
+    tuple of (ThresholdFit, dict)
+        The likeliest link's fit and the comparison of the links.
+    """
     if not powers:
         raise InvalidParameter("link_sensitivity: powers must name at least one link")
     fits = [fit_threshold(value, answer, reviewer, plot, ridge=ridge, confidence=confidence,

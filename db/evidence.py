@@ -1,0 +1,176 @@
+"""Checking stored evidence: every signal's seal (:mod:`railval.db.integrity`) and content
+hash, per campaign, per configuration (what a verdict rests on) or for the whole database.
+
+``campaign`` is a :data:`railval.db.campaigns.CampaignArg` and ``config`` a
+:data:`railval.db.campaigns.ConfigArg`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from railval.core.errors import InvalidSignal
+from railval.db import codec, integrity
+from railval.db.campaigns import (
+    CampaignArg,
+    CampaignRef,
+    ConfigArg,
+    campaign_ref,
+    config_name,
+    get_campaign,
+    get_configuration,
+    list_campaigns,
+    list_configurations,
+)
+from railval.db.models import Campaign, Channel, Recording, ResultCache, Section, Signal
+from railval.db.signals import source_filter
+
+
+def _decode_problem(blob: bytes, sha: str, n: int) -> str | None:
+    """Why a stored array fails its content hash or its recording's length, or ``None``."""
+    try:
+        a = codec.decode(blob, sha)
+    except InvalidSignal as exc:
+        return str(exc)
+    if a.shape != (n,):
+        return f"holds shape {a.shape}, the recording has n = {n}"
+    return None
+
+
+def verify_signals(session: Session, campaign: CampaignArg) -> list[dict[str, Any]]:
+    """Decode every stored array of the campaign and check it against its SHA-256.
+
+    Returns one record per problem (``section``, ``configuration`` or None for the
+    measurement, ``channel`` or ``"distance_m"``, ``error``); an empty list means every
+    sample is exactly what was imported or stored. Reads one recording at a time.
+    """
+    c = get_campaign(session, campaign)
+    names = {x.id: x.name for x in list_configurations(session, c)}
+    problems: list[dict[str, Any]] = []
+    recs = session.execute(
+        select(Recording.id, Section.section_id, Recording.configuration_id,
+               Recording.distance_blob, Recording.distance_sha256, Recording.n)
+        .join(Section, Recording.section_id == Section.id)
+        .where(Section.campaign_id == c.id).order_by(Recording.id)
+    ).all()
+    for rid, sid, conf_id, dblob, dsha, n in recs:
+        where = {"section": sid, "configuration": names.get(conf_id) if conf_id else None}
+        items = [("distance_m", dblob, dsha)] + list(session.execute(
+            select(Channel.name, Signal.blob, Signal.sha256)
+            .join(Channel, Signal.channel_id == Channel.id).where(Signal.recording_id == rid)
+        ).tuples())
+        for name, blob, sha in items:
+            if (why := _decode_problem(blob, sha, n)) is not None:
+                problems.append({**where, "channel": name, "error": why})
+    return problems
+
+
+def _source_problems(session: Session, c: Campaign | CampaignRef, config: ConfigArg | None | bool,
+                     secret: bytes, blobs: bool) -> list[dict[str, Any]]:
+    """Seal (and with ``blobs`` content-hash) problems of one source of ``c``;
+    ``config=True`` means every source of the campaign."""
+    names = {x.id: x.name for x in list_configurations(session, c)}
+    rec_q = (select(Recording.id, Section.section_id, Recording.configuration_id,
+                    Recording.distance_sha256, Recording.fs, Recording.t0, Recording.n)
+             .join(Section, Recording.section_id == Section.id)
+             .where(Section.campaign_id == c.id).order_by(Recording.id))
+    if config is not True:
+        rec_q = rec_q.where(source_filter(session, c.id, config))
+    recs = session.execute(rec_q).all()
+    problems: list[dict[str, Any]] = []
+    by_rec: dict[int, list] = {}
+    if not blobs:  # seals only: one query for every signal row of the source
+        meta_q = (select(Signal.recording_id, Channel.name, Signal.channel_id, Signal.sha256,
+                         Signal.provenance)
+                  .join(Channel, Signal.channel_id == Channel.id)
+                  .join(Recording, Signal.recording_id == Recording.id)
+                  .join(Section, Recording.section_id == Section.id)
+                  .where(Section.campaign_id == c.id).order_by(Signal.recording_id, Channel.id))
+        if config is not True:
+            meta_q = meta_q.where(source_filter(session, c.id, config))
+        for r in session.execute(meta_q):
+            by_rec.setdefault(r[0], []).append(tuple(r[1:]))
+    for rid, sid, conf_id, dsha, fs, t0, n in recs:
+        where = {"section": sid, "configuration": names.get(conf_id) if conf_id else None}
+        if blobs:
+            rows = session.execute(
+                select(Channel.name, Signal.channel_id, Signal.sha256, Signal.provenance,
+                       Signal.blob)
+                .join(Channel, Signal.channel_id == Channel.id)
+                .where(Signal.recording_id == rid).order_by(Channel.id)).all()
+        else:
+            rows = by_rec.get(rid, [])
+        if blobs:
+            dblob = session.scalar(select(Recording.distance_blob).where(Recording.id == rid))
+            if (why := _decode_problem(dblob, dsha, n)) is not None:
+                problems.append({**where, "channel": "distance_m", "error": why})
+        for row in rows:
+            name, cid, sha, prov = row[0], row[1], row[2], row[3] or {}
+            seal = prov.get("seal") if isinstance(prov, dict) else None
+            if seal is None:
+                problems.append({**where, "channel": name, "error": "has no seal (stored "
+                                 "outside railval, or before seals existed)"})
+            elif not integrity.check_signal_seal(
+                    secret, seal, rid, cid, sha, dsha, fs, t0, n,
+                    (c.name, sid, where["configuration"] or "", name)):
+                problems.append({**where, "channel": name, "error": "fails its seal: the "
+                                 "samples, their hash, the recording or its place (campaign, "
+                                 "section, configuration, channel) were changed outside "
+                                 "railval"})
+            if blobs and (why := _decode_problem(row[4], sha, n)) is not None:
+                problems.append({**where, "channel": name, "error": why})
+    return problems
+
+
+def verify_evidence(session: Session, campaign: CampaignArg, config: ConfigArg, *,
+                    blobs: bool = True) -> list[dict[str, Any]]:
+    """Check what a verdict on configuration ``config`` rests on — the measurement's and the
+    configuration's signals: every seal (:mod:`railval.db.integrity`) and, with ``blobs``,
+    every content hash. Returns one record per problem (``section``, ``configuration``,
+    ``channel``, ``error``); empty when the evidence is intact. Reports and sign-offs call it
+    before they state a verdict."""
+    c = campaign_ref(session, campaign)
+    get_configuration(session, c, config)
+    secret = integrity.session_secret(session)
+    return (_source_problems(session, c, None, secret, blobs)
+            + _source_problems(session, c, config, secret, blobs))
+
+
+def require_evidence(session: Session, campaign: CampaignArg, config: ConfigArg, *,
+                     blobs: bool = True) -> None:
+    """:func:`verify_evidence`, raising :class:`railval.db.integrity.IntegrityError` that names
+    the first problems and how many there are."""
+    problems = verify_evidence(session, campaign, config, blobs=blobs)
+    if problems:
+        first = "; ".join(f"section {p['section']}, "
+                          f"{'configuration ' + repr(p['configuration']) if p['configuration'] else 'measurement'}, "
+                          f"{p['channel']}: {p['error']}" for p in problems[:3])
+        raise integrity.IntegrityError(
+            f"the evidence of {config_name(config)!r} is not intact ({len(problems)} problem(s)): {first}; "
+            "check the database with `railval verify`")
+
+
+def verify_storage(session: Session, *, blobs: bool = True) -> dict[str, Any]:
+    """Check a whole database: every signal's seal and (``blobs``) content hash, every
+    distance axis, and every result-cache entry's seal. Returns ``{"ok", "campaigns":
+    {name: [problem, ...]}, "signals": n, "cache_entries": n, "cache_unauthentic": [keys]}``.
+    An unauthentic cache entry is never used (it is recomputed); it is listed because
+    someone wrote it without the server secret."""
+    secret = integrity.session_secret(session)
+    out: dict[str, Any] = {"campaigns": {}, "signals": 0}
+    for c in list_campaigns(session):
+        out["campaigns"][c.name] = _source_problems(session, c, True, secret, blobs)
+    out["signals"] = int(session.scalar(select(func.count(Signal.id))) or 0)
+    bad: list[str] = []
+    n = 0
+    for k, v in session.execute(select(ResultCache.key, ResultCache.value)):
+        n += 1
+        if integrity.open_cache_value(secret, k, bytes(v)) is None:
+            bad.append(k)
+    out["cache_entries"] = n
+    out["cache_unauthentic"] = bad
+    out["ok"] = not bad and not any(out["campaigns"].values())
+    return out
