@@ -44,14 +44,14 @@ from typing import Any
 
 import numpy as np
 
-from railval.core.stages import stage
 from railval.core.definitions import CHOSEN, READINGS, alternatives_for
 from railval.core.en14363 import evaluate_present
 from railval.core.errors import InvalidParameter
 from railval.core.filters import DEFAULT_ORDER
 from railval.core.quantities import QUANTITIES, QUANTITY_IDS, VEHICLE_KINDS
+from railval.core.stages import stage
 from railval.core.supplementary import supplementary_results
-from railval.core.types import ZONES, SectionInfo, SignalSet
+from railval.core.types import ZONES, SectionInfo, SignalSet, split_channel
 
 MIN_SECTIONS = 12
 MIN_SECTIONS_PER_ZONE = 3
@@ -201,33 +201,49 @@ class Coverage:
     def ok(self) -> bool:
         return not self.shortfalls
 
+    #: the rules' thresholds (Polach & Böttcher 2014 §5), as the views show them
+    sections_required = MIN_SECTIONS
+    sections_per_zone_required = MIN_SECTIONS_PER_ZONE
+    signals_per_quantity_required = MIN_POSITIONS
+    values_per_quantity_required = MIN_VALUES
+
     def to_dict(self) -> dict:
         return {
-            "ok": self.ok, "sections": self.n_sections, "sections_required": MIN_SECTIONS,
+            "ok": self.ok, "sections": self.n_sections, "sections_required": self.sections_required,
             "zones": {str(z): n for z, n in self.zones.items()},
-            "sections_per_zone_required": MIN_SECTIONS_PER_ZONE,
+            "sections_per_zone_required": self.sections_per_zone_required,
             "signals_per_quantity": dict(self.positions),
-            "signals_per_quantity_required": MIN_POSITIONS,
+            "signals_per_quantity_required": self.signals_per_quantity_required,
             "values_per_quantity": dict(self.values),
-            "values_per_quantity_required": MIN_VALUES,
+            "values_per_quantity_required": self.values_per_quantity_required,
             "shortfalls": list(self.shortfalls),
         }
 
 
 def coverage(pair_sections: Mapping[str, set], pair_positions: Mapping[str, set],
              pair_counts: Mapping[str, int], zone_of: Mapping[str, int]) -> Coverage:
-    """Check the coverage rules. ``pair_sections[q]``/``pair_positions[q]``: sections and
-    positions with a pair for quantity q; ``pair_counts[q]``: number of pairs; ``zone_of``:
-    section id → zone."""
+    """Check the coverage rules of Polach & Böttcher 2014 §5 on the pairs of a validation.
+
+    Parameters
+    ----------
+    pair_sections, pair_positions : mapping of quantity id → set
+        Sections and positions with a pair for each quantity.
+    pair_counts : mapping of quantity id → int
+        Number of pairs of each quantity.
+    zone_of : mapping of section id → int
+        EN 14363 test zone of every section.
+
+    Returns
+    -------
+    Coverage
+        Counts and one sentence per shortfall (empty when the coverage holds).
+    """
     sections = set().union(*pair_sections.values()) if pair_sections else set()
     zones = {z: sum(1 for s in sections if zone_of[s] == z) for z in ZONES}
     shortfalls = []
     if len(sections) < MIN_SECTIONS:
         shortfalls.append(f"{len(sections)} sections have comparisons, needs {MIN_SECTIONS}")
-    for z, n in zones.items():
-        if n < MIN_SECTIONS_PER_ZONE:
-            shortfalls.append(f"zone {z} has {n} section{'s' if n != 1 else ''}, needs "
-                              f"{MIN_SECTIONS_PER_ZONE}")
+    shortfalls += zone_shortfalls(zones)
     positions = {q: len(pair_positions.get(q, ())) for q in QUANTITY_IDS}
     values = {q: int(pair_counts.get(q, 0)) for q in QUANTITY_IDS}
     for q in QUANTITY_IDS:
@@ -237,6 +253,76 @@ def coverage(pair_sections: Mapping[str, set], pair_positions: Mapping[str, set]
         if values[q] < MIN_VALUES:
             shortfalls.append(f"quantity {q} has {values[q]} values, needs {MIN_VALUES}")
     return Coverage(len(sections), zones, positions, values, shortfalls)
+
+
+def zone_shortfalls(zones: Mapping[int, int], min_per_zone: int = MIN_SECTIONS_PER_ZONE) -> list[str]:
+    """The zone rule of Polach & Böttcher 2014 §5: every EN 14363 zone (1–4) with at least
+    ``min_per_zone`` sections; one sentence per zone short of it ("zone 3 has 2 sections,
+    needs 3").
+
+    Parameters
+    ----------
+    zones : mapping of zone → number of sections
+        Zones missing from the mapping count 0.
+    min_per_zone : int
+        Sections each zone needs.
+
+    Returns
+    -------
+    list of str
+        The shortfalls in zone order, empty when the rule holds.
+    """
+    out = []
+    for z in ZONES:
+        n = int(zones.get(z, 0))
+        if n < min_per_zone:
+            out.append(f"zone {z} has {n} section{'s' if n != 1 else ''}, needs {min_per_zone}")
+    return out
+
+
+def verdict_channel_kinds() -> tuple[str, ...]:
+    """The raw channel kinds the verdict quantities are formed from, in registry order
+    (``Y``, ``Q``, ``ay_cb``, ``az_cb``; :data:`railval.core.quantities.QUANTITIES`)."""
+    kinds: dict[str, None] = {}
+    for q in QUANTITIES.values():
+        for ch in q.channels(q.positions()[0]):
+            kinds[split_channel(ch)[0]] = None
+    return tuple(kinds)
+
+
+def layout_shortfalls(section_zones: Sequence[int], channel_kinds: Sequence[str], *,
+                      min_sections: int = MIN_SECTIONS, min_per_zone: int = MIN_SECTIONS_PER_ZONE,
+                      min_signals: int = MIN_POSITIONS) -> list[str]:
+    """The coverage rules of Polach & Böttcher 2014 §5 checked on a campaign's layout alone,
+    before any validation: enough sections, every zone 1–4 with enough sections, and enough
+    signals (channels) of every raw channel kind the verdict quantities use.
+
+    Parameters
+    ----------
+    section_zones : sequence of int
+        The EN 14363 zone of every section of the campaign.
+    channel_kinds : sequence of str
+        The kind of every stored channel (one entry per channel).
+    min_sections, min_per_zone, min_signals : int
+        The thresholds (defaults: the validation's own).
+
+    Returns
+    -------
+    list of str
+        One precise sentence per shortfall, empty when the layout can meet the rules.
+    """
+    out = []
+    if len(section_zones) < min_sections:
+        out.append(f"{len(section_zones)} sections, needs {min_sections}")
+    counts: dict[int, int] = {}
+    for z in section_zones:
+        counts[z] = counts.get(z, 0) + 1
+    out += zone_shortfalls(counts, min_per_zone)
+    for kind in verdict_channel_kinds():
+        n = sum(1 for k in channel_kinds if k == kind)
+        if n < min_signals:
+            out.append(f"channel kind {kind} has {n} signal{'s' if n != 1 else ''}, needs {min_signals}")
+    return out
 
 
 @dataclass
@@ -339,11 +425,42 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
              top: int = 5, warnings: Sequence[str] = ()) -> ValidationResult:
     """Validate one configuration from in-memory values (Polach & Böttcher 2014 §5).
 
-    ``measured_values``/``simulated_values``: ``{section_id: {(quantity_id, position):
-    value}}`` (units of the registry); a pair exists where both hold a finite value.
-    ``sections``: the SectionInfo of every section (zone used for coverage); ``vehicle``: a
-    :class:`Vehicle` or anything :meth:`Vehicle.from_any` accepts. ``n_boot`` bootstrap
-    resamples (seeded by ``seed``); ``top``: pairs listed per quantity in the drill-down.
+    Three steps: gather the pairs of every quantity (:func:`_gather_pairs`), compute the D_v
+    statistics per quantity (:func:`quantity_result`) and the coverage (:func:`coverage`),
+    then the verdict under the other readings of the open definitions and the supplementary
+    results.
+
+    Parameters
+    ----------
+    measured_values, simulated_values : mapping
+        ``{section_id: {(quantity_id, position): value}}`` in the units of the quantity
+        registry; a pair exists where both hold a finite value. Values carrying
+        ``value_under`` (``railval.core.en14363.SectionValues``) add the definition
+        sensitivity, values carrying ``supplementary`` the supplementary results.
+    sections : sequence or mapping of SectionInfo
+        Every section with values (its zone is used for the coverage).
+    vehicle : Vehicle or mapping
+        Anything :meth:`Vehicle.from_any` accepts (kind, secondary suspension, Q0 in kN).
+    n_boot : int
+        Bootstrap resamples of the normalised values (0: no intervals), seeded by ``seed``.
+    seed : int
+        Seed of the bootstrap.
+    ci_level : float
+        Confidence level of the percentile intervals, in (0, 1).
+    top : int
+        Pairs listed per quantity in the drill-down (largest |D_v| / std limit first).
+    warnings : sequence of str
+        Processing warnings carried into the result.
+
+    Returns
+    -------
+    ValidationResult
+        Verdict, coverage, per-quantity statistics and the per-pair table.
+
+    Raises
+    ------
+    InvalidParameter
+        Bad ``n_boot``/``ci_level``, a section without SectionInfo, an unknown quantity.
     """
     import pandas as pd
 
@@ -353,11 +470,36 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
         raise InvalidParameter(f"ci_level must be in (0, 1), got {ci_level}")
     veh = Vehicle.from_any(vehicle)
     secs = dict(sections) if isinstance(sections, Mapping) else {s.id: s for s in sections}
-    recs: dict[str, list] = {q: [] for q in QUANTITY_IDS}
     common = sorted(set(measured_values) & set(simulated_values))
-    with_alternatives = bool(common) and all(
-        hasattr(measured_values[sid], "value_under") and hasattr(simulated_values[sid], "value_under")
-        for sid in common)
+    recs = _gather_pairs(measured_values, simulated_values, secs, common)
+    results: dict[str, QuantityResult] = {}
+    frames = []
+    for qi, qid in enumerate(QUANTITY_IDS):
+        results[qid], frame = quantity_result(qid, recs[qid], veh, n_boot=n_boot,
+                                              rng=np.random.default_rng([seed, qi]),
+                                              ci_level=ci_level, top=top)
+        frames.append(pd.DataFrame(frame))
+    zone_of = {sid: int(info.zone) for sid, info in secs.items()}
+    cov = coverage({q: {r[0] for r in recs[q]} for q in QUANTITY_IDS},
+                   {q: {r[2] for r in recs[q]} for q in QUANTITY_IDS},
+                   {q: len(recs[q]) for q in QUANTITY_IDS}, zone_of)
+    validated = cov.ok and all(r.passed for r in results.values())
+    validated_under: dict[str, bool] = {}
+    if bool(common) and all(hasattr(measured_values[sid], "value_under")
+                            and hasattr(simulated_values[sid], "value_under") for sid in common):
+        validated_under = _verdicts_under_readings(results, recs, measured_values,
+                                                   simulated_values, cov.ok)
+    supp = _supplementary(measured_values, simulated_values, common, zone_of)
+    return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level,
+                            pd.concat(frames, ignore_index=True), list(warnings),
+                            supplementary=supp, validated_under=validated_under)
+
+
+def _gather_pairs(measured_values, simulated_values, secs: Mapping[str, SectionInfo],
+                  common: Sequence[str]) -> dict[str, list[tuple[str, int, str, float, float]]]:
+    """quantity id → its pairs ``(section, zone, position, M, S)`` where both sides hold a
+    finite value (sections in ``common`` order, keys in the measurement's order)."""
+    recs: dict[str, list] = {q: [] for q in QUANTITY_IDS}
     for sid in common:
         if sid not in secs:
             raise InvalidParameter(f"section {sid!r} has values but no SectionInfo")
@@ -371,68 +513,90 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
             if qid not in recs:
                 raise InvalidParameter(f"unknown quantity {qid!r} in section {sid}")
             recs[qid].append((sid, zone, pos, float(m), float(s)))
+    return recs
 
-    results: dict[str, QuantityResult] = {}
-    frames = []
-    pair_sections, pair_positions, pair_counts = {}, {}, {}
-    for qi, qid in enumerate(QUANTITY_IDS):
-        q = QUANTITIES[qid]
-        mean_limit = q.mean_limit(veh.Q0_kN, veh.kind, veh.secondary_suspension)
-        std_limit = q.std_limit(veh.Q0_kN, veh.kind, veh.secondary_suspension)
-        rec = recs[qid]
-        m = np.array([r[3] for r in rec], dtype=np.float64)
-        s = np.array([r[4] for r in rec], dtype=np.float64)
-        d = difference(s, m)
-        n = d.size
-        mean = float(d.mean()) if n else float("nan")
-        std = float(d.std(ddof=STD_DDOF)) if n >= 2 else float("nan")
-        rng = np.random.default_rng([seed, qi])
-        with stage("bootstrap"):
-            mci, sci = bootstrap_norm_ci(d, mean_limit, std_limit, n_boot=n_boot, rng=rng,
-                                         ci_level=ci_level)
-        d_norm = d / std_limit
-        ss = float(np.sum(d * d))
-        order = np.argsort(-np.abs(d_norm), kind="stable")[:top]
-        drill = [{"section": rec[i][0], "zone": rec[i][1], "position": rec[i][2],
-                  "M": rec[i][3], "S": rec[i][4], "D": float(d[i]),
-                  "D_norm": float(d_norm[i]),
-                  "share_of_sum_of_squares": float(d[i] ** 2 / ss) if ss > 0 else 0.0}
-                 for i in order]
-        results[qid] = QuantityResult(qid, q.unit, n, len({r[2] for r in rec}),
-                                      len({r[0] for r in rec}), mean, std, mean_limit,
-                                      std_limit, mci, sci, drill)
-        pair_sections[qid] = {r[0] for r in rec}
-        pair_positions[qid] = {r[2] for r in rec}
-        pair_counts[qid] = n
-        frames.append(pd.DataFrame({
-            "quantity": qid, "section": [r[0] for r in rec], "zone": [r[1] for r in rec],
-            "position": [r[2] for r in rec], "M": m, "S": s, "D": d, "D_norm": d_norm}))
-    zone_of = {sid: int(info.zone) for sid, info in secs.items()}
-    cov = coverage(pair_sections, pair_positions, pair_counts, zone_of)
-    validated = cov.ok and all(r.passed for r in results.values())
-    pairs = pd.concat(frames, ignore_index=True)
+
+def quantity_result(qid: str, rec: Sequence[tuple[str, int, str, float, float]], vehicle: Vehicle,
+                    *, n_boot: int, rng: np.random.Generator, ci_level: float = 0.95,
+                    top: int = 5) -> tuple[QuantityResult, dict[str, Any]]:
+    """D_v statistics of one quantity over its pairs (Polach & Böttcher 2014 §5, eq. 4).
+
+    Parameters
+    ----------
+    qid : str
+        Quantity id of :data:`railval.core.quantities.QUANTITIES`.
+    rec : sequence of (section, zone, position, M, S)
+        The pairs of the quantity.
+    vehicle : Vehicle
+        What the limits depend on (Table 2).
+    n_boot, rng, ci_level
+        Bootstrap of the normalised values (:func:`bootstrap_norm_ci`).
+    top : int
+        Pairs listed in the drill-down.
+
+    Returns
+    -------
+    (QuantityResult, dict)
+        The statistics and the columns of its part of ``ValidationResult.pairs``
+        (quantity, section, zone, position, M, S, D, D_norm).
+    """
+    q = QUANTITIES[qid]
+    mean_limit = q.mean_limit(vehicle.Q0_kN, vehicle.kind, vehicle.secondary_suspension)
+    std_limit = q.std_limit(vehicle.Q0_kN, vehicle.kind, vehicle.secondary_suspension)
+    m = np.array([r[3] for r in rec], dtype=np.float64)
+    s = np.array([r[4] for r in rec], dtype=np.float64)
+    d = difference(s, m)
+    n = d.size
+    mean = float(d.mean()) if n else float("nan")
+    std = float(d.std(ddof=STD_DDOF)) if n >= 2 else float("nan")
+    with stage("bootstrap"):
+        mci, sci = bootstrap_norm_ci(d, mean_limit, std_limit, n_boot=n_boot, rng=rng,
+                                     ci_level=ci_level)
+    d_norm = d / std_limit
+    ss = float(np.sum(d * d))
+    order = np.argsort(-np.abs(d_norm), kind="stable")[:top]
+    drill = [{"section": rec[i][0], "zone": rec[i][1], "position": rec[i][2],
+              "M": rec[i][3], "S": rec[i][4], "D": float(d[i]),
+              "D_norm": float(d_norm[i]),
+              "share_of_sum_of_squares": float(d[i] ** 2 / ss) if ss > 0 else 0.0}
+             for i in order]
+    result = QuantityResult(qid, q.unit, n, len({r[2] for r in rec}), len({r[0] for r in rec}),
+                            mean, std, mean_limit, std_limit, mci, sci, drill)
+    frame = {"quantity": qid, "section": [r[0] for r in rec], "zone": [r[1] for r in rec],
+             "position": [r[2] for r in rec], "M": m, "S": s, "D": d, "D_norm": d_norm}
+    return result, frame
+
+
+def _verdicts_under_readings(results: dict[str, QuantityResult], recs: Mapping[str, list],
+                             measured_values, simulated_values, coverage_ok: bool
+                             ) -> dict[str, bool]:
+    """Fill every quantity's ``alternatives`` and return reading id → validated under that
+    reading (a quantity whose reading is undefined keeps its chosen pass/fail)."""
+    for qid, res in results.items():
+        res.alternatives = _alternatives(qid, res, recs[qid], measured_values, simulated_values)
     validated_under: dict[str, bool] = {}
-    if with_alternatives:
-        for qid, res in results.items():
-            res.alternatives = _alternatives(qid, res, recs[qid], measured_values,
-                                             simulated_values)
-        for reading in READINGS:
-            if reading == CHOSEN:
-                continue
-            ok = []
-            for res in results.values():
-                alt = next((a for a in res.alternatives if a["reading"]["id"] == reading.id), None)
-                ok.append(res.passed if alt is None or alt["pass"] is None else alt["pass"])
-            validated_under[reading.id] = bool(cov.ok and all(ok))
-    supp = {}
-    if common and all(getattr(measured_values[s], "supplementary", None) is not None and
-                      getattr(simulated_values[s], "supplementary", None) is not None
-                      for s in common):
-        supp = supplementary_results({s: measured_values[s].supplementary for s in common},
-                                     {s: simulated_values[s].supplementary for s in common},
-                                     {s: zone_of[s] for s in common if s in zone_of})
-    return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level, pairs,
-                            list(warnings), supplementary=supp, validated_under=validated_under)
+    for reading in READINGS:
+        if reading == CHOSEN:
+            continue
+        ok = []
+        for res in results.values():
+            alt = next((a for a in res.alternatives if a["reading"]["id"] == reading.id), None)
+            ok.append(res.passed if alt is None or alt["pass"] is None else alt["pass"])
+        validated_under[reading.id] = bool(coverage_ok and all(ok))
+    return validated_under
+
+
+def _supplementary(measured_values, simulated_values, common: Sequence[str],
+                   zone_of: Mapping[str, int]) -> dict:
+    """:func:`railval.core.supplementary.supplementary_results` when every common section
+    carries supplementary values on both sides, else ``{}``."""
+    if not (common and all(getattr(measured_values[s], "supplementary", None) is not None and
+                           getattr(simulated_values[s], "supplementary", None) is not None
+                           for s in common)):
+        return {}
+    return supplementary_results({s: measured_values[s].supplementary for s in common},
+                                 {s: simulated_values[s].supplementary for s in common},
+                                 {s: zone_of[s] for s in common if s in zone_of})
 
 
 def _alternatives(qid: str, res: QuantityResult, rec: list, measured_values, simulated_values
