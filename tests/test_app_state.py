@@ -205,11 +205,11 @@ def test_dispatch_receives_every_state_change(app):
 def test_dashboard_summary_and_drilldown(app):
     dash = DashboardState(app)
     summary = dash.summary()
-    qs = [r["quantity"] for r in summary["quantities"]]
+    qs = [r["quantity"] for r in summary.quantities]
     assert len(qs) == 12 and "Y_qst" in qs
     rows = dash.drilldown("Y_max")
     assert rows and all(abs(a["D_v"]) >= abs(b["D_v"]) for a, b in itertools.pairwise(rows))
-    limit = next(r["std_limit"] for r in summary["quantities"] if r["quantity"] == "Y_max")
+    limit = next(r["std_limit"] for r in summary.quantities if r["quantity"] == "Y_max")
     assert rows[0]["norm"] == pytest.approx(rows[0]["D_v"] / limit)
     # D_v = (S_v − M_v)·sign(M_v) (Polach & Böttcher 2014 eq. 4)
     r = rows[0]
