@@ -47,10 +47,10 @@ from railval.app.scales import (
 from railval.app.services import overview as overview_service
 from railval.app.svg_charts import svg_bars, svg_lines
 from railval.app.views import ValidationView, view_of
+from railval.core.coverage import Coverage
 from railval.core.diagnosis import where_grid
 from railval.core.en14363 import quantity_trace
 from railval.core.quantities import QUANTITIES
-from railval.core.validation import Coverage
 
 #: points per trace of the report's line charts
 SVG_POINTS = 1200

@@ -19,8 +19,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from railval.core.coverage import Coverage
 from railval.core.en14363 import PROCESSING_VERSION
-from railval.core.validation import STD_DEFINITION, Coverage, QuantityResult, ValidationResult
+from railval.core.validation import STD_DEFINITION, QuantityResult, ValidationResult
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,8 @@ over the pairs (resampling pairs with replacement, seeded).
 A configuration is *validated* when every quantity has |mean| ≤ mean limit and std ≤ std
 limit **and** the coverage holds: ≥ 12 sections, each of the 4 EN 14363 zones with ≥ 3
 sections, and per quantity ≥ 2 signals (positions) and ≥ 24 values. Every shortfall is
-reported as a sentence ("zone 3 has 2 sections, needs 3").
+reported as a sentence ("zone 3 has 2 sections, needs 3"); the rules live in
+:mod:`railval.core.coverage`.
 
 Definition sensitivity: when the section values carry the values of the other readings of the
 open definitions (percentile method, sliding-window grid and mean;
@@ -44,6 +45,16 @@ from typing import Any
 
 import numpy as np
 
+from railval.core.coverage import (  # noqa: F401 - the coverage rules, re-exported for callers
+    MIN_POSITIONS,
+    MIN_SECTIONS,
+    MIN_SECTIONS_PER_ZONE,
+    MIN_VALUES,
+    Coverage,
+    coverage,
+    layout_shortfalls,
+    zone_shortfalls,
+)
 from railval.core.definitions import CHOSEN, READINGS, alternatives_for
 from railval.core.en14363 import evaluate_present
 from railval.core.errors import InvalidParameter
@@ -51,12 +62,8 @@ from railval.core.filters import DEFAULT_ORDER
 from railval.core.quantities import QUANTITIES, QUANTITY_IDS, VEHICLE_KINDS
 from railval.core.stages import stage
 from railval.core.supplementary import supplementary_results
-from railval.core.types import ZONES, SectionInfo, SignalSet, split_channel
+from railval.core.types import SectionInfo, SignalSet
 
-MIN_SECTIONS = 12
-MIN_SECTIONS_PER_ZONE = 3
-MIN_POSITIONS = 2
-MIN_VALUES = MIN_SECTIONS * MIN_POSITIONS
 STD_DDOF = 1
 STD_DEFINITION = "sample standard deviation (ddof = 1, divided by n − 1)"
 
@@ -79,7 +86,18 @@ class Vehicle:
     @classmethod
     def from_any(cls, obj) -> Vehicle:
         """Build from a :class:`Vehicle`, a mapping or an object with attributes ``kind``,
-        ``secondary_suspension``, ``Q0_kN`` (e.g. a db vehicle record)."""
+        ``secondary_suspension``, ``Q0_kN`` (e.g. a db vehicle record).
+
+        Parameters
+        ----------
+        obj : Vehicle, mapping or object
+            ``Q0_kN`` may also be spelt ``q0_kn`` (the database column); a missing
+            secondary suspension counts as present.
+
+        Returns
+        -------
+        Vehicle
+        """
         if isinstance(obj, Vehicle):
             return obj
         get = obj.get if isinstance(obj, Mapping) else (lambda k, d=None: getattr(obj, k, d))
@@ -99,7 +117,16 @@ class Vehicle:
 def difference(simulated, measured) -> np.ndarray:
     """D_v of Polach & Böttcher 2014 eq. (4), element-wise: ``(S − M)·sign(M)``, and ``S`` where ``M = 0``.
 
-    Unit of the quantity. Positive = simulation overestimates the measured magnitude.
+    Parameters
+    ----------
+    simulated, measured : array_like
+        S_v and M_v in the unit of the quantity, broadcastable.
+
+    Returns
+    -------
+    numpy.ndarray
+        D_v in the unit of the quantity; positive = the simulation overestimates the
+        measured magnitude.
     """
     s = np.asarray(simulated, dtype=np.float64)
     m = np.asarray(measured, dtype=np.float64)
@@ -112,7 +139,21 @@ def _none_if_nan(x):
 
 def judge(n: int, mean: float, std: float, mean_limit: float, std_limit: float) -> bool:
     """Pass/fail of one quantity: n ≥ 2, |mean| ≤ mean limit and std ≤ std limit
-    (Polach & Böttcher 2014 §5)."""
+    (Polach & Böttcher 2014 §5).
+
+    Parameters
+    ----------
+    n : int
+        Number of pairs.
+    mean, std : float
+        Mean and sample standard deviation (n − 1) of D_v.
+    mean_limit, std_limit : float
+        The limits of Table 2 for this vehicle.
+
+    Returns
+    -------
+    bool
+    """
     return bool(n >= 2 and np.isfinite(std) and abs(mean) <= mean_limit and std <= std_limit)
 
 
@@ -188,144 +229,6 @@ class QuantityResult:
 
 
 @dataclass
-class Coverage:
-    """Coverage rules of Polach & Böttcher 2014 §5 and their shortfalls (one sentence each)."""
-
-    n_sections: int
-    zones: dict[int, int]
-    positions: dict[str, int]
-    values: dict[str, int]
-    shortfalls: list[str]
-
-    @property
-    def ok(self) -> bool:
-        return not self.shortfalls
-
-    #: the rules' thresholds (Polach & Böttcher 2014 §5), as the views show them
-    sections_required = MIN_SECTIONS
-    sections_per_zone_required = MIN_SECTIONS_PER_ZONE
-    signals_per_quantity_required = MIN_POSITIONS
-    values_per_quantity_required = MIN_VALUES
-
-    def to_dict(self) -> dict:
-        return {
-            "ok": self.ok, "sections": self.n_sections, "sections_required": self.sections_required,
-            "zones": {str(z): n for z, n in self.zones.items()},
-            "sections_per_zone_required": self.sections_per_zone_required,
-            "signals_per_quantity": dict(self.positions),
-            "signals_per_quantity_required": self.signals_per_quantity_required,
-            "values_per_quantity": dict(self.values),
-            "values_per_quantity_required": self.values_per_quantity_required,
-            "shortfalls": list(self.shortfalls),
-        }
-
-
-def coverage(pair_sections: Mapping[str, set], pair_positions: Mapping[str, set],
-             pair_counts: Mapping[str, int], zone_of: Mapping[str, int]) -> Coverage:
-    """Check the coverage rules of Polach & Böttcher 2014 §5 on the pairs of a validation.
-
-    Parameters
-    ----------
-    pair_sections, pair_positions : mapping of quantity id → set
-        Sections and positions with a pair for each quantity.
-    pair_counts : mapping of quantity id → int
-        Number of pairs of each quantity.
-    zone_of : mapping of section id → int
-        EN 14363 test zone of every section.
-
-    Returns
-    -------
-    Coverage
-        Counts and one sentence per shortfall (empty when the coverage holds).
-    """
-    sections = set().union(*pair_sections.values()) if pair_sections else set()
-    zones = {z: sum(1 for s in sections if zone_of[s] == z) for z in ZONES}
-    shortfalls = []
-    if len(sections) < MIN_SECTIONS:
-        shortfalls.append(f"{len(sections)} sections have comparisons, needs {MIN_SECTIONS}")
-    shortfalls += zone_shortfalls(zones)
-    positions = {q: len(pair_positions.get(q, ())) for q in QUANTITY_IDS}
-    values = {q: int(pair_counts.get(q, 0)) for q in QUANTITY_IDS}
-    for q in QUANTITY_IDS:
-        if positions[q] < MIN_POSITIONS:
-            shortfalls.append(f"quantity {q} has {positions[q]} signal"
-                              f"{'s' if positions[q] != 1 else ''}, needs {MIN_POSITIONS}")
-        if values[q] < MIN_VALUES:
-            shortfalls.append(f"quantity {q} has {values[q]} values, needs {MIN_VALUES}")
-    return Coverage(len(sections), zones, positions, values, shortfalls)
-
-
-def zone_shortfalls(zones: Mapping[int, int], min_per_zone: int = MIN_SECTIONS_PER_ZONE) -> list[str]:
-    """The zone rule of Polach & Böttcher 2014 §5: every EN 14363 zone (1–4) with at least
-    ``min_per_zone`` sections; one sentence per zone short of it ("zone 3 has 2 sections,
-    needs 3").
-
-    Parameters
-    ----------
-    zones : mapping of zone → number of sections
-        Zones missing from the mapping count 0.
-    min_per_zone : int
-        Sections each zone needs.
-
-    Returns
-    -------
-    list of str
-        The shortfalls in zone order, empty when the rule holds.
-    """
-    out = []
-    for z in ZONES:
-        n = int(zones.get(z, 0))
-        if n < min_per_zone:
-            out.append(f"zone {z} has {n} section{'s' if n != 1 else ''}, needs {min_per_zone}")
-    return out
-
-
-def verdict_channel_kinds() -> tuple[str, ...]:
-    """The raw channel kinds the verdict quantities are formed from, in registry order
-    (``Y``, ``Q``, ``ay_cb``, ``az_cb``; :data:`railval.core.quantities.QUANTITIES`)."""
-    kinds: dict[str, None] = {}
-    for q in QUANTITIES.values():
-        for ch in q.channels(q.positions()[0]):
-            kinds[split_channel(ch)[0]] = None
-    return tuple(kinds)
-
-
-def layout_shortfalls(section_zones: Sequence[int], channel_kinds: Sequence[str], *,
-                      min_sections: int = MIN_SECTIONS, min_per_zone: int = MIN_SECTIONS_PER_ZONE,
-                      min_signals: int = MIN_POSITIONS) -> list[str]:
-    """The coverage rules of Polach & Böttcher 2014 §5 checked on a campaign's layout alone,
-    before any validation: enough sections, every zone 1–4 with enough sections, and enough
-    signals (channels) of every raw channel kind the verdict quantities use.
-
-    Parameters
-    ----------
-    section_zones : sequence of int
-        The EN 14363 zone of every section of the campaign.
-    channel_kinds : sequence of str
-        The kind of every stored channel (one entry per channel).
-    min_sections, min_per_zone, min_signals : int
-        The thresholds (defaults: the validation's own).
-
-    Returns
-    -------
-    list of str
-        One precise sentence per shortfall, empty when the layout can meet the rules.
-    """
-    out = []
-    if len(section_zones) < min_sections:
-        out.append(f"{len(section_zones)} sections, needs {min_sections}")
-    counts: dict[int, int] = {}
-    for z in section_zones:
-        counts[z] = counts.get(z, 0) + 1
-    out += zone_shortfalls(counts, min_per_zone)
-    for kind in verdict_channel_kinds():
-        n = sum(1 for k in channel_kinds if k == kind)
-        if n < min_signals:
-            out.append(f"channel kind {kind} has {n} signal{'s' if n != 1 else ''}, needs {min_signals}")
-    return out
-
-
-@dataclass
 class ValidationResult:
     """Verdict, coverage, per-quantity statistics and the per-pair table of one
     configuration. ``pairs``: DataFrame with columns quantity, section, zone, position, M, S,
@@ -398,7 +301,29 @@ class ValidationResult:
 def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_boot: int,
                       rng: np.random.Generator, ci_level: float = 0.95,
                       chunk: int = 2_000_000) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Percentile bootstrap CIs of mean/mean_limit and std(ddof=1)/std_limit over pairs."""
+    """Percentile bootstrap CIs of mean/mean_limit and std(ddof=1)/std_limit over pairs
+    (Efron & Tibshirani 1993, ch. 13: pairs resampled with replacement).
+
+    Parameters
+    ----------
+    d : numpy.ndarray
+        D_v of the pairs of one quantity.
+    mean_limit, std_limit : float
+        The limits the mean and std are divided by.
+    n_boot : int
+        Resamples (< 1, or fewer than 2 pairs: NaN intervals).
+    rng : numpy.random.Generator
+        Source of the resampling.
+    ci_level : float
+        Confidence level of the intervals.
+    chunk : int
+        Most resampled values held at once (memory bound).
+
+    Returns
+    -------
+    ((float, float), (float, float))
+        The intervals of mean/mean limit and of std/std limit.
+    """
     n = d.size
     if n < 2 or n_boot < 1:
         nan = (float("nan"), float("nan"))
@@ -635,7 +560,19 @@ def _alternatives(qid: str, res: QuantityResult, rec: list, measured_values, sim
 
 def source_warnings(label: str, values: Mapping[str, Any]) -> list[str]:
     """The processing warnings of one source's section values (``SectionValues.warnings``),
-    each prefixed with ``label`` ("measurement", "configuration X"), sections in id order."""
+    each prefixed with ``label`` ("measurement", "configuration X"), sections in id order.
+
+    Parameters
+    ----------
+    label : str
+        Names the source in every warning.
+    values : mapping of section id → SectionValues
+        One source's evaluated sections.
+
+    Returns
+    -------
+    list of str
+    """
     return [f"{label}: {w}" for sid in sorted(values) for w in values[sid].warnings]
 
 
@@ -645,7 +582,25 @@ def validate_signalsets(measured: Mapping[str, SignalSet], simulated: Mapping[st
     """:func:`validate` of in-memory signal sets (section id → SignalSet on each side),
     processed with :func:`railval.core.en14363.evaluate_present`. ``vehicle``: a
     :class:`Vehicle` or a mapping with ``kind``, ``secondary_suspension``, ``Q0_kN``. Sections
-    missing on either side are skipped (and show up in the coverage)."""
+    missing on either side are skipped (and show up in the coverage).
+
+    Parameters
+    ----------
+    measured, simulated : mapping of section id → SignalSet
+        The recorded signals of each side.
+    sections : sequence of SectionInfo
+        Every section (zone and evaluated range).
+    vehicle : Vehicle or mapping
+        What the limits depend on.
+    order : int
+        Butterworth prototype order of the EN filters.
+    n_boot, seed : int
+        Bootstrap of the normalised values.
+
+    Returns
+    -------
+    ValidationResult
+    """
     m_values = evaluate_present(measured, sections, order=order)
     s_values = evaluate_present(simulated, sections, order=order)
     warnings = source_warnings("measurement", m_values) + source_warnings("simulation", s_values)
@@ -657,7 +612,17 @@ def normalised_errors(result: ValidationResult) -> dict[str, Any]:
     ``mean_norm`` (mean D_v / mean limit), ``std_norm`` (std D_v / std limit) and
     ``error`` = max(|mean_norm|, std_norm) (Polach & Böttcher 2014 §5: validated when every
     error ≤ 1); ``max_error`` the largest (None when nothing is finite) and ``validated``.
-    The lineage of a configuration (root → it) is drawn from these."""
+    The lineage of a configuration (root → it) is drawn from these.
+
+    Parameters
+    ----------
+    result : ValidationResult
+
+    Returns
+    -------
+    dict
+        ``validated``, ``max_error`` and per quantity ``mean_norm``, ``std_norm``, ``error``.
+    """
     def finite(x: float | None) -> float | None:
         return float(x) if x is not None and math.isfinite(x) else None
 

@@ -13,9 +13,10 @@ from railval.app.cli.cmd_validate import format_result
 from railval.app.report import _coverage_html, _quantities_html, definition_html, supplementary_html
 from railval.app.services.overview import CampaignOverview
 from railval.app.views import InSample, ValidationView, view_of
+from railval.core.coverage import Coverage, layout_shortfalls
 from railval.core.quantities import QUANTITIES, QUANTITY_IDS
 from railval.core.types import SectionInfo
-from railval.core.validation import Coverage, QuantityResult, layout_shortfalls, validate
+from railval.core.validation import QuantityResult, validate
 
 VEHICLE = {"kind": "passenger", "Q0_kN": 80.0}
 

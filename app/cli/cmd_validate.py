@@ -22,7 +22,8 @@ from typing import TYPE_CHECKING
 from railval.app.cli import emit_json
 
 if TYPE_CHECKING:
-    from railval.core.validation import Coverage, ValidationResult
+    from railval.core.coverage import Coverage
+    from railval.core.validation import ValidationResult
 
 BAR_CELLS = 20  # cells for 0 … 2 × limit
 _BLOCKS = " ▏▎▍▌▋▊▉█"

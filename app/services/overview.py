@@ -15,15 +15,15 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
-from railval.core.errors import NotFound
-from railval.core.types import ZONES, SectionInfo
-from railval.core.validation import (
+from railval.core.coverage import (
     MIN_POSITIONS,
     MIN_SECTIONS,
     MIN_SECTIONS_PER_ZONE,
-    ValidationResult,
     layout_shortfalls,
 )
+from railval.core.errors import NotFound
+from railval.core.types import ZONES, SectionInfo
+from railval.core.validation import ValidationResult
 from railval.db import repo
 
 
@@ -54,7 +54,7 @@ class CampaignOverview:
                             min_per_zone: int = MIN_SECTIONS_PER_ZONE,
                             min_signals: int = MIN_POSITIONS) -> list[str]:
         """The coverage rules checked on the campaign layout alone
-        (:func:`railval.core.validation.layout_shortfalls`, Polach & Böttcher 2014 §5)."""
+        (:func:`railval.core.coverage.layout_shortfalls`, Polach & Böttcher 2014 §5)."""
         return layout_shortfalls([s.zone for s in self.sections], [c["kind"] for c in self.channels],
                                  min_sections=min_sections, min_per_zone=min_per_zone,
                                  min_signals=min_signals)
