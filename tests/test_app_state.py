@@ -361,4 +361,4 @@ def test_a_page_error_is_logged_and_shown_as_a_plain_message(app, caplog):
     assert any(r.exc_info and "secret internals" in str(r.exc_info[1]) for r in caplog.records)
     Broken.error = NotFound("configuration 'x' not found in campaign 'demo'")
     page.safe_refresh()
-    assert "configuration 'x' not found" in page.body.objects[0].object
+    assert "is not available: configuration &#x27;x&#x27; not found in campaign" in page.body.objects[0].object
