@@ -8,8 +8,9 @@ imported or run):
 * no module in ``app/`` above :data:`MAX_APP_LINES` lines unless its docstring says why
   (a paragraph starting ``Length:``);
 * no module in ``core/`` above :data:`MAX_CORE_LINES` lines (no exception: split by concept);
-* the views: ``app/report.py``, ``app/pdf.py`` and the view model ``app/views.py`` import no
-  ``app/state`` (pages and the report read the same view model); the view model imports no
+* the views: ``app/report.py``, ``app/audit_report.py``, ``app/pdf.py`` and the view model
+  ``app/views.py`` import neither ``app/state`` (pages and the report read the same view
+  model) nor ``railval.db`` (data comes through ``app/services``); the view model imports no
   UI library; ``app/state`` imports no Panel/Bokeh/HoloViews (``param`` is its base) and
   reaches the database only through ``app/services`` (no ``railval.db`` import);
 * no function above :data:`MAX_FUNCTION_LINES` lines outside :data:`LONG_FUNCTIONS` (the
@@ -228,8 +229,9 @@ def test_services_import_no_ui_library():
 #: (module prefix, forbidden imports) of the views' rules (docs/design.md §2)
 VIEW_RULES = (
     # the report takes one colour palette from Bokeh's palettes (data, no widget)
-    ("railval.app.report", ("railval.app.state", "railval.app.pages", "panel", "holoviews")),
-    ("railval.app.pdf", ("railval.app.state", "railval.app.pages", *WIDGET_LIBRARIES)),
+    ("railval.app.report", ("railval.app.state", "railval.app.pages", "railval.db", "panel", "holoviews")),
+    ("railval.app.audit_report", ("railval.app.state", "railval.app.pages", "railval.db", *WIDGET_LIBRARIES)),
+    ("railval.app.pdf", ("railval.app.state", "railval.app.pages", "railval.db", *WIDGET_LIBRARIES)),
     ("railval.app.views", ("railval.app.state", "railval.app.pages", "railval.db", *UI_LIBRARIES)),
     ("railval.app.state", (*WIDGET_LIBRARIES, "railval.app.pages", "railval.db")),
 )
@@ -245,6 +247,7 @@ def test_views_state_and_report_keep_their_layers(prefix, forbidden):
     ("railval.app.state", "from railval.db import repo\n"),
     ("railval.app.state", "def f():\n    from bokeh.models import Div\n"),
     ("railval.app.report", "from railval.app.state.dashboard import DashboardState\n"),
+    ("railval.app.report", "def f():\n    from railval.db import repo\n"),
     ("railval.app.views", "import param\n"),
 ])
 def test_view_rules_fail_on_a_planted_violation(tmp_path, prefix, planted):

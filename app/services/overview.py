@@ -125,13 +125,27 @@ def require_evidence(database, campaign: str, config: str) -> None:
         repo.require_evidence(s, campaign, config, blobs=True)
 
 
-def signoff_items(database, campaign: str, config: str) -> list[tuple[dict[str, Any], Any]]:
-    """The sign-offs of a configuration as ``(record dict, SignoffStatus)``."""
+def signoff_items(database, campaign: str | None = None, config: str | None = None
+                  ) -> list[tuple[dict[str, Any], Any]]:
+    """The sign-offs (of one campaign/configuration, or all) as ``(record dict,
+    SignoffStatus)``."""
     from railval.app.services.signoff import statuses
     from railval.db import signoff as db_signoff
 
     with database.session() as s:
         return [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, config)]
+
+
+def audit_and_signoffs(database) -> tuple[list[tuple[dict[str, Any], Any]], list[Any]]:
+    """Every sign-off with its status and every audit row, read in one unit of work (the
+    audit report)."""
+    from railval.app.services.signoff import statuses
+    from railval.db import audit
+    from railval.db import signoff as db_signoff
+
+    with database.session() as s:
+        items = [(db_signoff.as_dict(so), st) for so, st in statuses(s)]
+        return items, list(audit.iter_rows(s))
 
 
 def validation(database, campaign: str, config: str, **kw: Any) -> ValidationResult:
