@@ -36,9 +36,7 @@ class AuditReport:
 def build_audit_report(database) -> AuditReport:
     """Build the report from the database (chain checked quickly, sign-off statuses)."""
     from railval.app.services.audit import key_info, verify_database
-    from railval.app.services.signoff import statuses
-    from railval.db import audit
-    from railval.db import signoff as db_signoff
+    from railval.app.services.overview import audit_and_signoffs
 
     check = verify_database(database, signals=False, full=False)
     chain_findings = [f for f in check.findings
@@ -46,9 +44,7 @@ def build_audit_report(database) -> AuditReport:
     key = key_info(database)
     chain_status = ("intact" if not chain_findings else f"BROKEN — {chain_findings[0]}")
     now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
-    with database.session() as s:
-        items = [(db_signoff.as_dict(so), st) for so, st in statuses(s)]
-        rows = list(audit.iter_rows(s))
+    items, rows = audit_and_signoffs(database)
     stale = sum(1 for _, st in items if st.status != "valid")
     h: list[str] = [("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
                      f"<title>railval audit report</title><style>{CSS}</style></head><body>"),

@@ -29,6 +29,13 @@ from typing import Any
 
 import numpy as np
 
+from railval.app.pdf import (  # noqa: F401 - the report's writers, re-exported for callers
+    CHROMIUM_ARGS,
+    ReportError,
+    find_chromium,
+    html_to_pdf,
+    write_html_or_pdf,
+)
 from railval.app.scales import (
     FAIL_COLOR,
     MEASURED_COLOR,
@@ -37,16 +44,11 @@ from railval.app.scales import (
     downsample_xy,
     unit_label,
 )
-from railval.app.pdf import (  # noqa: F401 - the report's writers, re-exported for callers
-    CHROMIUM_ARGS,
-    ReportError,
-    find_chromium,
-    html_to_pdf,
-    write_html_or_pdf,
-)
+from railval.app.services import overview as overview_service
 from railval.app.svg_charts import svg_bars, svg_lines
+from railval.app.views import ValidationView, view_of
+from railval.core.coverage import Coverage
 from railval.core.diagnosis import where_grid
-from railval.core.errors import RailvalError
 from railval.core.en14363 import quantity_trace
 from railval.core.quantities import QUANTITIES
 
@@ -209,149 +211,187 @@ def _verdict_document(d: dict) -> dict:
     return clean({k: d.get(k) for k in ("validated", "coverage", "quantities")})
 
 
+@dataclass
+class ReportInputs:
+    """What a report is built from, gathered in one step (:func:`gather_report`)."""
+
+    campaign: str
+    configuration: str
+    result: Any  # railval.core.validation.ValidationResult
+    view: ValidationView
+    overview: Any  # railval.app.services.overview.CampaignOverview
+    lineage: list[str]
+    measured_hashes: dict[str, dict[str, str]]
+    simulated_hashes: dict[str, dict[str, str]]
+    signoffs: list[tuple[dict[str, Any], Any]] | None
+    versions: dict[str, str]
+    generated_at: str
+
+
+def gather_report(backend: Any, campaign: str, configuration: str) -> ReportInputs:
+    """Check every blob of the evidence against its hash and seal, then read the validation
+    (through ``backend``, exactly as the dashboard shows it), the campaign, the lineage, the
+    content hashes and the sign-offs."""
+    overview_service.require_evidence(backend.database, campaign, configuration)
+    result = backend.validation(campaign, configuration)
+    signoffs = (overview_service.signoff_items(backend.database, campaign, configuration)
+                if hasattr(backend, "session") else None)
+    return ReportInputs(
+        campaign, configuration, result, view_of(result), backend.overview(campaign),
+        backend.lineage(campaign, configuration), backend.hashes(campaign, None),
+        backend.hashes(campaign, configuration), signoffs, software_versions(),
+        dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"))
+
+
+def evidence_digest(inputs: ReportInputs) -> tuple[str, list[tuple[str, str, str, str]]]:
+    """SHA-256 over every (section, channel, measured hash, simulated hash) line, then the
+    verdict and the values of every quantity; returns the digest and the lines."""
+    meas, sim = inputs.measured_hashes, inputs.simulated_hashes
+    digest = hashlib.sha256()
+    lines = []
+    for sid in sorted(set(meas) | set(sim)):
+        for ch in sorted(set(meas.get(sid, {})) | set(sim.get(sid, {}))):
+            a, b = meas.get(sid, {}).get(ch, ""), sim.get(sid, {}).get(ch, "")
+            digest.update(f"{sid}\t{ch}\t{a}\t{b}\n".encode())
+            lines.append((sid, ch, a, b))
+    # the digest covers the verdict and every value it rests on, not only the inputs' hashes
+    digest.update(json.dumps(_verdict_document(inputs.result.to_dict()), sort_keys=True,
+                             allow_nan=False, default=str).encode())
+    return digest.hexdigest(), lines
+
+
 def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3,
                  cards: list[dict[str, Any]] | None = None) -> Report:
-    """Build the report of ``configuration`` of ``campaign`` from the database.
+    """Build the report of ``configuration`` of ``campaign`` from the database: gather
+    (:func:`gather_report`), compute the evidence digest (:func:`evidence_digest`), render.
 
     ``cards``: plot cards of an expert review workshop chosen for this report
     (:func:`railval.app.services.workshops.report_cards`), shown after the worst cases with
     the reviewed image embedded and its SHA-256.
 
-    ``backend`` is an :class:`railval.app.state.backend.Backend` (or anything with its methods); the validation comes from
-    ``railval.app.services.validation`` through it, exactly as the dashboard shows it.
+    ``backend`` is an :class:`railval.app.state.backend.Backend` (or anything with its
+    methods); the validation comes from ``railval.app.services.validation`` through it,
+    exactly as the dashboard shows it.
     """
-    from railval.db import repo
-
-    with backend.database.session() as s:  # every blob against its hash and seal first
-        repo.require_evidence(s, campaign, configuration, blobs=True)
-    result = backend.validation(campaign, configuration)
-    d = result.to_dict()
-    rows = d["quantities"]
-    cov = d.get("coverage", {})
-    versions = software_versions()
-    now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
-    lineage = backend.lineage(campaign, configuration)
-    ov = backend.overview(campaign)
-    conf = next((c for c in ov.configurations if c.name == configuration), None)
-    v = ov.vehicle
-    h: list[str] = [(f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
-                    f"<title>railval report — {_esc(campaign)} / {_esc(configuration)}</title>"
-                    f"<style>{CSS}</style></head><body>")]
-    h.append(f"<h1>Validation report: {_esc(configuration)}</h1>")
-    h.append("<table class='meta'>"
-             f"<tr><td>Campaign</td><td><b>{_esc(campaign)}</b> {_esc(ov.description)}</td></tr>"
-             f"<tr><td>Vehicle</td><td>{_esc(v.get('name', ''))} — {_esc(v.get('kind', ''))}, secondary "
-             f"suspension {'yes' if v.get('secondary_suspension') else 'no'}, Q0 = {_fmt(v.get('Q0_kN'))} kN</td></tr>"
-             f"<tr><td>Configuration</td><td>{_esc(configuration)}; effects: "
-             f"{_esc(', '.join(conf.effects) if conf and conf.effects else 'none')}</td></tr>"
-             f"<tr><td>Lineage</td><td>{' → '.join(_esc(x) for x in lineage)}</td></tr>"
-             f"<tr><td>Generated</td><td>{now}</td></tr>"
-             f"<tr><td>Processing</td><td>{_esc(d.get('processing_version', ''))}; std: "
-             f"{_esc(d.get('std_definition', 'sample standard deviation (n − 1)'))}</td></tr>"
-             "</table>")
-    ok = bool(d["validated"])
-    failing = [r["quantity"] for r in rows if not r.get("pass")]
-    h.append(f"<div class='verdict {'ok' if ok else 'no'}'><b>{'VALIDATED' if ok else 'NOT VALIDATED'}</b>"
-             + ("" if ok else f" — failing quantities: {_esc(', '.join(failing) or 'none')}"
-                + ("" if cov.get("ok", True) else "; coverage not met")) + "</div>")
-    info = d.get("info") or {}
-    if info.get("in_sample"):
-        held = info.get("held_out_sections") or []
-        h.append("<div class='verdict insample'><b>In-sample</b> — "
-                 f"{_esc(', '.join(info.get('calibrated_in') or []))} was calibrated on "
-                 f"{len(info.get('fit_sections') or [])} of these sections, so this verdict is partly on the "
-                 "data the fit used" + (f"; held out: {_esc(', '.join(held))}" if held else
-                                         "; no section was held out") + ".</div>")
-
-    # quantities
-    h.append("<h2>Quantities (Polach & Böttcher 2014 §5, EN 14363)</h2><table><tr><th class='l'>quantity</th><th>unit</th>"
-             "<th>n</th><th>mean D_v</th><th>std D_v</th><th>mean limit</th><th>std limit</th>"
-             "<th>mean/limit</th><th>95 % CI</th><th>std/limit</th><th>95 % CI</th><th>verdict</th></tr>")
-    for r in rows:
-        mci, sci = r.get("mean_norm_ci") or [None, None], r.get("std_norm_ci") or [None, None]
-        h.append(f"<tr><td class='l'>{_esc(r['quantity'])}</td><td>{_esc(unit_label(r.get('unit', '')))}</td>"
-                 f"<td>{_fmt(r.get('n'))}</td><td>{_fmt(r.get('mean'))}</td><td>{_fmt(r.get('std'))}</td>"
-                 f"<td>{_fmt(r.get('mean_limit'))}</td><td>{_fmt(r.get('std_limit'))}</td>"
-                 f"<td>{_fmt(r.get('mean_norm'))}</td><td>{_fmt(mci[0])} … {_fmt(mci[1])}</td>"
-                 f"<td>{_fmt(r.get('std_norm'))}</td><td>{_fmt(sci[0])} … {_fmt(sci[1])}</td>"
-                 f"<td class='{'pass' if r.get('pass') else 'fail'}'>{'pass' if r.get('pass') else 'FAIL'}"
-                 f"{' (definition-sensitive)' if r.get('definition_sensitive') else ''}</td></tr>")
-    h.append("</table><p class='note'>D_v = (S_v − M_v)·M_v/|M_v| (positive: the simulation overestimates). "
-             "Mean limit = 2/3 of the std limit; intervals: percentile bootstrap over the pairs.</p>")
-    labels = [r["quantity"] for r in rows]
-    h.append("<div class='charts'>")
-    h.append(svg_bars(labels, [r.get("mean_norm") for r in rows], title="Normalised mean (mean / limit)",
-                      ylabel="mean / limit (–)", limits=(1.0, -1.0), intervals=[r.get("mean_norm_ci") for r in rows]))
-    h.append(svg_bars(labels, [r.get("std_norm") for r in rows], title="Normalised std (std / limit, n − 1)",
-                      ylabel="std / limit (–)", limits=(1.0,), intervals=[r.get("std_norm_ci") for r in rows]))
-    h.append("</div>")
-
-    h.append(where_table(where_grid(result.pairs)))
-    h.append(definition_html(d))
-    h.append(supplementary_html(d))
-
-    # coverage
-    h.append("<h2>Coverage</h2>")
-    zones = cov.get("zones", {})
-    h.append("<table><tr><th class='l'>rule</th><th>found</th><th>required</th></tr>"
-             f"<tr><td class='l'>sections with comparisons</td><td>{_fmt(cov.get('sections'))}</td>"
-             f"<td>{_fmt(cov.get('sections_required'))}</td></tr>"
-             + "".join(f"<tr><td class='l'>zone {_esc(z)}</td><td>{_fmt(n)}</td>"
-                       f"<td>{_fmt(cov.get('sections_per_zone_required'))}</td></tr>" for z, n in zones.items())
-             + "</table>")
-    short = cov.get("shortfalls", [])
-    h.append("<p class='pass'>Coverage holds.</p>" if not short else
-             "<ul>" + "".join(f"<li class='fail'>{_esc(s)}</li>" for s in short) + "</ul>")
-
-    # worst cases
+    inputs = gather_report(backend, campaign, configuration)
+    digest, hash_lines = evidence_digest(inputs)
+    view = inputs.view
+    h: list[str] = [_head_html(inputs), _verdict_html(view), _quantities_html(view),
+                    where_table(where_grid(view.pairs)), definition_html(view),
+                    supplementary_html(view), _coverage_html(view.coverage)]
     if worst_cases > 0:
         h.append("<h2>Worst cases</h2><p class='note'>Pairs with the largest |D_v| / std limit over all "
                  "quantities; EN-filtered signals on the distance axis, measurement (grey) beneath the "
                  "simulation (blue), evaluated range shaded.</p>")
-        h.extend(_worst_case_plots(backend, campaign, configuration, result, ov, worst_cases))
-
+        h.extend(_worst_case_plots(backend, campaign, configuration, inputs.result, inputs.overview,
+                                   worst_cases))
     if cards:
         from railval.app.workshop_web.cards import report_section
 
         h.append(report_section(cards))
-
-    # independent sign-offs of this configuration, with their status
-    session = getattr(backend, "session", None)
-    if session is not None:
-        from railval.app.services.signoff import statuses
-        from railval.db import signoff as db_signoff
-
-        with session() as s:
-            items = [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, configuration)]
-        h.append("<h2>Sign-offs</h2>")
-        h.append("<p class='note'>Each sign-off is bound to the SHA-256 of its evidence "
-                 "(docs/audit.md); <b>stale</b> means the evidence changed after signing.</p>")
-        h.append(signoff_rows_html(items))
-
-    # hashes
-    h.append("<h2>Evidence: signal content hashes (SHA-256)</h2>")
-    meas = backend.hashes(campaign, None)
-    sim = backend.hashes(campaign, configuration)
-    digest = hashlib.sha256()
-    hrows = []
-    for sid in sorted(set(meas) | set(sim)):
-        for ch in sorted(set(meas.get(sid, {})) | set(sim.get(sid, {}))):
-            a, b = meas.get(sid, {}).get(ch, ""), sim.get(sid, {}).get(ch, "")
-            digest.update(f"{sid}\t{ch}\t{a}\t{b}\n".encode())
-            hrows.append(f"<tr><td class='l'>{_esc(sid)}</td><td class='l'>{_esc(ch)}</td><td class='l'>{a}</td>"
-                         f"<td class='l'>{b}</td></tr>")
-    # the digest covers the verdict and every value it rests on, not only the inputs' hashes
-    digest.update(json.dumps(_verdict_document(d), sort_keys=True, allow_nan=False,
-                             default=str).encode())
-    h.append(f"<p>Evidence digest (SHA-256 over every line below, then the verdict and the "
-             f"values of every quantity): <code>{digest.hexdigest()}</code></p>")
-    h.append("<table class='hashes'><tr><th class='l'>section</th><th class='l'>channel</th>"
-             "<th class='l'>measurement</th><th class='l'>simulation</th></tr>" + "".join(hrows) + "</table>")
-
+    if inputs.signoffs is not None:  # independent sign-offs of this configuration, with their status
+        h.append("<h2>Sign-offs</h2><p class='note'>Each sign-off is bound to the SHA-256 of its "
+                 "evidence (docs/audit.md); <b>stale</b> means the evidence changed after signing.</p>")
+        h.append(signoff_rows_html(inputs.signoffs))
+    h.append(_hashes_html(digest, hash_lines))
     h.append("<h2>Software</h2><table>" + "".join(
-        f"<tr><td class='l'>{_esc(k)}</td><td class='l'>{_esc(val)}</td></tr>" for k, val in versions.items())
-        + "</table></body></html>")
-    return Report(campaign, configuration, "".join(h), ok, now, versions, digest.hexdigest())
+        f"<tr><td class='l'>{_esc(k)}</td><td class='l'>{_esc(val)}</td></tr>"
+        for k, val in inputs.versions.items()) + "</table></body></html>")
+    return Report(campaign, configuration, "".join(h), view.validated, inputs.generated_at,
+                  inputs.versions, digest)
+
+
+def _head_html(inputs: ReportInputs) -> str:
+    """Document head, title and the meta table (campaign, vehicle, configuration, lineage)."""
+    campaign, configuration, ov = inputs.campaign, inputs.configuration, inputs.overview
+    conf = next((c for c in ov.configurations if c.name == configuration), None)
+    v = ov.vehicle
+    return (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+            f"<title>railval report — {_esc(campaign)} / {_esc(configuration)}</title>"
+            f"<style>{CSS}</style></head><body>"
+            f"<h1>Validation report: {_esc(configuration)}</h1>"
+            "<table class='meta'>"
+            f"<tr><td>Campaign</td><td><b>{_esc(campaign)}</b> {_esc(ov.description)}</td></tr>"
+            f"<tr><td>Vehicle</td><td>{_esc(v.get('name', ''))} — {_esc(v.get('kind', ''))}, secondary "
+            f"suspension {'yes' if v.get('secondary_suspension') else 'no'}, Q0 = {_fmt(v.get('Q0_kN'))} kN</td></tr>"
+            f"<tr><td>Configuration</td><td>{_esc(configuration)}; effects: "
+            f"{_esc(', '.join(conf.effects) if conf and conf.effects else 'none')}</td></tr>"
+            f"<tr><td>Lineage</td><td>{' → '.join(_esc(x) for x in inputs.lineage)}</td></tr>"
+            f"<tr><td>Generated</td><td>{inputs.generated_at}</td></tr>"
+            f"<tr><td>Processing</td><td>{_esc(inputs.view.processing_version)}; std: "
+            f"{_esc(inputs.view.std_definition)}</td></tr>"
+            "</table>")
+
+
+def _verdict_html(view: ValidationView) -> str:
+    """The verdict box and, for an in-sample verdict, the note that says so."""
+    ok = view.validated
+    out = (f"<div class='verdict {'ok' if ok else 'no'}'><b>{'VALIDATED' if ok else 'NOT VALIDATED'}</b>"
+           + ("" if ok else f" — failing quantities: {_esc(', '.join(view.failing) or 'none')}"
+              + ("" if view.coverage.ok else "; coverage not met")) + "</div>")
+    ins = view.in_sample
+    if ins is not None:
+        held = ins.held_out_sections
+        out += ("<div class='verdict insample'><b>In-sample</b> — "
+                f"{_esc(', '.join(ins.calibrated_in))} was calibrated on "
+                f"{len(ins.fit_sections)} of these sections, so this verdict is partly on the "
+                "data the fit used" + (f"; held out: {_esc(', '.join(held))}" if held else
+                                        "; no section was held out") + ".</div>")
+    return out
+
+
+def _quantities_html(view: ValidationView) -> str:
+    """Per quantity table (D_v statistics, limits, normalised values with intervals) and the
+    Fig. 12/13 bar charts."""
+    rows = view.quantities
+    h = [("<h2>Quantities (Polach & Böttcher 2014 §5, EN 14363)</h2><table><tr><th class='l'>quantity</th>"
+          "<th>unit</th><th>n</th><th>mean D_v</th><th>std D_v</th><th>mean limit</th><th>std limit</th>"
+          "<th>mean/limit</th><th>95 % CI</th><th>std/limit</th><th>95 % CI</th><th>verdict</th></tr>")]
+    for r in rows:
+        mci, sci = r["mean_norm_ci"], r["std_norm_ci"]
+        h.append(f"<tr><td class='l'>{_esc(r['quantity'])}</td><td>{_esc(unit_label(r['unit']))}</td>"
+                 f"<td>{_fmt(r['n'])}</td><td>{_fmt(r['mean'])}</td><td>{_fmt(r['std'])}</td>"
+                 f"<td>{_fmt(r['mean_limit'])}</td><td>{_fmt(r['std_limit'])}</td>"
+                 f"<td>{_fmt(r['mean_norm'])}</td><td>{_fmt(mci[0])} … {_fmt(mci[1])}</td>"
+                 f"<td>{_fmt(r['std_norm'])}</td><td>{_fmt(sci[0])} … {_fmt(sci[1])}</td>"
+                 f"<td class='{'pass' if r['pass'] else 'fail'}'>{'pass' if r['pass'] else 'FAIL'}"
+                 f"{' (definition-sensitive)' if r['definition_sensitive'] else ''}</td></tr>")
+    h.append("</table><p class='note'>D_v = (S_v − M_v)·M_v/|M_v| (positive: the simulation overestimates). "
+             "Mean limit = 2/3 of the std limit; intervals: percentile bootstrap over the pairs.</p>")
+    labels = [r["quantity"] for r in rows]
+    h.append("<div class='charts'>")
+    h.append(svg_bars(labels, [r["mean_norm"] for r in rows], title="Normalised mean (mean / limit)",
+                      ylabel="mean / limit (–)", limits=(1.0, -1.0), intervals=[r["mean_norm_ci"] for r in rows]))
+    h.append(svg_bars(labels, [r["std_norm"] for r in rows], title="Normalised std (std / limit, n − 1)",
+                      ylabel="std / limit (–)", limits=(1.0,), intervals=[r["std_norm_ci"] for r in rows]))
+    h.append("</div>")
+    return "".join(h)
+
+
+def _coverage_html(cov: Coverage) -> str:
+    """The coverage rules, what was found and the shortfalls."""
+    h = ["<h2>Coverage</h2>"]
+    h.append("<table><tr><th class='l'>rule</th><th>found</th><th>required</th></tr>"
+             f"<tr><td class='l'>sections with comparisons</td><td>{_fmt(cov.n_sections)}</td>"
+             f"<td>{_fmt(cov.sections_required)}</td></tr>"
+             + "".join(f"<tr><td class='l'>zone {_esc(z)}</td><td>{_fmt(n)}</td>"
+                       f"<td>{_fmt(cov.sections_per_zone_required)}</td></tr>" for z, n in cov.zones.items())
+             + "</table>")
+    short = cov.shortfalls
+    h.append("<p class='pass'>Coverage holds.</p>" if not short else
+             "<ul>" + "".join(f"<li class='fail'>{_esc(s)}</li>" for s in short) + "</ul>")
+    return "".join(h)
+
+
+def _hashes_html(digest: str, lines: list[tuple[str, str, str, str]]) -> str:
+    """The evidence digest and the table of every signal's content hashes."""
+    rows = "".join(f"<tr><td class='l'>{_esc(sid)}</td><td class='l'>{_esc(ch)}</td><td class='l'>{a}</td>"
+                   f"<td class='l'>{b}</td></tr>" for sid, ch, a, b in lines)
+    return ("<h2>Evidence: signal content hashes (SHA-256)</h2>"
+            f"<p>Evidence digest (SHA-256 over every line below, then the verdict and the "
+            f"values of every quantity): <code>{digest}</code></p>"
+            "<table class='hashes'><tr><th class='l'>section</th><th class='l'>channel</th>"
+            "<th class='l'>measurement</th><th class='l'>simulation</th></tr>" + rows + "</table>")
 
 
 def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: Any, ov: Any,
@@ -399,13 +439,10 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
     return out
 
 
-def definition_html(doc: dict[str, Any]) -> str:
+def definition_html(view: ValidationView) -> str:
     """Report section: which verdicts rest on an open choice of the definitions (percentile
     method, sliding-window grid and mean; docs/validation.md)."""
-    from railval.app.state.dashboard import definition_rows
-
-    rows = definition_rows(doc)
-    defs = doc.get("definitions", {})
+    rows = view.definition_rows()
     out = [("<h2>Definition sensitivity</h2><p class='note'>Chosen reading: percentiles by the inverted "
            "CDF (the smallest sample with F_n ≥ p), sliding-mean grid from the evaluated range's start, "
            "distance-weighted 2 m mean. Alternatives evaluated on the same filtered signals: linear "
@@ -417,7 +454,7 @@ def definition_html(doc: dict[str, Any]) -> str:
     sensitive = [r["quantity"] for r in rows if r["definition_sensitive"]]
     out.append(f"<p class='{'fail' if sensitive else 'pass'}'>"
                + (("definition-sensitive: " + _esc(", ".join(sensitive))
-                   + ("; the verdict itself changes under another reading" if defs.get("verdict_sensitive")
+                   + ("; the verdict itself changes under another reading" if view.verdict_sensitive
                       else "")) if sensitive
                   else "No verdict changes under the alternative readings.") + "</p>")
     out.append("<table><tr><th class='l'>quantity</th><th>verdict</th><th>definition-sensitive</th>"
@@ -436,11 +473,9 @@ def definition_html(doc: dict[str, Any]) -> str:
     return "".join(out)
 
 
-def supplementary_html(doc: dict[str, Any]) -> str:
+def supplementary_html(view: ValidationView) -> str:
     """Report section: bogie-frame and PSD-band quantities next to the verdict."""
-    from railval.app.state.dashboard import supplementary_rows
-
-    rows = supplementary_rows(doc)
+    rows = view.supplementary_rows()
     out = [("<h2>Supplementary results (do not change the verdict)</h2><p class='note'>Bogie-frame "
            "accelerations: band-pass 0.4–10 Hz of the whole section, evaluated range, rms and max(|0.15 %|, "
            "|99.85 %|) (EN 14363 acceleration processing). PSD bands: band rms √(Σ G(f)·Δf) of the Welch PSD "
@@ -455,7 +490,7 @@ def supplementary_html(doc: dict[str, Any]) -> str:
                "<th>mean D_v</th><th>std D_v</th><th>mean rel</th><th>std rel</th><th>log2 S/M</th></tr>")
     for r in rows:
         out.append(f"<tr><td class='l'>{_esc(r['quantity'])}</td><td class='l'>{_esc(r['group'])}</td>"
-                   f"<td>{_esc(unit_label(r.get('unit', '')))}</td><td>{_fmt(r['n'])}</td>"
+                   f"<td>{_esc(unit_label(r['unit']))}</td><td>{_fmt(r['n'])}</td>"
                    f"<td>{_fmt(r['mean'])}</td><td>{_fmt(r['std'])}</td><td>{_fmt(r['mean_rel'])}</td>"
                    f"<td>{_fmt(r['std_rel'])}</td><td>{_fmt(r['log2_ratio_mean'])}</td></tr>")
     out.append("</table>")

@@ -14,7 +14,8 @@ over the pairs (resampling pairs with replacement, seeded).
 A configuration is *validated* when every quantity has |mean| ≤ mean limit and std ≤ std
 limit **and** the coverage holds: ≥ 12 sections, each of the 4 EN 14363 zones with ≥ 3
 sections, and per quantity ≥ 2 signals (positions) and ≥ 24 values. Every shortfall is
-reported as a sentence ("zone 3 has 2 sections, needs 3").
+reported as a sentence ("zone 3 has 2 sections, needs 3"); the rules live in
+:mod:`railval.core.coverage`.
 
 Definition sensitivity: when the section values carry the values of the other readings of the
 open definitions (percentile method, sliding-window grid and mean;
@@ -44,19 +45,25 @@ from typing import Any
 
 import numpy as np
 
-from railval.core.stages import stage
+from railval.core.coverage import (  # noqa: F401 - the coverage rules, re-exported for callers
+    MIN_POSITIONS,
+    MIN_SECTIONS,
+    MIN_SECTIONS_PER_ZONE,
+    MIN_VALUES,
+    Coverage,
+    coverage,
+    layout_shortfalls,
+    zone_shortfalls,
+)
 from railval.core.definitions import CHOSEN, READINGS, alternatives_for
 from railval.core.en14363 import evaluate_present
 from railval.core.errors import InvalidParameter
 from railval.core.filters import DEFAULT_ORDER
 from railval.core.quantities import QUANTITIES, QUANTITY_IDS, VEHICLE_KINDS
+from railval.core.stages import stage
 from railval.core.supplementary import supplementary_results
-from railval.core.types import ZONES, SectionInfo, SignalSet
+from railval.core.types import SectionInfo, SignalSet
 
-MIN_SECTIONS = 12
-MIN_SECTIONS_PER_ZONE = 3
-MIN_POSITIONS = 2
-MIN_VALUES = MIN_SECTIONS * MIN_POSITIONS
 STD_DDOF = 1
 STD_DEFINITION = "sample standard deviation (ddof = 1, divided by n − 1)"
 
@@ -79,7 +86,18 @@ class Vehicle:
     @classmethod
     def from_any(cls, obj) -> Vehicle:
         """Build from a :class:`Vehicle`, a mapping or an object with attributes ``kind``,
-        ``secondary_suspension``, ``Q0_kN`` (e.g. a db vehicle record)."""
+        ``secondary_suspension``, ``Q0_kN`` (e.g. a db vehicle record).
+
+        Parameters
+        ----------
+        obj : Vehicle, mapping or object
+            ``Q0_kN`` may also be spelt ``q0_kn`` (the database column); a missing
+            secondary suspension counts as present.
+
+        Returns
+        -------
+        Vehicle
+        """
         if isinstance(obj, Vehicle):
             return obj
         get = obj.get if isinstance(obj, Mapping) else (lambda k, d=None: getattr(obj, k, d))
@@ -99,7 +117,16 @@ class Vehicle:
 def difference(simulated, measured) -> np.ndarray:
     """D_v of Polach & Böttcher 2014 eq. (4), element-wise: ``(S − M)·sign(M)``, and ``S`` where ``M = 0``.
 
-    Unit of the quantity. Positive = simulation overestimates the measured magnitude.
+    Parameters
+    ----------
+    simulated, measured : array_like
+        S_v and M_v in the unit of the quantity, broadcastable.
+
+    Returns
+    -------
+    numpy.ndarray
+        D_v in the unit of the quantity; positive = the simulation overestimates the
+        measured magnitude.
     """
     s = np.asarray(simulated, dtype=np.float64)
     m = np.asarray(measured, dtype=np.float64)
@@ -112,7 +139,21 @@ def _none_if_nan(x):
 
 def judge(n: int, mean: float, std: float, mean_limit: float, std_limit: float) -> bool:
     """Pass/fail of one quantity: n ≥ 2, |mean| ≤ mean limit and std ≤ std limit
-    (Polach & Böttcher 2014 §5)."""
+    (Polach & Böttcher 2014 §5).
+
+    Parameters
+    ----------
+    n : int
+        Number of pairs.
+    mean, std : float
+        Mean and sample standard deviation (n − 1) of D_v.
+    mean_limit, std_limit : float
+        The limits of Table 2 for this vehicle.
+
+    Returns
+    -------
+    bool
+    """
     return bool(n >= 2 and np.isfinite(std) and abs(mean) <= mean_limit and std <= std_limit)
 
 
@@ -188,58 +229,6 @@ class QuantityResult:
 
 
 @dataclass
-class Coverage:
-    """Coverage rules of Polach & Böttcher 2014 §5 and their shortfalls (one sentence each)."""
-
-    n_sections: int
-    zones: dict[int, int]
-    positions: dict[str, int]
-    values: dict[str, int]
-    shortfalls: list[str]
-
-    @property
-    def ok(self) -> bool:
-        return not self.shortfalls
-
-    def to_dict(self) -> dict:
-        return {
-            "ok": self.ok, "sections": self.n_sections, "sections_required": MIN_SECTIONS,
-            "zones": {str(z): n for z, n in self.zones.items()},
-            "sections_per_zone_required": MIN_SECTIONS_PER_ZONE,
-            "signals_per_quantity": dict(self.positions),
-            "signals_per_quantity_required": MIN_POSITIONS,
-            "values_per_quantity": dict(self.values),
-            "values_per_quantity_required": MIN_VALUES,
-            "shortfalls": list(self.shortfalls),
-        }
-
-
-def coverage(pair_sections: Mapping[str, set], pair_positions: Mapping[str, set],
-             pair_counts: Mapping[str, int], zone_of: Mapping[str, int]) -> Coverage:
-    """Check the coverage rules. ``pair_sections[q]``/``pair_positions[q]``: sections and
-    positions with a pair for quantity q; ``pair_counts[q]``: number of pairs; ``zone_of``:
-    section id → zone."""
-    sections = set().union(*pair_sections.values()) if pair_sections else set()
-    zones = {z: sum(1 for s in sections if zone_of[s] == z) for z in ZONES}
-    shortfalls = []
-    if len(sections) < MIN_SECTIONS:
-        shortfalls.append(f"{len(sections)} sections have comparisons, needs {MIN_SECTIONS}")
-    for z, n in zones.items():
-        if n < MIN_SECTIONS_PER_ZONE:
-            shortfalls.append(f"zone {z} has {n} section{'s' if n != 1 else ''}, needs "
-                              f"{MIN_SECTIONS_PER_ZONE}")
-    positions = {q: len(pair_positions.get(q, ())) for q in QUANTITY_IDS}
-    values = {q: int(pair_counts.get(q, 0)) for q in QUANTITY_IDS}
-    for q in QUANTITY_IDS:
-        if positions[q] < MIN_POSITIONS:
-            shortfalls.append(f"quantity {q} has {positions[q]} signal"
-                              f"{'s' if positions[q] != 1 else ''}, needs {MIN_POSITIONS}")
-        if values[q] < MIN_VALUES:
-            shortfalls.append(f"quantity {q} has {values[q]} values, needs {MIN_VALUES}")
-    return Coverage(len(sections), zones, positions, values, shortfalls)
-
-
-@dataclass
 class ValidationResult:
     """Verdict, coverage, per-quantity statistics and the per-pair table of one
     configuration. ``pairs``: DataFrame with columns quantity, section, zone, position, M, S,
@@ -312,7 +301,29 @@ class ValidationResult:
 def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_boot: int,
                       rng: np.random.Generator, ci_level: float = 0.95,
                       chunk: int = 2_000_000) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Percentile bootstrap CIs of mean/mean_limit and std(ddof=1)/std_limit over pairs."""
+    """Percentile bootstrap CIs of mean/mean_limit and std(ddof=1)/std_limit over pairs
+    (Efron & Tibshirani 1993, ch. 13: pairs resampled with replacement).
+
+    Parameters
+    ----------
+    d : numpy.ndarray
+        D_v of the pairs of one quantity.
+    mean_limit, std_limit : float
+        The limits the mean and std are divided by.
+    n_boot : int
+        Resamples (< 1, or fewer than 2 pairs: NaN intervals).
+    rng : numpy.random.Generator
+        Source of the resampling.
+    ci_level : float
+        Confidence level of the intervals.
+    chunk : int
+        Most resampled values held at once (memory bound).
+
+    Returns
+    -------
+    ((float, float), (float, float))
+        The intervals of mean/mean limit and of std/std limit.
+    """
     n = d.size
     if n < 2 or n_boot < 1:
         nan = (float("nan"), float("nan"))
@@ -339,11 +350,42 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
              top: int = 5, warnings: Sequence[str] = ()) -> ValidationResult:
     """Validate one configuration from in-memory values (Polach & Böttcher 2014 §5).
 
-    ``measured_values``/``simulated_values``: ``{section_id: {(quantity_id, position):
-    value}}`` (units of the registry); a pair exists where both hold a finite value.
-    ``sections``: the SectionInfo of every section (zone used for coverage); ``vehicle``: a
-    :class:`Vehicle` or anything :meth:`Vehicle.from_any` accepts. ``n_boot`` bootstrap
-    resamples (seeded by ``seed``); ``top``: pairs listed per quantity in the drill-down.
+    Three steps: gather the pairs of every quantity (:func:`_gather_pairs`), compute the D_v
+    statistics per quantity (:func:`quantity_result`) and the coverage (:func:`coverage`),
+    then the verdict under the other readings of the open definitions and the supplementary
+    results.
+
+    Parameters
+    ----------
+    measured_values, simulated_values : mapping
+        ``{section_id: {(quantity_id, position): value}}`` in the units of the quantity
+        registry; a pair exists where both hold a finite value. Values carrying
+        ``value_under`` (``railval.core.en14363.SectionValues``) add the definition
+        sensitivity, values carrying ``supplementary`` the supplementary results.
+    sections : sequence or mapping of SectionInfo
+        Every section with values (its zone is used for the coverage).
+    vehicle : Vehicle or mapping
+        Anything :meth:`Vehicle.from_any` accepts (kind, secondary suspension, Q0 in kN).
+    n_boot : int
+        Bootstrap resamples of the normalised values (0: no intervals), seeded by ``seed``.
+    seed : int
+        Seed of the bootstrap.
+    ci_level : float
+        Confidence level of the percentile intervals, in (0, 1).
+    top : int
+        Pairs listed per quantity in the drill-down (largest |D_v| / std limit first).
+    warnings : sequence of str
+        Processing warnings carried into the result.
+
+    Returns
+    -------
+    ValidationResult
+        Verdict, coverage, per-quantity statistics and the per-pair table.
+
+    Raises
+    ------
+    InvalidParameter
+        Bad ``n_boot``/``ci_level``, a section without SectionInfo, an unknown quantity.
     """
     import pandas as pd
 
@@ -353,11 +395,36 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
         raise InvalidParameter(f"ci_level must be in (0, 1), got {ci_level}")
     veh = Vehicle.from_any(vehicle)
     secs = dict(sections) if isinstance(sections, Mapping) else {s.id: s for s in sections}
-    recs: dict[str, list] = {q: [] for q in QUANTITY_IDS}
     common = sorted(set(measured_values) & set(simulated_values))
-    with_alternatives = bool(common) and all(
-        hasattr(measured_values[sid], "value_under") and hasattr(simulated_values[sid], "value_under")
-        for sid in common)
+    recs = _gather_pairs(measured_values, simulated_values, secs, common)
+    results: dict[str, QuantityResult] = {}
+    frames = []
+    for qi, qid in enumerate(QUANTITY_IDS):
+        results[qid], frame = quantity_result(qid, recs[qid], veh, n_boot=n_boot,
+                                              rng=np.random.default_rng([seed, qi]),
+                                              ci_level=ci_level, top=top)
+        frames.append(pd.DataFrame(frame))
+    zone_of = {sid: int(info.zone) for sid, info in secs.items()}
+    cov = coverage({q: {r[0] for r in recs[q]} for q in QUANTITY_IDS},
+                   {q: {r[2] for r in recs[q]} for q in QUANTITY_IDS},
+                   {q: len(recs[q]) for q in QUANTITY_IDS}, zone_of)
+    validated = cov.ok and all(r.passed for r in results.values())
+    validated_under: dict[str, bool] = {}
+    if bool(common) and all(hasattr(measured_values[sid], "value_under")
+                            and hasattr(simulated_values[sid], "value_under") for sid in common):
+        validated_under = _verdicts_under_readings(results, recs, measured_values,
+                                                   simulated_values, cov.ok)
+    supp = _supplementary(measured_values, simulated_values, common, zone_of)
+    return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level,
+                            pd.concat(frames, ignore_index=True), list(warnings),
+                            supplementary=supp, validated_under=validated_under)
+
+
+def _gather_pairs(measured_values, simulated_values, secs: Mapping[str, SectionInfo],
+                  common: Sequence[str]) -> dict[str, list[tuple[str, int, str, float, float]]]:
+    """quantity id → its pairs ``(section, zone, position, M, S)`` where both sides hold a
+    finite value (sections in ``common`` order, keys in the measurement's order)."""
+    recs: dict[str, list] = {q: [] for q in QUANTITY_IDS}
     for sid in common:
         if sid not in secs:
             raise InvalidParameter(f"section {sid!r} has values but no SectionInfo")
@@ -371,68 +438,90 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
             if qid not in recs:
                 raise InvalidParameter(f"unknown quantity {qid!r} in section {sid}")
             recs[qid].append((sid, zone, pos, float(m), float(s)))
+    return recs
 
-    results: dict[str, QuantityResult] = {}
-    frames = []
-    pair_sections, pair_positions, pair_counts = {}, {}, {}
-    for qi, qid in enumerate(QUANTITY_IDS):
-        q = QUANTITIES[qid]
-        mean_limit = q.mean_limit(veh.Q0_kN, veh.kind, veh.secondary_suspension)
-        std_limit = q.std_limit(veh.Q0_kN, veh.kind, veh.secondary_suspension)
-        rec = recs[qid]
-        m = np.array([r[3] for r in rec], dtype=np.float64)
-        s = np.array([r[4] for r in rec], dtype=np.float64)
-        d = difference(s, m)
-        n = d.size
-        mean = float(d.mean()) if n else float("nan")
-        std = float(d.std(ddof=STD_DDOF)) if n >= 2 else float("nan")
-        rng = np.random.default_rng([seed, qi])
-        with stage("bootstrap"):
-            mci, sci = bootstrap_norm_ci(d, mean_limit, std_limit, n_boot=n_boot, rng=rng,
-                                         ci_level=ci_level)
-        d_norm = d / std_limit
-        ss = float(np.sum(d * d))
-        order = np.argsort(-np.abs(d_norm), kind="stable")[:top]
-        drill = [{"section": rec[i][0], "zone": rec[i][1], "position": rec[i][2],
-                  "M": rec[i][3], "S": rec[i][4], "D": float(d[i]),
-                  "D_norm": float(d_norm[i]),
-                  "share_of_sum_of_squares": float(d[i] ** 2 / ss) if ss > 0 else 0.0}
-                 for i in order]
-        results[qid] = QuantityResult(qid, q.unit, n, len({r[2] for r in rec}),
-                                      len({r[0] for r in rec}), mean, std, mean_limit,
-                                      std_limit, mci, sci, drill)
-        pair_sections[qid] = {r[0] for r in rec}
-        pair_positions[qid] = {r[2] for r in rec}
-        pair_counts[qid] = n
-        frames.append(pd.DataFrame({
-            "quantity": qid, "section": [r[0] for r in rec], "zone": [r[1] for r in rec],
-            "position": [r[2] for r in rec], "M": m, "S": s, "D": d, "D_norm": d_norm}))
-    zone_of = {sid: int(info.zone) for sid, info in secs.items()}
-    cov = coverage(pair_sections, pair_positions, pair_counts, zone_of)
-    validated = cov.ok and all(r.passed for r in results.values())
-    pairs = pd.concat(frames, ignore_index=True)
+
+def quantity_result(qid: str, rec: Sequence[tuple[str, int, str, float, float]], vehicle: Vehicle,
+                    *, n_boot: int, rng: np.random.Generator, ci_level: float = 0.95,
+                    top: int = 5) -> tuple[QuantityResult, dict[str, Any]]:
+    """D_v statistics of one quantity over its pairs (Polach & Böttcher 2014 §5, eq. 4).
+
+    Parameters
+    ----------
+    qid : str
+        Quantity id of :data:`railval.core.quantities.QUANTITIES`.
+    rec : sequence of (section, zone, position, M, S)
+        The pairs of the quantity.
+    vehicle : Vehicle
+        What the limits depend on (Table 2).
+    n_boot, rng, ci_level
+        Bootstrap of the normalised values (:func:`bootstrap_norm_ci`).
+    top : int
+        Pairs listed in the drill-down.
+
+    Returns
+    -------
+    (QuantityResult, dict)
+        The statistics and the columns of its part of ``ValidationResult.pairs``
+        (quantity, section, zone, position, M, S, D, D_norm).
+    """
+    q = QUANTITIES[qid]
+    mean_limit = q.mean_limit(vehicle.Q0_kN, vehicle.kind, vehicle.secondary_suspension)
+    std_limit = q.std_limit(vehicle.Q0_kN, vehicle.kind, vehicle.secondary_suspension)
+    m = np.array([r[3] for r in rec], dtype=np.float64)
+    s = np.array([r[4] for r in rec], dtype=np.float64)
+    d = difference(s, m)
+    n = d.size
+    mean = float(d.mean()) if n else float("nan")
+    std = float(d.std(ddof=STD_DDOF)) if n >= 2 else float("nan")
+    with stage("bootstrap"):
+        mci, sci = bootstrap_norm_ci(d, mean_limit, std_limit, n_boot=n_boot, rng=rng,
+                                     ci_level=ci_level)
+    d_norm = d / std_limit
+    ss = float(np.sum(d * d))
+    order = np.argsort(-np.abs(d_norm), kind="stable")[:top]
+    drill = [{"section": rec[i][0], "zone": rec[i][1], "position": rec[i][2],
+              "M": rec[i][3], "S": rec[i][4], "D": float(d[i]),
+              "D_norm": float(d_norm[i]),
+              "share_of_sum_of_squares": float(d[i] ** 2 / ss) if ss > 0 else 0.0}
+             for i in order]
+    result = QuantityResult(qid, q.unit, n, len({r[2] for r in rec}), len({r[0] for r in rec}),
+                            mean, std, mean_limit, std_limit, mci, sci, drill)
+    frame = {"quantity": qid, "section": [r[0] for r in rec], "zone": [r[1] for r in rec],
+             "position": [r[2] for r in rec], "M": m, "S": s, "D": d, "D_norm": d_norm}
+    return result, frame
+
+
+def _verdicts_under_readings(results: dict[str, QuantityResult], recs: Mapping[str, list],
+                             measured_values, simulated_values, coverage_ok: bool
+                             ) -> dict[str, bool]:
+    """Fill every quantity's ``alternatives`` and return reading id → validated under that
+    reading (a quantity whose reading is undefined keeps its chosen pass/fail)."""
+    for qid, res in results.items():
+        res.alternatives = _alternatives(qid, res, recs[qid], measured_values, simulated_values)
     validated_under: dict[str, bool] = {}
-    if with_alternatives:
-        for qid, res in results.items():
-            res.alternatives = _alternatives(qid, res, recs[qid], measured_values,
-                                             simulated_values)
-        for reading in READINGS:
-            if reading == CHOSEN:
-                continue
-            ok = []
-            for res in results.values():
-                alt = next((a for a in res.alternatives if a["reading"]["id"] == reading.id), None)
-                ok.append(res.passed if alt is None or alt["pass"] is None else alt["pass"])
-            validated_under[reading.id] = bool(cov.ok and all(ok))
-    supp = {}
-    if common and all(getattr(measured_values[s], "supplementary", None) is not None and
-                      getattr(simulated_values[s], "supplementary", None) is not None
-                      for s in common):
-        supp = supplementary_results({s: measured_values[s].supplementary for s in common},
-                                     {s: simulated_values[s].supplementary for s in common},
-                                     {s: zone_of[s] for s in common if s in zone_of})
-    return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level, pairs,
-                            list(warnings), supplementary=supp, validated_under=validated_under)
+    for reading in READINGS:
+        if reading == CHOSEN:
+            continue
+        ok = []
+        for res in results.values():
+            alt = next((a for a in res.alternatives if a["reading"]["id"] == reading.id), None)
+            ok.append(res.passed if alt is None or alt["pass"] is None else alt["pass"])
+        validated_under[reading.id] = bool(coverage_ok and all(ok))
+    return validated_under
+
+
+def _supplementary(measured_values, simulated_values, common: Sequence[str],
+                   zone_of: Mapping[str, int]) -> dict:
+    """:func:`railval.core.supplementary.supplementary_results` when every common section
+    carries supplementary values on both sides, else ``{}``."""
+    if not (common and all(getattr(measured_values[s], "supplementary", None) is not None and
+                           getattr(simulated_values[s], "supplementary", None) is not None
+                           for s in common)):
+        return {}
+    return supplementary_results({s: measured_values[s].supplementary for s in common},
+                                 {s: simulated_values[s].supplementary for s in common},
+                                 {s: zone_of[s] for s in common if s in zone_of})
 
 
 def _alternatives(qid: str, res: QuantityResult, rec: list, measured_values, simulated_values
@@ -471,7 +560,19 @@ def _alternatives(qid: str, res: QuantityResult, rec: list, measured_values, sim
 
 def source_warnings(label: str, values: Mapping[str, Any]) -> list[str]:
     """The processing warnings of one source's section values (``SectionValues.warnings``),
-    each prefixed with ``label`` ("measurement", "configuration X"), sections in id order."""
+    each prefixed with ``label`` ("measurement", "configuration X"), sections in id order.
+
+    Parameters
+    ----------
+    label : str
+        Names the source in every warning.
+    values : mapping of section id → SectionValues
+        One source's evaluated sections.
+
+    Returns
+    -------
+    list of str
+    """
     return [f"{label}: {w}" for sid in sorted(values) for w in values[sid].warnings]
 
 
@@ -481,7 +582,25 @@ def validate_signalsets(measured: Mapping[str, SignalSet], simulated: Mapping[st
     """:func:`validate` of in-memory signal sets (section id → SignalSet on each side),
     processed with :func:`railval.core.en14363.evaluate_present`. ``vehicle``: a
     :class:`Vehicle` or a mapping with ``kind``, ``secondary_suspension``, ``Q0_kN``. Sections
-    missing on either side are skipped (and show up in the coverage)."""
+    missing on either side are skipped (and show up in the coverage).
+
+    Parameters
+    ----------
+    measured, simulated : mapping of section id → SignalSet
+        The recorded signals of each side.
+    sections : sequence of SectionInfo
+        Every section (zone and evaluated range).
+    vehicle : Vehicle or mapping
+        What the limits depend on.
+    order : int
+        Butterworth prototype order of the EN filters.
+    n_boot, seed : int
+        Bootstrap of the normalised values.
+
+    Returns
+    -------
+    ValidationResult
+    """
     m_values = evaluate_present(measured, sections, order=order)
     s_values = evaluate_present(simulated, sections, order=order)
     warnings = source_warnings("measurement", m_values) + source_warnings("simulation", s_values)
@@ -493,7 +612,17 @@ def normalised_errors(result: ValidationResult) -> dict[str, Any]:
     ``mean_norm`` (mean D_v / mean limit), ``std_norm`` (std D_v / std limit) and
     ``error`` = max(|mean_norm|, std_norm) (Polach & Böttcher 2014 §5: validated when every
     error ≤ 1); ``max_error`` the largest (None when nothing is finite) and ``validated``.
-    The lineage of a configuration (root → it) is drawn from these."""
+    The lineage of a configuration (root → it) is drawn from these.
+
+    Parameters
+    ----------
+    result : ValidationResult
+
+    Returns
+    -------
+    dict
+        ``validated``, ``max_error`` and per quantity ``mean_norm``, ``std_norm``, ``error``.
+    """
     def finite(x: float | None) -> float | None:
         return float(x) if x is not None and math.isfinite(x) else None
 

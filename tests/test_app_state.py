@@ -205,11 +205,11 @@ def test_dispatch_receives_every_state_change(app):
 def test_dashboard_summary_and_drilldown(app):
     dash = DashboardState(app)
     summary = dash.summary()
-    qs = [r["quantity"] for r in summary["quantities"]]
+    qs = [r["quantity"] for r in summary.quantities]
     assert len(qs) == 12 and "Y_qst" in qs
     rows = dash.drilldown("Y_max")
     assert rows and all(abs(a["D_v"]) >= abs(b["D_v"]) for a, b in itertools.pairwise(rows))
-    limit = next(r["std_limit"] for r in summary["quantities"] if r["quantity"] == "Y_max")
+    limit = next(r["std_limit"] for r in summary.quantities if r["quantity"] == "Y_max")
     assert rows[0]["norm"] == pytest.approx(rows[0]["D_v"] / limit)
     # D_v = (S_v − M_v)·sign(M_v) (Polach & Böttcher 2014 eq. 4)
     r = rows[0]
@@ -336,3 +336,29 @@ def test_compare_shows_derived_signals_yq_and_sumy(app):
     # a Y/Q drill-down row opens the derived signal it is about
     DashboardState(app).open_row({"quantity": "YQ_max", "position": "w1L", "section": app.section})
     assert app.page == "compare" and app.channel == "YQ_w1L"
+
+
+def test_a_page_error_is_logged_and_shown_as_a_plain_message(app, caplog):
+    """Pages show errors one way (railval.app.security.plain_message): the traceback goes
+    to the server log, the page and the status area get a plain sentence without the
+    error's text; railval's own errors keep their message (it names the input at fault)."""
+    from railval.app.pages._common import PageBase
+    from railval.core.errors import NotFound
+
+    class Broken(PageBase):
+        name_ = "dashboard"
+        error: Exception = ValueError("secret internals at /srv/x.py")
+
+        def refresh(self):
+            raise self.error
+
+    page = Broken(app)
+    with caplog.at_level("ERROR", logger="railval.app"):
+        page.safe_refresh()
+    shown = page.body.objects[0].object
+    assert "internal error (ValueError)" in shown and "secret internals" not in shown
+    assert app.status_level == "error" and "secret internals" not in app.status
+    assert any(r.exc_info and "secret internals" in str(r.exc_info[1]) for r in caplog.records)
+    Broken.error = NotFound("configuration 'x' not found in campaign 'demo'")
+    page.safe_refresh()
+    assert "is not available: configuration &#x27;x&#x27; not found in campaign" in page.body.objects[0].object

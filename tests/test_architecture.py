@@ -8,6 +8,13 @@ imported or run):
 * no module in ``app/`` above :data:`MAX_APP_LINES` lines unless its docstring says why
   (a paragraph starting ``Length:``);
 * no module in ``core/`` above :data:`MAX_CORE_LINES` lines (no exception: split by concept);
+* the views: ``app/report.py``, ``app/audit_report.py``, ``app/pdf.py`` and the view model
+  ``app/views.py`` import neither ``app/state`` (pages and the report read the same view
+  model) nor ``railval.db`` (data comes through ``app/services``); the view model imports no
+  UI library; ``app/state`` imports no Panel/Bokeh/HoloViews (``param`` is its base) and
+  reaches the database only through ``app/services`` (no ``railval.db`` import);
+* no function above :data:`MAX_FUNCTION_LINES` lines outside :data:`LONG_FUNCTIONS` (the
+  numba kernel and functions still to be split: the list only shrinks);
 * every package folder (a folder with ``__init__.py``) is installed (pyproject's package list);
 * no file cites documents that are not in the repository.
 """
@@ -28,7 +35,32 @@ ROOT = Path(__file__).resolve().parent.parent
 FOLDERS = {"core": "railval.core", "db": "railval.db", "app": "railval.app"}
 MAX_APP_LINES = 500
 MAX_CORE_LINES = 700
+MAX_FUNCTION_LINES = 80
 UI_LIBRARIES = ("panel", "param", "bokeh", "holoviews")
+#: UI libraries that draw (``param`` alone is the state classes' base)
+WIDGET_LIBRARIES = ("panel", "bokeh", "holoviews")
+#: functions longer than MAX_FUNCTION_LINES today (file, function); remove an entry when it is
+#: split — the test fails when a listed function has become short, so the list stays true
+LONG_FUNCTIONS = {
+    ("core/sim/kernel.py", "run_kernel"),  # the numba kernel: one compiled loop
+    ("core/diagnosis/engine.py", "diagnose_evidence"),
+    ("core/en14363.py", "_section_stats"),
+    ("core/review/analysis.py", "analyse"),
+    ("core/review/rasch.py", "fit_rasch"),
+    ("core/sim/model.py", "assemble"),
+    ("core/sim/synth.py", "build_campaign"),
+    ("db/exporter.py", "export_campaign"),
+    ("db/migrations/versions/0001_initial_schema.py", "upgrade"),
+    ("db/migrations/versions/0003_users_audit.py", "upgrade"),
+    ("db/repo.py", "store_configuration"),
+    ("app/bench/bench_dynotrain.py", "run"),
+    ("app/bench/bench_team.py", "run"),
+    ("app/services/audit_checks.py", "_check_signoffs"),
+    ("app/services/calibration.py", "calibrate"),
+    ("app/services/diagnosis_evidence.py", "diagnose"),
+    ("app/services/validation.py", "validate_configurations"),
+    ("app/services/workshops.py", "create"),
+}
 STORAGE_LIBRARIES = ("sqlalchemy", "alembic")
 
 
@@ -164,14 +196,21 @@ def _describe(cycle: list[str], graph: dict[str, dict[str, int]]) -> str:
     return " → ".join(f"{a} (line {graph[a][b]})" for a, b in itertools.pairwise(cycle)) + f" → {cycle[-1]}"
 
 
-def _violations(prefix: str, forbidden: tuple[str, ...]) -> list[str]:
+def _module_violations(name: str, path: Path, forbidden: tuple[str, ...]) -> list[str]:
+    """``file:line imports X`` for every import of ``name`` (source ``path``) that loads a
+    module of ``forbidden`` (or one below it)."""
+    where = path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
+    return [f"{where}:{line} imports {imported}" for imported, line in _imports(name, path)
+            if any(imported == f or imported.startswith(f + ".") for f in forbidden)]
+
+
+def _violations(prefix: str, forbidden: tuple[str, ...],
+                modules: dict[str, Path] | None = None) -> list[str]:
     out = []
-    for name, path in MODULES.items():
+    for name, path in (MODULES if modules is None else modules).items():
         if name != prefix and not name.startswith(prefix + "."):
             continue
-        for imported, line in _imports(name, path):
-            if any(imported == f or imported.startswith(f + ".") for f in forbidden):
-                out.append(f"{path.relative_to(ROOT)}:{line} imports {imported}")
+        out += _module_violations(name, path, forbidden)
     return out
 
 
@@ -185,6 +224,66 @@ def test_db_does_not_import_the_app():
 
 def test_services_import_no_ui_library():
     assert _violations("railval.app.services", UI_LIBRARIES) == []
+
+
+#: (module prefix, forbidden imports) of the views' rules (docs/design.md §2)
+VIEW_RULES = (
+    # the report takes one colour palette from Bokeh's palettes (data, no widget)
+    ("railval.app.report", ("railval.app.state", "railval.app.pages", "railval.db", "panel", "holoviews")),
+    ("railval.app.audit_report", ("railval.app.state", "railval.app.pages", "railval.db", *WIDGET_LIBRARIES)),
+    ("railval.app.pdf", ("railval.app.state", "railval.app.pages", "railval.db", *WIDGET_LIBRARIES)),
+    ("railval.app.views", ("railval.app.state", "railval.app.pages", "railval.db", *UI_LIBRARIES)),
+    ("railval.app.state", (*WIDGET_LIBRARIES, "railval.app.pages", "railval.db")),
+)
+
+
+@pytest.mark.parametrize(("prefix", "forbidden"), VIEW_RULES, ids=[r[0] for r in VIEW_RULES])
+def test_views_state_and_report_keep_their_layers(prefix, forbidden):
+    assert _violations(prefix, forbidden) == []
+
+
+@pytest.mark.parametrize(("prefix", "planted"), [
+    ("railval.app.state", "import panel as pn\n"),
+    ("railval.app.state", "from railval.db import repo\n"),
+    ("railval.app.state", "def f():\n    from bokeh.models import Div\n"),
+    ("railval.app.report", "from railval.app.state.dashboard import DashboardState\n"),
+    ("railval.app.report", "def f():\n    from railval.db import repo\n"),
+    ("railval.app.views", "import param\n"),
+])
+def test_view_rules_fail_on_a_planted_violation(tmp_path, prefix, planted):
+    forbidden = dict(VIEW_RULES)[prefix]
+    path = tmp_path / "planted.py"
+    path.write_text('"""planted"""\n' + planted, encoding="utf-8")
+    name = prefix + ".planted" if prefix == "railval.app.state" else prefix
+    found = _violations(prefix, forbidden, {name: path})
+    assert len(found) == 1 and "planted.py:" in found[0]
+
+
+def long_functions(folders: tuple[str, ...] = ("core", "db", "app"),
+                   limit: int = MAX_FUNCTION_LINES) -> dict[tuple[str, str], int]:
+    """(file, function) → lines of every function or method longer than ``limit``."""
+    out = {}
+    for folder in folders:
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                    n = node.end_lineno - node.lineno + 1
+                    if n > limit:
+                        out[(str(path.relative_to(ROOT)), node.name)] = n
+    return out
+
+
+def test_functions_are_at_most_80_lines():
+    found = long_functions()
+    assert {k: v for k, v in found.items() if k not in LONG_FUNCTIONS} == {}, \
+        f"functions over {MAX_FUNCTION_LINES} lines: split them by step"
+    assert sorted(LONG_FUNCTIONS - set(found)) == [], "split already: remove from LONG_FUNCTIONS"
+
+
+def test_function_length_cap_finds_a_long_function():
+    found = long_functions(("tests",), limit=40)
+    assert ("tests/test_architecture.py", "find_cycles") in found
 
 
 def test_no_import_loop():

@@ -231,8 +231,7 @@ def test_cli_marks_definition_sensitive_quantities():
     from railval.app.cli.cmd_validate import format_result
 
     sections, meas, sim, _ = _flip_campaign()
-    doc = validate(meas, sim, sections, {"kind": "passenger", "Q0_kN": 80.0}, n_boot=0).to_dict()
-    text = format_result(doc)
+    text = format_result(validate(meas, sim, sections, {"kind": "passenger", "Q0_kN": 80.0}, n_boot=0))
     row = next(line for line in text.splitlines() if line.startswith("SumY_max"))
     assert " FAIL " in row and row.endswith("(definition-sensitive)")
     assert "passes with percentile linearly interpolated" in text
@@ -317,14 +316,14 @@ def test_reading_labels():
 
 def test_report_sections_show_sensitivity_and_supplementary():
     from railval.app.report import definition_html, supplementary_html
-    from railval.app.state.dashboard import definition_rows
+    from railval.app.views import view_of
 
     sections, meas, sim, _ = _flip_campaign()
     for sid in meas:
         meas[sid].supplementary = {("az_bg_rms", "b1"): 1.0}
         sim[sid].supplementary = {("az_bg_rms", "b1"): 1.5}
-    doc = validate(meas, sim, sections, {"kind": "passenger", "Q0_kN": 80.0}, n_boot=0).to_dict()
-    rows = {r["quantity"]: r for r in definition_rows(doc)}
+    doc = view_of(validate(meas, sim, sections, {"kind": "passenger", "Q0_kN": 80.0}, n_boot=0))
+    rows = {r["quantity"]: r for r in doc.definition_rows()}
     assert set(rows) == {q for q in QUANTITIES if QUANTITIES[q].processing != "rms"}
     assert rows["SumY_max"]["definition_sensitive"] and rows["SumY_max"]["readings"] == 11
     assert rows["SumY_max"]["flipped by"] == "passes with linear percentiles"

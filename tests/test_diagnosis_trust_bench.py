@@ -82,7 +82,9 @@ def test_class_b_parameter_error_is_diagnosed_calibrated_on_a_split_and_flagged_
     backend = Backend(database)
     assert "In-sample" in build_report(backend, "tb", "tb+c", worst_cases=1).html
     assert "In-sample" not in build_report(backend, "tb", "baseline", worst_cases=1).html
-    summary = {"raw": backend.validation("tb", "tb+c").to_dict()}
+    from railval.app.views import view_of
+
+    summary = view_of(backend.validation("tb", "tb+c"))
     assert "in-sample: tb+c was calibrated on 8 of these sections" in in_sample_note(summary)
 
 

@@ -59,17 +59,16 @@ def _cmd_metrics(args: argparse.Namespace) -> int:
     if not args.campaign or not args.config:
         raise InvalidParameter("metrics needs CAMPAIGN and --config NAME (or --list)")
 
-    from railval.app.services.metrics import metrics_for_configuration, summary
+    from railval.app.services import overview
+    from railval.app.services.metrics import summary
     from railval.db.engine import connect
 
     database = connect(args.db)
     database.ensure_initialised()
     lowpass_hz = None if args.no_lowpass else args.lowpass
-    with database.session() as session:
-        df = metrics_for_configuration(session, args.campaign, args.config, args.section,
-                                       args.channel, lowpass_hz=lowpass_hz, max_lag_s=args.max_lag,
-                                       families=args.family, part=args.part,
-                                       subsample=args.subsample)
+    df = overview.metrics(database, args.campaign, args.config, args.section, args.channel,
+                          lowpass_hz=lowpass_hz, max_lag_s=args.max_lag, families=args.family,
+                          part=args.part, subsample=args.subsample)
     names = metric_names(args.family)
     if args.json:
         rows = [{k: _clean(v) for k, v in rec.items()} for rec in df.to_dict(orient="records")]

@@ -17,8 +17,13 @@ errors (unknown campaign/configuration, bad data).
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from railval.app.cli import emit_json
+
+if TYPE_CHECKING:
+    from railval.core.coverage import Coverage
+    from railval.core.validation import ValidationResult
 
 BAR_CELLS = 20  # cells for 0 … 2 × limit
 _BLOCKS = " ▏▎▍▌▋▊▉█"
@@ -66,76 +71,83 @@ def _fmt(x: float | None, spec: str = ".3g") -> str:
     return "n/a" if x is None else format(x, spec)
 
 
-def format_result(doc: dict) -> str:
-    """Human-readable table of a :meth:`ValidationResult.to_dict` document."""
+def format_result(result: ValidationResult) -> str:
+    """Human-readable table of a validation (the view model of :mod:`railval.app.views`)."""
+    from railval.app.views import view_of
     from railval.core.quantities import QUANTITIES
 
+    view = view_of(result)
     lines = []
-    info = doc.get("info", {})
-    head = f"validation of {info.get('campaign', '?')} / {info.get('configuration', '?')}"
-    lines.append(head)
+    info = view.info
+    lines.append(f"validation of {info.get('campaign', '?')} / {info.get('configuration', '?')}")
     lines.append("D_v = (S − M)·sign(M) (Polach & Böttcher 2014 eq. 4); std is the sample standard deviation "
                  "(n − 1); norm = value / limit; bars: |norm| from 0 to 2, │ = limit")
     lines.append(f"{'quantity':<9} {'unit':<6} {'n':>4} {'mean':>9} {'limit':>7} "
                  f"{'std':>9} {'limit':>7}  {'|mean|/limit':<21} {'std/limit':<21} "
                  f"{'95 % CI mean':>15} {'95 % CI std':>13}  result")
-    for q in doc["quantities"]:
-        ci_m = q["mean_norm_ci"]
-        ci_s = q["std_norm_ci"]
-        ci_m_txt = "n/a" if ci_m[0] is None else f"[{ci_m[0]:+.2f},{ci_m[1]:+.2f}]"
-        ci_s_txt = "n/a" if ci_s[0] is None else f"[{ci_s[0]:.2f},{ci_s[1]:.2f}]"
-        verdict = "PASS" if q["pass"] else "FAIL"
-        if q["n"] and not q.get("robust", True):
-            verdict += " (not robust)"
-        if q.get("definition_sensitive"):
-            verdict += " (definition-sensitive)"
-        lines.append(
-            f"{q['quantity']:<9} {QUANTITIES[q['quantity']].unit:<6} {q['n']:>4} "
-            f"{_fmt(q['mean'], '+.3g'):>9} {q['mean_limit']:>7.3g} {_fmt(q['std']):>9} "
-            f"{q['std_limit']:>7.3g}  {bar(q['mean_norm'])} {bar(q['std_norm'])} "
-            f"{ci_m_txt:>15} {ci_s_txt:>13}  {verdict}")
-        for alt in q.get("definition_alternatives", []):
-            if alt["flips"]:
-                lines.append(f"{'':<9} {'passes' if alt['pass'] else 'fails'} with "
-                             f"{alt['description']}: mean {_fmt(alt['mean'], '+.4g')}, "
-                             f"std {_fmt(alt['std'], '.4g')}")
-        if not q["pass"] and q["drilldown"]:
-            worst = q["drilldown"][0]
-            lines.append(f"{'':<9} largest: section {worst['section']} (zone {worst['zone']}) "
-                         f"position {worst['position']}: D_v = {worst['D']:+.3g}, "
-                         f"{worst['share_of_sum_of_squares'] * 100:.0f} % of ΣD²")
-    cov = doc["coverage"]
-    zones = ", ".join(f"zone {z}: {n}" for z, n in cov["zones"].items())
-    lines.append(f"coverage: {cov['sections']} sections (needs {cov['sections_required']}); "
-                 f"{zones} (each needs {cov['sections_per_zone_required']})")
-    if cov["shortfalls"]:
-        for s in cov["shortfalls"]:
-            lines.append(f"coverage shortfall: {s}")
-    else:
-        lines.append("coverage: all rules met")
-    for w in doc.get("warnings", []):
+    for q in view.quantities:
+        lines += _quantity_lines(q, QUANTITIES[q["quantity"]].unit)
+    lines += _coverage_lines(view.coverage)
+    for w in view.warnings:
         lines.append(f"warning: {w}")
-    lines += format_supplementary(doc.get("supplementary", {}))
-    defs = doc.get("definitions", {})
-    sensitive = defs.get("sensitive_quantities") or []
+    lines += format_supplementary(view.supplementary_rows())
+    sensitive = view.sensitive_quantities
     if sensitive:
         lines.append("definition-sensitive (pass/fail changes under another reading of the "
                      "percentile or sliding-mean definition, docs/validation.md): "
                      + ", ".join(sensitive))
-    verdict = "VALIDATED" if doc["validated"] else "NOT VALIDATED"
-    if defs.get("verdict_sensitive"):
+    verdict = "VALIDATED" if view.validated else "NOT VALIDATED"
+    if view.verdict_sensitive:
         verdict += " (definition-sensitive: another reading gives the opposite verdict)"
-    if doc.get("in_sample"):
-        info = doc.get("info", {})
-        verdict += (f" (in-sample: {', '.join(info.get('calibrated_in', []))} was calibrated on "
-                    f"{len(info.get('fit_sections', []))} of these sections)")
+    if view.in_sample is not None:
+        verdict += f" (in-sample: {view.in_sample.note()})"
     lines.append(verdict)
     return "\n".join(lines)
 
 
-def format_supplementary(supp: dict) -> list[str]:
-    """Lines of the supplementary block (bogie-frame and PSD-band quantities)."""
-    rows = supp.get("quantities") or []
+def _quantity_lines(q: dict, unit: str) -> list[str]:
+    """The table row of one quantity (a row of the view model), the readings that flip its
+    pass/fail and, when it fails, its largest pair."""
+    ci_m = q["mean_norm_ci"]
+    ci_s = q["std_norm_ci"]
+    ci_m_txt = "n/a" if ci_m[0] is None else f"[{ci_m[0]:+.2f},{ci_m[1]:+.2f}]"
+    ci_s_txt = "n/a" if ci_s[0] is None else f"[{ci_s[0]:.2f},{ci_s[1]:.2f}]"
+    verdict = "PASS" if q["pass"] else "FAIL"
+    if q["n"] and not q["robust"]:
+        verdict += " (not robust)"
+    if q["definition_sensitive"]:
+        verdict += " (definition-sensitive)"
+    lines = [(f"{q['quantity']:<9} {unit:<6} {q['n']:>4} "
+             f"{_fmt(q['mean'], '+.3g'):>9} {q['mean_limit']:>7.3g} {_fmt(q['std']):>9} "
+             f"{q['std_limit']:>7.3g}  {bar(q['mean_norm'])} {bar(q['std_norm'])} "
+             f"{ci_m_txt:>15} {ci_s_txt:>13}  {verdict}")]
+    for alt in q["definition_alternatives"]:
+        if alt["flips"]:
+            lines.append(f"{'':<9} {'passes' if alt['pass'] else 'fails'} with "
+                         f"{alt['description']}: mean {_fmt(alt['mean'], '+.4g')}, "
+                         f"std {_fmt(alt['std'], '.4g')}")
+    if not q["pass"] and q["drilldown"]:
+        worst = q["drilldown"][0]
+        lines.append(f"{'':<9} largest: section {worst['section']} (zone {worst['zone']}) "
+                     f"position {worst['position']}: D_v = {worst['D']:+.3g}, "
+                     f"{worst['share_of_sum_of_squares'] * 100:.0f} % of ΣD²")
+    return lines
+
+
+def _coverage_lines(cov: Coverage) -> list[str]:
+    zones = ", ".join(f"zone {z}: {n}" for z, n in cov.zones.items())
+    lines = [(f"coverage: {cov.n_sections} sections (needs {cov.sections_required}); "
+             f"{zones} (each needs {cov.sections_per_zone_required})")]
+    if cov.shortfalls:
+        lines += [f"coverage shortfall: {s}" for s in cov.shortfalls]
+    else:
+        lines.append("coverage: all rules met")
+    return lines
+
+
+def format_supplementary(rows: list[dict]) -> list[str]:
+    """Lines of the supplementary block (bogie-frame and PSD-band quantities, the rows of
+    :meth:`railval.app.views.ValidationView.supplementary_rows`)."""
     if not rows:
         return []
     lines = [("supplementary results (shown next to the verdict, they do not change it): "
@@ -151,7 +163,8 @@ def format_supplementary(supp: dict) -> list[str]:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from railval.app.services.validation import validate_configuration
+    from railval.app.services import overview
+    from railval.app.views import view_of
     from railval.db.engine import connect
 
     database = connect(args.db)
@@ -163,13 +176,12 @@ def cmd_validate(args: argparse.Namespace) -> int:
                                             order=args.order, n_boot=args.boot, seed=args.seed,
                                             scheduler=args.scheduler).values()
     else:
-        with database.session() as session:
-            result = validate_configuration(session, args.campaign, args.config, order=args.order,
-                                            n_boot=args.boot, seed=args.seed)
-    doc = result.to_dict()
-    doc["in_sample"] = bool(result.info.get("in_sample", False))
+        result = overview.validation(database, args.campaign, args.config, order=args.order,
+                                     n_boot=args.boot, seed=args.seed)
     if args.json:
+        doc = result.to_dict()
+        doc["in_sample"] = view_of(result).in_sample is not None
         emit_json(doc)
     else:
-        print(format_result(doc))
+        print(format_result(result))
     return 0

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import html
-import traceback
 from collections.abc import Callable
 from typing import Any
 
@@ -13,6 +12,7 @@ import param
 from panel.io.state import set_curdoc
 
 from railval.app import plots
+from railval.app.security import plain_message
 from railval.app.state import PAGE_TITLES, AppState
 
 TABLE_STYLE = {"font-size": "13px"}
@@ -166,7 +166,8 @@ class PageBase(pn.viewable.Viewer):
             self.safe_refresh()
 
     def safe_refresh(self) -> None:
-        """Refresh; any error is shown in the page and in the status area, never raised."""
+        """Refresh; any error is logged and shown in the page and in the status area as a plain
+        message (:func:`railval.app.security.plain_message`), never raised."""
         self._stale = False
         if not self.app.page_allowed(self.name_):  # server side, whatever the browser sent
             from railval.core.roles import PAGE_ACTIONS
@@ -181,7 +182,8 @@ class PageBase(pn.viewable.Viewer):
         try:
             self.refresh()
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-            detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+            # one way for every error: logged with its traceback, a plain sentence shown
+            detail = plain_message(exc, PAGE_TITLES[self.name_])
             self.app.set_status(f"{PAGE_TITLES[self.name_]}: {detail}", "error")
             self.body.objects = [message(f"{PAGE_TITLES[self.name_]} is not available: {detail}",
                                          "danger")]

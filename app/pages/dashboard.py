@@ -12,54 +12,40 @@ import panel as pn
 
 from railval.app import plots
 from railval.app.pages._common import PageBase, message, table, where_map
-from railval.app.state import AppState, DashboardState, unit_label
 from railval.app.security import plain_message
-from railval.app.state.dashboard import definition_rows, supplementary_rows
+from railval.app.state import AppState, DashboardState, unit_label
+from railval.app.views import ValidationView
 from railval.core.quantities import QUANTITIES
 
 SUMMARY_COLUMNS = ["quantity", "name", "unit", "n", "mean", "std", "mean_limit", "std_limit", "mean_norm",
                    "std_norm", "pass"]
 
 
-def coverage_lines(coverage: Any) -> tuple[bool, list[str]]:
-    """(coverage holds, shortfall messages) from the validation result's ``coverage``."""
-    if isinstance(coverage, dict):
-        ok = bool(coverage.get("ok", coverage.get("holds", coverage.get("satisfied", not coverage.get("shortfalls")))))
-        lines = [str(x) for x in coverage.get("shortfalls", coverage.get("messages", []))]
-        return ok and not lines, lines
-    if isinstance(coverage, (list, tuple)):
-        return not coverage, [str(x) for x in coverage]
-    return bool(coverage), []
-
-
-def in_sample_note(summary: dict[str, Any]) -> str:
+def in_sample_note(view: ValidationView) -> str:
     """" (in-sample: … was calibrated on n of these sections)" when the verdict includes
     sections a calibration of the lineage was fitted to, else ""."""
-    info = summary.get("info") or (summary.get("raw") or {}).get("info") or {}
-    if not info.get("in_sample"):
-        return ""
-    return (f" (in-sample: {html.escape(', '.join(info.get('calibrated_in') or []))} was calibrated on "
-            f"{len(info.get('fit_sections') or [])} of these sections)")
+    ins = view.in_sample
+    return "" if ins is None else f" (in-sample: {html.escape(ins.note())})"
 
 
-def verdict_panel(summary: dict[str, Any], config: str) -> pn.pane.Alert:
-    ok_cov, lines = coverage_lines(summary["coverage"])
-    failing = [r["quantity"] for r in summary["quantities"] if not r.get("pass", False)]
-    defs = summary.get("raw", {}).get("definitions", {})
-    sensitive = defs.get("sensitive_quantities") or []
+def verdict_panel(view: ValidationView, config: str) -> pn.pane.Alert:
+    """The verdict with the failing quantities, the coverage shortfalls and which
+    quantities are definition-sensitive."""
+    sensitive = view.sensitive_quantities
     note = ("" if not sensitive else " — definition-sensitive: " + ", ".join(html.escape(q) for q in sensitive)
-            + (" (another reading gives the opposite verdict)" if defs.get("verdict_sensitive") else ""))
-    if summary["validated"]:
-        return pn.pane.Alert(f"<b>{html.escape(config)}: VALIDATED</b>{in_sample_note(summary)} — every quantity "
+            + (" (another reading gives the opposite verdict)" if view.verdict_sensitive else ""))
+    if view.validated:
+        return pn.pane.Alert(f"<b>{html.escape(config)}: VALIDATED</b>{in_sample_note(view)} — every quantity "
                              "within its limits and coverage holds." + note, alert_type="success",
                              sizing_mode="stretch_width")
     parts = []
+    failing = view.failing
     if failing:
-        parts.append(f"{len(failing)} of {len(summary['quantities'])} quantities exceed their limits: "
+        parts.append(f"{len(failing)} of {len(view.quantities)} quantities exceed their limits: "
                      + ", ".join(html.escape(q) for q in failing))
-    if not ok_cov:
-        parts.append("coverage: " + "; ".join(html.escape(x) for x in lines))
-    return pn.pane.Alert(f"<b>{html.escape(config)}: NOT VALIDATED</b>{in_sample_note(summary)} — "
+    if not view.coverage.ok:
+        parts.append("coverage: " + "; ".join(html.escape(x) for x in view.coverage.shortfalls))
+    return pn.pane.Alert(f"<b>{html.escape(config)}: NOT VALIDATED</b>{in_sample_note(view)} — "
                          + " — ".join(parts or ["see table"]) + note,
                          alert_type="danger", sizing_mode="stretch_width")
 
@@ -120,19 +106,18 @@ def _range(r: Any) -> str:
     return "" if not r else f"{r[0]:+.3f} … {r[1]:+.3f}"
 
 
-def definition_block(doc: dict[str, Any]) -> pn.Column:
+def definition_block(view: ValidationView) -> pn.Column:
     """Which verdicts rest on an open choice of the definitions (docs/validation.md)."""
-    rows = definition_rows(doc)
+    rows = view.definition_rows()
     sensitive = [r["quantity"] for r in rows if r["definition_sensitive"]]
-    defs = doc.get("definitions", {})
-    if defs.get("verdict_sensitive") is None and not rows:
+    if not view.definitions_available:
         head = pn.pane.Markdown("#### Definition sensitivity\nNot available for this result.")
         return pn.Column(head, css_classes=["rv-definitions"], sizing_mode="stretch_width")
     if sensitive:
         alert = pn.pane.Alert(
             "<b>definition-sensitive</b>: " + ", ".join(html.escape(q) for q in sensitive)
             + " — pass/fail changes under another reading of the percentile or sliding-mean "
-            "definition" + ("; so does the verdict" if defs.get("verdict_sensitive") else ""),
+            "definition" + ("; so does the verdict" if view.verdict_sensitive else ""),
             alert_type="warning", sizing_mode="stretch_width")
     else:
         alert = pn.pane.Alert("No verdict changes under the alternative readings of the percentile "
@@ -157,9 +142,9 @@ def definition_block(doc: dict[str, Any]) -> pn.Column:
         css_classes=["rv-definitions"], sizing_mode="stretch_width")
 
 
-def supplementary_block(doc: dict[str, Any]) -> pn.Column:
+def supplementary_block(view: ValidationView) -> pn.Column:
     """Bogie-frame and PSD-band quantities next to the verdict (they do not change it)."""
-    rows = supplementary_rows(doc)
+    rows = view.supplementary_rows()
     head = pn.pane.Markdown(
         "#### Supplementary results (do not change the verdict)\nBogie-frame accelerations "
         "(band-pass 0.4–10 Hz, rms and max of the 0.15 %/99.85 % values, EN 14363) and band rms "
@@ -182,9 +167,9 @@ def supplementary_block(doc: dict[str, Any]) -> pn.Column:
 
 def validation_view(state: DashboardState, config: str, height: int = 320, compact: bool = False):
     """Verdict + the two bar charts of one configuration (side by side, or stacked when
-    ``compact``); returns (column, summary, bar elements)."""
+    ``compact``); returns (column, view model, bar elements)."""
     summary = state.summary(config)
-    mean_ov, mean_bars, std_ov, std_bars = plots.validation_bars(summary["quantities"], height=height)
+    mean_ov, mean_bars, std_ov, std_bars = plots.validation_bars(summary.quantities, height=height)
     box = pn.Column if compact else pn.Row
     col = pn.Column(
         verdict_panel(summary, config),
@@ -210,12 +195,12 @@ class DashboardPage(PageBase):
     def refresh(self) -> None:
         config = self.app.configuration
         col, summary, bars = validation_view(self.state, config)
-        qs = [r["quantity"] for r in summary["quantities"]]
+        qs = [r["quantity"] for r in summary.quantities]
         for el in bars:
             stream = hv.streams.Selection1D(source=el)
             stream.add_subscriber(lambda index, _qs=qs: self._bar_clicked(index, _qs))
         if self.state.quantity not in qs:
-            worst = max(summary["quantities"],
+            worst = max(summary.quantities,
                         key=lambda r: max(abs(r["mean_norm"]), abs(r["std_norm"])), default=None)
             self.state.quantity = worst["quantity"] if worst else None
         from railval.app.pages.signoff import signoff_banner
@@ -227,10 +212,10 @@ class DashboardPage(PageBase):
                              "position) pairs, divided by the EN 14363 limits (dashed line 1.0). "
                              "std is the sample standard deviation (n − 1). Click a bar for its "
                              "drill-down.", styles={"color": "#555"}),
-            summary_table(summary["quantities"]),
-            definition_block(summary["raw"]),
+            summary_table(summary.quantities),
+            definition_block(summary),
             self._where(config),
-            supplementary_block(summary["raw"]),
+            supplementary_block(summary),
             pn.Row(self.quantity_select, pn.pane.Markdown(
                 "Pairs contributing most (largest |D_v|). **Click a row** to compare that section "
                 "and channel.", margin=(28, 10, 0, 10))),

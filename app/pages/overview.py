@@ -12,6 +12,7 @@ from railval.app import plots
 from railval.app.pages._common import PageBase, html_table, message
 from railval.app.security import no_external_images
 from railval.app.state import CampaignOverview, unit_label
+from railval.core.coverage import MIN_POSITIONS, MIN_SECTIONS_PER_ZONE
 
 
 def lineage_tree_html(ov: CampaignOverview, selected: str | None = None) -> str:
@@ -50,8 +51,9 @@ class OverviewPage(PageBase):
         )
         short = ov.coverage_shortfalls()
         cov = (message("Coverage shortfalls: " + "; ".join(short), "danger") if short
-               else message(f"Coverage holds: {len(ov.sections)} sections, every zone ≥ 3 sections, "
-                            "≥ 2 signals per channel kind.", "success"))
+               else message(f"Coverage holds: {len(ov.sections)} sections, every zone ≥ "
+                            f"{MIN_SECTIONS_PER_ZONE} sections, ≥ {MIN_POSITIONS} signals per channel "
+                            "kind.", "success"))
         sec_df = pd.DataFrame([{
             "section": s.id, "country": s.country,
             "radius (m)": "straight" if (not s.radius_m or math.isinf(s.radius_m)) else round(s.radius_m),
@@ -61,7 +63,7 @@ class OverviewPage(PageBase):
         } for s in ov.sections]).sort_values(["zone", "section"]) if ov.sections else pd.DataFrame()
         ch_df = pd.DataFrame([{"channel": c["name"], "kind": c["kind"], "position": c["position"],
                                "unit": unit_label(c["unit"])} for c in ov.channels])
-        zone_plot = pn.pane.Bokeh(plots.zone_coverage(ov.zone_counts()), sizing_mode="stretch_width")
+        zone_plot = pn.pane.Bokeh(plots.zone_coverage(ov.zone_counts(), need=MIN_SECTIONS_PER_ZONE), sizing_mode="stretch_width")
         tree = pn.pane.HTML(lineage_tree_html(ov, self.app.configuration), sizing_mode="stretch_width",
                             stylesheets=[TREE_CSS])
         desc = pn.pane.Markdown(f"### {html.escape(ov.name)}\n{no_external_images(html.escape(ov.description))}\n\n{vehicle_md}",

@@ -1,14 +1,17 @@
 """UI state of the engineers' web app, apart from any view (docs/design.md §2).
 
-Nothing here imports Panel: every class is a :class:`param.Parameterized` that a test can
-drive without a browser. Pages (``app/pages/*.py``) are thin views bound to these states.
+Nothing here imports Panel, nor the database: every class is a :class:`param.Parameterized`
+that a test can drive without a browser, and stored data arrives through ``app/services``
+(``tests/test_architecture.py`` holds both). Pages (``app/pages/*.py``) are thin views bound
+to these states; what a validation shows comes from the view model :mod:`railval.app.views`.
 One module per page:
 
 ::
 
-    backend     Backend: one unit of work per call against db + app.services
-    app         AppState (campaign, configuration, section, channel, page, status area) and
-                run_job (background work with progress)
+    backend     Backend: one unit of work per call through app.services
+    app         AppState (campaign, configuration, section, channel, page, status area);
+                run_job hands background work to the session's JobRunner
+    jobs        JobRunner: background work with progress, server-wide job slots, reserved names
     compare     CompareState → CompareData (arrays + axis labels + evaluated range)
     dashboard   DashboardState: validation, drill-down rows; open_row() jumps to Compare
     metrics     MetricsState: metric tables (raw and synchronised)

@@ -1,14 +1,13 @@
 """The engineer's selections shared by all pages, and background jobs (docs/design.md §2).
 
-Long work runs through :meth:`AppState.run_job`: a thread calls the work function with a
-``progress(fraction, message)`` callback; every state change is handed to ``dispatch`` (the
-view passes one that schedules on the Bokeh document's event loop; tests pass the default,
-which calls directly). Errors land in ``AppState.status`` with level ``"error"``.
+Long work runs through :meth:`AppState.run_job`, which hands it to the session's
+:class:`~railval.app.state.jobs.JobRunner` (its own module): a thread calls the work
+function with a ``progress(fraction, message)`` callback and every state change goes
+through ``dispatch``. Errors land in ``AppState.status`` with level ``"error"``.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import threading
 import time
@@ -19,8 +18,15 @@ import param
 
 from railval.app.security import plain_message
 from railval.app.state.backend import Backend, CampaignOverview
+from railval.app.state.jobs import (  # noqa: F401 - re-exported for callers
+    _RESERVED,
+    MAX_JOBS,
+    JobCancelled,
+    JobRunner,
+    release_name,
+    reserve_name,
+)
 from railval.core.quantities import derived_signals
-from railval.core.errors import RailvalError
 from railval.core.roles import ACTIONS, PAGE_ACTIONS, Principal, allowed, open_principal
 
 PAGES = ("overview", "compare", "dashboard", "metrics", "diagnose", "report", "signoff", "audit",
@@ -44,35 +50,9 @@ ACCESS_ENDED = ("Your access has ended: the account was disabled, its password c
                 "the sign-in expired. Sign in again at /login.")
 
 
-class JobCancelled(RailvalError):
-    """The user cancelled a background job."""
-
-#: jobs (simulation, calibration, diagnosis, metrics) running at once in this server, over
-#: all browser sessions (``$RAILVAL_MAX_JOBS``, default 1: one calibration already keeps the
-#: two cores of the deployment busy); further jobs wait in line with a "queued" status
-MAX_JOBS = max(1, int(os.environ.get("RAILVAL_MAX_JOBS", "1")))
-_JOB_SLOTS = threading.BoundedSemaphore(MAX_JOBS)
 #: most campaign simulations one job may run (``$RAILVAL_MAX_JOB_SIMULATIONS``); a larger
 #: diagnosis or calibration is refused with its cost shown, before it starts
 MAX_JOB_SIMULATIONS = max(1, int(os.environ.get("RAILVAL_MAX_JOB_SIMULATIONS", "1000")))
-#: (campaign, configuration) names that a running or queued job of this server will store:
-#: a second job for the same name is refused when it is submitted, not at store time
-_RESERVED: set[tuple[str, str]] = set()
-_RESERVED_LOCK = threading.Lock()
-
-
-def reserve_name(campaign: str, name: str) -> bool:
-    """Reserve ``name`` in ``campaign`` for one job; ``False`` when another job holds it."""
-    with _RESERVED_LOCK:
-        if (campaign, name) in _RESERVED:
-            return False
-        _RESERVED.add((campaign, name))
-        return True
-
-
-def release_name(campaign: str, name: str) -> None:
-    with _RESERVED_LOCK:
-        _RESERVED.discard((campaign, name))
 
 
 class AppState(param.Parameterized):
@@ -100,7 +80,7 @@ class AppState(param.Parameterized):
         self._recheck = recheck
         self._checked_at = time.monotonic()
         self.access_ended = False
-        self._job: threading.Thread | None = None
+        self.jobs = JobRunner(self)
         if not self.page_allowed(self.page):
             permitted = self.pages_allowed()
             self.page = permitted[0] if permitted else "overview"
@@ -221,93 +201,16 @@ class AppState(param.Parameterized):
                 dispatch: Callable[[Callable[[], None]], None] | None = None,
                 background: bool = True, action: str | None = None,
                 reserves: tuple[str, str] | None = None) -> threading.Thread | None:
-        """Run ``work(progress)`` in a thread; ``progress(fraction, message)`` updates the
-        progress bar and status; ``on_done(result)`` runs through ``dispatch`` afterwards.
-        Refuses (status warning) while another job runs so the page never double-submits,
-        and (status error) when the session's user may not do ``action``. The job's database
-        changes are recorded in the audit trail as that user. ``reserves=(campaign, name)``
-        holds the configuration name the job will store from submission (also while queued)
-        to its end: a second job for that name is refused at once."""
-        if action is not None and not self.guard(action):
-            return None
-        if self.busy:
-            self.set_status(f"{title}: another job is still running — wait for it to finish", "warning")
-            return None
-        if reserves is not None:
-            if reserves[1] in (self.param.configuration.objects or []):
-                self.set_status(f"{title} refused: configuration {reserves[1]!r} already exists in "
-                                f"{reserves[0]!r} — choose another name", "error")
-                return None
-            if not reserve_name(*reserves):
-                self.set_status(f"{title} refused: another job is already computing configuration "
-                                f"{reserves[1]!r} in {reserves[0]!r} — choose another name", "error")
-                return None
-        call = dispatch or (lambda f: f())
-        cancel = self._cancel = threading.Event()
-        self.busy = True
-        self.progress = 0.0
-        self.set_status(f"{title}: started", "info")
-
-        def progress(fraction: float, message: str = "") -> None:
-            if cancel.is_set():  # the job stops at its next progress report
-                raise JobCancelled(f"{title}: cancelled")
-            frac = float(min(1.0, max(0.0, fraction if math.isfinite(fraction) else 0.0)))
-
-            def apply():
-                self.progress = frac
-                self.set_status(f"{title}: {message}" if message else f"{title}: {frac:.0%}", "info")
-            call(apply)
-
-        def body():
-            from railval.db.engine import acting_as
-
-            if not _JOB_SLOTS.acquire(blocking=False):
-                call(lambda: self.set_status(
-                    f"{title}: queued — {MAX_JOBS} job(s) of this server are running; it starts "
-                    "when one has finished", "info"))
-                _JOB_SLOTS.acquire()
-            try:
-                if cancel.is_set():
-                    raise JobCancelled(f"{title}: cancelled before it started")
-                with acting_as(self.principal.username):
-                    result = work(progress)
-            except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-                if isinstance(exc, JobCancelled):
-                    def cancelled(msg=str(exc)):
-                        self.busy = False
-                        self.set_status(msg, "warning")
-                    call(cancelled)
-                    return
-                detail = plain_message(exc, title)
-
-                def fail():
-                    self.busy = False
-                    self.set_status(f"{title} failed: {detail}", "error")
-                call(fail)
-                return
-            finally:
-                _JOB_SLOTS.release()
-                if reserves is not None:
-                    release_name(*reserves)
-
-            def done():
-                self.busy = False
-                self.progress = 1.0
-                self.set_status(f"{title}: done", "success")
-                if on_done is not None:
-                    try:
-                        on_done(result)
-                    except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
-                        self.set_status(f"{title}: finished but showing the result failed: "
-                                        f"{plain_message(exc, title)}", "error")
-            call(done)
-
-        if not background:
-            body()
-            return None
-        self._job = threading.Thread(target=body, name=f"railval-job-{title}", daemon=True)
-        self._job.start()
-        return self._job
+        """Run ``work(progress)`` in a thread (:class:`~railval.app.state.jobs.JobRunner`);
+        ``progress(fraction, message)`` updates the progress bar and status; ``on_done(result)``
+        runs through ``dispatch`` afterwards. Refuses (status warning) while another job runs
+        so the page never double-submits, and (status error) when the session's user may not
+        do ``action``. The job's database changes are recorded in the audit trail as that
+        user. ``reserves=(campaign, name)`` holds the configuration name the job will store
+        from submission (also while queued) to its end: a second job for that name is
+        refused at once."""
+        return self.jobs.submit(title, work, on_done, dispatch=dispatch, background=background,
+                                action=action, reserves=reserves)
 
     def within_cost_cap(self, title: str, simulations: int) -> bool:
         """``True`` when a job of ``simulations`` campaign simulations may run; else the
@@ -322,13 +225,8 @@ class AppState(param.Parameterized):
     def cancel_job(self) -> None:
         """Ask the running job to stop: it ends at its next progress report (a simulation
         or calibration step), or before it starts when it is still queued."""
-        cancel = getattr(self, "_cancel", None)
-        if self.busy and cancel is not None:
-            cancel.set()
+        if self.jobs.cancel():
             self.set_status("cancelling — the job stops after its current step", "warning")
 
     def wait(self, timeout: float | None = None) -> None:
-        if self._job is not None:
-            self._job.join(timeout)
-
-
+        self.jobs.wait(timeout)

@@ -6,72 +6,17 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 from railval.app.services import calibration as calibration_service
 from railval.app.services import diagnosis as diagnosis_service
 from railval.app.services import metrics as metrics_service
+from railval.app.services import overview as overview_service
 from railval.app.services import simulation as simulation_service
-from railval.app.services import validation as validation_service
-from railval.core.errors import NotFound
+from railval.app.services.overview import CampaignOverview, ConfigInfo
 from railval.core.sim.effects import EFFECTS
-from railval.core.types import SectionInfo
-from railval.core.validation import MIN_POSITIONS, MIN_SECTIONS, MIN_SECTIONS_PER_ZONE
-from railval.db import repo
 
-
-@dataclass
-class ConfigInfo:
-    name: str
-    parent: str | None
-    effects: dict[str, Any] = field(default_factory=dict)
-    description: str = ""
-
-
-@dataclass
-class CampaignOverview:
-    name: str
-    description: str
-    vehicle: dict[str, Any]
-    sections: list[SectionInfo]
-    channels: list[dict[str, str]]
-    configurations: list[ConfigInfo]
-
-    def zone_counts(self) -> dict[int, int]:
-        counts = {z: 0 for z in (1, 2, 3, 4)}
-        for s in self.sections:
-            counts[s.zone] = counts.get(s.zone, 0) + 1
-        return counts
-
-    def coverage_shortfalls(self, min_sections: int = MIN_SECTIONS,
-                            min_per_zone: int = MIN_SECTIONS_PER_ZONE,
-                            min_signals: int = MIN_POSITIONS) -> list[str]:
-        """Coverage rules of docs/design.md §3 (Polach & Böttcher 2014 §5) checked on the campaign layout alone.
-
-        ≥ ``min_sections`` sections, every zone 1–4 with ≥ ``min_per_zone`` sections and
-        ≥ ``min_signals`` channels per channel kind. Returns precise messages, empty when met.
-        """
-        out = []
-        if len(self.sections) < min_sections:
-            out.append(f"{len(self.sections)} sections, needs {min_sections}")
-        for zone, n in self.zone_counts().items():
-            if n < min_per_zone:
-                out.append(f"zone {zone} has {n} section{'s' if n != 1 else ''}, needs {min_per_zone}")
-        kinds: dict[str, int] = {}
-        for ch in self.channels:
-            kinds[ch["kind"]] = kinds.get(ch["kind"], 0) + 1
-        for kind in ("Y", "Q", "ay_cb", "az_cb"):
-            n = kinds.get(kind, 0)
-            if n < min_signals:
-                out.append(f"channel kind {kind} has {n} signal{'s' if n != 1 else ''}, needs {min_signals}")
-        return out
-
-    def children(self) -> dict[str | None, list[str]]:
-        tree: dict[str | None, list[str]] = {}
-        for c in self.configurations:
-            tree.setdefault(c.parent, []).append(c.name)
-        return tree
+__all__ = ["Backend", "CampaignOverview", "ConfigInfo"]
 
 
 class Backend:
@@ -99,51 +44,28 @@ class Backend:
             self._cache[key] = value
         return value
 
-    # -- campaign data
+    # -- campaign data (railval.app.services.overview)
     def campaigns(self) -> list[str]:
-        with self.session() as s:
-            return [c.name for c in repo.list_campaigns(s)]
+        return overview_service.campaign_names(self.database)
 
     def configurations(self, campaign: str) -> list[ConfigInfo]:
-        with self.session() as s:
-            confs = list(repo.list_configurations(s, campaign))
-            names = {c.id: c.name for c in confs}
-            return [ConfigInfo(name=c.name, parent=names.get(c.parent_id),
-                               effects=dict(c.effects or {}), description=c.description or "")
-                    for c in confs]
+        return overview_service.configurations(self.database, campaign)
 
     def overview(self, campaign: str) -> CampaignOverview:
-        with self.session() as s:
-            camp = repo.get_campaign(s, campaign)
-            sections = list(repo.section_infos(s, camp))
-            vehicle = dict(repo.vehicle_info(s, camp))
-            chans = [{"name": ch.name, "kind": ch.kind, "position": ch.position, "unit": ch.unit}
-                     for ch in repo.channels(s, camp)]
-            name, desc = camp.name, camp.description or ""
-        return CampaignOverview(name=name, description=desc, vehicle=vehicle, sections=sections,
-                                channels=chans, configurations=self.configurations(campaign))
+        return overview_service.overview(self.database, campaign)
 
     def signals(self, campaign: str, config: str | None, section: str,
                 channels: list[str] | None = None):
         """One section's SignalSet of the measurement (``config`` None) or a configuration."""
-        with self.session() as s:
-            camp = repo.get_campaign(s, campaign)
-            sets = repo.load_signalsets(s, camp, config=config, sections=[section], channels=channels)
-        if section not in sets:
-            raise NotFound(f"section {section!r} has no recording for "
-                           f"{'the measurement' if config is None else 'configuration ' + repr(config)}")
-        return sets[section]
+        return overview_service.signals(self.database, campaign, config, section, channels)
 
     def hashes(self, campaign: str, config: str | None) -> dict[str, dict[str, str]]:
         """section → channel → SHA-256 of the stored samples (no blob read)."""
-        with self.session() as s:
-            return repo.signal_hashes(s, campaign, config)
+        return overview_service.hashes(self.database, campaign, config)
 
     def lineage(self, campaign: str, config: str) -> list[str]:
         """Names from the root configuration down to ``config``."""
-        with self.session() as s:
-            camp = repo.get_campaign(s, campaign)
-            return [c.name for c in repo.lineage(s, camp, config)]
+        return overview_service.lineage(self.database, campaign, config)
 
     # -- services
     def validation(self, campaign: str, config: str, refresh: bool = False):
@@ -152,10 +74,7 @@ class Backend:
             with self._lock:
                 self._cache.pop(key, None)
 
-        def make():
-            with self.session() as s:
-                return validation_service.validate_configuration(s, campaign, config)
-        return self._cached(key, make)
+        return self._cached(key, lambda: overview_service.validation(self.database, campaign, config))
 
     def metrics(self, campaign: str, config: str, sections: list[str] | None = None,
                 families: list[str] | None = None):
@@ -163,32 +82,28 @@ class Backend:
         the database with its inputs' hashes; cached in memory too)."""
 
         def make():
-            with self.session() as s:
-                return metrics_service.metrics_for_configuration(s, campaign, config, sections=sections,
-                                                                 families=families)
+            return overview_service.metrics(self.database, campaign, config, sections=sections,
+                                            families=families)
         return self._cached(("metrics", campaign, config, tuple(sections or ()), tuple(families or ())), make)
 
     def stored_metrics(self, campaign: str, config: str, sections: list[str] | None = None,
                        families: list[str] | None = None):
         """The stored metrics of these sections with the current data and default settings,
         or None (nothing computed)."""
-        with self.session() as s:
-            return metrics_service.stored_metrics(s, campaign, config, sections=sections, families=families)
+        return overview_service.in_session(self.database, metrics_service.stored_metrics, campaign, config,
+                                           sections=sections, families=families)
 
     def metrics_runs(self, campaign: str, config: str) -> list[dict[str, Any]]:
         """Stored metrics runs of the configuration, newest first."""
-        with self.session() as s:
-            return metrics_service.metrics_runs(s, campaign, config)
+        return overview_service.in_session(self.database, metrics_service.metrics_runs, campaign, config)
 
     def latest_diagnosis(self, campaign: str, config: str):
         """The newest stored diagnosis of the configuration (DiagnosisResult) or None."""
-        with self.session() as s:
-            return diagnosis_service.latest_diagnosis(s, campaign, config)
+        return overview_service.in_session(self.database, diagnosis_service.latest_diagnosis, campaign, config)
 
     def diagnosis_runs(self, campaign: str, config: str) -> list[dict[str, Any]]:
         """Stored diagnoses of the configuration, newest first (time, settings, top candidate)."""
-        with self.session() as s:
-            return diagnosis_service.diagnosis_runs(s, campaign, config)
+        return overview_service.in_session(self.database, diagnosis_service.diagnosis_runs, campaign, config)
 
     def effects(self) -> list[dict[str, Any]]:
         """The effect registry (``railval.core.sim.effects``) as plain dicts for the UI."""

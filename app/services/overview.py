@@ -1,0 +1,182 @@
+"""Campaign data for the web app's state, the report and the CLI's analysis verbs: the one
+door between them and the database (docs/design.md §2).
+
+Each function opens one unit of work on ``database`` (``railval.db.engine.Database``) and
+returns plain data: campaign and configuration lists, a campaign's layout
+(:class:`CampaignOverview`), one section's signals, content hashes, the lineage, a
+configuration's validation and curve metrics, the sign-offs with their status, the evidence
+check. :func:`acting_as` names the user a background job's changes are recorded as.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+from railval.core.coverage import (
+    MIN_POSITIONS,
+    MIN_SECTIONS,
+    MIN_SECTIONS_PER_ZONE,
+    layout_shortfalls,
+)
+from railval.core.errors import NotFound
+from railval.core.types import ZONES, SectionInfo
+from railval.core.validation import ValidationResult
+from railval.db import repo
+
+
+@dataclass
+class ConfigInfo:
+    name: str
+    parent: str | None
+    effects: dict[str, Any] = field(default_factory=dict)
+    description: str = ""
+
+
+@dataclass
+class CampaignOverview:
+    name: str
+    description: str
+    vehicle: dict[str, Any]
+    sections: list[SectionInfo]
+    channels: list[dict[str, str]]
+    configurations: list[ConfigInfo]
+
+    def zone_counts(self) -> dict[int, int]:
+        counts = {z: 0 for z in ZONES}
+        for s in self.sections:
+            counts[s.zone] = counts.get(s.zone, 0) + 1
+        return counts
+
+    def coverage_shortfalls(self, min_sections: int = MIN_SECTIONS,
+                            min_per_zone: int = MIN_SECTIONS_PER_ZONE,
+                            min_signals: int = MIN_POSITIONS) -> list[str]:
+        """The coverage rules checked on the campaign layout alone
+        (:func:`railval.core.coverage.layout_shortfalls`, Polach & Böttcher 2014 §5)."""
+        return layout_shortfalls([s.zone for s in self.sections], [c["kind"] for c in self.channels],
+                                 min_sections=min_sections, min_per_zone=min_per_zone,
+                                 min_signals=min_signals)
+
+    def children(self) -> dict[str | None, list[str]]:
+        tree: dict[str | None, list[str]] = {}
+        for c in self.configurations:
+            tree.setdefault(c.parent, []).append(c.name)
+        return tree
+
+
+def campaign_names(database) -> list[str]:
+    with database.session() as s:
+        return [c.name for c in repo.list_campaigns(s)]
+
+
+def configurations(database, campaign: str) -> list[ConfigInfo]:
+    with database.session() as s:
+        confs = list(repo.list_configurations(s, campaign))
+        names = {c.id: c.name for c in confs}
+        return [ConfigInfo(name=c.name, parent=names.get(c.parent_id),
+                           effects=dict(c.effects or {}), description=c.description or "")
+                for c in confs]
+
+
+def overview(database, campaign: str) -> CampaignOverview:
+    """Sections, vehicle, channels and configurations of a campaign."""
+    with database.session() as s:
+        camp = repo.get_campaign(s, campaign)
+        sections = list(repo.section_infos(s, camp))
+        vehicle = dict(repo.vehicle_info(s, camp))
+        chans = [{"name": ch.name, "kind": ch.kind, "position": ch.position, "unit": ch.unit}
+                 for ch in repo.channels(s, camp)]
+        name, desc = camp.name, camp.description or ""
+    return CampaignOverview(name=name, description=desc, vehicle=vehicle, sections=sections,
+                            channels=chans, configurations=configurations(database, campaign))
+
+
+def signals(database, campaign: str, config: str | None, section: str,
+            channels: list[str] | None = None):
+    """One section's SignalSet of the measurement (``config`` None) or a configuration."""
+    with database.session() as s:
+        camp = repo.get_campaign(s, campaign)
+        sets = repo.load_signalsets(s, camp, config=config, sections=[section], channels=channels)
+    if section not in sets:
+        raise NotFound(f"section {section!r} has no recording for "
+                       f"{'the measurement' if config is None else 'configuration ' + repr(config)}")
+    return sets[section]
+
+
+def hashes(database, campaign: str, config: str | None) -> dict[str, dict[str, str]]:
+    """section → channel → SHA-256 of the stored samples (no blob read)."""
+    with database.session() as s:
+        return repo.signal_hashes(s, campaign, config)
+
+
+def lineage(database, campaign: str, config: str) -> list[str]:
+    """Names from the root configuration down to ``config``."""
+    with database.session() as s:
+        camp = repo.get_campaign(s, campaign)
+        return [c.name for c in repo.lineage(s, camp, config)]
+
+
+def require_evidence(database, campaign: str, config: str) -> None:
+    """Every blob of the measurement and of ``config`` against its hash and seal
+    (:func:`railval.db.repo.require_evidence`); raises on the first mismatch."""
+    with database.session() as s:
+        repo.require_evidence(s, campaign, config, blobs=True)
+
+
+def signoff_items(database, campaign: str | None = None, config: str | None = None
+                  ) -> list[tuple[dict[str, Any], Any]]:
+    """The sign-offs (of one campaign/configuration, or all) as ``(record dict,
+    SignoffStatus)``."""
+    from railval.app.services.signoff import statuses
+    from railval.db import signoff as db_signoff
+
+    with database.session() as s:
+        return [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, config)]
+
+
+def audit_and_signoffs(database) -> tuple[list[tuple[dict[str, Any], Any]], list[Any]]:
+    """Every sign-off with its status and every audit row, read in one unit of work (the
+    audit report)."""
+    from railval.app.services.signoff import statuses
+    from railval.db import audit
+    from railval.db import signoff as db_signoff
+
+    with database.session() as s:
+        items = [(db_signoff.as_dict(so), st) for so, st in statuses(s)]
+        return items, list(audit.iter_rows(s))
+
+
+def validation(database, campaign: str, config: str, **kw: Any) -> ValidationResult:
+    """:func:`railval.app.services.validation.validate_configuration` in one unit of work."""
+    from railval.app.services.validation import validate_configuration
+
+    with database.session() as s:
+        return validate_configuration(s, campaign, config, **kw)
+
+
+def metrics(database, campaign: str, config: str, sections: Sequence[str] | None = None,
+            channels: Sequence[str] | None = None, **kw: Any):
+    """:func:`railval.app.services.metrics.metrics_for_configuration` in one unit of work."""
+    from railval.app.services.metrics import metrics_for_configuration
+
+    with database.session() as s:
+        return metrics_for_configuration(s, campaign, config, sections, channels, **kw)
+
+
+@contextmanager
+def acting_as(username: str) -> Iterator[None]:
+    """Within the block, database changes are recorded as ``username``
+    (:func:`railval.db.engine.acting_as`)."""
+    from railval.db.engine import acting_as as db_acting_as
+
+    with db_acting_as(username):
+        yield
+
+
+def in_session(database, service: Any, *args: Any, **kw: Any) -> Any:
+    """``service(session, *args, **kw)`` — a service function that takes a session — in one
+    unit of work of its own (read-only)."""
+    with database.session() as s:
+        return service(s, *args, **kw)

@@ -1,0 +1,168 @@
+"""What a validation looks like to a reader: one view model for the dashboard, the report and
+the CLI's text output (docs/design.md §2, §8).
+
+Every view reads the same core objects (:class:`railval.core.validation.ValidationResult`,
+its :class:`~railval.core.validation.Coverage` and
+:class:`~railval.core.validation.QuantityResult` records) through :class:`ValidationView`;
+nothing guesses dictionary keys. Quantity rows are each quantity's
+:meth:`QuantityResult.to_dict` — the very fields of ``railval validate --json`` — and the
+drill-down carries core's normalised column ``D_norm`` (D_v / std limit) unchanged. A field
+renamed in core therefore raises here (``KeyError``/``AttributeError``) instead of
+emptying a table; ``tests/test_views.py`` holds that.
+
+No UI library is imported: pages turn these rows into widgets, the report into HTML.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from railval.core.coverage import Coverage
+from railval.core.en14363 import PROCESSING_VERSION
+from railval.core.validation import STD_DEFINITION, QuantityResult, ValidationResult
+
+
+@dataclass(frozen=True)
+class InSample:
+    """A verdict partly on the sections a calibration of the lineage was fitted to
+    (``railval.app.services.validation.calibration_provenance``)."""
+
+    calibrated_in: tuple[str, ...]
+    fit_sections: tuple[str, ...]
+    held_out_sections: tuple[str, ...]
+
+    @classmethod
+    def of(cls, info: Mapping[str, Any]) -> InSample | None:
+        """From a result's ``info``; None when the verdict is not in-sample (or the result
+        was computed without provenance)."""
+        if not info.get("in_sample"):
+            return None
+        return cls(tuple(info["calibrated_in"]), tuple(info["fit_sections"]),
+                   tuple(info["held_out_sections"]))
+
+    def note(self) -> str:
+        """"X was calibrated on n of these sections"."""
+        return (f"{', '.join(self.calibrated_in)} was calibrated on {len(self.fit_sections)} "
+                "of these sections")
+
+
+@dataclass(frozen=True)
+class ValidationView:
+    """One configuration's validation as every view shows it."""
+
+    result: ValidationResult
+
+    @property
+    def validated(self) -> bool:
+        return bool(self.result.validated)
+
+    @property
+    def coverage(self) -> Coverage:
+        return self.result.coverage
+
+    @property
+    def quantities(self) -> list[dict[str, Any]]:
+        """One row per quantity: the fields of ``railval validate --json``."""
+        return [q.to_dict() for q in self.result.quantities.values()]
+
+    def quantity(self, qid: str) -> QuantityResult:
+        return self.result.quantities[qid]
+
+    @property
+    def failing(self) -> list[str]:
+        """Quantities outside their limits, registry order."""
+        return [qid for qid, q in self.result.quantities.items() if not q.passed]
+
+    @property
+    def sensitive_quantities(self) -> list[str]:
+        """Quantities whose pass/fail another reading of the open definitions flips."""
+        return [qid for qid, q in self.result.quantities.items() if q.definition_sensitive]
+
+    @property
+    def verdict_sensitive(self) -> bool | None:
+        """True when another reading flips the verdict; None without alternatives."""
+        return self.result.definition_sensitive
+
+    @property
+    def in_sample(self) -> InSample | None:
+        return InSample.of(self.result.info)
+
+    @property
+    def info(self) -> dict[str, Any]:
+        return self.result.info
+
+    @property
+    def warnings(self) -> list[str]:
+        return list(self.result.warnings)
+
+    @property
+    def processing_version(self) -> str:
+        return PROCESSING_VERSION
+
+    @property
+    def std_definition(self) -> str:
+        return STD_DEFINITION
+
+    @property
+    def pairs(self):
+        """``ValidationResult.pairs`` (quantity, section, zone, position, M, S, D, D_norm)."""
+        return self.result.pairs
+
+    def drilldown(self, quantity: str, top: int | None = None) -> list[dict[str, Any]]:
+        """Pairs of one quantity, largest |D_v| first: section, position, zone, M_v, S_v,
+        D_v and ``norm`` = core's ``D_norm`` (D_v / std limit)."""
+        pairs = self.result.pairs
+        sub = pairs[pairs["quantity"] == quantity]
+        rows = [{"quantity": quantity, "section": str(r.section), "position": str(r.position),
+                 "zone": int(r.zone), "M_v": float(r.M), "S_v": float(r.S), "D_v": float(r.D),
+                 "norm": float(r.D_norm)} for r in sub.itertuples(index=False)]
+        rows.sort(key=lambda r: -abs(r["D_v"]))
+        return rows if top is None else rows[:top]
+
+    def definition_rows(self) -> list[dict[str, Any]]:
+        """Per quantity that another reading of the open definitions can change (percentile
+        method, sliding-window grid and mean; docs/validation.md): verdict, whether some
+        reading flips it, which, and the range of mean/limit and std/limit over the readings."""
+        out = []
+        for qid, q in self.result.quantities.items():
+            alts = q.alternatives or []
+            if not alts:
+                continue
+            means = [a["mean_norm"] for a in alts if a["mean_norm"] is not None]
+            stds = [a["std_norm"] for a in alts if a["std_norm"] is not None]
+            flips = [a for a in alts if a["flips"]]
+            mean_norm = q.to_dict()["mean_norm"]
+            out.append({
+                "quantity": qid,
+                "verdict": "pass" if q.passed else "FAIL",
+                "definition_sensitive": bool(q.definition_sensitive),
+                "readings": len(alts),
+                "mean/limit": mean_norm,
+                "mean/limit other readings": (min(means), max(means)) if means else None,
+                "std/limit other readings": (min(stds), max(stds)) if stds else None,
+                "flipped by": "" if not flips else (
+                    f"{'passes' if flips[0]['pass'] else 'fails'} with {flips[0]['label']}"
+                    + (f" (and {len(flips) - 1} more of {len(alts)} readings)" if len(flips) > 1 else "")),
+            })
+        return out
+
+    @property
+    def definitions_available(self) -> bool:
+        """False when the values carried no alternative readings (plain dictionaries)."""
+        return self.verdict_sensitive is not None or bool(self.definition_rows())
+
+    def supplementary_rows(self) -> list[dict[str, Any]]:
+        """The supplementary results (bogie-frame and PSD-band quantities,
+        :func:`railval.core.supplementary.supplementary_results`), one row each; they never
+        change the verdict."""
+        supp = self.result.supplementary
+        return [dict(r) for r in supp["quantities"]] if supp else []
+
+
+def view_of(result: ValidationResult) -> ValidationView:
+    """The view model of a validation result."""
+    if not isinstance(result, ValidationResult):
+        raise TypeError(f"a ValidationResult is needed, got {type(result).__name__}")
+    return ValidationView(result)
