@@ -44,21 +44,13 @@ WIDGET_LIBRARIES = ("panel", "bokeh", "holoviews")
 LONG_FUNCTIONS = {
     ("core/sim/kernel.py", "run_kernel"),  # the numba kernel: one compiled loop
     ("core/diagnosis/engine.py", "diagnose_evidence"),
-    ("core/en14363.py", "_section_stats"),
-    ("core/review/analysis.py", "analyse"),
-    ("core/review/rasch.py", "fit_rasch"),
     ("core/sim/model.py", "assemble"),
     ("core/sim/synth.py", "build_campaign"),
-    ("db/exporter.py", "export_campaign"),
     ("db/migrations/versions/0001_initial_schema.py", "upgrade"),
     ("db/migrations/versions/0003_users_audit.py", "upgrade"),
-    ("db/repo.py", "store_configuration"),
-    ("app/bench/bench_dynotrain.py", "run"),
     ("app/bench/bench_team.py", "run"),
     ("app/services/audit_checks.py", "_check_signoffs"),
-    ("app/services/calibration.py", "calibrate"),
-    ("app/services/diagnosis_evidence.py", "diagnose"),
-    ("app/services/validation.py", "validate_configurations"),
+    ("app/services/diagnosis_evidence.py", "rank_causes"),
     ("app/services/workshops.py", "create"),
 }
 STORAGE_LIBRARIES = ("sqlalchemy", "alembic")
