@@ -185,7 +185,7 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     flags += _parent_flags(vr_parent, vr_parent_held, vr_held) + support
     flags += [f"{'configuration effect' if x['kind'] == 'configuration' else 'effect'} {x['name']} left out: "
               f"{x['reason']}" for x in skipped]
-    with session_of(database) as s:
+    with session_of(database, write=True) as s:
         repo.store_configuration(
             s, campaign, new_name, parent=config, effects=eff, parameters=model,
             description=f"calibrated {', '.join(effects + model_candidates)} from {config} "

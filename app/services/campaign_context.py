@@ -40,14 +40,15 @@ ACC_CHANNELS = ("ay_cb_b1", "ay_cb_b2", "az_cb_b1", "az_cb_b2")
 
 
 @contextmanager
-def session_of(database_or_session: Any) -> Iterator[Any]:
-    """Yield a session from a :class:`railval.db.engine.Database`, a URL string or a Session."""
+def session_of(database_or_session: Any, *, write: bool = False) -> Iterator[Any]:
+    """Yield a session from a :class:`railval.db.engine.Database`, a URL string or a Session;
+    ``write=True`` opens a unit of work that writes (``Database.session(write=True)``)."""
     if isinstance(database_or_session, Session):
         yield database_or_session
         return
     if database_or_session is None or isinstance(database_or_session, str):
         database_or_session = connect(database_or_session)
-    with database_or_session.session() as s:
+    with database_or_session.session(write=write) as s:
         yield s
 
 

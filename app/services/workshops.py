@@ -590,7 +590,7 @@ def import_answers(database, name: str, path: str | Path, *,
     except UnicodeDecodeError as exc:
         raise InvalidParameter(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     rows = parse_answers_csv(text, str(path))
-    with database.session() as session:
+    with database.session(write=True) as session:
         w = wsdb.get_workshop(session, name)
         return wsdb.import_answers(session, w, rows, actor=actor, source_name=str(path))
 
