@@ -214,3 +214,11 @@ def count_since(session: Session, action: str, since_utc: str, *, object: str | 
 
 def count(session: Session) -> int:
     return int(session.scalar(select(func.count()).select_from(AuditEvent)) or 0)
+
+
+def newest_rows(session: Session, limit: int) -> tuple[list[dict[str, Any]], int]:
+    """The ``limit`` newest audit rows, newest first, and the number of all rows: one
+    ordered, limited query (a page shows the newest rows without reading the whole trail)."""
+    rows = [row_dict(ev) for ev in session.scalars(
+        select(AuditEvent).order_by(AuditEvent.seq.desc()).limit(max(0, int(limit))))]
+    return rows, count(session)

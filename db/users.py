@@ -370,3 +370,9 @@ def record_refusal(session: Session, token: str, message: str, *, source: str = 
 def role_names() -> list[str]:
     """The role registry's names (for forms and CLI choices)."""
     return list(ROLES)
+
+
+def count_with_password(session: Session) -> int:
+    """Users that have a password (none: the loopback-only open mode of the web pages)."""
+    return int(session.scalar(select(func.count()).select_from(AppUser)
+                              .where(AppUser.password_hash.is_not(None))) or 0)

@@ -264,10 +264,11 @@ def record_answer(session: Session, ctx: ReviewerContext, position: int, answer:
     Refused (:class:`WorkshopClosed`) when the workshop is closed or the reviewer has
     finished; :class:`InvalidParameter` for a position outside the sequence.
 
-    Call it as the first statement of its unit of work (``ctx`` read in an earlier one): its
-    first statement is a write, so on SQLite the transaction takes the write lock at once
-    (waiting up to the busy timeout) instead of failing to upgrade a read snapshot that a
-    concurrent answer has made stale.
+    Call it in a unit of work of its own opened with ``session(write=True)`` (``ctx`` read in
+    an earlier one; :func:`railval.app.services.workshop_review.record_answer`): on SQLite
+    that transaction takes the write lock at ``BEGIN IMMEDIATE`` (waiting up to the busy
+    timeout) instead of failing to upgrade a read snapshot that a concurrent answer has made
+    stale.
     """
     if ctx.workshop_status != "open":
         raise WorkshopClosed(f"workshop {ctx.workshop_name!r} is closed; answers are not taken")

@@ -162,40 +162,25 @@ def authorize(args: argparse.Namespace) -> None:
     import getpass
     import os
 
-    from railval.core.roles import CLI_ACTIONS, require
-    from railval.db import engine
+    from railval.app.services import database as db_service
+    from railval.app.services.users import check_cli
+    from railval.core.roles import CLI_ACTIONS
 
     verb = verb_name(args)
     action = CLI_ACTIONS[verb]
     who = args.as_user or os.environ.get("RAILVAL_USER")
-    engine.default_actor = who or f"cli:{getpass.getuser()}"
+    db_service.set_default_actor(who or f"cli:{getpass.getuser()}")
     if action is None or getattr(args, "bundle", None):  # a bundle is checked without the database
         return
-    from railval.db import users
-
-    database = engine.connect(args.db)
+    database = db_service.open_database(args.db, upgrade=None)
     try:
-        if database.current_revision() is None or not _has_user_table(database):
+        if database.current_revision() is None or not db_service.has_user_table(database):
             return
-        with database.session() as s:
-            if not users.has_users(s):
-                return
-            if first_admin(args) and not users.has_admin(s):
-                # nobody can manage users (e.g. open-mode `workshop import-answers` created
-                # panelists): whoever runs the CLI on the database may add the first admin
-                if not args.reason:
-                    args.reason = "first admin: the database had users but no enabled admin"
-                return
-            if not who:
-                raise RailvalError(
-                    f"this database has users: name the user you act as with --as USER or "
-                    f"RAILVAL_USER (`{verb}` needs the permission to {action})")
-            user = users.find_user(s, who)
-            if user is None:
-                raise RailvalError(f"--as {who!r}: no such user in {database.safe_url}")
-            if user.disabled:
-                raise RailvalError(f"--as {who!r}: this account is disabled")
-            require(users.principal(user), action)
+        # while nobody can manage users (e.g. open-mode `workshop import-answers` created
+        # panelists), whoever runs the CLI on the database may add the first admin
+        if check_cli(database, who, action, verb, adds_admin=first_admin(args)).first_admin \
+                and not args.reason:
+            args.reason = "first admin: the database had users but no enabled admin"
     finally:
         database.dispose()
 
@@ -204,12 +189,6 @@ def first_admin(args: argparse.Namespace) -> bool:
     """``user add NAME --role admin …``: allowed without ``--as`` while the database has no
     enabled admin (the README's first step; also after open-mode verbs created users)."""
     return verb_name(args) == "user add" and "admin" in (getattr(args, "role", None) or [])
-
-
-def _has_user_table(database) -> bool:
-    from sqlalchemy import inspect
-
-    return "app_user" in inspect(database.engine).get_table_names()
 
 
 def main(argv: list[str] | None = None) -> int:

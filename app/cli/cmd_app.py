@@ -54,20 +54,17 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(url: str | None, upgrade: bool):
-    from railval.db.engine import connect
+    from railval.app.services.database import open_database
 
-    database = connect(url)
-    database.ensure_initialised(upgrade=upgrade)
-    return database
+    return open_database(url, upgrade=upgrade)
 
 
 def seed_demo(database) -> str:
     """Seed the demo campaign into an empty database (H4's synth service); returns a message."""
-    from railval.db import repo
+    from railval.app.services.campaign_data import has_campaigns
 
-    with database.session() as s:
-        if repo.list_campaigns(s):
-            return "database holds campaigns; demo not seeded"
+    if has_campaigns(database):
+        return "database holds campaigns; demo not seeded"
     try:
         from railval.app.services.synth import ensure_demo
     except ImportError as exc:
@@ -113,16 +110,15 @@ def _cmd_report(args: argparse.Namespace) -> int:
     database = _database(args.db, upgrade=False)
     cards = None
     if args.cards or args.workshop:
+        from railval.app.services.database import default_actor
+        from railval.app.services.users import principal_of
         from railval.app.services.workshop_cards import report_cards
         from railval.core.errors import InvalidParameter
-        from railval.db import engine, users
 
         if not (args.cards and args.workshop):
             raise InvalidParameter("--workshop and --cards go together: the workshop and its plot ids")
-        actor = engine.default_actor
-        with database.session() as s:  # the cards show answers: the workshop.results permission
-            if users.has_users(s) and (u := users.find_user(s, actor)) is not None:
-                actor = users.principal(u)
+        # the cards show answers: the workshop.results permission
+        actor = principal_of(database, default_actor())
         cards = report_cards(database, args.workshop, args.config, args.cards, groups=args.groups,
                              actor=actor)
     rep = build_report(Backend(database), args.campaign, args.config, worst_cases=args.worst, cards=cards)

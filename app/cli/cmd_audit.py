@@ -114,11 +114,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(args):
-    from railval.db.engine import connect
+    from railval.app.services.database import open_database
 
-    database = connect(args.db)
-    database.ensure_initialised()
-    return database
+    return open_database(args.db)
 
 
 def _cmd_checkpoint(args) -> int:
@@ -181,12 +179,10 @@ def _cmd_key(args) -> int:
 
 
 def _cmd_seal(args) -> int:
-    from railval.db import audit, engine
+    from railval.app.services.audit import seal
+    from railval.app.services.database import default_actor
 
-    database = _database(args)
-    with database.session(write=True) as s:
-        ev = audit.seal(s, engine.default_actor, args.reason)
-        seq, h, n = ev.seq, ev.row_hash, (ev.detail or {}).get("unsigned_rows_before", 0)
+    seq, h, n = seal(_database(args), default_actor(), args.reason)
     print(f"sealed: signed head seq {seq} {h} (over {n} unsigned earlier rows); "
           "kept in the witness file")
     return 0
@@ -202,10 +198,9 @@ def _cmd_export(args) -> int:
 
 
 def _cmd_log(args) -> int:
-    from railval.db import audit
+    from railval.app.services.audit import trail
 
-    with _database(args).session() as s:
-        rows = list(audit.iter_rows(s, actor=args.actor, object_prefix=args.object))
+    rows = trail(_database(args), actor=args.actor, object_prefix=args.object)
     if args.json:
         emit_json({"rows": rows})
         return 0
@@ -231,19 +226,18 @@ def _cmd_report(args) -> int:
 
 # -- sign-off ----------------------------------------------------------------------------
 def _signer(args) -> str:
-    from railval.db import engine
+    from railval.app.services.database import default_actor
 
-    who = engine.default_actor
+    who = default_actor()
     if who.startswith("cli:"):
         raise RailvalError("name the signer with --as USER or RAILVAL_USER")
     return who
 
 
 def _summary(args) -> dict:
-    from railval.app.services.signoff import signing_summary
+    from railval.app.services.signoff import summary_of
 
-    with _database(args).session() as s:
-        return signing_summary(s, args.campaign, args.config)
+    return summary_of(_database(args), args.campaign, args.config)
 
 
 def _num(v, fmt: str = "+.3f") -> str:
@@ -348,11 +342,9 @@ def _print_signoff(rec: dict, status: str, reasons: list[str]) -> None:
 
 
 def _cmd_signoff_list(args) -> int:
-    from railval.app.services.signoff import statuses
-    from railval.db import signoff as db_signoff
+    from railval.app.services.signoff import records
 
-    with _database(args).session() as s:
-        items = [(db_signoff.as_dict(so), st) for so, st in statuses(s, args.campaign, args.config)]
+    items = records(_database(args), args.campaign, args.config)
     if args.json:
         emit_json({"signoffs": [{**{k: v for k, v in d.items() if k != "manifest"},
                                  "status": st.status, "stale_reasons": st.reasons}
@@ -369,13 +361,9 @@ def _cmd_signoff_list(args) -> int:
 
 
 def _cmd_signoff_show(args) -> int:
-    from railval.app.services.signoff import status
-    from railval.db import signoff as db_signoff
+    from railval.app.services.signoff import record
 
-    with _database(args).session() as s:
-        so = db_signoff.get(s, args.id)
-        st = status(s, so)
-        rec = db_signoff.as_dict(so)
+    rec, st = record(_database(args), args.id)
     if args.json:
         emit_json({**rec, "status": st.status, "stale_reasons": st.reasons})
     else:

@@ -29,14 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_backup(args: argparse.Namespace) -> int:
-    from railval.db import engine
-    from railval.db.backup import backup
+    from railval.app.services.database import backup
 
-    database = engine.connect(args.db)
-    try:
-        doc = backup(database, args.folder, actor=engine.default_actor)
-    finally:
-        database.dispose()
+    doc = backup(args.db, args.folder)
     if args.json:
         emit_json(doc)
     else:
@@ -46,14 +41,9 @@ def cmd_backup(args: argparse.Namespace) -> int:
 
 
 def cmd_restore(args: argparse.Namespace) -> int:
-    from railval.db import engine
-    from railval.db.backup import restore
+    from railval.app.services.database import restore
 
-    database = engine.connect(args.db)
-    try:
-        doc = restore(database, args.folder, actor=engine.default_actor)
-    finally:
-        database.dispose()
+    doc = restore(args.db, args.folder)
     if args.json:
         emit_json(doc)
     else:

@@ -66,30 +66,25 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(args: argparse.Namespace, *, upgrade: bool = True):
-    from railval.db.engine import connect
+    from railval.app.services.database import open_database
 
-    database = connect(args.db)
-    database.ensure_initialised(upgrade=upgrade)
-    return database
+    return open_database(args.db, upgrade=upgrade)
 
 
 def cmd_init(args: argparse.Namespace) -> int:
-    from railval.db.engine import connect
+    from railval.app.services.database import initialise
 
-    database = connect(args.db)
-    before = database.current_revision()
-    head = database.init()
-    doc = {"database": database.safe_url, "revision": head, "previous_revision": before}
+    doc = initialise(args.db)
     if args.json:
         emit_json(doc)
     else:
-        state = "already at" if before == head else "migrated to"
-        print(f"{database.safe_url}: {state} revision {head}")
+        state = "already at" if doc["previous_revision"] == doc["revision"] else "migrated to"
+        print(f"{doc['database']}: {state} revision {doc['revision']}")
     return 0
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    from railval.db.importer import import_campaign
+    from railval.app.services import campaign_data
 
     database = _database(args)
     bar = Progress()
@@ -101,9 +96,8 @@ def cmd_import(args: argparse.Namespace) -> int:
 
     t = time.perf_counter()
     if args.into:
-        from railval.db.importer import import_configuration
-
-        conf = import_configuration(database, args.into, args.folder, progress=progress)
+        conf = campaign_data.import_configuration_folder(database, args.into, args.folder,
+                                                         progress=progress)
         doc = {"campaign": args.into, "configuration": conf,
                "seconds": round(time.perf_counter() - t, 3)}
         if args.json:
@@ -112,7 +106,7 @@ def cmd_import(args: argparse.Namespace) -> int:
             print(f"imported configuration {conf!r} into campaign {args.into!r} in "
                   f"{doc['seconds']:.1f} s")
         return 0
-    name = import_campaign(database, args.folder, progress=progress)
+    name = campaign_data.import_folder(database, args.folder, progress=progress)
     elapsed = time.perf_counter() - t
     doc = _summary(database, name)
     doc["seconds"] = round(elapsed, 3)
@@ -126,11 +120,9 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from railval.db.exporter import export_campaign
+    from railval.app.services.campaign_data import export
 
-    database = _database(args, upgrade=False)
-    with database.session() as s:
-        path = export_campaign(s, args.name, args.folder, fmt=args.format)
+    path = export(_database(args, upgrade=False), args.name, args.folder, fmt=args.format)
     if args.json:
         emit_json({"campaign": args.name, "manifest": str(path), "format": args.format})
     else:
@@ -139,10 +131,9 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def _summary(database, name_or_campaign) -> dict:
-    from railval.db import repo
+    from railval.app.services.campaign_data import summary
 
-    with database.session() as s:
-        return repo.campaign_summary(s, name_or_campaign)
+    return summary(database, name_or_campaign)
 
 
 def _zones_text(zones: dict[str, int]) -> str:
@@ -151,26 +142,21 @@ def _zones_text(zones: dict[str, int]) -> str:
 
 def cmd_list(args: argparse.Namespace) -> int:
     """The catalogue, read with the database driver alone when the case is plain
-    (:mod:`railval.db.catalogue`: no SQLAlchemy, ORM or migrations imported), else through
-    the ordinary path: :func:`railval.app.cli.authorize` (skipped by ``main`` for this verb,
-    ``authorizes_itself``), migrations, :func:`railval.db.repo.campaign_summary`."""
+    (:mod:`railval.app.services.catalogue`: no SQLAlchemy, ORM or migrations imported), else
+    through the ordinary path: :func:`railval.app.cli.authorize` (skipped by ``main`` for this
+    verb, ``authorizes_itself``), migrations, the ORM's campaign summaries."""
     import os
 
-    from railval.db import catalogue
+    from railval.app.services import catalogue
 
-    url = catalogue.resolve_url(args.db)
-    docs = catalogue.read_catalogue(url, args.as_user or os.environ.get("RAILVAL_USER"))
-    safe_url = catalogue.safe_url(url)
+    docs, safe_url = catalogue.fast(args.db, args.as_user or os.environ.get("RAILVAL_USER"))
     if docs is None:
         from railval.app.cli import authorize
-        from railval.db import repo
 
         args.authorizes_itself = False
         authorize(args)
         database = _database(args)
-        with database.session() as s:
-            ids = [c.id for c in repo.list_campaigns(s)]
-        docs = [_summary(database, cid) for cid in ids]
+        docs = catalogue.summaries(database)
         safe_url = database.safe_url
     if args.json:
         emit_json({"database": safe_url, "campaigns": docs})
@@ -188,12 +174,11 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
-    from railval.db import repo
+    from railval.app.services.campaign_data import verify
 
     database = _database(args, upgrade=False)
     t = time.perf_counter()
-    with database.session() as s:
-        doc = repo.verify_database(s, blobs=not args.no_blobs)
+    doc = verify(database, blobs=not args.no_blobs)
     doc["seconds"] = round(time.perf_counter() - t, 3)
     doc["database"] = database.safe_url
     if args.json:

@@ -18,11 +18,9 @@ from railval.core.errors import InvalidParameter
 
 
 def _db(args: argparse.Namespace):
-    from railval.db.engine import connect
+    from railval.app.services.database import open_database
 
-    database = connect(args.db)
-    database.ensure_initialised()
-    return database
+    return open_database(args.db)
 
 
 def parse_effect(item: str) -> tuple[str, dict[str, float]]:

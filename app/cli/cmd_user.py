@@ -16,7 +16,6 @@ holds no user, anyone with access to it may add the first one (make it an admin)
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import getpass
 import sys
 from pathlib import Path
@@ -111,33 +110,25 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(args):
-    from railval.db.engine import connect
+    from railval.app.services.database import open_database
 
-    database = connect(args.db)
-    database.ensure_initialised(upgrade=True)
-    return database
+    return open_database(args.db, upgrade=True)
 
 
 def _cmd_add(args) -> int:
-    from railval.db import users
+    from railval.app.services import users
 
     password = None if args.no_password else read_password(args)
-    database = _database(args)
-    with database.session() as s:
-        u = users.create_user(s, args.name, display_name=args.display_name, password=password,
-                              roles=args.role, actor=database.actor, reason=args.reason)
-        print(f"user {u.username} added (roles: {', '.join(u.role_names) or 'none'})")
+    name, roles = users.add(_database(args), args.name, display_name=args.display_name,
+                      password=password, roles=args.role, reason=args.reason)
+    print(f"user {name} added (roles: {', '.join(roles) or 'none'})")
     return 0
 
 
 def _cmd_list(args) -> int:
-    from railval.db import users
+    from railval.app.services import users
 
-    with _database(args).session() as s:
-        rows = [{"username": u.username, "display_name": u.display_name,
-                 "roles": u.role_names, "disabled": bool(u.disabled),
-                 "password_set": u.password_hash is not None,
-                 "created_at": u.created_at.isoformat()} for u in users.list_users(s)]
+    rows = users.rows(_database(args))
     if args.json:
         emit_json({"users": rows})
         return 0
@@ -154,59 +145,47 @@ def _cmd_list(args) -> int:
 
 
 def _cmd_disable(args) -> int:
-    from railval.db import users
+    from railval.app.services import users
 
-    database = _database(args)
-    with database.session() as s:
-        users.disable(s, args.name, actor=database.actor, reason=args.reason)
+    users.set_disabled(_database(args), args.name, True, reason=args.reason)
     print(f"user {args.name} disabled")
     return 0
 
 
 def _cmd_enable(args) -> int:
-    from railval.db import users
+    from railval.app.services import users
 
-    database = _database(args)
-    with database.session() as s:
-        users.enable(s, args.name, actor=database.actor, reason=args.reason)
+    users.set_disabled(_database(args), args.name, False, reason=args.reason)
     print(f"user {args.name} enabled")
     return 0
 
 
 def _cmd_passwd(args) -> int:
-    from railval.db import users
+    from railval.app.services import users
 
     database = _database(args)
-    with database.session() as s:
-        users.get_user(s, args.name)
+    users.require_user(database, args.name)
     password = read_password(args)
-    with database.session() as s:
-        users.set_password(s, args.name, password, actor=database.actor, reason=args.reason)
+    users.set_password(database, args.name, password, reason=args.reason)
     print(f"password of {args.name} set")
     return 0
 
 
 def _cmd_role(args) -> int:
-    from railval.db import users
+    from railval.app.services import users
 
-    database = _database(args)
-    with database.session() as s:
-        u = users.set_roles(s, args.name, args.roles, actor=database.actor, reason=args.reason)
-        print(f"user {u.username}: roles {', '.join(u.role_names) or 'none'}")
+    name, roles = users.set_roles(_database(args), args.name, args.roles, reason=args.reason)
+    print(f"user {name}: roles {', '.join(roles) or 'none'}")
     return 0
 
 
 def _cmd_invite(args) -> int:
-    from railval.db import audit, users
+    from railval.app.services import users
 
     if args.days <= 0:
         raise RailvalError(f"--days {args.days}: must be positive")
-    database = _database(args)
-    with database.session() as s:
-        inv, token = users.create_invitation(
-            s, role=args.role, workshop_ref=args.workshop,
-            valid_for=dt.timedelta(days=args.days), actor=database.actor)
-        expires = audit.utc_stamp(users._aware(inv.expires_at))
+    token, expires = users.invite(_database(args), role=args.role, workshop=args.workshop,
+                                  days=args.days)
     link = f"{args.base_url.rstrip('/')}/invite?token={token}"
     if args.json:
         emit_json({"link": link, "role": args.role, "workshop": args.workshop,

@@ -35,9 +35,9 @@ from railval.app.cli import emit_json
 def _actor() -> str:
     """The acting user of this command (``--as`` / ``$RAILVAL_USER``, checked by the CLI),
     else ``cli:<OS user>``: the name in the audit trail."""
-    from railval.db import engine
+    from railval.app.services.database import default_actor
 
-    return engine.default_actor
+    return default_actor()
 
 
 def _list(text: str | None) -> list[str] | None:
@@ -126,11 +126,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(url: str | None):
-    from railval.db.engine import connect
+    from railval.app.services.database import open_database
 
-    database = connect(url)
-    database.ensure_initialised()
-    return database
+    return open_database(url)
 
 
 def _flat(values: list[str] | None) -> list[str] | None:
@@ -141,25 +139,25 @@ def _flat(values: list[str] | None) -> list[str] | None:
 
 def _create(args: argparse.Namespace) -> int:
     from railval.app.services import workshops as ws
+    from railval.app.services.workshop_admin import plan_counts
     from railval.core.workshop import DEFAULT_SCALING, check_scaling
 
     scaling = check_scaling(args.scaling or DEFAULT_SCALING)
     database = _database(args.db)
     configs, sections, kinds = _flat(args.configurations), _flat(args.sections), _flat(args.kinds)
-    with database.session() as session:
-        planned = ws.plan(session, args.campaign, configs, sections, kinds)
-    counts = ws.count_by_kind(planned)
+    planned = plan_counts(database, args.campaign, configs, sections, kinds)
+    n_plots, counts = planned["plots"], planned["by_kind"]
     if args.dry_run:
-        doc = {"name": args.name, "campaign": args.campaign, "plots": len(planned),
+        doc = {"name": args.name, "campaign": args.campaign, "plots": n_plots,
                "by_kind": counts, "stored": False}
         if args.json:
             emit_json(doc)
         else:
-            print(f"workshop {args.name}: {len(planned)} plots would be created "
+            print(f"workshop {args.name}: {n_plots} plots would be created "
                   f"({', '.join(f'{k} {n}' for k, n in counts.items())}); nothing stored")
         return 0
     if not args.json:
-        print(f"creating workshop {args.name}: {len(planned)} plots "
+        print(f"creating workshop {args.name}: {n_plots} plots "
               f"({', '.join(f'{k} {n}' for k, n in counts.items())})", file=sys.stderr, flush=True)
     out = ws.create(database, args.name, args.campaign, configurations=configs,
                     sections=sections, kinds=kinds, blind=args.blind, repeats=args.repeats,
@@ -188,10 +186,9 @@ def _kinds(args: argparse.Namespace) -> int:
 
 
 def _plots(args: argparse.Namespace) -> int:
-    from railval.app.services.workshops import plots_document
+    from railval.app.services.workshop_admin import plots
 
-    with _database(args.db).session() as session:
-        doc = plots_document(session, args.name)
+    doc = plots(_database(args.db), args.name)
     if args.json:
         emit_json(doc)
     else:
@@ -203,13 +200,10 @@ def _plots(args: argparse.Namespace) -> int:
 
 
 def _invite(args: argparse.Namespace) -> int:
+    from railval.app.services.workshop_admin import invite
     from railval.app.services.workshops import review_link
-    from railval.db import workshops as wsdb
 
-    database = _database(args.db)
-    with database.session() as session:
-        w = wsdb.get_workshop(session, args.name)
-        token = wsdb.invite(session, w, args.reviewer, actor=_actor())
+    token = invite(_database(args.db), args.name, args.reviewer, actor=_actor())
     link = review_link(args.base_url, token)
     if args.json:
         emit_json({"workshop": args.name, "reviewer": args.reviewer, "link": link})
@@ -219,10 +213,9 @@ def _invite(args: argparse.Namespace) -> int:
 
 
 def _status(args: argparse.Namespace) -> int:
-    from railval.app.services.workshops import status_document
+    from railval.app.services.workshop_admin import status
 
-    with _database(args.db).session() as session:
-        doc = status_document(session, args.name)
+    doc = status(_database(args.db), args.name)
     if args.json:
         emit_json(doc)
     else:
@@ -235,13 +228,10 @@ def _status(args: argparse.Namespace) -> int:
 
 
 def _set_status(args: argparse.Namespace) -> int:
-    from railval.db import workshops as wsdb
+    from railval.app.services.workshop_admin import set_status
 
-    database = _database(args.db)
-    with database.session() as session:
-        w = wsdb.set_status(session, wsdb.get_workshop(session, args.name), args.status,
-                            actor=_actor())
-        print(f"workshop {w.name} is {w.status}")
+    status = set_status(_database(args.db), args.name, args.status, actor=_actor())
+    print(f"workshop {args.name} is {status}")
     return 0
 
 

@@ -51,14 +51,11 @@ class AuditPage(PageBase):
         super().safe_refresh()
 
     def refresh(self) -> None:
-        from railval.app.services.audit import verify_database
-        from railval.db import audit
+        from railval.app.services.audit import newest, verify_database
 
         check = verify_database(self.app.backend.database, signals=False, full=False)
         chain = [f for f in check.findings if f.kind in ("chain", "head", "signature", "witness")]
-        with self.app.backend.session() as s:
-            n = audit.count(s)
-            rows = list(audit.iter_rows(s))[-ROWS_SHOWN:]
+        rows, n = newest(self.app.backend.database, ROWS_SHOWN)
         objs = [message(f"Hash chain intact: {check.rows} rows, head {check.head_hash[:16]}…, "
                         f"{check.signed_rows} signed (key {', '.join(k[:16] for k in check.keys)}…)"
                         if not chain else f"Hash chain BROKEN: {chain[0]}",
@@ -70,7 +67,7 @@ class AuditPage(PageBase):
         objs.append(pn.Row(self.html_dl, self.pdf_dl))
         df = pd.DataFrame([{"seq": r["seq"], "UTC": r["at_utc"][:19], "actor": r["actor"],
                             "action": r["action"], "object": r["object"],
-                            "reason": r["reason"]} for r in reversed(rows)])
+                            "reason": r["reason"]} for r in rows])
         objs.append(pn.pane.Markdown(f"Newest {min(n, ROWS_SHOWN)} of {n} audit rows:"))
         if len(df):
             objs.append(html_table(df, "rv-audit-table", max_height=600))

@@ -22,8 +22,6 @@ import panel as pn
 
 from railval.app.pages._common import PageBase, html_table, make_dispatch, message
 from railval.app.state import PAGE_TITLES, AppState
-from railval.db import signoff as db_signoff
-
 
 #: the label of a decision contrary to the objective verdict (cards, banner, table)
 CONTRARY_TAG = ("<span class='rv-contrary' style='background:#b3261e;color:#fff;padding:1px 6px;"
@@ -61,10 +59,9 @@ def signoff_card(rec: dict, status: str, reasons: list[str]) -> pn.pane.HTML:
 
 def signoff_banner(app: AppState, config: str | None) -> pn.pane.HTML:
     """One line per sign-off of ``config`` with its status (dashboard), escaped."""
-    from railval.app.services.signoff import statuses
+    from railval.app.services.signoff import records
 
-    with app.backend.session() as s:
-        items = [(db_signoff.as_dict(so), st) for so, st in statuses(s, app.campaign, config)]
+    items = records(app.backend.database, app.campaign, config)
     if not items:
         return pn.pane.HTML("<div class='rv-signoff-banner' style='color:#555;font-size:13px'>"
                             "Not signed off.</div>", sizing_mode="stretch_width")
@@ -229,18 +226,16 @@ class SignoffPage(PageBase):
                            action="signoff.create")
 
     def items(self):
-        from railval.app.services.signoff import statuses
+        from railval.app.services.signoff import records
 
-        with self.app.backend.session() as s:
-            return [(db_signoff.as_dict(so), st) for so, st in statuses(s, self.app.campaign)]
+        return records(self.app.backend.database, self.app.campaign)
 
     def load_summary(self) -> dict | None:
-        from railval.app.services.signoff import signing_summary
+        from railval.app.services.signoff import summary_of
 
         if self.app.campaign is None or self.app.configuration is None:
             return None
-        with self.app.backend.session() as s:
-            return signing_summary(s, self.app.campaign, self.app.configuration)
+        return summary_of(self.app.backend.database, self.app.campaign, self.app.configuration)
 
     def refresh(self) -> None:
         items = self.items()

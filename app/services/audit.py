@@ -317,3 +317,24 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, 
                 "; ".join(diffs)))
     report.seconds = time.perf_counter() - t0
     return report
+
+
+def seal(database, actor: str, reason: str = "") -> tuple[int, str, int]:
+    """Sign the current head (:func:`railval.db.audit.seal`) → (seq, row hash, number of
+    unsigned rows it covered)."""
+    with database.session(write=True) as s:
+        ev = audit.seal(s, actor, reason)
+        return ev.seq, ev.row_hash, int((ev.detail or {}).get("unsigned_rows_before", 0))
+
+
+def trail(database, *, actor: str | None = None, object_prefix: str | None = None
+          ) -> list[dict[str, Any]]:
+    """The audit rows in ``seq`` order, optionally of one actor or objects with a prefix."""
+    with database.session() as s:
+        return list(audit.iter_rows(s, actor=actor, object_prefix=object_prefix))
+
+
+def newest(database, limit: int) -> tuple[list[dict[str, Any]], int]:
+    """The ``limit`` newest audit rows (newest first) and the number of all rows."""
+    with database.session() as s:
+        return audit.newest_rows(s, limit)

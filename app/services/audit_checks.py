@@ -211,20 +211,81 @@ def _check_witness(by_seq: dict[int, str], witness: list[dict[str, Any]], where_
             break
 
 
-def _check_signoffs(sods: list[dict[str, Any]], rows: dict[int, dict[str, Any]],
-                    keys: dict[str, Any], report: VerifyReport) -> set[int]:
-    """Sign-offs ↔ ``signoff.create`` rows both ways; returns the ids with findings."""
+def _signoff_rows(rows: dict[int, dict[str, Any]]
+                  ) -> tuple[dict[int, list[dict[str, Any]]], dict[int, tuple[int, str]]]:
+    """(sign-off id → its ``signoff.create`` rows, unsigned sign-off id → (seal row, record
+    hash) of the first signed ``audit.seal`` row binding it)."""
     created: dict[int, list[dict[str, Any]]] = {}
+    sealed: dict[int, tuple[int, str]] = {}
     for r in rows.values():
         if r["action"] == "signoff.create":
             sid = (r.get("detail") or {}).get("signoff")
             if isinstance(sid, int):
                 created.setdefault(sid, []).append(r)
-    sealed: dict[int, tuple[int, str]] = {}  # unsigned sign-off → (seal row, record hash)
     for r in rows.values():
         if r["action"] == "audit.seal" and r.get("signature"):
             for sid, h in ((r.get("detail") or {}).get("unsigned_signoffs") or {}).items():
                 sealed.setdefault(int(sid), (int(r["seq"]), str(h)))
+    return created, sealed
+
+
+def _check_unsigned(sod: dict[str, Any], row: dict[str, Any] | None,
+                    sealed: dict[int, tuple[int, str]], report: VerifyReport, find) -> None:
+    """A sign-off without signature: its audit row, and the seal that binds its record."""
+    if row is None:
+        find(sod, "inserted", "a signoff.create audit row and a signature",
+             "neither: the sign-off was written outside railval")
+    elif row.get("signature") or (report.signed_from is not None
+                                  and int(row["seq"]) >= report.signed_from):
+        find(sod, f"inserted (audit row {row['seq']})",
+             "a signature (the trail was signed when its audit row was written)",
+             "none: the sign-off was written without the signing key")
+    elif row["after_sha256"] != sod["evidence_sha256"]:
+        find(sod, f"audit row {row['seq']}", sod["evidence_sha256"], str(row["after_sha256"]))
+    elif int(sod["id"]) in sealed:
+        seal_seq, h = sealed[int(sod["id"])]
+        if signoff_record_hash(sod) != h:
+            find(sod, f"edited after the seal (audit row {seal_seq})", h, signoff_record_hash(sod))
+        else:
+            report.notes.append(
+                f"sign-off {sod['id']} ({sod['campaign']}/{sod['configuration']}) is "
+                f"unsigned, written before signing was enabled (audit row "
+                f"{row['seq']}); its record is bound by the seal, row {seal_seq}")
+    else:
+        report.notes.append(
+            f"sign-off {sod['id']} ({sod['campaign']}/{sod['configuration']}) is "
+            f"unsigned, written before signing was enabled (audit row {row['seq']}), "
+            "and not sealed: its decision and statement are bound to nothing; run "
+            "`railval audit seal`")
+
+
+def _check_signed(sod: dict[str, Any], row: dict[str, Any] | None, keys: dict[str, Any],
+                  find) -> None:
+    """A signed sign-off: a trusted key, its signature, and its audit row's record hash."""
+    record_hash = signoff_record_hash(sod)
+    pk = keys.get(str(sod.get("key_fingerprint")))
+    hint = ""
+    if row is not None:
+        was = (row.get("detail") or {}).get("decision")
+        if was is not None and was != sod["decision"]:
+            hint = f"; decision: signed {was!r}, now {sod['decision']!r}"
+    if pk is None:
+        find(sod, "signature", "a key this verifier trusts",
+             f"key {str(sod.get('key_fingerprint'))[:16]}…")
+    elif not verify_signature(pk, "signoff", signoff_record(sod), sod["signature"]):
+        find(sod, "edited or forged: its signature does not verify",
+             f"the signed record {sod.get('record_sha256')}", f"record {record_hash}{hint}")
+    elif row is None:
+        find(sod, "audit row signoff.create", "a row naming this sign-off",
+             "none: the audit row was removed")
+    elif row["after_sha256"] != record_hash:
+        find(sod, f"audit row {row['seq']}", str(row["after_sha256"]), f"{record_hash}{hint}")
+
+
+def _check_signoffs(sods: list[dict[str, Any]], rows: dict[int, dict[str, Any]],
+                    keys: dict[str, Any], report: VerifyReport) -> set[int]:
+    """Sign-offs ↔ ``signoff.create`` rows both ways; returns the ids with findings."""
+    created, sealed = _signoff_rows(rows)
     bad: set[int] = set()
 
     def find(sod, what, expected, found):
@@ -246,54 +307,10 @@ def _check_signoffs(sods: list[dict[str, Any]], rows: dict[int, dict[str, Any]],
         if len(audit_rows) > 1:
             find(sod, "audit rows " + ", ".join(str(r["seq"]) for r in audit_rows),
                  "one signoff.create row", f"{len(audit_rows)}: a row was inserted")
-        if not sod.get("signature"):
-            if row is None:
-                find(sod, "inserted", "a signoff.create audit row and a signature",
-                     "neither: the sign-off was written outside railval")
-            elif row.get("signature") or (report.signed_from is not None
-                                          and int(row["seq"]) >= report.signed_from):
-                find(sod, f"inserted (audit row {row['seq']})",
-                     "a signature (the trail was signed when its audit row was written)",
-                     "none: the sign-off was written without the signing key")
-            elif row["after_sha256"] != sod["evidence_sha256"]:
-                find(sod, f"audit row {row['seq']}", sod["evidence_sha256"],
-                     str(row["after_sha256"]))
-            elif int(sod["id"]) in sealed:
-                seal_seq, h = sealed[int(sod["id"])]
-                if signoff_record_hash(sod) != h:
-                    find(sod, f"edited after the seal (audit row {seal_seq})", h,
-                         signoff_record_hash(sod))
-                else:
-                    report.notes.append(
-                        f"sign-off {sod['id']} ({sod['campaign']}/{sod['configuration']}) is "
-                        f"unsigned, written before signing was enabled (audit row "
-                        f"{row['seq']}); its record is bound by the seal, row {seal_seq}")
-            else:
-                report.notes.append(
-                    f"sign-off {sod['id']} ({sod['campaign']}/{sod['configuration']}) is "
-                    f"unsigned, written before signing was enabled (audit row {row['seq']}), "
-                    "and not sealed: its decision and statement are bound to nothing; run "
-                    "`railval audit seal`")
-            continue
-        record_hash = signoff_record_hash(sod)
-        pk = keys.get(str(sod.get("key_fingerprint")))
-        hint = ""
-        if row is not None:
-            was = (row.get("detail") or {}).get("decision")
-            if was is not None and was != sod["decision"]:
-                hint = f"; decision: signed {was!r}, now {sod['decision']!r}"
-        if pk is None:
-            find(sod, "signature", "a key this verifier trusts",
-                 f"key {str(sod.get('key_fingerprint'))[:16]}…")
-        elif not verify_signature(pk, "signoff", signoff_record(sod), sod["signature"]):
-            find(sod, "edited or forged: its signature does not verify",
-                 f"the signed record {sod.get('record_sha256')}", f"record {record_hash}{hint}")
-        elif row is None:
-            find(sod, "audit row signoff.create", "a row naming this sign-off",
-                 "none: the audit row was removed")
-        elif row["after_sha256"] != record_hash:
-            find(sod, f"audit row {row['seq']}", str(row["after_sha256"]),
-                 f"{record_hash}{hint}")
+        if sod.get("signature"):
+            _check_signed(sod, row, keys, find)
+        else:
+            _check_unsigned(sod, row, sealed, report, find)
     for sid, audit_rows in sorted(created.items()):
         if sid not in ids:
             r = audit_rows[0]
@@ -304,5 +321,3 @@ def _check_signoffs(sods: list[dict[str, Any]], rows: dict[int, dict[str, Any]],
                 f"{r['seq']})", "the sign-off this audit row records",
                 "none: the sign-off was deleted"))
     return bad
-
-

@@ -242,12 +242,12 @@ def sign(database, username: str, password: str, campaign: str, configuration: s
     A wrong password is recorded (``login.failed``) and counts towards the sign-in rate
     limit. Raises :class:`SignoffRefused` or :class:`PermissionDenied`.
     """
-    with database.session(actor=username) as s:
+    with database.session(actor=username, write=True) as s:  # a failure is recorded
         result = users.authenticate(s, username, password, source=source or "signoff",
                                     record_success=False)
     if not result.ok:
         raise SignoffRefused(f"sign-off refused: {result.message}")
-    with database.session(actor=username) as s:
+    with database.session(actor=username, write=True) as s:
         user = users.get_user(s, username)
         try:
             require(users.principal(user), "signoff.create")
@@ -347,3 +347,26 @@ def signing_summary(session: Session, campaign: str, configuration: str) -> dict
         "settings": dict(SETTINGS),
     }
 
+
+
+# -- units of work for the pages and verbs (they reach the database only through these) --
+def summary_of(database, campaign: str, configuration: str) -> dict[str, Any]:
+    """:func:`signing_summary` in a unit of work of its own."""
+    with database.session() as s:
+        return signing_summary(s, campaign, configuration)
+
+
+def records(database, campaign: str | None = None, configuration: str | None = None
+            ) -> list[tuple[dict[str, Any], SignoffStatus]]:
+    """Every sign-off (of ``campaign``, ``configuration`` when given) as its record
+    (:func:`railval.db.signoff.as_dict`) with its status, oldest first."""
+    with database.session() as s:
+        return [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, configuration)]
+
+
+def record(database, signoff_id: int) -> tuple[dict[str, Any], SignoffStatus]:
+    """One sign-off's record with its status; :class:`NotFound` for an unknown id."""
+    with database.session() as s:
+        so = db_signoff.get(s, signoff_id)
+        st = status(s, so)
+        return db_signoff.as_dict(so), st

@@ -299,23 +299,9 @@ def scaling_preview(database, campaign: str, configurations: Sequence[str] | Non
     return {"plots": len(facts), "default": DEFAULT_SCALING, "scalings": out}
 
 
-def create(database, name: str, campaign: str, *, configurations: Sequence[str] | None = None,
-           sections: Sequence[str] | None = None, kinds: Sequence[str] | None = None,
-           blind: bool = False, repeats: float = DEFAULT_REPEATS, auto_share: float = 0.0,
-           seed: int = 0, scaling: str = DEFAULT_SCALING, twin_scaling: str = "auto",
-           actor: Principal | str = "system",
-           progress: Callable[[str, float], None] | None = None) -> dict[str, Any]:
-    """Build, render and store a workshop; returns its summary (``name, plots, by_kind,
-    scaling, scales, flat_share``). ``scaling``: ``zone`` (one range per kind within each
-    EN 14363 test zone, the default) or ``workshop`` (one range per kind over the whole
-    workshop); ``auto_share``: share of the fixed plots also rendered with per-plot
-    automatic scaling (the presentation experiment), chosen with ``seed``; ``twin_scaling``:
-    how those twins are scaled — ``auto`` (per-plot ranges) or the other consistent scaling
-    (``workshop`` beside ``zone`` or the reverse: the two scalings paired on the same plot;
-    the twin's ``scaling`` is then that name)."""
-    from railval.app.services.workshop_render import render_parameters, render_png
-    from railval.core.workshop import nice_range
-    from railval.db import repo
+def _check_options(name: str, scaling: str, twin_scaling: str, repeats: float, auto_share: float,
+                   actor: Principal | str) -> None:
+    """Refuse a workshop's options before anything is read (:class:`InvalidParameter`)."""
     from railval.db import workshops as wsdb
 
     if isinstance(actor, Principal):
@@ -329,78 +315,147 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
         raise InvalidParameter(f"--repeats must be between 0 and 0.5, got {repeats!r}")
     if not (0.0 <= auto_share <= 1.0):
         raise InvalidParameter(f"automatic-scaling share must be between 0 and 1, got {auto_share!r}")
+
+
+def _refuse_existing(session, name: str) -> None:
+    if session.scalar(_exists_query(name)) is not None:
+        raise InvalidParameter(f"workshop {name!r} already exists; choose another name")
+
+
+@dataclass
+class _Gathered:
+    """What a new workshop is drawn from: its campaign, sections, vehicle and the plot facts
+    with their measured and simulated curves."""
+
+    campaign: str
+    campaign_id: int
+    infos: dict[str, Any]
+    vehicle: dict[str, Any]
+    facts: list[dict[str, Any]]
+    curves: list[tuple[_Curve, _Curve]]
+
+
+def _gather(session, name: str, campaign: str, configurations, sections, kinds,
+            progress: Callable[[str, float], None] | None) -> _Gathered:
+    """Read and filter the signals of the planned plots (step 1 of :func:`create`)."""
+    from railval.db import repo
+
+    _refuse_existing(session, name)
+    camp = repo.get_campaign(session, campaign)
+    planned = plan(session, camp.name, configurations, sections, kinds)
+    if not planned:
+        raise InvalidParameter("this choice of configurations, sections and kinds gives no plot "
+                               "(no section has the channels of the chosen kinds on both sides)")
+    infos = {s.id: s for s in repo.section_infos(session, camp)}
+    vehicle = repo.vehicle_info(session, camp)
+    std_limits = {q: QUANTITIES[q].std_limit(vehicle["Q0_kN"], vehicle["kind"],
+                                             vehicle["secondary_suspension"])
+                  for q in QUANTITIES}
+    facts, curves = _collect(session, camp, planned, infos, objective=True,
+                             std_limits=std_limits, progress=progress)
+    return _Gathered(camp.name, camp.id, infos, vehicle, facts, curves)
+
+
+def _own_scale(k, cm: _Curve, cs: _Curve) -> Scale:
+    """The per-plot automatic scaling of the presentation experiment."""
+    from railval.core.workshop import nice_range
+
+    own = kind_scale(k.domain, [_extent(k, cm), _extent(k, cs)])
+    if k.domain == "time":
+        own = Scale(nice_range(min(cm.x.min(), cs.x.min()), max(cm.x.max(), cs.x.max())), own.y)
+    return own
+
+
+def _render_rows(g: _Gathered, jobs: list[tuple[int, str]], fixed: tuple[list[str], dict[str, Scale]],
+                 twin: tuple[list[str], dict[str, Scale]] | None, *, blind: bool,
+                 progress: Callable[[str, float], None] | None) -> list[dict[str, Any]]:
+    """Render every plot once at its scaling (step 2 of :func:`create`): ``jobs`` are
+    (fact index, ``fixed`` | ``auto`` | the twin's scaling)."""
+    from railval.app.services.workshop_render import render_parameters, render_png
+
+    rows: list[dict[str, Any]] = []
+    for j, (i, plot_scaling) in enumerate(jobs):
+        f, (cm, cs) = g.facts[i], g.curves[i]
+        k = PLOT_KINDS[f["kind"]]
+        if plot_scaling == "fixed":
+            key, scale = fixed[0][i], fixed[1][fixed[0][i]]
+        elif plot_scaling != "auto":
+            key, scale = twin[0][i], twin[1][twin[0][i]]
+        else:
+            key, scale = None, _own_scale(k, cm, cs)
+        title = _title(k, f["position"], blind=blind, vehicle=g.vehicle["name"] or g.campaign,
+                       configuration=f["configuration"], section=f["section"])
+        image = render_png(cm.x, cm.y, cs.x, cs.y, scale, title=title, x_label=k.x_label,
+                           y_label=k.y_label)
+        params = render_parameters(k.to_dict(), scale, scaling=plot_scaling, title=title,
+                                   x_label=k.x_label, y_label=k.y_label,
+                                   extra={"lowpass_hz": LOWPASS_HZ,
+                                          "psd_segment_s": PSD_SEGMENT_S if k.domain == "psd" else None,
+                                          "blind": bool(blind), "scale_key": key,
+                                          "zone": g.infos[f["section"]].zone})
+        rows.append({**f, "scaling": plot_scaling, "render": params, "image": image,
+                     "twin": i if plot_scaling != "fixed" else None})
+        if progress is not None:
+            progress("rendering plots", 0.5 + 0.5 * (j + 1) / len(jobs))
+    return rows
+
+
+def create(database, name: str, campaign: str, *, configurations: Sequence[str] | None = None,
+           sections: Sequence[str] | None = None, kinds: Sequence[str] | None = None,
+           blind: bool = False, repeats: float = DEFAULT_REPEATS, auto_share: float = 0.0,
+           seed: int = 0, scaling: str = DEFAULT_SCALING, twin_scaling: str = "auto",
+           actor: Principal | str = "system",
+           progress: Callable[[str, float], None] | None = None) -> dict[str, Any]:
+    """Build, render and store a workshop; returns its summary (``name, plots, by_kind,
+    scaling, scales, flat_share``). ``scaling``: ``zone`` (one range per kind within each
+    EN 14363 test zone, the default) or ``workshop`` (one range per kind over the whole
+    workshop); ``auto_share``: share of the fixed plots also rendered with per-plot
+    automatic scaling (the presentation experiment), chosen with ``seed``; ``twin_scaling``:
+    how those twins are scaled — ``auto`` (per-plot ranges) or the other consistent scaling
+    (``workshop`` beside ``zone`` or the reverse: the two scalings paired on the same plot;
+    the twin's ``scaling`` is then that name).
+
+    Steps: gather the signals (a read unit of work), scale and render (no database), store
+    (one ``session(write=True)``, so the write lock is held only while storing)."""
+    from railval.db import workshops as wsdb
+
+    _check_options(name, scaling, twin_scaling, repeats, auto_share, actor)
     with database.session() as session:
-        if session.scalar(_exists_query(name)) is not None:
-            raise InvalidParameter(f"workshop {name!r} already exists; choose another name")
-        camp = repo.get_campaign(session, campaign)
-        planned = plan(session, camp.name, configurations, sections, kinds)
-        if not planned:
-            raise InvalidParameter("this choice of configurations, sections and kinds gives no plot "
-                                   "(no section has the channels of the chosen kinds on both sides)")
-        infos = {s.id: s for s in repo.section_infos(session, camp)}
-        vehicle = repo.vehicle_info(session, camp)
-        std_limits = {q: QUANTITIES[q].std_limit(vehicle["Q0_kN"], vehicle["kind"],
-                                                 vehicle["secondary_suspension"])
-                      for q in QUANTITIES}
-        facts, curves = _collect(session, camp, planned, infos, objective=True,
-                                 std_limits=std_limits, progress=progress)
-        used_secs = list(dict.fromkeys(f["section"] for f in facts))
-        used_cfgs = list(dict.fromkeys(f["configuration"] for f in facts))
-        keys, scales, groups = _scaled(facts, curves, infos, scaling)
-        if twin_scaling != "auto":
-            twin_keys, twin_scales, _ = _scaled(facts, curves, infos, twin_scaling)
-        rng = random.Random(seed)
-        n_auto = round(auto_share * len(facts))
-        auto_idx = sorted(rng.sample(range(len(facts)), n_auto)) if n_auto else []
-        rows: list[dict[str, Any]] = []
-        jobs = [(i, "fixed") for i in range(len(facts))] + [(i, twin_scaling) for i in auto_idx]
-        for j, (i, plot_scaling) in enumerate(jobs):
-            f, (cm, cs) = facts[i], curves[i]
-            k = PLOT_KINDS[f["kind"]]
-            if plot_scaling == "fixed":
-                scale = scales[keys[i]]
-            elif plot_scaling != "auto":
-                scale = twin_scales[twin_keys[i]]
-            else:
-                own = kind_scale(k.domain, [_extent(k, cm), _extent(k, cs)])
-                if k.domain == "time":
-                    own = Scale(nice_range(min(cm.x.min(), cs.x.min()), max(cm.x.max(), cs.x.max())),
-                                own.y)
-                scale = own
-            title = _title(k, f["position"], blind=blind, vehicle=vehicle["name"] or camp.name,
-                           configuration=f["configuration"], section=f["section"])
-            image = render_png(cm.x, cm.y, cs.x, cs.y, scale, title=title, x_label=k.x_label,
-                               y_label=k.y_label)
-            key = (keys[i] if plot_scaling == "fixed" else None if plot_scaling == "auto"
-                   else twin_keys[i])
-            params = render_parameters(k.to_dict(), scale, scaling=plot_scaling, title=title,
-                                       x_label=k.x_label, y_label=k.y_label,
-                                       extra={"lowpass_hz": LOWPASS_HZ,
-                                              "psd_segment_s": PSD_SEGMENT_S if k.domain == "psd" else None,
-                                              "blind": bool(blind), "scale_key": key,
-                                              "zone": infos[f["section"]].zone})
-            rows.append({**f, "scaling": plot_scaling, "render": params, "image": image,
-                         "twin": i if plot_scaling != "fixed" else None})
-            if progress is not None:
-                progress("rendering plots", 0.5 + 0.5 * (j + 1) / len(jobs))
-        settings = {"campaign": camp.name, "configurations": used_cfgs, "sections": used_secs,
-                    "kinds": sorted({f["kind"] for f in facts}, key=PLOT_KIND_IDS.index),
-                    "lowpass_hz": LOWPASS_HZ, "seed": seed, "blind": bool(blind),
-                    "repeats": repeats, "auto_share": auto_share, "scaling": scaling,
-                    "twin_scaling": twin_scaling,
-                    "objective": "largest |D_v| / std limit (Polach & Böttcher 2014 eq. 4, Table 2)"}
-        w = wsdb.create_workshop(session, name, camp.id, blind=blind, repeat_share=repeats,
+        g = _gather(session, name, campaign, configurations, sections, kinds, progress)
+    facts = g.facts
+    keys, scales, groups = _scaled(facts, g.curves, g.infos, scaling)
+    twin = None
+    if twin_scaling != "auto":
+        twin_keys, twin_scales, _ = _scaled(facts, g.curves, g.infos, twin_scaling)
+        twin = (twin_keys, twin_scales)
+    rng = random.Random(seed)
+    n_auto = round(auto_share * len(facts))
+    auto_idx = sorted(rng.sample(range(len(facts)), n_auto)) if n_auto else []
+    jobs = [(i, "fixed") for i in range(len(facts))] + [(i, twin_scaling) for i in auto_idx]
+    rows = _render_rows(g, jobs, (keys, scales), twin, blind=blind, progress=progress)
+    settings = {"campaign": g.campaign,
+                "configurations": list(dict.fromkeys(f["configuration"] for f in facts)),
+                "sections": list(dict.fromkeys(f["section"] for f in facts)),
+                "kinds": sorted({f["kind"] for f in facts}, key=PLOT_KIND_IDS.index),
+                "lowpass_hz": LOWPASS_HZ, "seed": seed, "blind": bool(blind),
+                "repeats": repeats, "auto_share": auto_share, "scaling": scaling,
+                "twin_scaling": twin_scaling,
+                "objective": "largest |D_v| / std limit (Polach & Böttcher 2014 eq. 4, Table 2)"}
+    with database.session(write=True) as session:
+        _refuse_existing(session, name)
+        w = wsdb.create_workshop(session, name, g.campaign_id, blind=blind, repeat_share=repeats,
                                  auto_share=auto_share, settings=settings,
                                  scales={k: s.to_dict() for k, s in scales.items()},
                                  plots=rows, actor=actor)
-        return {"name": w.name, "campaign": camp.name, "plots": len(rows),
-                "fixed_plots": len(facts), "auto_plots": len(auto_idx),
-                "by_kind": count_by_kind([PlannedPlot(f["configuration"], f["section"], f["kind"],
-                                                      f["position"]) for f in facts]),
-                "blind": bool(blind), "repeats": repeats, "scaling": scaling,
-                "flat_share": flat_share(groups),
-                "scales": {k: s.to_dict() for k, s in scales.items()},
-                "ranges": list(groups.values())}
+        stored_name = w.name
+    return {"name": stored_name, "campaign": g.campaign, "plots": len(rows),
+            "fixed_plots": len(facts), "auto_plots": len(auto_idx),
+            "by_kind": count_by_kind([PlannedPlot(f["configuration"], f["section"], f["kind"],
+                                                  f["position"]) for f in facts]),
+            "blind": bool(blind), "repeats": repeats, "scaling": scaling,
+            "flat_share": flat_share(groups),
+            "scales": {k: s.to_dict() for k, s in scales.items()},
+            "ranges": list(groups.values())}
 
 
 def workshop_scaling(settings: dict[str, Any] | None) -> str:
@@ -535,7 +590,7 @@ def import_answers(database, name: str, path: str | Path, *,
     except UnicodeDecodeError as exc:
         raise InvalidParameter(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     rows = parse_answers_csv(text, str(path))
-    with database.session() as session:
+    with database.session(write=True) as session:
         w = wsdb.get_workshop(session, name)
         return wsdb.import_answers(session, w, rows, actor=actor, source_name=str(path))
 

@@ -89,14 +89,11 @@ def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | N
 
 
 def _cards(database, name: str, groups: list[str], actor) -> dict[str, Any]:
+    from railval.app.services.workshop_admin import sibling_workshops
     from railval.app.services.workshop_cards import cards
-    from railval.db import workshops as wsdb
 
     doc = cards(database, name, groups=groups, actor=actor)
-    with database.session() as s:
-        w = wsdb.get_workshop(s, name)
-        doc["others"] = [x.name for x in wsdb.list_workshops(s)
-                         if x.campaign_id == w.campaign_id and x.name != name]
+    doc["others"] = sibling_workshops(database, name)
     return doc
 
 
@@ -136,10 +133,9 @@ class WorkshopPlotImage(_OrganiserBase):
 
 
 def _plot_image(database, name: str, plot_id: int) -> tuple[bytes, str]:
-    from railval.db import workshops as wsdb
+    from railval.app.services.workshop_admin import plot_image
 
-    with database.session() as s:
-        return wsdb.plot_image(s, wsdb.get_workshop(s, name).id, plot_id)
+    return plot_image(database, name, plot_id)
 
 
 def _pct_ci(ci: Any) -> str:

@@ -19,7 +19,7 @@ from urllib.parse import quote
 import tornado.web
 from tornado.ioloop import IOLoop
 
-from railval.core.roles import Principal, allowed, open_principal
+from railval.core.roles import Principal, allowed
 
 COOKIE = "railval_user"
 COOKIE_DAYS = 1
@@ -141,25 +141,10 @@ def _is_local(handler: tornado.web.RequestHandler) -> bool:
 
 def _principal_for(database, signed: tuple[str, float] | None, local: bool) -> Principal | None:
     """The user of a workshop cookie (user, issued at), re-read from the database on every
-    request: disabled, or password changed after the cookie was issued → nobody."""
-    from sqlalchemy import func, select
+    request (:func:`railval.app.services.users.cookie_principal`)."""
+    from railval.app.services.users import cookie_principal
 
-    from railval.db import users
-    from railval.db.models import AppUser
-
-    with database.session() as s:
-        if signed:
-            username, issued = signed
-            user = users.find_user(s, username)
-            if (user is not None and not user.disabled
-                    and users.password_changed_at(s, username) <= issued):
-                return users.principal(user)
-        if local:
-            n_pw = s.scalar(select(func.count()).select_from(AppUser)
-                            .where(AppUser.password_hash.is_not(None)))
-            if n_pw == 0:
-                return open_principal()
-    return None
+    return cookie_principal(database, signed, local)
 
 
 class _Base(tornado.web.RequestHandler):
@@ -244,7 +229,7 @@ class Login(_Base):
         self.finish(page("Sign in", _login_form(nxt, "")))
 
     async def post(self) -> None:
-        from railval.db import users
+        from railval.app.services.users import sign_in
 
         nxt = self.get_argument("next", "/workshops")
         if not nxt.startswith("/") or nxt.startswith("//"):
@@ -252,11 +237,8 @@ class Login(_Base):
         username = self.get_argument("username", "")
         password = self.get_argument("password", "")
 
-        def check():
-            with self.database.session() as s:
-                res = users.authenticate(s, username, password, source=self.request.remote_ip or "")
-                return res.ok, res.message
-        ok, message = await run(check)
+        ok, message = await run(sign_in, self.database, username, password,
+                                source=self.request.remote_ip or "")
         if not ok:
             self.set_status(401)
             self.finish(page("Sign in", _login_form(nxt, message)))

@@ -22,16 +22,9 @@ from railval.core.roles import allowed
 
 # -------------------------------------------------------------------------- organiser
 def _list_doc(database) -> list[dict[str, Any]]:
-    from railval.db import workshops as wsdb
+    from railval.app.services.workshop_admin import overview
 
-    with database.session() as s:
-        out = []
-        for w in wsdb.list_workshops(s):
-            prog = wsdb.progress(s, w)
-            out.append({"name": w.name, "campaign": w.campaign.name, "status": w.status,
-                        "blind": w.blind, "reviewers": len(prog),
-                        "answers": sum(r["answered"] for r in prog)})
-        return out
+    return overview(database)
 
 
 class WorkshopList(_OrganiserBase):
@@ -55,14 +48,10 @@ class WorkshopList(_OrganiserBase):
 
 
 def _form_choices(database) -> dict[str, Any]:
+    from railval.app.services.workshop_admin import campaign_choices
     from railval.app.services.workshops import describe_kinds
-    from railval.db import repo
 
-    with database.session() as s:
-        camps = {c.name: {"configurations": [x.name for x in repo.list_configurations(s, c)],
-                          "sections": [x.id for x in repo.section_infos(s, c)]}
-                 for c in repo.list_campaigns(s)}
-    return {"campaigns": camps, "kinds": describe_kinds()}
+    return {"campaigns": campaign_choices(database), "kinds": describe_kinds()}
 
 
 _NEW_JS = r"""
@@ -113,15 +102,13 @@ fill();
 
 
 def _plan_doc(database, args: dict[str, list[str]]) -> dict[str, Any]:
-    from railval.app.services import workshops as ws
+    from railval.app.services.workshop_admin import plan_counts
 
     # the form sends the ticked boxes only: a group with none ticked gives no plot
     if not all(args.get(g) for g in ("configurations", "sections", "kinds")):
         return {"plots": 0, "by_kind": {}}
-    with database.session() as s:
-        planned = ws.plan(s, (args.get("campaign") or [""])[0], args["configurations"],
-                          args["sections"], args["kinds"])
-    return {"plots": len(planned), "by_kind": ws.count_by_kind(planned)}
+    return plan_counts(database, (args.get("campaign") or [""])[0], args["configurations"],
+                       args["sections"], args["kinds"])
 
 
 def _args(handler: tornado.web.RequestHandler) -> dict[str, list[str]]:
@@ -213,10 +200,9 @@ EN 14363 test zone</option><option value='workshop'>same range per kind over the
 
 
 def _status_doc(database, name: str) -> dict[str, Any]:
-    from railval.app.services.workshops import status_document
+    from railval.app.services.workshop_admin import status
 
-    with database.session() as s:
-        return status_document(s, name)
+    return status(database, name)
 
 
 _STATUS_JS = r"""
@@ -258,17 +244,15 @@ class WorkshopStatus(_OrganiserBase):
 
 
 def _invite(database, name: str, reviewer: str, actor) -> str:
-    from railval.db import workshops as wsdb
+    from railval.app.services.workshop_admin import invite
 
-    with database.session() as s:
-        return wsdb.invite(s, wsdb.get_workshop(s, name), reviewer, actor=actor)
+    return invite(database, name, reviewer, actor=actor)
 
 
 def _set_status(database, name: str, status: str, actor) -> None:
-    from railval.db import workshops as wsdb
+    from railval.app.services.workshop_admin import set_status
 
-    with database.session() as s:
-        wsdb.set_status(s, wsdb.get_workshop(s, name), status, actor=actor)
+    set_status(database, name, status, actor=actor)
     clear_contexts()
 
 
@@ -334,17 +318,15 @@ answers <strong id='nanswers'>{d['answers']}</strong></p>
 
 # -------------------------------------------------------------------------- my workshops
 def _mine(database, username: str) -> list[dict[str, Any]]:
-    from railval.db import workshops as wsdb
+    from railval.app.services.workshop_admin import participations
 
-    with database.session() as s:
-        return wsdb.participations(s, username)
+    return participations(database, username)
 
 
 def _own_link(database, name: str, username: str) -> str:
-    from railval.db import workshops as wsdb
+    from railval.app.services.workshop_admin import own_link
 
-    with database.session() as s:
-        return wsdb.own_link(s, name, username)
+    return own_link(database, name, username)
 
 
 class MyWorkshops(_OrganiserBase):

@@ -35,7 +35,7 @@ def clear_contexts() -> None:
 
 
 def _ctx(database, token: str):
-    from railval.db import workshops as wsdb
+    from railval.app.services import workshop_review
 
     key = hashlib.sha256(token.encode()).hexdigest()
     now = time.monotonic()
@@ -43,8 +43,7 @@ def _ctx(database, token: str):
         hit = _contexts.get(key)
     if hit is not None and now - hit[0] < CONTEXT_TTL_S:
         return hit[1]
-    with database.session() as s:
-        ctx = wsdb.reviewer_by_token(s, token)
+    ctx = workshop_review.context(database, token)
     with _cache_lock:
         if len(_contexts) > 10_000:
             _contexts.clear()
@@ -53,16 +52,15 @@ def _ctx(database, token: str):
 
 
 def _state(database, ctx) -> dict[str, Any]:
-    from railval.db import workshops as wsdb
+    from railval.app.services import workshop_review
 
-    with database.session() as s:
-        own = wsdb.own_answers(s, ctx.reviewer_id)
+    own = workshop_review.answers(database, ctx.reviewer_id)
     total = len(ctx.sequence)
     nxt = next((i for i in range(total) if i not in own), total)
     return {"total": total, "answered": len(own), "next": nxt, "finished": ctx.finished,
             "status": ctx.workshop_status, "blind": ctx.blind,
             "workshop": None if ctx.blind else ctx.workshop_name,
-            "answers": {str(i): {"answer": "yes" if a.answer else "no", "comment": a.comment}
+            "answers": {str(i): {"answer": "yes" if a["answer"] else "no", "comment": a["comment"]}
                         for i, a in own.items()}}
 
 
@@ -202,15 +200,14 @@ class ReviewState(_ReviewerBase):
 
 
 def _image_at(database, ctx, position: int) -> tuple[bytes, str]:
-    from railval.db import workshops as wsdb
+    from railval.app.services import workshop_review
 
     key = (ctx.workshop_id, ctx.sequence[position][0])
     with _cache_lock:
         hit = _images.get(key)
     if hit is not None:
         return hit
-    with database.session() as s:
-        data, sha = wsdb.plot_image(s, *key)
+    data, sha = workshop_review.plot_image(database, *key)
     with _cache_lock:
         if _image_bytes[0] + len(data) > IMAGE_CACHE_BYTES:
             _images.clear()
@@ -239,13 +236,13 @@ class ReviewImage(_ReviewerBase):
 
 
 def _answer(database, token: str, body: dict[str, Any]) -> dict[str, Any]:
-    from railval.db import workshops as wsdb
+    from railval.app.services import workshop_review
 
     ctx = _ctx(database, token)
     if ctx is None or not allowed(ctx.principal, "workshop.answer"):
         raise NotFound("review link not valid")
     if ctx.finished:
-        raise wsdb.WorkshopClosed("you have finished this review; answers are final")
+        raise workshop_review.WorkshopClosed("you have finished this review; answers are final")
     ans = str(body.get("answer", "")).lower()
     if ans not in ("yes", "no"):
         raise InvalidParameter(f"answer must be yes or no, got {body.get('answer')!r}")
@@ -254,28 +251,23 @@ def _answer(database, token: str, body: dict[str, Any]) -> dict[str, Any]:
         seconds = float(body.get("seconds", 0.0))
     except (TypeError, ValueError):
         raise InvalidParameter("position must be a whole number and seconds a number") from None
-    with database.session() as s:  # the write comes first in its own unit of work
-        outcome = wsdb.record_answer(s, ctx, position, ans == "yes", seconds=seconds,
-                                     comment=str(body.get("comment") or ""),
-                                     submission=str(body.get("submission") or ""))
+    outcome = workshop_review.record_answer(database, ctx, position, ans == "yes", seconds=seconds,
+                                            comment=str(body.get("comment") or ""),
+                                            submission=str(body.get("submission") or ""))
     return {"stored": outcome, "position": position}
 
 
 def _finish(database, token: str) -> dict[str, Any]:
-    from railval.db import workshops as wsdb
+    from railval.app.services import workshop_review
 
-    with database.session() as s:
-        ctx = wsdb.reviewer_by_token(s, token)
-        if ctx is None or not allowed(ctx.principal, "workshop.answer"):
-            raise NotFound("review link not valid")
-        wsdb.finish(s, ctx)
+    workshop_review.finish(database, token, lambda ctx: allowed(ctx.principal, "workshop.answer"))
     clear_contexts()
     return {"finished": True}
 
 
 class ReviewAnswer(_Base):
     async def post(self, token: str) -> None:
-        from railval.db.workshops import WorkshopClosed
+        from railval.app.services.workshop_review import WorkshopClosed
 
         try:
             body = json.loads(self.request.body or b"{}")
