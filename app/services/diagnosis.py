@@ -21,8 +21,8 @@ from typing import Any
 from railval.app.services.campaign_context import Progress, session_of
 from railval.app.services.diagnosis_evidence import diagnose as diagnose_evidence_service
 from railval.app.services.diagnosis_evidence import scan_points
-from railval.app.services.stored_runs import data_inputs, digests, run_info
 from railval.app.services.diagnosis_measurement import MEASUREMENT_PREFIXES
+from railval.app.services.stored_runs import data_inputs, digests, run_info
 from railval.core.diagnosis import PARAMETER_CANDIDATES, DiagnosisResult
 from railval.core.en14363 import PROCESSING_VERSION
 from railval.core.sim.effects import EFFECTS

@@ -377,25 +377,41 @@ def estimate_lag(measured: np.ndarray, simulated: np.ndarray, fs: float, max_lag
     return float((lags[i] + frac) / fs), float(z[i] / den)
 
 
+def on_distance(ss: SignalSet, grid: np.ndarray, channel: str) -> np.ndarray:
+    """A channel's samples at the distances ``grid`` (linear interpolation along ``distance_m``)."""
+    return np.interp(grid, np.asarray(ss.distance_m, float), np.asarray(ss.channels[channel], float))
+
+
 def section_lag(measured: SignalSet, simulated: SignalSet, *, max_lag_s: float = MAX_LAG_S,
                 min_peak: float = MIN_PEAK, min_channels: int = MIN_CHANNELS) -> dict[str, Any]:
-    """The time shift of one section's measured signals against the simulation: the lag of every
-    channel both hold (:func:`estimate_lag`) whose correlation peak reaches ``min_peak``; the
-    section's lag is their median, ``spread`` the largest distance of a channel's lag from it.
-    ``consistent`` when at least ``min_channels`` channels count and every one lies within
-    max(1 sample, 25 % of the lag) of the median — one channel group recorded late is not a
-    shift of the section. ``reason`` says why not."""
-    if measured.fs != simulated.fs:
-        return {"lag": 0.0, "spread": 0.0, "lags": {}, "consistent": False,
-                "reason": f"measurement and simulation sampled at different rates ({measured.fs} / {simulated.fs} Hz)"}
+    """The time shift of one section's measured signals against the simulation. Both records
+    are taken onto one distance grid first (the measured run's speed differs from the
+    simulated one, so the same stretch of track is passed at other times; the EN evaluation
+    too takes its range on the distance axis), at the measurement's mean sample spacing over
+    the common distance range; the lag of every channel both hold (:func:`estimate_lag` along
+    distance) whose correlation peak reaches ``min_peak`` is turned into seconds with the
+    measured run's mean speed. The section's lag is their median, ``spread`` the largest
+    distance of a channel's lag from it. ``consistent`` when at least ``min_channels`` channels
+    count and every one lies within max(1 sample, 25 % of the lag) of the median — one channel
+    group recorded late is not a shift of the section. ``reason`` says why not."""
+    def fail(why: str, lags: dict | None = None) -> dict[str, Any]:
+        return {"lag": 0.0, "spread": 0.0, "lags": lags or {}, "consistent": False, "reason": why}
+
+    dm, ds = np.asarray(measured.distance_m, float), np.asarray(simulated.distance_m, float)
+    lo, hi = max(dm[0], ds[0]), min(dm[-1], ds[-1])
+    if dm.size < 3 or not hi > lo or not dm[-1] > dm[0]:
+        return fail("the measured and simulated records share no stretch of track")
+    speed = float((dm[-1] - dm[0]) / (dm.size - 1) * measured.fs)  # m/s
+    step = speed / measured.fs  # m per sample
+    grid = np.arange(lo, hi, step)
     lags = {}
     for c in sorted(set(measured.channels) & set(simulated.channels)):
-        lag, peak = estimate_lag(measured.channels[c], simulated.channels[c], measured.fs, max_lag_s)
+        lag_m, peak = estimate_lag(on_distance(measured, grid, c), on_distance(simulated, grid, c), 1.0 / step,
+                                   max_lag_s * speed)
         if peak >= min_peak:
-            lags[c] = lag
+            lags[c] = lag_m / speed  # the content comes a distance farther on: recorded late
     if len(lags) < min_channels:
-        return {"lag": 0.0, "spread": 0.0, "lags": lags, "consistent": False,
-                "reason": f"only {len(lags)} channel(s) correlate with the simulation (peak ≥ {min_peak})"}
+        return fail(f"only {len(lags)} channel(s) correlate with the simulation (peak ≥ {min_peak})", lags)
     med = float(np.median(list(lags.values())))
     spread = float(max(abs(v - med) for v in lags.values()))
     tol = max(1.0 / measured.fs, 0.25 * abs(med))
