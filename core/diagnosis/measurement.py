@@ -352,7 +352,9 @@ def estimate_lag(measured: np.ndarray, simulated: np.ndarray, fs: float, max_lag
     """The lag in s by which ``measured`` trails ``simulated`` (positive: recorded late) and the
     normalised correlation at the peak: the maximum of the cross-correlation of the two
     mean-free signals (``scipy.signal.correlate``/``correlation_lags``: z[k] = Σ_n x[n+k]·y[n],
-    so x[n] = y[n − L] peaks at k = L) within ± ``max_lag_s``, refined to a fraction of a sample
+    so x[n] = y[n − L] peaks at k = L) within ± ``max_lag_s``, divided by the number of
+    overlapping samples (the unbiased estimate, Bendat & Piersol, Random Data, 4th ed. 2010,
+    §8.4: the plain sum falls off linearly with |k| and pulls a broad peak towards 0), refined to a fraction of a sample
     by the vertex of the parabola through the peak and its two neighbours (J. O. Smith,
     Spectral Audio Signal Processing, 2011, "Quadratic Interpolation of Spectral Peaks")."""
     from scipy.signal import correlate, correlation_lags
@@ -364,8 +366,8 @@ def estimate_lag(measured: np.ndarray, simulated: np.ndarray, fs: float, max_lag
     den = float(np.linalg.norm(x) * np.linalg.norm(y))
     if n < 3 or not den > 0:
         return 0.0, 0.0
-    z = correlate(x, y, mode="full", method="fft")
     lags = correlation_lags(n, n, mode="full")
+    z = correlate(x, y, mode="full", method="fft") * n / (n - np.abs(lags))  # unbiased: per overlapping sample
     keep = np.abs(lags) <= max_lag_s * fs
     z, lags = z[keep], lags[keep]
     i = int(np.argmax(z))
