@@ -8,6 +8,7 @@ truth's), none of these candidates is claimed. SQLite and PostgreSQL."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 
 import numpy as np
@@ -42,16 +43,15 @@ PLANTS = {
 
 
 @pytest.fixture(scope="module")
-def planted(module_db_url, tmp_path_factory):
+def planted_folders(tmp_path_factory):
+    """One campaign folder per entry of :data:`PLANTS` (the baseline holds the truth's conicity;
+    ``worn``: the model's secondary vertical dampers 3× the truth's)."""
     import pandas as pd
 
     from railval.core.sim.synth import parse_hidden
-    from railval.db.engine import connect
-    from railval.db.importer import import_campaign
 
     plain = _write_plain_campaign(tmp_path_factory.mktemp("m") / "m", name="m")
-    db = connect(module_db_url)
-    db.init()
+    out = {}
     for name, plant in PLANTS.items():
         folder = tmp_path_factory.mktemp(name) / name
         shutil.copytree(plain, folder)
@@ -65,6 +65,18 @@ def planted(module_db_url, tmp_path_factory):
         for i, s in enumerate(manifest["sections"]):
             df = pd.read_csv(folder / s["measured"])
             plant(df, i).to_csv(folder / s["measured"], index=False)
+        out[name] = folder
+    return out
+
+
+@pytest.fixture(scope="module")
+def planted(module_db_url, planted_folders):
+    from railval.db.engine import connect
+    from railval.db.importer import import_campaign
+
+    db = connect(module_db_url)
+    db.init()
+    for folder in planted_folders.values():
         import_campaign(db, folder)
     yield db
     db.dispose()
@@ -157,3 +169,36 @@ def test_named_candidates_that_cannot_apply_are_left_out_with_their_reasons(plan
     why = {s["name"]: s for s in doc["skipped"]}
     assert why["sign az_cb_b1"]["kind"] == "measurement" and "invisible" in why["sign az_cb_b1"]["reason"]
     assert "not two channels" in why["swap az_cb_b1 ay_cb_b2"]["reason"]
+
+
+@pytest.mark.browser
+def test_diagnose_page_shows_the_sign_swap_and_shift_candidates(tmp_path, planted_folders, page):
+    """The Diagnose page shows a sign candidate like the gain candidates: ranked first with its
+    verdict and cause, its fitted value and interval, and the named candidate left out."""
+    from railval.db.engine import connect
+    from railval.db.importer import import_campaign
+    from tests.browser_support import element_screenshot, nav, open_app, require_browser, served_app
+
+    require_browser()
+    db = connect(f"sqlite:///{tmp_path / 'page.db'}")
+    db.init()
+    import_campaign(db, planted_folders["sign"])
+    diagnose(db, "sign", "baseline", effects=["sign Y_w1L", "swap w1L w1R", "sign az_cb_b1", "gain az_cb_b1"],
+             workers=2, n_boot=30)
+    try:
+        with served_app(db) as url:
+            open_app(page, url)
+            nav(page, "Diagnose & model workshop")
+            main = page.locator(".rv-main")
+            main.locator("h2", has_text="Diagnose & model workshop").wait_for(timeout=120_000)
+            main.get_by_text("Left out (cannot apply to this campaign): sign az_cb_b1").wait_for(timeout=120_000)
+            rows = main.locator(".rv-candidates .tabulator-row")
+            rows.first.wait_for(timeout=120_000)
+            assert rows.count() == 3
+            first = rows.first.locator(".tabulator-cell[tabulator-field='candidate']").inner_text().strip()
+            assert first == "sign Y_w1L"
+            main.get_by_text(re.compile(r"Causes found together \(1; .*sign Y_w1L \d+ %")).wait_for(timeout=120_000)
+            main.get_by_text(re.compile(r"Fitted value -1 \(interval")).wait_for(timeout=120_000)
+            element_screenshot(main, "diagnose-sign-candidate")
+    finally:
+        db.dispose()
