@@ -126,7 +126,7 @@ def measurement_cases() -> list[tuple[str, dict[str, Any], str | None]]:
     accelerometer, which no EN quantity can see — right answer none), two positions exchanged
     (the wheels of one wheelset; the car body accelerometers of both ends), every channel
     recorded late (a shift the EN quantities hardly see — right answer none), and nothing."""
-    acc = [f"{d}_cb_{e}" for d in ("ay", "az") for e in ("b1", "b2")]
+    acc = [f"{d}_{b}_{e}" for d in ("ay", "az") for b in ("cb", "bg") for e in ("b1", "b2")]
     wheels = [f"{k}_w{n}{s}" for k in ("Y", "Q") for n in range(1, 5) for s in "LR"]
     return [
         ("guiding force Y_w1L polarity reversed", {"channel_faults": {"gain": {"Y_w1L": -1.0}}}, "sign Y_w1L"),
@@ -135,7 +135,7 @@ def measurement_cases() -> list[tuple[str, dict[str, Any], str | None]]:
          {"channel_faults": {"swap": [["Y_w1L", "Y_w1R"], ["Q_w1L", "Q_w1R"]]}}, "swap w1L w1R"),
         ("car body accelerometers of both ends swapped",
          {"channel_faults": {"swap": [["ay_cb_b1", "ay_cb_b2"], ["az_cb_b1", "az_cb_b2"]]}}, "swap b1 b2"),
-        ("every channel recorded 0.2 s late", {"channel_faults": {"shift_samples": {c: 40 for c in acc + wheels}}},
+        ("every channel (bogie frames too) recorded 0.2 s late", {"channel_faults": {"shift_samples": {c: 40 for c in acc + wheels}}},
          None),
         ("car body accelerometer az_cb_b1 polarity reversed", {"channel_faults": {"gain": {"az_cb_b1": -1.0}}}, None),
         ("nothing (seed 21)", {"seed": 21}, None),
