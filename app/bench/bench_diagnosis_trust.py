@@ -118,6 +118,33 @@ CASES: dict[str, list[tuple[str, dict[str, Any], str | None]]] = {
 }
 
 
+# ----------------------------------------------------------------------------- class (m), i23meas
+def measurement_cases() -> list[tuple[str, dict[str, Any], str | None]]:
+    """Class (m): faults of the measurement chain that the measurement candidates ``sign``,
+    ``swap`` and ``shift`` name (docs/diagnosis.md "Sign, position swap and time shift"), on the
+    bench's structurally different truth: a polarity reversed (a wheel force; a car body
+    accelerometer, which no EN quantity can see — right answer none), two positions exchanged
+    (the wheels of one wheelset; the car body accelerometers of both ends), every channel
+    recorded late (a shift the EN quantities hardly see — right answer none), and nothing."""
+    acc = [f"{d}_{b}_{e}" for d in ("ay", "az") for b in ("cb", "bg") for e in ("b1", "b2")]
+    wheels = [f"{k}_w{n}{s}" for k in ("Y", "Q") for n in range(1, 5) for s in "LR"]
+    return [
+        ("guiding force Y_w1L polarity reversed", {"channel_faults": {"gain": {"Y_w1L": -1.0}}}, "sign Y_w1L"),
+        ("wheel force Q_w2R polarity reversed", {"channel_faults": {"gain": {"Q_w2R": -1.0}}}, "sign Q_w2R"),
+        ("wheels of wheelset 1 swapped (Y and Q)",
+         {"channel_faults": {"swap": [["Y_w1L", "Y_w1R"], ["Q_w1L", "Q_w1R"]]}}, "swap w1L w1R"),
+        ("car body accelerometers of both ends swapped",
+         {"channel_faults": {"swap": [["ay_cb_b1", "ay_cb_b2"], ["az_cb_b1", "az_cb_b2"]]}}, "swap b1 b2"),
+        ("every channel (bogie frames too) recorded 0.2 s late", {"channel_faults": {"shift_samples": {c: 40 for c in acc + wheels}}},
+         None),
+        ("car body accelerometer az_cb_b1 polarity reversed", {"channel_faults": {"gain": {"az_cb_b1": -1.0}}}, None),
+        ("nothing (seed 21)", {"seed": 21}, None),
+    ]
+
+
+CASES["m"] = measurement_cases()
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cases", type=int, default=10, help="cases per class (default 10, at most 10)")
     parser.add_argument("--classes", nargs="+", default=["a", "b", "c", "d", "e"],

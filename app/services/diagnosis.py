@@ -21,6 +21,7 @@ from typing import Any
 from railval.app.services.campaign_context import Progress, session_of
 from railval.app.services.diagnosis_evidence import rank_causes as diagnose_evidence_service
 from railval.app.services.diagnosis_evidence import scan_points
+from railval.app.services.diagnosis_measurement import MEASUREMENT_PREFIXES
 from railval.app.services.stored_runs import data_inputs, digests, run_info
 from railval.core.diagnosis import PARAMETER_CANDIDATES, DiagnosisResult
 from railval.core.en14363 import PROCESSING_VERSION
@@ -29,7 +30,7 @@ from railval.db import repo, runs
 
 #: version of the diagnosis procedure in the stored runs' digest (with the EN processing
 #: version): a change of the procedure computes afresh instead of reusing an older run
-DIAGNOSIS_VERSION = f"diagnosis/4+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets
+DIAGNOSIS_VERSION = f"diagnosis/5+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets; 5: sign/swap/shift
 
 __all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnosis_runs", "diagnosis_simulations", "latest_diagnosis", "scan_points"]
 
@@ -86,8 +87,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         params = [n for n in names if n.startswith("model.")]
         options.setdefault("parameters", params or None)
         options.setdefault("include_parameters", bool(params))
-        options.setdefault("measurement", [n for n in names if n.startswith(("gain ", "offset "))] or False)
-        effects = [n for n in names if not n.startswith(("model.", "gain ", "offset "))]
+        options.setdefault("measurement", [n for n in names if n.startswith(MEASUREMENT_PREFIXES)] or False)
+        effects = [n for n in names if not n.startswith(("model.", *MEASUREMENT_PREFIXES))]
     res = diagnose_evidence_service(database_or_session, campaign, config, progress=progress, scheduler=scheduler,
                                     values_per_parameter=values_per_parameter, effects=effects, workers=workers,
                                     **options)

@@ -28,7 +28,13 @@ from typing import Any
 import numpy as np
 
 from railval.app.services.campaign_context import effect_parameters
-from railval.app.services.diagnosis_measurement import offset_families, relative_gains, shared_gain
+from railval.app.services.diagnosis_measurement import (
+    DISCRETE_DEFAULTS,
+    discrete_families,
+    offset_families,
+    relative_gains,
+    shared_gain,
+)
 from railval.core.diagnosis import (
     PARAMETER_CANDIDATES,
     CandidateFamily,
@@ -181,7 +187,7 @@ def rank_causes(database_or_session: Any, campaign: str, config: str, *, progres
         conf_effects, conf_params, _ = configuration_of(s, campaign, config)
         config_sets = repo.load_signalsets(s, campaign, config)
         meas_bands = measured_section_bands(s, ctx)
-        named = measurement not in (True, False) and bool(measurement)
+        named = bool(measurement) and (measurement is not True or bool(DISCRETE_DEFAULTS))
         # named offsets and gains of shared channels re-evaluate the measurement from its signals
         measured_sets = repo.load_signalsets(s, campaign, None) if named else {}
     registry = EFFECTS
@@ -255,7 +261,7 @@ def rank_causes(database_or_session: Any, campaign: str, config: str, *, progres
             limits = {q: r.std_limit for q, r in vr.quantities.items()}
             chans = gain_channels(results[0][0])
             wanted_m = None if measurement is True else {m.removeprefix("gain ") for m in measurement
-                                                         if not m.startswith("offset ")}
+                                                         if m.startswith("gain ")}
             for bad in sorted((wanted_m or set()) - set(chans)):
                 fam = shared_gain(ctx, measured_sets, bad, base, results[0], meas_bands, sections, limits)
                 if fam is not None:
@@ -269,6 +275,8 @@ def rank_causes(database_or_session: Any, campaign: str, config: str, *, progres
                                                          comps, limits, bands=ctx.bands)
             families.update(offset_families(ctx, measured_sets, measurement, base, results[0], meas_bands, sections, limits,
                                              skipped))
+            families.update(discrete_families(ctx, measured_sets, config_sets, measurement, base, results[0], meas_bands,
+                                              sections, limits, skipped, defaults=DISCRETE_DEFAULTS))
         blind = _without_effect(base, list(families.values()))
         skipped += [{"name": f.name, "kind": f.kind, "reason": "changes none of the quantities the campaign "
                      "measures at any simulated value"} for f in blind
@@ -389,8 +397,10 @@ def next_step(res: DiagnosisResult, campaign: str, config: str) -> dict[str, Any
                                           "(quantities, zones, bands) — data, sensors or physics outside the library"}
     all_causes = res.extra.get("causes") or []
     sensors = [x for x in all_causes if x["kind"] == "measurement"]
+    summary = {c.name: c.summary for c in res.candidates}
     check = ("; first check the measurement: " + "; ".join(
         f"{x['name'].removeprefix('offset ')} reads ≈ the true value {x['fitted']:+.3g}" if x["parameter"] == "offset"
+        else summary.get(x["name"], x["name"]) if x["parameter"] in ("sign", "swap", "shift")
         else f"{x['name'].removeprefix('gain ')} reads ≈ {x['fitted']:.3g} × the true value" for x in sensors)
              ) if sensors else ""
     causes = [x for x in all_causes if x["kind"] != "measurement"]

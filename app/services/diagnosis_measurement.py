@@ -10,6 +10,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from railval.core.diagnosis import CandidateFamily, DiagnosisResult, SectionEvidence
 
 
@@ -106,3 +108,124 @@ def relative_gains(res: DiagnosisResult) -> None:
         c.parameters["relative_gain"] = rel
         c.summary += (f"; {rel:.3g} × what {other.name.removeprefix('gain ')} (the redundant channel) implies "
                       f"— what this sensor reads more than the other")
+
+
+#: prefixes of the measurement candidates' names (``--candidates``)
+MEASUREMENT_PREFIXES = ("gain ", "offset ", "sign ", "swap ", "shift ")
+#: the discrete measurement candidates of the default set (docs/diagnosis.md "Sign, position
+#: swap and time shift"; ``shift`` by name only: what it finds the EN residual does not see)
+DISCRETE_DEFAULTS: tuple[str, ...] = ("swap", "sign")
+
+
+def discrete_families(ctx: Any, sets: Mapping[str, Any], sim_sets: Mapping[str, Any],
+                      measurement: bool | Sequence[str], base: SectionEvidence, result: tuple, meas_bands: Mapping,
+                      sections: Sequence[tuple[str, int]], limits: Mapping[str, float], skipped: list[dict],
+                      *, defaults: Sequence[str] = ()) -> dict[str, CandidateFamily]:
+    """The discrete measurement candidates (:mod:`railval.core.diagnosis.measurement`):
+    ``sign CHANNEL`` (polarity reversed), ``swap A B`` (two channels or two positions exchanged)
+    and ``shift SECTION`` (all channels of a section recorded late by the lag fitted from the
+    cross-correlation with the configuration's simulation ``sim_sets``); named in
+    ``measurement``, or with ``measurement=True`` the kinds in ``defaults`` (``"swap"``: both
+    car body ends and the two wheels of every wheelset; ``"shift"``: every section whose
+    channels agree on a lag of at least one sample; ``"sign"``: every wheel force channel).
+    What cannot apply is left out with its reason in ``skipped``; a named shift of a section
+    without a consistent lag too."""
+    from railval.core.diagnosis.measurement import (
+        discrete_evidence,
+        discrete_family,
+        offset_components,
+        section_lag,
+        shifted_measured,
+        sign_blind,
+        signed_measured,
+        swap_pairs,
+        swapped_bands,
+        swapped_measured,
+    )
+
+    pairs, sim_bands = result
+    if measurement is True:
+        wanted: list[str] = []
+        if "sign" in defaults:
+            wanted += [f"sign {c}" for c in sorted(ctx.channels) if c.startswith(("Y_", "Q_"))]
+        if "swap" in defaults:
+            wheels = sorted({c.split("_", 1)[1][:-1] for c in ctx.channels if c.startswith(("Y_w", "Q_w"))})
+            wanted += ["swap b1 b2"] + [f"swap {w}L {w}R" for w in wheels]
+        if "shift" in defaults:
+            wanted += [f"shift {s.id}" for s in ctx.sections]
+        quiet = True  # a default candidate that does not apply is not worth a line
+    else:
+        wanted = [m for m in measurement if m.startswith(("sign ", "swap ", "shift "))]
+        quiet = False
+    if not wanted or not sets:
+        return {}
+    out: dict[str, CandidateFamily] = {}
+
+    def skip(name: str, why: str) -> None:
+        if not quiet:
+            skipped.append({"name": name, "kind": "measurement", "reason": why})
+
+    def add(fam: CandidateFamily) -> None:
+        if np.array_equal(fam.evidence[1].values(), base.values()):
+            skip(fam.name, "changes none of the quantities the campaign measures")
+        else:
+            out[fam.name] = fam
+
+    for name in wanted:
+        kind, _, arg = name.partition(" ")
+        if kind == "sign":
+            comps = offset_components(pairs, arg) if arg in ctx.channels else []
+            why = sign_blind(arg, comps)
+            if why:
+                skip(name, why)
+                continue
+            ev = discrete_evidence(base, pairs, sim_bands, meas_bands, sections,
+                                   signed_measured(sets, ctx.sections, arg, comps), limits, bands=ctx.bands)
+            add(discrete_family(
+                name, "sign", -1.0, ev, half_width=0.01, title=f"channel {arg} reads with reversed sign",
+                explanation=(f"the measurement, not the model: channel {arg} reads −1 × the true value (polarity of "
+                             f"the sensor or bridge reversed); it changes {', '.join(sorted({q for q, _ in comps}))}")))
+        elif kind == "swap":
+            a, _, b = arg.partition(" ")
+            pp = swap_pairs(a, b, ctx.channels)
+            comps = sorted({c for x, y in pp for c in (*offset_components(pairs, x), *offset_components(pairs, y))})
+            if not pp or not comps:
+                skip(name, f"{a} and {b} are not two channels (or positions) of the same kind this campaign "
+                           "measures a quantity with")
+                continue
+            mb = swapped_bands(meas_bands, pp)
+            ev = discrete_evidence(base, pairs, sim_bands, mb, sections, swapped_measured(sets, ctx.sections, pp, comps),
+                                   limits, bands=ctx.bands)
+            which = ", ".join(f"{x}↔{y}" for x, y in pp)
+            add(discrete_family(
+                name, "swap", 1.0, ev, half_width=0.01, title=f"{a} and {b} recorded each other's position ({which})",
+                explanation=(f"the measurement, not the model: the sensors of {a} and {b} are exchanged ({which}); "
+                             f"it changes {', '.join(sorted({q for q, _ in comps}))} at both positions"
+                             + (" and their band powers" if any(x in ctx.channels and x[:2] in ("ay", "az")
+                                                               for x, _ in pp) else ""))))
+        elif kind == "shift":
+            sec = next((s for s in ctx.sections if s.id == arg), None)
+            if sec is None or arg not in sets or arg not in sim_sets:
+                skip(name, f"{arg} is not a section of this campaign with measured and simulated signals")
+                continue
+            lag = section_lag(sets[arg], sim_sets[arg])
+            fs = float(sets[arg].fs)
+            if not lag["consistent"]:
+                skip(name, lag["reason"])
+                continue
+            if abs(lag["lag"]) < 1.0 / fs:
+                skip(name, f"the channels agree on a lag of {lag['lag']:+.4f} s, less than one sample")
+                continue
+            comps = sorted({(q, p) for r in pairs if str(r["section"]) == arg
+                            for q, p in [(str(r["quantity"]), str(r["position"]))]})
+            ev = discrete_evidence(base, pairs, sim_bands, meas_bands, sections,
+                                   shifted_measured(sets, ctx.sections, arg, lag["lag"], comps), limits,
+                                   bands=ctx.bands)
+            add(discrete_family(
+                name, "shift", lag["lag"], ev, half_width=max(lag["spread"], 0.5 / fs), unit="s",
+                title=f"section {arg} recorded {lag['lag']:+.3f} s late",
+                explanation=(f"the measurement, not the model: every channel of section {arg} trails the simulation "
+                             f"by {lag['lag']:+.3f} s (cross-correlation of {len(lag['lags'])} channels, spread "
+                             f"{lag['spread']:.3f} s — a time base or trigger set wrong); re-aligned, the section's "
+                             "quantities are evaluated on the right stretch of track")))
+    return out

@@ -35,6 +35,8 @@ ALIKE_CORRELATION = 0.8
 def _family_summary(fam: CandidateFamily, value: float) -> str:
     if fam.kind == "measurement" and fam.parameter == "offset":
         return f"{fam.title or fam.name} the true value {value:+.3g} {fam.unit} (offset of the measurement)"
+    if fam.kind == "measurement" and fam.parameter in ("sign", "swap", "shift"):  # discrete (measurement.py)
+        return f"{fam.title or fam.name} ({fam.parameter} of the measurement)"
     if fam.kind == "measurement":
         return f"{fam.title or fam.name} {value:.3g} × the true value ({fam.parameter} of the measurement)"
     if fam.kind == "parameter" and fam.reference:

@@ -209,3 +209,232 @@ def shared_gain_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]]
         explanation=(f"the measurement, not the model: channel {channel} reads g × the true value (a sensor "
                      f"sensitivity or amplifier gain set wrong); it changes {', '.join(sorted({q for q, _ in comps}))} "
                      "(re-evaluated from the signals) — the other wheel or wheelset measures what the model should match"))
+
+
+# ----------------------------------------------------------------------------- discrete candidates
+#: relative excess of the pattern's D_v part at the two neighbour nodes of a discrete candidate
+#: (:func:`discrete_family`): it makes the fit pick the candidate's own value, and changes no
+#: reported share by more than ~1e-6
+DISCRETE_TILT = 1e-6
+
+
+def _tilted(ev: SectionEvidence, factor: float) -> SectionEvidence:
+    from dataclasses import replace
+
+    return replace(ev, sums=ev.sums * factor)
+
+
+def discrete_family(name: str, parameter: str, value: float, evidence: SectionEvidence, *, half_width: float,
+                    unit: str = "", title: str = "", explanation: str = "") -> CandidateFamily:
+    """A measurement candidate without a residual-fitted value (a sign or position swap, a time
+    shift fitted from the signals): the evidence is the corrected measurement's, the same at every
+    node, so the share it explains on held-out sections is the share of their residual the
+    correction removes — nothing is fitted to those sections (Hastie, Tibshirani & Friedman
+    2009 §7.10, the held-out rule of the other candidates). The family holds three nodes
+    ``value ∓ half_width`` and ``value``; the D_v part at the two outer nodes is (1 +
+    :data:`DISCRETE_TILT`) × the corrected one, so that the fit along the family lands on
+    ``value`` (not at a bound of the search range) on any subset of sections; the fitted
+    value's interval is ``value ± half_width`` (for a time shift: the spread of the lags of the
+    section's channels)."""
+    h = float(half_width) if half_width > 0 else 1e-3 * max(1.0, abs(value))
+    edge = _tilted(evidence, 1.0 + DISCRETE_TILT)
+    return CandidateFamily("measurement", name, parameter, [value - h, value, value + h], [edge, evidence, edge],
+                           (value - h, value + h), log=False, reference=None, unit=unit, title=title,
+                           explanation=explanation)
+
+
+def remapped_measurement(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo],
+                         remap: Callable[[str, Mapping[str, np.ndarray], SignalSet], Mapping[str, np.ndarray]],
+                         components: Sequence[tuple[str, str]]) -> dict[tuple[str, str, str], float]:
+    """The measurement's EN values of ``components`` re-evaluated from the signals after
+    ``remap(section, channels, signalset)`` → the corrected channels of that section (only the
+    channels the components use are passed and evaluated; a section whose remap returns the
+    channels unchanged is evaluated as stored). ``(section, quantity, position)`` → M'."""
+    from dataclasses import replace
+
+    from railval.core.en14363 import evaluate_present
+    from railval.core.quantities import QUANTITIES
+
+    need = {c for q, p in components for c in QUANTITIES[q].channels(p)}
+    fixed = {}
+    for sid, ss in signalsets.items():
+        chans = {c: np.asarray(x, float) for c, x in ss.channels.items() if c in need}
+        if chans:
+            fixed[sid] = replace(ss, channels=dict(remap(sid, chans, ss)))
+    vals = evaluate_present(fixed, sections)
+    return {(sid, q, p): float(v[(q, p)]) for sid, v in vals.items() for q, p in components if (q, p) in v}
+
+
+def discrete_evidence(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]], sim_bands: Mapping,
+                      meas_bands: Mapping, sections: Sequence[tuple[str, int]],
+                      measured: Mapping[tuple[str, str, str], float], std_limits: Mapping[str, float], *,
+                      bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ) -> SectionEvidence:
+    """The evidence of the measurement corrected to ``measured`` (:func:`corrected_pairs`)."""
+    return _reevaluated_evidence(base, pairs, sim_bands, meas_bands, sections, [(0.0, measured)], std_limits,
+                                 bands)[0]
+
+
+# ----------------------------------------------------------------------------- sign
+def sign_blind(channel: str, components: Sequence[tuple[str, str]]) -> str | None:
+    """Why a reversed sign of ``channel`` cannot be seen, or None when it can. The EN statistics
+    of the car body and bogie accelerations are the r.m.s. and the larger magnitude of the
+    0.15 %/99.85 % values (Polach & Böttcher 2014 Table 2; :data:`railval.core.quantities.PROCESSINGS`)
+    and band powers — all even in the signal; Y_max is a maximum of the magnitude too. Only
+    the medians with sign (Y_qst, Q_qst, (Y/Q)_qst, ΣY_qst), the 99.85 % value Q_max and the
+    quantities formed with a second channel ((Y/Q)_max, ΣY_max) keep the sign."""
+    from railval.core.quantities import QUANTITIES
+
+    if not components:
+        return "not a channel of this campaign that a measured quantity is formed from"
+    seen = [(q, p) for q, p in components
+            if QUANTITIES[q].processing in ("median", "p99.85") or len(QUANTITIES[q].channels(p)) > 1]
+    if not seen:
+        qs = ", ".join(sorted({q for q, _ in components}))
+        return (f"a reversed sign is invisible to the EN quantities formed from this channel ({qs}: r.m.s., "
+                "maxima of the magnitude) and to its band powers: it changes nothing the validation sees")
+    return None
+
+
+def signed_measured(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo], channel: str,
+                    components: Sequence[tuple[str, str]]) -> dict[tuple[str, str, str], float]:
+    """The measurement's EN values of ``components`` with ``channel`` read with the opposite
+    sign (the channel's polarity reversed: x → −x), re-evaluated from the signals."""
+    return remapped_measurement(signalsets, sections,
+                                lambda _s, ch, _ss: {c: (-x if c == channel else x) for c, x in ch.items()}, components)
+
+
+# ----------------------------------------------------------------------------- position swap
+def swap_pairs(a: str, b: str, channels: Iterable[str]) -> list[tuple[str, str]]:
+    """The channel pairs ``swap A B`` exchanges: two channel names (``az_cb_b1 az_cb_b2``), or two
+    positions (``w1L w1R``: every channel kind the campaign has at both — Y and Q of the two
+    wheels; ``b1 b2``: the car body and bogie accelerometers of both ends). Empty when nothing
+    matches."""
+    from railval.core.types import split_channel
+
+    chans = set(channels)
+    if a in chans and b in chans:
+        return [(a, b)] if split_channel(a)[0] == split_channel(b)[0] and a != b else []
+    kinds = {split_channel(c)[0] for c in chans}
+    return [(f"{k}_{a}", f"{k}_{b}") for k in sorted(kinds) if f"{k}_{a}" in chans and f"{k}_{b}" in chans and a != b]
+
+
+def swapped_measured(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo],
+                     pairs: Sequence[tuple[str, str]], components: Sequence[tuple[str, str]]
+                     ) -> dict[tuple[str, str, str], float]:
+    """The measurement's EN values of ``components`` with the channels of every pair exchanged
+    (the sensors recorded each other's position), re-evaluated from the signals."""
+    other = {**{x: y for x, y in pairs}, **{y: x for x, y in pairs}}
+
+    def remap(_sid: str, ch: Mapping[str, np.ndarray], ss: SignalSet) -> dict[str, np.ndarray]:
+        full = {c: np.asarray(ss.channels[other.get(c, c)], float) for c in ch}
+        return full
+
+    return remapped_measurement(signalsets, sections, remap, components)
+
+
+def swapped_bands(meas_bands: Mapping[str, Mapping[str, np.ndarray]], pairs: Sequence[tuple[str, str]]
+                  ) -> dict[str, dict[str, np.ndarray]]:
+    """The measured band powers with the channels of every pair exchanged."""
+    other = {**{x: y for x, y in pairs}, **{y: x for x, y in pairs}}
+    return {sid: {c: chans.get(other.get(c, c), p) for c, p in chans.items()} for sid, chans in meas_bands.items()}
+
+
+# ----------------------------------------------------------------------------- time shift
+#: largest lag searched (s), smallest normalised correlation peak a channel's lag counts with,
+#: and the fewest channels a section's lag needs
+MAX_LAG_S = 2.0
+MIN_PEAK = 0.3
+MIN_CHANNELS = 3
+
+
+def estimate_lag(measured: np.ndarray, simulated: np.ndarray, fs: float, max_lag_s: float = MAX_LAG_S
+                 ) -> tuple[float, float]:
+    """The lag in s by which ``measured`` trails ``simulated`` (positive: recorded late) and the
+    normalised correlation at the peak: the maximum of the cross-correlation of the two
+    mean-free signals (``scipy.signal.correlate``/``correlation_lags``: z[k] = Σ_n x[n+k]·y[n],
+    so x[n] = y[n − L] peaks at k = L) within ± ``max_lag_s``, divided by the number of
+    overlapping samples (the unbiased estimate, Bendat & Piersol, Random Data, 4th ed. 2010,
+    §8.4: the plain sum falls off linearly with |k| and pulls a broad peak towards 0), refined to a fraction of a sample
+    by the vertex of the parabola through the peak and its two neighbours (J. O. Smith,
+    Spectral Audio Signal Processing, 2011, "Quadratic Interpolation of Spectral Peaks")."""
+    from scipy.signal import correlate, correlation_lags
+
+    x = np.asarray(measured, float) - float(np.mean(measured))
+    y = np.asarray(simulated, float) - float(np.mean(simulated))
+    n = min(x.size, y.size)
+    x, y = x[:n], y[:n]
+    den = float(np.linalg.norm(x) * np.linalg.norm(y))
+    if n < 3 or not den > 0:
+        return 0.0, 0.0
+    lags = correlation_lags(n, n, mode="full")
+    z = correlate(x, y, mode="full", method="fft") * n / (n - np.abs(lags))  # unbiased: per overlapping sample
+    keep = np.abs(lags) <= max_lag_s * fs
+    z, lags = z[keep], lags[keep]
+    i = int(np.argmax(z))
+    frac = 0.0
+    if 0 < i < z.size - 1:
+        a, b, c = z[i - 1], z[i], z[i + 1]
+        d = a - 2 * b + c
+        frac = 0.5 * (a - c) / d if d < 0 else 0.0
+    return float((lags[i] + frac) / fs), float(z[i] / den)
+
+
+def on_distance(ss: SignalSet, grid: np.ndarray, channel: str) -> np.ndarray:
+    """A channel's samples at the distances ``grid`` (linear interpolation along ``distance_m``)."""
+    return np.interp(grid, np.asarray(ss.distance_m, float), np.asarray(ss.channels[channel], float))
+
+
+def section_lag(measured: SignalSet, simulated: SignalSet, *, max_lag_s: float = MAX_LAG_S,
+                min_peak: float = MIN_PEAK, min_channels: int = MIN_CHANNELS) -> dict[str, Any]:
+    """The time shift of one section's measured signals against the simulation. Both records
+    are taken onto one distance grid first (the measured run's speed differs from the
+    simulated one, so the same stretch of track is passed at other times; the EN evaluation
+    too takes its range on the distance axis), at the measurement's mean sample spacing over
+    the common distance range; the lag of every channel both hold (:func:`estimate_lag` along
+    distance) whose correlation peak reaches ``min_peak`` is turned into seconds with the
+    measured run's mean speed. The section's lag is their median, ``spread`` the largest
+    distance of a channel's lag from it. ``consistent`` when at least ``min_channels`` channels
+    count and every one lies within max(1 sample, 25 % of the lag) of the median — one channel
+    group recorded late is not a shift of the section. ``reason`` says why not."""
+    def fail(why: str, lags: dict | None = None) -> dict[str, Any]:
+        return {"lag": 0.0, "spread": 0.0, "lags": lags or {}, "consistent": False, "reason": why}
+
+    dm, ds = np.asarray(measured.distance_m, float), np.asarray(simulated.distance_m, float)
+    lo, hi = max(dm[0], ds[0]), min(dm[-1], ds[-1])
+    if dm.size < 3 or not hi > lo or not dm[-1] > dm[0]:
+        return fail("the measured and simulated records share no stretch of track")
+    speed = float((dm[-1] - dm[0]) / (dm.size - 1) * measured.fs)  # m/s
+    step = speed / measured.fs  # m per sample
+    grid = np.arange(lo, hi, step)
+    lags = {}
+    for c in sorted(set(measured.channels) & set(simulated.channels)):
+        lag_m, peak = estimate_lag(on_distance(measured, grid, c), on_distance(simulated, grid, c), 1.0 / step,
+                                   max_lag_s * speed)
+        if peak >= min_peak:
+            lags[c] = lag_m / speed  # the content comes a distance farther on: recorded late
+    if len(lags) < min_channels:
+        return fail(f"only {len(lags)} channel(s) correlate with the simulation (peak ≥ {min_peak})", lags)
+    med = float(np.median(list(lags.values())))
+    spread = float(max(abs(v - med) for v in lags.values()))
+    tol = max(1.0 / measured.fs, 0.25 * abs(med))
+    ok = spread <= tol
+    return {"lag": med, "spread": spread, "lags": lags, "consistent": ok,
+            "reason": "" if ok else (f"the channels' lags disagree (median {med:+.3f} s, spread {spread:.3f} s "
+                                     f"> {tol:.3f} s): not one shift of the section")}
+
+
+def shifted(x: np.ndarray, lag_s: float, fs: float) -> np.ndarray:
+    """The samples of a channel recorded ``lag_s`` late, re-aligned: x'(t) = x(t + lag), linear
+    interpolation between samples, the end values held beyond the record."""
+    x = np.asarray(x, float)
+    t = np.arange(x.size) / fs
+    return np.interp(t + lag_s, t, x)
+
+
+def shifted_measured(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo], section: str,
+                     lag_s: float, components: Sequence[tuple[str, str]]) -> dict[tuple[str, str, str], float]:
+    """The measurement's EN values of ``components`` of ``section`` with all its channels
+    re-aligned by ``lag_s`` (:func:`shifted`); the evaluated range stays on the distance axis."""
+    one = {section: signalsets[section]} if section in signalsets else {}
+    return remapped_measurement(one, sections, lambda _s, ch, ss: {c: shifted(x, lag_s, ss.fs) for c, x in ch.items()},
+                                components)

@@ -220,9 +220,13 @@ def _apply_sensor_nuisance(ss: SignalSet, rng: np.random.Generator, nz: dict, ga
 
 def _apply_channel_faults(ss: SignalSet, faults: dict) -> SignalSet:
     """Causes outside the effect library in the measurement chain: ``gain`` ``{channel: factor}``
-    (a mis-calibrated sensor) and ``shift_samples`` ``{channel: n}`` (a channel recorded n
-    samples late against the others)."""
+    (a mis-calibrated sensor; −1: polarity reversed), ``shift_samples`` ``{channel: n}`` (a channel
+    recorded n samples late against the others) and ``swap`` ``[[a, b], …]`` (two sensors'
+    positions exchanged)."""
     chans = dict(ss.channels)
+    for a, b in faults.get("swap") or ():
+        if a in chans and b in chans:
+            chans[a], chans[b] = chans[b], chans[a]
     for ch, g in (faults.get("gain") or {}).items():
         if ch in chans:
             chans[ch] = chans[ch] * float(g)
