@@ -22,12 +22,14 @@ def _run(capsys, *argv):
 
 
 def test_internal_error_is_one_line_without_traceback(tmp_path, capsys, monkeypatch):
-    from railval.db import repo
+    from railval.db import catalogue, repo
 
     def broken(session):
         raise RuntimeError("boom in /srv/secret/path.py")
 
     monkeypatch.setattr(repo, "list_campaigns", broken)
+    # the ordinary path, also once the file exists (the driver-only catalogue would answer)
+    monkeypatch.setattr(catalogue, "read_catalogue", lambda url, who: None)
     url = f"sqlite:///{tmp_path / 'x.db'}"
     code, _, err = _run(capsys, "--db", url, "list")
     assert code == 1
