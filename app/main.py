@@ -300,8 +300,8 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
 #: Environment of a served app process, set by the deployment files (deploy/systemd/railval@.service,
 #: deploy/compose.yaml) and the team topology (app/bench/topology.py). ``PYTHONMALLOC=malloc``
 #: (Python docs, "Command line and environment": PYTHONMALLOC) hands Python's small objects to
-#: glibc malloc instead of pymalloc: a Panel session is ≈ 60 000 small objects (param and Bokeh
-#: properties, 60–150 B each) spread over pymalloc's 1 MiB arenas (CPython Objects/obmalloc.c,
+#: glibc malloc instead of pymalloc: a Panel session on its first page is ≈ 14 000 small objects
+#: (≈ 1.5 MiB of param and Bokeh properties, 60–150 B each) spread over pymalloc's 1 MiB arenas (CPython Objects/obmalloc.c,
 #: ARENA_BITS 20), and an arena goes back to the system only when every object in it is
 #: free, which long-lived objects allocated in between prevent; glibc's ``malloc_trim`` returns
 #: every free page instead. Measured (docs/app.md, "Memory after sessions close"): 10 sessions
