@@ -10,7 +10,6 @@ Pages are one module each under ``app/pages``; their state lives in ``app/state/
 from __future__ import annotations
 
 import functools
-
 import html
 import socket
 import time
@@ -23,13 +22,13 @@ from typing import Any
 import panel as pn
 
 from railval.app import security
+from railval.app.pages.audit import AuditPage
 from railval.app.pages.compare import ComparePage
 from railval.app.pages.dashboard import DashboardPage
 from railval.app.pages.diagnose import DiagnosePage
 from railval.app.pages.importer import ImportPage
 from railval.app.pages.metrics import MetricsPage
 from railval.app.pages.overview import OverviewPage
-from railval.app.pages.audit import AuditPage
 from railval.app.pages.report import ReportPage
 from railval.app.pages.signoff import SignoffPage
 from railval.app.state import PAGE_TITLES, AppState, Backend
