@@ -24,6 +24,9 @@ first loads modules, caches and the campaign's data once), with all sessions ope
 they closed; "per further Panel session" = (all open − one open) / (engineers − 1). Closed
 sessions are discarded by Bokeh after ``unused-session-lifetime`` (15 s) at its next check
 (every 17 s); the app then collects and trims the heap (``railval.app.main.release_memory``).
+The app processes run with the deployment's environment (``railval.app.main.SERVE_ENV``:
+Python objects in glibc's heap, so the trim returns them); ``--pymalloc`` runs them with
+Python's own allocator instead, for comparison.
 """
 
 from __future__ import annotations
@@ -50,6 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--apps", type=int, default=2, help="app processes behind nginx")
     parser.add_argument("--settle", type=float, default=60.0,
                         help="seconds after the sessions closed before memory is read again")
+    parser.add_argument("--pymalloc", action="store_true",
+                        help="app processes with Python's own allocator instead of the "
+                        "deployment's PYTHONMALLOC=malloc (railval.app.main.SERVE_ENV), to compare")
     parser.add_argument("--pg", default="postgresql://postgres@127.0.0.1:5432/test",
                         help="PostgreSQL database in which a fresh schema is used")
 
@@ -138,8 +144,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     url = f"{args.pg.replace('postgresql://', 'postgresql+psycopg://')}?options=-csearch_path%3D{schema}"
     work = Path(tempfile.mkdtemp(prefix="railval-bench-team-"))
     figures: dict[str, Any] = {"reviewers": args.reviewers, "engineers": args.engineers,
-                               "app_processes": args.apps, "answers_per_reviewer": args.answers}
-    topo = Topology(url, work / "site", n_apps=args.apps)
+                               "app_processes": args.apps, "answers_per_reviewer": args.answers,
+                               "allocator": "pymalloc" if args.pymalloc else "malloc"}
+    topo = Topology(url, work / "site", n_apps=args.apps, app_env={} if args.pymalloc else None)
     try:
         topo.workdir.mkdir(parents=True)
         topo._secrets()

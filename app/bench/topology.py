@@ -76,6 +76,8 @@ class Topology:
     workdir: Path
     n_apps: int = 2
     extra_args: list[str] = field(default_factory=list)
+    #: environment of the app processes on top of the deployment's (railval.app.main.SERVE_ENV)
+    app_env: dict[str, str] | None = None
     apps: dict[int, subprocess.Popen] = field(default_factory=dict)
     nginx: subprocess.Popen | None = None
     port: int = 0
@@ -85,8 +87,11 @@ class Topology:
         return f"https://127.0.0.1:{self.port}"
 
     def _env(self) -> dict[str, str]:
+        from railval.app.main import SERVE_ENV
+
         env = {k: v for k, v in os.environ.items()
-               if not k.startswith(("RAILVAL_", "BOKEH_SECRET"))}
+               if not k.startswith(("RAILVAL_", "BOKEH_SECRET", "PYTHONMALLOC"))}
+        env.update(SERVE_ENV if self.app_env is None else self.app_env)
         env.update(RAILVAL_DB=self.db_url, PYTHONUNBUFFERED="1")
         for name in ("RAILVAL_SECRET_KEY", "RAILVAL_COOKIE_SECRET", "BOKEH_SECRET_KEY"):
             env[f"{name}_FILE"] = str(self.workdir / "secrets" / name.lower())
