@@ -117,6 +117,111 @@ MEASUREMENT_PREFIXES = ("gain ", "offset ", "sign ", "swap ", "shift ")
 DISCRETE_DEFAULTS: tuple[str, ...] = ("swap", "sign")
 
 
+def _wanted(ctx: Any, measurement: bool | Sequence[str], defaults: Sequence[str]) -> tuple[list[str], bool]:
+    """(the discrete candidates asked for, whether those that cannot apply stay unsaid): named
+    in ``measurement``, or with ``measurement=True`` the kinds in ``defaults``."""
+    if measurement is not True:
+        return [m for m in measurement if m.startswith(("sign ", "swap ", "shift "))], False
+    wanted: list[str] = []
+    if "sign" in defaults:
+        wanted += [f"sign {c}" for c in sorted(ctx.channels) if c.startswith(("Y_", "Q_"))]
+    if "swap" in defaults:
+        wheels = sorted({c.split("_", 1)[1][:-1] for c in ctx.channels if c.startswith(("Y_w", "Q_w"))})
+        wanted += ["swap b1 b2"] + [f"swap {w}L {w}R" for w in wheels]
+    if "shift" in defaults:
+        wanted += [f"shift {s.id}" for s in ctx.sections]
+    return wanted, True  # a default candidate that does not apply is not worth a line
+
+
+def _sign_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | str:
+    """``sign CHANNEL``: the family, or why it cannot apply."""
+    from railval.core.diagnosis.measurement import (
+        discrete_evidence,
+        discrete_family,
+        offset_components,
+        sign_blind,
+        signed_measured,
+    )
+
+    ctx, pairs = k["ctx"], k["pairs"]
+    comps = offset_components(pairs, arg) if arg in ctx.channels else []
+    why = sign_blind(arg, comps)
+    if why:
+        return why
+    ev = discrete_evidence(k["base"], pairs, k["sim_bands"], k["meas_bands"], k["sections"],
+                           signed_measured(k["sets"], ctx.sections, arg, comps), k["limits"], bands=ctx.bands)
+    return discrete_family(
+        name, "sign", -1.0, ev, half_width=0.01, title=f"channel {arg} reads with reversed sign",
+        explanation=(f"the measurement, not the model: channel {arg} reads −1 × the true value (polarity of "
+                     f"the sensor or bridge reversed); it changes {', '.join(sorted({q for q, _ in comps}))}"))
+
+
+def _swap_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | str:
+    """``swap A B``: the family, or why it cannot apply."""
+    from railval.core.diagnosis.measurement import (
+        discrete_evidence,
+        discrete_family,
+        offset_components,
+        swap_pairs,
+        swapped_bands,
+        swapped_measured,
+    )
+
+    ctx, pairs = k["ctx"], k["pairs"]
+    a, _, b = arg.partition(" ")
+    pp = swap_pairs(a, b, ctx.channels)
+    comps = sorted({c for x, y in pp for c in (*offset_components(pairs, x), *offset_components(pairs, y))})
+    if not pp or not comps:
+        return (f"{a} and {b} are not two channels (or positions) of the same kind this campaign "
+                "measures a quantity with")
+    mb = swapped_bands(k["meas_bands"], pp)
+    ev = discrete_evidence(k["base"], pairs, k["sim_bands"], mb, k["sections"],
+                           swapped_measured(k["sets"], ctx.sections, pp, comps), k["limits"], bands=ctx.bands)
+    which = ", ".join(f"{x}↔{y}" for x, y in pp)
+    bands = any(x in ctx.channels and x[:2] in ("ay", "az") for x, _ in pp)
+    return discrete_family(
+        name, "swap", 1.0, ev, half_width=0.01, title=f"{a} and {b} recorded each other's position ({which})",
+        explanation=(f"the measurement, not the model: the sensors of {a} and {b} are exchanged ({which}); "
+                     f"it changes {', '.join(sorted({q for q, _ in comps}))} at both positions"
+                     + (" and their band powers" if bands else "")))
+
+
+def _shift_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | str:
+    """``shift SECTION``: the family, or why it cannot apply."""
+    from railval.core.diagnosis.measurement import (
+        discrete_evidence,
+        discrete_family,
+        section_lag,
+        shifted_measured,
+    )
+
+    ctx, sets, sim_sets = k["ctx"], k["sets"], k["sim_sets"]
+    sec = next((s for s in ctx.sections if s.id == arg), None)
+    if sec is None or arg not in sets or arg not in sim_sets:
+        return f"{arg} is not a section of this campaign with measured and simulated signals"
+    lag = section_lag(sets[arg], sim_sets[arg])
+    fs = float(sets[arg].fs)
+    if not lag["consistent"]:
+        return lag["reason"]
+    if abs(lag["lag"]) < 1.0 / fs:
+        return f"the channels agree on a lag of {lag['lag']:+.4f} s, less than one sample"
+    comps = sorted({(q, p) for r in k["pairs"] if str(r["section"]) == arg
+                    for q, p in [(str(r["quantity"]), str(r["position"]))]})
+    ev = discrete_evidence(k["base"], k["pairs"], k["sim_bands"], k["meas_bands"], k["sections"],
+                           shifted_measured(sets, ctx.sections, arg, lag["lag"], comps), k["limits"],
+                           bands=ctx.bands)
+    return discrete_family(
+        name, "shift", lag["lag"], ev, half_width=max(lag["spread"], 0.5 / fs), unit="s",
+        title=f"section {arg} recorded {lag['lag']:+.3f} s late",
+        explanation=(f"the measurement, not the model: every channel of section {arg} trails the simulation "
+                     f"by {lag['lag']:+.3f} s (cross-correlation of {len(lag['lags'])} channels, spread "
+                     f"{lag['spread']:.3f} s — a time base or trigger set wrong); re-aligned, the section's "
+                     "quantities are evaluated on the right stretch of track"))
+
+
+_DISCRETE_BUILDERS = {"sign": _sign_family, "swap": _swap_family, "shift": _shift_family}
+
+
 def discrete_families(ctx: Any, sets: Mapping[str, Any], sim_sets: Mapping[str, Any],
                       measurement: bool | Sequence[str], base: SectionEvidence, result: tuple, meas_bands: Mapping,
                       sections: Sequence[tuple[str, int]], limits: Mapping[str, float], skipped: list[dict],
@@ -130,102 +235,21 @@ def discrete_families(ctx: Any, sets: Mapping[str, Any], sim_sets: Mapping[str, 
     channels agree on a lag of at least one sample; ``"sign"``: every wheel force channel).
     What cannot apply is left out with its reason in ``skipped``; a named shift of a section
     without a consistent lag too."""
-    from railval.core.diagnosis.measurement import (
-        discrete_evidence,
-        discrete_family,
-        offset_components,
-        section_lag,
-        shifted_measured,
-        sign_blind,
-        signed_measured,
-        swap_pairs,
-        swapped_bands,
-        swapped_measured,
-    )
-
-    pairs, sim_bands = result
-    if measurement is True:
-        wanted: list[str] = []
-        if "sign" in defaults:
-            wanted += [f"sign {c}" for c in sorted(ctx.channels) if c.startswith(("Y_", "Q_"))]
-        if "swap" in defaults:
-            wheels = sorted({c.split("_", 1)[1][:-1] for c in ctx.channels if c.startswith(("Y_w", "Q_w"))})
-            wanted += ["swap b1 b2"] + [f"swap {w}L {w}R" for w in wheels]
-        if "shift" in defaults:
-            wanted += [f"shift {s.id}" for s in ctx.sections]
-        quiet = True  # a default candidate that does not apply is not worth a line
-    else:
-        wanted = [m for m in measurement if m.startswith(("sign ", "swap ", "shift "))]
-        quiet = False
+    wanted, quiet = _wanted(ctx, measurement, defaults)
     if not wanted or not sets:
         return {}
+    pairs, sim_bands = result
+    k = {"ctx": ctx, "sets": sets, "sim_sets": sim_sets, "base": base, "pairs": pairs, "sim_bands": sim_bands,
+         "meas_bands": meas_bands, "sections": sections, "limits": limits}
     out: dict[str, CandidateFamily] = {}
-
-    def skip(name: str, why: str) -> None:
-        if not quiet:
-            skipped.append({"name": name, "kind": "measurement", "reason": why})
-
-    def add(fam: CandidateFamily) -> None:
-        if np.array_equal(fam.evidence[1].values(), base.values()):
-            skip(fam.name, "changes none of the quantities the campaign measures")
-        else:
-            out[fam.name] = fam
-
     for name in wanted:
         kind, _, arg = name.partition(" ")
-        if kind == "sign":
-            comps = offset_components(pairs, arg) if arg in ctx.channels else []
-            why = sign_blind(arg, comps)
-            if why:
-                skip(name, why)
-                continue
-            ev = discrete_evidence(base, pairs, sim_bands, meas_bands, sections,
-                                   signed_measured(sets, ctx.sections, arg, comps), limits, bands=ctx.bands)
-            add(discrete_family(
-                name, "sign", -1.0, ev, half_width=0.01, title=f"channel {arg} reads with reversed sign",
-                explanation=(f"the measurement, not the model: channel {arg} reads −1 × the true value (polarity of "
-                             f"the sensor or bridge reversed); it changes {', '.join(sorted({q for q, _ in comps}))}")))
-        elif kind == "swap":
-            a, _, b = arg.partition(" ")
-            pp = swap_pairs(a, b, ctx.channels)
-            comps = sorted({c for x, y in pp for c in (*offset_components(pairs, x), *offset_components(pairs, y))})
-            if not pp or not comps:
-                skip(name, f"{a} and {b} are not two channels (or positions) of the same kind this campaign "
-                           "measures a quantity with")
-                continue
-            mb = swapped_bands(meas_bands, pp)
-            ev = discrete_evidence(base, pairs, sim_bands, mb, sections, swapped_measured(sets, ctx.sections, pp, comps),
-                                   limits, bands=ctx.bands)
-            which = ", ".join(f"{x}↔{y}" for x, y in pp)
-            add(discrete_family(
-                name, "swap", 1.0, ev, half_width=0.01, title=f"{a} and {b} recorded each other's position ({which})",
-                explanation=(f"the measurement, not the model: the sensors of {a} and {b} are exchanged ({which}); "
-                             f"it changes {', '.join(sorted({q for q, _ in comps}))} at both positions"
-                             + (" and their band powers" if any(x in ctx.channels and x[:2] in ("ay", "az")
-                                                               for x, _ in pp) else ""))))
-        elif kind == "shift":
-            sec = next((s for s in ctx.sections if s.id == arg), None)
-            if sec is None or arg not in sets or arg not in sim_sets:
-                skip(name, f"{arg} is not a section of this campaign with measured and simulated signals")
-                continue
-            lag = section_lag(sets[arg], sim_sets[arg])
-            fs = float(sets[arg].fs)
-            if not lag["consistent"]:
-                skip(name, lag["reason"])
-                continue
-            if abs(lag["lag"]) < 1.0 / fs:
-                skip(name, f"the channels agree on a lag of {lag['lag']:+.4f} s, less than one sample")
-                continue
-            comps = sorted({(q, p) for r in pairs if str(r["section"]) == arg
-                            for q, p in [(str(r["quantity"]), str(r["position"]))]})
-            ev = discrete_evidence(base, pairs, sim_bands, meas_bands, sections,
-                                   shifted_measured(sets, ctx.sections, arg, lag["lag"], comps), limits,
-                                   bands=ctx.bands)
-            add(discrete_family(
-                name, "shift", lag["lag"], ev, half_width=max(lag["spread"], 0.5 / fs), unit="s",
-                title=f"section {arg} recorded {lag['lag']:+.3f} s late",
-                explanation=(f"the measurement, not the model: every channel of section {arg} trails the simulation "
-                             f"by {lag['lag']:+.3f} s (cross-correlation of {len(lag['lags'])} channels, spread "
-                             f"{lag['spread']:.3f} s — a time base or trigger set wrong); re-aligned, the section's "
-                             "quantities are evaluated on the right stretch of track")))
+        fam = _DISCRETE_BUILDERS[kind](name, arg, k)
+        if not isinstance(fam, str) and np.array_equal(fam.evidence[1].values(), base.values()):
+            fam = "changes none of the quantities the campaign measures"
+        if isinstance(fam, str):
+            if not quiet:
+                skipped.append({"name": name, "kind": "measurement", "reason": fam})
+        else:
+            out[fam.name] = fam
     return out
