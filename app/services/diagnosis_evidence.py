@@ -41,7 +41,10 @@ from railval.core.diagnosis import (
     section_evidence,
 )
 from railval.core.diagnosis.causes import cause_set
+from railval.core.diagnosis.engine import STRONG
+from railval.core.diagnosis.fit import INTERFACE_PARAMETERS, MASS_PARAMETERS
 from railval.core.diagnosis.measurement import gain_channels, gain_family
+from railval.core.diagnosis.support import apply_interface_rule, cause_pool, outside_support
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import Effect
 
@@ -242,7 +245,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                     families[key] = CandidateFamily(
                         "effect", name, pname, [], [], (p["lower"], p["upper"]), log=p["log"], defaults=defaults,
                         plausible=plaus, plausible_source=source, unit=p["unit"],
-                        title=spec.title, explanation=spec.explanation)
+                        title=spec.title, explanation=spec.explanation, interface=spec.interface)
                 families[key].values.append(v)
                 families[key].evidence.append(evidence(k))
             else:
@@ -250,7 +253,8 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                 families[name] = CandidateFamily(
                     "parameter", name, pname, [pp["reference"], v], [base, evidence(k)], pp["bounds"], log=True,
                     extrapolate=True, reference=pp["reference"], plausible=pp["plausible"],
-                    plausible_source=pp["source"], unit=pp["unit"], title=pp["title"])
+                    plausible_source=pp["source"], unit=pp["unit"], title=pp["title"],
+                    interface=pname in INTERFACE_PARAMETERS)
         if measurement:
             limits = {q: r.std_limit for q, r in vr.quantities.items()}
             chans = gain_channels(results[0][0])
@@ -297,8 +301,13 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     res = diagnose_evidence(base, fams, validated=bool(vr.validated), n_boot=n_boot, folds=folds, seed=seed)
     res.extra["families"] = diagnose_families(base, fams, validated=bool(vr.validated), n_boot=n_boot,
                                               folds=folds, seed=seed)
+    # interface candidates need support outside the guiding forces (core/diagnosis/support.py)
+    support = outside_support(base, fams, n_boot=n_boot, folds=folds, seed=seed)
+    apply_interface_rule(res, res.extra["families"], support, base, strong=STRONG)
+    res.extra["interface_support"] = [x.to_dict() for x in support.values()]
     relative_gains(res)
-    pool = [f for f in fams if any(c.name == f.name and c.significant for c in res.candidates)]
+    pool, left_out = cause_pool([f for f in fams if any(c.name == f.name and c.significant for c in res.candidates)],
+                                res, support, MASS_PARAMETERS)
     if res.extra["verdict"] == "none" or not pool:
         cs = {"causes": [], "held_out_explained": 0.0, "remaining_within_noise": bool(res.extra["residual_within_noise"]),
               "stopped": "no candidate explains more than the section scatter" if res.extra["verdict"] != "none"
@@ -311,6 +320,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         if rel.get(x["name"]) is not None:
             x["relative_gain"] = rel[x["name"]]
     res.extra["causes"] = cs.pop("causes")
+    cs["left_out"] = left_out
     res.extra["cause_set"] = cs
     res.extra.update({"campaign": ctx.campaign, "configuration": config, "validated": bool(vr.validated),
                       "effects_in_configuration": sorted(conf_effects),

@@ -85,6 +85,12 @@ def _where(ev: SectionEvidence) -> tuple[list[str], list[int]]:
     return quantities, zones
 
 
+def structural_where(base: SectionEvidence, family: str) -> tuple[list[str], list[int]]:
+    """Quantities and zones where the residual of ``family`` lies (as :func:`_where`)."""
+    keep = [family_of(g) == family for g in base.groups]
+    return _where(restrict(base, keep)) if any(keep) else ([], [])
+
+
 def _top(c: Any) -> dict[str, Any]:
     return {"name": c.name, "kind": c.kind, "held_out_explained": c.held_out_explained, "explained": c.explained,
             "parameter": c.parameter, "fitted": c.fitted, "fitted_ci": list(c.fitted_ci), "plausible": c.plausible,
