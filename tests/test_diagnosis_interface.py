@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import pytest
+
 from railval.core.diagnosis import CandidateFamily, diagnose_evidence, diagnose_families
 from railval.core.diagnosis.causes import cause_set
 from railval.core.diagnosis.support import (
@@ -18,7 +19,6 @@ from railval.core.diagnosis.support import (
     guiding_only,
     outside_support,
 )
-
 from tests.test_diagnosis_trust import A, B, _evidence
 
 VALUES = [0.0, 0.5, 1.0, 1.5, 2.0]
