@@ -48,10 +48,10 @@ def test_interface_candidate_supported_only_by_the_guiding_forces_is_not_a_cause
     base, fams = _case(("Y_qst",))
     # without the rule (not an interface candidate) the toy gives a confident cause
     plain = [replace(f, interface=False) for f in fams]
-    assert diagnose_evidence(base, plain, n_boot=60).extra["verdict"] == "cause"
+    assert diagnose_evidence(base, plain, n_boot=60).verdict == "cause"
     res, fam, support = _diagnose(base, fams)
     assert guiding_only(support) == {"I"}
-    assert res.candidates[0].name == "I" and res.extra["verdict"] == "uncertain"
+    assert res.candidates[0].name == "I" and res.verdict == "uncertain"
     assert CONTACT_ALIKE in res.note and any(CONTACT_ALIKE in f for f in res.candidates[0].flags)
     g = fam["guiding"]
     assert g["verdict"] == "uncertain" and g["structural"]["flag"]
@@ -65,7 +65,7 @@ def test_interface_candidate_with_support_outside_the_guiding_forces_stays_a_cau
     base, fams = _case(("Y_qst", "az_rms", "ay_rms", "Q_max"))
     res, fam, support = _diagnose(base, fams)
     assert guiding_only(support) == set() and support["I"].significant_outside
-    assert res.candidates[0].name == "I" and res.extra["verdict"] == "cause"
+    assert res.candidates[0].name == "I" and res.verdict == "cause"
     assert not fam["guiding"]["structural"]["flag"]
     pool, left = cause_pool(fams, res, support, set())
     assert left == [] and [c["name"] for c in cause_set(base, pool, n_boot=60)["causes"]] == ["I"]
@@ -77,7 +77,7 @@ def test_a_mass_that_explains_alike_or_implausibly_does_not_join_the_cause_set()
     twin = replace(fams[0], name="model.m_b", kind="parameter", parameter="m_b")
     fams = [replace(fams[0], name="model.m_a", kind="parameter", parameter="m_a"), twin]
     res = diagnose_evidence(base, fams, n_boot=60)
-    assert res.extra["alike"] and res.extra["verdict"] == "uncertain"
+    assert res.alike and res.verdict == "uncertain"
     pool, left = cause_pool(fams, res, {}, {"m_a", "m_b"})
     assert pool == [] and {x["name"] for x in left} == {"model.m_a", "model.m_b"}
     # not masses: a worn part may join as before

@@ -162,7 +162,7 @@ class DiagnosePage(PageBase):
             return
         df = pd.DataFrame([{
             "#": i + 1, "candidate": c["effect"], "kind": c.get("kind", "effect"),
-            "held-out": round(100 * float(c.get("held_out_explained", c["explained"])), 1),
+            "held-out": round(100 * float(c["held_out_explained"]), 1),
             "in-sample": round(100 * float(c["explained"]), 1),
             "plausible": "yes" if c.get("plausible", True) else "no", "flags": len(c.get("flags") or []),
             "fitted parameters": ", ".join(f"{k} = {v:.4g}" for k, v in (c.get("parameters") or {}).items()),

@@ -64,7 +64,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     A stored run with the same inputs (signal content hashes of both sides, section records,
     configuration, candidates, ``values_per_parameter``, options, :data:`DIAGNOSIS_VERSION`)
     is returned without simulating unless ``refresh``; every computed run is stored
-    (``store``). ``result.extra["run"]`` describes the stored run
+    (``store``). ``result.run`` describes the stored run
     (:func:`railval.app.services.stored_runs.run_info`)."""
     settings = {"values_per_parameter": int(values_per_parameter),
                 "effects": sorted(effects) if effects is not None else None,
@@ -75,7 +75,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         stored = None if refresh else runs.latest_run(s, conf.id, "diagnosis", inputs_sha)
         if stored is not None:
             res = DiagnosisResult.from_dict(stored.result)
-            res.extra["run"] = run_info(stored, reused=True, current_data_sha256=data_sha)
+            res.run = run_info(stored, reused=True, current_data_sha256=data_sha)
             if progress is not None:
                 progress("done", 1.0, {"stored_run": stored.id})
             return res
@@ -98,7 +98,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                                  settings={**settings, "data_sha256": data_sha, "version": DIAGNOSIS_VERSION},
                                  result=res.to_dict(with_signatures=True),
                                  seconds=time.perf_counter() - started, actor=actor)
-            res.extra["run"] = run_info(row, reused=False, current_data_sha256=data_sha)
+            res.run = run_info(row, reused=False, current_data_sha256=data_sha)
     return res
 
 
@@ -121,7 +121,7 @@ def diagnosis_runs(session: Any, campaign: str, config: str) -> list[dict[str, A
 
 
 def latest_diagnosis(session: Any, campaign: str, config: str) -> DiagnosisResult | None:
-    """The newest stored diagnosis of ``config`` (any settings), ``extra["run"]`` saying
+    """The newest stored diagnosis of ``config`` (any settings), ``run`` saying
     whether its data are still current; None when never diagnosed."""
     conf = repo.get_configuration(session, campaign, config)
     row = runs.latest_run(session, conf.id, "diagnosis")
@@ -129,6 +129,6 @@ def latest_diagnosis(session: Any, campaign: str, config: str) -> DiagnosisResul
         return None
     data_sha, _ = digests(data_inputs(session, campaign, config), {}, DIAGNOSIS_VERSION)
     res = DiagnosisResult.from_dict(row.result)
-    res.extra["run"] = run_info(row, reused=True, current_data_sha256=data_sha)
+    res.run = run_info(row, reused=True, current_data_sha256=data_sha)
     return res
 

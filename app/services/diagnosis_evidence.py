@@ -208,18 +208,19 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         n_sim = len(tasks) + _refine(ex, req, base, fams, bool(vr.validated), refine, folds, seed)
     _report(progress, "score", 0.9)
     res = _score(base, fams, bool(vr.validated), req.template, n_boot=n_boot, folds=folds, seed=seed)
-    res.extra.update({"campaign": ctx.campaign, "configuration": config, "validated": bool(vr.validated),
-                      "effects_in_configuration": sorted(req.conf_effects),
-                      "parameters_in_configuration": dict(req.conf_params),
-                      "values_per_parameter": values_per_parameter, "simulations": n_sim,
-                      "stored_residual_norm": math.sqrt(stored_residual.norm2()),
-                      "simulated_residual_norm": math.sqrt(res.residual.norm2()),
-                      "effects_simulated": sorted(req.in_config), "skipped": req.conf_skipped + req.skipped})
+    res.campaign, res.configuration, res.validated = ctx.campaign, config, bool(vr.validated)
+    res.effects_in_configuration = sorted(req.conf_effects)
+    res.parameters_in_configuration = dict(req.conf_params)
+    res.values_per_parameter, res.simulations = values_per_parameter, n_sim
+    res.stored_residual_norm = math.sqrt(stored_residual.norm2())
+    res.simulated_residual_norm = math.sqrt(res.residual.norm2())
+    res.effects_simulated = sorted(req.in_config)
+    res.skipped = req.conf_skipped + req.skipped
     if req.skipped and not fams:
         res.note += "; left out: " + "; ".join(f"{s['name']} ({s['reason']})" for s in req.skipped)
     if req.conf_skipped:
         res.note += "; " + "; ".join(f"effect {s['name']} {s['reason']}" for s in req.conf_skipped)
-    res.extra["next"] = next_step(res, campaign, config)
+    res.next_step = next_step(res, campaign, config)
     _report(progress, "done", 1.0)
     return res
 
@@ -391,28 +392,28 @@ def _score(base: SectionEvidence, fams: list[CandidateFamily], validated: bool, 
     """Held-out ranking and verdict, per family, the interface rule (support outside the guiding
     forces, core/diagnosis/support.py) and the cause set."""
     res = diagnose_evidence(base, fams, validated=validated, n_boot=n_boot, folds=folds, seed=seed)
-    res.extra["families"] = diagnose_families(base, fams, validated=validated, n_boot=n_boot, folds=folds, seed=seed)
+    res.families = diagnose_families(base, fams, validated=validated, n_boot=n_boot, folds=folds, seed=seed)
     # interface candidates need support outside the guiding forces (core/diagnosis/support.py)
     support = outside_support(base, fams, n_boot=n_boot, folds=folds, seed=seed)
-    apply_interface_rule(res, res.extra["families"], support, base, strong=STRONG)
-    res.extra["interface_support"] = [x.to_dict() for x in support.values()]
+    apply_interface_rule(res, res.families, support, base, strong=STRONG)
+    res.interface_support = [x.to_dict() for x in support.values()]
     relative_gains(res)
     pool, left_out = cause_pool([f for f in fams if any(c.name == f.name and c.significant for c in res.candidates)],
                                 res, support, MASS_PARAMETERS)
-    if res.extra["verdict"] == "none" or not pool:
-        cs = {"causes": [], "held_out_explained": 0.0, "remaining_within_noise": bool(res.extra["residual_within_noise"]),
-              "stopped": "no candidate explains more than the section scatter" if res.extra["verdict"] != "none"
+    if res.verdict == "none" or not pool:
+        cs = {"causes": [], "held_out_explained": 0.0, "remaining_within_noise": bool(res.residual_within_noise),
+              "stopped": "no candidate explains more than the section scatter" if res.verdict != "none"
               else "verdict none: " + res.note}
     else:
-        later = {f["top"][0]["name"] for f in res.extra["families"] if f["top"]}
+        later = {f["top"][0]["name"] for f in res.families if f["top"]}
         cs = cause_set(base, pool, folds=folds, n_boot=n_boot, seed=seed, later=sorted(later))
     rel = {c.name: c.parameters.get("relative_gain") for c in res.candidates}
     for x in cs["causes"]:
         if rel.get(x["name"]) is not None:
             x["relative_gain"] = rel[x["name"]]
-    res.extra["causes"] = cs.pop("causes")
+    res.causes = cs.pop("causes")
     cs["left_out"] = left_out
-    res.extra["cause_set"] = cs
+    res.cause_set = cs
     return res
 
 
@@ -471,11 +472,11 @@ def _best_per_effect(base: SectionEvidence, fams: list[CandidateFamily], validat
 def next_step(res: DiagnosisResult, campaign: str, config: str) -> dict[str, Any]:
     """What to do next: calibrate the cause into a child configuration (then diagnose the
     child), or, with no cause, what stays unexplained."""
-    verdict = res.extra.get("verdict")
+    verdict = res.verdict
     if verdict == "none" or not res.candidates:
         return {"action": "none", "text": "no candidate explains the residual; look at what stays unexplained "
                                           "(quantities, zones, bands) — data, sensors or physics outside the library"}
-    all_causes = res.extra.get("causes") or []
+    all_causes = res.causes or []
     sensors = [x for x in all_causes if x["kind"] == "measurement"]
     check = ("; first check the measurement: " + "; ".join(
         f"{x['name'].removeprefix('offset ')} reads ≈ the true value {x['fitted']:+.3g}" if x["parameter"] == "offset"

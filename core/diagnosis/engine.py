@@ -88,11 +88,9 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
     verdict, why = _verdict(best, alike, within_noise=within_noise, noise_floor=noise_floor, validated=validated,
                             strong=strong)
     note = {"none": "no candidate explains the residual: " + why, "uncertain": "uncertain: " + why}.get(verdict, why)
-    res = DiagnosisResult(setup.residual, list(cands), not alike, evidence, note)
-    res.extra.update({"verdict": verdict, "noise_floor": noise_floor, "residual_within_noise": within_noise,
-                      "alike": alike, "unexplained": _unexplained(setup.residual, best),
-                      "folds": len(setup.masks), "bootstrap": n_boot})
-    return res
+    return DiagnosisResult(setup.residual, list(cands), not alike, evidence, note, verdict=verdict,
+                           noise_floor=noise_floor, residual_within_noise=within_noise, alike=alike,
+                           unexplained=_unexplained(setup.residual, best), folds=len(setup.masks), bootstrap=n_boot)
 
 
 class _Setup:

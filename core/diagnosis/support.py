@@ -85,7 +85,7 @@ def outside_support(base: SectionEvidence, families: Sequence[CandidateFamily], 
         return none
     subfams = [replace(f, evidence=[restrict(e, keep) for e in f.evidence]) for f in families]
     res = diagnose_evidence(sub, subfams, n_boot=n_boot, folds=folds, seed=seed)
-    floor = float(res.extra["noise_floor"])
+    floor = float(res.noise_floor)
     by = {c.name: c for c in res.candidates}
     return {n: Support(n, by[n].held_out_explained, bool(by[n].significant), floor) if n in by else none[n]
             for n in names}
@@ -112,8 +112,8 @@ def apply_interface_rule(res: Any, families_out: list[dict[str, Any]], support: 
         if c.name in only:
             c.flags.append(_alike_flag(support[c.name]))
     best = res.candidates[0] if res.candidates else None
-    if best is not None and best.name in only and res.extra["verdict"] == "cause":
-        res.extra["verdict"] = "uncertain"
+    if best is not None and best.name in only and res.verdict == "cause":
+        res.verdict = "uncertain"
         res.note = f"uncertain: {best.name} {_alike_flag(support[best.name])}"
     for fam in families_out:
         if fam["name"] != GUIDING or not fam["top"]:
@@ -142,7 +142,7 @@ def cause_pool(pool: Iterable[CandidateFamily], res: Any, support: Mapping[str, 
     only = guiding_only(support)
     masses = set(masses)
     by = {c.name: c for c in res.candidates}
-    alike = {n for pair in res.extra["alike"] for n in pair["candidates"]}
+    alike = {n for pair in res.alike for n in pair["candidates"]}
     keep, out = [], []
     for f in pool:
         c = by.get(f.name)
