@@ -188,6 +188,10 @@ class DiagnosePage(PageBase):
                 "sections): " + ", ".join(f"{c['name']} {100 * c['held_out_share']:.0f} %" for c in self.state.causes)
                 + (f"; together {100 * together:.0f} %" if together is not None else ""),
                 "success" if len(self.state.causes) > 1 else "info"))
+        left = (self.state.cause_set or {}).get("left_out") or []
+        if left:
+            extra.append(message("Not in the cause set: " + "; ".join(f"{x['name']} — {x['reason']}" for x in left),
+                                 "warning"))
         extra += self._families()
         in_config = [s for s in self.state.skipped if s["kind"] == "configuration"]
         candidates = [s for s in self.state.skipped if s["kind"] != "configuration"]
