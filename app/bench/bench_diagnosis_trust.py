@@ -15,14 +15,14 @@ model the diagnosis simulates:
       a time shift of one wheelset's vertical force channels, an unsprung-mass error, a
       profile shape (contact angle parameter at unchanged conicity), the centre-of-gravity height,
   (d) nothing,
-  (f) a truth with another creep law (Polach's instead of Shen–Hedrick–Elkins saturation, the
-      simulator's ``creep_law`` = 1), alone and with one or two causes on top, scored like (e);
   (e) a truth whose wheel–rail contact differs from the candidates' (softer flange contact,
       lower creep coefficients; no candidate changes either), alone or with a cause on top
       (worn dampers, a mass, a sensor gain), and two causes at once (two dampers; an effect
       plus a parameter): scored by whether the cause(s) on top appear in the cause set or as
       a family's cause, whether a family is flagged structural, and confident wrong claims
       (a ``cause`` verdict with a wrong top, or a wrong name in the cause set).
+  (f) a truth with another creep law (Polach's instead of Shen–Hedrick–Elkins saturation, the
+      simulator's ``creep_law`` = 1), alone and with one or two causes on top, scored like (e);
 
 Every case is synthesised (:func:`~railval.core.sim.synth.build_campaign`), written and
 imported (:func:`railval.app.services.synth.write_folder`, :func:`railval.db.importer.import_campaign`)
@@ -33,7 +33,7 @@ share of ``none``/``uncertain`` verdicts on (c) and (d), the share of confident 
 and wrong"), and — with ``--calibrate-wrong`` — whether a wrong candidate's calibration that
 passes validation is flagged (plausibility or held-out check).
 
-``railval bench diagnosis-trust [--cases N] [--classes a b c d] [--workers 2] [--calibrate-wrong]``
+``railval bench diagnosis-trust [--cases N] [--classes a b c d e f] [--workers 2] [--calibrate-wrong]``
 """
 
 from __future__ import annotations
