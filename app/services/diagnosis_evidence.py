@@ -402,8 +402,9 @@ def _score(base: SectionEvidence, fams: list[CandidateFamily], validated: bool, 
                                 res, support, MASS_PARAMETERS)
     if res.verdict == "none" or not pool:
         cs = {"causes": [], "held_out_explained": 0.0, "remaining_within_noise": bool(res.residual_within_noise),
-              "stopped": "no candidate explains more than the section scatter" if res.verdict != "none"
-              else "verdict none: " + res.note}
+              "stopped": "verdict none: " + res.note if res.verdict == "none" else
+              "every candidate beyond the section scatter is left out (left_out)" if left_out else
+              "no candidate explains more than the section scatter"}
     else:
         later = {f["top"][0]["name"] for f in res.families if f["top"]}
         cs = cause_set(base, pool, folds=folds, n_boot=n_boot, seed=seed, later=sorted(later))
