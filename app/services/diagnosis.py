@@ -29,7 +29,7 @@ from railval.db import repo, runs
 
 #: version of the diagnosis procedure in the stored runs' digest (with the EN processing
 #: version): a change of the procedure computes afresh instead of reusing an older run
-DIAGNOSIS_VERSION = f"diagnosis/4+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets
+DIAGNOSIS_VERSION = f"diagnosis/5+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets; 5: interface and mass rules
 
 __all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnosis_runs", "diagnosis_simulations", "latest_diagnosis", "scan_points"]
 
