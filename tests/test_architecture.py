@@ -324,8 +324,6 @@ def test_no_citation_of_documents_outside_the_repository():
 # short, so this list only shrinks.
 PENDING_LONG_FUNCTIONS = {
     "app/bench/bench_team.py::run",
-    "app/services/diagnosis_evidence.py::rank_causes",
-    "core/diagnosis/engine.py::diagnose_evidence",
     "core/sim/model.py::assemble",
     "core/sim/synth.py::build_campaign",
 }

@@ -131,7 +131,7 @@ def test_indistinguishable_effects_are_flagged_with_evidence():
     fams.append(_family("A2", "k", [0.0, 0.5, 1.0], r, a2))
     res = diagnose_evidence(base, fams, n_boot=0)
     assert [c.effect for c in res.candidates[:2]] == ["A", "A2"]
-    assert not res.separable and res.extra["verdict"] == "uncertain"
+    assert not res.separable and res.verdict == "uncertain"
     assert res.evidence[0]["component"] == "az_rms zone 4 p"
     assert "A2" in res.note
 

@@ -350,9 +350,9 @@ def test_next_step_calibrates_a_cause_set_together_and_the_cli_accepts_it():
     cands = [mk("conicity", "effect", {"conicity": 0.45}, 0.45, "conicity"),
              mk("model.c_secondary_z", "parameter", {"c_secondary_z": 9000.0}, 9000.0, "c_secondary_z"),
              mk("gain az_cb_b1", "measurement", {"gain": 1.3}, 1.3, "gain")]
-    res = DiagnosisResult(pat, cands, True, [], "", {"verdict": "cause", "causes": [
+    res = DiagnosisResult(pat, cands, True, [], "", verdict="cause", causes=[
         {"name": c.name, "kind": c.kind, "parameter": c.parameter, "fitted": c.fitted, "held_out_share": 0.3}
-        for c in cands]})
+        for c in cands])
     nxt = next_step(res, "camp", "baseline")
     assert nxt["candidates"] == ["conicity", "model.c_secondary_z"]
     assert "first check the measurement: az_cb_b1 reads ≈ 1.3 × the true value" in nxt["text"]

@@ -109,17 +109,17 @@ def test_true_cause_is_claimed_with_held_out_evidence():
 def test_scatter_alone_gives_no_cause():
     base, fams = _setup(0.0)
     res = diagnose_evidence(base, fams, n_boot=60)
-    assert res.extra["verdict"] == "none"
+    assert res.verdict == "none"
     assert "no candidate explains the residual" in res.note
-    assert res.extra["unexplained"]  # what stays unexplained is shown
-    assert {"quantity", "zone", "position"} <= set(res.extra["unexplained"][0])
+    assert res.unexplained  # what stays unexplained is shown
+    assert {"quantity", "zone", "position"} <= set(res.unexplained[0])
 
 
 def test_cause_outside_the_candidates_is_not_claimed():
     # the residual is along C, which no candidate produces
     base, fams = _setup(0.0, extra=1.0)
     res = diagnose_evidence(base, fams, n_boot=60)
-    assert res.extra["verdict"] in ("none", "uncertain")
+    assert res.verdict in ("none", "uncertain")
     assert all(c.held_out_explained < 0.5 for c in res.candidates)
 
 
@@ -135,8 +135,8 @@ def test_candidates_that_explain_alike_are_uncertain_with_advice():
     res = diagnose_evidence(base, fams, n_boot=40)
     names = [c.name for c in res.candidates[:2]]
     assert set(names) == {"A", "model.k2"}
-    assert res.extra["verdict"] == "uncertain" and not res.separable
-    alike = res.extra["alike"][0]
+    assert res.verdict == "uncertain" and not res.separable
+    alike = res.alike[0]
     assert alike["evidence"][0]["component"] == "Q_max zone 3 p2"
     assert alike["evidence"][0]["zone"] == 3 and alike["evidence"][0]["quantity"] == "Q_max"
     assert "zone 3" in alike["advice"]
@@ -153,7 +153,7 @@ def test_implausible_fit_is_flagged_and_not_claimed():
     first = res.candidates[0]
     assert first.name == "A" and not first.plausible
     assert any("plausible range" in f and "compensating" in f and "toy range" in f for f in first.flags)
-    assert res.extra["verdict"] == "uncertain"
+    assert res.verdict == "uncertain"
 
 
 def test_plausibility_flags_at_bound_and_inside():
@@ -231,7 +231,7 @@ def test_fitted_value_interval_decides_whether_implausibility_makes_the_answer_u
         lo, hi = c.fitted_ci_bootstrap  # the part that decides; fitted_ci also holds model error
         assert lo <= c.fitted <= hi and hi - lo < 0.2
         assert c.fitted_ci[0] <= lo and c.fitted_ci[1] >= hi
-        verdicts[upper] = (res.extra["verdict"], c.plausible, c.clearly_implausible, c.flags)
+        verdicts[upper] = (res.verdict, c.plausible, c.clearly_implausible, c.flags)
     assert lo < 0.99  # the interval reaches into [0, 0.99]: the premise of the first case
     v, ok, clearly, flags = verdicts[0.99]
     assert (v, ok, clearly) == ("cause", False, False)

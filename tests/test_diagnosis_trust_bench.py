@@ -129,3 +129,24 @@ def test_calibration_split_choices_and_errors():
         _calibration_split(ctx, ["S99"], None, False)
     with pytest.raises(InvalidParameter, match="only one"):
         _calibration_split(ctx, ["S00"], ["S01"], False)
+
+
+def test_class_f_another_creep_law_is_not_claimed_as_an_interface_cause(database):
+    """The truth runs Polach's creep law (no candidate changes the law): the interface
+    candidates explain the guiding forces alone — not claimed, kept out of the cause set, the
+    guiding family named structural (docs/diagnosis.md "Interface candidates")."""
+    label, kw, truth = _case("f", "creep law differs, nothing on top")
+    interface = ["track_flexibility", "wheel_rail_friction", "conicity"]
+    rec = run_case(database, "tf", "f", label, kw, truth,
+                   candidates=[*interface, "model.c_secondary_z", "model.m_carbody"])
+    d = rec["diagnosis"]
+    assert d["verdict"] != "cause" and not rec["confident_wrong"], d["note"]
+    assert not set(rec["causes"]) & set(interface)
+    guiding = next(f for f in d["families"] if f["name"] == "guiding")
+    assert guiding["structural"]["flag"] and guiding["verdict"] != "cause"
+    assert "contact difference no candidate models" in guiding["structural"]["reason"]
+    top = d["candidates"][0]
+    assert top["name"] in interface and any("contact difference no candidate models" in f for f in top["flags"])
+    support = {s["name"]: s for s in d["interface_support"]}
+    assert set(support) == set(interface) and not support[top["name"]]["significant_outside"]
+    assert {x["name"] for x in d["cause_set"]["left_out"]} >= {top["name"]}

@@ -255,7 +255,7 @@ def test_two_hidden_effects_both_in_top_three(tmp_path):
     diag = diagnose(database, "hidden", "baseline", workers=1)
     top3 = [c.effect for c in diag.candidates[:3]]
     print(json.dumps({"top3": top3, "explained": [c.explained for c in diag.candidates[:3]],
-                      "verdict": diag.extra.get("verdict")}))
+                      "verdict": diag.verdict}))
     assert {"conicity", "friction_damping"} <= set(top3), top3
 
 

@@ -42,11 +42,11 @@ def test_diagnosis_is_stored_and_reused(synth_demo, monkeypatch):
     demo = synth_demo
     kw = {"effects": ["conicity"], "values_per_parameter": 2, "workers": 1}
     first = diagnosis_service.diagnose(demo, "demo", "baseline", **kw)
-    assert first.extra["run"]["reused"] is False and first.extra["run"]["current"] is True
+    assert first.run["reused"] is False and first.run["current"] is True
     monkeypatch.setattr(diagnosis_service, "diagnose_evidence_service", _no_simulation)
     again = diagnosis_service.diagnose(demo, "demo", "baseline", **kw)
-    assert again.extra["run"]["reused"] is True
-    assert again.extra["run"]["id"] == first.extra["run"]["id"]
+    assert again.run["reused"] is True
+    assert again.run["id"] == first.run["id"]
     assert [c.effect for c in again.candidates] == [c.effect for c in first.candidates]
     assert again.candidates[0].explained == pytest.approx(first.candidates[0].explained, rel=1e-12)
     np.testing.assert_allclose(again.residual.values, first.residual.values, rtol=1e-12)
@@ -63,7 +63,7 @@ def test_diagnosis_is_stored_and_reused(synth_demo, monkeypatch):
         latest = diagnosis_service.latest_diagnosis(s, "demo", "baseline")
     assert len(listed) == 1 and listed[0]["top"] == first.candidates[0].effect
     assert listed[0]["settings"]["values_per_parameter"] == 2 and listed[0]["current"] is True
-    assert isinstance(latest, DiagnosisResult) and latest.extra["run"]["id"] == first.extra["run"]["id"]
+    assert isinstance(latest, DiagnosisResult) and latest.run["id"] == first.run["id"]
 
 
 def test_metrics_are_stored_reused_and_recomputed_when_inputs_change(demo, monkeypatch):

@@ -21,6 +21,8 @@ model the diagnosis simulates:
       plus a parameter): scored by whether the cause(s) on top appear in the cause set or as
       a family's cause, whether a family is flagged structural, and confident wrong claims
       (a ``cause`` verdict with a wrong top, or a wrong name in the cause set).
+  (f) a truth with another creep law (Polach's instead of Shen–Hedrick–Elkins saturation, the
+      simulator's ``creep_law`` = 1), alone and with one or two causes on top, scored like (e);
 
 Every case is synthesised (:func:`~railval.core.sim.synth.build_campaign`), written and
 imported (:func:`railval.app.services.synth.write_folder`, :func:`railval.db.importer.import_campaign`)
@@ -31,7 +33,7 @@ share of ``none``/``uncertain`` verdicts on (c) and (d), the share of confident 
 and wrong"), and — with ``--calibrate-wrong`` — whether a wrong candidate's calibration that
 passes validation is flagged (plausibility or held-out check).
 
-``railval bench diagnosis-trust [--cases N] [--classes a b c d] [--workers 2] [--calibrate-wrong]``
+``railval bench diagnosis-trust [--cases N] [--classes a b c d e f] [--workers 2] [--calibrate-wrong]``
 """
 
 from __future__ import annotations
@@ -115,7 +117,28 @@ CASES: dict[str, list[tuple[str, dict[str, Any], str | None]]] = {
          {"hidden": {"conicity": {"conicity": 0.45}}, "truth_parameters": {"m_carbody": 36800.0}},
          "conicity+model.m_carbody"),
     ],
+    # (f) a second creep law in the truth only (Polach 2005 with reduction factors kA = 1, kS = 0.4:
+    # core/sim/kernel.py; no candidate model changes the law), alone, with a cause on top, and with
+    # two causes on top; scored like (e)
+    "f": [
+        ("creep law differs, nothing on top", {"truth_parameters": {"creep_law": 1.0}}, None),
+        ("creep law differs + secondary vertical dampers x0.5",
+         {"truth_parameters": {"creep_law": 1.0, "c_secondary_z": 10000.0}}, "model.c_secondary_z"),
+        ("creep law differs + car body mass x1.15", {"truth_parameters": {"creep_law": 1.0, "m_carbody": 36800.0}},
+         "model.m_carbody"),
+        ("creep law differs + sensor az_cb_b1 x1.3",
+         {"truth_parameters": {"creep_law": 1.0}, "channel_faults": {"gain": {"az_cb_b1": 1.3}}}, "gain az_cb_b1"),
+        ("creep law differs + two dampers: secondary vertical x0.5 + lateral x0.5",
+         {"truth_parameters": {"creep_law": 1.0, "c_secondary_z": 10000.0, "c_secondary_y": 16000.0}},
+         "model.c_secondary_z+model.c_secondary_y"),
+        ("creep law differs + car body mass x1.15 + sensor az_cb_b2 x0.7",
+         {"truth_parameters": {"creep_law": 1.0, "m_carbody": 36800.0}, "channel_faults": {"gain": {"az_cb_b2": 0.7}}},
+         "model.m_carbody+gain az_cb_b2"),
+    ],
 }
+
+#: the classes whose truth differs in structure (scored by the cause on top and the structural flag)
+_STRUCTURAL = "ef"
 
 
 # ----------------------------------------------------------------------------- class (m), i23meas
@@ -147,8 +170,7 @@ CASES["m"] = measurement_cases()
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cases", type=int, default=10, help="cases per class (default 10, at most 10)")
-    parser.add_argument("--classes", nargs="+", default=["a", "b", "c", "d", "e"],
-                        choices=["a", "b", "c", "d", "e"])
+    parser.add_argument("--classes", nargs="+", default=list(CASES), choices=list(CASES))
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--values", type=int, default=3, help="diagnose: values per effect parameter")
     parser.add_argument("--oversample", type=int, default=4, help="truth simulated at this × the rate (default 4)")
@@ -234,7 +256,7 @@ def _records_in(path: str | None) -> dict[tuple[str, str], dict]:
 def summarise(records: list[dict]) -> dict:
     """Confusion figures of the bench (module docstring)."""
     out: dict[str, Any] = {"cases": len(records)}
-    for k in "abcde":
+    for k in CASES:
         rs = [r for r in records if r["class"] == k]
         if not rs:
             continue
@@ -242,7 +264,7 @@ def summarise(records: list[dict]) -> dict:
                                            for v in ("cause", "uncertain", "none", "error")}}
         if k in "ab":
             item["top1"] = sum(r["right"] for r in rs) / len(rs)
-        elif k == "e":
+        elif k in _STRUCTURAL:
             on_top = [r for r in rs if r["truth"]]
             item["cause_found"] = sum(r.get("cause_found", False) for r in on_top) / max(1, len(on_top))
             item["structural_named"] = sum(bool(r.get("structural_named")) for r in rs) / len(rs)
@@ -267,12 +289,12 @@ def format_table(records: list[dict], summary: dict) -> str:
                      f"{r['top_explained']:5.2f} {r['top_held_out']:5.2f} {r['noise_floor']:5.2f} "
                      f"{('yes' if r['right'] else '-') if r['truth'] else '':>3}")
     lines.append("")
-    for k in "abcde":
+    for k in CASES:
         if k in summary:
             s = summary[k]
             fig = (f"top-1 {100 * s['top1']:.0f} %" if "top1" in s else
                    f"cause on top found {100 * s['cause_found']:.0f} %, structural difference named "
-                   f"{100 * s['structural_named']:.0f} %" if k == "e"
+                   f"{100 * s['structural_named']:.0f} %" if k in _STRUCTURAL
                    else f"none/uncertain {100 * s['none_or_uncertain']:.0f} %")
             lines.append(f"class ({k}) n={s['n']}: {fig}; verdicts {s['verdicts']}")
     lines.append(f"confident wrong (verdict cause and wrong): {100 * summary['confident_wrong']:.0f} %; "

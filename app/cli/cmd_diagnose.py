@@ -35,35 +35,35 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     res = diagnose(_db(args), args.campaign, args.config, progress=Progress(), scheduler=args.scheduler,
                    values_per_parameter=args.values, effects=args.candidates,
                    **({"include_parameters": False} if args.no_parameters else {}))
-    d = res.to_dict()
     if args.json:
-        emit_json(d)
+        emit_json(res.to_dict())
         return 0
-    print(f"diagnosis of {args.campaign}/{args.config}: verdict {d['verdict'].upper()} — {res.note}")
-    print(f"noise floor (share of pure section scatter the candidates explain, 95 %): {d['noise_floor']:.2f}")
+    print(f"diagnosis of {args.campaign}/{args.config}: verdict {res.verdict.upper()} — {res.note}")
+    print(f"noise floor (share of pure section scatter the candidates explain, 95 %): {res.noise_floor:.2f}")
     print(f"{'rank':>4}  {'candidate':<28} {'kind':<9} {'held-out':>8} {'explained':>9}  fitted")
     for k, c in enumerate(res.candidates, 1):
         print(f"{k:>4}  {c.name:<28} {c.kind:<9} {c.held_out_explained:8.2f} {c.explained:9.2f}  {c.summary}")
         print(f"{'':>6}fixes {', '.join(c.fixes) or '-'}; worsens {', '.join(c.worsens) or '-'}")
         for f in c.flags:
             print(f"{'':>6}! {f}")
-    if d.get("causes"):
+    if res.causes:
         print("causes (greedy, joint refit; share added on held-out sections): " + ", ".join(
-            f"{c['name']} {c['held_out_share']:.2f}" for c in d["causes"])
-              + f" — together {d['cause_set']['held_out_explained']:.2f}")
-    for f in d.get("families") or []:
+            f"{c['name']} {c['held_out_share']:.2f}" for c in res.causes)
+              + f" — together {res.cause_set['held_out_explained']:.2f}")
+    for x in (res.cause_set or {}).get("left_out", []):
+        print(f"not in the cause set: {x['name']} — {x['reason']}")
+    for f in res.families or []:
         best = f["top"][0] if f["top"] else None
         print(f"family {f['title']} ({f['share']:.0%} of the residual): {f['verdict']}"
               + (f", best {best['name']} {best['held_out_explained']:.2f} held-out" if best else "")
               + (f" — STRUCTURAL: {f['structural']['reason']}" if f["structural"]["flag"] else ""))
-    for s in d.get("skipped") or []:
+    for s in res.skipped or []:
         print(f"left out: {s['name']} ({s['kind']}) — {s['reason']}")
-    if d["verdict"] == "none" and d.get("unexplained"):
+    if res.verdict == "none" and res.unexplained:
         print("unexplained (largest components): " + "; ".join(
-            f"{u['component']} {u['residual']:+.2f}" for u in d["unexplained"]))
-    nxt = d.get("next") or {}
-    if nxt.get("text"):
-        print(f"next: {nxt['text']}")
+            f"{u['component']} {u['residual']:+.2f}" for u in res.unexplained))
+    if res.next_step and res.next_step.get("text"):
+        print(f"next: {res.next_step['text']}")
     return 0
 
 

@@ -162,7 +162,7 @@ class DiagnosePage(PageBase):
             return
         df = pd.DataFrame([{
             "#": i + 1, "candidate": c["effect"], "kind": c.get("kind", "effect"),
-            "held-out": round(100 * float(c.get("held_out_explained", c["explained"])), 1),
+            "held-out": round(100 * float(c["held_out_explained"]), 1),
             "in-sample": round(100 * float(c["explained"]), 1),
             "plausible": "yes" if c.get("plausible", True) else "no", "flags": len(c.get("flags") or []),
             "fitted parameters": ", ".join(f"{k} = {v:.4g}" for k, v in (c.get("parameters") or {}).items()),
@@ -188,6 +188,10 @@ class DiagnosePage(PageBase):
                 "sections): " + ", ".join(f"{c['name']} {100 * c['held_out_share']:.0f} %" for c in self.state.causes)
                 + (f"; together {100 * together:.0f} %" if together is not None else ""),
                 "success" if len(self.state.causes) > 1 else "info"))
+        left = (self.state.cause_set or {}).get("left_out") or []
+        if left:
+            extra.append(message("Not in the cause set: " + "; ".join(f"{x['name']} — {x['reason']}" for x in left),
+                                 "warning"))
         extra += self._families()
         in_config = [s for s in self.state.skipped if s["kind"] == "configuration"]
         candidates = [s for s in self.state.skipped if s["kind"] != "configuration"]

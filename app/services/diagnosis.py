@@ -30,7 +30,7 @@ from railval.db import repo, runs
 
 #: version of the diagnosis procedure in the stored runs' digest (with the EN processing
 #: version): a change of the procedure computes afresh instead of reusing an older run
-DIAGNOSIS_VERSION = f"diagnosis/5+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets; 5: sign/swap/shift
+DIAGNOSIS_VERSION = f"diagnosis/6+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets; 5: sign/swap/shift; 6: interface and mass rules
 
 __all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnosis_runs", "diagnosis_simulations", "latest_diagnosis", "scan_points"]
 
@@ -65,7 +65,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
     A stored run with the same inputs (signal content hashes of both sides, section records,
     configuration, candidates, ``values_per_parameter``, options, :data:`DIAGNOSIS_VERSION`)
     is returned without simulating unless ``refresh``; every computed run is stored
-    (``store``). ``result.extra["run"]`` describes the stored run
+    (``store``). ``result.run`` describes the stored run
     (:func:`railval.app.services.stored_runs.run_info`)."""
     settings = {"values_per_parameter": int(values_per_parameter),
                 "effects": sorted(effects) if effects is not None else None,
@@ -76,7 +76,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         stored = None if refresh else runs.latest_run(s, conf.id, "diagnosis", inputs_sha)
         if stored is not None:
             res = DiagnosisResult.from_dict(stored.result)
-            res.extra["run"] = run_info(stored, reused=True, current_data_sha256=data_sha)
+            res.run = run_info(stored, reused=True, current_data_sha256=data_sha)
             if progress is not None:
                 progress("done", 1.0, {"stored_run": stored.id})
             return res
@@ -99,7 +99,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                                  settings={**settings, "data_sha256": data_sha, "version": DIAGNOSIS_VERSION},
                                  result=res.to_dict(with_signatures=True),
                                  seconds=time.perf_counter() - started, actor=actor)
-            res.extra["run"] = run_info(row, reused=False, current_data_sha256=data_sha)
+            res.run = run_info(row, reused=False, current_data_sha256=data_sha)
     return res
 
 
@@ -122,7 +122,7 @@ def diagnosis_runs(session: Any, campaign: str, config: str) -> list[dict[str, A
 
 
 def latest_diagnosis(session: Any, campaign: str, config: str) -> DiagnosisResult | None:
-    """The newest stored diagnosis of ``config`` (any settings), ``extra["run"]`` saying
+    """The newest stored diagnosis of ``config`` (any settings), ``run`` saying
     whether its data are still current; None when never diagnosed."""
     conf = repo.get_configuration(session, campaign, config)
     row = runs.latest_run(session, conf.id, "diagnosis")
@@ -130,6 +130,6 @@ def latest_diagnosis(session: Any, campaign: str, config: str) -> DiagnosisResul
         return None
     data_sha, _ = digests(data_inputs(session, campaign, config), {}, DIAGNOSIS_VERSION)
     res = DiagnosisResult.from_dict(row.result)
-    res.extra["run"] = run_info(row, reused=True, current_data_sha256=data_sha)
+    res.run = run_info(row, reused=True, current_data_sha256=data_sha)
     return res
 

@@ -16,6 +16,10 @@ Simulations
   (the response of a damper or stiffness is smooth but not linear over a factor of 3).
 
 Workers return per-section validation pairs and band powers only (no signals).
+
+Length: one diagnosis from loading the campaign to the cause set, in steps of ≤ 80 lines
+(load, simulation tasks, candidate evidence, refinement, scoring) that share one request
+record; splitting the steps over modules would pass that record across module boundaries.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -47,7 +52,10 @@ from railval.core.diagnosis import (
     section_evidence,
 )
 from railval.core.diagnosis.causes import cause_set
+from railval.core.diagnosis.engine import STRONG
+from railval.core.diagnosis.fit import INTERFACE_PARAMETERS, MASS_PARAMETERS
 from railval.core.diagnosis.measurement import gain_channels, gain_family
+from railval.core.diagnosis.support import apply_interface_rule, cause_pool, outside_support
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import Effect
 
@@ -151,12 +159,32 @@ def measured_section_bands(session: Any, ctx: Any) -> dict[str, dict[str, np.nda
 
 
 # --------------------------------------------------------------------------- rank_causes
+@dataclass
+class _Request:
+    """What one diagnosis simulates: the campaign context, the configuration (effects that can
+    run, parameters), the measured band powers, the candidate effects and parameter plan."""
+
+    ctx: Any
+    config: str
+    conf_effects: dict
+    conf_params: dict
+    config_sets: dict
+    meas_bands: dict
+    measured_sets: dict
+    template: str
+    skipped: list[dict]
+    in_config: dict
+    conf_skipped: list[dict]
+    todo: list[str]
+    plan: list[dict[str, Any]]
+
+
 def rank_causes(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
-                scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
-                parameters: Sequence[str] | None = None, include_parameters: bool = True,
-                measurement: bool | Sequence[str] = True,
-                workers: int | None = None, n_boot: int = 100, folds: int = 3, refine: int = 3,
-                seed: int = 0) -> DiagnosisResult:
+             scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
+             parameters: Sequence[str] | None = None, include_parameters: bool = True,
+             measurement: bool | Sequence[str] = True,
+             workers: int | None = None, n_boot: int = 100, folds: int = 3, refine: int = 3,
+             seed: int = 0) -> DiagnosisResult:
     """Rank the effects missing from ``config`` and the template parameters that may be mis-set
     by the share of the residual they explain on held-out sections, with noise floor,
     plausibility, identifiability and a verdict (module docstring;
@@ -165,23 +193,58 @@ def rank_causes(database_or_session: Any, campaign: str, config: str, *, progres
     :mod:`railval.core.diagnosis.measurement` — all, none or those named; ``offset CHANNEL``
     only when named;
     ``parameters``: template names or ``model.NAME``; ``include_parameters=False``:
-    effects only)."""
+    effects only). Steps: load, simulate the candidates, build their evidence, refine the
+    best parameter candidates, score (:func:`_score`)."""
     from railval.app.services.batch import BatchExecutor
+    from railval.app.services.campaign_context import band_sums, residual_pattern, section_values
+    from railval.app.services.campaign_context import report as _report
+
+    _report(progress, "load", 0.0, campaign=campaign, config=config)
+    req = _load(database_or_session, campaign, config, effects, parameters, include_parameters, measurement)
+    ctx = req.ctx
+    stored_residual, vr = residual_pattern(ctx, section_values(req.config_sets, ctx.sections),
+                                           band_sums(req.config_sets, ctx.bands))
+    tasks, index = _tasks(req, values_per_parameter)
+    total = len(tasks) + (refine if req.plan else 0)
+    _report(progress, "simulate", 0.05, tasks=total)
+    with BatchExecutor(scheduler, workers) as ex:
+        results = ex.map(_evaluate_sections, tasks,
+                         progress=lambda d, t: _report(progress, "simulate", 0.05 + 0.8 * d / total, done=d, total=total))
+        base, fams = _candidates(req, results, index, vr, measurement)
+        n_sim = len(tasks) + _refine(ex, req, base, fams, bool(vr.validated), refine, folds, seed)
+    _report(progress, "score", 0.9)
+    res = _score(base, fams, bool(vr.validated), req.template, n_boot=n_boot, folds=folds, seed=seed)
+    res.campaign, res.configuration, res.validated = ctx.campaign, config, bool(vr.validated)
+    res.effects_in_configuration = sorted(req.conf_effects)
+    res.parameters_in_configuration = dict(req.conf_params)
+    res.values_per_parameter, res.simulations = values_per_parameter, n_sim
+    res.stored_residual_norm = math.sqrt(stored_residual.norm2())
+    res.simulated_residual_norm = math.sqrt(res.residual.norm2())
+    res.effects_simulated = sorted(req.in_config)
+    res.skipped = req.conf_skipped + req.skipped
+    if req.skipped and not fams:
+        res.note += "; left out: " + "; ".join(f"{s['name']} ({s['reason']})" for s in req.skipped)
+    if req.conf_skipped:
+        res.note += "; " + "; ".join(f"effect {s['name']} {s['reason']}" for s in req.conf_skipped)
+    res.next_step = next_step(res, campaign, config)
+    _report(progress, "done", 1.0)
+    return res
+
+
+def _load(database_or_session: Any, campaign: str, config: str, effects: Sequence[str] | None,
+          parameters: Sequence[str] | None, include_parameters: bool,
+          measurement: bool | Sequence[str]) -> _Request:
+    """Read the campaign and configuration; the candidate effects that can apply and the
+    parameter plan (``parameter_plan`` once)."""
     from railval.app.services.campaign_context import (
-        band_sums,
         configuration_of,
-        effect_parameters,
         load_context,
-        residual_pattern,
         runnable_effects,
-        section_values,
         session_of,
     )
-    from railval.app.services.campaign_context import report as _report
     from railval.core.sim.effects import EFFECTS
     from railval.db import repo
 
-    _report(progress, "load", 0.0, campaign=campaign, config=config)
     with session_of(database_or_session) as s:
         ctx = load_context(s, campaign)
         conf_effects, conf_params, _ = configuration_of(s, campaign, config)
@@ -200,139 +263,167 @@ def rank_causes(database_or_session: Any, campaign: str, config: str, *, progres
     in_config, conf_skipped = runnable_effects(ctx, conf_effects, config)
     todo = [e for e in (effects if effects is not None else registry) if e not in conf_effects
             and template in registry[e].templates and e not in {x["name"] for x in skipped}]
-    plan = parameter_plan(ctx, conf_params) if include_parameters else []
+    every = parameter_plan(ctx, conf_params)
+    plan = every if include_parameters else []
     if parameters:
         wanted = {p.removeprefix("model.") for p in parameters}
-        known = {p["parameter"] for p in parameter_plan(ctx, conf_params)}
-        bad = sorted(wanted - known)
+        bad = sorted(wanted - {p["parameter"] for p in every})
         if bad:
-            raise InvalidParameter(f"parameter candidate(s) {bad} unknown; known: {sorted(known)}")
-        plan = [p for p in parameter_plan(ctx, conf_params) if p["parameter"] in wanted]
-    stored_residual, vr = residual_pattern(ctx, section_values(config_sets, ctx.sections),
-                                           band_sums(config_sets, ctx.bands))
-    tasks: list[tuple] = [(ctx, in_config, conf_params)]
+            raise InvalidParameter(f"parameter candidate(s) {bad} unknown; known: "
+                                   f"{sorted(p['parameter'] for p in every)}")
+        plan = [p for p in every if p["parameter"] in wanted]
+    return _Request(ctx, config, dict(conf_effects), dict(conf_params), config_sets, meas_bands, measured_sets,
+                    template, skipped, in_config, conf_skipped, todo, plan)
+
+
+def _tasks(req: _Request, values_per_parameter: int) -> tuple[list[tuple], list[tuple]]:
+    """The simulations (the configuration first, then every effect scan point once, then one
+    perturbed value per parameter candidate) and, per candidate value, which one it uses."""
+    from railval.core.sim.effects import EFFECTS
+
+    tasks: list[tuple] = [(req.ctx, req.in_config, req.conf_params)]
     index: list[tuple] = []
     unique: dict[str, int] = {}
-    for e in todo:
-        spec = registry[e]
-        eparams = effect_parameters(spec)
-        defaults = {k: float(q["default"]) for k, q in eparams.items()}
+    for e in req.todo:
+        spec = EFFECTS[e]
+        defaults = {k: float(q["default"]) for k, q in effect_parameters(spec).items()}
         for pname, v, point, _p in scan_points(spec, values_per_parameter):
-            key = json.dumps({**in_config, e: point}, sort_keys=True)
+            key = json.dumps({**req.in_config, e: point}, sort_keys=True)
             if key not in unique:
                 unique[key] = len(tasks)
-                tasks.append((ctx, {**in_config, e: point}, conf_params))
+                tasks.append((req.ctx, {**req.in_config, e: point}, req.conf_params))
             index.append(("effect", e, pname, v, defaults, unique[key]))
-    for p in plan:
+    for p in req.plan:
         index.append(("parameter", p["name"], p["parameter"], p["perturbed"], {}, len(tasks)))
-        tasks.append((ctx, in_config, {**conf_params, p["parameter"]: p["perturbed"]}))
-    total = len(tasks) + (refine if plan else 0)
-    _report(progress, "simulate", 0.05, tasks=total)
-    with BatchExecutor(scheduler, workers) as ex:
-        results = ex.map(_evaluate_sections, tasks,
-                         progress=lambda d, t: _report(progress, "simulate", 0.05 + 0.8 * d / total, done=d, total=total))
-        sections = [(s.id, int(s.zone)) for s in ctx.sections]
-        base = section_evidence(results[0][0], results[0][1], meas_bands, sections, value_key="D_norm")
+        tasks.append((req.ctx, req.in_config, {**req.conf_params, p["parameter"]: p["perturbed"]}))
+    return tasks, index
 
-        def evidence(k: int) -> SectionEvidence:
-            return section_evidence(results[k][0], results[k][1], meas_bands, sections, value_key="D_norm", like=base)
 
-        families: dict[str, CandidateFamily] = {}
-        for kind, name, pname, v, defaults, k in index:
-            if kind == "effect":
-                spec = registry[name]
-                p = effect_parameters(spec)[pname]
-                key = f"{name}.{pname}"
-                if key not in families:
-                    plaus, source = plausible_range(spec.parameters[pname])
-                    families[key] = CandidateFamily(
-                        "effect", name, pname, [], [], (p["lower"], p["upper"]), log=p["log"], defaults=defaults,
-                        plausible=plaus, plausible_source=source, unit=p["unit"],
-                        title=spec.title, explanation=spec.explanation)
-                families[key].values.append(v)
-                families[key].evidence.append(evidence(k))
-            else:
-                pp = next(x for x in plan if x["name"] == name)
-                families[name] = CandidateFamily(
-                    "parameter", name, pname, [pp["reference"], v], [base, evidence(k)], pp["bounds"], log=True,
-                    extrapolate=True, reference=pp["reference"], plausible=pp["plausible"],
-                    plausible_source=pp["source"], unit=pp["unit"], title=pp["title"])
-        if measurement:
-            limits = {q: r.std_limit for q, r in vr.quantities.items()}
-            chans = gain_channels(results[0][0])
-            wanted_m = None if measurement is True else {m.removeprefix("gain ") for m in measurement
-                                                         if m.startswith("gain ")}
-            for bad in sorted((wanted_m or set()) - set(chans)):
-                fam = shared_gain(ctx, measured_sets, bad, base, results[0], meas_bands, sections, limits)
-                if fam is not None:
-                    families[fam.name] = fam
-                else:
-                    skipped.append({"name": f"gain {bad}", "kind": "measurement", "reason": "not a channel of this "
-                                    "campaign whose quantities it forms alone, nor a low-pass channel they use"})
-            for ch, comps in chans.items():
-                if wanted_m is None or ch in wanted_m:
-                    families[f"gain {ch}"] = gain_family(base, results[0][0], results[0][1], meas_bands, sections, ch,
-                                                         comps, limits, bands=ctx.bands)
-            families.update(offset_families(ctx, measured_sets, measurement, base, results[0], meas_bands, sections, limits,
-                                             skipped))
-            families.update(discrete_families(ctx, measured_sets, config_sets, measurement, base, results[0], meas_bands,
-                                              sections, limits, skipped, defaults=DISCRETE_DEFAULTS))
-        blind = _without_effect(base, list(families.values()))
-        skipped += [{"name": f.name, "kind": f.kind, "reason": "changes none of the quantities the campaign "
+def _candidates(req: _Request, results: Sequence, index: Sequence[tuple], vr: Any,
+                measurement: bool | Sequence[str]) -> tuple[SectionEvidence, list[CandidateFamily]]:
+    """Per-section evidence of the configuration and the candidate families (effects, parameters,
+    measurement candidates); candidates that move nothing the campaign measures go to
+    ``req.skipped``; of an effect's one-parameter families the one that explains most."""
+    from railval.core.sim.effects import EFFECTS
+
+    ctx = req.ctx
+    sections = [(s.id, int(s.zone)) for s in ctx.sections]
+    base = section_evidence(results[0][0], results[0][1], req.meas_bands, sections, value_key="D_norm")
+
+    def evidence(k: int) -> SectionEvidence:
+        return section_evidence(results[k][0], results[k][1], req.meas_bands, sections, value_key="D_norm", like=base)
+
+    families: dict[str, CandidateFamily] = {}
+    for kind, name, pname, v, defaults, k in index:
+        if kind == "effect":
+            spec = EFFECTS[name]
+            p = effect_parameters(spec)[pname]
+            key = f"{name}.{pname}"
+            if key not in families:
+                plaus, source = plausible_range(spec.parameters[pname])
+                families[key] = CandidateFamily(
+                    "effect", name, pname, [], [], (p["lower"], p["upper"]), log=p["log"], defaults=defaults,
+                    plausible=plaus, plausible_source=source, unit=p["unit"],
+                    title=spec.title, explanation=spec.explanation, interface=spec.interface)
+            families[key].values.append(v)
+            families[key].evidence.append(evidence(k))
+        else:
+            pp = next(x for x in req.plan if x["name"] == name)
+            families[name] = CandidateFamily(
+                "parameter", name, pname, [pp["reference"], v], [base, evidence(k)], pp["bounds"], log=True,
+                extrapolate=True, reference=pp["reference"], plausible=pp["plausible"],
+                plausible_source=pp["source"], unit=pp["unit"], title=pp["title"],
+                interface=pname in INTERFACE_PARAMETERS)
+    if measurement:
+        families.update(_measurement_families(req, results[0], base, sections, vr, measurement))
+    blind = _without_effect(base, list(families.values()))
+    req.skipped += [{"name": f.name, "kind": f.kind, "reason": "changes none of the quantities the campaign "
                      "measures at any simulated value"} for f in blind
-                    if not any(s["name"] == f.name for s in skipped)]
-        # an effect with several parameters is one candidate: the parameter that explains most
-        fams = _best_per_effect(base, [f for f in families.values() if f not in blind], vr.validated)
-        n_sim = len(tasks)
-        if plan and refine:
-            first = diagnose_evidence(base, fams, validated=bool(vr.validated), n_boot=0, folds=folds, seed=seed)
-            redo = []
-            for c in first.candidates:
-                if c.kind != "parameter" or len(redo) >= refine:
-                    continue
-                fam = next(f for f in fams if f.name == c.name)
-                v = c.fitted  # inside the bounds: core.diagnosis.fit._Curve.value clamps it
-                if min(abs(math.log(v / x)) for x in fam.values) > math.log(1.1):
-                    redo.append((fam, v))
-            if redo:
-                more = ex.map(_evaluate_sections, [(ctx, in_config, {**conf_params, f.parameter: v}) for f, v in redo])
-                for (fam, v), res in zip(redo, more, strict=True):
-                    fam.values.append(v)
-                    fam.evidence.append(section_evidence(res[0], res[1], meas_bands, sections, value_key="D_norm",
-                                                         like=base))
-                n_sim += len(redo)
-    _report(progress, "score", 0.9)
-    res = diagnose_evidence(base, fams, validated=bool(vr.validated), n_boot=n_boot, folds=folds, seed=seed)
-    res.extra["families"] = diagnose_families(base, fams, validated=bool(vr.validated), n_boot=n_boot,
-                                              folds=folds, seed=seed)
+                    if not any(s["name"] == f.name for s in req.skipped)]
+    # an effect with several parameters is one candidate: the parameter that explains most
+    return base, _best_per_effect(base, [f for f in families.values() if f not in blind], vr.validated)
+
+
+def _measurement_families(req: _Request, result0: tuple, base: SectionEvidence, sections: list,
+                          vr: Any, measurement: bool | Sequence[str]) -> dict[str, CandidateFamily]:
+    """The measurement-side candidates (``gain CHANNEL``, named ``offset CHANNEL``, and the
+    discrete ``sign``, ``swap`` and ``shift`` candidates)."""
+    out: dict[str, CandidateFamily] = {}
+    limits = {q: r.std_limit for q, r in vr.quantities.items()}
+    chans = gain_channels(result0[0])
+    wanted_m = None if measurement is True else {m.removeprefix("gain ") for m in measurement
+                                                 if m.startswith("gain ")}
+    for bad in sorted((wanted_m or set()) - set(chans)):
+        fam = shared_gain(req.ctx, req.measured_sets, bad, base, result0, req.meas_bands, sections, limits)
+        if fam is not None:
+            out[fam.name] = fam
+        else:
+            req.skipped.append({"name": f"gain {bad}", "kind": "measurement", "reason": "not a channel of this "
+                                "campaign whose quantities it forms alone, nor a low-pass channel they use"})
+    for ch, comps in chans.items():
+        if wanted_m is None or ch in wanted_m:
+            out[f"gain {ch}"] = gain_family(base, result0[0], result0[1], req.meas_bands, sections, ch,
+                                            comps, limits, bands=req.ctx.bands)
+    out.update(offset_families(req.ctx, req.measured_sets, measurement, base, result0, req.meas_bands, sections,
+                               limits, req.skipped))
+    out.update(discrete_families(req.ctx, req.measured_sets, req.config_sets, measurement, base, result0,
+                                 req.meas_bands, sections, limits, req.skipped, defaults=DISCRETE_DEFAULTS))
+    return out
+
+
+def _refine(ex: Any, req: _Request, base: SectionEvidence, fams: list[CandidateFamily], validated: bool,
+            refine: int, folds: int, seed: int) -> int:
+    """Simulate the ``refine`` best parameter candidates once more at their fitted value when it
+    lies > 10 % from a simulated one; returns the number of simulations added."""
+    if not (req.plan and refine):
+        return 0
+    first = diagnose_evidence(base, fams, validated=validated, n_boot=0, folds=folds, seed=seed)
+    redo = []
+    for c in first.candidates:
+        if c.kind != "parameter" or len(redo) >= refine:
+            continue
+        fam = next(f for f in fams if f.name == c.name)
+        v = c.fitted  # inside the bounds: core.diagnosis.fit._Curve.value clamps it
+        if min(abs(math.log(v / x)) for x in fam.values) > math.log(1.1):
+            redo.append((fam, v))
+    if not redo:
+        return 0
+    sections = [(s.id, int(s.zone)) for s in req.ctx.sections]
+    more = ex.map(_evaluate_sections, [(req.ctx, req.in_config, {**req.conf_params, f.parameter: v}) for f, v in redo])
+    for (fam, v), res in zip(redo, more, strict=True):
+        fam.values.append(v)
+        fam.evidence.append(section_evidence(res[0], res[1], req.meas_bands, sections, value_key="D_norm", like=base))
+    return len(redo)
+
+
+def _score(base: SectionEvidence, fams: list[CandidateFamily], validated: bool, template: str, *, n_boot: int,
+           folds: int, seed: int) -> DiagnosisResult:
+    """Held-out ranking and verdict, per family, the interface rule (support outside the guiding
+    forces, core/diagnosis/support.py) and the cause set."""
+    res = diagnose_evidence(base, fams, validated=validated, n_boot=n_boot, folds=folds, seed=seed)
+    res.families = diagnose_families(base, fams, validated=validated, n_boot=n_boot, folds=folds, seed=seed)
+    # interface candidates need support outside the guiding forces (core/diagnosis/support.py)
+    support = outside_support(base, fams, n_boot=n_boot, folds=folds, seed=seed)
+    apply_interface_rule(res, res.families, support, base, strong=STRONG)
+    res.interface_support = [x.to_dict() for x in support.values()]
     relative_gains(res)
-    pool = [f for f in fams if any(c.name == f.name and c.significant for c in res.candidates)]
-    if res.extra["verdict"] == "none" or not pool:
-        cs = {"causes": [], "held_out_explained": 0.0, "remaining_within_noise": bool(res.extra["residual_within_noise"]),
-              "stopped": "no candidate explains more than the section scatter" if res.extra["verdict"] != "none"
-              else "verdict none: " + res.note}
+    pool, left_out = cause_pool([f for f in fams if any(c.name == f.name and c.significant for c in res.candidates)],
+                                res, support, MASS_PARAMETERS)
+    if res.verdict == "none" or not pool:
+        cs = {"causes": [], "held_out_explained": 0.0, "remaining_within_noise": bool(res.residual_within_noise),
+              "stopped": "verdict none: " + res.note if res.verdict == "none" else
+              "every candidate beyond the section scatter is left out (left_out)" if left_out else
+              "no candidate explains more than the section scatter"}
     else:
-        later = {f["top"][0]["name"] for f in res.extra["families"] if f["top"]}
+        later = {f["top"][0]["name"] for f in res.families if f["top"]}
         cs = cause_set(base, pool, folds=folds, n_boot=n_boot, seed=seed, later=sorted(later))
     rel = {c.name: c.parameters.get("relative_gain") for c in res.candidates}
     for x in cs["causes"]:
         if rel.get(x["name"]) is not None:
             x["relative_gain"] = rel[x["name"]]
-    res.extra["causes"] = cs.pop("causes")
-    res.extra["cause_set"] = cs
-    res.extra.update({"campaign": ctx.campaign, "configuration": config, "validated": bool(vr.validated),
-                      "effects_in_configuration": sorted(conf_effects),
-                      "parameters_in_configuration": dict(conf_params),
-                      "values_per_parameter": values_per_parameter, "simulations": n_sim,
-                      "stored_residual_norm": math.sqrt(stored_residual.norm2()),
-                      "simulated_residual_norm": math.sqrt(res.residual.norm2()),
-                      "effects_simulated": sorted(in_config), "skipped": conf_skipped + skipped})
-    if skipped and not fams:
-        res.note += "; left out: " + "; ".join(f"{s['name']} ({s['reason']})" for s in skipped)
-    if conf_skipped:
-        res.note += "; " + "; ".join(f"effect {s['name']} {s['reason']}" for s in conf_skipped)
-    res.extra["next"] = next_step(res, campaign, config)
-    _report(progress, "done", 1.0)
+    res.causes = cs.pop("causes")
+    cs["left_out"] = left_out
+    res.cause_set = cs
     return res
 
 
@@ -391,11 +482,11 @@ def _best_per_effect(base: SectionEvidence, fams: list[CandidateFamily], validat
 def next_step(res: DiagnosisResult, campaign: str, config: str) -> dict[str, Any]:
     """What to do next: calibrate the cause into a child configuration (then diagnose the
     child), or, with no cause, what stays unexplained."""
-    verdict = res.extra.get("verdict")
+    verdict = res.verdict
     if verdict == "none" or not res.candidates:
         return {"action": "none", "text": "no candidate explains the residual; look at what stays unexplained "
                                           "(quantities, zones, bands) — data, sensors or physics outside the library"}
-    all_causes = res.extra.get("causes") or []
+    all_causes = res.causes or []
     sensors = [x for x in all_causes if x["kind"] == "measurement"]
     summary = {c.name: c.summary for c in res.candidates}
     check = ("; first check the measurement: " + "; ".join(

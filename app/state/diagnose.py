@@ -191,24 +191,27 @@ class DiagnoseState(param.Parameterized):
                            action="diagnose")
 
     def show_diagnosis(self, result) -> None:
-        """Show a diagnosis (computed now or stored): ranked candidates, residual, verdict."""
-        d = result.to_dict(with_signatures=True) if hasattr(result, "to_dict") else result
-        cands = list(d.get("candidates", []))
-        self.residual = dict(d.get("residual") or {})
-        note = d.get("note") or ""
-        if not d.get("separable", True) and not note:
+        """Show a diagnosis (computed now or stored, a
+        :class:`railval.core.diagnosis.DiagnosisResult`): ranked candidates, residual, verdict,
+        families, cause set, candidates left out — from the result's typed fields."""
+        d = result.to_dict(with_signatures=True)  # candidates and residual as the page's tables take them
+        cands = list(d["candidates"])
+        self.residual = dict(d["residual"])
+        note = result.note
+        if not result.separable and not note:
             note = "the two best candidates explain nearly the same; see the evidence"
         self.diagnosis_note = note
-        self.separable = bool(d.get("separable", True))
-        self.verdict = str(d.get("verdict") or "")
-        self.noise_floor = d.get("noise_floor")
-        self.unexplained = list(d.get("unexplained") or [])
-        self.skipped = list(d.get("skipped") or [])
-        self.causes = list(d.get("causes") or [])
-        self.cause_set = dict(d.get("cause_set") or {})
-        self.families = list(d.get("families") or [])
-        self.diagnosis_run = {k: d.get(k) for k in ("simulations", "values_per_parameter", "configuration")}
-        self.stored_run = dict(d.get("run") or {})
+        self.separable = bool(result.separable)
+        self.verdict = result.verdict
+        self.noise_floor = result.noise_floor
+        self.unexplained = list(result.unexplained)
+        self.skipped = list(result.skipped or [])
+        self.causes = list(result.causes or [])
+        self.cause_set = dict(result.cause_set or {})
+        self.families = list(result.families or [])
+        self.diagnosis_run = {"simulations": result.simulations, "values_per_parameter": result.values_per_parameter,
+                              "configuration": result.configuration}
+        self.stored_run = dict(result.run or {})
         names = self.available_effects() if cands else []
         order = [c["effect"] for c in cands] + [n for n in names if n not in {c["effect"] for c in cands}]
         self.param.effect.objects = order

@@ -75,81 +75,126 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
     References: Efron & Tibshirani 1993 ch. 6/§8.2 (bootstrap, stratified), Hastie, Tibshirani
     & Friedman 2009 §7.10 (k-fold cross-validation); docs/diagnosis.md.
     """
-    S = len(base.sections)
-    r_full = base.values()
-    residual = base.pattern()
-    w = residual.weights()
-    r2 = float(np.sum((w * r_full) ** 2))
-    if not r2 > 0:
-        raise InvalidSignal("the residual pattern is zero: nothing to diagnose")
-    Wb = zone_bootstrap(base.zones, n_boot, seed) if n_boot > 0 else np.zeros((0, S))
-    test_masks = zone_folds(base.zones, folds)
-    R_boot = base.values(Wb) if n_boot > 0 else np.zeros((0, r_full.size))
-    noise = R_boot - r_full[None, :]
-    noise2 = np.sum((noise * w) ** 2, axis=1)
-    before = residual.group_norms()
+    setup = _Setup(base, n_boot, folds, seed)
     cands: list[TrustedCandidate] = []
     noise_share = np.zeros((len(families), n_boot))
     for fi, fam in enumerate(families):
-        curve = _Curve(fam)
-        P_full = np.stack([e.values() for e in fam.evidence])
-        k, cost, Pk = _fit(curve, P_full, w)
-        v = curve.value(k)
-        explained = float(np.clip(1 - cost / r2, 0.0, 1.0))
-        # held-out
-        num = den = 0.0
-        fold_values: list[float] = []
-        for m in test_masks:
-            P_tr = np.stack([e.values(1.0 - m) for e in fam.evidence])
-            kt, _, _ = _fit(curve, P_tr, w)
-            fold_values.append(curve.value(kt))
-            P_te = curve.patterns(np.stack([e.values(m) for e in fam.evidence]))[kt]
-            r_te = base.values(m)
-            num += float(np.sum((w * P_te) ** 2))
-            den += float(np.sum((w * r_te) ** 2))
-        held = float(np.clip(1 - num / den, 0.0, 1.0)) if den > 0 else 0.0
-        # bootstrap: refit on resampled sections; and the share of pure scatter it explains
-        boot: list[float] = []
-        v_ci = (v, v)
-        if n_boot:
-            P_boot = np.stack([e.values(Wb) for e in fam.evidence], axis=1)  # (B, K, n), family order
-            rb2 = np.sum((w * R_boot) ** 2, axis=1)
-            cb, vb = _min_cost(curve, P_boot, w, argmin=True)
-            boot = [1 - c / d if d > 0 else 0.0 for c, d in zip(cb, rb2, strict=True)]
-            v_ci = (float(np.percentile(vb, 5)), float(np.percentile(vb, 95)))
-            # the candidate's change P(v) − r added to pure scatter n_b: nodes P_k − r + n_b
-            cn = _min_cost(curve, P_full[None, :, :] - r_full[None, None, :] + noise[:, None, :], w)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                share = np.where(noise2 > 0, 1 - cn / noise2, 0.0)
-            noise_share[fi] = np.maximum(share, 0.0)
-        ci = (float(np.clip(np.percentile(boot, 5), 0, 1)), float(np.clip(np.percentile(boot, 95), 0, 1))) \
-            if boot else (explained, explained)
-        after = residual.group_norms(Pk)
-        fixes = [g for g in before if after[g] < (1 - change) * before[g]]
-        worsens = [g for g in before if after[g] > (1 + change) * before[g] + 1e-12]
-        bounds = fam.bounds if fam.extrapolate else (float(curve.v[0]), float(curve.v[-1]))
-        at_edge = k in (0, curve.fine.size - 1)
-        ok, flags = plausibility_flags(f"{fam.name}.{fam.parameter}" if fam.kind == "effect" else fam.name, v,
-                                       bounds=bounds, plausible=fam.plausible, source=fam.plausible_source,
-                                       unit=fam.unit, at_bound=at_edge, interval=v_ci, kind=fam.kind)
-        lo_ci, hi_ci = min(v_ci[0], v), max(v_ci[1], v)
-        clearly = at_edge or (fam.plausible is not None and (hi_ci < fam.plausible[0] or lo_ci > fam.plausible[1]))
-        params = {**fam.defaults, fam.parameter: v} if fam.kind == "effect" else {fam.parameter: v}
-        summary = _family_summary(fam, v)
-        expl = summary + (": " + fam.explanation if fam.explanation and fam.kind in ("effect", "measurement") else
-                          ("; a model parameter error, not a missing effect" if fam.kind == "parameter" else ""))
-        cands.append(TrustedCandidate(
-            fam.name, explained, params, sorted(fixes, key=lambda g: after[g] - before[g]),
-            sorted(worsens, key=lambda g: before[g] - after[g]), expl,
-            Pattern(residual.labels, residual.groups, r_full - Pk, residual.components), math.sqrt(cost),
-            {g: (before[g], after[g]) for g in before}, kind=fam.kind, name=fam.name,
-            held_out_explained=held, explained_ci=ci, plausible=ok, at_bound=at_edge, flags=flags,
-            summary=summary, reference=fam.reference, fitted=v, parameter=fam.parameter,
-            fitted_ci=_widened(lo_ci, hi_ci, fold_values, _lack_of_fit_range(curve, P_full, w, k, cost, residual)),
-            fitted_ci_bootstrap=(lo_ci, hi_ci),
-            fold_values=fold_values, clearly_implausible=bool(clearly)))
+        cand, noise_share[fi] = _score(fam, setup, change)
+        cands.append(cand)
     noise_floor = float(np.percentile(noise_share.max(axis=0), 95)) if n_boot and families else 0.0
-    within_noise = bool(n_boot and r2 <= float(np.percentile(noise2, 95)))
+    within_noise = bool(n_boot and setup.r2 <= float(np.percentile(setup.noise2, 95)))
+    _significance(cands, noise_floor)
+    cands.sort(key=lambda c: (-c.held_out_explained, -c.explained))
+    evidence, alike = _identifiability(cands, setup.residual, setup.w, alike_margin, alike_correlation)
+    best = cands[0] if cands else None
+    verdict, why = _verdict(best, alike, within_noise=within_noise, noise_floor=noise_floor, validated=validated,
+                            strong=strong)
+    note = {"none": "no candidate explains the residual: " + why, "uncertain": "uncertain: " + why}.get(verdict, why)
+    return DiagnosisResult(setup.residual, list(cands), not alike, evidence, note, verdict=verdict,
+                           noise_floor=noise_floor, residual_within_noise=within_noise, alike=alike,
+                           unexplained=_unexplained(setup.residual, best), folds=len(setup.masks), bootstrap=n_boot)
+
+
+class _Setup:
+    """What every candidate is scored against: the residual r (all sections), its weights, the
+    zone-stratified folds, the bootstrap resamples and the pure-scatter deviations n_b."""
+
+    def __init__(self, base: SectionEvidence, n_boot: int, folds: int, seed: int):
+        self.base = base
+        self.r_full = base.values()
+        self.residual = base.pattern()
+        self.w = self.residual.weights()
+        self.r2 = float(np.sum((self.w * self.r_full) ** 2))
+        if not self.r2 > 0:
+            raise InvalidSignal("the residual pattern is zero: nothing to diagnose")
+        S = len(base.sections)
+        self.n_boot = n_boot
+        self.Wb = zone_bootstrap(base.zones, n_boot, seed) if n_boot > 0 else np.zeros((0, S))
+        self.masks = zone_folds(base.zones, folds)
+        self.R_boot = base.values(self.Wb) if n_boot > 0 else np.zeros((0, self.r_full.size))
+        self.noise = self.R_boot - self.r_full[None, :]
+        self.noise2 = np.sum((self.noise * self.w) ** 2, axis=1)
+        self.before = self.residual.group_norms()
+
+
+def _held_out(curve: _Curve, fam: CandidateFamily, st: _Setup) -> tuple[float, list[float]]:
+    """Held-out share (value fitted on the training sections of each fold, scored on its test
+    sections; Hastie, Tibshirani & Friedman 2009 §7.10) and the value fitted in each fold."""
+    num = den = 0.0
+    fold_values: list[float] = []
+    for m in st.masks:
+        P_tr = np.stack([e.values(1.0 - m) for e in fam.evidence])
+        kt, _, _ = _fit(curve, P_tr, st.w)
+        fold_values.append(curve.value(kt))
+        P_te = curve.patterns(np.stack([e.values(m) for e in fam.evidence]))[kt]
+        r_te = st.base.values(m)
+        num += float(np.sum((st.w * P_te) ** 2))
+        den += float(np.sum((st.w * r_te) ** 2))
+    return (float(np.clip(1 - num / den, 0.0, 1.0)) if den > 0 else 0.0), fold_values
+
+
+def _bootstrap(curve: _Curve, fam: CandidateFamily, P_full: np.ndarray, st: _Setup, v: float
+               ) -> tuple[list[float], tuple[float, float], np.ndarray]:
+    """Refit on every resample of the sections (Efron & Tibshirani 1993 §8.2): explained shares,
+    the 5–95 % interval of the fitted value, and the share of pure scatter n_b the candidate's
+    change P(v) − r explains on each resample (its contribution to the noise floor)."""
+    if not st.n_boot:
+        return [], (v, v), np.zeros(0)
+    P_boot = np.stack([e.values(st.Wb) for e in fam.evidence], axis=1)  # (B, K, n), family order
+    rb2 = np.sum((st.w * st.R_boot) ** 2, axis=1)
+    cb, vb = _min_cost(curve, P_boot, st.w, argmin=True)
+    boot = [1 - c / d if d > 0 else 0.0 for c, d in zip(cb, rb2, strict=True)]
+    v_ci = (float(np.percentile(vb, 5)), float(np.percentile(vb, 95)))
+    # the candidate's change P(v) − r added to pure scatter n_b: nodes P_k − r + n_b
+    cn = _min_cost(curve, P_full[None, :, :] - st.r_full[None, None, :] + st.noise[:, None, :], st.w)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(st.noise2 > 0, 1 - cn / st.noise2, 0.0)
+    return boot, v_ci, np.maximum(share, 0.0)
+
+
+def _score(fam: CandidateFamily, st: _Setup, change: float) -> tuple[TrustedCandidate, np.ndarray]:
+    """One candidate: the fit on all sections, held-out share, bootstrap, plausibility; and its
+    share of pure scatter per resample."""
+    curve = _Curve(fam)
+    P_full = np.stack([e.values() for e in fam.evidence])
+    k, cost, Pk = _fit(curve, P_full, st.w)
+    v = curve.value(k)
+    explained = float(np.clip(1 - cost / st.r2, 0.0, 1.0))
+    held, fold_values = _held_out(curve, fam, st)
+    boot, v_ci, noise_share = _bootstrap(curve, fam, P_full, st, v)
+    ci = (float(np.clip(np.percentile(boot, 5), 0, 1)), float(np.clip(np.percentile(boot, 95), 0, 1))) \
+        if boot else (explained, explained)
+    before, residual = st.before, st.residual
+    after = residual.group_norms(Pk)
+    fixes = [g for g in before if after[g] < (1 - change) * before[g]]
+    worsens = [g for g in before if after[g] > (1 + change) * before[g] + 1e-12]
+    bounds = fam.bounds if fam.extrapolate else (float(curve.v[0]), float(curve.v[-1]))
+    at_edge = k in (0, curve.fine.size - 1)
+    ok, flags = plausibility_flags(f"{fam.name}.{fam.parameter}" if fam.kind == "effect" else fam.name, v,
+                                   bounds=bounds, plausible=fam.plausible, source=fam.plausible_source,
+                                   unit=fam.unit, at_bound=at_edge, interval=v_ci, kind=fam.kind)
+    lo_ci, hi_ci = min(v_ci[0], v), max(v_ci[1], v)
+    clearly = at_edge or (fam.plausible is not None and (hi_ci < fam.plausible[0] or lo_ci > fam.plausible[1]))
+    params = {**fam.defaults, fam.parameter: v} if fam.kind == "effect" else {fam.parameter: v}
+    summary = _family_summary(fam, v)
+    expl = summary + (": " + fam.explanation if fam.explanation and fam.kind in ("effect", "measurement") else
+                      ("; a model parameter error, not a missing effect" if fam.kind == "parameter" else ""))
+    cand = TrustedCandidate(
+        fam.name, explained, params, sorted(fixes, key=lambda g: after[g] - before[g]),
+        sorted(worsens, key=lambda g: before[g] - after[g]), expl,
+        Pattern(residual.labels, residual.groups, st.r_full - Pk, residual.components), math.sqrt(cost),
+        {g: (before[g], after[g]) for g in before}, kind=fam.kind, name=fam.name,
+        held_out_explained=held, explained_ci=ci, plausible=ok, at_bound=at_edge, flags=flags,
+        summary=summary, reference=fam.reference, fitted=v, parameter=fam.parameter,
+        fitted_ci=_widened(lo_ci, hi_ci, fold_values, _lack_of_fit_range(curve, P_full, st.w, k, cost, residual)),
+        fitted_ci_bootstrap=(lo_ci, hi_ci),
+        fold_values=fold_values, clearly_implausible=bool(clearly))
+    return cand, noise_share
+
+
+def _significance(cands: Sequence[TrustedCandidate], noise_floor: float) -> None:
+    """Significant: the 5 % end of the bootstrap interval and the held-out share both exceed
+    the noise floor; flags for the others and for a fit that does not hold out."""
     for c in cands:
         c.significant = c.explained_ci[0] > noise_floor and c.held_out_explained > noise_floor
         if not c.significant:
@@ -159,56 +204,54 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
         if c.explained - c.held_out_explained > 0.25:
             c.flags.append(f"explains {c.explained:.2f} of the residual on the sections it was fitted to but "
                            f"only {c.held_out_explained:.2f} on held-out sections")
-    cands.sort(key=lambda c: (-c.held_out_explained, -c.explained))
-    separable, evidence, note, alike = True, [], "", []
-    if len(cands) >= 2:
-        a = cands[0]
-        for b in cands[1:3]:
-            sa, sb = a.signature.values * w, b.signature.values * w
-            den = float(np.linalg.norm(sa) * np.linalg.norm(sb))
-            corr = float(sa @ sb / den) if den > 0 else 0.0
-            ev, advice = separating_evidence(a, b, residual)
-            if b is cands[1]:
-                evidence = ev
-            if a.held_out_explained - b.held_out_explained < alike_margin and corr > alike_correlation:
-                alike.append({"candidates": [a.name, b.name], "correlation": corr, "evidence": ev, "advice": advice})
-                a.flags.append(f"explains alike with {b.name} (signature correlation {corr:.2f}): {advice}")
-                b.flags.append(f"explains alike with {a.name} (signature correlation {corr:.2f}): {advice}")
-        separable = not alike
-    unexplained = _unexplained(residual, cands[0] if cands else None)
-    best = cands[0] if cands else None
+
+
+def _identifiability(cands: Sequence[TrustedCandidate], residual: Pattern, w: np.ndarray, alike_margin: float,
+                     alike_correlation: float) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The components separating the two best (``evidence``) and the pairs that explain alike
+    (held-out shares within ``alike_margin``, signatures correlating above ``alike_correlation``)."""
+    evidence: list[dict[str, Any]] = []
+    alike: list[dict[str, Any]] = []
+    if len(cands) < 2:
+        return evidence, alike
+    a = cands[0]
+    for b in cands[1:3]:
+        sa, sb = a.signature.values * w, b.signature.values * w
+        den = float(np.linalg.norm(sa) * np.linalg.norm(sb))
+        corr = float(sa @ sb / den) if den > 0 else 0.0
+        ev, advice = separating_evidence(a, b, residual)
+        if b is cands[1]:
+            evidence = ev
+        if a.held_out_explained - b.held_out_explained < alike_margin and corr > alike_correlation:
+            alike.append({"candidates": [a.name, b.name], "correlation": corr, "evidence": ev, "advice": advice})
+            a.flags.append(f"explains alike with {b.name} (signature correlation {corr:.2f}): {advice}")
+            b.flags.append(f"explains alike with {a.name} (signature correlation {corr:.2f}): {advice}")
+    return evidence, alike
+
+
+def _verdict(best: TrustedCandidate | None, alike: Sequence[dict[str, Any]], *, within_noise: bool,
+             noise_floor: float, validated: bool, strong: float) -> tuple[str, str]:
+    """``none`` | ``uncertain`` | ``cause`` and why (docs/diagnosis.md "Verdict")."""
     if best is None:
-        verdict, why = "none", "no candidate applies"
-    elif within_noise:
-        verdict, why = "none", "the residual is within the section-to-section scatter"
-    elif not best.significant:
-        verdict, why = "none", f"no candidate explains more than the noise floor ({noise_floor:.2f})"
-    elif validated and best.held_out_explained < strong:
-        verdict, why = "none", (f"the configuration passes and no candidate explains ≥ {strong:.1f} of the "
-                                f"rest on held-out sections (best {best.name} {best.held_out_explained:.2f})")
-    elif best.held_out_explained < strong or best.explained < strong:
-        verdict, why = "uncertain", (f"the best candidate {best.name} explains only {best.held_out_explained:.2f} "
-                                     f"on held-out sections ({best.explained:.2f} in-sample)")
-    elif alike:
-        verdict, why = "uncertain", "; ".join(x["advice"] for x in alike)
-    elif not best.plausible and best.clearly_implausible:
-        verdict, why = "uncertain", "; ".join(best.flags[:1])
-    elif best.explained - best.held_out_explained > 0.25:
-        verdict, why = "uncertain", f"{best.name} does not hold on held-out sections"
-    else:
-        verdict, why = "cause", (f"{best.summary} explains {best.held_out_explained:.2f} of the residual on "
-                                 f"held-out sections ({best.explained:.2f} in-sample; noise floor {noise_floor:.2f})")
-    if verdict == "none":
-        note = "no candidate explains the residual: " + why
-    elif verdict == "uncertain":
-        note = "uncertain: " + why
-    else:
-        note = why
-    res = DiagnosisResult(residual, list(cands), separable, evidence, note)
-    res.extra.update({"verdict": verdict, "noise_floor": noise_floor, "residual_within_noise": within_noise,
-                      "alike": alike, "unexplained": unexplained, "folds": len(test_masks),
-                      "bootstrap": n_boot})
-    return res
+        return "none", "no candidate applies"
+    if within_noise:
+        return "none", "the residual is within the section-to-section scatter"
+    if not best.significant:
+        return "none", f"no candidate explains more than the noise floor ({noise_floor:.2f})"
+    if validated and best.held_out_explained < strong:
+        return "none", (f"the configuration passes and no candidate explains ≥ {strong:.1f} of the "
+                        f"rest on held-out sections (best {best.name} {best.held_out_explained:.2f})")
+    if best.held_out_explained < strong or best.explained < strong:
+        return "uncertain", (f"the best candidate {best.name} explains only {best.held_out_explained:.2f} "
+                             f"on held-out sections ({best.explained:.2f} in-sample)")
+    if alike:
+        return "uncertain", "; ".join(x["advice"] for x in alike)
+    if not best.plausible and best.clearly_implausible:
+        return "uncertain", "; ".join(best.flags[:1])
+    if best.explained - best.held_out_explained > 0.25:
+        return "uncertain", f"{best.name} does not hold on held-out sections"
+    return "cause", (f"{best.summary} explains {best.held_out_explained:.2f} of the residual on "
+                     f"held-out sections ({best.explained:.2f} in-sample; noise floor {noise_floor:.2f})")
 
 
 def _lack_of_fit_range(curve: _Curve, P: np.ndarray, w: np.ndarray, k: int, cost: float, residual: Pattern,

@@ -85,6 +85,12 @@ def _where(ev: SectionEvidence) -> tuple[list[str], list[int]]:
     return quantities, zones
 
 
+def structural_where(base: SectionEvidence, family: str) -> tuple[list[str], list[int]]:
+    """Quantities and zones where the residual of ``family`` lies (as :func:`_where`)."""
+    keep = [family_of(g) == family for g in base.groups]
+    return _where(restrict(base, keep)) if any(keep) else ([], [])
+
+
 def _top(c: Any) -> dict[str, Any]:
     return {"name": c.name, "kind": c.kind, "held_out_explained": c.held_out_explained, "explained": c.explained,
             "parameter": c.parameter, "fitted": c.fitted, "fitted_ci": list(c.fitted_ci), "plausible": c.plausible,
@@ -130,10 +136,9 @@ def diagnose_families(base: SectionEvidence, families: Sequence[CandidateFamily]
             out.append({**item, "verdict": "none", "note": str(exc), "top": [],
                         "structural": {"flag": False, "quantities": [], "zones": [], "reason": ""}})
             continue
-        d = res.extra
         strong_ones = [c for c in res.candidates if c.held_out_explained >= strong and c.significant]
         # a parameter outside the range of serviceable parts is a worn or failed part, not structure
-        structural = bool(not d.get("residual_within_noise") and strong_ones
+        structural = bool(not res.residual_within_noise and strong_ones
                           and all(c.at_bound or (c.clearly_implausible and c.kind != "parameter")
                                   for c in strong_ones))
         reason = ""
@@ -142,9 +147,9 @@ def diagnose_families(base: SectionEvidence, families: Sequence[CandidateFamily]
             reason = (f"the {title} residual ({', '.join(quantities)}; zones {', '.join(map(str, zones)) or '-'}) is "
                       f"explained only at implausible values or search bounds ({names}): the model's behaviour "
                       "in this family differs structurally, not by a parameter value")
-        verdict = "uncertain" if structural and d["verdict"] == "cause" else d["verdict"]
+        verdict = "uncertain" if structural and res.verdict == "cause" else res.verdict
         out.append({**item, "verdict": verdict, "note": reason or res.note,
-                    "noise_floor": d.get("noise_floor"),
+                    "noise_floor": res.noise_floor,
                     "top": [_top(c) for c in res.candidates[:n_top]],
                     "structural": {"flag": structural, "quantities": quantities if structural else [],
                                    "zones": zones if structural else [], "reason": reason}})

@@ -40,6 +40,16 @@ PARAMETER_CANDIDATES: dict[str, dict[str, tuple[float, float, float]]] = {
               "link_length": _KC, "link_friction": _KC},
 }
 
+#: Parameter candidates acting on the wheel–rail interface: the wheelset's longitudinal and
+#: lateral guidance stiffness sets, with the creep forces, how the wheelsets steer in curves —
+#: the guiding forces a contact difference changes too (docs/diagnosis.md "Interface
+#: candidates"; the effects say it in :attr:`railval.core.sim.effects.Effect.interface`).
+INTERFACE_PARAMETERS = frozenset({"k_primary_x", "k_primary_y", "link_length"})
+
+#: The mass and inertia candidates (those perturbed by the ``_MI`` step): a mass does not wear,
+#: so it is a cause only where identified (docs/diagnosis.md "Interface candidates").
+MASS_PARAMETERS = frozenset(n for t in PARAMETER_CANDIDATES.values() for n, v in t.items() if v is _MI)
+
 
 @dataclass
 class CandidateFamily:
@@ -67,6 +77,9 @@ class CandidateFamily:
     unit: str = ""
     title: str = ""
     explanation: str = ""
+    #: acts on the wheel–rail interface (effect registry ``Effect.interface`` or
+    #: :data:`INTERFACE_PARAMETERS`): needs support outside the guiding forces to be a cause
+    interface: bool = False
 
 
 def _u(v: np.ndarray | float, log: bool):

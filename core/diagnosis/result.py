@@ -101,9 +101,27 @@ class TrustedCandidate:
             clearly_implausible=bool(d.get("clearly_implausible", not d.get("plausible", True))))
 
 
+#: the typed fields of a diagnosis and their JSON names (``--json``, stored runs, the page):
+#: (attribute, JSON key); the JSON names are the contract of docs/diagnosis.md
+_TYPED: tuple[tuple[str, str], ...] = (
+    ("verdict", "verdict"), ("noise_floor", "noise_floor"), ("residual_within_noise", "residual_within_noise"),
+    ("alike", "alike"), ("unexplained", "unexplained"), ("folds", "folds"), ("bootstrap", "bootstrap"),
+    ("families", "families"), ("interface_support", "interface_support"), ("causes", "causes"),
+    ("cause_set", "cause_set"), ("campaign", "campaign"), ("configuration", "configuration"),
+    ("validated", "validated"), ("effects_in_configuration", "effects_in_configuration"),
+    ("parameters_in_configuration", "parameters_in_configuration"),
+    ("values_per_parameter", "values_per_parameter"), ("simulations", "simulations"),
+    ("stored_residual_norm", "stored_residual_norm"), ("simulated_residual_norm", "simulated_residual_norm"),
+    ("effects_simulated", "effects_simulated"), ("skipped", "skipped"), ("next_step", "next"), ("run", "run"),
+)
+
+
 @dataclass
 class DiagnosisResult:
-    """Ranked candidates plus the separability verdict between the two best."""
+    """Ranked candidates, the separability verdict between the two best, and the verdict with
+    its evidence (:func:`railval.core.diagnosis.diagnose_evidence`); the fields from ``families``
+    on are filled by the diagnosis service (``None``: not part of this result, left out of the
+    dict). ``extra``: keys of a stored run this version does not know."""
 
     residual: Pattern
     candidates: list[TrustedCandidate]
@@ -111,6 +129,30 @@ class DiagnosisResult:
     evidence: list[dict[str, Any]]
     note: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    verdict: str = "none"
+    noise_floor: float = 0.0
+    residual_within_noise: bool = False
+    alike: list[dict[str, Any]] = field(default_factory=list)
+    unexplained: list[dict[str, Any]] = field(default_factory=list)
+    folds: int = 0
+    bootstrap: int = 0
+    families: list[dict[str, Any]] | None = None
+    interface_support: list[dict[str, Any]] | None = None
+    causes: list[dict[str, Any]] | None = None
+    cause_set: dict[str, Any] | None = None
+    campaign: str | None = None
+    configuration: str | None = None
+    validated: bool | None = None
+    effects_in_configuration: list[str] | None = None
+    parameters_in_configuration: dict[str, float] | None = None
+    values_per_parameter: int | None = None
+    simulations: int | None = None
+    stored_residual_norm: float | None = None
+    simulated_residual_norm: float | None = None
+    effects_simulated: list[str] | None = None
+    skipped: list[dict[str, Any]] | None = None
+    next_step: dict[str, Any] | None = None
+    run: dict[str, Any] | None = None
 
     def to_dict(self, with_signatures: bool = False) -> dict[str, Any]:
         """Plain dict; ``with_signatures`` adds the residual's components (``labels``,
@@ -122,18 +164,20 @@ class DiagnosisResult:
         d = {"candidates": [c.to_dict(with_signature=with_signatures) for c in self.candidates],
              "separable": self.separable, "evidence": list(self.evidence), "note": self.note,
              "residual": residual}
+        d.update({key: getattr(self, attr) for attr, key in _TYPED if getattr(self, attr) is not None})
         d.update(self.extra)
         return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> DiagnosisResult:
         """Inverse of :meth:`to_dict` with ``with_signatures=True`` (a stored run read back);
-        the keys beyond the ranked result go to ``extra``."""
-        own = {"candidates", "separable", "evidence", "note", "residual"}
+        keys this version does not know go to ``extra``."""
+        own = {"candidates", "separable", "evidence", "note", "residual"} | {key for _, key in _TYPED}
         return cls(residual=Pattern.from_dict(d["residual"]),
                    candidates=[TrustedCandidate.from_dict(c) for c in d["candidates"]],
                    separable=bool(d["separable"]), evidence=list(d["evidence"]), note=d.get("note", ""),
-                   extra={k: v for k, v in d.items() if k not in own})
+                   extra={k: v for k, v in d.items() if k not in own},
+                   **{attr: d[key] for attr, key in _TYPED if key in d})
 
     def to_pandas(self):
         import pandas as pd

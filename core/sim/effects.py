@@ -43,6 +43,10 @@ class Effect:
     #: what the effect needs from every section's layout record, as layout keys
     #: (``"irregularities"``: measured track geometry recorded with the campaign)
     requires_layout: tuple[str, ...] = ()
+    #: the effect acts on the wheel–rail interface (contact, track under the wheel, wheelset
+    #: steering): a contact difference no candidate models changes the same guiding forces, so
+    #: the diagnosis needs support outside them (docs/diagnosis.md "Interface candidates")
+    interface: bool = False
 
     def to_dict(self) -> dict:
         return {"id": self.id, "title": self.title, "explanation": self.explanation,
@@ -132,7 +136,7 @@ _LIST = [
         source="massless vertical track spring-damper per wheel (c = 50 kN·s/m, assumption); lateral "
                "track compliance counted once: each rail a massless spring k_rail deflecting under its "
                "wheel's tread force, the flange contact in series with k_rail; Knothe & Grassie, VSD "
-               "22, 1993 (magnitudes)"),
+               "22, 1993 (magnitudes)", interface=True),
     Effect(
         "wheel_rail_friction", "Wheel–rail friction coefficient",
         "The creep forces saturate at μ·Q. Measurements are often made on wet or contaminated "
@@ -144,7 +148,7 @@ _LIST = [
                  plausible_source="wet or contaminated rail 0.1–0.25, dry rail 0.3–0.5 (Iwnicki (ed.), "
                                   "Handbook of Railway Vehicle Dynamics, 2006, wheel–rail contact)")),
         ("Y_qst", "YQ_qst", "SumY_qst", "Y_max", "YQ_max", "SumY_max"), (3, 4), (),
-        source="Shen, Hedrick & Elkins 1983 saturation of Kalker's linear creep forces"),
+        source="Shen, Hedrick & Elkins 1983 saturation of Kalker's linear creep forces", interface=True),
     Effect(
         "conicity", "Equivalent conicity of the measured (worn) profiles",
         "The model uses the nominal conicity of new profiles; the measured wheel and rail "
@@ -157,7 +161,7 @@ _LIST = [
                                   "≈ 0.05–0.2, worn wheel–rail pairs up to ≈ 0.4–0.5 (the limits are an "
                                   "assumption)")),
         ("ay_rms", "ay_max", "Y_max", "SumY_max", "Y_qst"), (1, 2, 3, 4), ((1.0, 6.0),),
-        source="UIC 519 equivalent conicity; Klingel wavelength 2π·sqrt(r0·b0/λe)"),
+        source="UIC 519 equivalent conicity; Klingel wavelength 2π·sqrt(r0·b0/λe)", interface=True),
     Effect(
         "measured_irregularities", "Measured instead of generated track irregularities",
         "The baseline model runs on random irregularities generated from a standard spectrum "
@@ -186,7 +190,7 @@ _LIST = [
                                   "an air-spring bogie, 0.1–2 MN·m/rad; Polach & Böttcher 2014 §2 name "
                                   "parasitic suspension stiffness an unknown the modellers must estimate")),
         ("Y_qst", "YQ_qst", "SumY_qst", "Y_max", "YQ_max", "SumY_max"), (3, 4), (),
-        source="rotational spring between car body and bogie; Iwnicki 2006 ch. 7 (bogie yaw resistance)"),
+        source="rotational spring between car body and bogie; Iwnicki 2006 ch. 7 (bogie yaw resistance)", interface=True),
     Effect(
         "lateral_bumpstop", "Secondary lateral clearance and bump stop",
         "The car body's lateral travel on the secondary suspension is limited by bump stops after "

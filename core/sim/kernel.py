@@ -27,7 +27,8 @@ included) exponentially on the wheelset's own velocity. The step is chosen by th
 (anti-alias boxcar).
 
 The equations (quasi-static acceleration in the track plane a_q = v²κ − g·φ_t, Kalker linear
-creep with Shen–Hedrick–Elkins saturation, gravitational stiffness via the contact angle,
+creep with Shen–Hedrick–Elkins saturation (or, selected by the template parameter
+``creep_law`` = 1, Polach's law with reduction factors), gravitational stiffness via the contact angle,
 flange contact as a stiff spring beyond the clearance, lateral track compliance as a massless
 spring per rail) are documented in ``docs/simulator.md`` and in :mod:`railval.core.sim.model`.
 """
@@ -44,7 +45,8 @@ V, GRAV, NW, R0, B0, LAM, LAM2, YFR, CLEAR, KFL, GAM0, EPSG = range(12)
 F11, F22, Q0, MU, SAT, TFLEX, KTZ, CTZ, KTY = range(12, 21)
 FLEX, FLEX_W, FLEX_Z, FLEX_M, ZSENS, S_START, PHI_S1, PHI_S2, XS1, XS2 = range(21, 31)
 Y_INIT, Z_INIT, TH_INIT = range(31, 34)  # initial conditions (verification tests)
-NSC = 34
+POL_KA, POL_KS = range(34, 36)  # Polach reduction factors (SC[SAT] == 2: Polach creep law)
+NSC = 36
 
 # --- connection columns (CONN array)
 (C_P, C_C, C_X, C_B, C_ZP, C_ZC, C_KX, C_KY, C_KZ, C_CZ, C_CY, C_BYD, C_CYD, C_KSYD, C_KSZ,
@@ -70,6 +72,27 @@ def _sat_factor(fx, fy, mu_q):
     if b < 3.0:
         return (b - b * b / 3.0 + b * b * b / 27.0) / b
     return 1.0 / b
+
+
+@njit(cache=True, inline="always")
+def _polach_factor(fx, fy, mu_q, ka, ks):
+    """Polach's creep law as a factor on the linear Kalker force resultant |F_lin|: with the
+    gradient of the tangential stress ε = π·|F_lin|/(4μQ) (so that kA = kS = 1 has Kalker's
+    initial slope), F = (2μQ/π)·(kA·ε/(1 + (kA·ε)²) + arctan(kS·ε)), i.e. the factor
+    (kA·ε/(1 + (kA·ε)²) + arctan(kS·ε))/(2ε): (kA + kS)/2 at small creep, → μQ/|F_lin| far
+    beyond saturation. Reduction factors kA (adhesion area) and kS (slip area) below 1 model a
+    contaminated or rough contact (dry rail kA = 1, kS ≈ 0.4). Polach, O., Creep forces in
+    simulations of traction vehicles running on adhesion limit, Wear 258 (2005) 992–1000, §2
+    (without the slip-velocity dependence of μ); Polach, O., A fast wheel–rail forces
+    calculation computer code, Veh. Syst. Dyn. 33 suppl. (1999) 728–739."""
+    f = math.sqrt(fx * fx + fy * fy)
+    if mu_q <= 0.0:
+        return 0.0
+    e = 0.7853981633974483 * f / mu_q
+    if e <= 1e-9:
+        return 0.5 * (ka + ks)
+    ea = ka * e
+    return (ea / (1.0 + ea * ea) + math.atan(ks * e)) / (2.0 * e)
 
 
 @njit(cache=True, inline="always")
@@ -417,7 +440,14 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR,
             fyR = -SC[F22] * fR * xiy
             sL = 1.0
             sR = 1.0
-            if SC[SAT] > 0.0:
+            if SC[SAT] == 2.0:
+                sL = _polach_factor(fxL, fyL, SC[MU] * max(QL, 0.0), SC[POL_KA], SC[POL_KS])
+                sR = _polach_factor(fxR, fyR, SC[MU] * max(QR, 0.0), SC[POL_KA], SC[POL_KS])
+                fxL *= sL
+                fyL *= sL
+                fxR *= sR
+                fyR *= sR
+            elif SC[SAT] > 0.0:
                 sL = _sat_factor(fxL, fyL, SC[MU] * max(QL, 0.0))
                 sR = _sat_factor(fxR, fyR, SC[MU] * max(QR, 0.0))
                 fxL *= sL

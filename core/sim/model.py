@@ -10,7 +10,9 @@ Wheel–rail contact (per wheel, :mod:`railval.core.sim.kernel`)
   ξx,R = −Δr_R/r0 + b0·ψ̇/v + b0·κ, ξy = ẏ/v − ψ (spin neglected).
 * Linear creep forces F = −f·ξ with f11 = G·c²·C11, f22 = G·c²·C22, c² = a·b = area/π at Q0
   (Kalker 1967, C11 = 4.12, C22 = 3.67 for a/b = 1, ν = 0.25), scaled with (Q/Q0)^(2/3) (Hertz),
-  saturated at μ·Q (Shen, Hedrick & Elkins 1983).
+  saturated at μ·Q (Shen, Hedrick & Elkins 1983); with the template parameter ``creep_law`` = 1
+  Polach's law instead (Polach 2005, reduction factors kA, kS: initial slope (kA + kS)/2 of
+  Kalker's, a smoother approach to μQ) — a second contact law the trust bench's truth uses.
 * Lateral component of the normal force (gravitational stiffness): Y_n,L = −Q_L·(γ0 + e·y_rel),
   Y_n,R = +Q_R·(γ0 − e·y_rel), e = ε/b0 with Wickens' contact angle parameter ε, so the
   wheelset's gravitational stiffness is W·ε/b0 (Wickens, *Fundamentals of rail vehicle
@@ -192,7 +194,10 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
     SC[K.F22] = f22
     SC[K.Q0] = vehicle.q0_kN() * 1e3
     SC[K.MU] = ef["wheel_rail_friction"]["mu"] if "wheel_rail_friction" in ef else p["mu_nominal"]
-    SC[K.SAT] = 1.0
+    # creep law (docs/simulator.md): 1 = Shen–Hedrick–Elkins saturation, 2 = Polach
+    SC[K.SAT] = 2.0 if p.get("creep_law", 0.0) >= 0.5 else 1.0
+    SC[K.POL_KA] = p.get("polach_kA", 1.0)
+    SC[K.POL_KS] = p.get("polach_kS", 0.4)
     if tflex:
         SC[K.TFLEX] = 1.0
         SC[K.KTZ] = ef["track_flexibility"]["k_vertical_MN_m"] * 1e6

@@ -99,6 +99,14 @@ _COACH: tuple[Param, ...] = (
     Param("contact_area", "m^2", 1.2e-4, 3e-5, 3e-4, "contact patch area pi*a*b at Q0 (Hertz)", "[typ] assumption"),
     Param("shear_modulus", "Pa", 8.0e10, 7e10, 9e10, "steel shear modulus G", "steel"),
     Param("mu_nominal", "-", 0.45, 0.1, 0.7, "friction coefficient used without the wheel_rail_friction effect", "[typ] assumption"),
+    Param("creep_law", "-", 0.0, 0.0, 1.0,
+          "creep force law: 0 = linear Kalker saturated by Shen-Hedrick-Elkins, 1 = Polach with reduction "
+          "factors polach_kA, polach_kS (a different contact law; no diagnosis candidate changes it)",
+          "Shen, Hedrick & Elkins 1983; Polach 2005 (Wear 258)"),
+    Param("polach_kA", "-", 1.0, 0.1, 1.0, "Polach reduction factor in the adhesion area (creep_law = 1)",
+          "Polach 2005 (Wear 258), dry rail"),
+    Param("polach_kS", "-", 0.4, 0.05, 1.0, "Polach reduction factor in the slip area (creep_law = 1)",
+          "Polach 2005 (Wear 258), dry rail"),
 )
 
 _WAGON: tuple[Param, ...] = (
@@ -129,6 +137,14 @@ _WAGON: tuple[Param, ...] = (
     Param("contact_area", "m^2", 1.4e-4, 3e-5, 3e-4, "contact patch area pi*a*b at Q0 (Hertz)", "[typ] assumption"),
     Param("shear_modulus", "Pa", 8.0e10, 7e10, 9e10, "steel shear modulus G", "steel"),
     Param("mu_nominal", "-", 0.45, 0.1, 0.7, "friction coefficient used without the wheel_rail_friction effect", "[typ] assumption"),
+    Param("creep_law", "-", 0.0, 0.0, 1.0,
+          "creep force law: 0 = linear Kalker saturated by Shen-Hedrick-Elkins, 1 = Polach with reduction "
+          "factors polach_kA, polach_kS (a different contact law; no diagnosis candidate changes it)",
+          "Shen, Hedrick & Elkins 1983; Polach 2005 (Wear 258)"),
+    Param("polach_kA", "-", 1.0, 0.1, 1.0, "Polach reduction factor in the adhesion area (creep_law = 1)",
+          "Polach 2005 (Wear 258), dry rail"),
+    Param("polach_kS", "-", 0.4, 0.05, 1.0, "Polach reduction factor in the slip area (creep_law = 1)",
+          "Polach 2005 (Wear 258), dry rail"),
 )
 
 _CAT = "assumption: typical range for European bogie passenger coaches (Iwnicki (ed.) 2006)"
@@ -182,6 +198,9 @@ PLAUSIBLE_COACH: dict[str, tuple[float, float, str]] = {
     "contact_area": (6e-5, 2e-4, "Hertz contact area of a 50–60 kN wheel load on S1002/UIC60 (assumption)"),
     "shear_modulus": (7.9e10, 8.2e10, "wheel and rail steel"),
     "mu_nominal": (0.3, 0.5, "dry rail (Iwnicki (ed.) 2006, wheel–rail contact)"),
+    "creep_law": (0.0, 1.0, "either law is a physical contact model (Shen, Hedrick & Elkins 1983; Polach 2005)"),
+    "polach_kA": (0.3, 1.0, "Polach 2005 (Wear 258): kA 1 on dry rail, lower with contamination"),
+    "polach_kS": (0.1, 1.0, "Polach 2005 (Wear 258): kS 0.4 on dry rail, lower with contamination"),
 }
 
 #: plausible (lower, upper, source) of every wagon template parameter
@@ -213,6 +232,9 @@ PLAUSIBLE_WAGON: dict[str, tuple[float, float, str]] = {
     "contact_area": (8e-5, 2.5e-4, "Hertz contact area of an 80–110 kN wheel load (assumption)"),
     "shear_modulus": (7.9e10, 8.2e10, "wheel and rail steel"),
     "mu_nominal": (0.3, 0.5, "dry rail (Iwnicki (ed.) 2006, wheel–rail contact)"),
+    "creep_law": (0.0, 1.0, "either law is a physical contact model (Shen, Hedrick & Elkins 1983; Polach 2005)"),
+    "polach_kA": (0.3, 1.0, "Polach 2005 (Wear 258): kA 1 on dry rail, lower with contamination"),
+    "polach_kS": (0.1, 1.0, "Polach 2005 (Wear 258): kS 0.4 on dry rail, lower with contamination"),
 }
 
 
