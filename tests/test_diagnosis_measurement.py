@@ -112,7 +112,7 @@ def test_a_discrete_candidate_is_judged_at_its_value_on_held_out_sections():
     sign = by["sign Y_w1L"]
     # fitted exactly at its value, not at a bound, explaining nearly all, on held-out sections too
     assert sign.fitted == pytest.approx(-1.0, abs=1e-9) and not sign.at_bound and sign.plausible
-    assert sign.held_out_explained > 0.95 and sign.significant and res.extra["verdict"] == "cause"
+    assert sign.held_out_explained > 0.95 and sign.significant and res.verdict == "cause"
     assert sign.fitted_ci[0] >= -1.01 - 1e-9 and sign.fitted_ci[1] <= -0.99 + 1e-9
     # a correction that makes things worse explains nothing
     assert by["swap w1L w1R"].explained == 0.0 and by["swap w1L w1R"].held_out_explained == 0.0
