@@ -53,6 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--apps", type=int, default=2, help="app processes behind nginx")
     parser.add_argument("--settle", type=float, default=60.0,
                         help="seconds after the sessions closed before memory is read again")
+    parser.add_argument("--admin", action="store_true",
+                        help="run the app processes with Panel's admin page (it keeps every session's record)")
     parser.add_argument("--pymalloc", action="store_true",
                         help="app processes with Python's own allocator instead of the "
                         "deployment's PYTHONMALLOC=malloc (railval.app.main.SERVE_ENV), to compare")
@@ -145,8 +147,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     work = Path(tempfile.mkdtemp(prefix="railval-bench-team-"))
     figures: dict[str, Any] = {"reviewers": args.reviewers, "engineers": args.engineers,
                                "app_processes": args.apps, "answers_per_reviewer": args.answers,
-                               "allocator": "pymalloc" if args.pymalloc else "malloc"}
-    topo = Topology(url, work / "site", n_apps=args.apps, app_env={} if args.pymalloc else None)
+                               "allocator": "pymalloc" if args.pymalloc else "malloc", "admin_page": args.admin}
+    topo = Topology(url, work / "site", n_apps=args.apps, app_env={} if args.pymalloc else None,
+                    admin=args.admin)
     try:
         topo.workdir.mkdir(parents=True)
         topo._secrets()

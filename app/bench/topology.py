@@ -78,6 +78,8 @@ class Topology:
     extra_args: list[str] = field(default_factory=list)
     #: environment of the app processes on top of the deployment's (railval.app.main.SERVE_ENV)
     app_env: dict[str, str] | None = None
+    #: Panel's admin page on the app processes (it keeps a record of every session it saw)
+    admin: bool = True
     apps: dict[int, subprocess.Popen] = field(default_factory=dict)
     nginx: subprocess.Popen | None = None
     port: int = 0
@@ -110,7 +112,7 @@ class Topology:
         log = open(self.workdir / f"app-{port}.log", "ab")  # noqa: SIM115 - lives with the process
         proc = subprocess.Popen(
             [sys.executable, "-m", "railval.app", "serve", "--address", "127.0.0.1", "--port",
-             str(port), "--no-demo", "--behind-proxy", "--admin",
+             str(port), "--no-demo", "--behind-proxy", *(["--admin"] if self.admin else []),
              "--allow-websocket-origin", f"127.0.0.1:{self.port}", *self.extra_args],
             env=self._env(), stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         self.apps[port] = proc

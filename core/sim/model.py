@@ -36,13 +36,14 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from railval.core.errors import InvalidParameter
 from railval.core.sim import kernel as K
 from railval.core.sim.effects import resolve_effects
-from railval.core.workers import pool_kwargs
 from railval.core.sim.track import DS, TrackSection
 from railval.core.sim.vehicles import G, VehicleModel
 from railval.core.types import SignalSet
+from railval.core.workers import pool_kwargs
 
 H_SECONDARY = 0.9  # m above rail: secondary spring / yaw damper attachment height (coach)
 H_LEAF = 0.8  # m above rail: leaf spring attachment (wagon)
@@ -94,31 +95,60 @@ def _conn_row(**kw) -> np.ndarray:
 
 def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], speed_ms: float,
              nuisance: Mapping[str, float] | None = None) -> Assembly:
-    """Kernel arrays for ``vehicle`` with ``effects`` (already resolved) at ``speed_ms``."""
-    p = vehicle.parameters
-    nz = dict(nuisance or {})
+    """Kernel arrays for ``vehicle`` with ``effects`` (already resolved) at ``speed_ms``:
+    bodies (:func:`_bodies`), suspension connections (:func:`_connections`) and the kernel's
+    scalars (:func:`_scalars`)."""
     ef = dict(effects)
+    massd, free, hcb = _bodies(vehicle, "track_flexibility" in ef)
+    xabs = np.zeros(massd.shape[0])
+    rows = _connections(vehicle, ef, dict(nuisance or {}), hcb, massd, free, xabs)
+    CONN = np.array(rows)
+    SC = _scalars(vehicle, ef, speed_ms, hcb, CONN)
+    nb, nw = vehicle.n_bogies, vehicle.n_wheelsets
+    bogie_body = np.arange(1, 1 + nb, dtype=np.int64)
+    ws_body = np.arange(1 + nb, 1 + nb + nw, dtype=np.int64)
+    return Assembly(SC, massd, free, xabs, CONN, ws_body, bogie_body)
+
+
+def _bodies(vehicle: VehicleModel, tflex: bool) -> tuple[np.ndarray, np.ndarray, float]:
+    """(mass/inertia per body and degree of freedom, which degrees are free, car body centre of
+    gravity height) for the car body and the wheelsets; the bogies are filled by
+    :func:`_connections`."""
+    p = vehicle.parameters
     nb, nw = vehicle.n_bogies, vehicle.n_wheelsets
     nbody = 1 + nb + nw
     m = vehicle.masses()
     massd = np.ones((nbody, K.NDOF))
     free = np.zeros((nbody, K.NDOF), dtype=np.bool_)
-    xabs = np.zeros(nbody)
-    tflex = "track_flexibility" in ef
     if vehicle.template == "coach":
         massd[0] = [m["carbody"], m["carbody"], p["I_roll_carbody"], p["I_pitch_carbody"], p["I_yaw_carbody"],
                     m["carbody"]]
-        hcb = p["h_carbody"]
     else:
         mb = m["carbody"]
         # box body of length L, width 2.8 m, height 2.5 m (uniform), payload included
         lx, wy, hz = p["L_carbody"], 2.8, 2.5
         massd[0] = [mb, mb, mb * (wy**2 + hz**2) / 12, mb * (lx**2 + hz**2) / 12, mb * (lx**2 + wy**2) / 12, mb]
-        hcb = p["h_carbody"]
     free[0] = True
+    for i in range(nw):
+        k = 1 + nb + i
+        massd[k] = [m["wheelset"], m["wheelset"], p["I_roll_wheelset"], 1.0, p["I_yaw_wheelset"], m["wheelset"]]
+        free[k, 0] = True
+        free[k, 4] = True
+        if tflex:
+            free[k, 1] = True
+            free[k, 2] = True
+    return massd, free, p["h_carbody"]
+
+
+def _connections(vehicle: VehicleModel, ef: Mapping[str, Mapping[str, float]], nz: Mapping[str, float],
+                 hcb: float, massd: np.ndarray, free: np.ndarray, xabs: np.ndarray) -> list[np.ndarray]:
+    """The suspension connection rows (secondary and primary for the coach, links and leaf
+    springs for the two-axle wagon) with the effects that act on them; sets the bogies' masses,
+    free degrees and every body's longitudinal position ``xabs``."""
+    p = vehicle.parameters
+    m = vehicle.masses()
+    nb = vehicle.n_bogies
     xw = vehicle.wheelset_x()
-    bogie_body = np.arange(1, 1 + nb, dtype=np.int64)
-    ws_body = np.arange(1 + nb, 1 + nb + nw, dtype=np.int64)
     rows = []
     fr = ef.get("friction_damping", {}).get("force_kN", 0.0) * 1e3
     kser = ef.get("damper_series_stiffness", {}).get("k_series_MN_m", 0.0) * 1e6
@@ -129,7 +159,6 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
     asym = float(nz.get("damper_asymmetry", 0.0))
     if vehicle.template == "coach":
         c = p["bogie_centres"] / 2
-        a = p["wheelbase"] / 2
         for j, xb in enumerate((c, -c)):
             k = 1 + j
             massd[k] = [p["m_bogie"], p["m_bogie"], p["I_roll_bogie"], p["I_pitch_bogie"], p["I_yaw_bogie"],
@@ -151,36 +180,34 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
                 p=parent, c=k, x=x - xabs[parent], b=p["b_primary"], zp=p["r0"] - p["h_bogie"], zc=0.0,
                 kx=p["k_primary_x"], ky=p["k_primary_y"], kz=p["k_primary_z"], cz=p["c_primary_z"],
                 w=(m["carbody"] / 2 + m["bogie"]) * G / 2))
-        _ = a
-    else:
-        w_spring = m["carbody"] * G / 4
-        k_link = w_spring / p["link_length"]
-        k_link_x = w_spring / p["link_length_x"]
-        for i, x in enumerate(xw):
-            k = 1 + i
-            xabs[k] = x
-            rows.append(_conn_row(
-                p=0, c=k, x=x, b=p["b_spring"], zp=H_LEAF - hcb, zc=H_LEAF - p["r0"],
-                kx=k_link_x, ky=k_link, kz=p["k_leaf_z"], kpyaw=kpy, bscl=bs_cl, bsk=bs_k,
-                fz=p["leaf_friction"] * w_spring + fr, fy=p["link_friction"] * w_spring + fr,
-                fx=p["link_friction"] * w_spring, kstz=3.0 * p["k_leaf_z"], ksty=3.0 * k_link,
-                kstx=3.0 * k_link_x, w=m["carbody"] * G / 2))
-    for i in range(nw):
-        k = 1 + nb + i
-        massd[k] = [m["wheelset"], m["wheelset"], p["I_roll_wheelset"], 1.0, p["I_yaw_wheelset"], m["wheelset"]]
-        free[k, 0] = True
-        free[k, 4] = True
-        if tflex:
-            free[k, 1] = True
-            free[k, 2] = True
-    CONN = np.array(rows)
-    # ------------------------------------------------------------------ scalars
+        return rows
+    w_spring = m["carbody"] * G / 4
+    k_link = w_spring / p["link_length"]
+    k_link_x = w_spring / p["link_length_x"]
+    for i, x in enumerate(xw):
+        k = 1 + i
+        xabs[k] = x
+        rows.append(_conn_row(
+            p=0, c=k, x=x, b=p["b_spring"], zp=H_LEAF - hcb, zc=H_LEAF - p["r0"],
+            kx=k_link_x, ky=k_link, kz=p["k_leaf_z"], kpyaw=kpy, bscl=bs_cl, bsk=bs_k,
+            fz=p["leaf_friction"] * w_spring + fr, fy=p["link_friction"] * w_spring + fr,
+            fx=p["link_friction"] * w_spring, kstz=3.0 * p["k_leaf_z"], ksty=3.0 * k_link,
+            kstx=3.0 * k_link_x, w=m["carbody"] * G / 2))
+    return rows
+
+
+def _scalars(vehicle: VehicleModel, ef: Mapping[str, Mapping[str, float]], speed_ms: float, hcb: float,
+             CONN: np.ndarray) -> np.ndarray:
+    """The kernel's scalar vector: speed, wheel–rail contact (conicity, flange, creep
+    coefficients and law, friction), track flexibility, sensor positions and the car body's
+    bending mode (which also sets the mode shape at the secondary connections in ``CONN``)."""
+    p = vehicle.parameters
     SC = np.zeros(K.NSC)
     lam = ef["conicity"]["conicity"] if "conicity" in ef else p["conicity"]
     f11, f22 = kalker_coefficients(vehicle)
     SC[K.V] = speed_ms
     SC[K.GRAV] = G
-    SC[K.NW] = nw
+    SC[K.NW] = vehicle.n_wheelsets
     SC[K.R0] = p["r0"]
     SC[K.B0] = p["b0"]
     SC[K.LAM] = lam
@@ -198,7 +225,7 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
     SC[K.SAT] = 2.0 if p.get("creep_law", 0.0) >= 0.5 else 1.0
     SC[K.POL_KA] = p.get("polach_kA", 1.0)
     SC[K.POL_KS] = p.get("polach_kS", 0.4)
-    if tflex:
+    if "track_flexibility" in ef:
         SC[K.TFLEX] = 1.0
         SC[K.KTZ] = ef["track_flexibility"]["k_vertical_MN_m"] * 1e6
         SC[K.CTZ] = TRACK_CZ
@@ -211,13 +238,13 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
         SC[K.FLEX] = 1.0
         SC[K.FLEX_W] = 2 * math.pi * fl["frequency_Hz"]
         SC[K.FLEX_Z] = fl["damping_ratio"]
-        SC[K.FLEX_M] = m["carbody"]
+        SC[K.FLEX_M] = vehicle.masses()["carbody"]
         L = p["L_carbody"]
         SC[K.PHI_S1], SC[K.PHI_S2] = bending_mode_shape(np.array(xs), L)
         for r in CONN:
             if r[K.C_P] == 0:
                 r[K.C_PHIF] = float(bending_mode_shape(r[K.C_X], L))
-    return Assembly(SC, massd, free, xabs, CONN, ws_body, bogie_body)
+    return SC
 
 
 def _contact_slope(eps: float, b0: float) -> float:

@@ -31,6 +31,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import EFFECTS, resolve_effects
 from railval.core.sim.model import simulate_section
@@ -240,6 +241,66 @@ def _apply_channel_faults(ss: SignalSet, faults: dict) -> SignalSet:
     return SignalSet(fs=ss.fs, time_s=ss.time_s, distance_m=ss.distance_m, channels=chans)
 
 
+def _checked_hidden(template: str, hidden: dict | None, oversample: int, require_cause: bool) -> dict:
+    """The hidden effects resolved and checked against the template (default: friction
+    damping, :data:`HIDDEN_DEFAULTS`)."""
+    if int(oversample) < 1:
+        raise InvalidParameter(f"oversample must be an integer ≥ 1, got {oversample!r}")
+    hidden = resolve_effects(hidden if hidden is not None else {"friction_damping": HIDDEN_DEFAULTS["friction_damping"]})
+    if template not in TRUE_TRACK_TEMPLATES:
+        raise InvalidParameter(f"vehicle template {template!r} is unknown; known: {sorted(TRUE_TRACK_TEMPLATES)}")
+    if not hidden and require_cause:
+        raise InvalidParameter("synth needs at least one hidden effect")
+    for e in hidden:
+        if template not in EFFECTS[e].templates:
+            raise InvalidParameter(f"effect {e!r} does not apply to template {template!r} "
+                                   f"(applies to {EFFECTS[e].templates})")
+    return hidden
+
+
+def _section(sp: dict, rng: np.random.Generator, nz: dict) -> SynthSection:
+    """One planned section: its geometry (run-in ten seconds of travel, transitions, curve),
+    the true irregularities with defects and the recorded ones (recording gain × true + noise,
+    stored at 0.01 mm)."""
+    v = sp["speed"] / 3.6
+    run = 10.0 * v
+    trans = max(60.0, 0.6 * sp["cant"]) if sp["radius"] else 0.0
+    curve = float(np.clip(8.0 * v, 250.0, 450.0))
+    geom = {"straight_in_m": max(run - trans, 60.0), "transition_in_m": trans, "curve_m": curve,
+            "transition_out_m": trans, "straight_out_m": max(run - trans, 60.0)}
+    length = sum(geom.values())
+    true_irr = generate_irregularities(length + 120.0, level="low", seed=int(rng.integers(2**31)),
+                                       s0=-60.0, scale=true_track_scale(sp["speed"]))
+    _defects(true_irr, rng, length)
+    rec = {"s": true_irr["s"]}
+    for key in ("vertical", "alignment", "cross_level", "gauge"):
+        rec[key] = nz["recording_gain"] * true_irr[key] + rng.normal(0, nz["recording_noise_mm"] * 1e-3,
+                                                                     true_irr["s"].size)
+    # stored with 0.01 mm resolution, as in the manifest
+    rec = {k: (np.round(x * 1e5) / 1e5 if k != "s" else x) for k, x in rec.items()}
+    track = TrackSection(sp["id"], speed_kmh=sp["speed"], radius_m=sp["radius"], cant_mm=sp["cant"],
+                         curve_direction=sp["direction"], irregularities=rec, irregularity_level="low",
+                         seed=int(rng.integers(2**31)), **geom)
+    return SynthSection(track, true_irr, sp["country"], zone_for_radius(sp["radius"] or None))
+
+
+def _truth_signals(truth_veh: VehicleModel, true_track: TrackSection, truth_effects: dict, fs: float, k: int,
+                   speed_factor: float, nz: dict) -> SignalSet:
+    """The truth's signals on the true track; with ``k`` > 1 simulated at ``k`` × ``fs`` and
+    averaged over blocks of ``k`` samples (the kernel's own output averaging at ``fs``)."""
+    ss = simulate_section(truth_veh, true_track, truth_effects, fs_out=fs * k, speed_factor=speed_factor,
+                          nuisance={"damper_asymmetry": nz["damper_asymmetry"]})
+    if k == 1:
+        return ss
+    n = ss.time_s.size // k * k
+
+    def blk(x: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(x[:n].reshape(-1, k).mean(axis=1))
+
+    return SignalSet(fs=float(fs), time_s=blk(ss.time_s), distance_m=blk(ss.distance_m),
+                     channels={c: blk(x) for c, x in ss.channels.items()})
+
+
 def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict | None = None,
                    seed: int = 1, n_sections: int = 12, fs: float = 200.0,
                    nuisance: dict | None = None, progress=None, truth_parameters: dict | None = None,
@@ -258,77 +319,35 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
     allows a campaign with no hidden cause at all (``hidden={}``)."""
     veh = VehicleModel(template)
     truth_veh = VehicleModel(template, dict(truth_parameters or {}))
-    if int(oversample) < 1:
-        raise InvalidParameter(f"oversample must be an integer ≥ 1, got {oversample!r}")
-    hidden = resolve_effects(hidden if hidden is not None else {"friction_damping": HIDDEN_DEFAULTS["friction_damping"]})
-    if template not in TRUE_TRACK_TEMPLATES:
-        raise InvalidParameter(f"vehicle template {template!r} is unknown; known: {sorted(TRUE_TRACK_TEMPLATES)}")
-    if not hidden and require_cause and not truth_parameters and not channel_faults:
-        raise InvalidParameter("synth needs at least one hidden effect")
-    for e in hidden:
-        if template not in EFFECTS[e].templates:
-            raise InvalidParameter(f"effect {e!r} does not apply to template {template!r} "
-                                   f"(applies to {EFFECTS[e].templates})")
+    hidden = _checked_hidden(template, hidden, oversample, require_cause and not truth_parameters
+                             and not channel_faults)
     nz = {**NUISANCE_DEFAULTS, **(nuisance or {})}
     if template != "coach":
         nz["damper_asymmetry"] = 0.0
     rng = np.random.default_rng(seed)
-    plan = _plan(template, n_sections, rng)
-    sections: list[SynthSection] = []
-    for sp in plan:
-        v = sp["speed"] / 3.6
-        run = 10.0 * v
-        trans = max(60.0, 0.6 * sp["cant"]) if sp["radius"] else 0.0
-        curve = float(np.clip(8.0 * v, 250.0, 450.0))
-        geom = {"straight_in_m": max(run - trans, 60.0), "transition_in_m": trans, "curve_m": curve,
-                "transition_out_m": trans, "straight_out_m": max(run - trans, 60.0)}
-        length = sum(geom.values())
-        true_irr = generate_irregularities(length + 120.0, level="low", seed=int(rng.integers(2**31)),
-                                           s0=-60.0, scale=true_track_scale(sp["speed"]))
-        _defects(true_irr, rng, length)
-        rec = {"s": true_irr["s"]}
-        for key in ("vertical", "alignment", "cross_level", "gauge"):
-            rec[key] = nz["recording_gain"] * true_irr[key] + rng.normal(0, nz["recording_noise_mm"] * 1e-3,
-                                                                         true_irr["s"].size)
-        # stored with 0.01 mm resolution, as in the manifest
-        rec = {k: (np.round(x * 1e5) / 1e5 if k != "s" else x) for k, x in rec.items()}
-        track = TrackSection(sp["id"], speed_kmh=sp["speed"], radius_m=sp["radius"], cant_mm=sp["cant"],
-                             curve_direction=sp["direction"], irregularities=rec, irregularity_level="low",
-                             seed=int(rng.integers(2**31)), **geom)
-        zone = zone_for_radius(sp["radius"] or None)
-        sections.append(SynthSection(track, true_irr, sp["country"], zone))
+    sections = [_section(sp, rng, nz) for sp in _plan(template, n_sections, rng)]
     baseline_effects = {} if "measured_irregularities" in hidden else {"measured_irregularities": {"scale": 1.0}}
     truth_effects = {**{k: v for k, v in baseline_effects.items()}, **hidden}
     truth_effects["measured_irregularities"] = dict(hidden.get("measured_irregularities", {"scale": 1.0}))
-    gains = {}
+    gains: dict[str, float] = {}
     measured, baseline = {}, {}
     speed_factors = {}
     total = 2 * len(sections)
-    done = 0
-    for sec in sections:
-        true_track = TrackSection(**{**sec.track.__dict__, "irregularities": sec.true_irregularities})
+    for i, sec in enumerate(sections):
         sf = float(1.0 + rng.normal(0.0, nz["speed_sigma"]))
         speed_factors[sec.track.id] = sf
-        k = int(oversample)
-        ss = simulate_section(truth_veh, true_track, truth_effects, fs_out=fs * k, speed_factor=sf,
-                              nuisance={"damper_asymmetry": nz["damper_asymmetry"]})
-        if k > 1:  # block means of k samples: the kernel's own output averaging at fs
-            n = ss.time_s.size // k * k
-            blk = lambda x, n=n, k=k: np.ascontiguousarray(x[:n].reshape(-1, k).mean(axis=1))
-            ss = SignalSet(fs=float(fs), time_s=blk(ss.time_s), distance_m=blk(ss.distance_m),
-                           channels={c: blk(x) for c, x in ss.channels.items()})
+        true_track = TrackSection(**{**sec.track.__dict__, "irregularities": sec.true_irregularities})
+        ss = _truth_signals(truth_veh, true_track, truth_effects, fs, int(oversample), sf, nz)
         for ch in ss.channels:
             gains.setdefault(ch, float(1.0 + rng.normal(0.0, nz["gain_sigma"])))
         measured[sec.track.id] = _apply_sensor_nuisance(ss, rng, nz, gains)
         if channel_faults:
             measured[sec.track.id] = _apply_channel_faults(measured[sec.track.id], channel_faults)
-        done += 1
         if progress:
-            progress(done, total)
+            progress(2 * i + 1, total)
         baseline[sec.track.id] = simulate_section(veh, sec.track, baseline_effects, fs_out=fs)
-        done += 1
         if progress:
-            progress(done, total)
+            progress(2 * i + 2, total)
     truth = {"hidden_effects": hidden, "truth_effects": truth_effects,
              "nuisances": {**nz, "speed_factors": speed_factors, "channel_gains": gains},
              "baseline_effects": baseline_effects, "seed": seed, "template": template,
