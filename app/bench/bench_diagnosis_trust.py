@@ -141,7 +141,7 @@ CASES: dict[str, list[tuple[str, dict[str, Any], str | None]]] = {
 _STRUCTURAL = "ef"
 
 
-# ----------------------------------------------------------------------------- class (m), i23meas
+# ----------------------------------------------------------------------------- class (m)
 def measurement_cases() -> list[tuple[str, dict[str, Any], str | None]]:
     """Class (m): faults of the measurement chain that the measurement candidates ``sign``,
     ``swap`` and ``shift`` name (docs/diagnosis.md "Sign, position swap and time shift"), on the
