@@ -130,15 +130,8 @@ _PIDS: list[int] = []
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     import psycopg
-    from sqlalchemy import func, select
 
     from railval.app.bench.topology import Topology
-    from railval.app.cli import main
-    from railval.app.services import workshops as wsvc
-    from railval.db import users
-    from railval.db import workshops as wsdb
-    from railval.db.engine import connect
-    from railval.db.models import WorkshopAnswer
 
     schema = f"bench_{uuid.uuid4().hex[:10]}"
     with psycopg.connect(args.pg, autocommit=True) as conn:
@@ -151,88 +144,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     topo = Topology(url, work / "site", n_apps=args.apps, app_env={} if args.pymalloc else None,
                     admin=args.admin)
     try:
-        topo.workdir.mkdir(parents=True)
-        topo._secrets()
-        import os
-
-        os.environ["RAILVAL_SECRET_KEY_FILE"] = str(topo.workdir / "secrets" / "railval_secret_key")
-        import contextlib
-        import io
-
-        with contextlib.redirect_stdout(io.StringIO()):  # stdout is the figures' JSON
-            assert main(["--db", url, "init"]) == 0
-            assert main(["--db", url, "synth", "--name", "demo", "--sections", "12"]) == 0
-        db = connect(url)
-        with db.session() as s:
-            users.create_user(s, "eng", password="engineer password", roles=["engineer"])
-        wsvc.create(db, "W", "demo", kinds=["Y_time"], repeats=0.0)
-        with db.session() as s:
-            w = wsdb.get_workshop(s, "W")
-            tokens = [wsdb.invite(s, w, f"r{k}", seed=k) for k in range(args.reviewers)]
-            n_plots = len(wsdb.plots(s, w))
-        answers = min(args.answers, n_plots)
+        db, tokens, answers = _seed(args, url, topo)
         figures["answers_per_reviewer"] = answers
         topo.start()
-        pids = [p.pid for p in topo.apps.values()]
-        _PIDS[:] = pids
-        before = _rss_mb(pids)
-
-        from playwright.sync_api import sync_playwright
-
-        from railval.app.report import CHROMIUM_ARGS
-
-        first_page: list[float] = []
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
-            pages, warm = _open_sessions(browser, topo.url, args.engineers, first_page)
-            per_process: dict[int, int] = {}
-            for page in pages:
-                pid = page.evaluate("() => fetch('/health').then(r => r.json()).then(d => d.process)")
-                per_process[pid] = per_process.get(pid, 0) + 1
-            open_rss = _rss_mb(pids)
-
-            rtt: list[float] = []
-            errors: list[str] = []
-            threads = [threading.Thread(target=_reviewer, args=("127.0.0.1", topo.port, t, answers,
-                                                                rtt, errors)) for t in tokens]
-            t0 = time.perf_counter()
-            for t in threads:
-                t.start()
-            for t in threads:
-                t.join()
-            wall = time.perf_counter() - t0
-            loaded_rss = _rss_mb(pids)
-            for page in pages:
-                page.context.close()
-            time.sleep(args.settle)
-            after = _rss_mb(pids)
-            # a second wave of the same number of sessions: is the memory reused?
-            second: list[float] = []
-            pages, _ = _open_sessions(browser, topo.url, args.engineers, second)
-            second_rss = _rss_mb(pids)
-            browser.close()
-        with db.session() as s:
-            stored = s.scalar(select(func.count()).select_from(WorkshopAnswer))
+        m = _drive(args, topo, tokens, answers)
+        figures.update(_figures(args, m, _stored_answers(db), answers))
         db.dispose()
-        figures.update({
-            "first_panel_page_ms": {"p50": _pct(first_page, 50), "p95": _pct(first_page, 95),
-                                    "max": round(max(first_page), 1)},
-            "panel_sessions_per_process": sorted(per_process.values()),
-            "answer_round_trip_ms": {"p50": _pct(rtt, 50), "p95": _pct(rtt, 95),
-                                     "max": round(max(rtt), 1)},
-            "answers": {"sent": args.reviewers * answers, "confirmed": len(rtt), "stored": stored,
-                        "lost": args.reviewers * answers - stored, "retried_errors": len(errors)},
-            "answers_per_s": round(len(rtt) / wall, 1),
-            "rss_mb": {"before": round(sum(before.values()), 1),
-                       "one_session_open": round(sum(warm.values()), 1),
-                       "sessions_open": round(sum(open_rss.values()), 1),
-                       "after_answers": round(sum(loaded_rss.values()), 1),
-                       f"after_close_{args.settle:g}s": round(sum(after.values()), 1),
-                       "second_wave_open": round(sum(second_rss.values()), 1)},
-            # the first session loads modules and caches once; the others cost this each
-            "rss_per_further_panel_session_mb": round(
-                (sum(open_rss.values()) - sum(warm.values())) / max(1, args.engineers - 1), 1),
-        })
         with open("/proc/loadavg") as fh:
             figures["loadavg_at_end"] = fh.read().split()[:3]
     finally:
@@ -240,3 +157,101 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         with psycopg.connect(args.pg, autocommit=True) as conn:
             conn.execute(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE')
     return figures
+
+
+def _seed(args: argparse.Namespace, url: str, topo: Any) -> tuple[Any, list[str], int]:
+    """A fresh database with the synthetic campaign, an engineer and a workshop of Y plots with
+    one invitation per reviewer: (database, the reviewers' tokens, answers per reviewer)."""
+    import contextlib
+    import io
+    import os
+
+    from railval.app.cli import main
+    from railval.app.services import workshops as wsvc
+    from railval.db import users
+    from railval.db import workshops as wsdb
+    from railval.db.engine import connect
+
+    topo.workdir.mkdir(parents=True)
+    topo._secrets()
+    os.environ["RAILVAL_SECRET_KEY_FILE"] = str(topo.workdir / "secrets" / "railval_secret_key")
+    with contextlib.redirect_stdout(io.StringIO()):  # stdout is the figures' JSON
+        assert main(["--db", url, "init"]) == 0
+        assert main(["--db", url, "synth", "--name", "demo", "--sections", "12"]) == 0
+    db = connect(url)
+    with db.session(write=True) as s:
+        users.create_user(s, "eng", password="engineer password", roles=["engineer"])
+    wsvc.create(db, "W", "demo", kinds=["Y_time"], repeats=0.0)
+    with db.session(write=True) as s:
+        w = wsdb.get_workshop(s, "W")
+        tokens = [wsdb.invite(s, w, f"r{k}", seed=k) for k in range(args.reviewers)]
+        n_plots = len(wsdb.plots(s, w))
+    return db, tokens, min(args.answers, n_plots)
+
+
+def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int) -> dict[str, Any]:
+    """Engineers' Panel sessions in Chromium, reviewers answering over their own connections,
+    the sessions closed and a second wave opened; the raw timings and memory readings."""
+    from playwright.sync_api import sync_playwright
+
+    from railval.app.report import CHROMIUM_ARGS
+
+    pids = [p.pid for p in topo.apps.values()]
+    _PIDS[:] = pids
+    m: dict[str, Any] = {"before": _rss_mb(pids), "first_page": [], "rtt": [], "errors": []}
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+        pages, m["warm"] = _open_sessions(browser, topo.url, args.engineers, m["first_page"])
+        m["per_process"] = {}
+        for page in pages:
+            pid = page.evaluate("() => fetch('/health').then(r => r.json()).then(d => d.process)")
+            m["per_process"][pid] = m["per_process"].get(pid, 0) + 1
+        m["open"] = _rss_mb(pids)
+        threads = [threading.Thread(target=_reviewer, args=("127.0.0.1", topo.port, t, answers,
+                                                            m["rtt"], m["errors"])) for t in tokens]
+        t0 = time.perf_counter()
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        m["wall"] = time.perf_counter() - t0
+        m["loaded"] = _rss_mb(pids)
+        for page in pages:
+            page.context.close()
+        time.sleep(args.settle)
+        m["after"] = _rss_mb(pids)
+        # a second wave of the same number of sessions: is the memory reused?
+        _open_sessions(browser, topo.url, args.engineers, [])
+        m["second"] = _rss_mb(pids)
+        browser.close()
+    return m
+
+
+def _stored_answers(db: Any) -> int:
+    from sqlalchemy import func, select
+
+    from railval.db.models import WorkshopAnswer
+
+    with db.session() as s:
+        return int(s.scalar(select(func.count()).select_from(WorkshopAnswer)))
+
+
+def _figures(args: argparse.Namespace, m: dict[str, Any], stored: int, answers: int) -> dict[str, Any]:
+    """The printed figures from the raw readings of :func:`_drive`."""
+    total = lambda key: round(sum(m[key].values()), 1)
+    return {
+        "first_panel_page_ms": {"p50": _pct(m["first_page"], 50), "p95": _pct(m["first_page"], 95),
+                                "max": round(max(m["first_page"]), 1)},
+        "panel_sessions_per_process": sorted(m["per_process"].values()),
+        "answer_round_trip_ms": {"p50": _pct(m["rtt"], 50), "p95": _pct(m["rtt"], 95),
+                                 "max": round(max(m["rtt"]), 1)},
+        "answers": {"sent": args.reviewers * answers, "confirmed": len(m["rtt"]), "stored": stored,
+                    "lost": args.reviewers * answers - stored, "retried_errors": len(m["errors"])},
+        "answers_per_s": round(len(m["rtt"]) / m["wall"], 1),
+        "rss_mb": {"before": total("before"), "one_session_open": total("warm"),
+                   "sessions_open": total("open"), "after_answers": total("loaded"),
+                   f"after_close_{args.settle:g}s": total("after"), "second_wave_open": total("second")},
+        # the first session loads modules and caches once; the others cost this each
+        "rss_per_further_panel_session_mb": round(
+            (sum(m["open"].values()) - sum(m["warm"].values())) / max(1, args.engineers - 1), 1),
+    }
