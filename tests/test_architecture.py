@@ -22,6 +22,7 @@ imported or run):
   from page state), and ``app/state`` imports no Panel widgets (``panel``, ``bokeh``);
 * no function longer than :data:`MAX_FUNCTION_LINES` lines in ``core/``, ``db/`` or ``app/``
   (the numba kernel ``core/sim/kernel.py::run_kernel`` and the migration scripts excepted);
+* no ``x.get(key, y.get(…))`` fallback chain in ``app/`` (results are read as typed fields);
 * every package folder (a folder with ``__init__.py``) is installed (pyproject's package list);
 * no file cites documents that are not in the repository.
 """
@@ -469,3 +470,29 @@ def test_size_rules_fail_on_planted_violations(tmp_path):
     big = tmp_path / "big.py"
     big.write_text("x = 1\n" * (MAX_DB_LINES + 1), encoding="utf-8")
     assert big.read_text(encoding="utf-8").count("\n") > MAX_DB_LINES
+
+
+def get_fallback_chains(path: Path) -> list[str]:
+    """``file:line`` of every ``x.get(key, y.get(…))``: a guessed key with a fallback key hides a
+    renamed field (results reach views as typed objects, docs/design.md §2)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+
+    def is_get(node: ast.AST) -> bool:
+        return (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and node.func.attr == "get")
+
+    return [f"{_rel(path)}:{n.lineno}" for n in ast.walk(tree)
+            if is_get(n) and len(n.args) == 2 and is_get(n.args[1])]
+
+
+def test_no_key_fallback_chains_in_the_app():
+    found = [v for n, p in MODULES.items() if n.startswith("railval.app")
+             for v in get_fallback_chains(p)]
+    assert found == [], "read the result object's field, not a guessed key with a fallback"
+
+
+def test_key_fallback_rule_fails_on_a_planted_chain(tmp_path):
+    bad = tmp_path / "page.py"
+    bad.write_text("def f(cov):\n    return cov.get('ok', cov.get('holds', False)), cov.get('n', 0)\n",
+                   encoding="utf-8")
+    assert get_fallback_chains(bad) == ["page.py:2"]
