@@ -228,18 +228,18 @@ class ReportInputs:
     generated_at: str
 
 
-def gather_report(backend: Any, campaign: str, configuration: str) -> ReportInputs:
+def gather_report(backend: Any, campaign: str, config: str) -> ReportInputs:
     """Check every blob of the evidence against its hash and seal, then read the validation
     (through ``backend``, exactly as the dashboard shows it), the campaign, the lineage, the
     content hashes and the sign-offs."""
-    overview_service.require_evidence(backend.database, campaign, configuration)
-    result = backend.validation(campaign, configuration)
-    signoffs = (overview_service.signoff_items(backend.database, campaign, configuration)
+    overview_service.require_evidence(backend.database, campaign, config)
+    result = backend.validation(campaign, config)
+    signoffs = (overview_service.signoff_items(backend.database, campaign, config)
                 if hasattr(backend, "session") else None)
     return ReportInputs(
-        campaign, configuration, result, view_of(result), backend.overview(campaign),
-        backend.lineage(campaign, configuration), backend.hashes(campaign, None),
-        backend.hashes(campaign, configuration), signoffs, software_versions(),
+        campaign, config, result, view_of(result), backend.overview(campaign),
+        backend.lineage(campaign, config), backend.hashes(campaign, None),
+        backend.hashes(campaign, config), signoffs, software_versions(),
         dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"))
 
 
@@ -260,7 +260,7 @@ def evidence_digest(inputs: ReportInputs) -> tuple[str, list[tuple[str, str, str
     return digest.hexdigest(), lines
 
 
-def build_report(backend: Any, campaign: str, configuration: str, worst_cases: int = 3,
+def build_report(backend: Any, campaign: str, config: str, worst_cases: int = 3,
                  cards: list[dict[str, Any]] | None = None) -> Report:
     """Build the report of ``configuration`` of ``campaign`` from the database: gather
     (:func:`gather_report`), compute the evidence digest (:func:`evidence_digest`), render.
@@ -273,7 +273,7 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
     methods); the validation comes from ``railval.app.services.validation`` through it,
     exactly as the dashboard shows it.
     """
-    inputs = gather_report(backend, campaign, configuration)
+    inputs = gather_report(backend, campaign, config)
     digest, hash_lines = evidence_digest(inputs)
     view = inputs.view
     h: list[str] = [_head_html(inputs), _verdict_html(view), _quantities_html(view),
@@ -283,7 +283,7 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
         h.append("<h2>Worst cases</h2><p class='note'>Pairs with the largest |D_v| / std limit over all "
                  "quantities; EN-filtered signals on the distance axis, measurement (grey) beneath the "
                  "simulation (blue), evaluated range shaded.</p>")
-        h.extend(_worst_case_plots(backend, campaign, configuration, inputs.result, inputs.overview,
+        h.extend(_worst_case_plots(backend, campaign, config, inputs.result, inputs.overview,
                                    worst_cases))
     if cards:
         from railval.app.workshop_web.cards import report_section
@@ -297,7 +297,7 @@ def build_report(backend: Any, campaign: str, configuration: str, worst_cases: i
     h.append("<h2>Software</h2><table>" + "".join(
         f"<tr><td class='l'>{_esc(k)}</td><td class='l'>{_esc(val)}</td></tr>"
         for k, val in inputs.versions.items()) + "</table></body></html>")
-    return Report(campaign, configuration, "".join(h), view.validated, inputs.generated_at,
+    return Report(campaign, config, "".join(h), view.validated, inputs.generated_at,
                   inputs.versions, digest)
 
 
@@ -394,7 +394,7 @@ def _hashes_html(digest: str, lines: list[tuple[str, str, str, str]]) -> str:
             "<th class='l'>measurement</th><th class='l'>simulation</th></tr>" + rows + "</table>")
 
 
-def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: Any, ov: Any,
+def _worst_case_plots(backend: Any, campaign: str, config: str, result: Any, ov: Any,
                       n: int) -> list[str]:
     pairs = result.pairs
     if len(pairs) == 0:
@@ -413,7 +413,7 @@ def _worst_case_plots(backend: Any, campaign: str, configuration: str, result: A
             continue
         traces, marks, trace = [], [], None
         for label, cfg, color in (("measurement", None, MEASURED_COLOR),
-                                  (configuration, configuration, SIM_COLORS[0])):
+                                  (config, config, SIM_COLORS[0])):
             ss = backend.signals(campaign, cfg, r.section, names)
             trace = quantity_trace(ss, sec, r.quantity, r.position)
             if trace.sliding_means is not None:  # the 2 m sliding means are what is evaluated

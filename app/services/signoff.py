@@ -67,12 +67,12 @@ def _plain(obj: Any) -> Any:
     return repo._jsonable(json.loads(json.dumps(obj, default=default)))
 
 
-def input_manifest(session: Session, campaign: str, configuration: str,
+def input_manifest(session: Session, campaign: str, config: str,
                    settings: dict[str, Any] | None = None) -> dict[str, Any]:
     """The manifest without the validation result (cheap: no blob is read)."""
     settings = {**SETTINGS, **(settings or {})}
     camp = repo.get_campaign(session, campaign)
-    conf = repo.get_configuration(session, camp, configuration)
+    conf = repo.get_configuration(session, camp, config)
     chain = repo.lineage(session, camp, conf.name)
     sections = [
         {"id": s.id, "radius_m": s.radius_m, "cant_mm": s.cant_mm, "speed_kmh": s.speed_kmh,
@@ -98,13 +98,13 @@ def input_manifest(session: Session, campaign: str, configuration: str,
     })
 
 
-def validation_result(session: Session, campaign: str, configuration: str,
+def validation_result(session: Session, campaign: str, config: str,
                       settings: dict[str, Any] | None = None) -> dict[str, Any]:
     """The validation result (values, limits, verdict) as it enters the manifest."""
     from railval.app.services.validation import validate_configuration
 
     settings = {**SETTINGS, **(settings or {})}
-    res = validate_configuration(session, campaign, configuration,
+    res = validate_configuration(session, campaign, config,
                                  order=settings["filter_order"], n_boot=settings["n_boot"],
                                  seed=settings["seed"])
     d = res.to_dict()
@@ -112,10 +112,10 @@ def validation_result(session: Session, campaign: str, configuration: str,
     return _plain(d)
 
 
-def evidence_manifest(session: Session, campaign: str, configuration: str,
+def evidence_manifest(session: Session, campaign: str, config: str,
                       settings: dict[str, Any] | None = None) -> dict[str, Any]:
     """The complete evidence manifest (runs the validation, from the result cache if warm)."""
-    m = input_manifest(session, campaign, configuration, settings)
+    m = input_manifest(session, campaign, config, settings)
     m["result"] = validation_result(session, m["campaign"], m["configuration"], settings)
     return m
 
@@ -206,11 +206,11 @@ def status(session: Session, so: Signoff, *, full: bool = False) -> SignoffStatu
     return SignoffStatus(so.id, "stale" if reasons else "valid", reasons, current)
 
 
-def statuses(session: Session, campaign: str | None = None, configuration: str | None = None
+def statuses(session: Session, campaign: str | None = None, config: str | None = None
              ) -> list[tuple[Signoff, SignoffStatus]]:
     """Every sign-off (optionally of one campaign/configuration) with its quick status."""
     return [(so, status(session, so)) for so in
-            db_signoff.list_signoffs(session, campaign, configuration)]
+            db_signoff.list_signoffs(session, campaign, config)]
 
 
 # -- signing -----------------------------------------------------------------------------
@@ -219,18 +219,18 @@ class SignoffRefused(RailvalError):
 
 
 def independence_problem(session: Session, username: str, campaign: str,
-                         configuration: str) -> str | None:
+                         config: str) -> str | None:
     """Why ``username`` is not independent of the configuration (stored or replaced it)."""
     for row in audit.iter_rows(session, actor=username,
-                               object=f"configuration:{campaign}/{configuration}"):
+                               object=f"configuration:{campaign}/{config}"):
         if row["action"] in ("configuration.store", "configuration.replace"):
-            return (f"{username} stored configuration {configuration!r} "
+            return (f"{username} stored configuration {config!r} "
                     f"(audit row {row['seq']}, {row['at_utc']}); the sign-off must come "
                     "from an independent reviewer")
     return None
 
 
-def sign(database, username: str, password: str, campaign: str, configuration: str, *,
+def sign(database, username: str, password: str, campaign: str, config: str, *,
          decision: str, restrictions: str = "", statement: str = "", justification: str = "",
          source: str = "") -> dict:
     """Verify the password again (21 CFR 11.200(a)(1)), check role and independence, build
@@ -254,7 +254,7 @@ def sign(database, username: str, password: str, campaign: str, configuration: s
         except PermissionDenied as exc:
             raise SignoffRefused(f"sign-off refused: {exc}") from None
         camp = repo.get_campaign(s, campaign)
-        conf = repo.get_configuration(s, camp, configuration)
+        conf = repo.get_configuration(s, camp, config)
         problem = independence_problem(s, username, camp.name, conf.name)
         if problem:
             raise SignoffRefused(f"sign-off refused: {problem}")
@@ -271,10 +271,10 @@ def sign(database, username: str, password: str, campaign: str, configuration: s
         return db_signoff.as_dict(so)
 
 
-def _in_sample(session: Session, campaign, configuration: str) -> bool:
+def _in_sample(session: Session, campaign, config: str) -> bool:
     from railval.app.services.validation import calibration_provenance
 
-    return bool(calibration_provenance(session, campaign, configuration)["in_sample"])
+    return bool(calibration_provenance(session, campaign, config)["in_sample"])
 
 
 # -- what is signed ----------------------------------------------------------------------
@@ -282,7 +282,7 @@ def _in_sample(session: Session, campaign, configuration: str) -> bool:
 EVIDENCE_PAGES = ("dashboard", "compare", "report", "diagnose")
 
 
-def signing_summary(session: Session, campaign: str, configuration: str) -> dict[str, Any]:
+def signing_summary(session: Session, campaign: str, config: str) -> dict[str, Any]:
     """What a signer sees before the password (the sign-off page and ``signoff create``):
     the objective verdict with its 12 quantities (normalised mean and std against the
     limits), coverage, definition-sensitive and in-sample marks, supplementary results, the
@@ -297,7 +297,7 @@ def signing_summary(session: Session, campaign: str, configuration: str) -> dict
     from railval.db import workshops as wsdb
 
     camp = repo.get_campaign(session, campaign)
-    conf = repo.get_configuration(session, camp, configuration)
+    conf = repo.get_configuration(session, camp, config)
     res = validate_configuration(session, camp.name, conf.name, order=SETTINGS["filter_order"],
                                  n_boot=SETTINGS["n_boot"], seed=SETTINGS["seed"])
     d = _plain({k: v for k, v in res.to_dict().items() if k != "info"})
@@ -350,18 +350,18 @@ def signing_summary(session: Session, campaign: str, configuration: str) -> dict
 
 
 # -- units of work for the pages and verbs (they reach the database only through these) --
-def summary_of(database, campaign: str, configuration: str) -> dict[str, Any]:
+def summary_of(database, campaign: str, config: str) -> dict[str, Any]:
     """:func:`signing_summary` in a unit of work of its own."""
     with database.session() as s:
-        return signing_summary(s, campaign, configuration)
+        return signing_summary(s, campaign, config)
 
 
-def records(database, campaign: str | None = None, configuration: str | None = None
+def records(database, campaign: str | None = None, config: str | None = None
             ) -> list[tuple[dict[str, Any], SignoffStatus]]:
     """Every sign-off (of ``campaign``, ``configuration`` when given) as its record
     (:func:`railval.db.signoff.as_dict`) with its status, oldest first."""
     with database.session() as s:
-        return [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, configuration)]
+        return [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, config)]
 
 
 def record(database, signoff_id: int) -> tuple[dict[str, Any], SignoffStatus]:

@@ -297,8 +297,8 @@ def _verdict(measured, simulated, sections, vehicle, n_boot: int, seed: int,
     return result
 
 
-def calibration_provenance(session: Session, campaign, config_name: str) -> dict:
-    """Whether a verdict on configuration ``config_name`` is in-sample: it, or one of its
+def calibration_provenance(session: Session, campaign, config: str) -> dict:
+    """Whether a verdict on configuration ``config`` is in-sample: it, or one of its
     ancestors, was calibrated on sections of this campaign (``Configuration.calibration``), so
     a verdict over all sections includes the sections the fit used. Returns ``in_sample``,
     ``calibrated_in`` (the calibrated configurations of the lineage), ``fit_sections`` and
@@ -308,7 +308,7 @@ def calibration_provenance(session: Session, campaign, config_name: str) -> dict
     fitted: set[str] = set()
     held: set[str] = set()
     calibrated = []
-    for conf in repo.lineage(session, campaign, config_name):
+    for conf in repo.lineage(session, campaign, config):
         rec = conf.calibration or {}
         if rec:
             calibrated.append(conf.name)
@@ -319,10 +319,10 @@ def calibration_provenance(session: Session, campaign, config_name: str) -> dict
             "held_out_sections": sorted(held)}
 
 
-def validate_configuration(session: Session, campaign_name: str, config_name: str, *,
+def validate_configuration(session: Session, campaign_name: str, config: str, *,
                            order: int = DEFAULT_ORDER, n_boot: int = 1000,
                            seed: int = 0, check_seals: bool = True) -> ValidationResult:
-    """Validate configuration ``config_name`` of ``campaign_name`` against the measurement.
+    """Validate configuration ``config`` of ``campaign_name`` against the measurement.
 
     ``order``: Butterworth prototype order of both filters; ``n_boot``/``seed``: bootstrap of
     the normalised values. The result's ``info`` records how many sections of each side
@@ -333,9 +333,9 @@ def validate_configuration(session: Session, campaign_name: str, config_name: st
     """
     check_order(order)
     with stage("database"):
-        camp, conf = repo.resolve(session, campaign_name, config_name)
+        camp, conf = repo.resolve(session, campaign_name, config)
         if check_seals:
-            repo.require_evidence(session, camp, config_name, blobs=False)
+            repo.require_evidence(session, camp, config, blobs=False)
         sections = repo.section_infos(session, camp)
         vehicle = repo.vehicle_info(session, camp)
     m_stats: dict[str, int] = {}
@@ -343,7 +343,7 @@ def validate_configuration(session: Session, campaign_name: str, config_name: st
     measured = source_values(session, camp, None, sections, order=order, stats=m_stats)
     simulated = source_values(session, camp, conf, sections, order=order, stats=s_stats)
     with stage("database"):
-        provenance = calibration_provenance(session, camp, config_name)
+        provenance = calibration_provenance(session, camp, config)
     return _verdict(measured, simulated, sections, vehicle, n_boot, seed,
                     {"campaign": camp.name, "configuration": conf.name, "filter_order": order,
                      "sections_measured": m_stats, "sections_simulated": s_stats,

@@ -121,7 +121,7 @@ def cards(database, name: str, *, groups: Sequence[str] = (), actor: Principal |
     return {"workshop": name, "campaign": camp.name, "groups": [name, *groups], "cards": out}
 
 
-def card_choices(database, campaign: str, configuration: str) -> dict[str, tuple[str, int]]:
+def card_choices(database, campaign: str, config: str) -> dict[str, tuple[str, int]]:
     """Every fixed plot of the workshops on ``campaign`` that shows ``configuration``, as
     ``{label: (workshop, plot id)}`` for the report page's choice (labels such as
     ``"W · plot 12 · Y_time S01 Y_w1L"``); reads plot rows only, no image."""
@@ -133,12 +133,12 @@ def card_choices(database, campaign: str, configuration: str) -> dict[str, tuple
             if w.campaign.name != campaign:
                 continue
             for p in wsdb.plots(session, w):
-                if p.scaling == "fixed" and p.configuration == configuration:
+                if p.scaling == "fixed" and p.configuration == config:
                     out[f"{w.name} · plot {p.id} · {p.kind} {p.section} {p.channel}"] = (w.name, p.id)
     return out
 
 
-def chosen_cards(database, configuration: str, chosen: Sequence[tuple[str, int]], *,
+def chosen_cards(database, config: str, chosen: Sequence[tuple[str, int]], *,
                  actor: Principal | str = "system") -> list[dict[str, Any]]:
     """:func:`report_cards` of (workshop, plot id) pairs from several workshops, in the
     order chosen."""
@@ -147,11 +147,11 @@ def chosen_cards(database, configuration: str, chosen: Sequence[tuple[str, int]]
         by_workshop.setdefault(name, []).append(int(pid))
     got = {(c["workshop"], c["plot"]): c
            for name, ids in by_workshop.items()
-           for c in report_cards(database, name, configuration, ids, actor=actor)}
+           for c in report_cards(database, name, config, ids, actor=actor)}
     return [got[(name, int(pid))] for name, pid in chosen]
 
 
-def report_cards(database, name: str, configuration: str, plot_ids: Sequence[int], *,
+def report_cards(database, name: str, config: str, plot_ids: Sequence[int], *,
                  groups: Sequence[str] = (), actor: Principal | str = "system") -> list[dict[str, Any]]:
     """The chosen cards of workshop ``name`` for the validation report of ``configuration``:
     each card of :func:`cards` with ``image_png`` (the stored, reviewed bytes) and
@@ -171,9 +171,9 @@ def report_cards(database, name: str, configuration: str, plot_ids: Sequence[int
             if c is None:
                 raise InvalidParameter(f"--cards: plot {pid} is not a plot of workshop {name!r} "
                                        f"(see `railval workshop cards {name} --json`)")
-            if c["configuration"] != configuration:
+            if c["configuration"] != config:
                 raise InvalidParameter(f"--cards: plot {pid} of workshop {name!r} shows configuration "
-                                       f"{c['configuration']!r}, not {configuration!r}")
+                                       f"{c['configuration']!r}, not {config!r}")
             data, sha = wsdb.plot_image(session, w.id, int(pid))
             out.append({**c, "workshop": name,
                         "image_png": base64.b64encode(data).decode(), "image_sha256": sha})

@@ -178,12 +178,12 @@ def _sg_c(m_sig: np.ndarray, m_ss, s_sig: np.ndarray, s_ss) -> float | None:
     return float(c) if math.isfinite(c) else None
 
 
-def _title(kind, position: str, *, blind: bool, vehicle: str, configuration: str,
+def _title(kind, position: str, *, blind: bool, vehicle: str, config: str,
            section: str) -> str:
     what = f"{kind.label[:1].upper()}{kind.label[1:]}, {_POSITION_TEXT.get(position, position)}"
     if blind:
         return what
-    return f"{what} — {vehicle}, configuration {configuration}, section {section}"
+    return f"{what} — {vehicle}, configuration {config}, section {section}"
 
 
 # ------------------------------------------------------------------------- create
@@ -384,7 +384,7 @@ def _render_rows(g: _Gathered, jobs: list[tuple[int, str]], fixed: tuple[list[st
         else:
             key, scale = None, _own_scale(k, cm, cs)
         title = _title(k, f["position"], blind=blind, vehicle=g.vehicle["name"] or g.campaign,
-                       configuration=f["configuration"], section=f["section"])
+                       config=f["configuration"], section=f["section"])
         image = render_png(cm.x, cm.y, cs.x, cs.y, scale, title=title, x_label=k.x_label,
                            y_label=k.y_label)
         params = render_parameters(k.to_dict(), scale, scaling=plot_scaling, title=title,

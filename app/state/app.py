@@ -180,11 +180,11 @@ class AppState(param.Parameterized):
             self.configuration = select
         self.revision += 1
 
-    def open_compare(self, section: str, channel: str, configuration: str | None = None) -> None:
+    def open_compare(self, section: str, channel: str, config: str | None = None) -> None:
         """Jump to the Compare page for one section/channel (dashboard drill-down)."""
         with param.parameterized.batch_call_watchers(self):
-            if configuration is not None and configuration in self.param.configuration.objects:
-                self.configuration = configuration
+            if config is not None and config in self.param.configuration.objects:
+                self.configuration = config
             if section in self.param.section.objects:
                 self.section = section
             if channel in self.param.channel.objects:
