@@ -72,9 +72,6 @@ from railval.db.signals import (
     stored_blobs,
 )
 
-#: former name of :func:`verify_storage` (``railval verify``, the audit service call it so)
-verify_database = verify_storage
-
 __all__ = [
     "CACHE_CHUNK",
     "CampaignArg",
@@ -117,7 +114,6 @@ __all__ = [
     "store_configuration",
     "stored_blobs",
     "vehicle_info",
-    "verify_database",
     "verify_evidence",
     "verify_signals",
     "verify_storage",

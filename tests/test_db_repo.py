@@ -359,13 +359,13 @@ def test_a_reference_to_a_deleted_configuration_is_not_found(writable_demo):
 
 
 def test_repo_namespace_keeps_every_name_its_callers_use():
-    """``from railval.db import repo; repo.X`` for every X the repository's modules define and
-    the former names (``verify_database`` is :func:`repo.verify_storage`)."""
+    """``from railval.db import repo; repo.X`` for every X the repository's modules define; the
+    storage check has one name (``verify_storage``; ``verify_database`` is the audit service's)."""
     from railval.db import cache, campaigns, configurations, evidence, signals
 
     for module in (cache, campaigns, configurations, evidence, signals):
         public = [n for n, v in vars(module).items() if callable(v) and not n.startswith("_")
                   and getattr(v, "__module__", "") == module.__name__]
         assert public and all(getattr(repo, n) is getattr(module, n) for n in public), module.__name__
-    assert repo.verify_database is repo.verify_storage
+    assert not hasattr(repo, "verify_database")
     assert all(hasattr(repo, n) for n in repo.__all__)

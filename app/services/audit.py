@@ -164,7 +164,7 @@ def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
                 "head", "audit_head", f"seq {report.head_seq} hash {report.head_hash}",
                 f"seq {head_seq} hash {head_hash} (rows after {report.head_seq} removed?)"))
         broken: set[tuple[str, str | None, str, str]] = set()
-        doc = repo.verify_database(s, blobs=signals)  # seals always, samples unless quick
+        doc = repo.verify_storage(s, blobs=signals)  # seals always, samples unless quick
         if signals:
             report.signals = sum(repo.count_signals(s, c) for c in repo.list_campaigns(s))
         for camp_name, problems in doc["campaigns"].items():

@@ -56,6 +56,6 @@ def has_campaigns(database) -> bool:
 
 def verify(database, *, blobs: bool = True) -> dict[str, Any]:
     """Every signal's content hash and seal and every cached result's seal
-    (:func:`railval.db.repo.verify_database`)."""
+    (:func:`railval.db.repo.verify_storage`)."""
     with database.session() as s:
-        return repo.verify_database(s, blobs=blobs)
+        return repo.verify_storage(s, blobs=blobs)
