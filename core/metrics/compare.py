@@ -170,6 +170,22 @@ def compare_signalsets(measured: SignalSet, simulated: SignalSet, channels: Iter
     5 % of the ±max_lag bound), ``resampled``, ``error`` (message when the channel
     could not be compared, else empty) and each metric ``<name>`` (raw) and ``<name>_sync``.
     ``options`` go to :func:`compare`.
+
+    Parameters
+    ----------
+    measured, simulated : SignalSet
+        The section's measured and simulated records (own sampling rates allowed).
+    channels : iterable of str or None
+        Channels to compare; ``None`` = all common channels.
+    lowpass_hz : float or None
+        Low-pass cut-off in Hz.
+    **options
+        Keyword arguments of :func:`compare`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per channel, columns as above.
     """
     if channels is None:
         names = [ch for ch in measured.channels if ch in simulated.channels]

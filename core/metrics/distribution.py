@@ -158,6 +158,17 @@ def kolmogorov_smirnov(measured: np.ndarray, simulated: np.ndarray, *,
 
     The samples need not share a grid or length. ``D`` and ``p`` are those of
     ``scipy.stats.ks_2samp`` (``method="auto"``); ``p_eff`` uses :func:`effective_sample_size`.
+
+    Parameters
+    ----------
+    measured, simulated : numpy.ndarray
+        Samples, shape (N_m,) and (N_c,), same unit.
+    neff_method : str
+        Estimator of :func:`effective_sample_size` for ``p_eff``.
+
+    Returns
+    -------
+    KSResult
     """
     m = as_signal(measured, "measured", min_len=3)
     c = as_signal(simulated, "simulated", min_len=3)
@@ -176,6 +187,21 @@ def area_validation_metric(measured: np.ndarray, simulated: np.ndarray) -> float
     Ferson et al. (2008); [ref 2] eq. 2. Both CDFs are step functions, so the integral is the
     exact sum over the intervals between consecutive pooled sample values of
     ``|F_m − F_c| · Δx``. Equals ``scipy.stats.wasserstein_distance(measured, simulated)``.
+
+    Parameters
+    ----------
+    measured, simulated : numpy.ndarray
+        Samples, shape (N_m,) and (N_c,), same unit.
+
+    Returns
+    -------
+    float
+        Area in the signal's unit (0 = equal distributions).
+
+    Examples
+    --------
+    >>> area_validation_metric(np.array([0.0, 1.0]), np.array([1.0, 2.0]))
+    1.0
     """
     m = np.sort(as_signal(measured, "measured", min_len=1))
     c = np.sort(as_signal(simulated, "simulated", min_len=1))
@@ -206,6 +232,15 @@ def anderson_darling(measured: np.ndarray, simulated: np.ndarray) -> ADResult:
     ``scipy.stats.anderson_ksamp([measured, simulated], variant="midrank")``; scipy's warning
     that the p-value was floored/capped is turned into the ``p_capped`` flag. The statistic is
     the normalised ``(A²_kN − (k−1)) / σ_N``; larger means more different.
+
+    Parameters
+    ----------
+    measured, simulated : numpy.ndarray
+        Samples, shape (N_m,) and (N_c,), same unit.
+
+    Returns
+    -------
+    ADResult
     """
     m = as_signal(measured, "measured", min_len=2)
     c = as_signal(simulated, "simulated", min_len=2)
