@@ -57,6 +57,25 @@ def mac(phi_a: np.ndarray, phi_b: np.ndarray) -> float:
 
     MAC(a, b) = |a^H b|² / ((a^H a)(b^H b)), in [0, 1]: 1 for shapes that differ only by a
     (complex) scale factor, 0 for orthogonal shapes. Dimensionless.
+
+    Parameters
+    ----------
+    phi_a, phi_b : numpy.ndarray
+        Mode shapes, shape (n_sensors,), real or complex.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InvalidSignal
+        Shapes of unequal length or a zero shape.
+
+    Examples
+    --------
+    >>> mac(np.array([1.0, 0.0]), np.array([2.0, 0.0]))
+    1.0
     """
     a = np.asarray(phi_a).ravel()
     b = np.asarray(phi_b).ravel()
@@ -69,7 +88,18 @@ def mac(phi_a: np.ndarray, phi_b: np.ndarray) -> float:
 
 
 def mac_matrix(shapes_a: np.ndarray, shapes_b: np.ndarray) -> np.ndarray:
-    """MAC of every pair of columns: ``out[i, j] = MAC(shapes_a[:, i], shapes_b[:, j])``."""
+    """MAC of every pair of columns: ``out[i, j] = MAC(shapes_a[:, i], shapes_b[:, j])``.
+
+    Parameters
+    ----------
+    shapes_a, shapes_b : numpy.ndarray
+        Mode shapes as columns, shapes (n_sensors, m_a) and (n_sensors, m_b).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (m_a, m_b), in [0, 1].
+    """
     A = np.atleast_2d(np.asarray(shapes_a))
     B = np.atleast_2d(np.asarray(shapes_b))
     if A.shape[0] != B.shape[0]:
@@ -88,6 +118,19 @@ def pair_modes(freq_ref: np.ndarray, shapes_ref: np.ndarray, freq_other: np.ndar
     (Hungarian algorithm, ``scipy.optimize.linear_sum_assignment``); with ``freq_weight`` 0 it
     is the pure highest-MAC pairing of the seed, the weight breaks ties between modes whose
     shapes look alike on few sensors. Returns ``(i_ref, j_other, mac)`` sorted by ``i_ref``.
+
+    Parameters
+    ----------
+    freq_ref, freq_other : numpy.ndarray
+        Natural frequencies in Hz, shapes (m_ref,) and (m_other,).
+    shapes_ref, shapes_other : numpy.ndarray
+        Mode shapes as columns, shapes (n_sensors, m_ref) and (n_sensors, m_other).
+    freq_weight : float
+        Weight of the relative frequency difference (dimensionless).
+
+    Returns
+    -------
+    list of tuple of (int, int, float)
     """
     fr = np.asarray(freq_ref, dtype=float)
     fo = np.asarray(freq_other, dtype=float)
@@ -355,7 +398,21 @@ def decimated_records(signalsets: Iterable[SignalSet], channels: Sequence[str],
     """The records for :func:`ssi_cov`: each SignalSet's ``channels`` as columns, decimated by
     the integer factor nearest ``fs / fs_target`` with an anti-alias FIR
     (``scipy.signal.resample_poly``). Records whose decimated rate differs from the first
-    one's are left out. Returns (records, decimated rate), ([], None) when nothing is given."""
+    one's are left out. Returns (records, decimated rate), ([], None) when nothing is given.
+
+    Parameters
+    ----------
+    signalsets : iterable of SignalSet
+    channels : sequence of str
+        Acceleration channels (m/s²), one column each.
+    fs_target : float
+        Wanted rate in Hz.
+
+    Returns
+    -------
+    tuple of (list of numpy.ndarray, float or None)
+        Records of shape (n_samples, len(channels)) and their rate in Hz.
+    """
     records, fs_used = [], None
     for ss in signalsets:
         q = max(round(ss.fs / fs_target), 1)
