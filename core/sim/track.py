@@ -69,6 +69,28 @@ def generate_irregularities(length_m: float, *, level: str = "low", seed: int = 
     B176 spectra of ``level`` between wavelengths ``lambda_min`` and ``lambda_max`` (m).
 
     Returns ``{"s": grid, "vertical", "alignment", "cross_level", "gauge"}``.
+
+    Parameters
+    ----------
+    length_m : float
+        Length to cover in m.
+    level : str
+        ORE B176 level, ``"low"`` or ``"high"``.
+    seed : int
+        Random seed (same seed, same irregularities).
+    lambda_min, lambda_max : float
+        Wavelength band in m.
+    s0 : float
+        Grid start in m.
+    taper_m : float
+        Length in m of the cosine taper at the start (a simulation starts from rest).
+    scale : float
+        Factor on all amplitudes.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        Grid ``s`` in m and the four irregularities in m, all of shape (K,).
     """
     if not (0 < lambda_min < lambda_max):
         raise InvalidParameter(f"irregularity band must satisfy 0 < lambda_min < lambda_max, got "
