@@ -193,17 +193,25 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
               progress: Progress | None = None, raise_on_failure: bool = False) -> CalibrationResult:
     """Minimise ``objective(params)`` over the bounded box of ``specs``.
 
-    Parameters with ``log=True`` are searched as log10(value). Global stage:
-    ``differential_evolution`` (strategy best1bin, ``popsize``·n candidates per
-    generation, Latin-hypercube initialisation as [ref 3], ``seed`` for reproducibility, the
-    start values — when every spec has one — injected as a population member via ``x0``).
-    ``workers``: a ``map(func, iterable)`` callable (e.g. :class:`railval.app.services.batch.BatchExecutor`)
-    evaluating one generation in parallel (then ``updating="deferred"``). Local stage: Powell
-    with the same bounds, at most ``polish_maxfev`` evaluations (strictly; 0 = no polish).
-    ``n_evaluations`` counts the optimiser's calls, the start point's call not included;
-    :func:`max_evaluations` bounds the total. ``progress(stage, fraction, info)`` is called
-    after every generation and at the end.
-    """
+    Parameters
+    ----------
+    objective, specs : callable, sequence of ParameterSpec
+        ``{name: value}`` → cost; the bounded parameters (``log=True``: searched as log10).
+    seed, popsize, maxiter, tol : int, int, int, float
+        Global stage ``differential_evolution`` (best1bin, Latin-hypercube initialisation as
+        [ref 3]; ``popsize``·n per generation; start values, when all given, via ``x0``).
+    polish, polish_maxfev : bool, int
+        Powell polish, same bounds, ≤ ``polish_maxfev`` evaluations (strictly; 0 = none).
+    workers, progress : callable or None
+        ``map(func, iterable)`` evaluating a generation in parallel (``updating="deferred"``);
+        ``progress(stage, fraction, info)`` after every generation and at the end.
+    raise_on_failure : bool
+        Raise :class:`CalibrationDidNotConverge` when the DE stage did not converge.
+
+    Returns
+    -------
+    CalibrationResult
+        ``n_evaluations`` excludes the start point's call (total bound: :func:`max_evaluations`)."""
     specs = list(specs)
     if not specs:
         raise InvalidParameter("calibrate needs at least one parameter, got none")

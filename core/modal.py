@@ -336,17 +336,28 @@ def ssi_cov(y: np.ndarray, fs: float, *, channels: list[str] | None = None, bloc
 
     Parameters
     ----------
-    y : (n_samples, n_channels) accelerations, equally sampled at ``fs`` Hz, or a list of such
+    y : numpy.ndarray or list of numpy.ndarray
+        Accelerations (n_samples, n_channels) equally sampled at ``fs`` Hz, or a list of such
         records (e.g. one per test section; their covariances are averaged).
-    block_rows : i of the Toeplitz matrix (default: enough lags to span two periods of
-        ``f_min`` or 2·max_order/l, whichever is larger, at most n/20).
-    max_order : largest model order (even; default 2·⌊i·l/2⌋ capped at 40); orders 2, 4, …
-    f_min, f_max : frequency range of interest in Hz.
-    criteria : :class:`StabilisationCriteria`.
+    fs : float
+        Sampling rate in Hz.
+    channels : list of str or None
+        Channel names (default ``ch0``, ``ch1``, …).
+    block_rows : int or None
+        i of the Toeplitz matrix (default: enough lags to span two periods of ``f_min`` or
+        2·max_order/l, whichever is larger, at most n/20).
+    max_order : int or None
+        Largest model order (even; default 2·⌊i·l/2⌋ capped at 40); orders 2, 4, …
+    f_min, f_max : float
+        Frequency range of interest in Hz.
+    criteria : StabilisationCriteria or None
 
-    A pole of order n is *stable* when a pole of order n−2 lies within the frequency, damping
-    and MAC tolerances. Stable poles are clustered by frequency (``cluster_tol``); clusters with
-    ≥ ``min_stable`` members are returned as modes, sorted by frequency.
+    Returns
+    -------
+    ModalResult
+        A pole of order n is *stable* when a pole of order n−2 lies within the frequency,
+        damping and MAC tolerances. Stable poles are clustered by frequency (``cluster_tol``);
+        clusters with ≥ ``min_stable`` members are the modes, sorted by frequency.
     """
     records = _records(y, fs)
     l = records[0].shape[1]

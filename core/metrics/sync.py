@@ -161,6 +161,11 @@ def estimate_lag(measured: np.ndarray, simulated: np.ndarray, fs: float, *,
     fs : sampling rate in Hz.
     max_lag_s : search window ±max_lag_s in s (default 2 s), capped at half the signal.
     subsample : refine the peak by three-point parabolic interpolation.
+
+    Returns
+    -------
+    SyncResult
+        Lag in samples and s (positive: simulated delayed) and the correlation at it.
     """
     m, c = as_pair(measured, simulated)
     fs = positive(fs, "fs", "Hz")
