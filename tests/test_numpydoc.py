@@ -85,8 +85,8 @@ def numpydoc_sections(doc: str | None) -> dict[str, str]:
     """Section heading → section body of a numpydoc docstring (the summary is left out)."""
     text = inspect.cleandoc(doc or "")
     heads = list(_HEADING.finditer(text))
-    return {m.group(1).strip(): text[m.end():(heads[i + 1].start() if i + 1 < len(heads) else len(text))]
-            for i, m in enumerate(heads)}
+    ends = [h.start() for h in heads[1:]] + [len(text)]
+    return {m.group(1).strip(): text[m.end():end] for m, end in zip(heads, ends, strict=True)}
 
 
 def section_names(body: str) -> set[str]:
