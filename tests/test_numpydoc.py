@@ -85,7 +85,7 @@ def numpydoc_sections(doc: str | None) -> dict[str, str]:
     """Section heading → section body of a numpydoc docstring (the summary is left out)."""
     text = inspect.cleandoc(doc or "")
     heads = list(_HEADING.finditer(text))
-    ends = [h.start() for h in heads[1:]] + [len(text)]
+    ends = [h.start() for h in heads[1:]] + [len(text)] if heads else []
     return {m.group(1).strip(): text[m.end():end] for m, end in zip(heads, ends, strict=True)}
 
 
