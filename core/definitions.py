@@ -190,7 +190,26 @@ def sorted_percentiles(srt: np.ndarray, ps, method: str) -> np.ndarray:
 
 def percentile_ranks(n: int, ps, method: str) -> list[int]:
     """The 0-based positions in the sorted sample of size ``n`` that :func:`sorted_percentiles`
-    reads for ``ps`` under ``method`` (a percentile needs only these order statistics)."""
+    reads for ``ps`` under ``method`` (a percentile needs only these order statistics).
+
+    Parameters
+    ----------
+    n : int
+        Sample size.
+    ps : sequence of float
+        Percentiles as fractions.
+    method : str
+        ``"inverted_cdf"`` or ``"linear"``.
+
+    Returns
+    -------
+    list of int
+
+    Examples
+    --------
+    >>> percentile_ranks(4, [0.5], "inverted_cdf")
+    [1]
+    """
     return list(_percentile_ranks(int(n), tuple(float(p) for p in ps), method))
 
 
@@ -208,7 +227,22 @@ def _percentile_ranks(n: int, ps: tuple[float, ...], method: str) -> tuple[int, 
 
 def percentiles_from_order(take, n: int, ps, method: str) -> np.ndarray:
     """:func:`sorted_percentiles` from the order statistics alone: ``take(i)`` gives the
-    samples of 0-based rank ``i`` of every row (shape (rows,)), ``n`` the row length."""
+    samples of 0-based rank ``i`` of every row (shape (rows,)), ``n`` the row length.
+
+    Parameters
+    ----------
+    take : callable
+        0-based rank → that order statistic of every row, shape (rows,).
+    n : int
+        Row length.
+    ps, method
+        As in :func:`sorted_percentiles`.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (rows, len(ps)).
+    """
     ps = [float(p) for p in ps]
     if method == "inverted_cdf":
         idx = [min(max(int(np.ceil(n * p - 1e-12)) - 1, 0), n - 1) for p in ps]

@@ -111,6 +111,29 @@ def design(fs: float, kind: str, order: int = DEFAULT_ORDER) -> FilterDesign:
 
     ``kind`` is ``"lowpass"`` (20 Hz) or ``"bandpass"`` (0.4–10 Hz); ``order`` the
     Butterworth prototype order N (band-pass → order 2N).
+
+    Parameters
+    ----------
+    fs : float
+        Sampling rate in Hz (above twice the upper corner).
+    kind : str
+        ``"lowpass"`` or ``"bandpass"``.
+    order : int
+        Butterworth prototype order (1–10).
+
+    Returns
+    -------
+    FilterDesign
+
+    Raises
+    ------
+    InvalidParameter
+        An unknown kind, an order outside 1–10 or too low a sampling rate.
+
+    Examples
+    --------
+    >>> design(200.0, "lowpass").sos.shape
+    (2, 6)
     """
     fs = float(fs)
     _check_design_args(fs, kind, order)

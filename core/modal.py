@@ -164,7 +164,20 @@ def _records(y, fs: float) -> list[np.ndarray]:
 
 def output_covariances(y: np.ndarray, max_lag: int) -> np.ndarray:
     """Unbiased output covariance matrices R_k = 1/(N−k) Σ_t y_{t+k} y_tᵀ, k = 0 … max_lag
-    ([PdR99] eq. 8). ``y`` is (N, l); returns (max_lag + 1, l, l). Computed by FFT."""
+    ([PdR99] eq. 8). ``y`` is (N, l); returns (max_lag + 1, l, l). Computed by FFT.
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        Outputs, shape (N, l), e.g. accelerations in m/s².
+    max_lag : int
+        Largest lag k in samples (< N).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (max_lag + 1, l, l), in the square of the unit of ``y``.
+    """
     y = np.asarray(y, dtype=float)
     n, _l = y.shape
     if max_lag >= n:
@@ -199,6 +212,20 @@ def modes_from_matrices(A: np.ndarray, C: np.ndarray, fs: float) -> tuple[np.nda
     λ_i eigenvalues of A; continuous poles μ_i = ln(λ_i)·fs (1/s); f_i = |μ_i|/(2π) Hz;
     ζ_i = −Re μ_i / |μ_i|; shapes φ_i = C ψ_i ([PdR99] eq. 16). Keeps one of each complex-
     conjugate pair (Im μ > 0) and returns (freq_hz, damping, shapes[l, m]) sorted by frequency.
+
+    Parameters
+    ----------
+    A : numpy.ndarray
+        State matrix, shape (n, n).
+    C : numpy.ndarray
+        Output matrix, shape (l, n).
+    fs : float
+        Sampling rate in Hz.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        Frequencies in Hz (m,), damping ratios (m,), shapes (l, m).
     """
     lam, psi = np.linalg.eig(A)
     keep = np.imag(lam) > 1e-12

@@ -254,7 +254,17 @@ def _contact_slope(eps: float, b0: float) -> float:
 
 
 def channel_names(vehicle: VehicleModel) -> list[str]:
-    """Output channels in kernel column order (core/types.py vocabulary)."""
+    """Output channels in kernel column order (core/types.py vocabulary).
+
+    Parameters
+    ----------
+    vehicle : VehicleModel
+
+    Returns
+    -------
+    list of str
+        Channel names such as ``Y_w1L``.
+    """
     names = []
     for i in range(vehicle.n_wheelsets):
         names += [f"Y_w{i + 1}L", f"Y_w{i + 1}R", f"Q_w{i + 1}L", f"Q_w{i + 1}R"]

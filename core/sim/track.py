@@ -43,6 +43,25 @@ def ore_b176_psd(omega: np.ndarray, kind: str, level: str = "low") -> np.ndarray
 
     ``kind`` one of ``vertical``, ``alignment`` (m²/(rad/m)), ``cross_level`` (height difference
     of the rails, m²/(rad/m)), ``gauge`` (m²/(rad/m)). See the module docstring for the source.
+
+    Parameters
+    ----------
+    omega : numpy.ndarray
+        Spatial angular frequency in rad/m, any shape.
+    kind : str
+        ``"vertical"``, ``"alignment"``, ``"cross_level"`` or ``"gauge"``.
+    level : str
+        ``"low"`` or ``"high"``.
+
+    Returns
+    -------
+    numpy.ndarray
+        PSD in m²/(rad/m), shape of ``omega``.
+
+    Raises
+    ------
+    InvalidParameter
+        An unknown level.
     """
     if level not in ORE_LEVELS:
         raise InvalidParameter(f"irregularity level {level!r} unknown; known: {sorted(ORE_LEVELS)}")
