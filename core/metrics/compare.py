@@ -154,6 +154,20 @@ def lowpass(data: np.ndarray, fs: float, cutoff_hz: float, order: int = 4) -> np
     At the EN cut-off of 20 Hz the shared EN implementation ``railval.core.filters.filtfilt_rows``
     is used (identical processing to the EN quantities); other cut-offs use
     ``scipy.signal.butter`` + ``sosfiltfilt`` with the same order and zero phase.
+
+    Parameters
+    ----------
+    data : numpy.ndarray
+        Shape (n_signals, N) or (N,), any unit.
+    fs, cutoff_hz : float
+        Sampling rate and cut-off in Hz.
+    order : int
+        Butterworth prototype order.
+
+    Returns
+    -------
+    numpy.ndarray
+        Same shape and unit as ``data``.
     """
     if not np.isfinite(cutoff_hz) or not 0 < cutoff_hz < fs / 2:
         raise InvalidParameter(f"low-pass cut-off must lie in (0, fs/2 = {fs / 2:g}) Hz, got {cutoff_hz!r}")

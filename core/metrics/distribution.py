@@ -71,6 +71,23 @@ def autocorrelation(x: np.ndarray, max_lag: int | None = None) -> np.ndarray:
 
     ``ρ_k = Σ_{i=0}^{n−1−k} (x_i − x̄)(x_{i+k} − x̄) / Σ (x_i − x̄)²`` computed by FFT with
     zero padding (no circular wrap). Dimensionless.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Signal, shape (n,).
+    max_lag : int or None
+        Largest lag in samples (default n − 1).
+
+    Returns
+    -------
+    numpy.ndarray
+        ρ_0 … ρ_max_lag, shape (max_lag + 1,).
+
+    Examples
+    --------
+    >>> autocorrelation(np.array([1.0, -1.0, 1.0, -1.0]), 1)
+    array([ 1.  , -0.75])
     """
     a = as_signal(x, "signal", min_len=2)
     n = a.shape[0]
@@ -145,6 +162,18 @@ def ks_pvalue(d: float, n1: float, n2: float) -> float:
 
     Uses the Kolmogorov distribution of ``D_n`` with ``n = round(n1 n2 / (n1 + n2))`` (≥ 1),
     ``scipy.stats.kstwo.sf(d, n)`` — the formula of ``ks_2samp(method="asymp")``.
+
+    Parameters
+    ----------
+    d : float
+        KS distance D in [0, 1].
+    n1, n2 : float
+        Sample sizes (possibly effective, non-integer).
+
+    Returns
+    -------
+    float
+        p-value in [0, 1].
     """
     if not 0.0 <= d <= 1.0:
         raise InvalidParameter(f"KS distance must lie in [0, 1], got {d!r}")

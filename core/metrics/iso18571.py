@@ -369,7 +369,20 @@ def dtw_cost(reference: np.ndarray, comparison: np.ndarray, window: float = 1.0)
 
 def smoothed_slope(x: np.ndarray, dt: float) -> np.ndarray:
     """Derivative by central differences (one-sided at the ends) smoothed by a centred 9-point
-    moving average; windows of 1, 3, 5, 7 samples at the first/last four samples."""
+    moving average; windows of 1, 3, 5, 7 samples at the first/last four samples.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Curve, shape (N,), unit u.
+    dt : float
+        Sample interval in s.
+
+    Returns
+    -------
+    numpy.ndarray
+        Slope in u/s, shape (N,).
+    """
     a = np.asarray(x, dtype=np.float64)
     n = a.shape[0]
     if n < 9:

@@ -117,6 +117,18 @@ def lag_correlations(measured: np.ndarray, simulated: np.ndarray, max_lag: int) 
 
     Returns ``(lags, rho)``; ``rho[j]`` belongs to ``lags[j]`` (samples, sign convention of the
     module docstring).
+
+    Parameters
+    ----------
+    measured, simulated : numpy.ndarray
+        Signals, shape (N,), one grid.
+    max_lag : int
+        Largest lag K in samples.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``lags`` (2K + 1,) in samples and ``rho`` (2K + 1,), dimensionless.
     """
     m, c = as_pair(measured, simulated)
     n = m.shape[0]

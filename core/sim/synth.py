@@ -68,7 +68,18 @@ HIDDEN_DEFAULTS_WAGON: dict[str, dict[str, float]] = {
 
 
 def hidden_defaults(template: str = "coach") -> dict[str, dict[str, float]]:
-    """Default hidden-effect values for ``template``."""
+    """Default hidden-effect values for ``template``.
+
+    Parameters
+    ----------
+    template : str
+        Vehicle template name (``"wagon"`` has its own values).
+
+    Returns
+    -------
+    dict of str to dict of str to float
+        ``{effect: {param: value}}``.
+    """
     out = {k: dict(v) for k, v in HIDDEN_DEFAULTS.items()}
     if template == "wagon":
         out.update({k: dict(v) for k, v in HIDDEN_DEFAULTS_WAGON.items()})
@@ -142,7 +153,24 @@ class SynthCampaign:
 
 def parse_hidden(items: list[str] | None, template: str = "coach") -> dict[str, dict[str, float]]:
     """``["friction_damping", "conicity=0.4", "lateral_bumpstop:clearance_mm=15,stiffness_kN_mm=2"]``
-    → checked ``{effect: {param: value}}`` (defaults from :func:`hidden_defaults`)."""
+    → checked ``{effect: {param: value}}`` (defaults from :func:`hidden_defaults`).
+
+    Parameters
+    ----------
+    items : list of str or None
+        ``effect``, ``effect=value`` (its main parameter) or ``effect:param=value,...``.
+    template : str
+        Vehicle template whose defaults fill the gaps.
+
+    Returns
+    -------
+    dict of str to dict of str to float
+
+    Raises
+    ------
+    InvalidParameter
+        An unknown effect id or a malformed item.
+    """
     defaults = hidden_defaults(template)
     out: dict[str, dict[str, float]] = {}
     for item in items or []:
