@@ -171,7 +171,18 @@ def max_evaluations(n_parameters: int, popsize: int, maxiter: int, polish_maxfev
     """Upper bound of the objective calls of :func:`calibrate`: the start point, scipy's
     differential evolution population of max(5, ``popsize``·n) members initially and per
     generation for at most ``maxiter`` generations (it may stop earlier at convergence),
-    and the polish budget."""
+    and the polish budget.
+
+    Parameters
+    ----------
+    n_parameters, popsize, maxiter, polish_maxfev : int
+    start : bool
+        Whether the start point is evaluated.
+
+    Returns
+    -------
+    int
+    """
     members = max(5, popsize * max(1, n_parameters))
     return int(start) + members * (maxiter + 1) + polish_maxfev
 
@@ -182,17 +193,25 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
               progress: Progress | None = None, raise_on_failure: bool = False) -> CalibrationResult:
     """Minimise ``objective(params)`` over the bounded box of ``specs``.
 
-    Parameters with ``log=True`` are searched as log10(value). Global stage:
-    ``differential_evolution`` (strategy best1bin, ``popsize``·n candidates per
-    generation, Latin-hypercube initialisation as [ref 3], ``seed`` for reproducibility, the
-    start values — when every spec has one — injected as a population member via ``x0``).
-    ``workers``: a ``map(func, iterable)`` callable (e.g. :class:`railval.app.services.batch.BatchExecutor`)
-    evaluating one generation in parallel (then ``updating="deferred"``). Local stage: Powell
-    with the same bounds, at most ``polish_maxfev`` evaluations (strictly; 0 = no polish).
-    ``n_evaluations`` counts the optimiser's calls, the start point's call not included;
-    :func:`max_evaluations` bounds the total. ``progress(stage, fraction, info)`` is called
-    after every generation and at the end.
-    """
+    Parameters
+    ----------
+    objective, specs : callable, sequence of ParameterSpec
+        ``{name: value}`` → cost; the bounded parameters (``log=True``: searched as log10).
+    seed, popsize, maxiter, tol : int, int, int, float
+        Global stage ``differential_evolution`` (best1bin, Latin-hypercube initialisation as
+        [ref 3]; ``popsize``·n per generation; start values, when all given, via ``x0``).
+    polish, polish_maxfev : bool, int
+        Powell polish, same bounds, ≤ ``polish_maxfev`` evaluations (strictly; 0 = none).
+    workers, progress : callable or None
+        ``map(func, iterable)`` evaluating a generation in parallel (``updating="deferred"``);
+        ``progress(stage, fraction, info)`` after every generation and at the end.
+    raise_on_failure : bool
+        Raise :class:`CalibrationDidNotConverge` when the DE stage did not converge.
+
+    Returns
+    -------
+    CalibrationResult
+        ``n_evaluations`` excludes the start point's call (total bound: :func:`max_evaluations`)."""
     specs = list(specs)
     if not specs:
         raise InvalidParameter("calibrate needs at least one parameter, got none")
@@ -258,6 +277,23 @@ def validation_objective(mean_norm: Mapping[str, float], std_norm: Mapping[str, 
     objective is ≤ 12 when every quantity passes and every term is dimensionless. With
     ``smooth`` > 0 the max is replaced by the log-sum-exp soft maximum
     s·ln(e^{|m|/s} + e^{σ/s}) (differentiable; tends to the max as s → 0).
+
+    Parameters
+    ----------
+    mean_norm, std_norm : mapping of str to float
+        Quantity id → normalised mean / standard deviation of D_v (dimensionless).
+    smooth : float
+        Soft-maximum scale s (0 = the exact maximum).
+
+    Returns
+    -------
+    float
+        Dimensionless objective.
+
+    Examples
+    --------
+    >>> validation_objective({"Q_max": 0.5}, {"Q_max": 1.0})
+    1.0
     """
     total = 0.0
     for q, m in mean_norm.items():
@@ -306,6 +342,16 @@ def coach_vertical_modes(params: Mapping[str, float] | None = None) -> tuple[np.
     Returns (frequencies in Hz ascending, shapes at the car body sensors above bogie 1 and 2 —
     z_c ± a θ_c — as a (2, 4) array). Closed-form check (bogies rigidly fixed,
     k_p → ∞): bounce f = √(2k_s,b/m_c)/2π, pitch f = √(2k_s,b a²/I_c)/2π.
+
+    Parameters
+    ----------
+    params : mapping of str to float or None
+        :data:`COACH_MODAL_DEFAULTS` overrides (SI units: kg, kg·m², N/m, m).
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        Frequencies in Hz, shape (4,); shapes, shape (2, 4).
     """
     p = dict(COACH_MODAL_DEFAULTS)
     if params:
@@ -336,7 +382,21 @@ def modal_objective(freq_model: np.ndarray, shapes_model: np.ndarray, freq_exp: 
     """Seed 002 §4 objective: pair every experimental mode with a model mode by highest MAC
     (ties broken by frequency, :func:`railval.core.modal.pair_modes`), then
     J = Σ_i ((f_model − f_exp)/f_exp)² + mac_weight · Σ_i (1 − MAC_i). Dimensionless.
-    Returns (J, pairs ``(i_exp, j_model, mac)``)."""
+    Returns (J, pairs ``(i_exp, j_model, mac)``).
+
+    Parameters
+    ----------
+    freq_model, freq_exp : numpy.ndarray
+        Natural frequencies in Hz, shapes (m_model,) and (m_exp,).
+    shapes_model, shapes_exp : numpy.ndarray
+        Mode shapes as columns at the same sensors, shapes (n_sensors, m_model/m_exp).
+    mac_weight, freq_weight_pairing : float
+        Weight of the MAC term and of the frequency tie-break in the pairing.
+
+    Returns
+    -------
+    tuple of (float, list of tuple of (int, int, float))
+    """
     pairs = pair_modes(freq_exp, shapes_exp, freq_model, shapes_model, freq_weight=freq_weight_pairing)
     J = 0.0
     for i, j, m in pairs:
@@ -394,7 +454,30 @@ def calibrate_modal(freq_exp: Sequence[float], shapes_exp: np.ndarray, specs: Se
     starting point). Only parameters that move at least one identified mode can be identified
     ([ref 3]: "only those sufficiently correlated parameters can be estimated accurately");
     with two car body modes choose at most two parameters, e.g. I_pitch_carbody and
-    k_secondary_z with the mass fixed from the static wheel load."""
+    k_secondary_z with the mass fixed from the static wheel load.
+
+    Parameters
+    ----------
+    freq_exp : sequence of float
+        Identified natural frequencies in Hz, shape (m_exp,).
+    shapes_exp : numpy.ndarray
+        Identified shapes as columns, shape (n_sensors, m_exp).
+    specs : sequence of ParameterSpec
+        Parameters to fit, with their bounds.
+    model : callable
+        Parameter values → (frequencies in Hz, shapes) as :func:`coach_vertical_modes`.
+    base : mapping of str to float or None
+    mac_weight : float
+    seed, popsize, maxiter : int
+        Differential evolution settings (:func:`calibrate`).
+    progress : Progress or None
+        Called with the progress of the search.
+
+    Returns
+    -------
+    ModalCalibrationResult
+        Per-mode rows before/after, the calibration result and the starting objective.
+    """
     freq_exp = np.asarray(freq_exp, float)
     shapes_exp = np.atleast_2d(np.asarray(shapes_exp))
     if shapes_exp.shape[1] != freq_exp.size:
@@ -425,7 +508,17 @@ def calibrate_modal(freq_exp: Sequence[float], shapes_exp: np.ndarray, specs: Se
 def coach_modal_base(vehicle_parameters: Mapping[str, Any]) -> dict[str, float]:
     """Coach modal model values (:data:`COACH_MODAL_DEFAULTS` names) from the simulator's coach
     template defaults (:func:`railval.core.sim.vehicles.template_parameters`) overlaid by a
-    campaign's numeric vehicle parameters; ``bogie_centres`` gives ``bogie_half_distance``."""
+    campaign's numeric vehicle parameters; ``bogie_centres`` gives ``bogie_half_distance``.
+
+    Parameters
+    ----------
+    vehicle_parameters : mapping of str to Any
+        A campaign's vehicle parameters (non-numeric ones ignored).
+
+    Returns
+    -------
+    dict of str to float
+    """
     merged = {p.name: float(p.default) for p in template_parameters("coach")}
     merged.update({k: float(v) for k, v in vehicle_parameters.items() if isinstance(v, (int, float))})
     base = {k: merged[k] for k in COACH_MODAL_DEFAULTS if k in merged}

@@ -140,7 +140,17 @@ def alternatives_for(quantity) -> list[Reading]:
     """The readings other than :data:`CHOSEN` that can change ``quantity``'s value, one per
     distinct effect: all 11 for a sliding-mean quantity, the linear percentile for the other
     percentile-based ones, none for rms values. ``quantity``: a registry entry with
-    ``processing`` and ``sliding_mean`` (:mod:`railval.core.quantities`)."""
+    ``processing`` and ``sliding_mean`` (:mod:`railval.core.quantities`).
+
+    Parameters
+    ----------
+    quantity : Quantity
+        A registry entry of :data:`railval.core.quantities.QUANTITIES`.
+
+    Returns
+    -------
+    list of Reading
+    """
     if quantity.processing == "rms":
         return []
     if quantity.sliding_mean:
@@ -153,14 +163,53 @@ def sorted_percentiles(srt: np.ndarray, ps, method: str) -> np.ndarray:
     """Percentiles ``ps`` (fractions) of every row of the ascending-sorted ``srt`` (shape
     (rows, n)); returns shape (rows, len(ps)). ``inverted_cdf``: the sample of rank ⌈n·p⌉
     (rank 1 for n·p < 1); ``linear``: numpy's type-7 interpolation at h = (n − 1)·p with
-    numpy's own lerp, so the result equals ``numpy.quantile(x, p, method=...)`` bit for bit."""
+    numpy's own lerp, so the result equals ``numpy.quantile(x, p, method=...)`` bit for bit.
+
+    Parameters
+    ----------
+    srt : numpy.ndarray
+        Rows sorted ascending, shape (rows, n).
+    ps : sequence of float
+        Percentiles as fractions in [0, 1].
+    method : str
+        ``"inverted_cdf"`` or ``"linear"``.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (rows, len(ps)), unit of ``srt``.
+
+    Examples
+    --------
+    >>> sorted_percentiles(np.array([[1.0, 2.0, 3.0, 4.0]]), [0.5], "inverted_cdf")
+    array([[2.]])
+    """
     srt = np.atleast_2d(srt)
     return percentiles_from_order(lambda i: srt[:, i], srt.shape[-1], ps, method)
 
 
 def percentile_ranks(n: int, ps, method: str) -> list[int]:
     """The 0-based positions in the sorted sample of size ``n`` that :func:`sorted_percentiles`
-    reads for ``ps`` under ``method`` (a percentile needs only these order statistics)."""
+    reads for ``ps`` under ``method`` (a percentile needs only these order statistics).
+
+    Parameters
+    ----------
+    n : int
+        Sample size.
+    ps : sequence of float
+        Percentiles as fractions.
+    method : str
+        ``"inverted_cdf"`` or ``"linear"``.
+
+    Returns
+    -------
+    list of int
+
+    Examples
+    --------
+    >>> percentile_ranks(4, [0.5], "inverted_cdf")
+    [1]
+    """
     return list(_percentile_ranks(int(n), tuple(float(p) for p in ps), method))
 
 
@@ -178,7 +227,22 @@ def _percentile_ranks(n: int, ps: tuple[float, ...], method: str) -> tuple[int, 
 
 def percentiles_from_order(take, n: int, ps, method: str) -> np.ndarray:
     """:func:`sorted_percentiles` from the order statistics alone: ``take(i)`` gives the
-    samples of 0-based rank ``i`` of every row (shape (rows,)), ``n`` the row length."""
+    samples of 0-based rank ``i`` of every row (shape (rows,)), ``n`` the row length.
+
+    Parameters
+    ----------
+    take : callable
+        0-based rank → that order statistic of every row, shape (rows,).
+    n : int
+        Row length.
+    ps, method
+        As in :func:`sorted_percentiles`.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (rows, len(ps)).
+    """
     ps = [float(p) for p in ps]
     if method == "inverted_cdf":
         idx = [min(max(int(np.ceil(n * p - 1e-12)) - 1, 0), n - 1) for p in ps]
@@ -200,7 +264,27 @@ def percentiles_from_order(take, n: int, ps, method: str) -> np.ndarray:
 
 def window_centres(start_m: float, end_m: float, origin_m: float, window_m: float,
                    step_m: float) -> np.ndarray:
-    """Centres ``origin + w/2 + k·step`` of the windows lying inside [start_m, end_m] (m)."""
+    """Centres ``origin + w/2 + k·step`` of the windows lying inside [start_m, end_m] (m).
+
+    Parameters
+    ----------
+    start_m, end_m : float
+        Evaluated range in m.
+    origin_m : float
+        Grid origin in m (first window's start).
+    window_m, step_m : float
+        Window length and step in m.
+
+    Returns
+    -------
+    numpy.ndarray
+        Centres in m, shape (K,).
+
+    Examples
+    --------
+    >>> window_centres(0.0, 3.0, 0.0, 2.0, 0.5)
+    array([1. , 1.5, 2. ])
+    """
     if window_m <= 0 or step_m <= 0:
         raise InvalidParameter(
             f"window_m and step_m must be > 0 m, got window_m={window_m}, step_m={step_m}")
@@ -217,7 +301,28 @@ def sample_window_means(values: np.ndarray, distance_m: np.ndarray, centres: np.
     """Arithmetic mean of the samples inside each window ``[x − w/2, x + w/2]`` (``closed``)
     or ``[x − w/2, x + w/2)`` of every row of ``values`` (shape (rows, n)) on the distance
     axis ``distance_m`` (increasing, m). Windows holding no sample give NaN. ``prefix``: the
-    rows' prefix sums (shape (rows, n + 1), first column 0) when already formed."""
+    rows' prefix sums (shape (rows, n + 1), first column 0) when already formed.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        Shape (rows, n), any unit.
+    distance_m : numpy.ndarray
+        Increasing distance axis in m, shape (n,).
+    centres : numpy.ndarray
+        Window centres in m, shape (K,).
+    window_m : float
+        Window length w in m.
+    closed : bool
+        Whether the window includes its upper end.
+    prefix : numpy.ndarray or None
+        Prefix sums of ``values``, shape (rows, n + 1).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (rows, K), unit of ``values``.
+    """
     v = np.atleast_2d(np.asarray(values, dtype=np.float64))
     d = np.asarray(distance_m, dtype=np.float64)
     half = window_m / 2.0

@@ -17,26 +17,22 @@ The same chain is applied to measured and simulated signals (Polach & Böttcher 
    * ``YQ_max`` and ``SumY_max`` — the 2 m sliding mean evaluated every 0.5 m along the
      distance axis first (:func:`sliding_mean_distance`), then the maximum.
 
-Percentile definition: the p-value is read from the cumulative distribution of the samples
-of the evaluated part, as EN 14363 describes — the inverse of the empirical distribution
-function, i.e. the smallest sample x with ``F_n(x) ≥ p`` (Hyndman & Fan type 1,
-``numpy.quantile(method="inverted_cdf")``). With n samples sorted ascending this is the sample
-of 1-based rank ``ceil(n·p)`` (rank 1 for p·n < 1). For an even n the 50 % value is therefore
-the lower of the two middle samples, not their average.
+Percentile definition: the p-value is read from the cumulative distribution of the samples of the
+evaluated part, as EN 14363 describes — the inverse of the empirical distribution function, i.e.
+the smallest sample x with ``F_n(x) ≥ p`` (Hyndman & Fan type 1,
+``numpy.quantile(method="inverted_cdf")``). With n samples sorted ascending this is the sample of
+1-based rank ``ceil(n·p)`` (rank 1 for p·n < 1). For an even n the 50 % value is therefore the
+lower of the two middle samples, not their average.
 
-Definition sensitivity: the percentile method, the alignment of the sliding-mean grid and
-the definition of the window mean are open choices of the texts
-(:mod:`railval.core.definitions`). Besides the chosen reading's values, every section carries
-the values of the other readings (``SectionValues.alternatives``), computed from the same
-filtered arrays and the same sorts — nothing is filtered twice.
+Definition sensitivity: the percentile method, the alignment of the sliding-mean grid and the
+definition of the window mean are open choices of the texts (:mod:`railval.core.definitions`).
+Besides the chosen reading's values, every section carries the values of the other readings
+(``SectionValues.alternatives``), computed from the same filtered arrays and the same sorts —
+nothing is filtered twice.
 
-Supplementary values (:mod:`railval.core.supplementary`): bogie-frame accelerations go through
-the band-pass with the car body channels (rms, max); the PSD band rms of all acceleration
-channels come from the unfiltered evaluated samples (``SectionValues.supplementary``).
-
-:func:`evaluate_section` processes one section; :func:`evaluate_batch` processes many
-sections at once: all channels of all sections of equal length and sampling rate are filtered
-in one compiled call, all statistics of one section come from one row-wise sort.
+Supplementary values (:mod:`railval.core.supplementary`): bogie-frame accelerations go through the
+band-pass with the car body channels (rms, max); the PSD band rms of all acceleration channels come
+from the unfiltered evaluated samples (``SectionValues.supplementary``).
 
 References
 ----------
@@ -240,12 +236,19 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
     selected once for all its evaluated rows (:mod:`railval.core.orderstat`). Results equal
     :func:`evaluate_section` on each section alone.
 
-    ``alternatives=False`` leaves out the values under the other readings of the open
-    definitions and ``supplementary=False`` the PSD band values of the supplementary values
-    (the bogie-frame rms and maximum come with the band-pass call regardless; both for timing the
-    chosen reading alone: ``railval bench en``); ``timings``, when given, receives the wall
-    time in s of each stage: ``checks``, ``filter``, ``statistics``, ``alternatives``,
-    ``supplementary``.
+    Parameters
+    ----------
+    signalsets, sections : sequence of SignalSet, sequence of SectionInfo
+        One signal set (channels of N samples, ``distance_m`` in m) per section.
+    order, alternatives, supplementary : int, bool, bool
+        Butterworth order; ``False`` leaves out the other readings' / PSD band values.
+    timings : dict or None
+        Receives the wall time in s per stage (``checks``, ``filter``, ...).
+
+    Returns
+    -------
+    list of SectionValues
+        In the order of ``sections`` (see :func:`evaluate_section`).
     """
     clock = _Clock(timings)
     check_order(order)
@@ -287,9 +290,15 @@ def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,
                      order: int = DEFAULT_ORDER) -> SectionValues:
     """The 12 quantities at every available position of one section (docs/design.md §3).
 
-    Returns ``{(quantity_id, position): value}`` (a :class:`SectionValues`, which also holds
-    the processing steps of each value and any filter settling warning). Units per the
-    registry (kN, –, m/s²). ``order``: Butterworth prototype order of both filters.
+    Parameters
+    ----------
+    signalset, section_info, order : SignalSet, SectionInfo, int
+        Channels (N samples each); evaluated span in m; Butterworth order of both filters.
+
+    Returns
+    -------
+    SectionValues
+        ``{(qty, position): value}`` (kN, –, m/s²), processing steps, settling warnings.
     """
     return evaluate_batch([signalset], [section_info], order=order)[0]
 
@@ -584,12 +593,19 @@ def quantity_trace(signalset: SignalSet, section: SectionInfo, quantity: str, po
     """The signal quantity ``quantity`` at ``position`` is evaluated on and its statistic, for
     plotting what a row of the validation is about (Polach & Böttcher 2014 Table 2; EN 14363).
 
-    Uses this module's processing: :func:`railval.core.filters.filtfilt_rows` over the whole
-    section, the quantity's derivation (Y/Q, ΣY), :func:`sliding_mean_distance` where the
-    quantity uses the 2 m sliding mean, and the evaluated cut and the statistic of
-    :func:`evaluate_section` (:func:`_evaluated_cut`, the order statistics of
-    :func:`railval.core.en_statistics._row_percentiles`, :func:`_statistic`): one home for
-    steps 3 and 4 of the chain.
+    Processing as :func:`evaluate_section` (:func:`_evaluated_cut`, :func:`_statistic`).
+
+    Parameters
+    ----------
+    signalset, section : SignalSet, SectionInfo
+        The section's channels (N samples each) and its evaluated span in m.
+    quantity, position, order : str, str, int
+        Quantity id (e.g. ``"YQ_max"``), position (e.g. ``"11"``), Butterworth order.
+
+    Returns
+    -------
+    QuantityTrace
+        Signal (N,) over ``distance_m``, sliding means, marks, value (quantity's unit).
     """
     if quantity not in QUANTITIES:
         raise InvalidParameter(f"unknown quantity {quantity!r}; known: {', '.join(QUANTITIES)}")
@@ -629,8 +645,17 @@ def quantity_trace(signalset: SignalSet, section: SectionInfo, quantity: str, po
 
 def evaluate_present(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo], *,
                      order: int = DEFAULT_ORDER) -> dict[str, SectionValues]:
-    """:func:`evaluate_batch` of the sections of ``sections`` that ``signalsets`` holds
-    (section id → SignalSet), keyed by section id in the order of ``sections``."""
+    """:func:`evaluate_batch` of the sections of ``sections`` that ``signalsets`` holds.
+
+    Parameters
+    ----------
+    signalsets, sections, order : mapping of str to SignalSet, sequence of SectionInfo, int
+
+    Returns
+    -------
+    dict of str to SectionValues
+        Keyed by section id in the order of ``sections``.
+    """
     present = [s for s in sections if s.id in signalsets]
     values = evaluate_batch([signalsets[s.id] for s in present], present, order=order)
     return {s.id: v for s, v in zip(present, values, strict=True)}

@@ -78,7 +78,16 @@ class FilterDesign:
 
 
 def check_order(order: int) -> int:
-    """The Butterworth prototype order as int; raises InvalidParameter outside 1..10."""
+    """The Butterworth prototype order as int; raises InvalidParameter outside 1..10.
+
+    Parameters
+    ----------
+    order : int
+
+    Returns
+    -------
+    int
+    """
     if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or not 1 <= int(order) <= 10:
         raise InvalidParameter(f"filter order must be an integer in 1..10, got {order!r}")
     return int(order)
@@ -102,6 +111,29 @@ def design(fs: float, kind: str, order: int = DEFAULT_ORDER) -> FilterDesign:
 
     ``kind`` is ``"lowpass"`` (20 Hz) or ``"bandpass"`` (0.4–10 Hz); ``order`` the
     Butterworth prototype order N (band-pass → order 2N).
+
+    Parameters
+    ----------
+    fs : float
+        Sampling rate in Hz (above twice the upper corner).
+    kind : str
+        ``"lowpass"`` or ``"bandpass"``.
+    order : int
+        Butterworth prototype order (1–10).
+
+    Returns
+    -------
+    FilterDesign
+
+    Raises
+    ------
+    InvalidParameter
+        An unknown kind, an order outside 1–10 or too low a sampling rate.
+
+    Examples
+    --------
+    >>> design(200.0, "lowpass").sos.shape
+    (2, 6)
     """
     fs = float(fs)
     _check_design_args(fs, kind, order)
@@ -228,6 +260,28 @@ def filtfilt_rows(data, fs: float, kind: str, order: int = DEFAULT_ORDER) -> np.
     ``(n_signals, n_samples)`` (1-D for 1-D input). Units are those of ``data``; ``fs`` in Hz.
     Blocks of ``_BLOCK`` signals run in lockstep; the blocks are shared among the cores
     (:func:`railval.core.workers.split_rows`; the kernel releases the GIL).
+
+    Parameters
+    ----------
+    data : array_like or list of array_like
+        Shape (n_signals, n_samples), (n_samples,), or equally long 1-D arrays; any unit.
+    fs : float
+        Sampling rate in Hz.
+    kind : str
+        ``"lowpass"`` (20 Hz, forces) or ``"bandpass"`` (0.4–10 Hz, accelerations), see
+        :func:`design`.
+    order : int
+        Butterworth prototype order (1–10).
+
+    Returns
+    -------
+    numpy.ndarray
+        Filtered float64 copy, shape (n_signals, n_samples) (1-D for 1-D input).
+
+    Raises
+    ------
+    InvalidSignal
+        Rows of unequal length.
     """
     d = design(float(fs), kind, order)
     if isinstance(data, (list, tuple)):
@@ -308,6 +362,21 @@ def settling_check(time_s: np.ndarray, eval_mask: np.ndarray, fs: float, kind: s
 
     ``time_s``: sample times in s; ``eval_mask``: boolean mask of the evaluated samples.
     Returns one :class:`SettlingWarning` per short side (empty list when both suffice).
+
+    Parameters
+    ----------
+    time_s : numpy.ndarray
+        Sample times in s, shape (N,).
+    eval_mask : numpy.ndarray
+        Boolean mask of the evaluated samples, shape (N,).
+    fs, kind, order : float, str, int
+        Sampling rate in Hz, filter kind and Butterworth order as in :func:`design`.
+    section : str
+        Section id written into the warnings.
+
+    Returns
+    -------
+    list of SettlingWarning
     """
     d = design(float(fs), kind, order)
     idx = np.flatnonzero(eval_mask)

@@ -57,6 +57,25 @@ def mac(phi_a: np.ndarray, phi_b: np.ndarray) -> float:
 
     MAC(a, b) = |a^H b|² / ((a^H a)(b^H b)), in [0, 1]: 1 for shapes that differ only by a
     (complex) scale factor, 0 for orthogonal shapes. Dimensionless.
+
+    Parameters
+    ----------
+    phi_a, phi_b : numpy.ndarray
+        Mode shapes, shape (n_sensors,), real or complex.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InvalidSignal
+        Shapes of unequal length or a zero shape.
+
+    Examples
+    --------
+    >>> mac(np.array([1.0, 0.0]), np.array([2.0, 0.0]))
+    1.0
     """
     a = np.asarray(phi_a).ravel()
     b = np.asarray(phi_b).ravel()
@@ -69,7 +88,18 @@ def mac(phi_a: np.ndarray, phi_b: np.ndarray) -> float:
 
 
 def mac_matrix(shapes_a: np.ndarray, shapes_b: np.ndarray) -> np.ndarray:
-    """MAC of every pair of columns: ``out[i, j] = MAC(shapes_a[:, i], shapes_b[:, j])``."""
+    """MAC of every pair of columns: ``out[i, j] = MAC(shapes_a[:, i], shapes_b[:, j])``.
+
+    Parameters
+    ----------
+    shapes_a, shapes_b : numpy.ndarray
+        Mode shapes as columns, shapes (n_sensors, m_a) and (n_sensors, m_b).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (m_a, m_b), in [0, 1].
+    """
     A = np.atleast_2d(np.asarray(shapes_a))
     B = np.atleast_2d(np.asarray(shapes_b))
     if A.shape[0] != B.shape[0]:
@@ -88,6 +118,19 @@ def pair_modes(freq_ref: np.ndarray, shapes_ref: np.ndarray, freq_other: np.ndar
     (Hungarian algorithm, ``scipy.optimize.linear_sum_assignment``); with ``freq_weight`` 0 it
     is the pure highest-MAC pairing of the seed, the weight breaks ties between modes whose
     shapes look alike on few sensors. Returns ``(i_ref, j_other, mac)`` sorted by ``i_ref``.
+
+    Parameters
+    ----------
+    freq_ref, freq_other : numpy.ndarray
+        Natural frequencies in Hz, shapes (m_ref,) and (m_other,).
+    shapes_ref, shapes_other : numpy.ndarray
+        Mode shapes as columns, shapes (n_sensors, m_ref) and (n_sensors, m_other).
+    freq_weight : float
+        Weight of the relative frequency difference (dimensionless).
+
+    Returns
+    -------
+    list of tuple of (int, int, float)
     """
     fr = np.asarray(freq_ref, dtype=float)
     fo = np.asarray(freq_other, dtype=float)
@@ -121,7 +164,20 @@ def _records(y, fs: float) -> list[np.ndarray]:
 
 def output_covariances(y: np.ndarray, max_lag: int) -> np.ndarray:
     """Unbiased output covariance matrices R_k = 1/(N−k) Σ_t y_{t+k} y_tᵀ, k = 0 … max_lag
-    ([PdR99] eq. 8). ``y`` is (N, l); returns (max_lag + 1, l, l). Computed by FFT."""
+    ([PdR99] eq. 8). ``y`` is (N, l); returns (max_lag + 1, l, l). Computed by FFT.
+
+    Parameters
+    ----------
+    y : numpy.ndarray
+        Outputs, shape (N, l), e.g. accelerations in m/s².
+    max_lag : int
+        Largest lag k in samples (< N).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (max_lag + 1, l, l), in the square of the unit of ``y``.
+    """
     y = np.asarray(y, dtype=float)
     n, _l = y.shape
     if max_lag >= n:
@@ -156,6 +212,20 @@ def modes_from_matrices(A: np.ndarray, C: np.ndarray, fs: float) -> tuple[np.nda
     λ_i eigenvalues of A; continuous poles μ_i = ln(λ_i)·fs (1/s); f_i = |μ_i|/(2π) Hz;
     ζ_i = −Re μ_i / |μ_i|; shapes φ_i = C ψ_i ([PdR99] eq. 16). Keeps one of each complex-
     conjugate pair (Im μ > 0) and returns (freq_hz, damping, shapes[l, m]) sorted by frequency.
+
+    Parameters
+    ----------
+    A : numpy.ndarray
+        State matrix, shape (n, n).
+    C : numpy.ndarray
+        Output matrix, shape (l, n).
+    fs : float
+        Sampling rate in Hz.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        Frequencies in Hz (m,), damping ratios (m,), shapes (l, m).
     """
     lam, psi = np.linalg.eig(A)
     keep = np.imag(lam) > 1e-12
@@ -293,17 +363,28 @@ def ssi_cov(y: np.ndarray, fs: float, *, channels: list[str] | None = None, bloc
 
     Parameters
     ----------
-    y : (n_samples, n_channels) accelerations, equally sampled at ``fs`` Hz, or a list of such
+    y : numpy.ndarray or list of numpy.ndarray
+        Accelerations (n_samples, n_channels) equally sampled at ``fs`` Hz, or a list of such
         records (e.g. one per test section; their covariances are averaged).
-    block_rows : i of the Toeplitz matrix (default: enough lags to span two periods of
-        ``f_min`` or 2·max_order/l, whichever is larger, at most n/20).
-    max_order : largest model order (even; default 2·⌊i·l/2⌋ capped at 40); orders 2, 4, …
-    f_min, f_max : frequency range of interest in Hz.
-    criteria : :class:`StabilisationCriteria`.
+    fs : float
+        Sampling rate in Hz.
+    channels : list of str or None
+        Channel names (default ``ch0``, ``ch1``, …).
+    block_rows : int or None
+        i of the Toeplitz matrix (default: enough lags to span two periods of ``f_min`` or
+        2·max_order/l, whichever is larger, at most n/20).
+    max_order : int or None
+        Largest model order (even; default 2·⌊i·l/2⌋ capped at 40); orders 2, 4, …
+    f_min, f_max : float
+        Frequency range of interest in Hz.
+    criteria : StabilisationCriteria or None
 
-    A pole of order n is *stable* when a pole of order n−2 lies within the frequency, damping
-    and MAC tolerances. Stable poles are clustered by frequency (``cluster_tol``); clusters with
-    ≥ ``min_stable`` members are returned as modes, sorted by frequency.
+    Returns
+    -------
+    ModalResult
+        A pole of order n is *stable* when a pole of order n−2 lies within the frequency,
+        damping and MAC tolerances. Stable poles are clustered by frequency (``cluster_tol``);
+        clusters with ≥ ``min_stable`` members are the modes, sorted by frequency.
     """
     records = _records(y, fs)
     l = records[0].shape[1]
@@ -355,7 +436,21 @@ def decimated_records(signalsets: Iterable[SignalSet], channels: Sequence[str],
     """The records for :func:`ssi_cov`: each SignalSet's ``channels`` as columns, decimated by
     the integer factor nearest ``fs / fs_target`` with an anti-alias FIR
     (``scipy.signal.resample_poly``). Records whose decimated rate differs from the first
-    one's are left out. Returns (records, decimated rate), ([], None) when nothing is given."""
+    one's are left out. Returns (records, decimated rate), ([], None) when nothing is given.
+
+    Parameters
+    ----------
+    signalsets : iterable of SignalSet
+    channels : sequence of str
+        Acceleration channels (m/s²), one column each.
+    fs_target : float
+        Wanted rate in Hz.
+
+    Returns
+    -------
+    tuple of (list of numpy.ndarray, float or None)
+        Records of shape (n_samples, len(channels)) and their rate in Hz.
+    """
     records, fs_used = [], None
     for ss in signalsets:
         q = max(round(ss.fs / fs_target), 1)

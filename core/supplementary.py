@@ -135,7 +135,20 @@ def psd_band_values(evaluated: Mapping[str, np.ndarray], fs: float) -> dict[tupl
     """PSD band rms values of one section: ``evaluated[channel]`` = the unfiltered samples of
     the evaluated range (m/s²) for channels ``{kind}_{position}``. Returns
     ``{(quantity id, position): band rms}``; channels shorter than 8 samples are skipped and
-    bands without a frequency bin give no value."""
+    bands without a frequency bin give no value.
+
+    Parameters
+    ----------
+    evaluated : mapping of str to numpy.ndarray
+        Channel name → unfiltered evaluated samples in m/s², shape (N,).
+    fs : float
+        Sampling rate in Hz.
+
+    Returns
+    -------
+    dict of (str, str) to float
+        ``{(quantity id, position): band rms in m/s²}``.
+    """
     out: dict[tuple[str, str], float] = {}
     names = [ch for ch, x in evaluated.items()
              if ch.rpartition("_")[0] in PSD_KINDS and np.asarray(x).size >= 8]
@@ -194,6 +207,18 @@ def supplementary_results(measured: Mapping[str, Mapping[tuple[str, str], float]
     ``n_positions``, ``n_sections``, ``mean``, ``std`` (ddof = 1), ``mean_abs_measured``,
     ``mean_rel``, ``std_rel``, ``log2_ratio_mean``, ``filtering``, ``processing``,
     ``source``. Quantities without pairs are omitted.
+
+    Parameters
+    ----------
+    measured, simulated : mapping of str to mapping of (str, str) to float
+        Section id → ``{(quantity, position): value}`` in the quantity's unit.
+    zones : mapping of str to int or None
+        Section id → EN 14363 zone, written into the pairs.
+
+    Returns
+    -------
+    dict
+        ``{"quantities": [...], "pairs": [...], "note": ...}`` as above.
     """
     recs = _pairs(measured, simulated, zones)
     by_q: dict[str, list[dict]] = defaultdict(list)
@@ -237,6 +262,18 @@ def supplementary_pattern(pairs: Iterable[Mapping], kinds: Sequence[str] = BOGIE
     b1"``, group ``"bogie ay"``/``"bogie az"`` (each direction weighs like one quantity).
     Car body PSD bands are not repeated here: the diagnosis already holds them.
     ``pairs``: the ``pairs`` records of :func:`supplementary_results`.
+
+    Parameters
+    ----------
+    pairs : iterable of mapping
+        The ``pairs`` records of :func:`supplementary_results`.
+    kinds : sequence of str
+        Channel kinds to include (bogie-frame lateral and vertical by default).
+
+    Returns
+    -------
+    Pattern
+        Components in log₂ power ratio (dimensionless).
     """
     acc: dict[tuple[str, str], list[float]] = defaultdict(list)
     for r in pairs:

@@ -26,6 +26,30 @@ def zone_for_radius(radius_m: float | None, zone1_min_radius_m: float = DEFAULT_
     ``radius_m`` in m; ``None``, 0 or ``inf`` mean straight track. ``override`` (1–4) wins.
     Radii below 250 m are outside the EN 14363 zones and raise :class:`InvalidParameter`
     unless overridden.
+
+    Parameters
+    ----------
+    radius_m : float or None
+        Curve radius in m (sign ignored).
+    zone1_min_radius_m : float
+        Smallest radius in m that still counts as zone 1 (straight or large radius).
+    override : int or None
+        Zone 1–4 set by hand.
+
+    Returns
+    -------
+    int
+        Test zone 1–4.
+
+    Raises
+    ------
+    InvalidParameter
+        An override outside 1–4 or a radius below 250 m without override.
+
+    Examples
+    --------
+    >>> zone_for_radius(None)
+    1
     """
     if override is not None:
         if override not in (1, 2, 3, 4):

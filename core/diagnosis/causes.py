@@ -73,14 +73,22 @@ def _held_out(base: SectionEvidence, fams: Sequence[CandidateFamily], curves: Se
 def cause_set(base: SectionEvidence, families: Sequence[CandidateFamily], *, folds: int = 3, n_boot: int = 100,
               seed: int = 0, min_gain: float = MIN_GAIN, max_causes: int = MAX_CAUSES,
               later: Sequence[str] | None = None) -> dict[str, Any]:
-    """The greedy cause set (module docstring): ``causes`` — each ``name``, ``kind``,
-    ``parameter``, ``fitted`` (joint fit on all sections), ``held_out_share`` (what adding it
-    raised the set's held-out share by) — ``held_out_explained`` of the whole set,
-    ``remaining_within_noise`` (the residual the set leaves is within the section scatter)
-    and ``stopped`` (why no further cause was added). ``later``: the names that may join after
-    the first cause (the service passes the best candidate of each quantity family: a further
-    cause must be what explains some family best, not only what soaks up a remainder — on the
-    trust bench a friction change otherwise joined to absorb a contact difference)."""
+    """The greedy cause set (module docstring).
+
+    Parameters
+    ----------
+    base, families : SectionEvidence, sequence of CandidateFamily
+    folds, n_boot, seed, min_gain, max_causes : int, int, int, float, int
+        Held-out folds, bootstrap size and seed, least held-out gain, most causes.
+    later : sequence of str or None
+        Names that may join after the first (the best of each quantity family: a further cause
+        must explain some family best, not only soak up a remainder).
+
+    Returns
+    -------
+    dict
+        ``causes`` (``name``, ``kind``, ``parameter``, ``fitted``, ``held_out_share``),
+        ``held_out_explained``, ``remaining_within_noise``, ``stopped`` (why no further cause)."""
     r = base.values()
     w = base.pattern().weights()
     masks = zone_folds(base.zones, folds)

@@ -74,6 +74,26 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
 
     References: Efron & Tibshirani 1993 ch. 6/§8.2 (bootstrap, stratified), Hastie, Tibshirani
     & Friedman 2009 §7.10 (k-fold cross-validation); docs/diagnosis.md.
+
+    Parameters
+    ----------
+    base : SectionEvidence
+        The configuration's residual pattern per section.
+    families : sequence of CandidateFamily
+        Candidates with their evidence along one parameter each.
+    validated : bool
+        The configuration passes the validation (then ``none`` unless a strong cause).
+    n_boot, folds, seed : int
+        Bootstrap resamples, held-out folds, random seed.
+    change : float
+        Relative residual change for *fixes*/*worsens* (default 20 %).
+    strong, alike_margin, alike_correlation : float
+        The verdict thresholds :data:`STRONG`, :data:`ALIKE_MARGIN`, :data:`ALIKE_CORRELATION`.
+
+    Returns
+    -------
+    DiagnosisResult
+        Ranked candidates, noise floor, identifiability evidence and verdict.
     """
     setup = _Setup(base, n_boot, folds, seed)
     cands: list[TrustedCandidate] = []

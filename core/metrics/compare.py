@@ -123,6 +123,11 @@ def compare(measured: np.ndarray, simulated: np.ndarray, fs: float, *,
     iso_params : ISO/TS 18571 parameters (default: the standard's).
     neff_method : effective-sample-size estimator of the KS p-value (``"bartlett"``/``"ar1"``).
     unit : unit of the signals, carried into the result.
+
+    Returns
+    -------
+    ComparisonResult
+        Every metric of ``families`` raw and after synchronisation, with the lag found.
     """
     fams = resolve_families(families)
     grid = common_grid(measured, simulated, fs, fs_simulated, t0_measured=t0_measured,
@@ -149,6 +154,20 @@ def lowpass(data: np.ndarray, fs: float, cutoff_hz: float, order: int = 4) -> np
     At the EN cut-off of 20 Hz the shared EN implementation ``railval.core.filters.filtfilt_rows``
     is used (identical processing to the EN quantities); other cut-offs use
     ``scipy.signal.butter`` + ``sosfiltfilt`` with the same order and zero phase.
+
+    Parameters
+    ----------
+    data : numpy.ndarray
+        Shape (n_signals, N) or (N,), any unit.
+    fs, cutoff_hz : float
+        Sampling rate and cut-off in Hz.
+    order : int
+        Butterworth prototype order.
+
+    Returns
+    -------
+    numpy.ndarray
+        Same shape and unit as ``data``.
     """
     if not np.isfinite(cutoff_hz) or not 0 < cutoff_hz < fs / 2:
         raise InvalidParameter(f"low-pass cut-off must lie in (0, fs/2 = {fs / 2:g}) Hz, got {cutoff_hz!r}")
@@ -170,6 +189,22 @@ def compare_signalsets(measured: SignalSet, simulated: SignalSet, channels: Iter
     5 % of the ±max_lag bound), ``resampled``, ``error`` (message when the channel
     could not be compared, else empty) and each metric ``<name>`` (raw) and ``<name>_sync``.
     ``options`` go to :func:`compare`.
+
+    Parameters
+    ----------
+    measured, simulated : SignalSet
+        The section's measured and simulated records (own sampling rates allowed).
+    channels : iterable of str or None
+        Channels to compare; ``None`` = all common channels.
+    lowpass_hz : float or None
+        Low-pass cut-off in Hz.
+    **options
+        Keyword arguments of :func:`compare`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per channel, columns as above.
     """
     if channels is None:
         names = [ch for ch in measured.channels if ch in simulated.channels]

@@ -71,6 +71,23 @@ def autocorrelation(x: np.ndarray, max_lag: int | None = None) -> np.ndarray:
 
     ``ρ_k = Σ_{i=0}^{n−1−k} (x_i − x̄)(x_{i+k} − x̄) / Σ (x_i − x̄)²`` computed by FFT with
     zero padding (no circular wrap). Dimensionless.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Signal, shape (n,).
+    max_lag : int or None
+        Largest lag in samples (default n − 1).
+
+    Returns
+    -------
+    numpy.ndarray
+        ρ_0 … ρ_max_lag, shape (max_lag + 1,).
+
+    Examples
+    --------
+    >>> autocorrelation(np.array([1.0, -1.0, 1.0, -1.0]), 1)
+    array([ 1.  , -0.75])
     """
     a = as_signal(x, "signal", min_len=2)
     n = a.shape[0]
@@ -145,6 +162,18 @@ def ks_pvalue(d: float, n1: float, n2: float) -> float:
 
     Uses the Kolmogorov distribution of ``D_n`` with ``n = round(n1 n2 / (n1 + n2))`` (≥ 1),
     ``scipy.stats.kstwo.sf(d, n)`` — the formula of ``ks_2samp(method="asymp")``.
+
+    Parameters
+    ----------
+    d : float
+        KS distance D in [0, 1].
+    n1, n2 : float
+        Sample sizes (possibly effective, non-integer).
+
+    Returns
+    -------
+    float
+        p-value in [0, 1].
     """
     if not 0.0 <= d <= 1.0:
         raise InvalidParameter(f"KS distance must lie in [0, 1], got {d!r}")
@@ -158,6 +187,17 @@ def kolmogorov_smirnov(measured: np.ndarray, simulated: np.ndarray, *,
 
     The samples need not share a grid or length. ``D`` and ``p`` are those of
     ``scipy.stats.ks_2samp`` (``method="auto"``); ``p_eff`` uses :func:`effective_sample_size`.
+
+    Parameters
+    ----------
+    measured, simulated : numpy.ndarray
+        Samples, shape (N_m,) and (N_c,), same unit.
+    neff_method : str
+        Estimator of :func:`effective_sample_size` for ``p_eff``.
+
+    Returns
+    -------
+    KSResult
     """
     m = as_signal(measured, "measured", min_len=3)
     c = as_signal(simulated, "simulated", min_len=3)
@@ -176,6 +216,21 @@ def area_validation_metric(measured: np.ndarray, simulated: np.ndarray) -> float
     Ferson et al. (2008); [ref 2] eq. 2. Both CDFs are step functions, so the integral is the
     exact sum over the intervals between consecutive pooled sample values of
     ``|F_m − F_c| · Δx``. Equals ``scipy.stats.wasserstein_distance(measured, simulated)``.
+
+    Parameters
+    ----------
+    measured, simulated : numpy.ndarray
+        Samples, shape (N_m,) and (N_c,), same unit.
+
+    Returns
+    -------
+    float
+        Area in the signal's unit (0 = equal distributions).
+
+    Examples
+    --------
+    >>> area_validation_metric(np.array([0.0, 1.0]), np.array([1.0, 2.0]))
+    1.0
     """
     m = np.sort(as_signal(measured, "measured", min_len=1))
     c = np.sort(as_signal(simulated, "simulated", min_len=1))
@@ -206,6 +261,15 @@ def anderson_darling(measured: np.ndarray, simulated: np.ndarray) -> ADResult:
     ``scipy.stats.anderson_ksamp([measured, simulated], variant="midrank")``; scipy's warning
     that the p-value was floored/capped is turned into the ``p_capped`` flag. The statistic is
     the normalised ``(A²_kN − (k−1)) / σ_N``; larger means more different.
+
+    Parameters
+    ----------
+    measured, simulated : numpy.ndarray
+        Samples, shape (N_m,) and (N_c,), same unit.
+
+    Returns
+    -------
+    ADResult
     """
     m = as_signal(measured, "measured", min_len=2)
     c = as_signal(simulated, "simulated", min_len=2)

@@ -117,7 +117,23 @@ class ISORating:
 
 
 def grade(rating: float) -> str:
-    """ISO/TS 18571 grade: excellent > 0.94, good > 0.80, fair > 0.58, else poor."""
+    """ISO/TS 18571 grade: excellent > 0.94, good > 0.80, fair > 0.58, else poor.
+
+    Parameters
+    ----------
+    rating : float
+        Overall rating R in [0, 1].
+
+    Returns
+    -------
+    str
+        ``"excellent"``, ``"good"``, ``"fair"`` or ``"poor"``.
+
+    Examples
+    --------
+    >>> grade(0.9)
+    'good'
+    """
     r = float(rating)
     if not math.isfinite(r) or not -1e-12 <= r <= 1.0 + 1e-12:
         raise InvalidParameter(f"ISO 18571 rating must lie in [0, 1], got {rating!r}")
@@ -129,7 +145,27 @@ def grade(rating: float) -> str:
 
 def corridor_score(reference: np.ndarray, comparison: np.ndarray, *, a0: float = 0.05,
                    b0: float = 0.5, kz: float = 2.0) -> float:
-    """ISO/TS 18571 corridor score Z (see module docstring), in [0, 1]."""
+    """ISO/TS 18571 corridor score Z (see module docstring), in [0, 1].
+
+    Parameters
+    ----------
+    reference, comparison : numpy.ndarray
+        Measured and simulated curve, shape (N,), same unit.
+    a0, b0 : float
+        Inner and outer corridor half-width as fractions of ``max |reference|``.
+    kz : float
+        Exponent of the transition between the corridors.
+
+    Returns
+    -------
+    float
+        Z, dimensionless in [0, 1] (1 = inside the inner corridor everywhere).
+
+    Examples
+    --------
+    >>> corridor_score(np.array([0.0, 1.0, 0.0]), np.array([0.0, 1.0, 0.6]))
+    0.6666666666666666
+    """
     t, c = as_pair(reference, comparison, min_len=1)
     t_norm = float(np.max(np.abs(t)))
     if t_norm == 0.0:
@@ -144,7 +180,20 @@ def phase_shift(reference: np.ndarray, comparison: np.ndarray, max_shift: float 
     """Shift n_ε (samples, positive: comparison delayed) maximising the overlap correlation,
     ``|n| ≤ floor(max_shift · N)``. Ties within ``RHO_TIE_TOL`` of the largest correlation go
     to the smallest |n| (−n before +n): zero shift stays unless a shift beats it by more
-    than the tolerance."""
+    than the tolerance.
+
+    Parameters
+    ----------
+    reference, comparison : numpy.ndarray
+        Measured and simulated curve, shape (N,).
+    max_shift : float
+        ε_P, the largest shift as a fraction of N.
+
+    Returns
+    -------
+    int
+        n_ε in samples.
+    """
     t, c = as_pair(reference, comparison)
     n = t.shape[0]
     k = min(math.floor(max_shift * n), n - 2)
@@ -153,7 +202,27 @@ def phase_shift(reference: np.ndarray, comparison: np.ndarray, max_shift: float 
 
 
 def phase_score(n_shift: int, n: int, *, max_shift: float = 0.2, kp: float = 1.0) -> float:
-    """ISO/TS 18571 phase score E_P from the shift ``n_shift`` of ``n``-sample curves."""
+    """ISO/TS 18571 phase score E_P from the shift ``n_shift`` of ``n``-sample curves.
+
+    Parameters
+    ----------
+    n_shift : int
+        Phase shift n_ε in samples (:func:`phase_shift`).
+    n : int
+        Curve length N in samples.
+    max_shift, kp : float
+        ε_P (fraction of N) and the exponent.
+
+    Returns
+    -------
+    float
+        E_P, dimensionless in [0, 1].
+
+    Examples
+    --------
+    >>> phase_score(10, 100)
+    0.5
+    """
     bound = max_shift * n
     s = abs(int(n_shift))
     if s == 0:
@@ -268,6 +337,18 @@ def dtw_magnitude_error(reference: np.ndarray, comparison: np.ndarray, window: f
     """ISO/TS 18571 magnitude error ``e_M = Σ|C_w − T_w| / Σ|T_w|`` along the DTW path.
 
     Sakoe–Chiba band ``|i − j| < ceil(window · N)`` (at least 1, i.e. no warping).
+
+    Parameters
+    ----------
+    reference, comparison : numpy.ndarray
+        Shifted, truncated measured and simulated curves, shape (N',), same unit.
+    window : float
+        Band radius w as a fraction of N'.
+
+    Returns
+    -------
+    float
+        e_M, dimensionless (0 = equal magnitudes).
     """
     t, c = as_pair(reference, comparison, min_len=1)
     n = t.shape[0]
@@ -288,7 +369,20 @@ def dtw_cost(reference: np.ndarray, comparison: np.ndarray, window: float = 1.0)
 
 def smoothed_slope(x: np.ndarray, dt: float) -> np.ndarray:
     """Derivative by central differences (one-sided at the ends) smoothed by a centred 9-point
-    moving average; windows of 1, 3, 5, 7 samples at the first/last four samples."""
+    moving average; windows of 1, 3, 5, 7 samples at the first/last four samples.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Curve, shape (N,), unit u.
+    dt : float
+        Sample interval in s.
+
+    Returns
+    -------
+    numpy.ndarray
+        Slope in u/s, shape (N,).
+    """
     a = np.asarray(x, dtype=np.float64)
     n = a.shape[0]
     if n < 9:
@@ -304,7 +398,20 @@ def smoothed_slope(x: np.ndarray, dt: float) -> np.ndarray:
 
 
 def slope_error(reference: np.ndarray, comparison: np.ndarray, dt: float) -> float:
-    """``e_S = Σ |C'_i − T'_i| / Σ |T'_i|`` of the smoothed slopes (dimensionless)."""
+    """``e_S = Σ |C'_i − T'_i| / Σ |T'_i|`` of the smoothed slopes (dimensionless).
+
+    Parameters
+    ----------
+    reference, comparison : numpy.ndarray
+        Measured and simulated curve, shape (N,), same unit.
+    dt : float
+        Sample interval in s.
+
+    Returns
+    -------
+    float
+        e_S, dimensionless.
+    """
     ts = smoothed_slope(reference, dt)
     cs = smoothed_slope(comparison, dt)
     den = float(np.sum(np.abs(ts)))
@@ -325,7 +432,21 @@ def iso18571(reference: np.ndarray, comparison: np.ndarray, fs: float,
              params: ISOParameters | None = None) -> ISORating:
     """ISO/TS 18571 objective rating of ``comparison`` (simulated) against ``reference``
     (measured); equal-length curves sampled at ``fs`` Hz (see module docstring for the
-    formulas). Returns an :class:`ISORating`; all scores dimensionless in [0, 1]."""
+    formulas). Returns an :class:`ISORating`; all scores dimensionless in [0, 1].
+
+    Parameters
+    ----------
+    reference, comparison : numpy.ndarray
+        Measured and simulated curve, shape (N,), same unit.
+    fs : float
+        Sampling rate in Hz.
+    params : ISOParameters or None
+        Corridor, phase, magnitude and slope settings; ``None`` = the ISO/TS 18571 defaults.
+
+    Returns
+    -------
+    ISORating
+    """
     p = params or ISOParameters()
     t, c = as_pair(reference, comparison, min_len=12)
     fs = positive(fs, "fs", "Hz")

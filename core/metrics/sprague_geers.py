@@ -44,7 +44,18 @@ class SpragueGeers:
 
 
 def energies(measured: np.ndarray, simulated: np.ndarray) -> tuple[float, float, float]:
-    """Return ``(ψ_mm, ψ_cc, ψ_cm)``; raises :class:`InvalidSignal` if a signal is all zero."""
+    """Return ``(ψ_mm, ψ_cc, ψ_cm)``; raises :class:`InvalidSignal` if a signal is all zero.
+
+    Parameters
+    ----------
+    measured, simulated : numpy.ndarray
+        Signals, shape (N,), same unit u.
+
+    Returns
+    -------
+    tuple of float
+        ``(ψ_mm, ψ_cc, ψ_cm)`` in u².
+    """
     m, c = as_pair(measured, simulated, min_len=1)
     psi_mm = float(np.dot(m, m))
     psi_cc = float(np.dot(c, c))
@@ -57,7 +68,18 @@ def energies(measured: np.ndarray, simulated: np.ndarray) -> tuple[float, float,
 
 
 def normalised_correlation(psi_mm: float, psi_cc: float, psi_cm: float) -> float:
-    """``ψ_cm / sqrt(ψ_cc ψ_mm)`` clipped to [−1, 1] (rounding can exceed 1 by ~1e-16)."""
+    """``ψ_cm / sqrt(ψ_cc ψ_mm)`` clipped to [−1, 1] (rounding can exceed 1 by ~1e-16).
+
+    Parameters
+    ----------
+    psi_mm, psi_cc, psi_cm : float
+        The energies of :func:`energies`.
+
+    Returns
+    -------
+    float
+        In [−1, 1].
+    """
     return float(np.clip(psi_cm / np.sqrt(psi_cc * psi_mm), -1.0, 1.0))
 
 

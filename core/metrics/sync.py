@@ -84,7 +84,27 @@ class SyncResult:
 def best_lag_index(lags: np.ndarray, rho: np.ndarray, tol: float = RHO_TIE_TOL) -> int:
     """Index of the chosen lag: among the lags whose coefficient is within ``tol`` of the
     largest, the smallest |lag| (−k before +k). With ``tol = 0`` this is the first maximum
-    counted outwards from lag 0."""
+    counted outwards from lag 0.
+
+    Parameters
+    ----------
+    lags : numpy.ndarray
+        Lags in samples, shape (K,).
+    rho : numpy.ndarray
+        Correlation coefficient per lag, shape (K,).
+    tol : float
+        Tie tolerance on the coefficient.
+
+    Returns
+    -------
+    int
+        Index into ``lags``.
+
+    Examples
+    --------
+    >>> best_lag_index(np.array([-1, 0, 1]), np.array([0.9, 0.9, 0.5]))
+    1
+    """
     lags = np.asarray(lags)
     rho = np.asarray(rho, dtype=np.float64)
     candidates = np.flatnonzero(rho >= rho.max() - tol)
@@ -97,6 +117,18 @@ def lag_correlations(measured: np.ndarray, simulated: np.ndarray, max_lag: int) 
 
     Returns ``(lags, rho)``; ``rho[j]`` belongs to ``lags[j]`` (samples, sign convention of the
     module docstring).
+
+    Parameters
+    ----------
+    measured, simulated : numpy.ndarray
+        Signals, shape (N,), one grid.
+    max_lag : int
+        Largest lag K in samples.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``lags`` (2K + 1,) in samples and ``rho`` (2K + 1,), dimensionless.
     """
     m, c = as_pair(measured, simulated)
     n = m.shape[0]
@@ -141,6 +173,11 @@ def estimate_lag(measured: np.ndarray, simulated: np.ndarray, fs: float, *,
     fs : sampling rate in Hz.
     max_lag_s : search window ±max_lag_s in s (default 2 s), capped at half the signal.
     subsample : refine the peak by three-point parabolic interpolation.
+
+    Returns
+    -------
+    SyncResult
+        Lag in samples and s (positive: simulated delayed) and the correlation at it.
     """
     m, c = as_pair(measured, simulated)
     fs = positive(fs, "fs", "Hz")
@@ -168,6 +205,18 @@ def apply_lag(measured: np.ndarray, simulated: np.ndarray, lag_samples: float) -
 
     Integer lags cut both signals to the overlap; fractional lags evaluate the simulated
     signal at ``i + τ`` by linear interpolation for every ``i`` where that lies in the record.
+
+    Parameters
+    ----------
+    measured, simulated : numpy.ndarray
+        Signals, shape (N,), same unit and grid.
+    lag_samples : float
+        τ in samples (positive: simulated delayed).
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(m_s, c_s)``, both of the overlap length.
     """
     m, c = as_pair(measured, simulated)
     n = m.shape[0]

@@ -254,7 +254,17 @@ def _contact_slope(eps: float, b0: float) -> float:
 
 
 def channel_names(vehicle: VehicleModel) -> list[str]:
-    """Output channels in kernel column order (core/types.py vocabulary)."""
+    """Output channels in kernel column order (core/types.py vocabulary).
+
+    Parameters
+    ----------
+    vehicle : VehicleModel
+
+    Returns
+    -------
+    list of str
+        Channel names such as ``Y_w1L``.
+    """
     names = []
     for i in range(vehicle.n_wheelsets):
         names += [f"Y_w{i + 1}L", f"Y_w{i + 1}R", f"Q_w{i + 1}L", f"Q_w{i + 1}R"]
@@ -355,6 +365,28 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
     or ``NAME``). ``nuisance`` and ``speed_factor`` are used by the synthetic-data generator
     (truth model) only. ``refine`` multiplies the number of integration steps (accuracy
     checks). Distance axis = car body centre position from the section start (m).
+
+    Parameters
+    ----------
+    vehicle : VehicleModel, mapping or str
+        Vehicle model, its record or a template name.
+    section : TrackSection
+    effects : mapping of str to mapping of str to float or None
+    seed : int or None
+    fs_out : float
+        Output rate in Hz.
+    parameters : mapping of str to float or None
+    channels : sequence of str or None
+        Channels to return; ``None`` = all of :func:`channel_names`.
+    nuisance : mapping of str to float or None
+    speed_factor : float
+    refine : int
+
+    Returns
+    -------
+    SignalSet
+        Channels in their registry units (kN, m/s², :data:`railval.core.types.CHANNELS`), shape
+        (N,) each, with ``time_s`` (s) and ``distance_m`` (m).
     """
     veh = VehicleModel.from_any(vehicle, parameters)
     ef = resolve_effects(dict(effects or {}))
@@ -441,6 +473,25 @@ def simulate_campaign(vehicle, sections: Sequence, *, layouts: Mapping[str, dict
     process — the diagnosis parallelises over candidates itself), or a map-like callable
     ``workers(func, tasks)`` returning the results in order (e.g. a Dask cluster's executor). Results are identical
     for any number of workers. ``progress(done, total)`` is called after each section.
+
+    Parameters
+    ----------
+    vehicle : VehicleModel, mapping or str
+        As in :func:`simulate_section`.
+    sections : sequence of TrackSection or SectionInfo
+    layouts : mapping of str to dict or None
+    effects, parameters, channels
+        As in :func:`simulate_section`, for every section.
+    fs : float or mapping of str to float
+        Output rate in Hz.
+    workers : int, callable or None
+    progress : callable or None
+    **_ignored
+        Further keywords, ignored.
+
+    Returns
+    -------
+    dict of str to SignalSet
     """
     veh = VehicleModel.from_any(vehicle, parameters)
     ef = resolve_effects(dict(effects or {}))

@@ -68,7 +68,18 @@ HIDDEN_DEFAULTS_WAGON: dict[str, dict[str, float]] = {
 
 
 def hidden_defaults(template: str = "coach") -> dict[str, dict[str, float]]:
-    """Default hidden-effect values for ``template``."""
+    """Default hidden-effect values for ``template``.
+
+    Parameters
+    ----------
+    template : str
+        Vehicle template name (``"wagon"`` has its own values).
+
+    Returns
+    -------
+    dict of str to dict of str to float
+        ``{effect: {param: value}}``.
+    """
     out = {k: dict(v) for k, v in HIDDEN_DEFAULTS.items()}
     if template == "wagon":
         out.update({k: dict(v) for k, v in HIDDEN_DEFAULTS_WAGON.items()})
@@ -142,7 +153,24 @@ class SynthCampaign:
 
 def parse_hidden(items: list[str] | None, template: str = "coach") -> dict[str, dict[str, float]]:
     """``["friction_damping", "conicity=0.4", "lateral_bumpstop:clearance_mm=15,stiffness_kN_mm=2"]``
-    → checked ``{effect: {param: value}}`` (defaults from :func:`hidden_defaults`)."""
+    → checked ``{effect: {param: value}}`` (defaults from :func:`hidden_defaults`).
+
+    Parameters
+    ----------
+    items : list of str or None
+        ``effect``, ``effect=value`` (its main parameter) or ``effect:param=value,...``.
+    template : str
+        Vehicle template whose defaults fill the gaps.
+
+    Returns
+    -------
+    dict of str to dict of str to float
+
+    Raises
+    ------
+    InvalidParameter
+        An unknown effect id or a malformed item.
+    """
     defaults = hidden_defaults(template)
     out: dict[str, dict[str, float]] = {}
     for item in items or []:
@@ -307,16 +335,33 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
                    oversample: int = 1, channel_faults: dict | None = None,
                    require_cause: bool = True) -> SynthCampaign:
     """Build the whole synthetic campaign in memory (measured + baseline signals, manifest data
-    and the truth). ``hidden``: ``{effect: {param: value}}`` (checked), default
-    ``{"friction_damping": HIDDEN_DEFAULTS[...]}``. ``progress(done, total)`` per simulation.
+    and the truth).
 
-    Truth-model options (a truth structurally unlike the candidate models, docs/diagnosis.md
-    "test bench"): ``truth_parameters`` — vehicle-template values of the truth only (the
-    baseline keeps the template's); ``oversample`` — the truth is simulated at ``oversample``
-    × ``fs`` and averaged over blocks of ``oversample`` samples (the simulator takes ≥ 2
-    integration steps per output sample, so this is a finer step: coach at 200 Hz 1.67 ms,
-    at 4 × 200 Hz 0.625 ms); ``channel_faults`` — see :func:`_apply_channel_faults`; ``require_cause=False``
-    allows a campaign with no hidden cause at all (``hidden={}``)."""
+    Parameters
+    ----------
+    name, template, seed, n_sections, fs : str, str, int, int, float
+        Campaign name, vehicle template, random seed, number of sections, output rate in Hz.
+    hidden : dict or None
+        ``{effect: {param: value}}`` (checked), default
+        ``{"friction_damping": HIDDEN_DEFAULTS[...]}``.
+    nuisance : dict or None
+        Overrides of :data:`NUISANCE_DEFAULTS`.
+    progress : callable or None
+        ``progress(done, total)`` per simulation.
+    truth_parameters, oversample, channel_faults : dict or None, int, dict or None
+        Truth-model options (a truth structurally unlike the candidate models,
+        docs/diagnosis.md "test bench"): vehicle-template values of the truth only (the
+        baseline keeps the template's); the truth simulated at ``oversample`` × ``fs`` and
+        averaged over blocks of ``oversample`` samples (the simulator takes ≥ 2 integration
+        steps per output sample, so this is a finer step: coach at 200 Hz 1.67 ms, at
+        4 × 200 Hz 0.625 ms); faults, see :func:`_apply_channel_faults`.
+    require_cause : bool
+        ``False`` allows a campaign with no hidden cause at all (``hidden={}``).
+
+    Returns
+    -------
+    SynthCampaign
+    """
     veh = VehicleModel(template)
     truth_veh = VehicleModel(template, dict(truth_parameters or {}))
     hidden = _checked_hidden(template, hidden, oversample, require_cause and not truth_parameters

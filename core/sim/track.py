@@ -43,6 +43,25 @@ def ore_b176_psd(omega: np.ndarray, kind: str, level: str = "low") -> np.ndarray
 
     ``kind`` one of ``vertical``, ``alignment`` (m²/(rad/m)), ``cross_level`` (height difference
     of the rails, m²/(rad/m)), ``gauge`` (m²/(rad/m)). See the module docstring for the source.
+
+    Parameters
+    ----------
+    omega : numpy.ndarray
+        Spatial angular frequency in rad/m, any shape.
+    kind : str
+        ``"vertical"``, ``"alignment"``, ``"cross_level"`` or ``"gauge"``.
+    level : str
+        ``"low"`` or ``"high"``.
+
+    Returns
+    -------
+    numpy.ndarray
+        PSD in m²/(rad/m), shape of ``omega``.
+
+    Raises
+    ------
+    InvalidParameter
+        An unknown level.
     """
     if level not in ORE_LEVELS:
         raise InvalidParameter(f"irregularity level {level!r} unknown; known: {sorted(ORE_LEVELS)}")
@@ -69,6 +88,28 @@ def generate_irregularities(length_m: float, *, level: str = "low", seed: int = 
     B176 spectra of ``level`` between wavelengths ``lambda_min`` and ``lambda_max`` (m).
 
     Returns ``{"s": grid, "vertical", "alignment", "cross_level", "gauge"}``.
+
+    Parameters
+    ----------
+    length_m : float
+        Length to cover in m.
+    level : str
+        ORE B176 level, ``"low"`` or ``"high"``.
+    seed : int
+        Random seed (same seed, same irregularities).
+    lambda_min, lambda_max : float
+        Wavelength band in m.
+    s0 : float
+        Grid start in m.
+    taper_m : float
+        Length in m of the cosine taper at the start (a simulation starts from rest).
+    scale : float
+        Factor on all amplitudes.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        Grid ``s`` in m and the four irregularities in m, all of shape (K,).
     """
     if not (0 < lambda_min < lambda_max):
         raise InvalidParameter(f"irregularity band must satisfy 0 < lambda_min < lambda_max, got "
