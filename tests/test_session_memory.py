@@ -31,7 +31,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from tests.browser_support import CHROMIUM, CHROMIUM_ARGS, block_fonts, require_browser
+from tests.browser_support import block_fonts, require_browser
 
 pytestmark = [pytest.mark.browser,
               pytest.mark.filterwarnings("ignore:reference already known:UserWarning")]
@@ -77,45 +77,47 @@ def _wait_for(predicate, timeout_s: float, step_s: float = 0.5):
         time.sleep(step_s)
 
 
-def test_closed_sessions_release_every_session_object(tmp_path):
+def test_closed_sessions_release_every_session_object(tmp_path, browser):
+    """(``browser``: pytest-playwright's session browser — a second Playwright instance cannot
+    start inside the running one.)"""
     require_browser()
-    from playwright.sync_api import sync_playwright
-
     from railval.app.main import served
     from tests.browser_support import demo_database
 
     db = demo_database(tmp_path)
+    # what earlier tests of this process left (their own servers' objects): counts are relative
+    start = _live()
+    idle = start["bokeh.server.session.ServerSession"]
     # Bokeh discards a session 0.6 s after its last connection closed (checked every 0.3 s)
     with served(db, check_unused_sessions_milliseconds=300,
-                unused_session_lifetime_milliseconds=600) as url, sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-        try:
-            # a first session loads what a process keeps once (modules, caches, Bokeh's default
-            # document); it and the served() probe's session are discarded before counting
-            _open(browser, url, ("compare", "dashboard")).close()
-            assert _wait_for(lambda: _live()["bokeh.server.session.ServerSession"] == 0, 60)
-            base = _live()
-            assert base["railval.app.state.app.AppState"] == 0
-            contexts = [_open(browser, url, ("compare", "dashboard")), _open(browser, url),
-                        _open(browser, url)]
-            opened = _live()
-            assert opened["railval.app.state.app.AppState"] == base["railval.app.state.app.AppState"] + 3
-            assert opened["railval.app.pages.compare.ComparePage"] == 1
-            assert opened["bokeh.server.session.ServerSession"] >= 3
-            # the count sees what is still referenced: one AppState kept by this test stays
-            held = [o for o in gc.get_objects() if type(o).__name__ == "AppState"][:1]
-            for ctx in contexts:
-                ctx.close()
-            released = _wait_for(
-                lambda: (live := _live())["bokeh.server.session.ServerSession"] == 0 and live, 60)
-            assert released, f"sessions not discarded: {_live()}"
-            assert released["railval.app.state.app.AppState"] == base["railval.app.state.app.AppState"] + 1
-            held.clear()  # (not `del`: a snapshot of this frame's locals may hold the list)
-            after = _live()
-            assert {k: after[k] for k in SESSION_TYPES} == {k: base[k] for k in SESSION_TYPES}, \
-                f"objects of closed sessions still alive: {after - base}"
-        finally:
-            browser.close()
+                unused_session_lifetime_milliseconds=600) as url:
+        # a first session loads what a process keeps once (modules, caches, Bokeh's default
+        # document); it and the served() probe's session are discarded before counting
+        _open(browser, url, ("compare", "dashboard")).close()
+        assert _wait_for(lambda: _live()["bokeh.server.session.ServerSession"] == idle, 60)
+        base = _live()
+        known = {id(o) for o in gc.get_objects() if type(o).__name__ == "AppState"}
+        assert base["railval.app.state.app.AppState"] == start["railval.app.state.app.AppState"]
+        contexts = [_open(browser, url, ("compare", "dashboard")), _open(browser, url),
+                    _open(browser, url)]
+        opened = _live()
+        assert opened["railval.app.state.app.AppState"] == base["railval.app.state.app.AppState"] + 3
+        assert opened["railval.app.pages.compare.ComparePage"] == base["railval.app.pages.compare.ComparePage"] + 1
+        assert opened["bokeh.server.session.ServerSession"] >= idle + 3
+        # the count sees what is still referenced: one AppState kept by this test stays
+        held = [o for o in gc.get_objects() if type(o).__name__ == "AppState"
+                and id(o) not in known][:1]
+        for ctx in contexts:
+            ctx.close()
+        want = base["railval.app.state.app.AppState"] + 1
+        released = _wait_for(
+            lambda: (live := _live())["bokeh.server.session.ServerSession"] == idle
+            and live["railval.app.state.app.AppState"] == want and live, 60)
+        assert released, f"sessions not discarded: {_live()}"
+        held.clear()  # (not `del`: a snapshot of this frame's locals may hold the list)
+        after = _live()
+        assert {k: after[k] for k in SESSION_TYPES} == {k: base[k] for k in SESSION_TYPES}, \
+            f"objects of closed sessions still alive: {after - base}"
     db.dispose()
 
 
@@ -125,14 +127,12 @@ def _rss_mib(pid: int) -> float:
     return psutil.Process(pid).memory_info().rss / 1048576
 
 
-def test_served_process_returns_the_memory_of_closed_sessions(tmp_path):
+def test_served_process_returns_the_memory_of_closed_sessions(tmp_path, browser):
     """``railval serve`` with :data:`SERVE_ENV`, 1 + 8 sessions on the first page, all closed:
     within 60 s (Bokeh's default unused-session lifetime 15 s, checked every 17 s, then
     ``release_memory``) the process's resident set gives back at least half of what the 8
     sessions added (pymalloc: 7 % of it, docs/app.md)."""
     require_browser()
-    from playwright.sync_api import sync_playwright
-
     from railval.app.main import SERVE_ENV, free_port
     from tests.browser_support import demo_database
 
@@ -153,19 +153,16 @@ def test_served_process_returns_the_memory_of_closed_sessions(tmp_path):
             except OSError:
                 return False
         assert _wait_for(healthy, 120), (tmp_path / "serve.log").read_text()
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-            warm = _open(browser, url)  # modules, caches, the campaign's data: once per process
-            time.sleep(1.0)
-            one = _rss_mib(proc.pid)
-            contexts = [_open(browser, url) for _ in range(8)]
-            time.sleep(1.0)
-            peak = _rss_mib(proc.pid)
-            added = peak - one
-            assert added > 4.0, f"8 sessions added only {added:.1f} MiB: nothing to measure"
-            for ctx in [*contexts, warm]:
-                ctx.close()
-            browser.close()
+        warm = _open(browser, url)  # modules, caches, the campaign's data: once per process
+        time.sleep(1.0)
+        one = _rss_mib(proc.pid)
+        contexts = [_open(browser, url) for _ in range(8)]
+        time.sleep(1.0)
+        peak = _rss_mib(proc.pid)
+        added = peak - one
+        assert added > 4.0, f"8 sessions added only {added:.1f} MiB: nothing to measure"
+        for ctx in [*contexts, warm]:
+            ctx.close()
         returned = _wait_for(lambda: peak - _rss_mib(proc.pid) >= 0.5 * added and
                              peak - _rss_mib(proc.pid), 60, step_s=2.0)
         after = _rss_mib(proc.pid)

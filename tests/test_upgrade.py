@@ -46,7 +46,7 @@ def test_previous_release_database_migrates_on_start_with_nothing_lost(release_d
             assert len(s.scalars(select(AuditEvent.id)).all()) >= expected["audit_events"]
             (_so, st), = statuses(s)
             assert st.valid, st.to_dict()
-            assert repo.verify_database(s)["ok"]
+            assert repo.verify_storage(s)["ok"]
             assert users.verify_password(s, "rev", "reviewer password") is not None
         report = audit_svc.verify_database(db)
         assert report.ok and report.signoffs == 1, report.to_dict()

@@ -67,7 +67,7 @@ def test_upload_equals_cli_import(campaign_dir, db_url, tmp_path, capsys):
         with web.session() as s:
             ev = s.scalars(select(AuditEvent).where(AuditEvent.action == "campaign.import")).all()[-1]
             assert ev.actor == "eng" and ev.object == "campaign:demo"
-            assert repo.verify_database(s)["ok"]
+            assert repo.verify_storage(s)["ok"]
             web_after = ev.after_sha256
         web_hashes = signal_hashes(web)
         with web.session() as s:  # room for the second round
@@ -176,7 +176,7 @@ def test_configuration_upload_equals_cli_and_checks(campaign_dir, tmp_path, caps
             assert repo.get_configuration(s, "demo", "mbs1").parent.name == "baseline"
             ev = s.scalars(select(AuditEvent).where(AuditEvent.action == "configuration.import")).one()
             assert ev.actor == "eng" and ev.object == "configuration:demo/mbs1"
-            assert repo.verify_database(s)["ok"]
+            assert repo.verify_storage(s)["ok"]
         # the same name again, an unknown parent, kN guiding forces declared in N: refused,
         # nothing stored
         before = _count(web)
