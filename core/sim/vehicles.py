@@ -46,6 +46,18 @@ from railval.core.sim.params import Param, resolve
 
 G = 9.81  #: gravitational acceleration, m/s²
 
+#: the creep force law, the same for both templates (docs/simulator.md)
+_CREEP_LAW: tuple[Param, ...] = (
+    Param("creep_law", "-", 0.0, 0.0, 1.0,
+          "creep force law: 0 = linear Kalker saturated by Shen-Hedrick-Elkins, 1 = Polach with reduction "
+          "factors polach_kA, polach_kS (a different contact law; no diagnosis candidate changes it)",
+          "Shen, Hedrick & Elkins 1983; Polach 2005 (Wear 258)"),
+    Param("polach_kA", "-", 1.0, 0.1, 1.0, "Polach reduction factor in the adhesion area (creep_law = 1)",
+          "Polach 2005 (Wear 258), dry rail"),
+    Param("polach_kS", "-", 0.4, 0.05, 1.0, "Polach reduction factor in the slip area (creep_law = 1)",
+          "Polach 2005 (Wear 258), dry rail"),
+)
+
 _COACH: tuple[Param, ...] = (
     Param("m_carbody", "kg", 32000.0, 15000.0, 70000.0, "car body mass", "[MB]"),
     Param("I_roll_carbody", "kg*m^2", 56800.0, 2e4, 2e5, "car body roll inertia", "[MB?] assumption"),
@@ -99,14 +111,7 @@ _COACH: tuple[Param, ...] = (
     Param("contact_area", "m^2", 1.2e-4, 3e-5, 3e-4, "contact patch area pi*a*b at Q0 (Hertz)", "[typ] assumption"),
     Param("shear_modulus", "Pa", 8.0e10, 7e10, 9e10, "steel shear modulus G", "steel"),
     Param("mu_nominal", "-", 0.45, 0.1, 0.7, "friction coefficient used without the wheel_rail_friction effect", "[typ] assumption"),
-    Param("creep_law", "-", 0.0, 0.0, 1.0,
-          "creep force law: 0 = linear Kalker saturated by Shen-Hedrick-Elkins, 1 = Polach with reduction "
-          "factors polach_kA, polach_kS (a different contact law; no diagnosis candidate changes it)",
-          "Shen, Hedrick & Elkins 1983; Polach 2005 (Wear 258)"),
-    Param("polach_kA", "-", 1.0, 0.1, 1.0, "Polach reduction factor in the adhesion area (creep_law = 1)",
-          "Polach 2005 (Wear 258), dry rail"),
-    Param("polach_kS", "-", 0.4, 0.05, 1.0, "Polach reduction factor in the slip area (creep_law = 1)",
-          "Polach 2005 (Wear 258), dry rail"),
+    *_CREEP_LAW,
 )
 
 _WAGON: tuple[Param, ...] = (
@@ -137,14 +142,7 @@ _WAGON: tuple[Param, ...] = (
     Param("contact_area", "m^2", 1.4e-4, 3e-5, 3e-4, "contact patch area pi*a*b at Q0 (Hertz)", "[typ] assumption"),
     Param("shear_modulus", "Pa", 8.0e10, 7e10, 9e10, "steel shear modulus G", "steel"),
     Param("mu_nominal", "-", 0.45, 0.1, 0.7, "friction coefficient used without the wheel_rail_friction effect", "[typ] assumption"),
-    Param("creep_law", "-", 0.0, 0.0, 1.0,
-          "creep force law: 0 = linear Kalker saturated by Shen-Hedrick-Elkins, 1 = Polach with reduction "
-          "factors polach_kA, polach_kS (a different contact law; no diagnosis candidate changes it)",
-          "Shen, Hedrick & Elkins 1983; Polach 2005 (Wear 258)"),
-    Param("polach_kA", "-", 1.0, 0.1, 1.0, "Polach reduction factor in the adhesion area (creep_law = 1)",
-          "Polach 2005 (Wear 258), dry rail"),
-    Param("polach_kS", "-", 0.4, 0.05, 1.0, "Polach reduction factor in the slip area (creep_law = 1)",
-          "Polach 2005 (Wear 258), dry rail"),
+    *_CREEP_LAW,
 )
 
 _CAT = "assumption: typical range for European bogie passenger coaches (Iwnicki (ed.) 2006)"
