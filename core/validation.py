@@ -38,6 +38,7 @@ interval).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -56,7 +57,7 @@ from railval.core.coverage import (  # noqa: F401 - the coverage rules, re-expor
     zone_shortfalls,
 )
 from railval.core.definitions import CHOSEN, READINGS, alternatives_for
-from railval.core.en14363 import evaluate_present
+from railval.core.en14363 import SectionValues, evaluate_present
 from railval.core.errors import InvalidParameter
 from railval.core.filters import DEFAULT_ORDER
 from railval.core.quantities import QUANTITIES, QUANTITY_IDS, VEHICLE_KINDS
@@ -66,6 +67,7 @@ from railval.core.types import SectionInfo, SignalSet
 
 STD_DDOF = 1
 STD_DEFINITION = "sample standard deviation (ddof = 1, divided by n − 1)"
+_SECTION_VALUE_UNDER = SectionValues.value_under
 
 
 @dataclass(frozen=True)
@@ -350,10 +352,10 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
              top: int = 5, warnings: Sequence[str] = ()) -> ValidationResult:
     """Validate one configuration from in-memory values (Polach & Böttcher 2014 §5).
 
-    Three steps: gather the pairs of every quantity (:func:`_gather_pairs`), compute the D_v
-    statistics per quantity (:func:`quantity_result`) and the coverage (:func:`coverage`),
-    then the verdict under the other readings of the open definitions and the supplementary
-    results.
+    Three steps: gather the pairs of every quantity (:func:`_gather_pairs`, as arrays),
+    compute the D_v statistics per quantity (:func:`quantity_result`) and the coverage
+    (:func:`coverage`), then the verdict under the other readings of the open definitions and
+    the supplementary results.
 
     Parameters
     ----------
@@ -387,8 +389,6 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     InvalidParameter
         Bad ``n_boot``/``ci_level``, a section without SectionInfo, an unknown quantity.
     """
-    import pandas as pd
-
     if n_boot < 0:
         raise InvalidParameter(f"n_boot must be ≥ 0, got {n_boot}")
     if not 0.0 < ci_level < 1.0:
@@ -396,62 +396,142 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     veh = Vehicle.from_any(vehicle)
     secs = dict(sections) if isinstance(sections, Mapping) else {s.id: s for s in sections}
     common = sorted(set(measured_values) & set(simulated_values))
-    recs = _gather_pairs(measured_values, simulated_values, secs, common)
+    pairs = _gather_pairs(measured_values, simulated_values, secs, common)
     results: dict[str, QuantityResult] = {}
-    frames = []
     for qi, qid in enumerate(QUANTITY_IDS):
-        results[qid], frame = quantity_result(qid, recs[qid], veh, n_boot=n_boot,
-                                              rng=np.random.default_rng([seed, qi]),
-                                              ci_level=ci_level, top=top)
-        frames.append(pd.DataFrame(frame))
+        results[qid] = quantity_result(qid, pairs.of(qi), veh, n_boot=n_boot,
+                                       rng=np.random.default_rng([seed, qi]),
+                                       ci_level=ci_level, top=top)
     zone_of = {sid: int(info.zone) for sid, info in secs.items()}
-    cov = coverage({q: {r[0] for r in recs[q]} for q in QUANTITY_IDS},
-                   {q: {r[2] for r in recs[q]} for q in QUANTITY_IDS},
-                   {q: len(recs[q]) for q in QUANTITY_IDS}, zone_of)
+    cov = coverage({q: set(pairs.of(qi).section) for qi, q in enumerate(QUANTITY_IDS)},
+                   {q: set(pairs.of(qi).position) for qi, q in enumerate(QUANTITY_IDS)},
+                   {q: pairs.of(qi).n for qi, q in enumerate(QUANTITY_IDS)}, zone_of)
     validated = cov.ok and all(r.passed for r in results.values())
     validated_under: dict[str, bool] = {}
     if bool(common) and all(hasattr(measured_values[sid], "value_under")
                             and hasattr(simulated_values[sid], "value_under") for sid in common):
-        validated_under = _verdicts_under_readings(results, recs, measured_values,
+        validated_under = _verdicts_under_readings(results, pairs, measured_values,
                                                    simulated_values, cov.ok)
     supp = _supplementary(measured_values, simulated_values, common, zone_of)
     return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level,
-                            pd.concat(frames, ignore_index=True), list(warnings),
+                            pairs.frame(results), list(warnings),
                             supplementary=supp, validated_under=validated_under)
 
 
+@dataclass
+class QuantityPairs:
+    """The pairs of one quantity as columns, in gathering order (sections sorted, keys in the
+    measurement's order): section, zone, position, M, S and the indices of the pairs in the
+    gathered table (:class:`_Pairs`)."""
+
+    section: list[str]
+    zone: list[int]
+    position: list[str]
+    m: np.ndarray
+    s: np.ndarray
+    index: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.m.size)
+
+
+@dataclass
+class _Pairs:
+    """Every pair of one configuration as flat columns (gathering order) plus, per section,
+    the kept keys and their M and S values (to look the values up under other readings)."""
+
+    section: list[str]
+    zone: list[int]
+    position: list[str]
+    qindex: np.ndarray
+    m: np.ndarray
+    s: np.ndarray
+    by_section: list[tuple[str, list, list, list]]
+    _split: dict[int, QuantityPairs] = field(default_factory=dict)
+
+    def of(self, qi: int) -> QuantityPairs:
+        """The pairs of quantity ``QUANTITY_IDS[qi]`` (order kept)."""
+        if qi not in self._split:
+            idx = np.flatnonzero(self.qindex == qi)
+            il = idx.tolist()
+            self._split[qi] = QuantityPairs([self.section[i] for i in il],
+                                            [self.zone[i] for i in il],
+                                            [self.position[i] for i in il],
+                                            self.m[idx], self.s[idx], idx)
+        return self._split[qi]
+
+    def frame(self, results: Mapping[str, QuantityResult]):
+        """``ValidationResult.pairs``: quantity, section, zone, position, M, S, D, D_norm,
+        quantities in registry order."""
+        import pandas as pd
+
+        parts = [self.of(qi) for qi in range(len(QUANTITY_IDS))]
+        if any(p.n == 0 for p in parts):  # the per-quantity frames fix the empty columns' dtypes
+            return pd.concat([pd.DataFrame(_frame_columns(q, p, results[q].std_limit))
+                              for q, p in zip(QUANTITY_IDS, parts, strict=True)],
+                             ignore_index=True)
+        cols = [_frame_columns(q, p, results[q].std_limit)
+                for q, p in zip(QUANTITY_IDS, parts, strict=True)]
+        return pd.DataFrame({
+            "quantity": [q for q, p in zip(QUANTITY_IDS, parts, strict=True) for _ in range(p.n)],
+            **{k: [x for c in cols for x in c[k]] for k in ("section", "zone", "position")},
+            **{k: np.concatenate([c[k] for c in cols]) for k in ("M", "S", "D", "D_norm")}})
+
+
+def _frame_columns(qid: str, p: QuantityPairs, std_limit: float) -> dict[str, Any]:
+    d = difference(p.s, p.m)
+    return {"quantity": qid, "section": p.section, "zone": p.zone, "position": p.position,
+            "M": p.m, "S": p.s, "D": d, "D_norm": d / std_limit}
+
+
+_QINDEX = {q: i for i, q in enumerate(QUANTITY_IDS)}
+
+
 def _gather_pairs(measured_values, simulated_values, secs: Mapping[str, SectionInfo],
-                  common: Sequence[str]) -> dict[str, list[tuple[str, int, str, float, float]]]:
-    """quantity id → its pairs ``(section, zone, position, M, S)`` where both sides hold a
-    finite value (sections in ``common`` order, keys in the measurement's order)."""
-    recs: dict[str, list] = {q: [] for q in QUANTITY_IDS}
+                  common: Sequence[str]) -> _Pairs:
+    """Every pair ``(section, zone, position, M, S)`` where both sides hold a finite value
+    (sections in ``common`` order, keys in the measurement's order), as columns."""
+    section, zone, position, qindex, ms, ss, by_section = [], [], [], [], [], [], []
+    nan = float("nan")
     for sid in common:
         if sid not in secs:
             raise InvalidParameter(f"section {sid!r} has values but no SectionInfo")
-        zone = int(secs[sid].zone)
+        z = int(secs[sid].zone)
         mv, sv = measured_values[sid], simulated_values[sid]
-        for key, m in mv.items():
-            s = sv.get(key)
-            if s is None or not (np.isfinite(m) and np.isfinite(s)):
-                continue
-            qid, pos = key
-            if qid not in recs:
+        keys = list(mv)
+        m = np.fromiter((float(mv[k]) for k in keys), dtype=np.float64, count=len(keys))
+        s_raw = [sv.get(k) for k in keys]
+        s = np.fromiter((nan if v is None else float(v) for v in s_raw), dtype=np.float64,
+                        count=len(keys))
+        keep = np.flatnonzero(np.isfinite(m) & np.isfinite(s)).tolist()
+        kept = [keys[i] for i in keep]
+        for qid, _pos in kept:
+            if qid not in _QINDEX:
                 raise InvalidParameter(f"unknown quantity {qid!r} in section {sid}")
-            recs[qid].append((sid, zone, pos, float(m), float(s)))
-    return recs
+        section += [sid] * len(kept)
+        zone += [z] * len(kept)
+        position += [k[1] for k in kept]
+        qindex += [_QINDEX[k[0]] for k in kept]
+        ms.append(m[keep])
+        ss.append(s[keep])
+        by_section.append((sid, kept, [mv[k] for k in kept], [s_raw[i] for i in keep]))
+    cat = (lambda xs: np.concatenate(xs) if xs else np.empty(0))
+    return _Pairs(section, zone, position, np.array(qindex, dtype=np.intp), cat(ms), cat(ss),
+                  by_section)
 
 
-def quantity_result(qid: str, rec: Sequence[tuple[str, int, str, float, float]], vehicle: Vehicle,
-                    *, n_boot: int, rng: np.random.Generator, ci_level: float = 0.95,
-                    top: int = 5) -> tuple[QuantityResult, dict[str, Any]]:
+def quantity_result(qid: str, pairs: QuantityPairs, vehicle: Vehicle, *, n_boot: int,
+                    rng: np.random.Generator, ci_level: float = 0.95,
+                    top: int = 5) -> QuantityResult:
     """D_v statistics of one quantity over its pairs (Polach & Böttcher 2014 §5, eq. 4).
 
     Parameters
     ----------
     qid : str
         Quantity id of :data:`railval.core.quantities.QUANTITIES`.
-    rec : sequence of (section, zone, position, M, S)
-        The pairs of the quantity.
+    pairs : QuantityPairs
+        The pairs of the quantity (section, zone, position, M, S).
     vehicle : Vehicle
         What the limits depend on (Table 2).
     n_boot, rng, ci_level
@@ -461,15 +541,13 @@ def quantity_result(qid: str, rec: Sequence[tuple[str, int, str, float, float]],
 
     Returns
     -------
-    (QuantityResult, dict)
-        The statistics and the columns of its part of ``ValidationResult.pairs``
-        (quantity, section, zone, position, M, S, D, D_norm).
+    QuantityResult
+        The statistics; the per-pair columns are built by ``_Pairs.frame``.
     """
     q = QUANTITIES[qid]
     mean_limit = q.mean_limit(vehicle.Q0_kN, vehicle.kind, vehicle.secondary_suspension)
     std_limit = q.std_limit(vehicle.Q0_kN, vehicle.kind, vehicle.secondary_suspension)
-    m = np.array([r[3] for r in rec], dtype=np.float64)
-    s = np.array([r[4] for r in rec], dtype=np.float64)
+    m, s = pairs.m, pairs.s
     d = difference(s, m)
     n = d.size
     mean = float(d.mean()) if n else float("nan")
@@ -479,26 +557,25 @@ def quantity_result(qid: str, rec: Sequence[tuple[str, int, str, float, float]],
                                      ci_level=ci_level)
     d_norm = d / std_limit
     ss = float(np.sum(d * d))
-    order = np.argsort(-np.abs(d_norm), kind="stable")[:top]
-    drill = [{"section": rec[i][0], "zone": rec[i][1], "position": rec[i][2],
-              "M": rec[i][3], "S": rec[i][4], "D": float(d[i]),
+    order = np.argsort(-np.abs(d_norm), kind="stable")[:top].tolist()
+    drill = [{"section": pairs.section[i], "zone": pairs.zone[i], "position": pairs.position[i],
+              "M": float(m[i]), "S": float(s[i]), "D": float(d[i]),
               "D_norm": float(d_norm[i]),
               "share_of_sum_of_squares": float(d[i] ** 2 / ss) if ss > 0 else 0.0}
              for i in order]
-    result = QuantityResult(qid, q.unit, n, len({r[2] for r in rec}), len({r[0] for r in rec}),
-                            mean, std, mean_limit, std_limit, mci, sci, drill)
-    frame = {"quantity": qid, "section": [r[0] for r in rec], "zone": [r[1] for r in rec],
-             "position": [r[2] for r in rec], "M": m, "S": s, "D": d, "D_norm": d_norm}
-    return result, frame
+    return QuantityResult(qid, q.unit, n, len(set(pairs.position)), len(set(pairs.section)),
+                          mean, std, mean_limit, std_limit, mci, sci, drill)
 
 
-def _verdicts_under_readings(results: dict[str, QuantityResult], recs: Mapping[str, list],
+def _verdicts_under_readings(results: dict[str, QuantityResult], pairs: _Pairs,
                              measured_values, simulated_values, coverage_ok: bool
                              ) -> dict[str, bool]:
     """Fill every quantity's ``alternatives`` and return reading id → validated under that
     reading (a quantity whose reading is undefined keeps its chosen pass/fail)."""
-    for qid, res in results.items():
-        res.alternatives = _alternatives(qid, res, recs[qid], measured_values, simulated_values)
+    m_under = _values_under(pairs, measured_values, 2)
+    s_under = _values_under(pairs, simulated_values, 3)
+    for qi, (qid, res) in enumerate(results.items()):
+        res.alternatives = _alternatives(qid, res, pairs.of(qi), m_under, s_under)
     validated_under: dict[str, bool] = {}
     for reading in READINGS:
         if reading == CHOSEN:
@@ -509,6 +586,28 @@ def _verdicts_under_readings(results: dict[str, QuantityResult], recs: Mapping[s
             ok.append(res.passed if alt is None or alt["pass"] is None else alt["pass"])
         validated_under[reading.id] = bool(coverage_ok and all(ok))
     return validated_under
+
+
+def _values_under(pairs: _Pairs, values, column: int) -> dict[str, np.ndarray]:
+    """Reading id → every pair's value of one side under that reading (gathering order;
+    ``SectionValues.value_under``: the chosen value where the reading does not change it).
+    ``column``: 2 for the measured, 3 for the simulated side of ``pairs.by_section``."""
+    out = {}
+    for reading in READINGS:
+        if reading == CHOSEN:
+            continue
+        rid = reading.id
+        parts = []
+        for row in pairs.by_section:
+            sv = values[row[0]]
+            if type(sv).value_under is _SECTION_VALUE_UNDER:
+                alt = sv.alternatives.get(rid)
+                got = row[column] if not alt else list(map(alt.get, row[1], row[column]))
+            else:
+                got = [sv.value_under(rid, k) for k in row[1]]
+            parts.append(np.array(got, dtype=np.float64))
+        out[rid] = np.concatenate(parts) if parts else np.empty(0)
+    return out
 
 
 def _supplementary(measured_values, simulated_values, common: Sequence[str],
@@ -524,30 +623,35 @@ def _supplementary(measured_values, simulated_values, common: Sequence[str],
                                  {s: zone_of[s] for s in common if s in zone_of})
 
 
-def _alternatives(qid: str, res: QuantityResult, rec: list, measured_values, simulated_values
+@functools.cache
+def _reading_text(reading, sliding_mean: bool) -> tuple[dict, list, str, str]:
+    """The constant descriptions of a reading for a quantity (built once)."""
+    return (reading.to_dict(), reading.differs_from_chosen(sliding_mean),
+            reading.describe(sliding_mean), reading.short(sliding_mean))
+
+
+def _alternatives(qid: str, res: QuantityResult, pairs: QuantityPairs,
+                  m_under: Mapping[str, np.ndarray], s_under: Mapping[str, np.ndarray]
                   ) -> list[dict]:
     """Mean, std and pass/fail of one quantity under each reading that can change it, over
     the pairs of the chosen reading. ``pass`` is None where the reading is undefined for
     some pair (NaN value, e.g. a sample window without samples)."""
     out = []
+    sliding = QUANTITIES[qid].sliding_mean
     for reading in alternatives_for(QUANTITIES[qid]):
-        key_m = [measured_values[r[0]].value_under(reading.id, (qid, r[2])) for r in rec]
-        key_s = [simulated_values[r[0]].value_under(reading.id, (qid, r[2])) for r in rec]
-        m = np.array(key_m, dtype=np.float64)
-        s = np.array(key_s, dtype=np.float64)
-        changed = int(np.sum((m != np.array([r[3] for r in rec])) |
-                             (s != np.array([r[4] for r in rec]))))
+        m = m_under[reading.id][pairs.index]
+        s = s_under[reading.id][pairs.index]
+        changed = int(np.sum((m != pairs.m) | (s != pairs.s)))
         d = difference(s, m)
         n = d.size
         defined = bool(np.all(np.isfinite(d)))
         mean = float(d.mean()) if n and defined else float("nan")
         std = float(d.std(ddof=STD_DDOF)) if n >= 2 and defined else float("nan")
         passed = judge(n, mean, std, res.mean_limit, res.std_limit) if defined else None
+        as_dict, differs, description, label = _reading_text(reading, sliding)
         out.append({
-            "reading": reading.to_dict(),
-            "differs_in": reading.differs_from_chosen(QUANTITIES[qid].sliding_mean),
-            "description": reading.describe(QUANTITIES[qid].sliding_mean),
-            "label": reading.short(QUANTITIES[qid].sliding_mean),
+            "reading": dict(as_dict), "differs_in": list(differs),
+            "description": description, "label": label,
             "values_changed": changed,
             "mean": _none_if_nan(mean), "std": _none_if_nan(std),
             "mean_norm": _none_if_nan(mean / res.mean_limit),
