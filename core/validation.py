@@ -57,9 +57,10 @@ from railval.core.coverage import (  # noqa: F401 - the coverage rules, re-expor
     zone_shortfalls,
 )
 from railval.core.definitions import CHOSEN, READINGS, alternatives_for
-from railval.core.en14363 import SectionValues, evaluate_present
+from railval.core.en14363 import evaluate_present
 from railval.core.errors import InvalidParameter
 from railval.core.filters import DEFAULT_ORDER
+from railval.core.pairing import Pairs, QuantityPairs, gather_pairs, values_under
 from railval.core.quantities import QUANTITIES, QUANTITY_IDS, VEHICLE_KINDS
 from railval.core.stages import stage
 from railval.core.supplementary import supplementary_results
@@ -67,7 +68,6 @@ from railval.core.types import SectionInfo, SignalSet
 
 STD_DDOF = 1
 STD_DEFINITION = "sample standard deviation (ddof = 1, divided by n − 1)"
-_SECTION_VALUE_UNDER = SectionValues.value_under
 
 
 @dataclass(frozen=True)
@@ -234,7 +234,9 @@ class QuantityResult:
 class ValidationResult:
     """Verdict, coverage, per-quantity statistics and the per-pair table of one
     configuration. ``pairs``: DataFrame with columns quantity, section, zone, position, M, S,
-    D, D_norm (= D / std limit) — the normalised residual pattern."""
+    D, D_norm (= D / std limit) — the normalised residual pattern; built on first use
+    (``pairs_table`` holds the function that builds it until then), so a verdict that
+    nobody draws costs no DataFrame (nor the import of pandas)."""
 
     validated: bool
     coverage: Coverage
@@ -243,7 +245,7 @@ class ValidationResult:
     n_boot: int
     seed: int
     ci_level: float
-    pairs: object  # pandas.DataFrame
+    pairs_table: object  # pandas.DataFrame, or a function without arguments returning it
     warnings: list[str] = field(default_factory=list)
     #: free-form context added by callers (campaign, configuration, cache statistics)
     info: dict = field(default_factory=dict)
@@ -251,6 +253,13 @@ class ValidationResult:
     supplementary: dict = field(default_factory=dict)
     #: reading id → validated under that reading (empty: no alternatives carried)
     validated_under: dict = field(default_factory=dict)
+
+    @property
+    def pairs(self):
+        """The per-pair table (pandas.DataFrame), built on first use."""
+        if callable(self.pairs_table):
+            self.pairs_table = self.pairs_table()
+        return self.pairs_table
 
     @property
     def definition_sensitive(self) -> bool | None:
@@ -396,7 +405,7 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     veh = Vehicle.from_any(vehicle)
     secs = dict(sections) if isinstance(sections, Mapping) else {s.id: s for s in sections}
     common = sorted(set(measured_values) & set(simulated_values))
-    pairs = _gather_pairs(measured_values, simulated_values, secs, common)
+    pairs = gather_pairs(measured_values, simulated_values, secs, common)
     results: dict[str, QuantityResult] = {}
     for qi, qid in enumerate(QUANTITY_IDS):
         results[qid] = quantity_result(qid, pairs.of(qi), veh, n_boot=n_boot,
@@ -414,111 +423,32 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
                                                    simulated_values, cov.ok)
     supp = _supplementary(measured_values, simulated_values, common, zone_of)
     return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level,
-                            pairs.frame(results), list(warnings),
+                            functools.partial(_pairs_frame, pairs, results), list(warnings),
                             supplementary=supp, validated_under=validated_under)
 
 
-@dataclass
-class QuantityPairs:
-    """The pairs of one quantity as columns, in gathering order (sections sorted, keys in the
-    measurement's order): section, zone, position, M, S and the indices of the pairs in the
-    gathered table (:class:`_Pairs`)."""
+def _pairs_frame(pairs: Pairs, results: Mapping[str, QuantityResult]):
+    """``ValidationResult.pairs``: quantity, section, zone, position, M, S, D, D_norm,
+    quantities in registry order."""
+    import pandas as pd
 
-    section: list[str]
-    zone: list[int]
-    position: list[str]
-    m: np.ndarray
-    s: np.ndarray
-    index: np.ndarray
-
-    @property
-    def n(self) -> int:
-        return int(self.m.size)
-
-
-@dataclass
-class _Pairs:
-    """Every pair of one configuration as flat columns (gathering order) plus, per section,
-    the kept keys and their M and S values (to look the values up under other readings)."""
-
-    section: list[str]
-    zone: list[int]
-    position: list[str]
-    qindex: np.ndarray
-    m: np.ndarray
-    s: np.ndarray
-    by_section: list[tuple[str, list, list, list]]
-    _split: dict[int, QuantityPairs] = field(default_factory=dict)
-
-    def of(self, qi: int) -> QuantityPairs:
-        """The pairs of quantity ``QUANTITY_IDS[qi]`` (order kept)."""
-        if qi not in self._split:
-            idx = np.flatnonzero(self.qindex == qi)
-            il = idx.tolist()
-            self._split[qi] = QuantityPairs([self.section[i] for i in il],
-                                            [self.zone[i] for i in il],
-                                            [self.position[i] for i in il],
-                                            self.m[idx], self.s[idx], idx)
-        return self._split[qi]
-
-    def frame(self, results: Mapping[str, QuantityResult]):
-        """``ValidationResult.pairs``: quantity, section, zone, position, M, S, D, D_norm,
-        quantities in registry order."""
-        import pandas as pd
-
-        parts = [self.of(qi) for qi in range(len(QUANTITY_IDS))]
-        if any(p.n == 0 for p in parts):  # the per-quantity frames fix the empty columns' dtypes
-            return pd.concat([pd.DataFrame(_frame_columns(q, p, results[q].std_limit))
-                              for q, p in zip(QUANTITY_IDS, parts, strict=True)],
-                             ignore_index=True)
-        cols = [_frame_columns(q, p, results[q].std_limit)
-                for q, p in zip(QUANTITY_IDS, parts, strict=True)]
-        return pd.DataFrame({
-            "quantity": [q for q, p in zip(QUANTITY_IDS, parts, strict=True) for _ in range(p.n)],
-            **{k: [x for c in cols for x in c[k]] for k in ("section", "zone", "position")},
-            **{k: np.concatenate([c[k] for c in cols]) for k in ("M", "S", "D", "D_norm")}})
+    parts = [pairs.of(qi) for qi in range(len(QUANTITY_IDS))]
+    if any(p.n == 0 for p in parts):  # the per-quantity frames fix the empty columns' dtypes
+        return pd.concat([pd.DataFrame(_frame_columns(q, p, results[q].std_limit))
+                          for q, p in zip(QUANTITY_IDS, parts, strict=True)],
+                         ignore_index=True)
+    cols = [_frame_columns(q, p, results[q].std_limit)
+            for q, p in zip(QUANTITY_IDS, parts, strict=True)]
+    return pd.DataFrame({
+        "quantity": [q for q, p in zip(QUANTITY_IDS, parts, strict=True) for _ in range(p.n)],
+        **{k: [x for c in cols for x in c[k]] for k in ("section", "zone", "position")},
+        **{k: np.concatenate([c[k] for c in cols]) for k in ("M", "S", "D", "D_norm")}})
 
 
 def _frame_columns(qid: str, p: QuantityPairs, std_limit: float) -> dict[str, Any]:
     d = difference(p.s, p.m)
     return {"quantity": qid, "section": p.section, "zone": p.zone, "position": p.position,
             "M": p.m, "S": p.s, "D": d, "D_norm": d / std_limit}
-
-
-_QINDEX = {q: i for i, q in enumerate(QUANTITY_IDS)}
-
-
-def _gather_pairs(measured_values, simulated_values, secs: Mapping[str, SectionInfo],
-                  common: Sequence[str]) -> _Pairs:
-    """Every pair ``(section, zone, position, M, S)`` where both sides hold a finite value
-    (sections in ``common`` order, keys in the measurement's order), as columns."""
-    section, zone, position, qindex, ms, ss, by_section = [], [], [], [], [], [], []
-    nan = float("nan")
-    for sid in common:
-        if sid not in secs:
-            raise InvalidParameter(f"section {sid!r} has values but no SectionInfo")
-        z = int(secs[sid].zone)
-        mv, sv = measured_values[sid], simulated_values[sid]
-        keys = list(mv)
-        m = np.fromiter((float(mv[k]) for k in keys), dtype=np.float64, count=len(keys))
-        s_raw = [sv.get(k) for k in keys]
-        s = np.fromiter((nan if v is None else float(v) for v in s_raw), dtype=np.float64,
-                        count=len(keys))
-        keep = np.flatnonzero(np.isfinite(m) & np.isfinite(s)).tolist()
-        kept = [keys[i] for i in keep]
-        for qid, _pos in kept:
-            if qid not in _QINDEX:
-                raise InvalidParameter(f"unknown quantity {qid!r} in section {sid}")
-        section += [sid] * len(kept)
-        zone += [z] * len(kept)
-        position += [k[1] for k in kept]
-        qindex += [_QINDEX[k[0]] for k in kept]
-        ms.append(m[keep])
-        ss.append(s[keep])
-        by_section.append((sid, kept, [mv[k] for k in kept], [s_raw[i] for i in keep]))
-    cat = (lambda xs: np.concatenate(xs) if xs else np.empty(0))
-    return _Pairs(section, zone, position, np.array(qindex, dtype=np.intp), cat(ms), cat(ss),
-                  by_section)
 
 
 def quantity_result(qid: str, pairs: QuantityPairs, vehicle: Vehicle, *, n_boot: int,
@@ -567,13 +497,13 @@ def quantity_result(qid: str, pairs: QuantityPairs, vehicle: Vehicle, *, n_boot:
                           mean, std, mean_limit, std_limit, mci, sci, drill)
 
 
-def _verdicts_under_readings(results: dict[str, QuantityResult], pairs: _Pairs,
+def _verdicts_under_readings(results: dict[str, QuantityResult], pairs: Pairs,
                              measured_values, simulated_values, coverage_ok: bool
                              ) -> dict[str, bool]:
     """Fill every quantity's ``alternatives`` and return reading id → validated under that
     reading (a quantity whose reading is undefined keeps its chosen pass/fail)."""
-    m_under = _values_under(pairs, measured_values, 2)
-    s_under = _values_under(pairs, simulated_values, 3)
+    m_under = values_under(pairs, measured_values, 2)
+    s_under = values_under(pairs, simulated_values, 3)
     for qi, (qid, res) in enumerate(results.items()):
         res.alternatives = _alternatives(qid, res, pairs.of(qi), m_under, s_under)
     validated_under: dict[str, bool] = {}
@@ -586,29 +516,6 @@ def _verdicts_under_readings(results: dict[str, QuantityResult], pairs: _Pairs,
             ok.append(res.passed if alt is None or alt["pass"] is None else alt["pass"])
         validated_under[reading.id] = bool(coverage_ok and all(ok))
     return validated_under
-
-
-def _values_under(pairs: _Pairs, values, column: int) -> dict[str, np.ndarray]:
-    """Reading id → every pair's value of one side under that reading (gathering order;
-    ``SectionValues.value_under``: the chosen value where the reading does not change it).
-    ``column``: 2 for the measured, 3 for the simulated side of ``pairs.by_section``."""
-    out = {}
-    for reading in READINGS:
-        if reading == CHOSEN:
-            continue
-        rid = reading.id
-        parts = []
-        for row in pairs.by_section:
-            sv = values[row[0]]
-            if type(sv).value_under is _SECTION_VALUE_UNDER:
-                alt = sv.alternatives.get(rid)
-                got = row[column] if not alt else list(map(alt.get, row[1], row[column]))
-            else:
-                got = [sv.value_under(rid, k) for k in row[1]]
-            parts.append(np.array(got, dtype=np.float64))
-        out[rid] = np.concatenate(parts) if parts else np.empty(0)
-    return out
-
 
 def _supplementary(measured_values, simulated_values, common: Sequence[str],
                    zone_of: Mapping[str, int]) -> dict:

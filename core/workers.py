@@ -16,9 +16,12 @@ soon as that parent is gone:
 
 from __future__ import annotations
 
+import contextvars
 import os
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 #: seconds between two checks of the watch thread
 WATCH_INTERVAL_S = 0.5
@@ -85,9 +88,32 @@ if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_forget_thread_pool)
 
 
+#: row threads set by :func:`row_threads` for the work of this context (None: not set)
+_ROW_THREADS: contextvars.ContextVar[int | None] = contextvars.ContextVar(
+    "railval_row_threads", default=None)
+
+
+@contextmanager
+def row_threads(n: int) -> Iterator[None]:
+    """Within the block (this thread and work it hands on with
+    :func:`railval.core.stages.in_context`), :func:`thread_count` returns ``n``: a thread that
+    processes one of several chunks at once takes its share of the cores instead of all."""
+    token = _ROW_THREADS.set(max(1, int(n)))
+    try:
+        yield
+    finally:
+        _ROW_THREADS.reset(token)
+
+
 def thread_count() -> int:
-    """Threads for row-parallel compiled kernels: ``$RAILVAL_THREADS`` if set (≥ 1), else the
-    cores this process may run on (at most 8)."""
+    """Threads for row-parallel compiled kernels: the :func:`row_threads` setting of this
+    context, else ``$RAILVAL_THREADS`` if set (≥ 1), else the cores this process may run on
+    (at most 8)."""
+    override = _ROW_THREADS.get()
+    return override if override is not None else _process_thread_count()
+
+
+def _process_thread_count() -> int:
     env = os.environ.get("RAILVAL_THREADS", "").strip()
     if env:
         try:
@@ -121,7 +147,7 @@ def split_rows(fn, n_rows: int, *, min_rows: int = 1, align: int = 1) -> None:
         if _THREAD_POOL is None:
             from concurrent.futures import ThreadPoolExecutor
 
-            _THREAD_POOL = ThreadPoolExecutor(max_workers=max(1, thread_count() - 1),
+            _THREAD_POOL = ThreadPoolExecutor(max_workers=max(1, _process_thread_count() - 1),
                                               thread_name_prefix="railval-rows")
         pool = _THREAD_POOL
     futures = [pool.submit(fn, a, b) for a, b in bounds[:-1]]

@@ -30,6 +30,7 @@ The campaign and configuration names are resolved once at the entrance
 
 from __future__ import annotations
 
+import gc
 import os
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
@@ -40,6 +41,7 @@ from sqlalchemy.orm import Session
 
 from railval.core import en14363
 from railval.core.en14363 import pack_values, section_cache_key, unpack_values
+from railval.core.errors import InvalidParameter
 from railval.core.filters import DEFAULT_ORDER, check_order
 from railval.core.stages import collect, in_context, stage
 from railval.core.stages import current as current_stages
@@ -126,6 +128,9 @@ def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
     if threads:
         os.environ["RAILVAL_THREADS"] = str(threads)
     with collect() as stages:
+        if isinstance(db_or_url, str) and not _WORKER_WARM:
+            with stage("worker_start"):
+                _warm_kernels(order)
         with stage("database"):
             database = _worker_database(db_or_url) if isinstance(db_or_url, str) else db_or_url
         with database.session() as session:
@@ -144,6 +149,27 @@ def _evaluate_chunk_task(args: tuple) -> list[bytes]:
 
 
 _WORKER_DB: dict[str, Any] = {}
+#: orders whose kernels this process has loaded (:func:`_warm_kernels`)
+_WORKER_WARM: set[int] = set()
+
+
+def _warm_kernels(order: int) -> None:
+    """Load the compiled kernels of the EN chain in a new worker process (numba's on-disk
+    cache, ≈ 0.25 s; nothing when they came with the fork) by processing one small synthetic
+    section, so that ``railval bench dynotrain`` can show the start-up as its own stage."""
+    import numpy as np
+
+    from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SignalSet
+
+    n, fs = 2000, 500.0
+    t = np.arange(n) / fs
+    noise = np.random.default_rng(0).standard_normal(n)
+    channels = {f"{k}_{p}": noise + (75.0 if k == "Q" else 0.0)
+                for p in WHEEL_POSITIONS for k in ("Y", "Q")}
+    channels |= {f"{k}_cb_{b}": 0.3 * noise for b in BODY_POSITIONS for k in ("ay", "az")}
+    en14363.evaluate_batch([SignalSet(fs, t, 25.0 * t, channels)],
+                           [SectionInfo("warm-up", 0.0, 0.0, 90.0, 1, 10.0, 90.0)], order=order)
+    _WORKER_WARM.add(order)
 
 
 def _worker_database(url: str):
@@ -201,10 +227,38 @@ def _plan(database, campaign_name: str, configs: Sequence[str] | None, order: in
     return plan
 
 
+def _chunks(todo: dict[str | None, list[str]], chunk_sections: int
+            ) -> list[tuple[str | None, list[str]]]:
+    """The sections still to process as chunks of one source, the measurement first (every
+    verdict needs it), each source cut into near-equal parts of at most ``chunk_sections``
+    sections (17 sections by 8: 6 + 6 + 5, not 8 + 8 + 1)."""
+    out = []
+    for source in sorted(todo, key=lambda s: s is not None):
+        sids = todo[source]
+        parts = -(-len(sids) // max(1, chunk_sections))
+        out += [(source, sids[k * len(sids) // parts:(k + 1) * len(sids) // parts])
+                for k in range(parts)]
+    return out
+
+
+def _thread_chunk(decode, sections: list[SectionInfo], order: int,
+                  row: int) -> tuple[list[bytes], dict]:
+    """Thread task: decode and process one chunk read by the calling thread, with ``row`` row
+    threads for the compiled kernels; stage times go to the caller's collector."""
+    from railval.core.workers import row_threads
+
+    with row_threads(row):
+        vals = _decode_and_evaluate(decode, sections, order)
+    with stage("cache_pack"):
+        packed = [pack_values(v) for v in vals]
+    return packed, {}
+
+
 def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], order: int,
-             workers: int, scheduler, collect_chunk) -> None:
+             workers: int, scheduler, collect_chunk, backend: str = "processes") -> None:
     """Process the chunks on the chosen back end: a Dask scheduler, ``workers`` processes,
-    or this process; ``collect_chunk(chunk, (packed values, stage seconds))`` per chunk."""
+    ``workers`` threads of this process (``backend="threads"``) or this process alone;
+    ``collect_chunk(chunk, (packed values, stage seconds))`` per chunk, in chunk order."""
     by_id = {s.id: s for s in plan.sections}
     if scheduler is not None and chunks:
         from sqlalchemy.engine import make_url
@@ -218,70 +272,148 @@ def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], 
                                                    for c in chunks])
         for chunk, blobs in zip(chunks, packed, strict=True):
             collect_chunk(chunk, blobs)
+    elif workers > 1 and len(chunks) > 1 and backend == "threads":
+        _process_threads(database, plan, chunks, order, workers, collect_chunk)
     elif workers > 1 and len(chunks) > 1:
         from railval.core.workers import pool_kwargs, thread_count
 
         threads = max(1, thread_count() // workers)
-        with ProcessPoolExecutor(max_workers=workers, **pool_kwargs()) as pool:
-            futures = [(c, pool.submit(_evaluate_chunk, database.url, plan.name, c[0],
-                                       [by_id[s] for s in c[1]], order, threads))
-                       for c in chunks]
-            for chunk, fut in futures:
-                collect_chunk(chunk, fut.result())
+        # the forked workers share this process's memory copy-on-write; a full garbage
+        # collection here (or there) writes to every object's header and copies the whole
+        # heap (0.1-0.2 s per collection): the objects alive now are frozen for the pool's
+        # lifetime (Python docs, gc.freeze)
+        gc.freeze()
+        try:
+            with ProcessPoolExecutor(max_workers=workers, **pool_kwargs()) as pool:
+                futures = [(c, pool.submit(_evaluate_chunk, database.url, plan.name, c[0],
+                                           [by_id[s] for s in c[1]], order, threads))
+                           for c in chunks]
+                for chunk, fut in futures:
+                    with stage("main_idle"):
+                        done = fut.result()
+                    collect_chunk(chunk, done)
+        finally:
+            gc.unfreeze()
     else:
         for chunk in chunks:
             collect_chunk(chunk, _evaluate_chunk(database, plan.name, chunk[0],
                                                  [by_id[s] for s in chunk[1]], order))
 
 
+def _process_threads(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]],
+                     order: int, workers: int, collect_chunk) -> None:
+    """``workers`` threads of this process decode and process the chunks (the compiled
+    kernels release the GIL) while this thread reads the blobs of the next chunks (at most
+    ``workers + 1`` read ahead) and collects the finished ones."""
+    from collections import deque
+
+    from railval.core.workers import thread_count
+
+    by_id = {s.id: s for s in plan.sections}
+    row = max(1, thread_count() // workers)
+    pending: deque = deque()
+
+    def collect_first():
+        chunk, fut = pending.popleft()
+        with stage("main_idle"):
+            done = fut.result()
+        collect_chunk(chunk, done)
+
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="railval-chunk") as pool, \
+            database.session() as session:
+        for chunk in chunks:
+            with stage("database"):
+                decode = repo.fetch_signalsets(session, plan.name, chunk[0], sections=chunk[1],
+                                               verify=True)
+            pending.append((chunk, pool.submit(in_context(_thread_chunk), decode,
+                                               [by_id[s] for s in chunk[1]], order, row)))
+            while len(pending) > workers + 1 or (pending and pending[0][1].done()):
+                collect_first()
+        while pending:
+            collect_first()
+
+
+class _Collector:
+    """Receives the processed chunks (``collect_chunk``): unpacks them into the plan's values,
+    keeps the packed form for the cache and judges every configuration as soon as its values
+    and the measurement's are complete, while the remaining chunks are being processed."""
+
+    def __init__(self, plan: _Plan, order: int, n_boot: int, seed: int, progress) -> None:
+        self.plan, self.order, self.n_boot, self.seed = plan, order, n_boot, seed
+        self.progress = progress
+        self.outer = current_stages()
+        self.remaining = {s: len(v) for s, v in plan.todo.items()}
+        self.n_todo = max(1, sum(self.remaining.values()))
+        self.computed: dict[tuple[str | None, str], bytes] = {}
+        self.verdicts: dict[str, ValidationResult] = {}
+
+    def __call__(self, chunk, done) -> None:
+        packed, seconds = done
+        if self.outer is not None and seconds:
+            self.outer.merge(seconds)
+        source, sids = chunk
+        with stage("cache_unpack"):
+            for sid, blob in zip(sids, packed, strict=True):
+                self.computed[(source, sid)] = blob
+                self.plan.values[source][sid] = unpack_values(sid, blob)
+        self.remaining[source] -= len(sids)
+        if self.progress is not None:
+            self.progress("processing sections", len(self.computed) / self.n_todo,
+                          {"done": len(self.computed)})
+        self.judge_ready()
+
+    def judge_ready(self) -> None:
+        """Judge every configuration whose sections (and the measurement's) are all here."""
+        if self.remaining.get(None, 0):
+            return
+        plan = self.plan
+        for cname in plan.names:
+            if cname in self.verdicts or self.remaining.get(cname, 0):
+                continue
+            stats = {s: {"cached": len(plan.values[s]) - len(plan.todo.get(s, [])),
+                         "computed": len(plan.todo.get(s, []))} for s in (None, cname)}
+            self.verdicts[cname] = _verdict(
+                plan.values[None], plan.values[cname], plan.sections, plan.vehicle,
+                self.n_boot, self.seed,
+                {"campaign": plan.name, "configuration": cname, "filter_order": self.order,
+                 "sections_measured": stats[None], "sections_simulated": stats[cname],
+                 **plan.provenance[cname]})
+
+
 def validate_configurations(database, campaign_name: str, configs: Sequence[str] | None = None,
                             *, order: int = DEFAULT_ORDER, n_boot: int = 1000, seed: int = 0,
                             workers: int = 1, chunk_sections: int = 8,
                             scheduler: str | None = None, progress=None,
-                            check_seals: bool = True) -> dict[str, ValidationResult]:
+                            check_seals: bool = True,
+                            backend: str = "processes") -> dict[str, ValidationResult]:
     """Validate many configurations (default: all) of a campaign; the DynoTRAIN-scale path.
 
     The same pipeline as :func:`validate_configuration` — seals of the evidence checked
     first (``check_seals``), result cache, EN chain, :func:`_verdict` — with the sections
-    not in the cache processed in chunks of ``chunk_sections`` sections of one source by
-    ``workers`` processes (each opens its own connection), then written to the cache by
-    this process. ``database``: a :class:`railval.db.engine.Database`.
-    ``progress(stage, fraction, info)`` is called after every chunk. ``scheduler``: a Dask
-    scheduler address whose workers process the chunks instead (they read the database with
-    the URL without its password and take the password from their own
-    ``RAILVAL_DB_PASSWORD``/``_FILE`` setting — nothing secret crosses the Dask link).
+    not in the cache processed in chunks of at most ``chunk_sections`` sections of one
+    source (:func:`_chunks`, the measurement first) by ``workers`` processes (each opens its
+    own connection; ``backend="threads"``: ``workers`` threads of this process, which reads
+    the blobs), then written to the cache by this process. Each configuration is judged as
+    soon as its values are complete, while the other chunks are processed. ``database``: a
+    :class:`railval.db.engine.Database`. ``progress(stage, fraction, info)`` is called after
+    every chunk. ``scheduler``: a Dask scheduler address whose workers process the chunks
+    instead (they read the database with the URL without its password and take the password
+    from their own ``RAILVAL_DB_PASSWORD``/``_FILE`` setting — nothing secret crosses the
+    Dask link).
     """
     check_order(order)
+    if backend not in ("processes", "threads"):
+        raise InvalidParameter(f"backend must be 'processes' or 'threads', got {backend!r}")
     plan = _plan(database, campaign_name, configs, order, check_seals)
-    chunks = [(source, sids[i:i + chunk_sections]) for source, sids in plan.todo.items()
-              for i in range(0, len(sids), chunk_sections)]
-    computed: dict[tuple[str | None, str], bytes] = {}
-    outer = current_stages()
-    n_todo = max(1, sum(map(len, plan.todo.values())))
-
-    def collect_chunk(chunk, done):
-        packed, seconds = done
-        if outer is not None:
-            outer.merge(seconds)
-        source, sids = chunk
-        for sid, blob in zip(sids, packed, strict=True):
-            computed[(source, sid)] = blob
-            plan.values[source][sid] = unpack_values(sid, blob)
-        if progress is not None:
-            progress("processing sections", len(computed) / n_todo, {"done": len(computed)})
-
-    _process(database, plan, chunks, order, workers, scheduler, collect_chunk)
-    if computed:
+    collector = _Collector(plan, order, n_boot, seed, progress)
+    _process(database, plan, _chunks(plan.todo, chunk_sections), order, workers, scheduler,
+             collector, backend)
+    if collector.computed:
         with stage("database"), database.session(write=True) as session:
-            repo.cache_put_many(session, {plan.keys[k]: blob for k, blob in computed.items()})
-    stats = {source: {"cached": len(plan.values[source]) - len(plan.todo.get(source, [])),
-                      "computed": len(plan.todo.get(source, []))} for source in plan.values}
-    return {cname: _verdict(plan.values[None], plan.values[cname], plan.sections,
-                            plan.vehicle, n_boot, seed,
-                            {"campaign": plan.name, "configuration": cname,
-                             "filter_order": order, "sections_measured": stats[None],
-                             "sections_simulated": stats[cname], **plan.provenance[cname]})
-            for cname in plan.names}
+            repo.cache_put_many(session, {plan.keys[k]: blob
+                                          for k, blob in collector.computed.items()})
+    collector.judge_ready()  # nothing was to be processed: every value came from the cache
+    return {cname: collector.verdicts[cname] for cname in plan.names}
 
 
 def _verdict(measured, simulated, sections, vehicle, n_boot: int, seed: int,

@@ -1,0 +1,130 @@
+"""The pairs of a DynoTRAIN validation as columns (Polach & Böttcher 2014 §5; docs/design.md §3).
+
+A pair is one (section, quantity, position) where the measurement and the simulation both
+hold a finite value (eq. 4 is formed over the pairs of a quantity). :func:`gather_pairs`
+collects them once per configuration as flat columns (sections sorted, keys in the
+measurement's order — the order :func:`railval.core.validation.validate` reports them in);
+:func:`values_under` reads every pair's value under the other readings of the open
+definitions (:mod:`railval.core.definitions`) with one lookup per section and reading
+instead of one call per pair.
+
+References
+----------
+Polach & Böttcher 2014, §5, eq. (4).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from railval.core.definitions import CHOSEN, READINGS
+from railval.core.en14363 import SectionValues
+from railval.core.errors import InvalidParameter
+from railval.core.quantities import QUANTITY_IDS
+from railval.core.types import SectionInfo
+
+_SECTION_VALUE_UNDER = SectionValues.value_under
+
+
+@dataclass
+class QuantityPairs:
+    """The pairs of one quantity as columns, in gathering order (sections sorted, keys in the
+    measurement's order): section, zone, position, M, S and the indices of the pairs in the
+    gathered table (:class:`Pairs`)."""
+
+    section: list[str]
+    zone: list[int]
+    position: list[str]
+    m: np.ndarray
+    s: np.ndarray
+    index: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.m.size)
+
+
+@dataclass
+class Pairs:
+    """Every pair of one configuration as flat columns (gathering order) plus, per section,
+    the kept keys and their M and S values (to look the values up under other readings)."""
+
+    section: list[str]
+    zone: list[int]
+    position: list[str]
+    qindex: np.ndarray
+    m: np.ndarray
+    s: np.ndarray
+    by_section: list[tuple[str, list, list, list]]
+    _split: dict[int, QuantityPairs] = field(default_factory=dict)
+
+    def of(self, qi: int) -> QuantityPairs:
+        """The pairs of quantity ``QUANTITY_IDS[qi]`` (order kept)."""
+        if qi not in self._split:
+            idx = np.flatnonzero(self.qindex == qi)
+            il = idx.tolist()
+            self._split[qi] = QuantityPairs([self.section[i] for i in il],
+                                            [self.zone[i] for i in il],
+                                            [self.position[i] for i in il],
+                                            self.m[idx], self.s[idx], idx)
+        return self._split[qi]
+
+
+_QINDEX = {q: i for i, q in enumerate(QUANTITY_IDS)}
+
+
+def gather_pairs(measured_values, simulated_values, secs: Mapping[str, SectionInfo],
+                 common: Sequence[str]) -> Pairs:
+    """Every pair ``(section, zone, position, M, S)`` where both sides hold a finite value
+    (sections in ``common`` order, keys in the measurement's order), as columns."""
+    section, zone, position, qindex, ms, ss, by_section = [], [], [], [], [], [], []
+    nan = float("nan")
+    for sid in common:
+        if sid not in secs:
+            raise InvalidParameter(f"section {sid!r} has values but no SectionInfo")
+        z = int(secs[sid].zone)
+        mv, sv = measured_values[sid], simulated_values[sid]
+        keys = list(mv)
+        m = np.fromiter((float(mv[k]) for k in keys), dtype=np.float64, count=len(keys))
+        s_raw = [sv.get(k) for k in keys]
+        s = np.fromiter((nan if v is None else float(v) for v in s_raw), dtype=np.float64,
+                        count=len(keys))
+        keep = np.flatnonzero(np.isfinite(m) & np.isfinite(s)).tolist()
+        kept = [keys[i] for i in keep]
+        for qid, _pos in kept:
+            if qid not in _QINDEX:
+                raise InvalidParameter(f"unknown quantity {qid!r} in section {sid}")
+        section += [sid] * len(kept)
+        zone += [z] * len(kept)
+        position += [k[1] for k in kept]
+        qindex += [_QINDEX[k[0]] for k in kept]
+        ms.append(m[keep])
+        ss.append(s[keep])
+        by_section.append((sid, kept, [mv[k] for k in kept], [s_raw[i] for i in keep]))
+    cat = (lambda xs: np.concatenate(xs) if xs else np.empty(0))
+    return Pairs(section, zone, position, np.array(qindex, dtype=np.intp), cat(ms), cat(ss),
+                  by_section)
+
+def values_under(pairs: Pairs, values, column: int) -> dict[str, np.ndarray]:
+    """Reading id → every pair's value of one side under that reading (gathering order;
+    ``SectionValues.value_under``: the chosen value where the reading does not change it).
+    ``column``: 2 for the measured, 3 for the simulated side of ``pairs.by_section``."""
+    out = {}
+    for reading in READINGS:
+        if reading == CHOSEN:
+            continue
+        rid = reading.id
+        parts = []
+        for row in pairs.by_section:
+            sv = values[row[0]]
+            if type(sv).value_under is _SECTION_VALUE_UNDER:
+                alt = sv.alternatives.get(rid)
+                got = row[column] if not alt else list(map(alt.get, row[1], row[column]))
+            else:
+                got = [sv.value_under(rid, k) for k in row[1]]
+            parts.append(np.array(got, dtype=np.float64))
+        out[rid] = np.concatenate(parts) if parts else np.empty(0)
+    return out

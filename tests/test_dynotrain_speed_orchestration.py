@@ -1,0 +1,76 @@
+"""Orchestration of :func:`railval.app.services.validation.validate_configurations`: the
+threads back end and the process pool give the same verdicts as one configuration at a time;
+chunks are near-equal and start with the measurement; every configuration is judged once,
+as soon as its values are complete; row threads follow :func:`railval.core.workers.row_threads`."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from railval.app.services import validation as service
+from railval.core import workers
+from railval.core.errors import InvalidParameter
+from railval.db.importer import import_campaign
+from tests.factories import write_demo_campaign
+
+
+def test_chunks_are_near_equal_and_measurement_first():
+    todo = {"a": [f"S{i}" for i in range(17)], None: [f"S{i}" for i in range(12)]}
+    chunks = service._chunks(todo, 8)
+    assert [c[0] for c in chunks] == [None, None, "a", "a", "a"]
+    assert [len(c[1]) for c in chunks] == [6, 6, 5, 6, 6]
+    assert [s for c in chunks if c[0] == "a" for s in c[1]] == todo["a"]
+    assert service._chunks({"a": ["S1"]}, 8) == [("a", ["S1"])]
+    assert service._chunks({}, 8) == []
+
+
+def test_row_threads_override_is_per_context():
+    base = workers.thread_count()
+    seen = []
+    with workers.row_threads(1):
+        assert workers.thread_count() == 1
+        t = threading.Thread(target=lambda: seen.append(workers.thread_count()))
+        t.start()
+        t.join()
+    assert workers.thread_count() == base
+    assert seen == [base]  # a plain thread does not inherit the context
+
+
+@pytest.mark.parametrize("backend", ["threads", "processes"])
+def test_backends_equal_single_validation(sqlite_database, tmp_path, backend, monkeypatch):
+    write_demo_campaign(tmp_path / "c", n_configs=3, fs=200.0)
+    import_campaign(sqlite_database, tmp_path / "c")
+    judged = []
+    real = service._verdict
+
+    def counting(measured, simulated, *a, **kw):
+        # judged only once the measurement and this configuration are complete
+        assert len(measured) == 12 and len(simulated) == 12
+        judged.append(a[-1]["configuration"])
+        return real(measured, simulated, *a, **kw)
+
+    monkeypatch.setattr(service, "_verdict", counting)
+    many = service.validate_configurations(sqlite_database, "demo", n_boot=50, workers=2,
+                                           chunk_sections=5, backend=backend)
+    assert sorted(judged) == sorted(many) and len(judged) == len(set(judged)) == 3
+    for name, res in many.items():
+        with sqlite_database.session() as s:
+            single = service.validate_configuration(s, "demo", name, n_boot=50)
+        assert single.info["sections_simulated"] == {"cached": 12, "computed": 0}
+        a, b = res.to_dict(), single.to_dict()
+        assert a.pop("info")["sections_simulated"] == {"cached": 0, "computed": 12}
+        b.pop("info")
+        assert a == b
+        assert res.pairs.equals(single.pairs)
+    # everything cached now: judged from the cache alone
+    again = service.validate_configurations(sqlite_database, "demo", n_boot=50, workers=2,
+                                            backend=backend)
+    assert {k: v.to_dict()["quantities"] for k, v in again.items()} == \
+        {k: v.to_dict()["quantities"] for k, v in many.items()}
+
+
+def test_unknown_backend_is_refused(sqlite_database):
+    with pytest.raises(InvalidParameter, match="backend"):
+        service.validate_configurations(sqlite_database, "demo", backend="fibres")
