@@ -30,6 +30,7 @@ The campaign and configuration names are resolved once at the entrance
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
 from collections.abc import Sequence
@@ -47,11 +48,15 @@ from railval.core.stages import collect, in_context, stage
 from railval.core.stages import current as current_stages
 from railval.core.types import SectionInfo
 from railval.core.validation import ValidationResult, source_warnings, validate
+from railval.core.workers import row_threads, thread_count
 from railval.db import repo
 from railval.db.engine import connect
 
-#: sections read per query while the previous chunk is processed
+#: sections read per query while the previous chunks are processed
 _PIPELINE_CHUNK = 4
+#: threads that decode and process the chunks of one source at once (each with its share of
+#: the row threads): decoding one chunk overlaps the Python parts of the EN chain of another
+_PIPELINE_THREADS = 2
 
 
 def source_cache_keys(session: Session, campaign, config: str | repo.ConfigRef | None,
@@ -87,15 +92,18 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
         # this thread) while a worker thread decodes and processes chunk k. Decoding in the
         # worker, not here, avoids thousands of GIL hand-overs between the two threads
         # (every inflate and plane copy releases the GIL), which doubled the decode time.
-        chunks = [missing[i:i + _PIPELINE_CHUNK] for i in range(0, len(missing), _PIPELINE_CHUNK)]
+        chunks = [missing[i:i + _PIPELINE_CHUNK]
+                  for i in range(0, len(missing), _PIPELINE_CHUNK)]
         pending = []
-        with ThreadPoolExecutor(max_workers=1) as pool:
+        threads = min(_PIPELINE_THREADS, len(chunks))
+        row = max(1, thread_count() // threads)
+        with ThreadPoolExecutor(max_workers=threads) as pool:
             for chunk in chunks:
                 with stage("database"):
                     decode = repo.fetch_signalsets(session, camp, source, sections=chunk,
                                                    verify=True)
                 pending.append((chunk, pool.submit(in_context(_decode_and_evaluate), decode,
-                                                   [by_id[s] for s in chunk], order)))
+                                                   [by_id[s] for s in chunk], order, row)))
             new: dict[str, bytes] = {}
             for chunk, fut in pending:
                 for sid, vals in zip(chunk, fut.result(), strict=True):
@@ -109,11 +117,14 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
     return out
 
 
-def _decode_and_evaluate(decode, sections: list[SectionInfo],
-                         order: int) -> list[en14363.SectionValues]:
+def _decode_and_evaluate(decode, sections: list[SectionInfo], order: int,
+                         row: int | None = None) -> list[en14363.SectionValues]:
+    """Decode one chunk's blobs and process its sections; ``row``: row threads of the
+    compiled kernels (:func:`railval.core.workers.row_threads`; None: the process's)."""
     with stage("decode"):
         signalsets = decode()
-    values = en14363.evaluate_present(signalsets, sections, order=order)
+    with row_threads(row) if row else contextlib.nullcontext():
+        values = en14363.evaluate_present(signalsets, sections, order=order)
     return [values[s.id] for s in sections]
 
 
@@ -245,10 +256,7 @@ def _thread_chunk(decode, sections: list[SectionInfo], order: int,
                   row: int) -> tuple[list[bytes], dict]:
     """Thread task: decode and process one chunk read by the calling thread, with ``row`` row
     threads for the compiled kernels; stage times go to the caller's collector."""
-    from railval.core.workers import row_threads
-
-    with row_threads(row):
-        vals = _decode_and_evaluate(decode, sections, order)
+    vals = _decode_and_evaluate(decode, sections, order, row)
     with stage("cache_pack"):
         packed = [pack_values(v) for v in vals]
     return packed, {}
@@ -275,7 +283,7 @@ def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], 
     elif workers > 1 and len(chunks) > 1 and backend == "threads":
         _process_threads(database, plan, chunks, order, workers, collect_chunk)
     elif workers > 1 and len(chunks) > 1:
-        from railval.core.workers import pool_kwargs, thread_count
+        from railval.core.workers import pool_kwargs
 
         threads = max(1, thread_count() // workers)
         # the forked workers share this process's memory copy-on-write; a full garbage
@@ -306,8 +314,6 @@ def _process_threads(database, plan: _Plan, chunks: list[tuple[str | None, list[
     kernels release the GIL) while this thread reads the blobs of the next chunks (at most
     ``workers + 1`` read ahead) and collects the finished ones."""
     from collections import deque
-
-    from railval.core.workers import thread_count
 
     by_id = {s.id: s for s in plan.sections}
     row = max(1, thread_count() // workers)
