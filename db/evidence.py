@@ -143,7 +143,22 @@ def require_evidence(session: Session, campaign: CampaignArg, config: ConfigArg,
                      blobs: bool = True) -> None:
     """:func:`verify_evidence`, raising :class:`railval.db.integrity.IntegrityError` that names
     the first problems and how many there are."""
-    problems = verify_evidence(session, campaign, config, blobs=blobs)
+    _raise_problems(config, verify_evidence(session, campaign, config, blobs=blobs))
+
+
+def require_evidence_many(session: Session, campaign: CampaignArg, configs: list[ConfigArg], *,
+                          blobs: bool = True) -> None:
+    """:func:`require_evidence` for several configurations of one campaign, in their order,
+    with the measurement's signals checked once instead of once per configuration."""
+    c = campaign_ref(session, campaign)
+    secret = integrity.session_secret(session)
+    measured = _source_problems(session, c, None, secret, blobs)
+    for config in configs:
+        get_configuration(session, c, config)
+        _raise_problems(config, measured + _source_problems(session, c, config, secret, blobs))
+
+
+def _raise_problems(config: ConfigArg, problems: list[dict[str, Any]]) -> None:
     if problems:
         first = "; ".join(f"section {p['section']}, "
                           f"{'configuration ' + repr(p['configuration']) if p['configuration'] else 'measurement'}, "

@@ -74,3 +74,38 @@ def test_backends_equal_single_validation(sqlite_database, tmp_path, backend, mo
 def test_unknown_backend_is_refused(sqlite_database):
     with pytest.raises(InvalidParameter, match="backend"):
         service.validate_configurations(sqlite_database, "demo", backend="fibres")
+
+
+@pytest.mark.parametrize("backend", ["threads", "processes"])
+def test_forged_configuration_signal_refused_before_any_verdict(sqlite_database, tmp_path,
+                                                                backend, monkeypatch):
+    """The seals are checked while the chunks are processed: a forged signal of the second
+    configuration still raises before any verdict, and nothing is written to the cache."""
+    from sqlalchemy import func, select, update
+
+    from railval.db import codec, integrity
+    from railval.db.models import Channel, Configuration, Recording, ResultCache, Section, Signal
+
+    write_demo_campaign(tmp_path / "c", n_configs=2, fs=200.0)
+    import_campaign(sqlite_database, tmp_path / "c")
+    with sqlite_database.session(write=True) as s:
+        sig_id, blob = s.execute(
+            select(Signal.id, Signal.blob)
+            .join(Recording, Signal.recording_id == Recording.id)
+            .join(Section, Recording.section_id == Section.id)
+            .join(Channel, Signal.channel_id == Channel.id)
+            .join(Configuration, Recording.configuration_id == Configuration.id)
+            .where(Channel.name == "Q_w2R", Section.section_id == "S05",
+                   Configuration.name == "variant1")).first()
+        forged, sha = codec.encode(codec.decode(blob) + 1.0)
+        s.execute(update(Signal).where(Signal.id == sig_id).values(blob=forged, sha256=sha))
+    judged = []
+    monkeypatch.setattr(service, "_verdict", lambda *a, **kw: judged.append(a) or None)
+    with pytest.raises(integrity.IntegrityError,
+                       match="evidence of 'variant1'.*section S05, configuration 'variant1', "
+                             "Q_w2R"):
+        service.validate_configurations(sqlite_database, "demo", n_boot=0, workers=2,
+                                        chunk_sections=4, backend=backend)
+    assert judged == []
+    with sqlite_database.session() as s:
+        assert s.scalar(select(func.count()).select_from(ResultCache)) == 0

@@ -206,19 +206,16 @@ class _Plan:
     todo: dict[str | None, list[str]]
 
 
-def _plan(database, campaign_name: str, configs: Sequence[str] | None, order: int,
-          check_seals: bool) -> _Plan:
-    """Resolve names, check the seals of every configuration's evidence (as
-    :func:`validate_configuration` does) and read the result cache; no blob is read."""
+def _plan(database, campaign_name: str, configs: Sequence[str] | None,
+          order: int) -> _Plan:
+    """Resolve names and read the result cache; no blob is read (the seals are checked by
+    :func:`_require_seals` before the first verdict)."""
     with stage("database"), database.session() as session:
         camp, _ = repo.resolve(session, campaign_name)
         refs = {c.name: repo.ConfigRef(camp, c.id, c.name)
                 for c in repo.list_configurations(session, camp)}
         names = (list(refs) if configs is None
                  else [repo.resolve(session, camp, c)[1].name for c in configs])
-        if check_seals:
-            for cname in names:
-                repo.require_evidence(session, camp, cname, blobs=False)
         sections = repo.section_infos(session, camp)
         keys: dict[tuple[str | None, str], str] = {}
         for source in [None, *names]:
@@ -236,6 +233,16 @@ def _plan(database, campaign_name: str, configs: Sequence[str] | None, order: in
             else:
                 plan.todo.setdefault(source, []).append(sid)
     return plan
+
+
+def _require_seals(database, plan: _Plan) -> None:
+    """The seals of every configuration's evidence and of the measurement (checked once), as
+    :func:`validate_configuration` checks them (:func:`railval.db.repo.require_evidence`
+    without reading blobs)."""
+    from railval.db.evidence import require_evidence_many
+
+    with stage("database"), database.session() as session:
+        require_evidence_many(session, plan.name, plan.names, blobs=False)
 
 
 def _chunks(todo: dict[str | None, list[str]], chunk_sections: int
@@ -296,10 +303,14 @@ def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], 
                 futures = [(c, pool.submit(_evaluate_chunk, database.url, plan.name, c[0],
                                            [by_id[s] for s in c[1]], order, threads))
                            for c in chunks]
-                for chunk, fut in futures:
-                    with stage("main_idle"):
-                        done = fut.result()
-                    collect_chunk(chunk, done)
+                try:
+                    for chunk, fut in futures:
+                        with stage("main_idle"):
+                            done = fut.result()
+                        collect_chunk(chunk, done)
+                except BaseException:  # e.g. a broken seal: the remaining chunks are moot
+                    pool.shutdown(cancel_futures=True)
+                    raise
         finally:
             gc.unfreeze()
     else:
@@ -344,9 +355,10 @@ class _Collector:
     keeps the packed form for the cache and judges every configuration as soon as its values
     and the measurement's are complete, while the remaining chunks are being processed."""
 
-    def __init__(self, plan: _Plan, order: int, n_boot: int, seed: int, progress) -> None:
+    def __init__(self, plan: _Plan, order: int, n_boot: int, seed: int, progress,
+                 check_seals=None) -> None:
         self.plan, self.order, self.n_boot, self.seed = plan, order, n_boot, seed
-        self.progress = progress
+        self.progress, self.check_seals = progress, check_seals
         self.outer = current_stages()
         self.remaining = {s: len(v) for s, v in plan.todo.items()}
         self.n_todo = max(1, sum(self.remaining.values()))
@@ -376,6 +388,9 @@ class _Collector:
         for cname in plan.names:
             if cname in self.verdicts or self.remaining.get(cname, 0):
                 continue
+            if self.check_seals is not None:  # once, before the first verdict
+                self.check_seals()
+                self.check_seals = None
             stats = {s: {"cached": len(plan.values[s]) - len(plan.todo.get(s, [])),
                          "computed": len(plan.todo.get(s, []))} for s in (None, cname)}
             self.verdicts[cname] = _verdict(
@@ -395,7 +410,8 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
     """Validate many configurations (default: all) of a campaign; the DynoTRAIN-scale path.
 
     The same pipeline as :func:`validate_configuration` — seals of the evidence checked
-    first (``check_seals``), result cache, EN chain, :func:`_verdict` — with the sections
+    (``check_seals``; before the first verdict, by this process while the workers process,
+    the measurement's once), result cache, EN chain, :func:`_verdict` — with the sections
     not in the cache processed in chunks of at most ``chunk_sections`` sections of one
     source (:func:`_chunks`, the measurement first) by ``workers`` processes (each opens its
     own connection; ``backend="threads"``: ``workers`` threads of this process, which reads
@@ -410,8 +426,9 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
     check_order(order)
     if backend not in ("processes", "threads"):
         raise InvalidParameter(f"backend must be 'processes' or 'threads', got {backend!r}")
-    plan = _plan(database, campaign_name, configs, order, check_seals)
-    collector = _Collector(plan, order, n_boot, seed, progress)
+    plan = _plan(database, campaign_name, configs, order)
+    collector = _Collector(plan, order, n_boot, seed, progress,
+                           (lambda: _require_seals(database, plan)) if check_seals else None)
     _process(database, plan, _chunks(plan.todo, chunk_sections), order, workers, scheduler,
              collector, backend)
     if collector.computed:
