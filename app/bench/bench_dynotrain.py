@@ -26,9 +26,13 @@ Figures:
 Each figure carries its split (``split_s``, :mod:`railval.core.stages`): database (queries,
 blob reads, cache writes), decode (inflate, hash check), checks, filter, statistics,
 alternatives, supplementary (the EN chain), cache_pack/cache_unpack (cached values as JSON),
-aggregation (pairing, normalised errors, verdicts) and bootstrap. Stage seconds add up over
-threads and worker processes (the pipeline overlaps reading and processing), so their sum
-may exceed the elapsed time. The 1-minute load average is printed beside every figure.
+aggregation (pairing, normalised errors, verdicts) and bootstrap; in ``all`` also
+worker_start (each new worker process loading the compiled kernels) and main_idle (the main
+process waiting for a chunk), both also printed on their own, with the main process's CPU
+seconds. Stage seconds add up over threads and worker processes (the pipeline overlaps
+reading and processing), so their sum may exceed the elapsed time. The 1-minute load
+average is printed beside every figure. ``--backend threads`` runs the ``--workers`` as
+threads of one process instead of processes.
   ``--part new`` times only this (after validating ``c000`` once, untimed, which caches the
   measured side and warms the process as a running app server would be);
   ``--repeat N`` times it N times. Before every timing the result-cache entries of the new
@@ -62,6 +66,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--samples", type=int, default=20_000)
     parser.add_argument("--fs", type=float, default=500.0)
     parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
+    parser.add_argument("--backend", choices=["processes", "threads"], default="processes",
+                        help="the --workers are processes (default) or threads of one process")
     parser.add_argument("--boot", type=int, default=200,
                         help="bootstrap resamples in the all-configurations run")
     parser.add_argument("--data", default="bench-data", help="folder of the built data")
@@ -185,7 +191,8 @@ def _cpu_seconds() -> float:
 
 #: stages in the order printed (railval.core.stages)
 STAGES = ("database", "decode", "checks", "filter", "statistics", "alternatives",
-          "supplementary", "cache_pack", "cache_unpack", "aggregation", "bootstrap")
+          "supplementary", "cache_pack", "cache_unpack", "aggregation", "bootstrap",
+          "worker_start", "main_idle")
 
 
 def _split(seconds: dict[str, float]) -> dict[str, float]:
@@ -226,13 +233,16 @@ def _all_configurations(database, args: argparse.Namespace) -> dict:
         repo.cache_delete(session, prefix="en14363:")
     load_before = os.getloadavg()[0]
     cpu0 = _cpu_seconds()
+    main0 = time.process_time()
     t0 = time.perf_counter()
     with collect() as split_all:
         results = validate_configurations(database, "dynotrain-bench",
                                           [f"c{k:03d}" for k in range(args.configs)],
-                                          n_boot=args.boot, workers=args.workers)
+                                          n_boot=args.boot, workers=args.workers,
+                                          backend=getattr(args, "backend", "processes"))
     t_all = time.perf_counter() - t0
     cpu_all = _cpu_seconds() - cpu0
+    cpu_main = time.process_time() - main0
     comparisons = sum(q.n for r in results.values() for q in r.quantities.values())
     out = {
         "configurations": len(results), "sections": args.sections,
@@ -242,6 +252,13 @@ def _all_configurations(database, args: argparse.Namespace) -> dict:
         # CPU of this process and its finished workers: what the run needs of the cores
         "cpu_seconds": round(cpu_all, 2), "load_average_before": round(load_before, 2),
         "comparisons_per_s": round(comparisons / t_all, 1), "target_s_for_50000": 5.0,
+        "backend": getattr(args, "backend", "processes"),
+        # CPU of the main process alone (planning, seals, unpacking, verdicts, cache write)
+        "cpu_seconds_main_process": round(cpu_main, 2),
+        # loading the compiled kernels in each new worker process, summed over the workers
+        "worker_start_s": round(split_all.seconds.get("worker_start", 0.0), 3),
+        # the main process waiting for a worker's chunk (nothing else to do)
+        "main_idle_s": round(split_all.seconds.get("main_idle", 0.0), 3),
         "split_s": _split(split_all.seconds),
     }
     if comparisons >= TARGET_COMPARISONS:

@@ -162,6 +162,9 @@ def _evaluate_chunk_task(args: tuple) -> list[bytes]:
 _WORKER_DB: dict[str, Any] = {}
 #: orders whose kernels this process has loaded (:func:`_warm_kernels`)
 _WORKER_WARM: set[int] = set()
+#: load the kernels in this process before forking the worker processes (once, instead of
+#: once per worker)
+_WARM_BEFORE_FORK = True
 
 
 def _warm_kernels(order: int) -> None:
@@ -293,6 +296,10 @@ def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], 
         from railval.core.workers import pool_kwargs
 
         threads = max(1, thread_count() // workers)
+        if _WARM_BEFORE_FORK and order not in _WORKER_WARM:
+            # loaded once here, the kernels come with the fork to every worker
+            with stage("worker_start"):
+                _warm_kernels(order)
         # the forked workers share this process's memory copy-on-write; a full garbage
         # collection here (or there) writes to every object's header and copies the whole
         # heap (0.1-0.2 s per collection): the objects alive now are frozen for the pool's
