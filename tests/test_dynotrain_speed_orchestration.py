@@ -109,3 +109,41 @@ def test_forged_configuration_signal_refused_before_any_verdict(sqlite_database,
     assert judged == []
     with sqlite_database.session() as s:
         assert s.scalar(select(func.count()).select_from(ResultCache)) == 0
+
+
+def test_single_validation_checks_seals_while_processing_and_caches_nothing(sqlite_database,
+                                                                              tmp_path):
+    """validate_configuration checks the seals while the configuration's sections are
+    processed (the measurement cached): a forged signal raises and leaves no cache entry of
+    the configuration; intact, the same call gives the verdict."""
+    from sqlalchemy import func, select, update
+
+    from railval.db import codec, integrity
+    from railval.db.models import Channel, Configuration, Recording, ResultCache, Section, Signal
+
+    write_demo_campaign(tmp_path / "c", n_configs=2, fs=200.0)
+    import_campaign(sqlite_database, tmp_path / "c")
+    with sqlite_database.session() as s:
+        service.validate_configuration(s, "demo", "baseline", n_boot=0)
+    with sqlite_database.session() as s:
+        cached_before = s.scalar(select(func.count()).select_from(ResultCache))
+    assert cached_before == 24
+    with sqlite_database.session(write=True) as s:
+        sig_id, blob = s.execute(
+            select(Signal.id, Signal.blob)
+            .join(Recording, Signal.recording_id == Recording.id)
+            .join(Section, Recording.section_id == Section.id)
+            .join(Channel, Signal.channel_id == Channel.id)
+            .join(Configuration, Recording.configuration_id == Configuration.id)
+            .where(Channel.name == "Y_w1L", Section.section_id == "S02",
+                   Configuration.name == "variant1")).first()
+        forged, sha = codec.encode(codec.decode(blob) * 0.9)
+        s.execute(update(Signal).where(Signal.id == sig_id).values(blob=forged, sha256=sha))
+    with pytest.raises(integrity.IntegrityError,
+                       match="section S02, configuration 'variant1', Y_w1L: fails its seal"), \
+            sqlite_database.session() as s:
+        service.validate_configuration(s, "demo", "variant1", n_boot=0)
+    with sqlite_database.session() as s:
+        assert s.scalar(select(func.count()).select_from(ResultCache)) == cached_before
+        res = service.validate_configuration(s, "demo", "baseline", n_boot=0)
+    assert res.info["sections_simulated"] == {"cached": 12, "computed": 0}

@@ -73,11 +73,13 @@ def source_cache_keys(session: Session, campaign, config: str | repo.ConfigRef |
 
 
 def source_values(session: Session, campaign, config: str | None, sections: Sequence[SectionInfo],
-                  *, order: int = DEFAULT_ORDER,
-                  stats: dict | None = None) -> dict[str, en14363.SectionValues]:
+                  *, order: int = DEFAULT_ORDER, stats: dict | None = None,
+                  while_processing=None) -> dict[str, en14363.SectionValues]:
     """Processed values of every section of one source (``config=None``: the measurement),
     from the result cache where possible. ``stats`` (optional dict) receives
-    ``{"cached": n, "computed": n}``."""
+    ``{"cached": n, "computed": n}``. ``while_processing()`` (optional) runs in this thread
+    once every blob is read, while the sections are processed; when it raises, the
+    remaining sections are dropped and nothing is cached."""
     with stage("database"):
         camp, conf = repo.resolve(session, campaign, config)
         source = conf if config is not None else None
@@ -104,6 +106,12 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
                                                    verify=True)
                 pending.append((chunk, pool.submit(in_context(_decode_and_evaluate), decode,
                                                    [by_id[s] for s in chunk], order, row)))
+            if while_processing is not None:
+                try:
+                    while_processing()
+                except BaseException:
+                    pool.shutdown(cancel_futures=True)
+                    raise
             new: dict[str, bytes] = {}
             for chunk, fut in pending:
                 for sid, vals in zip(chunk, fut.result(), strict=True):
@@ -488,22 +496,32 @@ def validate_configuration(session: Session, campaign_name: str, config: str, *,
 
     ``order``: Butterworth prototype order of both filters; ``n_boot``/``seed``: bootstrap of
     the normalised values. The result's ``info`` records how many sections of each side
-    came from the cache. First the seals of both sides' signals are checked
-    (:func:`railval.db.repo.require_evidence` without reading blobs): a signal changed
-    outside railval raises :class:`railval.db.integrity.IntegrityError` instead of giving a
-    verdict. Raises :class:`railval.core.errors.NotFound` for unknown names.
+    came from the cache. The seals of both sides' signals are checked
+    (:func:`railval.db.repo.require_evidence` without reading blobs) before the verdict,
+    while the first uncached source is processed: a signal changed outside railval raises
+    :class:`railval.db.integrity.IntegrityError` instead of giving a verdict (and nothing
+    is cached). Raises :class:`railval.core.errors.NotFound` for unknown names.
     """
     check_order(order)
     with stage("database"):
         camp, conf = repo.resolve(session, campaign_name, config)
-        if check_seals:
-            repo.require_evidence(session, camp, config, blobs=False)
         sections = repo.section_infos(session, camp)
         vehicle = repo.vehicle_info(session, camp)
+    seals_due = [check_seals]
+
+    def seals() -> None:  # once, while the first source's sections are processed
+        if seals_due[0]:
+            seals_due[0] = False
+            with stage("database"):
+                repo.require_evidence(session, camp, config, blobs=False)
+
     m_stats: dict[str, int] = {}
     s_stats: dict[str, int] = {}
-    measured = source_values(session, camp, None, sections, order=order, stats=m_stats)
-    simulated = source_values(session, camp, conf, sections, order=order, stats=s_stats)
+    measured = source_values(session, camp, None, sections, order=order, stats=m_stats,
+                             while_processing=seals)
+    simulated = source_values(session, camp, conf, sections, order=order, stats=s_stats,
+                              while_processing=seals)
+    seals()  # every value came from the cache
     with stage("database"):
         provenance = calibration_provenance(session, camp, config)
     return _verdict(measured, simulated, sections, vehicle, n_boot, seed,
