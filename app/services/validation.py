@@ -351,10 +351,10 @@ def _process_threads(database, plan: _Plan, chunks: list[tuple[str | None, list[
             done = fut.result()
         collect_chunk(chunk, done)
 
-    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="railval-chunk") as pool, \
-            database.session() as session:
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="railval-chunk") as pool:
         for chunk in chunks:
-            with stage("database"):
+            # a session per read: the collector opens its own (seals) between the reads
+            with stage("database"), database.session() as session:
                 decode = repo.fetch_signalsets(session, plan.name, chunk[0], sections=chunk[1],
                                                verify=True)
             pending.append((chunk, pool.submit(in_context(_thread_chunk), decode,
