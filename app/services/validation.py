@@ -26,6 +26,11 @@ calibration loops without the database).
 
 The campaign and configuration names are resolved once at the entrance
 (:func:`railval.db.repo.resolve`); the references travel down to every query.
+
+Length: the one-configuration and the many-configurations paths (chunks, workers, seals
+checked while processing, verdicts as soon as a configuration is complete) are one pipeline
+sharing the cache keys, the chunk task and the verdict; kept in one module so that they
+cannot drift apart (tests/test_validation_pipeline.py compares them).
 """
 
 from __future__ import annotations
