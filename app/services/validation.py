@@ -95,10 +95,11 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
         out = {sid: unpack_values(sid, cached[k]) for sid, k in keys.items() if k in cached}
     missing = [sid for sid in keys if sid not in out]
     if missing:
-        # pipeline: this thread reads the blobs of chunk k+1 (the caller's session stays in
-        # this thread) while a worker thread decodes and processes chunk k. Decoding in the
-        # worker, not here, avoids thousands of GIL hand-overs between the two threads
-        # (every inflate and plane copy releases the GIL), which doubled the decode time.
+        # pipeline: this thread reads the blobs of the next chunks (the caller's session
+        # stays in this thread) while _PIPELINE_THREADS threads decode and process earlier
+        # ones. Decoding in those threads, not here, avoids thousands of GIL hand-overs with
+        # this thread (every inflate and plane copy releases the GIL); two of them overlap
+        # one chunk's decode with the Python parts of another's EN chain.
         chunks = [missing[i:i + _PIPELINE_CHUNK]
                   for i in range(0, len(missing), _PIPELINE_CHUNK)]
         pending = []
@@ -173,7 +174,8 @@ def _evaluate_chunk_task(args: tuple) -> list[bytes]:
 
 
 _WORKER_DB: dict[str, Any] = {}
-#: orders whose kernels this process has loaded (:func:`_warm_kernels`)
+#: filter orders this process has warmed up with (:func:`_warm_kernels`; the compiled kernels
+#: are the same for every order, so one is enough)
 _WORKER_WARM: set[int] = set()
 #: load the kernels in this process before forking the worker processes (once, instead of
 #: once per worker)
@@ -181,9 +183,10 @@ _WARM_BEFORE_FORK = True
 
 
 def _warm_kernels(order: int) -> None:
-    """Load the compiled kernels of the EN chain in a new worker process (numba's on-disk
-    cache, ≈ 0.25 s; nothing when they came with the fork) by processing one small synthetic
-    section, so that ``railval bench dynotrain`` can show the start-up as its own stage."""
+    """Load the compiled kernels of the EN chain in this process (numba's on-disk cache,
+    ≈ 0.25 s) by processing one small synthetic section: in the main process before it forks
+    the workers (they inherit them), or in a worker that came without them (Dask); timed as
+    the stage ``worker_start`` by ``railval bench dynotrain``."""
     import numpy as np
 
     from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SignalSet
@@ -309,7 +312,7 @@ def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], 
         from railval.core.workers import pool_kwargs
 
         threads = max(1, thread_count() // workers)
-        if _WARM_BEFORE_FORK and order not in _WORKER_WARM:
+        if _WARM_BEFORE_FORK and not _WORKER_WARM:
             # loaded once here, the kernels come with the fork to every worker
             with stage("worker_start"):
                 _warm_kernels(order)
