@@ -171,43 +171,29 @@ def _settling_time(sos: np.ndarray, fs: float) -> float:
 _BLOCK = 32
 
 
-#: samples per chunk of a pass: all sections run over one chunk (32 signals × 256 samples ×
-#: 8 B = 64 KiB, held in the core's cache) before the next
+#: samples per chunk of :func:`_cascade_pass`: all sections run over one chunk (32 signals ×
+#: 256 samples × 8 B = 64 KiB, held in the core's cache) before the next
 _CHUNK = 256
-#: samples per tile of the streaming kernel: a tile of ``_BLOCK`` signals (32 × 128 × 8 B =
-#: 32 KiB) is transposed into the L1 cache, every section runs over it, and it is written out
-_TILE = 128
+#: samples per tile of :func:`_filter_block`: 32 signals × 64 samples × 8 B = 16 KiB, held in
+#: the L1 cache while it is transposed and every section runs over it (64 measured faster
+#: than 32, 128 and 256 for the transposing copies)
+_TILE = 64
 
 
 @numba.njit(cache=True, nogil=True)
 def _cascade_pass(sos, zi, ext, first, stop, step):  # pragma: no cover - compiled
     """One in-place pass of the cascade over ``ext[first:stop:step]`` (shape ``(m, _BLOCK)``,
     time-major), every section starting in the steady state ``zi`` scaled by the first sample
-    of the pass (``scipy.signal.sosfilt`` with ``zi·x0``). The recursion is scipy's sosfilt
-    (direct form II transposed, the same operations in the same order); the inner loop runs
-    over the ``_BLOCK`` independent signals, so it is vectorised and the latency of each
-    recursion is hidden by the others. The sections run one after another over chunks of
-    ``_CHUNK`` samples, each section keeping its state from chunk to chunk, so a chunk stays
-    in the cache while every section filters it. (Kept for the machine limits of
-    ``app/bench/bench_en.py``; :func:`filtfilt_rows` streams with :func:`_sections_over`.)"""
+    of the pass (``scipy.signal.sosfilt`` with ``zi·x0``), the sections running one after
+    another over chunks of ``_CHUNK`` samples (:func:`_sections_over`). Used by the machine
+    limits of ``app/bench/bench_en.py``."""
     z0 = np.empty((sos.shape[0], _BLOCK))
     z1 = np.empty((sos.shape[0], _BLOCK))
     _start_state(zi, ext[first], z0, z1)
     length = (stop - first) // step
     for k0 in range(0, length, _CHUNK):
         k1 = min(k0 + _CHUNK, length)
-        for s in range(sos.shape[0]):
-            b0, b1, b2, a1, a2 = sos[s, 0], sos[s, 1], sos[s, 2], sos[s, 4], sos[s, 5]
-            zs0 = z0[s]
-            zs1 = z1[s]
-            for k in range(k0, k1):
-                row = ext[first + k * step]
-                for c in range(_BLOCK):
-                    x = row[c]
-                    y = b0 * x + zs0[c]
-                    zs0[c] = b1 * x - a1 * y + zs1[c]
-                    zs1[c] = b2 * x - a2 * y
-                    row[c] = y
+        _sections_over(sos, z0, z1, ext, first + k0 * step, first + k1 * step, step)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -221,23 +207,30 @@ def _start_state(zi, x0, z0, z1):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _sections_over(sos, z0, z1, tile, length):  # pragma: no cover - compiled
-    """Every section in turn over ``tile[:length]`` (time-major, ``_BLOCK`` signals), in
-    place, continuing from and updating the section states ``z0``, ``z1``: scipy's sosfilt
-    recursion (direct form II transposed), the same operations in the same order as
-    :func:`_cascade_pass`; the inner loop over the signals is vectorised."""
+def _sections_over(sos, z0, z1, ext, first, stop, step):  # pragma: no cover - compiled
+    """Every section in turn over ``ext[first:stop:step]`` (time-major, ``_BLOCK`` signals),
+    in place, continuing from and updating the section states ``z0``, ``z1``. The recursion is
+    scipy's sosfilt (direct form II transposed, the same operations in the same order); the
+    inner loop runs over the ``_BLOCK`` independent signals, so it is vectorised and the
+    latency of each recursion is hidden by the others. The states are copied into local
+    arrays (known not to alias ``ext``, so kept in registers)."""
+    zs0 = np.empty(_BLOCK)
+    zs1 = np.empty(_BLOCK)
+    length = (stop - first) // step
     for s in range(sos.shape[0]):
         b0, b1, b2, a1, a2 = sos[s, 0], sos[s, 1], sos[s, 2], sos[s, 4], sos[s, 5]
-        zs0 = z0[s]
-        zs1 = z1[s]
+        zs0[:] = z0[s]
+        zs1[:] = z1[s]
         for k in range(length):
-            row = tile[k]
+            row = ext[first + k * step]
             for c in range(_BLOCK):
                 x = row[c]
                 y = b0 * x + zs0[c]
                 zs0[c] = b1 * x - a1 * y + zs1[c]
                 zs1[c] = b2 * x - a2 * y
                 row[c] = y
+        z0[s] = zs0
+        z1[s] = zs1
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -258,68 +251,59 @@ def _address_to_pointer(typingctx, address):
 
 
 @numba.njit(cache=True, nogil=True)
-def _filter_block(sos, zi, edge, src, out, b, nb, tile, z0, z1):  # pragma: no cover
+def _filter_block(sos, zi, edge, src, out, b, nb, tile, fwd, z0, z1):  # pragma: no cover
     """Forward–backward filter of the ``nb`` (≤ ``_BLOCK``) rows at addresses ``src[b:b + nb]``
-    into ``out[b:b + nb]``, streamed tile by tile through ``tile`` (time-major): the forward
-    pass over the odd extension of ``edge`` samples at the start (scipy's ``padtype="odd"``),
-    over the signal (written to ``out``) and over the end extension; then the backward pass
-    from the steady state of the last forward output over the end extension and over ``out``
-    from its end. The backward outputs over the start extension are never used, so that part
-    is not run. Columns ``nb:`` of ``tile`` are filtered, never written out."""
+    into ``out[b:b + nb]``, tile by tile: the forward pass over the odd extension of ``edge``
+    samples at the start (in ``tile``, scipy's ``padtype="odd"``), over the signal (each tile
+    transposed into its place in the time-major ``fwd`` and filtered there, in the cache) and
+    over the end extension (in ``tile``); then the backward pass from the steady state of the
+    last forward output over the end extension and over ``fwd`` from its end, each tile
+    transposed into ``out`` once filtered. Every sample is read once from the rows, written
+    and read once in ``fwd`` and written once to ``out`` (32 bytes). The backward outputs over
+    the start extension are never used, so that part is not run. Columns ``nb:`` hold values
+    of an earlier block (or zeros): filtered, never written out."""
     n = out.shape[1]
     for c in range(nb):  # start extension, forward
         row = _as_row(src[b + c], n)
         for i in range(edge):
             tile[i, c] = 2.0 * row[0] - row[edge - i]
     _start_state(zi, tile[0], z0, z1)
-    _sections_over(sos, z0, z1, tile, edge)
+    _sections_over(sos, z0, z1, tile, 0, edge, 1)
     for t0 in range(0, n, _TILE):  # the signal, forward
         t1 = min(t0 + _TILE, n)
         for c in range(nb):
             row = _as_row(src[b + c], n)
             for i in range(t0, t1):
-                tile[i - t0, c] = row[i]
-        _sections_over(sos, z0, z1, tile, t1 - t0)
-        for c in range(nb):
-            dst = out[b + c]
-            for i in range(t0, t1):
-                dst[i] = tile[i - t0, c]
+                fwd[i, c] = row[i]
+        _sections_over(sos, z0, z1, fwd, t0, t1, 1)
     for c in range(nb):  # end extension, forward
         row = _as_row(src[b + c], n)
         for i in range(edge):
             tile[i, c] = 2.0 * row[n - 1] - row[n - 2 - i]
-    _sections_over(sos, z0, z1, tile, edge)
-    for i in range(edge // 2):  # reversed in place for the backward pass
-        for c in range(_BLOCK):
-            tile[i, c], tile[edge - 1 - i, c] = tile[edge - 1 - i, c], tile[i, c]
-    _start_state(zi, tile[0], z0, z1)  # backward: from the last forward output
-    _sections_over(sos, z0, z1, tile, edge)
+    _sections_over(sos, z0, z1, tile, 0, edge, 1)
+    _start_state(zi, tile[edge - 1], z0, z1)  # backward: from the last forward output
+    _sections_over(sos, z0, z1, tile, edge - 1, -1, -1)
     for t1 in range(n, 0, -_TILE):  # the signal, backward
         t0 = max(t1 - _TILE, 0)
+        _sections_over(sos, z0, z1, fwd, t1 - 1, t0 - 1, -1)
         for c in range(nb):
             dst = out[b + c]
             for i in range(t0, t1):
-                tile[t1 - 1 - i, c] = dst[i]
-        _sections_over(sos, z0, z1, tile, t1 - t0)
-        for c in range(nb):
-            dst = out[b + c]
-            for i in range(t0, t1):
-                dst[i] = tile[t1 - 1 - i, c]
+                dst[i] = fwd[i, c]
 
 
 @numba.njit(cache=True, nogil=True)
 def _filtfilt_kernel(sos, zi, edge, src, out, r0, r1):  # pragma: no cover - compiled
     """Forward–backward filter the rows ``r0:r1`` (addresses ``src``, ``out.shape[1]`` samples
-    each) into ``out``, ``_BLOCK`` rows at a time (:func:`_filter_block`); a last, partial
-    block runs with zero columns."""
-    tile = np.zeros((max(_TILE, edge), _BLOCK))
+    each) into ``out``, ``_BLOCK`` rows at a time (:func:`_filter_block`); one time-major
+    buffer of the forward pass per call (``n × _BLOCK × 8`` bytes), reused from block to
+    block."""
+    tile = np.zeros((edge, _BLOCK))
+    fwd = np.zeros((out.shape[1], _BLOCK))
     z0 = np.empty((sos.shape[0], _BLOCK))
     z1 = np.empty((sos.shape[0], _BLOCK))
     for b in range(r0, r1, _BLOCK):
-        nb = min(_BLOCK, r1 - b)
-        if nb < _BLOCK:
-            tile[:, :] = 0.0
-        _filter_block(sos, zi, edge, src, out, b, nb, tile, z0, z1)
+        _filter_block(sos, zi, edge, src, out, b, min(_BLOCK, r1 - b), tile, fwd, z0, z1)
 
 
 def _row_addresses(rows: list) -> np.ndarray:
