@@ -109,14 +109,24 @@ def test_both_threads_give_the_bits_of_one(monkeypatch):
     np.testing.assert_array_equal(one, reference(x, "bandpass", 4))
 
 
-def test_a_wrong_kernel_would_be_caught():
-    """The reference tells a one-ulp change of one sample: the comparison is exact."""
+@pytest.mark.parametrize("wrong", ["padding", "start state", "one ulp"])
+def test_a_wrong_kernel_would_be_caught(wrong):
+    """The exact comparison tells a kernel with one sample less of padding, a start state off
+    by one part in 1e15, or one output off by one ulp."""
     x = np.random.default_rng(5).standard_normal((33, 700))
-    got = filtfilt_rows(x, FS, "lowpass", 4)
-    bad = got.copy()
-    bad[32, 350] = np.nextafter(bad[32, 350], np.inf)
-    ref = reference(x, "lowpass", 4)
-    assert np.array_equal(got, ref) and not np.array_equal(bad, ref)
+    d = design(FS, "lowpass", 4)
+    src = x.__array_interface__["data"][0] + x.strides[0] * np.arange(33, dtype=np.intp)
+    got = np.empty_like(x)
+    edge, zi = d.edge, d.zi
+    if wrong == "padding":
+        edge = d.edge - 1
+    elif wrong == "start state":
+        zi = zi * (1.0 + 1e-15)
+    filters._filtfilt_kernel(d.sos, zi, edge, src, got, 0, 33)
+    if wrong == "one ulp":
+        got[32, 350] = np.nextafter(got[32, 350], np.inf)
+    assert not np.array_equal(got, reference(x, "lowpass", 4))
+    np.testing.assert_array_equal(filtfilt_rows(x, FS, "lowpass", 4), reference(x, "lowpass", 4))
 
 
 def test_cascade_pass_kept_for_the_bench():
@@ -126,3 +136,11 @@ def test_cascade_pass_kept_for_the_bench():
     filters._cascade_pass(d.sos, d.zi, ext, 0, ext.shape[0], 1)
     _ref_pass(d.sos, d.zi, ref, 0, ref.shape[0], 1)
     np.testing.assert_array_equal(ext, ref)
+    filters._cascade_pass(d.sos, d.zi, ext, ext.shape[0] - 1, -1, -1)  # backward, as sosfiltfilt
+    _ref_pass(d.sos, d.zi, ref, ref.shape[0] - 1, -1, -1)
+    np.testing.assert_array_equal(ext, ref)
+    x = np.random.default_rng(2).standard_normal((600, filters._BLOCK))
+    y = x.copy()
+    filters._cascade_pass(d.sos, d.zi, y, 0, y.shape[0], 1)
+    ref_y = scipy.signal.sosfilt(d.sos, x, axis=0, zi=d.zi[:, :, None] * x[0])[0]
+    np.testing.assert_allclose(y, ref_y, rtol=0, atol=1e-12)
