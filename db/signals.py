@@ -131,17 +131,21 @@ def fetch_signalsets(
             chans.append(r[5])
     _check_requested(session, c, config, present, sections, channels)
 
-    cname, cname_conf = c.name, config_name(config)
+    src_name = "measurement" if config is None else f"configuration {config_name(config)!r}"
+    return _decoder(rows, verify, f"campaign {c.name!r}, {src_name}")
+
+
+def _decoder(rows: list, verify: bool, where: str) -> Callable[[], dict[str, SignalSet]]:
+    """The decode function of :func:`fetch_signalsets` over its ordered ``rows`` (a
+    recording's distance axis before its channels); ``where`` names the source in errors."""
 
     def decode_all() -> dict[str, SignalSet]:
         try:
             arrays = codec.decode_many([(r[6], r[7] if verify else None) for r in rows])
         except codec.BlobError as exc:
             sid, chan = rows[exc.index][0], rows[exc.index][5]
-            src = "measurement" if config is None else f"configuration {cname_conf!r}"
-            raise InvalidSignal(f"campaign {cname!r}, {src}, section {sid!r}, "
-                                f"{chan or 'distance_m'}: {exc}; check the database with "
-                                "`railval verify`") from None
+            raise InvalidSignal(f"{where}, section {sid!r}, {chan or 'distance_m'}: {exc}; "
+                                "check the database with `railval verify`") from None
         out: dict[str, SignalSet] = {}
         for (sid, _rid, fs, t0, n, chan, _blob, sha, is_signal), a in zip(rows, arrays,
                                                                          strict=True):
