@@ -356,7 +356,8 @@ class _BlockPool:
     all gone is handed out again as it is. A buffer is free when the pool holds the only
     reference to it: every numpy view of it (rows, their slices) refers to it as ``base``.
     At most ``keep`` buffers are kept (the pipeline of the validation service has two
-    chunks in flight); larger blocks, or more at once, are ordinary allocations.
+    chunks in flight); blocks above a buffer or below a quarter of one, or more at once,
+    are ordinary allocations.
     """
 
     def __init__(self, keep: int):
@@ -366,8 +367,8 @@ class _BlockPool:
 
     def take(self, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
         nbytes = math.prod(shape) * dtype.itemsize
-        if nbytes > BLOCK_BYTES or not nbytes or dtype.alignment > 16:
-            return np.empty(shape, dtype)
+        if not BLOCK_BYTES // 4 <= nbytes <= BLOCK_BYTES or dtype.alignment > 16:
+            return np.empty(shape, dtype)  # small blocks do not pin a whole buffer
         with self._lock:
             buf = next((b for b in self._buffers if sys.getrefcount(b) <= 3), None)
             if buf is None:

@@ -118,6 +118,28 @@ def test_arrays_from_one_block_are_independent_and_writable():
         assert a.tobytes() == reference_decode(blob)[0].tobytes()
 
 
+def test_a_pooled_buffer_is_reused_only_when_no_array_refers_to_it(monkeypatch):
+    monkeypatch.setattr(codec, "BLOCK_BYTES", 6 * 2000 * 8)
+    monkeypatch.setattr(codec, "_BLOCKS", codec._BlockPool(2))
+    items = [codec.encode(measured_like(2000, k)) for k in range(6)]
+    others = [codec.encode(measured_like(2000, 10 + k)) for k in range(6)]
+    first = codec.decode_many(items)
+    second = codec.decode_many(others)
+    assert not np.shares_memory(first[0].base, second[0].base)
+    keep = first[3][100:200]  # a slice of one row still refers to the first buffer
+    del first
+    third = codec.decode_many(items)  # the first buffer is still in use: a fresh block
+    assert not np.shares_memory(third[0].base, keep) and len(codec._BLOCKS._buffers) == 2
+    assert keep.tobytes() == reference_decode(items[3][0])[0][100:200].tobytes()
+    del keep, third
+    fourth = codec.decode_many(others)  # now a pooled buffer is free again
+    assert any(fourth[0].base is b for b in codec._BLOCKS._buffers)
+    for (blob, _), a in zip(others, fourth, strict=True):
+        assert a.tobytes() == reference_decode(blob)[0].tobytes()
+    for (blob, _), a in zip(others, second, strict=True):  # untouched by the reuse
+        assert a.tobytes() == reference_decode(blob)[0].tobytes()
+
+
 @pytest.mark.parametrize("threads", ["1", "2"])
 def test_decode_many_refuses_a_forged_blob_and_names_the_first(monkeypatch, threads):
     monkeypatch.setenv("RAILVAL_THREADS", threads)
