@@ -40,6 +40,7 @@ planes take as long as one; two threads hashing take half the time).
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import itertools
 import math
@@ -119,11 +120,17 @@ def content_hash(array: np.ndarray) -> str:
 
 
 def _hash_canonical(a: np.ndarray) -> str:
-    h = hashlib.sha256()
-    shape = "x".join(str(s) for s in a.shape)
-    h.update(f"dtype={a.dtype.str};shape={shape};".encode("ascii"))
+    h = _hash_prefix(a.dtype.str, a.shape).copy()
     h.update(a.reshape(-1).view(np.uint8))
     return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=256)
+def _hash_prefix(dtype_str: str, shape: tuple[int, ...]):
+    """SHA-256 state after ``dtype=…;shape=…;`` (copied for every array of that kind)."""
+    h = hashlib.sha256()
+    h.update(f"dtype={dtype_str};shape={'x'.join(str(s) for s in shape)};".encode("ascii"))
+    return h
 
 
 def encode(array: np.ndarray, *, level: int = 1, allow_nonfinite: bool = True) -> tuple[bytes, str]:
