@@ -371,15 +371,28 @@ class _BlockPool:
 
     def __init__(self, keep: int):
         self.keep = keep
-        self._buffers: list[np.ndarray] = []
+        self._buffers: list[np.ndarray] = [np.empty(0, np.uint8)]  # a probe nothing else uses
+        self._idle_refs = self._refcounts()[0]
+        self._buffers.clear()
         self._lock = threading.Lock()
+
+    def _refcounts(self) -> list[int]:
+        """References to each buffer, counted the same way for the probe of ``__init__`` and
+        later, so the figure of an unused buffer does not depend on interpreter details."""
+        return [sys.getrefcount(b) for b in self._buffers]
+
+    def _idle(self) -> np.ndarray | None:
+        for b, refs in zip(self._buffers, self._refcounts(), strict=True):
+            if refs <= self._idle_refs:
+                return b
+        return None
 
     def take(self, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
         nbytes = math.prod(shape) * dtype.itemsize
         if not BLOCK_BYTES // 4 <= nbytes <= BLOCK_BYTES or dtype.alignment > 16:
             return np.empty(shape, dtype)  # small blocks do not pin a whole buffer
         with self._lock:
-            buf = next((b for b in self._buffers if sys.getrefcount(b) <= 3), None)
+            buf = self._idle()
             if buf is None:
                 if len(self._buffers) >= self.keep:
                     return np.empty(shape, dtype)
