@@ -25,18 +25,31 @@ C-ordered element bytes. It depends on the values only, never on the compression
 same samples always have the same hash whatever file format or codec carried them
 (export → import reproduces it).
 
-Decoding inflates with ISA-L (``isal.isal_zlib``, the same zlib stream format, about 1.8×
-faster on the byte planes of measured signals) when that package is installed and falls
-back to the standard :mod:`zlib` otherwise; both give identical bytes.
+Decoding inflates with libdeflate (``deflate``) or ISA-L (``isal.isal_zlib``), whichever is
+installed, in that order, else the standard :mod:`zlib` — the same stream format, identical
+bytes; both come with ``asammdf`` (the ``formats`` extra). On the 714 compressed planes of
+one source of the 6-configuration bench database they take 0.030 and 0.032 CPU-s against
+0.066 s for :mod:`zlib`. The byte planes of an 8-byte dtype are joined by one compiled pass
+(:func:`_interleave8`, numba, compiled on first use: importing this module does not import
+numba) straight into the output array. :func:`decode_many` decodes a list of blobs on the
+shared row threads (:func:`railval.core.workers.split_rows`): SHA-256 (:mod:`hashlib`) and
+the join release the GIL, so the hash of one blob overlaps the inflate of another. Neither
+libdeflate's nor ISA-L's Python binding releases the GIL (two threads inflating 20 kB
+planes take as long as one; two threads hashing take half the time).
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import itertools
+import math
 import os
 import struct
+import sys
 import threading
 import zlib
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -58,6 +71,12 @@ try:  # ISA-L inflate: same stream format as zlib, faster; optional
 except ImportError:  # pragma: no cover - depends on the installation
     _isal_decompress = None
     _isal_error = zlib.error
+try:  # libdeflate: same stream format, faster still on byte planes; optional
+    from deflate import DeflateError as _deflate_error
+    from deflate import zlib_decompress as _deflate_decompress
+except ImportError:  # pragma: no cover - depends on the installation
+    _deflate_decompress = None
+    _deflate_error = zlib.error
 
 
 def _zlib_inflate(data, size_hint: int) -> bytes:
@@ -68,9 +87,16 @@ def _isal_inflate(data, size_hint: int) -> bytes:
     return _isal_decompress(data, bufsize=max(size_hint, 1))
 
 
-#: the inflate used by :func:`decode` (ISA-L when installed, else :mod:`zlib`)
-inflate = _isal_inflate if _isal_decompress is not None else _zlib_inflate
-_INFLATE_ERRORS = (zlib.error, _isal_error)
+def _libdeflate_inflate(data, size_hint: int) -> bytes:
+    """libdeflate needs the output size up front: ``size_hint`` is the most it may give (a
+    longer stream is an error, a shorter one returns fewer bytes)."""
+    return _deflate_decompress(data, max(size_hint, 1))
+
+
+#: the inflate used by :func:`decode` (libdeflate, else ISA-L, else :mod:`zlib`)
+inflate = (_libdeflate_inflate if _deflate_decompress is not None
+           else _isal_inflate if _isal_decompress is not None else _zlib_inflate)
+_INFLATE_ERRORS = (zlib.error, _isal_error, _deflate_error)
 
 
 def _canonical(array: np.ndarray) -> np.ndarray:
@@ -94,11 +120,17 @@ def content_hash(array: np.ndarray) -> str:
 
 
 def _hash_canonical(a: np.ndarray) -> str:
-    h = hashlib.sha256()
-    shape = "x".join(str(s) for s in a.shape)
-    h.update(f"dtype={a.dtype.str};shape={shape};".encode("ascii"))
+    h = _hash_prefix(a.dtype.str, a.shape).copy()
     h.update(a.reshape(-1).view(np.uint8))
     return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=256)
+def _hash_prefix(dtype_str: str, shape: tuple[int, ...]):
+    """SHA-256 state after ``dtype=…;shape=…;`` (copied for every array of that kind)."""
+    h = hashlib.sha256()
+    h.update(f"dtype={dtype_str};shape={'x'.join(str(s) for s in shape)};".encode("ascii"))
+    return h
 
 
 def encode(array: np.ndarray, *, level: int = 1, allow_nonfinite: bool = True) -> tuple[bytes, str]:
@@ -140,15 +172,19 @@ def encode(array: np.ndarray, *, level: int = 1, allow_nonfinite: bool = True) -
 
 
 class VerifiedCache:
-    """Arrays already decoded and verified in this process, by content hash (LRU, at most
-    ``limit_bytes`` of arrays and blobs).
+    """Blobs already verified in this process, and the arrays decoded from them, by content
+    hash (LRU, at most ``limit_bytes`` of arrays and blobs).
 
     An entry keeps the blob it was decoded from; a hit requires the same content hash *and*
     byte-for-byte the same blob (a comparison at memory speed, ~10 GB/s, against ~0.3 ms
     of inflate and SHA-256 for a 160 kB signal), so the result is exactly what decoding and
     verifying that blob gives — a blob changed in the database since is decoded and verified
-    again. Never used without an expected hash: a first read is always verified. A hit
-    returns a copy (callers may write to their arrays).
+    again. Never used without an expected hash: a first read is always verified.
+
+    :func:`decode` records a first read with :meth:`mark` (the blob only: copying the
+    arrays of a source cost 0.02–0.03 CPU-s, a fifth of its old decode); a second read
+    of the same blob decodes without the hash and keeps a copy of the array (:meth:`put`);
+    later reads return a copy of it (:meth:`get`; callers may write to their arrays).
     """
 
     def __init__(self, limit_bytes: int):
@@ -157,32 +193,47 @@ class VerifiedCache:
         self.limit_bytes = limit_bytes
         self.size = 0
         self.hits = 0
-        self._entries: OrderedDict[str, tuple[bytes, np.ndarray]] = OrderedDict()
+        self._entries: OrderedDict[str, tuple[bytes, np.ndarray | None]] = OrderedDict()
         self._lock = threading.Lock()
 
-    def get(self, blob, sha: str) -> np.ndarray | None:
+    def lookup(self, blob, sha: str) -> np.ndarray | bool:
+        """A copy of the array kept for ``(blob, sha)``; ``True`` when that blob was verified
+        but its array is not kept; ``False`` when the blob was not verified (no hit)."""
         with self._lock:
             entry = self._entries.get(sha)
             if entry is None or entry[0] != blob:
-                return None
+                return False
             self._entries.move_to_end(sha)
             self.hits += 1
-        return entry[1].copy()
+        return True if entry[1] is None else entry[1].copy()
+
+    def get(self, blob, sha: str) -> np.ndarray | None:
+        """A copy of the array kept for ``(blob, sha)``, or ``None``."""
+        found = self.lookup(blob, sha)
+        return found if isinstance(found, np.ndarray) else None
+
+    def mark(self, blob, sha: str) -> None:
+        """Record that ``blob`` was decoded and matched ``sha`` (keeps the blob only)."""
+        self._store(bytes(blob), sha, None)
 
     def put(self, blob, sha: str, array: np.ndarray) -> None:
-        cost = len(blob) + array.nbytes
+        """Keep a copy of ``array``, decoded from ``blob`` and verified against ``sha``."""
+        if len(blob) + array.nbytes <= self.limit_bytes:
+            self._store(bytes(blob), sha, array.copy())
+
+    def _store(self, blob: bytes, sha: str, kept: np.ndarray | None) -> None:
+        cost = len(blob) + (0 if kept is None else kept.nbytes)
         if cost > self.limit_bytes:
             return
-        kept = array.copy()
         with self._lock:
             old = self._entries.pop(sha, None)
             if old is not None:
-                self.size -= len(old[0]) + old[1].nbytes
-            self._entries[sha] = (bytes(blob), kept)
+                self.size -= len(old[0]) + (0 if old[1] is None else old[1].nbytes)
+            self._entries[sha] = (blob, kept)
             self.size += cost
             while self.size > self.limit_bytes:
                 _, (b, a) = self._entries.popitem(last=False)
-                self.size -= len(b) + a.nbytes
+                self.size -= len(b) + (0 if a is None else a.nbytes)
 
     def clear(self) -> None:
         with self._lock:
@@ -201,42 +252,203 @@ def decode(blob: bytes, expected_sha: str | None = None) -> np.ndarray:
 
     Checks magic, codec, dtype and that the payload length matches the shape; with
     ``expected_sha`` also verifies the content hash. Raises :class:`InvalidSignal`.
-    A verified decode is kept in :data:`VERIFIED`; the same blob with the same expected hash
-    is then returned from there (a copy) without decoding it again.
+    A verified decode is recorded in :data:`VERIFIED`: the same blob with the same expected
+    hash is then not hashed again, and from its third read on not decoded (a copy of the
+    array kept at the second read is returned).
     """
+    return _decode_cached(blob, expected_sha, None)
+
+
+def _decode_cached(blob, expected_sha: str | None, out: np.ndarray | None) -> np.ndarray:
+    """:func:`decode` through :data:`VERIFIED` (``out``: see :func:`_decode`)."""
     if expected_sha is None or VERIFIED.limit_bytes <= 0:
-        return _decode(blob, expected_sha)
-    hit = VERIFIED.get(blob, expected_sha)
-    if hit is not None:
-        return hit
-    array = _decode(blob, expected_sha)
-    VERIFIED.put(blob, expected_sha, array)
+        return _decode(blob, expected_sha, out)
+    found = VERIFIED.lookup(blob, expected_sha)
+    if found is False:
+        array = _decode(blob, expected_sha, out)
+        VERIFIED.mark(blob, expected_sha)
+    elif found is True:  # this very blob was verified before: decode, keep the array
+        array = _decode(blob, None, out)
+        VERIFIED.put(blob, expected_sha, array)
+    else:
+        array = found
     return array
 
 
-def _decode(blob: bytes, expected_sha: str | None) -> np.ndarray:
-    mv = memoryview(blob)
+class BlobError(InvalidSignal):
+    """:func:`decode_many`: item ``index`` failed to decode or verify (the message says why)."""
+
+    def __init__(self, message: str, index: int):
+        super().__init__(message)
+        self.index = index
+
+
+#: :func:`decode_many` decodes on one thread below this many blobs per thread
+MIN_BLOBS_PER_THREAD = 4
+
+
+def decode_many(items: Sequence[tuple[bytes, str | None]]) -> list[np.ndarray]:
+    """``[decode(blob, sha) for blob, sha in items]`` on up to
+    :func:`railval.core.workers.thread_count` threads (``$RAILVAL_THREADS``).
+
+    The threads take the next blob from a shared counter (a blob is decoded whole by one
+    thread); SHA-256 and the plane join release the GIL, the inflate does not (module
+    docstring), so two threads overlap one blob's hash with another's inflate. Every blob is
+    decoded and verified exactly as :func:`decode` does it (same :data:`VERIFIED` cache).
+    Raises :class:`BlobError` for the first failing item in list order.
+    """
+    n = len(items)
+    out = _preallocate(items)
+    failed: list[tuple[int, str]] = []
+    taken = itertools.count()  # next() is atomic under the GIL
+
+    def work(_start: int, _stop: int) -> None:
+        while not failed and (i := next(taken)) < n:
+            try:
+                out[i] = _decode_cached(items[i][0], items[i][1], out[i])
+            except InvalidSignal as exc:
+                failed.append((i, str(exc)))
+
+    from railval.core.workers import split_rows, thread_count
+
+    threads = min(thread_count(), n // MIN_BLOBS_PER_THREAD)
+    if threads <= 1 or threading.current_thread().name.startswith("railval-rows"):
+        work(0, n)  # in a pool thread already: never wait on the pool from inside it
+    else:
+        split_rows(work, threads)
+    if failed:
+        # every item before the first failure was taken earlier and finished by its thread
+        index, message = min(failed)
+        raise BlobError(message, index)
+    return out
+
+
+def _preallocate(items: Sequence[tuple[bytes, str | None]]) -> list[np.ndarray | None]:
+    """Output arrays for the codec-2 blobs of ``items``: rows of one block per dtype and
+    shape (``None`` for the others, and for a blob whose header does not parse).
+
+    One large allocation instead of one per blob: the kernel maps fresh memory for both, but
+    a block of many signals is mapped with far fewer page faults (transparent huge pages;
+    numpy advises them for large arrays) — ≈ 13 900 faults and 0.03–0.05 CPU-s for 357
+    arrays of 160 kB against ≈ 660 faults and 0.012–0.017 CPU-s for one block; a pooled
+    buffer (:class:`_BlockPool`) needs neither. Rows of a block share its memory: it is
+    released (or free for reuse) when no row is referenced any more.
+    """
+    groups: dict[tuple[np.dtype, tuple[int, ...]], list[int]] = {}
+    for i, (blob, _sha) in enumerate(items):
+        try:
+            codec, dtype, shape, _size, _pos = _header(memoryview(blob))
+        except InvalidSignal:
+            continue  # decoding it reports the problem
+        if codec == CODEC_PLANES:
+            groups.setdefault((dtype, shape), []).append(i)
+    out: list[np.ndarray | None] = [None] * len(items)
+    for (dtype, shape), idx in groups.items():
+        rows = max(1, BLOCK_BYTES // max(1, dtype.itemsize * math.prod(shape)))
+        for first in range(0, len(idx), rows):
+            part = idx[first:first + rows]
+            block = _BLOCKS.take((len(part), *shape), dtype)
+            for row, i in enumerate(part):
+                out[i] = block[row]
+    return out
+
+
+#: bytes per preallocated output block of :func:`decode_many`
+BLOCK_BYTES = 64 << 20
+
+
+class _BlockPool:
+    """Buffers of :data:`BLOCK_BYTES` for output blocks, reused once no array uses them.
+
+    Fresh memory costs the kernel a page fault and zero fill per page (≈ 0.017 CPU-s for
+    the 57 MB of one DynoTRAIN source, a fifth of its decode); a buffer whose arrays are
+    all gone is handed out again as it is. A buffer is free when the pool holds the only
+    reference to it: every numpy view of it (rows, their slices) refers to it as ``base``.
+    At most ``keep`` buffers are kept (the pipeline of the validation service has two
+    chunks in flight); blocks above a buffer or below a quarter of one, or more at once,
+    are ordinary allocations.
+    """
+
+    def __init__(self, keep: int):
+        self.keep = keep
+        self._buffers: list[np.ndarray] = [np.empty(0, np.uint8)]  # a probe nothing else uses
+        self._idle_refs = self._refcounts()[0]
+        self._buffers.clear()
+        self._lock = threading.Lock()
+
+    def _refcounts(self) -> list[int]:
+        """References to each buffer, counted the same way for the probe of ``__init__`` and
+        later, so the figure of an unused buffer does not depend on interpreter details."""
+        return [sys.getrefcount(b) for b in self._buffers]
+
+    def _idle(self) -> np.ndarray | None:
+        for b, refs in zip(self._buffers, self._refcounts(), strict=True):
+            if refs <= self._idle_refs:
+                return b
+        return None
+
+    def take(self, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
+        nbytes = math.prod(shape) * dtype.itemsize
+        if not BLOCK_BYTES // 4 <= nbytes <= BLOCK_BYTES or dtype.alignment > 16:
+            return np.empty(shape, dtype)  # small blocks do not pin a whole buffer
+        with self._lock:
+            buf = self._idle()
+            if buf is None:
+                if len(self._buffers) >= self.keep:
+                    return np.empty(shape, dtype)
+                buf = np.empty(BLOCK_BYTES, np.uint8)
+                self._buffers.append(buf)
+            return buf[:nbytes].view(dtype).reshape(shape)
+
+
+#: the output buffers of :func:`decode_many` (two: ≤ 128 MB kept per process)
+_BLOCKS = _BlockPool(2)
+
+
+def _header(mv: memoryview) -> tuple[int, np.dtype, tuple[int, ...], int, int]:
+    """``(codec, dtype, shape, size, payload start)`` of a blob; raises :class:`InvalidSignal`."""
     if len(mv) < _FIXED.size:
         raise InvalidSignal(f"blob of {len(mv)} bytes is shorter than the {_FIXED.size}-byte header")
     magic, codec, _level, dlen, ndim = _FIXED.unpack_from(mv, 0)
     if magic != MAGIC:
         raise InvalidSignal(f"blob magic {bytes(magic)!r} is not {MAGIC!r}")
     pos = _FIXED.size
-    try:
-        dtype = np.dtype(bytes(mv[pos : pos + dlen]).decode("ascii"))
-    except (TypeError, UnicodeDecodeError) as exc:
-        raise InvalidSignal(f"blob dtype field is invalid: {exc}") from None
-    if dtype.kind not in _ALLOWED_KINDS:
-        raise InvalidSignal(f"blob dtype {dtype} is not storable")
+    dfield = bytes(mv[pos : pos + dlen])
+    dtype = _DTYPES.get(dfield)
+    if dtype is None:
+        try:
+            dtype = np.dtype(dfield.decode("ascii"))
+        except (TypeError, UnicodeDecodeError) as exc:
+            raise InvalidSignal(f"blob dtype field is invalid: {exc}") from None
+        if dtype.kind not in _ALLOWED_KINDS:
+            raise InvalidSignal(f"blob dtype {dtype} is not storable")
+        if len(_DTYPES) < 64:
+            _DTYPES[dfield] = dtype
     pos += dlen
     if len(mv) < pos + 8 * ndim:
         raise InvalidSignal("blob truncated inside the shape field")
     shape = struct.unpack_from(f"<{ndim}Q", mv, pos)
-    pos += 8 * ndim
     size = 1
     for s in shape:
         size *= s
+    return codec, dtype, shape, size, pos + 8 * ndim
+
+
+#: dtype field of a blob → its (storable) dtype, so the header parse skips ``np.dtype``
+_DTYPES: dict[bytes, np.dtype] = {}
+
+
+def _decode(blob: bytes, expected_sha: str | None, out: np.ndarray | None = None) -> np.ndarray:
+    """Decode (and with ``expected_sha`` verify) one blob; a codec-2 blob is written into
+    ``out`` when that is a C-contiguous array of its dtype and shape (else a new array)."""
+    mv = memoryview(blob)
+    codec, dtype, shape, size, pos = _header(mv)
     nbytes = size * dtype.itemsize
+    if codec == CODEC_PLANES:
+        if out is None or out.shape != shape or out.dtype != dtype or not out.flags.c_contiguous:
+            out = np.empty(shape, dtype)
+        _join_planes(mv, pos, out.reshape(-1))
+        return _verified(out, expected_sha)
     payload = mv[pos:]
     if codec == CODEC_RAW:
         data = payload
@@ -245,9 +457,6 @@ def _decode(blob: bytes, expected_sha: str | None) -> np.ndarray:
             data = inflate(payload, nbytes)
         except _INFLATE_ERRORS as exc:
             raise InvalidSignal(f"blob payload does not decompress: {exc}") from None
-    elif codec == CODEC_PLANES:
-        array = _join_planes(payload, dtype, size).reshape(shape)
-        return _verified(array, expected_sha)
     else:
         raise InvalidSignal(f"blob codec {codec} is unknown (known: 0 raw, 1 shuffle+zlib, "
                             "2 byte planes)")
@@ -271,38 +480,94 @@ def _verified(array: np.ndarray, expected_sha: str | None) -> np.ndarray:
     return array
 
 
-def _join_planes(payload: memoryview, dtype: np.dtype, size: int) -> np.ndarray:
-    """Rebuild a flat array from the byte planes of a codec-2 payload.
+def _join_planes(mv: memoryview, pos: int, out: np.ndarray) -> None:
+    """Write the byte planes of a codec-2 payload starting at ``mv[pos]`` into the flat
+    array ``out`` (its dtype and size are the header's).
 
-    Each plane is written into its byte column of the output (a strided uint8 copy, about
-    2.5× faster than transposing the plane-major buffer).
+    Raw planes are read in place in the blob; the compressed ones are inflated. An 8-byte
+    dtype is joined by :func:`_interleave8` in one pass (≈ 14 µs for 20 000 elements against
+    ≈ 55 µs for eight strided numpy copies); other sizes write each plane into its byte
+    column (a strided uint8 copy).
     """
-    itemsize = dtype.itemsize
-    out = np.empty(size, dtype)
-    cols = out.view(np.uint8).reshape(size, itemsize)
-    pos = 0
+    itemsize, size = out.dtype.itemsize, out.size
+    offsets = [0] * itemsize  # plane k: ≥ 0 its start in the blob, < 0 -1 - start in `extra`
+    inflated: list[bytes] = []
+    end = len(mv)
     for k in range(itemsize):
-        if len(payload) < pos + _PLANE.size:
+        if end < pos + _PLANE.size:
             raise InvalidSignal(f"blob truncated before byte plane {k}")
-        flag, length = _PLANE.unpack_from(payload, pos)
+        flag, length = _PLANE.unpack_from(mv, pos)
         pos += _PLANE.size
-        chunk = payload[pos : pos + length]
-        if len(chunk) != length:
+        if end < pos + length:
             raise InvalidSignal(f"blob truncated inside byte plane {k}")
-        pos += length
         if flag == 0:
-            plane = chunk
+            got = length
+            offsets[k] = pos
         elif flag == 1:
             try:
-                plane = inflate(chunk, size)
+                plane = inflate(mv[pos : pos + length], size)
             except _INFLATE_ERRORS as exc:
                 raise InvalidSignal(f"byte plane {k} does not decompress: {exc}") from None
+            got = len(plane)
+            offsets[k] = -1 - size * len(inflated)
+            inflated.append(plane)
         else:
             raise InvalidSignal(f"byte plane {k} has unknown flag {flag}")
-        if len(plane) != size:
-            raise InvalidSignal(f"byte plane {k} holds {len(plane)} bytes, the shape needs {size}")
-        if size:
-            cols[:, k] = np.frombuffer(plane, np.uint8)
-    if pos != len(payload):
-        raise InvalidSignal(f"blob has {len(payload) - pos} trailing bytes after the last plane")
-    return out
+        if got != size:
+            raise InvalidSignal(f"byte plane {k} holds {got} bytes, the shape needs {size}")
+        pos += length
+    if pos != end:
+        raise InvalidSignal(f"blob has {end - pos} trailing bytes after the last plane")
+    if size:
+        _fill_planes(out, np.frombuffer(mv, np.uint8), inflated, offsets)
+
+
+def _fill_planes(out: np.ndarray, src: np.ndarray, inflated: list[bytes],
+                 offsets: list[int]) -> None:
+    """Write the byte planes (``offsets`` as in :func:`_join_planes`) into ``out``."""
+    extra = np.frombuffer(inflated[0] if len(inflated) == 1 else b"".join(inflated) or b"\0",
+                          np.uint8)
+    if out.dtype.itemsize == 8 and _LITTLE:
+        _interleave8_kernel()(out.view(np.uint64), src, extra, np.array(offsets, np.int64))
+        return
+    size = out.size
+    cols = out.view(np.uint8).reshape(size, out.dtype.itemsize)
+    for k, o in enumerate(offsets):
+        cols[:, k] = src[o : o + size] if o >= 0 else extra[-1 - o : -1 - o + size]
+
+
+def _interleave8(out, src, extra, offsets):  # pragma: no cover - compiled by numba
+    """``out[i]`` = the 8 bytes ``plane_k[i]`` (k = 0 … 7, little-endian) of a codec-2
+    payload; plane k is ``src[offsets[k]:]`` when ``offsets[k] ≥ 0``, else
+    ``extra[-1 - offsets[k]:]`` (the byte shuffle of the module docstring, undone)."""
+    n = out.size
+    o0, o1, o2, o3 = offsets[0], offsets[1], offsets[2], offsets[3]
+    o4, o5, o6, o7 = offsets[4], offsets[5], offsets[6], offsets[7]
+    p0 = src[o0:o0 + n] if o0 >= 0 else extra[-1 - o0:-1 - o0 + n]
+    p1 = src[o1:o1 + n] if o1 >= 0 else extra[-1 - o1:-1 - o1 + n]
+    p2 = src[o2:o2 + n] if o2 >= 0 else extra[-1 - o2:-1 - o2 + n]
+    p3 = src[o3:o3 + n] if o3 >= 0 else extra[-1 - o3:-1 - o3 + n]
+    p4 = src[o4:o4 + n] if o4 >= 0 else extra[-1 - o4:-1 - o4 + n]
+    p5 = src[o5:o5 + n] if o5 >= 0 else extra[-1 - o5:-1 - o5 + n]
+    p6 = src[o6:o6 + n] if o6 >= 0 else extra[-1 - o6:-1 - o6 + n]
+    p7 = src[o7:o7 + n] if o7 >= 0 else extra[-1 - o7:-1 - o7 + n]
+    for i in range(n):
+        out[i] = (np.uint64(p0[i]) | (np.uint64(p1[i]) << 8) | (np.uint64(p2[i]) << 16)
+                  | (np.uint64(p3[i]) << 24) | (np.uint64(p4[i]) << 32)
+                  | (np.uint64(p5[i]) << 40) | (np.uint64(p6[i]) << 48)
+                  | (np.uint64(p7[i]) << 56))
+
+
+_KERNEL: list = []
+_KERNEL_LOCK = threading.Lock()
+
+
+def _interleave8_kernel():
+    """:func:`_interleave8` compiled (``numba.njit(cache=True, nogil=True)``) on first use."""
+    if not _KERNEL:
+        with _KERNEL_LOCK:
+            if not _KERNEL:
+                import numba
+
+                _KERNEL.append(numba.njit(cache=True, nogil=True)(_interleave8))
+    return _KERNEL[0]

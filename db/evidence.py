@@ -35,9 +35,24 @@ def _decode_problem(blob: bytes, sha: str, n: int) -> str | None:
         a = codec.decode(blob, sha)
     except InvalidSignal as exc:
         return str(exc)
-    if a.shape != (n,):
-        return f"holds shape {a.shape}, the recording has n = {n}"
-    return None
+    return _shape_problem(a, n)
+
+
+def _shape_problem(a, n: int) -> str | None:
+    return None if a.shape == (n,) else f"holds shape {a.shape}, the recording has n = {n}"
+
+
+def _decode_problems(items: list[tuple[str, bytes, str]], n: int) -> dict[str, str]:
+    """Name → why, for the ``(name, blob, sha)`` of one recording that fail their content hash
+    or its length: all decoded at once on the row threads (:func:`codec.decode_many`); only
+    when one fails is each decoded alone, to name every failing one."""
+    try:
+        arrays = codec.decode_many([(blob, sha) for _, blob, sha in items])
+    except InvalidSignal:
+        found = {name: _decode_problem(blob, sha, n) for name, blob, sha in items}
+    else:
+        found = {name: _shape_problem(a, n) for (name, _, _), a in zip(items, arrays, strict=True)}
+    return {name: why for name, why in found.items() if why is not None}
 
 
 def verify_signals(session: Session, campaign: CampaignArg) -> list[dict[str, Any]]:
@@ -62,9 +77,8 @@ def verify_signals(session: Session, campaign: CampaignArg) -> list[dict[str, An
             select(Channel.name, Signal.blob, Signal.sha256)
             .join(Channel, Signal.channel_id == Channel.id).where(Signal.recording_id == rid)
         ).tuples())
-        for name, blob, sha in items:
-            if (why := _decode_problem(blob, sha, n)) is not None:
-                problems.append({**where, "channel": name, "error": why})
+        for name, why in _decode_problems(items, n).items():
+            problems.append({**where, "channel": name, "error": why})
     return problems
 
 
@@ -105,8 +119,10 @@ def _source_problems(session: Session, c: Campaign | CampaignRef, config: Config
             rows = by_rec.get(rid, [])
         if blobs:
             dblob = session.scalar(select(Recording.distance_blob).where(Recording.id == rid))
-            if (why := _decode_problem(dblob, dsha, n)) is not None:
-                problems.append({**where, "channel": "distance_m", "error": why})
+            bad = _decode_problems([("distance_m", dblob, dsha)]
+                                   + [(row[0], row[4], row[2]) for row in rows], n)
+            if "distance_m" in bad:
+                problems.append({**where, "channel": "distance_m", "error": bad["distance_m"]})
         for row in rows:
             name, cid, sha, prov = row[0], row[1], row[2], row[3] or {}
             seal = prov.get("seal") if isinstance(prov, dict) else None
@@ -120,8 +136,8 @@ def _source_problems(session: Session, c: Campaign | CampaignRef, config: Config
                                  "samples, their hash, the recording or its place (campaign, "
                                  "section, configuration, channel) were changed outside "
                                  "railval"})
-            if blobs and (why := _decode_problem(row[4], sha, n)) is not None:
-                problems.append({**where, "channel": name, "error": why})
+            if blobs and name in bad:
+                problems.append({**where, "channel": name, "error": bad[name]})
     return problems
 
 

@@ -87,7 +87,10 @@ def fetch_signalsets(
 
     The returned function uses no database session, so another thread may call it (the
     validation service decodes and processes one chunk of sections in a worker thread
-    while this thread reads the next). Unknown names raise :class:`NotFound` here.
+    while this thread reads the next). It decodes every blob with
+    :func:`railval.db.codec.decode_many` (both cores: the hash of one blob overlaps the
+    inflate of another; the arrays of one dtype and shape are rows of one preallocated
+    block). Unknown names raise :class:`NotFound` here.
 
     One SQL query (a UNION ALL of the recordings' distance axes and the signal blobs,
     selecting only the columns decoded) executed through SQLAlchemy Core; rows are put in
@@ -128,27 +131,32 @@ def fetch_signalsets(
             chans.append(r[5])
     _check_requested(session, c, config, present, sections, channels)
 
-    cname, cname_conf = c.name, config_name(config)
+    src_name = "measurement" if config is None else f"configuration {config_name(config)!r}"
+    return _decoder(rows, verify, f"campaign {c.name!r}, {src_name}")
+
+
+def _decoder(rows: list, verify: bool, where: str) -> Callable[[], dict[str, SignalSet]]:
+    """The decode function of :func:`fetch_signalsets` over its ordered ``rows`` (a
+    recording's distance axis before its channels); ``where`` names the source in errors."""
 
     def decode_all() -> dict[str, SignalSet]:
+        try:
+            arrays = codec.decode_many([(r[6], r[7] if verify else None) for r in rows])
+        except codec.BlobError as exc:
+            sid, chan = rows[exc.index][0], rows[exc.index][5]
+            raise InvalidSignal(f"{where}, section {sid!r}, {chan or 'distance_m'}: {exc}; "
+                                "check the database with `railval verify`") from None
         out: dict[str, SignalSet] = {}
-        decode = codec.decode
-        for sid, _rid, fs, t0, n, chan, blob, sha, is_signal in rows:
-            try:
-                if not is_signal:
-                    dist = decode(blob, sha if verify else None)
-                    out[sid] = SignalSet(fs=float(fs),
-                                         time_s=t0 + np.arange(n, dtype=np.float64) / fs,
-                                         distance_m=dist)
-                else:
-                    ss = out[sid]
-                    ss.channels[chan] = decode(blob, sha if verify else None)
-                    ss.hashes[chan] = sha
-            except InvalidSignal as exc:
-                src = "measurement" if config is None else f"configuration {cname_conf!r}"
-                raise InvalidSignal(f"campaign {cname!r}, {src}, section {sid!r}, "
-                                    f"{chan or 'distance_m'}: {exc}; check the database with "
-                                    "`railval verify`") from None
+        for (sid, _rid, fs, t0, n, chan, _blob, sha, is_signal), a in zip(rows, arrays,
+                                                                         strict=True):
+            if not is_signal:
+                out[sid] = SignalSet(fs=float(fs),
+                                     time_s=t0 + np.arange(n, dtype=np.float64) / fs,
+                                     distance_m=a)
+            else:
+                ss = out[sid]
+                ss.channels[chan] = a
+                ss.hashes[chan] = sha
         return out
 
     return decode_all
