@@ -60,8 +60,13 @@ CODEC_RAW = 0
 CODEC_SHUFFLE_ZLIB = 1
 CODEC_PLANES = 2
 _PLANE = struct.Struct("<BI")
-#: a plane is stored raw when zlib shrinks its first PROBE bytes by less than 10 %
+#: a plane is stored raw when zlib shrinks its first PROBE bytes, or the whole plane, by
+#: less than MIN_SAVING: a plane that saves less costs more to inflate on every read than its
+#: bytes cost to store (the second-highest mantissa plane of measured forces saves ≈ 28 % and
+#: was a quarter of the inflate work of a DynoTRAIN source; stored raw, the source takes
+#: 1.5 % more space, docs/database.md)
 PROBE = 1024
+MIN_SAVING = 0.3
 _FIXED = struct.Struct("<4sBBBB")
 _ALLOWED_KINDS = "fiub"
 
@@ -157,9 +162,9 @@ def encode(array: np.ndarray, *, level: int = 1, allow_nonfinite: bool = True) -
     for plane in planes:
         data = plane.tobytes()
         probe = data[:PROBE]
-        if probe and len(zlib.compress(probe, level)) < 0.9 * len(probe):
+        if probe and len(zlib.compress(probe, level)) < (1 - MIN_SAVING) * len(probe):
             packed = zlib.compress(data, level)
-            if len(packed) < len(data):
+            if len(packed) < (1 - MIN_SAVING) * len(data):
                 parts += [_PLANE.pack(1, len(packed)), packed]
                 size += _PLANE.size + len(packed)
                 continue

@@ -57,6 +57,7 @@ from railval.db.configurations import (
 )
 from railval.db.evidence import (
     require_evidence,
+    require_evidence_many,
     verify_evidence,
     verify_signals,
     verify_storage,
@@ -104,6 +105,7 @@ __all__ = [
     "load_signalsets",
     "recording_meta",
     "require_evidence",
+    "require_evidence_many",
     "resolve",
     "row_counts",
     "section_infos",

@@ -258,10 +258,8 @@ def _require_seals(database, plan: _Plan) -> None:
     """The seals of every configuration's evidence and of the measurement (checked once), as
     :func:`validate_configuration` checks them (:func:`railval.db.repo.require_evidence`
     without reading blobs)."""
-    from railval.db.evidence import require_evidence_many
-
     with stage("database"), database.session() as session:
-        require_evidence_many(session, plan.name, plan.names, blobs=False)
+        repo.require_evidence_many(session, plan.name, plan.names, blobs=False)
 
 
 def _chunks(todo: dict[str | None, list[str]], chunk_sections: int
