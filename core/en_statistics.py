@@ -53,7 +53,13 @@ def _row_percentiles(rows: np.ndarray, methods: tuple[str, ...] = (QUANTILE_METH
     rows = np.atleast_2d(rows)
     n = rows.shape[-1]
     ranks = sorted({r for m in methods for r in percentile_ranks(n, PERCENTILES, m)})
-    stats = order_statistics(rows, ranks)
+    return _percentiles_of(order_statistics(rows, ranks), ranks, n, methods)
+
+
+def _percentiles_of(stats: np.ndarray, ranks: list[int], n: int, methods: tuple[str, ...]
+                    ) -> list[np.ndarray]:
+    """:func:`_row_percentiles` from the order statistics ``stats`` (shape (n_rows,
+    len(ranks)); column c holds the samples of 0-based rank ``ranks[c]`` of rows of n)."""
     column = {r: c for c, r in enumerate(ranks)}
     return [percentiles_from_order(lambda i: stats[:, column[i]], n, PERCENTILES, m)
             for m in methods]

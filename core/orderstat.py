@@ -100,22 +100,31 @@ def _select_row(x, ranks, out, hist, slot, start, fill, cand):  # pragma: no cov
 
 
 @numba.njit(cache=True, nogil=True)
+def select_ranks(x, ranks, out, hist, slot, start, fill, cand):  # pragma: no cover - compiled
+    """The samples of 0-based ranks ``ranks`` (ascending, unique) of the row ``x`` into
+    ``out``: a row of at most :data:`SMALL_ROW` samples sorted, a longer one selected
+    (:func:`_select_row`); the work arrays (``hist``, ``slot``: :data:`BUCKETS`; ``start``,
+    ``fill``: len(ranks); ``cand``: len(x)) are reused from row to row. For compiled callers
+    (:mod:`railval.core.en_section`)."""
+    if x.shape[0] <= SMALL_ROW:
+        srt = np.sort(x)
+        for j in range(ranks.shape[0]):
+            out[j] = srt[ranks[j]]
+        return
+    _select_row(x, ranks, out, hist, slot, start, fill, cand)
+
+
+@numba.njit(cache=True, nogil=True)
 def _order_statistics_kernel(rows, ranks, out, r0, r1):  # pragma: no cover - compiled
     n = rows.shape[1]
     k = ranks.shape[0]
-    if n <= SMALL_ROW:
-        for r in range(r0, r1):
-            srt = np.sort(rows[r])
-            for j in range(k):
-                out[r, j] = srt[ranks[j]]
-        return
     hist = np.empty(BUCKETS, np.int64)
     slot = np.empty(BUCKETS, np.int64)
     start = np.empty(k, np.int64)
     fill = np.empty(k, np.int64)
     cand = np.empty(n)
     for r in range(r0, r1):
-        _select_row(rows[r], ranks, out[r], hist, slot, start, fill, cand)
+        select_ranks(rows[r], ranks, out[r], hist, slot, start, fill, cand)
 
 
 def order_statistics(rows: np.ndarray, ranks) -> np.ndarray:
