@@ -50,6 +50,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from railval.core.en_section import (
@@ -76,7 +77,12 @@ from railval.core.en_statistics import (  # noqa: F401 - the statistics of the c
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows
 from railval.core.quantities import QUANTITIES
-from railval.core.supplementary import BOGIE_KINDS, PSD_KINDS, SUPPLEMENTARY, psd_band_values
+from railval.core.supplementary import (
+    BOGIE_KINDS,
+    PSD_KINDS,
+    SUPPLEMENTARY,
+    psd_band_values_batch,
+)
 from railval.core.types import CHANNELS, SectionInfo, SignalSet, channel_name
 
 #: bump whenever the numbers this module produces can change (enters result-cache keys)
@@ -143,6 +149,36 @@ class SectionValues(dict):
 
 # --------------------------------------------------------------------------- validation
 
+@numba.njit(cache=True, nogil=True)
+def _increasing(d):  # pragma: no cover - compiled
+    """Whether ``d`` is strictly increasing (``numpy.all(numpy.diff(d) > 0)``: False at NaN)."""
+    for i in range(1, d.shape[0]):
+        if not d[i] > d[i - 1]:
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _peak_bits(x):  # pragma: no cover - compiled
+    """The largest magnitude of ``x`` as the bits of a float64: the sign bit cleared, the bit
+    patterns of non-negative floats order as their values, NaN above +inf — so the float of
+    the result is max|x| (= ``max(max(x), −min(x))``), inf if any ±inf, NaN if any NaN (one
+    integer pass, vectorised)."""
+    bits = x.view(np.int64)
+    peak = 0
+    for i in range(bits.shape[0]):
+        peak = max(peak, bits[i] & 0x7FFFFFFFFFFFFFFF)
+    return peak
+
+
+def _peak(arr) -> float:
+    """``max(max(arr), −min(arr))`` of a 1-D channel of at least one sample (NaN if it holds
+    NaN, else inf if it holds ±inf)."""
+    if isinstance(arr, np.ndarray) and arr.dtype == np.float64 and arr.flags.c_contiguous:
+        return float(np.array([_peak_bits(arr)], dtype=np.int64).view(np.float64)[0])
+    return max(float(np.max(arr)), -float(np.min(arr)))
+
+
 def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
     n = len(ss)
     if not (np.isfinite(ss.fs) and ss.fs > 0):
@@ -151,13 +187,13 @@ def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
     if d.shape != (n,):
         raise InvalidSignal(
             f"section {sec.id}: distance_m has shape {d.shape}, expected ({n},) like time_s")
-    if n < 2 or not np.all(np.diff(d) > 0):
+    if n < 2 or not (_increasing(d) if d.dtype == np.float64 else np.all(np.diff(d) > 0)):
         raise InvalidSignal(f"section {sec.id}: distance_m must be strictly increasing")
     for name, arr in ss.channels.items():
         if np.shape(arr) != (n,):
             raise InvalidSignal(
                 f"section {sec.id}: channel {name} has shape {np.shape(arr)}, expected ({n},)")
-        peak = max(float(np.max(arr)), -float(np.min(arr))) if n else 0.0
+        peak = _peak(arr)
         if not np.isfinite(peak):
             raise InvalidSignal(f"section {sec.id}: channel {name} holds non-finite values "
                                 f"({peak:g})")
@@ -281,17 +317,17 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
                            filtered_lp.get(i), filtered_bp.get(i))
               for i in range(len(signalsets))]
     run_sections(states)
-    out = []
     for st in states:
         section_values(st)
-        if supplementary:
-            raw_acc = {name: np.asarray(arr, dtype=np.float64)[st.cut]
-                       for name, arr in st.ss.channels.items()
-                       if name.rpartition("_")[0] in PSD_KINDS}
-            st.supp.update(psd_band_values(raw_acc, st.fs))
-        st.clock.lap("supplementary")
-        out.append(SectionValues(st.sec.id, *st.result()))
-    return out
+    if supplementary:  # the PSD bands of all sections in one Welch call per length
+        raw = [{name: np.asarray(arr, dtype=np.float64)[st.cut]
+                for name, arr in st.ss.channels.items() if name.rpartition("_")[0] in PSD_KINDS}
+               for st in states]
+        for st, bands in zip(states, psd_band_values_batch(raw, [st.fs for st in states]),
+                             strict=True):
+            st.supp.update(bands)
+    clock.lap("supplementary")
+    return [SectionValues(st.sec.id, *st.result()) for st in states]
 
 
 def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,
