@@ -131,14 +131,17 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
     start = np.empty(k, np.int64)
     fill = np.empty(k, np.int64)
     cand = np.empty(cut1 - cut0)
+    bucket = np.empty(cut1 - cut0, np.int64)
     n_sel = sel.shape[0]
     for s in range(n_sel):
-        select_ranks(lp[sel[s], cut0:cut1], ranks, out_lp[s], hist, slot, start, fill, cand)
+        select_ranks(lp[sel[s], cut0:cut1], ranks, out_lp[s], hist, slot, start, fill, cand,
+                     bucket)
     for r in range(derived.shape[0]):
         select_ranks(derived[r, cut0 - wide0:cut1 - wide0], ranks, out_lp[n_sel + r], hist,
-                     slot, start, fill, cand)
+                     slot, start, fill, cand, bucket)
     for r in range(bp.shape[0]):
-        select_ranks(bp[r, cut0:cut1], ranks, out_bp[r], hist, slot, start, fill, cand)
+        select_ranks(bp[r, cut0:cut1], ranks, out_bp[r], hist, slot, start, fill, cand,
+                     bucket)
     return -1
 
 
