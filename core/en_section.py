@@ -34,7 +34,6 @@ from railval.core.definitions import (
     SLIDING_VARIANTS,
     Reading,
     percentile_ranks,
-    sample_window_means,
     window_centres,
 )
 from railval.core.en_statistics import (
@@ -364,32 +363,79 @@ def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: f
                           first_interp: np.ndarray, methods: tuple[str, ...],
                           alternative) -> None:
     """Values of the sliding-mean maxima under every other reading (grid alignment × window
-    mean × percentile method, :mod:`railval.core.definitions`) from the same derived rows;
-    the prefix sums and the cumulative integral are formed once for all readings, and the
-    percentiles of the chosen means (``chosen``: means and their percentiles under each
-    method) are not selected again."""
+    mean × percentile method, :mod:`railval.core.definitions`) from the same derived rows:
+    the sample-window means of both grids and both window ends in one compiled pass over the
+    rows (:func:`_sample_window_means`, the prefix sums of
+    :func:`railval.core.definitions.sample_window_means`), the means of all readings with
+    the same number of windows sorted in one call, and the percentiles of the chosen means
+    (``chosen``: means and their percentiles under each method) not formed again."""
     origins = {"section_start": sec.eval_start_m, "first_sample": float(first_m)}
-    prefix = np.empty((slide_rows.shape[0], slide_rows.shape[1] + 1))
-    prefix[:, 0] = 0.0
-    prefix[:, 1:] = slide_rows
-    np.cumsum(prefix, axis=1, out=prefix)  # in place: the same sums, a contiguous cumsum
-    for grid, window in SLIDING_VARIANTS:
-        pcts = None
-        if (grid, window) == CHOSEN.sliding:
-            means, pcts = chosen
-        elif window == "interpolant":
-            means = first_interp
-        else:
+    half = WINDOW_M / 2.0
+    others = [v for v in SLIDING_VARIANTS if v != CHOSEN.sliding]
+    bounds = []
+    for grid, window in others:
+        if window != "interpolant":
             centres = window_centres(sec.eval_start_m, sec.eval_end_m, origins[grid], WINDOW_M,
                                      STEP_M)
-            means = sample_window_means(slide_rows, d_wide, centres, WINDOW_M,
-                                        closed=(window == "samples_closed"), prefix=prefix)
-        undefined = ~np.all(np.isfinite(means), axis=1)
-        pcts = _row_percentiles(means, methods) if pcts is None else pcts
-        for method, pct in zip(methods, pcts, strict=True):
+            bounds.append((np.searchsorted(d_wide, centres - half, side="left"),
+                           np.searchsorted(d_wide, centres + half,
+                                           side="right" if window == "samples_closed"
+                                           else "left")))
+    lo = np.concatenate([b[0] for b in bounds]).astype(np.int64)
+    hi = np.concatenate([b[1] for b in bounds]).astype(np.int64)
+    sampled = np.empty((slide_rows.shape[0], lo.size))
+    _sample_window_means(slide_rows, lo, hi, sampled)
+    means_of, pos, b = {}, 0, 0
+    for variant in others:
+        if variant[1] == "interpolant":
+            means_of[variant] = first_interp
+        else:
+            k = bounds[b][0].size
+            means_of[variant] = sampled[:, pos:pos + k]
+            pos, b = pos + k, b + 1
+    pcts_of = _percentiles_by_length(means_of, methods)
+    pcts_of[CHOSEN.sliding] = chosen[1]
+    means_of[CHOSEN.sliding] = chosen[0]
+    for grid, window in SLIDING_VARIANTS:
+        undefined = ~np.all(np.isfinite(means_of[(grid, window)]), axis=1)
+        for method, pct in zip(methods, pcts_of[(grid, window)], strict=True):
             reading = Reading(method, grid, window)
             if reading == CHOSEN:
                 continue
             vals = maxabs(pct[:, 0], pct[:, 2])
             for r, key in enumerate(keys):
                 alternative(reading, key, float("nan") if undefined[r] else float(vals[r]))
+
+
+def _percentiles_by_length(means_of: dict, methods: tuple[str, ...]) -> dict:
+    """The (0.15 %, 50 %, 99.85 %) values under each method of every block of means in
+    ``means_of`` (rows × windows); the blocks with the same number of windows are sorted in
+    one call (a full sort gives the order statistics the selection gives)."""
+    by_k: dict[int, list] = {}
+    for variant, means in means_of.items():
+        by_k.setdefault(means.shape[1], []).append(variant)
+    out = {}
+    for k, variants in by_k.items():
+        srt = np.sort(np.vstack([means_of[v] for v in variants]), axis=-1)
+        ranks = sorted({r for m in methods for r in percentile_ranks(k, PERCENTILES, m)})
+        pcts = _percentiles_of(srt[:, ranks], ranks, k, methods)
+        rows = next(iter(means_of.values())).shape[0]
+        for i, v in enumerate(variants):
+            out[v] = [p[i * rows:(i + 1) * rows] for p in pcts]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _sample_window_means(v, lo, hi, out):  # pragma: no cover - compiled
+    """``out[r, c]`` = mean of ``v[r, lo[c]:hi[c]]`` from the row's prefix sums (``P_0 = 0``,
+    ``P_{i+1} = P_i + v_i``, summed in order as numpy's cumsum), ``(P_hi − P_lo)/(hi − lo)``;
+    NaN for an empty window — :func:`railval.core.definitions.sample_window_means`."""
+    n = v.shape[1]
+    cum = np.empty(n + 1)
+    for r in range(v.shape[0]):
+        cum[0] = 0.0
+        for i in range(n):
+            cum[i + 1] = cum[i] + v[r, i]
+        for c in range(lo.shape[0]):
+            count = hi[c] - lo[c]
+            out[r, c] = (cum[hi[c]] - cum[lo[c]]) / count if count > 0 else np.nan
