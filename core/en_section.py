@@ -42,11 +42,14 @@ from railval.core.en_statistics import (
     STEP_M,
     WINDOW_M,
     _check_sliding_range,
+    _integral_at,
     _interpolant_means,
+    _means_from_integrals,
     _percentiles_of,
     _row_percentiles,
+    _window_ends,
     maxabs,
-    rms,
+    pairwise_sum,
 )
 from railval.core.errors import InvalidSignal
 from railval.core.filters import design, settling_check
@@ -115,22 +118,26 @@ def _derive(lp, yq, sy, cut0, cut1, wide0, derived):  # pragma: no cover - compi
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp,
-                    out_bp):  # pragma: no cover - compiled
+def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
+                    out_rms, d, j, u, at):  # pragma: no cover - compiled
     """One section: the derived rows (:func:`_derive`), then the order statistics ``ranks``
     of the evaluated part of the low-pass rows ``sel``, of the derived rows and of every
-    band-pass row into ``out_lp`` (in that order) and ``out_bp``. Returns the Y/Q row with
-    Q = 0 in the evaluated range (nothing selected) or −1."""
+    band-pass row into ``out_lp`` (in that order) and ``out_bp``, the band-pass rows' rms
+    (numpy's ``sqrt(mean(x²))``, :func:`railval.core.en_statistics.pairwise_sum`) and the
+    integrals of the derived rows at the window ends ``j``, ``u`` on ``d[wide0:]``
+    (:func:`railval.core.en_statistics._integral_at`). Returns the Y/Q row with Q = 0 in the
+    evaluated range (nothing selected) or −1."""
     zero = _derive(lp, yq, sy, cut0, cut1, wide0, derived)
     if zero >= 0:
         return zero
     k = ranks.shape[0]
+    n = cut1 - cut0
     hist = np.empty(BUCKETS, np.int64)
     slot = np.empty(BUCKETS, np.int64)
     start = np.empty(k, np.int64)
     fill = np.empty(k, np.int64)
-    cand = np.empty(cut1 - cut0)
-    bucket = np.empty(cut1 - cut0, np.int64)
+    cand = np.empty(n)
+    bucket = np.empty(n, np.int64)
     n_sel = sel.shape[0]
     for s in range(n_sel):
         select_ranks(lp[sel[s], cut0:cut1], ranks, out_lp[s], hist, slot, start, fill, cand,
@@ -141,6 +148,15 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
     for r in range(bp.shape[0]):
         select_ranks(bp[r, cut0:cut1], ranks, out_bp[r], hist, slot, start, fill, cand,
                      bucket)
+        for i in range(n):
+            cand[i] = bp[r, cut0 + i] * bp[r, cut0 + i]
+        out_rms[r] = np.sqrt(pairwise_sum(cand, 0, n) / n)
+    if j.shape[0]:
+        n_wide = derived.shape[1]
+        h = np.empty(n_wide - 1)
+        for i in range(n_wide - 1):
+            h[i] = d[wide0 + i + 1] - d[wide0 + i]
+        _integral_at(derived, h, j, u, at)
     return -1
 
 
@@ -205,6 +221,28 @@ class SectionState:
         k = self.ranks.size
         self.out_lp = np.empty((self.sel.size + n_der, k))
         self.out_bp = np.empty((0 if self.bp is None else self.bp.shape[0], k))
+        self.out_rms = np.empty(self.out_bp.shape[0])
+        self._window_ends(n_der)
+
+    def _window_ends(self, n_der: int) -> None:
+        """Where the compiled step integrates the derived rows for the sliding means: the
+        window ends of the chosen grid and, with the alternatives, of the grid from the
+        first evaluated sample. A range the grid does not fit leaves ``grids`` None (the
+        error is raised in section order by :func:`_sliding_values`)."""
+        sec = self.sec
+        self.grids, self.j, self.u = None, np.empty(0, np.int64), np.empty(0)
+        if n_der:
+            origins = [sec.eval_start_m] + (
+                [float(self.d[self.cut.start])] if self.with_alternatives else [])
+            try:
+                d_wide = self.d[self.wide]
+                _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
+                self.grids, self.j, self.u = _window_ends(d_wide, sec.eval_start_m,
+                                                          sec.eval_end_m, WINDOW_M, STEP_M,
+                                                          origins)
+            except InvalidSignal:
+                self.grids = None
+        self.at = np.empty((n_der, self.j.size))
 
     def run(self) -> None:
         """The compiled step (releases the GIL; sections run on the cores in parallel)."""
@@ -212,7 +250,8 @@ class SectionState:
             self.zero_q = _section_kernel(
                 _NO_ROWS if self.lp is None else self.lp, self.sel, self.yq, self.sy,
                 _NO_ROWS if self.bp is None else self.bp, self.cut.start, self.cut.stop,
-                self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp)
+                self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
+                self.out_rms, self.d, self.j.astype(np.int64), self.u, self.at)
 
     def percentiles(self, stats: np.ndarray) -> list[np.ndarray]:
         """(0.15 %, 50 %, 99.85 %) values of each row under each method from the selected
@@ -315,8 +354,9 @@ def _sliding_values(st: SectionState, slide_rows: np.ndarray, d_wide: np.ndarray
     sec = st.sec
     _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
     origins = [sec.eval_start_m] + ([float(st.d[st.cut.start])] if st.with_alternatives else [])
-    interp = _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
-                                WINDOW_M, STEP_M, origins)
+    interp = (_means_from_integrals(st.at, st.grids, WINDOW_M) if st.grids is not None
+              else _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
+                                      WINDOW_M, STEP_M, origins))
     means = interp[0][1]
     # the order statistics of every percentile method in one selection (the linear
     # reading's values of the chosen means are used by the alternatives)
@@ -342,7 +382,7 @@ def _bandpass_values(st: SectionState) -> None:
     bp_label = st.settle("bandpass")
     both = st.percentiles(st.out_bp)
     pct, pct_lin = both[0], both[-1]
-    rmsv = rms(st.bp[:, st.cut])
+    rmsv = st.out_rms
     for r, name in enumerate(st.plan.bp_names):
         kind, _, pos = name.rpartition("_")
         if kind in BOGIE_KINDS:  # supplementary: same filter call, same statistics

@@ -258,3 +258,14 @@ def test_welch_blocks_equal_scipy_welch():
         f0, g0 = scipy.signal.welch(b, fs=200.0, nperseg=nper, detrend=detrend_linear, axis=-1)
         np.testing.assert_array_equal(f, f0)
         np.testing.assert_allclose(g, g0, rtol=1e-12, atol=0)
+
+
+def test_pairwise_sum_is_numpys_sum():
+    """The compiled rms sums as numpy does (bit for bit), across its block and split sizes."""
+    from railval.core.en_statistics import pairwise_sum
+
+    rng = np.random.default_rng(8)
+    for n in [*range(0, 140), 255, 256, 257, 8191, 8192, 8193, 10_000, 65_537]:
+        x = rng.standard_normal(n + 3) ** 2 * 10.0 ** rng.uniform(-3, 3)
+        assert pairwise_sum(x, 3, n) == np.add.reduce(x[3:])
+        assert pairwise_sum(x, 0, n) == np.add.reduce(x[:n])
