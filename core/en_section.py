@@ -31,6 +31,7 @@ import numpy as np
 
 from railval.core.definitions import (
     CHOSEN,
+    READINGS,
     SLIDING_VARIANTS,
     Reading,
     percentile_ranks,
@@ -61,6 +62,9 @@ from railval.core.types import WHEEL_POSITIONS, SectionInfo, SignalSet
 #: the reading that differs from the chosen one only in the percentile method
 _LINEAR = Reading("linear", CHOSEN.grid, CHOSEN.window)
 _NO_ROWS = np.empty((0, 0))
+#: every reading by its (percentile, grid, window)
+_READING = {(r.percentile, r.grid, r.window): r for r in READINGS}
+_READING_ID = {r: r.id for r in READINGS}
 
 
 def _evaluated_cut(d: np.ndarray, sec: SectionInfo) -> tuple[slice, int]:
@@ -262,7 +266,8 @@ class SectionState:
         """Keep ``value`` under ``reading`` where it differs from the chosen value (NaN:
         undefined under the reading)."""
         if self.with_alternatives and value != self.values[key]:  # True for NaN as well
-            self.alts.setdefault(reading.id, {})[key] = float(value)
+            rid = _READING_ID.get(reading) or reading.id
+            self.alts.setdefault(rid, {})[key] = float(value)
 
     def settle(self, kind: str) -> str:
         """Settling warnings of filter ``kind``; returns the filter's provenance label."""
@@ -331,7 +336,9 @@ _FORCE_PERCENTILE_QUANTITIES = {
 def _force_percentile_values(st: SectionState, families, pct: np.ndarray,
                              pct_lin: np.ndarray, lp_label: str) -> None:
     """The percentile values of the force rows (in ``families`` order) under the chosen
-    reading (``pct``) and the linear one (``pct_lin``)."""
+    reading (``pct``) and the linear one (``pct_lin``): each statistic formed for all rows
+    at once (:func:`_statistic` on columns), then read out as floats."""
+    chosen, linear = _by_processing(pct), _by_processing(pct_lin)
     r = 0
     for fam, positions in families:
         derive = _DERIVE_TEXT.get(fam)
@@ -339,10 +346,16 @@ def _force_percentile_values(st: SectionState, families, pct: np.ndarray,
         for p in positions:
             for qid, text in _FORCE_PERCENTILE_QUANTITIES[fam]:
                 processing = QUANTITIES[qid].processing
-                st.values[(qid, p)] = float(_statistic(processing, *pct[r]))
+                st.values[(qid, p)] = chosen[processing][r]
                 st.prov[(qid, p)] = base + (text, st.pct_text)
-                st.alternative(_LINEAR, (qid, p), _statistic(processing, *pct_lin[r]))
+                st.alternative(_LINEAR, (qid, p), linear[processing][r])
             r += 1
+
+
+def _by_processing(pct: np.ndarray) -> dict[str, list[float]]:
+    """:func:`_statistic` of every row of (0.15 %, 50 %, 99.85 %) values, per processing."""
+    return {proc: _statistic(proc, pct[:, 0], pct[:, 1], pct[:, 2]).tolist()
+            for proc in ("median", "p99.85", "maxabs")}
 
 
 def _sliding_values(st: SectionState, slide_rows: np.ndarray, d_wide: np.ndarray,
@@ -437,14 +450,14 @@ def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: f
     pcts_of[CHOSEN.sliding] = chosen[1]
     means_of[CHOSEN.sliding] = chosen[0]
     for grid, window in SLIDING_VARIANTS:
-        undefined = ~np.all(np.isfinite(means_of[(grid, window)]), axis=1)
+        undefined = (~np.all(np.isfinite(means_of[(grid, window)]), axis=1)).tolist()
         for method, pct in zip(methods, pcts_of[(grid, window)], strict=True):
-            reading = Reading(method, grid, window)
+            reading = _READING[(method, grid, window)]
             if reading == CHOSEN:
                 continue
-            vals = maxabs(pct[:, 0], pct[:, 2])
+            vals = maxabs(pct[:, 0], pct[:, 2]).tolist()
             for r, key in enumerate(keys):
-                alternative(reading, key, float("nan") if undefined[r] else float(vals[r]))
+                alternative(reading, key, float("nan") if undefined[r] else vals[r])
 
 
 def _percentiles_by_length(means_of: dict, methods: tuple[str, ...]) -> dict:
