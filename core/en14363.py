@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import struct
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -174,12 +175,47 @@ def _peak_bits(x):  # pragma: no cover - compiled
 def _peak(arr) -> float:
     """``max(max(arr), −min(arr))`` of a 1-D channel of at least one sample (NaN if it holds
     NaN, else inf if it holds ±inf)."""
-    if isinstance(arr, np.ndarray) and arr.dtype == np.float64 and arr.flags.c_contiguous:
-        return float(np.array([_peak_bits(arr)], dtype=np.int64).view(np.float64)[0])
+    if _compiled_layout(arr):
+        return _float_of_bits(_peak_bits(arr))
     return max(float(np.max(arr)), -float(np.min(arr)))
 
 
-def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
+def _compiled_layout(arr) -> bool:
+    return (isinstance(arr, np.ndarray) and arr.ndim == 1 and arr.dtype == np.float64
+            and arr.flags.c_contiguous and arr.size > 0)
+
+
+def _float_of_bits(bits: int) -> float:
+    return struct.unpack("<d", struct.pack("<q", int(bits)))[0]
+
+
+def _scan_signalsets(signalsets: Sequence[SignalSet]) -> list[tuple[bool | None, dict]]:
+    """Per section: whether ``distance_m`` is strictly increasing (None: not scanned) and the
+    peak bits (:func:`_peak_bits`) of its float64 channels — one integer pass per channel,
+    the sections shared among the cores (the pass is bound by memory reads). The checks
+    then read them in section order (:func:`_check_signalset`), so the same error comes
+    first."""
+    from railval.core.workers import split_rows
+
+    out: list[tuple[bool | None, dict]] = [(None, {}) for _ in signalsets]
+
+    def part(a: int, b: int) -> None:
+        for i in range(a, b):
+            try:
+                ss = signalsets[i]
+                d = ss.distance_m
+                incr = _increasing(d) if _compiled_layout(d) and d.size >= 2 else None
+                out[i] = (incr, {name: _peak_bits(arr) for name, arr in ss.channels.items()
+                                 if _compiled_layout(arr)})
+            except Exception:  # noqa: BLE001 - left to the checks, raised in section order
+                out[i] = (None, {})
+
+    split_rows(part, len(signalsets))
+    return out
+
+
+def _check_signalset(ss: SignalSet, sec: SectionInfo,
+                     scanned: tuple[bool | None, dict] = (None, {})) -> None:
     n = len(ss)
     if not (np.isfinite(ss.fs) and ss.fs > 0):
         raise InvalidSignal(f"section {sec.id}: fs must be a positive number of Hz, got {ss.fs}")
@@ -187,13 +223,16 @@ def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
     if d.shape != (n,):
         raise InvalidSignal(
             f"section {sec.id}: distance_m has shape {d.shape}, expected ({n},) like time_s")
-    if n < 2 or not (_increasing(d) if d.dtype == np.float64 else np.all(np.diff(d) > 0)):
+    increasing, peaks = scanned
+    if increasing is None:
+        increasing = n >= 2 and bool(np.all(np.diff(d) > 0))
+    if n < 2 or not increasing:
         raise InvalidSignal(f"section {sec.id}: distance_m must be strictly increasing")
     for name, arr in ss.channels.items():
         if np.shape(arr) != (n,):
             raise InvalidSignal(
                 f"section {sec.id}: channel {name} has shape {np.shape(arr)}, expected ({n},)")
-        peak = _peak(arr)
+        peak = _float_of_bits(peaks[name]) if name in peaks else _peak(arr)
         if not np.isfinite(peak):
             raise InvalidSignal(f"section {sec.id}: channel {name} holds non-finite values "
                                 f"({peak:g})")
@@ -290,8 +329,9 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
             f"signal sets and {len(sections)} sections")
     plans: list[_Plan] = []
     groups: dict[tuple[float, int], list[int]] = {}
-    for i, (ss, sec) in enumerate(zip(signalsets, sections)):
-        _check_signalset(ss, sec)
+    for i, (ss, sec, scanned) in enumerate(zip(signalsets, sections,
+                                               _scan_signalsets(signalsets))):
+        _check_signalset(ss, sec, scanned)
         lp, bp = _needed_channels(ss)
         plans.append(_Plan(lp, bp, slice(0, 0), slice(0, 0)))
         groups.setdefault((float(ss.fs), len(ss)), []).append(i)
