@@ -30,6 +30,13 @@ Besides the chosen reading's values, every section carries the values of the oth
 (``SectionValues.alternatives``), computed from the same filtered arrays and the same sorts —
 nothing is filtered twice.
 
+Throughput: the checks scan every channel once (one compiled integer pass for the peak
+magnitude, the sections shared among the cores) and report in section order; steps 2–4 run
+per section in one compiled call, the sections on the cores in parallel
+(:mod:`railval.core.en_section`), with the same operations on the samples as the step-by-step
+numpy code, so the same values; the PSD bands of all sections come from one Welch pass per
+segment length (:func:`railval.core.psd.welch_blocks`).
+
 Supplementary values (:mod:`railval.core.supplementary`): bogie-frame accelerations go through the
 band-pass with the car body channels (rms, max); the PSD band rms of all acceleration channels come
 from the unfiltered evaluated samples (``SectionValues.supplementary``).

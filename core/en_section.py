@@ -16,6 +16,12 @@ The operations on the samples are those of the former per-step numpy code, in th
 (IEEE division and addition for Y/Q and ΣY, the same order statistics, numpy's rms), so the
 values are the same numbers (docs/validation.md, Throughput).
 
+The compiled step calls compiled functions of :mod:`railval.core.orderstat`
+(``select_ranks``) and :mod:`railval.core.en_statistics` (``pairwise_sum``,
+``_integral_at``); numba's on-disk cache of :func:`_section_kernel` is keyed to this file
+only, so after editing those functions the cached ``core/__pycache__/en_section.*.nb[ic]``
+must be deleted (numba documentation, "Notes on caching").
+
 References
 ----------
 Polach & Böttcher 2014, §5 and Table 2. EN 14363:2005, on-track tests: filtering, test

@@ -9,9 +9,13 @@ selection in three passes over the row: its range; a histogram over :data:`BUCKE
 buckets of the range (the bucket index ``⌊(x − min)·B/(max − min)⌋`` is monotone in x, so a
 bucket's samples all lie above those of the buckets before it); the samples of the buckets
 holding a wanted rank gathered; the rank within its bucket is then selected among these few
-samples (``numpy.partition``). The result is exact — the samples a full sort gives at those
-positions — whatever the distribution (a crowded bucket only costs time). Rows run on the
+samples (``numpy.partition``). The range pass runs in four independent lanes (the
+comparisons of one lane do not wait for the others) and the bucket index of each sample is
+computed once, for the histogram and the gather. The result is exact — the samples a full
+sort gives at those positions — whatever the distribution (a crowded bucket only costs time). Rows run on the
 cores in parallel (compiled kernel without the GIL, :func:`railval.core.workers.split_rows`).
+Rows of at most :data:`NUMPY_SORT_ROW` samples are sorted by numpy instead (its vectorised
+sort is faster there; a sort gives the same order statistics).
 
 References
 ----------

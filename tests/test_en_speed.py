@@ -265,7 +265,7 @@ def test_pairwise_sum_is_numpys_sum():
     from railval.core.en_statistics import pairwise_sum
 
     rng = np.random.default_rng(8)
-    for n in [*range(0, 140), 255, 256, 257, 8191, 8192, 8193, 10_000, 65_537]:
+    for n in [*range(140), 255, 256, 257, 8191, 8192, 8193, 10_000, 65_537]:
         x = rng.standard_normal(n + 3) ** 2 * 10.0 ** rng.uniform(-3, 3)
         assert pairwise_sum(x, 3, n) == np.add.reduce(x[3:])
         assert pairwise_sum(x, 0, n) == np.add.reduce(x[:n])
