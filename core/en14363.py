@@ -217,7 +217,9 @@ def _scan_signalsets(signalsets: Sequence[SignalSet]) -> list[tuple[bool | None,
             except Exception:  # noqa: BLE001 - left to the checks, raised in section order
                 out[i] = (None, {})
 
-    split_rows(part, len(signalsets))
+    if signalsets:
+        part(0, 1)  # the first in the calling thread: a first call compiles the scans once
+        split_rows(lambda a, b: part(a + 1, b + 1), len(signalsets) - 1)
     return out
 
 
@@ -360,13 +362,28 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
                 store[i] = out[pos:pos + k]
                 pos += k
     clock.lap("filter")
-    states = [SectionState(signalsets[i], sections[i], order, alternatives, clock, plans[i],
-                           filtered_lp.get(i), filtered_bp.get(i))
-              for i in range(len(signalsets))]
+    out: list[SectionValues] = []
+    for c0 in range(0, len(signalsets), SECTIONS_PER_CHUNK):
+        states = [SectionState(signalsets[i], sections[i], order, alternatives, clock, plans[i],
+                               filtered_lp.pop(i, None), filtered_bp.pop(i, None))
+                  for i in range(c0, min(c0 + SECTIONS_PER_CHUNK, len(signalsets)))]
+        out += _chunk_values(states, supplementary, clock)
+    return out
+
+
+#: sections whose intermediate rows (derived rows, integrals, PSD segments) exist at once
+SECTIONS_PER_CHUNK = 16
+
+
+def _chunk_values(states: list[SectionState], supplementary: bool, clock: _Clock
+                  ) -> list[SectionValues]:
+    """Steps 2–4 of a chunk of sections (the compiled step on the cores, then the values in
+    section order), then their PSD bands in one Welch call per segment length."""
     run_sections(states)
     for st in states:
         section_values(st)
-    if supplementary:  # the PSD bands of all sections in one Welch call per length
+        st.release()
+    if supplementary:
         raw = [{name: np.asarray(arr, dtype=np.float64)[st.cut]
                 for name, arr in st.ss.channels.items() if name.rpartition("_")[0] in PSD_KINDS}
                for st in states]

@@ -263,6 +263,11 @@ class SectionState:
                 self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
                 self.out_rms, self.d, self.j.astype(np.int64), self.u, self.at)
 
+    def release(self) -> None:
+        """Drop the rows once the values are formed (a batch keeps only the values)."""
+        self.lp = self.bp = None
+        self.derived = self.at = _NO_ROWS
+
     def percentiles(self, stats: np.ndarray) -> list[np.ndarray]:
         """(0.15 %, 50 %, 99.85 %) values of each row under each method from the selected
         order statistics (columns in the order of ``self.ranks``)."""
@@ -292,14 +297,19 @@ class SectionState:
 
 
 def run_sections(states: list[SectionState]) -> None:
-    """The compiled step of every section, the sections shared among the cores."""
+    """The compiled step of every section, the sections shared among the cores (the first
+    one in the calling thread first: a first call compiles or loads the kernel once)."""
     from railval.core.workers import split_rows
 
+    if not states:
+        return
+    states[0].run()
+
     def part(a: int, b: int) -> None:
-        for st in states[a:b]:
+        for st in states[1 + a:1 + b]:
             st.run()
 
-    split_rows(part, len(states))
+    split_rows(part, len(states) - 1)
 
 
 def section_values(st: SectionState) -> None:
