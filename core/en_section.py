@@ -129,13 +129,15 @@ def _derive(lp, yq, sy, cut0, cut1, wide0, derived):  # pragma: no cover - compi
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
-                    out_rms, d, j, u, at):  # pragma: no cover - compiled
+                    out_rms, d, j, u, at, win_lo, win_hi, sampled
+                    ):  # pragma: no cover - compiled
     """One section: the derived rows (:func:`_derive`), then the order statistics ``ranks``
     of the evaluated part of the low-pass rows ``sel``, of the derived rows and of every
     band-pass row into ``out_lp`` (in that order) and ``out_bp``, the band-pass rows' rms
     (numpy's ``sqrt(mean(x²))``, :func:`railval.core.en_statistics.pairwise_sum`) and the
     integrals of the derived rows at the window ends ``j``, ``u`` on ``d[wide0:]``
-    (:func:`railval.core.en_statistics._integral_at`). Returns the Y/Q row with Q = 0 in the
+    (:func:`railval.core.en_statistics._integral_at`) and their means over the sample
+    windows ``win_lo``/``win_hi`` (:func:`_sample_window_means`). Returns the Y/Q row with Q = 0 in the
     evaluated range (nothing selected) or −1."""
     zero = _derive(lp, yq, sy, cut0, cut1, wide0, derived)
     if zero >= 0:
@@ -167,6 +169,8 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
         for i in range(n_wide - 1):
             h[i] = d[wide0 + i + 1] - d[wide0 + i]
         _integral_at(derived, h, j, u, at)
+    if win_lo.shape[0]:
+        _sample_window_means(derived, win_lo, win_hi, sampled)
     return -1
 
 
@@ -241,18 +245,23 @@ class SectionState:
         error is raised in section order by :func:`_sliding_values`)."""
         sec = self.sec
         self.grids, self.j, self.u = None, np.empty(0, np.int64), np.empty(0)
+        self.win_lo = self.win_hi = np.empty(0, np.int64)
+        sizes: list[int] = []
         if n_der:
             origins = [sec.eval_start_m] + (
                 [float(self.d[self.cut.start])] if self.with_alternatives else [])
             try:
                 d_wide = self.d[self.wide]
                 _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
-                self.grids, self.j, self.u = _window_ends(d_wide, sec.eval_start_m,
-                                                          sec.eval_end_m, WINDOW_M, STEP_M,
-                                                          origins)
+                grids, self.j, self.u = _window_ends(d_wide, sec.eval_start_m,
+                                                     sec.eval_end_m, WINDOW_M, STEP_M, origins)
+                if self.with_alternatives:
+                    sizes, self.win_lo, self.win_hi = _sample_bounds(d_wide, sec, origins[1])
+                self.grids = grids
             except InvalidSignal:
                 self.grids = None
         self.at = np.empty((n_der, self.j.size))
+        self.sampled = (sizes, np.empty((n_der, self.win_lo.size)))
 
     def run(self) -> None:
         """The compiled step (releases the GIL; sections run on the cores in parallel)."""
@@ -261,12 +270,14 @@ class SectionState:
                 _NO_ROWS if self.lp is None else self.lp, self.sel, self.yq, self.sy,
                 _NO_ROWS if self.bp is None else self.bp, self.cut.start, self.cut.stop,
                 self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
-                self.out_rms, self.d, self.j.astype(np.int64), self.u, self.at)
+                self.out_rms, self.d, self.j.astype(np.int64), self.u, self.at, self.win_lo,
+                self.win_hi, self.sampled[1])
 
     def release(self) -> None:
         """Drop the rows once the values are formed (a batch keeps only the values)."""
         self.lp = self.bp = None
         self.derived = self.at = _NO_ROWS
+        self.sampled = ([], _NO_ROWS)
 
     def percentiles(self, stats: np.ndarray) -> list[np.ndarray]:
         """(0.15 %, 50 %, 99.85 %) values of each row under each method from the selected
@@ -401,7 +412,8 @@ def _sliding_values(st: SectionState, slide_rows: np.ndarray, d_wide: np.ndarray
     st.clock.lap("statistics")
     if st.with_alternatives:
         _sliding_alternatives(slide_rows, d_wide, st.d[st.cut.start], sec, keys,
-                              (means, chosen_pcts), interp[1][1], st.methods, st.alternative)
+                              (means, chosen_pcts), interp[1][1], st.methods, st.alternative,
+                              st.sampled if st.grids is not None else None)
     st.clock.lap("alternatives")
 
 
@@ -430,38 +442,29 @@ def _bandpass_values(st: SectionState) -> None:
 def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: float,
                           sec: SectionInfo, keys: list[tuple[str, str]], chosen: tuple,
                           first_interp: np.ndarray, methods: tuple[str, ...],
-                          alternative) -> None:
+                          alternative, sampled: tuple | None = None) -> None:
     """Values of the sliding-mean maxima under every other reading (grid alignment × window
     mean × percentile method, :mod:`railval.core.definitions`) from the same derived rows:
     the sample-window means of both grids and both window ends in one compiled pass over the
     rows (:func:`_sample_window_means`, the prefix sums of
     :func:`railval.core.definitions.sample_window_means`), the means of all readings with
     the same number of windows sorted in one call, and the percentiles of the chosen means
-    (``chosen``: means and their percentiles under each method) not formed again."""
-    origins = {"section_start": sec.eval_start_m, "first_sample": float(first_m)}
-    half = WINDOW_M / 2.0
+    (``chosen``: means and their percentiles under each method) not formed again.
+    ``sampled``: the sample-window means (:func:`_sample_bounds` sizes, values) when the
+    compiled step formed them."""
     others = [v for v in SLIDING_VARIANTS if v != CHOSEN.sliding]
-    bounds = []
-    for grid, window in others:
-        if window != "interpolant":
-            centres = window_centres(sec.eval_start_m, sec.eval_end_m, origins[grid], WINDOW_M,
-                                     STEP_M)
-            bounds.append((np.searchsorted(d_wide, centres - half, side="left"),
-                           np.searchsorted(d_wide, centres + half,
-                                           side="right" if window == "samples_closed"
-                                           else "left")))
-    lo = np.concatenate([b[0] for b in bounds]).astype(np.int64)
-    hi = np.concatenate([b[1] for b in bounds]).astype(np.int64)
-    sampled = np.empty((slide_rows.shape[0], lo.size))
-    _sample_window_means(slide_rows, lo, hi, sampled)
+    if sampled is None:
+        sizes, lo, hi = _sample_bounds(d_wide, sec, first_m)
+        sampled = (sizes, np.empty((slide_rows.shape[0], lo.size)))
+        _sample_window_means(slide_rows, lo, hi, sampled[1])
+    sizes, values = sampled
     means_of, pos, b = {}, 0, 0
     for variant in others:
         if variant[1] == "interpolant":
             means_of[variant] = first_interp
         else:
-            k = bounds[b][0].size
-            means_of[variant] = sampled[:, pos:pos + k]
-            pos, b = pos + k, b + 1
+            means_of[variant] = values[:, pos:pos + sizes[b]]
+            pos, b = pos + sizes[b], b + 1
     pcts_of = _percentiles_by_length(means_of, methods)
     pcts_of[CHOSEN.sliding] = chosen[1]
     means_of[CHOSEN.sliding] = chosen[0]
@@ -474,6 +477,27 @@ def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: f
             vals = maxabs(pct[:, 0], pct[:, 2]).tolist()
             for r, key in enumerate(keys):
                 alternative(reading, key, float("nan") if undefined[r] else vals[r])
+
+
+def _sample_bounds(d_wide: np.ndarray, sec: SectionInfo, first_m: float
+                   ) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """The sample windows of the readings with a sample-window mean, in
+    ``SLIDING_VARIANTS`` order: their counts and, concatenated, the first sample in and the
+    first sample past each window on ``d_wide``
+    (:func:`railval.core.definitions.sample_window_means`)."""
+    origins = {"section_start": sec.eval_start_m, "first_sample": float(first_m)}
+    half = WINDOW_M / 2.0
+    sizes, los, his = [], [], []
+    for grid, window in SLIDING_VARIANTS:
+        if window == "interpolant":
+            continue
+        centres = window_centres(sec.eval_start_m, sec.eval_end_m, origins[grid], WINDOW_M,
+                                 STEP_M)
+        sizes.append(centres.size)
+        los.append(np.searchsorted(d_wide, centres - half, side="left"))
+        his.append(np.searchsorted(d_wide, centres + half,
+                                   side="right" if window == "samples_closed" else "left"))
+    return sizes, np.concatenate(los).astype(np.int64), np.concatenate(his).astype(np.int64)
 
 
 def _percentiles_by_length(means_of: dict, methods: tuple[str, ...]) -> dict:
