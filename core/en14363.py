@@ -30,6 +30,13 @@ Besides the chosen reading's values, every section carries the values of the oth
 (``SectionValues.alternatives``), computed from the same filtered arrays and the same sorts —
 nothing is filtered twice.
 
+Throughput: the checks scan every channel once (one compiled integer pass for the peak
+magnitude, the sections shared among the cores) and report in section order; steps 2–4 run
+per section in one compiled call, the sections on the cores in parallel
+(:mod:`railval.core.en_section`), with the same operations on the samples as the step-by-step
+numpy code, so the same values; the PSD bands of all sections come from one Welch pass per
+segment length (:func:`railval.core.psd.welch_blocks`).
+
 Supplementary values (:mod:`railval.core.supplementary`): bogie-frame accelerations go through the
 band-pass with the car body channels (rms, max); the PSD band rms of all acceleration channels come
 from the unfiltered evaluated samples (``SectionValues.supplementary``).
@@ -46,18 +53,20 @@ from __future__ import annotations
 
 import hashlib
 import json
+import struct
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from railval.core.definitions import (
-    CHOSEN,
-    SLIDING_VARIANTS,
-    Reading,
-    sample_window_means,
-    window_centres,
+from railval.core.en_section import (
+    SectionState,
+    _evaluated_cut,
+    _statistic,
+    run_sections,
+    section_values,
 )
 from railval.core.en_statistics import (  # noqa: F401 - the statistics of the chain, re-exported
     P_HIGH,
@@ -67,8 +76,6 @@ from railval.core.en_statistics import (  # noqa: F401 - the statistics of the c
     QUANTILE_METHOD,
     STEP_M,
     WINDOW_M,
-    _check_sliding_range,
-    _interpolant_means,
     _row_percentiles,
     maxabs,
     percentile,
@@ -76,18 +83,21 @@ from railval.core.en_statistics import (  # noqa: F401 - the statistics of the c
     sliding_mean_distance,
 )
 from railval.core.errors import InvalidParameter, InvalidSignal
-from railval.core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows, settling_check
-from railval.core.quantities import QUANTITIES, WHEELSET_POSITIONS
-from railval.core.supplementary import BOGIE_KINDS, PSD_KINDS, SUPPLEMENTARY, psd_band_values
-from railval.core.types import CHANNELS, WHEEL_POSITIONS, SectionInfo, SignalSet, channel_name
+from railval.core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows
+from railval.core.quantities import QUANTITIES
+from railval.core.supplementary import (
+    BOGIE_KINDS,
+    PSD_KINDS,
+    SUPPLEMENTARY,
+    psd_band_values_batch,
+)
+from railval.core.types import CHANNELS, SectionInfo, SignalSet, channel_name
 
 #: bump whenever the numbers this module produces can change (enters result-cache keys)
 PROCESSING_VERSION = "en14363/2"
 #: largest sample magnitude processed: squares and filter states of larger values overflow
 #: float64 (±1.8e308) and turn statistics into inf or NaN
 MAX_ABS_SAMPLE = 1e100
-#: the reading that differs from the chosen one only in the percentile method
-_LINEAR = Reading("linear", CHOSEN.grid, CHOSEN.window)
 
 
 class SectionValues(dict):
@@ -147,7 +157,74 @@ class SectionValues(dict):
 
 # --------------------------------------------------------------------------- validation
 
-def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
+@numba.njit(cache=True, nogil=True)
+def _increasing(d):  # pragma: no cover - compiled
+    """Whether ``d`` is strictly increasing (``numpy.all(numpy.diff(d) > 0)``: False at NaN)."""
+    for i in range(1, d.shape[0]):
+        if not d[i] > d[i - 1]:
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _peak_bits(x):  # pragma: no cover - compiled
+    """The largest magnitude of ``x`` as the bits of a float64: the sign bit cleared, the bit
+    patterns of non-negative floats order as their values, NaN above +inf — so the float of
+    the result is max|x| (= ``max(max(x), −min(x))``), inf if any ±inf, NaN if any NaN (one
+    integer pass, vectorised)."""
+    bits = x.view(np.int64)
+    peak = 0
+    for i in range(bits.shape[0]):
+        peak = max(peak, bits[i] & 0x7FFFFFFFFFFFFFFF)
+    return peak
+
+
+def _peak(arr) -> float:
+    """``max(max(arr), −min(arr))`` of a 1-D channel of at least one sample (NaN if it holds
+    NaN, else inf if it holds ±inf)."""
+    if _compiled_layout(arr):
+        return _float_of_bits(_peak_bits(arr))
+    return max(float(np.max(arr)), -float(np.min(arr)))
+
+
+def _compiled_layout(arr) -> bool:
+    return (isinstance(arr, np.ndarray) and arr.ndim == 1 and arr.dtype == np.float64
+            and arr.flags.c_contiguous and arr.size > 0)
+
+
+def _float_of_bits(bits: int) -> float:
+    return struct.unpack("<d", struct.pack("<q", int(bits)))[0]
+
+
+def _scan_signalsets(signalsets: Sequence[SignalSet]) -> list[tuple[bool | None, dict]]:
+    """Per section: whether ``distance_m`` is strictly increasing (None: not scanned) and the
+    peak bits (:func:`_peak_bits`) of its float64 channels — one integer pass per channel,
+    the sections shared among the cores (the pass is bound by memory reads). The checks
+    then read them in section order (:func:`_check_signalset`), so the same error comes
+    first."""
+    from railval.core.workers import split_rows
+
+    out: list[tuple[bool | None, dict]] = [(None, {}) for _ in signalsets]
+
+    def part(a: int, b: int) -> None:
+        for i in range(a, b):
+            try:
+                ss = signalsets[i]
+                d = ss.distance_m
+                incr = _increasing(d) if _compiled_layout(d) and d.size >= 2 else None
+                out[i] = (incr, {name: _peak_bits(arr) for name, arr in ss.channels.items()
+                                 if _compiled_layout(arr)})
+            except Exception:  # noqa: BLE001 - left to the checks, raised in section order
+                out[i] = (None, {})
+
+    if signalsets:
+        part(0, 1)  # the first in the calling thread: a first call compiles the scans once
+        split_rows(lambda a, b: part(a + 1, b + 1), len(signalsets) - 1)
+    return out
+
+
+def _check_signalset(ss: SignalSet, sec: SectionInfo,
+                     scanned: tuple[bool | None, dict] = (None, {})) -> None:
     n = len(ss)
     if not (np.isfinite(ss.fs) and ss.fs > 0):
         raise InvalidSignal(f"section {sec.id}: fs must be a positive number of Hz, got {ss.fs}")
@@ -155,13 +232,16 @@ def _check_signalset(ss: SignalSet, sec: SectionInfo) -> None:
     if d.shape != (n,):
         raise InvalidSignal(
             f"section {sec.id}: distance_m has shape {d.shape}, expected ({n},) like time_s")
-    if n < 2 or not np.all(np.diff(d) > 0):
+    increasing, peaks = scanned
+    if increasing is None:
+        increasing = n >= 2 and bool(np.all(np.diff(d) > 0))
+    if n < 2 or not increasing:
         raise InvalidSignal(f"section {sec.id}: distance_m must be strictly increasing")
     for name, arr in ss.channels.items():
         if np.shape(arr) != (n,):
             raise InvalidSignal(
                 f"section {sec.id}: channel {name} has shape {np.shape(arr)}, expected ({n},)")
-        peak = max(float(np.max(arr)), -float(np.min(arr))) if n else 0.0
+        peak = _float_of_bits(peaks[name]) if name in peaks else _peak(arr)
         if not np.isfinite(peak):
             raise InvalidSignal(f"section {sec.id}: channel {name} holds non-finite values "
                                 f"({peak:g})")
@@ -258,8 +338,9 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
             f"signal sets and {len(sections)} sections")
     plans: list[_Plan] = []
     groups: dict[tuple[float, int], list[int]] = {}
-    for i, (ss, sec) in enumerate(zip(signalsets, sections)):
-        _check_signalset(ss, sec)
+    for i, (ss, sec, scanned) in enumerate(zip(signalsets, sections,
+                                               _scan_signalsets(signalsets))):
+        _check_signalset(ss, sec, scanned)
         lp, bp = _needed_channels(ss)
         plans.append(_Plan(lp, bp, slice(0, 0), slice(0, 0)))
         groups.setdefault((float(ss.fs), len(ss)), []).append(i)
@@ -281,9 +362,36 @@ def evaluate_batch(signalsets: Sequence[SignalSet], sections: Sequence[SectionIn
                 store[i] = out[pos:pos + k]
                 pos += k
     clock.lap("filter")
-    return [_section_stats(signalsets[i], sections[i], plans[i], filtered_lp.get(i),
-                           filtered_bp.get(i), order, alternatives, supplementary, clock)
-            for i in range(len(signalsets))]
+    out: list[SectionValues] = []
+    for c0 in range(0, len(signalsets), SECTIONS_PER_CHUNK):
+        states = [SectionState(signalsets[i], sections[i], order, alternatives, clock, plans[i],
+                               filtered_lp.pop(i, None), filtered_bp.pop(i, None))
+                  for i in range(c0, min(c0 + SECTIONS_PER_CHUNK, len(signalsets)))]
+        out += _chunk_values(states, supplementary, clock)
+    return out
+
+
+#: sections whose intermediate rows (derived rows, integrals, PSD segments) exist at once
+SECTIONS_PER_CHUNK = 16
+
+
+def _chunk_values(states: list[SectionState], supplementary: bool, clock: _Clock
+                  ) -> list[SectionValues]:
+    """Steps 2–4 of a chunk of sections (the compiled step on the cores, then the values in
+    section order), then their PSD bands in one Welch call per segment length."""
+    run_sections(states)
+    for st in states:
+        section_values(st)
+        st.release()
+    if supplementary:
+        raw = [{name: np.asarray(arr, dtype=np.float64)[st.cut]
+                for name, arr in st.ss.channels.items() if name.rpartition("_")[0] in PSD_KINDS}
+               for st in states]
+        for st, bands in zip(states, psd_band_values_batch(raw, [st.fs for st in states]),
+                             strict=True):
+            st.supp.update(bands)
+    clock.lap("supplementary")
+    return [SectionValues(st.sec.id, *st.result()) for st in states]
 
 
 def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,
@@ -301,265 +409,6 @@ def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,
         ``{(qty, position): value}`` (kN, –, m/s²), processing steps, settling warnings.
     """
     return evaluate_batch([signalset], [section_info], order=order)[0]
-
-
-def _evaluated_cut(d: np.ndarray, sec: SectionInfo) -> tuple[np.ndarray, slice, int]:
-    """Step 3 of the chain: the samples with ``eval_start_m ≤ distance_m ≤ eval_end_m`` as a
-    mask and as the slice from the first to the last of them, and their number (≥ 2)."""
-    mask = (d >= sec.eval_start_m) & (d <= sec.eval_end_m)
-    n_eval = int(mask.sum())
-    if n_eval < 2:
-        raise InvalidSignal(
-            f"section {sec.id}: evaluated range {sec.eval_start_m}–{sec.eval_end_m} m holds "
-            f"{n_eval} samples, needs at least 2")
-    lo_idx, hi_idx = np.flatnonzero(mask)[[0, -1]]
-    return mask, slice(int(lo_idx), int(hi_idx) + 1), n_eval
-
-
-def _statistic(processing: str, p_lo, p_med, p_hi, rms_value=None):
-    """Step 4: a quantity's value from the (0.15 %, 50 %, 99.85 %) values and the rms by the
-    registry's ``Quantity.processing`` (:mod:`railval.core.quantities`; Polach & Böttcher 2014
-    Table 2): ``median`` the 50 % value with sign, ``p99.85`` the 99.85 % value, ``maxabs``
-    the larger magnitude of the 0.15 % and 99.85 % values, ``rms`` the rms."""
-    if processing == "maxabs":
-        return maxabs(p_lo, p_hi)
-    return {"median": p_med, "p99.85": p_hi, "rms": rms_value}[processing]
-
-
-_DERIVE_TEXT = {"YQ": "Y/Q formed sample-wise from the low-pass filtered Y and Q",
-                "SumY": "ΣY = Y_L + Y_R formed from the low-pass filtered forces"}
-
-
-class _SectionState:
-    """One section's values while :func:`_section_stats` forms them: the evaluated cut, the
-    values, their provenance, warnings, values under the other readings and supplementary
-    values."""
-
-    def __init__(self, ss: SignalSet, sec: SectionInfo, order: int, with_alternatives: bool,
-                 clock: _Clock):
-        self.ss, self.sec, self.order, self.clock = ss, sec, order, clock
-        self.d = np.asarray(ss.distance_m, dtype=np.float64)
-        self.mask, self.cut, n_eval = _evaluated_cut(self.d, sec)
-        self.fs = float(ss.fs)
-        self.cut_text = (f"cut to evaluated range {sec.eval_start_m:g}–{sec.eval_end_m:g} m "
-                         f"by distance ({n_eval} samples)")
-        self.pct_text = (f"percentiles: np.quantile method='{QUANTILE_METHOD}' (EN 14363 "
-                         "cumulative distribution)")
-        self.values: dict[tuple[str, str], float] = {}
-        self.prov: dict[tuple[str, str], tuple[str, ...]] = {}
-        self.warnings: list[str] = []
-        self.alts: dict[str, dict[tuple[str, str], float]] = {}
-        self.supp: dict[tuple[str, str], float] = {}
-        self.with_alternatives = with_alternatives
-        self.methods = ((QUANTILE_METHOD, _LINEAR.percentile) if with_alternatives
-                        else (QUANTILE_METHOD,))
-
-    def alternative(self, reading: Reading, key: tuple[str, str], value: float) -> None:
-        """Keep ``value`` under ``reading`` where it differs from the chosen value (NaN:
-        undefined under the reading)."""
-        if self.with_alternatives and value != self.values[key]:  # True for NaN as well
-            self.alts.setdefault(reading.id, {})[key] = float(value)
-
-    def settle(self, kind: str) -> str:
-        """Settling warnings of filter ``kind``; returns the filter's provenance label."""
-        self.warnings += [w.message for w in settling_check(
-            self.ss.time_s, self.mask, self.fs, kind, self.order, self.sec.id)]
-        return design(self.fs, kind, self.order).label + ", whole section"
-
-    def result(self) -> SectionValues:
-        order_keys = [(q, p) for q, quantity in QUANTITIES.items() for p in quantity.positions()]
-        supp_keys = [(q, p) for q, sq in SUPPLEMENTARY.items() for p in sq.positions()]
-        return SectionValues(self.sec.id, {k: self.values[k] for k in order_keys
-                                           if k in self.values},
-                             self.prov, self.warnings, self.alts,
-                             {k: self.supp[k] for k in supp_keys if k in self.supp})
-
-
-def _section_stats(ss: SignalSet, sec: SectionInfo, plan: _Plan, lp: np.ndarray | None,
-                   bp: np.ndarray | None, order: int, with_alternatives: bool = True,
-                   with_supplementary: bool = True, clock: _Clock | None = None
-                   ) -> SectionValues:
-    """Steps 2–4 of the chain for one section from its filtered rows (``lp``/``bp`` in the
-    channel order of ``plan``)."""
-    st = _SectionState(ss, sec, order, with_alternatives, clock or _Clock(None))
-    if lp is not None and lp.shape[0]:
-        _lowpass_values(st, plan, lp)
-    if bp is not None and bp.shape[0]:
-        _bandpass_values(st, plan, bp)
-    st.clock.lap("statistics")
-    if with_supplementary:
-        raw_acc = {name: np.asarray(arr, dtype=np.float64)[st.cut]
-                   for name, arr in ss.channels.items() if name.rpartition("_")[0] in PSD_KINDS}
-        st.supp.update(psd_band_values(raw_acc, st.fs))
-    st.clock.lap("supplementary")
-    return st.result()
-
-
-def _derived_rows(st: _SectionState, lp: np.ndarray, index: dict[str, int],
-                  wheels_yq: list[str], wsets: list[str]):
-    """Step 2: Y/Q per wheel and ΣY per wheelset, only where needed: the evaluated samples
-    plus one on each side (the sliding-mean windows lie inside the evaluated range). Returns
-    ``(ratio, sumy, wide, inner)``: the rows, their slice of the section and the evaluated
-    part within them."""
-    cut = st.cut
-    wide = slice(max(cut.start - 1, 0), min(cut.stop + 1, lp.shape[1]))
-    inner = slice(cut.start - wide.start, cut.stop - wide.start)
-    n_wide = wide.stop - wide.start
-    ratio = np.empty((len(wheels_yq), n_wide))
-    for r, p in enumerate(wheels_yq):
-        q = lp[index[f"Q_{p}"], wide]
-        if np.any(q[inner] == 0.0):
-            raise InvalidSignal(
-                f"section {st.sec.id}: Q_{p} is exactly 0 kN inside the evaluated range; "
-                f"Y/Q is undefined")
-        np.divide(lp[index[f"Y_{p}"], wide], q, out=ratio[r])
-    sumy = np.empty((len(wsets), n_wide))
-    for r, ws in enumerate(wsets):
-        np.add(lp[index[f"Y_w{ws[2:]}L"], wide], lp[index[f"Y_w{ws[2:]}R"], wide], out=sumy[r])
-    return ratio, sumy, wide, inner
-
-
-def _lowpass_values(st: _SectionState, plan: _Plan, lp: np.ndarray) -> None:
-    """The force quantities (Y, Q, Y/Q, ΣY: percentiles, then the sliding-mean maxima)."""
-    lp_label = st.settle("lowpass")
-    index = {c: r for r, c in enumerate(plan.lp_names)}
-    wheels_y = [p for p in WHEEL_POSITIONS if f"Y_{p}" in index]
-    wheels_q = [p for p in WHEEL_POSITIONS if f"Q_{p}" in index]
-    wheels_yq = [p for p in wheels_y if p in wheels_q]
-    wsets = [ws for ws in WHEELSET_POSITIONS
-             if f"Y_w{ws[2:]}L" in index and f"Y_w{ws[2:]}R" in index]
-    ratio, sumy, wide, inner = _derived_rows(st, lp, index, wheels_yq, wsets)
-    families = (("Y", wheels_y), ("Q", wheels_q), ("YQ", wheels_yq), ("SumY", wsets))
-    rows = np.empty((sum(len(p) for _, p in families), st.cut.stop - st.cut.start))
-    r = 0
-    for name in [f"Y_{p}" for p in wheels_y] + [f"Q_{p}" for p in wheels_q]:
-        rows[r] = lp[index[name], st.cut]
-        r += 1
-    rows[r:r + len(wheels_yq)] = ratio[:, inner]
-    rows[r + len(wheels_yq):] = sumy[:, inner]
-    both = (_row_percentiles(rows, st.methods) if rows.shape[0]
-            else [np.empty((0, 3))] * len(st.methods))
-    _force_percentile_values(st, families, both[0], both[-1], lp_label)
-    slide_rows = np.vstack([ratio, sumy])
-    if slide_rows.shape[0]:
-        keys = [("YQ_max", p) for p in wheels_yq] + [("SumY_max", w) for w in wsets]
-        _sliding_values(st, slide_rows, st.d[wide], keys, lp_label)
-
-
-#: the values a force family's percentiles give: (quantity, provenance of the statistic)
-_FORCE_PERCENTILE_QUANTITIES = {
-    "Y": (("Y_qst", "50 % value (median, with sign)"),
-          ("Y_max", "max(|0.15 % value|, |99.85 % value|)")),
-    "Q": (("Q_qst", "50 % value (median, with sign)"), ("Q_max", "99.85 % value")),
-    "YQ": (("YQ_qst", "50 % value (median, with sign)"),),
-    "SumY": (("SumY_qst", "50 % value (median, with sign)"),),
-}
-
-
-def _force_percentile_values(st: _SectionState, families, pct: np.ndarray,
-                             pct_lin: np.ndarray, lp_label: str) -> None:
-    """The percentile values of the force rows (in ``families`` order) under the chosen
-    reading (``pct``) and the linear one (``pct_lin``)."""
-    r = 0
-    for fam, positions in families:
-        derive = _DERIVE_TEXT.get(fam)
-        base = (lp_label,) + ((derive,) if derive else ()) + (st.cut_text,)
-        for p in positions:
-            for qid, text in _FORCE_PERCENTILE_QUANTITIES[fam]:
-                processing = QUANTITIES[qid].processing
-                st.values[(qid, p)] = float(_statistic(processing, *pct[r]))
-                st.prov[(qid, p)] = base + (text, st.pct_text)
-                st.alternative(_LINEAR, (qid, p), _statistic(processing, *pct_lin[r]))
-            r += 1
-
-
-def _sliding_values(st: _SectionState, slide_rows: np.ndarray, d_wide: np.ndarray,
-                    keys: list[tuple[str, str]], lp_label: str) -> None:
-    """``YQ_max`` and ``SumY_max``: the maxima of the 2 m sliding means (step 6 of
-    docs/validation.md), then, with the alternatives, their values under the other readings.
-    The chosen grid (from the section start) and the grid from the first evaluated sample
-    come from one cumulative integral."""
-    sec = st.sec
-    _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
-    origins = [sec.eval_start_m] + ([float(st.d[st.cut.start])] if st.with_alternatives else [])
-    interp = _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
-                                WINDOW_M, STEP_M, origins)
-    means = interp[0][1]
-    # the order statistics of every percentile method in one selection (the linear
-    # reading's values of the chosen means are used by the alternatives)
-    chosen_pcts = _row_percentiles(means, st.methods)
-    spct = chosen_pcts[0]
-    slide_text = (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
-                  f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "
-                  f"{means.shape[1]} values; exact integral of the linear interpolant)")
-    for r, key in enumerate(keys):
-        st.values[key] = float(_statistic(QUANTITIES[key[0]].processing, *spct[r]))
-        st.prov[key] = (lp_label, _DERIVE_TEXT[key[0].split("_")[0]], slide_text,
-                        "max(|0.15 % value|, |99.85 % value|)", st.pct_text)
-    st.clock.lap("statistics")
-    if st.with_alternatives:
-        _sliding_alternatives(slide_rows, d_wide, st.d[st.cut.start], sec, keys,
-                              (means, chosen_pcts), interp[1][1], st.methods, st.alternative)
-    st.clock.lap("alternatives")
-
-
-def _bandpass_values(st: _SectionState, plan: _Plan, bp: np.ndarray) -> None:
-    """The car body accelerations (rms, maximum) and, from the same filter call and
-    statistics, the supplementary bogie-frame values."""
-    bp_label = st.settle("bandpass")
-    rows = bp[:, st.cut]
-    both = _row_percentiles(rows, st.methods)
-    pct, pct_lin = both[0], both[-1]
-    rmsv = rms(rows)
-    for r, name in enumerate(plan.bp_names):
-        kind, _, pos = name.rpartition("_")
-        if kind in BOGIE_KINDS:  # supplementary: same filter call, same statistics
-            st.supp[(f"{kind}_rms", pos)] = float(rmsv[r])
-            st.supp[(f"{kind}_max", pos)] = float(maxabs(pct[r, 0], pct[r, 2]))
-            continue
-        q = kind.split("_")[0]
-        st.values[(f"{q}_rms", pos)] = float(rmsv[r])
-        st.prov[(f"{q}_rms", pos)] = (bp_label, st.cut_text, "rms value")
-        st.values[(f"{q}_max", pos)] = float(_statistic("maxabs", *pct[r]))
-        st.prov[(f"{q}_max", pos)] = (bp_label, st.cut_text,
-                                      "max(|0.15 % value|, |99.85 % value|)", st.pct_text)
-        st.alternative(_LINEAR, (f"{q}_max", pos), _statistic("maxabs", *pct_lin[r]))
-
-
-def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: float,
-                          sec: SectionInfo, keys: list[tuple[str, str]], chosen: tuple,
-                          first_interp: np.ndarray, methods: tuple[str, ...],
-                          alternative) -> None:
-    """Values of the sliding-mean maxima under every other reading (grid alignment × window
-    mean × percentile method, :mod:`railval.core.definitions`) from the same derived rows;
-    the prefix sums and the cumulative integral are formed once for all readings, and the
-    percentiles of the chosen means (``chosen``: means and their percentiles under each
-    method) are not selected again."""
-    origins = {"section_start": sec.eval_start_m, "first_sample": float(first_m)}
-    prefix = np.empty((slide_rows.shape[0], slide_rows.shape[1] + 1))
-    prefix[:, 0] = 0.0
-    prefix[:, 1:] = slide_rows
-    np.cumsum(prefix, axis=1, out=prefix)  # in place: the same sums, a contiguous cumsum
-    for grid, window in SLIDING_VARIANTS:
-        pcts = None
-        if (grid, window) == CHOSEN.sliding:
-            means, pcts = chosen
-        elif window == "interpolant":
-            means = first_interp
-        else:
-            centres = window_centres(sec.eval_start_m, sec.eval_end_m, origins[grid], WINDOW_M,
-                                     STEP_M)
-            means = sample_window_means(slide_rows, d_wide, centres, WINDOW_M,
-                                        closed=(window == "samples_closed"), prefix=prefix)
-        undefined = ~np.all(np.isfinite(means), axis=1)
-        pcts = _row_percentiles(means, methods) if pcts is None else pcts
-        for method, pct in zip(methods, pcts, strict=True):
-            reading = Reading(method, grid, window)
-            if reading == CHOSEN:
-                continue
-            vals = maxabs(pct[:, 0], pct[:, 2])
-            for r, key in enumerate(keys):
-                alternative(reading, key, float("nan") if undefined[r] else float(vals[r]))
 
 
 @dataclass
@@ -627,7 +476,7 @@ def quantity_trace(signalset: SignalSet, section: SectionInfo, quantity: str, po
         sig = filt[0]
         label = f"{names[0]} ({design(fs, q.filter, order).label})"
     d = np.asarray(signalset.distance_m, dtype=np.float64)
-    _, cut, _ = _evaluated_cut(d, section)
+    cut, _ = _evaluated_cut(d, section)
     centres = means = None
     src = sig[cut]
     if q.sliding_mean:

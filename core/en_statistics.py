@@ -53,7 +53,13 @@ def _row_percentiles(rows: np.ndarray, methods: tuple[str, ...] = (QUANTILE_METH
     rows = np.atleast_2d(rows)
     n = rows.shape[-1]
     ranks = sorted({r for m in methods for r in percentile_ranks(n, PERCENTILES, m)})
-    stats = order_statistics(rows, ranks)
+    return _percentiles_of(order_statistics(rows, ranks), ranks, n, methods)
+
+
+def _percentiles_of(stats: np.ndarray, ranks: list[int], n: int, methods: tuple[str, ...]
+                    ) -> list[np.ndarray]:
+    """:func:`_row_percentiles` from the order statistics ``stats`` (shape (n_rows,
+    len(ranks)); column c holds the samples of 0-based rank ``ranks[c]`` of rows of n)."""
     column = {r: c for c, r in enumerate(ranks)}
     return [percentiles_from_order(lambda i: stats[:, column[i]], n, PERCENTILES, m)
             for m in methods]
@@ -118,23 +124,36 @@ def _interpolant_means(v: np.ndarray, d: np.ndarray, start_m: float, end_m: floa
                        window_m: float, step_m: float, origins) -> list[tuple[np.ndarray, np.ndarray]]:
     """Distance-weighted window means of the rows of ``v`` for the grid of each origin in
     ``origins``; the cumulative integral is formed once for all of them."""
+    grids, j_all, u_all = _window_ends(d, start_m, end_m, window_m, step_m, origins)
+    at = np.empty((v.shape[0], j_all.size))
+    _integral_at(np.ascontiguousarray(v), np.diff(d), j_all, u_all, at)
+    return _means_from_integrals(at, grids, window_m)
+
+
+def _window_ends(d: np.ndarray, start_m: float, end_m: float, window_m: float, step_m: float,
+                 origins) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """The window centres of each origin's grid, and the interval ``j`` and offset ``u`` (m)
+    on the distance axis ``d`` of every window start, then every window end, grid after grid
+    (the points :func:`_integral_at` evaluates)."""
     half = window_m / 2.0
-    h = np.diff(d)
-    grids = []
+    grids, js, us = [], [], []
     for origin in origins:
         centres = window_centres(start_m, end_m, origin, window_m, step_m)
-        ends = []
+        grids.append(centres)
         for x in (centres - half, centres + half):
             j = np.clip(np.searchsorted(d, x, side="right") - 1, 0, d.size - 2)
-            ends.append((j, x - d[j]))
-        grids.append((centres, ends))
-    j_all = np.concatenate([e[0] for _, ends in grids for e in ends])
-    u_all = np.concatenate([e[1] for _, ends in grids for e in ends])
-    at = np.empty((v.shape[0], j_all.size))
-    _integral_at(np.ascontiguousarray(v), h, j_all, u_all, at)
+            js.append(j)
+            us.append(x - d[j])
+    return grids, np.concatenate(js), np.concatenate(us)
+
+
+def _means_from_integrals(at: np.ndarray, grids: list[np.ndarray], window_m: float
+                          ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(centres, means)`` per grid from the integrals ``at`` at the window starts and ends
+    (columns in the order of :func:`_window_ends`)."""
     out = []
     pos = 0
-    for centres, _ in grids:
+    for centres in grids:
         k = centres.size
         out.append((centres, (at[:, pos + k:pos + 2 * k] - at[:, pos:pos + k]) / window_m))
         pos += 2 * k
@@ -160,3 +179,62 @@ def _integral_at(v, h, j, u, out):  # pragma: no cover - compiled
             uu = u[k]
             slope = (v[r, jj + 1] - v[r, jj]) / h[jj]
             out[r, k] = cum[jj] + v[r, jj] * uu + 0.5 * slope * uu * uu
+
+
+@numba.njit(cache=True, nogil=True)
+def _block_sum(a, lo, n):  # pragma: no cover - compiled
+    """numpy's sum of a run of at most 128: sequential below 8, else eight interleaved
+    partial sums combined pairwise, then the rest."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r = a[lo:lo + 8].copy()
+    i = 8
+    while i < n - n % 8:
+        for k in range(8):
+            r[k] += a[lo + i + k]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    for k in range(i, n):
+        res += a[lo + k]
+    return res
+
+
+@numba.njit(cache=True, nogil=True)
+def pairwise_sum(a, lo, n):  # pragma: no cover - compiled
+    """``a[lo:lo + n].sum()`` as numpy sums a contiguous run, so the same number: runs of at
+    most 128 by :func:`_block_sum`, longer ones split at a multiple of 8 near the half and
+    the halves' sums added (Higham 1993; numpy's ``pairwise_sum``). The recursion is walked
+    with an explicit stack (a cached compiled function must not call itself)."""
+    if n <= 128:
+        return _block_sum(a, lo, n)
+    los = np.empty(64, np.int64)
+    ns = np.empty(64, np.int64)
+    stage = np.zeros(64, np.int64)
+    left = np.empty(64)
+    top = 0
+    los[0] = lo
+    ns[0] = n
+    ret = 0.0
+    while top >= 0:
+        m = ns[top]
+        if m <= 128:
+            ret = _block_sum(a, los[top], m)
+            top -= 1
+            continue
+        half = m // 2 - (m // 2) % 8
+        if stage[top] == 0:
+            stage[top] = 1
+            los[top + 1], ns[top + 1], stage[top + 1] = los[top], half, 0
+            top += 1
+        elif stage[top] == 1:
+            left[top] = ret
+            stage[top] = 2
+            los[top + 1], ns[top + 1], stage[top + 1] = los[top] + half, m - half, 0
+            top += 1
+        else:
+            ret = left[top] + ret
+            top -= 1
+    return ret

@@ -16,9 +16,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy import signal as _signal
 
+from railval.core.en_statistics import pairwise_sum
 from railval.core.errors import InvalidParameter, InvalidSignal
 
 
@@ -145,3 +147,98 @@ def welch_rows(rows: np.ndarray, fs: float, segment_s: float = 10.0) -> tuple[np
     f, p = _signal.welch(x, fs=fs, nperseg=nperseg, detrend=detrend_linear, scaling="density",
                          axis=-1)
     return f, p, nperseg / fs
+
+
+def welch_blocks(blocks: list[np.ndarray], fs: float, segment_s: float = 10.0
+                 ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`welch_rows` of many blocks of rows (``blocks[i]`` of shape (n_rows_i, n_i),
+    n_i ≥ 8, finite) at once: the segments of all blocks with the same segment length are
+    detrended, windowed and transformed in one call each (Welch 1967: Hann window, 50 %
+    overlap, segments starting every ``nperseg − nperseg//2`` samples, one-sided density
+    ``2·|X|²/(fs·Σw²)`` — DC and an even length's Nyquist bin not doubled — averaged over
+    the segments), the steps :func:`scipy.signal.welch` takes. Equal to :func:`welch_rows`
+    of each block to rounding (measured: ≤ 1.3e-12 relative per bin of a trend-dominated
+    record, ≤ 2.1e-15 for the band values of the EN chain).
+
+    Parameters
+    ----------
+    blocks : list of numpy.ndarray
+        Rows of equal length within a block; unit u.
+    fs, segment_s : float, float
+        Sampling rate in Hz; segment length in s.
+
+    Returns
+    -------
+    list of tuple of (numpy.ndarray, numpy.ndarray)
+        Per block: frequencies in Hz (n_freq,), density in u²/Hz (n_rows_i, n_freq).
+    """
+    from scipy import fft as _fft
+
+    blocks = [np.atleast_2d(np.asarray(b, dtype=np.float64)) for b in blocks]
+    nper = [int(min(b.shape[-1], max(8, round(segment_s * fs)))) for b in blocks]
+    out: list = [None] * len(blocks)
+    for m in sorted(set(nper)):
+        members = [i for i, v in enumerate(nper) if v == m]
+        hop = m - m // 2
+        n_segs = [(blocks[i].shape[-1] - m // 2) // hop for i in members]
+        seg = np.empty((sum(blocks[i].shape[0] * k for i, k in zip(members, n_segs)), m))
+        pos = 0
+        for i, n_seg in zip(members, n_segs, strict=True):  # segment-major per block
+            rows = blocks[i].shape[0]
+            for k in range(n_seg):
+                seg[pos:pos + rows] = blocks[i][:, k * hop:k * hop + m]
+                pos += rows
+        win = _signal.get_window("hann", m)
+        t = np.arange(m) - (m - 1) / 2.0
+        _detrend_taper(seg, seg.mean(axis=-1), t, win, seg)
+        spec = _fft.rfft(seg, axis=-1)
+        f = _fft.rfftfreq(m, 1.0 / fs)
+        pos = 0
+        for i, n_seg in zip(members, n_segs, strict=True):
+            rows = blocks[i].shape[0]
+            density = np.empty((rows, f.size))
+            _segment_mean_power(spec[pos:pos + rows * n_seg], n_seg,
+                                1.0 / (fs * float(np.sum(win * win))), m % 2 == 0,
+                                density)
+            out[i] = (f, density)
+            pos += rows * n_seg
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _segment_mean_power(spec, n_seg, scale, even, out):  # pragma: no cover - compiled
+    """One-sided density of each row (``spec`` segment-major: row r of segment k at
+    ``k·rows + r``): ``|X|²·scale``, doubled except DC and an even length's Nyquist bin,
+    averaged over the segments."""
+    rows = out.shape[0]
+    n_f = out.shape[1]
+    for r in range(rows):
+        for j in range(n_f):
+            acc = 0.0
+            for k in range(n_seg):
+                x = spec[k * rows + r, j]
+                acc += (x.real * x.real + x.imag * x.imag) * scale
+            if j > 0 and not (even and j == n_f - 1):
+                acc *= 2.0
+            out[r, j] = acc / n_seg
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _detrend_taper(seg, mean, t, win, out):  # pragma: no cover - compiled
+    """``out = (seg − mean − slope·t) · win`` row by row with ``slope = Σ t·x / Σ t²``:
+    :func:`detrend_linear` and the window in one pass. The sums are numpy's pairwise sums
+    (:func:`railval.core.en_statistics.pairwise_sum`) rather than a BLAS product, whose
+    threads keep spinning after the call (CPU taken from the other jobs of the machine)."""
+    n = seg.shape[1]
+    prod = np.empty(n)
+    for i in range(n):
+        prod[i] = t[i] * t[i]
+    tt = pairwise_sum(prod, 0, n)
+    for r in range(seg.shape[0]):
+        for i in range(n):
+            prod[i] = seg[r, i] * t[i]
+        a = mean[r]
+        b = pairwise_sum(prod, 0, n) / tt
+        for i in range(n):
+            out[r, i] = (seg[r, i] - a - b * t[i]) * win[i]

@@ -1,0 +1,534 @@
+"""Steps 2–4 of the EN 14363 chain for many sections at once (:mod:`railval.core.en14363`):
+derived signals, the evaluated cut, percentile values, rms, the sliding-mean maxima and the
+values under the other readings.
+
+Per section, one compiled call (:func:`_section_kernel`, run for the sections of a batch on
+the cores in parallel, :func:`railval.core.workers.split_rows`) forms Y/Q (per wheel,
+sample-wise ratio) and ΣY = Y_L + Y_R (per wheelset) from the low-pass filtered rows over the
+evaluated range plus one sample on each side, checks Q ≠ 0 inside the evaluated range and
+selects the order statistics every percentile reading needs from all evaluated rows — the
+filtered forces, the derived rows and the band-pass rows read in place, without row copies
+(:func:`railval.core.orderstat.select_ranks`: the samples a full sort gives at those
+positions, so the percentiles are those of ``numpy.quantile``). The values are then read off
+these order statistics (:func:`railval.core.definitions.percentiles_from_order`).
+
+The operations on the samples are those of the former per-step numpy code, in the same order
+(IEEE division and addition for Y/Q and ΣY, the same order statistics, numpy's rms), so the
+values are the same numbers (docs/validation.md, Throughput).
+
+The compiled step calls compiled functions of :mod:`railval.core.orderstat`
+(``select_ranks``) and :mod:`railval.core.en_statistics` (``pairwise_sum``,
+``_integral_at``); numba's on-disk cache of :func:`_section_kernel` is keyed to this file
+only, so after editing those functions the cached ``core/__pycache__/en_section.*.nb[ic]``
+must be deleted (numba documentation, "Notes on caching").
+
+References
+----------
+Polach & Böttcher 2014, §5 and Table 2. EN 14363:2005, on-track tests: filtering, test
+sections, percentile values from the cumulative frequency distribution.
+Floyd, R.W. & Rivest, R.L. (1975) Algorithm 489: SELECT, Comm. ACM 18(3) — selection of a few
+order statistics without sorting.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from railval.core.definitions import (
+    CHOSEN,
+    READINGS,
+    SLIDING_VARIANTS,
+    Reading,
+    percentile_ranks,
+    window_centres,
+)
+from railval.core.en_statistics import (
+    PERCENTILES,
+    QUANTILE_METHOD,
+    STEP_M,
+    WINDOW_M,
+    _check_sliding_range,
+    _integral_at,
+    _interpolant_means,
+    _means_from_integrals,
+    _percentiles_of,
+    _row_percentiles,
+    _window_ends,
+    maxabs,
+    pairwise_sum,
+)
+from railval.core.errors import InvalidSignal
+from railval.core.filters import design, settling_check
+from railval.core.orderstat import BUCKETS, select_ranks
+from railval.core.quantities import QUANTITIES, WHEELSET_POSITIONS
+from railval.core.supplementary import BOGIE_KINDS, SUPPLEMENTARY
+from railval.core.types import WHEEL_POSITIONS, SectionInfo, SignalSet
+
+#: the reading that differs from the chosen one only in the percentile method
+_LINEAR = Reading("linear", CHOSEN.grid, CHOSEN.window)
+_NO_ROWS = np.empty((0, 0))
+#: every reading by its (percentile, grid, window)
+_READING = {(r.percentile, r.grid, r.window): r for r in READINGS}
+_READING_ID = {r: r.id for r in READINGS}
+
+
+def _evaluated_cut(d: np.ndarray, sec: SectionInfo) -> tuple[slice, int]:
+    """Step 3 of the chain: the samples with ``eval_start_m ≤ distance_m ≤ eval_end_m`` (on
+    the strictly increasing distance axis a contiguous run) as a slice, and their number
+    (≥ 2)."""
+    lo = int(np.searchsorted(d, sec.eval_start_m, side="left"))
+    hi = int(np.searchsorted(d, sec.eval_end_m, side="right"))
+    n_eval = max(hi - lo, 0)
+    if n_eval < 2:
+        raise InvalidSignal(
+            f"section {sec.id}: evaluated range {sec.eval_start_m}–{sec.eval_end_m} m holds "
+            f"{n_eval} samples, needs at least 2")
+    return slice(lo, hi), n_eval
+
+
+def _statistic(processing: str, p_lo, p_med, p_hi, rms_value=None):
+    """Step 4: a quantity's value from the (0.15 %, 50 %, 99.85 %) values and the rms by the
+    registry's ``Quantity.processing`` (:mod:`railval.core.quantities`; Polach & Böttcher 2014
+    Table 2): ``median`` the 50 % value with sign, ``p99.85`` the 99.85 % value, ``maxabs``
+    the larger magnitude of the 0.15 % and 99.85 % values, ``rms`` the rms."""
+    if processing == "maxabs":
+        return maxabs(p_lo, p_hi)
+    return {"median": p_med, "p99.85": p_hi, "rms": rms_value}[processing]
+
+
+_DERIVE_TEXT = {"YQ": "Y/Q formed sample-wise from the low-pass filtered Y and Q",
+                "SumY": "ΣY = Y_L + Y_R formed from the low-pass filtered forces"}
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _derive(lp, yq, sy, cut0, cut1, wide0, derived):  # pragma: no cover - compiled
+    """Step 2: ``derived`` = Y/Q rows (``lp[yq[r, 0]] / lp[yq[r, 1]]``) then ΣY rows
+    (``lp[sy[r, 0]] + lp[sy[r, 1]]``) over ``wide0:wide0 + derived.shape[1]``; returns the
+    first Y/Q row whose Q is exactly 0 inside ``cut0:cut1`` (−1: none)."""
+    n_wide = derived.shape[1]
+    n_yq = yq.shape[0]
+    zero = -1
+    for r in range(n_yq):
+        y = lp[yq[r, 0]]
+        q = lp[yq[r, 1]]
+        for i in range(n_wide):
+            derived[r, i] = y[wide0 + i] / q[wide0 + i]
+        if zero < 0:
+            for i in range(cut0, cut1):
+                if q[i] == 0.0:
+                    zero = r
+                    break
+    for r in range(sy.shape[0]):
+        a = lp[sy[r, 0]]
+        b = lp[sy[r, 1]]
+        for i in range(n_wide):
+            derived[n_yq + r, i] = a[wide0 + i] + b[wide0 + i]
+    return zero
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
+                    out_rms, d, j, u, at, win_lo, win_hi, sampled
+                    ):  # pragma: no cover - compiled
+    """One section: the derived rows (:func:`_derive`), then the order statistics ``ranks``
+    of the evaluated part of the low-pass rows ``sel``, of the derived rows and of every
+    band-pass row into ``out_lp`` (in that order) and ``out_bp``, the band-pass rows' rms
+    (numpy's ``sqrt(mean(x²))``, :func:`railval.core.en_statistics.pairwise_sum`) and the
+    integrals of the derived rows at the window ends ``j``, ``u`` on ``d[wide0:]``
+    (:func:`railval.core.en_statistics._integral_at`) and their means over the sample
+    windows ``win_lo``/``win_hi`` (:func:`_sample_window_means`). Returns the Y/Q row with Q = 0 in the
+    evaluated range (nothing selected) or −1."""
+    zero = _derive(lp, yq, sy, cut0, cut1, wide0, derived)
+    if zero >= 0:
+        return zero
+    k = ranks.shape[0]
+    n = cut1 - cut0
+    hist = np.empty(BUCKETS, np.int64)
+    slot = np.empty(BUCKETS, np.int64)
+    start = np.empty(k, np.int64)
+    fill = np.empty(k, np.int64)
+    cand = np.empty(n)
+    bucket = np.empty(n, np.int64)
+    n_sel = sel.shape[0]
+    for s in range(n_sel):
+        select_ranks(lp[sel[s], cut0:cut1], ranks, out_lp[s], hist, slot, start, fill, cand,
+                     bucket)
+    for r in range(derived.shape[0]):
+        select_ranks(derived[r, cut0 - wide0:cut1 - wide0], ranks, out_lp[n_sel + r], hist,
+                     slot, start, fill, cand, bucket)
+    for r in range(bp.shape[0]):
+        select_ranks(bp[r, cut0:cut1], ranks, out_bp[r], hist, slot, start, fill, cand,
+                     bucket)
+        for i in range(n):
+            cand[i] = bp[r, cut0 + i] * bp[r, cut0 + i]
+        out_rms[r] = np.sqrt(pairwise_sum(cand, 0, n) / n)
+    if j.shape[0]:
+        n_wide = derived.shape[1]
+        h = np.empty(n_wide - 1)
+        for i in range(n_wide - 1):
+            h[i] = d[wide0 + i + 1] - d[wide0 + i]
+        _integral_at(derived, h, j, u, at)
+    if win_lo.shape[0]:
+        _sample_window_means(derived, win_lo, win_hi, sampled)
+    return -1
+
+
+class SectionState:
+    """One section's values while they are formed: the evaluated cut, the rows the compiled
+    call reads and writes, the values, their provenance, warnings, values under the other
+    readings and supplementary values. ``error``: the section's InvalidSignal, raised when
+    its values are asked for (sections are reported in order)."""
+
+    def __init__(self, ss: SignalSet, sec: SectionInfo, order: int, with_alternatives: bool,
+                 clock, plan, lp: np.ndarray | None, bp: np.ndarray | None):
+        self.ss, self.sec, self.order, self.clock, self.plan = ss, sec, order, clock, plan
+        self.values: dict[tuple[str, str], float] = {}
+        self.prov: dict[tuple[str, str], tuple[str, ...]] = {}
+        self.warnings: list[str] = []
+        self.alts: dict[str, dict[tuple[str, str], float]] = {}
+        self.supp: dict[tuple[str, str], float] = {}
+        self.with_alternatives = with_alternatives
+        self.methods = ((QUANTILE_METHOD, _LINEAR.percentile) if with_alternatives
+                        else (QUANTILE_METHOD,))
+        self.error: InvalidSignal | None = None
+        self.zero_q = -1
+        self.d = np.asarray(ss.distance_m, dtype=np.float64)
+        self.fs = float(ss.fs)
+        try:
+            self.cut, self.n_eval = _evaluated_cut(self.d, sec)
+        except InvalidSignal as exc:
+            self.error = exc
+            return
+        self.cut_text = (f"cut to evaluated range {sec.eval_start_m:g}–{sec.eval_end_m:g} m "
+                         f"by distance ({self.n_eval} samples)")
+        self.pct_text = (f"percentiles: np.quantile method='{QUANTILE_METHOD}' (EN 14363 "
+                         "cumulative distribution)")
+        self._rows(lp, bp)
+
+    def _rows(self, lp: np.ndarray | None, bp: np.ndarray | None) -> None:
+        """The inputs and outputs of :func:`_section_kernel`."""
+        plan, cut = self.plan, self.cut
+        self.lp = lp if lp is not None and lp.shape[0] else None
+        self.bp = bp if bp is not None and bp.shape[0] else None
+        index = {c: r for r, c in enumerate(plan.lp_names)} if self.lp is not None else {}
+        self.index = index
+        wy = [p for p in WHEEL_POSITIONS if f"Y_{p}" in index]
+        wq = [p for p in WHEEL_POSITIONS if f"Q_{p}" in index]
+        self.wheels_yq = [p for p in wy if p in wq]
+        self.wsets = [ws for ws in WHEELSET_POSITIONS
+                      if f"Y_w{ws[2:]}L" in index and f"Y_w{ws[2:]}R" in index]
+        self.families = (("Y", wy), ("Q", wq), ("YQ", self.wheels_yq), ("SumY", self.wsets))
+        self.sel = np.array([index[f"Y_{p}"] for p in wy] + [index[f"Q_{p}"] for p in wq],
+                            dtype=np.int64)
+        self.yq = np.array([[index[f"Y_{p}"], index[f"Q_{p}"]] for p in self.wheels_yq],
+                           dtype=np.int64).reshape(-1, 2)
+        self.sy = np.array([[index[f"Y_w{w[2:]}L"], index[f"Y_w{w[2:]}R"]] for w in self.wsets],
+                           dtype=np.int64).reshape(-1, 2)
+        n = self.d.size
+        self.wide = slice(max(cut.start - 1, 0), min(cut.stop + 1, n))
+        n_der = self.yq.shape[0] + self.sy.shape[0]
+        self.derived = np.empty((n_der, self.wide.stop - self.wide.start))
+        self.ranks = np.array(sorted({r for m in self.methods
+                                      for r in percentile_ranks(self.n_eval, PERCENTILES, m)}),
+                              dtype=np.int64)
+        k = self.ranks.size
+        self.out_lp = np.empty((self.sel.size + n_der, k))
+        self.out_bp = np.empty((0 if self.bp is None else self.bp.shape[0], k))
+        self.out_rms = np.empty(self.out_bp.shape[0])
+        self._window_ends(n_der)
+
+    def _window_ends(self, n_der: int) -> None:
+        """Where the compiled step integrates the derived rows for the sliding means: the
+        window ends of the chosen grid and, with the alternatives, of the grid from the
+        first evaluated sample. A range the grid does not fit leaves ``grids`` None (the
+        error is raised in section order by :func:`_sliding_values`)."""
+        sec = self.sec
+        self.grids, self.j, self.u = None, np.empty(0, np.int64), np.empty(0)
+        self.win_lo = self.win_hi = np.empty(0, np.int64)
+        sizes: list[int] = []
+        if n_der:
+            origins = [sec.eval_start_m] + (
+                [float(self.d[self.cut.start])] if self.with_alternatives else [])
+            try:
+                d_wide = self.d[self.wide]
+                _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
+                grids, self.j, self.u = _window_ends(d_wide, sec.eval_start_m,
+                                                     sec.eval_end_m, WINDOW_M, STEP_M, origins)
+                if self.with_alternatives:
+                    sizes, self.win_lo, self.win_hi = _sample_bounds(d_wide, sec, origins[1])
+                self.grids = grids
+            except InvalidSignal:
+                self.grids = None
+        self.at = np.empty((n_der, self.j.size))
+        self.sampled = (sizes, np.empty((n_der, self.win_lo.size)))
+
+    def run(self) -> None:
+        """The compiled step (releases the GIL; sections run on the cores in parallel)."""
+        if self.error is None:
+            self.zero_q = _section_kernel(
+                _NO_ROWS if self.lp is None else self.lp, self.sel, self.yq, self.sy,
+                _NO_ROWS if self.bp is None else self.bp, self.cut.start, self.cut.stop,
+                self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
+                self.out_rms, self.d, self.j.astype(np.int64), self.u, self.at, self.win_lo,
+                self.win_hi, self.sampled[1])
+
+    def release(self) -> None:
+        """Drop the rows once the values are formed (a batch keeps only the values)."""
+        self.lp = self.bp = None
+        self.derived = self.at = _NO_ROWS
+        self.sampled = ([], _NO_ROWS)
+
+    def percentiles(self, stats: np.ndarray) -> list[np.ndarray]:
+        """(0.15 %, 50 %, 99.85 %) values of each row under each method from the selected
+        order statistics (columns in the order of ``self.ranks``)."""
+        return _percentiles_of(stats, [int(r) for r in self.ranks], self.n_eval, self.methods)
+
+    def alternative(self, reading: Reading, key: tuple[str, str], value: float) -> None:
+        """Keep ``value`` under ``reading`` where it differs from the chosen value (NaN:
+        undefined under the reading)."""
+        if self.with_alternatives and value != self.values[key]:  # True for NaN as well
+            rid = _READING_ID.get(reading) or reading.id
+            self.alts.setdefault(rid, {})[key] = float(value)
+
+    def settle(self, kind: str) -> str:
+        """Settling warnings of filter ``kind``; returns the filter's provenance label."""
+        mask = np.zeros(self.d.size, dtype=bool)
+        mask[self.cut] = True
+        self.warnings += [w.message for w in settling_check(
+            self.ss.time_s, mask, self.fs, kind, self.order, self.sec.id)]
+        return design(self.fs, kind, self.order).label + ", whole section"
+
+    def result(self) -> tuple:
+        """``(values, provenance, warnings, alternatives, supplementary)`` in registry order."""
+        order_keys = [(q, p) for q, quantity in QUANTITIES.items() for p in quantity.positions()]
+        supp_keys = [(q, p) for q, sq in SUPPLEMENTARY.items() for p in sq.positions()]
+        return ({k: self.values[k] for k in order_keys if k in self.values}, self.prov,
+                self.warnings, self.alts, {k: self.supp[k] for k in supp_keys if k in self.supp})
+
+
+def run_sections(states: list[SectionState]) -> None:
+    """The compiled step of every section, the sections shared among the cores (the first
+    one in the calling thread first: a first call compiles or loads the kernel once)."""
+    from railval.core.workers import split_rows
+
+    if not states:
+        return
+    states[0].run()
+
+    def part(a: int, b: int) -> None:
+        for st in states[1 + a:1 + b]:
+            st.run()
+
+    split_rows(part, len(states) - 1)
+
+
+def section_values(st: SectionState) -> None:
+    """Steps 2–4 from the compiled step's rows and order statistics (in the channel order of
+    ``st.plan``); raises the section's InvalidSignal."""
+    if st.error is not None:
+        raise st.error
+    if st.zero_q >= 0:
+        raise InvalidSignal(
+            f"section {st.sec.id}: Q_{st.wheels_yq[st.zero_q]} is exactly 0 kN inside the "
+            f"evaluated range; Y/Q is undefined")
+    if st.lp is not None:
+        _lowpass_values(st)
+    if st.bp is not None:
+        _bandpass_values(st)
+    st.clock.lap("statistics")
+
+
+def _lowpass_values(st: SectionState) -> None:
+    """The force quantities (Y, Q, Y/Q, ΣY: percentiles, then the sliding-mean maxima)."""
+    lp_label = st.settle("lowpass")
+    if st.out_lp.shape[0]:
+        both = st.percentiles(st.out_lp)
+        _force_percentile_values(st, st.families, both[0], both[-1], lp_label)
+    if st.derived.shape[0]:
+        keys = ([("YQ_max", p) for p in st.wheels_yq] + [("SumY_max", w) for w in st.wsets])
+        _sliding_values(st, st.derived, st.d[st.wide], keys, lp_label)
+
+
+#: the values a force family's percentiles give: (quantity, provenance of the statistic)
+_FORCE_PERCENTILE_QUANTITIES = {
+    "Y": (("Y_qst", "50 % value (median, with sign)"),
+          ("Y_max", "max(|0.15 % value|, |99.85 % value|)")),
+    "Q": (("Q_qst", "50 % value (median, with sign)"), ("Q_max", "99.85 % value")),
+    "YQ": (("YQ_qst", "50 % value (median, with sign)"),),
+    "SumY": (("SumY_qst", "50 % value (median, with sign)"),),
+}
+
+
+def _force_percentile_values(st: SectionState, families, pct: np.ndarray,
+                             pct_lin: np.ndarray, lp_label: str) -> None:
+    """The percentile values of the force rows (in ``families`` order) under the chosen
+    reading (``pct``) and the linear one (``pct_lin``): each statistic formed for all rows
+    at once (:func:`_statistic` on columns), then read out as floats."""
+    chosen, linear = _by_processing(pct), _by_processing(pct_lin)
+    r = 0
+    for fam, positions in families:
+        derive = _DERIVE_TEXT.get(fam)
+        base = (lp_label,) + ((derive,) if derive else ()) + (st.cut_text,)
+        for p in positions:
+            for qid, text in _FORCE_PERCENTILE_QUANTITIES[fam]:
+                processing = QUANTITIES[qid].processing
+                st.values[(qid, p)] = chosen[processing][r]
+                st.prov[(qid, p)] = base + (text, st.pct_text)
+                st.alternative(_LINEAR, (qid, p), linear[processing][r])
+            r += 1
+
+
+def _by_processing(pct: np.ndarray) -> dict[str, list[float]]:
+    """:func:`_statistic` of every row of (0.15 %, 50 %, 99.85 %) values, per processing."""
+    return {proc: _statistic(proc, pct[:, 0], pct[:, 1], pct[:, 2]).tolist()
+            for proc in ("median", "p99.85", "maxabs")}
+
+
+def _sliding_values(st: SectionState, slide_rows: np.ndarray, d_wide: np.ndarray,
+                    keys: list[tuple[str, str]], lp_label: str) -> None:
+    """``YQ_max`` and ``SumY_max``: the maxima of the 2 m sliding means (step 6 of
+    docs/validation.md), then, with the alternatives, their values under the other readings.
+    The chosen grid (from the section start) and the grid from the first evaluated sample
+    come from one cumulative integral."""
+    sec = st.sec
+    _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
+    origins = [sec.eval_start_m] + ([float(st.d[st.cut.start])] if st.with_alternatives else [])
+    interp = (_means_from_integrals(st.at, st.grids, WINDOW_M) if st.grids is not None
+              else _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
+                                      WINDOW_M, STEP_M, origins))
+    means = interp[0][1]
+    # the order statistics of every percentile method in one selection (the linear
+    # reading's values of the chosen means are used by the alternatives)
+    chosen_pcts = _row_percentiles(means, st.methods)
+    spct = chosen_pcts[0]
+    slide_text = (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
+                  f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "
+                  f"{means.shape[1]} values; exact integral of the linear interpolant)")
+    for r, key in enumerate(keys):
+        st.values[key] = float(_statistic(QUANTITIES[key[0]].processing, *spct[r]))
+        st.prov[key] = (lp_label, _DERIVE_TEXT[key[0].split("_")[0]], slide_text,
+                        "max(|0.15 % value|, |99.85 % value|)", st.pct_text)
+    st.clock.lap("statistics")
+    if st.with_alternatives:
+        _sliding_alternatives(slide_rows, d_wide, st.d[st.cut.start], sec, keys,
+                              (means, chosen_pcts), interp[1][1], st.methods, st.alternative,
+                              st.sampled if st.grids is not None else None)
+    st.clock.lap("alternatives")
+
+
+def _bandpass_values(st: SectionState) -> None:
+    """The car body accelerations (rms, maximum) and, from the same filter call and
+    statistics, the supplementary bogie-frame values."""
+    bp_label = st.settle("bandpass")
+    both = st.percentiles(st.out_bp)
+    pct, pct_lin = both[0], both[-1]
+    rmsv = st.out_rms
+    for r, name in enumerate(st.plan.bp_names):
+        kind, _, pos = name.rpartition("_")
+        if kind in BOGIE_KINDS:  # supplementary: same filter call, same statistics
+            st.supp[(f"{kind}_rms", pos)] = float(rmsv[r])
+            st.supp[(f"{kind}_max", pos)] = float(maxabs(pct[r, 0], pct[r, 2]))
+            continue
+        q = kind.split("_")[0]
+        st.values[(f"{q}_rms", pos)] = float(rmsv[r])
+        st.prov[(f"{q}_rms", pos)] = (bp_label, st.cut_text, "rms value")
+        st.values[(f"{q}_max", pos)] = float(_statistic("maxabs", *pct[r]))
+        st.prov[(f"{q}_max", pos)] = (bp_label, st.cut_text,
+                                      "max(|0.15 % value|, |99.85 % value|)", st.pct_text)
+        st.alternative(_LINEAR, (f"{q}_max", pos), _statistic("maxabs", *pct_lin[r]))
+
+
+def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: float,
+                          sec: SectionInfo, keys: list[tuple[str, str]], chosen: tuple,
+                          first_interp: np.ndarray, methods: tuple[str, ...],
+                          alternative, sampled: tuple | None = None) -> None:
+    """Values of the sliding-mean maxima under every other reading (grid alignment × window
+    mean × percentile method, :mod:`railval.core.definitions`) from the same derived rows:
+    the sample-window means of both grids and both window ends in one compiled pass over the
+    rows (:func:`_sample_window_means`, the prefix sums of
+    :func:`railval.core.definitions.sample_window_means`), the means of all readings with
+    the same number of windows sorted in one call, and the percentiles of the chosen means
+    (``chosen``: means and their percentiles under each method) not formed again.
+    ``sampled``: the sample-window means (:func:`_sample_bounds` sizes, values) when the
+    compiled step formed them."""
+    others = [v for v in SLIDING_VARIANTS if v != CHOSEN.sliding]
+    if sampled is None:
+        sizes, lo, hi = _sample_bounds(d_wide, sec, first_m)
+        sampled = (sizes, np.empty((slide_rows.shape[0], lo.size)))
+        _sample_window_means(slide_rows, lo, hi, sampled[1])
+    sizes, values = sampled
+    means_of, pos, b = {}, 0, 0
+    for variant in others:
+        if variant[1] == "interpolant":
+            means_of[variant] = first_interp
+        else:
+            means_of[variant] = values[:, pos:pos + sizes[b]]
+            pos, b = pos + sizes[b], b + 1
+    pcts_of = _percentiles_by_length(means_of, methods)
+    pcts_of[CHOSEN.sliding] = chosen[1]
+    means_of[CHOSEN.sliding] = chosen[0]
+    for grid, window in SLIDING_VARIANTS:
+        undefined = (~np.all(np.isfinite(means_of[(grid, window)]), axis=1)).tolist()
+        for method, pct in zip(methods, pcts_of[(grid, window)], strict=True):
+            reading = _READING[(method, grid, window)]
+            if reading == CHOSEN:
+                continue
+            vals = maxabs(pct[:, 0], pct[:, 2]).tolist()
+            for r, key in enumerate(keys):
+                alternative(reading, key, float("nan") if undefined[r] else vals[r])
+
+
+def _sample_bounds(d_wide: np.ndarray, sec: SectionInfo, first_m: float
+                   ) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """The sample windows of the readings with a sample-window mean, in
+    ``SLIDING_VARIANTS`` order: their counts and, concatenated, the first sample in and the
+    first sample past each window on ``d_wide``
+    (:func:`railval.core.definitions.sample_window_means`)."""
+    origins = {"section_start": sec.eval_start_m, "first_sample": float(first_m)}
+    half = WINDOW_M / 2.0
+    sizes, los, his = [], [], []
+    for grid, window in SLIDING_VARIANTS:
+        if window == "interpolant":
+            continue
+        centres = window_centres(sec.eval_start_m, sec.eval_end_m, origins[grid], WINDOW_M,
+                                 STEP_M)
+        sizes.append(centres.size)
+        los.append(np.searchsorted(d_wide, centres - half, side="left"))
+        his.append(np.searchsorted(d_wide, centres + half,
+                                   side="right" if window == "samples_closed" else "left"))
+    return sizes, np.concatenate(los).astype(np.int64), np.concatenate(his).astype(np.int64)
+
+
+def _percentiles_by_length(means_of: dict, methods: tuple[str, ...]) -> dict:
+    """The (0.15 %, 50 %, 99.85 %) values under each method of every block of means in
+    ``means_of`` (rows × windows); the blocks with the same number of windows are sorted in
+    one call (a full sort gives the order statistics the selection gives)."""
+    by_k: dict[int, list] = {}
+    for variant, means in means_of.items():
+        by_k.setdefault(means.shape[1], []).append(variant)
+    out = {}
+    for k, variants in by_k.items():
+        srt = np.sort(np.vstack([means_of[v] for v in variants]), axis=-1)
+        ranks = sorted({r for m in methods for r in percentile_ranks(k, PERCENTILES, m)})
+        pcts = _percentiles_of(srt[:, ranks], ranks, k, methods)
+        rows = next(iter(means_of.values())).shape[0]
+        for i, v in enumerate(variants):
+            out[v] = [p[i * rows:(i + 1) * rows] for p in pcts]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _sample_window_means(v, lo, hi, out):  # pragma: no cover - compiled
+    """``out[r, c]`` = mean of ``v[r, lo[c]:hi[c]]`` from the row's prefix sums (``P_0 = 0``,
+    ``P_{i+1} = P_i + v_i``, summed in order as numpy's cumsum), ``(P_hi − P_lo)/(hi − lo)``;
+    NaN for an empty window — :func:`railval.core.definitions.sample_window_means`."""
+    n = v.shape[1]
+    cum = np.empty(n + 1)
+    for r in range(v.shape[0]):
+        cum[0] = 0.0
+        for i in range(n):
+            cum[i + 1] = cum[i] + v[r, i]
+        for c in range(lo.shape[0]):
+            count = hi[c] - lo[c]
+            out[r, c] = (cum[hi[c]] - cum[lo[c]]) / count if count > 0 else np.nan
