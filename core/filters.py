@@ -40,6 +40,7 @@ import numba.extending
 import numpy as np
 import scipy.signal
 
+from railval.core.buffers import BufferPool
 from railval.core.errors import InvalidParameter, InvalidSignal
 
 LOWPASS_HZ = 20.0
@@ -295,12 +296,17 @@ def _filter_block(sos, zi, edge, src, out, b, nb, tile, fwd, z0, z1):  # pragma:
 
 @numba.njit(cache=True, nogil=True)
 def _filtfilt_kernel(sos, zi, edge, src, out, r0, r1):  # pragma: no cover - compiled
+    """:func:`_filtfilt_into` with a time-major buffer of its own (``n × _BLOCK`` float64)."""
+    _filtfilt_into(sos, zi, edge, src, out, r0, r1, np.empty((out.shape[1], _BLOCK)))
+
+
+@numba.njit(cache=True, nogil=True)
+def _filtfilt_into(sos, zi, edge, src, out, r0, r1, fwd):  # pragma: no cover - compiled
     """Forward–backward filter the rows ``r0:r1`` (addresses ``src``, ``out.shape[1]`` samples
-    each) into ``out``, ``_BLOCK`` rows at a time (:func:`_filter_block`); one time-major
-    buffer of the forward pass per call (``n × _BLOCK × 8`` bytes), reused from block to
-    block."""
+    each) into ``out``, ``_BLOCK`` rows at a time (:func:`_filter_block`); ``fwd`` (shape
+    ``(n, _BLOCK)``, any content) is the time-major buffer of the forward pass, reused from
+    block to block."""
     tile = np.empty((edge, _BLOCK))
-    fwd = np.empty((out.shape[1], _BLOCK))
     if r1 - r0 < _BLOCK:  # a first, partial block: its unused columns start at zero
         tile[:, :] = 0.0
         fwd[:, :] = 0.0
@@ -308,6 +314,20 @@ def _filtfilt_kernel(sos, zi, edge, src, out, r0, r1):  # pragma: no cover - com
     z1 = np.empty((sos.shape[0], _BLOCK))
     for b in range(r0, r1, _BLOCK):
         _filter_block(sos, zi, edge, src, out, b, min(_BLOCK, r1 - b), tile, fwd, z0, z1)
+
+
+#: the outputs of :func:`filtfilt_rows` (docs/validation.md, Throughput): mapped once and
+#: reused when their arrays are gone — the EN chain holds a low-pass and a band-pass output
+#: at once (``railval bench en``: 43 and 11 MB), the validation service one or two chunks
+_OUTPUTS = BufferPool(keep=4, max_bytes=256 << 20, min_bytes=1 << 20)
+#: the time-major buffers of the forward pass (one per thread part, n × _BLOCK × 8 bytes)
+_SCRATCH = BufferPool(keep=4, max_bytes=64 << 20, min_bytes=1 << 20)
+
+
+def _filter_part(d: FilterDesign, src: np.ndarray, out: np.ndarray, r0: int, r1: int) -> None:
+    """Rows ``r0:r1`` into ``out`` with a pooled time-major buffer (held for the call)."""
+    fwd = _SCRATCH.take((out.shape[1], _BLOCK), np.float64)
+    _filtfilt_into(d.sos, d.zi, d.edge, src, out, r0, r1, fwd)
 
 
 def _row_addresses(rows: list) -> np.ndarray:
@@ -322,8 +342,10 @@ def filtfilt_rows(data, fs: float, kind: str, order: int = DEFAULT_ORDER) -> np.
     list of equally long 1-D arrays).
 
     Equal to ``scipy.signal.sosfiltfilt(design(fs, kind, order).sos, data, axis=-1)`` (same
-    padding and initial conditions) to rounding; returns a new float64 array of shape
-    ``(n_signals, n_samples)`` (1-D for 1-D input). Units are those of ``data``; ``fs`` in Hz.
+    padding and initial conditions) to rounding; returns a float64 array of shape
+    ``(n_signals, n_samples)`` (1-D for 1-D input) that shares memory with no other live
+    array: large outputs are placed in a buffer of a previous call once every array of that
+    call is gone (:class:`railval.core.buffers.BufferPool`, no page faults of fresh memory). Units are those of ``data``; ``fs`` in Hz.
     Blocks of ``_BLOCK`` signals run in lockstep; the blocks are shared among the cores
     (:func:`railval.core.workers.split_rows`; the kernel releases the GIL).
 
@@ -383,9 +405,9 @@ def filtfilt_rows(data, fs: float, kind: str, order: int = DEFAULT_ORDER) -> np.
     else:
         rows = [np.ascontiguousarray(r) for r in rows]
         src = _row_addresses(rows)
-    out = np.empty((src.shape[0], n), dtype=np.float64)
-    split_rows(lambda a, b: _filtfilt_kernel(d.sos, d.zi, d.edge, src, out, a, b),
-               src.shape[0], min_rows=_BLOCK, align=_BLOCK)
+    out = _OUTPUTS.take((src.shape[0], n), np.float64)
+    split_rows(lambda a, b: _filter_part(d, src, out, a, b), src.shape[0], min_rows=_BLOCK,
+               align=_BLOCK)
     return out[0] if one_d else out
 
 

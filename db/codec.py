@@ -46,13 +46,13 @@ import itertools
 import math
 import os
 import struct
-import sys
 import threading
 import zlib
 from collections.abc import Sequence
 
 import numpy as np
 
+from railval.core.buffers import BufferPool
 from railval.core.errors import InvalidSignal
 
 MAGIC = b"RVA1"
@@ -362,48 +362,19 @@ def _preallocate(items: Sequence[tuple[bytes, str | None]]) -> list[np.ndarray |
 BLOCK_BYTES = 64 << 20
 
 
-class _BlockPool:
-    """Buffers of :data:`BLOCK_BYTES` for output blocks, reused once no array uses them.
+class _BlockPool(BufferPool):
+    """Buffers of :data:`BLOCK_BYTES` for output blocks, reused once no array uses them
+    (:class:`railval.core.buffers.BufferPool`, fixed size).
 
     Fresh memory costs the kernel a page fault and zero fill per page (≈ 0.017 CPU-s for
     the 57 MB of one DynoTRAIN source, a fifth of its decode); a buffer whose arrays are
-    all gone is handed out again as it is. A buffer is free when the pool holds the only
-    reference to it: every numpy view of it (rows, their slices) refers to it as ``base``.
-    At most ``keep`` buffers are kept (the pipeline of the validation service has two
-    chunks in flight); blocks above a buffer or below a quarter of one, or more at once,
-    are ordinary allocations.
+    all gone is handed out again as it is. At most ``keep`` buffers are kept (the pipeline
+    of the validation service has two chunks in flight); blocks above a buffer or below a
+    quarter of one, or more at once, are ordinary allocations.
     """
 
     def __init__(self, keep: int):
-        self.keep = keep
-        self._buffers: list[np.ndarray] = [np.empty(0, np.uint8)]  # a probe nothing else uses
-        self._idle_refs = self._refcounts()[0]
-        self._buffers.clear()
-        self._lock = threading.Lock()
-
-    def _refcounts(self) -> list[int]:
-        """References to each buffer, counted the same way for the probe of ``__init__`` and
-        later, so the figure of an unused buffer does not depend on interpreter details."""
-        return [sys.getrefcount(b) for b in self._buffers]
-
-    def _idle(self) -> np.ndarray | None:
-        for b, refs in zip(self._buffers, self._refcounts(), strict=True):
-            if refs <= self._idle_refs:
-                return b
-        return None
-
-    def take(self, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
-        nbytes = math.prod(shape) * dtype.itemsize
-        if not BLOCK_BYTES // 4 <= nbytes <= BLOCK_BYTES or dtype.alignment > 16:
-            return np.empty(shape, dtype)  # small blocks do not pin a whole buffer
-        with self._lock:
-            buf = self._idle()
-            if buf is None:
-                if len(self._buffers) >= self.keep:
-                    return np.empty(shape, dtype)
-                buf = np.empty(BLOCK_BYTES, np.uint8)
-                self._buffers.append(buf)
-            return buf[:nbytes].view(dtype).reshape(shape)
+        super().__init__(keep, BLOCK_BYTES, BLOCK_BYTES // 4, fixed=True)
 
 
 #: the output buffers of :func:`decode_many` (two: ≤ 128 MB kept per process)
