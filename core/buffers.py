@@ -34,8 +34,10 @@ class BufferPool:
     is sized for the request that made it (rounded up to an eighth of its power of two) and
     serves requests of more than half its size; when none fits and the pool is full, an idle
     buffer is replaced by one for the new size (the pool follows the largest recent
-    requests). Requests outside the range, of a dtype aligned above 16 bytes, or while every
-    buffer is in use are ordinary ``numpy.empty`` allocations. Thread-safe.
+    requests). The buffers together hold at most ``max_total_bytes`` (default
+    ``keep × max_bytes``); idle buffers are dropped to make room. Requests outside the range,
+    of a dtype aligned above 16 bytes, or while every buffer is in use (or no room is left)
+    are ordinary ``numpy.empty`` allocations. Thread-safe.
 
     Parameters
     ----------
@@ -47,13 +49,18 @@ class BufferPool:
         Smallest request served (smaller arrays do not pin a buffer).
     fixed : bool
         Buffers of ``max_bytes`` (True) or sized per request (False).
+    max_total_bytes : int or None
+        Bytes kept by all buffers together at most.
     """
 
-    def __init__(self, keep: int, max_bytes: int, min_bytes: int = 0, fixed: bool = False):
+    def __init__(self, keep: int, max_bytes: int, min_bytes: int = 0, fixed: bool = False,
+                 max_total_bytes: int | None = None):
         self.keep = int(keep)
         self.max_bytes = int(max_bytes)
         self.min_bytes = int(min_bytes)
         self.fixed = bool(fixed)
+        self.max_total_bytes = (self.keep * self.max_bytes if max_total_bytes is None
+                                else int(max_total_bytes))
         self._buffers: list[np.ndarray] = [np.empty(0, np.uint8)]  # a probe nothing else uses
         self._idle_refs = self._refcounts()[0]
         self._buffers.clear()
@@ -100,14 +107,28 @@ class BufferPool:
             fitting = [i for i in idle if self._fits(self._buffers[i], nbytes)]
             if fitting:
                 buf = min((self._buffers[i] for i in fitting), key=lambda b: b.nbytes)
-            elif len(self._buffers) < self.keep or idle:
-                if len(self._buffers) >= self.keep:  # replace an idle buffer of another size
-                    del self._buffers[idle[0]]
-                buf = np.empty(self._size_for(nbytes), np.uint8)
-                self._buffers.append(buf)
             else:
-                return np.empty(shape, dtype)
+                buf = self._new_buffer(self._size_for(nbytes), idle)
+                if buf is None:
+                    return np.empty(shape, dtype)
             return buf[:nbytes].view(dtype).reshape(shape)
+
+    def _new_buffer(self, size: int, idle: list[int]) -> np.ndarray | None:
+        """A new pooled buffer of ``size`` bytes, dropping idle buffers (largest first) while
+        the pool is full or the room is short; ``None`` when that is not enough."""
+        kept = [b.nbytes for b in self._buffers]
+        drop = sorted(idle, key=lambda i: -kept[i])
+        n_drop = 0
+        while (len(kept) - n_drop >= self.keep
+               or sum(kept) - sum(kept[i] for i in drop[:n_drop]) + size > self.max_total_bytes):
+            if n_drop == len(drop):
+                return None
+            n_drop += 1
+        for i in sorted(drop[:n_drop], reverse=True):
+            del self._buffers[i]
+        buf = np.empty(size, np.uint8)
+        self._buffers.append(buf)
+        return buf
 
     def clear(self) -> None:
         """Forget every buffer (those still in use stay alive with their arrays)."""

@@ -88,6 +88,18 @@ def test_sized_buffers_follow_the_requests():
     assert any(np.shares_memory(d, x) for x in pool._buffers)
 
 
+def test_the_buffers_together_stay_below_the_total():
+    pool = BufferPool(keep=4, max_bytes=8 * MB, min_bytes=MB, max_total_bytes=10 * MB)
+    a = pool.take((6 * MB,), np.uint8)
+    b = pool.take((3 * MB,), np.uint8)  # 9 MB kept
+    c = pool.take((2 * MB,), np.uint8)  # would make 11 MB while both are in use: plain
+    assert c.base is None and sum(x.nbytes for x in pool._buffers) == 9 * MB
+    del a, c
+    d = pool.take((5 * MB // 2,), np.uint8)  # the idle 6 MB buffer is dropped for room
+    assert sorted(x.nbytes for x in pool._buffers) == [5 * MB // 2, 3 * MB]
+    assert not np.shares_memory(b, d)
+
+
 def test_fixed_buffers_serve_every_size_in_range():
     pool = BufferPool(keep=1, max_bytes=4 * MB, min_bytes=MB, fixed=True)
     a = pool.take((MB,), np.uint8)
