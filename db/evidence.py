@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import func, select
+from sqlalchemy import func, or_, select
 from sqlalchemy.orm import Session
 
 from railval.core.errors import InvalidSignal
@@ -18,6 +18,7 @@ from railval.db.campaigns import (
     CampaignArg,
     CampaignRef,
     ConfigArg,
+    ConfigRef,
     campaign_ref,
     config_name,
     get_campaign,
@@ -87,57 +88,96 @@ def _source_problems(session: Session, c: Campaign | CampaignRef, config: Config
     """Seal (and with ``blobs`` content-hash) problems of one source of ``c``;
     ``config=True`` means every source of the campaign."""
     names = {x.id: x.name for x in list_configurations(session, c)}
+    cond = None if config is True else source_filter(session, c.id, config)
+    if not blobs:  # seals only: one query for the recordings, one for every signal row
+        recs, by_rec = _seal_rows(session, c, cond)
+        return _seal_problems(c, names, recs, by_rec, secret)
     rec_q = (select(Recording.id, Section.section_id, Recording.configuration_id,
                     Recording.distance_sha256, Recording.fs, Recording.t0, Recording.n)
              .join(Section, Recording.section_id == Section.id)
              .where(Section.campaign_id == c.id).order_by(Recording.id))
-    if config is not True:
-        rec_q = rec_q.where(source_filter(session, c.id, config))
-    recs = session.execute(rec_q).all()
+    if cond is not None:
+        rec_q = rec_q.where(cond)
     problems: list[dict[str, Any]] = []
-    by_rec: dict[int, list] = {}
-    if not blobs:  # seals only: one query for every signal row of the source
-        meta_q = (select(Signal.recording_id, Channel.name, Signal.channel_id, Signal.sha256,
-                         Signal.provenance)
-                  .join(Channel, Signal.channel_id == Channel.id)
-                  .join(Recording, Signal.recording_id == Recording.id)
-                  .join(Section, Recording.section_id == Section.id)
-                  .where(Section.campaign_id == c.id).order_by(Signal.recording_id, Channel.id))
-        if config is not True:
-            meta_q = meta_q.where(source_filter(session, c.id, config))
-        for r in session.execute(meta_q):
-            by_rec.setdefault(r[0], []).append(tuple(r[1:]))
-    for rid, sid, conf_id, dsha, fs, t0, n in recs:
+    for rid, sid, conf_id, dsha, fs, t0, n in session.execute(rec_q).all():
         where = {"section": sid, "configuration": names.get(conf_id) if conf_id else None}
-        if blobs:
-            rows = session.execute(
-                select(Channel.name, Signal.channel_id, Signal.sha256, Signal.provenance,
-                       Signal.blob)
-                .join(Channel, Signal.channel_id == Channel.id)
-                .where(Signal.recording_id == rid).order_by(Channel.id)).all()
-        else:
-            rows = by_rec.get(rid, [])
-        if blobs:
-            dblob = session.scalar(select(Recording.distance_blob).where(Recording.id == rid))
-            bad = _decode_problems([("distance_m", dblob, dsha)]
-                                   + [(row[0], row[4], row[2]) for row in rows], n)
-            if "distance_m" in bad:
-                problems.append({**where, "channel": "distance_m", "error": bad["distance_m"]})
+        rows = session.execute(
+            select(Channel.name, Signal.channel_id, Signal.sha256, Signal.provenance,
+                   Signal.blob)
+            .join(Channel, Signal.channel_id == Channel.id)
+            .where(Signal.recording_id == rid).order_by(Channel.id)).all()
+        dblob = session.scalar(select(Recording.distance_blob).where(Recording.id == rid))
+        bad = _decode_problems([("distance_m", dblob, dsha)]
+                               + [(row[0], row[4], row[2]) for row in rows], n)
+        if "distance_m" in bad:
+            problems.append({**where, "channel": "distance_m", "error": bad["distance_m"]})
         for row in rows:
             name, cid, sha, prov = row[0], row[1], row[2], row[3] or {}
             seal = prov.get("seal") if isinstance(prov, dict) else None
-            if seal is None:
-                problems.append({**where, "channel": name, "error": "has no seal (stored "
-                                 "outside railval, or before seals existed)"})
-            elif not integrity.check_signal_seal(
-                    secret, seal, rid, cid, sha, dsha, fs, t0, n,
-                    (c.name, sid, where["configuration"] or "", name)):
-                problems.append({**where, "channel": name, "error": "fails its seal: the "
-                                 "samples, their hash, the recording or its place (campaign, "
-                                 "section, configuration, channel) were changed outside "
-                                 "railval"})
-            if blobs and name in bad:
+            why = _seal_problem(secret, seal, rid, cid, sha, dsha, fs, t0, n,
+                                (c.name, sid, where["configuration"] or "", name))
+            if why is not None:
+                problems.append({**where, "channel": name, "error": why})
+            if name in bad:
                 problems.append({**where, "channel": name, "error": bad[name]})
+    return problems
+
+
+_NO_SEAL = "has no seal (stored outside railval, or before seals existed)"
+_BAD_SEAL = ("fails its seal: the samples, their hash, the recording or its place (campaign, "
+             "section, configuration, channel) were changed outside railval")
+
+
+def _seal_problem(secret: bytes, seal, rid: int, cid: int, sha: str, dsha: str, fs: float,
+                  t0: float, n: int, names: tuple[str, str, str, str]) -> str | None:
+    """Why one signal row fails its seal (:func:`integrity.check_signal_seal`), or ``None``."""
+    if seal is None:
+        return _NO_SEAL
+    if not integrity.check_signal_seal(secret, seal, rid, cid, sha, dsha, fs, t0, n, names):
+        return _BAD_SEAL
+    return None
+
+
+def _seal_rows(session: Session, c: Campaign | CampaignRef, cond) -> tuple[list, dict]:
+    """The recordings (id, section id, configuration id, distance hash, fs, t0, n; by id) of
+    the sources of ``c`` selected by ``cond`` (``None``: all) and recording id → (channel,
+    channel id, content hash, seal) of their signals, by channel id: two queries; the seal
+    is read from the provenance JSON by the database (``provenance["seal"]``)."""
+    rec_q = (select(Recording.id, Section.section_id, Recording.configuration_id,
+                    Recording.distance_sha256, Recording.fs, Recording.t0, Recording.n)
+             .join(Section, Recording.section_id == Section.id)
+             .where(Section.campaign_id == c.id).order_by(Recording.id))
+    meta_q = (select(Signal.recording_id, Channel.name, Signal.channel_id, Signal.sha256,
+                     Signal.provenance)
+              .join(Channel, Signal.channel_id == Channel.id)
+              .join(Recording, Signal.recording_id == Recording.id)
+              .join(Section, Recording.section_id == Section.id)
+              .where(Section.campaign_id == c.id).order_by(Signal.recording_id, Channel.id))
+    if cond is not None:
+        rec_q, meta_q = rec_q.where(cond), meta_q.where(cond)
+    by_rec: dict[int, list] = {}
+    for rid, name, cid, sha, prov in session.execute(meta_q).tuples():
+        by_rec.setdefault(rid, []).append((name, cid, sha, _seal_of(prov)))
+    return session.execute(rec_q).all(), by_rec
+
+
+def _seal_of(prov) -> Any:
+    return prov.get("seal") if isinstance(prov, dict) else None
+
+
+def _seal_problems(c: Campaign | CampaignRef, names: dict[int, str], recs: list,
+                   by_rec: dict[int, list], secret: bytes) -> list[dict[str, Any]]:
+    """Seal problems of the signal rows ``by_rec`` of the recordings ``recs``
+    (:func:`_seal_rows`), in recording and channel order."""
+    problems: list[dict[str, Any]] = []
+    for rid, sid, conf_id, dsha, fs, t0, n in recs:
+        conf = names.get(conf_id) if conf_id else None
+        for name, cid, sha, seal in by_rec.get(rid, ()):
+            why = _seal_problem(secret, seal, rid, cid, sha, dsha, fs, t0, n,
+                                (c.name, sid, conf or "", name))
+            if why is not None:
+                problems.append({"section": sid, "configuration": conf, "channel": name,
+                                 "error": why})
     return problems
 
 
@@ -165,13 +205,34 @@ def require_evidence(session: Session, campaign: CampaignArg, config: ConfigArg,
 def require_evidence_many(session: Session, campaign: CampaignArg, configs: list[ConfigArg], *,
                           blobs: bool = True) -> None:
     """:func:`require_evidence` for several configurations of one campaign, in their order,
-    with the measurement's signals checked once instead of once per configuration."""
+    with the measurement's signals checked once instead of once per configuration. Seals
+    only (``blobs=False``): the rows of the measurement and of every configuration are read
+    by two queries in all (:func:`_seal_rows`), every row's seal checked as before."""
     c = campaign_ref(session, campaign)
     secret = integrity.session_secret(session)
-    measured = _source_problems(session, c, None, secret, blobs)
+    if blobs:
+        measured = _source_problems(session, c, None, secret, blobs)
+        for config in configs:
+            get_configuration(session, c, config)
+            _raise_problems(config, measured
+                            + _source_problems(session, c, config, secret, blobs))
+        return
+    listed = list_configurations(session, c)
+    names = {x.id: x.name for x in listed}
+    by_name = {x.name: x.id for x in listed}
+    ids = []
     for config in configs:
-        get_configuration(session, c, config)
-        _raise_problems(config, measured + _source_problems(session, c, config, secret, blobs))
+        cid = config.id if isinstance(config, ConfigRef) else by_name.get(config)
+        ids.append(cid if cid is not None else get_configuration(session, c, config).id)
+    recs, by_rec = _seal_rows(session, c, or_(Recording.configuration_id.is_(None),
+                                              Recording.configuration_id.in_(set(ids))))
+    per_source: dict[int | None, list] = {}
+    for rec in recs:
+        per_source.setdefault(rec[2], []).append(rec)
+    measured = _seal_problems(c, names, per_source.get(None, []), by_rec, secret)
+    for config, cid in zip(configs, ids, strict=True):
+        _raise_problems(config, measured + _seal_problems(c, names, per_source.get(cid, []),
+                                                          by_rec, secret))
 
 
 def _raise_problems(config: ConfigArg, problems: list[dict[str, Any]]) -> None:

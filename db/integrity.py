@@ -115,7 +115,9 @@ def session_secret(session) -> bytes:
 
 
 def _mac(secret: bytes, *parts: bytes) -> bytes:
-    return hmac.new(secret, b"\0".join(parts), hashlib.sha256).digest()
+    # one-shot HMAC-SHA256 (Python docs, hmac.digest: the same bytes as hmac.new(...).digest(),
+    # computed by OpenSSL in one call)
+    return hmac.digest(secret, b"\0".join(parts), "sha256")
 
 
 def seal_cache_value(secret: bytes, key: str, payload: bytes) -> bytes:

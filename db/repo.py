@@ -70,6 +70,7 @@ from railval.db.signals import (
     signal_hashes,
     source_filter,
     source_hashes,
+    source_hashes_many,
     stored_blobs,
 )
 
@@ -113,6 +114,7 @@ __all__ = [
     "signal_hashes",
     "source_filter",
     "source_hashes",
+    "source_hashes_many",
     "store_configuration",
     "stored_blobs",
     "vehicle_info",

@@ -234,13 +234,10 @@ def _plan(database, campaign_name: str, configs: Sequence[str] | None,
         refs = {c.name: repo.ConfigRef(camp, c.id, c.name)
                 for c in repo.list_configurations(session, camp)}
         names = (list(refs) if configs is None
-                 else [repo.resolve(session, camp, c)[1].name for c in configs])
+                 else [c if isinstance(c, str) and c in refs
+                       else repo.resolve(session, camp, c)[1].name for c in configs])
         sections = repo.section_infos(session, camp)
-        keys: dict[tuple[str | None, str], str] = {}
-        for source in [None, *names]:
-            for sid, key in source_cache_keys(session, camp, refs[source] if source else None,
-                                              sections, order=order).items():
-                keys[(source, sid)] = key
+        keys = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
         plan = _Plan(camp.name, sections, repo.vehicle_info(session, camp), names,
                      {c: calibration_provenance(session, camp, c) for c in names}, keys,
                      {s: {} for s in [None, *names]}, {})
@@ -252,6 +249,23 @@ def _plan(database, campaign_name: str, configs: Sequence[str] | None,
             else:
                 plan.todo.setdefault(source, []).append(sid)
     return plan
+
+
+def _plan_keys(session: Session, camp, refs: list, sections: Sequence[SectionInfo],
+               order: int) -> dict[tuple[str | None, str], str]:
+    """(source, section id) → result-cache key of the measurement (source ``None``) and of
+    the configurations ``refs``: :func:`source_cache_keys` for every source at once, from
+    two queries (:func:`railval.db.repo.source_hashes_many`) instead of two per source."""
+    hashes, meta = repo.source_hashes_many(session, camp, [r.id for r in refs])
+    by_id = {s.id: s for s in sections}
+    keys: dict[tuple[str | None, str], str] = {}
+    for name, cid in [(None, None), *((r.name, r.id) for r in refs)]:
+        h, m = hashes.get(cid, {}), meta.get(cid, {})
+        for sid in m:
+            if sid in by_id:
+                keys[(name, sid)] = section_cache_key(by_id[sid], m[sid][1], m[sid][2],
+                                                      m[sid][0], h.get(sid, {}), order)
+    return keys
 
 
 def _require_seals(database, plan: _Plan) -> None:
