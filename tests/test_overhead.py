@@ -1,0 +1,106 @@
+"""The main process's overheads around the EN chain (issue 26): the cache keys of every
+source read at once, the seals of many configurations checked from two queries and a
+one-shot HMAC. Each is compared with an independent computation: the per-source key path
+(:func:`source_cache_keys`), ``hmac.new`` (RFC 2104), and the one-configuration check
+(:func:`repo.require_evidence`), and a forged or missing seal is still refused."""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+
+import pytest
+from sqlalchemy import select, update
+
+from railval.app.bench import bench_dynotrain as bench
+from railval.app.services import validation as V
+from railval.db import integrity, repo
+from railval.db.engine import connect
+from railval.db.models import Channel, Configuration, Recording, Section, Signal
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    path = tmp_path_factory.mktemp("ovh")
+    bench.build(path, 3, 4, 5000, 200.0)
+    db = connect(f"sqlite:///{path / 'dynotrain.db'}")
+    yield db
+    db.dispose()
+
+
+def test_one_shot_mac_is_hmac_sha256():
+    secret, parts = b"k" * 40, (b"signal2", b"12", b"a\0b", "é".encode())
+    want = hmac.new(secret, b"\0".join(parts), hashlib.sha256).digest()
+    assert integrity._mac(secret, *parts) == want
+    assert integrity._mac(secret + b"x", *parts) != want
+
+
+def test_plan_keys_equal_the_per_source_keys(tiny):
+    with tiny.session() as s:
+        camp, _ = repo.resolve(s, "dynotrain-bench")
+        secs = repo.section_infos(s, camp)
+        refs = [repo.resolve(s, camp, c)[1] for c in ("c002", "c000")]
+        keys = V._plan_keys(s, camp, refs, secs, 4)
+        want = {}
+        for name, ref in [(None, None), *((r.name, r) for r in refs)]:
+            want |= {(name, sid): k for sid, k in
+                     V.source_cache_keys(s, camp, ref, secs, order=4).items()}
+    assert keys == want and len(keys) == 3 * 4
+    assert len(set(keys.values())) == len(keys)  # the sources' samples differ
+
+
+def test_many_configurations_equal_one_at_a_time(tiny):
+    with tiny.session() as s:
+        repo.cache_delete(s, prefix="en14363:")
+    many = V.validate_configurations(tiny, "dynotrain-bench", ["c001", "c000"], n_boot=30)
+    assert list(many) == ["c001", "c000"]
+    for name, res in many.items():
+        with tiny.session() as s:
+            one = V.validate_configuration(s, "dynotrain-bench", name, n_boot=30)
+        a, b = res.to_dict(), one.to_dict()
+        for d in (a, b):
+            d["info"].pop("sections_measured"), d["info"].pop("sections_simulated")
+        assert a == b
+
+
+def _signal(s, section: str, config: str | None, channel: str):
+    cond = (Recording.configuration_id.is_(None) if config is None else
+            Recording.configuration_id == select(Configuration.id)
+            .where(Configuration.name == config).scalar_subquery())
+    return s.execute(select(Signal.id, Signal.provenance)
+                     .join(Recording, Signal.recording_id == Recording.id)
+                     .join(Section, Recording.section_id == Section.id)
+                     .join(Channel, Signal.channel_id == Channel.id)
+                     .where(Channel.name == channel, Section.section_id == section, cond)
+                     ).first()
+
+
+@pytest.mark.parametrize("config, seal, why", [
+    ("c001", "v2:" + "0" * 64, "fails its seal"),
+    (None, None, "has no seal"),
+])
+def test_a_broken_seal_is_refused_with_the_single_check_message(tiny, config, seal, why):
+    chan = bench.CHANNELS[0]
+    with tiny.session(write=True) as s:
+        sid, prov = _signal(s, "S02", config, chan)
+        new = {k: v for k, v in prov.items() if k != "seal"}
+        if seal is not None:
+            new["seal"] = seal
+        s.execute(update(Signal).where(Signal.id == sid).values(provenance=new))
+    try:
+        with tiny.session() as s:
+            with pytest.raises(integrity.IntegrityError) as single:
+                repo.require_evidence(s, "dynotrain-bench", "c001", blobs=False)
+            with pytest.raises(integrity.IntegrityError) as many:
+                repo.require_evidence_many(s, "dynotrain-bench", ["c000", "c001"], blobs=False)
+            repo.require_evidence_many(s, "dynotrain-bench", ["c002"] if config else [],
+                                       blobs=False)
+        assert str(many.value) == str(single.value) if config else "'c000'" in str(many.value)
+        assert why in str(single.value) and "section S02, " in str(single.value)
+        with pytest.raises(integrity.IntegrityError, match=why):
+            V.validate_configurations(tiny, "dynotrain-bench", ["c001"], n_boot=0)
+    finally:
+        with tiny.session(write=True) as s:
+            s.execute(update(Signal).where(Signal.id == sid).values(provenance=prov))
+    with tiny.session() as s:
+        repo.require_evidence_many(s, "dynotrain-bench", ["c000", "c001", "c002"], blobs=False)
