@@ -142,13 +142,14 @@ def _seal_rows(session: Session, c: Campaign | CampaignRef, cond) -> tuple[list,
     """The recordings (id, section id, configuration id, distance hash, fs, t0, n; by id) of
     the sources of ``c`` selected by ``cond`` (``None``: all) and recording id → (channel,
     channel id, content hash, seal) of their signals, by channel id: two queries; the seal
-    is read from the provenance JSON by the database (``provenance["seal"]``)."""
+    is read from the provenance JSON by the database (``provenance["seal"]``, SQL NULL
+    when the provenance has none or is no object), not decoded here row by row."""
     rec_q = (select(Recording.id, Section.section_id, Recording.configuration_id,
                     Recording.distance_sha256, Recording.fs, Recording.t0, Recording.n)
              .join(Section, Recording.section_id == Section.id)
              .where(Section.campaign_id == c.id).order_by(Recording.id))
     meta_q = (select(Signal.recording_id, Channel.name, Signal.channel_id, Signal.sha256,
-                     Signal.provenance)
+                     Signal.provenance["seal"].as_string())
               .join(Channel, Signal.channel_id == Channel.id)
               .join(Recording, Signal.recording_id == Recording.id)
               .join(Section, Recording.section_id == Section.id)
@@ -156,13 +157,9 @@ def _seal_rows(session: Session, c: Campaign | CampaignRef, cond) -> tuple[list,
     if cond is not None:
         rec_q, meta_q = rec_q.where(cond), meta_q.where(cond)
     by_rec: dict[int, list] = {}
-    for rid, name, cid, sha, prov in session.execute(meta_q).tuples():
-        by_rec.setdefault(rid, []).append((name, cid, sha, _seal_of(prov)))
+    for rid, name, cid, sha, seal in session.execute(meta_q).tuples():
+        by_rec.setdefault(rid, []).append((name, cid, sha, seal))
     return session.execute(rec_q).all(), by_rec
-
-
-def _seal_of(prov) -> Any:
-    return prov.get("seal") if isinstance(prov, dict) else None
 
 
 def _seal_problems(c: Campaign | CampaignRef, names: dict[int, str], recs: list,
