@@ -200,11 +200,13 @@ def require_evidence(session: Session, campaign: CampaignArg, config: ConfigArg,
 
 
 def require_evidence_many(session: Session, campaign: CampaignArg, configs: list[ConfigArg], *,
-                          blobs: bool = True) -> None:
+                          blobs: bool = True, rows: tuple[list, dict] | None = None) -> None:
     """:func:`require_evidence` for several configurations of one campaign, in their order,
     with the measurement's signals checked once instead of once per configuration. Seals
     only (``blobs=False``): the rows of the measurement and of every configuration are read
-    by two queries in all (:func:`_seal_rows`), every row's seal checked as before."""
+    by two queries in all (:func:`seal_rows_many`), or taken from ``rows`` (what
+    :func:`seal_rows_many` returned for a superset of ``configs``, e.g. when the caller
+    derived its cache keys from them); every row's seal is checked as before."""
     c = campaign_ref(session, campaign)
     secret = integrity.session_secret(session)
     if blobs:
@@ -221,8 +223,7 @@ def require_evidence_many(session: Session, campaign: CampaignArg, configs: list
     for config in configs:
         cid = config.id if isinstance(config, ConfigRef) else by_name.get(config)
         ids.append(cid if cid is not None else get_configuration(session, c, config).id)
-    recs, by_rec = _seal_rows(session, c, or_(Recording.configuration_id.is_(None),
-                                              Recording.configuration_id.in_(set(ids))))
+    recs, by_rec = rows if rows is not None else seal_rows_many(session, c, ids)
     per_source: dict[int | None, list] = {}
     for rec in recs:
         per_source.setdefault(rec[2], []).append(rec)
@@ -230,6 +231,16 @@ def require_evidence_many(session: Session, campaign: CampaignArg, configs: list
     for config, cid in zip(configs, ids, strict=True):
         _raise_problems(config, measured + _seal_problems(c, names, per_source.get(cid, []),
                                                           by_rec, secret))
+
+
+def seal_rows_many(session: Session, campaign: CampaignArg, config_ids: list[int]
+                   ) -> tuple[list, dict]:
+    """:func:`_seal_rows` of the measurement and of the configurations ``config_ids``: the
+    recordings (id, section id, configuration id or None, distance hash, fs, t0, n) and
+    recording id → [(channel, channel id, content hash, seal)], two queries, no blob."""
+    c = campaign_ref(session, campaign)
+    return _seal_rows(session, c, or_(Recording.configuration_id.is_(None),
+                                      Recording.configuration_id.in_(set(config_ids))))
 
 
 def _raise_problems(config: ConfigArg, problems: list[dict[str, Any]]) -> None:

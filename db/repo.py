@@ -58,6 +58,7 @@ from railval.db.configurations import (
 from railval.db.evidence import (
     require_evidence,
     require_evidence_many,
+    seal_rows_many,
     verify_evidence,
     verify_signals,
     verify_storage,
@@ -70,7 +71,6 @@ from railval.db.signals import (
     signal_hashes,
     source_filter,
     source_hashes,
-    source_hashes_many,
     stored_blobs,
 )
 
@@ -109,12 +109,12 @@ __all__ = [
     "require_evidence_many",
     "resolve",
     "row_counts",
+    "seal_rows_many",
     "section_infos",
     "section_layouts",
     "signal_hashes",
     "source_filter",
     "source_hashes",
-    "source_hashes_many",
     "store_configuration",
     "stored_blobs",
     "vehicle_info",

@@ -12,11 +12,11 @@ once, or the row, name or id) and ``config`` a :data:`railval.db.campaigns.Confi
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
-from sqlalchemy import String, cast, insert, literal, null, or_, select, union_all
+from sqlalchemy import String, cast, insert, literal, null, select, union_all
 from sqlalchemy.orm import Session
 
 from railval.core.errors import InvalidSignal, NotFound
@@ -283,33 +283,3 @@ def recording_meta(session: Session, campaign: CampaignArg,
          .join(Section, Recording.section_id == Section.id)
          .where(Section.campaign_id == cid, source_filter(session, cid, config)))
     return {sid: (sha, float(fs), int(n)) for sid, sha, fs, n in session.execute(q)}
-
-
-def source_hashes_many(session: Session, campaign: CampaignArg, config_ids: Sequence[int]
-                       ) -> tuple[dict, dict]:
-    """:func:`signal_hashes` and :func:`recording_meta` of the measurement and of the
-    configurations with ids ``config_ids`` in two queries (not two per source): (source →
-    section id → channel → SHA-256, source → section id → (distance SHA-256, fs, n)), source
-    ``None`` for the measurement, else the configuration id; no blob is read."""
-    cid = campaign_id(session, campaign)
-    cond = or_(Recording.configuration_id.is_(None),
-               Recording.configuration_id.in_(set(config_ids)))
-    hashes: dict = {}
-    rows = session.execute(
-        select(Recording.configuration_id, Section.section_id, Channel.name, Signal.sha256)
-        .join(Recording, Signal.recording_id == Recording.id)
-        .join(Section, Recording.section_id == Section.id)
-        .join(Channel, Signal.channel_id == Channel.id)
-        .where(Section.campaign_id == cid, cond)
-        .order_by(Section.id, Channel.id)).tuples()
-    for conf, sid, chan, sha in rows:
-        hashes.setdefault(conf, {}).setdefault(sid, {})[chan] = sha
-    meta: dict = {}
-    rows = session.execute(
-        select(Recording.configuration_id, Section.section_id, Recording.distance_sha256,
-               Recording.fs, Recording.n)
-        .join(Section, Recording.section_id == Section.id)
-        .where(Section.campaign_id == cid, cond)).tuples()
-    for conf, sid, sha, fs, n in rows:
-        meta.setdefault(conf, {})[sid] = (sha, float(fs), int(n))
-    return hashes, meta

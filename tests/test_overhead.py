@@ -40,12 +40,14 @@ def test_plan_keys_equal_the_per_source_keys(tiny):
         camp, _ = repo.resolve(s, "dynotrain-bench")
         secs = repo.section_infos(s, camp)
         refs = [repo.resolve(s, camp, c)[1] for c in ("c002", "c000")]
-        keys = V._plan_keys(s, camp, refs, secs, 4)
+        keys, (recs, by_rec) = V._plan_keys(s, camp, refs, secs, 4)
         want = {}
         for name, ref in [(None, None), *((r.name, r) for r in refs)]:
             want |= {(name, sid): k for sid, k in
                      V.source_cache_keys(s, camp, ref, secs, order=4).items()}
     assert keys == want and len(keys) == 3 * 4
+    assert list(keys) == list(want)  # measurement first, then the configurations in order
+    assert len(recs) == 12 and sum(map(len, by_rec.values())) == 12 * len(bench.CHANNELS)
     assert len(set(keys.values())) == len(keys)  # the sources' samples differ
 
 

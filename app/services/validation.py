@@ -223,6 +223,8 @@ class _Plan:
     keys: dict[tuple[str | None, str], str]
     values: dict[str | None, dict[str, en14363.SectionValues]]
     todo: dict[str | None, list[str]]
+    #: the signal rows the keys come from, whose seals :func:`_require_seals` checks
+    evidence: tuple = ((), {})
 
 
 def _plan(database, campaign_name: str, configs: Sequence[str] | None,
@@ -237,10 +239,10 @@ def _plan(database, campaign_name: str, configs: Sequence[str] | None,
                  else [c if isinstance(c, str) and c in refs
                        else repo.resolve(session, camp, c)[1].name for c in configs])
         sections = repo.section_infos(session, camp)
-        keys = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
+        keys, rows = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
         plan = _Plan(camp.name, sections, repo.vehicle_info(session, camp), names,
                      {c: calibration_provenance(session, camp, c) for c in names}, keys,
-                     {s: {} for s in [None, *names]}, {})
+                     {s: {} for s in [None, *names]}, {}, rows)
         cached = repo.cache_get_many(session, list(keys.values()))
     with stage("cache_unpack"):
         for (source, sid), key in keys.items():
@@ -252,20 +254,26 @@ def _plan(database, campaign_name: str, configs: Sequence[str] | None,
 
 
 def _plan_keys(session: Session, camp, refs: list, sections: Sequence[SectionInfo],
-               order: int) -> dict[tuple[str | None, str], str]:
+               order: int) -> tuple[dict[tuple[str | None, str], str], tuple]:
     """(source, section id) → result-cache key of the measurement (source ``None``) and of
-    the configurations ``refs``: :func:`source_cache_keys` for every source at once, from
-    two queries (:func:`railval.db.repo.source_hashes_many`) instead of two per source."""
-    hashes, meta = repo.source_hashes_many(session, camp, [r.id for r in refs])
+    the configurations ``refs`` — :func:`source_cache_keys` for every source at once — and
+    the signal rows they come from (:func:`railval.db.repo.seal_rows_many`: two queries
+    instead of two per source; :func:`_require_seals` checks their seals, so the rows are
+    read once for the keys and the seals)."""
+    rows = repo.seal_rows_many(session, camp, [r.id for r in refs])
+    recs, by_rec = rows
+    per_source: dict[int | None, list] = {}
+    for rec in recs:
+        per_source.setdefault(rec[2], []).append(rec)
     by_id = {s.id: s for s in sections}
     keys: dict[tuple[str | None, str], str] = {}
     for name, cid in [(None, None), *((r.name, r.id) for r in refs)]:
-        h, m = hashes.get(cid, {}), meta.get(cid, {})
-        for sid in m:
+        for rid, sid, _cid, dsha, fs, _t0, n in per_source.get(cid, ()):
             if sid in by_id:
-                keys[(name, sid)] = section_cache_key(by_id[sid], m[sid][1], m[sid][2],
-                                                      m[sid][0], h.get(sid, {}), order)
-    return keys
+                hashes = {ch: sha for ch, _id, sha, _seal in by_rec.get(rid, ())}
+                keys[(name, sid)] = section_cache_key(by_id[sid], float(fs), int(n), dsha,
+                                                      hashes, order)
+    return keys, rows
 
 
 def _require_seals(database, plan: _Plan) -> None:
@@ -273,7 +281,8 @@ def _require_seals(database, plan: _Plan) -> None:
     :func:`validate_configuration` checks them (:func:`railval.db.repo.require_evidence`
     without reading blobs)."""
     with stage("database"), database.session() as session:
-        repo.require_evidence_many(session, plan.name, plan.names, blobs=False)
+        repo.require_evidence_many(session, plan.name, plan.names, blobs=False,
+                                   rows=plan.evidence)
 
 
 def _chunks(todo: dict[str | None, list[str]], chunk_sections: int
