@@ -186,8 +186,14 @@ def verify_evidence(session: Session, campaign: CampaignArg, config: ConfigArg, 
     ``channel``, ``error``); empty when the evidence is intact. Reports and sign-offs call it
     before they state a verdict."""
     c = campaign_ref(session, campaign)
-    get_configuration(session, c, config)
+    conf = get_configuration(session, c, config)
     secret = integrity.session_secret(session)
+    if not blobs:  # both sources' rows from two queries (:func:`seal_rows_many`)
+        names = {x.id: x.name for x in list_configurations(session, c)}
+        recs, by_rec = seal_rows_many(session, c, [conf.id])
+        return (_seal_problems(c, names, [r for r in recs if r[2] is None], by_rec, secret)
+                + _seal_problems(c, names, [r for r in recs if r[2] is not None], by_rec,
+                                 secret))
     return (_source_problems(session, c, None, secret, blobs)
             + _source_problems(session, c, config, secret, blobs))
 
