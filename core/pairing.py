@@ -117,14 +117,13 @@ def values_under(pairs: Pairs, values, column: int) -> dict[str, np.ndarray]:
         if reading == CHOSEN:
             continue
         rid = reading.id
-        parts = []
+        got: list = []  # one array per reading, not one per section (the same float64s)
         for row in pairs.by_section:
             sv = values[row[0]]
             if type(sv).value_under is _SECTION_VALUE_UNDER:
                 alt = sv.alternatives.get(rid)
-                got = row[column] if not alt else list(map(alt.get, row[1], row[column]))
+                got += row[column] if not alt else map(alt.get, row[1], row[column])
             else:
-                got = [sv.value_under(rid, k) for k in row[1]]
-            parts.append(np.array(got, dtype=np.float64))
-        out[rid] = np.concatenate(parts) if parts else np.empty(0)
+                got += [sv.value_under(rid, k) for k in row[1]]
+        out[rid] = np.array(got, dtype=np.float64) if got else np.empty(0)
     return out

@@ -106,3 +106,26 @@ def test_a_broken_seal_is_refused_with_the_single_check_message(tiny, config, se
             s.execute(update(Signal).where(Signal.id == sid).values(provenance=prov))
     with tiny.session() as s:
         repo.require_evidence_many(s, "dynotrain-bench", ["c000", "c001", "c002"], blobs=False)
+
+
+def test_values_under_equal_value_under_per_pair(tiny):
+    import numpy as np
+
+    from railval.core.definitions import CHOSEN, READINGS
+    from railval.core.pairing import gather_pairs, values_under
+
+    plan = V._plan(tiny, "dynotrain-bench", ["c000"], 4)
+    m, s = plan.values[None], plan.values["c000"]
+    common = sorted(set(m) & set(s))
+    pairs = gather_pairs(m, s, {x.id: x for x in plan.sections}, common)
+    got = values_under(pairs, s, 3)
+    n_alt = 0
+    for reading in READINGS:
+        if reading == CHOSEN:
+            continue
+        want = [s[sid].value_under(reading.id, k) for sid, kept, *_ in pairs.by_section
+                for k in kept]
+        assert got[reading.id].dtype == np.float64
+        np.testing.assert_array_equal(got[reading.id], np.array(want, dtype=np.float64))
+        n_alt += int(np.sum(got[reading.id] != np.concatenate([r[3] for r in pairs.by_section])))
+    assert n_alt > 0  # some reading changes some value: the alternatives were looked up
