@@ -165,16 +165,19 @@ def _seal_rows(session: Session, c: Campaign | CampaignRef, cond) -> tuple[list,
 def _seal_problems(c: Campaign | CampaignRef, names: dict[int, str], recs: list,
                    by_rec: dict[int, list], secret: bytes) -> list[dict[str, Any]]:
     """Seal problems of the signal rows ``by_rec`` of the recordings ``recs``
-    (:func:`_seal_rows`), in recording and channel order."""
+    (:func:`_seal_rows`), in recording and channel order; the seals of one recording are
+    checked together (:func:`integrity.check_signal_seals`)."""
     problems: list[dict[str, Any]] = []
     for rid, sid, conf_id, dsha, fs, t0, n in recs:
         conf = names.get(conf_id) if conf_id else None
-        for name, cid, sha, seal in by_rec.get(rid, ()):
-            why = _seal_problem(secret, seal, rid, cid, sha, dsha, fs, t0, n,
-                                (c.name, sid, conf or "", name))
-            if why is not None:
+        rows = by_rec.get(rid, ())
+        ok = iter(integrity.check_signal_seals(secret, (rid, dsha, fs, t0, n),
+                                               (c.name, sid, conf or ""),
+                                               [r for r in rows if r[3] is not None]))
+        for name, _cid, _sha, seal in rows:
+            if seal is None or not next(ok):
                 problems.append({"section": sid, "configuration": conf, "channel": name,
-                                 "error": why})
+                                 "error": _NO_SEAL if seal is None else _BAD_SEAL})
     return problems
 
 

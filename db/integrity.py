@@ -157,6 +157,36 @@ def seal_signal(secret: bytes, recording_id: int, channel_id: int, sha256: str,
     return SEAL_V2 + _mac(secret, b"signal2", *parts, *name_bytes).hex()
 
 
+def _name_bytes(x) -> bytes:
+    return str(x).encode("utf-8").replace(b"\\", b"\\\\").replace(b"\0", b"\\0")
+
+
+def check_signal_seals(secret: bytes, recording: tuple, names: tuple[str, str, str],
+                       rows) -> list[bool]:
+    """:func:`check_signal_seal` of every signal row of one recording: ``recording`` =
+    (recording id, distance hash, fs, t0, n), ``names`` = (campaign, section id,
+    configuration name or ""), ``rows`` = (channel, channel id, content hash, seal) with a
+    seal (not ``None``). The same message and HMAC per row as :func:`seal_signal` (the
+    recording's parts encoded once, not once per signal); seals of version 1 go through
+    :func:`check_signal_seal`."""
+    rid, dsha, fs, t0, n = recording
+    head = b"signal2\0" + str(int(rid)).encode() + b"\0"
+    tail = b"\0".join([dsha.encode(), repr(float(fs)).encode(), repr(float(t0)).encode(),
+                       str(int(n)).encode(), *map(_name_bytes, names), b""])
+    out = []
+    for chan, cid, sha, seal in rows:
+        seal = str(seal)
+        if seal.startswith(SEAL_V2):
+            msg = head + str(int(cid)).encode() + b"\0" + sha.encode() + b"\0" + tail \
+                + _name_bytes(chan)
+            out.append(hmac.compare_digest(seal, SEAL_V2 + hmac.digest(secret, msg,
+                                                                       "sha256").hex()))
+        else:
+            out.append(check_signal_seal(secret, seal, rid, cid, sha, dsha, fs, t0, n,
+                                         (*names, chan)))
+    return out
+
+
 def check_signal_seal(secret: bytes, seal: str, recording_id: int, channel_id: int,
                       sha256: str, distance_sha256: str, fs: float, t0: float, n: int,
                       names: tuple[str, str, str, str]) -> bool:

@@ -129,3 +129,23 @@ def test_values_under_equal_value_under_per_pair(tiny):
         np.testing.assert_array_equal(got[reading.id], np.array(want, dtype=np.float64))
         n_alt += int(np.sum(got[reading.id] != np.concatenate([r[3] for r in pairs.by_section])))
     assert n_alt > 0  # some reading changes some value: the alternatives were looked up
+
+
+def test_batched_seal_check_equals_one_at_a_time():
+    secret = b"s" * 40
+    rec = (17, "d" * 64, 500.0, 0.25, 20000)
+    names = ("camp\\x", "S\x0001", "")
+    rows, want = [], []
+    for k, chan in enumerate(["Y_w1L", "Q\\w1R", "ay\x00cb", "é"]):
+        cid, sha = 3 + k, f"{k:064x}"
+        v2 = integrity.seal_signal(secret, rec[0], cid, sha, *rec[1:], names=(*names, chan))
+        v1 = integrity.seal_signal(secret, rec[0], cid, sha, *rec[1:])
+        for seal in (v2, v1, v2[:-1] + "0" if v2[-1] != "0" else v2[:-1] + "1",
+                     "v2:" + "f" * 64, v1[::-1]):
+            rows.append((chan, cid, sha, seal))
+            want.append(integrity.check_signal_seal(secret, seal, rec[0], cid, sha, *rec[1:],
+                                                    (*names, chan)))
+    got = integrity.check_signal_seals(secret, rec, names, rows)
+    assert got == want and want.count(True) == 8 and len(want) == 20
+    assert not any(integrity.check_signal_seals(secret, (18, *rec[1:]), names, rows))
+    assert not any(integrity.check_signal_seals(secret, rec, ("camp\\x", "S01", ""), rows[::5]))
