@@ -149,3 +149,32 @@ def test_batched_seal_check_equals_one_at_a_time():
     assert got == want and want.count(True) == 8 and len(want) == 20
     assert not any(integrity.check_signal_seals(secret, (18, *rec[1:]), names, rows))
     assert not any(integrity.check_signal_seals(secret, rec, ("camp\\x", "S01", ""), rows[::5]))
+
+
+@pytest.fixture
+def imported(database, tmp_path):
+    """The tiny bench campaign (measurement + c000) imported into a database of each
+    backend: the seal is read by the database's own JSON operator there."""
+    from railval.db.importer import import_campaign
+
+    bench.build(tmp_path, 1, 3, 5000, 200.0)
+    import_campaign(database, tmp_path / "campaign")
+    return database
+
+
+def test_seal_read_by_the_database_refuses_a_forged_seal_on_every_backend(imported):
+    chan = bench.CHANNELS[0]
+    with imported.session() as s:
+        repo.require_evidence_many(s, "dynotrain-bench", ["c000"], blobs=False)
+    with imported.session(write=True) as s:
+        sid, prov = _signal(s, "S02", "c000", chan)
+        s.execute(update(Signal).where(Signal.id == sid)
+                  .values(provenance={**prov, "seal": "v2:" + "0" * 64}))
+    with imported.session() as s:
+        with pytest.raises(integrity.IntegrityError, match="fails its seal") as single:
+            repo.require_evidence(s, "dynotrain-bench", "c000", blobs=False)
+        with pytest.raises(integrity.IntegrityError) as many:
+            repo.require_evidence_many(s, "dynotrain-bench", ["c000"], blobs=False)
+    assert str(many.value) == str(single.value)
+    with pytest.raises(integrity.IntegrityError, match="fails its seal"):
+        V.validate_configurations(imported, "dynotrain-bench", ["c000"], n_boot=0)
