@@ -16,11 +16,9 @@ The operations on the samples are those of the former per-step numpy code, in th
 (IEEE division and addition for Y/Q and ΣY, the same order statistics, numpy's rms), so the
 values are the same numbers (docs/validation.md, Throughput).
 
-The compiled step calls compiled functions of :mod:`railval.core.orderstat`
-(``select_ranks``) and :mod:`railval.core.en_statistics` (``pairwise_sum``,
-``_integral_at``); numba's on-disk cache of :func:`_section_kernel` is keyed to this file
-only, so after editing those functions the cached ``core/__pycache__/en_section.*.nb[ic]``
-must be deleted (numba documentation, "Notes on caching").
+The compiled step itself (:func:`_section_kernel`) and the compiled functions it calls live
+in :mod:`railval.core.en_kernels` (one file: numba's on-disk cache keys a kernel to its own
+file).
 
 References
 ----------
@@ -32,7 +30,6 @@ order statistics without sorting.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from railval.core.definitions import (
@@ -43,24 +40,22 @@ from railval.core.definitions import (
     percentile_ranks,
     window_centres,
 )
+from railval.core.en_kernels import _derive, _sample_window_means, _section_kernel  # noqa: F401
 from railval.core.en_statistics import (
     PERCENTILES,
     QUANTILE_METHOD,
     STEP_M,
     WINDOW_M,
     _check_sliding_range,
-    _integral_at,
     _interpolant_means,
     _means_from_integrals,
     _percentiles_of,
     _row_percentiles,
     _window_ends,
     maxabs,
-    pairwise_sum,
 )
 from railval.core.errors import InvalidSignal
 from railval.core.filters import design, settling_check
-from railval.core.orderstat import BUCKETS, select_ranks
 from railval.core.quantities import QUANTITIES, WHEELSET_POSITIONS
 from railval.core.supplementary import BOGIE_KINDS, SUPPLEMENTARY
 from railval.core.types import WHEEL_POSITIONS, SectionInfo, SignalSet
@@ -99,79 +94,6 @@ def _statistic(processing: str, p_lo, p_med, p_hi, rms_value=None):
 
 _DERIVE_TEXT = {"YQ": "Y/Q formed sample-wise from the low-pass filtered Y and Q",
                 "SumY": "ΣY = Y_L + Y_R formed from the low-pass filtered forces"}
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _derive(lp, yq, sy, cut0, cut1, wide0, derived):  # pragma: no cover - compiled
-    """Step 2: ``derived`` = Y/Q rows (``lp[yq[r, 0]] / lp[yq[r, 1]]``) then ΣY rows
-    (``lp[sy[r, 0]] + lp[sy[r, 1]]``) over ``wide0:wide0 + derived.shape[1]``; returns the
-    first Y/Q row whose Q is exactly 0 inside ``cut0:cut1`` (−1: none)."""
-    n_wide = derived.shape[1]
-    n_yq = yq.shape[0]
-    zero = -1
-    for r in range(n_yq):
-        y = lp[yq[r, 0]]
-        q = lp[yq[r, 1]]
-        for i in range(n_wide):
-            derived[r, i] = y[wide0 + i] / q[wide0 + i]
-        if zero < 0:
-            for i in range(cut0, cut1):
-                if q[i] == 0.0:
-                    zero = r
-                    break
-    for r in range(sy.shape[0]):
-        a = lp[sy[r, 0]]
-        b = lp[sy[r, 1]]
-        for i in range(n_wide):
-            derived[n_yq + r, i] = a[wide0 + i] + b[wide0 + i]
-    return zero
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
-                    out_rms, d, j, u, at, win_lo, win_hi, sampled
-                    ):  # pragma: no cover - compiled
-    """One section: the derived rows (:func:`_derive`), then the order statistics ``ranks``
-    of the evaluated part of the low-pass rows ``sel``, of the derived rows and of every
-    band-pass row into ``out_lp`` (in that order) and ``out_bp``, the band-pass rows' rms
-    (numpy's ``sqrt(mean(x²))``, :func:`railval.core.en_statistics.pairwise_sum`) and the
-    integrals of the derived rows at the window ends ``j``, ``u`` on ``d[wide0:]``
-    (:func:`railval.core.en_statistics._integral_at`) and their means over the sample
-    windows ``win_lo``/``win_hi`` (:func:`_sample_window_means`). Returns the Y/Q row with Q = 0 in the
-    evaluated range (nothing selected) or −1."""
-    zero = _derive(lp, yq, sy, cut0, cut1, wide0, derived)
-    if zero >= 0:
-        return zero
-    k = ranks.shape[0]
-    n = cut1 - cut0
-    hist = np.empty(BUCKETS, np.int64)
-    slot = np.empty(BUCKETS, np.int64)
-    start = np.empty(k, np.int64)
-    fill = np.empty(k, np.int64)
-    cand = np.empty(n)
-    bucket = np.empty(n, np.int64)
-    n_sel = sel.shape[0]
-    for s in range(n_sel):
-        select_ranks(lp[sel[s], cut0:cut1], ranks, out_lp[s], hist, slot, start, fill, cand,
-                     bucket)
-    for r in range(derived.shape[0]):
-        select_ranks(derived[r, cut0 - wide0:cut1 - wide0], ranks, out_lp[n_sel + r], hist,
-                     slot, start, fill, cand, bucket)
-    for r in range(bp.shape[0]):
-        select_ranks(bp[r, cut0:cut1], ranks, out_bp[r], hist, slot, start, fill, cand,
-                     bucket)
-        for i in range(n):
-            cand[i] = bp[r, cut0 + i] * bp[r, cut0 + i]
-        out_rms[r] = np.sqrt(pairwise_sum(cand, 0, n) / n)
-    if j.shape[0]:
-        n_wide = derived.shape[1]
-        h = np.empty(n_wide - 1)
-        for i in range(n_wide - 1):
-            h[i] = d[wide0 + i + 1] - d[wide0 + i]
-        _integral_at(derived, h, j, u, at)
-    if win_lo.shape[0]:
-        _sample_window_means(derived, win_lo, win_hi, sampled)
-    return -1
 
 
 class SectionState:
@@ -517,18 +439,3 @@ def _percentiles_by_length(means_of: dict, methods: tuple[str, ...]) -> dict:
             out[v] = [p[i * rows:(i + 1) * rows] for p in pcts]
     return out
 
-
-@numba.njit(cache=True, nogil=True)
-def _sample_window_means(v, lo, hi, out):  # pragma: no cover - compiled
-    """``out[r, c]`` = mean of ``v[r, lo[c]:hi[c]]`` from the row's prefix sums (``P_0 = 0``,
-    ``P_{i+1} = P_i + v_i``, summed in order as numpy's cumsum), ``(P_hi − P_lo)/(hi − lo)``;
-    NaN for an empty window — :func:`railval.core.definitions.sample_window_means`."""
-    n = v.shape[1]
-    cum = np.empty(n + 1)
-    for r in range(v.shape[0]):
-        cum[0] = 0.0
-        for i in range(n):
-            cum[i + 1] = cum[i] + v[r, i]
-        for c in range(lo.shape[0]):
-            count = hi[c] - lo[c]
-            out[r, c] = (cum[hi[c]] - cum[lo[c]]) / count if count > 0 else np.nan

@@ -11,7 +11,6 @@ definitions and the reading railval takes are in docs/validation.md and
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from railval.core.definitions import (
@@ -20,6 +19,7 @@ from railval.core.definitions import (
     percentiles_from_order,
     window_centres,
 )
+from railval.core.en_kernels import _block_sum, _integral_at, pairwise_sum  # noqa: F401
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.orderstat import order_statistics
 
@@ -159,82 +159,3 @@ def _means_from_integrals(at: np.ndarray, grids: list[np.ndarray], window_m: flo
         pos += 2 * k
     return out
 
-
-@numba.njit(cache=True, nogil=True)
-def _integral_at(v, h, j, u, out):  # pragma: no cover - compiled
-    """``out[r, k]`` = C(x_k) of row r, the integral of the piecewise-linear signal from the
-    first sample to ``x_k = d[j[k]] + u[k]``: the cumulative trapezoid at the samples
-    (``C_0 = 0``, ``C_i = C_{i−1} + 0.5·(v_i + v_{i−1})·h_{i−1}``, summed in order as numpy's
-    cumsum sums) plus the quadratic of the interval ``[d_j, d_{j+1}]``:
-    ``C_j + v_j·u + 0.5·slope·u²`` with ``slope = (v_{j+1} − v_j)/h_j`` — the same operations
-    in the same order as the former numpy expression, so the same numbers."""
-    rows, n = v.shape
-    cum = np.empty(n)
-    for r in range(rows):
-        cum[0] = 0.0
-        for i in range(1, n):
-            cum[i] = cum[i - 1] + (v[r, i] + v[r, i - 1]) * 0.5 * h[i - 1]
-        for k in range(j.shape[0]):
-            jj = j[k]
-            uu = u[k]
-            slope = (v[r, jj + 1] - v[r, jj]) / h[jj]
-            out[r, k] = cum[jj] + v[r, jj] * uu + 0.5 * slope * uu * uu
-
-
-@numba.njit(cache=True, nogil=True)
-def _block_sum(a, lo, n):  # pragma: no cover - compiled
-    """numpy's sum of a run of at most 128: sequential below 8, else eight interleaved
-    partial sums combined pairwise, then the rest."""
-    if n < 8:
-        res = 0.0
-        for i in range(lo, lo + n):
-            res += a[i]
-        return res
-    r = a[lo:lo + 8].copy()
-    i = 8
-    while i < n - n % 8:
-        for k in range(8):
-            r[k] += a[lo + i + k]
-        i += 8
-    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-    for k in range(i, n):
-        res += a[lo + k]
-    return res
-
-
-@numba.njit(cache=True, nogil=True)
-def pairwise_sum(a, lo, n):  # pragma: no cover - compiled
-    """``a[lo:lo + n].sum()`` as numpy sums a contiguous run, so the same number: runs of at
-    most 128 by :func:`_block_sum`, longer ones split at a multiple of 8 near the half and
-    the halves' sums added (Higham 1993; numpy's ``pairwise_sum``). The recursion is walked
-    with an explicit stack (a cached compiled function must not call itself)."""
-    if n <= 128:
-        return _block_sum(a, lo, n)
-    los = np.empty(64, np.int64)
-    ns = np.empty(64, np.int64)
-    stage = np.zeros(64, np.int64)
-    left = np.empty(64)
-    top = 0
-    los[0] = lo
-    ns[0] = n
-    ret = 0.0
-    while top >= 0:
-        m = ns[top]
-        if m <= 128:
-            ret = _block_sum(a, los[top], m)
-            top -= 1
-            continue
-        half = m // 2 - (m // 2) % 8
-        if stage[top] == 0:
-            stage[top] = 1
-            los[top + 1], ns[top + 1], stage[top + 1] = los[top], half, 0
-            top += 1
-        elif stage[top] == 1:
-            left[top] = ret
-            stage[top] = 2
-            los[top + 1], ns[top + 1], stage[top + 1] = los[top] + half, m - half, 0
-            top += 1
-        else:
-            ret = left[top] + ret
-            top -= 1
-    return ret

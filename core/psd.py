@@ -20,7 +20,7 @@ import numba
 import numpy as np
 from scipy import signal as _signal
 
-from railval.core.en_statistics import pairwise_sum
+from railval.core.en_kernels import _detrend_taper
 from railval.core.errors import InvalidParameter, InvalidSignal
 
 
@@ -223,22 +223,3 @@ def _segment_mean_power(spec, n_seg, scale, even, out):  # pragma: no cover - co
             out[r, j] = acc / n_seg
     return out
 
-
-@numba.njit(cache=True, nogil=True)
-def _detrend_taper(seg, mean, t, win, out):  # pragma: no cover - compiled
-    """``out = (seg − mean − slope·t) · win`` row by row with ``slope = Σ t·x / Σ t²``:
-    :func:`detrend_linear` and the window in one pass. The sums are numpy's pairwise sums
-    (:func:`railval.core.en_statistics.pairwise_sum`) rather than a BLAS product, whose
-    threads keep spinning after the call (CPU taken from the other jobs of the machine)."""
-    n = seg.shape[1]
-    prod = np.empty(n)
-    for i in range(n):
-        prod[i] = t[i] * t[i]
-    tt = pairwise_sum(prod, 0, n)
-    for r in range(seg.shape[0]):
-        for i in range(n):
-            prod[i] = seg[r, i] * t[i]
-        a = mean[r]
-        b = pairwise_sum(prod, 0, n) / tt
-        for i in range(n):
-            out[r, i] = (seg[r, i] - a - b * t[i]) * win[i]

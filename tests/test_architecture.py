@@ -23,6 +23,9 @@ imported or run):
 * no function longer than :data:`MAX_FUNCTION_LINES` lines in ``core/``, ``db/`` or ``app/``
   (the numba kernel ``core/sim/kernel.py::run_kernel`` and the migration scripts excepted);
 * no ``x.get(key, y.get(…))`` fallback chain in ``app/`` (results are read as typed fields);
+* no compiled (numba) function calls a compiled function of another module: numba's on-disk
+  cache keys a kernel to its own file and compiles its callees into it, so a change in a
+  callee of another file would leave the caller's cached code stale (core/en_kernels.py);
 * every package folder (a folder with ``__init__.py``) is installed (pyproject's package list);
 * no file cites documents that are not in the repository.
 """
@@ -496,3 +499,56 @@ def test_key_fallback_rule_fails_on_a_planted_chain(tmp_path):
     bad.write_text("def f(cov):\n    return cov.get('ok', cov.get('holds', False)), cov.get('n', 0)\n",
                    encoding="utf-8")
     assert get_fallback_chains(bad) == ["page.py:2"]
+
+
+def _compiled(tree: ast.AST) -> set[str]:
+    """Names of the functions of a module compiled by numba (``@numba.njit``/``@njit``/``@jit``)."""
+    return {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)
+            and any(re.search(r"\b(njit|jit)\b", ast.unparse(d)) for d in n.decorator_list)}
+
+
+def cross_module_kernel_calls(modules: dict[str, Path]) -> list[str]:
+    """``path:line caller -> module.callee`` for every call of a compiled function of another
+    railval module from inside a compiled function (by imported name or module alias)."""
+    trees = {name: ast.parse(path.read_text(encoding="utf-8")) for name, path in modules.items()}
+    kernels = {name: _compiled(tree) for name, tree in trees.items()}
+    found = []
+    for name, tree in trees.items():
+        names, aliases = {}, {}
+        for n in ast.walk(tree):
+            if isinstance(n, ast.ImportFrom) and n.module in trees:
+                names.update({a.asname or a.name: (n.module, a.name) for a in n.names})
+            elif isinstance(n, ast.ImportFrom) and n.module:
+                aliases.update({a.asname or a.name: f"{n.module}.{a.name}" for a in n.names
+                                if f"{n.module}.{a.name}" in trees})
+            elif isinstance(n, ast.Import):
+                aliases.update({a.asname or a.name: a.name for a in n.names if a.name in trees})
+        for fn in (n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)
+                   and n.name in kernels[name]):
+            for call in (c for c in ast.walk(fn) if isinstance(c, ast.Call)):
+                f = call.func
+                target = (names.get(f.id) if isinstance(f, ast.Name) else
+                          (aliases[f.value.id], f.attr) if isinstance(f, ast.Attribute)
+                          and isinstance(f.value, ast.Name) and f.value.id in aliases else None)
+                if target and target[0] != name and target[1] in kernels.get(target[0], ()):
+                    found.append(f"{_rel(modules[name])}:{call.lineno} {fn.name} -> "
+                                 f"{target[0]}.{target[1]}")
+    return found
+
+
+def test_compiled_functions_call_no_compiled_function_of_another_module():
+    assert cross_module_kernel_calls(MODULES) == [], (
+        "keep a numba kernel and the compiled functions it calls in one file "
+        "(core/en_kernels.py): numba's cache would keep a stale copy of the callee")
+
+
+def test_kernel_call_rule_fails_on_a_planted_call(tmp_path):
+    a = tmp_path / "a.py"
+    a.write_text("import numba\n\n@numba.njit(cache=True)\ndef inner(x):\n    return x\n",
+                 encoding="utf-8")
+    b = tmp_path / "b.py"
+    b.write_text("import numba\nfrom railval.core.a import inner\nfrom railval.core import a\n\n"
+                 "@numba.njit(cache=True)\ndef outer(x):\n    return inner(x) + a.inner(x)\n\n"
+                 "def plain(x):\n    return inner(x)\n", encoding="utf-8")
+    found = cross_module_kernel_calls({"railval.core.a": a, "railval.core.b": b})
+    assert [f.split(" ", 1)[1] for f in found] == ["outer -> railval.core.a.inner"] * 2

@@ -1,0 +1,331 @@
+"""The compiled kernels of the EN 14363 statistics, in one file.
+
+They call each other: the per-section step (:func:`_section_kernel`, used by
+:mod:`railval.core.en_section`) selects order statistics (:func:`select_ranks`, used by
+:mod:`railval.core.orderstat`), sums pairwise (:func:`pairwise_sum`, also used by the Welch
+taper of :mod:`railval.core.psd`) and integrates the linear interpolant at the window ends
+(:func:`_integral_at`, :mod:`railval.core.en_statistics`). Numba's on-disk cache
+(``cache=True``) keys a kernel to the file it is defined in and compiles the compiled functions
+it calls into it; a change in a callee defined in another file would leave the caller's cached
+code unchanged (numba documentation, "Cache invalidation fails to recognize changes in
+functions defined in a different file"). Kept in one file, any change here invalidates every
+kernel that could contain it. ``tests/test_architecture.py`` refuses a cached kernel that calls
+a compiled function of another module.
+
+The modules named above keep their public functions and re-export these kernels; the
+algorithms and their sources are described there (Knuth 1998 §5.2.5 and §5.3.3 for the
+selection; numpy's pairwise summation for the sums; docs/validation.md for the sliding
+means).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+#: rows of at most this many samples are sorted (selection does not pay below)
+SMALL_ROW = 256
+#: buckets of the histogram pass
+BUCKETS = 2048
+
+
+@numba.njit(cache=True, nogil=True)
+def _range(x):  # pragma: no cover - compiled
+    """(min, max) of a row without NaN, in four independent lanes (the comparisons of one
+    lane do not wait for those of the others); min and max are exact in any order."""
+    n = x.shape[0]
+    a0 = a1 = a2 = a3 = b0 = b1 = b2 = b3 = x[0]
+    i = 0
+    while i + 4 <= n:
+        v0, v1, v2, v3 = x[i], x[i + 1], x[i + 2], x[i + 3]
+        a0 = min(a0, v0)
+        a1 = min(a1, v1)
+        a2 = min(a2, v2)
+        a3 = min(a3, v3)
+        b0 = max(b0, v0)
+        b1 = max(b1, v1)
+        b2 = max(b2, v2)
+        b3 = max(b3, v3)
+        i += 4
+    for j in range(i, n):
+        a0 = min(a0, x[j])
+        b0 = max(b0, x[j])
+    return min(min(a0, a1), min(a2, a3)), max(max(b0, b1), max(b2, b3))
+
+
+@numba.njit(cache=True, nogil=True)
+def _select_row(x, ranks, out, hist, slot, start, fill, cand, bucket
+                ):  # pragma: no cover - compiled
+    n = x.shape[0]
+    k = ranks.shape[0]
+    nb = hist.shape[0]
+    mn, mx = _range(x)
+    if mn == mx:
+        for j in range(k):
+            out[j] = mn
+        return
+    scale = nb / (mx - mn)
+    if not np.isfinite(scale):  # a range too narrow for the buckets: sort
+        srt = np.sort(x)
+        for j in range(k):
+            out[j] = srt[ranks[j]]
+        return
+    # histogram over equal buckets of [mn, mx]; the bucket index is monotone in the value,
+    # so every sample of a bucket lies above those of the buckets before it
+    for i in range(n):
+        bucket[i] = min(int((x[i] - mn) * scale), nb - 1)
+    hist[:] = 0
+    for i in range(n):
+        hist[bucket[i]] += 1
+    # the bucket of each wanted rank and the samples below that bucket
+    slot[:] = -1
+    n_slots = 0
+    total = 0
+    below = 0
+    b = 0
+    for j in range(k):
+        while below + hist[b] <= ranks[j]:
+            below += hist[b]
+            b += 1
+        if slot[b] < 0:
+            slot[b] = n_slots
+            start[n_slots] = total
+            fill[n_slots] = 0
+            total += hist[b]
+            n_slots += 1
+    # gather the samples of those buckets
+    for i in range(n):
+        s = slot[bucket[i]]
+        if s >= 0:
+            cand[start[s] + fill[s]] = x[i]
+            fill[s] += 1
+    # select each rank within its bucket
+    b = 0
+    below = 0
+    for j in range(k):
+        while below + hist[b] <= ranks[j]:
+            below += hist[b]
+            b += 1
+        s = slot[b]
+        r = ranks[j] - below
+        seg = cand[start[s]:start[s] + fill[s]]
+        out[j] = np.partition(seg, r)[r] if seg.shape[0] > 1 else seg[0]
+
+
+@numba.njit(cache=True, nogil=True)
+def select_ranks(x, ranks, out, hist, slot, start, fill, cand, bucket
+                 ):  # pragma: no cover - compiled
+    """The samples of 0-based ranks ``ranks`` (ascending, unique) of the row ``x`` into
+    ``out``: a row of at most :data:`SMALL_ROW` samples sorted, a longer one selected
+    (:func:`_select_row`); the work arrays (``hist``, ``slot``: :data:`BUCKETS`; ``start``,
+    ``fill``: len(ranks); ``cand``, ``bucket`` (int64): len(x)) are reused from row to row. For compiled callers
+    (:mod:`railval.core.en_section`)."""
+    if x.shape[0] <= SMALL_ROW:
+        srt = np.sort(x)
+        for j in range(ranks.shape[0]):
+            out[j] = srt[ranks[j]]
+        return
+    _select_row(x, ranks, out, hist, slot, start, fill, cand, bucket)
+
+
+@numba.njit(cache=True, nogil=True)
+def _order_statistics_kernel(rows, ranks, out, r0, r1):  # pragma: no cover - compiled
+    n = rows.shape[1]
+    k = ranks.shape[0]
+    hist = np.empty(BUCKETS, np.int64)
+    slot = np.empty(BUCKETS, np.int64)
+    start = np.empty(k, np.int64)
+    fill = np.empty(k, np.int64)
+    cand = np.empty(n)
+    bucket = np.empty(n, np.int64)
+    for r in range(r0, r1):
+        select_ranks(rows[r], ranks, out[r], hist, slot, start, fill, cand, bucket)
+
+
+@numba.njit(cache=True, nogil=True)
+def _block_sum(a, lo, n):  # pragma: no cover - compiled
+    """numpy's sum of a run of at most 128: sequential below 8, else eight interleaved
+    partial sums combined pairwise, then the rest."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r = a[lo:lo + 8].copy()
+    i = 8
+    while i < n - n % 8:
+        for k in range(8):
+            r[k] += a[lo + i + k]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    for k in range(i, n):
+        res += a[lo + k]
+    return res
+
+
+@numba.njit(cache=True, nogil=True)
+def pairwise_sum(a, lo, n):  # pragma: no cover - compiled
+    """``a[lo:lo + n].sum()`` as numpy sums a contiguous run, so the same number: runs of at
+    most 128 by :func:`_block_sum`, longer ones split at a multiple of 8 near the half and
+    the halves' sums added (Higham 1993; numpy's ``pairwise_sum``). The recursion is walked
+    with an explicit stack (a cached compiled function must not call itself)."""
+    if n <= 128:
+        return _block_sum(a, lo, n)
+    los = np.empty(64, np.int64)
+    ns = np.empty(64, np.int64)
+    stage = np.zeros(64, np.int64)
+    left = np.empty(64)
+    top = 0
+    los[0] = lo
+    ns[0] = n
+    ret = 0.0
+    while top >= 0:
+        m = ns[top]
+        if m <= 128:
+            ret = _block_sum(a, los[top], m)
+            top -= 1
+            continue
+        half = m // 2 - (m // 2) % 8
+        if stage[top] == 0:
+            stage[top] = 1
+            los[top + 1], ns[top + 1], stage[top + 1] = los[top], half, 0
+            top += 1
+        elif stage[top] == 1:
+            left[top] = ret
+            stage[top] = 2
+            los[top + 1], ns[top + 1], stage[top + 1] = los[top] + half, m - half, 0
+            top += 1
+        else:
+            ret = left[top] + ret
+            top -= 1
+    return ret
+
+
+@numba.njit(cache=True, nogil=True)
+def _integral_at(v, h, j, u, out):  # pragma: no cover - compiled
+    """``out[r, k]`` = C(x_k) of row r, the integral of the piecewise-linear signal from the
+    first sample to ``x_k = d[j[k]] + u[k]``: the cumulative trapezoid at the samples
+    (``C_0 = 0``, ``C_i = C_{i−1} + 0.5·(v_i + v_{i−1})·h_{i−1}``, summed in order as numpy's
+    cumsum sums) plus the quadratic of the interval ``[d_j, d_{j+1}]``:
+    ``C_j + v_j·u + 0.5·slope·u²`` with ``slope = (v_{j+1} − v_j)/h_j`` — the same operations
+    in the same order as the former numpy expression, so the same numbers."""
+    rows, n = v.shape
+    cum = np.empty(n)
+    for r in range(rows):
+        cum[0] = 0.0
+        for i in range(1, n):
+            cum[i] = cum[i - 1] + (v[r, i] + v[r, i - 1]) * 0.5 * h[i - 1]
+        for k in range(j.shape[0]):
+            jj = j[k]
+            uu = u[k]
+            slope = (v[r, jj + 1] - v[r, jj]) / h[jj]
+            out[r, k] = cum[jj] + v[r, jj] * uu + 0.5 * slope * uu * uu
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _derive(lp, yq, sy, cut0, cut1, wide0, derived):  # pragma: no cover - compiled
+    """Step 2: ``derived`` = Y/Q rows (``lp[yq[r, 0]] / lp[yq[r, 1]]``) then ΣY rows
+    (``lp[sy[r, 0]] + lp[sy[r, 1]]``) over ``wide0:wide0 + derived.shape[1]``; returns the
+    first Y/Q row whose Q is exactly 0 inside ``cut0:cut1`` (−1: none)."""
+    n_wide = derived.shape[1]
+    n_yq = yq.shape[0]
+    zero = -1
+    for r in range(n_yq):
+        y = lp[yq[r, 0]]
+        q = lp[yq[r, 1]]
+        for i in range(n_wide):
+            derived[r, i] = y[wide0 + i] / q[wide0 + i]
+        if zero < 0:
+            for i in range(cut0, cut1):
+                if q[i] == 0.0:
+                    zero = r
+                    break
+    for r in range(sy.shape[0]):
+        a = lp[sy[r, 0]]
+        b = lp[sy[r, 1]]
+        for i in range(n_wide):
+            derived[n_yq + r, i] = a[wide0 + i] + b[wide0 + i]
+    return zero
+
+
+@numba.njit(cache=True, nogil=True)
+def _sample_window_means(v, lo, hi, out):  # pragma: no cover - compiled
+    """``out[r, c]`` = mean of ``v[r, lo[c]:hi[c]]`` from the row's prefix sums (``P_0 = 0``,
+    ``P_{i+1} = P_i + v_i``, summed in order as numpy's cumsum), ``(P_hi − P_lo)/(hi − lo)``;
+    NaN for an empty window — :func:`railval.core.definitions.sample_window_means`."""
+    n = v.shape[1]
+    cum = np.empty(n + 1)
+    for r in range(v.shape[0]):
+        cum[0] = 0.0
+        for i in range(n):
+            cum[i + 1] = cum[i] + v[r, i]
+        for c in range(lo.shape[0]):
+            count = hi[c] - lo[c]
+            out[r, c] = (cum[hi[c]] - cum[lo[c]]) / count if count > 0 else np.nan
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
+                    out_rms, d, j, u, at, win_lo, win_hi, sampled
+                    ):  # pragma: no cover - compiled
+    """One section: the derived rows (:func:`_derive`), then the order statistics ``ranks``
+    of the evaluated part of the low-pass rows ``sel``, of the derived rows and of every
+    band-pass row into ``out_lp`` (in that order) and ``out_bp``, the band-pass rows' rms
+    (numpy's ``sqrt(mean(x²))``, :func:`railval.core.en_statistics.pairwise_sum`) and the
+    integrals of the derived rows at the window ends ``j``, ``u`` on ``d[wide0:]``
+    (:func:`railval.core.en_statistics._integral_at`) and their means over the sample
+    windows ``win_lo``/``win_hi`` (:func:`_sample_window_means`). Returns the Y/Q row with Q = 0 in the
+    evaluated range (nothing selected) or −1."""
+    zero = _derive(lp, yq, sy, cut0, cut1, wide0, derived)
+    if zero >= 0:
+        return zero
+    k = ranks.shape[0]
+    n = cut1 - cut0
+    hist = np.empty(BUCKETS, np.int64)
+    slot = np.empty(BUCKETS, np.int64)
+    start = np.empty(k, np.int64)
+    fill = np.empty(k, np.int64)
+    cand = np.empty(n)
+    bucket = np.empty(n, np.int64)
+    n_sel = sel.shape[0]
+    for s in range(n_sel):
+        select_ranks(lp[sel[s], cut0:cut1], ranks, out_lp[s], hist, slot, start, fill, cand,
+                     bucket)
+    for r in range(derived.shape[0]):
+        select_ranks(derived[r, cut0 - wide0:cut1 - wide0], ranks, out_lp[n_sel + r], hist,
+                     slot, start, fill, cand, bucket)
+    for r in range(bp.shape[0]):
+        select_ranks(bp[r, cut0:cut1], ranks, out_bp[r], hist, slot, start, fill, cand,
+                     bucket)
+        for i in range(n):
+            cand[i] = bp[r, cut0 + i] * bp[r, cut0 + i]
+        out_rms[r] = np.sqrt(pairwise_sum(cand, 0, n) / n)
+    if j.shape[0]:
+        n_wide = derived.shape[1]
+        h = np.empty(n_wide - 1)
+        for i in range(n_wide - 1):
+            h[i] = d[wide0 + i + 1] - d[wide0 + i]
+        _integral_at(derived, h, j, u, at)
+    if win_lo.shape[0]:
+        _sample_window_means(derived, win_lo, win_hi, sampled)
+    return -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _detrend_taper(seg, mean, t, win, out):  # pragma: no cover - compiled
+    """``out = (seg − mean − slope·t) · win`` row by row with ``slope = Σ t·x / Σ t²``:
+    :func:`detrend_linear` and the window in one pass. The sums are numpy's pairwise sums
+    (:func:`railval.core.en_statistics.pairwise_sum`) rather than a BLAS product, whose
+    threads keep spinning after the call (CPU taken from the other jobs of the machine)."""
+    n = seg.shape[1]
+    prod = np.empty(n)
+    for i in range(n):
+        prod[i] = t[i] * t[i]
+    tt = pairwise_sum(prod, 0, n)
+    for r in range(seg.shape[0]):
+        for i in range(n):
+            prod[i] = seg[r, i] * t[i]
+        a = mean[r]
+        b = pairwise_sum(prod, 0, n) / tt
+        for i in range(n):
+            out[r, i] = (seg[r, i] - a - b * t[i]) * win[i]
