@@ -27,6 +27,8 @@ import numpy as np
 SMALL_ROW = 256
 #: buckets of the histogram pass
 BUCKETS = 2048
+#: the provisional range of a row is that of every STRIDE-th sample
+STRIDE = 16
 
 
 @numba.njit(cache=True, nogil=True)
@@ -54,36 +56,28 @@ def _range(x):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _select_row(x, ranks, out, hist, slot, start, fill, cand, bucket
-                ):  # pragma: no cover - compiled
+def _strided_range(x, stride):  # pragma: no cover - compiled
+    """(min, max) of every ``stride``-th sample of ``x`` and of its last sample: a
+    provisional range of the row (samples outside it are counted in the end buckets)."""
     n = x.shape[0]
-    k = ranks.shape[0]
-    nb = hist.shape[0]
-    mn, mx = _range(x)
-    if mn == mx:
-        for j in range(k):
-            out[j] = mn
-        return
-    scale = nb / (mx - mn)
-    if not np.isfinite(scale):  # a range too narrow for the buckets: sort
-        srt = np.sort(x)
-        for j in range(k):
-            out[j] = srt[ranks[j]]
-        return
-    # histogram over equal buckets of [mn, mx]; the bucket index is monotone in the value,
-    # so every sample of a bucket lies above those of the buckets before it
-    for i in range(n):
-        bucket[i] = min(int((x[i] - mn) * scale), nb - 1)
-    hist[:] = 0
-    for i in range(n):
-        hist[bucket[i]] += 1
-    # the bucket of each wanted rank and the samples below that bucket
+    a = b = x[n - 1]
+    for i in range(0, n, stride):
+        v = x[i]
+        a = min(a, v)
+        b = max(b, v)
+    return a, b
+
+
+@numba.njit(cache=True, nogil=True)
+def _slots(hist, ranks, slot, start, fill):  # pragma: no cover - compiled
+    """The bucket of each wanted rank: ``slot[b]`` its place among the wanted buckets (−1:
+    none), ``start`` where its samples go in the candidate array."""
     slot[:] = -1
     n_slots = 0
     total = 0
     below = 0
     b = 0
-    for j in range(k):
+    for j in range(ranks.shape[0]):
         while below + hist[b] <= ranks[j]:
             below += hist[b]
             b += 1
@@ -93,6 +87,37 @@ def _select_row(x, ranks, out, hist, slot, start, fill, cand, bucket
             fill[n_slots] = 0
             total += hist[b]
             n_slots += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _select_row(x, ranks, out, hist, slot, start, fill, cand, bucket
+                ):  # pragma: no cover - compiled
+    n = x.shape[0]
+    k = ranks.shape[0]
+    nb = hist.shape[0]
+    mn, mx = _strided_range(x, STRIDE)
+    if mn == mx:
+        mn, mx = _range(x)
+        if mn == mx:
+            for j in range(k):
+                out[j] = mn
+            return
+    scale = nb / (mx - mn)
+    if not np.isfinite(scale):  # a range too narrow for the buckets: sort
+        srt = np.sort(x)
+        for j in range(k):
+            out[j] = srt[ranks[j]]
+        return
+    # histogram over equal buckets of the provisional range [mn, mx], the samples below it
+    # in the first bucket, those above in the last: the bucket index is monotone in the
+    # value, so every sample of a bucket lies above those of the buckets before it
+    top = float(nb - 1)
+    for i in range(n):
+        bucket[i] = int(min(max((x[i] - mn) * scale, 0.0), top))
+    hist[:] = 0
+    for i in range(n):
+        hist[bucket[i]] += 1
+    _slots(hist, ranks, slot, start, fill)
     # gather the samples of those buckets
     for i in range(n):
         s = slot[bucket[i]]
@@ -264,6 +289,58 @@ def _sample_window_means(v, lo, hi, out):  # pragma: no cover - compiled
             out[r, c] = (cum[hi[c]] - cum[lo[c]]) / count if count > 0 else np.nan
 
 
+@numba.njit(cache=True, nogil=True)
+def _pair_prefix(v, r, m, h, ct, cs):  # pragma: no cover - compiled
+    """The prefix sums of rows ``r .. r + m − 1`` (m = 1 or 2) of ``v``: ``ct[q]`` the
+    cumulative trapezoid of :func:`_integral_at`, ``cs[q]`` the prefix sums of
+    :func:`_sample_window_means` — the same additions in the same order, the (up to four)
+    independent running sums carried in one loop so that one addition need not wait for
+    the one before it."""
+    n = v.shape[1]
+    a = v[r]
+    b = v[r + m - 1]
+    ta = tb = 0.0
+    sa = sb = 0.0
+    ct[0, 0] = ct[1, 0] = 0.0
+    cs[0, 0] = cs[1, 0] = 0.0
+    for i in range(1, n):
+        ta = ta + (a[i] + a[i - 1]) * 0.5 * h[i - 1]
+        tb = tb + (b[i] + b[i - 1]) * 0.5 * h[i - 1]
+        sa = sa + a[i - 1]
+        sb = sb + b[i - 1]
+        ct[0, i] = ta
+        ct[1, i] = tb
+        cs[0, i] = sa
+        cs[1, i] = sb
+    cs[0, n] = sa + a[n - 1]
+    cs[1, n] = sb + b[n - 1]
+
+
+@numba.njit(cache=True, nogil=True)
+def _derived_means(v, h, j, u, at, lo, hi, sampled):  # pragma: no cover - compiled
+    """:func:`_integral_at` (``at``, when ``j`` is not empty) and
+    :func:`_sample_window_means` (``sampled``, when ``lo`` is not empty) of the rows of
+    ``v``, two rows at a time from one pass of their prefix sums (:func:`_pair_prefix`):
+    the same operations in the same order, so the same numbers."""
+    rows, n = v.shape
+    ct = np.empty((2, n))
+    cs = np.empty((2, n + 1))
+    for r in range(0, rows, 2):
+        m = min(2, rows - r)
+        _pair_prefix(v, r, m, h, ct, cs)
+        for q in range(m):
+            x = v[r + q]
+            for k in range(j.shape[0]):
+                jj = j[k]
+                uu = u[k]
+                slope = (x[jj + 1] - x[jj]) / h[jj]
+                at[r + q, k] = ct[q, jj] + x[jj] * uu + 0.5 * slope * uu * uu
+            for c in range(lo.shape[0]):
+                count = hi[c] - lo[c]
+                sampled[r + q, c] = ((cs[q, hi[c]] - cs[q, lo[c]]) / count if count > 0
+                                     else np.nan)
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
                     out_rms, d, j, u, at, win_lo, win_hi, sampled
@@ -300,14 +377,12 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
         for i in range(n):
             cand[i] = bp[r, cut0 + i] * bp[r, cut0 + i]
         out_rms[r] = np.sqrt(pairwise_sum(cand, 0, n) / n)
-    if j.shape[0]:
+    if j.shape[0] or win_lo.shape[0]:
         n_wide = derived.shape[1]
         h = np.empty(n_wide - 1)
         for i in range(n_wide - 1):
             h[i] = d[wide0 + i + 1] - d[wide0 + i]
-        _integral_at(derived, h, j, u, at)
-    if win_lo.shape[0]:
-        _sample_window_means(derived, win_lo, win_hi, sampled)
+        _derived_means(derived, h, j, u, at, win_lo, win_hi, sampled)
     return -1
 
 
