@@ -92,6 +92,8 @@ def _slots(hist, ranks, slot, start, fill):  # pragma: no cover - compiled
 @numba.njit(cache=True, nogil=True)
 def _select_row(x, ranks, out, hist, slot, start, fill, cand, bucket
                 ):  # pragma: no cover - compiled
+    """Bucket selection of one row over a provisional range (the algorithm and its
+    exactness: :mod:`railval.core.orderstat`)."""
     n = x.shape[0]
     k = ranks.shape[0]
     nb = hist.shape[0]

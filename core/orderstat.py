@@ -5,13 +5,18 @@ A percentile reading needs only a few order statistics of each row (the inverse 
 empirical distribution reads one sample of rank ⌈n·p⌉; numpy's linear reading the two
 around ``(n − 1)·p``, :func:`railval.core.definitions.sorted_percentiles`). Sorting the row
 costs ``O(n log n)``; :func:`order_statistics` selects them by distribution (bucket)
-selection in three passes over the row: its range; a histogram over :data:`BUCKETS` equal
-buckets of the range (the bucket index ``⌊(x − min)·B/(max − min)⌋`` is monotone in x, so a
-bucket's samples all lie above those of the buckets before it); the samples of the buckets
-holding a wanted rank gathered; the rank within its bucket is then selected among these few
-samples (``numpy.partition``). The range pass runs in four independent lanes (the
-comparisons of one lane do not wait for the others) and the bucket index of each sample is
-computed once, for the histogram and the gather. The result is exact — the samples a full
+selection: a provisional range, that of every ``STRIDE``-th sample (1/16 of the row); a
+histogram over :data:`BUCKETS` equal buckets of that range, the samples below it counted in
+the first bucket and those above in the last (the bucket index
+``min(max(⌊(x − min)·B/(max − min)⌋, 0), B − 1)``, clamped before the conversion, is monotone
+in x, so a bucket's samples all lie above those of the buckets before it, whichever range is
+used); the samples of the buckets holding a wanted rank gathered; the rank within its bucket
+is then selected among these few samples (``numpy.partition``). A provisional range that
+misses samples only makes the end buckets larger (the 0.15 % and 99.85 % ranks of a row lie
+near its strided extremes, a few dozen candidates); a strided sample of one value falls back
+to the full range, computed in four independent lanes (the comparisons of one lane do not
+wait for the others). The bucket index of each sample is computed once, for the histogram
+and the gather. The result is exact — the samples a full
 sort gives at those positions — whatever the distribution (a crowded bucket only costs time). Rows run on the
 cores in parallel (compiled kernel without the GIL, :func:`railval.core.workers.split_rows`).
 Rows of at most :data:`NUMPY_SORT_ROW` samples are sorted by numpy instead (its vectorised
