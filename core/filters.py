@@ -276,10 +276,10 @@ def _rows_into_tile(src, b, nb, n, fwd, t0, t1):  # pragma: no cover - compiled
             f[c], f[c + 1], f[c + 2], f[c + 3] = r0[i], r1[i], r2[i], r3[i]
             f[c + 4], f[c + 5], f[c + 6], f[c + 7] = r4[i], r5[i], r6[i], r7[i]
         c += 8
-    for c in range(c, nb):
-        row = _as_row(src[b + c], n)
+    for k in range(c, nb):
+        row = _as_row(src[b + k], n)
         for i in range(t0, t1):
-            fwd[i, c] = row[i]
+            fwd[i, k] = row[i]
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -297,10 +297,10 @@ def _tile_into_rows(fwd, out, b, nb, t0, t1):  # pragma: no cover - compiled
             d0[i], d1[i], d2[i], d3[i] = f[c], f[c + 1], f[c + 2], f[c + 3]
             d4[i], d5[i], d6[i], d7[i] = f[c + 4], f[c + 5], f[c + 6], f[c + 7]
         c += 8
-    for c in range(c, nb):
-        dst = out[b + c]
+    for k in range(c, nb):
+        dst = out[b + k]
         for i in range(t0, t1):
-            dst[i] = fwd[i, c]
+            dst[i] = fwd[i, k]
 
 
 @numba.njit(cache=True, nogil=True)

@@ -16,6 +16,11 @@ from __future__ import annotations
 import numba
 import numba.extending
 import numpy as np
+import pytest
+import scipy.signal
+
+from railval.core import filters
+from railval.core.filters import design, filtfilt_rows
 
 # ---- the previous kernel (core/filters.py before branch filt2), unchanged ----------------
 _BLOCK = 32
@@ -169,11 +174,6 @@ def _filtfilt_into(sos, zi, edge, src, out, r0, r1, fwd):  # pragma: no cover - 
 
 
 # ---- tests ----------------------------------------------------------------------------------
-import pytest  # noqa: E402
-import scipy.signal  # noqa: E402
-
-from railval.core import filters  # noqa: E402
-from railval.core.filters import design, filtfilt_rows  # noqa: E402
 
 FS = 500.0
 
