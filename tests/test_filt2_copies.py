@@ -6,9 +6,10 @@ reference: the new kernel must give its values bit for bit (the recursion is the
 same order; only the copies changed), and ``scipy.signal.sosfiltfilt`` is the independent
 expectation (Gustafsson 1996, odd extension, docs/validation.md, Throughput).
 
-Run as a script for the figures: ``python tests/test_filt2_copies.py`` prints CPU and wall ns
-per sample of the previous and the current kernel, alternating, in one process (272 low-pass
-and 68 band-pass rows × 20 000 samples, one and two threads) with the load average.
+Run as a script for the figures: ``python -m tests.test_filt2_copies`` (from the repository
+root) prints CPU and wall ns per sample of the previous and the current kernel, alternating,
+in one process (272 low-pass and 68 band-pass rows × 20 000 samples, one and two threads)
+with the load average.
 """
 
 from __future__ import annotations
@@ -280,5 +281,7 @@ def _bench(reps: int = 6) -> None:
                       f"load {os.getloadavg()[0]:.2f}", flush=True)
 
 
-if __name__ == "__main__":
-    _bench()
+if __name__ == "__main__":  # the module under its package name, as the kernels' cache knows it
+    import importlib
+
+    importlib.import_module("tests.test_filt2_copies")._bench()
