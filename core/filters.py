@@ -366,8 +366,9 @@ def _filtfilt_into(sos, zi, edge, src, out, r0, r1, fwd):  # pragma: no cover - 
 #: at once (``railval bench en``: 43 and 11 MB); ≤ 256 MB kept per process
 _OUTPUTS = BufferPool(keep=4, max_bytes=128 << 20, min_bytes=1 << 20, max_total_bytes=256 << 20)
 #: the time-major buffers of the forward pass (one per thread part, n × _BLOCK × 8 bytes; the
-#: kernel's own allocation page-faulted afresh in some calls); ≤ 128 MB kept per process
-_SCRATCH = BufferPool(keep=4, max_bytes=64 << 20, min_bytes=1 << 20, max_total_bytes=128 << 20)
+#: kernel's own allocation page-faulted afresh in some calls); pooled from 512 KiB (4096
+#: samples of 16 signals, the signal length pooled before with 32); ≤ 128 MB kept per process
+_SCRATCH = BufferPool(keep=4, max_bytes=64 << 20, min_bytes=1 << 19, max_total_bytes=128 << 20)
 
 
 def _filter_part(d: FilterDesign, src: np.ndarray, out: np.ndarray, r0: int, r1: int) -> None:
