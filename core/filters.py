@@ -167,17 +167,23 @@ def _settling_time(sos: np.ndarray, fs: float) -> float:
         n *= 2
 
 
-#: signals filtered in lockstep by one thread (the inner loop of the kernel runs over them;
-#: 32 measured fastest of 8/16/32/64 with AVX-512, docs/validation.md, Throughput)
-_BLOCK = 32
+#: signals filtered in lockstep by one thread (the inner loop of the kernel runs over them).
+#: 16, not 32: the time-major buffer of the forward pass (n × 16 × 8 B, 2.6 MB for 20 000
+#: samples) is half as large, so more of it is still in the core's L2 cache when the backward
+#: pass reads it from its end, and a partial last block wastes fewer lanes; 16 lanes still keep
+#: the recursion throughput-bound, 8 do not (branch filt2, 2026-11-26, loaded 2-core machine,
+#: same process: 272 low-pass rows × 20 000 samples 4.8 instead of 5.1 CPU ns/sample, 68
+#: band-pass rows 8.5 instead of 10.3; 8 lanes 7.9 and 14.5; tests/test_filt2_copies.py)
+_BLOCK = 16
 
 
-#: samples per chunk of :func:`_cascade_pass`: all sections run over one chunk (32 signals ×
-#: 256 samples × 8 B = 64 KiB, held in the core's cache) before the next
+#: samples per chunk of :func:`_cascade_pass`: all sections run over one chunk (16 signals ×
+#: 256 samples × 8 B = 32 KiB, held in the core's cache) before the next
 _CHUNK = 256
-#: samples per tile of :func:`_filter_block`: 32 signals × 64 samples × 8 B = 16 KiB, held in
+#: samples per tile of :func:`_filter_block`: 16 signals × 64 samples × 8 B = 8 KiB, held in
 #: the L1 cache while it is transposed and every section runs over it (64 measured faster
-#: than 32, 128 and 256 on the bench machine, 2026-11-26)
+#: than 32, 128 and 256 with 32 signals on the bench machine, and not slower than 128 with 16,
+#: 2026-11-26)
 _TILE = 64
 
 
@@ -252,6 +258,51 @@ def _address_to_pointer(typingctx, address):
     return sig, codegen
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _rows_into_tile(src, b, nb, n, fwd, t0, t1):  # pragma: no cover - compiled
+    """``fwd[t0:t1, c] = row_c[t0:t1]`` for the ``nb`` rows at addresses ``src[b:b + nb]``,
+    eight rows at a time: each time step of the tile receives eight contiguous values (one
+    cache line of ``fwd``, written whole) instead of eight separate strided stores (alone,
+    256 rows × 20 000 samples into a 32-wide buffer: 0.96 instead of 1.19 CPU ns per element,
+    tests/test_filt2_copies.py). Values are moved, not computed: bit for bit the same."""
+    c = 0
+    while c + 8 <= nb:
+        r0, r1 = _as_row(src[b + c], n), _as_row(src[b + c + 1], n)
+        r2, r3 = _as_row(src[b + c + 2], n), _as_row(src[b + c + 3], n)
+        r4, r5 = _as_row(src[b + c + 4], n), _as_row(src[b + c + 5], n)
+        r6, r7 = _as_row(src[b + c + 6], n), _as_row(src[b + c + 7], n)
+        for i in range(t0, t1):
+            f = fwd[i]
+            f[c], f[c + 1], f[c + 2], f[c + 3] = r0[i], r1[i], r2[i], r3[i]
+            f[c + 4], f[c + 5], f[c + 6], f[c + 7] = r4[i], r5[i], r6[i], r7[i]
+        c += 8
+    for k in range(c, nb):
+        row = _as_row(src[b + k], n)
+        for i in range(t0, t1):
+            fwd[i, k] = row[i]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _tile_into_rows(fwd, out, b, nb, t0, t1):  # pragma: no cover - compiled
+    """``out[b + c, t0:t1] = fwd[t0:t1, c]`` for ``c < nb``, eight rows at a time (each time
+    step of the tile read as one contiguous group of eight values). Alone 1.31 instead of
+    1.35 CPU ns per element: the cost is the writing of ``out`` itself (a plain row-to-row
+    copy of the same size takes 1.33)."""
+    c = 0
+    while c + 8 <= nb:
+        d0, d1, d2, d3 = out[b + c], out[b + c + 1], out[b + c + 2], out[b + c + 3]
+        d4, d5, d6, d7 = out[b + c + 4], out[b + c + 5], out[b + c + 6], out[b + c + 7]
+        for i in range(t0, t1):
+            f = fwd[i]
+            d0[i], d1[i], d2[i], d3[i] = f[c], f[c + 1], f[c + 2], f[c + 3]
+            d4[i], d5[i], d6[i], d7[i] = f[c + 4], f[c + 5], f[c + 6], f[c + 7]
+        c += 8
+    for k in range(c, nb):
+        dst = out[b + k]
+        for i in range(t0, t1):
+            dst[i] = fwd[i, k]
+
+
 @numba.njit(cache=True, nogil=True)
 def _filter_block(sos, zi, edge, src, out, b, nb, tile, fwd, z0, z1):  # pragma: no cover
     """Forward–backward filter of the ``nb`` (≤ ``_BLOCK``) rows at addresses ``src[b:b + nb]``
@@ -273,10 +324,7 @@ def _filter_block(sos, zi, edge, src, out, b, nb, tile, fwd, z0, z1):  # pragma:
     _sections_over(sos, z0, z1, tile, 0, edge, 1)
     for t0 in range(0, n, _TILE):  # the signal, forward
         t1 = min(t0 + _TILE, n)
-        for c in range(nb):
-            row = _as_row(src[b + c], n)
-            for i in range(t0, t1):
-                fwd[i, c] = row[i]
+        _rows_into_tile(src, b, nb, n, fwd, t0, t1)
         _sections_over(sos, z0, z1, fwd, t0, t1, 1)
     for c in range(nb):  # end extension, forward
         row = _as_row(src[b + c], n)
@@ -288,10 +336,7 @@ def _filter_block(sos, zi, edge, src, out, b, nb, tile, fwd, z0, z1):  # pragma:
     for t1 in range(n, 0, -_TILE):  # the signal, backward
         t0 = max(t1 - _TILE, 0)
         _sections_over(sos, z0, z1, fwd, t1 - 1, t0 - 1, -1)
-        for c in range(nb):
-            dst = out[b + c]
-            for i in range(t0, t1):
-                dst[i] = fwd[i, c]
+        _tile_into_rows(fwd, out, b, nb, t0, t1)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -321,8 +366,9 @@ def _filtfilt_into(sos, zi, edge, src, out, r0, r1, fwd):  # pragma: no cover - 
 #: at once (``railval bench en``: 43 and 11 MB); ≤ 256 MB kept per process
 _OUTPUTS = BufferPool(keep=4, max_bytes=128 << 20, min_bytes=1 << 20, max_total_bytes=256 << 20)
 #: the time-major buffers of the forward pass (one per thread part, n × _BLOCK × 8 bytes; the
-#: kernel's own allocation page-faulted afresh in some calls); ≤ 128 MB kept per process
-_SCRATCH = BufferPool(keep=4, max_bytes=64 << 20, min_bytes=1 << 20, max_total_bytes=128 << 20)
+#: kernel's own allocation page-faulted afresh in some calls); pooled from 512 KiB (4096
+#: samples of 16 signals, the signal length pooled before with 32); ≤ 128 MB kept per process
+_SCRATCH = BufferPool(keep=4, max_bytes=64 << 20, min_bytes=1 << 19, max_total_bytes=128 << 20)
 
 
 def _filter_part(d: FilterDesign, src: np.ndarray, out: np.ndarray, r0: int, r1: int) -> None:

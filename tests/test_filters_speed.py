@@ -24,17 +24,18 @@ BLOCK = 32
 def _ref_pass(sos, zi, ext, first, stop, step):
     """The previous ``_cascade_pass``: one in-place pass over ext[first:stop:step]."""
     n_sec = sos.shape[0]
-    z0 = np.empty((n_sec, BLOCK))
-    z1 = np.empty((n_sec, BLOCK))
+    width = ext.shape[1]  # the kernel's block width (filters._BLOCK)
+    z0 = np.empty((n_sec, width))
+    z1 = np.empty((n_sec, width))
     for s in range(n_sec):
-        for c in range(BLOCK):
+        for c in range(width):
             z0[s, c] = zi[s, 0] * ext[first, c]
             z1[s, c] = zi[s, 1] * ext[first, c]
     length = (stop - first) // step
     for s in range(n_sec):
         for k in range(length):
             row = ext[first + k * step]
-            for c in range(BLOCK):
+            for c in range(width):
                 x = row[c]
                 y = sos[s, 0] * x + z0[s, c]
                 z0[s, c] = sos[s, 1] * x - sos[s, 4] * y + z1[s, c]
