@@ -569,24 +569,36 @@ def _alternatives(qid: str, res: QuantityResult, pairs: QuantityPairs,
                   ) -> list[dict]:
     """Mean, std and pass/fail of one quantity under each reading that can change it, over
     the pairs of the chosen reading. ``pass`` is None where the reading is undefined for
-    some pair (NaN value, e.g. a sample window without samples)."""
-    out = []
+    some pair (NaN value, e.g. a sample window without samples). Every reading is a row of
+    one array (row-wise mean and std: the same sums per row as one reading at a time)."""
     sliding = QUANTITIES[qid].sliding_mean
-    for reading in alternatives_for(QUANTITIES[qid]):
-        m = m_under[reading.id][pairs.index]
-        s = s_under[reading.id][pairs.index]
-        changed = int(np.sum((m != pairs.m) | (s != pairs.s)))
-        d = difference(s, m)
-        n = d.size
-        defined = bool(np.all(np.isfinite(d)))
-        mean = float(d.mean()) if n and defined else float("nan")
-        std = float(d.std(ddof=STD_DDOF)) if n >= 2 and defined else float("nan")
-        passed = judge(n, mean, std, res.mean_limit, res.std_limit) if defined else None
+    readings = alternatives_for(QUANTITIES[qid])
+    if not readings:
+        return []
+    m = np.stack([m_under[r.id] for r in readings])[:, pairs.index]
+    s = np.stack([s_under[r.id] for r in readings])[:, pairs.index]
+    changed = ((m != pairs.m) | (s != pairs.s)).sum(axis=1).tolist()
+    d = difference(s, m)
+    n = d.shape[1]
+    defined = np.isfinite(d).all(axis=1).tolist()
+    nan = float("nan")
+    means, stds = [nan] * len(readings), [nan] * len(readings)
+    rows = [k for k, ok in enumerate(defined) if ok]  # statistics of defined readings only
+    if n and rows:
+        for k, v in zip(rows, d[rows].mean(axis=1).tolist(), strict=True):
+            means[k] = v
+    if n >= 2 and rows:
+        for k, v in zip(rows, d[rows].std(axis=1, ddof=STD_DDOF).tolist(), strict=True):
+            stds[k] = v
+    out = []
+    for k, reading in enumerate(readings):
+        mean, std = means[k], stds[k]
+        passed = judge(n, mean, std, res.mean_limit, res.std_limit) if defined[k] else None
         as_dict, differs, description, label = _reading_text(reading, sliding)
         out.append({
             "reading": dict(as_dict), "differs_in": list(differs),
             "description": description, "label": label,
-            "values_changed": changed,
+            "values_changed": int(changed[k]),
             "mean": _none_if_nan(mean), "std": _none_if_nan(std),
             "mean_norm": _none_if_nan(mean / res.mean_limit),
             "std_norm": _none_if_nan(std / res.std_limit),

@@ -151,3 +151,50 @@ def test_many_configurations_equal_the_fresh_generator_path(monkeypatch):
     assert kept == fresh
     q0 = kept[0]["quantities"][0]
     assert q0["n"] == 39 and all(v is not None for v in q0["mean_norm_ci"])
+
+
+def _reference_alternative(m, s, ml, sl):
+    """One reading at a time, written independently: D_v (eq. 4), mean, std (n − 1)."""
+    d = np.where(m == 0.0, s, (s - m) * np.sign(m))
+    if not np.all(np.isfinite(d)):
+        return None, None, None
+    mean = float(np.sum(d) / d.size) if d.size else None
+    std = float(np.sqrt(np.sum((d - d.mean()) ** 2) / (d.size - 1))) if d.size >= 2 else None
+    return mean, std, bool(d.size >= 2 and abs(mean) <= ml and std <= sl)
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 37, 300])
+def test_alternatives_of_all_readings_at_once_equal_one_at_a_time(n):
+    from railval.core.definitions import alternatives_for
+    from railval.core.pairing import QuantityPairs
+    from railval.core.quantities import QUANTITIES
+
+    qid = next(q for q in QUANTITY_IDS if len(alternatives_for(QUANTITIES[q])) > 2)
+    readings = alternatives_for(QUANTITIES[qid])
+    rng = np.random.default_rng(n)
+    total = n + 5  # the quantity's pairs are a subset of the gathered table
+    index = np.sort(rng.choice(total, size=n, replace=False))
+    m0, s0 = rng.standard_normal(total) * 10, rng.standard_normal(total) * 10
+    m_under, s_under = {}, {}
+    for k, r in enumerate(readings):
+        m_under[r.id] = np.where(rng.random(total) < 0.3, m0 * 1.01, m0)
+        s_under[r.id] = s0 + (k % 3) * 0.5
+    if n:
+        s_under[readings[1].id][index[0]] = np.nan  # this reading is undefined
+    pairs = QuantityPairs(["S"] * n, [1] * n, ["p"] * n, m0[index], s0[index], index)
+    res = validation.QuantityResult(qid, "kN", n, 1, 1, 0.1, 5.0, 4.0, 12.0, (0, 0), (0, 0))
+    got = validation._alternatives(qid, res, pairs, m_under, s_under)
+    assert [a["reading"]["id"] for a in got] == [r.id for r in readings]
+    for a, r in zip(got, readings, strict=True):
+        m, s = m_under[r.id][index], s_under[r.id][index]
+        mean, std, passed = _reference_alternative(m, s, 4.0, 12.0)
+        assert a["values_changed"] == int(np.sum((m != m0[index]) | (s != s0[index])))
+        assert a["pass"] == passed
+        for key, want in (("mean", mean), ("std", std)):
+            if want is None:
+                assert a[key] is None
+            else:
+                assert abs(a[key] - want) <= 1e-12 * max(1.0, abs(want))
+        if std is not None:  # the same sums as numpy one reading at a time: bit for bit
+            d = validation.difference(s, m)
+            assert a["mean"] == float(d.mean()) and a["std"] == float(d.std(ddof=1))
