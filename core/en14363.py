@@ -51,6 +51,7 @@ Hyndman, R.J. & Fan, Y. (1996) Sample quantiles in statistical packages, Am. Sta
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import struct
@@ -95,6 +96,9 @@ from railval.core.types import CHANNELS, SectionInfo, SignalSet, channel_name
 
 #: bump whenever the numbers this module produces can change (enters result-cache keys)
 PROCESSING_VERSION = "en14363/2"
+#: the cached form of a section's values (:func:`pack_values`); enters the result-cache keys
+#: so that a cache written in another form is never read (the numbers do not change with it)
+CACHE_FORM = "packed/2"
 #: largest sample magnitude processed: squares and filter states of larger values overflow
 #: float64 (±1.8e308) and turn statistics into inf or NaN
 MAX_ABS_SAMPLE = 1e100
@@ -513,11 +517,11 @@ def evaluate_present(signalsets: Mapping[str, SignalSet], sections: Sequence[Sec
 def section_cache_key(section: SectionInfo, fs: float, n: int, distance_sha: str,
                       channel_hashes: Mapping[str, str], order: int) -> str:
     """Key of the processed values of one section of one source: SHA-256 over the processing
-    version, filter order, section id, evaluated range, fs, n, the distance-axis hash and the
+    version, the cached form (:data:`CACHE_FORM`), filter order, section id, evaluated range, fs, n, the distance-axis hash and the
     sorted (channel, content hash) pairs. Any change of samples, axis, range, order or
     processing code changes the key."""
     h = hashlib.sha256()
-    parts = [PROCESSING_VERSION, f"order={int(order)}", f"section={section.id}",
+    parts = [PROCESSING_VERSION, CACHE_FORM, f"order={int(order)}", f"section={section.id}",
              f"eval={section.eval_start_m!r}:{section.eval_end_m!r}", f"fs={float(fs)!r}",
              f"n={int(n)}", f"distance={distance_sha}"]
     parts += [f"{c}={channel_hashes[c]}" for c in sorted(channel_hashes)]
@@ -525,21 +529,65 @@ def section_cache_key(section: SectionInfo, fs: float, n: int, distance_sha: str
     return "en14363:" + h.hexdigest()
 
 
+_PACK_MAGIC = b"RVP2"
+_PACK_HEAD = struct.Struct("<4sII")  # magic, bytes of the layout, bytes of the warnings
+
+
 def pack_values(values: SectionValues) -> bytes:
     """A section's values, warnings, values under the alternative readings and supplementary
-    values as JSON bytes (the cached form; provenance not kept)."""
-    return json.dumps({
-        "values": [[q, p, float(v)] for (q, p), v in values.items()],
-        "warnings": values.warnings,
-        "alternatives": {rid: [[q, p, float(v) if np.isfinite(v) else None]
-                               for (q, p), v in vals.items()]
-                         for rid, vals in values.alternatives.items()},
-        "supplementary": [[q, p, float(v)] for (q, p), v in values.supplementary.items()],
-    }, allow_nan=False).encode()
+    values (the cached form; provenance not kept): a header, the layout (every key, in
+    order) and the warnings as JSON, then every value as one little-endian float64 block in
+    layout order (the same float64s; non-finite values under an alternative reading are
+    stored as NaN, as the former JSON form did). The layout is the same for every section
+    with the same channels, so :func:`unpack_values` parses it once."""
+    alts = values.alternatives
+    layout = json.dumps([[list(k) for k in values],
+                         [[rid, [list(k) for k in vals]] for rid, vals in alts.items()],
+                         [list(k) for k in values.supplementary]]).encode()
+    main = np.fromiter(values.values(), dtype=np.float64, count=len(values))
+    supp = np.fromiter(values.supplementary.values(), dtype=np.float64,
+                       count=len(values.supplementary))
+    if not (np.isfinite(main).all() and np.isfinite(supp).all()):
+        raise ValueError(f"section {values.section_id}: a value is not finite")
+    parts = [main]
+    for vals in alts.values():
+        a = np.fromiter(vals.values(), dtype=np.float64, count=len(vals))
+        parts.append(np.where(np.isfinite(a), a, np.nan))
+    parts.append(supp)
+    warnings = json.dumps(values.warnings).encode()
+    return b"".join([_PACK_HEAD.pack(_PACK_MAGIC, len(layout), len(warnings)), layout,
+                     warnings, np.concatenate(parts).astype("<f8").tobytes()])
+
+
+@functools.lru_cache(maxsize=256)
+def _pack_layout(layout: bytes) -> tuple[tuple, tuple, tuple]:
+    """The keys of a packed layout as tuples (parsed once per distinct layout)."""
+    main, alts, supp = json.loads(layout)
+    return (tuple(tuple(k) for k in main),
+            tuple((rid, tuple(tuple(k) for k in keys)) for rid, keys in alts),
+            tuple(tuple(k) for k in supp))
 
 
 def unpack_values(section_id: str, blob: bytes) -> SectionValues:
-    """The inverse of :func:`pack_values`."""
+    """The inverse of :func:`pack_values` (also reads the former JSON form)."""
+    if blob[:4] != _PACK_MAGIC:
+        return _unpack_json(section_id, blob)
+    _magic, n_layout, n_warn = _PACK_HEAD.unpack_from(blob)
+    start = _PACK_HEAD.size
+    main, alts, supp = _pack_layout(bytes(blob[start:start + n_layout]))
+    warnings = json.loads(blob[start + n_layout:start + n_layout + n_warn])
+    flat = np.frombuffer(blob, dtype="<f8", offset=start + n_layout + n_warn).tolist()
+    out = SectionValues(section_id, zip(main, flat), warnings=warnings)
+    at = len(main)
+    for rid, keys in alts:
+        out.alternatives[rid] = dict(zip(keys, flat[at:at + len(keys)]))
+        at += len(keys)
+    out.supplementary = dict(zip(supp, flat[at:]))
+    return out
+
+
+def _unpack_json(section_id: str, blob: bytes) -> SectionValues:
+    """The former JSON form of the cached values."""
     doc = json.loads(blob)
     alts = {rid: {(q, p): (float("nan") if v is None else v) for q, p, v in vals}
             for rid, vals in doc.get("alternatives", {}).items()}

@@ -111,19 +111,41 @@ def gather_pairs(measured_values, simulated_values, secs: Mapping[str, SectionIn
 def values_under(pairs: Pairs, values, column: int) -> dict[str, np.ndarray]:
     """Reading id → every pair's value of one side under that reading (gathering order;
     ``SectionValues.value_under``: the chosen value where the reading does not change it).
-    ``column``: 2 for the measured, 3 for the simulated side of ``pairs.by_section``."""
+    ``column``: 2 for the measured, 3 for the simulated side of ``pairs.by_section``.
+    A :class:`SectionValues` stores only the values a reading changes, so each reading's
+    column is the chosen column with those values written over it (the same float64s)."""
+    base = np.array([v for row in pairs.by_section for v in row[column]], dtype=np.float64)
+    plain, offsets, at = [], [], 0
+    for row in pairs.by_section:
+        sv = values[row[0]]
+        plain.append(type(sv).value_under is _SECTION_VALUE_UNDER)
+        offsets.append(at)
+        at += len(row[1])
+    where: list = [None] * len(pairs.by_section)  # per section: key → position, on first use
     out = {}
     for reading in READINGS:
         if reading == CHOSEN:
             continue
         rid = reading.id
-        got: list = []  # one array per reading, not one per section (the same float64s)
-        for row in pairs.by_section:
+        col = base.copy()
+        pos: list[int] = []
+        got: list = []
+        for j, row in enumerate(pairs.by_section):
             sv = values[row[0]]
-            if type(sv).value_under is _SECTION_VALUE_UNDER:
-                alt = sv.alternatives.get(rid)
-                got += row[column] if not alt else map(alt.get, row[1], row[column])
-            else:
-                got += [sv.value_under(rid, k) for k in row[1]]
-        out[rid] = np.array(got, dtype=np.float64) if got else np.empty(0)
+            if not plain[j]:
+                col[offsets[j]:offsets[j] + len(row[1])] = [sv.value_under(rid, k)
+                                                            for k in row[1]]
+                continue
+            alt = sv.alternatives.get(rid)
+            if not alt:
+                continue
+            if where[j] is None:
+                where[j] = {k: offsets[j] + i for i, k in enumerate(row[1])}
+            for k, v in alt.items():
+                i = where[j].get(k)
+                if i is not None:
+                    pos.append(i)
+                    got.append(v)
+        col[pos] = got
+        out[rid] = col
     return out

@@ -309,9 +309,23 @@ class ValidationResult:
         return pd.DataFrame(rows).set_index("quantity")
 
 
+#: most resample indices kept per (seed, quantity, n, n_boot) by :func:`_resample_indices`
+_CACHED_DRAW = 1 << 18
+
+
+@functools.lru_cache(maxsize=64)
+def _resample_indices(seed_key: tuple, n: int, n_boot: int) -> np.ndarray:
+    """The resample indices of :func:`bootstrap_norm_ci` for ``seed_key`` in one draw
+    (read-only; every configuration of a run with as many pairs reuses them)."""
+    idx = np.random.default_rng(list(seed_key)).integers(0, n, size=(n_boot, n))
+    idx.setflags(write=False)
+    return idx
+
+
 def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_boot: int,
-                      rng: np.random.Generator, ci_level: float = 0.95,
-                      chunk: int = 2_000_000) -> tuple[tuple[float, float], tuple[float, float]]:
+                      rng: np.random.Generator | None = None, ci_level: float = 0.95,
+                      chunk: int = 2_000_000, seed_key: tuple | None = None
+                      ) -> tuple[tuple[float, float], tuple[float, float]]:
     """Percentile bootstrap CIs of mean/mean_limit and std(ddof=1)/std_limit over pairs
     (Efron & Tibshirani 1993, ch. 13: pairs resampled with replacement).
 
@@ -323,12 +337,16 @@ def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_b
         The limits the mean and std are divided by.
     n_boot : int
         Resamples (< 1, or fewer than 2 pairs: NaN intervals).
-    rng : numpy.random.Generator
+    rng : numpy.random.Generator, optional
         Source of the resampling.
     ci_level : float
         Confidence level of the intervals.
     chunk : int
         Most resampled values held at once (memory bound).
+    seed_key : tuple, optional
+        Instead of ``rng``: the seed of ``numpy.random.default_rng``; the indices of a
+        single draw (at most :data:`_CACHED_DRAW` values) are kept and reused — the same
+        numbers as ``rng=default_rng(list(seed_key))``.
 
     Returns
     -------
@@ -341,16 +359,26 @@ def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_b
         return nan, nan
     means = np.empty(n_boot)
     stds = np.empty(n_boot)
-    rows = max(1, chunk // n)
-    for start in range(0, n_boot, rows):
-        stop = min(n_boot, start + rows)
-        sample = d[rng.integers(0, n, size=(stop - start, n))]
-        means[start:stop] = sample.mean(axis=1)
-        stds[start:stop] = sample.std(axis=1, ddof=STD_DDOF)
+    if seed_key is not None and n * n_boot <= min(chunk, _CACHED_DRAW):
+        # one draw of every resample: default_rng(seed_key).integers(0, n, (n_boot, n)),
+        # drawn once per (seed_key, n, n_boot) and reused (what the loop below draws)
+        sample = d[_resample_indices(tuple(seed_key), n, n_boot)]
+        means, stds = sample.mean(axis=1), sample.std(axis=1, ddof=STD_DDOF)
+    else:
+        if rng is None:
+            rng = np.random.default_rng(list(seed_key))
+        means, stds = np.empty(n_boot), np.empty(n_boot)
+        rows = max(1, chunk // n)
+        for start in range(0, n_boot, rows):
+            stop = min(n_boot, start + rows)
+            sample = d[rng.integers(0, n, size=(stop - start, n))]
+            means[start:stop] = sample.mean(axis=1)
+            stds[start:stop] = sample.std(axis=1, ddof=STD_DDOF)
     a = (1.0 - ci_level) / 2.0
     qs = [100 * a, 100 * (1 - a)]
-    m_lo, m_hi = np.percentile(means / mean_limit, qs)
-    s_lo, s_hi = np.percentile(stds / std_limit, qs)
+    # both intervals in one call, row by row (the same partition and interpolation per row)
+    (m_lo, s_lo), (m_hi, s_hi) = np.percentile(np.stack([means / mean_limit,
+                                                         stds / std_limit]), qs, axis=1)
     return (float(m_lo), float(m_hi)), (float(s_lo), float(s_hi))
 
 
@@ -409,8 +437,7 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     results: dict[str, QuantityResult] = {}
     for qi, qid in enumerate(QUANTITY_IDS):
         results[qid] = quantity_result(qid, pairs.of(qi), veh, n_boot=n_boot,
-                                       rng=np.random.default_rng([seed, qi]),
-                                       ci_level=ci_level, top=top)
+                                       seed_key=(seed, qi), ci_level=ci_level, top=top)
     zone_of = {sid: int(info.zone) for sid, info in secs.items()}
     cov = coverage({q: set(pairs.of(qi).section) for qi, q in enumerate(QUANTITY_IDS)},
                    {q: set(pairs.of(qi).position) for qi, q in enumerate(QUANTITY_IDS)},
@@ -452,8 +479,8 @@ def _frame_columns(qid: str, p: QuantityPairs, std_limit: float) -> dict[str, An
 
 
 def quantity_result(qid: str, pairs: QuantityPairs, vehicle: Vehicle, *, n_boot: int,
-                    rng: np.random.Generator, ci_level: float = 0.95,
-                    top: int = 5) -> QuantityResult:
+                    rng: np.random.Generator | None = None, ci_level: float = 0.95,
+                    top: int = 5, seed_key: tuple | None = None) -> QuantityResult:
     """D_v statistics of one quantity over its pairs (Polach & Böttcher 2014 §5, eq. 4).
 
     Parameters
@@ -464,7 +491,7 @@ def quantity_result(qid: str, pairs: QuantityPairs, vehicle: Vehicle, *, n_boot:
         The pairs of the quantity (section, zone, position, M, S).
     vehicle : Vehicle
         What the limits depend on (Table 2).
-    n_boot, rng, ci_level
+    n_boot, rng, ci_level, seed_key
         Bootstrap of the normalised values (:func:`bootstrap_norm_ci`).
     top : int
         Pairs listed in the drill-down.
@@ -484,7 +511,7 @@ def quantity_result(qid: str, pairs: QuantityPairs, vehicle: Vehicle, *, n_boot:
     std = float(d.std(ddof=STD_DDOF)) if n >= 2 else float("nan")
     with stage("bootstrap"):
         mci, sci = bootstrap_norm_ci(d, mean_limit, std_limit, n_boot=n_boot, rng=rng,
-                                     ci_level=ci_level)
+                                     ci_level=ci_level, seed_key=seed_key)
     d_norm = d / std_limit
     ss = float(np.sum(d * d))
     order = np.argsort(-np.abs(d_norm), kind="stable")[:top].tolist()
@@ -542,24 +569,36 @@ def _alternatives(qid: str, res: QuantityResult, pairs: QuantityPairs,
                   ) -> list[dict]:
     """Mean, std and pass/fail of one quantity under each reading that can change it, over
     the pairs of the chosen reading. ``pass`` is None where the reading is undefined for
-    some pair (NaN value, e.g. a sample window without samples)."""
-    out = []
+    some pair (NaN value, e.g. a sample window without samples). Every reading is a row of
+    one array (row-wise mean and std: the same sums per row as one reading at a time)."""
     sliding = QUANTITIES[qid].sliding_mean
-    for reading in alternatives_for(QUANTITIES[qid]):
-        m = m_under[reading.id][pairs.index]
-        s = s_under[reading.id][pairs.index]
-        changed = int(np.sum((m != pairs.m) | (s != pairs.s)))
-        d = difference(s, m)
-        n = d.size
-        defined = bool(np.all(np.isfinite(d)))
-        mean = float(d.mean()) if n and defined else float("nan")
-        std = float(d.std(ddof=STD_DDOF)) if n >= 2 and defined else float("nan")
-        passed = judge(n, mean, std, res.mean_limit, res.std_limit) if defined else None
+    readings = alternatives_for(QUANTITIES[qid])
+    if not readings:
+        return []
+    m = np.stack([m_under[r.id] for r in readings])[:, pairs.index]
+    s = np.stack([s_under[r.id] for r in readings])[:, pairs.index]
+    changed = ((m != pairs.m) | (s != pairs.s)).sum(axis=1).tolist()
+    d = difference(s, m)
+    n = d.shape[1]
+    defined = np.isfinite(d).all(axis=1).tolist()
+    nan = float("nan")
+    means, stds = [nan] * len(readings), [nan] * len(readings)
+    rows = [k for k, ok in enumerate(defined) if ok]  # statistics of defined readings only
+    if n and rows:
+        for k, v in zip(rows, d[rows].mean(axis=1).tolist(), strict=True):
+            means[k] = v
+    if n >= 2 and rows:
+        for k, v in zip(rows, d[rows].std(axis=1, ddof=STD_DDOF).tolist(), strict=True):
+            stds[k] = v
+    out = []
+    for k, reading in enumerate(readings):
+        mean, std = means[k], stds[k]
+        passed = judge(n, mean, std, res.mean_limit, res.std_limit) if defined[k] else None
         as_dict, differs, description, label = _reading_text(reading, sliding)
         out.append({
             "reading": dict(as_dict), "differs_in": list(differs),
             "description": description, "label": label,
-            "values_changed": changed,
+            "values_changed": int(changed[k]),
             "mean": _none_if_nan(mean), "std": _none_if_nan(std),
             "mean_norm": _none_if_nan(mean / res.mean_limit),
             "std_norm": _none_if_nan(std / res.std_limit),

@@ -9,11 +9,13 @@ Results cache
 Processing a section of one source (the measurement or a configuration) is cached in the
 database table ``result_cache`` (:func:`railval.db.repo.cache_get` / :func:`railval.db.repo.cache_put`) under
 
-    sha256(PROCESSING_VERSION, filter order, section id, evaluated range, fs, n,
+    sha256(PROCESSING_VERSION, CACHE_FORM, filter order, section id, evaluated range, fs, n,
            distance-axis hash, sorted (channel, content hash) of the recording)
 
-and holds the section's values as JSON (with the values under the alternative readings of
-the open definitions and the supplementary values). Content hashes are read first
+and holds the section's values (with the values under the alternative readings of the open
+definitions and the supplementary values) as one float64 block behind a JSON layout of the
+keys, which the main process parses once per distinct layout
+(:func:`railval.core.en14363.pack_values`). Content hashes are read first
 (:func:`railval.db.repo.signal_hashes`, no blob is touched); only sections whose key is not cached are
 loaded and processed. So the measured side is processed once per campaign and filter order,
 and a new configuration costs only its own signals. Any change of samples, distance axis,
