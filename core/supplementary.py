@@ -57,7 +57,7 @@ import numpy as np
 
 from railval.core.diagnosis import DEFAULT_BANDS_HZ, Component, Pattern
 from railval.core.errors import InvalidParameter
-from railval.core.psd import welch_blocks
+from railval.core.psd import welch_rows
 from railval.core.types import BODY_POSITIONS
 
 PSD_SEGMENT_S = 10.0
@@ -170,38 +170,35 @@ def psd_band_values_batch(evaluated: Sequence[Mapping[str, np.ndarray]], fs: Seq
     list of dict of (str, str) to float
         Per section ``{(quantity id, position): band rms in m/s²}``.
     """
-    groups: dict[tuple[float, int], list[tuple[int, str]]] = defaultdict(list)
-    for i, chans in enumerate(evaluated):
-        for ch, x in chans.items():
-            if ch.rpartition("_")[0] in PSD_KINDS and np.asarray(x).size >= 8:
-                groups[(float(fs[i]), np.asarray(x).size)].append((i, ch))
-    out: list[dict[tuple[str, str], float]] = [{} for _ in evaluated]
-    by_fs: dict[float, list[tuple[int, list[tuple[int, str]]]]] = defaultdict(list)
-    for (rate, _), members in groups.items():
-        by_fs[rate].append(members)
-    for rate, member_lists in by_fs.items():
-        blocks = [np.vstack([np.asarray(evaluated[i][c], dtype=np.float64) for i, c in members])
-                  for members in member_lists]
-        for members, (f, g) in zip(member_lists, welch_blocks(blocks, rate, PSD_SEGMENT_S),
-                                   strict=True):
-            _band_rms(f, g, members, out)
+    return [_section_band_values(ev, float(rate)) for ev, rate in zip(evaluated, fs, strict=True)]
+
+
+def _section_band_values(evaluated: Mapping[str, np.ndarray], fs: float
+                         ) -> dict[tuple[str, str], float]:
+    """The band rms values of one section, computed exactly as the values a sign-off binds
+    were computed (one :func:`railval.core.psd.welch_rows` call per channel length of the
+    section, the bins selected by mask): a faster batched Welch that differed in the last
+    bits (≤ 2.1·10⁻¹⁵ relative) made signed results read as changed, so the arithmetic here
+    must not change (tests/test_upgrade.py)."""
+    out: dict[tuple[str, str], float] = {}
+    names = [ch for ch, x in evaluated.items()
+             if ch.rpartition("_")[0] in PSD_KINDS and np.asarray(x).size >= 8]
+    by_length: dict[int, list[str]] = defaultdict(list)
+    for ch in names:
+        by_length[np.asarray(evaluated[ch]).size].append(ch)
+    for chans in by_length.values():  # one Welch call for the channels of equal length
+        f, g, _ = welch_rows(np.vstack([np.asarray(evaluated[c], dtype=np.float64) for c in chans]),
+                             fs, PSD_SEGMENT_S)
+        df = f[1] - f[0]
+        for lo, hi in DEFAULT_BANDS_HZ:
+            inside = (f >= lo) & (f < hi)  # the bins of railval.core.diagnosis.band_powers
+            if not inside.any():
+                continue
+            power = np.sum(g[:, inside], axis=1) * df
+            for ch, pw in zip(chans, power, strict=True):
+                kind, _, pos = ch.rpartition("_")
+                out[(f"psd_{kind}_{lo:g}-{hi:g}Hz", pos)] = float(math.sqrt(pw))
     return out
-
-
-def _band_rms(f: np.ndarray, g: np.ndarray, members: list[tuple[int, str]],
-              out: list[dict[tuple[str, str], float]]) -> None:
-    """Band rms ``sqrt(Σ_{lo ≤ f < hi} G(f)·Δf)`` of each row of ``g`` (channel ``members[r]``
-    = (section index, channel)) into ``out``; bands without a bin give no value."""
-    df = f[1] - f[0]
-    for lo, hi in DEFAULT_BANDS_HZ:
-        # the bins lo ≤ f < hi of railval.core.diagnosis.band_powers (f ascending: a run)
-        first, stop = np.searchsorted(f, lo, side="left"), np.searchsorted(f, hi, side="left")
-        if stop <= first:
-            continue
-        power = np.sum(g[:, first:stop], axis=1) * df
-        for (i, ch), pw in zip(members, power, strict=True):
-            kind, _, pos = ch.rpartition("_")
-            out[i][(f"psd_{kind}_{lo:g}-{hi:g}Hz", pos)] = float(math.sqrt(pw))
 
 
 def _pairs(measured: Mapping[str, Mapping[tuple[str, str], float]],
