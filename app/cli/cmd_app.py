@@ -3,7 +3,9 @@
 ``railval serve [--port 5006] [--address 127.0.0.1] [--no-demo] [--allow-websocket-origin H]
 [--cookie-secret-file FILE] [--behind-proxy] [--admin]``
     migrate the database, seed the demo campaign (``railval.app.services.synth.ensure_demo``) into an
-    empty database unless ``--no-demo``, and serve the web app until interrupted. With users in
+    empty database unless ``--no-demo``, and serve the web app until interrupted. A child
+    process at low priority loads the validation's compiled kernels meanwhile, compiling them
+    on a fresh installation (:mod:`railval.app.services.warmup`; ``RAILVAL_NO_WARMUP=1`` skips it). With users in
     the database every page needs sign-in (:mod:`railval.app.auth`); without users it serves
     open single-user mode on a loopback address only and refuses any other address.
 ``railval report CAMPAIGN --config NAME --out FILE.html|FILE.pdf [--worst N] [--json]
@@ -79,6 +81,11 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
     database = _database(args.db, upgrade=True)
     has_users = check_startup(database, args.address)
+    from railval.app.services.warmup import start_background
+
+    # compiles the validation kernels on a fresh installation (≈ 25 s of one core) while the
+    # demo is seeded and the server starts, instead of during the first Validate
+    start_background()
     if has_users:
         _secret, origin = cookie_secret(args.cookie_secret_file)
         print(f"railval serve: sign-in required (users in the database); cookie secret: {origin}",

@@ -1,0 +1,95 @@
+"""Load — on a fresh installation compile — the compiled kernels a validation runs, in a
+separate low-priority process started by ``railval serve``.
+
+The EN chain (:mod:`railval.core.filters`, :mod:`railval.core.en_kernels`,
+:mod:`railval.core.en14363`) and the blob codec (:mod:`railval.db.codec`) are numba kernels
+cached on disk (``cache=True``: ``__pycache__`` beside the module, or numba's per-user cache
+directory when the installation is read-only). The first run after an installation compiles
+them: about 25 s of one core on the 2-core reference machine, which the first user to press
+Validate would otherwise wait through. :func:`start_background` runs :func:`warm` in a child
+process while the server seeds the demo campaign and starts, so that user finds the kernels
+compiled; when they already are, the child only loads them (≈ 1 CPU-s) and exits.
+
+:func:`warm` goes the way a validation goes: arrays of every channel kind are encoded and
+decoded by the codec (hash checked), then one batch of sections of every filter need runs
+through :func:`railval.core.en14363.evaluate_batch` at the default filter order, with the
+definition alternatives and supplementary values, so the kernels are compiled for the types a
+stored campaign gives them (tests/test_warmup.py checks that a validation afterwards compiles
+nothing new). No database is opened and nothing is written except numba's cache.
+
+``python -m railval.app.services.warmup`` runs :func:`warm` and prints its seconds as JSON.
+``RAILVAL_NO_WARMUP=1`` stops ``railval serve`` from starting it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+#: environment variable that switches the background warm-up off (any non-empty value but "0")
+NO_WARMUP_ENV = "RAILVAL_NO_WARMUP"
+
+
+def _sections(rng: np.random.Generator):
+    """Two sections (a curve and a straight) with every channel of the registry, stored and
+    read back by the codec as a validation reads them."""
+    from railval.core.types import CHANNELS, SectionInfo, SignalSet
+    from railval.db import codec
+
+    fs, n = 200.0, 4000
+    out_sets, infos = [], []
+    for k, (radius, zone) in enumerate(((500.0, 3), (0.0, 1))):
+        t = np.arange(n) / fs
+        d = np.cumsum(np.full(n, 25.0 / fs)) - 25.0 / fs
+        raw = {}
+        for kind, spec in CHANNELS.items():
+            for pos in spec.positions:
+                base = 75.0 if kind == "Q" else 0.0
+                raw[f"{kind}_{pos}"] = base + rng.standard_normal(n)
+        blobs = [codec.encode(a) for a in [d, *raw.values()]]
+        arrays = codec.decode_many(blobs)  # hashes checked, as on every read
+        sset = SignalSet(fs, t, arrays[0], dict(zip(raw, arrays[1:], strict=True)))
+        sset.hashes = {name: sha for name, (_b, sha) in zip(raw, blobs[1:], strict=True)}
+        out_sets.append(sset)
+        infos.append(SectionInfo(f"warm{k}", radius, 100.0, 90.0, zone, 100.0, 400.0))
+    return out_sets, infos
+
+
+def warm() -> dict[str, float]:
+    """Compile or load the kernels of a validation (module docstring); returns the seconds
+    of each step."""
+    t0 = time.perf_counter()
+    from railval.core.en14363 import evaluate_batch
+
+    t_import = time.perf_counter()
+    sets, infos = _sections(np.random.default_rng(0))
+    t_codec = time.perf_counter()
+    evaluate_batch(sets, infos)
+    t_en = time.perf_counter()
+    return {"import_s": round(t_import - t0, 3), "codec_s": round(t_codec - t_import, 3),
+            "en_chain_s": round(t_en - t_codec, 3), "total_s": round(t_en - t0, 3)}
+
+
+def start_background() -> subprocess.Popen | None:
+    """Start :func:`warm` in a child process at the lowest CPU priority (``nice`` 19), its
+    output discarded; returns the process, or None when :data:`NO_WARMUP_ENV` switches it
+    off. The server does not wait for it."""
+    if os.environ.get(NO_WARMUP_ENV, "") not in ("", "0"):
+        return None
+
+    def lower_priority() -> None:  # runs in the child before exec
+        os.nice(19)
+
+    return subprocess.Popen([sys.executable, "-m", "railval.app.services.warmup"],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, preexec_fn=lower_priority,
+                            start_new_session=True)
+
+
+if __name__ == "__main__":
+    print(json.dumps(warm()))
