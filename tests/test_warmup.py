@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 from railval.app.services import warmup
@@ -34,7 +35,8 @@ def test_warm_compiles_what_a_validation_needs(tmp_path, demo_campaign_dir):
         subprocess.run([sys.executable, "-m", "railval.app", *verb], env=env, check=True,
                        capture_output=True, timeout=600)
     res = subprocess.run([sys.executable, "-m", "railval.app", "validate", "demo", "--config",
-                          "baseline"], env=env, capture_output=True, text=True, timeout=600)
+                          "baseline"], env=env, capture_output=True, text=True, timeout=600,
+                         check=False)
     assert res.returncode in (0, 1), res.stderr  # 1: the configuration is not validated
     assert "VALIDATED" in res.stdout
     # the validation found every kernel compiled for its types: no cache file new or rewritten
@@ -49,6 +51,9 @@ def test_start_background_lowest_priority_and_switch(monkeypatch):
     assert proc is not None
     try:
         assert proc.args[-1] == "railval.app.services.warmup"
+        deadline = time.monotonic() + 30  # the child lowers itself first thing
+        while os.getpriority(os.PRIO_PROCESS, proc.pid) != 19 and time.monotonic() < deadline:
+            time.sleep(0.02)
         assert os.getpriority(os.PRIO_PROCESS, proc.pid) == 19
     finally:
         proc.kill()

@@ -76,20 +76,16 @@ def warm() -> dict[str, float]:
 
 
 def start_background() -> subprocess.Popen | None:
-    """Start :func:`warm` in a child process at the lowest CPU priority (``nice`` 19), its
-    output discarded; returns the process, or None when :data:`NO_WARMUP_ENV` switches it
+    """Start :func:`warm` in a child process, which first lowers itself to the lowest CPU
+    priority (``nice`` 19); its output is discarded; returns the process, or None when :data:`NO_WARMUP_ENV` switches it
     off. The server does not wait for it."""
     if os.environ.get(NO_WARMUP_ENV, "") not in ("", "0"):
         return None
-
-    def lower_priority() -> None:  # runs in the child before exec
-        os.nice(19)
-
     return subprocess.Popen([sys.executable, "-m", "railval.app.services.warmup"],
                             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, preexec_fn=lower_priority,
-                            start_new_session=True)
+                            stderr=subprocess.DEVNULL, start_new_session=True)
 
 
 if __name__ == "__main__":
+    os.nice(19)  # before the kernels load: the child never competes with the server it helps
     print(json.dumps(warm()))
