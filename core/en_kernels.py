@@ -389,44 +389,45 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
 
 
 @numba.njit(cache=True, nogil=True)
-def _welch_density(spec, n_blocks, n_seg, rows, even, out):  # pragma: no cover - compiled
+def _welch_density(spec, first, n_seg, rows, even, out):  # pragma: no cover - compiled
     """The end of :func:`scipy.signal.welch` over the segment spectra of many blocks
-    (:func:`railval.core.psd.welch_blocks`; ``spec`` row ``(j·n_seg + p)·rows + r`` = row r
-    of block j, segment p): ``re² + im²``, doubled except DC and an even length's Nyquist
-    bin (``·2``), then the mean over the segments as numpy takes it on scipy's layout (the
-    segments' sum as numpy's pairwise sum: in order from 0.0 below 8 segments, else
+    (:func:`railval.core.psd.welch_blocks`; ``spec`` row ``(first[j] + p)·rows + r`` = row r
+    of block j, segment p < n_seg[j]): ``re² + im²``, doubled except DC and an even length's
+    Nyquist bin (``·2``), then the mean over the segments as numpy takes it on scipy's layout
+    (the segments' sum as numpy's pairwise sum: in order from 0.0 below 8 segments, else
     :func:`pairwise_sum`; ÷ their count; one segment as it is) — the same operations in the
     same order, so the same numbers."""
     n_f = spec.shape[1]
     last = n_f - 1 if even else n_f
-    vals = np.empty(n_seg)
+    vals = np.empty(max(1, n_seg.max()))
     acc = np.empty(n_f)
-    for j in range(n_blocks):
+    for j in range(n_seg.shape[0]):
+        k = n_seg[j]
         for r in range(rows):
             o = out[j, r]
-            if n_seg == 1:
-                x = spec[j * rows + r]
+            if k == 1:
+                x = spec[first[j] * rows + r]
                 for q in range(n_f):
                     o[q] = x[q].real * x[q].real + x[q].imag * x[q].imag
                 for q in range(1, last):
                     o[q] = o[q] * 2.0
-            elif n_seg < 8:
+            elif k < 8:
                 acc[:] = 0.0
-                for p in range(n_seg):
-                    x = spec[(j * n_seg + p) * rows + r]
+                for p in range(k):
+                    x = spec[(first[j] + p) * rows + r]
                     acc[0] += x[0].real * x[0].real + x[0].imag * x[0].imag
                     for q in range(1, last):
                         acc[q] += (x[q].real * x[q].real + x[q].imag * x[q].imag) * 2.0
                     for q in range(last, n_f):
                         acc[q] += x[q].real * x[q].real + x[q].imag * x[q].imag
                 for q in range(n_f):
-                    o[q] = acc[q] / n_seg
+                    o[q] = acc[q] / k
             else:
                 for q in range(n_f):
-                    for p in range(n_seg):
-                        x = spec[(j * n_seg + p) * rows + r, q]
+                    for p in range(k):
+                        x = spec[(first[j] + p) * rows + r, q]
                         v = x.real * x.real + x.imag * x.imag
                         if 0 < q < last:
                             v = v * 2.0
                         vals[p] = v
-                    o[q] = pairwise_sum(vals, 0, n_seg) / n_seg
+                    o[q] = pairwise_sum(vals, 0, k) / k

@@ -144,12 +144,13 @@ def welch_rows(rows: np.ndarray, fs: float, segment_s: float = 10.0) -> tuple[np
     return f, p, nperseg / fs
 
 
-def _checked_nperseg(x, n: int, fs: float, segment_s: float) -> int:
+def _checked_nperseg(x, n: int, fs: float, segment_s: float, finite: bool = True) -> int:
     """The checks of :func:`welch_rows` on rows ``x`` of length ``n`` (a 2-D array or a list
-    of 1-D arrays), in its order; the segment length in samples."""
+    of 1-D arrays), in its order (``finite=False``: all but the finite values); the segment
+    length in samples."""
     if n < 8:
         raise InvalidSignal(f"welch_psd: values must hold at least 8 samples, got {n}")
-    if not (np.all(np.isfinite(x)) if isinstance(x, np.ndarray)
+    if finite and not (np.all(np.isfinite(x)) if isinstance(x, np.ndarray)
             else all(np.isfinite(r).all() for r in x)):
         raise InvalidSignal("welch_psd: values contain NaN or inf")
     if not (fs > 0 and np.isfinite(fs)):
@@ -254,37 +255,93 @@ def welch_blocks(blocks: Sequence, fs: float | Sequence[float], segment_s: float
 def welch_groups(blocks: Sequence, fs: float | Sequence[float], segment_s: float = 10.0
                  ) -> list[tuple[list[int], np.ndarray, np.ndarray]]:
     """:func:`welch_blocks` as computed: per group of blocks with the same segment length,
-    rate, row count and segment count, ``(block indices, frequency_hz, density of shape
-    (n_blocks, n_rows, n_freq))``."""
+    rate and row count, ``(block indices, frequency_hz, density of shape (n_blocks, n_rows,
+    n_freq))``."""
     rates = [fs] * len(blocks) if np.ndim(fs) == 0 else list(fs)
     if len(rates) != len(blocks):
         raise InvalidParameter(f"welch_blocks: {len(blocks)} blocks but {len(rates)} rates")
     xs: list = []
-    groups: dict[tuple, list[int]] = {}
-    for i, (b, rate) in enumerate(zip(blocks, rates, strict=True)):
-        x = _rows(b)
-        n = len(x[0]) if len(x) else 0
-        m = _checked_nperseg(x, n, rate, segment_s)
-        xs.append(x)
-        groups.setdefault((m, rate, len(x), (n - m // 2) // (m - m // 2)), []).append(i)
+    groups: dict[tuple, list[tuple[int, int]]] = {}
+    try:
+        for i, (b, rate) in enumerate(zip(blocks, rates, strict=True)):
+            x = _rows(b)
+            n = len(x[0]) if len(x) else 0
+            m = _checked_nperseg(x, n, rate, segment_s, finite=False)
+            xs.append(x)
+            groups.setdefault((m, rate, len(x)), []).append((i, (n - m // 2) // (m - m // 2)))
+    except (InvalidSignal, InvalidParameter):
+        _raise_first(blocks, rates, segment_s)
+        raise
     res = []
-    for (m, rate, rows, k), members in groups.items():
+    for (m, rate, rows), members in groups.items():
         win, f, t, tt = _welch_setup(m, rate)
-        hop = m - m // 2
-        seg = np.empty((len(members), k, rows, m))
-        for j, i in enumerate(members):
-            for r, row in enumerate(xs[i]):
-                seg[j, :, r] = np.lib.stride_tricks.as_strided(
-                    row, shape=(k, m), strides=(hop * row.strides[0], row.strides[0]),
-                    writeable=False)
-        flat = seg.reshape(-1, m)
-        mean = flat.mean(axis=-1)
-        slope = (seg.reshape(-1, rows, m) @ t).reshape(-1) / tt
-        _detrend_window(flat, mean, slope, t, win)
         density = np.empty((len(members), rows, f.size))
-        _welch_density(_fft.rfft(flat, n=m, axis=-1), len(members), k, rows, m % 2 == 0, density)
-        res.append((members, f, density))
+        j0 = 0
+        while j0 < len(members):  # blocks in chunks of about CHUNK_BYTES of segments
+            j1, size = j0 + 1, members[j0][1] * rows * m * 8
+            while j1 < len(members) and size + members[j1][1] * rows * m * 8 <= CHUNK_BYTES:
+                size += members[j1][1] * rows * m * 8
+                j1 += 1
+            if not _welch_chunk([xs[i] for i, _ in members[j0:j1]],
+                                [k for _, k in members[j0:j1]], win, t, tt, density[j0:j1]):
+                _raise_first(blocks, rates, segment_s)  # a NaN or inf: the first error
+            j0 = j1
+        res.append(([i for i, _ in members], f, density))
     return res
+
+
+#: Segments processed at once, in bytes: the chunk and its spectra stay in a core's cache,
+#: and buffers this size are reused by the allocator instead of being mapped afresh.
+CHUNK_BYTES = 1 << 20
+
+
+def _welch_chunk(xs: list, n_seg: list[int], win: np.ndarray, t: np.ndarray, tt: float,
+                 out: np.ndarray) -> bool:
+    """The densities of blocks ``xs`` (rows of equal count and length, ``n_seg`` segments of
+    ``len(win)`` samples each) into ``out`` (n_blocks, n_rows, n_freq), the steps listed in
+    :func:`welch_blocks`; False (and ``out`` unfinished) when a sample is not finite."""
+    m = win.size
+    hop = m - m // 2
+    rows = out.shape[1]
+    k = np.array(n_seg, dtype=np.int64)
+    first = np.zeros(k.size, dtype=np.int64)
+    np.cumsum(k[:-1], out=first[1:])
+    seg = np.empty((int(k.sum()) * rows, m))
+    finite = True
+    for x, n, j in zip(xs, n_seg, first.tolist(), strict=True):
+        for r, row in enumerate(x):
+            finite &= _gather_segments(row, hop, n, seg, j * rows + r, rows)
+    mean = seg.mean(axis=-1)
+    if not (finite and np.isfinite(mean).all()):  # a NaN or inf in the tail or a segment
+        return False
+    slope = (seg.reshape(-1, rows, m) @ t).reshape(-1) / tt
+    _detrend_window(seg, mean, slope, t, win)
+    _welch_density(_fft.rfft(seg, n=m, axis=-1), first, k, rows, m % 2 == 0, out)
+    return True
+
+
+def _raise_first(blocks: Sequence, rates: Sequence[float], segment_s: float) -> None:
+    """Every check of :func:`welch_rows`, block by block: raises the error of the first block
+    that fails, as one :func:`welch_rows` call per block would."""
+    for b, rate in zip(blocks, rates, strict=True):
+        x = _rows(b)
+        _checked_nperseg(x, len(x[0]) if len(x) else 0, rate, segment_s)
+
+
+@numba.njit(cache=True, nogil=True)
+def _gather_segments(row, hop, k, seg, first, rows):  # pragma: no cover - compiled
+    """``seg[first + p·rows] = row[p·hop : p·hop + m]`` for the k segments (m =
+    ``seg.shape[1]``); whether the samples after the last segment are finite (those of the
+    segments are checked through their means)."""
+    m = seg.shape[1]
+    for p in range(k):
+        o = first + p * rows
+        for i in range(m):
+            seg[o, i] = row[p * hop + i]
+    for i in range((k - 1) * hop + m, row.shape[0]):
+        if not np.isfinite(row[i]):
+            return False
+    return True
 
 
 @numba.njit(cache=True, nogil=True)

@@ -190,21 +190,44 @@ def psd_band_values_batch(evaluated: Sequence[Mapping[str, np.ndarray]], fs: Seq
         plan.append(groups)
     band_rms: list = [None] * len(blocks)
     for members, f, density in welch_groups(blocks, rates, PSD_SEGMENT_S):
-        df = f[1] - f[0]
-        bands = [(f"{lo:g}-{hi:g}Hz", inside) for lo, hi in DEFAULT_BANDS_HZ
-                 if (inside := (f >= lo) & (f < hi)).any()]  # the bins of diagnosis.band_powers
+        powers = _band_powers(f, density)
         for j, i in enumerate(members):
-            g = density[j]
-            band_rms[i] = [(label, np.sum(g[:, inside], axis=1) * df) for label, inside in bands]
+            band_rms[i] = [(label, [math.sqrt(pw) for pw in p[j].tolist()]) for label, p in powers]
     out = []
     for groups in plan:
         values: dict[tuple[str, str], float] = {}
         for chans, i in groups:
-            for label, power in band_rms[i]:
-                for ch, pw in zip(chans, power, strict=True):
-                    kind, _, pos = ch.rpartition("_")
-                    values[(f"psd_{kind}_{label}", pos)] = float(math.sqrt(pw))
+            keys = [ch.rpartition("_") for ch in chans]
+            for label, rms in band_rms[i]:
+                for (kind, _, pos), v in zip(keys, rms, strict=True):
+                    values[(f"psd_{kind}_{label}", pos)] = v
         out.append(values)
+    return out
+
+
+def _band_powers(f: np.ndarray, density: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """Band power ``Σ_{lo ≤ f < hi} G(f)·Δf`` of every row of every block of ``density``
+    (n_blocks, n_rows, n_freq) for the bands of :data:`DEFAULT_BANDS_HZ` with a bin:
+    ``(label "lo-hiHz", powers (n_blocks, n_rows))``. Each the number of the former
+    per-block expression ``numpy.sum(g[:, inside], axis=1) · (f[1] − f[0])`` (``inside`` the
+    bins ``(f >= lo) & (f < hi)`` of :func:`railval.core.diagnosis.band_powers`, a run of
+    consecutive bins), computed for all blocks at once on the layout numpy gives that
+    expression: the boolean index copies the bins bin-major (memory (n_bins, n_rows)), so
+    numpy sums the bins of a row in order when a block has several rows, and pairwise (one
+    contiguous run) when it has one; here the same sums on the same layouts
+    (tests/test_supp_exact.py holds them equal to the former expression)."""
+    df = f[1] - f[0]
+    out = []
+    for lo, hi in DEFAULT_BANDS_HZ:
+        idx = np.flatnonzero((f >= lo) & (f < hi))
+        if not idx.size:
+            continue
+        run = density[..., idx[0]:idx[-1] + 1]
+        if density.shape[1] > 1:  # bins in order: the sum over the outer axis
+            power = np.ascontiguousarray(np.moveaxis(run, -1, 0)).sum(axis=0) * df
+        else:  # one contiguous run per row: numpy's pairwise sum
+            power = run.sum(axis=-1) * df
+        out.append((f"{lo:g}-{hi:g}Hz", power))
     return out
 
 
