@@ -14,7 +14,7 @@ PSDs of measurement and simulation side by side.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -202,20 +202,22 @@ def welch_blocks(blocks: Sequence, fs: float | Sequence[float], segment_s: float
 
     The steps of :func:`scipy.signal.welch` (scipy's ``csd`` and ``ShortTimeFFT.spectrogram``;
     Welch 1967: Hann window, 50 % overlap, one-sided density, mean over the segments), each
-    the same operations on the same numbers, but over all segments of all blocks with the
-    same segment length and rate at once where that leaves every result unchanged:
+    the same operations on the same numbers, but over the segments of all blocks with the
+    same segment length, rate and row count at once (in chunks of about
+    :data:`CHUNK_BYTES`), where that leaves every result unchanged:
 
     * window, frequencies, ``t``: :func:`_welch_setup` (scipy's own calls, cached);
     * segments ``x[:, p·hop : p·hop + nperseg]``, ``hop = nperseg − nperseg//2``,
-      ``p < (n − nperseg//2)//hop`` (scipy's zero padding is never reached);
+      ``p < (n − nperseg//2)//hop`` (scipy's zero padding is never reached), copied by
+      :func:`_gather_segments`;
     * linear detrend as :func:`detrend_linear`: row means by ``numpy.mean`` (a row's pairwise
       sum does not depend on the other rows) and ``seg @ t`` as one BLAS product per segment
       of a block *with that block's rows in their order*, as scipy calls it (a stacked
       ``matmul``: one gemv per block segment) — the BLAS result of a row depends on the
       number of rows of the call, so blocks are never merged into one product; then
       ``((seg − mean) − slope·t)·win`` (:func:`_detrend_window`);
-    * ``scipy.fft.rfft`` of all segment rows in one call (a row's transform does not depend
-      on the other rows);
+    * ``scipy.fft.rfft`` of all segment rows of a chunk in one call (a row's transform does
+      not depend on the other rows);
     * power, doubling and mean over the segments:
       :func:`railval.core.en_kernels._welch_density`.
 
@@ -282,9 +284,9 @@ def welch_groups(blocks: Sequence, fs: float | Sequence[float], segment_s: float
             while j1 < len(members) and size + members[j1][1] * rows * m * 8 <= CHUNK_BYTES:
                 size += members[j1][1] * rows * m * 8
                 j1 += 1
-            if not _welch_chunk([xs[i] for i, _ in members[j0:j1]],
-                                [k for _, k in members[j0:j1]], win, t, tt, density[j0:j1]):
-                _raise_first(blocks, rates, segment_s)  # a NaN or inf: the first error
+            _welch_chunk([xs[i] for i, _ in members[j0:j1]], [k for _, k in members[j0:j1]],
+                         win, t, tt, density[j0:j1],
+                         lambda: _raise_first(blocks, rates, segment_s))
             j0 = j1
         res.append(([i for i, _ in members], f, density))
     return res
@@ -296,10 +298,12 @@ CHUNK_BYTES = 1 << 20
 
 
 def _welch_chunk(xs: list, n_seg: list[int], win: np.ndarray, t: np.ndarray, tt: float,
-                 out: np.ndarray) -> bool:
+                 out: np.ndarray, check: Callable[[], None]) -> None:
     """The densities of blocks ``xs`` (rows of equal count and length, ``n_seg`` segments of
     ``len(win)`` samples each) into ``out`` (n_blocks, n_rows, n_freq), the steps listed in
-    :func:`welch_blocks`; False (and ``out`` unfinished) when a sample is not finite."""
+    :func:`welch_blocks`; ``check()`` (the checks of every block, raising the first error)
+    when a sample may not be finite (a non-finite sample after the last segment, or a
+    non-finite segment mean, which finite samples can also give by overflow)."""
     m = win.size
     hop = m - m // 2
     rows = out.shape[1]
@@ -312,12 +316,11 @@ def _welch_chunk(xs: list, n_seg: list[int], win: np.ndarray, t: np.ndarray, tt:
         for r, row in enumerate(x):
             finite &= _gather_segments(row, hop, n, seg, j * rows + r, rows)
     mean = seg.mean(axis=-1)
-    if not (finite and np.isfinite(mean).all()):  # a NaN or inf in the tail or a segment
-        return False
+    if not (finite and np.isfinite(mean).all()):
+        check()
     slope = (seg.reshape(-1, rows, m) @ t).reshape(-1) / tt
     _detrend_window(seg, mean, slope, t, win)
     _welch_density(_fft.rfft(seg, n=m, axis=-1), first, k, rows, m % 2 == 0, out)
-    return True
 
 
 def _raise_first(blocks: Sequence, rates: Sequence[float], segment_s: float) -> None:

@@ -157,10 +157,12 @@ def psd_band_values_batch(evaluated: Sequence[Mapping[str, np.ndarray]], fs: Seq
     """:func:`psd_band_values` of many sections at once, every value the same float as one
     section at a time: per section, the channels of equal length form one block of rows
     (one :func:`railval.core.psd.welch_rows` call each, as the values a sign-off binds were
-    computed), and all blocks go through :func:`railval.core.psd.welch_blocks`, which gives
-    each block's :func:`~railval.core.psd.welch_rows` result bit for bit without its
-    per-call cost. A result that changes in its last bit makes a signed result read as
-    changed (tests/test_upgrade.py; tests/test_supp_exact.py holds the equality).
+    computed); all blocks go through :func:`railval.core.psd.welch_groups` (the computation
+    of :func:`~railval.core.psd.welch_blocks`: each block's
+    :func:`~railval.core.psd.welch_rows` result bit for bit, without its per-call cost), the
+    band powers of all blocks through :func:`_band_powers`, then ``math.sqrt``. A value that
+    changes in its last bit makes a signed result read as changed (tests/test_upgrade.py;
+    tests/test_supp_exact.py holds the equality with the former per-section code).
 
     Parameters
     ----------
@@ -192,7 +194,8 @@ def psd_band_values_batch(evaluated: Sequence[Mapping[str, np.ndarray]], fs: Seq
     for members, f, density in welch_groups(blocks, rates, PSD_SEGMENT_S):
         powers = _band_powers(f, density)
         for j, i in enumerate(members):
-            band_rms[i] = [(label, [math.sqrt(pw) for pw in p[j].tolist()]) for label, p in powers]
+            band_rms[i] = [(label, [math.sqrt(pw) for pw in p[j].tolist()])
+                           for label, p in powers]
     out = []
     for groups in plan:
         values: dict[tuple[str, str], float] = {}

@@ -87,16 +87,36 @@ def test_welch_blocks_same_bits_whatever_the_other_blocks():
         assert np.array_equal(a, t) and np.array_equal(a, r)
 
 
-def test_welch_blocks_raises_as_welch_rows_first_failing_block():
-    x = np.ones((2, 100))
+def test_welch_blocks_same_bits_in_chunks_of_any_size(monkeypatch):
+    from railval.core import psd
+
+    rng = np.random.default_rng(9)
+    blocks = [rng.standard_normal((int(rng.integers(1, 5)), int(rng.integers(2000, 9000))))
+              for _ in range(12)]
+    want = [welch_rows(b, 200.0, 3.0)[1] for b in blocks]
+    for size in (1, 1 << 16, 1 << 20, 1 << 40):
+        monkeypatch.setattr(psd, "CHUNK_BYTES", size)
+        for w, (_, g) in zip(want, welch_blocks(blocks, 200.0, 3.0), strict=True):
+            assert np.array_equal(w, g)
+
+
+@pytest.mark.parametrize("where", [5, 99, 4_000, 4_099])  # in a segment / after the last one
+@pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf])
+def test_welch_blocks_raises_as_welch_rows_first_failing_block(where, value):
+    x = np.ones((2, 4_100)) + np.linspace(0, 1, 4_100)
     bad = x.copy()
-    bad[1, 99] = np.nan  # after the last segment: still refused, as scipy's caller refuses it
+    bad[1, where] = value
     with pytest.raises(InvalidSignal, match="values contain NaN or inf"):
-        welch_blocks([x, list(bad), x[:, :5]], 100.0)
-    with pytest.raises(InvalidSignal, match="at least 8 samples, got 5"):
-        welch_blocks([x, x[:, :5], bad], 100.0)
-    with pytest.raises(InvalidParameter, match="fs must be a positive finite"):
-        welch_blocks([x, x], [100.0, float("nan")])
+        welch_rows(bad, 100.0)
+    for b in (bad, list(bad)):
+        with pytest.raises(InvalidSignal, match="values contain NaN or inf"):
+            welch_blocks([x, b, x[:, :5]], 100.0)
+        with pytest.raises(InvalidSignal, match="values contain NaN or inf"):
+            welch_blocks([x, b, x], [100.0, 100.0, float("nan")])
+        with pytest.raises(InvalidSignal, match="at least 8 samples, got 5"):
+            welch_blocks([x, x[:, :5], b], 100.0)
+        with pytest.raises(InvalidParameter, match="fs must be a positive finite"):
+            welch_blocks([x, x, b], [100.0, -1.0, 100.0])
     with pytest.raises(InvalidParameter, match="2 blocks but 1 rates"):
         welch_blocks([x, x], [100.0])
 
@@ -148,3 +168,25 @@ def test_band_values_batch_equal_former_per_section_values():
             assert type(values[key]) is float and values[key] == v, key
         n_values += len(want)
     assert n_values > 500
+    # both sums of the former expression occur, each with bands of 8 bins or more (where
+    # numpy's in-order and pairwise sums differ): blocks of one row and of several rows
+    shapes = set()
+    for ev, fs in zip(sections, rates, strict=True):
+        lengths = defaultdict(int)
+        for ch, x in ev.items():
+            if ch.rpartition("_")[0] in PSD_KINDS and x.size >= 8:
+                lengths[x.size] += 1
+        for n, rows in lengths.items():
+            m = int(min(n, max(8, round(PSD_SEGMENT_S * fs))))
+            if 5.0 * m / fs >= 8:  # the 5-10 Hz band holds at least 8 bins
+                shapes.add(min(rows, 2))
+    assert shapes == {1, 2}
+
+
+def test_welch_blocks_finite_values_whose_mean_overflows_as_welch_rows():
+    x = np.full((2, 300), 1.7e308) * np.linspace(0.5, 1.0, 300)
+    with np.errstate(all="ignore"):
+        want = welch_rows(x, 100.0, 1.0)[1]
+        got = welch_blocks([x, list(x)], 100.0, 1.0)
+    for _, g in got:
+        assert np.array_equal(g, want, equal_nan=True)
