@@ -14,6 +14,7 @@ PSDs of measurement and simulation side by side.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -292,9 +293,21 @@ def welch_groups(blocks: Sequence, fs: float | Sequence[float], segment_s: float
     return res
 
 
-#: Segments processed at once, in bytes: the chunk and its spectra stay in a core's cache,
-#: and buffers this size are reused by the allocator instead of being mapped afresh.
+#: Segments processed at once, in bytes: the chunk and its spectra stay in a core's cache.
 CHUNK_BYTES = 1 << 20
+_SCRATCH = threading.local()
+
+
+def _scratch(n: int) -> np.ndarray:
+    """A float64 buffer of ``n`` values for this thread's segments, kept between calls up to
+    4·:data:`CHUNK_BYTES` (a buffer of a size the allocator maps afresh on every call costs
+    its page faults each time)."""
+    buf = getattr(_SCRATCH, "buf", None)
+    if buf is None or buf.size < n:
+        buf = np.empty(max(n, CHUNK_BYTES // 8))
+        if buf.size * 8 <= 4 * CHUNK_BYTES:
+            _SCRATCH.buf = buf
+    return buf[:n]
 
 
 def _welch_chunk(xs: list, n_seg: list[int], win: np.ndarray, t: np.ndarray, tt: float,
@@ -310,7 +323,7 @@ def _welch_chunk(xs: list, n_seg: list[int], win: np.ndarray, t: np.ndarray, tt:
     k = np.array(n_seg, dtype=np.int64)
     first = np.zeros(k.size, dtype=np.int64)
     np.cumsum(k[:-1], out=first[1:])
-    seg = np.empty((int(k.sum()) * rows, m))
+    seg = _scratch(int(k.sum()) * rows * m).reshape(-1, m)
     finite = True
     for x, n, j in zip(xs, n_seg, first.tolist(), strict=True):
         for r, row in enumerate(x):
