@@ -162,15 +162,16 @@ def _checked_nperseg(x, n: int, fs: float, segment_s: float, finite: bool = True
 
 
 def _rows(block) -> np.ndarray | list[np.ndarray]:
-    """A block of :func:`welch_blocks` as a 2-D float array, or as a list of 1-D float arrays
-    of equal length when given as a sequence of rows (not stacked: its rows are copied
-    segment by segment)."""
+    """A block of :func:`welch_blocks` as a C-contiguous 2-D float array, or as a list of
+    C-contiguous 1-D float arrays of equal length when given as a sequence of rows (not
+    stacked: its rows are copied segment by segment); contiguous rows keep the compiled
+    copy to one signature."""
     if not isinstance(block, np.ndarray):
-        rows = [np.asarray(r, dtype=float) for r in block]
+        rows = [np.ascontiguousarray(r, dtype=float) for r in block]
         if rows and all(r.ndim == 1 and r.size == rows[0].size for r in rows):
             return rows
         block = np.asarray(rows, dtype=float)
-    return np.atleast_2d(np.asarray(block, dtype=float))
+    return np.ascontiguousarray(np.atleast_2d(np.asarray(block, dtype=float)))
 
 
 @lru_cache(maxsize=32)

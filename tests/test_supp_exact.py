@@ -190,3 +190,11 @@ def test_welch_blocks_finite_values_whose_mean_overflows_as_welch_rows():
         got = welch_blocks([x, list(x)], 100.0, 1.0)
     for _, g in got:
         assert np.array_equal(g, want, equal_nan=True)
+
+
+def test_welch_blocks_strided_and_fortran_inputs():
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((6, 9001))
+    want = welch_rows(x[::2, ::3], 50.0, 10.0)[1]
+    for b in (x[::2, ::3], np.asfortranarray(x[::2, ::3]), list(x[::2, ::3])):
+        assert np.array_equal(welch_blocks([b], 50.0)[0][1], want)
