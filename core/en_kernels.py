@@ -3,7 +3,7 @@
 They call each other: the per-section step (:func:`_section_kernel`, used by
 :mod:`railval.core.en_section`) selects order statistics (:func:`select_ranks`, used by
 :mod:`railval.core.orderstat`), sums pairwise (:func:`pairwise_sum`, also used by the Welch
-taper of :mod:`railval.core.psd`) and integrates the linear interpolant at the window ends
+segment mean of :mod:`railval.core.psd`) and integrates the linear interpolant at the window ends
 (:func:`_integral_at`, :mod:`railval.core.en_statistics`). Numba's on-disk cache
 (``cache=True``) keys a kernel to the file it is defined in and compiles the compiled functions
 it calls into it; a change in a callee defined in another file would leave the caller's cached
@@ -389,20 +389,45 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
 
 
 @numba.njit(cache=True, nogil=True)
-def _detrend_taper(seg, mean, t, win, out):  # pragma: no cover - compiled
-    """``out = (seg − mean − slope·t) · win`` row by row with ``slope = Σ t·x / Σ t²``:
-    :func:`detrend_linear` and the window in one pass. The sums are numpy's pairwise sums
-    (:func:`railval.core.en_statistics.pairwise_sum`) rather than a BLAS product, whose
-    threads keep spinning after the call (CPU taken from the other jobs of the machine)."""
-    n = seg.shape[1]
-    prod = np.empty(n)
-    for i in range(n):
-        prod[i] = t[i] * t[i]
-    tt = pairwise_sum(prod, 0, n)
-    for r in range(seg.shape[0]):
-        for i in range(n):
-            prod[i] = seg[r, i] * t[i]
-        a = mean[r]
-        b = pairwise_sum(prod, 0, n) / tt
-        for i in range(n):
-            out[r, i] = (seg[r, i] - a - b * t[i]) * win[i]
+def _welch_density(spec, first, n_seg, rows, even, out):  # pragma: no cover - compiled
+    """The end of :func:`scipy.signal.welch` over the segment spectra of many blocks
+    (:func:`railval.core.psd.welch_blocks`; ``spec`` row ``(first[j] + p)·rows + r`` = row r
+    of block j, segment p < n_seg[j]): ``re² + im²``, doubled except DC and an even length's
+    Nyquist bin (``·2``), then the mean over the segments as numpy takes it on scipy's layout
+    (the segments' sum as numpy's pairwise sum: in order from 0.0 below 8 segments, else
+    :func:`pairwise_sum`; ÷ their count; one segment as it is) — the same operations in the
+    same order, so the same numbers."""
+    n_f = spec.shape[1]
+    last = n_f - 1 if even else n_f
+    vals = np.empty(max(1, n_seg.max()))
+    acc = np.empty(n_f)
+    for j in range(n_seg.shape[0]):
+        k = n_seg[j]
+        for r in range(rows):
+            o = out[j, r]
+            if k == 1:
+                x = spec[first[j] * rows + r]
+                for q in range(n_f):
+                    o[q] = x[q].real * x[q].real + x[q].imag * x[q].imag
+                for q in range(1, last):
+                    o[q] = o[q] * 2.0
+            elif k < 8:
+                acc[:] = 0.0
+                for p in range(k):
+                    x = spec[(first[j] + p) * rows + r]
+                    acc[0] += x[0].real * x[0].real + x[0].imag * x[0].imag
+                    for q in range(1, last):
+                        acc[q] += (x[q].real * x[q].real + x[q].imag * x[q].imag) * 2.0
+                    for q in range(last, n_f):
+                        acc[q] += x[q].real * x[q].real + x[q].imag * x[q].imag
+                for q in range(n_f):
+                    o[q] = acc[q] / k
+            else:
+                for q in range(n_f):
+                    for p in range(k):
+                        x = spec[(first[j] + p) * rows + r, q]
+                        v = x.real * x.real + x.imag * x.imag
+                        if 0 < q < last:
+                            v = v * 2.0
+                        vals[p] = v
+                    o[q] = pairwise_sum(vals, 0, k) / k

@@ -57,7 +57,7 @@ import numpy as np
 
 from railval.core.diagnosis import DEFAULT_BANDS_HZ, Component, Pattern
 from railval.core.errors import InvalidParameter
-from railval.core.psd import welch_rows
+from railval.core.psd import welch_groups
 from railval.core.types import BODY_POSITIONS
 
 PSD_SEGMENT_S = 10.0
@@ -154,9 +154,15 @@ def psd_band_values(evaluated: Mapping[str, np.ndarray], fs: float) -> dict[tupl
 
 def psd_band_values_batch(evaluated: Sequence[Mapping[str, np.ndarray]], fs: Sequence[float]
                           ) -> list[dict[tuple[str, str], float]]:
-    """:func:`psd_band_values` of many sections at once: the channels of equal length and
-    sampling rate of all sections go through one Welch call
-    (:func:`railval.core.psd.welch_blocks`).
+    """:func:`psd_band_values` of many sections at once, every value the same float as one
+    section at a time: per section, the channels of equal length form one block of rows
+    (one :func:`railval.core.psd.welch_rows` call each, as the values a sign-off binds were
+    computed); all blocks go through :func:`railval.core.psd.welch_groups` (the computation
+    of :func:`~railval.core.psd.welch_blocks`: each block's
+    :func:`~railval.core.psd.welch_rows` result bit for bit, without its per-call cost), the
+    band powers of all blocks through :func:`_band_powers`, then ``math.sqrt``. A value that
+    changes in its last bit makes a signed result read as changed (tests/test_upgrade.py;
+    tests/test_supp_exact.py holds the equality with the former per-section code).
 
     Parameters
     ----------
@@ -170,34 +176,61 @@ def psd_band_values_batch(evaluated: Sequence[Mapping[str, np.ndarray]], fs: Seq
     list of dict of (str, str) to float
         Per section ``{(quantity id, position): band rms in m/s²}``.
     """
-    return [_section_band_values(ev, float(rate)) for ev, rate in zip(evaluated, fs, strict=True)]
+    plan: list[list[tuple[list[str], int]]] = []
+    blocks: list[list[np.ndarray]] = []
+    rates: list[float] = []
+    for ev, rate in zip(evaluated, fs, strict=True):
+        by_length: dict[int, list[str]] = defaultdict(list)
+        for ch, x in ev.items():
+            if ch.rpartition("_")[0] in PSD_KINDS and np.asarray(x).size >= 8:
+                by_length[np.asarray(x).size].append(ch)
+        groups = []
+        for chans in by_length.values():  # one block of rows per channel length
+            groups.append((chans, len(blocks)))
+            blocks.append([np.asarray(ev[c], dtype=np.float64) for c in chans])
+            rates.append(float(rate))
+        plan.append(groups)
+    band_rms: list = [None] * len(blocks)
+    for members, f, density in welch_groups(blocks, rates, PSD_SEGMENT_S):
+        powers = _band_powers(f, density)
+        for j, i in enumerate(members):
+            band_rms[i] = [(label, [math.sqrt(pw) for pw in p[j].tolist()])
+                           for label, p in powers]
+    out = []
+    for groups in plan:
+        values: dict[tuple[str, str], float] = {}
+        for chans, i in groups:
+            keys = [ch.rpartition("_") for ch in chans]
+            for label, rms in band_rms[i]:
+                for (kind, _, pos), v in zip(keys, rms, strict=True):
+                    values[(f"psd_{kind}_{label}", pos)] = v
+        out.append(values)
+    return out
 
 
-def _section_band_values(evaluated: Mapping[str, np.ndarray], fs: float
-                         ) -> dict[tuple[str, str], float]:
-    """The band rms values of one section, computed exactly as the values a sign-off binds
-    were computed (one :func:`railval.core.psd.welch_rows` call per channel length of the
-    section, the bins selected by mask): a faster batched Welch that differed in the last
-    bits (≤ 2.1·10⁻¹⁵ relative) made signed results read as changed, so the arithmetic here
-    must not change (tests/test_upgrade.py)."""
-    out: dict[tuple[str, str], float] = {}
-    names = [ch for ch, x in evaluated.items()
-             if ch.rpartition("_")[0] in PSD_KINDS and np.asarray(x).size >= 8]
-    by_length: dict[int, list[str]] = defaultdict(list)
-    for ch in names:
-        by_length[np.asarray(evaluated[ch]).size].append(ch)
-    for chans in by_length.values():  # one Welch call for the channels of equal length
-        f, g, _ = welch_rows(np.vstack([np.asarray(evaluated[c], dtype=np.float64) for c in chans]),
-                             fs, PSD_SEGMENT_S)
-        df = f[1] - f[0]
-        for lo, hi in DEFAULT_BANDS_HZ:
-            inside = (f >= lo) & (f < hi)  # the bins of railval.core.diagnosis.band_powers
-            if not inside.any():
-                continue
-            power = np.sum(g[:, inside], axis=1) * df
-            for ch, pw in zip(chans, power, strict=True):
-                kind, _, pos = ch.rpartition("_")
-                out[(f"psd_{kind}_{lo:g}-{hi:g}Hz", pos)] = float(math.sqrt(pw))
+def _band_powers(f: np.ndarray, density: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """Band power ``Σ_{lo ≤ f < hi} G(f)·Δf`` of every row of every block of ``density``
+    (n_blocks, n_rows, n_freq) for the bands of :data:`DEFAULT_BANDS_HZ` with a bin:
+    ``(label "lo-hiHz", powers (n_blocks, n_rows))``. Each the number of the former
+    per-block expression ``numpy.sum(g[:, inside], axis=1) · (f[1] − f[0])`` (``inside`` the
+    bins ``(f >= lo) & (f < hi)`` of :func:`railval.core.diagnosis.band_powers`, a run of
+    consecutive bins), computed for all blocks at once on the layout numpy gives that
+    expression: the boolean index copies the bins bin-major (memory (n_bins, n_rows)), so
+    numpy sums the bins of a row in order when a block has several rows, and pairwise (one
+    contiguous run) when it has one; here the same sums on the same layouts
+    (tests/test_supp_exact.py holds them equal to the former expression)."""
+    df = f[1] - f[0]
+    out = []
+    for lo, hi in DEFAULT_BANDS_HZ:
+        idx = np.flatnonzero((f >= lo) & (f < hi))
+        if not idx.size:
+            continue
+        run = density[..., idx[0]:idx[-1] + 1]
+        if density.shape[1] > 1:  # bins in order: the sum over the outer axis
+            power = np.ascontiguousarray(np.moveaxis(run, -1, 0)).sum(axis=0) * df
+        else:  # one contiguous run per row: numpy's pairwise sum
+            power = run.sum(axis=-1) * df
+        out.append((f"{lo:g}-{hi:g}Hz", power))
     return out
 
 
