@@ -343,18 +343,178 @@ def _derived_means(v, h, j, u, at, lo, hi, sampled):  # pragma: no cover - compi
                                      else np.nan)
 
 
+@numba.njit(cache=True, nogil=True)
+def _window_bounds(d, origins, n_cs, half, step, j, u, lo, hi):  # pragma: no cover - compiled
+    """The window ends on the distance axis ``d`` of the grids with centres
+    ``c_k = (origins[g] + half) + step·k``, k < ``n_cs[g]`` (as
+    :func:`railval.core.definitions.window_centres` forms them): into ``j``/``u`` the
+    interval and offset of every window start, then every window end, grid after grid
+    (``clip(searchsorted(d, x, "right") − 1, 0, n − 2)`` and ``x − d[j]``,
+    :func:`railval.core.en_statistics._window_ends`); when ``lo`` is not empty, into
+    ``lo``/``hi`` the first sample in and the first past the closed window
+    ``[c − half, c + half]``, then the half-open one, grid after grid
+    (``searchsorted`` left / right resp. left, :func:`railval.core.en_section._sample_bounds`).
+    The centres increase, so each search walks on from the previous result: the same
+    comparisons decide, so the same indices."""
+    n = d.shape[0]
+    pos = 0
+    for g in range(origins.shape[0]):
+        base = origins[g] + half
+        for e in range(2):
+            i = 0
+            for k in range(n_cs[g]):
+                c = base + step * k
+                x = c - half if e == 0 else c + half
+                while i < n and d[i] <= x:
+                    i += 1
+                jj = min(max(i - 1, 0), n - 2)
+                j[pos] = jj
+                u[pos] = x - d[jj]
+                pos += 1
+    if lo.shape[0] == 0:
+        return
+    pos = 0
+    for g in range(origins.shape[0]):
+        base = origins[g] + half
+        for closed in (True, False):
+            a = 0
+            b = 0
+            for k in range(n_cs[g]):
+                c = base + step * k
+                xl = c - half
+                xh = c + half
+                while a < n and d[a] < xl:
+                    a += 1
+                if closed:
+                    while b < n and d[b] <= xh:
+                        b += 1
+                else:
+                    while b < n and d[b] < xh:
+                        b += 1
+                lo[pos] = a
+                hi[pos] = b
+                pos += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _read_percentiles(stats, cols, mode, g, omg, out):  # pragma: no cover - compiled
+    """``out[m, t]`` = percentile t of method m from the order statistics ``stats`` by the
+    recipe of :func:`railval.core.definitions.percentile_recipe`: mode 0 the statistic
+    ``stats[cols[m, t, 0]]`` itself (inverted CDF); else numpy's lerp of ``a`` =
+    ``stats[cols[m, t, 0]]`` and ``b`` = ``stats[cols[m, t, 1]]`` with ``diff = b − a``:
+    mode 1 ``a + diff·g``, mode 2 ``b − diff·omg`` (``omg = 1 − g``, formed by the caller)
+    — :func:`railval.core.definitions.percentiles_from_order`, the same operations."""
+    for m in range(cols.shape[0]):
+        for t in range(cols.shape[1]):
+            a = stats[cols[m, t, 0]]
+            md = mode[m, t]
+            if md == 0:
+                out[m, t] = a
+            else:
+                b = stats[cols[m, t, 1]]
+                diff = b - a
+                if md == 2:
+                    out[m, t] = b - diff * omg[m, t]
+                else:
+                    out[m, t] = a + diff * g[m, t]
+
+
+@numba.njit(cache=True, nogil=True)
+def _rows_percentiles(stats, cols, mode, g, omg, out):  # pragma: no cover - compiled
+    """:func:`_read_percentiles` of every row of ``stats`` into ``out[:, r, :]``."""
+    tmp = np.empty((cols.shape[0], cols.shape[1]))
+    for r in range(stats.shape[0]):
+        _read_percentiles(stats[r], cols, mode, g, omg, tmp)
+        for m in range(cols.shape[0]):
+            for t in range(cols.shape[1]):
+                out[m, r, t] = tmp[m, t]
+
+
+@numba.njit(cache=True, nogil=True)
+def _sliding_percentiles(at, n_cs, sampled, window_m, ranks, n_ranks, cols, mode, g, omg,
+                         pct, bad):  # pragma: no cover - compiled
+    """The percentiles of the sliding means of every reading's grid and window, variant
+    ``v = 3·grid + window`` (window: interpolant, closed samples, half-open samples;
+    :data:`railval.core.definitions.SLIDING_VARIANTS` order; only ``v = 0`` when
+    ``sampled`` has no columns): the distance-weighted means
+    ``(at[:, end] − at[:, start]) / window_m`` (:func:`railval.core.en_statistics.
+    _means_from_integrals`) or the sample-window means (columns of ``sampled``), the order
+    statistics ``ranks[grid, :n_ranks[grid]]`` of each row (:func:`select_ranks`, exact) and
+    the percentiles of each method (:func:`_read_percentiles`, recipe of the grid's number
+    of windows) into ``pct[v, m, r, :]``. A row holding a non-finite mean is marked in
+    ``bad[v, r]`` and not selected."""
+    rows = at.shape[0]
+    n_grids = n_cs.shape[0]
+    kmax = 1
+    for q in range(n_grids):
+        kmax = max(kmax, n_cs[q])
+    rmax = ranks.shape[1]
+    buf = np.empty(kmax)
+    stats = np.empty(rmax)
+    tmp = np.empty((cols.shape[1], cols.shape[2]))
+    hist = np.empty(BUCKETS, np.int64)
+    slot = np.empty(BUCKETS, np.int64)
+    start = np.empty(rmax, np.int64)
+    fill = np.empty(rmax, np.int64)
+    cand = np.empty(kmax)
+    bucket = np.empty(kmax, np.int64)
+    n_win = 3 if sampled.shape[1] else 1
+    a_pos = 0
+    s_pos = 0
+    for q in range(n_grids):
+        k = n_cs[q]
+        rk = ranks[q, :n_ranks[q]]
+        for w in range(n_win):
+            v = q * n_win + w
+            for r in range(rows):
+                finite = True
+                if w == 0:
+                    for i in range(k):
+                        x = (at[r, a_pos + k + i] - at[r, a_pos + i]) / window_m
+                        buf[i] = x
+                        if not np.isfinite(x):
+                            finite = False
+                else:
+                    for i in range(k):
+                        x = sampled[r, s_pos + i]
+                        buf[i] = x
+                        if not np.isfinite(x):
+                            finite = False
+                if not finite:
+                    bad[v, r] = True
+                    for m in range(pct.shape[1]):
+                        for t in range(pct.shape[3]):
+                            pct[v, m, r, t] = 0.0
+                    continue
+                bad[v, r] = False
+                select_ranks(buf[:k], rk, stats, hist, slot, start, fill, cand, bucket)
+                _read_percentiles(stats, cols[q], mode[q], g[q], omg[q], tmp)
+                for m in range(pct.shape[1]):
+                    for t in range(pct.shape[3]):
+                        pct[v, m, r, t] = tmp[m, t]
+            if w > 0:
+                s_pos += k
+        a_pos += 2 * k
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
-                    out_rms, d, j, u, at, win_lo, win_hi, sampled
-                    ):  # pragma: no cover - compiled
+                    out_rms, d, j, u, at, win_lo, win_hi, sampled, origins, n_cs, window_m,
+                    step_m, recipe, pct_lp, pct_bp, s_ranks, s_n_ranks, s_recipe, s_pct,
+                    s_bad):  # pragma: no cover - compiled
     """One section: the derived rows (:func:`_derive`), then the order statistics ``ranks``
     of the evaluated part of the low-pass rows ``sel``, of the derived rows and of every
-    band-pass row into ``out_lp`` (in that order) and ``out_bp``, the band-pass rows' rms
-    (numpy's ``sqrt(mean(x²))``, :func:`railval.core.en_statistics.pairwise_sum`) and the
-    integrals of the derived rows at the window ends ``j``, ``u`` on ``d[wide0:]``
-    (:func:`railval.core.en_statistics._integral_at`) and their means over the sample
-    windows ``win_lo``/``win_hi`` (:func:`_sample_window_means`). Returns the Y/Q row with Q = 0 in the
-    evaluated range (nothing selected) or −1."""
+    band-pass row into ``out_lp`` (in that order) and ``out_bp``, and their percentiles
+    under each method into ``pct_lp``/``pct_bp`` (:func:`_rows_percentiles`, ``recipe`` =
+    (cols, mode, g, 1 − g)), the band-pass rows' rms
+    (numpy's ``sqrt(mean(x²))``, :func:`railval.core.en_statistics.pairwise_sum`). When
+    ``n_cs`` is not empty: the window ends of the sliding-mean grids from ``origins`` on
+    ``d[wide0:]`` (:func:`_window_bounds`; into ``j``, ``u`` and, when ``win_lo`` is not
+    empty, the sample windows ``win_lo``/``win_hi``), the integrals of the derived rows at
+    the window ends (:func:`railval.core.en_statistics._integral_at`), their means over the
+    sample windows (:func:`_sample_window_means`) and the percentiles of the sliding means
+    of every grid and window (:func:`_sliding_percentiles` into ``s_pct``/``s_bad``).
+    Returns the Y/Q row with Q = 0 in the evaluated range (nothing selected) or −1."""
     zero = _derive(lp, yq, sy, cut0, cut1, wide0, derived)
     if zero >= 0:
         return zero
@@ -379,12 +539,20 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
         for i in range(n):
             cand[i] = bp[r, cut0 + i] * bp[r, cut0 + i]
         out_rms[r] = np.sqrt(pairwise_sum(cand, 0, n) / n)
-    if j.shape[0] or win_lo.shape[0]:
+    cols, mode, g, omg = recipe
+    _rows_percentiles(out_lp, cols, mode, g, omg, pct_lp)
+    _rows_percentiles(out_bp, cols, mode, g, omg, pct_bp)
+    if n_cs.shape[0]:
         n_wide = derived.shape[1]
+        _window_bounds(d[wide0:wide0 + n_wide], origins, n_cs, window_m / 2.0, step_m, j, u,
+                       win_lo, win_hi)
         h = np.empty(n_wide - 1)
         for i in range(n_wide - 1):
             h[i] = d[wide0 + i + 1] - d[wide0 + i]
         _derived_means(derived, h, j, u, at, win_lo, win_hi, sampled)
+        s_cols, s_mode, s_g, s_omg = s_recipe
+        _sliding_percentiles(at, n_cs, sampled, window_m, s_ranks, s_n_ranks, s_cols, s_mode,
+                             s_g, s_omg, s_pct, s_bad)
     return -1
 
 
