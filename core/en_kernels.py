@@ -354,46 +354,40 @@ def _window_bounds(d, origins, n_cs, half, step, j, u, lo, hi):  # pragma: no co
     ``lo``/``hi`` the first sample in and the first past the closed window
     ``[c − half, c + half]``, then the half-open one, grid after grid
     (``searchsorted`` left / right resp. left, :func:`railval.core.en_section._sample_bounds`).
-    The centres increase, so each search walks on from the previous result: the same
+    The centres increase, so each search walks on from the previous result (``a``: the
+    first sample ≥ x, ``searchsorted`` left; ``b``: the first sample > x, right): the same
     comparisons decide, so the same indices."""
     n = d.shape[0]
+    samples = lo.shape[0] > 0
     pos = 0
+    s_pos = 0
     for g in range(origins.shape[0]):
         base = origins[g] + half
+        k_n = n_cs[g]
         for e in range(2):
-            i = 0
-            for k in range(n_cs[g]):
+            a = 0
+            b = 0
+            for k in range(k_n):
                 c = base + step * k
                 x = c - half if e == 0 else c + half
-                while i < n and d[i] <= x:
-                    i += 1
-                jj = min(max(i - 1, 0), n - 2)
+                while a < n and d[a] < x:
+                    a += 1
+                if b < a:
+                    b = a
+                while b < n and d[b] <= x:
+                    b += 1
+                jj = min(max(b - 1, 0), n - 2)
                 j[pos] = jj
                 u[pos] = x - d[jj]
                 pos += 1
-    if lo.shape[0] == 0:
-        return
-    pos = 0
-    for g in range(origins.shape[0]):
-        base = origins[g] + half
-        for closed in (True, False):
-            a = 0
-            b = 0
-            for k in range(n_cs[g]):
-                c = base + step * k
-                xl = c - half
-                xh = c + half
-                while a < n and d[a] < xl:
-                    a += 1
-                if closed:
-                    while b < n and d[b] <= xh:
-                        b += 1
-                else:
-                    while b < n and d[b] < xh:
-                        b += 1
-                lo[pos] = a
-                hi[pos] = b
-                pos += 1
+                if samples:
+                    if e == 0:
+                        lo[s_pos + k] = a
+                        lo[s_pos + k_n + k] = a
+                    else:
+                        hi[s_pos + k] = b
+                        hi[s_pos + k_n + k] = a
+        s_pos += 2 * k_n
 
 
 @numba.njit(cache=True, nogil=True)
@@ -431,77 +425,80 @@ def _rows_percentiles(stats, cols, mode, g, omg, out):  # pragma: no cover - com
 
 
 @numba.njit(cache=True, nogil=True)
-def _sliding_percentiles(at, n_cs, sampled, window_m, ranks, n_ranks, cols, mode, g, omg,
-                         pct, bad):  # pragma: no cover - compiled
-    """The percentiles of the sliding means of every reading's grid and window, variant
-    ``v = 3·grid + window`` (window: interpolant, closed samples, half-open samples;
+def _sliding_means(at, n_cs, sampled, window_m, means, bad):  # pragma: no cover - compiled
+    """The sliding means of every reading's grid and window into the rows of ``means``,
+    variant ``v = 3·grid + window`` (window: interpolant, closed samples, half-open samples;
     :data:`railval.core.definitions.SLIDING_VARIANTS` order; only ``v = 0`` when
-    ``sampled`` has no columns): the distance-weighted means
-    ``(at[:, end] − at[:, start]) / window_m`` (:func:`railval.core.en_statistics.
-    _means_from_integrals`) or the sample-window means (columns of ``sampled``), the order
-    statistics ``ranks[grid, :n_ranks[grid]]`` of each row (:func:`select_ranks`, exact) and
-    the percentiles of each method (:func:`_read_percentiles`, recipe of the grid's number
-    of windows) into ``pct[v, m, r, :]``. A row holding a non-finite mean is marked in
-    ``bad[v, r]`` and not selected."""
+    ``sampled`` has no columns), row ``v·rows + r``: the distance-weighted means
+    ``(at[:, end] − at[:, start]) / window_m``
+    (:func:`railval.core.en_statistics._means_from_integrals`) or the sample-window means
+    (the columns of ``sampled``); a row's columns past its grid's number of windows are
+    +inf (they sort after every finite mean). ``bad[v, r]``: the row holds a non-finite
+    mean."""
     rows = at.shape[0]
-    n_grids = n_cs.shape[0]
-    kmax = 1
-    for q in range(n_grids):
-        kmax = max(kmax, n_cs[q])
-    rmax = ranks.shape[1]
-    buf = np.empty(kmax)
-    stats = np.empty(rmax)
-    tmp = np.empty((cols.shape[1], cols.shape[2]))
-    hist = np.empty(BUCKETS, np.int64)
-    slot = np.empty(BUCKETS, np.int64)
-    start = np.empty(rmax, np.int64)
-    fill = np.empty(rmax, np.int64)
-    cand = np.empty(kmax)
-    bucket = np.empty(kmax, np.int64)
     n_win = 3 if sampled.shape[1] else 1
+    width = means.shape[1]
     a_pos = 0
     s_pos = 0
-    for q in range(n_grids):
+    for q in range(n_cs.shape[0]):
         k = n_cs[q]
-        rk = ranks[q, :n_ranks[q]]
         for w in range(n_win):
             v = q * n_win + w
             for r in range(rows):
+                out = means[v * rows + r]
                 finite = True
                 if w == 0:
                     for i in range(k):
                         x = (at[r, a_pos + k + i] - at[r, a_pos + i]) / window_m
-                        buf[i] = x
-                        if not np.isfinite(x):
-                            finite = False
+                        out[i] = x
+                        finite &= np.isfinite(x)
                 else:
                     for i in range(k):
                         x = sampled[r, s_pos + i]
-                        buf[i] = x
-                        if not np.isfinite(x):
-                            finite = False
-                if not finite:
-                    bad[v, r] = True
-                    for m in range(pct.shape[1]):
-                        for t in range(pct.shape[3]):
-                            pct[v, m, r, t] = 0.0
-                    continue
-                bad[v, r] = False
-                select_ranks(buf[:k], rk, stats, hist, slot, start, fill, cand, bucket)
-                _read_percentiles(stats, cols[q], mode[q], g[q], omg[q], tmp)
-                for m in range(pct.shape[1]):
-                    for t in range(pct.shape[3]):
-                        pct[v, m, r, t] = tmp[m, t]
+                        out[i] = x
+                        finite &= np.isfinite(x)
+                for i in range(k, width):
+                    out[i] = np.inf
+                bad[v, r] = not finite
             if w > 0:
                 s_pos += k
         a_pos += 2 * k
 
 
+@numba.njit(cache=True, nogil=True)
+def _sliding_percentiles(srt, n_cs, n_win, ranks, n_ranks, cols, mode, g, omg, bad, pct
+                         ):  # pragma: no cover - compiled
+    """``pct[v, m, r, :]``: the percentiles under each method of the sliding means of row
+    ``v·rows + r`` of ``srt`` (:func:`_sliding_means`, each row sorted ascending): the
+    order statistics ``ranks[grid, :n_ranks[grid]]`` read off the sorted row and the
+    percentiles formed by the recipe of the grid's number of windows
+    (:func:`_read_percentiles`); 0 for a row marked in ``bad`` (its value is undefined)."""
+    rows = bad.shape[1]
+    stats = np.empty(ranks.shape[1])
+    tmp = np.empty((cols.shape[1], cols.shape[2]))
+    for q in range(n_cs.shape[0]):
+        for w in range(n_win):
+            v = q * n_win + w
+            for r in range(rows):
+                if bad[v, r]:
+                    for m in range(pct.shape[1]):
+                        for t in range(pct.shape[3]):
+                            pct[v, m, r, t] = 0.0
+                    continue
+                row = srt[v * rows + r]
+                for c in range(n_ranks[q]):
+                    stats[c] = row[ranks[q, c]]
+                _read_percentiles(stats, cols[q], mode[q], g[q], omg[q], tmp)
+                for m in range(pct.shape[1]):
+                    for t in range(pct.shape[3]):
+                        pct[v, m, r, t] = tmp[m, t]
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
                     out_rms, d, j, u, at, win_lo, win_hi, sampled, origins, n_cs, window_m,
-                    step_m, recipe, pct_lp, pct_bp, s_ranks, s_n_ranks, s_recipe, s_pct,
-                    s_bad):  # pragma: no cover - compiled
+                    step_m, recipe, pct_lp, pct_bp, s_means, s_bad
+                    ):  # pragma: no cover - compiled
     """One section: the derived rows (:func:`_derive`), then the order statistics ``ranks``
     of the evaluated part of the low-pass rows ``sel``, of the derived rows and of every
     band-pass row into ``out_lp`` (in that order) and ``out_bp``, and their percentiles
@@ -512,8 +509,9 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
     ``d[wide0:]`` (:func:`_window_bounds`; into ``j``, ``u`` and, when ``win_lo`` is not
     empty, the sample windows ``win_lo``/``win_hi``), the integrals of the derived rows at
     the window ends (:func:`railval.core.en_statistics._integral_at`), their means over the
-    sample windows (:func:`_sample_window_means`) and the percentiles of the sliding means
-    of every grid and window (:func:`_sliding_percentiles` into ``s_pct``/``s_bad``).
+    sample windows (:func:`_sample_window_means`) and the sliding means of every grid and
+    window (:func:`_sliding_means` into ``s_means``/``s_bad``; their percentiles are read by
+    :func:`_sliding_percentiles` once the caller has sorted the rows).
     Returns the Y/Q row with Q = 0 in the evaluated range (nothing selected) or −1."""
     zero = _derive(lp, yq, sy, cut0, cut1, wide0, derived)
     if zero >= 0:
@@ -550,9 +548,7 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
         for i in range(n_wide - 1):
             h[i] = d[wide0 + i + 1] - d[wide0 + i]
         _derived_means(derived, h, j, u, at, win_lo, win_hi, sampled)
-        s_cols, s_mode, s_g, s_omg = s_recipe
-        _sliding_percentiles(at, n_cs, sampled, window_m, s_ranks, s_n_ranks, s_cols, s_mode,
-                             s_g, s_omg, s_pct, s_bad)
+        _sliding_means(at, n_cs, sampled, window_m, s_means, s_bad)
     return -1
 
 

@@ -31,6 +31,7 @@ order statistics without sorting.
 from __future__ import annotations
 
 import functools
+import threading
 
 import numpy as np
 
@@ -44,7 +45,12 @@ from railval.core.definitions import (
     window_centres,
     window_count,
 )
-from railval.core.en_kernels import _derive, _sample_window_means, _section_kernel  # noqa: F401
+from railval.core.en_kernels import (  # noqa: F401
+    _derive,
+    _sample_window_means,
+    _section_kernel,
+    _sliding_percentiles,
+)
 from railval.core.en_statistics import (
     PERCENTILES,
     QUANTILE_METHOD,
@@ -104,6 +110,18 @@ def _statistic(processing: str, p_lo, p_med, p_hi, rms_value=None):
 
 _DERIVE_TEXT = {"YQ": "Y/Q formed sample-wise from the low-pass filtered Y and Q",
                 "SumY": "ΣY = Y_L + Y_R formed from the low-pass filtered forces"}
+
+
+_SCRATCH = threading.local()
+
+
+def _scratch(n: int) -> np.ndarray:
+    """``n`` float64 of this thread's scratch (grown as needed; its content is the caller's
+    until its next call in this thread: first-touched memory costs more than reused)."""
+    buf = getattr(_SCRATCH, "buf", None)
+    if buf is None or buf.size < n:
+        buf = _SCRATCH.buf = np.empty(max(n, 1 << 17))
+    return buf[:n]
 
 
 @functools.lru_cache(maxsize=64)
@@ -245,16 +263,25 @@ class SectionState:
                                STEP_M) for o in self.origins]
 
     def run(self) -> None:
-        """The compiled step (releases the GIL; sections run on the cores in parallel)."""
-        if self.error is None:
-            self.zero_q = _section_kernel(
-                _NO_ROWS if self.lp is None else self.lp, self.sel, self.yq, self.sy,
-                _NO_ROWS if self.bp is None else self.bp, self.cut.start, self.cut.stop,
-                self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
-                self.out_rms, self.d, self.j, self.u, self.at, self.win_lo,
-                self.win_hi, self.sampled[1], self.origins, self.n_cs, WINDOW_M, STEP_M,
-                self.recipe, self.pct_lp, self.pct_bp, self.s_ranks, self.s_n_ranks,
-                self.s_recipe, self.s_pct, self.s_bad)
+        """The compiled step (releases the GIL; sections run on the cores in parallel), then
+        the sliding means of every reading sorted row by row (numpy's sort, also without
+        the GIL, into this thread's scratch rows) and their percentiles read off."""
+        if self.error is not None:
+            return
+        n_var, rows = self.s_bad.shape
+        kmax = int(self.n_cs.max()) if self.n_cs.size else 0
+        means = _scratch(n_var * rows * kmax).reshape(n_var * rows, kmax)
+        self.zero_q = _section_kernel(
+            _NO_ROWS if self.lp is None else self.lp, self.sel, self.yq, self.sy,
+            _NO_ROWS if self.bp is None else self.bp, self.cut.start, self.cut.stop,
+            self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
+            self.out_rms, self.d, self.j, self.u, self.at, self.win_lo,
+            self.win_hi, self.sampled[1], self.origins, self.n_cs, WINDOW_M, STEP_M,
+            self.recipe, self.pct_lp, self.pct_bp, means, self.s_bad)
+        if self.zero_q < 0 and n_var:
+            means.sort(axis=-1)
+            _sliding_percentiles(means, self.n_cs, n_var // self.n_cs.size, self.s_ranks,
+                                 self.s_n_ranks, *self.s_recipe, self.s_bad, self.s_pct)
 
     def release(self) -> None:
         """Drop the rows once the values are formed (a batch keeps only the values)."""
