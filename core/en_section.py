@@ -466,12 +466,20 @@ def _sliding_values_compiled(st: SectionState, keys: list[tuple[str, str]],
     st.clock.lap("statistics")
     if st.with_alternatives:
         per = vals.tolist()
-        for v, (grid, window) in enumerate(SLIDING_VARIANTS):
-            for m, method in enumerate(st.methods):
-                reading = _READING[(method, grid, window)]
-                if reading != CHOSEN:
-                    st.alternatives(_READING_ID[reading], keys, per[v][m])
+        for v, m, rid in _sliding_readings(st.methods):
+            st.alternatives(rid, keys, per[v][m])
     st.clock.lap("alternatives")
+
+
+@functools.lru_cache(maxsize=4)
+def _sliding_readings(methods: tuple[str, ...]) -> list[tuple[int, int, str]]:
+    """``(variant, method, reading id)`` of every reading other than the chosen one, in the
+    order :func:`_sliding_alternatives` takes them (variants in ``SLIDING_VARIANTS`` order,
+    then methods)."""
+    return [(v, m, _READING_ID[_READING[(method, grid, window)]])
+            for v, (grid, window) in enumerate(SLIDING_VARIANTS)
+            for m, method in enumerate(methods)
+            if _READING[(method, grid, window)] != CHOSEN]
 
 
 def _sliding_values(st: SectionState, slide_rows: np.ndarray, d_wide: np.ndarray,
@@ -512,20 +520,26 @@ def _bandpass_values(st: SectionState) -> None:
     statistics, the supplementary bogie-frame values."""
     bp_label = st.settle("bandpass")
     pct, pct_lin = st.pct_bp[0], st.pct_bp[-1]
-    rmsv = st.out_rms
+    rmsv = st.out_rms.tolist()
+    mx = maxabs(pct[:, 0], pct[:, 2]).tolist()
+    mx_lin = maxabs(pct_lin[:, 0], pct_lin[:, 2]).tolist()
+    values, prov, supp = st.values, st.prov, st.supp
+    alt_keys, alt_vals = [], []
     for r, name in enumerate(st.plan.bp_names):
         kind, _, pos = name.rpartition("_")
         if kind in BOGIE_KINDS:  # supplementary: same filter call, same statistics
-            st.supp[(f"{kind}_rms", pos)] = float(rmsv[r])
-            st.supp[(f"{kind}_max", pos)] = float(maxabs(pct[r, 0], pct[r, 2]))
+            supp[(f"{kind}_rms", pos)] = rmsv[r]
+            supp[(f"{kind}_max", pos)] = mx[r]
             continue
         q = kind.split("_")[0]
-        st.values[(f"{q}_rms", pos)] = float(rmsv[r])
-        st.prov[(f"{q}_rms", pos)] = (bp_label, st.cut_text, "rms value")
-        st.values[(f"{q}_max", pos)] = float(_statistic("maxabs", *pct[r]))
-        st.prov[(f"{q}_max", pos)] = (bp_label, st.cut_text,
-                                      "max(|0.15 % value|, |99.85 % value|)", st.pct_text)
-        st.alternative(_LINEAR, (f"{q}_max", pos), _statistic("maxabs", *pct_lin[r]))
+        values[(f"{q}_rms", pos)] = rmsv[r]
+        prov[(f"{q}_rms", pos)] = (bp_label, st.cut_text, "rms value")
+        values[(f"{q}_max", pos)] = mx[r]
+        prov[(f"{q}_max", pos)] = (bp_label, st.cut_text,
+                                   "max(|0.15 % value|, |99.85 % value|)", st.pct_text)
+        alt_keys.append((f"{q}_max", pos))
+        alt_vals.append(mx_lin[r])
+    st.alternatives(_LINEAR.id, alt_keys, alt_vals)
 
 
 def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: float,
