@@ -4,7 +4,9 @@ They call each other: the per-section step (:func:`_section_kernel`, used by
 :mod:`railval.core.en_section`) selects order statistics (:func:`select_ranks`, used by
 :mod:`railval.core.orderstat`), sums pairwise (:func:`pairwise_sum`, also used by the Welch
 taper of :mod:`railval.core.psd`) and integrates the linear interpolant at the window ends
-(:func:`_integral_at`, :mod:`railval.core.en_statistics`). Numba's on-disk cache
+(:func:`_integral_at`, :mod:`railval.core.en_statistics`), finds the sliding windows
+(:func:`_window_bounds`), forms the sliding means of every reading (:func:`_sliding_means`)
+and reads percentiles off order statistics (:func:`_read_percentiles`). Numba's on-disk cache
 (``cache=True``) keys a kernel to the file it is defined in and compiles the compiled functions
 it calls into it; a change in a callee defined in another file would leave the caller's cached
 code unchanged (numba documentation, "Cache invalidation fails to recognize changes in

@@ -9,8 +9,16 @@ evaluated range plus one sample on each side, checks Q ≠ 0 inside the evaluate
 selects the order statistics every percentile reading needs from all evaluated rows — the
 filtered forces, the derived rows and the band-pass rows read in place, without row copies
 (:func:`railval.core.orderstat.select_ranks`: the samples a full sort gives at those
-positions, so the percentiles are those of ``numpy.quantile``). The values are then read off
-these order statistics (:func:`railval.core.definitions.percentiles_from_order`).
+positions, so the percentiles are those of ``numpy.quantile``) and reads the percentiles off
+these order statistics by the recipe of :func:`railval.core.definitions.percentile_recipe`
+(the operations of :func:`railval.core.definitions.percentiles_from_order`). The same call
+finds the sliding-mean window ends of every grid (a walk along the distance axis that
+makes the comparisons of ``numpy.searchsorted``) and forms the sliding means of every
+reading; they are sorted row by row by numpy (its sort releases the GIL too) and their
+percentiles read off the sorted rows. What is left to Python per section is reading the
+values out (a few numpy calls and one dict entry per value); a section whose chosen sliding
+means are not all finite, or whose range does not fit the grid, takes the step-by-step numpy
+path (:func:`_sliding_values`).
 
 The operations on the samples are those of the former per-step numpy code, in the same order
 (IEEE division and addition for Y/Q and ΣY, the same order statistics, numpy's rms), so the
