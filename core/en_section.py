@@ -84,6 +84,8 @@ _NO_ROWS = np.empty((0, 0))
 _NO_INTS = np.empty(0, np.int64)
 _NO_FLOATS = np.empty(0)
 _NO_RANKS = np.zeros((0, 1), np.int64)
+#: the evaluated samples among (first, first evaluated, last evaluated, last) sample
+_END_MASK = np.array([False, True, True, False])
 #: the sliding-percentile recipe of no grid (cols, mode, g, 1 − g; shapes of one grid's)
 _NO_RECIPE = (np.zeros((0, 1, 3, 2), np.int64), np.zeros((0, 1, 3), np.int64),
               np.zeros((0, 1, 3)), np.zeros((0, 1, 3)))
@@ -323,11 +325,13 @@ class SectionState:
                 into[key] = value
 
     def settle(self, kind: str) -> str:
-        """Settling warnings of filter ``kind``; returns the filter's provenance label."""
-        mask = np.zeros(self.d.size, dtype=bool)
-        mask[self.cut] = True
+        """Settling warnings of filter ``kind``; returns the filter's provenance label.
+        The check reads only the first and last sample times and those of the first and
+        last evaluated samples, so it is given these four (the same differences)."""
+        t = np.asarray(self.ss.time_s)
+        ends = t[[0, self.cut.start, self.cut.stop - 1, t.shape[0] - 1]]
         self.warnings += [w.message for w in settling_check(
-            self.ss.time_s, mask, self.fs, kind, self.order, self.sec.id)]
+            ends, _END_MASK, self.fs, kind, self.order, self.sec.id)]
         return design(self.fs, kind, self.order).label + ", whole section"
 
     def result(self) -> tuple:
