@@ -427,27 +427,46 @@ def _rows_percentiles(stats, cols, mode, g, omg, out):  # pragma: no cover - com
 
 
 @numba.njit(cache=True, nogil=True)
-def _sliding_means(at, n_cs, sampled, window_m, means, bad):  # pragma: no cover - compiled
-    """The sliding means of every reading's grid and window into the rows of ``means``,
-    variant ``v = 3·grid + window`` (window: interpolant, closed samples, half-open samples;
+def _sliding_means(at, n_cs, sampled, window_m, win_hi, means, bad, slot
+                   ):  # pragma: no cover - compiled
+    """The sliding means of every reading's grid and window, variant ``v = 3·grid + window``
+    (window: interpolant, closed samples, half-open samples;
     :data:`railval.core.definitions.SLIDING_VARIANTS` order; only ``v = 0`` when
-    ``sampled`` has no columns), row ``v·rows + r``: the distance-weighted means
+    ``sampled`` has no columns): the distance-weighted means
     ``(at[:, end] − at[:, start]) / window_m``
     (:func:`railval.core.en_statistics._means_from_integrals`) or the sample-window means
-    (the columns of ``sampled``); a row's columns past its grid's number of windows are
-    +inf (they sort after every finite mean). ``bad[v, r]``: the row holds a non-finite
-    mean."""
+    (the columns of ``sampled``), row r of variant v into row ``slot[v]·rows + r`` of
+    ``means``; a row's columns past its grid's number of windows are +inf (they sort after
+    every finite mean). Where no sample lies on the upper end of a window of a grid
+    (``win_hi`` of its closed and half-open windows equal; the lower ends are equal by
+    construction, :func:`_window_bounds`) the half-open means are the closed ones: that
+    variant gets the closed variant's slot and no rows of its own. ``bad[v, r]``: the row
+    holds a non-finite mean. Returns the number of slots used."""
     rows = at.shape[0]
     n_win = 3 if sampled.shape[1] else 1
     width = means.shape[1]
     a_pos = 0
     s_pos = 0
+    used = 0
     for q in range(n_cs.shape[0]):
         k = n_cs[q]
         for w in range(n_win):
             v = q * n_win + w
+            if w == 2:
+                same = True
+                for i in range(k):
+                    if win_hi[s_pos - k + i] != win_hi[s_pos + i]:
+                        same = False
+                        break
+                if same:
+                    slot[v] = slot[v - 1]
+                    for r in range(rows):
+                        bad[v, r] = bad[v - 1, r]
+                    s_pos += k
+                    continue
+            slot[v] = used
             for r in range(rows):
-                out = means[v * rows + r]
+                out = means[used * rows + r]
                 finite = True
                 if w == 0:
                     for i in range(k):
@@ -462,18 +481,20 @@ def _sliding_means(at, n_cs, sampled, window_m, means, bad):  # pragma: no cover
                 for i in range(k, width):
                     out[i] = np.inf
                 bad[v, r] = not finite
+            used += 1
             if w > 0:
                 s_pos += k
         a_pos += 2 * k
+    return used
 
 
 @numba.njit(cache=True, nogil=True)
-def _sliding_percentiles(srt, n_cs, n_win, ranks, n_ranks, cols, mode, g, omg, bad, pct
-                         ):  # pragma: no cover - compiled
-    """``pct[v, m, r, :]``: the percentiles under each method of the sliding means of row
-    ``v·rows + r`` of ``srt`` (:func:`_sliding_means`, each row sorted ascending): the
-    order statistics ``ranks[grid, :n_ranks[grid]]`` read off the sorted row and the
-    percentiles formed by the recipe of the grid's number of windows
+def _sliding_percentiles(srt, n_cs, n_win, slot, ranks, n_ranks, cols, mode, g, omg, bad,
+                         pct):  # pragma: no cover - compiled
+    """``pct[v, m, r, :]``: the percentiles under each method of the sliding means of
+    variant v, row r (row ``slot[v]·rows + r`` of ``srt``, :func:`_sliding_means`, each row
+    sorted ascending): the order statistics ``ranks[grid, :n_ranks[grid]]`` read off the
+    sorted row and the percentiles formed by the recipe of the grid's number of windows
     (:func:`_read_percentiles`); 0 for a row marked in ``bad`` (its value is undefined)."""
     rows = bad.shape[1]
     stats = np.empty(ranks.shape[1])
@@ -487,7 +508,7 @@ def _sliding_percentiles(srt, n_cs, n_win, ranks, n_ranks, cols, mode, g, omg, b
                         for t in range(pct.shape[3]):
                             pct[v, m, r, t] = 0.0
                     continue
-                row = srt[v * rows + r]
+                row = srt[slot[v] * rows + r]
                 for c in range(n_ranks[q]):
                     stats[c] = row[ranks[q, c]]
                 _read_percentiles(stats, cols[q], mode[q], g[q], omg[q], tmp)
@@ -499,7 +520,7 @@ def _sliding_percentiles(srt, n_cs, n_win, ranks, n_ranks, cols, mode, g, omg, b
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
                     out_rms, d, j, u, at, win_lo, win_hi, sampled, origins, n_cs, window_m,
-                    step_m, recipe, pct_lp, pct_bp, s_means, s_bad
+                    step_m, recipe, pct_lp, pct_bp, s_means, s_bad, s_slot
                     ):  # pragma: no cover - compiled
     """One section: the derived rows (:func:`_derive`), then the order statistics ``ranks``
     of the evaluated part of the low-pass rows ``sel``, of the derived rows and of every
@@ -512,9 +533,10 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
     empty, the sample windows ``win_lo``/``win_hi``), the integrals of the derived rows at
     the window ends (:func:`railval.core.en_statistics._integral_at`), their means over the
     sample windows (:func:`_sample_window_means`) and the sliding means of every grid and
-    window (:func:`_sliding_means` into ``s_means``/``s_bad``; their percentiles are read by
-    :func:`_sliding_percentiles` once the caller has sorted the rows).
-    Returns the Y/Q row with Q = 0 in the evaluated range (nothing selected) or −1."""
+    window (:func:`_sliding_means` into ``s_means``/``s_bad``/``s_slot``; their percentiles
+    are read by :func:`_sliding_percentiles` once the caller has sorted the rows).
+    Returns the Y/Q row with Q = 0 in the evaluated range (nothing selected), else
+    −2 − (the slots of sliding means used), or −1 without sliding means."""
     zero = _derive(lp, yq, sy, cut0, cut1, wide0, derived)
     if zero >= 0:
         return zero
@@ -550,7 +572,8 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
         for i in range(n_wide - 1):
             h[i] = d[wide0 + i + 1] - d[wide0 + i]
         _derived_means(derived, h, j, u, at, win_lo, win_hi, sampled)
-        _sliding_means(at, n_cs, sampled, window_m, s_means, s_bad)
+        used = _sliding_means(at, n_cs, sampled, window_m, win_hi, s_means, s_bad, s_slot)
+        return -2 - used
     return -1
 
 

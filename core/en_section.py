@@ -281,17 +281,21 @@ class SectionState:
         n_var, rows = self.s_bad.shape
         kmax = int(self.n_cs.max()) if self.n_cs.size else 0
         means = _scratch(n_var * rows * kmax).reshape(n_var * rows, kmax)
-        self.zero_q = _section_kernel(
+        slot = np.empty(n_var, np.int64)
+        ret = _section_kernel(
             _NO_ROWS if self.lp is None else self.lp, self.sel, self.yq, self.sy,
             _NO_ROWS if self.bp is None else self.bp, self.cut.start, self.cut.stop,
             self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
             self.out_rms, self.d, self.j, self.u, self.at, self.win_lo,
             self.win_hi, self.sampled[1], self.origins, self.n_cs, WINDOW_M, STEP_M,
-            self.recipe, self.pct_lp, self.pct_bp, means, self.s_bad)
-        if self.zero_q < 0 and n_var:
-            means.sort(axis=-1)
-            _sliding_percentiles(means, self.n_cs, n_var // self.n_cs.size, self.s_ranks,
-                                 self.s_n_ranks, *self.s_recipe, self.s_bad, self.s_pct)
+            self.recipe, self.pct_lp, self.pct_bp, means, self.s_bad, slot)
+        self.zero_q = max(ret, -1)
+        if ret < -1:  # −2 − the slots of sliding means formed
+            srt = means[:(-2 - ret) * rows]
+            srt.sort(axis=-1)
+            _sliding_percentiles(srt, self.n_cs, n_var // self.n_cs.size, slot,
+                                 self.s_ranks, self.s_n_ranks, *self.s_recipe, self.s_bad,
+                                 self.s_pct)
 
     def release(self) -> None:
         """Drop the rows once the values are formed (a batch keeps only the values)."""

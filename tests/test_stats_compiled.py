@@ -82,12 +82,26 @@ def _sparse(ss: SignalSet, info, factor: float):
                                 eval_end_m=info.eval_end_m * factor))
 
 
+def _lattice(ss: SignalSet, info, offset: float):
+    """The section on a distance axis of 1/16 m steps (exact in binary): with ``offset`` 0
+    samples lie exactly on window ends (closed and half-open windows differ), else none."""
+    n = len(ss)
+    d = np.arange(n) / 16.0
+    start, end = float(np.floor(d[n // 4])) + offset, float(np.floor(d[3 * n // 4]))
+    return (dataclasses.replace(ss, distance_m=d),
+            dataclasses.replace(info, eval_start_m=start, eval_end_m=end))
+
+
 @pytest.mark.parametrize("alternatives", [True, False])
 def test_compiled_sliding_path_equals_the_numpy_path(monkeypatch, alternatives):
     sets, infos = en_frozen.campaign_inputs()
     sets, infos = list(sets[:4]), list(infos[:4])
     for factor in (40.0, 150.0):
         ss, info = _sparse(sets[0], infos[0], factor)
+        sets.append(ss)
+        infos.append(info)
+    for offset in (0.0, 0.03):
+        ss, info = _lattice(sets[1], infos[1], offset)
         sets.append(ss)
         infos.append(info)
     got = evaluate_batch(sets, infos, alternatives=alternatives)
@@ -98,3 +112,8 @@ def test_compiled_sliding_path_equals_the_numpy_path(monkeypatch, alternatives):
         want = evaluate_batch(sets, infos, alternatives=alternatives)
     for a, b in zip(got, want, strict=True):
         assert repr(a.to_dict()) == repr(b.to_dict())
+    if alternatives:  # on the lattice the closed and half-open windows differ
+        lat = got[-2].alternatives
+        closed = [r for r in lat if "samples_closed" in r]
+        half = [r for r in lat if "samples_half_open" in r]
+        assert [lat[r] for r in closed] != [lat[r] for r in half]
