@@ -43,6 +43,7 @@ import threading
 
 import numpy as np
 
+from railval.core.buffers import BufferPool
 from railval.core.definitions import (
     CHOSEN,
     READINGS,
@@ -202,7 +203,8 @@ class SectionState:
         n = self.d.size
         self.wide = slice(max(cut.start - 1, 0), min(cut.stop + 1, n))
         n_der = self.yq.shape[0] + self.sy.shape[0]
-        self.derived = np.empty((n_der, self.wide.stop - self.wide.start))
+        self.derived = _NO_ROWS  # (with at and sampled: allocate_rows)
+        self.row_shapes = [(n_der, self.wide.stop - self.wide.start)]
         rec = percentile_recipe(self.n_eval, PERCENTILES, self.methods)
         self.ranks, self.recipe = rec[0], rec[1:]
         k = self.ranks.size
@@ -261,8 +263,9 @@ class SectionState:
             self.s_recipe = _NO_RECIPE
         self.s_pct = np.empty((n_var, m, n_der, 3))
         self.s_bad = np.empty((n_var, n_der), dtype=np.bool_)
-        self.at = np.empty((n_der, self.j.size))
-        self.sampled = (sizes, np.empty((n_der, self.win_lo.size)))
+        self.at = _NO_ROWS
+        self.sampled = (sizes, _NO_ROWS)
+        self.row_shapes += [(n_der, self.j.size), (n_der, self.win_lo.size)]
 
     @property
     def grids(self) -> list[np.ndarray] | None:
@@ -354,13 +357,39 @@ def _registry_keys() -> tuple[list, list]:
             [(q, p) for q, sq in SUPPLEMENTARY.items() for p in sq.positions()])
 
 
+#: the derived rows, integrals and sample-window means of the sections of a chunk (one
+#: buffer per chunk, reused once the chunk's values are formed: fresh memory costs a page
+#: fault and a zero fill per page, :mod:`railval.core.buffers`)
+_ROWS_POOL = BufferPool(keep=4, max_bytes=128 << 20, min_bytes=1 << 20,
+                        max_total_bytes=256 << 20)
+
+
+def allocate_rows(states: list[SectionState]) -> None:
+    """The derived rows, integrals and sample-window means (``row_shapes``) of every
+    section of ``states`` as views of one pooled buffer (the buffer is free again once
+    every section is released, :meth:`SectionState.release`)."""
+    live = [st for st in states if st.error is None]
+    total = sum(a * b for st in live for a, b in st.row_shapes)
+    block = _ROWS_POOL.take((total,))
+    pos = 0
+    for st in live:
+        views = []
+        for a, b in st.row_shapes:
+            views.append(block[pos:pos + a * b].reshape(a, b))
+            pos += a * b
+        st.derived, st.at = views[0], views[1]
+        st.sampled = (st.sampled[0], views[2])
+
+
 def run_sections(states: list[SectionState]) -> None:
     """The compiled step of every section, the sections shared among the cores (the first
-    one in the calling thread first: a first call compiles or loads the kernel once)."""
+    one in the calling thread first: a first call compiles or loads the kernel once); the
+    rows of the chunk allocated first (:func:`allocate_rows`)."""
     from railval.core.workers import split_rows
 
     if not states:
         return
+    allocate_rows(states)
     states[0].run()
 
     def part(a: int, b: int) -> None:
