@@ -177,11 +177,12 @@ class SectionValues(dict):
 
 @numba.njit(cache=True, nogil=True)
 def _increasing(d):  # pragma: no cover - compiled
-    """Whether ``d`` is strictly increasing (``numpy.all(numpy.diff(d) > 0)``: False at NaN)."""
+    """Whether ``d`` is strictly increasing (``numpy.all(numpy.diff(d) > 0)``: False at NaN).
+    Every comparison is made (no early exit), so the loop is vectorised."""
+    ok = True
     for i in range(1, d.shape[0]):
-        if not d[i] > d[i - 1]:
-            return False
-    return True
+        ok &= d[i] > d[i - 1]
+    return ok
 
 
 @numba.njit(cache=True, nogil=True)
