@@ -244,22 +244,103 @@ def percentiles_from_order(take, n: int, ps, method: str) -> np.ndarray:
         Shape (rows, len(ps)).
     """
     ps = [float(p) for p in ps]
+    if method not in PERCENTILE_METHODS:
+        raise InvalidParameter(
+            f"percentile method must be one of {PERCENTILE_METHODS}, got {method!r}")
+    cols = []
+    for p in ps:
+        mode, lo, hi, g, omg = _percentile_read(n, p, method)
+        if mode == 0:
+            cols.append(take(lo))
+            continue
+        a, b = take(lo), take(hi)
+        diff = b - a
+        # numpy's _lerp: a + diff·g, from the upper end for g ≥ 0.5 (monotone, exact ends)
+        cols.append(b - diff * omg if mode == 2 else a + diff * g)
+    return np.stack(cols, axis=-1)
+
+
+def _percentile_read(n: int, p: float, method: str) -> tuple[int, int, int, float, float]:
+    """How :func:`percentiles_from_order` reads percentile ``p`` of ``n`` sorted samples:
+    ``(mode, lo, hi, g, 1 − g)``. ``inverted_cdf``: mode 0, the sample of 0-based rank
+    ``lo`` = ⌈n·p⌉ − 1 (clipped to 0..n − 1); ``linear``: h = (n − 1)·p, ``lo`` = ⌊h⌋,
+    ``hi`` = lo + 1 (both ≤ n − 1), g = h − lo; mode 2 (``b − diff·(1 − g)``) for g ≥ 0.5,
+    else mode 1 (``a + diff·g``), a and b the samples of ranks lo and hi (numpy's lerp)."""
     if method == "inverted_cdf":
-        idx = [min(max(int(np.ceil(n * p - 1e-12)) - 1, 0), n - 1) for p in ps]
-        return np.stack([take(i) for i in idx], axis=-1)
-    if method == "linear":
-        cols = []
-        for p in ps:
-            h = (n - 1) * p
-            lo = min(int(np.floor(h)), n - 1)
-            hi = min(lo + 1, n - 1)
-            g = h - lo
-            a, b = take(lo), take(hi)
-            diff = b - a
-            # numpy's _lerp: a + diff·g, from the upper end for g ≥ 0.5 (monotone, exact ends)
-            cols.append(b - diff * (1.0 - g) if g >= 0.5 else a + diff * g)
-        return np.stack(cols, axis=-1)
-    raise InvalidParameter(f"percentile method must be one of {PERCENTILE_METHODS}, got {method!r}")
+        idx = min(max(int(np.ceil(n * p - 1e-12)) - 1, 0), n - 1)
+        return 0, idx, idx, 0.0, 1.0
+    h = (n - 1) * p
+    lo = min(int(np.floor(h)), n - 1)
+    hi = min(lo + 1, n - 1)
+    g = h - lo
+    return (2 if g >= 0.5 else 1), lo, hi, g, 1.0 - g
+
+
+@functools.lru_cache(maxsize=1024)
+def percentile_recipe(n: int, ps: tuple[float, ...], methods: tuple[str, ...]) -> tuple:
+    """The order statistics percentiles ``ps`` of ``n`` samples need under each of
+    ``methods`` and how they are read, for compiled callers
+    (:func:`railval.core.en_kernels._read_percentiles`): ``(ranks, cols, mode, g, omg)`` —
+    ``ranks`` the sorted 0-based ranks (int64), ``cols[m, t]`` the columns (in ``ranks``) of
+    the samples a and b of percentile t under method m, ``mode``, ``g``, ``omg`` = 1 − g as
+    :func:`_percentile_read` gives them (the same reading as :func:`percentiles_from_order`).
+    Cached per ``n``: the arrays must not be written to.
+
+    Parameters
+    ----------
+    n : int
+        Sample size.
+    ps : tuple of float
+        Percentiles as fractions.
+    methods : tuple of str
+        Percentile methods (:data:`PERCENTILE_METHODS`).
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+    """
+    for m in methods:
+        if m not in PERCENTILE_METHODS:
+            raise InvalidParameter(
+                f"percentile method must be one of {PERCENTILE_METHODS}, got {m!r}")
+    reads = [[_percentile_read(int(n), float(p), m) for p in ps] for m in methods]
+    ranks = sorted({i for row in reads for r in row for i in r[1:3]})
+    column = {r: c for c, r in enumerate(ranks)}
+    cols = np.array([[[column[r[1]], column[r[2]]] for r in row] for row in reads],
+                    dtype=np.int64).reshape(len(methods), len(ps), 2)
+    mode = np.array([[r[0] for r in row] for row in reads], dtype=np.int64
+                    ).reshape(len(methods), len(ps))
+    g = np.array([[r[3] for r in row] for row in reads], dtype=np.float64
+                 ).reshape(len(methods), len(ps))
+    omg = np.array([[r[4] for r in row] for row in reads], dtype=np.float64
+                   ).reshape(len(methods), len(ps))
+    out = (np.array(ranks, dtype=np.int64), cols, mode, g, omg)
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
+def window_count(start_m: float, end_m: float, origin_m: float, window_m: float,
+                 step_m: float) -> int:
+    """The number of centres :func:`window_centres` gives (raises as it does).
+
+    Parameters
+    ----------
+    start_m, end_m, origin_m, window_m, step_m : float
+        As in :func:`window_centres`.
+
+    Returns
+    -------
+    int
+    """
+    if window_m <= 0 or step_m <= 0:
+        raise InvalidParameter(
+            f"window_m and step_m must be > 0 m, got window_m={window_m}, step_m={step_m}")
+    if end_m - origin_m < window_m or origin_m < start_m:
+        raise InvalidSignal(
+            f"sliding-window grid from {origin_m} m does not fit a {window_m} m window inside "
+            f"the evaluated range {start_m}–{end_m} m")
+    return int(np.floor((end_m - origin_m - window_m) / step_m + 1e-9)) + 1
 
 
 def window_centres(start_m: float, end_m: float, origin_m: float, window_m: float,
@@ -285,14 +366,7 @@ def window_centres(start_m: float, end_m: float, origin_m: float, window_m: floa
     >>> window_centres(0.0, 3.0, 0.0, 2.0, 0.5)
     array([1. , 1.5, 2. ])
     """
-    if window_m <= 0 or step_m <= 0:
-        raise InvalidParameter(
-            f"window_m and step_m must be > 0 m, got window_m={window_m}, step_m={step_m}")
-    if end_m - origin_m < window_m or origin_m < start_m:
-        raise InvalidSignal(
-            f"sliding-window grid from {origin_m} m does not fit a {window_m} m window inside "
-            f"the evaluated range {start_m}–{end_m} m")
-    n_c = int(np.floor((end_m - origin_m - window_m) / step_m + 1e-9)) + 1
+    n_c = window_count(start_m, end_m, origin_m, window_m, step_m)
     return origin_m + window_m / 2.0 + step_m * np.arange(n_c)
 
 

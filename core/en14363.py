@@ -128,6 +128,20 @@ class SectionValues(dict):
             k: dict(v) for k, v in (alternatives or {}).items()}
         self.supplementary: dict[tuple[str, str], float] = dict(supplementary or {})
 
+    @classmethod
+    def _adopt(cls, section_id: str, values: dict, provenance: dict, warnings: list,
+               alternatives: dict, supplementary: dict) -> SectionValues:
+        """A SectionValues holding the given containers themselves (no copies): for the
+        fresh containers of :func:`evaluate_batch`, which keeps no other reference."""
+        out = cls.__new__(cls)
+        dict.__init__(out, values)
+        out.section_id = section_id
+        out.provenance = provenance
+        out.warnings = warnings
+        out.alternatives = alternatives
+        out.supplementary = supplementary
+        return out
+
     def value_under(self, reading_id: str, key: tuple[str, str]) -> float:
         """The value of ``key`` under the reading ``reading_id`` (the chosen value where the
         reading does not change it)."""
@@ -163,11 +177,12 @@ class SectionValues(dict):
 
 @numba.njit(cache=True, nogil=True)
 def _increasing(d):  # pragma: no cover - compiled
-    """Whether ``d`` is strictly increasing (``numpy.all(numpy.diff(d) > 0)``: False at NaN)."""
+    """Whether ``d`` is strictly increasing (``numpy.all(numpy.diff(d) > 0)``: False at NaN).
+    Every comparison is made (no early exit), so the loop is vectorised."""
+    ok = True
     for i in range(1, d.shape[0]):
-        if not d[i] > d[i - 1]:
-            return False
-    return True
+        ok &= d[i] > d[i - 1]
+    return ok
 
 
 @numba.njit(cache=True, nogil=True)
@@ -395,7 +410,7 @@ def _chunk_values(states: list[SectionState], supplementary: bool, clock: _Clock
                              strict=True):
             st.supp.update(bands)
     clock.lap("supplementary")
-    return [SectionValues(st.sec.id, *st.result()) for st in states]
+    return [SectionValues._adopt(st.sec.id, *st.result()) for st in states]
 
 
 def evaluate_section(signalset: SignalSet, section_info: SectionInfo, *,

@@ -4,7 +4,9 @@ They call each other: the per-section step (:func:`_section_kernel`, used by
 :mod:`railval.core.en_section`) selects order statistics (:func:`select_ranks`, used by
 :mod:`railval.core.orderstat`), sums pairwise (:func:`pairwise_sum`, also used by the Welch
 segment mean of :mod:`railval.core.psd`) and integrates the linear interpolant at the window ends
-(:func:`_integral_at`, :mod:`railval.core.en_statistics`). Numba's on-disk cache
+(:func:`_integral_at`, :mod:`railval.core.en_statistics`), finds the sliding windows
+(:func:`_window_bounds`), forms the sliding means of every reading (:func:`_sliding_means`)
+and reads percentiles off order statistics (:func:`_read_percentiles`). Numba's on-disk cache
 (``cache=True``) keys a kernel to the file it is defined in and compiles the compiled functions
 it calls into it; a change in a callee defined in another file would leave the caller's cached
 code unchanged (numba documentation, "Cache invalidation fails to recognize changes in
@@ -343,18 +345,198 @@ def _derived_means(v, h, j, u, at, lo, hi, sampled):  # pragma: no cover - compi
                                      else np.nan)
 
 
+@numba.njit(cache=True, nogil=True)
+def _window_bounds(d, origins, n_cs, half, step, j, u, lo, hi):  # pragma: no cover - compiled
+    """The window ends on the distance axis ``d`` of the grids with centres
+    ``c_k = (origins[g] + half) + step·k``, k < ``n_cs[g]`` (as
+    :func:`railval.core.definitions.window_centres` forms them): into ``j``/``u`` the
+    interval and offset of every window start, then every window end, grid after grid
+    (``clip(searchsorted(d, x, "right") − 1, 0, n − 2)`` and ``x − d[j]``,
+    :func:`railval.core.en_statistics._window_ends`); when ``lo`` is not empty, into
+    ``lo``/``hi`` the first sample in and the first past the closed window
+    ``[c − half, c + half]``, then the half-open one, grid after grid
+    (``searchsorted`` left / right resp. left, :func:`railval.core.en_section._sample_bounds`).
+    The centres increase, so each search walks on from the previous result (``a``: the
+    first sample ≥ x, ``searchsorted`` left; ``b``: the first sample > x, right): the same
+    comparisons decide, so the same indices."""
+    n = d.shape[0]
+    samples = lo.shape[0] > 0
+    pos = 0
+    s_pos = 0
+    for g in range(origins.shape[0]):
+        base = origins[g] + half
+        k_n = n_cs[g]
+        for e in range(2):
+            a = 0
+            b = 0
+            for k in range(k_n):
+                c = base + step * k
+                x = c - half if e == 0 else c + half
+                while a < n and d[a] < x:
+                    a += 1
+                if b < a:
+                    b = a
+                while b < n and d[b] <= x:
+                    b += 1
+                jj = min(max(b - 1, 0), n - 2)
+                j[pos] = jj
+                u[pos] = x - d[jj]
+                pos += 1
+                if samples:
+                    if e == 0:
+                        lo[s_pos + k] = a
+                        lo[s_pos + k_n + k] = a
+                    else:
+                        hi[s_pos + k] = b
+                        hi[s_pos + k_n + k] = a
+        s_pos += 2 * k_n
+
+
+@numba.njit(cache=True, nogil=True)
+def _read_percentiles(stats, cols, mode, g, omg, out):  # pragma: no cover - compiled
+    """``out[m, t]`` = percentile t of method m from the order statistics ``stats`` by the
+    recipe of :func:`railval.core.definitions.percentile_recipe`: mode 0 the statistic
+    ``stats[cols[m, t, 0]]`` itself (inverted CDF); else numpy's lerp of ``a`` =
+    ``stats[cols[m, t, 0]]`` and ``b`` = ``stats[cols[m, t, 1]]`` with ``diff = b − a``:
+    mode 1 ``a + diff·g``, mode 2 ``b − diff·omg`` (``omg = 1 − g``, formed by the caller)
+    — :func:`railval.core.definitions.percentiles_from_order`, the same operations."""
+    for m in range(cols.shape[0]):
+        for t in range(cols.shape[1]):
+            a = stats[cols[m, t, 0]]
+            md = mode[m, t]
+            if md == 0:
+                out[m, t] = a
+            else:
+                b = stats[cols[m, t, 1]]
+                diff = b - a
+                if md == 2:
+                    out[m, t] = b - diff * omg[m, t]
+                else:
+                    out[m, t] = a + diff * g[m, t]
+
+
+@numba.njit(cache=True, nogil=True)
+def _rows_percentiles(stats, cols, mode, g, omg, out):  # pragma: no cover - compiled
+    """:func:`_read_percentiles` of every row of ``stats`` into ``out[:, r, :]``."""
+    tmp = np.empty((cols.shape[0], cols.shape[1]))
+    for r in range(stats.shape[0]):
+        _read_percentiles(stats[r], cols, mode, g, omg, tmp)
+        for m in range(cols.shape[0]):
+            for t in range(cols.shape[1]):
+                out[m, r, t] = tmp[m, t]
+
+
+@numba.njit(cache=True, nogil=True)
+def _sliding_means(at, n_cs, sampled, window_m, win_hi, means, bad, slot
+                   ):  # pragma: no cover - compiled
+    """The sliding means of every reading's grid and window, variant ``v = 3·grid + window``
+    (window: interpolant, closed samples, half-open samples;
+    :data:`railval.core.definitions.SLIDING_VARIANTS` order; only ``v = 0`` when
+    ``sampled`` has no columns): the distance-weighted means
+    ``(at[:, end] − at[:, start]) / window_m``
+    (:func:`railval.core.en_statistics._means_from_integrals`) or the sample-window means
+    (the columns of ``sampled``), row r of variant v into row ``slot[v]·rows + r`` of
+    ``means``; a row's columns past its grid's number of windows are +inf (they sort after
+    every finite mean). Where no sample lies on the upper end of a window of a grid
+    (``win_hi`` of its closed and half-open windows equal; the lower ends are equal by
+    construction, :func:`_window_bounds`) the half-open means are the closed ones: that
+    variant gets the closed variant's slot and no rows of its own. ``bad[v, r]``: the row
+    holds a non-finite mean. Returns the number of slots used."""
+    rows = at.shape[0]
+    n_win = 3 if sampled.shape[1] else 1
+    width = means.shape[1]
+    a_pos = 0
+    s_pos = 0
+    used = 0
+    for q in range(n_cs.shape[0]):
+        k = n_cs[q]
+        for w in range(n_win):
+            v = q * n_win + w
+            if w == 2:
+                same = True
+                for i in range(k):
+                    if win_hi[s_pos - k + i] != win_hi[s_pos + i]:
+                        same = False
+                        break
+                if same:
+                    slot[v] = slot[v - 1]
+                    for r in range(rows):
+                        bad[v, r] = bad[v - 1, r]
+                    s_pos += k
+                    continue
+            slot[v] = used
+            for r in range(rows):
+                out = means[used * rows + r]
+                finite = True
+                if w == 0:
+                    for i in range(k):
+                        x = (at[r, a_pos + k + i] - at[r, a_pos + i]) / window_m
+                        out[i] = x
+                        finite &= np.isfinite(x)
+                else:
+                    for i in range(k):
+                        x = sampled[r, s_pos + i]
+                        out[i] = x
+                        finite &= np.isfinite(x)
+                for i in range(k, width):
+                    out[i] = np.inf
+                bad[v, r] = not finite
+            used += 1
+            if w > 0:
+                s_pos += k
+        a_pos += 2 * k
+    return used
+
+
+@numba.njit(cache=True, nogil=True)
+def _sliding_percentiles(srt, n_cs, n_win, slot, ranks, n_ranks, cols, mode, g, omg, bad,
+                         pct):  # pragma: no cover - compiled
+    """``pct[v, m, r, :]``: the percentiles under each method of the sliding means of
+    variant v, row r (row ``slot[v]·rows + r`` of ``srt``, :func:`_sliding_means`, each row
+    sorted ascending): the order statistics ``ranks[grid, :n_ranks[grid]]`` read off the
+    sorted row and the percentiles formed by the recipe of the grid's number of windows
+    (:func:`_read_percentiles`); 0 for a row marked in ``bad`` (its value is undefined)."""
+    rows = bad.shape[1]
+    stats = np.empty(ranks.shape[1])
+    tmp = np.empty((cols.shape[1], cols.shape[2]))
+    for q in range(n_cs.shape[0]):
+        for w in range(n_win):
+            v = q * n_win + w
+            for r in range(rows):
+                if bad[v, r]:
+                    for m in range(pct.shape[1]):
+                        for t in range(pct.shape[3]):
+                            pct[v, m, r, t] = 0.0
+                    continue
+                row = srt[slot[v] * rows + r]
+                for c in range(n_ranks[q]):
+                    stats[c] = row[ranks[q, c]]
+                _read_percentiles(stats, cols[q], mode[q], g[q], omg[q], tmp)
+                for m in range(pct.shape[1]):
+                    for t in range(pct.shape[3]):
+                        pct[v, m, r, t] = tmp[m, t]
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
-                    out_rms, d, j, u, at, win_lo, win_hi, sampled
+                    out_rms, d, j, u, at, win_lo, win_hi, sampled, origins, n_cs, window_m,
+                    step_m, recipe, pct_lp, pct_bp, s_means, s_bad, s_slot
                     ):  # pragma: no cover - compiled
     """One section: the derived rows (:func:`_derive`), then the order statistics ``ranks``
     of the evaluated part of the low-pass rows ``sel``, of the derived rows and of every
-    band-pass row into ``out_lp`` (in that order) and ``out_bp``, the band-pass rows' rms
-    (numpy's ``sqrt(mean(x²))``, :func:`railval.core.en_statistics.pairwise_sum`) and the
-    integrals of the derived rows at the window ends ``j``, ``u`` on ``d[wide0:]``
-    (:func:`railval.core.en_statistics._integral_at`) and their means over the sample
-    windows ``win_lo``/``win_hi`` (:func:`_sample_window_means`). Returns the Y/Q row with Q = 0 in the
-    evaluated range (nothing selected) or −1."""
+    band-pass row into ``out_lp`` (in that order) and ``out_bp``, and their percentiles
+    under each method into ``pct_lp``/``pct_bp`` (:func:`_rows_percentiles`, ``recipe`` =
+    (cols, mode, g, 1 − g)), the band-pass rows' rms
+    (numpy's ``sqrt(mean(x²))``, :func:`railval.core.en_statistics.pairwise_sum`). When
+    ``n_cs`` is not empty: the window ends of the sliding-mean grids from ``origins`` on
+    ``d[wide0:]`` (:func:`_window_bounds`; into ``j``, ``u`` and, when ``win_lo`` is not
+    empty, the sample windows ``win_lo``/``win_hi``), the integrals of the derived rows at
+    the window ends (:func:`railval.core.en_statistics._integral_at`), their means over the
+    sample windows (:func:`_sample_window_means`) and the sliding means of every grid and
+    window (:func:`_sliding_means` into ``s_means``/``s_bad``/``s_slot``; their percentiles
+    are read by :func:`_sliding_percentiles` once the caller has sorted the rows).
+    Returns the Y/Q row with Q = 0 in the evaluated range (nothing selected), else
+    −2 − (the slots of sliding means used), or −1 without sliding means."""
     zero = _derive(lp, yq, sy, cut0, cut1, wide0, derived)
     if zero >= 0:
         return zero
@@ -379,12 +561,19 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
         for i in range(n):
             cand[i] = bp[r, cut0 + i] * bp[r, cut0 + i]
         out_rms[r] = np.sqrt(pairwise_sum(cand, 0, n) / n)
-    if j.shape[0] or win_lo.shape[0]:
+    cols, mode, g, omg = recipe
+    _rows_percentiles(out_lp, cols, mode, g, omg, pct_lp)
+    _rows_percentiles(out_bp, cols, mode, g, omg, pct_bp)
+    if n_cs.shape[0]:
         n_wide = derived.shape[1]
+        _window_bounds(d[wide0:wide0 + n_wide], origins, n_cs, window_m / 2.0, step_m, j, u,
+                       win_lo, win_hi)
         h = np.empty(n_wide - 1)
         for i in range(n_wide - 1):
             h[i] = d[wide0 + i + 1] - d[wide0 + i]
         _derived_means(derived, h, j, u, at, win_lo, win_hi, sampled)
+        used = _sliding_means(at, n_cs, sampled, window_m, win_hi, s_means, s_bad, s_slot)
+        return -2 - used
     return -1
 
 

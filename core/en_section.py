@@ -9,8 +9,16 @@ evaluated range plus one sample on each side, checks Q ≠ 0 inside the evaluate
 selects the order statistics every percentile reading needs from all evaluated rows — the
 filtered forces, the derived rows and the band-pass rows read in place, without row copies
 (:func:`railval.core.orderstat.select_ranks`: the samples a full sort gives at those
-positions, so the percentiles are those of ``numpy.quantile``). The values are then read off
-these order statistics (:func:`railval.core.definitions.percentiles_from_order`).
+positions, so the percentiles are those of ``numpy.quantile``) and reads the percentiles off
+these order statistics by the recipe of :func:`railval.core.definitions.percentile_recipe`
+(the operations of :func:`railval.core.definitions.percentiles_from_order`). The same call
+finds the sliding-mean window ends of every grid (a walk along the distance axis that
+makes the comparisons of ``numpy.searchsorted``) and forms the sliding means of every
+reading; they are sorted row by row by numpy (its sort releases the GIL too) and their
+percentiles read off the sorted rows. What is left to Python per section is reading the
+values out (a few numpy calls and one dict entry per value); a section whose chosen sliding
+means are not all finite, or whose range does not fit the grid, takes the step-by-step numpy
+path (:func:`_sliding_values`).
 
 The operations on the samples are those of the former per-step numpy code, in the same order
 (IEEE division and addition for Y/Q and ΣY, the same order statistics, numpy's rms), so the
@@ -30,17 +38,28 @@ order statistics without sorting.
 
 from __future__ import annotations
 
+import functools
+import threading
+
 import numpy as np
 
+from railval.core.buffers import BufferPool
 from railval.core.definitions import (
     CHOSEN,
     READINGS,
     SLIDING_VARIANTS,
     Reading,
     percentile_ranks,
+    percentile_recipe,
     window_centres,
+    window_count,
 )
-from railval.core.en_kernels import _derive, _sample_window_means, _section_kernel  # noqa: F401
+from railval.core.en_kernels import (  # noqa: F401
+    _derive,
+    _sample_window_means,
+    _section_kernel,
+    _sliding_percentiles,
+)
 from railval.core.en_statistics import (
     PERCENTILES,
     QUANTILE_METHOD,
@@ -63,6 +82,14 @@ from railval.core.types import WHEEL_POSITIONS, SectionInfo, SignalSet
 #: the reading that differs from the chosen one only in the percentile method
 _LINEAR = Reading("linear", CHOSEN.grid, CHOSEN.window)
 _NO_ROWS = np.empty((0, 0))
+_NO_INTS = np.empty(0, np.int64)
+_NO_FLOATS = np.empty(0)
+_NO_RANKS = np.zeros((0, 1), np.int64)
+#: the evaluated samples among (first, first evaluated, last evaluated, last) sample
+_END_MASK = np.array([False, True, True, False])
+#: the sliding-percentile recipe of no grid (cols, mode, g, 1 − g; shapes of one grid's)
+_NO_RECIPE = (np.zeros((0, 1, 3, 2), np.int64), np.zeros((0, 1, 3), np.int64),
+              np.zeros((0, 1, 3)), np.zeros((0, 1, 3)))
 #: every reading by its (percentile, grid, window)
 _READING = {(r.percentile, r.grid, r.window): r for r in READINGS}
 _READING_ID = {r: r.id for r in READINGS}
@@ -94,6 +121,43 @@ def _statistic(processing: str, p_lo, p_med, p_hi, rms_value=None):
 
 _DERIVE_TEXT = {"YQ": "Y/Q formed sample-wise from the low-pass filtered Y and Q",
                 "SumY": "ΣY = Y_L + Y_R formed from the low-pass filtered forces"}
+
+
+_SCRATCH = threading.local()
+
+
+def _scratch(n: int) -> np.ndarray:
+    """``n`` float64 of this thread's scratch (grown as needed; its content is the caller's
+    until its next call in this thread: first-touched memory costs more than reused)."""
+    buf = getattr(_SCRATCH, "buf", None)
+    if buf is None or buf.size < n:
+        buf = _SCRATCH.buf = np.empty(max(n, 1 << 17))
+    return buf[:n]
+
+
+@functools.lru_cache(maxsize=64)
+def _channel_layout(lp_names: tuple[str, ...]) -> tuple:
+    """The rows of the low-pass channels ``lp_names`` the compiled step reads:
+    ``(index, wheels_yq, wsets, families, sel, yq, sy)`` — the row of each channel, the
+    wheels with Y and Q, the wheelsets with both Y, the force families in value order, the
+    Y then Q rows selected, the (Y, Q) rows of each Y/Q and the (Y_L, Y_R) rows of each ΣY.
+    Formed once per set of names (the arrays must not be written to)."""
+    index = {c: r for r, c in enumerate(lp_names)}
+    wy = [p for p in WHEEL_POSITIONS if f"Y_{p}" in index]
+    wq = [p for p in WHEEL_POSITIONS if f"Q_{p}" in index]
+    wheels_yq = [p for p in wy if p in wq]
+    wsets = [ws for ws in WHEELSET_POSITIONS
+             if f"Y_w{ws[2:]}L" in index and f"Y_w{ws[2:]}R" in index]
+    families = (("Y", wy), ("Q", wq), ("YQ", wheels_yq), ("SumY", wsets))
+    sel = np.array([index[f"Y_{p}"] for p in wy] + [index[f"Q_{p}"] for p in wq],
+                   dtype=np.int64)
+    yq = np.array([[index[f"Y_{p}"], index[f"Q_{p}"]] for p in wheels_yq],
+                  dtype=np.int64).reshape(-1, 2)
+    sy = np.array([[index[f"Y_w{w[2:]}L"], index[f"Y_w{w[2:]}R"]] for w in wsets],
+                  dtype=np.int64).reshape(-1, 2)
+    for a in (sel, yq, sy):
+        a.flags.writeable = False
+    return index, wheels_yq, wsets, families, sel, yq, sy
 
 
 class SectionState:
@@ -129,71 +193,112 @@ class SectionState:
         self._rows(lp, bp)
 
     def _rows(self, lp: np.ndarray | None, bp: np.ndarray | None) -> None:
-        """The inputs and outputs of :func:`_section_kernel`."""
+        """The inputs and outputs of :func:`_section_kernel` (the row indices come from
+        :func:`_channel_layout`, formed once per set of channel names)."""
         plan, cut = self.plan, self.cut
         self.lp = lp if lp is not None and lp.shape[0] else None
         self.bp = bp if bp is not None and bp.shape[0] else None
-        index = {c: r for r, c in enumerate(plan.lp_names)} if self.lp is not None else {}
-        self.index = index
-        wy = [p for p in WHEEL_POSITIONS if f"Y_{p}" in index]
-        wq = [p for p in WHEEL_POSITIONS if f"Q_{p}" in index]
-        self.wheels_yq = [p for p in wy if p in wq]
-        self.wsets = [ws for ws in WHEELSET_POSITIONS
-                      if f"Y_w{ws[2:]}L" in index and f"Y_w{ws[2:]}R" in index]
-        self.families = (("Y", wy), ("Q", wq), ("YQ", self.wheels_yq), ("SumY", self.wsets))
-        self.sel = np.array([index[f"Y_{p}"] for p in wy] + [index[f"Q_{p}"] for p in wq],
-                            dtype=np.int64)
-        self.yq = np.array([[index[f"Y_{p}"], index[f"Q_{p}"]] for p in self.wheels_yq],
-                           dtype=np.int64).reshape(-1, 2)
-        self.sy = np.array([[index[f"Y_w{w[2:]}L"], index[f"Y_w{w[2:]}R"]] for w in self.wsets],
-                           dtype=np.int64).reshape(-1, 2)
+        lay = _channel_layout(tuple(plan.lp_names) if self.lp is not None else ())
+        self.index, self.wheels_yq, self.wsets, self.families, self.sel, self.yq, self.sy = lay
         n = self.d.size
         self.wide = slice(max(cut.start - 1, 0), min(cut.stop + 1, n))
         n_der = self.yq.shape[0] + self.sy.shape[0]
-        self.derived = np.empty((n_der, self.wide.stop - self.wide.start))
-        self.ranks = np.array(sorted({r for m in self.methods
-                                      for r in percentile_ranks(self.n_eval, PERCENTILES, m)}),
-                              dtype=np.int64)
+        self.derived = _NO_ROWS  # (with at and sampled: allocate_rows)
+        self.row_shapes = [(n_der, self.wide.stop - self.wide.start)]
+        rec = percentile_recipe(self.n_eval, PERCENTILES, self.methods)
+        self.ranks, self.recipe = rec[0], rec[1:]
         k = self.ranks.size
+        m = len(self.methods)
         self.out_lp = np.empty((self.sel.size + n_der, k))
         self.out_bp = np.empty((0 if self.bp is None else self.bp.shape[0], k))
         self.out_rms = np.empty(self.out_bp.shape[0])
+        self.pct_lp = np.empty((m, self.out_lp.shape[0], 3))
+        self.pct_bp = np.empty((m, self.out_bp.shape[0], 3))
         self._window_ends(n_der)
 
     def _window_ends(self, n_der: int) -> None:
-        """Where the compiled step integrates the derived rows for the sliding means: the
-        window ends of the chosen grid and, with the alternatives, of the grid from the
-        first evaluated sample. A range the grid does not fit leaves ``grids`` None (the
-        error is raised in section order by :func:`_sliding_values`)."""
+        """What the compiled step needs for the sliding means: the grid origins (the chosen
+        grid's and, with the alternatives, the grid from the first evaluated sample), their
+        numbers of windows, room for the window ends (filled by the compiled step,
+        :func:`railval.core.en_kernels._window_bounds`), the integrals, the sample-window
+        means and the sliding percentiles with their recipes per number of windows. A range
+        the grid does not fit leaves ``n_cs`` empty (the error is raised in section order by
+        :func:`_sliding_values`)."""
         sec = self.sec
-        self.grids, self.j, self.u = None, np.empty(0, np.int64), np.empty(0)
-        self.win_lo = self.win_hi = np.empty(0, np.int64)
+        self.origins, self.n_cs = _NO_FLOATS, _NO_INTS
+        self.j = self.win_lo = self.win_hi = _NO_INTS
+        self.u = _NO_FLOATS
         sizes: list[int] = []
+        m = len(self.methods)
+        n_var = 0
         if n_der:
             origins = [sec.eval_start_m] + (
                 [float(self.d[self.cut.start])] if self.with_alternatives else [])
             try:
                 d_wide = self.d[self.wide]
                 _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
-                grids, self.j, self.u = _window_ends(d_wide, sec.eval_start_m,
-                                                     sec.eval_end_m, WINDOW_M, STEP_M, origins)
-                if self.with_alternatives:
-                    sizes, self.win_lo, self.win_hi = _sample_bounds(d_wide, sec, origins[1])
-                self.grids = grids
+                n_cs = [window_count(sec.eval_start_m, sec.eval_end_m, o, WINDOW_M, STEP_M)
+                        for o in origins]
             except InvalidSignal:
-                self.grids = None
-        self.at = np.empty((n_der, self.j.size))
-        self.sampled = (sizes, np.empty((n_der, self.win_lo.size)))
+                n_cs = []
+            if n_cs:
+                self.origins = np.array(origins, dtype=np.float64)
+                self.n_cs = np.array(n_cs, dtype=np.int64)
+                total = sum(n_cs)
+                self.j = np.empty(2 * total, np.int64)
+                self.u = np.empty(2 * total)
+                if self.with_alternatives:
+                    sizes = [c for c in n_cs for _ in range(2)]
+                    self.win_lo = np.empty(2 * total, np.int64)
+                    self.win_hi = np.empty(2 * total, np.int64)
+                recs = [percentile_recipe(c, PERCENTILES, self.methods) for c in n_cs]
+                self.s_n_ranks = np.array([r[0].size for r in recs], dtype=np.int64)
+                self.s_ranks = np.zeros((len(recs), int(self.s_n_ranks.max())), np.int64)
+                for q, r in enumerate(recs):
+                    self.s_ranks[q, :r[0].size] = r[0]
+                self.s_recipe = tuple(np.stack([r[i] for r in recs]) for i in range(1, 5))
+                n_var = len(n_cs) * (3 if self.with_alternatives else 1)
+        if not n_var:
+            self.s_ranks, self.s_n_ranks = _NO_RANKS, _NO_INTS
+            self.s_recipe = _NO_RECIPE
+        self.s_pct = np.empty((n_var, m, n_der, 3))
+        self.s_bad = np.empty((n_var, n_der), dtype=np.bool_)
+        self.at = _NO_ROWS
+        self.sampled = (sizes, _NO_ROWS)
+        self.row_shapes += [(n_der, self.j.size), (n_der, self.win_lo.size)]
+
+    @property
+    def grids(self) -> list[np.ndarray] | None:
+        """The window centres of each grid (None: the range does not fit the grid)."""
+        if not self.n_cs.size:
+            return None
+        return [window_centres(self.sec.eval_start_m, self.sec.eval_end_m, float(o), WINDOW_M,
+                               STEP_M) for o in self.origins]
 
     def run(self) -> None:
-        """The compiled step (releases the GIL; sections run on the cores in parallel)."""
-        if self.error is None:
-            self.zero_q = _section_kernel(
-                _NO_ROWS if self.lp is None else self.lp, self.sel, self.yq, self.sy,
-                _NO_ROWS if self.bp is None else self.bp, self.cut.start, self.cut.stop,
-                self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
-                self.out_rms, self.d, self.j.astype(np.int64), self.u, self.at, self.win_lo,
-                self.win_hi, self.sampled[1])
+        """The compiled step (releases the GIL; sections run on the cores in parallel), then
+        the sliding means of every reading sorted row by row (numpy's sort, also without
+        the GIL, into this thread's scratch rows) and their percentiles read off."""
+        if self.error is not None:
+            return
+        n_var, rows = self.s_bad.shape
+        kmax = int(self.n_cs.max()) if self.n_cs.size else 0
+        means = _scratch(n_var * rows * kmax).reshape(n_var * rows, kmax)
+        slot = np.empty(n_var, np.int64)
+        ret = _section_kernel(
+            _NO_ROWS if self.lp is None else self.lp, self.sel, self.yq, self.sy,
+            _NO_ROWS if self.bp is None else self.bp, self.cut.start, self.cut.stop,
+            self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
+            self.out_rms, self.d, self.j, self.u, self.at, self.win_lo,
+            self.win_hi, self.sampled[1], self.origins, self.n_cs, WINDOW_M, STEP_M,
+            self.recipe, self.pct_lp, self.pct_bp, means, self.s_bad, slot)
+        self.zero_q = max(ret, -1)
+        if ret < -1:  # −2 − the slots of sliding means formed
+            srt = means[:(-2 - ret) * rows]
+            srt.sort(axis=-1)
+            _sliding_percentiles(srt, self.n_cs, n_var // self.n_cs.size, slot,
+                                 self.s_ranks, self.s_n_ranks, *self.s_recipe, self.s_bad,
+                                 self.s_pct)
 
     def release(self) -> None:
         """Drop the rows once the values are formed (a batch keeps only the values)."""
@@ -213,29 +318,78 @@ class SectionState:
             rid = _READING_ID.get(reading) or reading.id
             self.alts.setdefault(rid, {})[key] = float(value)
 
+    def alternatives(self, rid: str, keys, values: list[float]) -> None:
+        """:meth:`alternative` of every key of ``keys`` with its value (Python floats) under
+        the reading of id ``rid``, in that order."""
+        if not self.with_alternatives:
+            return
+        chosen = self.values
+        into = self.alts.get(rid)
+        for key, value in zip(keys, values, strict=True):
+            if value != chosen[key]:  # True for NaN as well
+                if into is None:
+                    into = self.alts[rid] = {}
+                into[key] = value
+
     def settle(self, kind: str) -> str:
-        """Settling warnings of filter ``kind``; returns the filter's provenance label."""
-        mask = np.zeros(self.d.size, dtype=bool)
-        mask[self.cut] = True
+        """Settling warnings of filter ``kind``; returns the filter's provenance label.
+        The check reads only the first and last sample times and those of the first and
+        last evaluated samples, so it is given these four (the same differences)."""
+        t = np.asarray(self.ss.time_s)
+        ends = t[[0, self.cut.start, self.cut.stop - 1, t.shape[0] - 1]]
         self.warnings += [w.message for w in settling_check(
-            self.ss.time_s, mask, self.fs, kind, self.order, self.sec.id)]
+            ends, _END_MASK, self.fs, kind, self.order, self.sec.id)]
         return design(self.fs, kind, self.order).label + ", whole section"
 
     def result(self) -> tuple:
         """``(values, provenance, warnings, alternatives, supplementary)`` in registry order."""
-        order_keys = [(q, p) for q, quantity in QUANTITIES.items() for p in quantity.positions()]
-        supp_keys = [(q, p) for q, sq in SUPPLEMENTARY.items() for p in sq.positions()]
-        return ({k: self.values[k] for k in order_keys if k in self.values}, self.prov,
-                self.warnings, self.alts, {k: self.supp[k] for k in supp_keys if k in self.supp})
+        order_keys, supp_keys = _registry_keys()
+        values, supp = self.values, self.supp
+        return ({k: values[k] for k in order_keys if k in values}, self.prov,
+                self.warnings, self.alts, {k: supp[k] for k in supp_keys if k in supp})
+
+
+@functools.lru_cache(maxsize=1)
+def _registry_keys() -> tuple[list, list]:
+    """Every (quantity, position) of the registry and of the supplementary values, in
+    registry order."""
+    return ([(q, p) for q, quantity in QUANTITIES.items() for p in quantity.positions()],
+            [(q, p) for q, sq in SUPPLEMENTARY.items() for p in sq.positions()])
+
+
+#: the derived rows, integrals and sample-window means of the sections of a chunk (one
+#: buffer per chunk, reused once the chunk's values are formed: fresh memory costs a page
+#: fault and a zero fill per page, :mod:`railval.core.buffers`)
+_ROWS_POOL = BufferPool(keep=4, max_bytes=128 << 20, min_bytes=1 << 20,
+                        max_total_bytes=256 << 20)
+
+
+def allocate_rows(states: list[SectionState]) -> None:
+    """The derived rows, integrals and sample-window means (``row_shapes``) of every
+    section of ``states`` as views of one pooled buffer (the buffer is free again once
+    every section is released, :meth:`SectionState.release`)."""
+    live = [st for st in states if st.error is None]
+    total = sum(a * b for st in live for a, b in st.row_shapes)
+    block = _ROWS_POOL.take((total,))
+    pos = 0
+    for st in live:
+        views = []
+        for a, b in st.row_shapes:
+            views.append(block[pos:pos + a * b].reshape(a, b))
+            pos += a * b
+        st.derived, st.at = views[0], views[1]
+        st.sampled = (st.sampled[0], views[2])
 
 
 def run_sections(states: list[SectionState]) -> None:
     """The compiled step of every section, the sections shared among the cores (the first
-    one in the calling thread first: a first call compiles or loads the kernel once)."""
+    one in the calling thread first: a first call compiles or loads the kernel once); the
+    rows of the chunk allocated first (:func:`allocate_rows`)."""
     from railval.core.workers import split_rows
 
     if not states:
         return
+    allocate_rows(states)
     states[0].run()
 
     def part(a: int, b: int) -> None:
@@ -265,11 +419,13 @@ def _lowpass_values(st: SectionState) -> None:
     """The force quantities (Y, Q, Y/Q, ΣY: percentiles, then the sliding-mean maxima)."""
     lp_label = st.settle("lowpass")
     if st.out_lp.shape[0]:
-        both = st.percentiles(st.out_lp)
-        _force_percentile_values(st, st.families, both[0], both[-1], lp_label)
+        _force_percentile_values(st, st.families, st.pct_lp[0], st.pct_lp[-1], lp_label)
     if st.derived.shape[0]:
         keys = ([("YQ_max", p) for p in st.wheels_yq] + [("SumY_max", w) for w in st.wsets])
-        _sliding_values(st, st.derived, st.d[st.wide], keys, lp_label)
+        if st.n_cs.size and not st.s_bad[0].any():
+            _sliding_values_compiled(st, keys, lp_label)
+        else:
+            _sliding_values(st, st.derived, st.d[st.wide], keys, lp_label)
 
 
 #: the values a force family's percentiles give: (quantity, provenance of the statistic)
@@ -282,23 +438,43 @@ _FORCE_PERCENTILE_QUANTITIES = {
 }
 
 
+@functools.lru_cache(maxsize=64)
+def _force_layout(families: tuple) -> tuple:
+    """For the force rows of ``families``: ``(keys, rows, processing, texts, derive)`` —
+    every (quantity, position) in value order, the row and processing of its statistic,
+    the provenance text of the statistic and of the derived signal (None: none)."""
+    keys, rows, procs, texts, derive = [], [], [], [], []
+    r = 0
+    for fam, positions in families:
+        for p in positions:
+            for qid, text in _FORCE_PERCENTILE_QUANTITIES[fam]:
+                keys.append((qid, p))
+                rows.append(r)
+                procs.append(QUANTITIES[qid].processing)
+                texts.append(text)
+                derive.append(_DERIVE_TEXT.get(fam))
+            r += 1
+    return keys, rows, procs, texts, derive
+
+
 def _force_percentile_values(st: SectionState, families, pct: np.ndarray,
                              pct_lin: np.ndarray, lp_label: str) -> None:
     """The percentile values of the force rows (in ``families`` order) under the chosen
     reading (``pct``) and the linear one (``pct_lin``): each statistic formed for all rows
     at once (:func:`_statistic` on columns), then read out as floats."""
+    keys, rows, procs, texts, derive = _force_layout(
+        tuple((fam, tuple(positions)) for fam, positions in families))
     chosen, linear = _by_processing(pct), _by_processing(pct_lin)
-    r = 0
-    for fam, positions in families:
-        derive = _DERIVE_TEXT.get(fam)
-        base = (lp_label,) + ((derive,) if derive else ()) + (st.cut_text,)
-        for p in positions:
-            for qid, text in _FORCE_PERCENTILE_QUANTITIES[fam]:
-                processing = QUANTITIES[qid].processing
-                st.values[(qid, p)] = chosen[processing][r]
-                st.prov[(qid, p)] = base + (text, st.pct_text)
-                st.alternative(_LINEAR, (qid, p), linear[processing][r])
-            r += 1
+    values, prov = st.values, st.prov
+    bases = {None: (lp_label, st.cut_text)}
+    tail = st.pct_text
+    for key, r, proc, text, der in zip(keys, rows, procs, texts, derive):
+        base = bases.get(der)
+        if base is None:
+            base = bases[der] = (lp_label, der, st.cut_text)
+        values[key] = chosen[proc][r]
+        prov[key] = base + (text, tail)
+    st.alternatives(_LINEAR.id, keys, [linear[proc][r] for r, proc in zip(rows, procs)])
 
 
 def _by_processing(pct: np.ndarray) -> dict[str, list[float]]:
@@ -307,16 +483,63 @@ def _by_processing(pct: np.ndarray) -> dict[str, list[float]]:
             for proc in ("median", "p99.85", "maxabs")}
 
 
+def _slide_text(sec: SectionInfo, n_windows: int) -> str:
+    return (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
+            f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "
+            f"{n_windows} values; exact integral of the linear interpolant)")
+
+
+def _sliding_values_compiled(st: SectionState, keys: list[tuple[str, str]],
+                             lp_label: str) -> None:
+    """:func:`_sliding_values` from the percentiles the compiled step formed of the sliding
+    means of every grid and window (:func:`railval.core.en_kernels._sliding_percentiles`;
+    the chosen means all finite): the maximum magnitude of the 0.15 % and 99.85 % values
+    (:func:`maxabs` on all of them at once), NaN under a reading whose means of that row are
+    not all finite — the values and the order of :func:`_sliding_values`."""
+    sec = st.sec
+    pct, bad = st.s_pct, st.s_bad
+    vals = maxabs(pct[..., 0], pct[..., 2])
+    if bad.any():
+        vals[np.broadcast_to(bad[:, None, :], vals.shape)] = np.nan
+    chosen = vals[0, 0].tolist()
+    slide_text = _slide_text(sec, int(st.n_cs[0]))
+    values, prov = st.values, st.prov
+    for key, v in zip(keys, chosen):
+        values[key] = v
+        prov[key] = (lp_label, _DERIVE_TEXT[key[0].split("_")[0]], slide_text,
+                     "max(|0.15 % value|, |99.85 % value|)", st.pct_text)
+    st.clock.lap("statistics")
+    if st.with_alternatives:
+        per = vals.tolist()
+        for v, m, rid in _sliding_readings(st.methods):
+            st.alternatives(rid, keys, per[v][m])
+    st.clock.lap("alternatives")
+
+
+@functools.lru_cache(maxsize=4)
+def _sliding_readings(methods: tuple[str, ...]) -> list[tuple[int, int, str]]:
+    """``(variant, method, reading id)`` of every reading other than the chosen one, in the
+    order :func:`_sliding_alternatives` takes them (variants in ``SLIDING_VARIANTS`` order,
+    then methods)."""
+    return [(v, m, _READING_ID[_READING[(method, grid, window)]])
+            for v, (grid, window) in enumerate(SLIDING_VARIANTS)
+            for m, method in enumerate(methods)
+            if _READING[(method, grid, window)] != CHOSEN]
+
+
 def _sliding_values(st: SectionState, slide_rows: np.ndarray, d_wide: np.ndarray,
                     keys: list[tuple[str, str]], lp_label: str) -> None:
     """``YQ_max`` and ``SumY_max``: the maxima of the 2 m sliding means (step 6 of
     docs/validation.md), then, with the alternatives, their values under the other readings.
     The chosen grid (from the section start) and the grid from the first evaluated sample
-    come from one cumulative integral."""
+    come from one cumulative integral. (The path of a section whose range does not fit the
+    grid — it raises — or whose chosen means are not all finite; the others take
+    :func:`_sliding_values_compiled`.)"""
     sec = st.sec
     _check_sliding_range(d_wide, sec.eval_start_m, sec.eval_end_m, WINDOW_M, STEP_M)
     origins = [sec.eval_start_m] + ([float(st.d[st.cut.start])] if st.with_alternatives else [])
-    interp = (_means_from_integrals(st.at, st.grids, WINDOW_M) if st.grids is not None
+    grids = st.grids
+    interp = (_means_from_integrals(st.at, grids, WINDOW_M) if grids is not None
               else _interpolant_means(slide_rows, d_wide, sec.eval_start_m, sec.eval_end_m,
                                       WINDOW_M, STEP_M, origins))
     means = interp[0][1]
@@ -324,9 +547,7 @@ def _sliding_values(st: SectionState, slide_rows: np.ndarray, d_wide: np.ndarray
     # reading's values of the chosen means are used by the alternatives)
     chosen_pcts = _row_percentiles(means, st.methods)
     spct = chosen_pcts[0]
-    slide_text = (f"sliding mean over {WINDOW_M:g} m every {STEP_M:g} m along distance "
-                  f"(windows inside {sec.eval_start_m:g}–{sec.eval_end_m:g} m, "
-                  f"{means.shape[1]} values; exact integral of the linear interpolant)")
+    slide_text = _slide_text(sec, means.shape[1])
     for r, key in enumerate(keys):
         st.values[key] = float(_statistic(QUANTITIES[key[0]].processing, *spct[r]))
         st.prov[key] = (lp_label, _DERIVE_TEXT[key[0].split("_")[0]], slide_text,
@@ -335,7 +556,7 @@ def _sliding_values(st: SectionState, slide_rows: np.ndarray, d_wide: np.ndarray
     if st.with_alternatives:
         _sliding_alternatives(slide_rows, d_wide, st.d[st.cut.start], sec, keys,
                               (means, chosen_pcts), interp[1][1], st.methods, st.alternative,
-                              st.sampled if st.grids is not None else None)
+                              st.sampled if grids is not None else None)
     st.clock.lap("alternatives")
 
 
@@ -343,22 +564,27 @@ def _bandpass_values(st: SectionState) -> None:
     """The car body accelerations (rms, maximum) and, from the same filter call and
     statistics, the supplementary bogie-frame values."""
     bp_label = st.settle("bandpass")
-    both = st.percentiles(st.out_bp)
-    pct, pct_lin = both[0], both[-1]
-    rmsv = st.out_rms
+    pct, pct_lin = st.pct_bp[0], st.pct_bp[-1]
+    rmsv = st.out_rms.tolist()
+    mx = maxabs(pct[:, 0], pct[:, 2]).tolist()
+    mx_lin = maxabs(pct_lin[:, 0], pct_lin[:, 2]).tolist()
+    values, prov, supp = st.values, st.prov, st.supp
+    alt_keys, alt_vals = [], []
     for r, name in enumerate(st.plan.bp_names):
         kind, _, pos = name.rpartition("_")
         if kind in BOGIE_KINDS:  # supplementary: same filter call, same statistics
-            st.supp[(f"{kind}_rms", pos)] = float(rmsv[r])
-            st.supp[(f"{kind}_max", pos)] = float(maxabs(pct[r, 0], pct[r, 2]))
+            supp[(f"{kind}_rms", pos)] = rmsv[r]
+            supp[(f"{kind}_max", pos)] = mx[r]
             continue
         q = kind.split("_")[0]
-        st.values[(f"{q}_rms", pos)] = float(rmsv[r])
-        st.prov[(f"{q}_rms", pos)] = (bp_label, st.cut_text, "rms value")
-        st.values[(f"{q}_max", pos)] = float(_statistic("maxabs", *pct[r]))
-        st.prov[(f"{q}_max", pos)] = (bp_label, st.cut_text,
-                                      "max(|0.15 % value|, |99.85 % value|)", st.pct_text)
-        st.alternative(_LINEAR, (f"{q}_max", pos), _statistic("maxabs", *pct_lin[r]))
+        values[(f"{q}_rms", pos)] = rmsv[r]
+        prov[(f"{q}_rms", pos)] = (bp_label, st.cut_text, "rms value")
+        values[(f"{q}_max", pos)] = mx[r]
+        prov[(f"{q}_max", pos)] = (bp_label, st.cut_text,
+                                   "max(|0.15 % value|, |99.85 % value|)", st.pct_text)
+        alt_keys.append((f"{q}_max", pos))
+        alt_vals.append(mx_lin[r])
+    st.alternatives(_LINEAR.id, alt_keys, alt_vals)
 
 
 def _sliding_alternatives(slide_rows: np.ndarray, d_wide: np.ndarray, first_m: float,
