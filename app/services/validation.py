@@ -97,39 +97,66 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
         out = {sid: unpack_values(sid, cached[k]) for sid, k in keys.items() if k in cached}
     missing = [sid for sid in keys if sid not in out]
     if missing:
-        # pipeline: this thread reads the blobs of the next chunks (the caller's session
-        # stays in this thread) while _PIPELINE_THREADS threads decode and process earlier
-        # ones. Decoding in those threads, not here, avoids thousands of GIL hand-overs with
-        # this thread (every inflate and plane copy releases the GIL); two of them overlap
-        # one chunk's decode with the Python parts of another's EN chain.
-        chunks = [missing[i:i + _PIPELINE_CHUNK]
-                  for i in range(0, len(missing), _PIPELINE_CHUNK)]
-        pending = []
-        threads = min(_PIPELINE_THREADS, len(chunks))
-        row = max(1, thread_count() // threads)
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            for chunk in chunks:
+        done = _read_and_process(session, camp, [(source, missing)], by_id, order,
+                                 while_processing)
+        new: dict[str, bytes] = {}
+        for (_src, sid), (vals, packed) in done.items():
+            new[keys[sid]] = packed
+            out[sid] = vals
+        with stage("database"):
+            repo.cache_put_many(session, new)
+    elif while_processing is not None:
+        while_processing()
+    if stats is not None:
+        stats.update({"cached": len(keys) - len(missing), "computed": len(missing)})
+    return out
+
+
+def _pipeline_chunks(todo: Sequence[tuple[Any, list[str]]]) -> list[tuple[Any, list[str]]]:
+    """The sections to process, ``todo`` = [(source, section ids)] in order, cut into chunks
+    of one source of :data:`_PIPELINE_CHUNK` sections, the remainder last (17 sections:
+    4 + 4 + 4 + 4 + 1 — the small last chunk shortens the tail where one thread waits)."""
+    return [(source, sids[i:i + _PIPELINE_CHUNK])
+            for source, sids in todo for i in range(0, len(sids), _PIPELINE_CHUNK)]
+
+
+def _read_and_process(session: Session, camp, todo: Sequence[tuple[Any, list[str]]],
+                      by_id: dict[str, SectionInfo], order: int, while_processing=None
+                      ) -> dict[tuple[Any, str], tuple[en14363.SectionValues, bytes]]:
+    """Read, decode and process the sections ``todo`` = [(source ref or None, section ids)]
+    of one or more sources as one pipeline: (source, section id) → (values, packed values).
+
+    This thread reads the blobs of the next chunk (the caller's session stays in this
+    thread) while :data:`_PIPELINE_THREADS` threads decode and process earlier ones — the
+    chunks of every source in one pool, so the second source's first chunks overlap the
+    first source's last. Decoding in those threads, not here, avoids thousands of GIL
+    hand-overs with this thread (every inflate and plane copy releases the GIL); two of them
+    overlap one chunk's decode with the Python parts of another's EN chain.
+    ``while_processing()`` runs once every chunk is read (here, while the threads
+    process); when it raises, the remaining chunks are dropped."""
+    chunks = _pipeline_chunks(todo)
+    threads = min(_PIPELINE_THREADS, len(chunks))
+    row = max(1, thread_count() // threads)
+    pending = []
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="railval-chunk") as pool:
+        try:
+            for source, chunk in chunks:
                 with stage("database"):
                     decode = repo.fetch_signalsets(session, camp, source, sections=chunk,
                                                    verify=True)
-                pending.append((chunk, pool.submit(in_context(_decode_and_evaluate), decode,
-                                                   [by_id[s] for s in chunk], order, row)))
+                pending.append((source, chunk, pool.submit(
+                    in_context(_decode_and_evaluate), decode, [by_id[s] for s in chunk],
+                    order, row)))
             if while_processing is not None:
-                try:
-                    while_processing()
-                except BaseException:
-                    pool.shutdown(cancel_futures=True)
-                    raise
-            new: dict[str, bytes] = {}
-            for chunk, fut in pending:
+                while_processing()
+            out = {}
+            for source, chunk, fut in pending:
                 for sid, vals in zip(chunk, fut.result(), strict=True):
                     with stage("cache_pack"):
-                        new[keys[sid]] = pack_values(vals)
-                    out[sid] = vals
-        with stage("database"):
-            repo.cache_put_many(session, new)
-    if stats is not None:
-        stats.update({"cached": len(keys) - len(missing), "computed": len(missing)})
+                        out[(source, sid)] = (vals, pack_values(vals))
+        except BaseException:
+            pool.shutdown(cancel_futures=True)
+            raise
     return out
 
 
@@ -575,24 +602,47 @@ def validate_configuration(session: Session, campaign_name: str, config: str, *,
         camp, conf = repo.resolve(session, campaign_name, config)
         sections = repo.section_infos(session, camp)
         vehicle = repo.vehicle_info(session, camp)
-    seals_due = [check_seals]
-
-    def seals() -> None:  # once, while the first source's sections are processed
-        if seals_due[0]:
-            seals_due[0] = False
-            with stage("database"):
-                repo.require_evidence(session, camp, config, blobs=False)
-
-    m_stats: dict[str, int] = {}
-    s_stats: dict[str, int] = {}
-    measured = source_values(session, camp, None, sections, order=order, stats=m_stats,
-                             while_processing=seals)
-    simulated = source_values(session, camp, conf, sections, order=order, stats=s_stats,
-                              while_processing=seals)
-    seals()  # every value came from the cache
-    with stage("database"):
+        # both sources' keys from their content hashes (no blob; the seals are checked
+        # while the sections are processed), one cache lookup for both
+        keys = {(name, sid): key for name, src in ((None, None), (conf.name, conf))
+                for sid, key in source_cache_keys(session, camp, src, sections,
+                                                  order=order).items()}
+        cached = repo.cache_get_many(session, list(keys.values()))
         provenance = calibration_provenance(session, camp, config)
-    return _verdict(measured, simulated, sections, vehicle, n_boot, seed,
+    values: dict[str | None, dict[str, en14363.SectionValues]] = {None: {}, conf.name: {}}
+    todo: dict[str | None, list[str]] = {None: [], conf.name: []}
+    with stage("cache_unpack"):
+        for (source, sid), key in keys.items():
+            if key in cached:
+                values[source][sid] = unpack_values(sid, cached[key])
+            else:
+                todo[source].append(sid)
+
+    def seals() -> None:  # the measurement's and the configuration's, from the same rows
+        if check_seals:
+            with stage("database"):
+                repo.require_evidence(session, camp, conf, blobs=False)
+
+    if todo[None] or todo[conf.name]:
+        # one pipeline over both sources (the measurement first): its last chunks overlap
+        # the configuration's first; the seals are checked while the first chunk is processed
+        by_id = {s.id: s for s in sections}
+        done = _read_and_process(session, camp, [(src, todo[name]) for src, name in
+                                                 ((None, None), (conf, conf.name))
+                                                 if todo[name]],
+                                 by_id, order, seals)
+        new: dict[str, bytes] = {}
+        for (src, sid), (vals, packed) in done.items():
+            name = None if src is None else conf.name
+            values[name][sid] = vals
+            new[keys[(name, sid)]] = packed
+        with stage("database"):
+            repo.cache_put_many(session, new)
+    else:
+        seals()  # every value came from the cache
+    stats = {name: {"cached": len(values[name]) - len(todo[name]),
+                    "computed": len(todo[name])} for name in (None, conf.name)}
+    return _verdict(values[None], values[conf.name], sections, vehicle, n_boot, seed,
                     {"campaign": camp.name, "configuration": conf.name, "filter_order": order,
-                     "sections_measured": m_stats, "sections_simulated": s_stats,
+                     "sections_measured": stats[None], "sections_simulated": stats[conf.name],
                      **provenance})
