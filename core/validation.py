@@ -322,6 +322,21 @@ def _resample_indices(seed_key: tuple, n: int, n_boot: int) -> np.ndarray:
     return idx
 
 
+def _mean_std_rows(sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``sample.mean(axis=1)`` and ``sample.std(axis=1, ddof=STD_DDOF)`` of a 2-d float64
+    array with one sum of the rows instead of two: the operations numpy's ``mean`` and
+    ``_var`` perform (sum of each row, divided by n; deviations squared in place, summed,
+    divided by n − ddof, square root), so the same float64s."""
+    n = sample.shape[1]
+    means = np.add.reduce(sample, axis=1)
+    np.true_divide(means, n, out=means)
+    x = np.subtract(sample, means[:, None])
+    np.multiply(x, x, out=x)
+    var = np.add.reduce(x, axis=1)
+    np.true_divide(var, max(n - STD_DDOF, 0), out=var)
+    return means, np.sqrt(var, out=var)
+
+
 def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_boot: int,
                       rng: np.random.Generator | None = None, ci_level: float = 0.95,
                       chunk: int = 2_000_000, seed_key: tuple | None = None
@@ -363,7 +378,7 @@ def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_b
         # one draw of every resample: default_rng(seed_key).integers(0, n, (n_boot, n)),
         # drawn once per (seed_key, n, n_boot) and reused (what the loop below draws)
         sample = d[_resample_indices(tuple(seed_key), n, n_boot)]
-        means, stds = sample.mean(axis=1), sample.std(axis=1, ddof=STD_DDOF)
+        means, stds = _mean_std_rows(sample)
     else:
         if rng is None:
             rng = np.random.default_rng(list(seed_key))
