@@ -163,10 +163,13 @@ def _read_and_process(session: Session, camp, todo: Sequence[tuple[Any, list[str
 def _decode_and_evaluate(decode, sections: list[SectionInfo], order: int,
                          row: int | None = None) -> list[en14363.SectionValues]:
     """Decode one chunk's blobs and process its sections; ``row``: row threads of the
-    compiled kernels (:func:`railval.core.workers.row_threads`; None: the process's)."""
-    with stage("decode"):
-        signalsets = decode()
+    decode and the compiled kernels (:func:`railval.core.workers.row_threads`; None: the
+    process's). A chunk thread of the pipeline decodes its blobs on its own share: two
+    chunk threads decoding at once with the shared row thread were three threads taking
+    turns at the GIL for every inflate."""
     with row_threads(row) if row else contextlib.nullcontext():
+        with stage("decode"):
+            signalsets = decode()
         values = en14363.evaluate_present(signalsets, sections, order=order)
     return [values[s.id] for s in sections]
 
