@@ -594,9 +594,12 @@ def validate_configuration(session: Session, campaign_name: str, config: str, *,
 
     ``order``: Butterworth prototype order of both filters; ``n_boot``/``seed``: bootstrap of
     the normalised values. The result's ``info`` records how many sections of each side
-    came from the cache. The seals of both sides' signals are checked
+    came from the cache. Both sides' cache keys are read first (content hashes, no blob)
+    and looked up at once; the sections of both sides not in the cache are read, decoded
+    and processed as one pipeline (:func:`_read_and_process`, the measurement's chunks
+    first). The seals of both sides' signals are checked
     (:func:`railval.db.repo.require_evidence` without reading blobs) before the verdict,
-    while the first uncached source is processed: a signal changed outside railval raises
+    while the sections are processed: a signal changed outside railval raises
     :class:`railval.db.integrity.IntegrityError` instead of giving a verdict (and nothing
     is cached). Raises :class:`railval.core.errors.NotFound` for unknown names.
     """
