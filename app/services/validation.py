@@ -292,8 +292,8 @@ class _Plan:
     keys: dict[tuple[str | None, str], str]
     values: dict[str | None, dict[str, en14363.SectionValues]]
     todo: dict[str | None, list[str]]
-    #: the signal rows the keys come from, whose seals :func:`_require_seals` checks
-    evidence: tuple = ((), {})
+    #: signal rows with their seals for :func:`_require_seals` (None: it reads them)
+    evidence: tuple | None = None
 
 
 def _plan(database, campaign_name: str, configs: Sequence[str] | None,
@@ -308,10 +308,10 @@ def _plan(database, campaign_name: str, configs: Sequence[str] | None,
                  else [c if isinstance(c, str) and c in refs
                        else repo.resolve(session, camp, c)[1].name for c in configs])
         sections = repo.section_infos(session, camp)
-        keys, rows = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
+        keys, _rows = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
         plan = _Plan(camp.name, sections, repo.vehicle_info(session, camp), names,
                      {c: calibration_provenance(session, camp, c) for c in names}, keys,
-                     {s: {} for s in [None, *names]}, {}, rows)
+                     {s: {} for s in [None, *names]}, {})
         cached = repo.cache_get_many(session, list(keys.values()))
     with stage("cache_unpack"):
         for (source, sid), key in keys.items():
@@ -326,10 +326,11 @@ def _plan_keys(session: Session, camp, refs: list, sections: Sequence[SectionInf
                order: int) -> tuple[dict[tuple[str | None, str], str], tuple]:
     """(source, section id) → result-cache key of the measurement (source ``None``) and of
     the configurations ``refs`` — :func:`source_cache_keys` for every source at once — and
-    the signal rows they come from (:func:`railval.db.repo.seal_rows_many`: two queries
-    instead of two per source; :func:`_require_seals` checks their seals, so the rows are
-    read once for the keys and the seals)."""
-    rows = repo.seal_rows_many(session, camp, [r.id for r in refs])
+    the signal rows they come from (:func:`railval.db.repo.hash_rows_many`: the content
+    hashes without the seals, on SQLite from the indexes alone — no blob's overflow chain
+    is walked before the workers start; :func:`_require_seals` reads and checks the seals
+    while they process)."""
+    rows = repo.hash_rows_many(session, camp, [r.id for r in refs])
     recs, by_rec = rows
     per_source: dict[int | None, list] = {}
     for rec in recs:
