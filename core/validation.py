@@ -325,17 +325,13 @@ def _resample_indices(seed_key: tuple, n: int, n_boot: int) -> np.ndarray:
 
 
 def _mean_std_rows(sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``sample.mean(axis=1)`` and ``sample.std(axis=1, ddof=STD_DDOF)`` of a 2-d float64
-    array with one sum of the rows instead of two: the operations numpy's ``mean`` and
-    ``_var`` perform (sum of each row, divided by n; deviations squared in place, summed,
-    divided by n − ddof, square root), so the same float64s."""
+    """``sample.mean(axis=1)``, ``sample.std(axis=1, ddof=STD_DDOF)`` of a 2-d float64 array
+    with one row sum instead of two: numpy's ``mean``/``_var`` steps (row sum / n; deviations
+    squared, summed, / (n − ddof), square root), so the same float64s."""
     n = sample.shape[1]
-    means = np.add.reduce(sample, axis=1)
-    np.true_divide(means, n, out=means)
-    x = np.subtract(sample, means[:, None])
-    np.multiply(x, x, out=x)
-    var = np.add.reduce(x, axis=1)
-    np.true_divide(var, max(n - STD_DDOF, 0), out=var)
+    means = np.add.reduce(sample, axis=1) / n
+    x = sample - means[:, None]
+    var = np.add.reduce(np.multiply(x, x, out=x), axis=1) / max(n - STD_DDOF, 0)
     return means, np.sqrt(var, out=var)
 
 
@@ -378,9 +374,8 @@ def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_b
     stds = np.empty(n_boot)
     if seed_key is not None and n * n_boot <= min(chunk, _CACHED_DRAW):
         # one draw of every resample: default_rng(seed_key).integers(0, n, (n_boot, n)),
-        # drawn once per (seed_key, n, n_boot) and reused (what the loop below draws)
-        # in blocks of rows whose resample, deviations and indices stay in the core's
-        # L2 cache (the verdicts share the memory bus with the worker processes)
+        # drawn once per (seed_key, n, n_boot) and reused (what the loop below draws),
+        # reduced in blocks of rows that stay in the L2 cache
         idx = _resample_indices(tuple(seed_key), n, n_boot)
         step = max(1, _BOOT_BLOCK // n)
         for start in range(0, n_boot, step):
