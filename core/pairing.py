@@ -141,11 +141,16 @@ def values_under(pairs: Pairs, values, column: int) -> dict[str, np.ndarray]:
                 continue
             if where[j] is None:
                 where[j] = {k: offsets[j] + i for i, k in enumerate(row[1])}
-            for k, v in alt.items():
-                i = where[j].get(k)
-                if i is not None:
-                    pos.append(i)
-                    got.append(v)
+            # positions of the changed values (None: the key is no pair), looked up in C
+            at_pair = list(map(where[j].get, alt))
+            if None in at_pair:
+                kept = [(i, v) for i, v in zip(at_pair, alt.values(), strict=True)
+                        if i is not None]
+                pos += [i for i, _ in kept]
+                got += [v for _, v in kept]
+            else:
+                pos += at_pair
+                got += alt.values()
         col[pos] = got
         out[rid] = col
     return out

@@ -309,6 +309,8 @@ class ValidationResult:
         return pd.DataFrame(rows).set_index("quantity")
 
 
+#: resampled values per block of rows in :func:`bootstrap_norm_ci` (256 kB of float64)
+_BOOT_BLOCK = 1 << 15
 #: most resample indices kept per (seed, quantity, n, n_boot) by :func:`_resample_indices`
 _CACHED_DRAW = 1 << 18
 
@@ -320,6 +322,17 @@ def _resample_indices(seed_key: tuple, n: int, n_boot: int) -> np.ndarray:
     idx = np.random.default_rng(list(seed_key)).integers(0, n, size=(n_boot, n))
     idx.setflags(write=False)
     return idx
+
+
+def _mean_std_rows(sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``sample.mean(axis=1)``, ``sample.std(axis=1, ddof=STD_DDOF)`` of a 2-d float64 array
+    with one row sum instead of two: numpy's ``mean``/``_var`` steps (row sum / n; deviations
+    squared, summed, / (n − ddof), square root), so the same float64s."""
+    n = sample.shape[1]
+    means = np.add.reduce(sample, axis=1) / n
+    x = sample - means[:, None]
+    var = np.add.reduce(np.multiply(x, x, out=x), axis=1) / max(n - STD_DDOF, 0)
+    return means, np.sqrt(var, out=var)
 
 
 def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_boot: int,
@@ -361,9 +374,13 @@ def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_b
     stds = np.empty(n_boot)
     if seed_key is not None and n * n_boot <= min(chunk, _CACHED_DRAW):
         # one draw of every resample: default_rng(seed_key).integers(0, n, (n_boot, n)),
-        # drawn once per (seed_key, n, n_boot) and reused (what the loop below draws)
-        sample = d[_resample_indices(tuple(seed_key), n, n_boot)]
-        means, stds = sample.mean(axis=1), sample.std(axis=1, ddof=STD_DDOF)
+        # drawn once per (seed_key, n, n_boot) and reused (what the loop below draws),
+        # reduced in blocks of rows that stay in the L2 cache
+        idx = _resample_indices(tuple(seed_key), n, n_boot)
+        step = max(1, _BOOT_BLOCK // n)
+        for start in range(0, n_boot, step):
+            means[start:start + step], stds[start:start + step] = _mean_std_rows(
+                d[idx[start:start + step]])
     else:
         if rng is None:
             rng = np.random.default_rng(list(seed_key))

@@ -56,6 +56,7 @@ from railval.db.configurations import (
     store_configuration,
 )
 from railval.db.evidence import (
+    hash_rows_many,
     require_evidence,
     require_evidence_many,
     seal_rows_many,
@@ -100,6 +101,7 @@ __all__ = [
     "fetch_signalsets",
     "get_campaign",
     "get_configuration",
+    "hash_rows_many",
     "lineage",
     "list_campaigns",
     "list_configurations",

@@ -97,49 +97,79 @@ def source_values(session: Session, campaign, config: str | None, sections: Sequ
         out = {sid: unpack_values(sid, cached[k]) for sid, k in keys.items() if k in cached}
     missing = [sid for sid in keys if sid not in out]
     if missing:
-        # pipeline: this thread reads the blobs of the next chunks (the caller's session
-        # stays in this thread) while _PIPELINE_THREADS threads decode and process earlier
-        # ones. Decoding in those threads, not here, avoids thousands of GIL hand-overs with
-        # this thread (every inflate and plane copy releases the GIL); two of them overlap
-        # one chunk's decode with the Python parts of another's EN chain.
-        chunks = [missing[i:i + _PIPELINE_CHUNK]
-                  for i in range(0, len(missing), _PIPELINE_CHUNK)]
-        pending = []
-        threads = min(_PIPELINE_THREADS, len(chunks))
-        row = max(1, thread_count() // threads)
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            for chunk in chunks:
+        done = _read_and_process(session, camp, [(source, missing)], by_id, order,
+                                 while_processing)
+        new: dict[str, bytes] = {}
+        for (_src, sid), (vals, packed) in done.items():
+            new[keys[sid]] = packed
+            out[sid] = vals
+        with stage("database"):
+            repo.cache_put_many(session, new)
+    elif while_processing is not None:
+        while_processing()
+    if stats is not None:
+        stats.update({"cached": len(keys) - len(missing), "computed": len(missing)})
+    return out
+
+
+def _pipeline_chunks(todo: Sequence[tuple[Any, list[str]]]) -> list[tuple[Any, list[str]]]:
+    """The sections to process, ``todo`` = [(source, section ids)] in order, cut into chunks
+    of one source of :data:`_PIPELINE_CHUNK` sections, the remainder last (17 sections:
+    4 + 4 + 4 + 4 + 1 — the small last chunk shortens the tail where one thread waits)."""
+    return [(source, sids[i:i + _PIPELINE_CHUNK])
+            for source, sids in todo for i in range(0, len(sids), _PIPELINE_CHUNK)]
+
+
+def _read_and_process(session: Session, camp, todo: Sequence[tuple[Any, list[str]]],
+                      by_id: dict[str, SectionInfo], order: int, while_processing=None
+                      ) -> dict[tuple[Any, str], tuple[en14363.SectionValues, bytes]]:
+    """Read, decode and process the sections ``todo`` = [(source ref or None, section ids)]
+    of one or more sources as one pipeline: (source, section id) → (values, packed values).
+
+    This thread reads the blobs of the next chunk (the caller's session stays in this
+    thread) while :data:`_PIPELINE_THREADS` threads decode and process earlier ones — the
+    chunks of every source in one pool, so the second source's first chunks overlap the
+    first source's last. Decoding in those threads, not here, avoids thousands of GIL
+    hand-overs with this thread (every inflate and plane copy releases the GIL); two of them
+    overlap one chunk's decode with the Python parts of another's EN chain.
+    ``while_processing()`` runs once every chunk is read (here, while the threads
+    process); when it raises, the remaining chunks are dropped."""
+    chunks = _pipeline_chunks(todo)
+    threads = min(_PIPELINE_THREADS, len(chunks))
+    row = max(1, thread_count() // threads)
+    pending = []
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="railval-chunk") as pool:
+        try:
+            for source, chunk in chunks:
                 with stage("database"):
                     decode = repo.fetch_signalsets(session, camp, source, sections=chunk,
                                                    verify=True)
-                pending.append((chunk, pool.submit(in_context(_decode_and_evaluate), decode,
-                                                   [by_id[s] for s in chunk], order, row)))
+                pending.append((source, chunk, pool.submit(
+                    in_context(_decode_and_evaluate), decode, [by_id[s] for s in chunk],
+                    order, row)))
             if while_processing is not None:
-                try:
-                    while_processing()
-                except BaseException:
-                    pool.shutdown(cancel_futures=True)
-                    raise
-            new: dict[str, bytes] = {}
-            for chunk, fut in pending:
+                while_processing()
+            out = {}
+            for source, chunk, fut in pending:
                 for sid, vals in zip(chunk, fut.result(), strict=True):
                     with stage("cache_pack"):
-                        new[keys[sid]] = pack_values(vals)
-                    out[sid] = vals
-        with stage("database"):
-            repo.cache_put_many(session, new)
-    if stats is not None:
-        stats.update({"cached": len(keys) - len(missing), "computed": len(missing)})
+                        out[(source, sid)] = (vals, pack_values(vals))
+        except BaseException:
+            pool.shutdown(cancel_futures=True)
+            raise
     return out
 
 
 def _decode_and_evaluate(decode, sections: list[SectionInfo], order: int,
                          row: int | None = None) -> list[en14363.SectionValues]:
     """Decode one chunk's blobs and process its sections; ``row``: row threads of the
-    compiled kernels (:func:`railval.core.workers.row_threads`; None: the process's)."""
-    with stage("decode"):
-        signalsets = decode()
+    decode and the compiled kernels (:func:`railval.core.workers.row_threads`; None: the
+    process's). A chunk thread of the pipeline decodes its blobs on its own share: two
+    chunk threads decoding at once with the shared row thread were three threads taking
+    turns at the GIL for every inflate."""
     with row_threads(row) if row else contextlib.nullcontext():
+        with stage("decode"):
+            signalsets = decode()
         values = en14363.evaluate_present(signalsets, sections, order=order)
     return [values[s.id] for s in sections]
 
@@ -155,6 +185,8 @@ def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
     if threads:
         os.environ["RAILVAL_THREADS"] = str(threads)
     with collect() as stages:
+        if isinstance(db_or_url, str) and not _WORKER_SETUP:
+            _worker_process_setup()
         if isinstance(db_or_url, str) and not _WORKER_WARM:
             with stage("worker_start"):
                 _warm_kernels(order)
@@ -204,6 +236,41 @@ def _warm_kernels(order: int) -> None:
     _WORKER_WARM.add(order)
 
 
+#: :func:`_worker_process_setup` has run in this process
+_WORKER_SETUP: list[bool] = []
+#: a worker process keeps freed heap memory up to this many bytes for its next chunk
+#: (glibc ``M_TRIM_THRESHOLD``) and serves allocations below ``_WORKER_MMAP_BYTES`` from
+#: the heap (``M_MMAP_THRESHOLD``)
+_WORKER_TRIM_BYTES = 256 << 20
+_WORKER_MMAP_BYTES = 4 << 20
+
+
+def _worker_process_setup() -> None:
+    """Once per worker process (one that reads the database by URL: a process of the pool,
+    or a Dask worker): it reads every blob once, so
+
+    * the verified-array cache (:data:`railval.db.codec.VERIFIED`) is turned off — every
+      read is still hashed and checked, but the blobs are not kept for a second read that
+      never comes (kept, each chunk's 15–20 MB of blobs came from fresh memory: ≈ 12 000
+      page faults and ≈ 0.02 CPU-s per DynoTRAIN source);
+    * glibc keeps the freed heap for the next chunk instead of returning it to the kernel
+      (``mallopt``; without it each chunk's blobs were faulted in again). Not glibc: skipped.
+    """
+    from railval.db import codec
+
+    codec.VERIFIED.limit_bytes = 0
+    codec.VERIFIED.clear()
+    try:
+        import ctypes
+
+        mallopt = ctypes.CDLL(None).mallopt
+        mallopt(-1, _WORKER_TRIM_BYTES)  # M_TRIM_THRESHOLD
+        mallopt(-3, _WORKER_MMAP_BYTES)  # M_MMAP_THRESHOLD
+    except (OSError, AttributeError):  # pragma: no cover - not glibc
+        pass
+    _WORKER_SETUP.append(True)
+
+
 def _worker_database(url: str):
     if url not in _WORKER_DB:
         _WORKER_DB[url] = connect(url)
@@ -225,8 +292,8 @@ class _Plan:
     keys: dict[tuple[str | None, str], str]
     values: dict[str | None, dict[str, en14363.SectionValues]]
     todo: dict[str | None, list[str]]
-    #: the signal rows the keys come from, whose seals :func:`_require_seals` checks
-    evidence: tuple = ((), {})
+    #: signal rows with their seals for :func:`_require_seals` (None: it reads them)
+    evidence: tuple | None = None
 
 
 def _plan(database, campaign_name: str, configs: Sequence[str] | None,
@@ -241,10 +308,10 @@ def _plan(database, campaign_name: str, configs: Sequence[str] | None,
                  else [c if isinstance(c, str) and c in refs
                        else repo.resolve(session, camp, c)[1].name for c in configs])
         sections = repo.section_infos(session, camp)
-        keys, rows = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
+        keys, _rows = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
         plan = _Plan(camp.name, sections, repo.vehicle_info(session, camp), names,
                      {c: calibration_provenance(session, camp, c) for c in names}, keys,
-                     {s: {} for s in [None, *names]}, {}, rows)
+                     {s: {} for s in [None, *names]}, {})
         cached = repo.cache_get_many(session, list(keys.values()))
     with stage("cache_unpack"):
         for (source, sid), key in keys.items():
@@ -259,10 +326,11 @@ def _plan_keys(session: Session, camp, refs: list, sections: Sequence[SectionInf
                order: int) -> tuple[dict[tuple[str | None, str], str], tuple]:
     """(source, section id) → result-cache key of the measurement (source ``None``) and of
     the configurations ``refs`` — :func:`source_cache_keys` for every source at once — and
-    the signal rows they come from (:func:`railval.db.repo.seal_rows_many`: two queries
-    instead of two per source; :func:`_require_seals` checks their seals, so the rows are
-    read once for the keys and the seals)."""
-    rows = repo.seal_rows_many(session, camp, [r.id for r in refs])
+    the signal rows they come from (:func:`railval.db.repo.hash_rows_many`: the content
+    hashes without the seals, on SQLite from the indexes alone — no blob's overflow chain
+    is walked before the workers start; :func:`_require_seals` reads and checks the seals
+    while they process)."""
+    rows = repo.hash_rows_many(session, camp, [r.id for r in refs])
     recs, by_rec = rows
     per_source: dict[int | None, list] = {}
     for rec in recs:
@@ -527,9 +595,12 @@ def validate_configuration(session: Session, campaign_name: str, config: str, *,
 
     ``order``: Butterworth prototype order of both filters; ``n_boot``/``seed``: bootstrap of
     the normalised values. The result's ``info`` records how many sections of each side
-    came from the cache. The seals of both sides' signals are checked
+    came from the cache. Both sides' cache keys are read first (content hashes, no blob)
+    and looked up at once; the sections of both sides not in the cache are read, decoded
+    and processed as one pipeline (:func:`_read_and_process`, the measurement's chunks
+    first). The seals of both sides' signals are checked
     (:func:`railval.db.repo.require_evidence` without reading blobs) before the verdict,
-    while the first uncached source is processed: a signal changed outside railval raises
+    while the sections are processed: a signal changed outside railval raises
     :class:`railval.db.integrity.IntegrityError` instead of giving a verdict (and nothing
     is cached). Raises :class:`railval.core.errors.NotFound` for unknown names.
     """
@@ -538,24 +609,47 @@ def validate_configuration(session: Session, campaign_name: str, config: str, *,
         camp, conf = repo.resolve(session, campaign_name, config)
         sections = repo.section_infos(session, camp)
         vehicle = repo.vehicle_info(session, camp)
-    seals_due = [check_seals]
-
-    def seals() -> None:  # once, while the first source's sections are processed
-        if seals_due[0]:
-            seals_due[0] = False
-            with stage("database"):
-                repo.require_evidence(session, camp, config, blobs=False)
-
-    m_stats: dict[str, int] = {}
-    s_stats: dict[str, int] = {}
-    measured = source_values(session, camp, None, sections, order=order, stats=m_stats,
-                             while_processing=seals)
-    simulated = source_values(session, camp, conf, sections, order=order, stats=s_stats,
-                              while_processing=seals)
-    seals()  # every value came from the cache
-    with stage("database"):
+        # both sources' keys from their content hashes (no blob; the seals are checked
+        # while the sections are processed), one cache lookup for both
+        keys = {(name, sid): key for name, src in ((None, None), (conf.name, conf))
+                for sid, key in source_cache_keys(session, camp, src, sections,
+                                                  order=order).items()}
+        cached = repo.cache_get_many(session, list(keys.values()))
         provenance = calibration_provenance(session, camp, config)
-    return _verdict(measured, simulated, sections, vehicle, n_boot, seed,
+    values: dict[str | None, dict[str, en14363.SectionValues]] = {None: {}, conf.name: {}}
+    todo: dict[str | None, list[str]] = {None: [], conf.name: []}
+    with stage("cache_unpack"):
+        for (source, sid), key in keys.items():
+            if key in cached:
+                values[source][sid] = unpack_values(sid, cached[key])
+            else:
+                todo[source].append(sid)
+
+    def seals() -> None:  # the measurement's and the configuration's, from the same rows
+        if check_seals:
+            with stage("database"):
+                repo.require_evidence(session, camp, conf, blobs=False)
+
+    if todo[None] or todo[conf.name]:
+        # one pipeline over both sources (the measurement first): its last chunks overlap
+        # the configuration's first; the seals are checked while the first chunk is processed
+        by_id = {s.id: s for s in sections}
+        done = _read_and_process(session, camp, [(src, todo[name]) for src, name in
+                                                 ((None, None), (conf, conf.name))
+                                                 if todo[name]],
+                                 by_id, order, seals)
+        new: dict[str, bytes] = {}
+        for (src, sid), (vals, packed) in done.items():
+            name = None if src is None else conf.name
+            values[name][sid] = vals
+            new[keys[(name, sid)]] = packed
+        with stage("database"):
+            repo.cache_put_many(session, new)
+    else:
+        seals()  # every value came from the cache
+    stats = {name: {"cached": len(values[name]) - len(todo[name]),
+                    "computed": len(todo[name])} for name in (None, conf.name)}
+    return _verdict(values[None], values[conf.name], sections, vehicle, n_boot, seed,
                     {"campaign": camp.name, "configuration": conf.name, "filter_order": order,
-                     "sections_measured": m_stats, "sections_simulated": s_stats,
+                     "sections_measured": stats[None], "sections_simulated": stats[conf.name],
                      **provenance})
