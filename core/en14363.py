@@ -34,8 +34,9 @@ Throughput: the checks scan every channel once (one compiled integer pass for th
 magnitude, the sections shared among the cores) and report in section order; steps 2–4 run
 per section in one compiled call, the sections on the cores in parallel
 (:mod:`railval.core.en_section`), with the same operations on the samples as the step-by-step
-numpy code, so the same values; the PSD bands of all sections come from one Welch pass per
-segment length (:func:`railval.core.psd.welch_blocks`).
+numpy code, so the same values; the PSD bands of all sections come from one batched Welch
+that repeats scipy's arithmetic operation by operation, so the same bits
+(:func:`railval.core.psd.welch_groups`).
 
 Supplementary values (:mod:`railval.core.supplementary`): bogie-frame accelerations go through the
 band-pass with the car body channels (rms, max); the PSD band rms of all acceleration channels come
