@@ -176,9 +176,11 @@ def _decode_and_evaluate(decode, sections: list[SectionInfo], order: int,
 
 def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
                     sections: list[SectionInfo], order: int,
-                    threads: int | None = None) -> tuple[list[bytes], dict]:
-    """Worker task: load and process some sections of one source; returns packed values and
-    the seconds per stage it spent (:mod:`railval.core.stages`).
+                    threads: int | None = None) -> tuple[list[bytes], dict, list]:
+    """Worker task: load and process some sections of one source; returns packed values,
+    the seconds per stage it spent (:mod:`railval.core.stages`) and the signal rows it read
+    with their seals (``seals`` of :func:`railval.db.repo.fetch_signalsets`), which the
+    main process checks (:class:`_SealCheck`) instead of reading them again.
     ``db_or_url``: a :class:`railval.db.engine.Database` (in-process) or its URL (worker
     process); ``threads``: row threads of the EN chain in this worker process (the workers
     share the cores, so each takes its part instead of all of them)."""
@@ -195,11 +197,12 @@ def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
         with database.session() as session:
             with stage("database"):
                 decode = repo.fetch_signalsets(session, campaign, config,
-                                               sections=[s.id for s in sections], verify=True)
+                                               sections=[s.id for s in sections], verify=True,
+                                               seals=True)
             vals = _decode_and_evaluate(decode, sections, order)
         with stage("cache_pack"):
             packed = [pack_values(v) for v in vals]
-    return packed, stages.seconds
+    return packed, stages.seconds, decode.seals
 
 
 def _evaluate_chunk_task(args: tuple) -> list[bytes]:
@@ -294,6 +297,15 @@ class _Plan:
     todo: dict[str | None, list[str]]
     #: signal rows with their seals for :func:`_require_seals` (None: it reads them)
     evidence: tuple | None = None
+    #: the campaign and the configurations resolved (:func:`_plan`)
+    camp: repo.CampaignRef | None = None
+    refs: dict[str, repo.ConfigRef] | None = None
+    #: the signal rows the keys come from, without seals (:func:`_plan_keys`)
+    rows: tuple | None = None
+
+    def ref(self, source: str | None) -> repo.ConfigRef | None:
+        """The reference of a source (``None``: the measurement)."""
+        return None if source is None else self.refs[source]
 
 
 def _plan(database, campaign_name: str, configs: Sequence[str] | None,
@@ -308,10 +320,11 @@ def _plan(database, campaign_name: str, configs: Sequence[str] | None,
                  else [c if isinstance(c, str) and c in refs
                        else repo.resolve(session, camp, c)[1].name for c in configs])
         sections = repo.section_infos(session, camp)
-        keys, _rows = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
+        keys, rows = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
         plan = _Plan(camp.name, sections, repo.vehicle_info(session, camp), names,
                      {c: calibration_provenance(session, camp, c) for c in names}, keys,
-                     {s: {} for s in [None, *names]}, {})
+                     {s: {} for s in [None, *names]}, {}, camp=camp,
+                     refs={c: refs[c] for c in names}, rows=rows)
         cached = repo.cache_get_many(session, list(keys.values()))
     with stage("cache_unpack"):
         for (source, sid), key in keys.items():
@@ -355,6 +368,83 @@ def _require_seals(database, plan: _Plan) -> None:
                                    rows=plan.evidence)
 
 
+class _SealCheck:
+    """The seals of the evidence of every verdict, checked before it as
+    :func:`_require_seals` checks them, from the signal rows the chunks read (``add``: the
+    seals of :func:`railval.db.repo.fetch_signalsets`, read with the blobs) instead of a
+    second walk of the signal table: a source whose every row (the plan's rows, same
+    content hashes) came with a chunk is checked from those; the others (cached sources,
+    chunks without seals) are read by :func:`railval.db.repo.seal_rows_many`, once. Every
+    seal is checked (:func:`railval.db.repo.seal_problems`). On any problem the full check
+    :func:`_require_seals` runs and raises the same error as before; should it find none,
+    the problems found here are raised."""
+
+    def __init__(self, database, plan: _Plan) -> None:
+        self.database, self.plan = database, plan
+        self.read: dict[tuple[int, str], tuple[str, str | None]] = {}
+        self.per_source: dict[int | None, list] | None = None
+        self.problems = None
+        self.measured: list | None = None
+
+    def add(self, seals: list) -> None:
+        for rid, chan, sha, seal in seals:
+            self.read[(rid, chan)] = (sha, seal)
+
+    def _sealed(self, recs: list, by_rec: dict) -> dict | None:
+        """recording id → the plan's rows with the seals the chunks read, or None when one
+        is missing or its content hash differs."""
+        out = {}
+        for rec in recs:
+            rows = []
+            for name, cid, sha, _none in by_rec.get(rec[0], ()):
+                got = self.read.get((rec[0], name))
+                if got is None or got[0] != sha:
+                    return None
+                rows.append((name, cid, sha, got[1]))
+            out[rec[0]] = rows
+        return out
+
+    def check(self, cnames: list[str]) -> None:
+        """Check the measurement's seals (once) and those of the configurations ``cnames``."""
+        plan = self.plan
+        if plan.rows is None:  # pragma: no cover - every plan has its rows
+            _require_seals(self.database, plan)
+            return
+        recs, by_rec = plan.rows
+        if self.per_source is None:
+            self.per_source = {}
+            for rec in recs:
+                self.per_source.setdefault(rec[2], []).append(rec)
+        sources = ([None] if self.measured is None else []) + [plan.refs[c].id for c in cnames]
+        sealed: dict[int | None, dict] = {}
+        unread = []
+        for src in sources:
+            got = self._sealed(self.per_source.get(src, []), by_rec)
+            if got is None:
+                unread.append(src)
+            else:
+                sealed[src] = got
+        with stage("database"), self.database.session() as session:
+            if self.problems is None:
+                self.problems = repo.seal_problems(session, plan.camp)
+            if unread:
+                _r, rows = repo.seal_rows_many(session, plan.camp,
+                                               [s for s in unread if s is not None],
+                                               measurement=None in unread)
+                for src in unread:
+                    sealed[src] = {rec[0]: rows.get(rec[0], [])
+                                   for rec in self.per_source.get(src, [])}
+        with stage("database"):
+            if self.measured is None:
+                self.measured = self.problems(self.per_source.get(None, []), sealed[None])
+            bad = [(c, self.problems(self.per_source.get(plan.refs[c].id, []),
+                                     sealed[plan.refs[c].id])) for c in cnames]
+        if self.measured or any(p for _c, p in bad):
+            _require_seals(self.database, plan)  # raises the error of the full check
+            for c, p in bad:
+                repo.raise_problems(c, self.measured + p)
+
+
 def _chunks(todo: dict[str | None, list[str]], chunk_sections: int
             ) -> list[tuple[str | None, list[str]]]:
     """The sections still to process as chunks of one source, the measurement first (every
@@ -370,13 +460,13 @@ def _chunks(todo: dict[str | None, list[str]], chunk_sections: int
 
 
 def _thread_chunk(decode, sections: list[SectionInfo], order: int,
-                  row: int) -> tuple[list[bytes], dict]:
+                  row: int) -> tuple[list[bytes], dict, list]:
     """Thread task: decode and process one chunk read by the calling thread, with ``row`` row
     threads for the compiled kernels; stage times go to the caller's collector."""
     vals = _decode_and_evaluate(decode, sections, order, row)
     with stage("cache_pack"):
         packed = [pack_values(v) for v in vals]
-    return packed, {}
+    return packed, {}, decode.seals
 
 
 def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], order: int,
@@ -414,8 +504,9 @@ def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], 
         gc.freeze()
         try:
             with ProcessPoolExecutor(max_workers=workers, **pool_kwargs()) as pool:
-                futures = [(c, pool.submit(_evaluate_chunk, database.url, plan.name, c[0],
-                                           [by_id[s] for s in c[1]], order, threads))
+                futures = [(c, pool.submit(_evaluate_chunk, database.url, plan.camp,
+                                           plan.ref(c[0]), [by_id[s] for s in c[1]], order,
+                                           threads))
                            for c in chunks]
                 try:
                     for chunk, fut in futures:
@@ -429,7 +520,7 @@ def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], 
             gc.unfreeze()
     else:
         for chunk in chunks:
-            collect_chunk(chunk, _evaluate_chunk(database, plan.name, chunk[0],
+            collect_chunk(chunk, _evaluate_chunk(database, plan.camp, plan.ref(chunk[0]),
                                                  [by_id[s] for s in chunk[1]], order))
 
 
@@ -454,8 +545,8 @@ def _process_threads(database, plan: _Plan, chunks: list[tuple[str | None, list[
         for chunk in chunks:
             # a session per read: the collector opens its own (seals) between the reads
             with stage("database"), database.session() as session:
-                decode = repo.fetch_signalsets(session, plan.name, chunk[0], sections=chunk[1],
-                                               verify=True)
+                decode = repo.fetch_signalsets(session, plan.camp, plan.ref(chunk[0]),
+                                               sections=chunk[1], verify=True, seals=True)
             pending.append((chunk, pool.submit(in_context(_thread_chunk), decode,
                                                [by_id[s] for s in chunk[1]], order, row)))
             while len(pending) > workers + 1 or (pending and pending[0][1].done()):
@@ -480,10 +571,12 @@ class _Collector:
         self.verdicts: dict[str, ValidationResult] = {}
 
     def __call__(self, chunk, done) -> None:
-        packed, seconds = done
+        packed, seconds, *seals = done
         if self.outer is not None and seconds:
             self.outer.merge(seconds)
         source, sids = chunk
+        if seals and self.check_seals is not None:
+            self.check_seals.add(seals[0])
         with stage("cache_unpack"):
             for sid, blob in zip(sids, packed, strict=True):
                 self.computed[(source, sid)] = blob
@@ -499,12 +592,10 @@ class _Collector:
         if self.remaining.get(None, 0):
             return
         plan = self.plan
-        for cname in plan.names:
-            if cname in self.verdicts or self.remaining.get(cname, 0):
-                continue
-            if self.check_seals is not None:  # once, before the first verdict
-                self.check_seals()
-                self.check_seals = None
+        ready = [c for c in plan.names if c not in self.verdicts and not self.remaining.get(c, 0)]
+        if ready and self.check_seals is not None:  # before the verdicts
+            self.check_seals.check(ready)
+        for cname in ready:
             stats = {s: {"cached": len(plan.values[s]) - len(plan.todo.get(s, [])),
                          "computed": len(plan.todo.get(s, []))} for s in (None, cname)}
             self.verdicts[cname] = _verdict(
@@ -542,7 +633,7 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
         raise InvalidParameter(f"backend must be 'processes' or 'threads', got {backend!r}")
     plan = _plan(database, campaign_name, configs, order)
     collector = _Collector(plan, order, n_boot, seed, progress,
-                           (lambda: _require_seals(database, plan)) if check_seals else None)
+                           _SealCheck(database, plan) if check_seals else None)
     _process(database, plan, _chunks(plan.todo, chunk_sections), order, workers, scheduler,
              collector, backend)
     if collector.computed:
