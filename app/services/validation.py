@@ -61,6 +61,9 @@ from railval.db.engine import connect
 
 #: sections read per query while the previous chunks are processed
 _PIPELINE_CHUNK = 4
+#: share of the chunks of a run on worker processes collected before the seal check and the
+#: first verdict (:class:`_Collector`)
+_SEAL_HOLD = 0.75
 #: threads that decode and process the chunks of one source at once (each with its share of
 #: the row threads): decoding one chunk overlaps the Python parts of the EN chain of another
 _PIPELINE_THREADS = 2
@@ -369,22 +372,21 @@ def _require_seals(database, plan: _Plan) -> None:
 
 
 class _SealCheck:
-    """The seals of the evidence of every verdict, checked before it as
-    :func:`_require_seals` checks them, from the signal rows the chunks read (``add``: the
-    seals of :func:`railval.db.repo.fetch_signalsets`, read with the blobs) instead of a
-    second walk of the signal table: a source whose every row (the plan's rows, same
-    content hashes) came with a chunk is checked from those; the others (cached sources,
-    chunks without seals) are read by :func:`railval.db.repo.seal_rows_many`, once. Every
-    seal is checked (:func:`railval.db.repo.seal_problems`). On any problem the full check
-    :func:`_require_seals` runs and raises the same error as before; should it find none,
-    the problems found here are raised."""
+    """The seals of the evidence of every verdict, checked once before the first verdict as
+    :func:`_require_seals` checks them, but from the signal rows the chunks read where it
+    can (``add``: the seals :func:`railval.db.repo.fetch_signalsets` read with the blobs)
+    instead of a second walk of the signal table (on SQLite the seal lies after the blob:
+    reading it walks the blob's overflow chain, ≈ 0.3 CPU-s for a DynoTRAIN run). A source
+    whose every row of the plan came with a chunk, with the same content hashes, is checked
+    from those; the others (cached sources, sources not read yet) are read by
+    :func:`railval.db.repo.seal_rows_many`, one query. Every seal is checked
+    (:func:`railval.db.repo.seal_problems`), the measurement's once. On a problem the full
+    check :func:`_require_seals` runs first and raises the same error as before; should it
+    find none, the problems found here are raised, in the same form."""
 
     def __init__(self, database, plan: _Plan) -> None:
         self.database, self.plan = database, plan
         self.read: dict[tuple[int, str], tuple[str, str | None]] = {}
-        self.per_source: dict[int | None, list] | None = None
-        self.problems = None
-        self.measured: list | None = None
 
     def add(self, seals: list) -> None:
         for rid, chan, sha, seal in seals:
@@ -404,45 +406,40 @@ class _SealCheck:
             out[rec[0]] = rows
         return out
 
-    def check(self, cnames: list[str]) -> None:
-        """Check the measurement's seals (once) and those of the configurations ``cnames``."""
+    def __call__(self) -> None:
         plan = self.plan
         if plan.rows is None:  # pragma: no cover - every plan has its rows
             _require_seals(self.database, plan)
             return
         recs, by_rec = plan.rows
-        if self.per_source is None:
-            self.per_source = {}
-            for rec in recs:
-                self.per_source.setdefault(rec[2], []).append(rec)
-        sources = ([None] if self.measured is None else []) + [plan.refs[c].id for c in cnames]
+        per_source: dict[int | None, list] = {}
+        for rec in recs:
+            per_source.setdefault(rec[2], []).append(rec)
+        ids = [None, *(plan.refs[c].id for c in plan.names)]
         sealed: dict[int | None, dict] = {}
         unread = []
-        for src in sources:
-            got = self._sealed(self.per_source.get(src, []), by_rec)
+        for src in ids:
+            got = self._sealed(per_source.get(src, []), by_rec)
             if got is None:
                 unread.append(src)
             else:
                 sealed[src] = got
+        self.read = {}
         with stage("database"), self.database.session() as session:
-            if self.problems is None:
-                self.problems = repo.seal_problems(session, plan.camp)
+            problems = repo.seal_problems(session, plan.camp)
             if unread:
                 _r, rows = repo.seal_rows_many(session, plan.camp,
                                                [s for s in unread if s is not None],
                                                measurement=None in unread)
                 for src in unread:
-                    sealed[src] = {rec[0]: rows.get(rec[0], [])
-                                   for rec in self.per_source.get(src, [])}
-        with stage("database"):
-            if self.measured is None:
-                self.measured = self.problems(self.per_source.get(None, []), sealed[None])
-            bad = [(c, self.problems(self.per_source.get(plan.refs[c].id, []),
-                                     sealed[plan.refs[c].id])) for c in cnames]
-        if self.measured or any(p for _c, p in bad):
+                    sealed[src] = {rec[0]: rows.get(rec[0], []) for rec in per_source.get(src, [])}
+            measured = problems(per_source.get(None, []), sealed[None])
+            bad = [(c, problems(per_source.get(plan.refs[c].id, []), sealed[plan.refs[c].id]))
+                   for c in plan.names]
+        if measured or any(p for _c, p in bad):
             _require_seals(self.database, plan)  # raises the error of the full check
             for c, p in bad:
-                repo.raise_problems(c, self.measured + p)
+                repo.raise_problems(c, measured + p)
 
 
 def _chunks(todo: dict[str | None, list[str]], chunk_sections: int
@@ -561,7 +558,7 @@ class _Collector:
     and the measurement's are complete, while the remaining chunks are being processed."""
 
     def __init__(self, plan: _Plan, order: int, n_boot: int, seed: int, progress,
-                 check_seals=None) -> None:
+                 check_seals=None, chunks: int = 0, hold_fraction: float = 0.0) -> None:
         self.plan, self.order, self.n_boot, self.seed = plan, order, n_boot, seed
         self.progress, self.check_seals = progress, check_seals
         self.outer = current_stages()
@@ -569,6 +566,11 @@ class _Collector:
         self.n_todo = max(1, sum(self.remaining.values()))
         self.computed: dict[tuple[str | None, str], bytes] = {}
         self.verdicts: dict[str, ValidationResult] = {}
+        #: chunks collected; the seal check (and so the first verdict) waits for ``hold``
+        #: of the ``chunks`` chunks: the seals of the sources read by then come with their
+        #: chunks (:class:`_SealCheck`), only the others are read from the database; the
+        #: verdicts waiting meanwhile are given while the last chunks are processed
+        self.collected, self.hold = 0, int(-(-chunks * hold_fraction // 1))
 
     def __call__(self, chunk, done) -> None:
         packed, seconds, *seals = done
@@ -582,6 +584,7 @@ class _Collector:
                 self.computed[(source, sid)] = blob
                 self.plan.values[source][sid] = unpack_values(sid, blob)
         self.remaining[source] -= len(sids)
+        self.collected += 1
         if self.progress is not None:
             self.progress("processing sections", len(self.computed) / self.n_todo,
                           {"done": len(self.computed)})
@@ -592,10 +595,14 @@ class _Collector:
         if self.remaining.get(None, 0):
             return
         plan = self.plan
-        ready = [c for c in plan.names if c not in self.verdicts and not self.remaining.get(c, 0)]
-        if ready and self.check_seals is not None:  # before the verdicts
-            self.check_seals.check(ready)
-        for cname in ready:
+        if self.check_seals is not None and self.collected < self.hold:
+            return  # the verdicts wait for the seal check (see __init__)
+        for cname in plan.names:
+            if cname in self.verdicts or self.remaining.get(cname, 0):
+                continue
+            if self.check_seals is not None:  # once, before the first verdict
+                self.check_seals()
+                self.check_seals = None
             stats = {s: {"cached": len(plan.values[s]) - len(plan.todo.get(s, [])),
                          "computed": len(plan.todo.get(s, []))} for s in (None, cname)}
             self.verdicts[cname] = _verdict(
@@ -616,7 +623,8 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
 
     The same pipeline as :func:`validate_configuration` — seals of the evidence checked
     (``check_seals``; before the first verdict, by this process while the workers process,
-    the measurement's once), result cache, EN chain, :func:`_verdict` — with the sections
+    the measurement's once, from the seals the chunks read with the blobs where it can:
+    :class:`_SealCheck`), result cache, EN chain, :func:`_verdict` — with the sections
     not in the cache processed in chunks of at most ``chunk_sections`` sections of one
     source (:func:`_chunks`, the measurement first) by ``workers`` processes (each opens its
     own connection; ``backend="threads"``: ``workers`` threads of this process, which reads
@@ -632,10 +640,15 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
     if backend not in ("processes", "threads"):
         raise InvalidParameter(f"backend must be 'processes' or 'threads', got {backend!r}")
     plan = _plan(database, campaign_name, configs, order)
+    chunks = _chunks(plan.todo, chunk_sections)
+    # the process workers' chunks do not wait for this process: it may hold the verdicts
+    # (and the seal check) until most chunks are in; the threads back end reads the blobs
+    # here, between the verdicts, so it checks at the first verdict
+    hold = _SEAL_HOLD if backend == "processes" and workers > 1 and scheduler is None else 0.0
     collector = _Collector(plan, order, n_boot, seed, progress,
-                           _SealCheck(database, plan) if check_seals else None)
-    _process(database, plan, _chunks(plan.todo, chunk_sections), order, workers, scheduler,
-             collector, backend)
+                           _SealCheck(database, plan) if check_seals else None,
+                           len(chunks), hold)
+    _process(database, plan, chunks, order, workers, scheduler, collector, backend)
     if collector.computed:
         with stage("database"), database.session(write=True) as session:
             repo.cache_put_many(session, {plan.keys[k]: blob
