@@ -292,7 +292,6 @@ def hash_rows_many(session: Session, campaign: CampaignArg, config_ids: list[int
         recs, by_rec = _seal_rows(session, c, cond)
         return recs, {rid: [(name, cid, sha, None) for name, cid, sha, _seal in rows]
                       for rid, rows in by_rec.items()}
-    from sqlalchemy import text
 
     rec_q = (select(Recording.id, Section.section_id, Recording.configuration_id,
                     Recording.distance_sha256, Recording.fs, Recording.t0, Recording.n)
@@ -310,11 +309,10 @@ def hash_rows_many(session: Session, campaign: CampaignArg, config_ids: list[int
             + ",".join("?" * len(part)) + ")", tuple(part)).all()
     wanted = {m[0] for m in members}
     sha = {}
-    if wanted:
-        for sid, h in conn.execute(text("SELECT id, sha256 FROM signal "
-                                        "INDEXED BY ix_signal_sha256")):
-            if sid in wanted:
-                sha[sid] = h
+    if wanted:  # the driver's rows at once (through SQLAlchemy's rows: 3 times the CPU)
+        cur = conn.connection.driver_connection.execute(
+            "SELECT id, sha256 FROM signal INDEXED BY ix_signal_sha256")
+        sha = {sid: h for sid, h in cur.fetchall() if sid in wanted}
     by_rec: dict[int, list] = {}
     for sig, rid, cid in sorted(members, key=lambda m: (m[1], m[2])):
         by_rec.setdefault(rid, []).append((names[cid], cid, sha[sig], None))

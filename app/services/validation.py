@@ -63,7 +63,7 @@ from railval.db.engine import connect
 _PIPELINE_CHUNK = 4
 #: share of the chunks of a run on worker processes collected before the seal check and the
 #: first verdict (:class:`_Collector`)
-_SEAL_HOLD = 0.75
+_SEAL_HOLD = 0.8
 #: threads that decode and process the chunks of one source at once (each with its share of
 #: the row threads): decoding one chunk overlaps the Python parts of the EN chain of another
 _PIPELINE_THREADS = 2
@@ -314,18 +314,19 @@ class _Plan:
 def _plan(database, campaign_name: str, configs: Sequence[str] | None,
           order: int) -> _Plan:
     """Resolve names and read the result cache; no blob is read (the seals are checked by
-    :func:`_require_seals` before the first verdict)."""
+    :class:`_SealCheck` before the first verdict)."""
     with stage("database"), database.session() as session:
         camp, _ = repo.resolve(session, campaign_name)
-        refs = {c.name: repo.ConfigRef(camp, c.id, c.name)
-                for c in repo.list_configurations(session, camp)}
+        # the rows stay referenced: the lineages below find them in the session (by id)
+        conf_rows = repo.list_configurations(session, camp)
+        refs = {c.name: repo.ConfigRef(camp, c.id, c.name) for c in conf_rows}
         names = (list(refs) if configs is None
                  else [c if isinstance(c, str) and c in refs
                        else repo.resolve(session, camp, c)[1].name for c in configs])
         sections = repo.section_infos(session, camp)
         keys, rows = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
         plan = _Plan(camp.name, sections, repo.vehicle_info(session, camp), names,
-                     {c: calibration_provenance(session, camp, c) for c in names}, keys,
+                     {c: calibration_provenance(session, camp, refs[c]) for c in names}, keys,
                      {s: {} for s in [None, *names]}, {}, camp=camp,
                      refs={c: refs[c] for c in names}, rows=rows)
         cached = repo.cache_get_many(session, list(keys.values()))
@@ -670,7 +671,7 @@ def _verdict(measured, simulated, sections, vehicle, n_boot: int, seed: int,
     return result
 
 
-def calibration_provenance(session: Session, campaign, config: str) -> dict:
+def calibration_provenance(session: Session, campaign, config: str | repo.ConfigRef) -> dict:
     """Whether a verdict on configuration ``config`` is in-sample: it, or one of its
     ancestors, was calibrated on sections of this campaign (``Configuration.calibration``), so
     a verdict over all sections includes the sections the fit used. Returns ``in_sample``,
