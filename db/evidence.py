@@ -7,6 +7,7 @@ hash, per campaign, per configuration (what a verdict rests on) or for the whole
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from sqlalchemy import func, or_, select
@@ -242,14 +243,36 @@ def require_evidence_many(session: Session, campaign: CampaignArg, configs: list
                                                           by_rec, secret))
 
 
-def seal_rows_many(session: Session, campaign: CampaignArg, config_ids: list[int]
-                   ) -> tuple[list, dict]:
-    """:func:`_seal_rows` of the measurement and of the configurations ``config_ids``: the
-    recordings (id, section id, configuration id or None, distance hash, fs, t0, n) and
-    recording id → [(channel, channel id, content hash, seal)], two queries, no blob."""
+def seal_rows_many(session: Session, campaign: CampaignArg, config_ids: list[int], *,
+                   measurement: bool = True) -> tuple[list, dict]:
+    """:func:`_seal_rows` of the measurement (``measurement=False``: without it) and of the
+    configurations ``config_ids``: the recordings (id, section id, configuration id or None,
+    distance hash, fs, t0, n) and recording id → [(channel, channel id, content hash,
+    seal)], two queries, no blob."""
     c = campaign_ref(session, campaign)
-    return _seal_rows(session, c, or_(Recording.configuration_id.is_(None),
-                                      Recording.configuration_id.in_(set(config_ids))))
+    cond = Recording.configuration_id.in_(set(config_ids))
+    if measurement:
+        cond = or_(Recording.configuration_id.is_(None), cond)
+    return _seal_rows(session, c, cond)
+
+
+def seal_problems(session: Session, campaign: CampaignArg) -> Callable[[list, dict], list]:
+    """The check of :func:`require_evidence_many` on rows the caller already holds:
+    returns ``problems(recs, by_rec)`` — the seal problems (records as
+    :func:`verify_evidence`'s) of the recordings ``recs`` of one source with their signal
+    rows ``by_rec`` (the form of :func:`seal_rows_many`), every seal checked
+    (:func:`integrity.check_signal_seals`). The secret and the configuration names are
+    read once, here."""
+    c = campaign_ref(session, campaign)
+    secret = integrity.session_secret(session)
+    names = {x.id: x.name for x in list_configurations(session, c)}
+    return lambda recs, by_rec: _seal_problems(c, names, recs, by_rec, secret)
+
+
+def raise_problems(config: ConfigArg, problems: list[dict[str, Any]]) -> None:
+    """Raise :class:`railval.db.integrity.IntegrityError` as :func:`require_evidence` does
+    when ``problems`` (records of :func:`verify_evidence`) is not empty."""
+    _raise_problems(config, problems)
 
 
 def hash_rows_many(session: Session, campaign: CampaignArg, config_ids: list[int]
@@ -269,7 +292,6 @@ def hash_rows_many(session: Session, campaign: CampaignArg, config_ids: list[int
         recs, by_rec = _seal_rows(session, c, cond)
         return recs, {rid: [(name, cid, sha, None) for name, cid, sha, _seal in rows]
                       for rid, rows in by_rec.items()}
-    from sqlalchemy import text
 
     rec_q = (select(Recording.id, Section.section_id, Recording.configuration_id,
                     Recording.distance_sha256, Recording.fs, Recording.t0, Recording.n)
@@ -287,11 +309,10 @@ def hash_rows_many(session: Session, campaign: CampaignArg, config_ids: list[int
             + ",".join("?" * len(part)) + ")", tuple(part)).all()
     wanted = {m[0] for m in members}
     sha = {}
-    if wanted:
-        for sid, h in conn.execute(text("SELECT id, sha256 FROM signal "
-                                        "INDEXED BY ix_signal_sha256")):
-            if sid in wanted:
-                sha[sid] = h
+    if wanted:  # the driver's rows at once (through SQLAlchemy's rows: 3 times the CPU)
+        cur = conn.connection.driver_connection.execute(
+            "SELECT id, sha256 FROM signal INDEXED BY ix_signal_sha256")
+        sha = {sid: h for sid, h in cur.fetchall() if sid in wanted}
     by_rec: dict[int, list] = {}
     for sig, rid, cid in sorted(members, key=lambda m: (m[1], m[2])):
         by_rec.setdefault(rid, []).append((names[cid], cid, sha[sig], None))

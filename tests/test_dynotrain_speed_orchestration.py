@@ -147,3 +147,46 @@ def test_single_validation_checks_seals_while_processing_and_caches_nothing(sqli
         assert s.scalar(select(func.count()).select_from(ResultCache)) == cached_before
         res = service.validate_configuration(s, "demo", "baseline", n_boot=0)
     assert res.info["sections_simulated"] == {"cached": 12, "computed": 0}
+
+
+@pytest.mark.parametrize("hold", [0.0, 1.0])
+def test_forged_seal_read_by_the_workers_is_refused(sqlite_database, tmp_path, hold,
+                                                    monkeypatch):
+    """The seals the worker processes read with the blobs are checked like those read by
+    the main process: a seal forged with the samples (hold 1.0: every source's rows come
+    from the chunks; 0.0: most from the database) raises the same error, before any
+    verdict, and nothing is cached."""
+    from sqlalchemy import func, select, update
+
+    from railval.db import codec, integrity, repo
+    from railval.db.models import Channel, Configuration, Recording, ResultCache, Section, Signal
+
+    write_demo_campaign(tmp_path / "c", n_configs=2, fs=200.0)
+    import_campaign(sqlite_database, tmp_path / "c")
+    with sqlite_database.session(write=True) as s:
+        sig_id, blob, prov = s.execute(
+            select(Signal.id, Signal.blob, Signal.provenance)
+            .join(Recording, Signal.recording_id == Recording.id)
+            .join(Section, Recording.section_id == Section.id)
+            .join(Channel, Signal.channel_id == Channel.id)
+            .join(Configuration, Recording.configuration_id == Configuration.id)
+            .where(Channel.name == "Y_w1L", Section.section_id == "S02",
+                   Configuration.name == "variant1")).first()
+        forged, sha = codec.encode(codec.decode(blob) * 2.0)
+        s.execute(update(Signal).where(Signal.id == sig_id).values(
+            blob=forged, sha256=sha, provenance={**prov, "seal": "v2:" + "0" * 64}))
+    monkeypatch.setattr(service, "_SEAL_HOLD", hold)
+    judged = []
+    monkeypatch.setattr(service, "_verdict", lambda *a, **kw: judged.append(a) or None)
+    with pytest.raises(integrity.IntegrityError,
+                       match=r"evidence of 'variant1' is not intact \(1 problem\(s\)\): "
+                             "section S02, configuration 'variant1', Y_w1L: fails its seal"):
+        service.validate_configurations(sqlite_database, "demo", n_boot=0, workers=2,
+                                        chunk_sections=4)
+    assert judged == []
+    with sqlite_database.session() as s:
+        assert s.scalar(select(func.count()).select_from(ResultCache)) == 0
+    with sqlite_database.session() as s:  # the same message as the full check gives
+        with pytest.raises(integrity.IntegrityError, match="fails its seal"):
+            names = [c.name for c in repo.list_configurations(s, "demo")]
+            repo.require_evidence_many(s, "demo", names, blobs=False)

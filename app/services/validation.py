@@ -61,6 +61,9 @@ from railval.db.engine import connect
 
 #: sections read per query while the previous chunks are processed
 _PIPELINE_CHUNK = 4
+#: share of the chunks of a run on worker processes collected before the seal check and the
+#: first verdict (:class:`_Collector`)
+_SEAL_HOLD = 0.8
 #: threads that decode and process the chunks of one source at once (each with its share of
 #: the row threads): decoding one chunk overlaps the Python parts of the EN chain of another
 _PIPELINE_THREADS = 2
@@ -176,9 +179,11 @@ def _decode_and_evaluate(decode, sections: list[SectionInfo], order: int,
 
 def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
                     sections: list[SectionInfo], order: int,
-                    threads: int | None = None) -> tuple[list[bytes], dict]:
-    """Worker task: load and process some sections of one source; returns packed values and
-    the seconds per stage it spent (:mod:`railval.core.stages`).
+                    threads: int | None = None) -> tuple[list[bytes], dict, list]:
+    """Worker task: load and process some sections of one source; returns packed values,
+    the seconds per stage it spent (:mod:`railval.core.stages`) and the signal rows it read
+    with their seals (``seals`` of :func:`railval.db.repo.fetch_signalsets`), which the
+    main process checks (:class:`_SealCheck`) instead of reading them again.
     ``db_or_url``: a :class:`railval.db.engine.Database` (in-process) or its URL (worker
     process); ``threads``: row threads of the EN chain in this worker process (the workers
     share the cores, so each takes its part instead of all of them)."""
@@ -195,11 +200,12 @@ def _evaluate_chunk(db_or_url, campaign: str, config: str | None,
         with database.session() as session:
             with stage("database"):
                 decode = repo.fetch_signalsets(session, campaign, config,
-                                               sections=[s.id for s in sections], verify=True)
+                                               sections=[s.id for s in sections], verify=True,
+                                               seals=True)
             vals = _decode_and_evaluate(decode, sections, order)
         with stage("cache_pack"):
             packed = [pack_values(v) for v in vals]
-    return packed, stages.seconds
+    return packed, stages.seconds, decode.seals
 
 
 def _evaluate_chunk_task(args: tuple) -> list[bytes]:
@@ -294,24 +300,35 @@ class _Plan:
     todo: dict[str | None, list[str]]
     #: signal rows with their seals for :func:`_require_seals` (None: it reads them)
     evidence: tuple | None = None
+    #: the campaign and the configurations resolved (:func:`_plan`)
+    camp: repo.CampaignRef | None = None
+    refs: dict[str, repo.ConfigRef] | None = None
+    #: the signal rows the keys come from, without seals (:func:`_plan_keys`)
+    rows: tuple | None = None
+
+    def ref(self, source: str | None) -> repo.ConfigRef | None:
+        """The reference of a source (``None``: the measurement)."""
+        return None if source is None else self.refs[source]
 
 
 def _plan(database, campaign_name: str, configs: Sequence[str] | None,
           order: int) -> _Plan:
     """Resolve names and read the result cache; no blob is read (the seals are checked by
-    :func:`_require_seals` before the first verdict)."""
+    :class:`_SealCheck` before the first verdict)."""
     with stage("database"), database.session() as session:
         camp, _ = repo.resolve(session, campaign_name)
-        refs = {c.name: repo.ConfigRef(camp, c.id, c.name)
-                for c in repo.list_configurations(session, camp)}
+        # the rows stay referenced: the lineages below find them in the session (by id)
+        conf_rows = repo.list_configurations(session, camp)
+        refs = {c.name: repo.ConfigRef(camp, c.id, c.name) for c in conf_rows}
         names = (list(refs) if configs is None
                  else [c if isinstance(c, str) and c in refs
                        else repo.resolve(session, camp, c)[1].name for c in configs])
         sections = repo.section_infos(session, camp)
-        keys, _rows = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
+        keys, rows = _plan_keys(session, camp, [refs[c] for c in names], sections, order)
         plan = _Plan(camp.name, sections, repo.vehicle_info(session, camp), names,
-                     {c: calibration_provenance(session, camp, c) for c in names}, keys,
-                     {s: {} for s in [None, *names]}, {})
+                     {c: calibration_provenance(session, camp, refs[c]) for c in names}, keys,
+                     {s: {} for s in [None, *names]}, {}, camp=camp,
+                     refs={c: refs[c] for c in names}, rows=rows)
         cached = repo.cache_get_many(session, list(keys.values()))
     with stage("cache_unpack"):
         for (source, sid), key in keys.items():
@@ -355,6 +372,77 @@ def _require_seals(database, plan: _Plan) -> None:
                                    rows=plan.evidence)
 
 
+class _SealCheck:
+    """The seals of the evidence of every verdict, checked once before the first verdict as
+    :func:`_require_seals` checks them, but from the signal rows the chunks read where it
+    can (``add``: the seals :func:`railval.db.repo.fetch_signalsets` read with the blobs)
+    instead of a second walk of the signal table (on SQLite the seal lies after the blob:
+    reading it walks the blob's overflow chain, ≈ 0.3 CPU-s for a DynoTRAIN run). A source
+    whose every row of the plan came with a chunk, with the same content hashes, is checked
+    from those; the others (cached sources, sources not read yet) are read by
+    :func:`railval.db.repo.seal_rows_many`, one query. Every seal is checked
+    (:func:`railval.db.repo.seal_problems`), the measurement's once. On a problem the full
+    check :func:`_require_seals` runs first and raises the same error as before; should it
+    find none, the problems found here are raised, in the same form."""
+
+    def __init__(self, database, plan: _Plan) -> None:
+        self.database, self.plan = database, plan
+        self.read: dict[tuple[int, str], tuple[str, str | None]] = {}
+
+    def add(self, seals: list) -> None:
+        for rid, chan, sha, seal in seals:
+            self.read[(rid, chan)] = (sha, seal)
+
+    def _sealed(self, recs: list, by_rec: dict) -> dict | None:
+        """recording id → the plan's rows with the seals the chunks read, or None when one
+        is missing or its content hash differs."""
+        out = {}
+        for rec in recs:
+            rows = []
+            for name, cid, sha, _none in by_rec.get(rec[0], ()):
+                got = self.read.get((rec[0], name))
+                if got is None or got[0] != sha:
+                    return None
+                rows.append((name, cid, sha, got[1]))
+            out[rec[0]] = rows
+        return out
+
+    def __call__(self) -> None:
+        plan = self.plan
+        if plan.rows is None:  # pragma: no cover - every plan has its rows
+            _require_seals(self.database, plan)
+            return
+        recs, by_rec = plan.rows
+        per_source: dict[int | None, list] = {}
+        for rec in recs:
+            per_source.setdefault(rec[2], []).append(rec)
+        ids = [None, *(plan.refs[c].id for c in plan.names)]
+        sealed: dict[int | None, dict] = {}
+        unread = []
+        for src in ids:
+            got = self._sealed(per_source.get(src, []), by_rec)
+            if got is None:
+                unread.append(src)
+            else:
+                sealed[src] = got
+        self.read = {}
+        with stage("database"), self.database.session() as session:
+            problems = repo.seal_problems(session, plan.camp)
+            if unread:
+                _r, rows = repo.seal_rows_many(session, plan.camp,
+                                               [s for s in unread if s is not None],
+                                               measurement=None in unread)
+                for src in unread:
+                    sealed[src] = {rec[0]: rows.get(rec[0], []) for rec in per_source.get(src, [])}
+            measured = problems(per_source.get(None, []), sealed[None])
+            bad = [(c, problems(per_source.get(plan.refs[c].id, []), sealed[plan.refs[c].id]))
+                   for c in plan.names]
+        if measured or any(p for _c, p in bad):
+            _require_seals(self.database, plan)  # raises the error of the full check
+            for c, p in bad:
+                repo.raise_problems(c, measured + p)
+
+
 def _chunks(todo: dict[str | None, list[str]], chunk_sections: int
             ) -> list[tuple[str | None, list[str]]]:
     """The sections still to process as chunks of one source, the measurement first (every
@@ -370,13 +458,13 @@ def _chunks(todo: dict[str | None, list[str]], chunk_sections: int
 
 
 def _thread_chunk(decode, sections: list[SectionInfo], order: int,
-                  row: int) -> tuple[list[bytes], dict]:
+                  row: int) -> tuple[list[bytes], dict, list]:
     """Thread task: decode and process one chunk read by the calling thread, with ``row`` row
     threads for the compiled kernels; stage times go to the caller's collector."""
     vals = _decode_and_evaluate(decode, sections, order, row)
     with stage("cache_pack"):
         packed = [pack_values(v) for v in vals]
-    return packed, {}
+    return packed, {}, decode.seals
 
 
 def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], order: int,
@@ -414,8 +502,9 @@ def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], 
         gc.freeze()
         try:
             with ProcessPoolExecutor(max_workers=workers, **pool_kwargs()) as pool:
-                futures = [(c, pool.submit(_evaluate_chunk, database.url, plan.name, c[0],
-                                           [by_id[s] for s in c[1]], order, threads))
+                futures = [(c, pool.submit(_evaluate_chunk, database.url, plan.camp,
+                                           plan.ref(c[0]), [by_id[s] for s in c[1]], order,
+                                           threads))
                            for c in chunks]
                 try:
                     for chunk, fut in futures:
@@ -429,7 +518,7 @@ def _process(database, plan: _Plan, chunks: list[tuple[str | None, list[str]]], 
             gc.unfreeze()
     else:
         for chunk in chunks:
-            collect_chunk(chunk, _evaluate_chunk(database, plan.name, chunk[0],
+            collect_chunk(chunk, _evaluate_chunk(database, plan.camp, plan.ref(chunk[0]),
                                                  [by_id[s] for s in chunk[1]], order))
 
 
@@ -454,8 +543,8 @@ def _process_threads(database, plan: _Plan, chunks: list[tuple[str | None, list[
         for chunk in chunks:
             # a session per read: the collector opens its own (seals) between the reads
             with stage("database"), database.session() as session:
-                decode = repo.fetch_signalsets(session, plan.name, chunk[0], sections=chunk[1],
-                                               verify=True)
+                decode = repo.fetch_signalsets(session, plan.camp, plan.ref(chunk[0]),
+                                               sections=chunk[1], verify=True, seals=True)
             pending.append((chunk, pool.submit(in_context(_thread_chunk), decode,
                                                [by_id[s] for s in chunk[1]], order, row)))
             while len(pending) > workers + 1 or (pending and pending[0][1].done()):
@@ -470,7 +559,7 @@ class _Collector:
     and the measurement's are complete, while the remaining chunks are being processed."""
 
     def __init__(self, plan: _Plan, order: int, n_boot: int, seed: int, progress,
-                 check_seals=None) -> None:
+                 check_seals=None, chunks: int = 0, hold_fraction: float = 0.0) -> None:
         self.plan, self.order, self.n_boot, self.seed = plan, order, n_boot, seed
         self.progress, self.check_seals = progress, check_seals
         self.outer = current_stages()
@@ -478,17 +567,25 @@ class _Collector:
         self.n_todo = max(1, sum(self.remaining.values()))
         self.computed: dict[tuple[str | None, str], bytes] = {}
         self.verdicts: dict[str, ValidationResult] = {}
+        #: chunks collected; the seal check (and so the first verdict) waits for ``hold``
+        #: of the ``chunks`` chunks: the seals of the sources read by then come with their
+        #: chunks (:class:`_SealCheck`), only the others are read from the database; the
+        #: verdicts waiting meanwhile are given while the last chunks are processed
+        self.collected, self.hold = 0, int(-(-chunks * hold_fraction // 1))
 
     def __call__(self, chunk, done) -> None:
-        packed, seconds = done
+        packed, seconds, *seals = done
         if self.outer is not None and seconds:
             self.outer.merge(seconds)
         source, sids = chunk
+        if seals and self.check_seals is not None:
+            self.check_seals.add(seals[0])
         with stage("cache_unpack"):
             for sid, blob in zip(sids, packed, strict=True):
                 self.computed[(source, sid)] = blob
                 self.plan.values[source][sid] = unpack_values(sid, blob)
         self.remaining[source] -= len(sids)
+        self.collected += 1
         if self.progress is not None:
             self.progress("processing sections", len(self.computed) / self.n_todo,
                           {"done": len(self.computed)})
@@ -499,6 +596,8 @@ class _Collector:
         if self.remaining.get(None, 0):
             return
         plan = self.plan
+        if self.check_seals is not None and self.collected < self.hold:
+            return  # the verdicts wait for the seal check (see __init__)
         for cname in plan.names:
             if cname in self.verdicts or self.remaining.get(cname, 0):
                 continue
@@ -525,7 +624,8 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
 
     The same pipeline as :func:`validate_configuration` — seals of the evidence checked
     (``check_seals``; before the first verdict, by this process while the workers process,
-    the measurement's once), result cache, EN chain, :func:`_verdict` — with the sections
+    the measurement's once, from the seals the chunks read with the blobs where it can:
+    :class:`_SealCheck`), result cache, EN chain, :func:`_verdict` — with the sections
     not in the cache processed in chunks of at most ``chunk_sections`` sections of one
     source (:func:`_chunks`, the measurement first) by ``workers`` processes (each opens its
     own connection; ``backend="threads"``: ``workers`` threads of this process, which reads
@@ -541,10 +641,15 @@ def validate_configurations(database, campaign_name: str, configs: Sequence[str]
     if backend not in ("processes", "threads"):
         raise InvalidParameter(f"backend must be 'processes' or 'threads', got {backend!r}")
     plan = _plan(database, campaign_name, configs, order)
+    chunks = _chunks(plan.todo, chunk_sections)
+    # the process workers' chunks do not wait for this process: it may hold the verdicts
+    # (and the seal check) until most chunks are in; the threads back end reads the blobs
+    # here, between the verdicts, so it checks at the first verdict
+    hold = _SEAL_HOLD if backend == "processes" and workers > 1 and scheduler is None else 0.0
     collector = _Collector(plan, order, n_boot, seed, progress,
-                           (lambda: _require_seals(database, plan)) if check_seals else None)
-    _process(database, plan, _chunks(plan.todo, chunk_sections), order, workers, scheduler,
-             collector, backend)
+                           _SealCheck(database, plan) if check_seals else None,
+                           len(chunks), hold)
+    _process(database, plan, chunks, order, workers, scheduler, collector, backend)
     if collector.computed:
         with stage("database"), database.session(write=True) as session:
             repo.cache_put_many(session, {plan.keys[k]: blob
@@ -566,7 +671,7 @@ def _verdict(measured, simulated, sections, vehicle, n_boot: int, seed: int,
     return result
 
 
-def calibration_provenance(session: Session, campaign, config: str) -> dict:
+def calibration_provenance(session: Session, campaign, config: str | repo.ConfigRef) -> dict:
     """Whether a verdict on configuration ``config`` is in-sample: it, or one of its
     ancestors, was calibrated on sections of this campaign (``Configuration.calibration``), so
     a verdict over all sections includes the sections the fit used. Returns ``in_sample``,
