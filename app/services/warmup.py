@@ -27,6 +27,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -77,13 +78,17 @@ def warm() -> dict[str, float]:
 
 def start_background() -> subprocess.Popen | None:
     """Start :func:`warm` in a child process, which first lowers itself to the lowest CPU
-    priority (``nice`` 19); its output is discarded; returns the process, or None when :data:`NO_WARMUP_ENV` switches it
-    off. The server does not wait for it."""
+    priority (``nice`` 19); its output is discarded and a daemon thread reaps it when it
+    ends. Returns the process, or None when :data:`NO_WARMUP_ENV` switches it off. The
+    server does not wait for it."""
     if os.environ.get(NO_WARMUP_ENV, "") not in ("", "0"):
         return None
-    return subprocess.Popen([sys.executable, "-m", "railval.app.services.warmup"],
+    proc = subprocess.Popen([sys.executable, "-m", "railval.app.services.warmup"],
                             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
+    # reaped when it ends, so a long-running server keeps no defunct child
+    threading.Thread(target=proc.wait, name="railval-warmup-reaper", daemon=True).start()
+    return proc
 
 
 if __name__ == "__main__":
