@@ -84,19 +84,12 @@ def test_forged_configuration_signal_refused_before_any_verdict(sqlite_database,
     from sqlalchemy import func, select, update
 
     from railval.db import codec, integrity
-    from railval.db.models import Channel, Configuration, Recording, ResultCache, Section, Signal
+    from railval.db.models import ResultCache, Signal
 
     write_demo_campaign(tmp_path / "c", n_configs=2, fs=200.0)
     import_campaign(sqlite_database, tmp_path / "c")
     with sqlite_database.session(write=True) as s:
-        sig_id, blob = s.execute(
-            select(Signal.id, Signal.blob)
-            .join(Recording, Signal.recording_id == Recording.id)
-            .join(Section, Recording.section_id == Section.id)
-            .join(Channel, Signal.channel_id == Channel.id)
-            .join(Configuration, Recording.configuration_id == Configuration.id)
-            .where(Channel.name == "Q_w2R", Section.section_id == "S05",
-                   Configuration.name == "variant1")).first()
+        sig_id, blob, _prov = _variant1_signal(s, "S05", "Q_w2R")
         forged, sha = codec.encode(codec.decode(blob) + 1.0)
         s.execute(update(Signal).where(Signal.id == sig_id).values(blob=forged, sha256=sha))
     judged = []
@@ -129,7 +122,7 @@ def test_single_validation_checks_seals_while_processing_and_caches_nothing(sqli
         cached_before = s.scalar(select(func.count()).select_from(ResultCache))
     assert cached_before == 24
     with sqlite_database.session(write=True) as s:
-        sig_id, blob, _prov = _variant1_s02_y_w1l(s)
+        sig_id, blob, _prov = _variant1_signal(s, "S02", "Y_w1L")
         forged, sha = codec.encode(codec.decode(blob) * 0.9)
         s.execute(update(Signal).where(Signal.id == sig_id).values(blob=forged, sha256=sha))
     with pytest.raises(integrity.IntegrityError,
@@ -157,7 +150,7 @@ def test_forged_seal_read_by_the_workers_is_refused(sqlite_database, tmp_path, h
     write_demo_campaign(tmp_path / "c", n_configs=2, fs=200.0)
     import_campaign(sqlite_database, tmp_path / "c")
     with sqlite_database.session(write=True) as s:
-        sig_id, blob, prov = _variant1_s02_y_w1l(s)
+        sig_id, blob, prov = _variant1_signal(s, "S02", "Y_w1L")
         forged, sha = codec.encode(codec.decode(blob) * 2.0)
         s.execute(update(Signal).where(Signal.id == sig_id).values(
             blob=forged, sha256=sha, provenance={**prov, "seal": "v2:" + "0" * 64}))
@@ -178,9 +171,9 @@ def test_forged_seal_read_by_the_workers_is_refused(sqlite_database, tmp_path, h
             repo.require_evidence_many(s, "demo", names, blobs=False)
 
 
-def _variant1_s02_y_w1l(session):
-    """(id, blob, provenance) of the stored signal Y_w1L of section S02, configuration
-    variant1 of the demo campaign: the signal the forgery tests alter."""
+def _variant1_signal(session, section: str, channel: str):
+    """(id, blob, provenance) of a stored signal of configuration variant1 of the demo
+    campaign: the signal a forgery test alters."""
     from sqlalchemy import select
 
     from railval.db.models import Channel, Configuration, Recording, Section, Signal
@@ -191,5 +184,5 @@ def _variant1_s02_y_w1l(session):
         .join(Section, Recording.section_id == Section.id)
         .join(Channel, Signal.channel_id == Channel.id)
         .join(Configuration, Recording.configuration_id == Configuration.id)
-        .where(Channel.name == "Y_w1L", Section.section_id == "S02",
+        .where(Channel.name == channel, Section.section_id == section,
                Configuration.name == "variant1")).first()
