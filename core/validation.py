@@ -320,7 +320,8 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
              simulated_values: Mapping[str, Mapping[tuple[str, str], float]],
              sections: Sequence[SectionInfo] | Mapping[str, SectionInfo],
              vehicle, *, n_boot: int = 1000, seed: int = 0, ci_level: float = 0.95,
-             top: int = 5, warnings: Sequence[str] = ()) -> ValidationResult:
+             top: int = 5, warnings: Sequence[str] = (), memo: dict | None = None
+             ) -> ValidationResult:
     """Validate one configuration from in-memory values (Polach & Böttcher 2014 §5).
 
     Three steps: gather the pairs of every quantity (:func:`_gather_pairs`, as arrays),
@@ -349,6 +350,10 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
         Pairs listed per quantity in the drill-down (largest |D_v| / std limit first).
     warnings : sequence of str
         Processing warnings carried into the result.
+    memo : dict, optional
+        Kept by the caller across the validations of several configurations against the
+        same measured values (unchanged meanwhile): the measured side's columns are built
+        once and reused (:func:`railval.core.pairing.gather_pairs`; the same numbers).
 
     Returns
     -------
@@ -367,7 +372,7 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     veh = Vehicle.from_any(vehicle)
     secs = dict(sections) if isinstance(sections, Mapping) else {s.id: s for s in sections}
     common = sorted(set(measured_values) & set(simulated_values))
-    pairs = gather_pairs(measured_values, simulated_values, secs, common)
+    pairs = gather_pairs(measured_values, simulated_values, secs, common, memo)
     results: dict[str, QuantityResult] = {}
     parts = [pairs.of(qi) for qi in range(len(QUANTITY_IDS))]
     ds = [difference(p.s, p.m) for p in parts]
@@ -388,7 +393,7 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     if bool(common) and all(hasattr(measured_values[sid], "value_under")
                             and hasattr(simulated_values[sid], "value_under") for sid in common):
         validated_under = _verdicts_under_readings(results, pairs, measured_values,
-                                                   simulated_values, cov.ok)
+                                                   simulated_values, cov.ok, memo)
     supp = _supplementary(measured_values, simulated_values, common, zone_of)
     return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level,
                             functools.partial(_pairs_frame, pairs, results), list(warnings),
@@ -478,11 +483,11 @@ def _limits(q, vehicle: Vehicle) -> tuple[float, float]:
 
 
 def _verdicts_under_readings(results: dict[str, QuantityResult], pairs: Pairs,
-                             measured_values, simulated_values, coverage_ok: bool
-                             ) -> dict[str, bool]:
+                             measured_values, simulated_values, coverage_ok: bool,
+                             memo: dict | None = None) -> dict[str, bool]:
     """Fill every quantity's ``alternatives`` and return reading id → validated under that
     reading (a quantity whose reading is undefined keeps its chosen pass/fail)."""
-    m_under = values_under(pairs, measured_values, 2)
+    m_under = values_under(pairs, measured_values, 2, memo)
     s_under = values_under(pairs, simulated_values, 3)
     for qi, (qid, res) in enumerate(results.items()):
         res.alternatives = _alternatives(qid, res, pairs.of(qi), m_under, s_under)
