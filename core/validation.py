@@ -143,7 +143,7 @@ def difference(simulated, measured) -> np.ndarray:
 
 
 def _none_if_nan(x):
-    return None if x is None or not np.isfinite(x) else float(x)
+    return None if x is None or not math.isfinite(x) else float(x)
 
 
 def judge(n: int, mean: float, std: float, mean_limit: float, std_limit: float) -> bool:
@@ -163,7 +163,7 @@ def judge(n: int, mean: float, std: float, mean_limit: float, std_limit: float) 
     -------
     bool
     """
-    return bool(n >= 2 and np.isfinite(std) and abs(mean) <= mean_limit and std <= std_limit)
+    return bool(n >= 2 and math.isfinite(std) and abs(mean) <= mean_limit and std <= std_limit)
 
 
 @dataclass
@@ -489,8 +489,11 @@ def _verdicts_under_readings(results: dict[str, QuantityResult], pairs: Pairs,
     reading (a quantity whose reading is undefined keeps its chosen pass/fail)."""
     m_under = values_under(pairs, measured_values, 2, memo)
     s_under = values_under(pairs, simulated_values, 3)
+    rids = list(m_under)  # every reading's column stacked once, the quantities' rows taken
+    stacked = (np.stack([m_under[r] for r in rids]), np.stack([s_under[r] for r in rids]),
+               {r: k for k, r in enumerate(rids)}) if rids else None
     for qi, (qid, res) in enumerate(results.items()):
-        res.alternatives = _alternatives(qid, res, pairs.of(qi), m_under, s_under)
+        res.alternatives = _alternatives(qid, res, pairs.of(qi), m_under, s_under, stacked)
     validated_under: dict[str, bool] = {}
     for reading in READINGS:
         if reading == CHOSEN:
@@ -523,8 +526,8 @@ def _reading_text(reading, sliding_mean: bool) -> tuple[dict, list, str, str]:
 
 
 def _alternatives(qid: str, res: QuantityResult, pairs: QuantityPairs,
-                  m_under: Mapping[str, np.ndarray], s_under: Mapping[str, np.ndarray]
-                  ) -> list[dict]:
+                  m_under: Mapping[str, np.ndarray], s_under: Mapping[str, np.ndarray],
+                  stacked: tuple | None = None) -> list[dict]:
     """Mean, std and pass/fail of one quantity under each reading that can change it, over
     the pairs of the chosen reading. ``pass`` is None where the reading is undefined for
     some pair (NaN value, e.g. a sample window without samples). Every reading is a row of
@@ -533,8 +536,12 @@ def _alternatives(qid: str, res: QuantityResult, pairs: QuantityPairs,
     readings = alternatives_for(QUANTITIES[qid])
     if not readings:
         return []
-    m = np.stack([m_under[r.id] for r in readings])[:, pairs.index]
-    s = np.stack([s_under[r.id] for r in readings])[:, pairs.index]
+    if stacked is None:
+        m = np.stack([m_under[r.id] for r in readings])[:, pairs.index]
+        s = np.stack([s_under[r.id] for r in readings])[:, pairs.index]
+    else:  # ``m_under``/``s_under`` stacked by the caller (rows: reading id → row)
+        at = np.ix_([stacked[2][r.id] for r in readings], pairs.index)
+        m, s = stacked[0][at], stacked[1][at]
     changed = ((m != pairs.m) | (s != pairs.s)).sum(axis=1).tolist()
     d = difference(s, m)
     n = d.shape[1]
