@@ -99,8 +99,9 @@ def gather_pairs(measured_values, simulated_values, secs: Mapping[str, SectionIn
             if memo is not None:
                 memo[("gather", sid)] = side
         _mv, keys, m, m_ok, cols = side
-        s_raw = [sv.get(k) for k in keys]
-        s = np.fromiter((nan if v is None else float(v) for v in s_raw), dtype=np.float64,
+        s_raw = list(map(sv.get, keys))
+        s = np.fromiter(s_raw if None not in s_raw else  # a missing key: NaN
+                        (nan if v is None else v for v in s_raw), dtype=np.float64,
                         count=len(keys))
         ok = m_ok & np.isfinite(s)
         if cols is not None and ok.all():  # every key a pair: the kept columns

@@ -495,13 +495,19 @@ def _verdicts_under_readings(results: dict[str, QuantityResult], pairs: Pairs,
     for qi, (qid, res) in enumerate(results.items()):
         res.alternatives = _alternatives(qid, res, pairs.of(qi), m_under, s_under, stacked)
     validated_under: dict[str, bool] = {}
+    by_reading = []  # per quantity: its pass/fail and reading id → its first alternative
+    for res in results.values():
+        first: dict = {}
+        for a in res.alternatives:
+            first.setdefault(a["reading"]["id"], a)
+        by_reading.append((res.passed, first))
     for reading in READINGS:
         if reading == CHOSEN:
             continue
         ok = []
-        for res in results.values():
-            alt = next((a for a in res.alternatives if a["reading"]["id"] == reading.id), None)
-            ok.append(res.passed if alt is None or alt["pass"] is None else alt["pass"])
+        for passed, first in by_reading:
+            alt = first.get(reading.id)
+            ok.append(passed if alt is None or alt["pass"] is None else alt["pass"])
         validated_under[reading.id] = bool(coverage_ok and all(ok))
     return validated_under
 
