@@ -32,5 +32,8 @@ def test_rows_equal_numpy(n):
         got, want = resample_mean_std(d, idx), _numpy_rows(d, idx)
         assert np.array_equal(_bits(got[0]), _bits(want[0]))
         assert np.array_equal(_bits(got[1]), _bits(want[1]))
+        narrow = resample_mean_std(d, idx.astype(np.uint16))  # the kept indices' form
+        assert np.array_equal(_bits(narrow[0]), _bits(got[0]))
+        assert np.array_equal(_bits(narrow[1]), _bits(got[1]))
         assert np.array_equal(_bits(got[0]), _bits(d[idx].mean(axis=1)))
         assert np.array_equal(_bits(got[1]), _bits(d[idx].std(axis=1, ddof=1)))
