@@ -373,17 +373,7 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     secs = dict(sections) if isinstance(sections, Mapping) else {s.id: s for s in sections}
     common = sorted(set(measured_values) & set(simulated_values))
     pairs = gather_pairs(measured_values, simulated_values, secs, common, memo)
-    results: dict[str, QuantityResult] = {}
-    parts = [pairs.of(qi) for qi in range(len(QUANTITY_IDS))]
-    ds = [difference(p.s, p.m) for p in parts]
-    with stage("bootstrap"):  # every quantity's intervals from one percentile call
-        cis = bootstrap_cis([_resampled_rows(d, n_boot=n_boot, seed_key=(seed, qi))
-                             for qi, d in enumerate(ds)],
-                            [_limits(QUANTITIES[q], veh) for q in QUANTITY_IDS], ci_level)
-    for qi, qid in enumerate(QUANTITY_IDS):
-        results[qid] = quantity_result(qid, parts[qi], veh, n_boot=n_boot,
-                                       seed_key=(seed, qi), ci_level=ci_level, top=top,
-                                       _d=ds[qi], _cis=cis[qi])
+    results = _quantity_results(pairs, veh, n_boot, seed, ci_level, top)
     zone_of = {sid: int(info.zone) for sid, info in secs.items()}
     cov = coverage({q: set(pairs.of(qi).section) for qi, q in enumerate(QUANTITY_IDS)},
                    {q: set(pairs.of(qi).position) for qi, q in enumerate(QUANTITY_IDS)},
@@ -398,6 +388,22 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level,
                             functools.partial(_pairs_frame, pairs, results), list(warnings),
                             supplementary=supp, validated_under=validated_under)
+
+
+def _quantity_results(pairs: Pairs, veh: Vehicle, n_boot: int, seed: int, ci_level: float,
+                      top: int) -> dict[str, QuantityResult]:
+    """:func:`quantity_result` of every quantity (bootstrap seeded by (seed, quantity
+    index)), the intervals of all quantities from one percentile call
+    (:func:`railval.core.bootstrap.bootstrap_cis`)."""
+    parts = [pairs.of(qi) for qi in range(len(QUANTITY_IDS))]
+    ds = [difference(p.s, p.m) for p in parts]
+    with stage("bootstrap"):
+        cis = bootstrap_cis([_resampled_rows(d, n_boot=n_boot, seed_key=(seed, qi))
+                             for qi, d in enumerate(ds)],
+                            [_limits(QUANTITIES[q], veh) for q in QUANTITY_IDS], ci_level)
+    return {qid: quantity_result(qid, parts[qi], veh, n_boot=n_boot, seed_key=(seed, qi),
+                                 ci_level=ci_level, top=top, _d=ds[qi], _cis=cis[qi])
+            for qi, qid in enumerate(QUANTITY_IDS)}
 
 
 def _pairs_frame(pairs: Pairs, results: Mapping[str, QuantityResult]):
