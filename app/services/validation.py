@@ -614,7 +614,7 @@ class _Collector:
                 self.n_boot, self.seed,
                 {"campaign": plan.name, "configuration": cname, "filter_order": self.order,
                  "sections_measured": stats[None], "sections_simulated": stats[cname],
-                 **plan.provenance[cname]}, self.memo)
+                 **plan.provenance[cname]}, memo=self.memo)
 
 
 def validate_configurations(database, campaign_name: str, configs: Sequence[str] | None = None,
