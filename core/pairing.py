@@ -77,9 +77,13 @@ _QINDEX = {q: i for i, q in enumerate(QUANTITY_IDS)}
 
 
 def gather_pairs(measured_values, simulated_values, secs: Mapping[str, SectionInfo],
-                 common: Sequence[str]) -> Pairs:
+                 common: Sequence[str], memo: dict | None = None) -> Pairs:
     """Every pair ``(section, zone, position, M, S)`` where both sides hold a finite value
-    (sections in ``common`` order, keys in the measurement's order), as columns."""
+    (sections in ``common`` order, keys in the measurement's order), as columns.
+    ``memo``: a dict kept by the caller across calls with the same measured values (one
+    run's configurations; they must not change meanwhile): each measured section's keys,
+    M column and the columns of its keys are kept there, per section object, and reused
+    when every key makes a pair (the same lists and float64s as built here)."""
     section, zone, position, qindex, ms, ss, by_section = [], [], [], [], [], [], []
     nan = float("nan")
     for sid in common:
@@ -87,33 +91,72 @@ def gather_pairs(measured_values, simulated_values, secs: Mapping[str, SectionIn
             raise InvalidParameter(f"section {sid!r} has values but no SectionInfo")
         z = int(secs[sid].zone)
         mv, sv = measured_values[sid], simulated_values[sid]
-        keys = list(mv)
-        m = np.fromiter((float(mv[k]) for k in keys), dtype=np.float64, count=len(keys))
-        s_raw = [sv.get(k) for k in keys]
-        s = np.fromiter((nan if v is None else float(v) for v in s_raw), dtype=np.float64,
+        side = memo.get(("gather", sid)) if memo is not None else None
+        if side is None or side[0] is not mv:
+            keys = list(mv)
+            m = np.fromiter((float(mv[k]) for k in keys), dtype=np.float64, count=len(keys))
+            side = (mv, keys, m, np.isfinite(m), None)
+            if memo is not None:
+                memo[("gather", sid)] = side
+        _mv, keys, m, m_ok, cols = side
+        s_raw = list(map(sv.get, keys))
+        s = np.fromiter(s_raw if None not in s_raw else  # a missing key: NaN
+                        (nan if v is None else v for v in s_raw), dtype=np.float64,
                         count=len(keys))
-        keep = np.flatnonzero(np.isfinite(m) & np.isfinite(s)).tolist()
+        ok = m_ok & np.isfinite(s)
+        if cols is not None and ok.all():  # every key a pair: the kept columns
+            kept, pos, qi, m_kept = cols
+            ms.append(m)
+            ss.append(s)
+            section += [sid] * len(kept)
+            zone += [z] * len(kept)
+            position += pos
+            qindex += qi
+            by_section.append((sid, kept, m_kept, s_raw))
+            continue
+        keep = np.flatnonzero(ok).tolist()
         kept = [keys[i] for i in keep]
         for qid, _pos in kept:
             if qid not in _QINDEX:
                 raise InvalidParameter(f"unknown quantity {qid!r} in section {sid}")
+        pos = [k[1] for k in kept]
+        qi = [_QINDEX[k[0]] for k in kept]
+        m_kept = [mv[k] for k in kept]
         section += [sid] * len(kept)
         zone += [z] * len(kept)
-        position += [k[1] for k in kept]
-        qindex += [_QINDEX[k[0]] for k in kept]
+        position += pos
+        qindex += qi
         ms.append(m[keep])
         ss.append(s[keep])
-        by_section.append((sid, kept, [mv[k] for k in kept], [s_raw[i] for i in keep]))
+        by_section.append((sid, kept, m_kept, [s_raw[i] for i in keep]))
+        if memo is not None and len(keep) == len(keys):  # reused while every key pairs
+            memo[("gather", sid)] = (mv, keys, m, m_ok, (kept, pos, qi, m_kept))
     cat = (lambda xs: np.concatenate(xs) if xs else np.empty(0))
     return Pairs(section, zone, position, np.array(qindex, dtype=np.intp), cat(ms), cat(ss),
                   by_section)
 
-def values_under(pairs: Pairs, values, column: int) -> dict[str, np.ndarray]:
+def values_under(pairs: Pairs, values, column: int, memo: dict | None = None
+                 ) -> dict[str, np.ndarray]:
     """Reading id → every pair's value of one side under that reading (gathering order;
     ``SectionValues.value_under``: the chosen value where the reading does not change it).
     ``column``: 2 for the measured, 3 for the simulated side of ``pairs.by_section``.
     A :class:`SectionValues` stores only the values a reading changes, so each reading's
-    column is the chosen column with those values written over it (the same float64s)."""
+    column is the chosen column with those values written over it (the same float64s).
+    ``memo`` (see :func:`gather_pairs`): the columns are kept there and returned again
+    (read-only) while the sections, their value objects and their pairs' keys are the
+    same — the measured side of every configuration of a run."""
+    if memo is not None:
+        got = memo.get(("under", column))
+        if got is not None and len(got[0]) == len(pairs.by_section) and all(
+                sid == row[0] and obj is values[row[0]] and kept == row[1]
+                for (sid, obj, kept), row in zip(got[0], pairs.by_section)):
+            return got[1]
+        out = values_under(pairs, values, column)
+        for col in out.values():
+            col.setflags(write=False)
+        memo[("under", column)] = ([(row[0], values[row[0]], row[1])
+                                    for row in pairs.by_section], out)
+        return out
     base = np.array([v for row in pairs.by_section for v in row[column]], dtype=np.float64)
     plain, offsets, at = [], [], 0
     for row in pairs.by_section:

@@ -52,6 +52,7 @@ import math
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -234,25 +235,33 @@ def _band_powers(f: np.ndarray, density: np.ndarray) -> list[tuple[str, np.ndarr
     return out
 
 
+_UNSET = object()
+
+
 def _pairs(measured: Mapping[str, Mapping[tuple[str, str], float]],
            simulated: Mapping[str, Mapping[tuple[str, str], float]],
            zones: Mapping[str, int] | None = None) -> list[dict]:
     recs = []
+    nan = float("nan")
     for sid in sorted(set(measured) & set(simulated)):
         mv, sv = measured[sid], simulated[sid]
+        zone: Any = _UNSET
         for key, m in mv.items():
             s = sv.get(key)
-            if s is None or not (np.isfinite(m) and np.isfinite(s)):
+            if s is None:
+                continue
+            m, s = float(m), float(s)  # finite as numpy.isfinite says of the values
+            if not (math.isfinite(m) and math.isfinite(s)):
                 continue
             qid, pos = key
             if qid not in SUPPLEMENTARY:
                 raise InvalidParameter(f"unknown supplementary quantity {qid!r} in section {sid}")
-            m, s = float(m), float(s)
             d = s if m == 0.0 else (s - m) * math.copysign(1.0, m)
-            recs.append({"quantity": qid, "section": sid, "position": pos,
-                         "zone": None if zones is None else int(zones[sid]),
+            if zone is _UNSET:  # looked up at the section's first pair, as before
+                zone = None if zones is None else int(zones[sid])
+            recs.append({"quantity": qid, "section": sid, "position": pos, "zone": zone,
                          "M": m, "S": s, "D": d,
-                         "log2_ratio": (math.log2(s / m) if m > 0 and s > 0 else float("nan"))})
+                         "log2_ratio": (math.log2(s / m) if m > 0 and s > 0 else nan)})
     return recs
 
 

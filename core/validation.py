@@ -46,6 +46,13 @@ from typing import Any
 
 import numpy as np
 
+from railval.core.bootstrap import (  # noqa: F401 - the bootstrap, re-exported for callers
+    _CACHED_DRAW,
+    _resample_indices,
+    _resampled_rows,
+    bootstrap_cis,
+    bootstrap_norm_ci,
+)
 from railval.core.coverage import (  # noqa: F401 - the coverage rules, re-exported for callers
     MIN_POSITIONS,
     MIN_SECTIONS,
@@ -136,7 +143,7 @@ def difference(simulated, measured) -> np.ndarray:
 
 
 def _none_if_nan(x):
-    return None if x is None or not np.isfinite(x) else float(x)
+    return None if x is None or not math.isfinite(x) else float(x)
 
 
 def judge(n: int, mean: float, std: float, mean_limit: float, std_limit: float) -> bool:
@@ -156,7 +163,7 @@ def judge(n: int, mean: float, std: float, mean_limit: float, std_limit: float) 
     -------
     bool
     """
-    return bool(n >= 2 and np.isfinite(std) and abs(mean) <= mean_limit and std <= std_limit)
+    return bool(n >= 2 and math.isfinite(std) and abs(mean) <= mean_limit and std <= std_limit)
 
 
 @dataclass
@@ -309,101 +316,12 @@ class ValidationResult:
         return pd.DataFrame(rows).set_index("quantity")
 
 
-#: resampled values per block of rows in :func:`bootstrap_norm_ci` (256 kB of float64)
-_BOOT_BLOCK = 1 << 15
-#: most resample indices kept per (seed, quantity, n, n_boot) by :func:`_resample_indices`
-_CACHED_DRAW = 1 << 18
-
-
-@functools.lru_cache(maxsize=64)
-def _resample_indices(seed_key: tuple, n: int, n_boot: int) -> np.ndarray:
-    """The resample indices of :func:`bootstrap_norm_ci` for ``seed_key`` in one draw
-    (read-only; every configuration of a run with as many pairs reuses them)."""
-    idx = np.random.default_rng(list(seed_key)).integers(0, n, size=(n_boot, n))
-    idx.setflags(write=False)
-    return idx
-
-
-def _mean_std_rows(sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``sample.mean(axis=1)``, ``sample.std(axis=1, ddof=STD_DDOF)`` of a 2-d float64 array
-    with one row sum instead of two: numpy's ``mean``/``_var`` steps (row sum / n; deviations
-    squared, summed, / (n − ddof), square root), so the same float64s."""
-    n = sample.shape[1]
-    means = np.add.reduce(sample, axis=1) / n
-    x = sample - means[:, None]
-    var = np.add.reduce(np.multiply(x, x, out=x), axis=1) / max(n - STD_DDOF, 0)
-    return means, np.sqrt(var, out=var)
-
-
-def bootstrap_norm_ci(d: np.ndarray, mean_limit: float, std_limit: float, *, n_boot: int,
-                      rng: np.random.Generator | None = None, ci_level: float = 0.95,
-                      chunk: int = 2_000_000, seed_key: tuple | None = None
-                      ) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Percentile bootstrap CIs of mean/mean_limit and std(ddof=1)/std_limit over pairs
-    (Efron & Tibshirani 1993, ch. 13: pairs resampled with replacement).
-
-    Parameters
-    ----------
-    d : numpy.ndarray
-        D_v of the pairs of one quantity.
-    mean_limit, std_limit : float
-        The limits the mean and std are divided by.
-    n_boot : int
-        Resamples (< 1, or fewer than 2 pairs: NaN intervals).
-    rng : numpy.random.Generator, optional
-        Source of the resampling.
-    ci_level : float
-        Confidence level of the intervals.
-    chunk : int
-        Most resampled values held at once (memory bound).
-    seed_key : tuple, optional
-        Instead of ``rng``: the seed of ``numpy.random.default_rng``; the indices of a
-        single draw (at most :data:`_CACHED_DRAW` values) are kept and reused — the same
-        numbers as ``rng=default_rng(list(seed_key))``.
-
-    Returns
-    -------
-    ((float, float), (float, float))
-        The intervals of mean/mean limit and of std/std limit.
-    """
-    n = d.size
-    if n < 2 or n_boot < 1:
-        nan = (float("nan"), float("nan"))
-        return nan, nan
-    means = np.empty(n_boot)
-    stds = np.empty(n_boot)
-    if seed_key is not None and n * n_boot <= min(chunk, _CACHED_DRAW):
-        # one draw of every resample: default_rng(seed_key).integers(0, n, (n_boot, n)),
-        # drawn once per (seed_key, n, n_boot) and reused (what the loop below draws),
-        # reduced in blocks of rows that stay in the L2 cache
-        idx = _resample_indices(tuple(seed_key), n, n_boot)
-        step = max(1, _BOOT_BLOCK // n)
-        for start in range(0, n_boot, step):
-            means[start:start + step], stds[start:start + step] = _mean_std_rows(
-                d[idx[start:start + step]])
-    else:
-        if rng is None:
-            rng = np.random.default_rng(list(seed_key))
-        means, stds = np.empty(n_boot), np.empty(n_boot)
-        rows = max(1, chunk // n)
-        for start in range(0, n_boot, rows):
-            stop = min(n_boot, start + rows)
-            sample = d[rng.integers(0, n, size=(stop - start, n))]
-            means[start:stop] = sample.mean(axis=1)
-            stds[start:stop] = sample.std(axis=1, ddof=STD_DDOF)
-    a = (1.0 - ci_level) / 2.0
-    qs = [100 * a, 100 * (1 - a)]
-    # both intervals in one call, row by row (the same partition and interpolation per row)
-    (m_lo, s_lo), (m_hi, s_hi) = np.percentile(np.stack([means / mean_limit,
-                                                         stds / std_limit]), qs, axis=1)
-    return (float(m_lo), float(m_hi)), (float(s_lo), float(s_hi))
-
-
 def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
              simulated_values: Mapping[str, Mapping[tuple[str, str], float]],
              sections: Sequence[SectionInfo] | Mapping[str, SectionInfo],
              vehicle, *, n_boot: int = 1000, seed: int = 0, ci_level: float = 0.95,
-             top: int = 5, warnings: Sequence[str] = ()) -> ValidationResult:
+             top: int = 5, warnings: Sequence[str] = (), memo: dict | None = None
+             ) -> ValidationResult:
     """Validate one configuration from in-memory values (Polach & Böttcher 2014 §5).
 
     Three steps: gather the pairs of every quantity (:func:`_gather_pairs`, as arrays),
@@ -432,6 +350,10 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
         Pairs listed per quantity in the drill-down (largest |D_v| / std limit first).
     warnings : sequence of str
         Processing warnings carried into the result.
+    memo : dict, optional
+        Kept by the caller across the validations of several configurations against the
+        same measured values (unchanged meanwhile): the measured side's columns are built
+        once and reused (:func:`railval.core.pairing.gather_pairs`; the same numbers).
 
     Returns
     -------
@@ -450,11 +372,8 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     veh = Vehicle.from_any(vehicle)
     secs = dict(sections) if isinstance(sections, Mapping) else {s.id: s for s in sections}
     common = sorted(set(measured_values) & set(simulated_values))
-    pairs = gather_pairs(measured_values, simulated_values, secs, common)
-    results: dict[str, QuantityResult] = {}
-    for qi, qid in enumerate(QUANTITY_IDS):
-        results[qid] = quantity_result(qid, pairs.of(qi), veh, n_boot=n_boot,
-                                       seed_key=(seed, qi), ci_level=ci_level, top=top)
+    pairs = gather_pairs(measured_values, simulated_values, secs, common, memo)
+    results = _quantity_results(pairs, veh, n_boot, seed, ci_level, top)
     zone_of = {sid: int(info.zone) for sid, info in secs.items()}
     cov = coverage({q: set(pairs.of(qi).section) for qi, q in enumerate(QUANTITY_IDS)},
                    {q: set(pairs.of(qi).position) for qi, q in enumerate(QUANTITY_IDS)},
@@ -464,11 +383,27 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     if bool(common) and all(hasattr(measured_values[sid], "value_under")
                             and hasattr(simulated_values[sid], "value_under") for sid in common):
         validated_under = _verdicts_under_readings(results, pairs, measured_values,
-                                                   simulated_values, cov.ok)
+                                                   simulated_values, cov.ok, memo)
     supp = _supplementary(measured_values, simulated_values, common, zone_of)
     return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level,
                             functools.partial(_pairs_frame, pairs, results), list(warnings),
                             supplementary=supp, validated_under=validated_under)
+
+
+def _quantity_results(pairs: Pairs, veh: Vehicle, n_boot: int, seed: int, ci_level: float,
+                      top: int) -> dict[str, QuantityResult]:
+    """:func:`quantity_result` of every quantity (bootstrap seeded by (seed, quantity
+    index)), the intervals of all quantities from one percentile call
+    (:func:`railval.core.bootstrap.bootstrap_cis`)."""
+    parts = [pairs.of(qi) for qi in range(len(QUANTITY_IDS))]
+    ds = [difference(p.s, p.m) for p in parts]
+    with stage("bootstrap"):
+        cis = bootstrap_cis([_resampled_rows(d, n_boot=n_boot, seed_key=(seed, qi))
+                             for qi, d in enumerate(ds)],
+                            [_limits(QUANTITIES[q], veh) for q in QUANTITY_IDS], ci_level)
+    return {qid: quantity_result(qid, parts[qi], veh, n_boot=n_boot, seed_key=(seed, qi),
+                                 ci_level=ci_level, top=top, _d=ds[qi], _cis=cis[qi])
+            for qi, qid in enumerate(QUANTITY_IDS)}
 
 
 def _pairs_frame(pairs: Pairs, results: Mapping[str, QuantityResult]):
@@ -497,7 +432,8 @@ def _frame_columns(qid: str, p: QuantityPairs, std_limit: float) -> dict[str, An
 
 def quantity_result(qid: str, pairs: QuantityPairs, vehicle: Vehicle, *, n_boot: int,
                     rng: np.random.Generator | None = None, ci_level: float = 0.95,
-                    top: int = 5, seed_key: tuple | None = None) -> QuantityResult:
+                    top: int = 5, seed_key: tuple | None = None, _d=None,
+                    _cis=None) -> QuantityResult:
     """D_v statistics of one quantity over its pairs (Polach & Böttcher 2014 §5, eq. 4).
 
     Parameters
@@ -512,6 +448,9 @@ def quantity_result(qid: str, pairs: QuantityPairs, vehicle: Vehicle, *, n_boot:
         Bootstrap of the normalised values (:func:`bootstrap_norm_ci`).
     top : int
         Pairs listed in the drill-down.
+    _d, _cis
+        D_v of the pairs and the intervals, when the caller computed them
+        (:func:`validate`: the intervals of all quantities at once, :func:`bootstrap_cis`).
 
     Returns
     -------
@@ -519,16 +458,18 @@ def quantity_result(qid: str, pairs: QuantityPairs, vehicle: Vehicle, *, n_boot:
         The statistics; the per-pair columns are built by ``_Pairs.frame``.
     """
     q = QUANTITIES[qid]
-    mean_limit = q.mean_limit(vehicle.Q0_kN, vehicle.kind, vehicle.secondary_suspension)
-    std_limit = q.std_limit(vehicle.Q0_kN, vehicle.kind, vehicle.secondary_suspension)
+    mean_limit, std_limit = _limits(q, vehicle)
     m, s = pairs.m, pairs.s
-    d = difference(s, m)
+    d = difference(s, m) if _d is None else _d
     n = d.size
     mean = float(d.mean()) if n else float("nan")
     std = float(d.std(ddof=STD_DDOF)) if n >= 2 else float("nan")
-    with stage("bootstrap"):
-        mci, sci = bootstrap_norm_ci(d, mean_limit, std_limit, n_boot=n_boot, rng=rng,
-                                     ci_level=ci_level, seed_key=seed_key)
+    if _cis is not None:  # computed by the caller (validate: all quantities at once)
+        mci, sci = _cis
+    else:
+        with stage("bootstrap"):
+            mci, sci = bootstrap_norm_ci(d, mean_limit, std_limit, n_boot=n_boot, rng=rng,
+                                         ci_level=ci_level, seed_key=seed_key)
     d_norm = d / std_limit
     ss = float(np.sum(d * d))
     order = np.argsort(-np.abs(d_norm), kind="stable")[:top].tolist()
@@ -541,23 +482,38 @@ def quantity_result(qid: str, pairs: QuantityPairs, vehicle: Vehicle, *, n_boot:
                           mean, std, mean_limit, std_limit, mci, sci, drill)
 
 
+def _limits(q, vehicle: Vehicle) -> tuple[float, float]:
+    """(mean limit, std limit) of quantity ``q`` for ``vehicle`` (Table 2)."""
+    return (q.mean_limit(vehicle.Q0_kN, vehicle.kind, vehicle.secondary_suspension),
+            q.std_limit(vehicle.Q0_kN, vehicle.kind, vehicle.secondary_suspension))
+
+
 def _verdicts_under_readings(results: dict[str, QuantityResult], pairs: Pairs,
-                             measured_values, simulated_values, coverage_ok: bool
-                             ) -> dict[str, bool]:
+                             measured_values, simulated_values, coverage_ok: bool,
+                             memo: dict | None = None) -> dict[str, bool]:
     """Fill every quantity's ``alternatives`` and return reading id → validated under that
     reading (a quantity whose reading is undefined keeps its chosen pass/fail)."""
-    m_under = values_under(pairs, measured_values, 2)
+    m_under = values_under(pairs, measured_values, 2, memo)
     s_under = values_under(pairs, simulated_values, 3)
+    rids = list(m_under)  # every reading's column stacked once, the quantities' rows taken
+    stacked = (np.stack([m_under[r] for r in rids]), np.stack([s_under[r] for r in rids]),
+               {r: k for k, r in enumerate(rids)}) if rids else None
     for qi, (qid, res) in enumerate(results.items()):
-        res.alternatives = _alternatives(qid, res, pairs.of(qi), m_under, s_under)
+        res.alternatives = _alternatives(qid, res, pairs.of(qi), m_under, s_under, stacked)
     validated_under: dict[str, bool] = {}
+    by_reading = []  # per quantity: its pass/fail and reading id → its first alternative
+    for res in results.values():
+        first: dict = {}
+        for a in res.alternatives:
+            first.setdefault(a["reading"]["id"], a)
+        by_reading.append((res.passed, first))
     for reading in READINGS:
         if reading == CHOSEN:
             continue
         ok = []
-        for res in results.values():
-            alt = next((a for a in res.alternatives if a["reading"]["id"] == reading.id), None)
-            ok.append(res.passed if alt is None or alt["pass"] is None else alt["pass"])
+        for passed, first in by_reading:
+            alt = first.get(reading.id)
+            ok.append(passed if alt is None or alt["pass"] is None else alt["pass"])
         validated_under[reading.id] = bool(coverage_ok and all(ok))
     return validated_under
 
@@ -582,8 +538,8 @@ def _reading_text(reading, sliding_mean: bool) -> tuple[dict, list, str, str]:
 
 
 def _alternatives(qid: str, res: QuantityResult, pairs: QuantityPairs,
-                  m_under: Mapping[str, np.ndarray], s_under: Mapping[str, np.ndarray]
-                  ) -> list[dict]:
+                  m_under: Mapping[str, np.ndarray], s_under: Mapping[str, np.ndarray],
+                  stacked: tuple | None = None) -> list[dict]:
     """Mean, std and pass/fail of one quantity under each reading that can change it, over
     the pairs of the chosen reading. ``pass`` is None where the reading is undefined for
     some pair (NaN value, e.g. a sample window without samples). Every reading is a row of
@@ -592,8 +548,12 @@ def _alternatives(qid: str, res: QuantityResult, pairs: QuantityPairs,
     readings = alternatives_for(QUANTITIES[qid])
     if not readings:
         return []
-    m = np.stack([m_under[r.id] for r in readings])[:, pairs.index]
-    s = np.stack([s_under[r.id] for r in readings])[:, pairs.index]
+    if stacked is None:
+        m = np.stack([m_under[r.id] for r in readings])[:, pairs.index]
+        s = np.stack([s_under[r.id] for r in readings])[:, pairs.index]
+    else:  # ``m_under``/``s_under`` stacked by the caller (rows: reading id → row)
+        at = np.ix_([stacked[2][r.id] for r in readings], pairs.index)
+        m, s = stacked[0][at], stacked[1][at]
     changed = ((m != pairs.m) | (s != pairs.s)).sum(axis=1).tolist()
     d = difference(s, m)
     n = d.shape[1]

@@ -161,26 +161,45 @@ def _name_bytes(x) -> bytes:
     return str(x).encode("utf-8").replace(b"\\", b"\\\\").replace(b"\0", b"\\0")
 
 
+#: channel name → :func:`_name_bytes` (the few channel names of a database, encoded once)
+_CHANNEL_BYTES: dict = {}
+
+try:  # OpenSSL's keyed HMAC object (the C object ``hmac.new`` wraps): copy, update, hexdigest
+    from _hashlib import hmac_new as _hmac_new
+except ImportError:  # pragma: no cover - Python without OpenSSL's HMAC
+    def _hmac_new(key: bytes, msg: bytes, digestmod: str):
+        return hmac.new(key, msg, digestmod)
+
+
 def check_signal_seals(secret: bytes, recording: tuple, names: tuple[str, str, str],
                        rows) -> list[bool]:
     """:func:`check_signal_seal` of every signal row of one recording: ``recording`` =
     (recording id, distance hash, fs, t0, n), ``names`` = (campaign, section id,
     configuration name or ""), ``rows`` = (channel, channel id, content hash, seal) with a
     seal (not ``None``). The same message and HMAC per row as :func:`seal_signal` (the
-    recording's parts encoded once, not once per signal); seals of version 1 go through
-    :func:`check_signal_seal`."""
+    recording's parts encoded once, not once per signal); the secret is keyed into the
+    HMAC once per recording and copied for each row (RFC 2104: the keyed inner and outer
+    states do not depend on the message — the same digest as ``hmac.digest``, without the
+    key set-up per row). Seals of version 1 go through :func:`check_signal_seal`."""
     rid, dsha, fs, t0, n = recording
     head = b"signal2\0" + str(int(rid)).encode() + b"\0"
     tail = b"\0".join([dsha.encode(), repr(float(fs)).encode(), repr(float(t0)).encode(),
                        str(int(n)).encode(), *map(_name_bytes, names), b""])
     out = []
+    keyed = None
     for chan, cid, sha, seal in rows:
         seal = str(seal)
         if seal.startswith(SEAL_V2):
-            msg = head + str(int(cid)).encode() + b"\0" + sha.encode() + b"\0" + tail \
-                + _name_bytes(chan)
-            out.append(hmac.compare_digest(seal, SEAL_V2 + hmac.digest(secret, msg,
-                                                                       "sha256").hex()))
+            chan_bytes = _CHANNEL_BYTES.get(chan)
+            if chan_bytes is None:
+                if len(_CHANNEL_BYTES) > 4096:
+                    _CHANNEL_BYTES.clear()
+                chan_bytes = _CHANNEL_BYTES[chan] = _name_bytes(chan)
+            if keyed is None:
+                keyed = _hmac_new(secret, b"", "sha256")
+            mac = keyed.copy()
+            mac.update(b"%b%d\0%b\0%b%b" % (head, int(cid), sha.encode(), tail, chan_bytes))
+            out.append(hmac.compare_digest(seal, SEAL_V2 + mac.hexdigest()))
         else:
             out.append(check_signal_seal(secret, seal, rid, cid, sha, dsha, fs, t0, n,
                                          (*names, chan)))

@@ -11,7 +11,7 @@ import struct
 import numpy as np
 import pytest
 
-from railval.core import en14363, validation
+from railval.core import bootstrap, en14363, validation
 from railval.core.definitions import CHOSEN, READINGS
 from railval.core.en14363 import SectionValues, pack_values, unpack_values
 from railval.core.quantities import QUANTITY_IDS
@@ -145,7 +145,7 @@ def test_many_configurations_equal_the_fresh_generator_path(monkeypatch):
     veh = {"kind": "passenger", "secondary_suspension": True, "Q0_kN": 80.0}
     kept = [validation.validate(measured, c, sections, veh, n_boot=300, seed=4).to_dict()
             for c in configs]
-    monkeypatch.setattr(validation, "_CACHED_DRAW", 0)  # every resample from a fresh generator
+    monkeypatch.setattr(bootstrap, "_CACHED_DRAW", 0)  # every resample from a fresh generator
     fresh = [validation.validate(measured, c, sections, veh, n_boot=300, seed=4).to_dict()
              for c in configs]
     assert kept == fresh

@@ -596,6 +596,9 @@ class _Collector:
         #: chunks (:class:`_SealCheck`), only the others are read from the database; the
         #: verdicts waiting meanwhile are given while the last chunks are processed
         self.collected, self.hold = 0, int(-(-chunks * hold_fraction // 1))
+        #: the measured side's columns, built at the first verdict and reused by the others
+        #: (``memo`` of :func:`railval.core.validation.validate`)
+        self.memo: dict = {}
 
     def __call__(self, chunk, done) -> None:
         packed, seconds, *seals = done
@@ -635,7 +638,7 @@ class _Collector:
                 self.n_boot, self.seed,
                 {"campaign": plan.name, "configuration": cname, "filter_order": self.order,
                  "sections_measured": stats[None], "sections_simulated": stats[cname],
-                 **plan.provenance[cname]})
+                 **plan.provenance[cname]}, memo=self.memo)
 
 
 def validate_configurations(database, campaign_name: str, configs: Sequence[str] | None = None,
@@ -693,14 +696,15 @@ def _validate_configurations(database, campaign_name, configs, order, n_boot, se
 
 
 def _verdict(measured, simulated, sections, vehicle, n_boot: int, seed: int,
-             info: dict) -> ValidationResult:
+             info: dict, memo: dict | None = None) -> ValidationResult:
     """The DynoTRAIN verdict on the processed values of both sides
-    (:func:`railval.core.validation.validate`), with the sources' warnings and ``info``."""
+    (:func:`railval.core.validation.validate`), with the sources' warnings and ``info``;
+    ``memo``: kept across the verdicts on one measurement (``validate``'s)."""
     warnings = (source_warnings("measurement", measured)
                 + source_warnings(f"configuration {info['configuration']}", simulated))
     with stage("aggregation"):
         result = validate(measured, simulated, sections, vehicle, n_boot=n_boot, seed=seed,
-                          warnings=warnings)
+                          warnings=warnings, memo=memo)
     result.info.update(info)
     return result
 
