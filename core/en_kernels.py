@@ -436,15 +436,13 @@ def _sliding_means(at, n_cs, sampled, window_m, win_hi, means, bad, slot
     ``(at[:, end] − at[:, start]) / window_m``
     (:func:`railval.core.en_statistics._means_from_integrals`) or the sample-window means
     (the columns of ``sampled``), row r of variant v into row ``slot[v]·rows + r`` of
-    ``means``; a row's columns past its grid's number of windows are +inf (they sort after
-    every finite mean). Where no sample lies on the upper end of a window of a grid
+    ``means`` (its first ``n_cs[grid]`` columns). Where no sample lies on the upper end of a window of a grid
     (``win_hi`` of its closed and half-open windows equal; the lower ends are equal by
     construction, :func:`_window_bounds`) the half-open means are the closed ones: that
     variant gets the closed variant's slot and no rows of its own. ``bad[v, r]``: the row
     holds a non-finite mean. Returns the number of slots used."""
     rows = at.shape[0]
     n_win = 3 if sampled.shape[1] else 1
-    width = means.shape[1]
     a_pos = 0
     s_pos = 0
     used = 0
@@ -478,8 +476,6 @@ def _sliding_means(at, n_cs, sampled, window_m, win_hi, means, bad, slot
                         x = sampled[r, s_pos + i]
                         out[i] = x
                         finite &= np.isfinite(x)
-                for i in range(k, width):
-                    out[i] = np.inf
                 bad[v, r] = not finite
             used += 1
             if w > 0:
@@ -489,28 +485,87 @@ def _sliding_means(at, n_cs, sampled, window_m, win_hi, means, bad, slot
 
 
 @numba.njit(cache=True, nogil=True)
-def _sliding_percentiles(srt, n_cs, n_win, slot, ranks, n_ranks, cols, mode, g, omg, bad,
+def _row_extremes(x, n_lo, n_hi, lo, hi):  # pragma: no cover - compiled
+    """The ``n_lo`` smallest samples of the row ``x`` (finite; ``n_lo``, ``n_hi`` ≤ len(x))
+    into ``lo[:n_lo]`` and its ``n_hi`` largest into ``hi[:n_hi]``, each ascending: one pass, a sample entering a
+    buffer only when it is below its largest (above its smallest) kept sample, by insertion
+    (Knuth 1998 §5.3.3, selection of the extremes). ``lo[i]`` is then the sample of 0-based
+    rank i of the sorted row and ``hi[i]`` that of rank ``len(x) − n_hi + i``: the same
+    numbers a full sort puts there (order statistics do not depend on the algorithm; only
+    the sign of a zero may differ where −0.0 and 0.0 tie)."""
+    for i in range(n_lo):
+        lo[i] = np.inf
+    for i in range(n_hi):
+        hi[i] = -np.inf
+    t_lo = np.inf if n_lo else -np.inf
+    t_hi = -np.inf if n_hi else np.inf
+    last = n_lo - 1
+    for i in range(x.shape[0]):
+        v = x[i]
+        if v < t_lo:
+            j = last
+            while j > 0 and lo[j - 1] > v:
+                lo[j] = lo[j - 1]
+                j -= 1
+            lo[j] = v
+            t_lo = lo[last]
+        if v > t_hi:
+            j = 0
+            while j < n_hi - 1 and hi[j + 1] < v:
+                hi[j] = hi[j + 1]
+                j += 1
+            hi[j] = v
+            t_hi = hi[0]
+
+
+@numba.njit(cache=True, nogil=True)
+def _sliding_percentiles(means, n_cs, n_win, slot, ranks, n_ranks, cols, mode, g, omg, bad,
                          pct):  # pragma: no cover - compiled
     """``pct[v, m, r, :]``: the percentiles under each method of the sliding means of
-    variant v, row r (row ``slot[v]·rows + r`` of ``srt``, :func:`_sliding_means`, each row
-    sorted ascending): the order statistics ``ranks[grid, :n_ranks[grid]]`` read off the
-    sorted row and the percentiles formed by the recipe of the grid's number of windows
-    (:func:`_read_percentiles`); 0 for a row marked in ``bad`` (its value is undefined)."""
+    variant v, row r (the first ``n_cs[grid]`` values of row ``slot[v]·rows + r`` of
+    ``means``, :func:`_sliding_means`, unsorted): the order statistics
+    ``ranks[grid, :n_ranks[grid]]`` — ranks near the two ends of the row (those of the
+    0.15 % and 99.85 % values) — selected by :func:`_row_extremes` and the percentiles
+    formed by the recipe of the grid's number of windows (:func:`_read_percentiles`); a
+    variant sharing the slot of the one before (:func:`_sliding_means`) takes its values;
+    0 for a row marked in ``bad`` (its value is undefined)."""
     rows = bad.shape[1]
     stats = np.empty(ranks.shape[1])
     tmp = np.empty((cols.shape[1], cols.shape[2]))
+    lo = np.empty(ranks.shape[1] + 1)
+    hi = np.empty(ranks.shape[1] + 1)
     for q in range(n_cs.shape[0]):
+        k = n_cs[q]
+        n_lo = 0
+        n_hi = 0
+        for c in range(n_ranks[q]):
+            rk = ranks[q, c]
+            if 2 * rk < k:
+                n_lo = max(n_lo, rk + 1)
+            else:
+                n_hi = max(n_hi, k - rk)
+        if n_lo > lo.shape[0]:
+            lo = np.empty(n_lo)
+        if n_hi > hi.shape[0]:
+            hi = np.empty(n_hi)
         for w in range(n_win):
             v = q * n_win + w
+            shared = w > 0 and slot[v] == slot[v - 1]
             for r in range(rows):
+                if shared:
+                    for m in range(pct.shape[1]):
+                        for t in range(pct.shape[3]):
+                            pct[v, m, r, t] = pct[v - 1, m, r, t]
+                    continue
                 if bad[v, r]:
                     for m in range(pct.shape[1]):
                         for t in range(pct.shape[3]):
                             pct[v, m, r, t] = 0.0
                     continue
-                row = srt[slot[v] * rows + r]
+                _row_extremes(means[slot[v] * rows + r, :k], n_lo, n_hi, lo, hi)
                 for c in range(n_ranks[q]):
-                    stats[c] = row[ranks[q, c]]
+                    rk = ranks[q, c]
+                    stats[c] = lo[rk] if 2 * rk < k else hi[rk - (k - n_hi)]
                 _read_percentiles(stats, cols[q], mode[q], g[q], omg[q], tmp)
                 for m in range(pct.shape[1]):
                     for t in range(pct.shape[3]):
@@ -520,8 +575,8 @@ def _sliding_percentiles(srt, n_cs, n_win, slot, ranks, n_ranks, cols, mode, g, 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
                     out_rms, d, j, u, at, win_lo, win_hi, sampled, origins, n_cs, window_m,
-                    step_m, recipe, pct_lp, pct_bp, s_means, s_bad, s_slot
-                    ):  # pragma: no cover - compiled
+                    step_m, recipe, pct_lp, pct_bp, s_means, s_bad, s_slot, s_ranks,
+                    s_n_ranks, s_recipe, s_pct):  # pragma: no cover - compiled
     """One section: the derived rows (:func:`_derive`), then the order statistics ``ranks``
     of the evaluated part of the low-pass rows ``sel``, of the derived rows and of every
     band-pass row into ``out_lp`` (in that order) and ``out_bp``, and their percentiles
@@ -533,8 +588,9 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
     empty, the sample windows ``win_lo``/``win_hi``), the integrals of the derived rows at
     the window ends (:func:`railval.core.en_statistics._integral_at`), their means over the
     sample windows (:func:`_sample_window_means`) and the sliding means of every grid and
-    window (:func:`_sliding_means` into ``s_means``/``s_bad``/``s_slot``; their percentiles
-    are read by :func:`_sliding_percentiles` once the caller has sorted the rows).
+    window (:func:`_sliding_means` into ``s_means``/``s_bad``/``s_slot``) and their
+    percentiles into ``s_pct`` (:func:`_sliding_percentiles`: the order statistics
+    ``s_ranks`` selected from the unsorted means, ``s_recipe`` per grid).
     Returns the Y/Q row with Q = 0 in the evaluated range (nothing selected), else
     −2 − (the slots of sliding means used), or −1 without sliding means."""
     zero = _derive(lp, yq, sy, cut0, cut1, wide0, derived)
@@ -573,6 +629,9 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
             h[i] = d[wide0 + i + 1] - d[wide0 + i]
         _derived_means(derived, h, j, u, at, win_lo, win_hi, sampled)
         used = _sliding_means(at, n_cs, sampled, window_m, win_hi, s_means, s_bad, s_slot)
+        s_cols, s_mode, s_g, s_omg = s_recipe
+        _sliding_percentiles(s_means, n_cs, 3 if sampled.shape[1] else 1, s_slot, s_ranks,
+                             s_n_ranks, s_cols, s_mode, s_g, s_omg, s_bad, s_pct)
         return -2 - used
     return -1
 

@@ -14,9 +14,10 @@ these order statistics by the recipe of :func:`railval.core.definitions.percenti
 (the operations of :func:`railval.core.definitions.percentiles_from_order`). The same call
 finds the sliding-mean window ends of every grid (a walk along the distance axis that
 makes the comparisons of ``numpy.searchsorted``) and forms the sliding means of every
-reading; they are sorted row by row by numpy (its sort releases the GIL too) and their
-percentiles read off the sorted rows. What is left to Python per section is reading the
-values out (a few numpy calls and one dict entry per value); a section whose chosen sliding
+reading, and reads their 0.15 % and 99.85 % values (all the sliding-mean maxima use) off
+the few order statistics at the two ends of each row, selected in one pass without sorting
+the row (:func:`railval.core.en_kernels._row_extremes`; the numbers a sort puts there).
+What is left to Python per section is reading the values out (a few numpy calls and one dict entry per value); a section whose chosen sliding
 means are not all finite, or whose range does not fit the grid, takes the step-by-step numpy
 path (:func:`_sliding_values`).
 
@@ -58,9 +59,10 @@ from railval.core.en_kernels import (  # noqa: F401
     _derive,
     _sample_window_means,
     _section_kernel,
-    _sliding_percentiles,
 )
 from railval.core.en_statistics import (
+    P_HIGH,
+    P_LOW,
     PERCENTILES,
     QUANTILE_METHOD,
     STEP_M,
@@ -87,9 +89,12 @@ _NO_FLOATS = np.empty(0)
 _NO_RANKS = np.zeros((0, 1), np.int64)
 #: the evaluated samples among (first, first evaluated, last evaluated, last) sample
 _END_MASK = np.array([False, True, True, False])
+#: the percentiles of the sliding means the maxima read (maxabs of the 0.15 % and 99.85 %
+#: values, :func:`_sliding_values_compiled`; their median is not a value of the chain)
+_SLIDING_PERCENTILES = (P_LOW, P_HIGH)
 #: the sliding-percentile recipe of no grid (cols, mode, g, 1 − g; shapes of one grid's)
-_NO_RECIPE = (np.zeros((0, 1, 3, 2), np.int64), np.zeros((0, 1, 3), np.int64),
-              np.zeros((0, 1, 3)), np.zeros((0, 1, 3)))
+_NO_RECIPE = (np.zeros((0, 1, 2, 2), np.int64), np.zeros((0, 1, 2), np.int64),
+              np.zeros((0, 1, 2)), np.zeros((0, 1, 2)))
 #: every reading by its (percentile, grid, window)
 _READING = {(r.percentile, r.grid, r.window): r for r in READINGS}
 _READING_ID = {r: r.id for r in READINGS}
@@ -251,7 +256,8 @@ class SectionState:
                     sizes = [c for c in n_cs for _ in range(2)]
                     self.win_lo = np.empty(2 * total, np.int64)
                     self.win_hi = np.empty(2 * total, np.int64)
-                recs = [percentile_recipe(c, PERCENTILES, self.methods) for c in n_cs]
+                recs = [percentile_recipe(c, _SLIDING_PERCENTILES, self.methods)
+                        for c in n_cs]
                 self.s_n_ranks = np.array([r[0].size for r in recs], dtype=np.int64)
                 self.s_ranks = np.zeros((len(recs), int(self.s_n_ranks.max())), np.int64)
                 for q, r in enumerate(recs):
@@ -261,7 +267,7 @@ class SectionState:
         if not n_var:
             self.s_ranks, self.s_n_ranks = _NO_RANKS, _NO_INTS
             self.s_recipe = _NO_RECIPE
-        self.s_pct = np.empty((n_var, m, n_der, 3))
+        self.s_pct = np.empty((n_var, m, n_der, len(_SLIDING_PERCENTILES)))
         self.s_bad = np.empty((n_var, n_der), dtype=np.bool_)
         self.at = _NO_ROWS
         self.sampled = (sizes, _NO_ROWS)
@@ -276,9 +282,9 @@ class SectionState:
                                STEP_M) for o in self.origins]
 
     def run(self) -> None:
-        """The compiled step (releases the GIL; sections run on the cores in parallel), then
-        the sliding means of every reading sorted row by row (numpy's sort, also without
-        the GIL, into this thread's scratch rows) and their percentiles read off."""
+        """The compiled step (releases the GIL; sections run on the cores in parallel): the
+        sliding means of every reading formed into this thread's scratch rows and their
+        percentiles read off the order statistics selected from them."""
         if self.error is not None:
             return
         n_var, rows = self.s_bad.shape
@@ -291,14 +297,9 @@ class SectionState:
             self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
             self.out_rms, self.d, self.j, self.u, self.at, self.win_lo,
             self.win_hi, self.sampled[1], self.origins, self.n_cs, WINDOW_M, STEP_M,
-            self.recipe, self.pct_lp, self.pct_bp, means, self.s_bad, slot)
+            self.recipe, self.pct_lp, self.pct_bp, means, self.s_bad, slot, self.s_ranks,
+            self.s_n_ranks, self.s_recipe, self.s_pct)
         self.zero_q = max(ret, -1)
-        if ret < -1:  # −2 − the slots of sliding means formed
-            srt = means[:(-2 - ret) * rows]
-            srt.sort(axis=-1)
-            _sliding_percentiles(srt, self.n_cs, n_var // self.n_cs.size, slot,
-                                 self.s_ranks, self.s_n_ranks, *self.s_recipe, self.s_bad,
-                                 self.s_pct)
 
     def release(self) -> None:
         """Drop the rows once the values are formed (a batch keeps only the values)."""
@@ -498,7 +499,7 @@ def _sliding_values_compiled(st: SectionState, keys: list[tuple[str, str]],
     not all finite — the values and the order of :func:`_sliding_values`."""
     sec = st.sec
     pct, bad = st.s_pct, st.s_bad
-    vals = maxabs(pct[..., 0], pct[..., 2])
+    vals = maxabs(pct[..., 0], pct[..., 1])
     if bad.any():
         vals[np.broadcast_to(bad[:, None, :], vals.shape)] = np.nan
     chosen = vals[0, 0].tolist()
