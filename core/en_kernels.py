@@ -72,23 +72,17 @@ def _strided_range(x, stride):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, nogil=True)
 def _rank_buckets(hist, ranks, n, rb, rbelow):  # pragma: no cover - compiled
-    """The bucket ``rb[j]`` holding rank ``ranks[j]`` of a row of ``n`` samples and the
-    number ``rbelow[j]`` of samples in the buckets before it: the ranks of the lower half
-    found walking the histogram up from the first bucket, those of the upper half walking
-    it down from the last (the 0.15 % and 99.85 % ranks lie near the ends: two short walks
-    and one to the median instead of the whole histogram). Bucket b holds the ranks
-    ``below .. below + hist[b] − 1``; the same bucket and count whichever end it is reached
-    from."""
+    """The bucket ``rb[j]`` of rank ``ranks[j]`` (row of ``n``) and the number ``rbelow[j]``
+    of samples in the buckets before it (bucket b holds ranks below .. below + hist[b] − 1):
+    the ranks of the lower half walking the histogram up from the first bucket, the others
+    down from the last (the 0.15 %/99.85 % ranks lie near the ends: short walks)."""
     k = ranks.shape[0]
-    b = 0
-    below = 0
-    j = 0
+    b = below = j = 0
     while j < k and 2 * ranks[j] < n:
         while below + hist[b] <= ranks[j]:
             below += hist[b]
             b += 1
-        rb[j] = b
-        rbelow[j] = below
+        rb[j], rbelow[j] = b, below
         j += 1
     b = hist.shape[0] - 1
     above = 0
@@ -96,8 +90,7 @@ def _rank_buckets(hist, ranks, n, rb, rbelow):  # pragma: no cover - compiled
         while n - above - hist[b] > ranks[i]:
             above += hist[b]
             b -= 1
-        rb[i] = b
-        rbelow[i] = n - above - hist[b]
+        rb[i], rbelow[i] = b, n - above - hist[b]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -517,26 +510,20 @@ def _sliding_means(at, n_cs, sampled, window_m, win_hi, means, bad, slot
 @numba.njit(cache=True, nogil=True)
 def _row_extremes(x, n_lo, n_hi, lo, hi):  # pragma: no cover - compiled
     """The ``n_lo`` smallest samples of the row ``x`` (finite; ``n_lo``, ``n_hi`` ≤ len(x))
-    into ``lo[:n_lo]`` and its ``n_hi`` largest into ``hi[:n_hi]``, each ascending: one pass, a sample entering a
-    buffer only when it is below its largest (above its smallest) kept sample, by insertion
-    (Knuth 1998 §5.3.3, selection of the extremes). ``lo[i]`` is then the sample of 0-based
-    rank i of the sorted row and ``hi[i]`` that of rank ``len(x) − n_hi + i``: the same
-    numbers a full sort puts there (order statistics do not depend on the algorithm; only
-    the sign of a zero may differ where −0.0 and 0.0 tie)."""
-    for i in range(n_lo):
-        lo[i] = np.inf
-    for i in range(n_hi):
-        hi[i] = -np.inf
+    into ``lo[:n_lo]``, its ``n_hi`` largest into ``hi[:n_hi]``, each ascending: one pass, a
+    sample entering a buffer by insertion only when it passes its end (Knuth 1998 §5.3.3).
+    ``lo[i]``, ``hi[i]``: the samples of 0-based ranks i and ``len(x) − n_hi + i`` — the
+    numbers a sort puts there (only a zero's sign may differ where −0.0 and 0.0 tie)."""
+    lo[:n_lo] = np.inf
+    hi[:n_hi] = -np.inf
     t_lo = np.inf if n_lo else -np.inf
     t_hi = -np.inf if n_hi else np.inf
     last = n_lo - 1
     n = x.shape[0]
     i = 0
     while i < n:
-        # a block of 8 samples is looked at one by one only when its minimum or maximum
-        # would enter a buffer (most blocks do not: the check is a few vector operations)
         stop = min(i + 8, n)
-        if stop - i == 8:
+        if stop - i == 8:  # a block of 8 none of which enters a buffer is passed over
             a0 = min(min(x[i], x[i + 1]), min(x[i + 2], x[i + 3]))
             a1 = min(min(x[i + 4], x[i + 5]), min(x[i + 6], x[i + 7]))
             b0 = max(max(x[i], x[i + 1]), max(x[i + 2], x[i + 3]))
@@ -568,53 +555,34 @@ def _sliding_percentiles(means, n_cs, n_win, slot, ranks, n_ranks, cols, mode, g
                          pct):  # pragma: no cover - compiled
     """``pct[v, m, r, :]``: the percentiles under each method of the sliding means of
     variant v, row r (the first ``n_cs[grid]`` values of row ``slot[v]·rows + r`` of
-    ``means``, :func:`_sliding_means`, unsorted): the order statistics
-    ``ranks[grid, :n_ranks[grid]]`` — ranks near the two ends of the row (those of the
-    0.15 % and 99.85 % values) — selected by :func:`_row_extremes` and the percentiles
-    formed by the recipe of the grid's number of windows (:func:`_read_percentiles`); a
-    variant sharing the slot of the one before (:func:`_sliding_means`) takes its values;
-    0 for a row marked in ``bad`` (its value is undefined)."""
+    ``means``, :func:`_sliding_means`, unsorted): the order statistics ``ranks[grid,
+    :n_ranks[grid]]`` (near the two ends of the row: the 0.15 % and 99.85 % values) selected
+    by :func:`_row_extremes`, read by the grid's recipe (:func:`_read_percentiles`); those
+    of the variant before for one sharing its slot; 0 for a row marked in ``bad``."""
     rows = bad.shape[1]
     stats = np.empty(ranks.shape[1])
     tmp = np.empty((cols.shape[1], cols.shape[2]))
-    lo = np.empty(ranks.shape[1] + 1)
-    hi = np.empty(ranks.shape[1] + 1)
     for q in range(n_cs.shape[0]):
         k = n_cs[q]
-        n_lo = 0
-        n_hi = 0
+        n_lo = n_hi = 0
         for c in range(n_ranks[q]):
             rk = ranks[q, c]
-            if 2 * rk < k:
-                n_lo = max(n_lo, rk + 1)
-            else:
-                n_hi = max(n_hi, k - rk)
-        if n_lo > lo.shape[0]:
-            lo = np.empty(n_lo)
-        if n_hi > hi.shape[0]:
-            hi = np.empty(n_hi)
+            n_lo, n_hi = (max(n_lo, rk + 1), n_hi) if 2 * rk < k else (n_lo, max(n_hi, k - rk))
+        lo, hi = np.empty(max(n_lo, 1)), np.empty(max(n_hi, 1))
         for w in range(n_win):
             v = q * n_win + w
             shared = w > 0 and slot[v] == slot[v - 1]
             for r in range(rows):
-                if shared:
-                    for m in range(pct.shape[1]):
-                        for t in range(pct.shape[3]):
-                            pct[v, m, r, t] = pct[v - 1, m, r, t]
-                    continue
-                if bad[v, r]:
-                    for m in range(pct.shape[1]):
-                        for t in range(pct.shape[3]):
-                            pct[v, m, r, t] = 0.0
-                    continue
-                _row_extremes(means[slot[v] * rows + r, :k], n_lo, n_hi, lo, hi)
-                for c in range(n_ranks[q]):
-                    rk = ranks[q, c]
-                    stats[c] = lo[rk] if 2 * rk < k else hi[rk - (k - n_hi)]
-                _read_percentiles(stats, cols[q], mode[q], g[q], omg[q], tmp)
+                if not (shared or bad[v, r]):
+                    _row_extremes(means[slot[v] * rows + r, :k], n_lo, n_hi, lo, hi)
+                    for c in range(n_ranks[q]):
+                        rk = ranks[q, c]
+                        stats[c] = lo[rk] if 2 * rk < k else hi[rk - (k - n_hi)]
+                    _read_percentiles(stats, cols[q], mode[q], g[q], omg[q], tmp)
                 for m in range(pct.shape[1]):
                     for t in range(pct.shape[3]):
-                        pct[v, m, r, t] = tmp[m, t]
+                        pct[v, m, r, t] = (pct[v - 1, m, r, t] if shared else 0.0 if bad[v, r]
+                                           else tmp[m, t])
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")

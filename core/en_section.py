@@ -86,15 +86,18 @@ _LINEAR = Reading("linear", CHOSEN.grid, CHOSEN.window)
 _NO_ROWS = np.empty((0, 0))
 _NO_INTS = np.empty(0, np.int64)
 _NO_FLOATS = np.empty(0)
-_NO_RANKS = np.zeros((0, 1), np.int64)
 #: the evaluated samples among (first, first evaluated, last evaluated, last) sample
 _END_MASK = np.array([False, True, True, False])
 #: the percentiles of the sliding means the maxima read (maxabs of the 0.15 % and 99.85 %
 #: values, :func:`_sliding_values_compiled`; their median is not a value of the chain)
 _SLIDING_PERCENTILES = (P_LOW, P_HIGH)
-#: the sliding-percentile recipe of no grid (cols, mode, g, 1 − g; shapes of one grid's)
-_NO_RECIPE = (np.zeros((0, 1, 2, 2), np.int64), np.zeros((0, 1, 2), np.int64),
-              np.zeros((0, 1, 2)), np.zeros((0, 1, 2)))
+#: the sliding-percentile ranks, their numbers and recipe (cols, mode, g, 1 − g) of no grid
+#: (shapes of one grid's; read-only as those of :func:`_sliding_recipe`: one compiled type)
+_NO_SLIDING_RECIPE = (np.zeros((0, 1), np.int64), np.zeros(0, np.int64),
+                      (np.zeros((0, 1, 2, 2), np.int64), np.zeros((0, 1, 2), np.int64),
+                       np.zeros((0, 1, 2)), np.zeros((0, 1, 2))))
+for _a in (*_NO_SLIDING_RECIPE[:2], *_NO_SLIDING_RECIPE[2]):
+    _a.flags.writeable = False
 #: every reading by its (percentile, grid, window)
 _READING = {(r.percentile, r.grid, r.window): r for r in READINGS}
 _READING_ID = {r: r.id for r in READINGS}
@@ -138,6 +141,24 @@ def _scratch(n: int) -> np.ndarray:
     if buf is None or buf.size < n:
         buf = _SCRATCH.buf = np.empty(max(n, 1 << 17))
     return buf[:n]
+
+
+@functools.lru_cache(maxsize=256)
+def _sliding_recipe(n_cs: tuple[int, ...], methods: tuple[str, ...]) -> tuple:
+    """The order statistics the sliding-mean percentiles of grids of ``n_cs`` windows read
+    and how (:func:`railval.core.definitions.percentile_recipe` of each grid, stacked for
+    the compiled step): ``(ranks, n_ranks, (cols, mode, g, 1 − g))``, ``ranks[q,
+    :n_ranks[q]]`` those of grid q. Formed once per numbers of windows (the arrays must not
+    be written to)."""
+    recs = [percentile_recipe(c, _SLIDING_PERCENTILES, methods) for c in n_cs]
+    n_ranks = np.array([r[0].size for r in recs], dtype=np.int64)
+    ranks = np.zeros((len(recs), int(n_ranks.max())), np.int64)
+    for q, r in enumerate(recs):
+        ranks[q, :r[0].size] = r[0]
+    recipe = tuple(np.stack([r[i] for r in recs]) for i in range(1, 5))
+    for a in (ranks, n_ranks, *recipe):
+        a.flags.writeable = False
+    return ranks, n_ranks, recipe
 
 
 @functools.lru_cache(maxsize=64)
@@ -256,17 +277,11 @@ class SectionState:
                     sizes = [c for c in n_cs for _ in range(2)]
                     self.win_lo = np.empty(2 * total, np.int64)
                     self.win_hi = np.empty(2 * total, np.int64)
-                recs = [percentile_recipe(c, _SLIDING_PERCENTILES, self.methods)
-                        for c in n_cs]
-                self.s_n_ranks = np.array([r[0].size for r in recs], dtype=np.int64)
-                self.s_ranks = np.zeros((len(recs), int(self.s_n_ranks.max())), np.int64)
-                for q, r in enumerate(recs):
-                    self.s_ranks[q, :r[0].size] = r[0]
-                self.s_recipe = tuple(np.stack([r[i] for r in recs]) for i in range(1, 5))
+                self.s_ranks, self.s_n_ranks, self.s_recipe = _sliding_recipe(
+                    tuple(n_cs), self.methods)
                 n_var = len(n_cs) * (3 if self.with_alternatives else 1)
         if not n_var:
-            self.s_ranks, self.s_n_ranks = _NO_RANKS, _NO_INTS
-            self.s_recipe = _NO_RECIPE
+            self.s_ranks, self.s_n_ranks, self.s_recipe = _NO_SLIDING_RECIPE
         self.s_pct = np.empty((n_var, m, n_der, len(_SLIDING_PERCENTILES)))
         self.s_bad = np.empty((n_var, n_der), dtype=np.bool_)
         self.at = _NO_ROWS
