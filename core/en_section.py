@@ -7,9 +7,11 @@ the cores in parallel, :func:`railval.core.workers.split_rows`) forms Y/Q (per w
 sample-wise ratio) and ΣY = Y_L + Y_R (per wheelset) from the low-pass filtered rows over the
 evaluated range plus one sample on each side, checks Q ≠ 0 inside the evaluated range and
 selects the order statistics every percentile reading needs from all evaluated rows — the
-filtered forces, the derived rows and the band-pass rows read in place, without row copies
+filtered forces and the derived rows read in place, without row copies
 (:func:`railval.core.orderstat.select_ranks`: the samples a full sort gives at those
-positions, so the percentiles are those of ``numpy.quantile``) and reads the percentiles off
+positions, so the percentiles are those of ``numpy.quantile``); of the band-pass rows only
+those of the 0.15 % and 99.85 % values (their maxima read no median), near the two ends of
+the row (:func:`railval.core.en_kernels._end_stats`) — and reads the percentiles off
 these order statistics by the recipe of :func:`railval.core.definitions.percentile_recipe`
 (the operations of :func:`railval.core.definitions.percentiles_from_order`). The same call
 finds the sliding-mean window ends of every grid (a walk along the distance axis that
@@ -17,9 +19,9 @@ makes the comparisons of ``numpy.searchsorted``) and forms the sliding means of 
 reading, and reads their 0.15 % and 99.85 % values (all the sliding-mean maxima use) off
 the few order statistics at the two ends of each row, selected in one pass without sorting
 the row (:func:`railval.core.en_kernels._row_extremes`; the numbers a sort puts there).
-What is left to Python per section is reading the values out (a few numpy calls and one dict entry per value); a section whose chosen sliding
-means are not all finite, or whose range does not fit the grid, takes the step-by-step numpy
-path (:func:`_sliding_values`).
+What is left to Python per section is reading the values out (a few numpy calls and one
+dict entry per value); a section whose chosen sliding means are not all finite, or whose
+range does not fit the grid, takes the step-by-step numpy path (:func:`_sliding_values`).
 
 The operations on the samples are those of the former per-step numpy code, in the same order
 (IEEE division and addition for Y/Q and ΣY, the same order statistics, numpy's rms), so the
@@ -88,9 +90,10 @@ _NO_INTS = np.empty(0, np.int64)
 _NO_FLOATS = np.empty(0)
 #: the evaluated samples among (first, first evaluated, last evaluated, last) sample
 _END_MASK = np.array([False, True, True, False])
-#: the percentiles of the sliding means the maxima read (maxabs of the 0.15 % and 99.85 %
-#: values, :func:`_sliding_values_compiled`; their median is not a value of the chain)
-_SLIDING_PERCENTILES = (P_LOW, P_HIGH)
+#: the percentiles of the sliding means and of the band-pass rows the values read (maxabs of
+#: the 0.15 % and 99.85 % values, :func:`_sliding_values_compiled`, :func:`_bandpass_values`;
+#: their medians are not values of the chain)
+_END_PERCENTILES = (P_LOW, P_HIGH)
 #: the sliding-percentile ranks, their numbers and recipe (cols, mode, g, 1 − g) of no grid
 #: (shapes of one grid's; read-only as those of :func:`_sliding_recipe`: one compiled type)
 _NO_SLIDING_RECIPE = (np.zeros((0, 1), np.int64), np.zeros(0, np.int64),
@@ -150,7 +153,7 @@ def _sliding_recipe(n_cs: tuple[int, ...], methods: tuple[str, ...]) -> tuple:
     the compiled step): ``(ranks, n_ranks, (cols, mode, g, 1 − g))``, ``ranks[q,
     :n_ranks[q]]`` those of grid q. Formed once per numbers of windows (the arrays must not
     be written to)."""
-    recs = [percentile_recipe(c, _SLIDING_PERCENTILES, methods) for c in n_cs]
+    recs = [percentile_recipe(c, _END_PERCENTILES, methods) for c in n_cs]
     n_ranks = np.array([r[0].size for r in recs], dtype=np.int64)
     ranks = np.zeros((len(recs), int(n_ranks.max())), np.int64)
     for q, r in enumerate(recs):
@@ -236,10 +239,12 @@ class SectionState:
         k = self.ranks.size
         m = len(self.methods)
         self.out_lp = np.empty((self.sel.size + n_der, k))
-        self.out_bp = np.empty((0 if self.bp is None else self.bp.shape[0], k))
-        self.out_rms = np.empty(self.out_bp.shape[0])
+        self.bp_recipe = percentile_recipe(self.n_eval, _END_PERCENTILES, self.methods)
+        n_bp = 0 if self.bp is None else self.bp.shape[0]
+        self.out_bp = np.empty((n_bp, self.bp_recipe[0].size))
+        self.out_rms = np.empty(n_bp)
         self.pct_lp = np.empty((m, self.out_lp.shape[0], 3))
-        self.pct_bp = np.empty((m, self.out_bp.shape[0], 3))
+        self.pct_bp = np.empty((m, n_bp, len(_END_PERCENTILES)))
         self._window_ends(n_der)
 
     def _window_ends(self, n_der: int) -> None:
@@ -282,7 +287,7 @@ class SectionState:
                 n_var = len(n_cs) * (3 if self.with_alternatives else 1)
         if not n_var:
             self.s_ranks, self.s_n_ranks, self.s_recipe = _NO_SLIDING_RECIPE
-        self.s_pct = np.empty((n_var, m, n_der, len(_SLIDING_PERCENTILES)))
+        self.s_pct = np.empty((n_var, m, n_der, len(_END_PERCENTILES)))
         self.s_bad = np.empty((n_var, n_der), dtype=np.bool_)
         self.at = _NO_ROWS
         self.sampled = (sizes, _NO_ROWS)
@@ -312,8 +317,8 @@ class SectionState:
             self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
             self.out_rms, self.d, self.j, self.u, self.at, self.win_lo,
             self.win_hi, self.sampled[1], self.origins, self.n_cs, WINDOW_M, STEP_M,
-            self.recipe, self.pct_lp, self.pct_bp, means, self.s_bad, slot, self.s_ranks,
-            self.s_n_ranks, self.s_recipe, self.s_pct)
+            self.recipe, self.bp_recipe, self.pct_lp, self.pct_bp, means, self.s_bad, slot,
+            self.s_ranks, self.s_n_ranks, self.s_recipe, self.s_pct)
         self.zero_q = max(ret, -1)
 
     def release(self) -> None:
@@ -582,8 +587,8 @@ def _bandpass_values(st: SectionState) -> None:
     bp_label = st.settle("bandpass")
     pct, pct_lin = st.pct_bp[0], st.pct_bp[-1]
     rmsv = st.out_rms.tolist()
-    mx = maxabs(pct[:, 0], pct[:, 2]).tolist()
-    mx_lin = maxabs(pct_lin[:, 0], pct_lin[:, 2]).tolist()
+    mx = maxabs(pct[:, 0], pct[:, 1]).tolist()
+    mx_lin = maxabs(pct_lin[:, 0], pct_lin[:, 1]).tolist()
     values, prov, supp = st.values, st.prov, st.supp
     alt_keys, alt_vals = [], []
     for r, name in enumerate(st.plan.bp_names):
