@@ -71,23 +71,36 @@ def _strided_range(x, stride):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _slots(hist, ranks, slot, start, fill):  # pragma: no cover - compiled
-    """The bucket of each wanted rank: ``slot[b]`` its place among the wanted buckets (−1:
-    none), ``start`` where its samples go in the candidate array."""
-    slot[:] = -1
-    n_slots = 0
-    total = 0
-    below = 0
-    b = 0
-    for j in range(ranks.shape[0]):
+def _rank_buckets(hist, ranks, n, rb, rbelow, slot, start, fill):  # pragma: no cover - compiled
+    """The bucket ``rb[j]`` of rank ``ranks[j]`` (row of ``n``) and the number ``rbelow[j]``
+    of samples in the buckets before it (bucket b holds ranks below .. below + hist[b] − 1):
+    the ranks of the lower half walking the histogram up from the first bucket, the others
+    down from the last (the 0.15 %/99.85 % ranks lie near the ends: short walks). Then
+    ``slot[b]``: the place of bucket b among those wanted (−1: none), ``start``: where its
+    samples go in the candidate array."""
+    k = ranks.shape[0]
+    b = below = j = 0
+    while j < k and 2 * ranks[j] < n:
         while below + hist[b] <= ranks[j]:
             below += hist[b]
             b += 1
-        if slot[b] < 0:
-            slot[b] = n_slots
+        rb[j], rbelow[j] = b, below
+        j += 1
+    b = hist.shape[0] - 1
+    above = 0
+    for i in range(k - 1, j - 1, -1):
+        while n - above - hist[b] > ranks[i]:
+            above += hist[b]
+            b -= 1
+        rb[i], rbelow[i] = b, n - above - hist[b]
+    slot[:] = -1
+    n_slots = total = 0
+    for j in range(k):
+        if slot[rb[j]] < 0:
+            slot[rb[j]] = n_slots
             start[n_slots] = total
             fill[n_slots] = 0
-            total += hist[b]
+            total += hist[rb[j]]
             n_slots += 1
 
 
@@ -121,7 +134,9 @@ def _select_row(x, ranks, out, hist, slot, start, fill, cand, bucket
     hist[:] = 0
     for i in range(n):
         hist[bucket[i]] += 1
-    _slots(hist, ranks, slot, start, fill)
+    rb = np.empty(k, np.int64)
+    rbelow = np.empty(k, np.int64)
+    _rank_buckets(hist, ranks, n, rb, rbelow, slot, start, fill)
     # gather the samples of those buckets
     for i in range(n):
         s = slot[bucket[i]]
@@ -129,14 +144,9 @@ def _select_row(x, ranks, out, hist, slot, start, fill, cand, bucket
             cand[start[s] + fill[s]] = x[i]
             fill[s] += 1
     # select each rank within its bucket
-    b = 0
-    below = 0
     for j in range(k):
-        while below + hist[b] <= ranks[j]:
-            below += hist[b]
-            b += 1
-        s = slot[b]
-        r = ranks[j] - below
+        s = slot[rb[j]]
+        r = ranks[j] - rbelow[j]
         seg = cand[start[s]:start[s] + fill[s]]
         out[j] = np.partition(seg, r)[r] if seg.shape[0] > 1 else seg[0]
 
@@ -259,21 +269,27 @@ def _derive(lp, yq, sy, cut0, cut1, wide0, derived):  # pragma: no cover - compi
     n_wide = derived.shape[1]
     n_yq = yq.shape[0]
     zero = -1
+    # contiguous row slices and loops without early exit, so that the compiler vectorises
+    # them (IEEE division and addition element by element: the same numbers)
     for r in range(n_yq):
-        y = lp[yq[r, 0]]
-        q = lp[yq[r, 1]]
+        y = lp[yq[r, 0], wide0:wide0 + n_wide]
+        q = lp[yq[r, 1], wide0:wide0 + n_wide]
+        out = derived[r]
         for i in range(n_wide):
-            derived[r, i] = y[wide0 + i] / q[wide0 + i]
+            out[i] = y[i] / q[i]
         if zero < 0:
-            for i in range(cut0, cut1):
-                if q[i] == 0.0:
-                    zero = r
-                    break
+            qc = lp[yq[r, 1], cut0:cut1]
+            hit = False
+            for i in range(qc.shape[0]):
+                hit |= qc[i] == 0.0
+            if hit:
+                zero = r
     for r in range(sy.shape[0]):
-        a = lp[sy[r, 0]]
-        b = lp[sy[r, 1]]
+        a = lp[sy[r, 0], wide0:wide0 + n_wide]
+        b = lp[sy[r, 1], wide0:wide0 + n_wide]
+        out = derived[n_yq + r]
         for i in range(n_wide):
-            derived[n_yq + r, i] = a[wide0 + i] + b[wide0 + i]
+            out[i] = a[i] + b[i]
     return zero
 
 
@@ -432,19 +448,16 @@ def _sliding_means(at, n_cs, sampled, window_m, win_hi, means, bad, slot
     """The sliding means of every reading's grid and window, variant ``v = 3·grid + window``
     (window: interpolant, closed samples, half-open samples;
     :data:`railval.core.definitions.SLIDING_VARIANTS` order; only ``v = 0`` when
-    ``sampled`` has no columns): the distance-weighted means
-    ``(at[:, end] − at[:, start]) / window_m``
-    (:func:`railval.core.en_statistics._means_from_integrals`) or the sample-window means
-    (the columns of ``sampled``), row r of variant v into row ``slot[v]·rows + r`` of
-    ``means``; a row's columns past its grid's number of windows are +inf (they sort after
-    every finite mean). Where no sample lies on the upper end of a window of a grid
-    (``win_hi`` of its closed and half-open windows equal; the lower ends are equal by
-    construction, :func:`_window_bounds`) the half-open means are the closed ones: that
-    variant gets the closed variant's slot and no rows of its own. ``bad[v, r]``: the row
-    holds a non-finite mean. Returns the number of slots used."""
+    ``sampled`` has no columns): the distance-weighted means ``(at[:, end] − at[:, start])
+    / window_m`` (:func:`railval.core.en_statistics._means_from_integrals`) or the
+    sample-window means (the columns of ``sampled``), row r of variant v into the first
+    ``n_cs[grid]`` columns of row ``slot[v]·rows + r`` of ``means``. Where no sample lies on
+    the upper end of a window of a grid (``win_hi`` of its closed and half-open windows
+    equal; the lower ends are equal by construction, :func:`_window_bounds`) the half-open
+    means are the closed ones: that variant gets the closed variant's slot and no rows of
+    its own. ``bad[v, r]``: the row holds a non-finite mean. Returns the slots used."""
     rows = at.shape[0]
     n_win = 3 if sampled.shape[1] else 1
-    width = means.shape[1]
     a_pos = 0
     s_pos = 0
     used = 0
@@ -478,8 +491,6 @@ def _sliding_means(at, n_cs, sampled, window_m, win_hi, means, bad, slot
                         x = sampled[r, s_pos + i]
                         out[i] = x
                         finite &= np.isfinite(x)
-                for i in range(k, width):
-                    out[i] = np.inf
                 bad[v, r] = not finite
             used += 1
             if w > 0:
@@ -489,53 +500,113 @@ def _sliding_means(at, n_cs, sampled, window_m, win_hi, means, bad, slot
 
 
 @numba.njit(cache=True, nogil=True)
-def _sliding_percentiles(srt, n_cs, n_win, slot, ranks, n_ranks, cols, mode, g, omg, bad,
+def _row_extremes(x, n_lo, n_hi, lo, hi):  # pragma: no cover - compiled
+    """The ``n_lo`` smallest samples of the row ``x`` (finite; ``n_lo``, ``n_hi`` ≤ len(x))
+    into ``lo[:n_lo]``, its ``n_hi`` largest into ``hi[:n_hi]``, each ascending: one pass, a
+    sample entering a buffer by insertion only when it passes its end (Knuth 1998 §5.3.3).
+    ``lo[i]``, ``hi[i]``: the samples of 0-based ranks i and ``len(x) − n_hi + i`` — the
+    numbers a sort puts there (only a zero's sign may differ where −0.0 and 0.0 tie)."""
+    lo[:n_lo] = np.inf
+    hi[:n_hi] = -np.inf
+    t_lo, t_hi = (np.inf if n_lo else -np.inf), (-np.inf if n_hi else np.inf)
+    last, n, i = n_lo - 1, x.shape[0], 0
+    while i < n:
+        stop = min(i + 8, n)
+        if stop - i == 8:  # a block of 8 none of which enters a buffer is passed over
+            a0 = min(min(x[i], x[i + 1]), min(x[i + 2], x[i + 3]))
+            a1 = min(min(x[i + 4], x[i + 5]), min(x[i + 6], x[i + 7]))
+            b0 = max(max(x[i], x[i + 1]), max(x[i + 2], x[i + 3]))
+            b1 = max(max(x[i + 4], x[i + 5]), max(x[i + 6], x[i + 7]))
+            if not (min(a0, a1) < t_lo or max(b0, b1) > t_hi):
+                i = stop
+                continue
+        for e in range(i, stop):
+            v = x[e]
+            if v < t_lo:
+                j = last
+                while j > 0 and lo[j - 1] > v:
+                    lo[j] = lo[j - 1]
+                    j -= 1
+                lo[j] = v
+                t_lo = lo[last]
+            if v > t_hi:
+                j = 0
+                while j < n_hi - 1 and hi[j + 1] < v:
+                    hi[j] = hi[j + 1]
+                    j += 1
+                hi[j] = v
+                t_hi = hi[0]
+        i = stop
+
+
+@numba.njit(cache=True, nogil=True)
+def _end_counts(ranks, k):  # pragma: no cover - compiled
+    """``(n_lo, n_hi)``: the smallest and largest samples of a row of ``k`` holding ranks."""
+    n_lo = n_hi = 0
+    for rk in ranks:
+        n_lo, n_hi = (max(n_lo, rk + 1), n_hi) if 2 * rk < k else (n_lo, max(n_hi, k - rk))
+    return n_lo, n_hi
+
+
+@numba.njit(cache=True, nogil=True)
+def _end_stats(x, ranks, n_lo, n_hi, lo, hi, out):  # pragma: no cover - compiled
+    """``out[c]``: the sample of rank ``ranks[c]`` of ``x`` by :func:`_row_extremes` (``n_lo``,
+    ``n_hi``: :func:`_end_counts`; ``lo``, ``hi`` at least that long)."""
+    k = x.shape[0]
+    _row_extremes(x, n_lo, n_hi, lo, hi)
+    for c in range(ranks.shape[0]):
+        rk = ranks[c]
+        out[c] = lo[rk] if 2 * rk < k else hi[rk - (k - n_hi)]
+
+
+@numba.njit(cache=True, nogil=True)
+def _sliding_percentiles(means, n_cs, n_win, slot, ranks, n_ranks, cols, mode, g, omg, bad,
                          pct):  # pragma: no cover - compiled
     """``pct[v, m, r, :]``: the percentiles under each method of the sliding means of
-    variant v, row r (row ``slot[v]·rows + r`` of ``srt``, :func:`_sliding_means`, each row
-    sorted ascending): the order statistics ``ranks[grid, :n_ranks[grid]]`` read off the
-    sorted row and the percentiles formed by the recipe of the grid's number of windows
-    (:func:`_read_percentiles`); 0 for a row marked in ``bad`` (its value is undefined)."""
+    variant v, row r (the first ``n_cs[grid]`` values of row ``slot[v]·rows + r`` of
+    ``means``, :func:`_sliding_means`, unsorted): the order statistics ``ranks[grid,
+    :n_ranks[grid]]`` (near the two ends of the row: the 0.15 % and 99.85 % values) selected
+    by :func:`_row_extremes`, read by the grid's recipe (:func:`_read_percentiles`); those
+    of the variant before for one sharing its slot; 0 for a row marked in ``bad``."""
     rows = bad.shape[1]
     stats = np.empty(ranks.shape[1])
     tmp = np.empty((cols.shape[1], cols.shape[2]))
     for q in range(n_cs.shape[0]):
+        k = n_cs[q]
+        n_lo, n_hi = _end_counts(ranks[q, :n_ranks[q]], k)
+        lo, hi = np.empty(max(n_lo, 1)), np.empty(max(n_hi, 1))
         for w in range(n_win):
             v = q * n_win + w
+            shared = w > 0 and slot[v] == slot[v - 1]
             for r in range(rows):
-                if bad[v, r]:
-                    for m in range(pct.shape[1]):
-                        for t in range(pct.shape[3]):
-                            pct[v, m, r, t] = 0.0
-                    continue
-                row = srt[slot[v] * rows + r]
-                for c in range(n_ranks[q]):
-                    stats[c] = row[ranks[q, c]]
-                _read_percentiles(stats, cols[q], mode[q], g[q], omg[q], tmp)
+                if not (shared or bad[v, r]):
+                    _end_stats(means[slot[v] * rows + r, :k], ranks[q, :n_ranks[q]], n_lo,
+                               n_hi, lo, hi, stats)
+                    _read_percentiles(stats, cols[q], mode[q], g[q], omg[q], tmp)
                 for m in range(pct.shape[1]):
                     for t in range(pct.shape[3]):
-                        pct[v, m, r, t] = tmp[m, t]
+                        pct[v, m, r, t] = (pct[v - 1, m, r, t] if shared else 0.0 if bad[v, r]
+                                           else tmp[m, t])
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_lp, out_bp,
                     out_rms, d, j, u, at, win_lo, win_hi, sampled, origins, n_cs, window_m,
-                    step_m, recipe, pct_lp, pct_bp, s_means, s_bad, s_slot
-                    ):  # pragma: no cover - compiled
-    """One section: the derived rows (:func:`_derive`), then the order statistics ``ranks``
-    of the evaluated part of the low-pass rows ``sel``, of the derived rows and of every
-    band-pass row into ``out_lp`` (in that order) and ``out_bp``, and their percentiles
-    under each method into ``pct_lp``/``pct_bp`` (:func:`_rows_percentiles`, ``recipe`` =
-    (cols, mode, g, 1 − g)), the band-pass rows' rms
-    (numpy's ``sqrt(mean(x²))``, :func:`railval.core.en_statistics.pairwise_sum`). When
-    ``n_cs`` is not empty: the window ends of the sliding-mean grids from ``origins`` on
-    ``d[wide0:]`` (:func:`_window_bounds`; into ``j``, ``u`` and, when ``win_lo`` is not
-    empty, the sample windows ``win_lo``/``win_hi``), the integrals of the derived rows at
-    the window ends (:func:`railval.core.en_statistics._integral_at`), their means over the
-    sample windows (:func:`_sample_window_means`) and the sliding means of every grid and
-    window (:func:`_sliding_means` into ``s_means``/``s_bad``/``s_slot``; their percentiles
-    are read by :func:`_sliding_percentiles` once the caller has sorted the rows).
-    Returns the Y/Q row with Q = 0 in the evaluated range (nothing selected), else
+                    step_m, recipe, bp_recipe, pct_lp, pct_bp, s_means, s_bad, s_slot,
+                    s_ranks, s_n_ranks, s_recipe, s_pct):  # pragma: no cover - compiled
+    """One section: the derived rows (:func:`_derive`), the order statistics ``ranks`` of
+    the evaluated part of the low-pass rows ``sel`` and of the derived rows into ``out_lp``
+    (in that order), those of ``bp_recipe[0]`` (the 0.15 %/99.85 % values' ranks,
+    :func:`_end_stats`) of every band-pass row into ``out_bp``; their percentiles under each
+    method into ``pct_lp``/``pct_bp`` (:func:`_rows_percentiles` by ``recipe``/``bp_recipe``
+    (cols, mode, g, 1 − g)); the band-pass rows' rms (numpy's ``sqrt(mean(x²))``,
+    :func:`pairwise_sum`). When ``n_cs`` is not empty: the window ends of the grids from
+    ``origins`` on ``d[wide0:]`` (:func:`_window_bounds`: ``j``, ``u``; with ``win_lo``, the
+    sample windows), the integrals and sample-window means of the derived rows
+    (:func:`_derived_means`), the sliding means of every grid and window
+    (:func:`_sliding_means`: ``s_means``/``s_bad``/``s_slot``) and their percentiles
+    (:func:`_sliding_percentiles` by ``s_ranks``/``s_recipe``: ``s_pct``). Returns the Y/Q
+    row with Q = 0 in the evaluated range (nothing selected), else
     −2 − (the slots of sliding means used), or −1 without sliding means."""
     zero = _derive(lp, yq, sy, cut0, cut1, wide0, derived)
     if zero >= 0:
@@ -555,15 +626,17 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
     for r in range(derived.shape[0]):
         select_ranks(derived[r, cut0 - wide0:cut1 - wide0], ranks, out_lp[n_sel + r], hist,
                      slot, start, fill, cand, bucket)
+    b_ranks, b_cols, b_mode, b_g, b_omg = bp_recipe
+    n_lo, n_hi = _end_counts(b_ranks, n)
+    lo, hi = np.empty(max(n_lo, 1)), np.empty(max(n_hi, 1))
     for r in range(bp.shape[0]):
-        select_ranks(bp[r, cut0:cut1], ranks, out_bp[r], hist, slot, start, fill, cand,
-                     bucket)
+        _end_stats(bp[r, cut0:cut1], b_ranks, n_lo, n_hi, lo, hi, out_bp[r])
         for i in range(n):
             cand[i] = bp[r, cut0 + i] * bp[r, cut0 + i]
         out_rms[r] = np.sqrt(pairwise_sum(cand, 0, n) / n)
     cols, mode, g, omg = recipe
     _rows_percentiles(out_lp, cols, mode, g, omg, pct_lp)
-    _rows_percentiles(out_bp, cols, mode, g, omg, pct_bp)
+    _rows_percentiles(out_bp, b_cols, b_mode, b_g, b_omg, pct_bp)
     if n_cs.shape[0]:
         n_wide = derived.shape[1]
         _window_bounds(d[wide0:wide0 + n_wide], origins, n_cs, window_m / 2.0, step_m, j, u,
@@ -573,6 +646,9 @@ def _section_kernel(lp, sel, yq, sy, bp, cut0, cut1, wide0, ranks, derived, out_
             h[i] = d[wide0 + i + 1] - d[wide0 + i]
         _derived_means(derived, h, j, u, at, win_lo, win_hi, sampled)
         used = _sliding_means(at, n_cs, sampled, window_m, win_hi, s_means, s_bad, s_slot)
+        s_cols, s_mode, s_g, s_omg = s_recipe
+        _sliding_percentiles(s_means, n_cs, 3 if sampled.shape[1] else 1, s_slot, s_ranks,
+                             s_n_ranks, s_cols, s_mode, s_g, s_omg, s_bad, s_pct)
         return -2 - used
     return -1
 

@@ -7,18 +7,21 @@ the cores in parallel, :func:`railval.core.workers.split_rows`) forms Y/Q (per w
 sample-wise ratio) and ΣY = Y_L + Y_R (per wheelset) from the low-pass filtered rows over the
 evaluated range plus one sample on each side, checks Q ≠ 0 inside the evaluated range and
 selects the order statistics every percentile reading needs from all evaluated rows — the
-filtered forces, the derived rows and the band-pass rows read in place, without row copies
+filtered forces and the derived rows read in place, without row copies
 (:func:`railval.core.orderstat.select_ranks`: the samples a full sort gives at those
-positions, so the percentiles are those of ``numpy.quantile``) and reads the percentiles off
+positions, so the percentiles are those of ``numpy.quantile``); of the band-pass rows only
+those of the 0.15 % and 99.85 % values (their maxima read no median), near the two ends of
+the row (:func:`railval.core.en_kernels._end_stats`) — and reads the percentiles off
 these order statistics by the recipe of :func:`railval.core.definitions.percentile_recipe`
 (the operations of :func:`railval.core.definitions.percentiles_from_order`). The same call
 finds the sliding-mean window ends of every grid (a walk along the distance axis that
 makes the comparisons of ``numpy.searchsorted``) and forms the sliding means of every
-reading; they are sorted row by row by numpy (its sort releases the GIL too) and their
-percentiles read off the sorted rows. What is left to Python per section is reading the
-values out (a few numpy calls and one dict entry per value); a section whose chosen sliding
-means are not all finite, or whose range does not fit the grid, takes the step-by-step numpy
-path (:func:`_sliding_values`).
+reading, and reads their 0.15 % and 99.85 % values (all the sliding-mean maxima use) off
+the few order statistics at the two ends of each row, selected in one pass without sorting
+the row (:func:`railval.core.en_kernels._row_extremes`; the numbers a sort puts there).
+What is left to Python per section is reading the values out (a few numpy calls and one
+dict entry per value); a section whose chosen sliding means are not all finite, or whose
+range does not fit the grid, takes the step-by-step numpy path (:func:`_sliding_values`).
 
 The operations on the samples are those of the former per-step numpy code, in the same order
 (IEEE division and addition for Y/Q and ΣY, the same order statistics, numpy's rms), so the
@@ -58,9 +61,10 @@ from railval.core.en_kernels import (  # noqa: F401
     _derive,
     _sample_window_means,
     _section_kernel,
-    _sliding_percentiles,
 )
 from railval.core.en_statistics import (
+    P_HIGH,
+    P_LOW,
     PERCENTILES,
     QUANTILE_METHOD,
     STEP_M,
@@ -84,12 +88,19 @@ _LINEAR = Reading("linear", CHOSEN.grid, CHOSEN.window)
 _NO_ROWS = np.empty((0, 0))
 _NO_INTS = np.empty(0, np.int64)
 _NO_FLOATS = np.empty(0)
-_NO_RANKS = np.zeros((0, 1), np.int64)
 #: the evaluated samples among (first, first evaluated, last evaluated, last) sample
 _END_MASK = np.array([False, True, True, False])
-#: the sliding-percentile recipe of no grid (cols, mode, g, 1 − g; shapes of one grid's)
-_NO_RECIPE = (np.zeros((0, 1, 3, 2), np.int64), np.zeros((0, 1, 3), np.int64),
-              np.zeros((0, 1, 3)), np.zeros((0, 1, 3)))
+#: the percentiles of the sliding means and of the band-pass rows the values read (maxabs of
+#: the 0.15 % and 99.85 % values, :func:`_sliding_values_compiled`, :func:`_bandpass_values`;
+#: their medians are not values of the chain)
+_END_PERCENTILES = (P_LOW, P_HIGH)
+#: the sliding-percentile ranks, their numbers and recipe (cols, mode, g, 1 − g) of no grid
+#: (shapes of one grid's; read-only as those of :func:`_sliding_recipe`: one compiled type)
+_NO_SLIDING_RECIPE = (np.zeros((0, 1), np.int64), np.zeros(0, np.int64),
+                      (np.zeros((0, 1, 2, 2), np.int64), np.zeros((0, 1, 2), np.int64),
+                       np.zeros((0, 1, 2)), np.zeros((0, 1, 2))))
+for _a in (*_NO_SLIDING_RECIPE[:2], *_NO_SLIDING_RECIPE[2]):
+    _a.flags.writeable = False
 #: every reading by its (percentile, grid, window)
 _READING = {(r.percentile, r.grid, r.window): r for r in READINGS}
 _READING_ID = {r: r.id for r in READINGS}
@@ -133,6 +144,24 @@ def _scratch(n: int) -> np.ndarray:
     if buf is None or buf.size < n:
         buf = _SCRATCH.buf = np.empty(max(n, 1 << 17))
     return buf[:n]
+
+
+@functools.lru_cache(maxsize=256)
+def _sliding_recipe(n_cs: tuple[int, ...], methods: tuple[str, ...]) -> tuple:
+    """The order statistics the sliding-mean percentiles of grids of ``n_cs`` windows read
+    and how (:func:`railval.core.definitions.percentile_recipe` of each grid, stacked for
+    the compiled step): ``(ranks, n_ranks, (cols, mode, g, 1 − g))``, ``ranks[q,
+    :n_ranks[q]]`` those of grid q. Formed once per numbers of windows (the arrays must not
+    be written to)."""
+    recs = [percentile_recipe(c, _END_PERCENTILES, methods) for c in n_cs]
+    n_ranks = np.array([r[0].size for r in recs], dtype=np.int64)
+    ranks = np.zeros((len(recs), int(n_ranks.max())), np.int64)
+    for q, r in enumerate(recs):
+        ranks[q, :r[0].size] = r[0]
+    recipe = tuple(np.stack([r[i] for r in recs]) for i in range(1, 5))
+    for a in (ranks, n_ranks, *recipe):
+        a.flags.writeable = False
+    return ranks, n_ranks, recipe
 
 
 @functools.lru_cache(maxsize=64)
@@ -210,10 +239,12 @@ class SectionState:
         k = self.ranks.size
         m = len(self.methods)
         self.out_lp = np.empty((self.sel.size + n_der, k))
-        self.out_bp = np.empty((0 if self.bp is None else self.bp.shape[0], k))
-        self.out_rms = np.empty(self.out_bp.shape[0])
+        self.bp_recipe = percentile_recipe(self.n_eval, _END_PERCENTILES, self.methods)
+        n_bp = 0 if self.bp is None else self.bp.shape[0]
+        self.out_bp = np.empty((n_bp, self.bp_recipe[0].size))
+        self.out_rms = np.empty(n_bp)
         self.pct_lp = np.empty((m, self.out_lp.shape[0], 3))
-        self.pct_bp = np.empty((m, self.out_bp.shape[0], 3))
+        self.pct_bp = np.empty((m, n_bp, len(_END_PERCENTILES)))
         self._window_ends(n_der)
 
     def _window_ends(self, n_der: int) -> None:
@@ -251,17 +282,12 @@ class SectionState:
                     sizes = [c for c in n_cs for _ in range(2)]
                     self.win_lo = np.empty(2 * total, np.int64)
                     self.win_hi = np.empty(2 * total, np.int64)
-                recs = [percentile_recipe(c, PERCENTILES, self.methods) for c in n_cs]
-                self.s_n_ranks = np.array([r[0].size for r in recs], dtype=np.int64)
-                self.s_ranks = np.zeros((len(recs), int(self.s_n_ranks.max())), np.int64)
-                for q, r in enumerate(recs):
-                    self.s_ranks[q, :r[0].size] = r[0]
-                self.s_recipe = tuple(np.stack([r[i] for r in recs]) for i in range(1, 5))
+                self.s_ranks, self.s_n_ranks, self.s_recipe = _sliding_recipe(
+                    tuple(n_cs), self.methods)
                 n_var = len(n_cs) * (3 if self.with_alternatives else 1)
         if not n_var:
-            self.s_ranks, self.s_n_ranks = _NO_RANKS, _NO_INTS
-            self.s_recipe = _NO_RECIPE
-        self.s_pct = np.empty((n_var, m, n_der, 3))
+            self.s_ranks, self.s_n_ranks, self.s_recipe = _NO_SLIDING_RECIPE
+        self.s_pct = np.empty((n_var, m, n_der, len(_END_PERCENTILES)))
         self.s_bad = np.empty((n_var, n_der), dtype=np.bool_)
         self.at = _NO_ROWS
         self.sampled = (sizes, _NO_ROWS)
@@ -276,9 +302,9 @@ class SectionState:
                                STEP_M) for o in self.origins]
 
     def run(self) -> None:
-        """The compiled step (releases the GIL; sections run on the cores in parallel), then
-        the sliding means of every reading sorted row by row (numpy's sort, also without
-        the GIL, into this thread's scratch rows) and their percentiles read off."""
+        """The compiled step (releases the GIL; sections run on the cores in parallel): the
+        sliding means of every reading formed into this thread's scratch rows and their
+        percentiles read off the order statistics selected from them."""
         if self.error is not None:
             return
         n_var, rows = self.s_bad.shape
@@ -291,14 +317,9 @@ class SectionState:
             self.wide.start, self.ranks, self.derived, self.out_lp, self.out_bp,
             self.out_rms, self.d, self.j, self.u, self.at, self.win_lo,
             self.win_hi, self.sampled[1], self.origins, self.n_cs, WINDOW_M, STEP_M,
-            self.recipe, self.pct_lp, self.pct_bp, means, self.s_bad, slot)
+            self.recipe, self.bp_recipe, self.pct_lp, self.pct_bp, means, self.s_bad, slot,
+            self.s_ranks, self.s_n_ranks, self.s_recipe, self.s_pct)
         self.zero_q = max(ret, -1)
-        if ret < -1:  # −2 − the slots of sliding means formed
-            srt = means[:(-2 - ret) * rows]
-            srt.sort(axis=-1)
-            _sliding_percentiles(srt, self.n_cs, n_var // self.n_cs.size, slot,
-                                 self.s_ranks, self.s_n_ranks, *self.s_recipe, self.s_bad,
-                                 self.s_pct)
 
     def release(self) -> None:
         """Drop the rows once the values are formed (a batch keeps only the values)."""
@@ -498,7 +519,7 @@ def _sliding_values_compiled(st: SectionState, keys: list[tuple[str, str]],
     not all finite — the values and the order of :func:`_sliding_values`."""
     sec = st.sec
     pct, bad = st.s_pct, st.s_bad
-    vals = maxabs(pct[..., 0], pct[..., 2])
+    vals = maxabs(pct[..., 0], pct[..., 1])
     if bad.any():
         vals[np.broadcast_to(bad[:, None, :], vals.shape)] = np.nan
     chosen = vals[0, 0].tolist()
@@ -566,8 +587,8 @@ def _bandpass_values(st: SectionState) -> None:
     bp_label = st.settle("bandpass")
     pct, pct_lin = st.pct_bp[0], st.pct_bp[-1]
     rmsv = st.out_rms.tolist()
-    mx = maxabs(pct[:, 0], pct[:, 2]).tolist()
-    mx_lin = maxabs(pct_lin[:, 0], pct_lin[:, 2]).tolist()
+    mx = maxabs(pct[:, 0], pct[:, 1]).tolist()
+    mx_lin = maxabs(pct_lin[:, 0], pct_lin[:, 1]).tolist()
     values, prov, supp = st.values, st.prov, st.supp
     alt_keys, alt_vals = [], []
     for r, name in enumerate(st.plan.bp_names):

@@ -1,6 +1,7 @@
-"""The compiled readings of the EN statistics (window ends, percentile recipes, the sliding
-percentiles of every reading) give the same numbers, bit for bit, as the numpy code they
-replace (which stays as the path of the sections the compiled one does not take)."""
+"""The compiled readings of the EN statistics (window ends, percentile recipes, the order
+statistics at the ends of a row, the sliding percentiles of every reading) give the same
+numbers, bit for bit, as the numpy code they replace (which stays as the path of the
+sections the compiled one does not take)."""
 
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from railval.core.definitions import (
     window_centres,
 )
 from railval.core.en14363 import evaluate_batch
-from railval.core.en_kernels import _rows_percentiles, _window_bounds
+from railval.core.en_kernels import _row_extremes, _rows_percentiles, _window_bounds
 from railval.core.en_statistics import PERCENTILES, _window_ends
 from railval.core.types import SignalSet
 from tests import en_frozen
@@ -35,6 +36,21 @@ def test_percentile_recipe_reads_what_sorted_percentiles_reads(n):
         for m, method in enumerate(methods):
             want = sorted_percentiles(rows, PERCENTILES, method)
             assert out[m].tobytes() == want.tobytes(), (n, method)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 8, 40, 1011, 5000])
+def test_row_extremes_are_the_ends_of_the_sorted_row(n):
+    rng = np.random.default_rng(n)
+    rows = [rng.normal(size=n), np.arange(n, dtype=np.float64), np.arange(n, 0, -1.0),
+            rng.integers(-2, 3, size=n).astype(np.float64), np.full(n, 1.5)]
+    for x in rows:
+        srt = np.sort(x)
+        for n_lo, n_hi in ((0, 1), (1, 0), (1, 1), (min(3, n), min(4, n)), (n, n),
+                           (n // 2, n - n // 2)):
+            lo, hi = np.empty(max(n_lo, 1)), np.empty(max(n_hi, 1))
+            _row_extremes(x, n_lo, n_hi, lo, hi)
+            assert lo[:n_lo].tobytes() == srt[:n_lo].tobytes()
+            assert hi[:n_hi].tobytes() == srt[n - n_hi:].tobytes()
 
 
 def _axis(rng, n, spacing, lattice):
