@@ -28,7 +28,7 @@ def test_warm_compiles_what_a_validation_needs(tmp_path, demo_campaign_dir):
     seconds = json.loads(out.stdout)
     assert set(seconds) == {"import_s", "codec_s", "en_chain_s", "total_s"}
     files = _cache_files(cache)
-    for module in ("filters", "en_kernels", "codec"):  # the kernels of the EN chain and the codec
+    for module in ("filters", "en_kernels", "codec_planes"):  # the EN chain and the codec
         assert any(f"{module}." in name and name.endswith(".nbc") for name in files), (module, files)
 
     for verb in (["init"], ["import", str(demo_campaign_dir)]):

@@ -240,6 +240,9 @@ def _warm_kernels(order: int) -> None:
     channels |= {f"{k}_cb_{b}": 0.3 * noise for b in BODY_POSITIONS for k in ("ay", "az")}
     en14363.evaluate_batch([SignalSet(fs, t, 25.0 * t, channels)],
                            [SectionInfo("warm-up", 0.0, 0.0, 90.0, 1, 10.0, 90.0)], order=order)
+    from railval.db import codec
+
+    codec.decode(*codec.encode(noise))  # the codec's kernel (db/codec_planes.py)
     _WORKER_WARM.add(order)
 
 

@@ -2,7 +2,8 @@
 separate low-priority process started by ``railval serve``.
 
 The EN chain (:mod:`railval.core.filters`, :mod:`railval.core.en_kernels`,
-:mod:`railval.core.en14363`) and the blob codec (:mod:`railval.db.codec`) are numba kernels
+:mod:`railval.core.en14363`), the blob codec (:mod:`railval.db.codec_planes`) and the
+verdict's bootstrap (:mod:`railval.core.bootstrap`) are numba kernels
 cached on disk (``cache=True``: ``__pycache__`` beside the module, or numba's per-user cache
 directory when the installation is read-only). The first run after an installation compiles
 them: about 25 s of one core on the 2-core reference machine, which the first user to press
@@ -13,7 +14,7 @@ compiled; when they already are, the child only loads them (≈ 1 CPU-s) and exi
 :func:`warm` goes the way a validation goes: arrays of every channel kind are encoded and
 decoded by the codec (hash checked), then one batch of sections of every filter need runs
 through :func:`railval.core.en14363.evaluate_batch` at the default filter order, with the
-definition alternatives and supplementary values, so the kernels are compiled for the types a
+definition alternatives and supplementary values, and one bootstrap of a verdict, so the kernels are compiled for the types a
 stored campaign gives them (tests/test_warmup.py checks that a validation afterwards compiles
 nothing new). No database is opened and nothing is written except numba's cache.
 
@@ -71,6 +72,11 @@ def warm() -> dict[str, float]:
     sets, infos = _sections(np.random.default_rng(0))
     t_codec = time.perf_counter()
     evaluate_batch(sets, infos)
+    # the verdict's bootstrap kernel, for the index arrays a validation gives it
+    from railval.core.bootstrap import bootstrap_norm_ci
+
+    bootstrap_norm_ci(np.random.default_rng(1).standard_normal(17), 1.0, 1.0, n_boot=1000,
+                      seed_key=(0, 17))
     t_en = time.perf_counter()
     return {"import_s": round(t_import - t0, 3), "codec_s": round(t_codec - t_import, 3),
             "en_chain_s": round(t_en - t_codec, 3), "total_s": round(t_en - t0, 3)}
