@@ -29,13 +29,17 @@ Decoding inflates with libdeflate (``deflate``) or ISA-L (``isal.isal_zlib``), w
 installed, in that order, else the standard :mod:`zlib` — the same stream format, identical
 bytes; both come with ``asammdf`` (the ``formats`` extra). On the 714 compressed planes of
 one source of the 6-configuration bench database they take 0.030 and 0.032 CPU-s against
-0.066 s for :mod:`zlib`. The byte planes of an 8-byte dtype are joined by one compiled pass
-(:func:`_interleave8`, numba, compiled on first use: importing this module does not import
-numba) straight into the output array. :func:`decode_many` decodes a list of blobs on the
-shared row threads (:func:`railval.core.workers.split_rows`): SHA-256 (:mod:`hashlib`) and
-the join release the GIL, so the hash of one blob overlaps the inflate of another. Neither
-libdeflate's nor ISA-L's Python binding releases the GIL (two threads inflating 20 kB
-planes take as long as one; two threads hashing take half the time).
+0.066 s for :mod:`zlib`. With libdeflate, a well-formed codec-2 blob of an 8-byte dtype is
+decoded by one compiled call (:mod:`railval.db.codec_planes`: plane table, libdeflate's
+inflate called by address without the GIL, join straight into the output array); otherwise
+the byte planes are inflated by the binding and joined by one compiled pass
+(:func:`_interleave8`), and an irregular payload raises its error there. numba is imported on
+first use: importing this module does not import it. :func:`decode_many` decodes a list of
+blobs on the shared row threads (:func:`railval.core.workers.split_rows`): SHA-256
+(:mod:`hashlib`), the compiled decode and the join release the GIL, so the hash of one blob
+overlaps the decode of another. Neither libdeflate's nor ISA-L's Python binding releases the
+GIL (two threads inflating 20 kB planes take as long as one; two threads hashing take half
+the time).
 """
 
 from __future__ import annotations
