@@ -217,6 +217,12 @@ def _float_of_bits(bits: int) -> float:
     return struct.unpack("<d", struct.pack("<q", int(bits)))[0]
 
 
+def _bits_of(value: float) -> int:
+    """The bits of a non-negative float64 as :func:`_peak_bits` gives them (their order is
+    that of the values; every NaN and +inf lie above a finite limit)."""
+    return struct.unpack("<q", struct.pack("<d", float(value)))[0]
+
+
 def _scan_signalsets(signalsets: Sequence[SignalSet]) -> list[tuple[bool | None, dict]]:
     """Per section: whether ``distance_m`` is strictly increasing (None: not scanned) and the
     peak bits (:func:`_peak_bits`) of its float64 channels — one integer pass per channel,
@@ -258,7 +264,11 @@ def _check_signalset(ss: SignalSet, sec: SectionInfo,
         increasing = n >= 2 and bool(np.all(np.diff(d) > 0))
     if n < 2 or not increasing:
         raise InvalidSignal(f"section {sec.id}: distance_m must be strictly increasing")
+    limit = _bits_of(MAX_ABS_SAMPLE)
     for name, arr in ss.channels.items():
+        bits = peaks.get(name)
+        if bits is not None and bits <= limit and arr.shape == (n,):
+            continue  # scanned (a float64 array): finite and within the limit
         if np.shape(arr) != (n,):
             raise InvalidSignal(
                 f"section {sec.id}: channel {name} has shape {np.shape(arr)}, expected ({n},)")
