@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import itertools
 import json
 import struct
 import time
@@ -216,6 +217,12 @@ def _float_of_bits(bits: int) -> float:
     return struct.unpack("<d", struct.pack("<q", int(bits)))[0]
 
 
+def _bits_of(value: float) -> int:
+    """The bits of a non-negative float64 as :func:`_peak_bits` gives them (their order is
+    that of the values; every NaN and +inf lie above a finite limit)."""
+    return struct.unpack("<q", struct.pack("<d", float(value)))[0]
+
+
 def _scan_signalsets(signalsets: Sequence[SignalSet]) -> list[tuple[bool | None, dict]]:
     """Per section: whether ``distance_m`` is strictly increasing (None: not scanned) and the
     peak bits (:func:`_peak_bits`) of its float64 channels — one integer pass per channel,
@@ -257,7 +264,11 @@ def _check_signalset(ss: SignalSet, sec: SectionInfo,
         increasing = n >= 2 and bool(np.all(np.diff(d) > 0))
     if n < 2 or not increasing:
         raise InvalidSignal(f"section {sec.id}: distance_m must be strictly increasing")
+    limit = _bits_of(MAX_ABS_SAMPLE)
     for name, arr in ss.channels.items():
+        bits = peaks.get(name)
+        if bits is not None and bits <= limit and arr.shape == (n,):
+            continue  # scanned (a float64 array): finite and within the limit
         if np.shape(arr) != (n,):
             raise InvalidSignal(
                 f"section {sec.id}: channel {name} has shape {np.shape(arr)}, expected ({n},)")
@@ -557,22 +568,34 @@ def pack_values(values: SectionValues) -> bytes:
     stored as NaN, as the former JSON form did). The layout is the same for every section
     with the same channels, so :func:`unpack_values` parses it once."""
     alts = values.alternatives
-    layout = json.dumps([[list(k) for k in values],
-                         [[rid, [list(k) for k in vals]] for rid, vals in alts.items()],
-                         [list(k) for k in values.supplementary]]).encode()
-    main = np.fromiter(values.values(), dtype=np.float64, count=len(values))
-    supp = np.fromiter(values.supplementary.values(), dtype=np.float64,
-                       count=len(values.supplementary))
-    if not (np.isfinite(main).all() and np.isfinite(supp).all()):
+    supp_vals = values.supplementary
+    shape = (tuple(values), tuple((rid, tuple(vals)) for rid, vals in alts.items()),
+             tuple(supp_vals))
+    layout = _LAYOUTS.get(shape)
+    if layout is None:
+        layout = json.dumps([[list(k) for k in shape[0]],
+                             [[rid, [list(k) for k in keys]] for rid, keys in shape[1]],
+                             [list(k) for k in shape[2]]]).encode()
+        if len(_LAYOUTS) >= 256:
+            _LAYOUTS.clear()
+        _LAYOUTS[shape] = layout
+    n_main, n_supp = len(values), len(supp_vals)
+    n_alt = sum(len(vals) for vals in alts.values())
+    flat = np.fromiter(itertools.chain(values.values(), supp_vals.values(),
+                                       *(vals.values() for vals in alts.values())),
+                       dtype=np.float64, count=n_main + n_supp + n_alt)
+    if not np.isfinite(flat[:n_main + n_supp]).all():
         raise ValueError(f"section {values.section_id}: a value is not finite")
-    parts = [main]
-    for vals in alts.values():
-        a = np.fromiter(vals.values(), dtype=np.float64, count=len(vals))
-        parts.append(np.where(np.isfinite(a), a, np.nan))
-    parts.append(supp)
-    warnings = json.dumps(values.warnings).encode()
-    return b"".join([_PACK_HEAD.pack(_PACK_MAGIC, len(layout), len(warnings)), layout,
-                     warnings, np.concatenate(parts).astype("<f8").tobytes()])
+    alt = flat[n_main + n_supp:]
+    warnings = json.dumps(values.warnings).encode() if values.warnings else b"[]"
+    return b"".join([_PACK_HEAD.pack(_PACK_MAGIC, len(layout), len(warnings)), layout, warnings,
+                     flat[:n_main].astype("<f8").tobytes(),
+                     np.where(np.isfinite(alt), alt, np.nan).astype("<f8").tobytes(),
+                     flat[n_main:n_main + n_supp].astype("<f8").tobytes()])
+
+
+#: layout JSON of :func:`pack_values` by its keys (sections with the same channels share it)
+_LAYOUTS: dict[tuple, bytes] = {}
 
 
 @functools.lru_cache(maxsize=256)

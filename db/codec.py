@@ -268,16 +268,17 @@ def decode(blob: bytes, expected_sha: str | None = None) -> np.ndarray:
     return _decode_cached(blob, expected_sha, None)
 
 
-def _decode_cached(blob, expected_sha: str | None, out: np.ndarray | None) -> np.ndarray:
-    """:func:`decode` through :data:`VERIFIED` (``out``: see :func:`_decode`)."""
+def _decode_cached(blob, expected_sha: str | None, out: np.ndarray | None,
+                   head: tuple | None = None) -> np.ndarray:
+    """:func:`decode` through :data:`VERIFIED` (``out``, ``head``: see :func:`_decode`)."""
     if expected_sha is None or VERIFIED.limit_bytes <= 0:
-        return _decode(blob, expected_sha, out)
+        return _decode(blob, expected_sha, out, head)
     found = VERIFIED.lookup(blob, expected_sha)
     if found is False:
-        array = _decode(blob, expected_sha, out)
+        array = _decode(blob, expected_sha, out, head)
         VERIFIED.mark(blob, expected_sha)
     elif found is True:  # this very blob was verified before: decode, keep the array
-        array = _decode(blob, None, out)
+        array = _decode(blob, None, out, head)
         VERIFIED.put(blob, expected_sha, array)
     else:
         array = found
@@ -307,14 +308,14 @@ def decode_many(items: Sequence[tuple[bytes, str | None]]) -> list[np.ndarray]:
     Raises :class:`BlobError` for the first failing item in list order.
     """
     n = len(items)
-    out = _preallocate(items)
+    out, heads = _preallocate(items)
     failed: list[tuple[int, str]] = []
     taken = itertools.count()  # next() is atomic under the GIL
 
     def work(_start: int, _stop: int) -> None:
         while not failed and (i := next(taken)) < n:
             try:
-                out[i] = _decode_cached(items[i][0], items[i][1], out[i])
+                out[i] = _decode_cached(items[i][0], items[i][1], out[i], heads[i])
             except InvalidSignal as exc:
                 failed.append((i, str(exc)))
 
@@ -332,9 +333,11 @@ def decode_many(items: Sequence[tuple[bytes, str | None]]) -> list[np.ndarray]:
     return out
 
 
-def _preallocate(items: Sequence[tuple[bytes, str | None]]) -> list[np.ndarray | None]:
+def _preallocate(items: Sequence[tuple[bytes, str | None]]
+                 ) -> tuple[list[np.ndarray | None], list[tuple | None]]:
     """Output arrays for the codec-2 blobs of ``items``: rows of one block per dtype and
-    shape (``None`` for the others, and for a blob whose header does not parse).
+    shape (``None`` for the others, and for a blob whose header does not parse), and the
+    parsed header (:func:`_header`) of each blob (``None`` where it does not parse).
 
     One large allocation instead of one per blob: the kernel maps fresh memory for both, but
     a block of many signals is mapped with far fewer page faults (transparent huge pages;
@@ -344,11 +347,13 @@ def _preallocate(items: Sequence[tuple[bytes, str | None]]) -> list[np.ndarray |
     released (or free for reuse) when no row is referenced any more.
     """
     groups: dict[tuple[np.dtype, tuple[int, ...]], list[int]] = {}
+    heads: list[tuple | None] = [None] * len(items)
     for i, (blob, _sha) in enumerate(items):
         try:
-            codec, dtype, shape, _size, _pos = _header(memoryview(blob))
+            heads[i] = head = _header(memoryview(blob))
         except InvalidSignal:
             continue  # decoding it reports the problem
+        codec, dtype, shape = head[:3]
         if codec == CODEC_PLANES:
             groups.setdefault((dtype, shape), []).append(i)
     out: list[np.ndarray | None] = [None] * len(items)
@@ -359,7 +364,7 @@ def _preallocate(items: Sequence[tuple[bytes, str | None]]) -> list[np.ndarray |
             block = _BLOCKS.take((len(part), *shape), dtype)
             for row, i in enumerate(part):
                 out[i] = block[row]
-    return out
+    return out, heads
 
 
 #: bytes per preallocated output block of :func:`decode_many`
@@ -418,11 +423,13 @@ def _header(mv: memoryview) -> tuple[int, np.dtype, tuple[int, ...], int, int]:
 _DTYPES: dict[bytes, np.dtype] = {}
 
 
-def _decode(blob: bytes, expected_sha: str | None, out: np.ndarray | None = None) -> np.ndarray:
+def _decode(blob: bytes, expected_sha: str | None, out: np.ndarray | None = None,
+            head: tuple | None = None) -> np.ndarray:
     """Decode (and with ``expected_sha`` verify) one blob; a codec-2 blob is written into
-    ``out`` when that is a C-contiguous array of its dtype and shape (else a new array)."""
+    ``out`` when that is a C-contiguous array of its dtype and shape (else a new array).
+    ``head``: the blob's :func:`_header` when already parsed."""
     mv = memoryview(blob)
-    codec, dtype, shape, size, pos = _header(mv)
+    codec, dtype, shape, size, pos = _header(mv) if head is None else head
     nbytes = size * dtype.itemsize
     if codec == CODEC_PLANES:
         if out is None or out.shape != shape or out.dtype != dtype or not out.flags.c_contiguous:
