@@ -33,7 +33,7 @@ one source of the 6-configuration bench database they take 0.030 and 0.032 CPU-s
 decoded by one compiled call (:mod:`railval.db.codec_planes`: plane table, libdeflate's
 inflate called by address without the GIL, join straight into the output array); otherwise
 the byte planes are inflated by the binding and joined by one compiled pass
-(:func:`_interleave8`), and an irregular payload raises its error there. numba is imported on
+(:func:`railval.db.codec_planes.interleave8`), and an irregular payload raises its error there. numba is imported on
 first use: importing this module does not import it. :func:`decode_many` decodes a list of
 blobs on the shared row threads (:func:`railval.core.workers.split_rows`): SHA-256
 (:mod:`hashlib`), the compiled decode and the join release the GIL, so the hash of one blob
@@ -474,9 +474,9 @@ def _join_planes(mv: memoryview, pos: int, out: np.ndarray) -> None:
     Raw planes are read in place in the blob; the compressed ones are inflated. With
     libdeflate, an 8-byte dtype is decoded by one compiled call
     (:func:`railval.db.codec_planes.join8`: plane table, inflate and join). Otherwise an
-    8-byte dtype is joined by :func:`_interleave8` in one pass (≈ 14 µs for 20 000 elements against
-    ≈ 55 µs for eight strided numpy copies); other sizes write each plane into its byte
-    column (a strided uint8 copy).
+    8-byte dtype is joined by :func:`railval.db.codec_planes.interleave8` in one pass
+    (≈ 14 µs for 20 000 elements against ≈ 55 µs for eight strided numpy copies); other
+    sizes write each plane into its byte column (a strided uint8 copy).
     """
     itemsize, size = out.dtype.itemsize, out.size
     if itemsize == 8 and size and _LITTLE and inflate is _libdeflate_inflate:
@@ -521,7 +521,9 @@ def _fill_planes(out: np.ndarray, src: np.ndarray, inflated: list[bytes],
     extra = np.frombuffer(inflated[0] if len(inflated) == 1 else b"".join(inflated) or b"\0",
                           np.uint8)
     if out.dtype.itemsize == 8 and _LITTLE:
-        _interleave8_kernel()(out.view(np.uint64), src, extra, np.array(offsets, np.int64))
+        from railval.db.codec_planes import interleave8  # imports numba on first use
+
+        interleave8(out.view(np.uint64), src, extra, np.array(offsets, np.int64))
         return
     size = out.size
     cols = out.view(np.uint8).reshape(size, out.dtype.itemsize)
@@ -529,51 +531,15 @@ def _fill_planes(out: np.ndarray, src: np.ndarray, inflated: list[bytes],
         cols[:, k] = src[o : o + size] if o >= 0 else extra[-1 - o : -1 - o + size]
 
 
-def _interleave8(out, src, extra, offsets):  # pragma: no cover - compiled by numba
-    """``out[i]`` = the 8 bytes ``plane_k[i]`` (k = 0 … 7, little-endian) of a codec-2
-    payload; plane k is ``src[offsets[k]:]`` when ``offsets[k] ≥ 0``, else
-    ``extra[-1 - offsets[k]:]`` (the byte shuffle of the module docstring, undone)."""
-    n = out.size
-    o0, o1, o2, o3 = offsets[0], offsets[1], offsets[2], offsets[3]
-    o4, o5, o6, o7 = offsets[4], offsets[5], offsets[6], offsets[7]
-    p0 = src[o0:o0 + n] if o0 >= 0 else extra[-1 - o0:-1 - o0 + n]
-    p1 = src[o1:o1 + n] if o1 >= 0 else extra[-1 - o1:-1 - o1 + n]
-    p2 = src[o2:o2 + n] if o2 >= 0 else extra[-1 - o2:-1 - o2 + n]
-    p3 = src[o3:o3 + n] if o3 >= 0 else extra[-1 - o3:-1 - o3 + n]
-    p4 = src[o4:o4 + n] if o4 >= 0 else extra[-1 - o4:-1 - o4 + n]
-    p5 = src[o5:o5 + n] if o5 >= 0 else extra[-1 - o5:-1 - o5 + n]
-    p6 = src[o6:o6 + n] if o6 >= 0 else extra[-1 - o6:-1 - o6 + n]
-    p7 = src[o7:o7 + n] if o7 >= 0 else extra[-1 - o7:-1 - o7 + n]
-    for i in range(n):
-        out[i] = (np.uint64(p0[i]) | (np.uint64(p1[i]) << 8) | (np.uint64(p2[i]) << 16)
-                  | (np.uint64(p3[i]) << 24) | (np.uint64(p4[i]) << 32)
-                  | (np.uint64(p5[i]) << 40) | (np.uint64(p6[i]) << 48)
-                  | (np.uint64(p7[i]) << 56))
-
-
-_KERNEL: list = []
-_KERNEL_LOCK = threading.Lock()
-
-
-def _interleave8_kernel():
-    """:func:`_interleave8` compiled (``numba.njit(cache=True, nogil=True)``) on first use."""
-    if not _KERNEL:
-        with _KERNEL_LOCK:
-            if not _KERNEL:
-                import numba
-
-                _KERNEL.append(numba.njit(cache=True, nogil=True)(_interleave8))
-    return _KERNEL[0]
-
-
 _PLANES: list = []
+_PLANES_LOCK = threading.Lock()
 
 
 def _planes_module():
     """:mod:`railval.db.codec_planes` (imported on first use: it imports numba), or ``None``
     when libdeflate's symbols are not found."""
     if not _PLANES:
-        with _KERNEL_LOCK:
+        with _PLANES_LOCK:
             if not _PLANES:
                 from railval.db import codec_planes
 

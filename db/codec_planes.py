@@ -55,6 +55,30 @@ def _call_inflate(typingctx, fn, dec, src, src_len, dst, dst_len, actual):
 
 
 @numba.njit(cache=True, nogil=True)
+def interleave8(out, src, extra, offsets):  # pragma: no cover - compiled
+    """``out[i]`` = the 8 bytes ``plane_k[i]`` (k = 0 … 7, little-endian) of a codec-2
+    payload; plane k is ``src[offsets[k]:]`` when ``offsets[k] ≥ 0``, else
+    ``extra[-1 - offsets[k]:]`` (the byte shuffle of :mod:`railval.db.codec`, undone). The
+    join of :func:`_join8` and of the codec's interpreted plane path."""
+    n = out.size
+    o0, o1, o2, o3 = offsets[0], offsets[1], offsets[2], offsets[3]
+    o4, o5, o6, o7 = offsets[4], offsets[5], offsets[6], offsets[7]
+    p0 = src[o0:o0 + n] if o0 >= 0 else extra[-1 - o0:-1 - o0 + n]
+    p1 = src[o1:o1 + n] if o1 >= 0 else extra[-1 - o1:-1 - o1 + n]
+    p2 = src[o2:o2 + n] if o2 >= 0 else extra[-1 - o2:-1 - o2 + n]
+    p3 = src[o3:o3 + n] if o3 >= 0 else extra[-1 - o3:-1 - o3 + n]
+    p4 = src[o4:o4 + n] if o4 >= 0 else extra[-1 - o4:-1 - o4 + n]
+    p5 = src[o5:o5 + n] if o5 >= 0 else extra[-1 - o5:-1 - o5 + n]
+    p6 = src[o6:o6 + n] if o6 >= 0 else extra[-1 - o6:-1 - o6 + n]
+    p7 = src[o7:o7 + n] if o7 >= 0 else extra[-1 - o7:-1 - o7 + n]
+    for i in range(n):
+        out[i] = (np.uint64(p0[i]) | (np.uint64(p1[i]) << 8) | (np.uint64(p2[i]) << 16)
+                  | (np.uint64(p3[i]) << 24) | (np.uint64(p4[i]) << 32)
+                  | (np.uint64(p5[i]) << 40) | (np.uint64(p6[i]) << 48)
+                  | (np.uint64(p7[i]) << 56))
+
+
+@numba.njit(cache=True, nogil=True)
 def _join8(out, src, pos, scratch, actual, fn, dec):  # pragma: no cover - compiled
     """Decode the codec-2 payload ``src[pos:]`` of ``out.size`` 8-byte elements into the
     uint64 array ``out``; 0 on success, else 1 (``out`` then holds anything). ``scratch``:
@@ -94,21 +118,7 @@ def _join8(out, src, pos, scratch, actual, fn, dec):  # pragma: no cover - compi
         pos += length
     if pos != end:
         return 1
-    o0, o1, o2, o3 = offsets[0], offsets[1], offsets[2], offsets[3]
-    o4, o5, o6, o7 = offsets[4], offsets[5], offsets[6], offsets[7]
-    p0 = src[o0:o0 + n] if o0 >= 0 else scratch[-1 - o0:-1 - o0 + n]
-    p1 = src[o1:o1 + n] if o1 >= 0 else scratch[-1 - o1:-1 - o1 + n]
-    p2 = src[o2:o2 + n] if o2 >= 0 else scratch[-1 - o2:-1 - o2 + n]
-    p3 = src[o3:o3 + n] if o3 >= 0 else scratch[-1 - o3:-1 - o3 + n]
-    p4 = src[o4:o4 + n] if o4 >= 0 else scratch[-1 - o4:-1 - o4 + n]
-    p5 = src[o5:o5 + n] if o5 >= 0 else scratch[-1 - o5:-1 - o5 + n]
-    p6 = src[o6:o6 + n] if o6 >= 0 else scratch[-1 - o6:-1 - o6 + n]
-    p7 = src[o7:o7 + n] if o7 >= 0 else scratch[-1 - o7:-1 - o7 + n]
-    for i in range(n):
-        out[i] = (np.uint64(p0[i]) | (np.uint64(p1[i]) << 8) | (np.uint64(p2[i]) << 16)
-                  | (np.uint64(p3[i]) << 24) | (np.uint64(p4[i]) << 32)
-                  | (np.uint64(p5[i]) << 40) | (np.uint64(p6[i]) << 48)
-                  | (np.uint64(p7[i]) << 56))
+    interleave8(out, src, scratch, offsets)
     return 0
 
 
