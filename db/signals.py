@@ -101,6 +101,11 @@ def fetch_signalsets(
     (:func:`_fetch_statement`; the campaign, configuration, sections and channels are bound
     parameters), not per call: building and keying it cost ≈ 3 ms a chunk.
 
+    The returned function carries ``read`` = [(recording id, section id, channel or None
+    for the distance axis, content hash, fs, t0, n)] of the rows read, for a caller that derived
+    its cache keys and checked the seals from rows it read before (the validation service
+    compares them: the blobs decoded are those the keys and seals name).
+
     ``seals=True`` also reads each signal row's seal (``provenance["seal"]``, stored after
     the blob: on SQLite the row's overflow chain is walked for the content hash anyway);
     the returned function then carries ``seals`` = [(recording id, channel, content hash,
@@ -128,6 +133,8 @@ def fetch_signalsets(
 
     src_name = "measurement" if config is None else f"configuration {config_name(config)!r}"
     decode = _decoder(rows, verify, f"campaign {c.name!r}, {src_name}")
+    decode.read = [(r[1], r[0], r[5] if r[8] else None, r[7], r[2], r[3], r[4])
+                   for r in rows]
     if seals:
         decode.seals = [(r[1], r[5], r[7], r[9]) for r in rows if r[8]]
     return decode

@@ -125,7 +125,8 @@ def _pipeline_chunks(todo: Sequence[tuple[Any, list[str]]]) -> list[tuple[Any, l
 
 
 def _read_and_process(session: Session, camp, todo: Sequence[tuple[Any, list[str]]],
-                      by_id: dict[str, SectionInfo], order: int, while_processing=None
+                      by_id: dict[str, SectionInfo], order: int, while_processing=None,
+                      on_read=None
                       ) -> dict[tuple[Any, str], tuple[en14363.SectionValues, bytes]]:
     """Read, decode and process the sections ``todo`` = [(source ref or None, section ids)]
     of one or more sources as one pipeline: (source, section id) → (values, packed values).
@@ -137,7 +138,9 @@ def _read_and_process(session: Session, camp, todo: Sequence[tuple[Any, list[str
     hand-overs with this thread (every inflate and plane copy releases the GIL); two of them
     overlap one chunk's decode with the Python parts of another's EN chain.
     ``while_processing()`` runs once every chunk is read (here, while the threads
-    process); when it raises, the remaining chunks are dropped."""
+    process); ``on_read(decode)`` after each chunk is read (``decode`` of
+    :func:`railval.db.repo.fetch_signalsets`); when either raises, the remaining chunks are
+    dropped."""
     chunks = _pipeline_chunks(todo)
     threads = min(_PIPELINE_THREADS, len(chunks))
     row = max(1, thread_count() // threads)
@@ -148,6 +151,8 @@ def _read_and_process(session: Session, camp, todo: Sequence[tuple[Any, list[str
                 with stage("database"):
                     decode = repo.fetch_signalsets(session, camp, source, sections=chunk,
                                                    verify=True)
+                    if on_read is not None:
+                        on_read(decode)
                 pending.append((source, chunk, pool.submit(
                     in_context(_decode_and_evaluate), decode, [by_id[s] for s in chunk],
                     order, row)))
@@ -352,19 +357,30 @@ def _plan_keys(session: Session, camp, refs: list, sections: Sequence[SectionInf
     is walked before the workers start; :func:`_require_seals` reads and checks the seals
     while they process)."""
     rows = repo.hash_rows_many(session, camp, [r.id for r in refs])
+    return _keys_from_rows(rows, [(None, None), *((r.name, r.id) for r in refs)], sections,
+                           order), rows
+
+
+def _keys_from_rows(rows: tuple[list, dict], sources: list[tuple[str | None, int | None]],
+                    sections: Sequence[SectionInfo], order: int
+                    ) -> dict[tuple[str | None, str], str]:
+    """(source name, section id) → result-cache key (:func:`section_cache_key`, as
+    :func:`source_cache_keys` makes it) of the sources ``[(name, configuration id or None
+    for the measurement)]``, from their signal rows ``rows`` (the form of
+    :func:`railval.db.repo.seal_rows_many`)."""
     recs, by_rec = rows
     per_source: dict[int | None, list] = {}
     for rec in recs:
         per_source.setdefault(rec[2], []).append(rec)
     by_id = {s.id: s for s in sections}
     keys: dict[tuple[str | None, str], str] = {}
-    for name, cid in [(None, None), *((r.name, r.id) for r in refs)]:
+    for name, cid in sources:
         for rid, sid, _cid, dsha, fs, _t0, n in per_source.get(cid, ()):
             if sid in by_id:
                 hashes = {ch: sha for ch, _id, sha, _seal in by_rec.get(rid, ())}
                 keys[(name, sid)] = section_cache_key(by_id[sid], float(fs), int(n), dsha,
                                                       hashes, order)
-    return keys, rows
+    return keys
 
 
 def _require_seals(database, plan: _Plan) -> None:
@@ -741,12 +757,14 @@ def validate_configuration(session: Session, campaign_name: str, config: str, *,
 
     ``order``: Butterworth prototype order of both filters; ``n_boot``/``seed``: bootstrap of
     the normalised values. The result's ``info`` records how many sections of each side
-    came from the cache. Both sides' cache keys are read first (content hashes, no blob)
-    and looked up at once; the sections of both sides not in the cache are read, decoded
-    and processed as one pipeline (:func:`_read_and_process`, the measurement's chunks
-    first). The seals of both sides' signals are checked
-    (:func:`railval.db.repo.require_evidence` without reading blobs) before the verdict,
-    while the sections are processed: a signal changed outside railval raises
+    came from the cache. Both sides' signal rows (content hashes and seals, no blob) are
+    read first, by two queries (:func:`railval.db.repo.seal_rows_many`); the cache keys
+    come from them and are looked up at once; the sections of both sides not in the cache
+    are read, decoded and processed as one pipeline (:func:`_read_and_process`, the
+    measurement's chunks first), every blob row read checked against those rows
+    (:class:`_SameRows`). The seals of both sides' signals are checked on the same rows
+    (as :func:`railval.db.repo.require_evidence` without blobs checks them) before the
+    verdict, while the sections are processed: a signal changed outside railval raises
     :class:`railval.db.integrity.IntegrityError` instead of giving a verdict (and nothing
     is cached). Raises :class:`railval.core.errors.NotFound` for unknown names. The heap
     alive on entry is left out of the garbage collector's passes meanwhile
@@ -764,14 +782,12 @@ def _validate_configuration(session: Session, campaign_name: str, config: str, o
     with stage("database"):
         camp, conf = repo.resolve(session, campaign_name, config)
         sections = repo.section_infos(session, camp)
-        vehicle = repo.vehicle_info(session, camp)
-        # both sources' keys from their content hashes (no blob; the seals are checked
-        # while the sections are processed), one cache lookup for both
-        keys = {(name, sid): key for name, src in ((None, None), (conf.name, conf))
-                for sid, key in source_cache_keys(session, camp, src, sections,
-                                                  order=order).items()}
+        # both sources' signal rows (content hashes and seals, no blob) read once: the cache
+        # keys come from them now, the seals are checked on them while the sections are
+        # processed, and the blobs read later must carry the same hashes (_SameRows)
+        rows = repo.seal_rows_many(session, camp, [conf.id])
+        keys = _keys_from_rows(rows, [(None, None), (conf.name, conf.id)], sections, order)
         cached = repo.cache_get_many(session, list(keys.values()))
-        provenance = calibration_provenance(session, camp, config)
     values: dict[str | None, dict[str, en14363.SectionValues]] = {None: {}, conf.name: {}}
     todo: dict[str | None, list[str]] = {None: [], conf.name: []}
     with stage("cache_unpack"):
@@ -780,20 +796,23 @@ def _validate_configuration(session: Session, campaign_name: str, config: str, o
                 values[source][sid] = unpack_values(sid, cached[key])
             else:
                 todo[source].append(sid)
+    later: dict[str, Any] = {}
 
-    def seals() -> None:  # the measurement's and the configuration's, from the same rows
-        if check_seals:
-            with stage("database"):
-                repo.require_evidence(session, camp, conf, blobs=False)
+    def meanwhile() -> None:  # while the sections are processed: what only the verdict needs
+        with stage("database"):
+            later["vehicle"] = repo.vehicle_info(session, camp)
+            later["provenance"] = calibration_provenance(session, camp, config)
+            if check_seals:
+                _check_seals(session, camp, conf, rows)
 
     if todo[None] or todo[conf.name]:
         # one pipeline over both sources (the measurement first): its last chunks overlap
-        # the configuration's first; the seals are checked while the first chunk is processed
+        # the configuration's first; the seals are checked while the chunks are processed
         by_id = {s.id: s for s in sections}
         done = _read_and_process(session, camp, [(src, todo[name]) for src, name in
                                                  ((None, None), (conf, conf.name))
                                                  if todo[name]],
-                                 by_id, order, seals)
+                                 by_id, order, meanwhile, _SameRows(camp, conf, rows))
         new: dict[str, bytes] = {}
         for (src, sid), (vals, packed) in done.items():
             name = None if src is None else conf.name
@@ -802,10 +821,56 @@ def _validate_configuration(session: Session, campaign_name: str, config: str, o
         with stage("database"):
             repo.cache_put_many(session, new)
     else:
-        seals()  # every value came from the cache
+        meanwhile()  # every value came from the cache
     stats = {name: {"cached": len(values[name]) - len(todo[name]),
                     "computed": len(todo[name])} for name in (None, conf.name)}
-    return _verdict(values[None], values[conf.name], sections, vehicle, n_boot, seed,
+    return _verdict(values[None], values[conf.name], sections, later["vehicle"], n_boot, seed,
                     {"campaign": camp.name, "configuration": conf.name, "filter_order": order,
                      "sections_measured": stats[None], "sections_simulated": stats[conf.name],
-                     **provenance})
+                     **later["provenance"]})
+
+
+def _check_seals(session: Session, camp, conf, rows: tuple[list, dict]) -> None:
+    """The check of :func:`railval.db.repo.require_evidence` without blobs — every seal of
+    the measurement's and the configuration's signals — on the rows ``rows`` read for the
+    cache keys (:func:`railval.db.repo.seal_rows_many`) instead of reading them again. On a
+    problem the full check runs and raises its error (should it find none, the problems
+    found here are raised in the same form)."""
+    recs, by_rec = rows
+    problems = repo.seal_problems(session, camp)
+    found = (problems([r for r in recs if r[2] is None], by_rec)
+             + problems([r for r in recs if r[2] is not None], by_rec))
+    if found:
+        repo.require_evidence(session, camp, conf, blobs=False)
+        repo.raise_problems(conf, found)
+
+
+class _SameRows:
+    """``on_read`` of :func:`_read_and_process` for a validation whose cache keys and seal
+    check come from signal rows read before the blobs (:func:`_validate_configuration`):
+    every row read with the blobs must be one of those, with the same content hash (and,
+    for a distance axis, the same fs, t0 and n), else the values computed would be cached
+    under a key they do not belong to and judged on evidence whose seals were not checked.
+    A row changed in between (the configuration stored again meanwhile) raises
+    :class:`railval.db.integrity.IntegrityError` and nothing is cached."""
+
+    def __init__(self, camp, conf, rows: tuple[list, dict]) -> None:
+        recs, by_rec = rows
+        self.camp, self.conf = camp, conf
+        self.expected: dict[tuple[int, str | None], Any] = {
+            (rid, None): (dsha, fs, t0, n) for rid, _sid, _cid, dsha, fs, t0, n in recs}
+        for rid, signals in by_rec.items():
+            for chan, _cid, sha, _seal in signals:
+                self.expected[(rid, chan)] = sha
+
+    def __call__(self, decode) -> None:
+        expected = self.expected
+        for rid, sid, chan, sha, fs, t0, n in decode.read:
+            got = sha if chan is not None else (sha, fs, t0, n)
+            if expected.get((rid, chan)) != got:
+                from railval.db.integrity import IntegrityError
+
+                raise IntegrityError(
+                    f"campaign {self.camp.name!r}: section {sid}, {chan or 'distance_m'} of "
+                    f"the evidence of {self.conf.name!r} changed while it was validated; "
+                    "nothing was cached — validate again")
