@@ -279,12 +279,11 @@ def hash_rows_many(session: Session, campaign: CampaignArg, config_ids: list[int
                    ) -> tuple[list, dict]:
     """:func:`seal_rows_many` without the seals: the same recordings and recording id →
     [(channel, channel id, content hash, None)], by channel id — what the result-cache keys
-    are made of. On SQLite the signals' content hashes come from the index on
-    ``signal.sha256`` and their recording and channel from the unique index on
-    (recording, channel), both read alone (covering): the table row holds the hash after
-    the blob, so reading it there walks the blob's whole overflow chain (≈ 0.45 CPU-s for
-    the 16 000 signals of a DynoTRAIN run in a fresh process, against ≈ 0.03 s for both
-    indexes). Other databases read the table."""
+    are made of. On SQLite the signals' recording, channel and content hash come from the
+    covering index ``ix_signal_evidence`` alone (migration 0009): the table row holds the
+    hash after the blob, so reading it there walks the blob's whole overflow chain (≈ 0.45
+    CPU-s for the 16 000 signals of a DynoTRAIN run in a fresh process). Other databases
+    read the table."""
     c = campaign_ref(session, campaign)
     cond = or_(Recording.configuration_id.is_(None),
                Recording.configuration_id.in_(set(config_ids)))
@@ -300,22 +299,17 @@ def hash_rows_many(session: Session, campaign: CampaignArg, config_ids: list[int
     recs = session.execute(rec_q).all()
     rids = [r[0] for r in recs]
     names = {cid: name for cid, name in session.execute(select(Channel.id, Channel.name))}
-    conn = session.connection()
-    members: list[tuple[int, int, int]] = []
+    # the driver's rows at once (through SQLAlchemy's rows: 3 times the CPU)
+    cur = session.connection().connection.driver_connection
+    members: list[tuple[int, int, str]] = []
     for i in range(0, len(rids), 500):
         part = rids[i:i + 500]
-        members += conn.exec_driver_sql(
-            "SELECT id, recording_id, channel_id FROM signal WHERE recording_id IN ("
-            + ",".join("?" * len(part)) + ")", tuple(part)).all()
-    wanted = {m[0] for m in members}
-    sha = {}
-    if wanted:  # the driver's rows at once (through SQLAlchemy's rows: 3 times the CPU)
-        cur = conn.connection.driver_connection.execute(
-            "SELECT id, sha256 FROM signal INDEXED BY ix_signal_sha256")
-        sha = {sid: h for sid, h in cur.fetchall() if sid in wanted}
+        members += cur.execute(
+            "SELECT recording_id, channel_id, sha256 FROM signal WHERE recording_id IN ("
+            + ",".join("?" * len(part)) + ")", tuple(part)).fetchall()
     by_rec: dict[int, list] = {}
-    for sig, rid, cid in sorted(members, key=lambda m: (m[1], m[2])):
-        by_rec.setdefault(rid, []).append((names[cid], cid, sha[sig], None))
+    for rid, cid, sha in sorted(members, key=lambda m: (m[0], m[1])):
+        by_rec.setdefault(rid, []).append((names[cid], cid, sha, None))
     return recs, by_rec
 
 

@@ -48,6 +48,11 @@ NAMING = {
     "pk": "pk_%(table_name)s",
 }
 
+#: indexes that exist on SQLite only, made by a migration and not declared here:
+#: ``ix_signal_evidence`` (recording, channel, content hash, provenance) covers what a
+#: validation reads of its signal rows (migration 0009_signal_evidence_index)
+SQLITE_ONLY_INDEXES = frozenset({"ix_signal_evidence"})
+
 
 def utcnow() -> dt.datetime:
     return dt.datetime.now(dt.UTC)

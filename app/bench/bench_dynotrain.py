@@ -353,6 +353,7 @@ def run(args: argparse.Namespace) -> dict:
     data = Path(args.data)
     record = build(data, args.configs, args.sections, args.samples, args.fs)
     database = connect(f"sqlite:///{data / 'dynotrain.db'}")
+    database.init()  # a database built by an earlier version: migrated (untimed)
     only_new = getattr(args, "part", "both") == "new"
     out: dict = {"data": record}
     if not only_new:
