@@ -41,7 +41,6 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Mapping, Sequence
-from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -70,10 +69,9 @@ from railval.core.errors import InvalidParameter
 from railval.core.filters import DEFAULT_ORDER
 from railval.core.pairing import Pairs, QuantityPairs, gather_pairs, values_under
 from railval.core.quantities import QUANTITIES, QUANTITY_IDS, VEHICLE_KINDS
-from railval.core.stages import in_context, stage
+from railval.core.stages import stage
 from railval.core.supplementary import supplementary_results
 from railval.core.types import SectionInfo, SignalSet
-from railval.core.workers import background
 
 STD_DDOF = 1
 STD_DEFINITION = "sample standard deviation (ddof = 1, divided by n − 1)"
@@ -375,7 +373,7 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
     secs = dict(sections) if isinstance(sections, Mapping) else {s.id: s for s in sections}
     common = sorted(set(measured_values) & set(simulated_values))
     pairs = gather_pairs(measured_values, simulated_values, secs, common, memo)
-    results, intervals = _quantity_results(pairs, veh, n_boot, seed, ci_level, top)
+    results = _quantity_results(pairs, veh, n_boot, seed, ci_level, top)
     zone_of = {sid: int(info.zone) for sid, info in secs.items()}
     cov = coverage({q: set(pairs.of(qi).section) for qi, q in enumerate(QUANTITY_IDS)},
                    {q: set(pairs.of(qi).position) for qi, q in enumerate(QUANTITY_IDS)},
@@ -387,35 +385,25 @@ def validate(measured_values: Mapping[str, Mapping[tuple[str, str], float]],
         validated_under = _verdicts_under_readings(results, pairs, measured_values,
                                                    simulated_values, cov.ok, memo)
     supp = _supplementary(measured_values, simulated_values, common, zone_of)
-    for res, (mci, sci) in zip(results.values(), intervals.result(), strict=True):
-        res.mean_norm_ci, res.std_norm_ci = mci, sci
     return ValidationResult(validated, cov, results, veh, n_boot, seed, ci_level,
                             functools.partial(_pairs_frame, pairs, results), list(warnings),
                             supplementary=supp, validated_under=validated_under)
 
 
 def _quantity_results(pairs: Pairs, veh: Vehicle, n_boot: int, seed: int, ci_level: float,
-                      top: int) -> tuple[dict[str, QuantityResult], Future]:
-    """:func:`quantity_result` of every quantity, and the future of their intervals (the
-    bootstrap seeded by (seed, quantity index); all quantities' intervals from one
-    percentile call, :func:`railval.core.bootstrap.bootstrap_cis`), which runs on a row
-    thread (:func:`railval.core.workers.background`) while the caller goes on with the
-    readings and the supplementary results; the results hold NaN intervals until the
-    caller sets them from the future (:func:`validate`)."""
+                      top: int) -> dict[str, QuantityResult]:
+    """:func:`quantity_result` of every quantity (bootstrap seeded by (seed, quantity
+    index)), the intervals of all quantities from one percentile call
+    (:func:`railval.core.bootstrap.bootstrap_cis`)."""
     parts = [pairs.of(qi) for qi in range(len(QUANTITY_IDS))]
     ds = [difference(p.s, p.m) for p in parts]
-    limits = [_limits(QUANTITIES[q], veh) for q in QUANTITY_IDS]
-
-    def intervals():
-        with stage("bootstrap"):
-            return bootstrap_cis([_resampled_rows(d, n_boot=n_boot, seed_key=(seed, qi))
-                                  for qi, d in enumerate(ds)], limits, ci_level)
-
-    pending = background(in_context(intervals))
-    nan = (float("nan"), float("nan"))
+    with stage("bootstrap"):
+        cis = bootstrap_cis([_resampled_rows(d, n_boot=n_boot, seed_key=(seed, qi))
+                             for qi, d in enumerate(ds)],
+                            [_limits(QUANTITIES[q], veh) for q in QUANTITY_IDS], ci_level)
     return {qid: quantity_result(qid, parts[qi], veh, n_boot=n_boot, seed_key=(seed, qi),
-                                 ci_level=ci_level, top=top, _d=ds[qi], _cis=(nan, nan))
-            for qi, qid in enumerate(QUANTITY_IDS)}, pending
+                                 ci_level=ci_level, top=top, _d=ds[qi], _cis=cis[qi])
+            for qi, qid in enumerate(QUANTITY_IDS)}
 
 
 def _pairs_frame(pairs: Pairs, results: Mapping[str, QuantityResult]):

@@ -21,7 +21,6 @@ import os
 import threading
 import time
 from collections.abc import Iterator
-from concurrent.futures import Future
 from contextlib import contextmanager
 
 #: seconds between two checks of the watch thread
@@ -128,38 +127,12 @@ def _process_thread_count() -> int:
     return max(1, min(cores, 8))
 
 
-def background(fn) -> Future:
-    """Start ``fn()`` on the shared row threads and return its future, for the caller to
-    do other work meanwhile (``fn`` should release the GIL for most of its time). Runs
-    ``fn`` at once in this thread (a completed future) when this process has one row
-    thread or this is a row thread already (never wait on the pool from inside it)."""
-    if thread_count() <= 1 or threading.current_thread().name.startswith("railval-rows"):
-        done: Future = Future()
-        try:
-            done.set_result(fn())
-        except BaseException as exc:  # noqa: BLE001 - handed to the caller by result()
-            done.set_exception(exc)
-        return done
-    return _pool().submit(fn)
-
-
-def _pool():
-    """The shared row threads (created on first use)."""
-    global _THREAD_POOL
-    with _THREAD_POOL_LOCK:
-        if _THREAD_POOL is None:
-            from concurrent.futures import ThreadPoolExecutor
-
-            _THREAD_POOL = ThreadPoolExecutor(max_workers=max(1, _process_thread_count() - 1),
-                                              thread_name_prefix="railval-rows")
-        return _THREAD_POOL
-
-
 def split_rows(fn, n_rows: int, *, min_rows: int = 1, align: int = 1) -> None:
     """Run ``fn(start, stop)`` over contiguous parts of ``range(n_rows)`` on up to
     :func:`thread_count` threads, the caller's thread doing the last part; ``fn`` must release
     the GIL (a numba ``nogil`` kernel) for the parts to run at once. Parts hold at least
     ``min_rows`` rows and start at multiples of ``align``. Exceptions of a part propagate."""
+    global _THREAD_POOL
     parts = min(thread_count(), max(1, n_rows // max(1, min_rows)))
     if parts <= 1:
         fn(0, n_rows)
@@ -170,7 +143,13 @@ def split_rows(fn, n_rows: int, *, min_rows: int = 1, align: int = 1) -> None:
     if len(bounds) == 1:
         fn(0, n_rows)
         return
-    pool = _pool()
+    with _THREAD_POOL_LOCK:
+        if _THREAD_POOL is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            _THREAD_POOL = ThreadPoolExecutor(max_workers=max(1, _process_thread_count() - 1),
+                                              thread_name_prefix="railval-rows")
+        pool = _THREAD_POOL
     futures = [pool.submit(fn, a, b) for a, b in bounds[:-1]]
     fn(*bounds[-1])
     for f in futures:
