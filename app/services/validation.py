@@ -15,9 +15,10 @@ database table ``result_cache`` (:func:`railval.db.repo.cache_get` / :func:`rail
 and holds the section's values (with the values under the alternative readings of the open
 definitions and the supplementary values) as one float64 block behind a JSON layout of the
 keys, which the main process parses once per distinct layout
-(:func:`railval.core.en14363.pack_values`). Content hashes are read first
-(:func:`railval.db.repo.signal_hashes`, no blob is touched); only sections whose key is not cached are
-loaded and processed. So the measured side is processed once per campaign and filter order,
+(:func:`railval.core.en14363.pack_values`). Content hashes are read first, no blob touched
+(:func:`railval.db.repo.signal_hashes`; one validation reads them with the seals,
+:func:`railval.db.repo.seal_rows_many`, on SQLite from a covering index); only sections whose
+key is not cached are loaded and processed. So the measured side is processed once per campaign and filter order,
 and a new configuration costs only its own signals. Any change of samples, distance axis,
 evaluated range, filter order or processing code changes the key.
 
