@@ -87,6 +87,9 @@ from railval.core.en_statistics import (  # noqa: F401 - the statistics of the c
 )
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.filters import DEFAULT_ORDER, check_order, design, filtfilt_rows
+#: PROCESSING_VERSION: bump whenever the numbers this module produces can change (enters
+#: result-cache keys); kept in railval.core.processing, which records read without this module
+from railval.core.processing import PROCESSING_VERSION
 from railval.core.quantities import QUANTITIES
 from railval.core.supplementary import (
     BOGIE_KINDS,
@@ -96,8 +99,6 @@ from railval.core.supplementary import (
 )
 from railval.core.types import CHANNELS, SectionInfo, SignalSet, channel_name
 
-#: bump whenever the numbers this module produces can change (enters result-cache keys)
-PROCESSING_VERSION = "en14363/2"
 #: the cached form of a section's values (:func:`pack_values`); enters the result-cache keys
 #: so that a cache written in another form is never read (the numbers do not change with it)
 CACHE_FORM = "packed/2"

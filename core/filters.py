@@ -42,10 +42,10 @@ import scipy.signal
 
 from railval.core.buffers import BufferPool
 from railval.core.errors import InvalidParameter, InvalidSignal
+from railval.core.processing import DEFAULT_ORDER
 
 LOWPASS_HZ = 20.0
 BANDPASS_HZ = (0.4, 10.0)
-DEFAULT_ORDER = 4
 #: relative impulse-response level below which a filter counts as settled
 SETTLING_LEVEL = 0.01
 

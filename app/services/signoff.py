@@ -30,10 +30,9 @@ from typing import Any
 
 from sqlalchemy.orm import Session
 
-from railval.core.en14363 import PROCESSING_VERSION
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
-from railval.core.filters import DEFAULT_ORDER
 from railval.core.integrity import evidence_hash, signoff_record, verify_signature
+from railval.core.processing import DEFAULT_ORDER, PROCESSING_VERSION
 from railval.core.roles import PermissionDenied, require
 from railval.db import audit, integrity, repo, users
 from railval.db import signoff as db_signoff
