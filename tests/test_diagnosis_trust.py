@@ -378,3 +378,49 @@ def test_lack_of_fit_region_grows_with_what_the_fit_leaves():
     lo, hi = _lack_of_fit_range(curve, P, w, k, cost, Pattern(labels, groups, r))
     half = np.linalg.norm(e) * np.sqrt(f_dist.ppf(0.90, 1, n - 1) / (n - 1)) / np.linalg.norm(a)
     assert lo == pytest.approx(0.8 - half, abs=2e-4) and hi == pytest.approx(0.8 + half, abs=2e-4)
+
+
+def test_cause_set_carries_on_past_an_implausible_candidate():
+    """Candidate T explains the residual best but only at a value outside its plausible range;
+    the plausible cause A behind it must still be tried and named, T reported as passed over."""
+    from railval.core.diagnosis.causes import cause_set
+
+    off = lambda q, z, p: A[(q, z, p)] + 0.3 * C[(q, z, p)]
+    base, *_ = _evidence(off)
+    values = [0.0, 0.5, 1.0, 1.5, 2.0]
+    # T removes the whole residual at v = 0.9, outside its plausible range [0, 0.5]; A removes A only
+    ev_t = [_evidence(lambda q, z, p, v=v: (1.0 - v / 0.9) * off(q, z, p), like=base)[0] for v in values]
+    ev_a = [_evidence(lambda q, z, p, v=v: (1.0 - v) * A[(q, z, p)] + 0.3 * C[(q, z, p)], like=base)[0]
+            for v in values]
+    t_fam = CandidateFamily("effect", "T", "x", values, ev_t, (0.0, 2.0), plausible=(0.0, 0.5))
+    a_fam = CandidateFamily("effect", "A", "x", values, ev_a, (0.0, 2.0), plausible=(0.0, 2.0))
+    out = cause_set(base, [t_fam, a_fam], n_boot=60)
+    assert [c["name"] for c in out["causes"]] == ["A"]
+    assert [p["name"] for p in out["passed_over"]] == ["T"]
+    assert "outside its plausible range" in out["passed_over"][0]["reason"]
+
+
+def test_cause_set_values_are_fitted_jointly_off_the_grid():
+    """Two causes without section scatter at values between the fine grid's points (step 0.01):
+    the joint least-squares fit lands off the grid, closer to the truth than the grid's step, with
+    a smaller remaining residual than the best pair of grid points (independent brute force over
+    the 3 × 3 grid points around the truth)."""
+    from railval.core.diagnosis.causes import _combined, _joint_fit
+    from railval.core.diagnosis.fit import _Curve
+
+    off = lambda q, z, p: 0.737 * A[(q, z, p)] + 1.263 * B[(q, z, p)]
+    base, *_ = _evidence(off, scale=0.0)
+    values = [0.0, 0.5, 1.0, 1.5, 2.0]
+    fams = [CandidateFamily("effect", n, "x", values,
+                            [_evidence(lambda q, z, p, v=v, d=d: off(q, z, p) - v * d[(q, z, p)], like=base, scale=0.0)[0]
+                             for v in values], (0.0, 2.0)) for n, d in (("A", A), ("B", B))]
+    curves = [_Curve(f) for f in fams]
+    nodes = [np.stack([e.values() for e in f.evidence]) for f in fams]
+    r, w = base.values(), base.pattern().weights()
+    us, comb = _joint_fit(curves, nodes, r, w)
+    assert us[0] == pytest.approx(0.737, abs=2e-3) and us[1] == pytest.approx(1.263, abs=2e-3)
+    assert min(abs(us[0] - g) for g in (0.73, 0.74)) > 1e-4  # not a grid point
+    cost = float(np.sum((w * comb) ** 2))
+    grid = min(float(np.sum((w * _combined(curves, nodes, r, [a, b])) ** 2))
+               for a in (0.73, 0.74, 0.75) for b in (1.25, 1.26, 1.27))
+    assert cost < grid and cost < 1e-4 * float(np.sum((w * r) ** 2))

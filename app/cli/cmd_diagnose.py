@@ -52,6 +52,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
               + f" — together {res.cause_set['held_out_explained']:.2f}")
     for x in (res.cause_set or {}).get("left_out", []):
         print(f"not in the cause set: {x['name']} — {x['reason']}")
+    for x in (res.cause_set or {}).get("passed_over", []):
+        print(f"passed over (the search carried on): {x['name']} — {x['reason']}")
     for f in res.families or []:
         best = f["top"][0] if f["top"] else None
         print(f"family {f['title']} ({f['share']:.0%} of the residual): {f['verdict']}"
