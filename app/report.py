@@ -333,10 +333,9 @@ def _verdict_html(view: ValidationView) -> str:
     if ins is not None:
         held = ins.held_out_sections
         out += ("<div class='verdict insample'><b>In-sample</b> — "
-                f"{_esc(', '.join(ins.calibrated_in))} was calibrated on "
-                f"{len(ins.fit_sections)} of these sections, so this verdict is partly on the "
-                "data the fit used" + (f"; held out: {_esc(', '.join(held))}" if held else
-                                        "; no section was held out") + ".</div>")
+                f"{_esc(ins.note())}, so this verdict is partly on the data the fit used"
+                + (f"; held out: {_esc(', '.join(held))}" if held else "; no section was held out")
+                + f". {_esc(ins.held_out_check[:1].upper() + ins.held_out_check[1:])}.</div>")
     return out
 
 

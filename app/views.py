@@ -26,12 +26,15 @@ from railval.core.validation import STD_DEFINITION, QuantityResult, ValidationRe
 
 @dataclass(frozen=True)
 class InSample:
-    """A verdict partly on the sections a calibration of the lineage was fitted to
-    (``railval.app.services.validation.calibration_provenance``)."""
+    """A verdict partly on the sections a fit of the lineage used — a calibration, or a
+    diagnosis whose fitted parameters a configuration took — decided in one place,
+    ``railval.app.services.validation.calibration_provenance``."""
 
     calibrated_in: tuple[str, ...]
     fit_sections: tuple[str, ...]
     held_out_sections: tuple[str, ...]
+    fitted_by: tuple[tuple[str, str], ...] = ()
+    held_out_check: str = ""
 
     @classmethod
     def of(cls, info: Mapping[str, Any]) -> InSample | None:
@@ -40,12 +43,24 @@ class InSample:
         if not info.get("in_sample"):
             return None
         return cls(tuple(info["calibrated_in"]), tuple(info["fit_sections"]),
-                   tuple(info["held_out_sections"]))
+                   tuple(info["held_out_sections"]),
+                   tuple(sorted((info.get("fitted_by") or {}).items())),
+                   str(info.get("held_out_check") or ""))
 
     def note(self) -> str:
-        """"X was calibrated on n of these sections"."""
-        return (f"{', '.join(self.calibrated_in)} was calibrated on {len(self.fit_sections)} "
-                "of these sections")
+        """"X was calibrated on n of these sections" (or "X's parameters were fitted by a
+        diagnosis on n of these sections")."""
+        by = dict(self.fitted_by)
+        parts = [f"{c}'s parameters were fitted by a diagnosis" if by.get(c) == "diagnosis"
+                 else f"{c} was calibrated" for c in self.calibrated_in]
+        return f"{', '.join(parts)} on {len(self.fit_sections)} of these sections"
+
+    def to_dict(self) -> dict[str, Any]:
+        """The provenance as ``railval validate --json`` prints it (``in_sample_provenance``)."""
+        return {"fitted_in": list(self.calibrated_in), "fitted_by": dict(self.fitted_by),
+                "fit_sections": list(self.fit_sections),
+                "held_out_sections": list(self.held_out_sections),
+                "held_out_check": self.held_out_check, "note": self.note()}
 
 
 @dataclass(frozen=True)

@@ -249,7 +249,8 @@ def summary_lines(summ: dict) -> list[str]:
     o = summ["objective"]
     marks = []
     if o["in_sample"]:
-        marks.append(f"IN-SAMPLE (calibrated on sections {', '.join(o['fit_sections'])})")
+        marks.append(f"IN-SAMPLE ({o.get('in_sample_note') or 'calibrated'}: sections "
+                     f"{', '.join(o['fit_sections'])}; {o.get('held_out_check') or ''})")
     if o["definition_sensitive"]:
         marks.append("DEFINITION-SENSITIVE (another reading of the open definitions flips it)")
     lines = [f"what is signed: {summ['campaign']}/{summ['configuration']}",

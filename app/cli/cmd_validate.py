@@ -10,7 +10,9 @@ then the coverage lines, the supplementary results and which quantities are
 definition-sensitive (pass/fail changes under another reading of the open percentile or
 sliding-mean definitions). ``--json`` prints one JSON document (``validated``, ``coverage``,
 ``quantities`` with ``definition_sensitive`` and ``definition_alternatives`` each,
-``definitions``, ``supplementary`` …). The exit code is 0 whether or not the configuration is validated; 2 on
+``definitions``, ``supplementary`` …, ``in_sample`` and ``in_sample_provenance``: the fit
+that makes the verdict in-sample — fitted configurations, calibration or diagnosis, fit and
+held-out sections — and the held-out check, or null). The exit code is 0 whether or not the configuration is validated; 2 on
 errors (unknown campaign/configuration, bad data).
 """
 
@@ -101,6 +103,8 @@ def format_result(result: ValidationResult) -> str:
         verdict += " (definition-sensitive: another reading gives the opposite verdict)"
     if view.in_sample is not None:
         verdict += f" (in-sample: {view.in_sample.note()})"
+        if view.in_sample.held_out_check:
+            verdict += f"\n{view.in_sample.held_out_check}"
     lines.append(verdict)
     return "\n".join(lines)
 
@@ -180,7 +184,10 @@ def cmd_validate(args: argparse.Namespace) -> int:
                                      n_boot=args.boot, seed=args.seed)
     if args.json:
         doc = result.to_dict()
-        doc["in_sample"] = view_of(result).in_sample is not None
+        ins = view_of(result).in_sample
+        doc["in_sample"] = ins is not None
+        # which fit makes it in-sample and the held-out check (None when not in-sample)
+        doc["in_sample_provenance"] = ins.to_dict() if ins is not None else None
         emit_json(doc)
     else:
         print(format_result(result))

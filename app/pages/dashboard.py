@@ -23,21 +23,33 @@ SUMMARY_COLUMNS = ["quantity", "name", "unit", "n", "mean", "std", "mean_limit",
 
 def in_sample_note(view: ValidationView) -> str:
     """" (in-sample: … was calibrated on n of these sections)" when the verdict includes
-    sections a calibration of the lineage was fitted to, else ""."""
+    sections a fit of the lineage used (a calibration, or a diagnosis whose fitted parameters
+    the configuration took), else ""."""
     ins = view.in_sample
     return "" if ins is None else f" (in-sample: {html.escape(ins.note())})"
 
 
+def held_out_line(view: ValidationView) -> str:
+    """For an in-sample verdict, a second line of the verdict box: the held-out check, or why
+    none is possible and how to get one (``calibration_provenance``'s ``held_out_check``)."""
+    ins = view.in_sample
+    if ins is None or not ins.held_out_check:
+        return ""
+    text = ins.held_out_check[:1].upper() + ins.held_out_check[1:]
+    return f"<br><span class='rv-held-out-check'>{html.escape(text)}.</span>"
+
+
 def verdict_panel(view: ValidationView, config: str) -> pn.pane.Alert:
-    """The verdict with the failing quantities, the coverage shortfalls and which
-    quantities are definition-sensitive."""
+    """The verdict with the failing quantities, the coverage shortfalls, which quantities
+    are definition-sensitive and, when in-sample, the held-out check."""
     sensitive = view.sensitive_quantities
     note = ("" if not sensitive else " — definition-sensitive: " + ", ".join(html.escape(q) for q in sensitive)
             + (" (another reading gives the opposite verdict)" if view.verdict_sensitive else ""))
     if view.validated:
         return pn.pane.Alert(f"<b>{html.escape(config)}: VALIDATED</b>{in_sample_note(view)} — every quantity "
-                             "within its limits and coverage holds." + note, alert_type="success",
-                             sizing_mode="stretch_width")
+                             "within its limits and coverage holds." + note + held_out_line(view),
+                             alert_type="warning" if view.in_sample is not None else "success",
+                             sizing_mode="stretch_width", css_classes=["rv-verdict"])
     parts = []
     failing = view.failing
     if failing:
@@ -46,8 +58,8 @@ def verdict_panel(view: ValidationView, config: str) -> pn.pane.Alert:
     if not view.coverage.ok:
         parts.append("coverage: " + "; ".join(html.escape(x) for x in view.coverage.shortfalls))
     return pn.pane.Alert(f"<b>{html.escape(config)}: NOT VALIDATED</b>{in_sample_note(view)} — "
-                         + " — ".join(parts or ["see table"]) + note,
-                         alert_type="danger", sizing_mode="stretch_width")
+                         + " — ".join(parts or ["see table"]) + note + held_out_line(view),
+                         alert_type="danger", sizing_mode="stretch_width", css_classes=["rv-verdict"])
 
 
 #: the summary table's headers as a reader sees them (field → header)

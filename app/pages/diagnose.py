@@ -371,7 +371,14 @@ class DiagnosePage(PageBase):
         if not r or r.get("configuration") != config:
             return ""
         if r["kind"] == "re-simulation":
-            return f"{config}: {r['parent']} + {r['effect']} re-simulated with the parameters set."
+            text = f"{config}: {r['parent']} + {r['effect']} re-simulated with the parameters set."
+            fit = r.get("calibration") or {}
+            if fit.get("fitted_by") == "diagnosis":
+                text += (f" Its verdict is in-sample: {', '.join(fit.get('parameters') or [])} took the values the "
+                         f"diagnosis fitted on all {len(fit.get('fit_sections') or [])} sections, so no held-out "
+                         "check is possible for it; for one, tick 'Hold out one section per zone' in the "
+                         "calibration settings and press 'Add, calibrate & re-simulate'.")
+            return text
         units = r.get("units") or {}
         fitted = ", ".join(f"{k.split('.', 1)[-1]} = {v:.4g}{' ' + unit_label(units[k]) if units.get(k) else ''}"
                            for k, v in (r.get("parameters") or {}).items())

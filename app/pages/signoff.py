@@ -94,8 +94,11 @@ def summary_html(summ: dict) -> str:
     colour = "#1e7b34" if ok else "#b3261e"
     marks = []
     if o["in_sample"]:
-        marks.append("<span class='rv-mark rv-in-sample'>IN-SAMPLE</span> calibrated on sections "
-                     + e(", ".join(o["fit_sections"])) + " — the verdict is not an independent test")
+        marks.append("<span class='rv-mark rv-in-sample'>IN-SAMPLE</span> "
+                     + e(o.get("in_sample_note") or "calibrated") + " (sections "
+                     + e(", ".join(o["fit_sections"])) + ") — the verdict is not an independent test"
+                     + (f"<br><span class='rv-held-out-check'>{e(o['held_out_check'])}.</span>"
+                        if o.get("held_out_check") else ""))
     if o["definition_sensitive"]:
         marks.append("<span class='rv-mark rv-definition'>DEFINITION-SENSITIVE</span> another "
                      "reading of the open definitions flips the verdict ("

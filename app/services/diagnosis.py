@@ -32,7 +32,8 @@ from railval.db import repo, runs
 #: version): a change of the procedure computes afresh instead of reusing an older run
 DIAGNOSIS_VERSION = f"diagnosis/6+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets; 5: sign/swap/shift; 6: interface and mass rules
 
-__all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnosis_runs", "diagnosis_simulations", "latest_diagnosis", "scan_points"]
+__all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnosis_fit_record", "diagnosis_runs", "diagnosis_simulations",
+           "latest_diagnosis", "scan_points"]
 
 
 def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3,
@@ -133,3 +134,32 @@ def latest_diagnosis(session: Any, campaign: str, config: str) -> DiagnosisResul
     res.run = run_info(row, reused=True, current_data_sha256=data_sha)
     return res
 
+
+
+def diagnosis_fit_record(database_or_session: Any, campaign: str, config: str, effect: str,
+                         parameters: dict[str, float]) -> dict[str, Any] | None:
+    """The provenance to store with a configuration made by adding ``effect`` to ``config``
+    with ``parameters`` (``Configuration.calibration``), when any of those values is one the
+    newest stored diagnosis of ``config`` fitted (on every section of the campaign): then the
+    new configuration's verdict is in-sample like a calibration's on all sections
+    (:func:`railval.app.services.validation.calibration_provenance`). ``model.NAME``
+    candidates: ``parameters`` holds ``NAME``. None when no value came from the diagnosis
+    (set by hand, or no diagnosis)."""
+    with session_of(database_or_session) as s:
+        camp, conf = repo.resolve(s, campaign, config)
+        row = runs.latest_run(s, conf.id, "diagnosis")
+        cands = ((row.result or {}).get("candidates") or []) if row is not None else []
+        cand = next((c for c in cands if effect in (c.get("effect"), c.get("name"))), None)
+        if cand is None:
+            return None
+        fitted = ({effect[6:]: cand.get("fitted")} if effect.startswith("model.")
+                  else dict(cand.get("parameters") or {}))
+        same = sorted(k for k, v in parameters.items()
+                      if fitted.get(k) is not None and abs(float(v) - float(fitted[k]))
+                      <= 1e-9 * max(1.0, abs(float(fitted[k]))))
+        if not same:
+            return None
+        sections = [sec.id for sec in repo.section_infos(s, camp)]
+        owner = "model" if effect.startswith("model.") else effect
+        return {"fit_sections": sections, "held_out_sections": [], "fitted_by": "diagnosis",
+                "diagnosis_run": row.id, "parameters": [f"{owner}.{k}" for k in same]}

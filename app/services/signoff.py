@@ -293,6 +293,7 @@ def signing_summary(session: Session, campaign: str, config: str) -> dict[str, A
 
     from railval.app.services.diagnosis import diagnosis_runs
     from railval.app.services.validation import validate_configuration
+    from railval.app.views import InSample
     from railval.db import workshops as wsdb
 
     camp = repo.get_campaign(session, campaign)
@@ -307,6 +308,7 @@ def signing_summary(session: Session, campaign: str, config: str) -> dict[str, A
                   for q in d["quantities"]]
     cov = d["coverage"]
     in_sample = bool(info.get("in_sample"))
+    ins = InSample.of(info)
     runs = diagnosis_runs(session, camp.name, conf.name)
     newest = runs[0] if runs else None
     diagnosis = None if newest is None else {
@@ -331,6 +333,8 @@ def signing_summary(session: Session, campaign: str, config: str) -> dict[str, A
             "sensitive_quantities": d["definitions"]["sensitive_quantities"],
             "in_sample": in_sample, "fit_sections": info.get("fit_sections", []),
             "calibrated_in": info.get("calibrated_in", []),
+            "in_sample_note": ins.note() if ins is not None else "",
+            "held_out_check": info.get("held_out_check", "") if in_sample else "",
             "std_ddof": d["std_ddof"], "warnings": d["warnings"],
         },
         "quantities": quantities,

@@ -28,14 +28,17 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
                            effects: Mapping[str, Mapping[str, float]] | None = None,
                            parameters: Mapping[str, float] | None = None, description: str | None = None,
                            replace: bool = False, workers: int | None = None,
-                           scheduler: str | None = None, progress: Progress | None = None) -> dict:
+                           scheduler: str | None = None, progress: Progress | None = None,
+                           calibration: Mapping[str, Any] | None = None) -> dict:
     """Simulate every section of ``campaign`` with ``effects`` (and vehicle ``parameters``
     overrides, ``model.NAME`` or ``NAME``), store the result as configuration ``name`` (parent
     ``parent``) and return a summary. With a ``parent``, its effects and parameters are the
     starting point and ``effects``/``parameters`` are added on top. ``scheduler``: the
     address of a Dask scheduler that simulates the sections (results identical to a local run;
     :class:`railval.app.services.batch.BatchExecutor`). Campaign and parent are resolved once
-    here (:func:`railval.db.repo.resolve`)."""
+    here (:func:`railval.db.repo.resolve`). ``calibration``: the sections its parameters were
+    fitted on, stored as ``Configuration.calibration`` (values taken from a diagnosis:
+    :func:`railval.app.services.diagnosis.diagnosis_fit_record`)."""
     from railval.db import repo
 
     with database.session() as s:
@@ -80,8 +83,10 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
     desc = description or ("built-in simulator: " + (", ".join(sorted(eff)) or "no effects"))
     with database.session(write=True) as s:
         repo.store_configuration(s, camp, name, parent=pref, effects=eff, parameters=par,
-                                 description=desc, signalsets=sets, replace=replace)
+                                 description=desc, signalsets=sets, replace=replace,
+                                 calibration=dict(calibration) if calibration else None)
     if progress:
         progress("done", 1.0, {})
     return {"campaign": camp_name, "configuration": name, "parent": parent, "effects": eff,
-            "parameters": par, "sections": len(sets)}
+            "parameters": par, "sections": len(sets),
+            "calibration": dict(calibration) if calibration else None}

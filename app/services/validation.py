@@ -730,25 +730,58 @@ def _verdict(measured, simulated, sections, vehicle, n_boot: int, seed: int,
 
 
 def calibration_provenance(session: Session, campaign, config: str | repo.ConfigRef) -> dict:
-    """Whether a verdict on configuration ``config`` is in-sample: it, or one of its
-    ancestors, was calibrated on sections of this campaign (``Configuration.calibration``), so
-    a verdict over all sections includes the sections the fit used. Returns ``in_sample``,
-    ``calibrated_in`` (the calibrated configurations of the lineage), ``fit_sections`` and
-    ``held_out_sections`` (union over the lineage; held-out = never fitted to)."""
+    """Whether a verdict on configuration ``config`` is in-sample — the one place that decides
+    it for the dashboard, the report, the sign-off and ``railval validate --json``: it, or one
+    of its ancestors, has parameters fitted on sections of this campaign
+    (``Configuration.calibration``: by a calibration, or taken from a diagnosis that fitted
+    them on every section, ``fitted_by: "diagnosis"``), so a verdict over all sections
+    includes the sections the fit used. Returns ``in_sample``, ``calibrated_in`` (the fitted
+    configurations of the lineage), ``fitted_by`` (configuration → ``calibration`` or
+    ``diagnosis``), ``fit_sections`` and ``held_out_sections`` (union over the lineage;
+    held-out = never fitted to) and ``held_out_check``: how to judge the fit on sections it
+    has not seen ("" when not in-sample; :func:`held_out_check`)."""
     from railval.db import repo
 
     fitted: set[str] = set()
     held: set[str] = set()
-    calibrated = []
+    calibrated, fitted_by, parents = [], {}, {}
+    prev = None
     for conf in repo.lineage(session, campaign, config):
         rec = conf.calibration or {}
         if rec:
             calibrated.append(conf.name)
+            fitted_by[conf.name] = str(rec.get("fitted_by") or "calibration")
+            parents[conf.name] = prev
             fitted |= set(rec.get("fit_sections") or [])
             held |= set(rec.get("held_out_sections") or [])
+        prev = conf.name
     held -= fitted
-    return {"in_sample": bool(fitted), "calibrated_in": calibrated, "fit_sections": sorted(fitted),
-            "held_out_sections": sorted(held)}
+    out = {"in_sample": bool(fitted), "calibrated_in": calibrated, "fitted_by": fitted_by,
+           "fit_sections": sorted(fitted), "held_out_sections": sorted(held)}
+    name = campaign if isinstance(campaign, str) else getattr(campaign, "name", str(campaign))
+    out["held_out_check"] = held_out_check(name, out, parents) if fitted else ""
+    return out
+
+
+def held_out_check(campaign: str, prov: dict, parents: dict[str, str | None]) -> str:
+    """How to check an in-sample configuration on sections its fit did not use (plain text
+    for every view): with held-out sections, the calibration's held-out verdict; when every
+    section was used, that no held-out check is possible for this configuration and the
+    calibration with a split (``railval calibrate --split``: one section per zone held out,
+    :func:`railval.core.diagnosis.zone_folds`) that gives one."""
+    held = prov["held_out_sections"]
+    if held:
+        return (f"held-out check: sections {', '.join(held)} were not used for the fit; the "
+                "calibration's held-out verdict on them is the independent test (shown on the "
+                "Diagnose page after the calibration, printed by railval calibrate)")
+    last = prov["calibrated_in"][-1]
+    parent = parents.get(last) or "PARENT"
+    how = ("its parameters were taken from a diagnosis that fitted them on every section"
+           if prov["fitted_by"].get(last) == "diagnosis" else "its calibration used every section")
+    return (f"no held-out check is possible for this configuration: {how}. To get one, calibrate "
+            f"{parent} with a split — railval calibrate {campaign} --config {parent} --effect EFFECT "
+            "--as NEW --split (Diagnose page: tick 'Hold out one section per zone', then "
+            "'Add, calibrate & re-simulate')")
 
 
 def validate_configuration(session: Session, campaign_name: str, config: str, *,

@@ -126,9 +126,16 @@ class Backend:
     def simulate(self, campaign: str, config: str, effects: dict[str, dict], new_name: str,
                  progress: Callable | None = None):
         """Re-simulate ``config`` plus ``effects`` with the given parameters (no fit) and
-        store it as ``new_name`` (``railval.app.services.simulation``)."""
+        store it as ``new_name`` (``railval.app.services.simulation``). Values the newest
+        diagnosis of ``config`` fitted (on every section) are recorded as such, so the new
+        configuration's verdict is labelled in-sample
+        (``railval.app.services.diagnosis.diagnosis_fit_record``)."""
+        record = None
+        for effect, values in effects.items():
+            record = record or diagnosis_service.diagnosis_fit_record(self.database, campaign, config, effect,
+                                                                      dict(values or {}))
         result = simulation_service.simulate_configuration(self.database, campaign, new_name, parent=config, effects=effects,
-                    progress=_stage_progress(progress))
+                    progress=_stage_progress(progress), calibration=record)
         self.invalidate()
         return result
 
