@@ -506,7 +506,10 @@ def parse_answers_csv(text: str, source_name: str = "FILE") -> list[dict[str, An
     """Check an answers CSV (columns ``reviewer,plot,answer,seconds,comment``; an optional
     ``repeat`` column as written by the export; other export columns are ignored). Every
     problem names the line and the column; duplicate (reviewer, plot, repeat) rows are
-    refused naming both lines."""
+    refused naming both lines. A comment escaped by :func:`export_answers` against formula
+    injection is read back as it was written."""
+    from railval.db.io.formats import spreadsheet_text
+
     reader = csv.reader(io.StringIO(text))
     try:
         header = next(reader)
@@ -569,7 +572,7 @@ def parse_answers_csv(text: str, source_name: str = "FILE") -> list[dict[str, An
         seen[key] = line_no
         rows.append({"line": line_no, "reviewer": reviewer, "plot": plot,
                      "answer": _YES[ans], "seconds": seconds,
-                     "comment": cells[col["comment"]], "repeat": repeat})
+                     "comment": spreadsheet_text(cells[col["comment"]]), "repeat": repeat})
     if not rows:
         raise InvalidParameter(f"{source_name}: no answer rows after the header")
     return rows
@@ -596,17 +599,24 @@ def import_answers(database, name: str, path: str | Path, *,
 
 
 def export_answers(database, name: str, path: str | Path) -> int:
-    """Write every answer of workshop ``name`` to a CSV (:data:`EXPORT_COLUMNS`)."""
+    """Write every answer of workshop ``name`` to a CSV (:data:`EXPORT_COLUMNS`).
+
+    Text cells are quoted, and those a spreadsheet would read as a formula (a comment
+    ``=HYPERLINK(…)``) get a leading single quote (:func:`railval.db.io.formats.spreadsheet_safe`,
+    OWASP CSV injection); numbers stay unquoted numbers. :func:`parse_answers_csv` reads the
+    comment back unchanged."""
     from railval.db import workshops as wsdb
+    from railval.db.io.formats import spreadsheet_safe
 
     with database.session() as session:
         rows = wsdb.answer_rows(session, wsdb.get_workshop(session, name))
     path = Path(path)
     with path.open("w", newline="", encoding="utf-8") as fh:
-        wr = csv.writer(fh)
+        wr = csv.writer(fh, quoting=csv.QUOTE_NONNUMERIC)
         wr.writerow(EXPORT_COLUMNS)
         for r in rows:
-            wr.writerow([str(r[c]).lower() if isinstance(r[c], bool) else r[c]
+            wr.writerow([spreadsheet_safe("" if r[c] is None else
+                                          str(r[c]).lower() if isinstance(r[c], bool) else r[c])
                          for c in EXPORT_COLUMNS])
     return len(rows)
 

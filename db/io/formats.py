@@ -99,11 +99,63 @@ def pa_is_numeric(dtype) -> bool:
 
 
 def write_csv(path: Path, columns: dict[str, np.ndarray]) -> None:
-    """Header row plus one row per sample; floats in their shortest exact decimal form."""
+    """Header row plus one row per sample; floats in their shortest exact decimal form.
+
+    Only numbers are written below the header (:func:`railval.db.io.write_table` makes every
+    column float64; a negative number is a number to a spreadsheet, not a formula); a column
+    name a spreadsheet would read as a formula (:func:`spreadsheet_safe`) is refused, since
+    escaping it would change what a re-import reads.
+    """
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    pacsv.write_csv(pa.table({k: pa.array(v) for k, v in columns.items()}), path)
+    table = pa.table({k: pa.array(v) for k, v in columns.items()})
+    for name in table.column_names:
+        if spreadsheet_safe(name) != name:
+            raise CampaignFormatError(f"column name {name!r} begins like a spreadsheet "
+                                      "formula; it is not written to CSV", file=str(path),
+                                      field=name)
+    pacsv.write_csv(table, path)
+
+
+#: first characters that make a spreadsheet (Excel, LibreOffice Calc, Google Sheets) read a
+#: CSV cell as a formula: ``=``, ``+``, ``-``, ``@``, tab (0x09) and carriage return (0x0D)
+#: — OWASP, "CSV Injection", https://owasp.org/www-community/attacks/CSV_Injection
+FORMULA_LEADS = ("=", "+", "-", "@", "\t", "\r")
+
+
+def spreadsheet_safe(value: object) -> object:
+    """A CSV cell that no spreadsheet evaluates: text beginning with one of
+    :data:`FORMULA_LEADS` gets a leading single quote, as OWASP's CSV-injection guidance
+    prescribes; numbers (negative ones included) and every other value stay as they are.
+
+    Text that already begins with single quotes followed by a formula lead gets one more
+    quote, so that :func:`spreadsheet_text` undoes the escape exactly.
+
+    Examples
+    --------
+    >>> spreadsheet_safe("@SUM(A1)")
+    "'@SUM(A1)"
+    >>> spreadsheet_safe(-1.5), spreadsheet_safe("a - b")
+    (-1.5, 'a - b')
+    """
+    if isinstance(value, str) and value.lstrip("'").startswith(FORMULA_LEADS):
+        return "'" + value
+    return value
+
+
+def spreadsheet_text(cell: str) -> str:
+    """The text :func:`spreadsheet_safe` escaped, read back from a CSV cell (the one leading
+    quote it added removed; any other text unchanged).
+
+    Examples
+    --------
+    >>> spreadsheet_text("'=1+1"), spreadsheet_text("''=1+1"), spreadsheet_text("'quoted")
+    ('=1+1', "'=1+1", "'quoted")
+    """
+    if cell.startswith("'") and cell.lstrip("'").startswith(FORMULA_LEADS):
+        return cell[1:]
+    return cell
 
 
 # -- Parquet -----------------------------------------------------------------------------
