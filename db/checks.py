@@ -112,17 +112,25 @@ def check_recording(
 #: largest magnitude any stored sample may have, in canonical units (kN, m/s²): beyond it
 #: the EN 14363 filters overflow, and no wheel force or acceleration comes near it
 MAX_ABS_VALUE = 1e9
-#: the mean of the vertical wheel forces Q of a recording must lie within this factor of the
-#: vehicle's static wheel force Q0 (the mean over all wheels of a vehicle is Q0 on any track;
-#: a factor 1000 off means N declared for kN data or the reverse)
+#: the mean of every vertical wheel force channel Q must lie within this factor of the
+#: vehicle's static wheel force Q0: each wheel carries Q0 plus the quasi-static load transfer
+#: of cant deficiency or excess, a fraction of Q0 (EN 14363 limits the wheel unloading
+#: ΔQ/Q0 to 0.6 even on twisted track); a factor 1000 off means N declared for kN data or
+#: the reverse. The bound holds per channel, so one channel declared in the wrong unit
+#: among correct ones is refused too (a mean over the channels would hide it).
 Q_MEAN_FACTOR = 3.0
-#: the largest 99th percentile of |Y| over the guiding-force channels of a recording declared
-#: in N must reach this fraction of Q0: quasi-static curving forces, track irregularities and
-#: flange contact give every running wheelset lateral forces of a few kN (Y/Q of a few
-#: per cent on straight track, 0.2–0.8 in curves; EN 14363 §7.6); kN data declared as N land
-#: 1000 times lower, far below it (a simulation on ideal straight track with Y ≈ 0 is the
-#: honest exception: set "check_unit": false on its channels)
+#: the 99th percentile of |Y| of every guiding-force channel declared in N must reach this
+#: fraction of Q0: quasi-static curving forces, track irregularities and flange contact give
+#: every running wheel lateral forces of a few kN (Y/Q of a few per cent on straight track,
+#: 0.2–0.8 in curves; EN 14363 §7.6); kN data declared as N land 1000 times lower, far below
+#: it (a simulation on ideal straight track with Y ≈ 0 is the honest exception: set
+#: "check_unit": false on its channels)
 Y_P99_MIN_FRACTION = 0.005
+#: the 99th percentile of |Y| of every guiding-force channel must stay below this multiple of
+#: Q0: the flange-climbing limit of EN 14363 is (Y/Q)lim = 0.8 (1.2 in the tightest curves)
+#: and Q stays below Q_MEAN_FACTOR·Q0, so |Y| beyond 3·Q0 is no wheel force in kN — N data
+#: declared as kN land 1000 times higher
+Y_P99_MAX_FACTOR = 3.0
 #: 99th percentile of |a| in m/s² above which an acceleration is implausible, per kind:
 #: car body accelerations stay well below 0.5 g in service, bogie frames below 5 g
 #: (EN 14363 limits the bogie frame to about 8 m/s² and the car body to about 2.5 m/s²;
@@ -145,49 +153,74 @@ def check_magnitudes(channels: Mapping[str, np.ndarray], units: Mapping[str, str
                 "(MAX_ABS_VALUE)")
 
 
+_FIX = "fix the unit, or set \"check_unit\": false on the channel if the values are right"
+
+
+def _unit_hint(ratio: float) -> str:
+    """A hint when ``ratio`` (expected / found magnitude) is about 1000 or 1/1000."""
+    if 300 < abs(ratio) < 3000:
+        return " — the data look like kN declared as N"
+    if 1 / 3000 < abs(ratio) < 1 / 300:
+        return " — the data look like N declared as kN"
+    return ""
+
+
+def _check_wheel_load(name: str, values: np.ndarray, unit: str, q0_kn: float) -> None:
+    """The mean of the vertical wheel force channel ``name`` (kN) within
+    :data:`Q_MEAN_FACTOR` of Q0."""
+    mean = float(np.mean(np.asarray(values, dtype=np.float64)))
+    if not (q0_kn / Q_MEAN_FACTOR <= mean <= q0_kn * Q_MEAN_FACTOR):
+        hint = _unit_hint(q0_kn / mean if mean else float("inf"))
+        raise RecordingProblem(
+            name, f"mean vertical wheel force Q of channel {name!r} is {mean:.4g} kN (unit "
+            f"declared {unit}) but the vehicle's Q0 is {q0_kn:g} kN (plausible: "
+            f"{q0_kn / Q_MEAN_FACTOR:.4g}–{q0_kn * Q_MEAN_FACTOR:.4g} kN){hint}; {_FIX}")
+
+
+def _check_guiding_force(name: str, values: np.ndarray, unit: str, q0_kn: float) -> None:
+    """The 99th percentile of |Y| of channel ``name`` (kN) below :data:`Y_P99_MAX_FACTOR` · Q0
+    and, when declared in N, at least :data:`Y_P99_MIN_FRACTION` · Q0."""
+    p99 = float(np.percentile(np.abs(np.asarray(values, dtype=np.float64)), 99))
+    ceiling = Y_P99_MAX_FACTOR * q0_kn
+    if p99 > ceiling:
+        hint = " — the data look like N declared as kN" if p99 / 1000 <= ceiling else ""
+        raise RecordingProblem(
+            name, f"99 % of |Y| of channel {name!r} reach {p99:.4g} kN (unit declared {unit}), "
+            f"more than any wheel carries: at most {ceiling:.4g} kN ({Y_P99_MAX_FACTOR:g}·Q0) "
+            f"expected{hint}; {_FIX}")
+    floor = Y_P99_MIN_FRACTION * q0_kn
+    if unit == "N" and p99 < floor:
+        hint = (" — the data look like kN declared as N"
+                if floor <= p99 * 1000 <= ceiling else "")
+        raise RecordingProblem(
+            name, f"99 % of |Y| of channel {name!r} stay below {p99:.4g} kN (unit declared N), "
+            f"too small for a running wheelset: at least {floor:.4g} kN "
+            f"({Y_P99_MIN_FRACTION:g}·Q0) expected{hint}; {_FIX}")
+
+
 def check_units_plausible(channels: Mapping[str, np.ndarray], declared: Mapping[str, str],
                           q0_kn: float, skip: Iterable[str] = ()) -> None:
-    """Magnitudes consistent with the declared units (values already in canonical units).
+    """Magnitudes consistent with the declared units (values already in canonical units),
+    checked channel by channel so that one channel in the wrong unit is found among good ones:
 
-    * Q: the mean over all Q channels lies within a factor :data:`Q_MEAN_FACTOR` of Q0;
-    * Y declared in N (values too small for their unit): the largest 99th percentile of |Y|
-      over the recording's Y channels reaches :data:`Y_P99_MIN_FRACTION` · Q0;
+    * every Q channel: its mean lies within a factor :data:`Q_MEAN_FACTOR` of Q0;
+    * every Y channel: the 99th percentile of |Y| stays below :data:`Y_P99_MAX_FACTOR` · Q0,
+      and, when declared in N (values that may have shrunk 1000 times), reaches
+      :data:`Y_P99_MIN_FRACTION` · Q0;
     * accelerations: the 99th percentile of |a| stays below :data:`ACC_P99_BOUND`.
 
     ``skip``: channel names whose check the manifest switched off (``check_unit: false``).
+    Raises :class:`RecordingProblem` naming the channel, its declared unit and the bound.
     """
     skip = set(skip)
-    q_names = [n for n in channels if n.startswith("Q_") and n not in skip]
-    if q_names and q0_kn > 0:
-        mean = float(np.mean([np.mean(np.asarray(channels[n], dtype=np.float64))
-                              for n in q_names]))
-        if not (q0_kn / Q_MEAN_FACTOR <= mean <= q0_kn * Q_MEAN_FACTOR):
-            units = sorted({declared.get(n, "?") for n in q_names})
-            ratio = q0_kn / mean if mean else float("inf")
-            hint = ""
-            if 300 < abs(ratio) < 3000:
-                hint = " — the data look like kN declared as N"
-            elif 1 / 3000 < abs(ratio) < 1 / 300:
-                hint = " — the data look like N declared as kN"
-            raise RecordingProblem(
-                q_names[0], f"mean vertical wheel force Q is {mean:.4g} kN (unit declared "
-                f"{', '.join(units)}) but the vehicle's Q0 is {q0_kn:g} kN{hint}; fix the "
-                "unit, or set \"check_unit\": false on the channel if the values are right")
-    y_names = [n for n in channels if n.startswith("Y_") and n not in skip
-               and declared.get(n) == "N"]
-    if y_names and q0_kn > 0:
-        p99 = {n: float(np.percentile(np.abs(np.asarray(channels[n], dtype=np.float64)), 99))
-               for n in y_names}
-        largest = max(p99, key=p99.get)
-        floor = Y_P99_MIN_FRACTION * q0_kn
-        if p99[largest] < floor:
-            hint = (" — the data look like kN declared as N"
-                    if floor <= p99[largest] * 1000 <= Q_MEAN_FACTOR * q0_kn else "")
-            raise RecordingProblem(
-                largest, f"99 % of |Y| stay below {p99[largest]:.4g} kN in every guiding-force "
-                f"channel (largest: {largest!r}, unit declared N), too small for a running "
-                f"wheelset: at least {floor:.4g} kN ({Y_P99_MIN_FRACTION:g}·Q0) expected{hint}; "
-                "fix the unit, or set \"check_unit\": false on the channel if the values are right")
+    if q0_kn > 0:
+        for name, values in channels.items():
+            if name in skip:
+                continue
+            if name.startswith("Q_"):
+                _check_wheel_load(name, values, declared.get(name, "?"), q0_kn)
+            elif name.startswith("Y_"):
+                _check_guiding_force(name, values, declared.get(name, "?"), q0_kn)
     for name, values in channels.items():
         kind = name.rpartition("_")[0]
         bound = ACC_P99_BOUND.get(kind)

@@ -340,16 +340,78 @@ def _declare_unit(folder, kind_prefix, unit, check=None):
 def test_unit_newton_on_kilonewton_data_refused(good_db, folder):
     _declare_unit(folder, "Q_", "N")
     _expect(good_db, folder, "measured/S01.csv", "Q_w1L",
-            "mean vertical wheel force Q is 0.07.* kN .*unit declared N.* look like kN "
-            "declared as N")
+            "mean vertical wheel force Q of channel 'Q_w1L' is 0.07.* kN .*unit declared N.* "
+            "look like kN declared as N")
 
 
 def test_guiding_force_kilonewton_data_declared_newton_refused(good_db, folder):
     """Y declared in N holding kN values would be stored ×0.001 (too small for their unit)."""
     _declare_unit(folder, "Y_", "N")
+    _expect(good_db, folder, "measured/S01.csv", "Y_w1L",
+            r"99 % of \|Y\| of channel 'Y_w1L' stay below .* kN .*unit declared N.*too small"
+            ".*look like kN declared as N")
+
+
+def _declare_channel(folder, name, unit, scale=1.0):
+    """Declare the one channel ``name`` in ``unit`` and multiply its samples in every data
+    file by ``scale`` (1000: kN values rewritten as the N values they are)."""
+    m = _manifest(folder)
+    [ch] = [ch for ch in m["channels"] if ch["name"] == name]
+    ch["unit"] = unit
+    _save(folder, m)
+    if scale != 1.0:
+        for path in sorted(folder.rglob("S*.csv")):
+            def rescale(cols):
+                cols[name] = cols[name] * scale
+            _edit_table(path, rescale)
+
+
+def test_one_wheel_load_channel_in_newton_among_kilonewton_refused(good_db, folder):
+    """One Q channel declared N holding kN values: the mean over the four Q channels stays
+    within a factor 3 of Q0 (3 · 77 + 0.077) / 4 ≈ 58 kN, so only a per-channel check finds
+    the channel that would be stored ×0.001."""
+    _declare_channel(folder, "Q_w2R", "N")
+    _expect(good_db, folder, "measured/S01.csv", "Q_w2R",
+            "mean vertical wheel force Q of channel 'Q_w2R' is 0.0[67].* kN \\(unit declared N\\)"
+            ".*look like kN declared as N")
+
+
+def test_one_guiding_force_channel_in_newton_among_true_newton_refused(good_db, folder):
+    """Y_w1L holds true N values (×1000) and Y_w2R kN values, both declared N: the largest
+    99th percentile over the N channels reaches 0.005·Q0, only the channel itself does not."""
+    _declare_channel(folder, "Y_w1L", "N", scale=1000.0)
+    _declare_channel(folder, "Y_w2R", "N")
+    _expect(good_db, folder, "measured/S01.csv", "Y_w2R",
+            r"99 % of \|Y\| of channel 'Y_w2R' stay below .* kN \(unit declared N\)"
+            ".*look like kN declared as N")
+
+
+def test_newton_data_declared_kilonewton_refused(good_db, folder):
+    """N values (×1000) in a channel declared kN would be stored 1000 times too large."""
+    _declare_channel(folder, "Q_w1R", "kN", scale=1000.0)
+    _expect(good_db, folder, "measured/S01.csv", "Q_w1R",
+            r"mean vertical wheel force Q of channel 'Q_w1R' is 7\.\d+e\+04 kN \(unit declared kN\)"
+            ".*look like N declared as kN")
+
+
+def test_guiding_force_newton_data_declared_kilonewton_refused(good_db, folder):
+    _declare_channel(folder, "Y_w2L", "kN", scale=1000.0)
     _expect(good_db, folder, "measured/S01.csv", "Y_w2L",
-            r"99 % of \|Y\| stay below .* kN .*unit declared N.*too small.*look like kN "
-            "declared as N")
+            r"99 % of \|Y\| of channel 'Y_w2L' reach .* kN \(unit declared kN\), more than any "
+            r"wheel carries: at most 231 kN \(3·Q0\) expected — the data look like N declared as kN")
+
+
+def test_one_true_newton_channel_imports_converted(good_db, folder):
+    """A channel really in N among kN channels is accepted and stored ×0.001."""
+    _declare_channel(folder, "Q_w1L", "N", scale=1000.0)
+    raw = read_table(folder / "measured" / "S01.csv")["Q_w1L"]
+    vc = validate_campaign_folder(folder)
+    from railval.db import codec
+
+    stored = codec.decode(vc.recordings[0].signals["Q_w1L"][0])
+    assert np.array_equal(stored, raw * 1e-3)
+    assert vc.recordings[0].signals["Q_w1L"][2]["unit_conversion"] == {
+        "from": "N", "to": "kN", "factor": 1e-3}
 
 
 def test_guiding_force_unit_check_override(good_db, folder):
