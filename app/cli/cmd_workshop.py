@@ -282,12 +282,29 @@ def _analyse(args: argparse.Namespace) -> int:
         emit_json(doc)
     else:
         for row in doc.get("table1", []):
-            print(f"{row['kind']:14s} plots {row['plots']:4d}  share of Yes "
-                  f"{100 * row['min_yes']:5.1f} % … {100 * row['max_yes']:5.1f} %")
-        thr = doc.get("threshold") or {}
-        if thr.get("deviation_at_50") is not None:
-            ci = thr.get("ci")
-            interval = f"interval {ci[0]:.2f} … {ci[1]:.2f}; " if ci else ""
-            print(f"deviation at which a typical reviewer says Yes half of the time: "
-                  f"{thr['deviation_at_50']:.2f} ({interval}limit 1.0; {thr.get('method', '').split(':')[0]})")
+            shares = " … ".join("—" if row.get(f"{e}_yes") is None else
+                                f"{100 * row[f'{e}_yes']:5.1f} % ({row[f'{e}_yes_count']} of {row[f'{e}_yes_answers']})"
+                                for e in ("min", "max"))
+            print(f"{row['kind']:14s} plots {row['plots']:4d}  answers {row.get('answers', 0):5d}  "
+                  f"share of Yes {shares}")
+        print(_at50_line(doc.get("threshold") or {}))
     return 0
+
+
+def _at50_line(thr: dict) -> str:
+    """The 50 % deviation with its interval and n, where it lies, or "too few answers to
+    estimate" — the same statement as the analysis page."""
+    n = thr.get("deviation_n") or {}
+    n_text = f"{n.get('answers', 0)} answers by {n.get('reviewers', 0)} reviewer(s) on {n.get('plots', 0)} plots"
+    head = "deviation at which a typical reviewer says Yes half of the time: "
+    status = thr.get("deviation_at_50_status") or "too few answers to estimate"
+    if status == "too few answers to estimate":
+        return (f"{head}too few answers to estimate ({n_text}; at least {thr.get('min_answers')} answers "
+                f"on {thr.get('min_plots')} plots are needed)")
+    if status != "estimated":
+        return f"{head}{status} (no value extrapolated; {n_text})"
+    ci = thr.get("ci")
+    interval = (f"interval reaches {thr['ci_status']}" if thr.get("ci_status")
+                else f"interval {ci[0]:.2f} … {ci[1]:.2f}" if ci else "no interval")
+    return (f"{head}{thr['deviation_at_50']:.2f} ({interval}; {n_text}; limit 1.0; "
+            f"{thr.get('method', '').split(':')[0]})")

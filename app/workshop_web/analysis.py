@@ -35,6 +35,38 @@ def _sensitivity_html(sens: dict | None) -> str:
             f"{'—' if spread is None else f'{100 * spread:.0f} %'} of the reported value.")
 
 
+def _n_text(n: dict | None) -> str:
+    """``12 answers by 1 reviewer on 12 plots`` — the n a 50 % value rests on."""
+    n = n or {}
+    a, r, q = n.get("answers", 0), n.get("reviewers", 0), n.get("plots", 0)
+    return (f"{a} answer{'s' * (a != 1)} by {r} reviewer{'s' * (r != 1)} "
+            f"on {q} plot{'s' * (q != 1)}")
+
+
+def at50_html(thr: dict[str, Any], column: str, what: str) -> str:
+    """The sentence of one 50 % value (``column`` ``deviation`` or ``sg_c``): the number with
+    its interval and n, or where it lies ("above/below the observed range"), or "too few
+    answers to estimate" with the n and the stated minimum — never a bare number."""
+    key, ci_key = ("deviation_at_50", "ci") if column == "deviation" else ("sg_c_at_50", "sg_c_ci")
+    status = thr.get(f"{key}_status") or ("estimated" if thr.get(key) is not None else "too few answers to estimate")
+    n = _n_text(thr.get(f"{column}_n"))
+    head = f"{what} at which a typical reviewer says Yes half of the time: "
+    if status == "too few answers to estimate":
+        return (f"<p class='at50'>{head}<strong>too few answers to estimate</strong> ({esc(n)}; "
+                f"at least {thr.get('min_answers')} answers on {thr.get('min_plots')} plots with a value "
+                f"are needed).</p>")
+    if status != "estimated":
+        curve = thr.get(f"{column}_curve") or {}
+        vals = [v for v in curve.get("value") or [] if v is not None]
+        span = f" (observed {_fmt(min(vals))} … {_fmt(max(vals))})" if vals else ""
+        return (f"<p class='at50'>{head}<strong>{esc(status)}</strong>{span}: the monotone fit does not "
+                f"cross 50 % there, and no value is extrapolated — from {esc(n)}.</p>")
+    ci_status = thr.get(f"{ci_key}_status")
+    interval = f"interval reaches {esc(ci_status)}" if ci_status else f"interval {_fmt(thr.get(ci_key))}"
+    return (f"<p class='at50'>{head}<strong>{_fmt(thr.get(key))}</strong> ({interval}; bootstrap over "
+            f"plots) — from {esc(n)}; the point where the drawn monotone fit crosses 50 %.</p>")
+
+
 def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | None) -> str:
     """The answers against an objective value (``deviation`` or ``sg_c``): each plot's share
     of Yes (points), the monotone fit of a typical reviewer that gives the reported value
@@ -67,6 +99,7 @@ def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | N
         ax.plot(xs, yes_curve(xs, fit["intercept"], fit["slope"], power=fit.get("power") or 0.0),
                 color="#56B4E9", linestyle="--",
                 label=f"logistic fit, {fit.get('link', 'log')} link (sensitivity)", zorder=3)
+    status = thr.get("deviation_at_50_status" if column == "deviation" else "sg_c_at_50_status")
     if at50 is not None:
         if ci and None not in ci:
             ax.errorbar([at50], [0.5], xerr=[[at50 - ci[0]], [ci[1] - at50]], fmt="o",
@@ -81,6 +114,8 @@ def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | N
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel(label)
     ax.set_ylabel("share of Yes")
+    ax.set_title(f"{_n_text(thr.get(f'{column}_n'))}"
+                 f"{'' if status in (None, 'estimated') else ' — 50 % point: ' + status}", fontsize=9)
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     buf = io.BytesIO()
@@ -138,6 +173,12 @@ def _plot_image(database, name: str, plot_id: int) -> tuple[bytes, str]:
     return plot_image(database, name, plot_id)
 
 
+def _share_of(row: dict[str, Any], end: str) -> str:
+    """``100.0 % (2 of 2)``: a Table 1 share of Yes with the Yes count and answers it rests on."""
+    share, k, n = row.get(f"{end}_yes"), row.get(f"{end}_yes_count"), row.get(f"{end}_yes_answers")
+    return _pct(share) if share is None or n is None else f"{_pct(share)} ({k} of {n})"
+
+
 def _pct_ci(ci: Any) -> str:
     if not ci or None in ci:
         return "—"
@@ -163,41 +204,43 @@ def analysis_html(doc: dict[str, Any]) -> str:
 
     t1 = "".join(f"<tr><td>{esc(PLOT_KINDS[r['kind']].label if r['kind'] in PLOT_KINDS else r['kind'])}"
                  f" <span class='muted'>({esc(r['kind'])})</span></td><td class='num'>{r['plots']}</td>"
-                 f"<td class='num'>{_pct(r.get('min_yes'))}</td>"
-                 f"<td class='num'>{_pct(r.get('max_yes'))}</td></tr>"
+                 f"<td class='num'>{r.get('answers', '—')}</td><td class='num'>{r.get('reviewers', '—')}</td>"
+                 f"<td class='num'>{_share_of(r, 'min')}</td><td class='num'>{_share_of(r, 'max')}</td></tr>"
                  for r in doc.get("table1", []))
     rv = "".join(f"<tr><td>{esc(r['reviewer'])}</td><td class='num'>{r['answers']}</td>"
                  f"<td class='num'>{_pct(r.get('yes_share'))}</td>"
                  f"<td class='num'>{_pct_ci(r.get('yes_share_ci'))}</td>"
-                 f"<td class='num'>{_fmt(r.get('strictness'))}</td>"
-                 f"<td class='num'>{_fmt(r.get('strictness_ci'))}</td>"
-                 f"<td class='num'>{_fmt(r.get('consistency'))}</td></tr>"
+                 + (f"<td colspan='2' class='muted'>{esc(r['strictness_note'])}</td>" if r.get("strictness_note")
+                    else f"<td class='num'>{_fmt(r.get('strictness'))}</td>"
+                         f"<td class='num'>{_fmt(r.get('strictness_ci'))}</td>")
+                 + f"<td class='num'>{_fmt(r.get('consistency'))} ({r.get('repeats', 0)} repeats)</td></tr>"
                  for r in doc.get("reviewers", []))
     ag = doc.get("agreement") or {}
-    agr = "".join(f"<tr><td>{esc(k)}</td><td class='num'>{_fmt((v or {}).get('value') if isinstance(v, dict) else v)}</td>"
-                  f"<td class='num'>{_fmt((v or {}).get('ci')) if isinstance(v, dict) else '—'}</td></tr>"
-                  for k, v in ag.items())
+    agr = "".join(f"<tr><td>{esc(k)}</td><td class='num'>{_fmt(v.get('value'))}</td>"
+                  f"<td class='num'>{_fmt(v.get('ci'))}</td><td class='num'>{v.get('plots', '—')}</td>"
+                  f"<td class='num'>{v.get('reviewers', '—')}</td></tr>"
+                  for k, v in ag.items() if isinstance(v, dict))
     thr = doc.get("threshold") or {}
     sc = doc.get("scaling_effect")
     charts = (f"<h4>Against the normalised deviation (largest |D_v| / std limit)</h4>"
               f"<img alt='answers against the normalised deviation' "
-              f"src='{threshold_png(doc, 'deviation', 'largest |D_v| / std limit', 1.0)}'>"
-              f"<p>Sprague–Geers C at 50 % Yes: <strong>{_fmt(thr.get('sg_c_at_50'))}</strong> "
-              f"(interval {_fmt(thr.get('sg_c_ci'))})</p>"
+              f"src='{threshold_png(doc, 'deviation', 'normalised deviation: largest |D_v| / std limit (1)', 1.0)}'>"
+              f"{at50_html(thr, 'sg_c', 'Sprague–Geers C')}"
               f"<img alt='answers against Sprague–Geers C' "
-              f"src='{threshold_png(doc, 'sg_c', 'Sprague–Geers C', None)}'>")
+              f"src='{threshold_png(doc, 'sg_c', 'Sprague–Geers comprehensive error C (1)', None)}'>")
     return f"""
 <h2>{esc(doc.get('workshop', ''))}</h2>
-<h3>Table 1 — share of Yes per plot kind (min and max over reviewers)</h3>
-<table><tr><th>plot kind</th><th>plots</th><th>min Yes</th><th>max Yes</th></tr>{t1}</table>
+<h3>Table 1 — share of Yes per plot kind (min and max over reviewers, Yes of answers)</h3>
+<table><tr><th>plot kind</th><th>plots</th><th>answers</th><th>reviewers</th><th>min Yes</th><th>max Yes</th></tr>{t1}
+</table>
 <h3>Reviewers</h3>
 <table><tr><th>reviewer</th><th>answers</th><th>share of Yes</th><th>Wilson 95 % interval</th>
 <th>strictness</th><th>interval</th><th>consistency on repeats</th></tr>{rv}</table>
-<h3>Agreement</h3><table><tr><th>statistic</th><th>value</th><th>interval</th></tr>{agr}</table>
+<h3>Agreement</h3><table><tr><th>statistic</th><th>value</th><th>interval</th><th>plots</th><th>reviewers</th></tr>
+{agr}</table>
 <h3>Threshold</h3>
-<p>Deviation at which a typical reviewer says Yes half of the time:
-<strong>{_fmt(thr.get('deviation_at_50'))}</strong> (interval {_fmt(thr.get('ci'))}); the
-validation limit is 1.0.</p>
-<p>Method: {esc(thr.get('method', ''))}. {_sensitivity_html(thr.get('link_sensitivity'))}</p>{charts}
+{at50_html(thr, 'deviation', 'Deviation')}
+<p>The validation limit is 1.0. Method: {esc(thr.get('method', ''))}.
+{_sensitivity_html(thr.get('link_sensitivity'))}</p>{charts}
 <h3>Scaling effect (same reviewer, same plot: fixed against automatic scaling)</h3>{_scaling_html(sc)}
 """

@@ -53,7 +53,7 @@ from railval.core.review.agreement import (
     wilson_interval,
 )
 from railval.core.review.rasch import fit_rasch
-from railval.core.review.threshold import DEFAULT_BOOT, link_sensitivity, monotone_threshold
+from railval.core.review.threshold import DEFAULT_BOOT, TOO_FEW, link_sensitivity, monotone_threshold
 
 __all__ = ["ANSWER_COLUMNS", "PLOT_COLUMNS", "SCALINGS", "WorkshopAnalysis", "analyse"]
 
@@ -63,7 +63,16 @@ SCALINGS = ("fixed", "auto")
 CONFIDENCE = 0.95
 #: ``threshold.method`` of the JSON: how the 50 % values are estimated (:mod:`.threshold`).
 THRESHOLD_METHOD = ("isotonic: falling isotonic regression (pooled adjacent violators) of the reviewer-adjusted "
-                    "acceptability on the objective value, crossing 0; percentile bootstrap over plots")
+                    "acceptability on the objective value; the 50 % value is where the drawn curve of a typical "
+                    "reviewer crosses 50 % (linear between adjacent values, Stylianou & Flournoy 2002); "
+                    "percentile bootstrap over plots (Davison & Hinkley 1997 §3.8)")
+#: The fewest first answers (on plots with the objective value) and plots a 50 % value is
+#: reported from; below either the status is "too few answers to estimate" (docs/workshops.md
+#: "Too few answers", where the measured behaviour of smaller workshops is given).
+MIN_ANSWERS = 20
+MIN_PLOTS = 12
+#: ``strictness_note`` of a reviewer when fewer than two reviewers answered.
+STRICTNESS_ALONE = "cannot be estimated with one reviewer (strictness is relative to the panel's mean reviewer)"
 
 
 @dataclass(frozen=True)
@@ -335,19 +344,24 @@ def analyse(answers: pd.DataFrame, plots: pd.DataFrame, *, n_boot: int = 1000, s
 
 
 def _table1(y: np.ndarray, kinds: np.ndarray) -> list[dict]:
-    """Per plot kind: plots, reviewers and the smallest and largest share of Yes over the
-    reviewers, on the first answers ``y`` (reviewer × plot, NaN = none) — Polach & Böttcher
-    2014 §4.2, Table 1."""
+    """Per plot kind: plots, reviewers, first answers and the smallest and largest share of
+    Yes over the reviewers, each with the Yes count and answers it rests on (``min_yes_count``
+    of ``min_yes_answers``; the first such reviewer), on the first answers ``y`` (reviewer ×
+    plot, NaN = none) — Polach & Böttcher 2014 §4.2, Table 1."""
     table1 = []
     for kind in dict.fromkeys(kinds.tolist()):
         cols = kinds == kind
         n_ans = (~np.isnan(y[:, cols])).sum(axis=1)
-        share = np.nansum(y[:, cols], axis=1)[n_ans > 0] / n_ans[n_ans > 0]
-        table1.append({
-            "kind": kind, "plots": int(cols.sum()), "reviewers": int((n_ans > 0).sum()),
-            "min_yes": _f(share.min()) if share.size else None,
-            "max_yes": _f(share.max()) if share.size else None,
-        })
+        k_yes = np.nansum(y[:, cols], axis=1)
+        has = n_ans > 0
+        share = k_yes[has] / n_ans[has]
+        row = {"kind": kind, "plots": int(cols.sum()), "reviewers": int(has.sum()), "answers": int(n_ans.sum())}
+        for end, pick in (("min", np.argmin), ("max", np.argmax)):
+            i = int(pick(share)) if share.size else None
+            row[f"{end}_yes"] = _f(share[i]) if i is not None else None
+            row[f"{end}_yes_count"] = int(k_yes[has][i]) if i is not None else None
+            row[f"{end}_yes_answers"] = int(n_ans[has][i]) if i is not None else None
+        table1.append(row)
     return table1
 
 
@@ -375,10 +389,14 @@ def _rasch(y: np.ndarray, fr: np.ndarray, fp: np.ndarray,
 def _reviewer_rows(a: pd.DataFrame, first: pd.DataFrame, names: list[str], y: np.ndarray,
                    strict: tuple[np.ndarray, ...]) -> list[dict]:
     """Per reviewer: first answers, share of Yes with its Wilson interval, strictness with its
-    interval, consistency on hidden repeats and median time per plot."""
+    interval (``None`` with a ``strictness_note`` when fewer than two reviewers answered),
+    consistency on hidden repeats and median time per plot."""
     reps = a[a["repeat"] & (a["scaling"] == "fixed")]
     paired = reps.merge(first[["reviewer", "plot", "answer"]], on=["reviewer", "plot"], suffixes=("", "_first"))
     same = (paired["answer"] == paired["answer_first"]).groupby(paired["reviewer"]).agg(["sum", "count"])
+    # strictness is relative to the panel's mean reviewer: with one reviewer it is 0 by
+    # construction, not an estimate
+    alone = STRICTNESS_ALONE if int((~np.isnan(y)).any(axis=1).sum()) < 2 else None
     reviewers = []
     for i, name in enumerate(names):
         row = y[i]
@@ -392,8 +410,9 @@ def _reviewer_rows(a: pd.DataFrame, first: pd.DataFrame, names: list[str], y: np
             "reviewer": name, "answers": n,
             "yes_share": _f(k / n) if n else None,
             "yes_share_ci": _interval(*ci) if ci else None,
-            "strictness": _f(strict[0][i]),
-            "strictness_ci": _interval(strict[1][i], strict[2][i]),
+            "strictness": _f(strict[0][i]) if alone is None else None,
+            "strictness_ci": _interval(strict[1][i], strict[2][i]) if alone is None else None,
+            "strictness_note": alone,
             "consistency": _f(same.loc[name, "sum"] / n_rep) if n_rep else None,
             "repeats": n_rep,
             "median_seconds": _f(np.median(secs)) if secs.size else None,
@@ -405,16 +424,26 @@ def _threshold(p: pd.DataFrame, accept: np.ndarray, fnames: np.ndarray, fp: np.n
                threshold_boot: int, rng: np.random.Generator) -> dict:
     """The objective value at which a typical reviewer says Yes half of the time, model-free in
     the link (isotonic on the reviewer-adjusted acceptability ``accept``,
-    :func:`railval.core.review.threshold.monotone_threshold`), with the parametric links beside
-    it (:func:`railval.core.review.threshold.link_sensitivity`; the drawn curve is the likeliest
-    link), for the normalised deviation and the Sprague–Geers C."""
-    threshold: dict = {"method": THRESHOLD_METHOD}
+    :func:`railval.core.review.threshold.monotone_threshold`: the reported value is the
+    crossing of the drawn curve), with the parametric links beside it
+    (:func:`railval.core.review.threshold.link_sensitivity`; the drawn dashed curve is the
+    likeliest link), for the normalised deviation and the Sprague–Geers C. Each carries its
+    n (``deviation_n``/``sg_c_n``: first answers, reviewers and plots it rests on) and its
+    ``…_status``; below :data:`MIN_ANSWERS` answers or :data:`MIN_PLOTS` plots the value and
+    interval are ``None`` and the status says "too few answers to estimate"."""
+    threshold: dict = {"method": THRESHOLD_METHOD, "min_answers": MIN_ANSWERS, "min_plots": MIN_PLOTS}
     for col, key, ci_key in (("deviation", "deviation_at_50", "ci"), ("sg_c", "sg_c_at_50", "sg_c_ci")):
         vals = p[col].to_numpy()
         mono = monotone_threshold(vals, accept, n_boot=threshold_boot, seed=rng, confidence=CONFIDENCE)
+        used = np.isfinite(vals[fp]) & np.isfinite(accept[fp])
+        n = {"answers": int(used.sum()), "reviewers": int(np.unique(fnames[used]).size), "plots": int(mono.plots)}
+        enough = n["answers"] >= MIN_ANSWERS and n["plots"] >= MIN_PLOTS
         best, sens = link_sensitivity(vals[fp], fy, fnames, fp, reference=mono.at_50, confidence=CONFIDENCE)
-        threshold[key] = _f(mono.at_50)
-        threshold[ci_key] = _interval(*mono.ci) if mono.ci else None
+        threshold[key] = _f(mono.at_50) if enough else None
+        threshold[ci_key] = (_interval(*mono.ci) if mono.ci else None) if enough else None
+        threshold[f"{key}_status"] = mono.status if enough else TOO_FEW
+        threshold[f"{ci_key}_status"] = mono.ci_status if enough else None
+        threshold[f"{col}_n"] = n
         threshold[f"{col}_curve"] = {"value": [_f(x) for x in mono.curve_value],
                                      "yes": [_f(x) for x in mono.curve_yes]}
         threshold[f"{col}_fit"] = {k: (_f(v) if isinstance(v, float) else v) for k, v in best.to_dict().items()

@@ -38,12 +38,17 @@ fit of :mod:`.rasch`, on the scale where a typical reviewer says Yes with probab
 ``a_p = 0``) is regressed on ``v`` under the only assumption that it does not rise with
 ``v`` — isotonic regression by pooled adjacent violators (Ayer, Brunk, Ewing, Reid &
 Silverman 1955, Ann. Math. Stat. 26:641–647; Barlow, Bartholomew, Bremner & Brunk 1972,
-Statistical Inference under Order Restrictions) — and ``v₅₀`` is where that monotone fit
-crosses 0, linearly interpolated between the adjacent blocks (the isotonic estimate of a
-target quantile of Stylianou & Flournoy 2002, Biometrics 58:171–177; here in ``log v``).
-Its interval is a percentile bootstrap over plots, the clusters of the answers (Davison &
-Hinkley 1997, Bootstrap Methods and their Application, §3.8). The reviewers stay fixed
-effects: the estimand is this panel's typical reviewer.
+Statistical Inference under Order Restrictions). A typical reviewer's P(Yes) at each
+observed value is ``expit`` of that monotone fit — the curve the analysis page draws, a
+straight line between adjacent points — and ``v₅₀`` is where that line crosses ½, linearly
+interpolated in ``v`` between the adjacent observed values (the isotonic estimate of a
+target quantile of Stylianou & Flournoy 2002, Biometrics 58:171–177): one computation for
+the number and the chart (:func:`curve_crossing`). A curve that stays above (below) ½ over
+the observed values has no ``v₅₀``: it lies above (below) the observed range, and nothing
+is extrapolated. Its interval is a percentile bootstrap over plots, the clusters of the
+answers (Davison & Hinkley 1997, Bootstrap Methods and their Application, §3.8), each
+replicate estimated the same way. The reviewers stay fixed effects: the estimand is this
+panel's typical reviewer.
 
 The link sensitivity (:func:`link_sensitivity`) fits the parametric model above with
 ``log v`` replaced by the Box–Cox power ``x_λ(v) = (v^λ − 1)/λ`` (``log v`` at λ = 0) for
@@ -65,8 +70,9 @@ import scipy.stats
 from railval.core.errors import InvalidParameter
 from railval.core.review.rasch import DEFAULT_RIDGE
 
-__all__ = ["LINKS", "MIN_VALUE", "MonotoneThreshold", "ThresholdFit", "fit_threshold",
-           "link_name", "link_sensitivity", "monotone_threshold", "transform", "yes_curve"]
+__all__ = ["ABOVE_RANGE", "BELOW_RANGE", "ESTIMATED", "LINKS", "MIN_VALUE", "MonotoneThreshold", "TOO_FEW",
+           "ThresholdFit", "curve_crossing", "fit_threshold", "link_name", "link_sensitivity",
+           "monotone_threshold", "transform", "yes_curve"]
 
 #: Objective values are clipped to at least this before taking the log (a thousandth of the limit).
 MIN_VALUE = 1e-3
@@ -76,6 +82,10 @@ LINKS = (0.0, 0.5, 1.0)
 
 #: Bootstrap replicates of :func:`monotone_threshold` by default.
 DEFAULT_BOOT = 1000
+
+#: ``status`` of a 50 % point with too few answers, plots or values to draw a curve
+#: (docs/workshops.md "Too few answers").
+TOO_FEW = "too few answers to estimate"
 
 _LINK_NAMES = {0.0: "log", 0.5: "sqrt", 1.0: "linear"}
 
@@ -316,37 +326,107 @@ def fit_threshold(value, answer, reviewer, plot, *, ridge: float = DEFAULT_RIDGE
     return ThresholdFit(at50, ci, -s_bar, b, strict, n_g, int(y.size), float(power), loglik)
 
 
+#: ``status`` of a 50 % point: the curve crosses ½ inside the observed values (a number).
+ESTIMATED = "estimated"
+#: ``status``: the curve stays above ½ at every observed value (the 50 % point lies beyond the
+#: largest value; no number is extrapolated).
+ABOVE_RANGE = "above the observed range"
+#: ``status``: the curve is below ½ already at the smallest observed value.
+BELOW_RANGE = "below the observed range"
+
+
 @dataclass(frozen=True)
 class MonotoneThreshold:
-    """Result of :func:`monotone_threshold`: ``at_50`` (``None`` if the monotone fit does
-    not cross 0), its percentile ``ci`` (``None`` if fewer than 20 replicates cross), the
-    number of ``plots`` used, ``boot_valid`` replicates that crossed out of ``n_boot``."""
+    """Result of :func:`monotone_threshold`.
+
+    ``at_50``: where the drawn curve (``curve_value``, ``curve_yes``) crosses ½ (``None``
+    unless ``status`` is :data:`ESTIMATED`); ``status``: :data:`ESTIMATED`,
+    :data:`ABOVE_RANGE`, :data:`BELOW_RANGE` (or ``"too few answers to estimate"`` set by the
+    caller); ``ci``: the percentile interval (``None`` without one, see ``ci_status``);
+    ``ci_status``: ``None`` or :data:`ABOVE_RANGE` / :data:`BELOW_RANGE` when the interval
+    reaches beyond the observed values (more than the tail share of the replicates never
+    cross inside their range); ``plots``: the plots used; ``boot_valid``: replicates that
+    crossed inside the observed range, out of ``n_boot``."""
 
     at_50: float | None
     ci: tuple[float, float] | None
     plots: int
     boot_valid: int
     n_boot: int
-    #: the monotone fit on the full data: sorted values and P(Yes) of a typical reviewer
-    #: there, ``expit(fitted a_p)`` (a step curve; empty without a fit)
+    #: the monotone fit on the full data: values sorted, P(Yes) of a typical reviewer there,
+    #: ``expit(fitted a_p)``; the curve drawn is the straight line through these points
+    #: (empty without a fit)
     curve_value: tuple[float, ...] = ()
     curve_yes: tuple[float, ...] = ()
+    status: str = ESTIMATED
+    ci_status: str | None = None
 
 
-def _crossing(v: np.ndarray, a: np.ndarray, w: np.ndarray | None) -> float | None:
-    """Where the falling isotonic fit of ``a`` on sorted ``v`` crosses 0, interpolated
-    linearly in ``log v`` between the weighted centres of the last block above and the first
-    block below 0 (Stylianou & Flournoy 2002)."""
-    fit = scipy.optimize.isotonic_regression(a, weights=w, increasing=False).x
-    above, below = np.flatnonzero(fit > 0), np.flatnonzero(fit < 0)
-    if not above.size or not below.size:
-        return None
-    i, j = above.max(), below.min()
-    lv = np.log(v)
-    ww = np.ones_like(a) if w is None else w
-    bi, bj = fit == fit[i], fit == fit[j]
-    xi, xj = np.average(lv[bi], weights=ww[bi]), np.average(lv[bj], weights=ww[bj])
-    return float(np.exp(xi + (xj - xi) * fit[i] / (fit[i] - fit[j])))
+def curve_crossing(value, yes) -> tuple[float | None, str]:
+    """Where the polyline through the points ``(value[k], yes[k])`` — a non-increasing curve of
+    P(Yes), in the order given — crosses ½: ``(v₅₀, ESTIMATED)``, or ``(None, ABOVE_RANGE)``
+    if every point is above ½, ``(None, BELOW_RANGE)`` if every point is below.
+
+    Between the last point above ½ (``k``) and the next one (below ½), linear interpolation in
+    ``v``: ``v₅₀ = v_k + (v_{k+1} − v_k)(P_k − ½)/(P_k − P_{k+1})`` — the linearly
+    interpolated isotonic estimate of a target quantile (Stylianou & Flournoy 2002,
+    "Dose finding using the biased coin up-and-down design and isotonic regression",
+    Biometrics 58:171–177, §2.3). Points exactly at ½ form the segment where the curve equals
+    ½; its midpoint is returned. This is the crossing of the line a chart draws through the
+    same points (straight segments in ``v``), so the reported value and the drawn curve agree.
+
+    Parameters
+    ----------
+    value : array_like
+        Objective values, sorted ascending (ties allowed).
+    yes : array_like
+        P(Yes) at each value, non-increasing.
+
+    Returns
+    -------
+    tuple of (float or None, str)
+        The 50 % value and its status.
+
+    Examples
+    --------
+    >>> curve_crossing([0.5, 1.0, 2.0], [0.9, 0.7, 0.3])
+    (1.5, 'estimated')
+    >>> curve_crossing([0.5, 1.0], [0.9, 0.7])
+    (None, 'above the observed range')
+    """
+    v = np.asarray(value, dtype=float)
+    p = np.asarray(yes, dtype=float)
+    if v.shape != p.shape or v.ndim != 1 or v.size == 0:
+        raise InvalidParameter("curve_crossing: value and yes must be 1-D of equal, non-zero length")
+    at = np.flatnonzero(p == 0.5)
+    if at.size:
+        return float(0.5 * (v[at[0]] + v[at[-1]])), ESTIMATED
+    above = np.flatnonzero(p > 0.5)
+    if not above.size:
+        return None, BELOW_RANGE
+    k = int(above.max())
+    if k == v.size - 1:
+        return None, ABOVE_RANGE
+    return float(v[k] + (v[k + 1] - v[k]) * (p[k] - 0.5) / (p[k] - p[k + 1])), ESTIMATED
+
+
+def _curve(v: np.ndarray, a: np.ndarray, w: np.ndarray | None) -> np.ndarray:
+    """P(Yes) of a typical reviewer at the sorted values ``v``: ``expit`` of the falling
+    isotonic regression (pooled adjacent violators) of the acceptabilities ``a``."""
+    return scipy.special.expit(scipy.optimize.isotonic_regression(a, weights=w, increasing=False).x)
+
+
+def _percentile_ci(draws: np.ndarray, confidence: float) -> tuple[tuple[float, float] | None, str | None]:
+    """Percentile interval of the replicates ``draws`` (``±inf`` = beyond the observed range
+    of that replicate; they keep their place in the order, so leaving them out cannot narrow
+    the interval) — Efron & Tibshirani 1993, An Introduction to the Bootstrap, §13.3."""
+    q = (1.0 - confidence) / 2.0
+    lo, hi = np.quantile(draws, [q, 1.0 - q], method="inverted_cdf")
+    if np.isposinf(hi):
+        return None, ABOVE_RANGE
+    if np.isneginf(lo):
+        return None, BELOW_RANGE
+    return (float(lo), float(hi)), None
 
 
 def monotone_threshold(value, acceptability, *, n_boot: int = DEFAULT_BOOT,
@@ -354,10 +434,16 @@ def monotone_threshold(value, acceptability, *, n_boot: int = DEFAULT_BOOT,
     """``v₅₀`` without a link (module docstring, last part): per plot its objective
     ``value`` and its reviewer-adjusted ``acceptability`` (the Rasch fit's ``a_p``, on the
     scale where a typical reviewer says Yes with probability ½ at ``a_p = 0``). The falling
-    isotonic regression of ``a_p`` on ``v`` (pooled adjacent violators) crosses 0 at
-    ``v₅₀``; the interval resamples the plots (``n_boot`` replicates, the multiplicities as
-    weights). Plots whose value or acceptability is not finite stay out; ``v ≤ 0`` is
-    clipped to :data:`MIN_VALUE`.
+    isotonic regression of ``a_p`` on ``v`` (pooled adjacent violators) gives a typical
+    reviewer's P(Yes) = expit(fit) at each value — the curve; ``v₅₀`` is where the straight
+    line through those points crosses ½ (:func:`curve_crossing`), so the reported value is
+    the crossing of the drawn curve. The interval resamples the plots (``n_boot`` replicates,
+    the multiplicities as weights) and applies the same two steps to each replicate
+    (percentile bootstrap over plots, the clusters of the answers: Davison & Hinkley 1997,
+    Bootstrap Methods and their Application, §3.8); a replicate whose curve does not cross
+    inside its values counts as beyond the range (see :class:`MonotoneThreshold`). Plots
+    whose value or acceptability is not finite stay out; ``v ≤ 0`` is clipped to
+    :data:`MIN_VALUE`.
 
     Parameters
     ----------
@@ -373,7 +459,7 @@ def monotone_threshold(value, acceptability, *, n_boot: int = DEFAULT_BOOT,
     Returns
     -------
     MonotoneThreshold
-        ``v₅₀``, its interval and the fitted falling curve.
+        ``v₅₀`` (or where it lies), its interval and the fitted falling curve.
     """
     if int(n_boot) < 0:
         raise InvalidParameter(f"monotone_threshold: n_boot must be ≥ 0, got {n_boot!r}")
@@ -387,24 +473,19 @@ def monotone_threshold(value, acceptability, *, n_boot: int = DEFAULT_BOOT,
     v, a = v[order], a[order]
     n = v.size
     if n < 3 or np.unique(v).size < 2:
-        return MonotoneThreshold(None, None, n, 0, int(n_boot))
-    at50 = _crossing(v, a, None)
-    fit = scipy.optimize.isotonic_regression(a, increasing=False).x
-    curve = (tuple(float(x) for x in v), tuple(float(x) for x in scipy.special.expit(fit)))
+        return MonotoneThreshold(None, None, n, 0, int(n_boot), status=TOO_FEW)
+    yes = _curve(v, a, None)
+    at50, status = curve_crossing(v, yes)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-    draws = []
-    for _ in range(int(n_boot)):
+    draws = np.empty(int(n_boot))
+    for b in range(int(n_boot)):
         wt = np.bincount(rng.integers(0, n, n), minlength=n).astype(float)
         k = wt > 0
-        c = _crossing(v[k], a[k], wt[k])
-        if c is not None:
-            draws.append(c)
-    ci = None
-    if len(draws) >= 20:
-        q = (1.0 - confidence) / 2.0
-        lo, hi = np.quantile(np.asarray(draws), [q, 1.0 - q])
-        ci = (float(lo), float(hi))
-    return MonotoneThreshold(at50, ci, n, len(draws), int(n_boot), *curve)
+        c, where = curve_crossing(v[k], _curve(v[k], a[k], wt[k]))
+        draws[b] = c if c is not None else (np.inf if where == ABOVE_RANGE else -np.inf)
+    ci, ci_status = _percentile_ci(draws, confidence) if draws.size else (None, None)
+    return MonotoneThreshold(at50, ci, n, int(np.isfinite(draws).sum()), int(n_boot),
+                             tuple(float(x) for x in v), tuple(float(x) for x in yes), status, ci_status)
 
 
 def link_sensitivity(value, answer, reviewer, plot, *, powers=LINKS, reference: float | None = None,
