@@ -42,7 +42,7 @@ import scipy.signal
 
 from railval.core.buffers import BufferPool
 from railval.core.errors import InvalidParameter, InvalidSignal
-from railval.core.processing import DEFAULT_ORDER
+from railval.core.processing import DEFAULT_ORDER, check_order
 
 LOWPASS_HZ = 20.0
 BANDPASS_HZ = (0.4, 10.0)
@@ -77,22 +77,6 @@ class FilterDesign:
         lo, hi = BANDPASS_HZ
         return (f"Butterworth band-pass {lo:g}–{hi:g} Hz, prototype order {self.order} "
                 f"(order {2 * self.order}), zero-phase")
-
-
-def check_order(order: int) -> int:
-    """The Butterworth prototype order as int; raises InvalidParameter outside 1..10.
-
-    Parameters
-    ----------
-    order : int
-
-    Returns
-    -------
-    int
-    """
-    if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or not 1 <= int(order) <= 10:
-        raise InvalidParameter(f"filter order must be an integer in 1..10, got {order!r}")
-    return int(order)
 
 
 def _check_design_args(fs: float, kind: str, order: int) -> None:

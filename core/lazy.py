@@ -81,6 +81,9 @@ class LazyFunction:
     def __getattr__(self, attr: str) -> Any:  # __doc__, __wrapped__, py_func, …
         return getattr(self._load(), attr)
 
+    def __reduce__(self):  # sent to a worker process: re-bound there, imported on its call
+        return (LazyFunction, (self._module, self._attr))
+
     def __repr__(self) -> str:
         return f"<lazy function {self._module}.{self._attr}>"
 

@@ -168,7 +168,6 @@ def format_supplementary(rows: list[dict]) -> list[str]:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     from railval.app.services import overview
-    from railval.app.views import view_of
     from railval.db.engine import connect
 
     database = connect(args.db)
@@ -183,6 +182,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
         result = overview.validation(database, args.campaign, args.config, order=args.order,
                                      n_boot=args.boot, seed=args.seed)
     if args.json:
+        from railval.app.views import view_of  # loads the verdict's module: once there is one
+
         doc = result.to_dict()
         ins = view_of(result).in_sample
         doc["in_sample"] = ins is not None

@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from railval.core.coverage import (
     MIN_POSITIONS,
@@ -23,8 +23,10 @@ from railval.core.coverage import (
 )
 from railval.core.errors import NotFound
 from railval.core.types import ZONES, SectionInfo
-from railval.core.validation import ValidationResult
 from railval.db import repo
+
+if TYPE_CHECKING:  # the verdict's module loads numba: imported by the validation itself
+    from railval.core.validation import ValidationResult
 
 
 @dataclass

@@ -45,21 +45,31 @@ import threading
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sqlalchemy.orm import Session
 
-from railval.core import en14363
-from railval.core.en14363 import pack_values, section_cache_key, unpack_values
+from railval.core import lazy
 from railval.core.errors import InvalidParameter
-from railval.core.filters import DEFAULT_ORDER, check_order
+from railval.core.processing import DEFAULT_ORDER, check_order
 from railval.core.stages import collect, in_context, stage
 from railval.core.stages import current as current_stages
 from railval.core.types import SectionInfo
-from railval.core.validation import ValidationResult, source_warnings, validate
 from railval.core.workers import row_threads, thread_count
 from railval.db import repo
 from railval.db.engine import connect
+
+if TYPE_CHECKING:
+    from railval.core.validation import ValidationResult
+
+# the EN 14363 processing and the verdict load numba and scipy.signal: imported when the first
+# section is processed, so that an unknown campaign or configuration is answered at once
+en14363 = lazy.module("railval.core.en14363")
+pack_values = lazy.function("railval.core.en14363", "pack_values")
+section_cache_key = lazy.function("railval.core.en14363", "section_cache_key")
+unpack_values = lazy.function("railval.core.en14363", "unpack_values")
+source_warnings = lazy.function("railval.core.validation", "source_warnings")
+validate = lazy.function("railval.core.validation", "validate")
 
 #: sections read per query while the previous chunks are processed
 _PIPELINE_CHUNK = 4

@@ -33,11 +33,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from railval.core import lazy
 from railval.core.errors import InvalidParameter, InvalidSignal
-from railval.core.filters import filtfilt_rows
-from railval.core.metrics.grid import common_grid
-from railval.core.metrics.sprague_geers import sprague_geers
-from railval.core.psd import welch_psd
 from railval.core.quantities import QUANTITIES
 from railval.core.roles import Principal, require
 from railval.core.workshop import (
@@ -61,6 +58,13 @@ from railval.core.workshop import (
     plots_for,
     scale_key,
 )
+
+# the filters, the PSD and the Sprague–Geers metric load numba, scipy.signal and pandas: bound
+# here, imported when a plot is first rendered (not by `workshop analyse`, `status`, …)
+filtfilt_rows = lazy.function("railval.core.filters", "filtfilt_rows")
+common_grid = lazy.function("railval.core.metrics.grid", "common_grid")
+sprague_geers = lazy.function("railval.core.metrics.sprague_geers", "sprague_geers")
+welch_psd = lazy.function("railval.core.psd", "welch_psd")
 
 DEFAULT_REPEATS = 0.1
 CSV_COLUMNS = ("reviewer", "plot", "answer", "seconds", "comment")
@@ -630,11 +634,11 @@ def analysis_frames(session, name: str):
     fixed plot with ``scaling`` = ``auto`` (the pairing the scaling effect needs). plots: the fixed plots, ``plot, kind,
     deviation, sg_c`` (NaN where none).
     """
-    import pandas as pd
     from railval.db import workshops as wsdb
 
     w = wsdb.get_workshop(session, name)
     rows = wsdb.answer_rows(session, w)
+    import pandas as pd  # after the look-up: an unknown workshop is answered at once
     answers = pd.DataFrame(
         [{"reviewer": r["reviewer"],
           "plot": r["twin"] if r["scaling"] != "fixed" and r["twin"] is not None else r["plot"],
@@ -656,14 +660,13 @@ def analyse(database, name: str, *, actor: Principal | str = "system",
             with_plots: bool = False) -> dict[str, Any]:
     """The ``workshop analyse NAME --json`` document (railval.core.review.analyse);
     ``with_plots`` adds the per-plot rows (share of Yes, objective values) for the page."""
-    from railval.core.review import analyse as core_analyse
-
     if isinstance(actor, Principal):
         require(actor, "workshop.results")
     with database.session() as session:
         answers, plots = analysis_frames(session, name)
     if answers.empty:
         raise InvalidParameter(f"workshop {name!r} has no answers yet")
+    from railval.core.review import analyse as core_analyse  # scipy.stats: once there is work
     result = core_analyse(answers, plots)
     doc = {"workshop": name, **result.to_dict()}
     if with_plots:
