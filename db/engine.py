@@ -25,7 +25,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from sqlalchemy import Engine, create_engine, event, inspect
+from sqlalchemy import Engine, create_engine, event, inspect, text
 from sqlalchemy.engine import make_url
 from sqlalchemy.orm import Session, sessionmaker
 from sqlalchemy.pool import StaticPool
@@ -154,17 +154,31 @@ class Database:
         return cfg
 
     def head_revision(self) -> str:
-        from alembic.script import ScriptDirectory
+        """The newest migration revision, read from the scripts without importing Alembic
+        (:func:`railval.db.catalogue.head_revision`; Alembic's ScriptDirectory when the
+        scripts do not form one linear head)."""
+        from railval.db.catalogue import head_revision as scripts_head
 
-        head = ScriptDirectory.from_config(self._alembic_config()).get_current_head()
+        head = scripts_head()
+        if head is None:
+            from alembic.script import ScriptDirectory
+
+            head = ScriptDirectory.from_config(self._alembic_config()).get_current_head()
         assert head is not None
         return head
 
     def current_revision(self) -> str | None:
-        from alembic.migration import MigrationContext
-
+        """The revision stamped in the database (None before the first migration): the query
+        of Alembic's ``MigrationContext.get_current_revision``, without importing Alembic
+        (a verb checks the revision on every start)."""
         with self.engine.connect() as conn:
-            return MigrationContext.configure(conn).get_current_revision()
+            if not inspect(conn).has_table("alembic_version"):
+                return None
+            rows = conn.execute(text("SELECT version_num FROM alembic_version")).scalars().all()
+        if len(rows) > 1:
+            raise RuntimeError(f"database {self.safe_url} has {len(rows)} revisions stamped "
+                               f"({', '.join(rows)}): a branched migration history")
+        return rows[0] if rows else None
 
     def init(self) -> str:
         """Create or upgrade the schema to the newest revision; returns that revision."""

@@ -6,13 +6,18 @@ Every verb lives in its own module ``app/cli/cmd_<group>.py`` exposing
 options and dispatches. Global options: ``--db URL`` (else ``$RAILVAL_DB``, else the embedded
 SQLite file ``railval.db`` in the working directory).
 
-Start-up stays short (``railval --help``, ``railval list``): every ``cmd_*`` module is imported
-to register its verbs, so a module's top level and its ``register`` import only the standard
-library and light railval modules; a verb imports what it computes with (scipy, pandas,
-numba, the services, the database layer) inside its function, when it runs. A registration
-that needs a registry of a heavy module (argparse ``choices``) passes :class:`LazyChoices`,
-which reads the registry only when that verb's arguments are parsed or its help is printed.
-tests/test_cli_startup.py checks this in a fresh interpreter for every verb.
+Start-up by need. :data:`VERBS` maps every verb to the module that registers it; a command
+line naming a verb imports that one module (:func:`chosen_verb`, :func:`build_parser`), and
+only ``railval --help``, a bare ``railval`` or an unknown verb imports them all (to list them
+with their help). A module's top level and its ``register`` import only the standard library
+and light railval modules; a verb imports what it computes with (the services, the database
+layer) inside its function, when it runs, and the services defer scipy.signal, scipy.stats,
+pandas, numba and the plotting libraries until the work reaches them
+(:mod:`railval.core.lazy`, :mod:`railval.core.processing`). A registration that needs a
+registry of a heavy module (argparse ``choices``) passes :class:`LazyChoices`, which reads the
+registry only when that verb's arguments are parsed or its help is printed.
+tests/test_cli_startup.py checks this in a fresh interpreter for every verb and that the table
+names every registered verb; ``railval bench startup`` times it (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -29,7 +34,48 @@ import traceback
 from railval.core.errors import RailvalError
 
 
-def build_parser() -> argparse.ArgumentParser:
+#: every verb → the module of app/cli whose ``register`` adds it; a command line naming a verb
+#: imports only that module (tests/test_cli_startup.py checks the table against the modules)
+VERBS: dict[str, str] = {
+    "serve": "cmd_app", "report": "cmd_app",
+    "audit": "cmd_audit", "signoff": "cmd_audit",
+    "backup": "cmd_backup", "restore": "cmd_backup",
+    "bench": "cmd_bench",
+    "init": "cmd_data", "import": "cmd_data", "export": "cmd_data", "verify": "cmd_data",
+    "list": "cmd_data",
+    "diagnose": "cmd_diagnose", "calibrate": "cmd_diagnose", "modal": "cmd_diagnose",
+    "metrics": "cmd_metrics",
+    "simulate": "cmd_sim", "synth": "cmd_sim",
+    "user": "cmd_user",
+    "validate": "cmd_validate",
+    "workshop": "cmd_workshop",
+}
+#: the global options that take a value (``--db URL``, ``--as USER``) and the one that takes none
+_VALUE_OPTIONS = ("--db", "--as")
+_FLAG_OPTIONS = ("--debug",)
+
+
+def chosen_verb(argv: list[str]) -> str | None:
+    """The verb of a command line when it can be told without argparse: the first word after
+    the global options, if it is in :data:`VERBS`. None for help (``-h`` before the verb), an
+    abbreviated or unknown option, an unknown verb or no verb: the full parser answers those."""
+    i = 0
+    while i < len(argv):
+        word = argv[i]
+        if word in _VALUE_OPTIONS:
+            i += 2
+        elif word in _FLAG_OPTIONS or word.split("=", 1)[0] in _VALUE_OPTIONS and "=" in word:
+            i += 1
+        elif word.startswith("-"):
+            return None
+        else:
+            return word if word in VERBS else None
+    return None
+
+
+def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
+    """The parser of the command line: with ``verb`` (a key of :data:`VERBS`) it holds the
+    verbs of that verb's module only, else every module's verbs."""
     parser = argparse.ArgumentParser(
         prog="railval",
         description="Validate railway vehicle simulation models against on-track measurements.",
@@ -50,6 +96,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="print the traceback of an error (also RAILVAL_DEBUG=1)")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     sub.required = True
+    if verb is not None:
+        importlib.import_module(f"{__name__}.{VERBS[verb]}").register(sub)
+        return parser
     package = importlib.import_module(__name__)
     for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
         if info.name.startswith("cmd_"):
@@ -195,7 +244,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run one verb. Errors print one line ``railval VERB: error: …`` on stderr (exit 2 for
     bad input, 1 for anything else); ``--debug`` (or ``RAILVAL_DEBUG=1``) adds the
     traceback. Output piped into a reader that stops early (``| head``) ends quietly."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(chosen_verb(argv))
     args = parser.parse_args(argv)
     debug = bool(args.debug) or os.environ.get("RAILVAL_DEBUG") == "1"
     if debug:
