@@ -5,7 +5,8 @@
 [--seed 0] [--dry-run] [--json]``
     build the plot set, render every plot once and store it (``--dry-run``: only count);
     ``--json`` reports per kind ``flat_share``, the share of plots whose filtered signal
-    spans less than 10 % of its y range.
+    spans less than 10 % of its y range. Progress (plots rendered n/N) goes to stderr, with
+    and without ``--json``.
 ``railval workshop kinds [--json]``          the plot kinds (registry).
 ``railval workshop plots NAME --json``       ``plots``: id, kind, section, configuration,
                                              channel, deviation, image_sha256 (and sg_c,
@@ -29,7 +30,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from railval.app.cli import emit_json
+from railval.app.cli import Progress, emit_json
 
 
 def _actor() -> str:
@@ -162,7 +163,7 @@ def _create(args: argparse.Namespace) -> int:
     out = ws.create(database, args.name, args.campaign, configurations=configs,
                     sections=sections, kinds=kinds, blind=args.blind, repeats=args.repeats,
                     auto_share=args.auto_share, seed=args.seed, scaling=scaling,
-                    twin_scaling=args.twin_scaling, actor=_actor())
+                    twin_scaling=args.twin_scaling, actor=_actor(), progress=Progress())
     if args.json:
         emit_json({**out, "stored": True})
     else:

@@ -10,12 +10,29 @@ Look (the same for every plot of a workshop): measurement drawn first (beneath) 
 simulation on top in Okabe–Ito vermilion (the app's colours, :mod:`railval.app.scales`: a
 colour-blind-safe pair; Okabe & Ito 2008, "Color Universal Design"), legend in the upper right corner, both axes labelled
 with units, the kind's fixed axis ranges (:func:`railval.core.workshop.kind_scale`).
+
+Speed (docs/workshops.md "Rendering speed"): a thread keeps one figure per axis type
+(linear or logarithmic y) and redraws it with each plot's data, ticks, ranges, labels and
+title (:class:`_Canvas`): the figure, its tick objects, the legend and the text metrics the
+Agg renderer caches are made once instead of for every plot — the PNG bytes are the same as
+those of a figure made for the plot alone (:func:`render_fresh`; tests/test_workshop_jobs.py
+compares them). :func:`render_many` renders a workshop's plots on a pool of
+:data:`RENDER_WORKERS` processes (``forkserver``; the workers end with their parent,
+:mod:`railval.core.workers`) and renders plots of identical content (the SHA-256 of
+everything that decides the pixels, :func:`content_key`) once — within a workshop and,
+through a bounded cache (:data:`CACHE_BYTES`), across the workshops this process creates.
 """
 
 from __future__ import annotations
 
+import hashlib
 import io
-from collections.abc import Mapping
+import json
+import os
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import matplotlib
@@ -51,34 +68,205 @@ _RC = {
 }
 
 
+class _Canvas:
+    """One reusable review figure (one per axis type and thread): two lines, grid and legend
+    made once; :meth:`draw` sets a plot's data, ticks, ranges, labels and title and saves."""
+
+    def __init__(self, log: bool):
+        m, s = STYLE["measurement"], STYLE["simulation"]
+        with matplotlib.rc_context(_RC):
+            fig = Figure(figsize=(STYLE["width_in"], STYLE["height_in"]), dpi=STYLE["dpi"])
+            ax = fig.add_subplot(1, 1, 1)
+            ax.set_axisbelow(True)
+            ax.grid(True, color=STYLE["grid_color"], linewidth=0.6)
+            (self.meas,) = ax.plot([], [], color=m["color"], linewidth=m["linewidth"],
+                                   zorder=m["zorder"], label=m["label"])
+            (self.sim,) = ax.plot([], [], color=s["color"], linewidth=s["linewidth"],
+                                  zorder=s["zorder"], label=s["label"])
+            if log:
+                ax.set_yscale("log")
+            ax.legend(loc=STYLE["legend"], frameon=True, framealpha=0.9)
+            fig.subplots_adjust(left=0.09, right=0.98, top=0.91, bottom=0.11)
+        self.fig, self.ax = fig, ax
+
+    def draw(self, x_meas, y_meas, x_sim, y_sim, scale: Scale, *, title: str, x_label: str,
+             y_label: str) -> bytes:
+        ax = self.ax
+        with matplotlib.rc_context(_RC):
+            self.meas.set_data(x_meas, y_meas)
+            self.sim.set_data(x_sim, y_sim)
+            if not scale.y.log:
+                ax.set_yticks(_ticks(scale.y.lo, scale.y.hi, scale.y.step))
+            ax.set_xticks(_ticks(scale.x.lo, scale.x.hi, scale.x.step))
+            ax.set_xlim(scale.x.lo, scale.x.hi)
+            ax.set_ylim(scale.y.lo, scale.y.hi)
+            ax.set_xlabel(x_label)
+            ax.set_ylabel(y_label)
+            ax.set_title(title, loc="left")
+            buf = io.BytesIO()
+            self.fig.savefig(buf, format="png", dpi=STYLE["dpi"], metadata={"Software": None})
+        return buf.getvalue()
+
+
+_LOCAL = threading.local()
+
+
 def render_png(x_meas: np.ndarray, y_meas: np.ndarray, x_sim: np.ndarray, y_sim: np.ndarray,
                scale: Scale, *, title: str, x_label: str, y_label: str) -> bytes:
-    """One review plot as PNG bytes (see the module docstring for the look)."""
-    with matplotlib.rc_context(_RC):
-        fig = Figure(figsize=(STYLE["width_in"], STYLE["height_in"]), dpi=STYLE["dpi"])
-        ax = fig.add_subplot(1, 1, 1)
-        ax.set_axisbelow(True)
-        ax.grid(True, color=STYLE["grid_color"], linewidth=0.6)
-        m, s = STYLE["measurement"], STYLE["simulation"]
-        ax.plot(x_meas, y_meas, color=m["color"], linewidth=m["linewidth"], zorder=m["zorder"],
-                label=m["label"])
-        ax.plot(x_sim, y_sim, color=s["color"], linewidth=s["linewidth"], zorder=s["zorder"],
-                label=s["label"])
-        if scale.y.log:
-            ax.set_yscale("log")
-        else:
-            ax.set_yticks(_ticks(scale.y.lo, scale.y.hi, scale.y.step))
-        ax.set_xticks(_ticks(scale.x.lo, scale.x.hi, scale.x.step))
-        ax.set_xlim(scale.x.lo, scale.x.hi)
-        ax.set_ylim(scale.y.lo, scale.y.hi)
-        ax.set_xlabel(x_label)
-        ax.set_ylabel(y_label)
-        ax.set_title(title, loc="left")
-        ax.legend(loc=STYLE["legend"], frameon=True, framealpha=0.9)
-        fig.subplots_adjust(left=0.09, right=0.98, top=0.91, bottom=0.11)
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=STYLE["dpi"], metadata={"Software": None})
-    return buf.getvalue()
+    """One review plot as PNG bytes (see the module docstring for the look), drawn on this
+    thread's reusable figure of the plot's axis type."""
+    canvases = getattr(_LOCAL, "canvases", None)
+    if canvases is None:
+        canvases = _LOCAL.canvases = {}
+    log = bool(scale.y.log)
+    if log not in canvases:
+        canvases[log] = _Canvas(log)
+    return canvases[log].draw(x_meas, y_meas, x_sim, y_sim, scale, title=title,
+                              x_label=x_label, y_label=y_label)
+
+
+def render_fresh(x_meas: np.ndarray, y_meas: np.ndarray, x_sim: np.ndarray, y_sim: np.ndarray,
+                 scale: Scale, *, title: str, x_label: str, y_label: str) -> bytes:
+    """The same plot on a figure made for it alone (what :func:`render_png` is checked
+    against)."""
+    return _Canvas(bool(scale.y.log)).draw(x_meas, y_meas, x_sim, y_sim, scale, title=title,
+                                           x_label=x_label, y_label=y_label)
+
+
+# ------------------------------------------------------------------------- many plots
+def _default_workers() -> int:
+    env = os.environ.get("RAILVAL_RENDER_WORKERS", "").strip()
+    if env.isdigit() and int(env) >= 1:
+        return int(env)
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(2, cores))
+
+
+#: processes rendering one workshop's plots (``$RAILVAL_RENDER_WORKERS``, default: the cores
+#: this process may use, at most 2 — the deployment's machines have 2); 1: in this process
+RENDER_WORKERS = _default_workers()
+#: fewer plots to render than this are rendered in this process (a pool costs time to start)
+POOL_MIN_PLOTS = 16
+#: plots handed to a worker at once
+CHUNK = 4
+#: PNG bytes kept by content key in this process, across workshops (oldest dropped first)
+CACHE_BYTES = 64 * 1024 * 1024
+_CACHE: OrderedDict[str, bytes] = OrderedDict()
+_CACHE_LOCK = threading.Lock()
+
+
+@dataclass(frozen=True)
+class PlotSpec:
+    """Everything that decides one review plot's pixels."""
+
+    x_meas: np.ndarray
+    y_meas: np.ndarray
+    x_sim: np.ndarray
+    y_sim: np.ndarray
+    scale: Scale
+    title: str
+    x_label: str
+    y_label: str
+
+
+def content_key(spec: PlotSpec) -> str:
+    """SHA-256 of the plot's data (dtype, shape and bytes of the four arrays), scale, texts,
+    :data:`STYLE` and the matplotlib version: equal keys give equal PNG bytes."""
+    h = hashlib.sha256()
+    for a in (spec.x_meas, spec.y_meas, spec.x_sim, spec.y_sim):
+        arr = np.ascontiguousarray(a)
+        h.update(f"{arr.dtype.str}{arr.shape}".encode())
+        h.update(arr.tobytes())
+    h.update(json.dumps([spec.scale.to_dict(), spec.title, spec.x_label, spec.y_label, STYLE,
+                         matplotlib.__version__], sort_keys=True, default=str).encode())
+    return h.hexdigest()
+
+
+def _render_chunk(specs: list[PlotSpec]) -> list[bytes]:
+    """A worker's task: render ``specs`` in order."""
+    return [render_png(s.x_meas, s.y_meas, s.x_sim, s.y_sim, s.scale, title=s.title,
+                       x_label=s.x_label, y_label=s.y_label) for s in specs]
+
+
+def _cached(key: str) -> bytes | None:
+    with _CACHE_LOCK:
+        png = _CACHE.get(key)
+        if png is not None:
+            _CACHE.move_to_end(key)
+        return png
+
+
+def _remember(key: str, png: bytes) -> None:
+    with _CACHE_LOCK:
+        _CACHE[key] = png
+        _CACHE.move_to_end(key)
+        total = sum(len(v) for v in _CACHE.values())
+        while total > CACHE_BYTES and len(_CACHE) > 1:
+            total -= len(_CACHE.popitem(last=False)[1])
+
+
+def clear_cache() -> None:
+    """Forget the PNG bytes kept across workshops (benchmarks measure without them)."""
+    with _CACHE_LOCK:
+        _CACHE.clear()
+
+
+def render_many(specs: Sequence[PlotSpec], progress: Callable[[int, int], None] | None = None,
+                *, workers: int | None = None) -> list[bytes]:
+    """PNG bytes of every spec, in order, the same as :func:`render_png` of each.
+
+    Identical specs (:func:`content_key`) are rendered once and plots rendered earlier in
+    this process come from the cache; the rest are rendered on ``workers`` processes
+    (default :data:`RENDER_WORKERS`) in chunks of :data:`CHUNK`. ``progress(done, total)``
+    is called in the calling thread as plots are ready (``total`` = ``len(specs)``)."""
+    total = len(specs)
+    keys = [content_key(s) for s in specs]
+    out: dict[str, bytes] = {}
+    todo: dict[str, PlotSpec] = {}
+    for k, s in zip(keys, specs, strict=True):
+        png = out.get(k) or _cached(k)
+        if png is not None:
+            out[k] = png
+        elif k not in todo:
+            todo[k] = s
+
+    def report() -> None:
+        if progress is not None:
+            progress(sum(1 for k in keys if k in out), total)
+    if out:
+        report()
+    order = list(todo)
+    chunks = [order[i:i + CHUNK] for i in range(0, len(order), CHUNK)]
+    n_workers = RENDER_WORKERS if workers is None else max(1, workers)
+    for ks, pngs in _run_chunks(chunks, todo, n_workers):
+        for k, png in zip(ks, pngs, strict=True):
+            out[k] = png
+            _remember(k, png)
+        report()
+    return [out[k] for k in keys]
+
+
+def _run_chunks(chunks: list[list[str]], todo: dict[str, PlotSpec], workers: int):
+    """Yield ``(keys, PNG bytes)`` of each chunk as it is ready: in this thread for one
+    worker or few plots, else on a process pool started for this call."""
+    if workers <= 1 or len(todo) < POOL_MIN_PLOTS:
+        for ks in chunks:
+            yield ks, _render_chunk([todo[k] for k in ks])
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    from railval.core.workers import pool_kwargs
+
+    ctx = multiprocessing.get_context("forkserver")
+    with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx,
+                             **pool_kwargs()) as pool:
+        futures = {pool.submit(_render_chunk, [todo[k] for k in ks]): ks for ks in chunks}
+        for f in as_completed(futures):
+            yield futures[f], f.result()
 
 
 def _ticks(lo: float, hi: float, step: float) -> np.ndarray:

@@ -232,7 +232,7 @@ def _collect(session, camp, planned: Sequence[PlannedPlot], infos, *, objective:
                     fact["sg_c"] = _sg_c(m_sig, m_ss, s_sig, s_ss)
                 facts.append(fact)
         if progress is not None:
-            progress("reading and filtering signals", 0.5 * (si + 1) / len(used_secs))
+            progress("reading and filtering signals", 0.5 * (si + 1) / len(used_secs), {})
     return facts, curves
 
 
@@ -340,7 +340,7 @@ class _Gathered:
 
 
 def _gather(session, name: str, campaign: str, configurations, sections, kinds,
-            progress: Callable[[str, float], None] | None) -> _Gathered:
+            progress: Callable[..., None] | None) -> _Gathered:
     """Read and filter the signals of the planned plots (step 1 of :func:`create`)."""
     from railval.db import repo
 
@@ -372,13 +372,16 @@ def _own_scale(k, cm: _Curve, cs: _Curve) -> Scale:
 
 def _render_rows(g: _Gathered, jobs: list[tuple[int, str]], fixed: tuple[list[str], dict[str, Scale]],
                  twin: tuple[list[str], dict[str, Scale]] | None, *, blind: bool,
-                 progress: Callable[[str, float], None] | None) -> list[dict[str, Any]]:
+                 progress: Callable[..., None] | None) -> list[dict[str, Any]]:
     """Render every plot once at its scaling (step 2 of :func:`create`): ``jobs`` are
-    (fact index, ``fixed`` | ``auto`` | the twin's scaling)."""
-    from railval.app.services.workshop_render import render_parameters, render_png
+    (fact index, ``fixed`` | ``auto`` | the twin's scaling); the PNGs on the render pool
+    (:func:`railval.app.services.workshop_render.render_many`), progress as plots rendered
+    n of N."""
+    from railval.app.services.workshop_render import PlotSpec, render_many, render_parameters
 
     rows: list[dict[str, Any]] = []
-    for j, (i, plot_scaling) in enumerate(jobs):
+    specs: list[PlotSpec] = []
+    for i, plot_scaling in jobs:
         f, (cm, cs) = g.facts[i], g.curves[i]
         k = PLOT_KINDS[f["kind"]]
         if plot_scaling == "fixed":
@@ -389,18 +392,22 @@ def _render_rows(g: _Gathered, jobs: list[tuple[int, str]], fixed: tuple[list[st
             key, scale = None, _own_scale(k, cm, cs)
         title = _title(k, f["position"], blind=blind, vehicle=g.vehicle["name"] or g.campaign,
                        config=f["configuration"], section=f["section"])
-        image = render_png(cm.x, cm.y, cs.x, cs.y, scale, title=title, x_label=k.x_label,
-                           y_label=k.y_label)
+        specs.append(PlotSpec(cm.x, cm.y, cs.x, cs.y, scale, title, k.x_label, k.y_label))
         params = render_parameters(k.to_dict(), scale, scaling=plot_scaling, title=title,
                                    x_label=k.x_label, y_label=k.y_label,
                                    extra={"lowpass_hz": LOWPASS_HZ,
                                           "psd_segment_s": PSD_SEGMENT_S if k.domain == "psd" else None,
                                           "blind": bool(blind), "scale_key": key,
                                           "zone": g.infos[f["section"]].zone})
-        rows.append({**f, "scaling": plot_scaling, "render": params, "image": image,
+        rows.append({**f, "scaling": plot_scaling, "render": params,
                      "twin": i if plot_scaling != "fixed" else None})
+
+    def rendered(done: int, total: int) -> None:
         if progress is not None:
-            progress("rendering plots", 0.5 + 0.5 * (j + 1) / len(jobs))
+            progress("rendering plots", 0.5 + 0.5 * done / max(1, total),
+                     {"done": done, "total": total})
+    for row, image in zip(rows, render_many(specs, rendered), strict=True):
+        row["image"] = image
     return rows
 
 
@@ -409,7 +416,7 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
            blind: bool = False, repeats: float = DEFAULT_REPEATS, auto_share: float = 0.0,
            seed: int = 0, scaling: str = DEFAULT_SCALING, twin_scaling: str = "auto",
            actor: Principal | str = "system",
-           progress: Callable[[str, float], None] | None = None) -> dict[str, Any]:
+           progress: Callable[..., None] | None = None) -> dict[str, Any]:
     """Build, render and store a workshop; returns its summary (``name, plots, by_kind,
     scaling, scales, flat_share``). ``scaling``: ``zone`` (one range per kind within each
     EN 14363 test zone, the default) or ``workshop`` (one range per kind over the whole
@@ -420,7 +427,9 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
     the twin's ``scaling`` is then that name).
 
     Steps: gather the signals (a read unit of work), scale and render (no database), store
-    (one ``session(write=True)``, so the write lock is held only while storing)."""
+    (one ``session(write=True)``, so the write lock is held only while storing: a failure
+    before leaves nothing stored). ``progress(stage, fraction, info)`` is called as the work
+    advances; while rendering, ``info`` is ``{"done": n, "total": N}`` (plots rendered)."""
     from railval.db import workshops as wsdb
 
     _check_options(name, scaling, twin_scaling, repeats, auto_share, actor)

@@ -10,15 +10,28 @@ pass none, which calls directly). Jobs of all sessions of this server share
 name a job will store is reserved from submission to its end, so a second job for it is
 refused at once. Errors land in the status area as a plain message (the details in the
 server log, :func:`railval.app.security.plain_message`).
+
+Every job is also recorded in this server's job list (:class:`JobRecord`, :func:`jobs_of`):
+its user, title, state (queued, running, done, failed, cancelled), progress (fraction and,
+where the work counts, ``done`` of ``total``), start and end time and the link to its result
+(the app page with the job's campaign and configuration selected, or the workshop's page).
+A browser session that is reloaded, or any other page the user opens, lists the user's
+running and recently finished jobs from it (the Panel sidebar, the workshop pages), never
+another user's. Work that runs outside a Panel session (a workshop being created from its
+web page) is started with :func:`start_tracked` and shares the same slots.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import threading
+import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
+from urllib.parse import urlencode
 
 from railval.app.security import plain_message
 from railval.app.services.overview import acting_as
@@ -55,6 +68,142 @@ def release_name(campaign: str, name: str) -> None:
         _RESERVED.discard((campaign, name))
 
 
+# -------------------------------------------------------------------------- job list
+#: finished jobs stay listed this long (seconds) ...
+RECENT_S = 3600.0
+#: ... and at most this many finished jobs per user
+RECENT_PER_USER = 8
+APP_URL = "/app"
+
+
+def app_link(page: str, **selection: str | None) -> str:
+    """The app's URL opening ``page`` with the given campaign/configuration selected."""
+    query = {"page": page, **{k: v for k, v in selection.items() if v}}
+    return f"{APP_URL}?{urlencode(query)}"
+
+
+@dataclass
+class JobRecord:
+    """One job of this server as its user's job lists show it."""
+
+    id: str
+    user: str
+    title: str
+    link: str
+    workshop: str | None = None
+    state: str = "queued"
+    fraction: float = 0.0
+    message: str = ""
+    done: int | None = None
+    total: int | None = None
+    error: str = ""
+    started: float = field(default_factory=time.time)
+    ended: float | None = None
+
+    @property
+    def active(self) -> bool:
+        return self.state in ("queued", "running")
+
+    def to_dict(self) -> dict[str, Any]:
+        end = self.ended if self.ended is not None else time.time()
+        return {"id": self.id, "title": self.title, "link": self.link, "workshop": self.workshop,
+                "state": self.state, "fraction": round(self.fraction, 4), "message": self.message,
+                "done": self.done, "total": self.total, "error": self.error,
+                "elapsed_s": round(max(0.0, end - self.started), 1),
+                "started": self.started, "ended": self.ended}
+
+
+_JOBS: dict[str, JobRecord] = {}
+_JOBS_LOCK = threading.Lock()
+_IDS = itertools.count(1)
+
+
+def track(user: str, title: str, link: str, *, workshop: str | None = None) -> JobRecord:
+    """A new entry of ``user``'s job list (state ``queued``)."""
+    rec = JobRecord(id=f"j{next(_IDS)}", user=user, title=title, link=link, workshop=workshop)
+    with _JOBS_LOCK:
+        _JOBS[rec.id] = rec
+        _prune(user)
+    return rec
+
+
+def _prune(user: str) -> None:
+    now = time.time()
+    ended = sorted((r for r in _JOBS.values() if r.user == user and not r.active),
+                   key=lambda r: r.ended or 0.0, reverse=True)
+    for i, r in enumerate(ended):
+        if i >= RECENT_PER_USER or now - (r.ended or now) > RECENT_S:
+            _JOBS.pop(r.id, None)
+
+
+def update(rec: JobRecord, **changes: Any) -> None:
+    with _JOBS_LOCK:
+        for k, v in changes.items():
+            setattr(rec, k, v)
+        if not rec.active and rec.ended is None:
+            rec.ended = time.time()
+
+
+def jobs_of(user: str) -> list[dict[str, Any]]:
+    """``user``'s running and queued jobs, then those finished in the last :data:`RECENT_S`
+    seconds, newest first (only that user's)."""
+    with _JOBS_LOCK:
+        _prune(user)
+        mine = [r for r in _JOBS.values() if r.user == user]
+        mine.sort(key=lambda r: (not r.active, -r.started))
+        return [r.to_dict() for r in mine]
+
+
+def creating(workshop: str) -> JobRecord | None:
+    """The queued or running job creating ``workshop`` (any user's), else ``None``."""
+    with _JOBS_LOCK:
+        return next((r for r in _JOBS.values() if r.workshop == workshop and r.active), None)
+
+
+def workshop_job(user: str, workshop: str) -> dict[str, Any] | None:
+    """``user``'s latest job creating ``workshop`` (running or recently finished)."""
+    with _JOBS_LOCK:
+        mine = [r for r in _JOBS.values() if r.user == user and r.workshop == workshop]
+        return max(mine, key=lambda r: r.started).to_dict() if mine else None
+
+
+def start_tracked(user: str, title: str, work: Callable[[Callable[..., None]], Any], *,
+                  link: str, workshop: str | None = None) -> JobRecord:
+    """Run ``work(progress)`` in a thread outside any browser session (a workshop created
+    from its web page) in one of the server's :data:`MAX_JOBS` slots, recorded in ``user``'s
+    job list; ``progress(stage, fraction, info)`` with ``info`` ``{"done", "total"}`` when the
+    work counts. Refused with :class:`~railval.core.errors.InvalidParameter` while another job
+    creates the same workshop."""
+    from railval.core.errors import InvalidParameter
+
+    with _JOBS_LOCK:
+        if workshop is not None and any(r.workshop == workshop and r.active for r in _JOBS.values()):
+            raise InvalidParameter(f"workshop {workshop!r} is already being created; wait for "
+                                   "it or choose another name")
+        rec = JobRecord(id=f"j{next(_IDS)}", user=user, title=title, link=link, workshop=workshop)
+        _JOBS[rec.id] = rec
+
+    def progress(stage: str, fraction: float, info: dict | None = None) -> None:
+        info = info or {}
+        update(rec, state="running", message=stage,
+               fraction=float(min(1.0, max(0.0, fraction if math.isfinite(fraction) else 0.0))),
+               done=info.get("done", rec.done), total=info.get("total", rec.total))
+
+    def run() -> None:
+        _JOB_SLOTS.acquire()
+        try:
+            update(rec, state="running", started=time.time())
+            work(progress)
+        except Exception as exc:  # noqa: BLE001 - shown on the job's page
+            update(rec, state="failed", error=plain_message(exc, title))
+        else:
+            update(rec, state="done", fraction=1.0, message="done")
+        finally:
+            _JOB_SLOTS.release()
+    threading.Thread(target=run, name=f"railval-job-{title}", daemon=True).start()
+    return rec
+
+
 def _direct(fn: Callable[[], None]) -> None:
     fn()
 
@@ -63,9 +212,10 @@ class _Job:
     """One submitted job: its progress callback and its run (slot, work, outcome)."""
 
     def __init__(self, state: Any, title: str, work: Callable, on_done: Callable | None,
-                 call: Dispatch, cancel: threading.Event, reserves: tuple[str, str] | None):
+                 call: Dispatch, cancel: threading.Event, reserves: tuple[str, str] | None,
+                 record: JobRecord):
         self.state, self.title, self.work, self.on_done = state, title, work, on_done
-        self.call, self.cancel, self.reserves = call, cancel, reserves
+        self.call, self.cancel, self.reserves, self.record = call, cancel, reserves, record
 
     def progress(self, fraction: float, message: str = "") -> None:
         """Progress bar and status; raises :class:`JobCancelled` once cancel was asked (the
@@ -73,6 +223,7 @@ class _Job:
         if self.cancel.is_set():
             raise JobCancelled(f"{self.title}: cancelled")
         frac = float(min(1.0, max(0.0, fraction if math.isfinite(fraction) else 0.0)))
+        update(self.record, state="running", fraction=frac, message=message)
 
         def apply():
             self.state.progress = frac
@@ -87,22 +238,26 @@ class _Job:
                 f"{self.title}: queued — {MAX_JOBS} job(s) of this server are running; it starts "
                 "when one has finished", "info"))
             _JOB_SLOTS.acquire()
+        update(self.record, state="running", started=time.time())
         try:
             if self.cancel.is_set():
                 raise JobCancelled(f"{self.title}: cancelled before it started")
             with acting_as(self.state.principal.username):
                 result = self.work(self.progress)
         except JobCancelled as exc:
+            update(self.record, state="cancelled", message=str(exc))
             self.call(lambda msg=str(exc): self._ended(msg, "warning"))
             return
         except Exception as exc:  # noqa: BLE001 - UI boundary: shown in the status area
             detail = plain_message(exc, self.title)
+            update(self.record, state="failed", error=detail)
             self.call(lambda: self._ended(f"{self.title} failed: {detail}", "error"))
             return
         finally:
             _JOB_SLOTS.release()
             if self.reserves is not None:
                 release_name(*self.reserves)
+        update(self.record, state="done", fraction=1.0, message="done")
         self.call(lambda: self._done(result))
 
     def _ended(self, message: str, level: str) -> None:
@@ -144,13 +299,22 @@ class JobRunner:
         self.state.busy = True
         self.state.progress = 0.0
         self.state.set_status(f"{title}: started", "info")
-        job = _Job(self.state, title, work, on_done, dispatch or _direct, cancel, reserves)
+        job = _Job(self.state, title, work, on_done, dispatch or _direct, cancel, reserves,
+                   track(self.state.principal.username, title, self._link(reserves)))
         if not background:
             job.run()
             return None
         self.thread = threading.Thread(target=job.run, name=f"railval-job-{title}", daemon=True)
         self.thread.start()
         return self.thread
+
+    def _link(self, reserves: tuple[str, str] | None) -> str:
+        """Where the job's result is shown: the page it was started on, with its campaign and
+        its configuration (the one the job stores, when it stores one) selected."""
+        st = self.state
+        page = getattr(st, "page", None) or "overview"
+        conf = reserves[1] if reserves is not None else getattr(st, "configuration", None)
+        return app_link(page, campaign=getattr(st, "campaign", None), configuration=conf)
 
     def _admit(self, title: str, action: str | None, reserves: tuple[str, str] | None) -> bool:
         """False (with the reason in the status area) when the user may not do ``action``,

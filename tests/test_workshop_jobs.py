@@ -1,0 +1,209 @@
+"""Workshop creation as a job, below the browser: the reusable render figure and the
+process pool give the same PNG bytes as a figure made for each plot, identical plots are
+rendered once, the job list is per user, a failed creation leaves nothing stored, the CLI
+reports progress on stderr and keeps its --json document (docs/workshops.md "Creating a
+workshop as a job", "Rendering speed")."""
+
+from __future__ import annotations
+
+import io
+import json
+import threading
+import time
+
+import matplotlib
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+from railval.app.services import workshop_render as wr
+from railval.app.services import workshops as ws
+from railval.app.state import jobs
+from railval.core.errors import InvalidParameter
+from railval.core.workshop import AxisRange, Scale
+from railval.db import workshops as wsdb
+
+
+def _reference_png(x_meas, y_meas, x_sim, y_sim, scale, *, title, x_label, y_label) -> bytes:
+    """The plot as the renderer drew it before figures were reused: a new figure per plot
+    (the code of ``render_png`` before the change, kept here as the reference)."""
+    st = wr.STYLE
+    with matplotlib.rc_context(wr._RC):
+        fig = Figure(figsize=(st["width_in"], st["height_in"]), dpi=st["dpi"])
+        ax = fig.add_subplot(1, 1, 1)
+        ax.set_axisbelow(True)
+        ax.grid(True, color=st["grid_color"], linewidth=0.6)
+        m, s = st["measurement"], st["simulation"]
+        ax.plot(x_meas, y_meas, color=m["color"], linewidth=m["linewidth"], zorder=m["zorder"],
+                label=m["label"])
+        ax.plot(x_sim, y_sim, color=s["color"], linewidth=s["linewidth"], zorder=s["zorder"],
+                label=s["label"])
+        if scale.y.log:
+            ax.set_yscale("log")
+        else:
+            ax.set_yticks(wr._ticks(scale.y.lo, scale.y.hi, scale.y.step))
+        ax.set_xticks(wr._ticks(scale.x.lo, scale.x.hi, scale.x.step))
+        ax.set_xlim(scale.x.lo, scale.x.hi)
+        ax.set_ylim(scale.y.lo, scale.y.hi)
+        ax.set_xlabel(x_label)
+        ax.set_ylabel(y_label)
+        ax.set_title(title, loc="left")
+        ax.legend(loc=st["legend"], frameon=True, framealpha=0.9)
+        fig.subplots_adjust(left=0.09, right=0.98, top=0.91, bottom=0.11)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=st["dpi"], metadata={"Software": None})
+    return buf.getvalue()
+
+
+def _specs(n: int) -> list[wr.PlotSpec]:
+    """``n`` different plots: time plots of two ranges and logarithmic PSD plots."""
+    rng = np.random.default_rng(7)
+    out = []
+    for i in range(n):
+        x = np.linspace(0.0, 400.0 + 50 * (i % 3), 900)
+        if i % 3 == 2:  # PSD-like, log y
+            f = np.linspace(0.1, 20.0, 200)
+            ym = 1e-2 / (1 + f ** 2) * (1 + 0.3 * rng.random(200))
+            ys = ym * (1 + 0.2 * rng.standard_normal(200)) ** 2
+            scale = Scale(AxisRange(0.0, 20.0, 5.0), AxisRange(1e-6, 1e-1, 10.0, log=True))
+            out.append(wr.PlotSpec(f, ym, f, ys, scale, f"PSD plot {i}", "frequency in Hz",
+                                   "PSD in (m/s²)²/Hz"))
+            continue
+        ym = 20 * np.sin(x / (30 + i)) + rng.standard_normal(x.size)
+        ys = ym + 3 * np.cos(x / 17)
+        hi = 40.0 if i % 2 else 30.0
+        scale = Scale(AxisRange(0.0, 500.0, 100.0), AxisRange(-hi, hi, 10.0))
+        out.append(wr.PlotSpec(x, ym, x, ys, scale, f"Guiding force Y, plot {i} — Ä ß",
+                               "distance in m", "guiding force Y in kN"))
+    return out
+
+
+def _ref(spec: wr.PlotSpec) -> bytes:
+    return _reference_png(spec.x_meas, spec.y_meas, spec.x_sim, spec.y_sim, spec.scale,
+                          title=spec.title, x_label=spec.x_label, y_label=spec.y_label)
+
+
+def test_reused_figure_gives_the_bytes_of_a_fresh_figure():
+    specs = _specs(9)
+    # drawn one after the other on the thread's reused figures (linear and log interleaved)
+    reused = [wr.render_png(s.x_meas, s.y_meas, s.x_sim, s.y_sim, s.scale, title=s.title,
+                            x_label=s.x_label, y_label=s.y_label) for s in specs]
+    assert reused == [_ref(s) for s in specs]
+    assert len(set(reused)) == len(reused)  # nine different plots
+
+
+def test_process_pool_gives_the_same_bytes_in_order_and_renders_duplicates_once(monkeypatch):
+    monkeypatch.setattr(wr, "POOL_MIN_PLOTS", 4)
+    wr.clear_cache()
+    specs = _specs(10)
+    doubled = specs + specs[:3]  # three plots twice: rendered once each
+    seen: list[tuple[int, int]] = []
+    out = wr.render_many(doubled, lambda d, t: seen.append((d, t)), workers=2)
+    assert out == [_ref(s) for s in doubled]
+    assert seen[-1] == (13, 13) and all(t == 13 for _, t in seen)
+    assert [d for d, _ in seen] == sorted(d for d, _ in seen)
+    # a second call finds every plot in the cache: nothing is rendered again
+    monkeypatch.setattr(wr, "_render_chunk", lambda specs: pytest.fail("rendered again"))
+    assert wr.render_many(specs) == out[:10]
+
+
+def test_content_key_changes_with_every_input():
+    s = _specs(1)[0]
+    base = wr.content_key(s)
+    y2 = s.y_sim.copy()
+    y2[5] += 1e-9
+    variants = [
+        wr.PlotSpec(s.x_meas, s.y_meas, s.x_sim, y2, s.scale, s.title, s.x_label, s.y_label),
+        wr.PlotSpec(s.x_meas, s.y_meas, s.x_sim, s.y_sim, s.scale, s.title + ".", s.x_label, s.y_label),
+        wr.PlotSpec(s.x_meas, s.y_meas, s.x_sim, s.y_sim,
+                    Scale(s.scale.x, AxisRange(-50.0, 50.0, 10.0)), s.title, s.x_label, s.y_label),
+        wr.PlotSpec(s.x_meas, s.y_meas, s.x_sim, s.y_sim.astype(np.float32), s.scale, s.title,
+                    s.x_label, s.y_label),
+    ]
+    assert len({base, *(wr.content_key(v) for v in variants)}) == 5
+
+
+# -------------------------------------------------------------------------- job list
+def test_job_list_is_per_user_and_keeps_the_error():
+    gate = threading.Event()
+
+    def work(progress):
+        progress("plots rendered 3 of 9", 0.6, {"done": 3, "total": 9})
+        gate.wait(10)
+        raise InvalidParameter("no plot for this choice")
+
+    rec = jobs.start_tracked("alice-jl", "Create workshop J1", work, link="/workshops/J1",
+                             workshop="J1")
+    deadline = time.monotonic() + 10
+    while jobs.jobs_of("alice-jl")[0]["done"] != 3 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    mine = jobs.jobs_of("alice-jl")
+    assert [(j["title"], j["state"], j["done"], j["total"]) for j in mine] == [
+        ("Create workshop J1", "running", 3, 9)]
+    assert jobs.jobs_of("bob-jl") == []  # another user sees nothing of it
+    with pytest.raises(InvalidParameter, match="already being created"):
+        jobs.start_tracked("bob-jl", "Create workshop J1", work, link="/x", workshop="J1")
+    gate.set()
+    while jobs.jobs_of("alice-jl")[0]["state"] == "running" and time.monotonic() < deadline:
+        time.sleep(0.02)
+    done = jobs.workshop_job("alice-jl", "J1")
+    assert done["state"] == "failed" and "no plot for this choice" in done["error"]
+    assert jobs.workshop_job("bob-jl", "J1") is None and rec.ended is not None
+
+
+# -------------------------------------------------------------------------- creation
+@pytest.fixture(scope="module")
+def db(tmp_path_factory):
+    from tests.browser_support import demo_database
+
+    database = demo_database(tmp_path_factory.mktemp("wsjobs"), n_configs=2)
+    yield database
+    database.dispose()
+
+
+def test_creation_reports_plots_rendered_n_of_n_and_stores_the_same_images(db, monkeypatch):
+    monkeypatch.setattr(wr, "POOL_MIN_PLOTS", 4)
+    wr.clear_cache()
+    calls = []
+    out = ws.create(db, "JP", "demo", sections=["S01", "S02"], kinds=["Y_time", "ay_cb_psd"],
+                    repeats=0.0, progress=lambda stage, f, info=None: calls.append((stage, f, info)))
+    n = out["plots"]
+    rendered = [c for c in calls if c[0] == "rendering plots"]
+    assert rendered[-1] == ("rendering plots", 1.0, {"done": n, "total": n})
+    assert [c[2]["done"] for c in rendered] == sorted(c[2]["done"] for c in rendered)
+    # the same workshop rendered in this process alone, without the cache: the same bytes
+    wr.clear_cache()
+    monkeypatch.setattr(wr, "RENDER_WORKERS", 1)
+    ws.create(db, "JS", "demo", sections=["S01", "S02"], kinds=["Y_time", "ay_cb_psd"],
+              repeats=0.0)
+
+    def images(name):
+        with db.session() as s:
+            w = wsdb.get_workshop(s, name)
+            return [wsdb.plot_image(s, w.id, p.id)[0] for p in wsdb.plots(s, w)]
+    pool, alone = images("JP"), images("JS")
+    assert len(pool) == n and pool == alone and len(set(pool)) == n
+
+
+def test_failed_creation_stores_nothing(db, monkeypatch):
+    def broken(specs, progress=None, **kw):
+        progress(1, len(specs))
+        raise RuntimeError("renderer crashed")
+
+    monkeypatch.setattr(wr, "render_many", broken)
+    with pytest.raises(RuntimeError, match="renderer crashed"):
+        ws.create(db, "JF", "demo", sections=["S01"], kinds=["Y_time"], repeats=0.0)
+    with db.session() as s:
+        assert "JF" not in [w.name for w in wsdb.list_workshops(s)]
+
+
+def test_cli_create_reports_progress_on_stderr_and_keeps_the_json(db, capsys):
+    from railval.app.cli import main as cli
+
+    url = str(db.engine.url)
+    code = cli(["--db", url, "workshop", "create", "JC", "--campaign", "demo", "--sections",
+                "S01", "--kinds", "Y_time", "--repeats", "0", "--json"])
+    captured = capsys.readouterr()
+    assert code == 0
+    doc = json.loads(captured.out)
+    assert doc["name"] == "JC" and doc["stored"] is True and doc["plots"] == 4
+    assert "[100.0 %] rendering plots 4/4" in captured.err  # progress on stderr only
