@@ -12,13 +12,15 @@ All functions take an open :class:`sqlalchemy.orm.Session` (from
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Any
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-from railval.core.errors import NotFound
+from railval.core.errors import InvalidParameter, NotFound
+from railval.core.names import check_name
 from railval.core.types import SectionInfo
 from railval.core.zones import zone_for_radius
 from railval.db import audit
@@ -102,9 +104,40 @@ def list_campaigns(session: Session) -> list[Campaign]:
     return list(session.scalars(select(Campaign).order_by(Campaign.name)))
 
 
+#: a campaign id as the CLI and the services take it: ASCII digits only, at most 18 of them
+#: (ids are 64-bit integers; a longer string is no id, not an overflow in the database)
+_ID_RE = re.compile(r"[0-9]{1,18}")
+
+
+def is_campaign_id(text: object) -> bool:
+    """``True`` when ``text`` is a numeric campaign id (an int, or ASCII digits only)."""
+    return isinstance(text, int) or (isinstance(text, str) and bool(_ID_RE.fullmatch(text.strip())))
+
+
+def check_campaign_name(name: object, what: str = "campaign name") -> str:
+    """:func:`railval.core.names.check_name`, and no name of digits only.
+
+    A campaign is found by its name or by its numeric id (``railval validate 1``); a campaign
+    called ``1`` would hide, or be mistaken for, the campaign with id 1. Every way a campaign
+    is created (``railval import``, ``railval synth``, the Import page) calls this before
+    anything is stored. Raises :class:`railval.core.errors.InvalidParameter`.
+    """
+    check_name(name, what)
+    if str(name).isdigit():
+        raise InvalidParameter(
+            f"{what} {name!r} is digits only: a campaign is also found by its numeric id "
+            f"(`railval validate {name}` means the campaign with id {name}), so such a name "
+            f"would hide another campaign; add a letter, e.g. {'C' + str(name)!r}")
+    return str(name)
+
+
 def get_campaign(session: Session, campaign: CampaignArg) -> Campaign:
-    """The row of ``campaign``: a :class:`CampaignRef` (by id), a row (returned as it is), or
-    a name (or, failing that, a numeric id).
+    """The row of ``campaign``: a :class:`CampaignRef` (by id), a row (returned as it is), a
+    numeric id (an int, or a string of ASCII digits: :func:`is_campaign_id`), or a name.
+
+    Digits are always an id: no new campaign may be named so (:func:`check_campaign_name`),
+    and a row called ``1`` left by an older version or a restored backup cannot stand in for
+    the campaign with id 1 (it stays reachable by its own id).
 
     Raises :class:`railval.core.errors.NotFound` saying how to list the campaigns (it does
     not list them: whoever mistyped a name is not shown the others).
@@ -116,9 +149,10 @@ def get_campaign(session: Session, campaign: CampaignArg) -> Campaign:
         if found is None:  # deleted since it was resolved
             raise NotFound(f"campaign {campaign.name!r} no longer exists")
         return found
-    found = session.scalar(select(Campaign).where(Campaign.name == str(campaign)))
-    if found is None and str(campaign).strip().isdigit():
-        found = session.get(Campaign, int(campaign))
+    if is_campaign_id(campaign):
+        found = session.get(Campaign, int(str(campaign).strip()))
+    else:
+        found = session.scalar(select(Campaign).where(Campaign.name == str(campaign)))
     if found is None:
         # the names of the other campaigns are not shown to whoever typed a wrong one
         raise NotFound(f"campaign {campaign!r} not found; list the campaigns with "

@@ -35,6 +35,7 @@ from railval.core.names import NAME_PATTERN, name_problem
 from railval.core.types import BODY_POSITIONS, CHANNEL_KINDS, WHEEL_POSITIONS
 from railval.core.zones import zone_for_radius
 from railval.db import audit, codec, integrity
+from railval.db.campaigns import check_campaign_name
 from railval.db.checks import (
     RecordingProblem,
     check_magnitudes,
@@ -234,6 +235,10 @@ def _check_manifest(manifest: dict[str, Any], folder: Path) -> None:
     def bad(fld: str, msg: str) -> CampaignFormatError:
         return CampaignFormatError(msg, file=MANIFEST, field=fld)
 
+    try:  # digits only would be read as another campaign's id (db/campaigns.get_campaign)
+        check_campaign_name(manifest["name"])
+    except InvalidParameter as exc:
+        raise bad("name", str(exc)) from None
     names: set[str] = set()
     for i, ch in enumerate(manifest["channels"]):
         kind, pos, name, unit = ch["kind"], ch["position"], ch["name"], ch["unit"]

@@ -113,10 +113,10 @@ def synth(database: Any, *, name: str = "synth", template: str = "coach", hidden
             progress(stage, frac, info)
 
     from railval.core.errors import CampaignFormatError
-    from railval.core.names import check_name
     from railval.db import repo
+    from railval.db.campaigns import check_campaign_name
 
-    check_name(name, "campaign name")
+    check_campaign_name(name)  # also no digits only: that reads as another campaign's id
     with database.session() as s:  # before minutes of simulation, not after
         if any(c.name == name for c in repo.list_campaigns(s)):
             raise CampaignFormatError(f"a campaign named {name!r} already exists in the "
