@@ -1,20 +1,27 @@
-"""The command line starts without the heavy libraries: ``railval --help``, ``railval list``
-and every ``railval VERB --help`` run in a fresh interpreter without importing scipy.signal,
-pandas or numba (app/cli/__init__.py, start-up; docs/app.md). An import check, not a timing."""
+"""The command line starts by need: ``railval --help``, ``railval list``, every
+``railval VERB --help`` and the verbs people type most (``signoff list``, ``signoff show``,
+``audit verify``, ``user list``, ``validate``, ``workshop analyse``) run in a fresh interpreter
+without importing scipy.signal, scipy.stats, pandas, numba or the plotting libraries, and a
+command line naming a verb imports only that verb's command module (app/cli/__init__.py,
+start-up by need; docs/performance.md). Import checks, not timings (``railval bench startup``
+times them)."""
 
 from __future__ import annotations
 
+import argparse
 import json
+import pickle
 import subprocess
 import sys
 
 import pytest
 
-from railval.app.cli import build_parser, main
+from railval.app.cli import VERBS, build_parser, chosen_verb, main
 
 from tests.factories import write_demo_campaign
 
-HEAVY = ("scipy.signal", "pandas", "numba")
+HEAVY = ("scipy.signal", "scipy.stats", "pandas", "numba", "panel", "bokeh", "holoviews",
+         "matplotlib")
 
 #: runs one command line in this interpreter, then reports what it imported
 _PROBE = """
@@ -150,3 +157,186 @@ def test_list_falls_back_on_an_uninitialised_database(tmp_path, capsys):
     assert main(["--db", url, "list"]) == 0
     assert "no campaigns" in capsys.readouterr().out
     assert (tmp_path / "new.db").exists()
+
+
+# -- start-up by need: the verbs people type most, the verb table, the deferred imports ----
+
+#: what a listed verb must not load on an empty database: the heavy libraries, and Alembic (the
+#: schema revision is read with one query; migrations import it only when they run)
+NOT_AT_START = HEAVY + ("alembic", "statsmodels")
+
+#: runs one command line, then reports the heavy modules and the command modules it imported
+_VERB_PROBE = """
+import json, sys
+from railval.app.cli import main
+try:
+    code = main(sys.argv[1:])
+except SystemExit as exc:
+    code = exc.code
+sys.stdout.flush()
+loaded = {"heavy": sorted(m for m in %r if m in sys.modules),
+          "cmd": sorted(m.rsplit(".", 1)[1] for m in sys.modules
+                        if m.startswith("railval.app.cli.cmd_"))}
+sys.stderr.write("\\nPROBE " + json.dumps({"code": code, **loaded}) + "\\n")
+""" % (NOT_AT_START,)
+
+#: (arguments after --db URL, exit code, a piece of the answer, the command module) on an
+#: empty database: the answers are the verbs' whole work there
+LISTED = {
+    "signoff list": (["signoff", "list"], 0, "no sign-offs", "cmd_audit"),
+    "signoff show": (["signoff", "show", "7"], 2, "sign-off 7 not found", "cmd_audit"),
+    "audit verify": (["audit", "verify"], None, "0 audit rows", "cmd_audit"),
+    "user list": (["user", "list"], 0, "no users", "cmd_user"),
+    "validate": (["validate", "nowhere", "--config", "c"], 2, "campaign 'nowhere' not found",
+                 "cmd_validate"),
+    "workshop analyse": (["workshop", "analyse", "w0"], 2, "workshop 'w0' not found",
+                         "cmd_workshop"),
+    "list": (["list"], 0, "no campaigns", "cmd_data"),
+}
+
+
+def _probe_verb(url: str, argv: list[str]) -> tuple[dict, str]:
+    proc = subprocess.run([sys.executable, "-c", _VERB_PROBE, "--db", url, *argv],
+                          capture_output=True, text=True, timeout=180)
+    line = [x for x in proc.stderr.splitlines() if x.startswith("PROBE ")]
+    assert line, proc.stderr
+    return json.loads(line[-1][len("PROBE "):]), proc.stdout + proc.stderr
+
+
+@pytest.fixture(scope="module")
+def empty_db(module_db_url):
+    """An initialised database without data or users, one per backend."""
+    proc = subprocess.run([sys.executable, "-m", "railval.app", "--db", module_db_url, "init"],
+                          capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 0, proc.stderr
+    return module_db_url
+
+
+@pytest.mark.parametrize("label", sorted(LISTED))
+def test_listed_verb_starts_by_need(empty_db, label):
+    """Each listed verb answers on an empty database having imported none of the heavy
+    libraries nor Alembic, and no command module but its own (the verb table)."""
+    argv, code, answer, module = LISTED[label]
+    report, out = _probe_verb(empty_db, argv)
+    assert answer in out, out
+    if code is not None:  # `audit verify` fails without a signing key on a fresh database
+        assert report["code"] == code, out
+    assert report["heavy"] == [], (label, report)
+    assert report["cmd"] == [module], (label, report)
+
+
+def test_help_lists_every_verb_of_the_table():
+    """``railval --help`` (no verb chosen) imports every command module and lists all verbs."""
+    report, out = _probe("--help")
+    assert report == {"code": 0, "heavy": []}
+    for verb in VERBS:
+        assert f"    {verb} " in out or f"    {verb}\n" in out, verb
+
+
+def test_the_verb_table_names_every_registered_verb():
+    """:data:`VERBS` holds exactly the verbs the command modules register, each with the module
+    that registers it, and the parser built for one verb parses that verb."""
+    sub = next(a for a in build_parser()._actions if a.dest == "verb")
+    assert sorted(sub.choices) == sorted(VERBS)
+    for verb, parser in sub.choices.items():
+        funcs = [parser.get_default("func")]
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                funcs = [p.get_default("func") for p in action.choices.values()]
+        modules = {f.__module__.rsplit(".", 1)[1] for f in funcs}
+        assert modules == {VERBS[verb]}, verb
+        only = next(a for a in build_parser(verb)._actions if a.dest == "verb")
+        assert verb in only.choices
+        assert {VERBS[v] for v in only.choices} == {VERBS[verb]}
+
+
+@pytest.mark.parametrize("argv, verb", [
+    (["signoff", "list"], "signoff"),
+    (["--db", "sqlite:///x.db", "--as", "ann", "--debug", "user", "list"], "user"),
+    (["--db=sqlite:///x.db", "--as=ann", "validate", "c", "--config", "k"], "validate"),
+    (["--db", "user", "list"], "list"),  # "user" is the URL here
+    (["-h", "list"], None),  # help before the verb: the full parser answers
+    (["--help"], None),
+    (["--d", "x", "list"], None),  # abbreviated option: argparse decides
+    (["signof", "list"], None),  # unknown verb: the full parser names the choices
+    ([], None),
+    (["--db"], None),
+])
+def test_chosen_verb(argv, verb):
+    assert chosen_verb(argv) == verb
+
+
+def test_unknown_verb_lists_every_verb(capsys):
+    with pytest.raises(SystemExit):
+        main(["signof", "list"])
+    err = capsys.readouterr().err
+    assert "invalid choice: 'signof'" in err and "'signoff'" in err and "'workshop'" in err
+
+
+def test_revision_check_reads_what_alembic_reads(db_url):
+    """The start-up's schema check (one query, no Alembic import) gives Alembic's answers: no
+    revision on an empty database, the head after ``init``; the head read from the scripts
+    equals Alembic's ScriptDirectory head."""
+    from alembic.migration import MigrationContext
+    from alembic.script import ScriptDirectory
+
+    from railval.db.engine import connect
+
+    database = connect(db_url)
+    try:
+        def alembic_current():
+            with database.engine.connect() as conn:
+                return MigrationContext.configure(conn).get_current_revision()
+
+        assert database.current_revision() is None and alembic_current() is None
+        head = ScriptDirectory.from_config(database._alembic_config()).get_current_head()
+        assert database.head_revision() == head
+        database.init()
+        assert database.current_revision() == alembic_current() == head
+    finally:
+        database.dispose()
+
+
+# -- railval.core.lazy ---------------------------------------------------------------------
+
+@pytest.fixture
+def planted(tmp_path, monkeypatch):
+    """A module ``startup_planted`` that counts its imports (in ``sys.startup_planted_loads``)."""
+    (tmp_path / "startup_planted.py").write_text(
+        "import sys\nsys.startup_planted_loads = getattr(sys, 'startup_planted_loads', 0) + 1\n"
+        "def double(x):\n    return 2 * x\nVALUE = 41\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "startup_planted", raising=False)
+    monkeypatch.setattr(sys, "startup_planted_loads", 0, raising=False)
+    yield "startup_planted"
+    sys.modules.pop("startup_planted", None)
+
+
+def test_lazy_function_imports_on_first_call(planted):
+    from railval.core import lazy
+
+    double = lazy.function(planted, "double")
+    assert planted not in sys.modules and sys.startup_planted_loads == 0
+    assert double(21) == 42 and double(1) == 2
+    assert sys.startup_planted_loads == 1 and planted in sys.modules
+    clone = pickle.loads(pickle.dumps(double))  # sent to a worker process
+    assert clone(5) == 10 and sys.startup_planted_loads == 1
+
+
+def test_lazy_module_imports_on_first_attribute(planted):
+    from railval.core import lazy
+
+    module = lazy.module(planted)
+    assert planted not in sys.modules and "not loaded" in repr(module)
+    assert module.VALUE == 41 and module.double(2) == 4
+    assert sys.startup_planted_loads == 1 and "(loaded)" in repr(module)
+
+
+def test_lazy_import_error_surfaces_at_first_use():
+    from railval.core import lazy
+
+    missing = lazy.function("railval_no_such_module", "f")  # binding never fails
+    with pytest.raises(ModuleNotFoundError, match="railval_no_such_module"):
+        missing()
+    with pytest.raises(ModuleNotFoundError):
+        lazy.module("railval_no_such_module").anything  # noqa: B018

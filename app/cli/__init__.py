@@ -212,7 +212,6 @@ def authorize(args: argparse.Namespace) -> None:
     import os
 
     from railval.app.services import database as db_service
-    from railval.app.services.users import check_cli
     from railval.core.roles import CLI_ACTIONS
 
     verb = verb_name(args)
@@ -225,6 +224,8 @@ def authorize(args: argparse.Namespace) -> None:
     try:
         if database.current_revision() is None or not db_service.has_user_table(database):
             return
+        from railval.app.services.users import check_cli  # the ORM models: once there are users
+
         # while nobody can manage users (e.g. open-mode `workshop import-answers` created
         # panelists), whoever runs the CLI on the database may add the first admin
         if check_cli(database, who, action, verb, adds_admin=first_admin(args)).first_admin \

@@ -1,0 +1,162 @@
+"""CLI start-up: wall time of the verbs people type most, each in a fresh interpreter.
+
+Every command runs ``--repeat`` times in a new process (``python -c PROBE railval-args``, the
+entry point's ``main`` with a timer around the chosen verb's function); the commands take turns
+in each round, so a change in the machine's load falls on all of them alike, and the best and
+the median are reported. Per command:
+
+* ``best_s`` / ``median_s``: from the process's spawn to its exit (what a user waits for);
+* ``to_verb_s``: from the spawn to the call of the verb's own function (parsing, the command
+  module, the permission check done) — the start-up the CLI adds before the work;
+* ``heavy``: which of the heavy libraries (scipy.signal, scipy.stats, pandas, numba, the
+  plotting libraries, Alembic, statsmodels, SQLAlchemy's ORM models) the command imported.
+
+Baselines timed in the same rounds: ``python -c pass`` (the interpreter with this
+environment's site packages), ``import sqlalchemy.orm and railval.db.models`` (the floor of a
+verb that reads the database through the ORM) and ``import scipy.signal`` (what a verb paid
+when a service imported the filters at its top). The 1-minute load average is printed before
+and after: on a shared machine compare figures taken at a similar load.
+
+The database is a fresh, empty SQLite file made by ``railval init`` (untimed) unless
+``railval --db URL bench startup`` names one. Goal (docs/performance.md): every listed verb
+reaches its own work within 0.3 s of launch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+#: the libraries a verb must not load unless its work needs them
+HEAVY = ("scipy.signal", "scipy.stats", "pandas", "numba", "panel", "bokeh", "holoviews",
+         "matplotlib", "statsmodels", "alembic", "railval.db.models")
+
+#: label → railval arguments after ``--db URL`` (an empty database: the error answers of
+#: ``signoff show``, ``validate`` and ``workshop analyse`` are their whole work there)
+COMMANDS: dict[str, list[str]] = {
+    "--help": ["--help"],
+    "list": ["list"],
+    "signoff list": ["signoff", "list"],
+    "signoff show": ["signoff", "show", "1"],
+    "audit verify": ["audit", "verify"],
+    "user list": ["user", "list"],
+    "validate": ["validate", "bench-campaign", "--config", "c0"],
+    "workshop analyse": ["workshop", "analyse", "bench-workshop"],
+}
+
+BASELINES: dict[str, str] = {
+    "python -c pass": "pass",
+    "import sqlalchemy.orm, railval.db.models": "import sqlalchemy.orm, railval.db.models",
+    "import scipy.signal": "import scipy.signal",
+}
+
+#: runs ``railval ARGS`` as the entry point does, marking when the verb's function is called
+_PROBE = """
+import json, sys, time
+import railval.app.cli as cli
+marks = {}
+_build = cli.build_parser
+def build(verb=None):
+    parser = _build(verb)
+    parse = parser.parse_args
+    def parse_args(argv=None):
+        args = parse(argv)
+        func = args.func
+        def timed(a):
+            marks["verb"] = time.time()
+            return func(a)
+        args.func = timed
+        return args
+    parser.parse_args = parse_args
+    return parser
+cli.build_parser = build
+try:
+    code = cli.main(sys.argv[1:])
+except SystemExit as exc:
+    code = exc.code
+sys.stdout.flush()
+heavy = [m for m in %r if m in sys.modules]
+sys.stderr.write("\\nSTARTUP " + json.dumps({"code": code, "marks": marks, "heavy": heavy}) + "\\n")
+""" % (HEAVY,)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--repeat", type=int, default=7,
+                        help="fresh processes per command, best and median reported (default 7)")
+    parser.add_argument("--only", nargs="+", default=None, metavar="LABEL",
+                        help=f"time only these commands (of: {', '.join(COMMANDS)})")
+
+
+def _run(argv: list[str], env: dict, probe: bool) -> tuple[float, dict | None]:
+    """Wall time of one fresh process and, for a railval command (``probe``), its report."""
+    spawned = time.time()
+    t0 = time.perf_counter()
+    proc = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=300)
+    wall = time.perf_counter() - t0
+    lines = [x for x in proc.stderr.splitlines() if x.startswith("STARTUP ")]
+    if probe:
+        if not lines:
+            raise RuntimeError(f"`railval {' '.join(argv[3:])}` gave no report: {proc.stderr[-500:]}")
+        report = json.loads(lines[-1][len("STARTUP "):])
+        verb = report["marks"].get("verb")
+        report["to_verb"] = None if verb is None else verb - spawned
+        return wall, report
+    if proc.returncode != 0:
+        raise RuntimeError(f"baseline {argv[2]!r} failed: {proc.stderr[-500:]}")
+    return wall, None
+
+
+def _initialise(url: str, env: dict) -> None:
+    proc = subprocess.run([sys.executable, "-m", "railval.app", "--db", url, "init"],
+                          capture_output=True, text=True, env=env, timeout=300)
+    if proc.returncode != 0:
+        raise RuntimeError(f"railval init {url}: {proc.stderr[-500:]}")
+
+
+def _summary(walls: list[float], reports: list[dict]) -> dict:
+    out = {"best_s": round(min(walls), 3), "median_s": round(statistics.median(walls), 3)}
+    if reports:
+        to_verb = [r["to_verb"] for r in reports if r["to_verb"] is not None]
+        out["to_verb_s"] = round(min(to_verb), 3) if to_verb else "n/a (no verb function)"
+        out["exit"] = reports[-1]["code"]
+        out["heavy"] = ", ".join(reports[-1]["heavy"]) or "none"
+    return out
+
+
+def run(args: argparse.Namespace) -> dict:
+    if args.repeat < 1:
+        raise ValueError(f"--repeat must be at least 1, got {args.repeat}")
+    labels = args.only or list(COMMANDS)
+    unknown = [x for x in labels if x not in COMMANDS]
+    if unknown:
+        raise ValueError(f"--only: unknown command(s) {unknown}; known: {list(COMMANDS)}")
+    env = {k: v for k, v in os.environ.items() if k != "RAILVAL_DEBUG"}
+    with tempfile.TemporaryDirectory(prefix="railval-startup-") as tmp:
+        url = args.db or f"sqlite:///{Path(tmp) / 'empty.db'}"
+        if not args.db:
+            _initialise(url, env)
+        jobs = {**{f"baseline: {k}": ([sys.executable, "-c", v], False)
+                   for k, v in BASELINES.items()},
+                **{k: ([sys.executable, "-c", _PROBE, "--db", url, *COMMANDS[k]], True)
+                   for k in labels}}
+        walls: dict[str, list[float]] = {k: [] for k in jobs}
+        reports: dict[str, list[dict]] = {k: [] for k in jobs}
+        load_before = os.getloadavg()[0]
+        for _ in range(args.repeat):  # the commands take turns in every round
+            for label, (argv, probe) in jobs.items():
+                wall, report = _run(argv, env, probe)
+                walls[label].append(wall)
+                if report is not None:
+                    reports[label].append(report)
+        load_after = os.getloadavg()[0]
+    return {"load_1min_before": round(load_before, 2), "load_1min_after": round(load_after, 2),
+            "cpus": os.cpu_count(), "repeat": args.repeat,
+            "database": "empty SQLite (railval init)" if not args.db else "--db",
+            **{label: _summary(walls[label], reports[label]) for label in jobs}}
