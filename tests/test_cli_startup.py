@@ -3,7 +3,7 @@
 ``audit verify``, ``user list``, ``validate``, ``workshop analyse``) run in a fresh interpreter
 without importing scipy.signal, scipy.stats, pandas, numba or the plotting libraries, and a
 command line naming a verb imports only that verb's command module (app/cli/__init__.py,
-start-up by need; docs/performance.md). Import checks, not timings (``railval bench startup``
+start-up by need; docs/app.md). Import checks, not timings (``railval bench startup``
 times them)."""
 
 from __future__ import annotations

@@ -18,8 +18,8 @@ when a service imported the filters at its top). The 1-minute load average is pr
 and after: on a shared machine compare figures taken at a similar load.
 
 The database is a fresh, empty SQLite file made by ``railval init`` (untimed) unless
-``railval --db URL bench startup`` names one. Goal (docs/performance.md): every listed verb
-reaches its own work within 0.3 s of launch.
+``railval --db URL bench startup`` names one. Goal (docs/app.md, command-line start-up):
+every listed verb reaches its own work within 0.3 s of launch on a quiet machine.
 """
 
 from __future__ import annotations
@@ -103,7 +103,8 @@ def _run(argv: list[str], env: dict, probe: bool) -> tuple[float, dict | None]:
     lines = [x for x in proc.stderr.splitlines() if x.startswith("STARTUP ")]
     if probe:
         if not lines:
-            raise RuntimeError(f"`railval {' '.join(argv[3:])}` gave no report: {proc.stderr[-500:]}")
+            raise RuntimeError(f"`railval {' '.join(argv[3:])}` gave no report: "
+                               f"{proc.stderr[-500:]}")
         report = json.loads(lines[-1][len("STARTUP "):])
         verb = report["marks"].get("verb")
         report["to_verb"] = None if verb is None else verb - spawned

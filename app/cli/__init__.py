@@ -17,7 +17,8 @@ pandas, numba and the plotting libraries until the work reaches them
 registry of a heavy module (argparse ``choices``) passes :class:`LazyChoices`, which reads the
 registry only when that verb's arguments are parsed or its help is printed.
 tests/test_cli_startup.py checks this in a fresh interpreter for every verb and that the table
-names every registered verb; ``railval bench startup`` times it (docs/performance.md).
+names every registered verb; ``railval bench startup`` times it (docs/app.md, command-line
+start-up).
 """
 
 from __future__ import annotations
