@@ -93,10 +93,11 @@ def build_audit_report(database) -> AuditReport:
     counts: Counter = Counter((r["actor"], r["action"]) for r in rows)
     actors = sorted({a for a, _ in counts})
     actions = sorted({b for _, b in counts})
-    h.append("<table><tr><th class='l'>actor</th>" + "".join(f"<th>{_esc(a)}</th>" for a in actions)
-             + "</tr>" + "".join(
-                 f"<tr><td class='l'>{_esc(a)}</td>" + "".join(
-                     f"<td>{counts.get((a, b), '') or ''}</td>" for b in actions) + "</tr>"
+    # one block per actor in print (class ``blocks`` of report.CSS): no column cut off on A4
+    h.append("<table class='blocks'><tr class='head'><th class='l'>actor</th>"
+             + "".join(f"<th>{_esc(a)}</th>" for a in actions) + "</tr>" + "".join(
+                 f"<tr><td class='l' data-label='actor'>{_esc(a)}</td>" + "".join(
+                     f"<td data-label='{_esc(b)}'>{counts.get((a, b), '') or ''}</td>" for b in actions) + "</tr>"
                  for a in actors) + "</table>")
     h.append("</body></html>")
     return AuditReport("".join(h), chain_status, now, len(items), stale)

@@ -123,10 +123,25 @@ table { border-collapse: collapse; margin: 8px 0; } th, td { border: 1px solid #
 .verdict.ok { background: #e8f5e9; border: 1px solid {pass_}; }
 .verdict.no { background: #ffebee; border: 1px solid {fail}; }
 .meta td { text-align: left; border: none; padding: 1px 10px 1px 0; }
-.hashes td { font-family: 'DejaVu Sans Mono', monospace; font-size: 10px; }
+.hashes td, td.hash { font-family: 'DejaVu Sans Mono', monospace; font-size: 10px; }
 .charts { display: flex; flex-wrap: wrap; gap: 12px; } .note { color: #555; }
 @media print { h2 { page-break-after: avoid; } .worst { page-break-inside: avoid; } }
+@page { size: A4; margin: 14mm 12mm; }
+@media print {
+  body { margin: 0; font-size: 11px; font-variant-ligatures: none; }  /* fi, ff stay searchable text */
+  td, th { overflow-wrap: anywhere; }
+  table.blocks, table.blocks tbody, table.blocks tr, table.blocks td { display: block; border: none;
+    text-align: left; padding: 1px 0; }
+  table.blocks tr.head { display: none; }
+  table.blocks tr { border: 1px solid #ccc; margin: 0 0 8px; padding: 4px 8px; }
+  table.blocks td:empty { display: none; }
+  table.blocks td::before { content: attr(data-label) ": "; font-weight: bold; color: #444; }
+}
 """.replace("{pass_}", PASS_COLOR).replace("{fail}", FAIL_COLOR)
+#: The print rules above lay a wide table of class ``blocks`` out as one block per row, each
+#: cell on its own line headed by its ``data-label`` (its column's name), so the A4 PDF
+#: (:func:`railval.app.pdf.html_to_pdf`) holds every field of the HTML, wrapped, and pages
+#: break between and inside blocks as needed.
 
 
 def diverging_color(value: float, limit: float = 2.0) -> str:
@@ -170,31 +185,38 @@ def contrary_html(d: dict[str, Any]) -> str:
             f"justification: {_esc(d.get('justification') or '–')}")
 
 
+#: The columns of the sign-off table (its header and each cell's ``data-label``).
+SIGNOFF_COLUMNS = ("id", "configuration", "status", "decision", "signed by", "UTC", "meaning",
+                   "restrictions", "statement", "against the objective verdict", "evidence SHA-256",
+                   "changed since")
+
+
 def signoff_rows_html(items: list[tuple[dict[str, Any], Any]]) -> str:
     """The sign-off table (escaped) of the validation report and the audit report
-    (:mod:`railval.app.audit_report`)."""
+    (:mod:`railval.app.audit_report`): a table on screen, one block per sign-off in print
+    (class ``blocks`` of :data:`CSS`), every field in both."""
     if not items:
         return "<p class='note'>No sign-off.</p>"
     rows = []
     for d, st in items:
         cls = "pass" if st.status == "valid" else "fail"
-        why = "<br>".join(_esc(r) for r in st.reasons[:5])
-        rows.append(
-            f"<tr><td>{d['id']}</td><td class='l'>{_esc(d['campaign'])} / {_esc(d['configuration'])}</td>"
-            f"<td class='l {cls}'>{_esc(st.status)}</td><td class='l'>{_esc(d['decision_text'])}</td>"
-            f"<td class='l'>{_esc(d['printed_name'])} ({_esc(d['username'])})</td>"
-            f"<td class='l'>{_esc(d['signed_at_utc'])}</td>"
-            f"<td class='l'>{_esc(d['meaning'])}</td>"
-            f"<td class='l'>{_esc(d['restrictions'] or '–')}</td><td class='l'>{_esc(d['statement'] or '–')}</td>"
-            f"<td class='l'>{contrary_html(d)}</td>"
-            f"<td class='l' style='font-family:monospace;font-size:10px'>{_esc(d['evidence_sha256'])}</td>"
-            f"<td class='l'>{why}</td></tr>")
-    return ("<table><tr><th>id</th><th class='l'>configuration</th><th class='l'>status</th>"
-            "<th class='l'>decision</th><th class='l'>signed by</th><th class='l'>UTC</th>"
-            "<th class='l'>meaning</th><th class='l'>restrictions</th><th class='l'>statement</th>"
-            "<th class='l'>against the objective verdict</th>"
-            "<th class='l'>evidence SHA-256</th><th class='l'>changed since</th></tr>"
-            + "".join(rows) + "</table>")
+        why = "<br>".join(_esc(r) for r in st.reasons[:5]) or "–"
+        cells = (
+            (str(d["id"]), ""), (f"{_esc(d['campaign'])} / {_esc(d['configuration'])}", "l"),
+            (_esc(st.status), f"l {cls}"), (_esc(d["decision_text"]), "l"),
+            (f"{_esc(d['printed_name'])} ({_esc(d['username'])})", "l"), (_esc(d["signed_at_utc"]), "l"),
+            (_esc(d["meaning"]), "l"), (_esc(d["restrictions"] or "–"), "l"), (_esc(d["statement"] or "–"), "l"),
+            (contrary_html(d), "l"), (_esc(d["evidence_sha256"]), "l hash"), (why, "l"))
+        rows.append("<tr>" + "".join(_cell(v, c, label) for (v, c), label in zip(cells, SIGNOFF_COLUMNS, strict=True))
+                    + "</tr>")
+    head = "".join(f"<th class='{'l' if i else ''}'>{_esc(c)}</th>" for i, c in enumerate(SIGNOFF_COLUMNS))
+    return "<table class='blocks signoffs'><tr class='head'>" + head + "</tr>" + "".join(rows) + "</table>"
+
+
+def _cell(value: str, cls: str, label: str) -> str:
+    """A table cell of a ``blocks`` table: ``value`` (already escaped) with its column's name
+    as ``data-label`` (the heading of the line in print)."""
+    return f"<td data-label='{_esc(label)}' class='{cls}'>{value}</td>"
 
 
 def _verdict_document(d: dict) -> dict:
