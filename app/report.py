@@ -129,7 +129,8 @@ table { border-collapse: collapse; margin: 8px 0; } th, td { border: 1px solid #
 @page { size: A4; margin: 14mm 12mm; }
 @media print {
   body { margin: 0; font-size: 11px; font-variant-ligatures: none; }  /* fi, ff stay searchable text */
-  td, th { overflow-wrap: anywhere; }
+  td, th { overflow-wrap: break-word; }  /* a long word breaks only where it would overflow */
+  td:last-child { overflow-wrap: anywhere; }  /* the free-text column gives way first */
   table.blocks, table.blocks tbody, table.blocks tr, table.blocks td { display: block; border: none;
     text-align: left; padding: 1px 0; }
   table.blocks tr.head { display: none; }
