@@ -307,8 +307,12 @@ def token_hash(token: str) -> str:
 def create_invitation(session: Session, *, role: str = "panelist", workshop_ref: str | int | None = None,
                       valid_for: dt.timedelta = INVITATION_VALIDITY, note: str = "",
                       actor: Any = "system") -> tuple[Invitation, str]:
-    """A new single-use invitation → (row, token). The token is returned once, never stored."""
+    """A new single-use invitation → (row, token). The token is returned once, never stored.
+    ``workshop_ref``: the workshop the invitee joins (it must exist; panelists only)."""
+    from railval.db import workshops  # it imports this module
+
     check_roles([role])
+    workshop_ref = workshops.invitation_workshop(session, role, workshop_ref)
     if valid_for <= dt.timedelta(0):
         raise InvalidParameter(f"invitation validity {valid_for} must be positive")
     token = secrets.token_urlsafe(32)
@@ -338,12 +342,16 @@ def check_invitation(session: Session, token: str) -> Invitation:
         raise InvitationRefused(
             f"This invitation link expired on {audit.utc_stamp(_aware(inv.expires_at))[:16]} UTC; "
             "ask the organiser for a new one.")
+    from railval.db import workshops  # it imports this module
+
+    workshops.check_invited_workshop(session, inv)
     return inv
 
 
 def redeem_invitation(session: Session, token: str, *, username: str, password: str,
                       display_name: str = "") -> AppUser:
-    """Create the invitee's account with the invitation's role and mark the link used.
+    """Create the invitee's account with the invitation's role and mark the link used; a
+    panelist invited to a workshop takes part in it at once (its "My workshops" entry).
 
     Raises :class:`InvitationRefused` (unknown, used, expired) — the caller records the
     refusal with :func:`record_refusal` in its own transaction — or
@@ -356,6 +364,9 @@ def redeem_invitation(session: Session, token: str, *, username: str, password: 
     inv.used_at = utcnow()
     inv.used_by = user.id
     session.flush()
+    from railval.db import workshops  # it imports this module
+
+    workshops.join_invited(session, inv, user.username)  # a panelist invited to a workshop
     audit.record(session, username, "invitation.redeem", f"invitation:{inv.id}",
                  detail={"role": inv.role, "workshop_ref": inv.workshop_ref, "user": username})
     return user

@@ -32,6 +32,7 @@ from railval.core.workshop import review_order
 from railval.db import audit, users
 from railval.db.models import (
     AppUser,
+    Invitation,
     Workshop,
     WorkshopAnswer,
     WorkshopPlot,
@@ -210,6 +211,47 @@ def invite(session: Session, workshop: Workshop, username: str, *, actor: Any = 
     audit.record(session, actor, "workshop.invite", f"workshop:{workshop.name}",
                  detail={"reviewer": username})
     return token
+
+
+def invitation_workshop(session: Session, role: str, workshop_ref: str | None) -> str | None:
+    """The workshop a new invitation (``railval user invite --workshop W``) names, checked
+    when it is made: the workshop exists, and only a panelist joins a workshop through an
+    invitation. Returns its name (``None`` without one); raises :class:`NotFound` or
+    :class:`InvalidParameter`."""
+    if workshop_ref is None:
+        return None
+    if role != "panelist":
+        raise InvalidParameter(
+            f"--workshop {workshop_ref!r}: an invitation joins its invitee to a workshop only "
+            f"with the role panelist, not {role!r}; invite with --role panelist")
+    return get_workshop(session, str(workshop_ref)).name
+
+
+def check_invited_workshop(session: Session, inv: Invitation) -> None:
+    """An open invitation of a panelist to a workshop is refused once the workshop no longer
+    exists (:class:`railval.db.users.InvitationRefused`, without naming other workshops to
+    the anonymous invitee), so that nobody fills in the form for nothing."""
+    if inv.workshop_ref is None or inv.role != "panelist":
+        return
+    if session.scalar(select(Workshop.id).where(Workshop.name == inv.workshop_ref)) is None:
+        raise users.InvitationRefused(
+            f"The workshop {inv.workshop_ref!r} of this invitation no longer exists; ask the "
+            "organiser for a new one.")
+
+
+def join_invited(session: Session, inv: Invitation, username: str) -> WorkshopReviewer | None:
+    """The panelist ``username``, whose account the invitation ``inv`` has just created,
+    takes part in the workshop it names: their participation (seed and plot sequence) is
+    stored, so "My workshops" lists the workshop with its "Open review" button (a personal
+    link issued on the spot, :func:`own_link`). Audited as ``workshop.join``. ``None`` when
+    the invitation names no workshop (or, made by an older version, is not a panelist's)."""
+    if inv.workshop_ref is None or inv.role != "panelist":
+        return None
+    w = get_workshop(session, inv.workshop_ref)
+    r = participation(session, w, username, actor=username)
+    audit.record(session, username, "workshop.join", f"workshop:{w.name}",
+                 detail={"reviewer": username, "via": f"invitation:{inv.id}"})
+    return r
 
 
 @dataclass(frozen=True)

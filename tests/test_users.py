@@ -102,13 +102,16 @@ def test_authenticate_records_failures_and_rate_limits(database):
 def test_invitation_is_single_use_hashed_and_expires(database):
     with database.session() as s:
         users.create_user(s, "org", password="organiser pw", roles=["organiser"])
+    with pytest.raises(NotFound, match="workshop '7' not found"):  # it must exist
+        with database.session() as s:
+            users.create_invitation(s, workshop_ref=7, actor="org")
     with database.session() as s:
-        inv, token = users.create_invitation(s, workshop_ref=7, actor="org")
+        inv, token = users.create_invitation(s, actor="org")
         old, old_token = users.create_invitation(s, valid_for=dt.timedelta(seconds=1), actor="org")
     with database.session() as s:
         stored = s.get(Invitation, inv.id)
         assert token not in (stored.token_sha256, stored.note)
-        assert stored.token_sha256 == users.token_hash(token) and stored.workshop_ref == "7"
+        assert stored.token_sha256 == users.token_hash(token) and stored.workshop_ref is None
     with database.session() as s:
         user = users.redeem_invitation(s, token, username="rev1", password="reviewer pw",
                                        display_name="Reviewer One")

@@ -5,7 +5,8 @@
 ``railval user disable NAME [--reason TEXT]`` / ``railval user enable NAME``
 ``railval user passwd NAME [--password-stdin | --password-file F]``
 ``railval user role NAME ROLE [ROLE ...]`` (replaces the user's roles)
-``railval user invite [--role panelist] [--workshop REF] [--days 7] [--base-url URL]``
+``railval user invite [--role panelist] [--workshop NAME] [--days 7] [--base-url URL]``
+    (with ``--workshop``, the panelist takes part in that workshop once the account is made)
 
 Passwords are never command-line arguments (they would stay in the shell history and the
 process list): they come from a prompt (asked twice), one line of standard input
@@ -101,7 +102,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     inv = us.add_parser("invite", help="create a single-use invitation link")
     inv.add_argument("--role", default="panelist", choices=list(ROLES),
                      help="role of the invitee (default panelist: a workshop participant)")
-    inv.add_argument("--workshop", default=None, help="workshop reference the invitee joins")
+    inv.add_argument("--workshop", default=None, metavar="NAME",
+                     help="workshop the invitee takes part in once the account is made "
+                          "(with --role panelist; the workshop must exist)")
     inv.add_argument("--days", type=float, default=7.0, help="validity in days (default 7)")
     inv.add_argument("--base-url", default="http://127.0.0.1:5006",
                      help="server address printed in the link")
@@ -191,5 +194,6 @@ def _cmd_invite(args) -> int:
         emit_json({"link": link, "role": args.role, "workshop": args.workshop,
                    "expires_at_utc": expires})
     else:
-        print(f"single-use invitation ({args.role}), valid until {expires[:16]} UTC:\n{link}")
+        joins = f" to workshop {args.workshop}" if args.workshop else ""
+        print(f"single-use invitation ({args.role}{joins}), valid until {expires[:16]} UTC:\n{link}")
     return 0

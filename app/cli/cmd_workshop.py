@@ -11,8 +11,10 @@
 ``railval workshop plots NAME --json``       ``plots``: id, kind, section, configuration,
                                              channel, deviation, image_sha256 (and sg_c,
                                              scaling, twin).
-``railval workshop invite NAME --reviewer R [--base-url URL]``  a personal link.
-``railval workshop status NAME [--json]``    progress per reviewer.
+``railval workshop invite NAME --reviewer R [--base-url URL]``  a personal review link for
+                                             the panelist R (user name; a new one gets the role
+                                             panelist, without password).
+``railval workshop status NAME [--json]``    progress per panelist.
 ``railval workshop close|reopen NAME``
 ``railval workshop import-answers NAME FILE.csv`` / ``export NAME FILE.csv``
 ``railval workshop analyse NAME --json``
@@ -48,7 +50,7 @@ def _list(text: str | None) -> list[str] | None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    w = sub.add_parser("workshop", help="expert review workshops (plot sets, reviewers, answers)")
+    w = sub.add_parser("workshop", help="expert review workshops (plot sets, panelists, answers)")
     wsub = w.add_subparsers(dest="subverb", metavar="ACTION")
     wsub.required = True
 
@@ -84,15 +86,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_plots)
 
-    i = wsub.add_parser("invite", help="a personal review link for a reviewer")
-    i.add_argument("name")
-    i.add_argument("--reviewer", required=True, help="user name (created as reviewer when new)")
+    i = wsub.add_parser("invite", help="a personal review link for a panelist",
+                        description="Print a personal review link of workshop NAME for the "
+                        "panelist R (the role panelist: answers in the own workshops only). A user "
+                        "name not yet known is created with the role panelist and no password; an "
+                        "existing user must hold the role panelist. A new link replaces the "
+                        "panelist's earlier one; the answers stay.")
+    i.add_argument("name", metavar="NAME", help="workshop name")
+    i.add_argument("--reviewer", required=True, metavar="R",
+                   help="user name of the panelist (created with the role panelist when new)")
     i.add_argument("--base-url", default="http://127.0.0.1:5006",
-                   help="address of `railval serve` as reviewers reach it")
+                   help="address of `railval serve` as the panelists reach it")
     i.add_argument("--json", action="store_true")
     i.set_defaults(func=_invite)
 
-    s = wsub.add_parser("status", help="progress per reviewer")
+    s = wsub.add_parser("status", help="progress per panelist")
     s.add_argument("name")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_status)
