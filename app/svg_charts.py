@@ -126,3 +126,55 @@ def svg_lines(traces: list[tuple[str, np.ndarray, np.ndarray, str]], *, title: s
     return "".join(out)
 
 
+
+
+def svg_paired_hbars(labels: list[str], before: list[float], after: list[float], *, title: str,
+                     xlabel: str, names: tuple[str, str] = ("before", "after"),
+                     colors: tuple[str, str] = ("#c0392b", "#2e7d32"), width: int = 640,
+                     row: int = 30) -> str:
+    """Grouped horizontal bar chart as SVG: one pair of bars (``names``: before / after) per
+    label, the labels left of the bars in reading direction (never rotated, never
+    overlapping: one row of ``row`` px each), the value axis below with ``xlabel`` and a
+    legend above. Height = ``row`` × labels + margins, fixed for a given number of labels,
+    whatever the window width. Non-finite values draw no bar (the value reads "n/a")."""
+    n = len(labels)
+    longest = max((len(str(lab)) for lab in labels), default=4)
+    ml, mr, mt, mb = 16 + 7 * min(longest, 24), 56, 52, 48
+    height = mt + mb + row * max(n, 1)
+    w = width - ml - mr
+    vals = [v for v in (*before, *after) if v is not None and math.isfinite(v)]
+    _, hi = nice_limits(0.0, max(vals) if vals else 1.0)
+
+    def px(v: float) -> float:
+        return ml + w * max(v, 0.0) / hi
+
+    out = [(f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" role="img" '
+            f'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">'),
+           f'<title>{_esc(title)}</title>',
+           f'<text x="{width / 2}" y="18" text-anchor="middle" font-size="14" font-weight="bold">{_esc(title)}</text>']
+    for k, (name, color) in enumerate(zip(names, colors, strict=True)):  # the legend, above the bars
+        lx = ml + k * 170
+        out.append(f'<rect x="{lx}" y="30" width="14" height="10" fill="{color}"/>'
+                   f'<text x="{lx + 20}" y="39" class="legend">{_esc(name)}</text>')
+    for t in nice_ticks(0.0, hi):
+        out.append(f'<line x1="{px(t):.1f}" x2="{px(t):.1f}" y1="{mt}" y2="{mt + row * n}" stroke="#e3e3e3"/>'
+                   f'<text x="{px(t):.1f}" y="{mt + row * n + 16}" text-anchor="middle" class="tick">{t:.4g}</text>')
+    bar = (row - 8) / 2
+    for i, lab in enumerate(labels):
+        y0 = mt + i * row
+        out.append(f'<text x="{ml - 8}" y="{y0 + row / 2 + 4:.1f}" text-anchor="end" class="label">{_esc(lab)}</text>')
+        for k, (vals_k, name, color) in enumerate(zip((before, after), names, colors, strict=True)):
+            v = vals_k[i]
+            yb = y0 + 4 + k * bar
+            if v is None or not math.isfinite(v):
+                out.append(f'<text x="{ml + 4}" y="{yb + bar - 2:.1f}" font-size="11">n/a</text>')
+                continue
+            out.append(f'<rect x="{ml}" y="{yb:.1f}" width="{max(px(v) - ml, 0.5):.1f}" height="{bar:.1f}" '
+                       f'fill="{color}"><title>{_esc(lab)} {_esc(name)}: {v:.3g}</title></rect>'
+                       f'<text x="{px(v) + 4:.1f}" y="{yb + bar - 2:.1f}" font-size="11" class="value">{v:.2f}</text>')
+    out.append(f'<line x1="{ml}" x2="{ml}" y1="{mt}" y2="{mt + row * n}" stroke="#000"/>'
+               f'<line x1="{ml}" x2="{ml + w}" y1="{mt + row * n}" y2="{mt + row * n}" stroke="#000"/>')
+    out.append(f'<text x="{ml + w / 2}" y="{mt + row * n + 36}" text-anchor="middle" class="axis-label">'
+               f'{_esc(xlabel)}</text>')
+    out.append("</svg>")
+    return "".join(out)

@@ -166,22 +166,27 @@ def test_zone_coverage_marks_short_zones_and_lineage_chart():
 
 
 def test_signature_chart_of_a_candidate():
-    from railval.app.pages.diagnose import signature_chart
+    """One before/after bar pair per quantity (EN order), labels horizontal in their own
+    rows, the value axis labelled as normalised and dimensionless, fixed height per group."""
+    import re
+
+    from railval.app.pages.diagnose import SIGNATURE_AXIS, signature_chart
 
     cand = {"effect": "friction_damping",
             "quantities": {"az_rms": {"before": 1.4, "after": 0.3}, "Y_qst": {"before": 0.2, "after": 0.25}}}
-    chart = signature_chart(cand)
-    assert list(chart.dimension_values("rms")) == [0.2, 0.25, 1.4, 0.3]  # EN quantity order
-    fig = hv.render(chart, backend="bokeh")
-    assert fig.yaxis[0].axis_label == "residual rms (normalised, –)"
-    assert "friction_damping" in fig.title.text
-    assert [tuple(map(str, f)) for f in fig.x_range.factors] == [  # before, then after, per group
-        ("Y_qst", "before"), ("Y_qst", "after (fitted)"), ("az_rms", "before"), ("az_rms", "after (fitted)")]
-    bars = next(r for r in fig.renderers if hasattr(r, "glyph"))
-    mapper = bars.glyph.fill_color.transform  # colours follow "when", not the bar order
-    assert bars.glyph.fill_color.field == "when"
-    assert dict(zip(mapper.factors, mapper.palette, strict=True)) == {
-        "before": plots.FAIL_COLOR, "after (fitted)": plots.PASS_COLOR}
+    svg = signature_chart(cand)
+    labels = re.findall(r'class="label">([^<]+)<', svg)
+    assert labels == ["Y_qst", "az_rms"]  # EN quantity order
+    bars = re.findall(r'<title>(\S+) (before|after \(fitted\)): ([0-9.]+)</title>', svg)
+    assert bars == [("Y_qst", "before", "0.2"), ("Y_qst", "after (fitted)", "0.25"),
+                    ("az_rms", "before", "1.4"), ("az_rms", "after (fitted)", "0.3")]
+    assert f'fill="{plots.FAIL_COLOR}"' in svg and f'fill="{plots.PASS_COLOR}"' in svg
+    assert "dimensionless" in SIGNATURE_AXIS and "std limit" in SIGNATURE_AXIS and SIGNATURE_AXIS in svg
+    assert "friction_damping" in svg and "rotate(" not in svg
+    h2 = int(re.search(r'height="(\d+)"', svg).group(1))
+    more = dict(cand["quantities"], Q_qst={"before": 0.5, "after": 0.4})
+    h3 = int(re.search(r'height="(\d+)"', signature_chart({**cand, "quantities": more})).group(1))
+    assert h3 - h2 == 30  # one row per quantity, whatever the window
 
 
 def test_pattern_grids_average_positions_per_quantity_zone_and_psd_band():

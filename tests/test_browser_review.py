@@ -104,7 +104,7 @@ def test_reviewer_sees_what_is_signed_and_a_contrary_decision_needs_a_justificat
     main.locator(".rv-statement textarea").fill("ride comfort not credible")
     main.locator(".rv-sign-password input").fill(PW["rev"])
     main.locator(".rv-sign button").click()
-    page.locator(".rv-status", has_text="needs a written justification").first.wait_for(
+    page.locator(".rv-status", has_text="needs a justification").first.wait_for(
         timeout=TIMEOUT_MS)
     with db.session() as s:
         from railval.db.models import Signoff

@@ -66,7 +66,7 @@ def test_values_fitted_by_a_diagnosis_make_the_verdict_in_sample(diagnosed):
     assert prov["in_sample"] and prov["fitted_by"] == {"fitted": "diagnosis"}
     assert len(prov["fit_sections"]) == n_sections == 12 and prov["held_out_sections"] == []
     assert prov["held_out_check"].startswith("no held-out check is possible for this configuration")
-    assert "railval calibrate ins --config baseline" in prov["held_out_check"] and "--split" in prov["held_out_check"]
+    assert f"railval calibrate ins --config baseline --effect {EFFECT} --as NEW --split" in prov["held_out_check"]
     # values set by hand, and the parent, are not in-sample
     assert not hand["in_sample"] and hand["held_out_check"] == ""
     assert not base["in_sample"]

@@ -17,6 +17,14 @@ from railval.app.state import AppState
 ROWS_SHOWN = 200
 
 
+def contrary_mark(row: dict) -> str:
+    """" — CONTRARY TO THE OBJECTIVE VERDICT" for a ``signoff.create`` row whose decision
+    contradicts the objective verdict (the row's signed ``detail``), else ""."""
+    if row.get("action") == "signoff.create" and (row.get("detail") or {}).get("contrary_to_objective"):
+        return " — CONTRARY TO THE OBJECTIVE VERDICT"
+    return ""
+
+
 class AuditPage(PageBase):
     name_ = "audit"
     watch_app = ("revision",)
@@ -66,7 +74,7 @@ class AuditPage(PageBase):
             objs.append(message(f"{len(stale)} sign-off(s) stale or unbound: {stale[0]}", "warning"))
         objs.append(pn.Row(self.html_dl, self.pdf_dl))
         df = pd.DataFrame([{"seq": r["seq"], "UTC": r["at_utc"][:19], "actor": r["actor"],
-                            "action": r["action"], "object": r["object"],
+                            "action": r["action"], "object": r["object"] + contrary_mark(r),
                             "reason": r["reason"]} for r in rows])
         objs.append(pn.pane.Markdown(f"Newest {min(n, ROWS_SHOWN)} of {n} audit rows:"))
         if len(df):

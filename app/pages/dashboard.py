@@ -100,14 +100,25 @@ def verdict_style(value: Any) -> str:
     return ""
 
 
+#: numbers for people: at most four decimals, trailing zeros dropped (0.1025, not
+#: 0.10250000000000001), right-aligned
+NUMBER_FORMAT = "0.[0000]"
+
+
 def summary_table(rows: list[dict[str, Any]]) -> pn.widgets.Tabulator:
-    """The quantity table: human headers, FAIL coloured, columns fitted to their content."""
+    """The quantity table: human headers, FAIL coloured, columns fitted to their content,
+    every row shown (no height: the table grows with its rows, no scrolling inside it),
+    numbers formatted for people (:data:`NUMBER_FORMAT`)."""
+    from bokeh.models.widgets.tables import NumberFormatter
+
     df = summary_frame(rows)
     # every column inside the page width: headers wrap, the name column takes the rest
     widths = {c: 72 for c in df.columns}  # 892 px in all: fits the main area at 1280 px
     widths.update({"quantity": 90, "what it is": 154, "unit": 60, "pairs": 80, "verdict": 80})
-    tab = table(df, height=80 + 40 * len(df), layout="fit_columns", widths=widths, css_classes=["rv-summary"],
-                formatters={"what it is": {"type": "textarea"}},  # long names wrap, never cut
+    numeric = [c for c in df.columns if c not in ("quantity", "what it is", "unit", "verdict", "pairs")]
+    formatters: dict[str, Any] = {c: NumberFormatter(format=NUMBER_FORMAT, text_align="right") for c in numeric}
+    formatters["what it is"] = {"type": "textarea"}  # long names wrap, never cut
+    tab = table(df, layout="fit_columns", widths=widths, css_classes=["rv-summary"], formatters=formatters,
                 stylesheets=[":host {font-size: 13px;}", WRAP_HEADERS_CSS])
     if "verdict" in df:
         tab.style.map(verdict_style, subset=["verdict"])

@@ -10,7 +10,6 @@ from __future__ import annotations
 import html
 from typing import Any
 
-import holoviews as hv
 import numpy as np
 import pandas as pd
 import panel as pn
@@ -20,27 +19,28 @@ from railval.app.pages._common import PageBase, bounded_input, make_dispatch, me
 from railval.app.pages.dashboard import validation_view
 from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
+from railval.app.svg_charts import svg_paired_hbars
 
 
-def signature_chart(candidate: dict[str, Any], height: int = 280) -> hv.Overlay:
+#: the signature chart's value axis: what the residual is, and that it has no unit
+SIGNATURE_AXIS = ("residual rms, normalised: D_v / std limit (PSD groups: log2 PSD ratio) "
+                  "— dimensionless")
+
+
+def signature_chart(candidate: dict[str, Any]) -> str:
     """Residual RMS per quantity group before/after adding the candidate (its signature on
-    the residual pattern), as grouped bars."""
+    the residual pattern) as a grouped horizontal bar chart (inline SVG,
+    :func:`railval.app.svg_charts.svg_paired_hbars`): one before/after pair per quantity, EN
+    quantity order then PSD groups, labels horizontal, a fixed height per group."""
     from railval.core.quantities import QUANTITY_IDS
 
     order = {q: i for i, q in enumerate(QUANTITY_IDS)}  # the quantities in EN order, then PSD groups
     groups = sorted((candidate.get("quantities") or {}).items(), key=lambda kv: (order.get(kv[0], 99), kv[0]))
-    rows = []
-    for group, change in groups:
-        rows.append((group, "before", float(change["before"])))
-        rows.append((group, "after (fitted)", float(change["after"])))
-    bars = hv.Bars(rows, kdims=[hv.Dimension("group", label="quantity / PSD group"),
-                                hv.Dimension("when", label="residual", values=["before", "after (fitted)"])],
-                   vdims=[hv.Dimension("rms", label="residual rms (normalised, –)")]).opts(
-        cmap={"before": plots.FAIL_COLOR, "after (fitted)": plots.PASS_COLOR},  # colour by "when"
-        line_color=None, tools=["hover"])
-    return bars.opts(title=f"Signature of {candidate['effect']}: residual before → after",
-                     responsive=True, height=height, fontsize=plots.FONTS, xrotation=45,
-                     show_grid=True, show_legend=True, legend_position="top_right", multi_level=False)
+    return svg_paired_hbars([g for g, _ in groups], [float(c["before"]) for _, c in groups],
+                            [float(c["after"]) for _, c in groups],
+                            title=f"Signature of {candidate['effect']}: residual before → after",
+                            xlabel=SIGNATURE_AXIS, names=("before", "after (fitted)"),
+                            colors=(plots.FAIL_COLOR, plots.PASS_COLOR))
 
 
 class DiagnosePage(PageBase):
@@ -295,7 +295,8 @@ class DiagnosePage(PageBase):
                              f"{html.escape(', '.join(cand.get('worsens') or []) or 'none')}.",
                              sizing_mode="stretch_width"),
             *[message(str(f), "warning") for f in (cand.get("flags") or [])],
-            pn.pane.HoloViews(signature_chart(cand), sizing_mode="stretch_width"),
+            pn.pane.HTML(signature_chart(cand), css_classes=["rv-signature"], styles={"overflow-x": "auto"},
+                         sizing_mode="stretch_width"),
         ]
         where = self.state.where(cand["effect"])
         if where:

@@ -16,17 +16,55 @@ and the password again (21 CFR 11.200(a)); the check and the signing run on the 
 from __future__ import annotations
 
 import html
+import re
 
 import pandas as pd
 import panel as pn
 
 from railval.app.pages._common import PageBase, html_table, make_dispatch, message
 from railval.app.state import PAGE_TITLES, AppState
+from railval.core.errors import RailvalError
+
+#: the decision list's first entry: nothing chosen yet
+NO_DECISION = "— choose a decision —"
 
 #: the label of a decision contrary to the objective verdict (cards, banner, table)
 CONTRARY_TAG = ("<span class='rv-contrary' style='background:#b3261e;color:#fff;padding:1px 6px;"
                 "border-radius:3px;margin-left:8px;font-size:12px'>CONTRARY TO THE OBJECTIVE "
                 "VERDICT</span>")
+
+
+def status_label(status: str) -> str:
+    """A sign-off's status as a reader must take it: the *signature*'s state ("signature
+    valid": the evidence is unchanged), never a bare "VALID" that reads as "validated"."""
+    return f"signature {status}"
+
+
+#: what the reviewer must do, in the page's words, for each refusal of the signing rules
+#: (railval.db.signoff.create words them for the CLI: a flag name means nothing here)
+_REFUSALS = (
+    ("justification:", "A decision contrary to the objective verdict needs a justification"),
+    ("restrictions: a decision 'restricted'", "The decision 'validated with restrictions' needs "
+     "the restrictions: write them in the Restrictions box"),
+    ("restrictions: only the decision", "Only the decision 'validated with restrictions' takes "
+     "restrictions: empty the Restrictions box or choose that decision"),
+    ("decision ", "Choose a decision: validated, validated with restrictions or not validated"),
+)
+
+
+def refusal_text(message_text: str) -> str:
+    """A refusal of the signing as the page says it: the rule in plain words (with the
+    reason the decision is contrary, when that is the rule), no CLI flag."""
+    text = re.sub(r"^sign-off refused:\s*", "", str(message_text).strip())
+    for prefix, plain in _REFUSALS:
+        if text.startswith(prefix):
+            if prefix == "justification:":
+                reason = text[len(prefix):].split(";", 1)[0].strip()
+                return (f"{plain}: {reason}. Write it in the Justification box; the sign-off is "
+                        "stored and shown marked contrary to the objective verdict.")
+            return plain + "."
+    text = re.sub(r"\s*\(--[a-z][a-z-]*[^)]*\)", "", text)  # a CLI flag in any other rule
+    return text[:1].upper() + text[1:]
 
 
 def signoff_card(rec: dict, status: str, reasons: list[str]) -> pn.pane.HTML:
@@ -50,7 +88,7 @@ def signoff_card(rec: dict, status: str, reasons: list[str]) -> pn.pane.HTML:
     return pn.pane.HTML(
         f"<div class='rv-signoff' style='border-left:4px solid {colour};padding:4px 10px;margin:6px 0'>"
         f"<b>Sign-off {rec['id']}: {e(rec['campaign'])} / {e(rec['configuration'])} — "
-        f"<span class='rv-signoff-status' style='color:{colour}'>{e(status.upper())}</span></b>"
+        f"<span class='rv-signoff-status' style='color:{colour}'>{e(status_label(status))}</span></b>"
         + (CONTRARY_TAG if rec.get("contrary_to_objective") else "")
         + f"<table style='font-size:13px'>{body}</table>"
         + (f"<div>Evidence changed since signing:<ul>{stale}</ul></div>" if stale else "")
@@ -71,7 +109,7 @@ def signoff_banner(app: AppState, config: str | None) -> pn.pane.HTML:
         colour = "#1e7b34" if st.valid else "#b3261e"
         why = f" — evidence changed: {e(st.reasons[0])}" if st.reasons else ""
         lines.append(f"<div style='border-left:4px solid {colour};padding:2px 8px;margin:2px 0'>"
-                     f"Sign-off {d['id']} <b style='color:{colour}'>{e(st.status.upper())}</b>: "
+                     f"Sign-off {d['id']} <b style='color:{colour}'>{e(status_label(st.status))}</b>: "
                      f"{e(d['decision_text'])} by {e(d['printed_name'])}, {e(d['signed_at_utc'])} "
                      f"UTC, evidence {e(d['evidence_sha256'][:16])}…{why}"
                      + (f"{CONTRARY_TAG} justification: {e(d['justification'])}"
@@ -141,7 +179,7 @@ def summary_html(summ: dict) -> str:
                        f"rel='noopener'>{e(PAGE_TITLES.get(name, name))}</a>"
                        for name, url in summ["links"].items())
     earlier = "".join(
-        f"<li>sign-off {so['id']} <b>{e(so['status'].upper())}</b>: {e(so['decision_text'])} by "
+        f"<li>sign-off {so['id']} <b>{e(status_label(so['status']))}</b>: {e(so['decision_text'])} by "
         f"{e(so['printed_name'])}, {e(so['signed_at_utc'])} UTC"
         + (CONTRARY_TAG if so["contrary_to_objective"] else "") + "</li>"
         for so in summ["signoffs"]) or "<li>none</li>"
@@ -167,9 +205,11 @@ class SignoffPage(PageBase):
 
     def __init__(self, app: AppState, **params):
         super().__init__(app, **params)
-        self.decision = pn.widgets.Select(name="Decision", options={
-            "validated": "validated", "validated with restrictions": "restricted",
-            "not validated": "not-validated"}, width=260)
+        # no default decision: the reviewer chooses one (a preset "validated" was signed
+        # by whoever did not look)
+        self.decision = pn.widgets.Select(name="Decision (choose one)", options={
+            NO_DECISION: "", "validated": "validated", "validated with restrictions": "restricted",
+            "not validated": "not-validated"}, value="", width=300, css_classes=["rv-decision"])
         self.restrictions = pn.widgets.TextAreaInput(name="Restrictions (required for 'with restrictions')",
                                                      height=70, css_classes=["rv-restrictions"])
         self.statement = pn.widgets.TextAreaInput(name="Statement", height=90,
@@ -184,6 +224,7 @@ class SignoffPage(PageBase):
         self.sign_btn = pn.widgets.Button(name="Sign", button_type="primary", width=160,
                                           css_classes=["rv-sign"])
         self.sign_btn.on_click(lambda e: self.sign(dispatch=make_dispatch()))
+        self.refusal = pn.pane.HTML("", sizing_mode="stretch_width", css_classes=["rv-signoff-refusal"])
         self.summary: dict | None = None
         self.decision.param.watch(lambda e: self._show_contrary(), ["value"])
 
@@ -195,31 +236,67 @@ class SignoffPage(PageBase):
             "Write your justification; the sign-off is stored and shown with this mark.</div>"
             if reason else "")
 
+    def show_refusal(self, text: str) -> None:
+        """A refusal next to the form (and in the status line), escaped."""
+        self.refusal.object = (
+            "<div class='rv-refusal' role='alert' style='background:#fdecea;color:#8a1f11;"
+            f"border-left:4px solid #b3261e;padding:6px 8px;margin:4px 0'><b>Not signed.</b> "
+            f"{html.escape(text)}</div>" if text else "")
+        if text:
+            self.app.set_status(f"sign-off refused: {text}", "error")
+
+    def precheck(self) -> str:
+        """The refusal the form's values get before anything is sent ("" when none): no
+        decision chosen, or a contrary decision without a justification. The server checks
+        the same rules again (``railval.db.signoff.create``)."""
+        decision = self.decision.value
+        if not decision:
+            return ("Choose a decision: validated, validated with restrictions or not validated. "
+                    "There is no default.")
+        reason = (self.summary or {}).get("contrary_if", {}).get(decision)
+        if reason and not (self.justification.value or "").strip():
+            return refusal_text(f"justification: {reason}; needs a justification")
+        return ""
+
     def sign(self, dispatch=None, background: bool = True):
-        """Run the signing as a background job (the validation may take seconds)."""
+        """Run the signing as a background job (the validation may take seconds); a form
+        the rules refuse is refused next to the form, without a job."""
         app = self.app
         if not app.guard("signoff.create"):
+            return None
+        problem = self.precheck()
+        self.show_refusal(problem)
+        if problem:
+            self.password.value = ""  # the password is typed again for every attempt
             return None
         password, self.password.value = self.password.value, ""
         campaign, config = app.campaign, app.configuration
         decision, restrictions, statement, justification = (
             self.decision.value, self.restrictions.value, self.statement.value,
             self.justification.value)
+        show = dispatch or (lambda fn: fn())
         username = app.principal.username
         database = app.backend.database
 
         def work(progress):
-            from railval.app.services.signoff import sign
+            from railval.app.services.signoff import SignoffRefused, sign
 
             progress(0.1, "checking the password and building the evidence")
-            return sign(database, username, password, campaign, config, decision=decision,
-                        restrictions=restrictions, statement=statement,
-                        justification=justification, source="web")
+            try:
+                return sign(database, username, password, campaign, config, decision=decision,
+                            restrictions=restrictions, statement=statement,
+                            justification=justification, source="web")
+            except RailvalError as exc:  # a refusal: next to the form, in the page's words
+                text = refusal_text(str(exc))
+                show(lambda: self.show_refusal(text))
+                raise SignoffRefused(text) from None
 
         def done(rec):
             self.restrictions.value = ""
             self.statement.value = ""
             self.justification.value = ""
+            self.decision.value = ""
+            self.refusal.object = ""
             mark = " — CONTRARY TO THE OBJECTIVE VERDICT" if rec["contrary_to_objective"] else ""
             app.set_status(f"sign-off {rec['id']} recorded: {campaign}/{config} "
                            f"{rec['decision_text']}{mark}", "success")
@@ -260,12 +337,12 @@ class SignoffPage(PageBase):
                     "the validation result, the software version).", sizing_mode="stretch_width"),
                     self.decision, self.contrary_note,
                     self.restrictions, self.statement, self.justification,
-                    pn.Row(self.password, self.sign_btn)]
+                    pn.Row(self.password, self.sign_btn), self.refusal]
         if not items:
             objs.append(message(f"No sign-off of campaign {self.app.campaign!r} yet."))
         else:
             df = pd.DataFrame([{"id": d["id"], "configuration": d["configuration"],
-                                "status": st.status, "decision": d["decision_text"],
+                                "status": status_label(st.status), "decision": d["decision_text"],
                                 "against objective": ("CONTRARY" if d["contrary_to_objective"]
                                                       else "agrees"),
                                 "signed by": d["printed_name"], "UTC": d["signed_at_utc"],

@@ -754,7 +754,7 @@ def calibration_provenance(session: Session, campaign, config: str | repo.Config
 
     fitted: set[str] = set()
     held: set[str] = set()
-    calibrated, fitted_by, parents = [], {}, {}
+    calibrated, fitted_by, parents, effects = [], {}, {}, {}
     prev = None
     for conf in repo.lineage(session, campaign, config):
         rec = conf.calibration or {}
@@ -762,6 +762,8 @@ def calibration_provenance(session: Session, campaign, config: str | repo.Config
             calibrated.append(conf.name)
             fitted_by[conf.name] = str(rec.get("fitted_by") or "calibration")
             parents[conf.name] = prev
+            effects[conf.name] = sorted({p if p.startswith("model.") else p.split(".", 1)[0]
+                                         for p in rec.get("parameters") or []})
             fitted |= set(rec.get("fit_sections") or [])
             held |= set(rec.get("held_out_sections") or [])
         prev = conf.name
@@ -769,16 +771,18 @@ def calibration_provenance(session: Session, campaign, config: str | repo.Config
     out = {"in_sample": bool(fitted), "calibrated_in": calibrated, "fitted_by": fitted_by,
            "fit_sections": sorted(fitted), "held_out_sections": sorted(held)}
     name = campaign if isinstance(campaign, str) else getattr(campaign, "name", str(campaign))
-    out["held_out_check"] = held_out_check(name, out, parents) if fitted else ""
+    out["held_out_check"] = held_out_check(name, out, parents, effects) if fitted else ""
     return out
 
 
-def held_out_check(campaign: str, prov: dict, parents: dict[str, str | None]) -> str:
+def held_out_check(campaign: str, prov: dict, parents: dict[str, str | None],
+                   effects: dict[str, list[str]] | None = None) -> str:
     """How to check an in-sample configuration on sections its fit did not use (plain text
     for every view): with held-out sections, the calibration's held-out verdict; when every
     section was used, that no held-out check is possible for this configuration and the
     calibration with a split (``railval calibrate --split``: one section per zone held out,
-    :func:`railval.core.diagnosis.zone_folds`) that gives one."""
+    :func:`railval.core.diagnosis.zone_folds`) that gives one. ``effects``: per fitted
+    configuration, the effects (or ``model.NAME``) whose parameters were fitted."""
     held = prov["held_out_sections"]
     if held:
         return (f"held-out check: sections {', '.join(held)} were not used for the fit; the "
@@ -788,8 +792,9 @@ def held_out_check(campaign: str, prov: dict, parents: dict[str, str | None]) ->
     parent = parents.get(last) or "PARENT"
     how = ("its parameters were taken from a diagnosis that fitted them on every section"
            if prov["fitted_by"].get(last) == "diagnosis" else "its calibration used every section")
+    named = " ".join(f"--effect {e}" for e in (effects or {}).get(last) or []) or "--effect EFFECT"
     return (f"no held-out check is possible for this configuration: {how}. To get one, calibrate "
-            f"{parent} with a split — railval calibrate {campaign} --config {parent} --effect EFFECT "
+            f"{parent} with a split — railval calibrate {campaign} --config {parent} {named} "
             "--as NEW --split (Diagnose page: tick 'Hold out one section per zone', then "
             "'Add, calibrate & re-simulate')")
 

@@ -164,8 +164,16 @@ class WorkshopNew(_OrganiserBase):
 <p><strong>Sections</strong><br><span id='secs'></span></p>
 <p><strong>Plot kinds</strong><br><span id='kinds'></span></p>
 <p><label><input type='checkbox' name='blind' value='1'> blind (no vehicle, configuration or
-section names)</label> <label>hidden repeats <input name='repeats' value='0.1' size='4'></label>
-<label>share also shown with automatic scaling <input name='auto_share' value='0' size='4'></label></p>
+section names)</label> <label>hidden repeats <input name='repeats' value='0.1' size='4'
+aria-describedby='repeats-help'></label>
+<label>share also shown with automatic scaling <input name='auto_share' value='0' size='4'
+aria-describedby='auto-help'></label></p>
+<p class='help' style='color:#555;font-size:13px;margin-top:-6px'><span id='repeats-help'><b>Hidden
+repeats</b> (0 to 0.5): the share of plots shown a second time, unannounced among the others, to
+measure whether each reviewer gives the same answer twice; 0.1 = one plot in ten is repeated.</span><br>
+<span id='auto-help'><b>Share also shown with automatic scaling</b> (0 to 1): the share of plots shown
+a second time with each plot's own y range instead of the common range, to measure how the scaling
+changes the answers; 0 = every plot uses the common range only.</span></p>
 <p><label>Scaling <select name='scaling'><option value='zone' selected>same range per kind within each
 EN 14363 test zone</option><option value='workshop'>same range per kind over the whole workshop</option></select></label>
 <button id='previewbtn' type='button'>Preview ranges</button></p>
