@@ -6,8 +6,10 @@ in each round, so a change in the machine's load falls on all of them alike, and
 the median are reported. Per command:
 
 * ``best_s`` / ``median_s``: from the process's spawn to its exit (what a user waits for);
-* ``to_verb_s``: from the spawn to the call of the verb's own function (parsing, the command
-  module, the permission check done) — the start-up the CLI adds before the work;
+* ``to_dispatch_s``: from the spawn to the verb's dispatch (the interpreter, the parser and the
+  verb's command module loaded, arguments parsed) — the command line's own start-up;
+* ``to_verb_s``: from the spawn to the call of the verb's own function, after the permission
+  check (which opens the database through SQLAlchemy);
 * ``heavy``: which of the heavy libraries (scipy.signal, scipy.stats, pandas, numba, the
   plotting libraries, Alembic, statsmodels, SQLAlchemy's ORM models) the command imported.
 
@@ -77,6 +79,11 @@ def build(verb=None):
     parser.parse_args = parse_args
     return parser
 cli.build_parser = build
+_authorize = cli.authorize
+def authorize(args):
+    marks["dispatch"] = time.time()
+    return _authorize(args)
+cli.authorize = authorize
 try:
     code = cli.main(sys.argv[1:])
 except SystemExit as exc:
@@ -106,8 +113,9 @@ def _run(argv: list[str], env: dict, probe: bool) -> tuple[float, dict | None]:
             raise RuntimeError(f"`railval {' '.join(argv[3:])}` gave no report: "
                                f"{proc.stderr[-500:]}")
         report = json.loads(lines[-1][len("STARTUP "):])
-        verb = report["marks"].get("verb")
-        report["to_verb"] = None if verb is None else verb - spawned
+        for mark in ("dispatch", "verb"):
+            at = report["marks"].get(mark)
+            report[f"to_{mark}"] = None if at is None else at - spawned
         return wall, report
     if proc.returncode != 0:
         raise RuntimeError(f"baseline {argv[2]!r} failed: {proc.stderr[-500:]}")
@@ -124,8 +132,9 @@ def _initialise(url: str, env: dict) -> None:
 def _summary(walls: list[float], reports: list[dict]) -> dict:
     out = {"best_s": round(min(walls), 3), "median_s": round(statistics.median(walls), 3)}
     if reports:
-        to_verb = [r["to_verb"] for r in reports if r["to_verb"] is not None]
-        out["to_verb_s"] = round(min(to_verb), 3) if to_verb else "n/a (no verb function)"
+        for mark in ("dispatch", "verb"):
+            at = [r[f"to_{mark}"] for r in reports if r[f"to_{mark}"] is not None]
+            out[f"to_{mark}_s"] = round(min(at), 3) if at else "n/a (help printed)"
         out["exit"] = reports[-1]["code"]
         out["heavy"] = ", ".join(reports[-1]["heavy"]) or "none"
     return out
