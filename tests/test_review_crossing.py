@@ -153,3 +153,14 @@ def test_curve_above_or_below_the_range_is_said_not_extrapolated():
         assert th["deviation_at_50"] is None and th["deviation_at_50_status"] == where
         assert th["ci"] is None and th["ci_status"] == where
         assert th["deviation_n"] == {"answers": 48, "reviewers": 2, "plots": 24}
+
+
+def test_curve_flat_at_one_half_names_no_point():
+    """A typical reviewer at exactly 50 % at every value: no 50 % point, not the midpoint of
+    the range; flat only on part of the range: the midpoint of that part."""
+    from railval.core.review.threshold import FLAT, curve_crossing
+
+    v = np.array([0.2, 0.5, 1.0, 2.0])
+    flat = monotone_threshold(v, np.zeros(4), n_boot=30)
+    assert flat.at_50 is None and flat.status == FLAT
+    assert curve_crossing(v, [0.9, 0.5, 0.5, 0.1]) == (0.75, "estimated")

@@ -26,7 +26,8 @@ def _analysis(database, name: str, actor) -> dict[str, Any]:
 
 
 def _sensitivity_html(sens: dict | None) -> str:
-    """One sentence: the 50 % deviation under every parametric link and their spread."""
+    """One sentence: the 50 % deviation under every parametric link and their spread (left out
+    when no 50 % deviation is reported: no number where the page says there is none)."""
     if not sens:
         return ""
     links = ", ".join(f"{esc(r['link'])} {_fmt(r.get('at_50'))}" for r in sens.get("links", []))
@@ -241,6 +242,6 @@ def analysis_html(doc: dict[str, Any]) -> str:
 <h3>Threshold</h3>
 {at50_html(thr, 'deviation', 'Deviation')}
 <p>The validation limit is 1.0. Method: {esc(thr.get('method', ''))}.
-{_sensitivity_html(thr.get('link_sensitivity'))}</p>{charts}
+{_sensitivity_html(thr.get('link_sensitivity') if thr.get('deviation_at_50') is not None else None)}</p>{charts}
 <h3>Scaling effect (same reviewer, same plot: fixed against automatic scaling)</h3>{_scaling_html(sc)}
 """

@@ -70,7 +70,7 @@ import scipy.stats
 from railval.core.errors import InvalidParameter
 from railval.core.review.rasch import DEFAULT_RIDGE
 
-__all__ = ["ABOVE_RANGE", "BELOW_RANGE", "ESTIMATED", "LINKS", "MIN_VALUE", "MonotoneThreshold", "TOO_FEW",
+__all__ = ["ABOVE_RANGE", "BELOW_RANGE", "ESTIMATED", "FLAT", "LINKS", "MIN_VALUE", "MonotoneThreshold", "TOO_FEW",
            "ThresholdFit", "curve_crossing", "fit_threshold", "link_name", "link_sensitivity",
            "monotone_threshold", "transform", "yes_curve"]
 
@@ -333,6 +333,8 @@ ESTIMATED = "estimated"
 ABOVE_RANGE = "above the observed range"
 #: ``status``: the curve is below ½ already at the smallest observed value.
 BELOW_RANGE = "below the observed range"
+#: ``status``: the curve is exactly ½ at every observed value (no point to name).
+FLAT = "flat at 50 % over the observed range"
 
 
 @dataclass(frozen=True)
@@ -372,7 +374,7 @@ def curve_crossing(value, yes) -> tuple[float | None, str]:
     interpolated isotonic estimate of a target quantile (Stylianou & Flournoy 2002,
     "Dose finding using the biased coin up-and-down design and isotonic regression",
     Biometrics 58:171–177, §2.3). Points exactly at ½ form the segment where the curve equals
-    ½; its midpoint is returned. This is the crossing of the line a chart draws through the
+    ½; its midpoint is returned — unless every point is at ½: ``(None, FLAT)``. This is the crossing of the line a chart draws through the
     same points (straight segments in ``v``), so the reported value and the drawn curve agree.
 
     Parameters
@@ -399,6 +401,8 @@ def curve_crossing(value, yes) -> tuple[float | None, str]:
     if v.shape != p.shape or v.ndim != 1 or v.size == 0:
         raise InvalidParameter("curve_crossing: value and yes must be 1-D of equal, non-zero length")
     at = np.flatnonzero(p == 0.5)
+    if at.size == v.size:
+        return None, FLAT
     if at.size:
         return float(0.5 * (v[at[0]] + v[at[-1]])), ESTIMATED
     above = np.flatnonzero(p > 0.5)
@@ -482,7 +486,8 @@ def monotone_threshold(value, acceptability, *, n_boot: int = DEFAULT_BOOT,
         wt = np.bincount(rng.integers(0, n, n), minlength=n).astype(float)
         k = wt > 0
         c, where = curve_crossing(v[k], _curve(v[k], a[k], wt[k]))
-        draws[b] = c if c is not None else (np.inf if where == ABOVE_RANGE else -np.inf)
+        draws[b] = c if c is not None else {ABOVE_RANGE: np.inf, BELOW_RANGE: -np.inf}.get(where, np.nan)
+    draws = draws[~np.isnan(draws)]                 # a flat replicate names no point, on no side
     ci, ci_status = _percentile_ci(draws, confidence) if draws.size else (None, None)
     return MonotoneThreshold(at50, ci, n, int(np.isfinite(draws).sum()), int(n_boot),
                              tuple(float(x) for x in v), tuple(float(x) for x in yes), status, ci_status)
