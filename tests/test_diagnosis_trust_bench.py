@@ -150,3 +150,43 @@ def test_class_f_another_creep_law_is_not_claimed_as_an_interface_cause(database
     support = {s["name"]: s for s in d["interface_support"]}
     assert set(support) == set(interface) and not support[top["name"]]["significant_outside"]
     assert {x["name"] for x in d["cause_set"]["left_out"]} >= {top["name"]}
+
+
+@pytest.mark.slow  # a synthetic campaign with an oversampled truth and a diagnosis: ~1 min
+def test_class_g_an_instrumented_wheelsets_gain_is_named_as_the_measurement(database):
+    """Both lateral force transducers of the leading wheelset read 1.3 × (class g): the
+    wheelset's gain candidate leads, is labelled "measurement", is fitted ≈ 1.3 and is in the
+    cause set; no model candidate is claimed."""
+    label, kw, truth = _case("g", "leading wheelset: both Y transducers x1.3")
+    rec = run_case(database, "tg", "g", label, kw, truth,
+                   candidates=["gain Y_w1", "gain Y_w1L", "gain Y_L", "model.k_primary_y", "conicity"])
+    d = rec["diagnosis"]
+    top = d["candidates"][0]
+    assert top["name"] == "gain Y_w1" and top["kind"] == "measurement", d["note"]
+    assert top["fitted"] == pytest.approx(1.3, rel=0.06)
+    assert rec["named_in_set"] and not rec["confident_wrong"]
+    assert d["next"]["action"] == "check measurement"
+
+
+@pytest.mark.slow  # a synthetic campaign with an oversampled truth and a diagnosis: ~1 min
+def test_class_r_a_rougher_track_without_measured_geometry_is_the_track_input(database):
+    """A rougher true track and no measured geometry (class r): the answer is the track input
+    ("supply measured track geometry"), never a vehicle parameter as the cause."""
+    label, kw, truth = _case("r", "track x2.0 rougher, no measured geometry (seed 4)")
+    rec = run_case(database, "tr", "r", label, kw, truth,
+                   candidates=["track_level_vertical", "track_level_lateral", "model.c_secondary_z",
+                               "model.k_secondary_z", "friction_damping"])
+    d = rec["diagnosis"]
+    assert "track input" in rec["statements"], d["note"]
+    assert not rec["vehicle_parameter_cause"] and not rec["confident_wrong"]
+    assert "supply measured track geometry" in d["next"]["text"]
+    st = next(x for x in d["statements"] if x["kind"] == "track input")
+    assert set(st["candidates"]) <= {"track_level_vertical", "track_level_lateral"}
+    # the same campaign with measured geometry: the candidate is skipped with its reason
+    from railval.app.services.diagnosis_evidence import inapplicable_effects
+    from types import SimpleNamespace
+
+    ctx = SimpleNamespace(vehicle={"template": "coach"}, layouts={"S1": {"irregularities": {"ds_m": 0.25}}},
+                          measured_values={})
+    why = {x["name"]: x["reason"] for x in inapplicable_effects(ctx, {}, ["track_level_vertical"])}
+    assert "measured track geometry" in why["track_level_vertical"]

@@ -24,6 +24,15 @@ model the diagnosis simulates:
   (f) a truth with another creep law (Polach's instead of Shen–Hedrick–Elkins saturation, the
       simulator's ``creep_law`` = 1), alone and with one or two causes on top, scored like (e);
 
+  (g) force-channel gains: one wheel, both transducers of an instrumented wheelset, a bogie's
+      four (``gain GROUP`` candidates, docs/diagnosis.md "Model or measurement?");
+  (t) two causes at once: a worn damper and a heavier car body;
+  (r) a rougher track than the simulated one, the campaign without measured track geometry
+      (right answer: the track input, never a vehicle parameter as ``cause``);
+  (w) worn secondary dampers, where an implausible candidate (a damper series stiffness) ranks
+      ahead (the cause set must carry on past it);
+  some cases of (g), (t) and (w) with the truth's other creep law of (f).
+
 Every case is synthesised (:func:`~railval.core.sim.synth.build_campaign`), written and
 imported (:func:`railval.app.services.synth.write_folder`, :func:`railval.db.importer.import_campaign`)
 into a temporary SQLite database and diagnosed with the public service
@@ -33,7 +42,10 @@ share of ``none``/``uncertain`` verdicts on (c) and (d), the share of confident 
 and wrong"), and — with ``--calibrate-wrong`` — whether a wrong candidate's calibration that
 passes validation is flagged (plausibility or held-out check).
 
-``railval bench diagnosis-trust [--cases N] [--classes a b c d e f] [--workers 2] [--calibrate-wrong]``
+Per class also (:func:`class_scores`): named as cause, named in the set, ``uncertain`` with the
+right top, confidently wrong.
+
+``railval bench diagnosis_trust [--cases N] [--classes a b c d e f m g t r w] [--workers 2] [--calibrate-wrong]``
 """
 
 from __future__ import annotations
@@ -91,7 +103,7 @@ CASES: dict[str, list[tuple[str, dict[str, Any], str | None]]] = {
         ("profile shape: contact angle parameter 2 -> 10", {"truth_parameters": {"contact_angle_parameter": 10.0}},
          None),
         ("centre of gravity height 1.8 -> 2.3 m", {"truth_parameters": {"h_carbody": 2.3}}, None),
-        ("gain of sensor Y_w1L x1.25", {"channel_faults": {"gain": {"Y_w1L": 1.25}}}, None),
+        ("gain of sensor Y_w1L x1.25", {"channel_faults": {"gain": {"Y_w1L": 1.25}}}, "gain Y_w1L"),
         ("gain of sensor az_cb_b2 x0.7", {"channel_faults": {"gain": {"az_cb_b2": 0.7}}}, "gain az_cb_b2"),
         ("Y of wheelset 3 recorded 0.05 s late", {"channel_faults": {"shift_samples": {"Y_w3L": 10, "Y_w3R": 10}}},
          None),
@@ -167,6 +179,67 @@ def measurement_cases() -> list[tuple[str, dict[str, Any], str | None]]:
 
 CASES["m"] = measurement_cases()
 
+#: the truth with another creep law (class f): structurally unlike every candidate model
+_POLACH = {"creep_law": 1.0}
+_W1 = {"Y_w1L": 1.3, "Y_w1R": 1.3}
+# (g) force-channel gains: one wheel, one instrumented wheelset (both transducers), one bogie;
+# the right answer any one of the " | "-separated alternatives ("+": all of them)
+CASES["g"] = [
+    ("leading wheelset: both Y transducers x1.3", {"channel_faults": {"gain": _W1}}, "gain Y_w1"),
+    ("wheel force Q_w2L x0.8", {"channel_faults": {"gain": {"Q_w2L": 0.8}}}, "gain Q_w2L"),
+    ("guiding force Y_w3R x1.25, creep law differs",
+     {"truth_parameters": _POLACH, "channel_faults": {"gain": {"Y_w3R": 1.25}}}, "gain Y_w3R"),
+    ("rear bogie: all four Y transducers x0.75",
+     {"channel_faults": {"gain": {f"Y_w{n}{s}": 0.75 for n in (3, 4) for s in "LR"}}}, "gain Y_bogie2"),
+    ("wheelset 1: both Q transducers x1.2, creep law differs",
+     {"truth_parameters": _POLACH, "channel_faults": {"gain": {"Q_w1L": 1.2, "Q_w1R": 1.2}}}, "gain Q_w1"),
+    ("leading wheelset Y x1.3, seed 5", {"seed": 5, "channel_faults": {"gain": _W1}}, "gain Y_w1"),
+]
+# (t) two causes at once: a worn damper and a heavier car body
+CASES["t"] = [
+    ("secondary lateral dampers x0.4 + car body mass x1.2",
+     {"truth_parameters": {"c_secondary_y": 12800.0, "m_carbody": 38400.0}}, "model.c_secondary_y+model.m_carbody"),
+    ("secondary vertical dampers x0.5 + car body mass x1.2",
+     {"truth_parameters": {"c_secondary_z": 10000.0, "m_carbody": 38400.0}}, "model.c_secondary_z+model.m_carbody"),
+    ("yaw dampers x0.4 + car body mass x1.2",
+     {"truth_parameters": {"c_yaw_damper": 100000.0, "m_carbody": 38400.0}}, "model.c_yaw_damper+model.m_carbody"),
+    ("secondary vertical dampers x0.4 + car body mass x1.25, creep law differs",
+     {"truth_parameters": {**_POLACH, "c_secondary_z": 8000.0, "m_carbody": 40000.0}},
+     "model.c_secondary_z+model.m_carbody"),
+    ("secondary lateral dampers x0.4 + car body mass x1.2, seed 5",
+     {"seed": 5, "truth_parameters": {"c_secondary_y": 12800.0, "m_carbody": 38400.0}},
+     "model.c_secondary_y+model.m_carbody"),
+]
+# (r) a rougher track than the simulated irregularities, the campaign without measured track
+# geometry (the baseline runs on ORE B176 low-level irregularities of another realisation);
+# right answer: the track input (either direction), never a vehicle parameter as cause
+_TRACK = "track_level_vertical | track_level_lateral"
+CASES["r"] = [
+    (f"track x{f} rougher, no measured geometry (seed {sd})",
+     {"seed": sd, "track_recorded": False, "track_roughness": f}, _TRACK)
+    for f, sd in ((1.6, 3), (2.0, 4), (2.5, 5), (1.8, 6), (2.2, 7))
+]
+# (w) worn secondary dampers in both directions (a worn damper looks like a soft damper series
+# stiffness, which is implausible there: the search must carry on to the dampers)
+_SEC = "model.c_secondary_y+model.c_secondary_z | model.c_secondary_y | model.c_secondary_z"
+CASES["w"] = [
+    ("secondary dampers worn x0.35 (both directions)",
+     {"truth_parameters": {"c_secondary_y": 11200.0, "c_secondary_z": 7000.0}}, _SEC),
+    ("secondary dampers worn x0.3 (both directions)",
+     {"truth_parameters": {"c_secondary_y": 9600.0, "c_secondary_z": 6000.0}}, _SEC),
+    ("secondary dampers worn x0.4, creep law differs",
+     {"truth_parameters": {**_POLACH, "c_secondary_y": 12800.0, "c_secondary_z": 8000.0}}, _SEC),
+    ("secondary lateral dampers worn x0.3", {"truth_parameters": {"c_secondary_y": 9600.0}}, "model.c_secondary_y"),
+    ("secondary dampers worn x0.35, seed 5",
+     {"seed": 5, "truth_parameters": {"c_secondary_y": 11200.0, "c_secondary_z": 7000.0}}, _SEC),
+]
+
+
+def truth_sets(truth: str | None) -> list[list[str]]:
+    """The right answers of a case: alternatives separated by " | ", each the "+"-joined names
+    that must all be found."""
+    return [[n.strip() for n in alt.split("+")] for alt in truth.split("|")] if truth else []
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cases", type=int, default=10, help="cases per class (default 10, at most 10)")
@@ -206,18 +279,25 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
     t_diag = time.perf_counter() - t0
     d = res.to_dict()
     top = d["candidates"][0] if d["candidates"] else None
-    truths = truth.split("+") if truth else []
+    alts = truth_sets(truth)
+    truths = sorted({n for alt in alts for n in alt})
     right = bool(truths and top is not None and top["name"] in truths)
     rec = {"diagnosis": d, "class": klass, "case": label, "truth": truth, "verdict": d["verdict"], "noise_floor": d["noise_floor"],
            "top": top["name"] if top else None, "top_explained": top["explained"] if top else 0.0,
            "top_held_out": top["held_out_explained"] if top else 0.0, "top_plausible": top["plausible"] if top else None,
            "right": right, "baseline_validated": d["validated"], "simulations": d["simulations"],
            "synth_s": round(t_synth, 1), "diagnose_s": round(t_diag, 1),
-           "truth_rank": next((i + 1 for i, c in enumerate(d["candidates"]) if c["name"] == truth), None)}
+           "truth_rank": next((i + 1 for i, c in enumerate(d["candidates"]) if c["name"] in truths), None)}
     causes = [c["name"] for c in d.get("causes") or []]
     fam_causes = {f["top"][0]["name"] for f in d.get("families") or [] if f["verdict"] == "cause" and f["top"]}
     rec["causes"] = causes
-    rec["cause_found"] = bool(truths) and all(x in causes or x in fam_causes for x in truths)
+    rec["cause_found"] = any(all(x in causes or x in fam_causes for x in alt) for alt in alts)
+    rec["named_in_set"] = any(all(x in causes for x in alt) for alt in alts)
+    rec["named_as_cause"] = d["verdict"] == "cause" and right
+    rec["uncertain_right_top"] = d["verdict"] == "uncertain" and right
+    rec["statements"] = [x["kind"] for x in d.get("statements") or []]
+    rec["vehicle_parameter_cause"] = bool(d["verdict"] == "cause" and top and top["kind"] == "parameter")
+    rec["passed_over"] = [x["name"] for x in (d.get("cause_set") or {}).get("passed_over") or []]
     rec["structural_named"] = [f["name"] for f in d.get("families") or [] if f["structural"]["flag"]]
     rec["confident_wrong"] = (d["verdict"] == "cause" and not right) or any(x not in truths for x in causes)
     rec["explained_wrong"] = bool(top and top["explained"] >= 0.5 and not right)
@@ -270,6 +350,7 @@ def summarise(records: list[dict]) -> dict:
             item["structural_named"] = sum(bool(r.get("structural_named")) for r in rs) / len(rs)
         else:
             item["none_or_uncertain"] = sum(r["verdict"] in ("none", "uncertain") for r in rs) / len(rs)
+        item.update(class_scores(rs))
         item["tops"] = sorted({r["top"] for r in rs if r["top"]})
         out[k] = item
     out["confident_wrong"] = sum(r["confident_wrong"] for r in records) / max(1, len(records))
@@ -278,6 +359,24 @@ def summarise(records: list[dict]) -> dict:
     if passes:
         out["wrong_calibrations_passing"] = len(passes)
         out["of_those_flagged"] = sum(r["wrong_calibration_flagged"] for r in passes) / len(passes)
+    return out
+
+
+def class_scores(rs: list[dict]) -> dict[str, float]:
+    """Per class (issue 40): of the cases with a right answer, the share named as the ``cause``
+    (verdict cause, right top), named in the cause set (every name of one right alternative),
+    ``uncertain`` with the right top; of all cases, the share confidently wrong; for the track
+    class also the share answering "track input" (the statement, or the top is a track level)
+    and the share with a vehicle parameter as the ``cause``."""
+    on = [r for r in rs if r["truth"]]
+    share = lambda xs, key: sum(bool(r.get(key)) for r in xs) / len(xs) if xs else 0.0
+    out = {"named_as_cause": share(on, "named_as_cause"), "named_in_set": share(on, "named_in_set"),
+           "uncertain_right_top": share(on, "uncertain_right_top"), "confident_wrong": share(rs, "confident_wrong")}
+    track = [r for r in on if "track_level" in r["truth"]]
+    if track:
+        out["track_input"] = sum("track input" in (r.get("statements") or []) or
+                                 str(r.get("top") or "").startswith("track_level") for r in track) / len(track)
+        out["vehicle_parameter_cause"] = share(track, "vehicle_parameter_cause")
     return out
 
 
@@ -296,6 +395,12 @@ def format_table(records: list[dict], summary: dict) -> str:
                    f"cause on top found {100 * s['cause_found']:.0f} %, structural difference named "
                    f"{100 * s['structural_named']:.0f} %" if k in _STRUCTURAL
                    else f"none/uncertain {100 * s['none_or_uncertain']:.0f} %")
+            fig += (f"; named as cause {100 * s['named_as_cause']:.0f} %, in the set {100 * s['named_in_set']:.0f} %, "
+                    f"uncertain with the right top {100 * s['uncertain_right_top']:.0f} %, confidently wrong "
+                    f"{100 * s['confident_wrong']:.0f} %")
+            if "track_input" in s:
+                fig += (f"; track input {100 * s['track_input']:.0f} %, vehicle parameter as cause "
+                        f"{100 * s['vehicle_parameter_cause']:.0f} %")
             lines.append(f"class ({k}) n={s['n']}: {fig}; verdicts {s['verdicts']}")
     lines.append(f"confident wrong (verdict cause and wrong): {100 * summary['confident_wrong']:.0f} %; "
                  f"explained ≥ 0.5 and wrong: {100 * summary['explained_ge_0_5_and_wrong']:.0f} %")

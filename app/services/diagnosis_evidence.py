@@ -35,6 +35,7 @@ import numpy as np
 from railval.app.services.campaign_context import effect_parameters
 from railval.app.services.diagnosis_measurement import (
     DISCRETE_DEFAULTS,
+    apply_redundancy_rule,
     discrete_families,
     offset_families,
     relative_gains,
@@ -54,10 +55,11 @@ from railval.core.diagnosis import (
 from railval.core.diagnosis.causes import cause_set
 from railval.core.diagnosis.engine import STRONG
 from railval.core.diagnosis.fit import INTERFACE_PARAMETERS, MASS_PARAMETERS
-from railval.core.diagnosis.measurement import gain_channels, gain_family
+from railval.core.diagnosis.inputs import contact_statement, scatter_level, track_first_pool, track_statement
+from railval.core.diagnosis.measurement import force_gain_groups, gain_channels, gain_family
 from railval.core.diagnosis.support import apply_interface_rule, cause_pool, outside_support
 from railval.core.errors import InvalidParameter
-from railval.core.sim.effects import Effect
+from railval.core.sim.effects import EFFECTS, Effect
 
 Progress = Any
 
@@ -353,7 +355,9 @@ def _measurement_families(req: _Request, result0: tuple, base: SectionEvidence, 
     chans = gain_channels(result0[0])
     wanted_m = None if measurement is True else {m.removeprefix("gain ") for m in measurement
                                                  if m.startswith("gain ")}
-    for bad in sorted((wanted_m or set()) - set(chans)):
+    groups = force_gain_groups(req.ctx.channels) if req.measured_sets else {}
+    out.update(force_gain_families(req, result0, base, sections, limits, groups, wanted_m))
+    for bad in sorted((wanted_m or set()) - set(chans) - set(groups)):
         fam = shared_gain(req.ctx, req.measured_sets, bad, base, result0, req.meas_bands, sections, limits)
         if fam is not None:
             out[fam.name] = fam
@@ -368,6 +372,32 @@ def _measurement_families(req: _Request, result0: tuple, base: SectionEvidence, 
                                limits, req.skipped))
     out.update(discrete_families(req.ctx, req.measured_sets, req.config_sets, measurement, base, result0,
                                  req.meas_bands, sections, limits, req.skipped, defaults=DISCRETE_DEFAULTS))
+    return out
+
+
+def force_gain_families(req: _Request, result0: tuple, base: SectionEvidence, sections: list,
+                        limits: Mapping[str, float], groups: Mapping[str, Sequence[str]],
+                        wanted: set[str] | None) -> dict[str, CandidateFamily]:
+    """The ``gain GROUP`` candidates of the wheel-force channels (per wheel, wheelset, side and
+    bogie, :func:`railval.core.diagnosis.measurement.force_gain_groups`): all of them by default,
+    those named otherwise; judged on the measurement corrected by the power law of each
+    quantity, ΣY of a group holding one wheel of it re-evaluated from the signals."""
+    from railval.core.diagnosis.measurement import group_gain_family, remapped_measurement
+
+    out: dict[str, CandidateFamily] = {}
+    for name, group in groups.items():
+        if wanted is not None and name not in wanted:
+            continue
+        g_set = set(group)
+
+        def redo(g: float, comps: Sequence[tuple[str, str]], g_set: set = g_set) -> dict:
+            return remapped_measurement(req.measured_sets, req.ctx.sections, lambda _s, ch, _ss: {
+                c: (x / g if c in g_set else x) for c, x in ch.items()}, comps)
+
+        fam = group_gain_family(base, result0[0], result0[1], req.meas_bands, sections, name, group, limits, redo,
+                                bands=req.ctx.bands)
+        if fam is not None:
+            out[fam.name] = fam
     return out
 
 
@@ -407,8 +437,16 @@ def _score(base: SectionEvidence, fams: list[CandidateFamily], validated: bool, 
     apply_interface_rule(res, res.families, support, base, strong=STRONG)
     res.interface_support = [x.to_dict() for x in support.values()]
     relative_gains(res)
+    no_fault = apply_redundancy_rule(res)
     pool, left_out = cause_pool([f for f in fams if any(c.name == f.name and c.significant for c in res.candidates)],
                                 res, support, MASS_PARAMETERS)
+    # input-side statements: the generated track's level, the contact geometry (core/diagnosis/inputs.py)
+    track = sorted(e for e, spec in EFFECTS.items() if spec.input_side == "track")
+    res.statements = [x for x in [track_statement(res, track)] if x]
+    pool, track_out = track_first_pool(pool, res, track)
+    left_out += track_out + [{"name": f.name, "reason": "not a sensor fault: " + no_fault[f.name]}
+                             for f in pool if f.name in no_fault]
+    pool = [f for f in pool if f.name not in no_fault]
     if res.verdict == "none" or not pool:
         cs = {"causes": [], "held_out_explained": 0.0, "remaining_within_noise": bool(res.residual_within_noise),
               "stopped": "verdict none: " + res.note if res.verdict == "none" else
@@ -424,6 +462,8 @@ def _score(base: SectionEvidence, fams: list[CandidateFamily], validated: bool, 
     res.causes = cs.pop("causes")
     cs["left_out"] = left_out
     res.cause_set = cs
+    covered = any(x["name"] == "conicity" for x in res.causes) and bool(cs["remaining_within_noise"])
+    res.statements += [x for x in [contact_statement(res, base, scatter_level(base, n_boot, seed), covered)] if x]
     return res
 
 
@@ -494,6 +534,10 @@ def next_step(res: DiagnosisResult, campaign: str, config: str) -> dict[str, Any
         else summary.get(x["name"], x["name"]) if x["parameter"] in ("sign", "swap", "shift")
         else f"{x['name'].removeprefix('gain ')} reads ≈ {x['fitted']:.3g} × the true value" for x in sensors)
              ) if sensors else ""
+    if res.statements:  # an input of the simulation differs: data, not a model change (core/diagnosis/inputs.py)
+        return {"action": "supply data", "candidates": [n for x in res.statements for n in x["candidates"]],
+                "text": "; ".join(x["text"] for x in res.statements)
+                        + " — then diagnose again; no vehicle parameter is calibrated on an assumed input" + check}
     causes = [x for x in all_causes if x["kind"] != "measurement"]
     if sensors and not causes:
         return {"action": "check measurement", "candidates": [x["name"] for x in sensors],

@@ -253,3 +253,59 @@ def discrete_families(ctx: Any, sets: Mapping[str, Any], sim_sets: Mapping[str, 
         else:
             out[fam.name] = fam
     return out
+
+
+def _gain_kind(name: str) -> tuple[str, bool]:
+    """(kind, single channel) of a ``gain X`` candidate: ``Y``/``Q`` for the wheel-force
+    groups (single: one wheel ``Y_w1L``), the channel stem for an accelerometer (``az_cb``)."""
+    x = name.removeprefix("gain ")
+    if x[:2] in ("Y_", "Q_"):
+        return x[0], x[-1] in "LR" and x[3:-1].isdigit() and x[2] == "w"
+    stem, _, end = x.rpartition("_")
+    return stem or x, True
+
+
+def not_sensor_faults(res: DiagnosisResult) -> dict[str, str]:
+    """The campaign's redundancy rule (docs/diagnosis.md "Model or measurement?"): a gain
+    candidate is no sensor fault when its interval of fitted values contains 1 (the sensor may
+    read right), or when every channel of its kind wants the same gain — each single channel's
+    fitted gain inside every other one's interval, away from 1: a model error common to all
+    those sensors (a mass, a stiffness) scales them alike, a sensor fault scales one. The
+    interval is the bootstrap one (refit on resampled sections, Efron & Tibshirani 1993 §8.2):
+    the widened interval also holds the lack-of-fit region, which grows with any model error
+    the gain cannot remove. Name → reason."""
+    gains = [c for c in res.candidates if c.kind == "measurement" and c.parameter == "gain"]
+    out: dict[str, str] = {}
+    by_kind: dict[str, list] = {}
+    for c in gains:
+        kind, single = _gain_kind(c.name)
+        if single:
+            by_kind.setdefault(kind, []).append(c)
+        lo, hi = c.fitted_ci_bootstrap
+        if lo is not None and hi is not None and lo <= 1.0 <= hi:
+            out[c.name] = (f"its bootstrap interval of fitted gains {lo:.3g}–{hi:.3g} contains 1: the sensor may "
+                           "read right")
+    for kind, singles in by_kind.items():
+        if len(singles) < 2:
+            continue
+        alike = all(o.fitted_ci_bootstrap[0] <= c.fitted <= o.fitted_ci_bootstrap[1] for c in singles for o in singles)
+        if alike and all(c.fitted > 1 for c in singles) or alike and all(c.fitted < 1 for c in singles):
+            vals = sorted(c.fitted for c in singles)
+            for c in gains:
+                if _gain_kind(c.name)[0] == kind:
+                    out.setdefault(c.name, f"every {kind} channel wants the same gain ({vals[0]:.3g}–{vals[-1]:.3g}): "
+                                           "a model error common to those sensors, not a sensor fault")
+    return out
+
+
+def apply_redundancy_rule(res: DiagnosisResult) -> dict[str, str]:
+    """Flag the gain candidates that are no sensor fault (:func:`not_sensor_faults`); a top
+    ``cause`` among them becomes ``uncertain``. Returns name → reason (left out of the cause set)."""
+    out = not_sensor_faults(res)
+    for c in res.candidates:
+        if c.name in out:
+            c.flags.append("not a sensor fault: " + out[c.name])
+    if res.candidates and res.verdict == "cause" and res.candidates[0].name in out:
+        res.verdict = "uncertain"
+        res.note = f"uncertain: {res.candidates[0].name} is not a sensor fault — {out[res.candidates[0].name]}"
+    return out

@@ -164,31 +164,8 @@ def cause_set(base: SectionEvidence, families: Sequence[CandidateFamily], *, fol
         if float(np.sum((w * remaining) ** 2)) <= noise_level:
             stopped = "the residual left is within the section-to-section scatter"
             break
-        ranked = []
-        for f in families:
-            if any(f is x for x in chosen) or f.name in refused or \
-                    (chosen and later is not None and f.name not in later):
-                continue
-            trial = [*chosen, f]
-            ranked.append((_held_out(base, trial, [curves[x.name] for x in trial], masks, w), f))
-        ranked.sort(key=lambda x: -x[0])
-        pick = None
-        for held, f in ranked:
-            if held - current < min_gain:
-                stopped = (f"the next candidate ({f.name}) adds {held - current:.2f} on held-out sections, "
-                           f"less than {min_gain:.2f}")
-                break
-            trial = [*chosen, f]
-            us, _ = _joint_fit([curves[x.name] for x in trial], [nodes[x.name] for x in trial], r, w)
-            why = _refusal(f, curves[f.name], us[-1])
-            if why:  # reported and skipped: the search carries on with the next candidate
-                passed.append({"name": f.name, "reason": f"would need {why}"})
-                refused.add(f.name)
-                continue
-            pick = (held, f)
-            break
-        else:
-            stopped = "no candidate left" if not passed else "every further candidate is passed over (passed_over)"
+        pick, stopped = _next_cause(base, families, chosen, refused, passed, later, curves, nodes, masks, w, r,
+                                    current, min_gain)
         if pick is None:
             break
         held, f = pick
@@ -196,6 +173,7 @@ def cause_set(base: SectionEvidence, families: Sequence[CandidateFamily], *, fol
         shares.append(held - current)
         current = held
         _, remaining = _joint_fit([curves[x.name] for x in chosen], [nodes[x.name] for x in chosen], r, w)
+    stopped = stopped or f"the set holds the most causes ({max_causes})"
     causes = []
     if chosen:
         us, remaining = _joint_fit([curves[x.name] for x in chosen], [nodes[x.name] for x in chosen], r, w)
@@ -205,3 +183,33 @@ def cause_set(base: SectionEvidence, families: Sequence[CandidateFamily], *, fol
     return {"causes": causes, "held_out_explained": current,
             "remaining_within_noise": bool(float(np.sum((w * remaining) ** 2)) <= noise_level),
             "stopped": stopped, "passed_over": passed}
+
+
+def _next_cause(base: SectionEvidence, families: Sequence[CandidateFamily], chosen: list[CandidateFamily],
+                refused: set[str], passed: list[dict[str, str]], later: Sequence[str] | None,
+                curves: dict, nodes: dict, masks: Sequence[np.ndarray], w: np.ndarray, r: np.ndarray,
+                current: float, min_gain: float) -> tuple[tuple[float, CandidateFamily] | None, str]:
+    """One greedy step: the candidates ranked by the held-out share of the set with each added;
+    the first that adds ``min_gain`` and is neither at a bound nor implausible (those go to
+    ``passed``/``refused`` and the search carries on); (held-out share, candidate) or None, and
+    why the search stops there."""
+    ranked = []
+    for f in families:
+        if any(f is x for x in chosen) or f.name in refused or (chosen and later is not None and f.name not in later):
+            continue
+        trial = [*chosen, f]
+        ranked.append((_held_out(base, trial, [curves[x.name] for x in trial], masks, w), f))
+    ranked.sort(key=lambda x: -x[0])
+    for held, f in ranked:
+        if held - current < min_gain:
+            return None, (f"the next candidate ({f.name}) adds {held - current:.2f} on held-out sections, "
+                          f"less than {min_gain:.2f}")
+        trial = [*chosen, f]
+        us, _ = _joint_fit([curves[x.name] for x in trial], [nodes[x.name] for x in trial], r, w)
+        why = _refusal(f, curves[f.name], us[-1])
+        if why:  # reported and skipped: the search carries on with the next candidate
+            passed.append({"name": f.name, "reason": f"would need {why}"})
+            refused.add(f.name)
+            continue
+        return (held, f), ""
+    return None, "no candidate left" if not passed else "every further candidate is passed over (passed_over)"

@@ -438,3 +438,92 @@ def shifted_measured(signalsets: Mapping[str, SignalSet], sections: Sequence[Sec
     one = {section: signalsets[section]} if section in signalsets else {}
     return remapped_measurement(one, sections, lambda _s, ch, ss: {c: shifted(x, lag_s, ss.fs) for c, x in ch.items()},
                                 components)
+
+
+# ----------------------------------------------------------------------------- force-channel gains
+#: gain nodes of the force-channel groups (fewer than :data:`GAIN_NODES`: a group whose ΣY needs
+#: re-evaluating from the signals costs one EN evaluation per node)
+FORCE_GAIN_NODES = (0.5, 0.7, 0.85, 1.0, 1.15, 1.3, 1.5, 2.0)
+
+
+def force_gain_groups(channels: Iterable[str]) -> dict[str, tuple[str, ...]]:
+    """The wheel-force channel groups that may read g × the truth together (one amplifier, one
+    calibration of an instrumented wheelset, one data-acquisition card), per kind Y and Q:
+    every wheel (``Y_w1L``), every wheelset (``Y_w1``: both wheels), every side (``Y_L``: the
+    wheels of that side) and every bogie (``Y_bogie1``: the wheels of wheelsets 1–2; with four
+    wheelsets). A group of one channel of a wheelset with one wheel measured is the wheel's."""
+    chans = set(channels)
+    out: dict[str, tuple[str, ...]] = {}
+    for k in ("Y", "Q"):
+        wheels = sorted(c for c in chans if c.startswith(f"{k}_w") and c[-1] in "LR" and c[len(k) + 2:-1].isdigit())
+        sets = {n: tuple(sorted(c for c in wheels if c[len(k) + 2:-1] == n))
+                for n in sorted({c[len(k) + 2:-1] for c in wheels})}
+        out.update({c: (c,) for c in wheels})
+        out.update({f"{k}_w{n}": g for n, g in sets.items() if len(g) == 2})
+        for side in "LR":
+            g = tuple(c for c in wheels if c.endswith(side))
+            if len(g) > 1:
+                out[f"{k}_{side}"] = g
+        if len(sets) == 4:
+            for b, ns in (("1", ("1", "2")), ("2", ("3", "4"))):
+                out[f"{k}_bogie{b}"] = tuple(c for n in ns for c in sets[n])
+    return out
+
+
+def gain_degree(quantity: str, position: str, group: Iterable[str]) -> int | None:
+    """The power d with which a quantity's measured statistic scales when every channel of
+    ``group`` reads g × the truth: M(g) = g^d · M(1). The EN statistics are positively
+    homogeneous of degree 1 in the filtered signal (linear filters; median, percentile, r.m.s.,
+    maximum of the magnitude), Y/Q is the sample-wise ratio (degree +1 in Y, −1 in Q) and ΣY
+    the sum of the two wheels' Y (degree 1 when both read g, exact then;
+    :func:`railval.core.en14363` ``evaluate``). None when only one of ΣY's two wheels is in the
+    group (not a power law: re-evaluate from the signals)."""
+    from railval.core.quantities import QUANTITIES
+
+    g = set(group)
+    q = QUANTITIES[quantity]
+    chans = q.channels(position)
+    if q.signal == "YQ":
+        return int(chans[0] in g) - int(chans[1] in g)
+    inside = sum(c in g for c in chans)
+    if inside in (0, len(chans)):
+        return 1 if inside else 0
+    return None
+
+
+def group_gain_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]], sim_bands: Mapping,
+                      meas_bands: Mapping, sections: Sequence[tuple[str, int]], name: str, group: Sequence[str],
+                      std_limits: Mapping[str, float],
+                      reevaluate: Callable[[float, Sequence[tuple[str, str]]], Mapping[tuple[str, str, str], float]],
+                      *, bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ,
+                      values: Sequence[float] = FORCE_GAIN_NODES) -> CandidateFamily | None:
+    """The measurement candidate "the channels of ``group`` read g × the true value" along g
+    (log scale): the measured statistics corrected to M/g^d (:func:`gain_degree`), those without
+    a power law from ``reevaluate(g, components)`` (the signals re-evaluated with the group's
+    channels divided by g). None when no measured quantity uses the group."""
+    comps = sorted({(str(r["quantity"]), str(r["position"])) for r in pairs})
+    deg = {c: gain_degree(c[0], c[1], group) for c in comps}
+    deg = {c: d for c, d in deg.items() if d != 0}
+    if not deg:
+        return None
+    other = [c for c, d in deg.items() if d is None]
+    evidence = []
+    for gv in values:
+        redo = reevaluate(gv, other) if other else {}
+
+        def measured(r: Mapping[str, Any], gv: float = gv, redo: Mapping = redo) -> float | None:
+            key = (str(r["quantity"]), str(r["position"]))
+            if key not in deg:
+                return None
+            d = deg[key]
+            return redo.get((str(r["section"]), *key)) if d is None else float(r["M"]) / gv ** d
+
+        evidence.append(section_evidence(corrected_pairs(pairs, measured, std_limits), sim_bands, meas_bands,
+                                         sections, bands=bands, value_key="D_norm", like=base))
+    qs = ", ".join(sorted({q for q, _ in deg}))
+    return CandidateFamily(
+        "measurement", f"gain {name}", "gain", list(values), evidence, GAIN_BOUNDS, log=True, reference=1.0,
+        unit="×", title=f"channel(s) {', '.join(group)} read",
+        explanation=(f"the measurement, not the model: the force channel(s) {', '.join(group)} read g × the true "
+                     f"value (a transducer calibration or amplifier gain of an instrumented wheelset set wrong); "
+                     f"it changes {qs} — the other wheels measure what the model should match"))

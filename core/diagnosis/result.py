@@ -113,6 +113,7 @@ _TYPED: tuple[tuple[str, str], ...] = (
     ("values_per_parameter", "values_per_parameter"), ("simulations", "simulations"),
     ("stored_residual_norm", "stored_residual_norm"), ("simulated_residual_norm", "simulated_residual_norm"),
     ("effects_simulated", "effects_simulated"), ("skipped", "skipped"), ("next_step", "next"), ("run", "run"),
+    ("statements", "statements"),
 )
 
 
@@ -153,6 +154,10 @@ class DiagnosisResult:
     skipped: list[dict[str, Any]] | None = None
     next_step: dict[str, Any] | None = None
     run: dict[str, Any] | None = None
+    #: input-side statements (``kind`` "track input" / "contact geometry", ``candidates``,
+    #: ``text``): which input of the simulation differs and what data replace it
+    #: (:mod:`railval.core.diagnosis.inputs`)
+    statements: list[dict[str, Any]] | None = None
 
     def to_dict(self, with_signatures: bool = False) -> dict[str, Any]:
         """Plain dict; ``with_signatures`` adds the residual's components (``labels``,

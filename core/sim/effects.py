@@ -47,6 +47,12 @@ class Effect:
     #: steering): a contact difference no candidate models changes the same guiding forces, so
     #: the diagnosis needs support outside them (docs/diagnosis.md "Interface candidates")
     interface: bool = False
+    #: layout keys whose presence makes the effect pointless (``"irregularities"``: the
+    #: generated track's level is no candidate where measured track geometry exists)
+    excludes_layout: tuple[str, ...] = ()
+    #: the effect stands for an input of the simulation, not for the vehicle (``"track"``: the
+    #: track irregularities; docs/diagnosis.md "Track input")
+    input_side: str = ""
 
     def to_dict(self) -> dict:
         return {"id": self.id, "title": self.title, "explanation": self.explanation,
@@ -155,11 +161,11 @@ _LIST = [
         "profiles give another equivalent conicity. Higher conicity shortens the kinematic "
         "wavelength (Klingel), raises the bogie's lateral activity and the car body lateral "
         "accelerations on straight track, and improves steering in curves.",
-        _p(Param("conicity", "-", 0.35, 0.02, 0.6, "equivalent conicity",
-                 plausible=(0.03, 0.5),
+        _p(Param("conicity", "-", 0.35, 0.01, 0.6, "equivalent conicity", scale="log",
+                 plausible=(0.02, 0.5),
                  plausible_source="EN 15302 equivalent conicity at 3 mm amplitude: new S1002/UIC60 1:40 "
-                                  "≈ 0.05–0.2, worn wheel–rail pairs up to ≈ 0.4–0.5 (the limits are an "
-                                  "assumption)")),
+                                  "≈ 0.05–0.2, worn wheel–rail pairs from ≈ 0.02 (flat tread cone 1:40 on a "
+                                  "worn rail head) up to ≈ 0.4–0.5 (the limits are an assumption)")),
         ("ay_rms", "ay_max", "Y_max", "SumY_max", "Y_qst"), (1, 2, 3, 4), ((1.0, 6.0),),
         source="UIC 519 equivalent conicity; Klingel wavelength 2π·sqrt(r0·b0/λe)", interface=True),
     Effect(
@@ -177,6 +183,26 @@ _LIST = [
         ((0.4, 10.0),),
         source="layout['irregularities'] of each section (see docs/simulator.md)",
         requires_layout=("irregularities",)),
+    *[Effect(
+        f"track_level_{d}", f"Level of the generated track irregularities, {d}",
+        f"A campaign without measured track geometry is simulated on irregularities generated from the "
+        f"ORE B176 low-level spectrum. The real track may be rougher or smoother: `factor` scales the "
+        f"amplitude of the generated {what} (the spectrum's shape kept). It moves the stochastic "
+        f"quantities — r.m.s. and maxima of the accelerations, dynamic wheel forces — not the "
+        f"quasi-static ones. Where it explains the residual the track input differs: supply measured "
+        f"track geometry rather than tuning the vehicle.",
+        _p(Param("factor", "-", 1.0, 0.3, 4.0, f"amplitude factor of the generated {what}", scale="log",
+                 plausible=(0.5, 3.0),
+                 plausible_source="ERRI B176 RP1 1989: the high level has 1.64 × the low level's amplitude; "
+                                  "lines from well kept high-speed track to poorly kept secondary lines "
+                                  "span about 0.5–3 × the low level (assumption)")),
+        qs, (1, 2, 3, 4), ((0.4, 10.0),),
+        source="ERRI B176 RP1 1989 spectra (core/sim/track.py), amplitude scaled per direction",
+        excludes_layout=("irregularities",), input_side="track")
+      for d, what, qs in (("vertical", "vertical level and cross level",
+                           ("az_rms", "az_max", "Q_max", "ay_rms", "ay_max")),
+                          ("lateral", "alignment and gauge",
+                           ("ay_rms", "ay_max", "Y_max", "YQ_max", "SumY_max")))],
     Effect(
         "parasitic_yaw_stiffness", "Bogie yaw resistance (parasitic yaw stiffness)",
         "Besides the secondary springs' shear, the bogie's rotation against the car body is "
@@ -228,6 +254,11 @@ def unmet_requirement(effect: Effect, layouts: Mapping[str, Mapping[str, Any] | 
     :attr:`Effect.requires_layout` a key needs it in every section (the simulator refuses a
     section without it). ``measured_quantities``: the EN 14363 quantity ids the campaign
     measures; an effect that moves none of them cannot be seen in its residual."""
+    for key in effect.excludes_layout:
+        having = sorted(sid for sid, lay in layouts.items() if (lay or {}).get(key))
+        if layouts and len(having) == len(layouts):
+            return (f"every section carries layout['{key}'] (measured track geometry): the simulator runs "
+                    "on it with the measured_irregularities effect, the generated track's level is no candidate")
     for key in effect.requires_layout:
         missing = sorted(sid for sid, lay in layouts.items() if not (lay or {}).get(key))
         if missing:

@@ -338,11 +338,20 @@ def choose_substeps(asm: Assembly, fs_out: float) -> int:
     return max(2, math.ceil(1.0 / (fs_out * dt_max)))
 
 
+#: the irregularity keys each ``level`` direction of :func:`_track_arrays` scales
+LEVEL_KEYS = {"vertical": ("vertical", "cross_level"), "lateral": ("alignment", "gauge")}
+
+
 def _track_arrays(section: TrackSection, vehicle: VehicleModel, use_measured: bool, scale: float,
-                  margin: float = 40.0) -> dict[str, np.ndarray]:
+                  margin: float = 40.0, level: Mapping[str, float] | None = None) -> dict[str, np.ndarray]:
+    """The track input arrays; ``level``: amplitude factor per direction of :data:`LEVEL_KEYS`
+    (the generated irregularities' level, effects ``track_level_*``)."""
     reach = max(abs(x) for x in vehicle.wheelset_x()) + margin
     s0, s1 = -reach, section.length_m + reach
     irr = section.irregularity_arrays(s0, s1, scale=scale, use_measured=use_measured)
+    for d, f in (level or {}).items():
+        for key in LEVEL_KEYS[d]:
+            irr[key] = f * irr[key]
     s = irr["s"]
     kap, phit = section.geometry(s)
     d1 = lambda a: np.gradient(a, DS)
@@ -399,9 +408,13 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
         raise InvalidParameter(f"effect 'measured_irregularities': section {section.id!r} carries no "
                                "measured irregularities (layout['irregularities'])")
     scale = ef["measured_irregularities"]["scale"] if use_meas else 1.0
+    # the generated track's level per direction (effects track_level_*; not on measured geometry)
+    level = None if use_meas and section.irregularities is not None else \
+        {d: ef[f"track_level_{d}"]["factor"] for d in ("vertical", "lateral") if f"track_level_{d}" in ef}
     v = section.speed_ms * float(speed_factor)
     asm = assemble(veh, ef, v, nuisance)
-    ss, _ = run_assembled(asm, veh, section, fs_out=fs_out, use_measured=use_meas, scale=scale, refine=refine)
+    ss, _ = run_assembled(asm, veh, section, fs_out=fs_out, use_measured=use_meas, scale=scale, refine=refine,
+                          level=level)
     if channels is not None:
         want = set(channels)
         ss.channels = {k: x for k, x in ss.channels.items() if k in want}
@@ -410,12 +423,13 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
 
 def run_assembled(asm: Assembly, veh: VehicleModel, section: TrackSection, *, fs_out: float = 200.0,
                   use_measured: bool = False, scale: float = 1.0, states: bool = False,
-                  duration_s: float | None = None, refine: int = 1) -> tuple[SignalSet, np.ndarray | None]:
+                  duration_s: float | None = None, refine: int = 1,
+                  level: Mapping[str, float] | None = None) -> tuple[SignalSet, np.ndarray | None]:
     """Run the kernel for an assembled model. ``states=True`` also returns the wheelsets' lateral
     displacements, the car body's vertical displacement, pitch and lateral displacement and the
     bogies' lateral displacements (columns, per output sample) for verification tests.
     ``refine`` multiplies the number of steps per output sample (step-halving checks)."""
-    tr = _track_arrays(section, veh, use_measured, scale)
+    tr = _track_arrays(section, veh, use_measured, scale, level=level)
     v = asm.SC[K.V]
     decim = choose_substeps(asm, fs_out) * int(refine)
     dt = 1.0 / (fs_out * decim)

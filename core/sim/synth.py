@@ -125,7 +125,9 @@ class SynthSection:
         layout = {"straight_in_m": t.straight_in_m, "transition_in_m": t.transition_in_m,
                   "curve_m": t.curve_m, "transition_out_m": t.transition_out_m,
                   "straight_out_m": t.straight_out_m, "irregularity_level": t.irregularity_level,
-                  "seed": t.seed, "irregularities": irregularities_to_layout(t.irregularities)}
+                  "seed": t.seed}
+        if t.irregularities is not None:  # a campaign without measured track geometry stores none
+            layout["irregularities"] = irregularities_to_layout(t.irregularities)
         return {"id": t.id, "country": self.country, "radius_m": t.radius_m if t.is_curve else 0.0,
                 "cant_mm": t.cant_mm, "speed_kmh": t.speed_kmh, "curve_direction": t.curve_direction,
                 "zone": None, "evaluated": {"start_m": a, "end_m": b}, "layout": layout}
@@ -286,7 +288,19 @@ def _checked_hidden(template: str, hidden: dict | None, oversample: int, require
     return hidden
 
 
-def _section(sp: dict, rng: np.random.Generator, nz: dict) -> SynthSection:
+def _baseline_effects(hidden: dict, track_recorded: bool, track_roughness: float) -> dict:
+    """The baseline's effects: the measured irregularities at scale 1 unless hidden or not
+    recorded (then generated ones); the track options checked."""
+    if not track_roughness > 0:
+        raise InvalidParameter(f"track_roughness must be > 0, got {track_roughness}")
+    if not track_recorded and "measured_irregularities" in hidden:
+        raise InvalidParameter("hidden effect 'measured_irregularities' needs recorded track geometry "
+                               "(track_recorded=True)")
+    return {} if "measured_irregularities" in hidden or not track_recorded else {"measured_irregularities": {"scale": 1.0}}
+
+
+def _section(sp: dict, rng: np.random.Generator, nz: dict, roughness: float = 1.0,
+             recorded: bool = True) -> SynthSection:
     """One planned section: its geometry (run-in ten seconds of travel, transitions, curve),
     the true irregularities with defects and the recorded ones (recording gain × true + noise,
     stored at 0.01 mm)."""
@@ -298,7 +312,7 @@ def _section(sp: dict, rng: np.random.Generator, nz: dict) -> SynthSection:
             "transition_out_m": trans, "straight_out_m": max(run - trans, 60.0)}
     length = sum(geom.values())
     true_irr = generate_irregularities(length + 120.0, level="low", seed=int(rng.integers(2**31)),
-                                       s0=-60.0, scale=true_track_scale(sp["speed"]))
+                                       s0=-60.0, scale=roughness * true_track_scale(sp["speed"]))
     _defects(true_irr, rng, length)
     rec = {"s": true_irr["s"]}
     for key in ("vertical", "alignment", "cross_level", "gauge"):
@@ -307,7 +321,8 @@ def _section(sp: dict, rng: np.random.Generator, nz: dict) -> SynthSection:
     # stored with 0.01 mm resolution, as in the manifest
     rec = {k: (np.round(x * 1e5) / 1e5 if k != "s" else x) for k, x in rec.items()}
     track = TrackSection(sp["id"], speed_kmh=sp["speed"], radius_m=sp["radius"], cant_mm=sp["cant"],
-                         curve_direction=sp["direction"], irregularities=rec, irregularity_level="low",
+                         curve_direction=sp["direction"], irregularities=rec if recorded else None,
+                         irregularity_level="low",
                          seed=int(rng.integers(2**31)), **geom)
     return SynthSection(track, true_irr, sp["country"], zone_for_radius(sp["radius"] or None))
 
@@ -333,7 +348,8 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
                    seed: int = 1, n_sections: int = 12, fs: float = 200.0,
                    nuisance: dict | None = None, progress=None, truth_parameters: dict | None = None,
                    oversample: int = 1, channel_faults: dict | None = None,
-                   require_cause: bool = True) -> SynthCampaign:
+                   require_cause: bool = True, track_recorded: bool = True,
+                   track_roughness: float = 1.0) -> SynthCampaign:
     """Build the whole synthetic campaign in memory (measured + baseline signals, manifest data
     and the truth).
 
@@ -357,6 +373,9 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
         4 × 200 Hz 0.625 ms); faults, see :func:`_apply_channel_faults`.
     require_cause : bool
         ``False`` allows a campaign with no hidden cause at all (``hidden={}``).
+    track_recorded, track_roughness : bool, float
+        ``False``: no measured track geometry stored (the baseline runs on ORE B176 low-level
+        irregularities of the section's seed); the true track's amplitude × ``track_roughness``.
 
     Returns
     -------
@@ -370,8 +389,9 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
     if template != "coach":
         nz["damper_asymmetry"] = 0.0
     rng = np.random.default_rng(seed)
-    sections = [_section(sp, rng, nz) for sp in _plan(template, n_sections, rng)]
-    baseline_effects = {} if "measured_irregularities" in hidden else {"measured_irregularities": {"scale": 1.0}}
+    baseline_effects = _baseline_effects(hidden, track_recorded, track_roughness)
+    sections = [_section(sp, rng, nz, float(track_roughness), bool(track_recorded))
+                for sp in _plan(template, n_sections, rng)]
     truth_effects = {**{k: v for k, v in baseline_effects.items()}, **hidden}
     truth_effects["measured_irregularities"] = dict(hidden.get("measured_irregularities", {"scale": 1.0}))
     gains: dict[str, float] = {}
@@ -397,7 +417,7 @@ def build_campaign(*, name: str = "synth", template: str = "coach", hidden: dict
              "nuisances": {**nz, "speed_factors": speed_factors, "channel_gains": gains},
              "baseline_effects": baseline_effects, "seed": seed, "template": template,
              "truth_parameters": dict(truth_parameters or {}), "oversample": int(oversample),
-             "channel_faults": dict(channel_faults or {}),
+             "channel_faults": dict(channel_faults or {}), "track": [bool(track_recorded), float(track_roughness)],
              "note": "measurements = baseline template + hidden effects on the true track "
                      "(stored irregularities = recording gain x true + noise) + nuisances"}
     return SynthCampaign(name, veh, sections, measured, baseline, baseline_effects, truth,

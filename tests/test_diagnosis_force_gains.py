@@ -1,0 +1,92 @@
+"""Gains of the wheel-force channels as measurement candidates (docs/diagnosis.md "Model or
+measurement?"): the groups (wheel, wheelset, side, bogie), the power law of each EN statistic
+checked against the statistic re-evaluated from the signals, and the redundancy rule that keeps
+a gain absorbing a common model error from being called a sensor fault."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from railval.app.services.diagnosis_measurement import apply_redundancy_rule, not_sensor_faults
+from railval.core.diagnosis import DiagnosisResult, TrustedCandidate
+from railval.core.diagnosis.measurement import force_gain_groups, gain_degree, remapped_measurement
+from railval.core.diagnosis.patterns import Component, Pattern
+from railval.core.types import SectionInfo, SignalSet
+
+WHEELS = [f"{k}_w{n}{s}" for k in "YQ" for n in range(1, 5) for s in "LR"]
+
+
+def test_groups_per_wheel_wheelset_side_and_bogie():
+    g = force_gain_groups(WHEELS + ["ay_cb_b1"])
+    assert g["Y_w1L"] == ("Y_w1L",) and g["Y_w1"] == ("Y_w1L", "Y_w1R")
+    assert g["Q_L"] == ("Q_w1L", "Q_w2L", "Q_w3L", "Q_w4L")
+    assert g["Y_bogie2"] == ("Y_w3L", "Y_w3R", "Y_w4L", "Y_w4R")
+    assert len(g) == 2 * (8 + 4 + 2 + 2) and not any("ay" in k for k in g)
+    # a two-axle wagon: no bogie groups
+    two = force_gain_groups([c for c in WHEELS if c[3] in "12"])
+    assert "Y_bogie1" not in two and two["Q_w2"] == ("Q_w2L", "Q_w2R")
+
+
+def test_power_law_of_each_statistic_equals_the_statistics_of_the_scaled_signals():
+    """Independent check: the EN values re-evaluated from signals whose group channels are
+    divided by g equal M / g^d with d from :func:`gain_degree`; ΣY with one wheel in the group
+    has no power law (None) and indeed differs from every g^d."""
+    fs, n = 200.0, 6000
+    t = np.arange(n) / fs
+    rng = np.random.default_rng(3)
+    ch = {c: (40.0 if c[0] == "Q" else 5.0) * (1.5 + 0.2 * np.sin(0.7 * t + k)) + rng.normal(0, 1.0, n)
+          for k, c in enumerate(WHEELS)}
+    ss = {"S1": SignalSet(fs, t, 25.0 * t, ch)}
+    sec = [SectionInfo("S1", 600.0, 100.0, 90.0, 3, 100.0, 600.0)]
+    comps = [(q, p) for q, p in (("Y_qst", "w1L"), ("Y_max", "w1R"), ("YQ_qst", "w1L"), ("YQ_max", "w1R"),
+                                 ("SumY_qst", "ws1"), ("SumY_max", "ws1"), ("Q_qst", "w1L"), ("Q_max", "w1R"))]
+    g = 1.3
+    base = remapped_measurement(ss, sec, lambda _s, c, _ss: c, comps)
+    for group in (("Y_w1L", "Y_w1R"), ("Q_w1L", "Q_w1R"), ("Y_w1L",)):
+        scaled = remapped_measurement(ss, sec, lambda _s, c, _ss: {k: (x / g if k in group else x)
+                                                                   for k, x in c.items()}, comps)
+        for q, p in comps:
+            d = gain_degree(q, p, group)
+            if d is None:
+                assert q.startswith("SumY") and group == ("Y_w1L",)
+                assert all(abs(scaled[("S1", q, p)] - base[("S1", q, p)] / g ** e) > 1e-3 for e in (0, 1))
+            else:
+                assert scaled[("S1", q, p)] == pytest.approx(base[("S1", q, p)] / g ** d, rel=1e-9), (group, q, p, d)
+    assert gain_degree("YQ_qst", "w1L", ("Q_w1L",)) == -1 and gain_degree("YQ_qst", "w1L", ("Y_w1L", "Q_w1L")) == 0
+
+
+def _cand(name, fitted, ci):
+    pat = Pattern(["x"], ["x"], np.zeros(1), [Component("pair", "az_rms", 1, "b1")])
+    wide = (ci[0] - 0.2, ci[1] + 0.2)  # the widened interval holds 1 in every case: the rule reads the bootstrap one
+    return TrustedCandidate(name, 0.8, {}, [], [], "", pat, 0.0, kind="measurement", name=name, parameter="gain",
+                            fitted=fitted, fitted_ci=wide, fitted_ci_bootstrap=ci, significant=True,
+                            held_out_explained=0.8)
+
+
+def _res(cands, verdict="cause"):
+    return DiagnosisResult(Pattern(["x"], ["x"], np.ones(1), [Component("pair", "az_rms", 1, "b1")]), cands, True, [],
+                           verdict=verdict)
+
+
+def test_redundancy_rule_a_gain_interval_containing_one_is_no_sensor_fault():
+    res = _res([_cand("gain Y_w1", 1.12, (0.95, 1.3)), _cand("gain Q_w2L", 0.8, (0.74, 0.86))])
+    out = apply_redundancy_rule(res)
+    assert set(out) == {"gain Y_w1"} and "contains 1" in out["gain Y_w1"]
+    assert res.verdict == "uncertain" and any(f.startswith("not a sensor fault") for f in res.candidates[0].flags)
+    res = _res([_cand("gain Q_w2L", 0.8, (0.74, 0.86))])
+    assert apply_redundancy_rule(res) == {} and res.verdict == "cause"
+
+
+def test_redundancy_rule_the_same_gain_on_every_channel_of_a_kind_is_a_model_error():
+    """Every car body vertical accelerometer (or every Y transducer) wants ≈ 1.2: a model error
+    common to them; one wheel alone at 1.3 with the others at 1 is a sensor fault."""
+    same = [_cand("gain az_cb_b1", 1.21, (1.15, 1.27)), _cand("gain az_cb_b2", 1.19, (1.13, 1.25))]
+    out = not_sensor_faults(_res(same))
+    assert set(out) == {"gain az_cb_b1", "gain az_cb_b2"} and "same gain" in out["gain az_cb_b1"]
+    wheels = [_cand(f"gain Y_w{n}L", 1.2 + 0.01 * n, (1.1, 1.35)) for n in (1, 2, 3, 4)] + \
+        [_cand("gain Y_L", 1.22, (1.15, 1.3))]
+    assert set(not_sensor_faults(_res(wheels))) == {c.name for c in wheels}
+    one = [_cand("gain Y_w1L", 1.3, (1.22, 1.38)), _cand("gain Y_w2L", 1.02, (1.01, 1.08)),
+           _cand("gain Y_w3L", 1.03, (1.01, 1.1))]
+    assert "gain Y_w1L" not in not_sensor_faults(_res(one))
