@@ -65,7 +65,7 @@ def chosen_verb(argv: list[str]) -> str | None:
         word = argv[i]
         if word in _VALUE_OPTIONS:
             i += 2
-        elif word in _FLAG_OPTIONS or word.split("=", 1)[0] in _VALUE_OPTIONS and "=" in word:
+        elif word in _FLAG_OPTIONS or ("=" in word and word.split("=", 1)[0] in _VALUE_OPTIONS):
             i += 1
         elif word.startswith("-"):
             return None
