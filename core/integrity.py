@@ -21,7 +21,8 @@ compute the very same bytes.
   ``cryptography`` package over a domain-separated message ``b"railval/<kind>/1\\0" ‖
   canonical JSON``. Three kinds: a sign-off's canonical record (:func:`signoff_record`), an
   audit row's signed head ``{seq, row_hash}`` (:func:`head_message`) — the signed tree head
-  of Certificate Transparency (RFC 9162 §4.10) reduced to a hash chain — and nothing else.
+  of Certificate Transparency (RFC 9162 §4.10) reduced to a hash chain — and a key
+  rotation's countersignature by the new key (:func:`rotation_message`); nothing else.
   The public key alone verifies, offline; its fingerprint is the SHA-256 of the raw 32-byte
   public key in hex (:func:`key_fingerprint`).
 """
@@ -179,6 +180,13 @@ def head_message(seq: int, row_hash: str) -> dict[str, Any]:
     return {"format": "railval-audit-head/1", "seq": int(seq), "row_hash": str(row_hash)}
 
 
+def rotation_message(old_fingerprint: str, new_fingerprint: str) -> dict[str, Any]:
+    """What the *new* key signs in a ``key.rotate`` audit row (the row itself is signed by
+    the old key): with both signatures the hand-over is trusted from either end."""
+    return {"format": "railval-key-rotation/1", "old_fingerprint": str(old_fingerprint),
+            "new_fingerprint": str(new_fingerprint)}
+
+
 def _message(kind: str, doc: Any) -> bytes:
     return b"railval/" + kind.encode("ascii") + b"/1\0" + canonical_json(doc)
 
@@ -233,3 +241,109 @@ def verify_signature(public_key: Any, kind: str, doc: Any, signature: str | None
 def evidence_hash(manifest: Mapping[str, Any]) -> str:
     """SHA-256 of the canonical JSON of an evidence manifest (21 CFR 11.70)."""
     return content_hash(dict(manifest))
+
+
+# -- the keys a verification trusts --------------------------------------------------------
+IDENTITY_ACTION = "database.identity"
+ROTATE_ACTION = "key.rotate"
+_INF = float("inf")
+
+
+class KeyRing(dict):
+    """fingerprint → public key of the keys a verification trusts, with the window of
+    audit rows (``seq`` from, to) each may sign and where the trust came from."""
+
+    def __init__(self, keys: dict[str, Any] | None = None, source: str = ""):
+        super().__init__(keys or {})
+        self.windows: dict[str, list[float]] = {fp: [1, _INF] for fp in self}
+        self.how: dict[str, str] = {fp: source for fp in self}
+        self.source = source
+
+    def at(self, fp: Any, seq: int | None) -> Any:
+        """The public key of ``fp`` when it may sign row ``seq`` (any row: ``None``)."""
+        pk = self.get(str(fp))
+        if pk is None or seq is None:
+            return pk
+        lo, hi = self.windows[str(fp)]
+        return pk if lo <= seq <= hi else None
+
+    def why(self, fp: Any, seq: int | None) -> str:
+        """Why ``fp`` does not verify row ``seq`` (the text of a finding)."""
+        fp = str(fp)
+        if fp in self and seq is not None:
+            lo, hi = self.windows[fp]
+            return (f"key {fp[:16]}… is trusted for rows {int(lo)}–"
+                    f"{'' if hi == _INF else int(hi)} only (a key rotation row retired it)")
+        return f"key {fp[:16]}…: signed by a key that is not trusted"
+
+    def describe(self) -> list[dict[str, Any]]:
+        return [{"fingerprint": fp, "source": self.how.get(fp, ""),
+                 "rows_from": int(self.windows[fp][0]),
+                 "rows_to": None if self.windows[fp][1] == _INF else int(self.windows[fp][1])}
+                for fp in self]
+
+
+def _rotation_keys(detail: dict[str, Any]) -> tuple[str, Any, str, Any] | None:
+    """(old fingerprint, old key, new fingerprint, new key) of a ``key.rotate`` row."""
+    try:
+        old = public_key_from_hex(str(detail["old_public_key"]))
+        new = public_key_from_hex(str(detail["new_public_key"]))
+    except (KeyError, ValueError, TypeError):
+        return None
+    return key_fingerprint(old), old, key_fingerprint(new), new
+
+
+def _rotate_once(ring: KeyRing, r: dict[str, Any]) -> bool:
+    """Apply one ``key.rotate`` row: forward when its old key (trusted at that row) signed
+    it — the new key is trusted after it, the old one retired; backward when its new key
+    (trusted) countersigned it — the old key is trusted for the rows up to it."""
+    keys = _rotation_keys(r.get("detail") or {})
+    if keys is None:
+        return False
+    ofp, opk, nfp, npk = keys
+    seq, changed = int(r["seq"]), False
+    if (ring.at(ofp, seq) is not None and str(r.get("key_fingerprint")) == ofp
+            and verify_signature(opk, "audit-head", head_message(seq, r["row_hash"]),
+                                 r.get("signature"))):
+        if ring.windows[ofp][1] > seq:
+            ring.windows[ofp][1], changed = seq, True
+        if nfp not in ring:
+            ring[nfp], ring.windows[nfp] = npk, [seq + 1, _INF]
+            ring.how[nfp] = f"key.rotate row {seq}, signed by trusted key {ofp[:16]}…"
+            changed = True
+    if nfp in ring and ring.windows[nfp][1] > seq and verify_signature(
+            npk, "key-rotation", rotation_message(ofp, nfp), (r.get("detail") or {})
+            .get("new_key_signature")):
+        if ring.windows[nfp][0] < seq + 1:
+            ring.windows[nfp][0], changed = seq + 1, True
+        if ofp not in ring:
+            ring[ofp], ring.windows[ofp] = opk, [1, seq]
+            ring.how[ofp] = f"key.rotate row {seq}, countersigned by trusted key {nfp[:16]}…"
+            changed = True
+    return changed
+
+
+def apply_rotations(ring: KeyRing, rows: dict[int, dict[str, Any]]) -> KeyRing:
+    """Extend ``ring`` through the trail's authentic ``key.rotate`` rows (to a fixed
+    point: each pass only adds a key or narrows a window)."""
+    rotations = [rows[s] for s in sorted(rows) if rows[s]["action"] == ROTATE_ACTION]
+    for _ in range(2 * len(rotations) + 1):
+        if not any([_rotate_once(ring, r) for r in rotations]):
+            break
+    return ring
+
+
+def known_public_keys(rows: dict[int, dict[str, Any]]) -> dict[str, Any]:
+    """fingerprint → public key named by the trail (identity and rotation rows): what a
+    ``--trust-fingerprint`` is matched against."""
+    out: dict[str, Any] = {}
+    for r in rows.values():
+        d = r.get("detail") or {}
+        for k in ("public_key", "old_public_key", "new_public_key"):
+            if r["action"] in (IDENTITY_ACTION, ROTATE_ACTION) and d.get(k):
+                try:
+                    pk = public_key_from_hex(str(d[k]))
+                except ValueError:
+                    continue
+                out[key_fingerprint(pk)] = pk
+    return out

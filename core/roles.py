@@ -96,7 +96,7 @@ CLI_ACTIONS: dict[str, str | None] = {
     "signoff show": "signoff.read", "signoff summary": "data.read",
     "audit verify": "audit.read", "audit export": "audit.read", "audit report": "audit.read",
     "audit checkpoint": "audit.checkpoint", "audit log": "audit.read",
-    "audit key": "audit.read", "audit seal": "user.manage",
+    "audit key": "audit.read", "audit seal": "user.manage", "audit rotate-key": "user.manage",
     "workshop kinds": None,
     "workshop create": "workshop.run", "workshop invite": "workshop.run",
     "workshop status": "workshop.run", "workshop close": "workshop.run",

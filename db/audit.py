@@ -34,10 +34,11 @@ from railval.core.integrity import (
     chain_hash,
     content_hash,
     head_message,
+    public_key_hex,
     sign,
     signoff_record_hash,
 )
-from railval.db import integrity
+from railval.db import integrity, trust
 from railval.db.models import AuditEvent, AuditHead
 
 __all__ = ["GENESIS", "actor_of", "head", "iter_rows", "record", "row_dict", "utc_stamp"]
@@ -97,12 +98,12 @@ def record(
     if not action or not object:
         raise ValueError("audit record needs an action and an object")
     # Take the head's lock first: every appender waits here for the one before it.
-    seq, prev = session.execute(
-        update(AuditHead).where(AuditHead.id == 1).values(seq=AuditHead.seq + 1)
-        .returning(AuditHead.seq, AuditHead.row_hash)
-    ).one()
+    seq, prev = _next_seq(session)
+    url = integrity.session_url(session)
+    key, fp = integrity.signer_for(url)
+    db_id, seq, prev = _identity_for(session, url, key, fp, seq, prev)
     row = {
-        "seq": int(seq),
+        "seq": seq,
         "at_utc": utc_stamp(),
         "actor": actor_name,
         "action": str(action)[:60],
@@ -112,30 +113,121 @@ def record(
         "reason": str(reason or ""),
         "detail": dict(detail or {}),
     }
+    h, sig = _append(session, row, prev, key, fp)
+    witness = trust.witness_file(db_id)
+    pin = None if (url, db_id) in _pinned else {
+        "fingerprint": fp, "public_key": public_key_hex(key.public_key()),
+        "how": "first use: the key the server signed with"}
+    session.info["railval_witness"] = (url, db_id, witness, pin, {
+        "seq": row["seq"], "row_hash": h, "at_utc": row["at_utc"], "key_fingerprint": fp,
+        "signature": sig, "database_id": db_id})
+    return session.scalar(select(AuditEvent).where(AuditEvent.seq == int(seq)))
+
+
+#: URL → database id, once committed; (URL, id) whose signer and pin were checked
+_ids: dict[str, str] = {}
+_pinned: set[tuple[str, str]] = set()
+_checked: set[tuple[str, str, str]] = set()
+
+
+def _forget() -> None:
+    _ids.clear()
+    _pinned.clear()
+    _checked.clear()
+
+
+integrity.FORGET_HOOKS.append(_forget)
+
+
+def _next_seq(session: Session) -> tuple[int, str]:
+    seq, prev = session.execute(
+        update(AuditHead).where(AuditHead.id == 1).values(seq=AuditHead.seq + 1)
+        .returning(AuditHead.seq, AuditHead.row_hash)
+    ).one()
+    return int(seq), str(prev)
+
+
+def _append(session: Session, row: dict[str, Any], prev: str, key, fp: str) -> tuple[str, str]:
+    """Insert ``row`` after ``prev``, signed; move the head's hash. → (row hash, signature)"""
     h = chain_hash(prev, row)
-    key, fp, witness = integrity.signer_for(integrity.session_url(session))
     sig = sign(key, "audit-head", head_message(row["seq"], h))
     session.execute(insert(AuditEvent).values(**row, prev_hash=prev, row_hash=h,
                                               signature=sig, key_fingerprint=fp))
     session.execute(update(AuditHead).where(AuditHead.id == 1).values(row_hash=h))
-    if witness is not None:
-        session.info["railval_witness"] = (witness, {
-            "seq": row["seq"], "row_hash": h, "at_utc": row["at_utc"], "key_fingerprint": fp,
-            "signature": sig})
-    return session.scalar(select(AuditEvent).where(AuditEvent.seq == int(seq)))
+    return h, sig
+
+
+def identity(session: Session) -> dict[str, Any] | None:
+    """The detail of the trail's first ``database.identity`` row (with its ``seq``), or
+    ``None`` when the trail names no identity."""
+    got = session.execute(select(AuditEvent.seq, AuditEvent.detail)
+                          .where(AuditEvent.action == trust.IDENTITY_ACTION)
+                          .order_by(AuditEvent.seq).limit(1)).first()
+    if got is None or not isinstance(got[1], dict) or "database_id" not in got[1]:
+        return None
+    return {**got[1], "seq": int(got[0])}
+
+
+def _identity_for(session: Session, url: str, key, fp: str, seq: int,
+                  prev: str) -> tuple[str, int, str]:
+    """The database id; the first signed row of a database is its ``database.identity``
+    row (written here, at ``seq``, when the trail has none). Refuses a signing key the
+    trust anchor does not pin (:func:`railval.db.trust.check_signer`). → (id, seq, prev)
+    of the row to write next."""
+    db_id = _ids.get(url) or session.info.get("railval_db_id")
+    if db_id is None:
+        ident = identity(session)
+        db_id = ident["database_id"] if ident else None
+    if db_id is None:
+        found = trust.find_anchor(url, None)  # a database met before (e.g. verified)
+        db_id = found[1]["database_id"] if found else trust.new_database_id()
+        if (url, db_id, fp) not in _checked:
+            trust.check_signer(url, db_id, fp)
+        unsigned = int(session.scalar(select(func.count()).select_from(AuditEvent)
+                                      .where(AuditEvent.signature.is_(None))) or 0)
+        row = {"seq": seq, "at_utc": utc_stamp(), "actor": "system",
+               "action": trust.IDENTITY_ACTION, "object": f"database:{db_id}",
+               "before_sha256": None, "after_sha256": None,
+               "reason": "the database's identity (railval trust anchor)",
+               "detail": {"database_id": db_id, "key_fingerprint": fp,
+                          "public_key": public_key_hex(key.public_key()),
+                          "unsigned_rows_before": unsigned}}
+        prev, _sig = _append(session, row, prev, key, fp)
+        seq, _ = _next_seq(session)
+    session.info["railval_db_id"] = db_id
+    if (url, db_id, fp) not in _checked:
+        trust.check_signer(url, db_id, fp)
+        _checked.add((url, db_id, fp))
+    return db_id, seq, prev
 
 
 @event.listens_for(Session, "after_commit")
 def _witness_after_commit(session: Session) -> None:
     """Append the committed transaction's signed head to the witness file."""
+    session.info.pop("railval_db_id", None)
     pending = session.info.pop("railval_witness", None)
-    if pending is not None:
-        integrity.append_witness(*pending)
+    if pending is None:
+        return
+    url, db_id, witness, pin, line = pending
+    if witness is not None:
+        integrity.append_witness(witness, line)
+    try:
+        doc = trust.update_anchor(url, db_id, pin=pin, head=line)
+    except (OSError, integrity.IntegrityError) as exc:
+        import logging
+
+        logging.getLogger("railval.db").error("trust anchor of database %s: cannot record "
+                                              "signed head seq %s: %s", db_id, line["seq"], exc)
+        return
+    _ids[url] = db_id
+    if doc.get("pins") or trust.deploy_pins() is not None:
+        _pinned.add((url, db_id))
 
 
 @event.listens_for(Session, "after_rollback")
 def _witness_after_rollback(session: Session) -> None:
     session.info.pop("railval_witness", None)
+    session.info.pop("railval_db_id", None)
 
 
 def seal(session: Session, actor: Any, reason: str = "") -> AuditEvent:
@@ -152,6 +244,14 @@ def seal(session: Session, actor: Any, reason: str = "") -> AuditEvent:
     return record(session, actor, "audit.seal", "audit:trail", None, None,
                   reason or "seal the current head",
                   detail={"unsigned_rows_before": unsigned, "unsigned_signoffs": legacy})
+
+
+def key_rows(session: Session) -> list[dict[str, Any]]:
+    """The ``database.identity`` and ``key.rotate`` rows (what names the signing keys)."""
+    return [row_dict(ev) for ev in session.scalars(
+        select(AuditEvent).where(AuditEvent.action.in_((trust.IDENTITY_ACTION,
+                                                        trust.ROTATE_ACTION)))
+        .order_by(AuditEvent.seq))]
 
 
 def actor_of(session: Session) -> str:

@@ -11,9 +11,10 @@ A backup is a folder:
   (:mod:`railval.db.integrity`). Without it a restored database holds signals whose seals no
   longer verify: the backup folder must be kept as securely as the key itself;
 * ``signing-key.pem`` (0600) — the Ed25519 key that signs audit rows and sign-offs, with
-  ``signing-key.pem.retired`` (public keys of rotated keys) and ``witness.jsonl`` (the signed
-  heads kept outside the database) when they exist; without them a restored trail would be
-  verified against a new key and an empty witness (docs/audit.md);
+  ``trust-anchor.json`` (the database's pinned keys and newest witnessed head) and
+  ``witness.jsonl`` (the signed heads kept outside the database, :mod:`railval.db.trust`)
+  when they exist; without them a restored trail would be verified against a new key and
+  an empty witness (docs/audit.md);
 * ``backup.json`` — format, backend, schema revision, audit head, signal count and the
   SHA-256 of each file (checked before a restore).
 
@@ -21,9 +22,11 @@ A backup is a folder:
 file; a PostgreSQL database or schema without railval tables), installs the secret
 (beside an SQLite file as ``FILE.key``, else where :func:`railval.db.integrity.secret_path`
 looks, unless ``$RAILVAL_SECRET_KEY`` already holds the same secret) and migrates to the
-newest schema revision; the signing key, retired keys and witness are installed where
-:func:`railval.db.integrity.signing_key_path` and :func:`~railval.db.integrity.witness_path`
-look for the restored database (refused when another key or witness is already there). Both
+newest schema revision; the signing key is installed where
+:func:`railval.db.integrity.signing_key_path` looks for the restored database (refused when
+another key is already there), the trust anchor and witness in the trust directory under the
+database's identity (kept when the server already holds them: the same database, witnessed
+at least as far; refused when they disagree). Both
 write an audit row (``database.backup`` before the copy, so the
 backup holds it; ``database.restore`` after).
 """
@@ -44,13 +47,13 @@ from sqlalchemy import func, inspect, select, text
 from sqlalchemy.engine import make_url
 
 from railval.core.errors import RailvalError
-from railval.db import audit, integrity
+from railval.db import audit, integrity, trust
 
 FORMAT = "railval-backup/1"
 MANIFEST = "backup.json"
 SECRET = "secret.key"
 SIGNING_KEY = "signing-key.pem"
-RETIRED = "signing-key.pem.retired"
+ANCHOR = "trust-anchor.json"
 WITNESS = "witness.jsonl"
 FILES = {"sqlite": "database.sqlite", "postgresql": "database.pgdump"}
 
@@ -137,7 +140,10 @@ def backup(database, folder: str | Path, *, actor: Any = "system") -> dict[str, 
         facts["schema"] = schema
     key = out / SECRET
     _write_private(key, secret + b"\n")
-    files = [target, key, *_copy_signing_files(database.url, out)]
+    with database.session() as s:
+        ident = audit.identity(s)
+    files = [target, key, *_copy_signing_files(database.url, out,
+                                               ident["database_id"] if ident else None)]
     manifest = {"format": FORMAT, "backend": backend, "revision": database.current_revision(),
                 "created_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
                 "source": database.safe_url, **facts,
@@ -154,13 +160,14 @@ def _write_private(path: Path, data: bytes) -> None:
         fh.write(data)
 
 
-def _copy_signing_files(url: str, out: Path) -> list[Path]:
-    """Copy the signing key (made now if the database has none yet), its retired keys and
+def _copy_signing_files(url: str, out: Path, database_id: str | None) -> list[Path]:
+    """Copy the signing key (made now if the database has none yet), the trust anchor and
     the witness of ``url`` into the backup folder ``out``; returns the copies."""
     integrity.signing_key(url)
-    key_path = integrity.signing_key_path(url)
-    sources = {SIGNING_KEY: key_path, RETIRED: Path(f"{key_path}.retired") if key_path else None,
-               WITNESS: integrity.witness_path(url)}
+    found = trust.find_anchor(url, database_id)
+    sources = {SIGNING_KEY: integrity.signing_key_path(url),
+               ANCHOR: found[0] if found else None,
+               WITNESS: trust.witness_file(database_id)}
     copies = []
     for name, src in sources.items():
         if src is None or not src.is_file():
@@ -172,27 +179,43 @@ def _copy_signing_files(url: str, out: Path) -> list[Path]:
 
 
 def _install_signing_files(url: str, root: Path) -> None:
-    """Install the backup's signing key, retired keys and witness for the restored ``url``:
-    an existing file with other content is refused (it belongs to another database)."""
+    """Install the backup's signing key, trust anchor and witness for the restored ``url``:
+    a key file with other content is refused (it belongs to another database); an anchor or
+    witness the server already holds for this database is kept when it reaches at least as
+    far as the backup's (the backup is older), refused otherwise."""
     key_path = integrity.signing_key_path(url)
-    targets = {SIGNING_KEY: key_path, RETIRED: Path(f"{key_path}.retired") if key_path else None,
-               WITNESS: integrity.witness_path(url)}
+    db_id = None
+    if (root / ANCHOR).is_file():
+        db_id = trust.read_anchor(root / ANCHOR)["database_id"]
+    targets = {SIGNING_KEY: key_path,
+               ANCHOR: trust.anchor_file(db_id) if db_id else None,
+               WITNESS: trust.witness_file(db_id) if db_id else None}
     for name, dst in targets.items():
         src = root / name
-        if not src.is_file():
+        if not src.is_file() or dst is None:
+            if src.is_file() and name == SIGNING_KEY:
+                raise BackupError("an in-memory database cannot be restored into")
             continue
-        if dst is None:
-            raise BackupError("an in-memory database cannot be restored into")
         data = src.read_bytes()
         if dst.exists():
-            if dst.read_bytes() != data:
-                raise BackupError(f"{dst} exists with other content; move it away or point "
-                                  f"RAILVAL_SIGNING_KEY_FILE / RAILVAL_WITNESS_FILE at the "
-                                  f"backup's {name}")
-            continue
+            held = dst.read_bytes()
+            if held == data or (name == WITNESS and held.startswith(data)):
+                continue
+            if name == ANCHOR and _anchor_reaches(trust.read_anchor(dst), trust.read_anchor(src)):
+                continue
+            raise BackupError(f"{dst} exists with other content; move it away or point "
+                              f"RAILVAL_SIGNING_KEY_FILE / RAILVAL_TRUST_DIR at another place")
         dst.parent.mkdir(parents=True, exist_ok=True)
         _write_private(dst, data)
     integrity.forget_keys()
+
+
+def _anchor_reaches(held: dict[str, Any], backup_anchor: dict[str, Any]) -> bool:
+    """Does the anchor the server holds pin the backup's keys and witness at least as far?"""
+    pins = {p["fingerprint"] for p in held.get("pins", [])}
+    want = {p["fingerprint"] for p in backup_anchor.get("pins", [])}
+    hw, bw = held.get("witnessed") or {}, backup_anchor.get("witnessed") or {}
+    return want <= pins and int(hw.get("seq", 0)) >= int(bw.get("seq", 0))
 
 
 def read_manifest(folder: str | Path) -> dict[str, Any]:

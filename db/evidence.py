@@ -91,6 +91,8 @@ def _source_problems(session: Session, c: Campaign | CampaignRef, config: Config
     names = {x.id: x.name for x in list_configurations(session, c)}
     cond = None if config is True else source_filter(session, c.id, config)
     if not blobs:  # seals only: one query for the recordings, one for every signal row
+        if secret is None:
+            return []
         recs, by_rec = _seal_rows(session, c, cond)
         return _seal_problems(c, names, recs, by_rec, secret)
     rec_q = (select(Recording.id, Section.section_id, Recording.configuration_id,
@@ -115,8 +117,9 @@ def _source_problems(session: Session, c: Campaign | CampaignRef, config: Config
         for row in rows:
             name, cid, sha, prov = row[0], row[1], row[2], row[3] or {}
             seal = prov.get("seal") if isinstance(prov, dict) else None
-            why = _seal_problem(secret, seal, rid, cid, sha, dsha, fs, t0, n,
-                                (c.name, sid, where["configuration"] or "", name))
+            why = None if secret is None else _seal_problem(
+                secret, seal, rid, cid, sha, dsha, fs, t0, n,
+                (c.name, sid, where["configuration"] or "", name))
             if why is not None:
                 problems.append({**where, "channel": name, "error": why})
             if name in bad:
@@ -323,13 +326,15 @@ def _raise_problems(config: ConfigArg, problems: list[dict[str, Any]]) -> None:
             "check the database with `railval verify`")
 
 
-def verify_storage(session: Session, *, blobs: bool = True) -> dict[str, Any]:
+def verify_storage(session: Session, *, blobs: bool = True, seals: bool = True
+                   ) -> dict[str, Any]:
     """Check a whole database: every signal's seal and (``blobs``) content hash, every
     distance axis, and every result-cache entry's seal. Returns ``{"ok", "campaigns":
     {name: [problem, ...]}, "signals": n, "cache_entries": n, "cache_unauthentic": [keys]}``.
     An unauthentic cache entry is never used (it is recomputed); it is listed because
-    someone wrote it without the server secret."""
-    secret = integrity.session_secret(session)
+    someone wrote it without the server secret. ``seals=False`` (no secret at hand, e.g. an
+    assessor's account): the content hashes only; no seal is checked, no secret made."""
+    secret = integrity.session_secret(session) if seals else None
     out: dict[str, Any] = {"campaigns": {}, "signals": 0}
     for c in list_campaigns(session):
         out["campaigns"][c.name] = _source_problems(session, c, True, secret, blobs)
@@ -338,7 +343,7 @@ def verify_storage(session: Session, *, blobs: bool = True) -> dict[str, Any]:
     n = 0
     for k, v in session.execute(select(ResultCache.key, ResultCache.value)):
         n += 1
-        if integrity.open_cache_value(secret, k, bytes(v)) is None:
+        if secret is not None and integrity.open_cache_value(secret, k, bytes(v)) is None:
             bad.append(k)
     out["cache_entries"] = n
     out["cache_unauthentic"] = bad

@@ -43,7 +43,6 @@ it out of reach of the database's users (docs/database.md, "Integrity").
 
 from __future__ import annotations
 
-import hashlib
 import hmac
 import os
 import secrets
@@ -238,21 +237,6 @@ def signing_key_path(url: str) -> Path | None:
     return _config_dir() / "signing-key.pem"
 
 
-def witness_path(url: str) -> Path | None:
-    """The witness file of database ``url`` (see the module docstring)."""
-    env = os.environ.get("RAILVAL_WITNESS_FILE")
-    if env:
-        return Path(env)
-    parsed = make_url(url)
-    key = signing_key_path(url)
-    if key is None:
-        return None
-    if parsed.get_backend_name() == "sqlite" and not os.environ.get("RAILVAL_SIGNING_KEY_FILE"):
-        return Path(str(parsed.database) + ".witness.jsonl")
-    ident = hashlib.sha256(parsed.render_as_string(hide_password=True).encode()).hexdigest()
-    return key.parent / f"witness-{ident[:16]}.jsonl"
-
-
 def _load_or_create_key(path: Path):
     from cryptography.hazmat.primitives import serialization
     from cryptography.hazmat.primitives.asymmetric.ed25519 import (
@@ -299,19 +283,20 @@ def signing_key(url: str):
 
 
 _signers: dict[tuple, tuple] = {}
+#: functions called by :func:`forget_keys` (other modules' caches of keys and identities)
+FORGET_HOOKS: list = []
 
 
 def signer_for(url: str) -> tuple:
-    """(private key, its fingerprint, witness path) for database ``url``, cached per URL and
-    key/witness settings (the per-row cost of signing is then the signature alone)."""
+    """(private key, its fingerprint) for database ``url``, cached per URL and key
+    settings (the per-row cost of signing is then the signature alone)."""
     from railval.core.integrity import key_fingerprint
 
-    ck = (url, os.environ.get("RAILVAL_SIGNING_KEY_FILE"), os.environ.get("RAILVAL_WITNESS_FILE"),
-          os.environ.get("XDG_CONFIG_HOME"))
+    ck = (url, os.environ.get("RAILVAL_SIGNING_KEY_FILE"), os.environ.get("XDG_CONFIG_HOME"))
     got = _signers.get(ck)
     if got is None:
         key = signing_key(url)
-        got = (key, key_fingerprint(key.public_key()), witness_path(url))
+        got = (key, key_fingerprint(key.public_key()))
         with _lock:
             _signers[ck] = got
     return got
@@ -323,6 +308,8 @@ def forget_keys() -> None:
         _keys.clear()
         _secrets.clear()
         _signers.clear()
+    for hook in FORGET_HOOKS:
+        hook()
 
 
 def session_url(session) -> str:
@@ -333,28 +320,23 @@ def session_url(session) -> str:
     return engine.url.render_as_string(hide_password=False)
 
 
-def trusted_public_keys(url: str) -> dict[str, object]:
-    """fingerprint → public key: the current signing key and the retired ones. A key file
-    that does not exist is not created (verifying a copied database must not make a key)."""
-    from railval.core.integrity import key_fingerprint, public_key_from_hex
-
+def current_public_key(url: str):
+    """The public key of the signing key file of ``url``, or ``None`` when there is no key
+    file (a key is never created here: verifying a copied database must not make one)."""
     path = signing_key_path(url)
-    keys = {}
     if path is None or path.is_file() or str(path) in _keys:
-        current = signing_key(url).public_key()
-        keys[key_fingerprint(current)] = current
-    retired = Path(str(path) + ".retired") if path is not None else None
-    if retired is not None and retired.is_file():
-        for line_no, line in enumerate(retired.read_text().splitlines(), 1):
-            text = line.split("#", 1)[0].strip()
-            if not text:
-                continue
-            try:
-                pk = public_key_from_hex(text)
-            except ValueError as exc:
-                raise IntegrityError(f"{retired} line {line_no}: {exc}") from None
-            keys[key_fingerprint(pk)] = pk
-    return keys
+        return signing_key(url).public_key()
+    return None
+
+
+def secret_exists(url: str) -> bool:
+    """Is the seal secret of ``url`` at hand without creating it?"""
+    from railval.db.settings import setting
+
+    if setting("RAILVAL_SECRET_KEY") is not None:
+        return True
+    path = secret_path(url)
+    return path is None or path.is_file()
 
 
 def append_witness(path: Path, line: dict) -> None:

@@ -36,11 +36,11 @@ def test_record_appends_a_verifiable_chain(database):
     with database.session() as s:
         rows = list(audit.iter_rows(s))
         n, head, brk = verify_chain(rows)
-        assert (n, brk) == (5, None)
-        assert audit.head(s) == (5, head)
-        assert rows[0]["prev_hash"] == GENESIS
-        assert rows[2]["before_sha256"] == hashlib.sha256(b'{"v":2}').hexdigest()
-        assert [r["seq"] for r in rows] == [1, 2, 3, 4, 5]
+        assert (n, brk) == (6, None)  # the database's identity row first (docs/audit.md)
+        assert audit.head(s) == (6, head)
+        assert rows[0]["prev_hash"] == GENESIS and rows[0]["action"] == "database.identity"
+        assert rows[3]["before_sha256"] == hashlib.sha256(b'{"v":2}').hexdigest()
+        assert [r["seq"] for r in rows] == [1, 2, 3, 4, 5, 6]
 
 
 def test_audit_row_rolls_back_with_the_change(database):
@@ -76,7 +76,7 @@ def test_database_refuses_update_and_delete_of_audit_rows(database, statement):
         with database.session() as s:
             s.execute(text(statement))
     with database.session() as s:
-        assert [r["actor"] for r in audit.iter_rows(s)] == ["tester"]
+        assert [r["actor"] for r in audit.iter_rows(s)] == ["system", "tester"]
         assert s.execute(text("SELECT decision FROM signoff")).scalars().all() == ["not-validated"]
 
 
@@ -95,7 +95,9 @@ def test_import_store_and_delete_are_audited_with_content_hashes(database, tmp_p
     with database.session(actor="eng") as s:
         repo.delete_campaign(s, "demo", reason="test over")
     with database.session() as s:
-        rows = list(audit.iter_rows(s))
+        every = list(audit.iter_rows(s))
+        assert every[0]["action"] == "database.identity"  # written before the first change
+        rows = every[1:]
         assert [(r["actor"], r["action"], r["object"]) for r in rows] == [
             ("importer", "campaign.import", "campaign:demo"),
             ("eng", "configuration.delete", "configuration:demo/variant1"),
@@ -104,5 +106,5 @@ def test_import_store_and_delete_are_audited_with_content_hashes(database, tmp_p
         assert rows[1]["after_sha256"] is None and rows[1]["reason"] == "superseded"
         assert state["signals"] and all(len(h) == 64 for sec in state["signals"].values()
                                         for h in sec.values())
-        assert verify_chain(rows)[2] is None
+        assert verify_chain(every)[2] is None
         assert repo.list_campaigns(s) == []

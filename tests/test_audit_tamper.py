@@ -63,10 +63,10 @@ def test_untouched_database_verifies_and_signoff_is_valid(signed):
     database, rec = signed
     report = verify(database)
     assert report.ok, [str(f) for f in report.findings]
-    assert report.signoffs == 1 and report.signals > 0 and report.rows == 4
+    assert report.signoffs == 1 and report.signals > 0 and report.rows == 5
     with database.session() as s:
         assert [(r["actor"], r["action"]) for r in audit.iter_rows(s)] == [
-            ("eng", "campaign.import"), ("admin", "user.add"), ("admin", "user.add"),
+            ("system", "database.identity"), ("eng", "campaign.import"), ("admin", "user.add"), ("admin", "user.add"),
             ("rev", "signoff.create")]
     assert rec["printed_name"] == "Rita Reviewer" and rec["signed_at_utc"].endswith("Z")
     assert rec["evidence_sha256"] in rec["meaning"] and "validated" in rec["meaning"]
@@ -78,11 +78,11 @@ def test_flipped_byte_in_an_audit_row_is_named(signed):
     database, _ = signed
     drop_triggers(database)
     with database.session() as s:
-        s.execute(text("UPDATE audit_event SET actor = 'evx' WHERE seq = 1"))
+        s.execute(text("UPDATE audit_event SET actor = 'evx' WHERE seq = 2"))
     report = verify(database)
     assert not report.ok
     first = report.findings[0]
-    assert first.kind == "chain" and "row seq 1" in first.where and "campaign:demo" in first.where
+    assert first.kind == "chain" and "row seq 2" in first.where and "campaign:demo" in first.where
     assert "row_hash" in first.where and first.expected != first.found
 
 

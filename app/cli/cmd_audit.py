@@ -5,9 +5,11 @@
     recompute the chain, every signal blob's SHA-256 and every sign-off's evidence hash (or
     check an exported bundle without the database); names the first break; exit 0 only
     when everything holds, 1 when something does not
-    [--witness FILE | --no-witness] [--public-key HEX|FILE]: the signed heads of the witness
-    file beside the signing key are compared by default
-``railval audit key [--json]``  the public signing key and its fingerprint
+    [--witness FILE | --no-witness] [--public-key HEX|FILE] [--trust-fingerprint FP]...:
+    trusts the key pinned in the server's configuration directory (or given), prints which
+    and from where, and compares with the trust anchor's witnessed head and witness file
+``railval audit key [--json]``  the trusted public signing key and its fingerprint
+``railval audit rotate-key [--reason TEXT]``  a new signing key, handed over in a signed row
 ``railval audit seal [--reason TEXT]``  sign the current head (rows written before signing)
 ``railval audit export DIR``  the offline bundle
 ``railval audit log [--object PREFIX] [--actor NAME] [--json]``  the trail, oldest first
@@ -53,7 +55,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     v.add_argument("--no-witness", action="store_true", help="do not compare with a witness file")
     v.add_argument("--public-key", metavar="HEX|FILE",
                    help="trust only this Ed25519 public key (hex, or a file from `audit key "
-                   "--json`); default: the server's signing key")
+                   "--json`); default: the key pinned in the server's configuration directory")
+    v.add_argument("--trust-fingerprint", metavar="FP", action="append", default=[],
+                   help="trust the key with this SHA-256 fingerprint (repeatable); with "
+                   "--public-key or alone, nothing is written")
+
+    rk = au.add_parser("rotate-key", help="replace the signing key: a key.rotate row signed "
+                       "by the current key and countersigned by the new one")
+    rk.add_argument("--reason", default="", help="why (e.g. 'yearly rotation')")
+    rk.set_defaults(func=_cmd_rotate_key)
 
     k = au.add_parser("key", help="print the public signing key and its fingerprint")
     k.add_argument("--json", action="store_true")
@@ -77,6 +87,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--out", required=True, help="output file, .html or .pdf")
     r.set_defaults(func=_cmd_report)
 
+    _register_signoff(sub)
+
+
+def _register_signoff(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("signoff", help="independent sign-off of a configuration")
     so = s.add_subparsers(dest="subverb", metavar="SUBVERB")
     so.required = True
@@ -132,34 +146,47 @@ def _cmd_verify(args) -> int:
 
     checkpoint = svc.read_checkpoint(args.checkpoint) if args.checkpoint else None
     if args.bundle:
-        report = svc.verify_bundle(args.bundle, checkpoint, public_key=args.public_key)
+        report = svc.verify_bundle(args.bundle, checkpoint, public_key=args.public_key,
+                                   trust_fingerprints=args.trust_fingerprint)
     else:
         report = svc.verify_database(_database(args), checkpoint, signals=not args.quick,
                                      full=not args.quick, witness=args.witness,
                                      use_witness=not args.no_witness,
-                                     public_key=args.public_key)
+                                     public_key=args.public_key,
+                                     trust_fingerprints=args.trust_fingerprint)
     if args.json:
         emit_json(report.to_dict())
     else:
-        print(f"audit verify {report.source}: {report.rows} audit rows, head seq "
-              f"{report.head_seq} {report.head_hash[:16]}…, {report.signals} stored arrays, "
-              f"{report.signoffs} sign-offs ({report.seconds:.2f} s)")
-        print(f"  signatures: {report.signed_rows} signed rows, key "
-              + ", ".join(k[:16] + "…" for k in report.keys)
-              + (f"; witness {report.witness}: {report.witness_heads} signed heads"
-                 if report.witness else ""))
-        for note in report.notes:
-            print(f"  note: {note}")
-        if report.ok:
-            print("OK: the chain, the signatures, " + ("the witness, " if report.witness else "")
-                  + ("the checkpoint, " if checkpoint else "")
-                  + ("every stored array, " if report.signals else "")
-                  + "and every sign-off's record and evidence hash hold")
-        else:
-            print(f"FAILED: first break: {report.findings[0]}")
-            for f in report.findings[1:]:
-                print(f"  also: {f}")
+        _print_report(report, checkpoint)
     return 0 if report.ok else 1
+
+
+def _print_report(report, checkpoint) -> None:
+    print(f"audit verify {report.source}: {report.rows} audit rows, head seq "
+          f"{report.head_seq} {report.head_hash[:16]}…, {report.signals} stored arrays, "
+          f"{report.signoffs} sign-offs ({report.seconds:.2f} s)")
+    for t in report.trust:
+        rows = (f", rows {t['rows_from']}–{t['rows_to']}" if t["rows_to"] is not None
+                else (f", rows from {t['rows_from']}" if t["rows_from"] > 1 else ""))
+        print(f"  trusted key {t['fingerprint']} ({t['source']}{rows})")
+    print(f"  signatures: {report.signed_rows} signed rows"
+          + (f"; witness {report.witness}: {report.witness_heads} signed heads"
+             if report.witness else "")
+          + ("" if report.seals_checked else "; seals: not checked (no secret)"))
+    for note in report.notes:
+        print(f"  note: {note}")
+    if report.ok and not report.rows and not report.signoffs and not report.signals:
+        print("OK, nothing to verify: the database holds no audit row, no sign-off and no "
+              "stored array")
+    elif report.ok:
+        print("OK: the chain, the signatures, " + ("the witness, " if report.witness else "")
+              + ("the checkpoint, " if checkpoint else "")
+              + ("every stored array, " if report.signals else "")
+              + "and every sign-off's record and evidence hash hold")
+    else:
+        print(f"FAILED: first break: {report.findings[0]}")
+        for f in report.findings[1:]:
+            print(f"  also: {f}")
 
 
 def _cmd_key(args) -> int:
@@ -171,10 +198,25 @@ def _cmd_key(args) -> int:
         return 0
     print(f"Ed25519 public key  {info['public_key']}")
     print(f"fingerprint SHA-256 {info['fingerprint']}")
+    print(f"trusted from        {info['trusted_from']}")
     print(f"key file            {info['key_file']}")
+    if info["key_file_fingerprint"] not in (None, info["fingerprint"]):
+        print(f"  NOT TRUSTED: the key file holds key {info['key_file_fingerprint']}")
+    print(f"trust anchor        {info['anchor_file']}")
     print(f"witness file        {info['witness_file']}")
     for fp in info["retired"]:
         print(f"retired key         {fp}")
+    return 0
+
+
+def _cmd_rotate_key(args) -> int:
+    from railval.app.services.audit import rotate_key
+    from railval.app.services.database import default_actor
+
+    done = rotate_key(_database(args), default_actor(), args.reason)
+    print(f"signing key rotated at audit row {done['seq']}: {done['old_fingerprint']} → "
+          f"{done['new_fingerprint']}; the new key is pinned; the old private key is at "
+          f"{done['old_key_file']} — move it offline")
     return 0
 
 

@@ -36,17 +36,34 @@ from typing import Any
 
 from railval.app.services.audit_checks import (
     Finding,
+    KeyRing,
     VerifyReport,
     _check_chain,
     _check_row_signatures,
     _check_signoffs,
     _check_witness,
+    apply_rotations,
+    check_anchor,
+    known_public_keys,
     witness_signed_from,
 )
+from railval.app.services.audit_trust import (
+    _check_trail,
+    _fingerprints,
+    _parse_public_keys,
+    _pin_first_use,
+    _witness_lines,
+    key_info,
+    rotate_key,
+    trusted_keys,
+)
 from railval.core.errors import RailvalError
-from railval.core.integrity import key_fingerprint, public_key_from_hex, public_key_hex
 from railval.db import audit, integrity, repo
 from railval.db import signoff as db_signoff
+
+__all__ = ["BUNDLE_FORMAT", "export_bundle", "key_info", "newest", "read_checkpoint",
+           "rotate_key", "seal", "trail", "trusted_keys", "verify_bundle", "verify_database",
+           "write_checkpoint"]
 
 BUNDLE_FORMAT = "railval-audit-bundle/1"
 
@@ -75,132 +92,84 @@ def write_checkpoint(database, path: str | Path) -> dict[str, Any]:
     return doc
 
 
-def trusted_keys(database, public_key: str | None = None) -> dict[str, Any]:
-    """fingerprint → public key the verifier trusts: ``public_key`` (hex, or a file holding
-    it) alone when given, else the server's signing key and its retired keys."""
-    if public_key:
-        p = Path(public_key)
-        text = p.read_text(encoding="utf-8") if p.is_file() else public_key
-        hexes = [text]
-        try:
-            doc = json.loads(text)
-            if isinstance(doc, dict):  # `railval audit key --json`: current and retired keys
-                hexes = [doc["public_key"], *doc.get("retired_public_keys", [])]
-        except (ValueError, KeyError):
-            pass
-        keys = {}
-        for h in hexes:
-            try:
-                pk = public_key_from_hex(str(h).strip())
-            except ValueError as exc:
-                raise RailvalError(f"--public-key {public_key[:60]}: {exc}") from None
-            keys[key_fingerprint(pk)] = pk
-        return keys
-    return integrity.trusted_public_keys(database.url)
-
-
-def key_info(database) -> dict[str, Any]:
-    """The public signing key, its fingerprint, the key and witness files (``audit key``)."""
-    pk = integrity.signing_key(database.url).public_key()
-    witness = integrity.witness_path(database.url)
-    retired = [k for fp, k in integrity.trusted_public_keys(database.url).items()
-               if fp != key_fingerprint(pk)]
-    return {"format": "railval-public-key/1", "algorithm": "Ed25519",
-            "public_key": public_key_hex(pk), "fingerprint": key_fingerprint(pk),
-            "retired": [key_fingerprint(k) for k in retired],
-            "retired_public_keys": [public_key_hex(k) for k in retired],
-            "key_file": str(integrity.signing_key_path(database.url) or "(in memory)"),
-            "witness_file": str(witness) if witness else None}
-
-
-def _witness_lines(path: Path | None, report: VerifyReport) -> list[dict[str, Any]] | None:
-    if path is None or not path.is_file():
-        report.notes.append(
-            f"no witness file ({path or 'in-memory database'}): a removed tail is found only "
-            "with a checkpoint (`--checkpoint`)")
-        return None
-    try:
-        return integrity.read_witness(path)
-    except integrity.IntegrityError as exc:
-        report.findings.append(Finding("witness", str(path), "signed heads, one per line",
-                                       str(exc)))
-        return None
-
-
 def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
                     signals: bool = True, full: bool = True, witness: str | None = None,
-                    use_witness: bool = True, public_key: str | None = None) -> VerifyReport:
-    """Verify chain, checkpoint, signatures, witness, signal blobs and sign-offs (module
-    docstring). ``witness``: another witness file than the default beside the key."""
-    from railval.app.services import signoff as svc
-
+                    use_witness: bool = True, public_key: str | None = None,
+                    trust_fingerprints: list[str] | None = None) -> VerifyReport:
+    """Verify chain, checkpoint, signatures, trust anchor and witness, signal blobs and
+    sign-offs (module docstring). ``witness``: another witness file than the anchor's.
+    Given its trust (``public_key``, ``trust_fingerprints``) it writes nothing, and without
+    the seal secret it checks no seal (says so)."""
     t0 = time.perf_counter()
     report = VerifyReport(source=database.safe_url)
-    keys = trusted_keys(database, public_key)
-    report.keys = list(keys)
-    if not keys:
-        report.findings.append(Finding(
-            "signature", "signing key", "the public key to verify with (the server's key file "
-            f"{integrity.signing_key_path(database.url)}, or --public-key HEX|FILE)", "none"))
+    fps = _fingerprints(trust_fingerprints)
     with database.session() as s:
-        rows = {}
-
-        def collect():
-            for r in audit.iter_rows(s):
-                rows[int(r["seq"])] = r
-                yield r
-
-        by_seq = _check_chain(collect(), report, checkpoint)
-        lines = None
-        if use_witness:
-            wpath = Path(witness) if witness else integrity.witness_path(database.url)
-            lines = _witness_lines(wpath, report)
-        good = _check_row_signatures(rows, keys, report, witness_signed_from(lines, keys))
-        if lines is not None:
-            _check_witness(by_seq, lines, str(wpath), keys, report, rows, good)
-        head_seq, head_hash = audit.head(s)
-        if not report.findings and (head_seq, head_hash) != (report.head_seq, report.head_hash):
+        rows, ring, explicit = _check_trail(database, s, report, checkpoint, witness=witness,
+                                            use_witness=use_witness, public_key=public_key,
+                                            fingerprints=fps)
+        seals = integrity.secret_exists(database.url)
+        if not seals and not explicit and any(repo.count_signals(s, c)
+                                              for c in repo.list_campaigns(s)):
             report.findings.append(Finding(
-                "head", "audit_head", f"seq {report.head_seq} hash {report.head_hash}",
-                f"seq {head_seq} hash {head_hash} (rows after {report.head_seq} removed?)"))
-        broken: set[tuple[str, str | None, str, str]] = set()
-        doc = repo.verify_storage(s, blobs=signals)  # seals always, samples unless quick
-        if signals:
-            report.signals = sum(repo.count_signals(s, c) for c in repo.list_campaigns(s))
-        for camp_name, problems in doc["campaigns"].items():
-            for p in problems:
-                broken.add((camp_name, p["configuration"], p["section"], p["channel"]))
-                src = p["configuration"] or "measurement"
-                report.findings.append(Finding(
-                    "signal", f"campaign {camp_name!r}, {src}, section {p['section']}, "
-                    f"channel {p['channel']}", "its stored SHA-256 and seal", p["error"]))
-        sos = db_signoff.list_signoffs(s)
-        bad_ids = _check_signoffs([db_signoff.as_dict(so) for so in sos], rows, keys, report)
-        for so in sos:
-            report.signoffs += 1
-            if so.id in bad_ids:
-                continue
-            bad = sorted(f"{'measurement' if src is None else src} section {sec} {ch}"
-                         for camp_name, src, sec, ch in broken if camp_name == so.campaign
-                         and src in (None, so.configuration))
-            if bad:
-                report.findings.append(Finding(
-                    "signoff", f"sign-off {so.id} ({so.campaign}/{so.configuration}, "
-                    f"{so.printed_name}) is stale: its evidence includes stored arrays that no "
-                    "longer match their hashes", f"evidence {so.evidence_sha256}",
-                    "; ".join(bad[:5])))
-                continue
-            try:
-                st = svc.status(s, so, full=full)
-            except RailvalError as exc:
-                st = svc.SignoffStatus(so.id, "stale", [str(exc)])
-            if not st.valid:
-                report.findings.append(Finding(
-                    "signoff", f"sign-off {so.id} ({so.campaign}/{so.configuration}, "
-                    f"{so.printed_name}) is stale", f"evidence {so.evidence_sha256}",
-                    "; ".join(st.reasons)))
+                "signal", "seal secret", "the server's secret that sealed the stored arrays "
+                f"({integrity.secret_path(database.url)}, or $RAILVAL_SECRET_KEY)",
+                "none: it was removed; no seal can be checked"))
+        if not seals:
+            full = False
+            report.notes.append(
+                "seals not checked (no secret): the signal and result-cache seals need the "
+                "server's secret; the content hashes, the chain, the signatures and the "
+                "sign-offs' records and evidence inputs were checked (the validation was "
+                "not recomputed: its cache needs the secret)")
+        report.seals_checked = seals
+        _check_evidence(s, report, rows, ring, signals=signals, full=full, seals=seals)
+    if not explicit:
+        _pin_first_use(database, rows, ring, report)
     report.seconds = time.perf_counter() - t0
     return report
+
+
+def _check_evidence(s, report: VerifyReport, rows, ring, *, signals: bool, full: bool,
+                    seals: bool) -> None:
+    """Signal blobs and seals, and every sign-off (record, audit row, evidence)."""
+    from railval.app.services import signoff as svc
+
+    broken: set[tuple[str, str | None, str, str]] = set()
+    doc = repo.verify_storage(s, blobs=signals, seals=seals)
+    if signals:
+        report.signals = sum(repo.count_signals(s, c) for c in repo.list_campaigns(s))
+    for camp_name, problems in doc["campaigns"].items():
+        for p in problems:
+            broken.add((camp_name, p["configuration"], p["section"], p["channel"]))
+            src = p["configuration"] or "measurement"
+            report.findings.append(Finding(
+                "signal", f"campaign {camp_name!r}, {src}, section {p['section']}, "
+                f"channel {p['channel']}", "its stored SHA-256 and seal", p["error"]))
+    sos = db_signoff.list_signoffs(s)
+    bad_ids = _check_signoffs([db_signoff.as_dict(so) for so in sos], rows, ring, report)
+    for so in sos:
+        report.signoffs += 1
+        if so.id in bad_ids:
+            continue
+        bad = sorted(f"{'measurement' if src is None else src} section {sec} {ch}"
+                     for camp_name, src, sec, ch in broken if camp_name == so.campaign
+                     and src in (None, so.configuration))
+        if bad:
+            report.findings.append(Finding(
+                "signoff", f"sign-off {so.id} ({so.campaign}/{so.configuration}, "
+                f"{so.printed_name}) is stale: its evidence includes stored arrays that no "
+                "longer match their hashes", f"evidence {so.evidence_sha256}",
+                "; ".join(bad[:5])))
+            continue
+        try:
+            st = svc.status(s, so, full=full, check_signature=False)
+        except RailvalError as exc:
+            st = svc.SignoffStatus(so.id, "stale", [str(exc)])
+        if not st.valid:
+            report.findings.append(Finding(
+                "signoff", f"sign-off {so.id} ({so.campaign}/{so.configuration}, "
+                f"{so.printed_name}) is stale", f"evidence {so.evidence_sha256}",
+                "; ".join(st.reasons)))
 
 
 def export_bundle(database, folder: str | Path) -> dict[str, Any]:
@@ -239,39 +208,36 @@ def export_bundle(database, folder: str | Path) -> dict[str, Any]:
             "exported_at_utc": audit.utc_stamp(), "database": database.safe_url,
             "software_version": svc.software_version()}
     (out / "head.json").write_text(json.dumps(head, indent=2) + "\n", encoding="utf-8")
-    (out / "key.json").write_text(json.dumps(key_info(database), indent=2) + "\n",
-                                  encoding="utf-8")
-    wpath = integrity.witness_path(database.url)
+    info = key_info(database)
+    (out / "key.json").write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
+    wpath = Path(info["witness_file"]) if info["witness_file"] else None
     if wpath is not None and wpath.is_file():
         (out / "witness.jsonl").write_bytes(wpath.read_bytes())
+    if info["anchor_file"]:
+        (out / "anchor.json").write_bytes(Path(info["anchor_file"]).read_bytes())
     return head
 
 
 def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, *,
-                  public_key: str | None = None) -> VerifyReport:
+                  public_key: str | None = None,
+                  trust_fingerprints: list[str] | None = None) -> VerifyReport:
     """Verify an exported bundle without the database (chain, checkpoint, signatures,
-    witness, sign-offs both ways). ``public_key``: the hex key (or a file holding it) the
-    assessor obtained from the server's owner; without it the bundle's ``key.json`` is
-    trusted and a note says to compare its fingerprint."""
+    the server's anchor and witness, sign-offs both ways). ``public_key``: the hex key (or
+    a file holding it) the assessor obtained from the server's owner, ``trust_fingerprints``
+    the fingerprints; without them the bundle's ``key.json`` is trusted and a note says to
+    compare its fingerprint. Older keys are trusted only through the trail's countersigned
+    ``key.rotate`` rows."""
     from railval.app.services.signoff import manifest_differences
 
     t0 = time.perf_counter()
     root = Path(folder)
     report = VerifyReport(source=str(root))
-    if public_key:
-        keys = trusted_keys(None, public_key)
-    elif (root / "key.json").is_file():
-        keys = trusted_keys(None, str(root / "key.json"))
-        report.notes.append(f"trusting the public key(s) in the bundle (fingerprint "
-                            f"{', '.join(keys)}); compare with the fingerprint the "
-                            "server's owner published (`railval audit key`), or pass "
-                            "--public-key")
-    else:
-        raise RailvalError(f"audit bundle {root}: key.json is missing; pass --public-key")
-    report.keys = list(keys)
+    fps = _fingerprints(trust_fingerprints)
     for name in ("audit.jsonl", "signoffs.json", "current-evidence.json", "head.json"):
         if not (root / name).is_file():
             raise RailvalError(f"audit bundle {root}: {name} is missing")
+    if not (public_key or fps or (root / "key.json").is_file()):
+        raise RailvalError(f"audit bundle {root}: key.json is missing; pass --public-key")
     rows: dict[int, dict[str, Any]] = {}
 
     def read():
@@ -286,8 +252,16 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, 
                 yield r
 
     by_seq = _check_chain(read(), report, checkpoint)
-    lines = (_witness_lines(root / "witness.jsonl", report)
-             if (root / "witness.jsonl").is_file() else None)
+    keys = _bundle_ring(root, rows, public_key, fps, report)
+    report.keys, report.trust = list(keys), keys.describe()
+    lines = _witness_lines(root / "witness.jsonl", report,
+                           quiet=(root / "anchor.json").is_file() or not rows)
+    if (root / "anchor.json").is_file():
+        try:
+            anchor = json.loads((root / "anchor.json").read_text(encoding="utf-8"))
+        except ValueError as exc:
+            raise RailvalError(f"audit bundle {root}/anchor.json: {exc}") from None
+        check_anchor(by_seq, lines, anchor, "anchor.json", report)
     good = _check_row_signatures(rows, keys, report, witness_signed_from(lines, keys))
     if lines is not None:
         _check_witness(by_seq, lines, "witness.jsonl", keys, report, rows, good)
@@ -317,6 +291,30 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, 
                 "; ".join(diffs)))
     report.seconds = time.perf_counter() - t0
     return report
+
+
+def _bundle_ring(root: Path, rows: dict[int, dict[str, Any]], public_key: str | None,
+                 fps: list[str], report: VerifyReport) -> KeyRing:
+    """The keys a bundle is verified with (see :func:`verify_bundle`)."""
+    known = known_public_keys(rows)
+    if public_key or fps:
+        ring = KeyRing(_parse_public_keys(public_key) if public_key else {},
+                       "--public-key" if public_key else "")
+        for fp in fps:
+            if fp in known and fp not in ring:
+                ring[fp], ring.windows[fp] = known[fp], [1, float("inf")]
+                ring.how[fp] = "--trust-fingerprint"
+            elif fp not in ring:
+                report.findings.append(Finding(
+                    "signature", f"--trust-fingerprint {fp[:16]}…", "a public key with this "
+                    "fingerprint in the trail's identity or key rotation rows", "none"))
+    else:
+        ring = KeyRing(_parse_public_keys(str(root / "key.json")), "the bundle's key.json")
+        report.notes.append(f"trusting the public key in the bundle (fingerprint "
+                            f"{', '.join(ring)}); compare with the fingerprint the "
+                            "server's owner published (`railval audit key`), or pass "
+                            "--public-key / --trust-fingerprint")
+    return apply_rotations(ring, rows)
 
 
 def seal(database, actor: str, reason: str = "") -> tuple[int, str, int]:

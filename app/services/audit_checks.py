@@ -12,16 +12,21 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from railval.core.integrity import (
+    IDENTITY_ACTION,
+    KeyRing,
+    apply_rotations,
     check_checkpoint,
     evidence_hash,
     head_message,
+    known_public_keys,
     signoff_record,
     signoff_record_hash,
     verify_chain,
     verify_signature,
 )
 
-__all__ = ["Finding", "VerifyReport"]
+
+__all__ = ["Finding", "KeyRing", "VerifyReport", "apply_rotations", "known_public_keys"]
 
 
 @dataclass
@@ -55,6 +60,8 @@ class VerifyReport:
     witness: str | None = None
     witness_heads: int = 0
     signed_from: int | None = None
+    trust: list[dict[str, Any]] = field(default_factory=list)
+    seals_checked: bool = True
     seconds: float = 0.0
     source: str = "database"
 
@@ -67,6 +74,7 @@ class VerifyReport:
                 "head": {"seq": self.head_seq, "row_hash": self.head_hash},
                 "signals_checked": self.signals, "signoffs_checked": self.signoffs,
                 "signed_rows": self.signed_rows, "trusted_keys": self.keys,
+                "trust": self.trust, "seals_checked": self.seals_checked,
                 "witness": self.witness, "witness_heads": self.witness_heads,
                 "findings": [f.to_dict() for f in self.findings], "notes": self.notes,
                 "seconds": round(self.seconds, 3)}
@@ -115,61 +123,122 @@ def witness_signed_from(witness: list[dict[str, Any]] | None,
     return best
 
 
+def _declared_unsigned(rows: dict[int, dict[str, Any]], good: set[int]) -> dict[int, int]:
+    """seq → number of earlier unsigned rows, of the verified rows that say so
+    (``database.identity`` and ``audit.seal`` rows, detail ``unsigned_rows_before``)."""
+    out = {}
+    for seq in good:
+        r = rows[seq]
+        if r["action"] in (IDENTITY_ACTION, "audit.seal"):
+            n = (r.get("detail") or {}).get("unsigned_rows_before")
+            if isinstance(n, int) and n > 0:
+                out[seq] = n
+    return out
+
+
 def _check_row_signatures(rows: dict[int, dict[str, Any]], keys: dict[str, Any],
                           report: VerifyReport, signed_from: int | None = None) -> set[int]:
-    """Every row's signed head verifies; unsigned rows only before the first signed one (or
-    before ``signed_from``, the first head in the witness). Returns the seqs whose signature
-    verified; sets ``report.signed_from``."""
+    """Every row's signed head verifies with a key trusted for that row; unsigned rows are
+    a note only when a verified row after them says so (``unsigned_rows_before`` of a
+    ``database.identity`` or ``audit.seal`` row) and before ``signed_from`` (the first head
+    in the witness). Returns the seqs whose signature verified; sets ``report.signed_from``."""
+    ring = keys if isinstance(keys, KeyRing) else KeyRing(keys)
     good: set[int] = set()
     first_signed: int | None = signed_from
-    unsigned_before: list[int] = []
+    unsigned: list[int] = []
     bad = 0
+
+    def find(where, expected, found):
+        nonlocal bad
+        bad += 1
+        if bad <= 20:
+            report.findings.append(Finding("signature", where, expected, found))
+
     for seq in sorted(rows):
         r = rows[seq]
         where = f"row seq {seq} ({r['action']}, object {r['object']!r})"
         sig, fp = r.get("signature"), r.get("key_fingerprint")
         if not sig:
-            if first_signed is None or seq < first_signed:
-                unsigned_before.append(seq)
-            elif bad < 20:
-                bad += 1
-                report.findings.append(Finding(
-                    "signature", where, f"a signature (rows are signed from seq {first_signed})",
-                    "none: the row was written without the signing key"))
+            unsigned.append(seq)
             continue
         if first_signed is None or seq < first_signed:
             first_signed = seq
-        pk = keys.get(str(fp))
+        pk = ring.at(fp, seq)
         if pk is None:
-            if bad < 20:
-                bad += 1
-                report.findings.append(Finding(
-                    "signature", where, "a key this verifier trusts ("
-                    + ", ".join(k[:16] + "…" for k in keys) + ")",
-                    f"key {str(fp)[:16]}…"))
+            find(where, "a key this verifier trusts (" + ", ".join(k[:16] + "…" for k in ring)
+                 + ")", ring.why(fp, seq))
         elif not verify_signature(pk, "audit-head", head_message(seq, r["row_hash"]), sig):
             report.signed_rows += 1
-            if bad < 20:
-                bad += 1
-                report.findings.append(Finding(
-                    "signature", where, "a valid Ed25519 signature of {seq, row_hash}",
-                    "an invalid one: the row was changed or written without the signing key"))
+            find(where, "a valid Ed25519 signature of {seq, row_hash}",
+                 "an invalid one: the row was changed or written without the signing key")
         else:
             report.signed_rows += 1
             good.add(seq)
     report.signed_from = first_signed
-    if unsigned_before:
-        lo, hi = unsigned_before[0], unsigned_before[-1]
-        if first_signed is not None:
-            report.notes.append(
-                f"rows seq {lo}–{hi} ({len(unsigned_before)}) are unsigned, written before "
-                f"signing was enabled; the signed row seq {first_signed} chains over them")
-        else:
-            report.notes.append(
-                f"no row is signed ({len(unsigned_before)} rows, written before signing was "
-                "enabled): anyone with write access could have rewritten them; run "
-                "`railval audit seal` to sign the current head")
+    _unsigned_rows(rows, unsigned, _declared_unsigned(rows, good), first_signed, report, find)
     return good
+
+
+def _unsigned_rows(rows, unsigned: list[int], declared: dict[int, int],
+                   first_signed: int | None, report: VerifyReport, find) -> None:
+    """Unsigned rows: a note when a verified row after them declares them, else findings."""
+    if not unsigned:
+        return
+    stmt = max(declared, default=None)
+    ok = [s for s in unsigned if stmt is not None and s < stmt]
+    if stmt is not None and len(ok) > declared[stmt]:
+        ok = []  # more unsigned rows than the signed statement counted: signatures stripped
+    for seq in (s for s in unsigned if s not in set(ok)):
+        r = rows[seq]
+        what = (f"a signature (rows are signed from seq {first_signed})"
+                if first_signed is not None else "a signature, or a signed row declaring "
+                "the rows written before signing (`railval audit seal`)")
+        find(f"row seq {seq} ({r['action']}, object {r['object']!r})", what,
+             "none: the row was written without the signing key")
+    if ok:
+        report.notes.append(
+            f"rows seq {ok[0]}–{ok[-1]} ({len(ok)}) are unsigned, written before signing "
+            f"was enabled; the signed row seq {stmt} declares them and chains over them")
+    if first_signed is None:
+        report.notes.append(
+            f"no row is signed ({len(unsigned)} rows): anyone with write access could have "
+            "written them; run `railval audit seal` on the server to sign the current head")
+
+
+def _key_at(keys: dict[str, Any], fp: Any, seq: int | None) -> Any:
+    return keys.at(fp, seq) if isinstance(keys, KeyRing) else keys.get(str(fp))
+
+
+def check_anchor(by_seq: dict[int, str], witness: list[dict[str, Any]] | None,
+                 anchor: dict[str, Any], where: str, report: VerifyReport) -> None:
+    """The newest head the trust anchor ``anchor`` (at ``where``) recorded as witnessed:
+    the chain still holds it, and the witness file (``witness``; ``None``: missing) still
+    reaches it — a cut tail, a deleted trail, an older copy restored, a deleted, truncated
+    or rewound witness file fail."""
+    hw = anchor.get("witnessed")
+    if not hw:
+        return
+    seq, h = int(hw["seq"]), str(hw["row_hash"])
+    top = max(by_seq) if by_seq else 0
+    label = f"trust anchor {where}: witnessed head seq {seq} ({hw.get('at_utc', '')})"
+    if seq > top:
+        report.findings.append(Finding(
+            "witness", label, f"the chain to hold at least {seq} rows",
+            f"{top} rows: the rows after seq {top} were removed (or an older copy restored)"))
+    elif by_seq.get(seq) != h:
+        report.findings.append(Finding("witness", label, h,
+                                       f"{by_seq.get(seq)} (the chain was rewritten)"))
+    if witness is None:
+        report.findings.append(Finding(
+            "witness", label, "the witness file holding the signed heads up to that seq",
+            "no witness file: it was deleted"))
+        return
+    reach = max((int(w["seq"]) for w in witness), default=0)
+    if reach < seq or not any(int(w["seq"]) == seq and str(w["row_hash"]) == h
+                              for w in witness):
+        report.findings.append(Finding(
+            "witness", label, f"the witness file to hold the head seq {seq}",
+            f"heads up to seq {reach} only: the witness file was truncated or rewound"))
 
 
 def _check_witness(by_seq: dict[int, str], witness: list[dict[str, Any]], where_file: str,
@@ -186,7 +255,7 @@ def _check_witness(by_seq: dict[int, str], witness: list[dict[str, Any]], where_
     bad = 0
     for i, w in enumerate(witness, 1):
         seq, h = int(w["seq"]), str(w["row_hash"])
-        pk = keys.get(str(w.get("key_fingerprint")))
+        pk = _key_at(keys, w.get("key_fingerprint"), seq)
         label = f"witness {where_file} line {i}: signed head seq {seq} ({w.get('at_utc', '')})"
         same = (seq in verified and rows[seq]["row_hash"] == h
                 and rows[seq].get("signature") == w.get("signature")
@@ -263,15 +332,18 @@ def _check_signed(sod: dict[str, Any], row: dict[str, Any] | None, keys: dict[st
                   find) -> None:
     """A signed sign-off: a trusted key, its signature, and its audit row's record hash."""
     record_hash = signoff_record_hash(sod)
-    pk = keys.get(str(sod.get("key_fingerprint")))
+    seq = int(row["seq"]) if row is not None else None
+    pk = _key_at(keys, sod.get("key_fingerprint"), seq)
     hint = ""
     if row is not None:
         was = (row.get("detail") or {}).get("decision")
         if was is not None and was != sod["decision"]:
             hint = f"; decision: signed {was!r}, now {sod['decision']!r}"
     if pk is None:
-        find(sod, "signature", "a key this verifier trusts",
-             f"key {str(sod.get('key_fingerprint'))[:16]}…")
+        why = (keys.why(sod.get("key_fingerprint"), seq) if isinstance(keys, KeyRing)
+               else f"key {str(sod.get('key_fingerprint'))[:16]}…: signed by a key that is "
+               "not trusted")
+        find(sod, "signature", "a key this verifier trusts", why)
     elif not verify_signature(pk, "signoff", signoff_record(sod), sod["signature"]):
         find(sod, "edited or forged: its signature does not verify",
              f"the signed record {sod.get('record_sha256')}", f"record {record_hash}{hint}")

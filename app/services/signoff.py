@@ -31,10 +31,17 @@ from typing import Any
 from sqlalchemy.orm import Session
 
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
-from railval.core.integrity import evidence_hash, signoff_record, verify_signature
+from railval.core.integrity import (
+    apply_rotations,
+    evidence_hash,
+    head_message,
+    signoff_record,
+    signoff_record_hash,
+    verify_signature,
+)
 from railval.core.processing import DEFAULT_ORDER, PROCESSING_VERSION
 from railval.core.roles import PermissionDenied, require
-from railval.db import audit, integrity, repo, users
+from railval.db import audit, integrity, repo, trust, users
 from railval.db import signoff as db_signoff
 from railval.db.models import Signoff
 
@@ -169,25 +176,67 @@ def manifest_differences(signed: dict[str, Any], now: dict[str, Any], *,
     return out
 
 
-def _signature_holds(session: Session, so: Signoff) -> bool:
-    """Does the sign-off's signature verify with a key the server trusts? (True when no key
-    is at hand, e.g. a copied database: ``railval audit verify --public-key`` decides.)"""
-    keys = integrity.trusted_public_keys(integrity.session_url(session))
-    if not keys:
-        return True
-    pk = keys.get(str(so.key_fingerprint))
-    return pk is not None and verify_signature(pk, "signoff",
-                                               signoff_record(db_signoff.as_dict(so)),
-                                               so.signature)
+def _server_keys(session: Session):
+    """The keys the server trusts (pins or ``$RAILVAL_TRUST_ANCHOR_FILE``, extended by the
+    trail's ``key.rotate`` rows), once per unit of work; ``None``: no trust anchor here."""
+    if "railval_trusted_keys" not in session.info:
+        rows = {int(r["seq"]): r for r in audit.key_rows(session)}
+        ring, how, _found = trust.server_ring(integrity.session_url(session), rows)
+        session.info["railval_trusted_keys"] = (
+            None if how in ("none", "first use") else apply_rotations(ring, rows))
+    return session.info["railval_trusted_keys"]
 
 
-def status(session: Session, so: Signoff, *, full: bool = False) -> SignoffStatus:
-    """Is the sign-off still bound to the current evidence? (``full``: recompute the result.)"""
+def _unsigned_problem(session: Session, so: Signoff, keys) -> str | None:
+    """An unsigned sign-off holds only when a signed ``audit.seal`` row (verified with a
+    trusted key) binds its record hash (written before signing was enabled, then sealed)."""
+    if "railval_seals" not in session.info:
+        session.info["railval_seals"] = list(audit.iter_rows(session, action="audit.seal"))
+    want = signoff_record_hash(db_signoff.as_dict(so))
+    for r in session.info["railval_seals"]:
+        bound = ((r.get("detail") or {}).get("unsigned_signoffs") or {}).get(str(so.id))
+        pk = (keys or {}).get(str(r.get("key_fingerprint")))
+        if bound == want and pk is not None and verify_signature(
+                pk, "audit-head", head_message(int(r["seq"]), r["row_hash"]), r["signature"]):
+            return None
+    return ("unsigned, and no signed seal binds its record: it was written or edited "
+            "outside railval, or before signing and never sealed (`railval audit verify`)")
+
+
+def _signature_problem(session: Session, so: Signoff) -> str | None:
+    """Why the sign-off's signature does not hold with a key the server trusts (``None``:
+    it holds). A key that is not pinned (a replaced key file, a ``.retired`` file) or no
+    trust anchor at all never makes it valid."""
+    keys = _server_keys(session)
+    fp = str(so.key_fingerprint)
+    if not so.signature:
+        return _unsigned_problem(session, so, keys)
+    if keys is None:
+        return ("its signature cannot be checked here: no trust anchor for this database "
+                "(no pin in the server's configuration directory, no "
+                "$RAILVAL_TRUST_ANCHOR_FILE); run `railval audit verify` on the server, or "
+                "with --public-key")
+    pk = keys.get(fp)
+    if pk is None:
+        return (f"signed by a key that is not trusted (fingerprint {fp[:16]}…; trusted: "
+                + ", ".join(k[:16] + "…" for k in keys) + ")")
+    if not verify_signature(pk, "signoff", signoff_record(db_signoff.as_dict(so)),
+                            so.signature):
+        return ("the sign-off's record does not match its signature: it was edited "
+                "outside railval (run `railval audit verify`)")
+    return None
+
+
+def status(session: Session, so: Signoff, *, full: bool = False,
+           check_signature: bool = True) -> SignoffStatus:
+    """Is the sign-off still bound to the current evidence, signed by a trusted key?
+    (``full``: recompute the result; ``check_signature=False``: the caller checked the
+    signature already, as ``railval audit verify`` does with its own trust.)"""
     reasons: list[str] = []
     stored = dict(so.manifest or {})
-    if so.signature and not _signature_holds(session, so):
-        reasons.append("the sign-off's record does not match its signature: it was edited "
-                       "outside railval (run `railval audit verify`)")
+    problem = _signature_problem(session, so) if check_signature else None
+    if problem:
+        reasons.append(problem)
     if evidence_hash(stored) != so.evidence_sha256:
         reasons.append(f"stored manifest does not hash to the signed evidence hash "
                        f"{so.evidence_sha256} (found {evidence_hash(stored)})")
