@@ -17,6 +17,7 @@ import panel as pn
 from railval.app.pages._common import PageBase, make_dispatch, message
 from railval.app.services.web_import import MAX_UPLOAD_MB
 from railval.app.state import AppState
+from railval.core.errors import RailvalError
 
 
 class ImportPage(PageBase):
@@ -63,27 +64,47 @@ class ImportPage(PageBase):
             self.result,
         ]
 
+    def _show(self, level: str, text_html: str) -> None:
+        """The outcome under the upload box: success, refusal and a missing choice alike
+        (the sidebar's status area says it too)."""
+        style, role = _RESULT_STYLES[level]
+        self.result.object = (f"<div class='rv-import-{level}' role='{role}' style='{style};"
+                              "padding:8px 10px;border-radius:4px;font-size:14px;"
+                              f"line-height:1.4'>{text_html}</div>")
+
+    def _warn(self, text: str) -> None:
+        self.app.set_status(f"Import: {text}", "warning")
+        self._show("warning", html.escape(text[:1].upper() + text[1:]) + ".")
+
     def start(self) -> None:
         from railval.app.services.web_import import import_configuration_zip, import_zip
 
         data, name = self.file.value, self.file.filename or "upload.zip"
         if not data:
-            self.app.set_status("Import: choose a zip file first", "warning")
+            self._warn("choose a zip file first")
             return
         principal, database = self.app.principal, self.app.backend.database
         into = self.app.campaign if self.kind.value == "configuration" else None
         if self.kind.value == "configuration" and into is None:
-            self.app.set_status("Import: no campaign selected to add the configuration to", "warning")
+            self._warn("no campaign selected to add the configuration to")
             return
         self.result.object = ""
+        dispatch = make_dispatch()
 
         def work(progress):
             def step(done: int, total: int, what: str) -> None:
                 progress(done / max(total, 1), f"checked {done}/{total} files ({what})")
-            if into is not None:
-                return into, import_configuration_zip(database, principal, into, data, name,
-                                                      progress=step)
-            return import_zip(database, principal, data, name, progress=step), None
+            try:
+                if into is not None:
+                    return into, import_configuration_zip(database, principal, into, data, name,
+                                                          progress=step)
+                return import_zip(database, principal, data, name, progress=step), None
+            except Exception as exc:  # shown under the upload box; the job reports it too
+                why = (str(exc) if isinstance(exc, RailvalError) else
+                       f"internal error ({type(exc).__name__}); the details are in the server log")
+                dispatch(lambda: self._show("error", f"Not imported: {html.escape(why)}<br>"
+                                            f"Nothing of {html.escape(name)} was stored."))
+                raise
 
         def done(result: tuple[str, str | None]) -> None:
             campaign, conf = result
@@ -91,12 +112,20 @@ class ImportPage(PageBase):
             what = (f"configuration <b>{html.escape(conf)}</b> into campaign "
                     f"<b>{html.escape(campaign)}</b>" if conf else
                     f"campaign <b>{html.escape(campaign)}</b>")
-            self.result.object = (f"<div class='rv-import-ok'>Imported {what} from "
-                                  f"{html.escape(name)}.</div>")
+            self._show("ok", f"Imported {what} from {html.escape(name)}.")
             self.app.refresh_campaigns()
             self.app.campaign = campaign
             if conf:
                 self.app.reload_configurations(select=conf)
 
-        self.app.run_job(f"Import {name}", work, on_done=done, dispatch=make_dispatch(),
+        self.app.run_job(f"Import {name}", work, on_done=done, dispatch=dispatch,
                          action="data.import")
+
+
+#: look of the outcome under the upload box per level: (inline style, ARIA role); the pane
+#: renders in its own shadow root, so the style travels with the element
+_RESULT_STYLES = {
+    "ok": ("color:#1b4d1b;background:#e8f5e9;border:1px solid #2e7d32", "status"),
+    "warning": ("color:#5c4300;background:#fff8e1;border:1px solid #b8860b", "status"),
+    "error": ("color:#7a1010;background:#fdecea;border:1px solid #c62828", "alert"),
+}
