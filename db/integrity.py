@@ -22,11 +22,11 @@ that signs every audit row's head and every sign-off's canonical record
 (:mod:`railval.core.integrity`), so an assessor verifies with the public key alone. In this
 order: the PEM file named by ``$RAILVAL_SIGNING_KEY_FILE``; for an SQLite file ``railval.db``
 the file ``railval.db.signing-key.pem`` beside it; otherwise
-``$XDG_CONFIG_HOME/railval/signing-key.pem`` (created 0600 on first use). Public keys of
-earlier (rotated) keys that still verify old rows: ``<key file>.retired``, one hex key a line.
-The **witness file** (:func:`witness_path`) keeps every signed head outside the database:
-``$RAILVAL_WITNESS_FILE``, else ``<key file without .pem>.witness.jsonl`` for SQLite, else
-``$XDG_CONFIG_HOME/railval/witness-<SHA-256 of the database URL, 16 hex>.jsonl``.
+``$XDG_CONFIG_HOME/railval/signing-key.pem`` (created 0600 on first use). What verification
+*trusts* is not this file: the pinned fingerprints, the database's identity and the witness
+(every signed head, and the newest one witnessed) live in the trust directory, by default
+``$XDG_CONFIG_HOME/railval/trust/`` (:func:`_config_dir`), out of reach of whoever writes the
+database's folder (:mod:`railval.db.trust`; docs/database.md, "Trust anchor").
 
 Signal seals, version 2, also bind the **names**: campaign, section, configuration (empty for
 the measurement) and channel, so data moved to another section, configuration or campaign
