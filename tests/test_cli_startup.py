@@ -340,3 +340,23 @@ def test_lazy_import_error_surfaces_at_first_use():
         missing()
     with pytest.raises(ModuleNotFoundError):
         lazy.module("railval_no_such_module").anything  # noqa: B018
+
+
+def test_startup_bench_times_the_verbs_against_the_baselines(capsys):
+    """``railval bench startup`` runs each command in fresh processes and reports its wall
+    time, the time to the verb's dispatch and function, and the heavy modules it imported,
+    beside the baselines of the same rounds and the load."""
+    assert main(["bench", "startup", "--repeat", "1", "--only", "list", "signoff list",
+                 "--json"]) == 0
+    figures = json.loads(capsys.readouterr().out)["figures"]
+    assert figures["repeat"] == 1 and figures["load_1min_before"] >= 0
+    assert 0 < figures["baseline: python -c pass"]["best_s"]
+    assert figures["baseline: import scipy.signal"]["best_s"] > 0
+    for label in ("list", "signoff list"):
+        row = figures[label]
+        assert row["exit"] == 0 and row["heavy"] in ("none", "railval.db.models"), row
+        assert 0 < row["to_dispatch_s"] <= row["to_verb_s"] <= row["best_s"] <= row["median_s"]
+    assert figures["list"]["heavy"] == "none"
+    assert "validate" not in figures  # --only
+    assert main(["bench", "startup", "--only", "nonsense"]) == 2
+    assert "--only: unknown command(s) ['nonsense']" in capsys.readouterr().err

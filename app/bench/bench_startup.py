@@ -36,6 +36,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from railval.core.errors import InvalidParameter
+
 #: the libraries a verb must not load unless its work needs them
 HEAVY = ("scipy.signal", "scipy.stats", "pandas", "numba", "panel", "bokeh", "holoviews",
          "matplotlib", "statsmodels", "alembic", "railval.db.models")
@@ -142,11 +144,11 @@ def _summary(walls: list[float], reports: list[dict]) -> dict:
 
 def run(args: argparse.Namespace) -> dict:
     if args.repeat < 1:
-        raise ValueError(f"--repeat must be at least 1, got {args.repeat}")
+        raise InvalidParameter(f"--repeat must be at least 1, got {args.repeat}")
     labels = args.only or list(COMMANDS)
     unknown = [x for x in labels if x not in COMMANDS]
     if unknown:
-        raise ValueError(f"--only: unknown command(s) {unknown}; known: {list(COMMANDS)}")
+        raise InvalidParameter(f"--only: unknown command(s) {unknown}; known: {list(COMMANDS)}")
     env = {k: v for k, v in os.environ.items() if k != "RAILVAL_DEBUG"}
     with tempfile.TemporaryDirectory(prefix="railval-startup-") as tmp:
         url = args.db or f"sqlite:///{Path(tmp) / 'empty.db'}"
