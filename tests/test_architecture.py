@@ -80,7 +80,9 @@ def _is_package(name: str) -> bool:
 
 def _imports(name: str, path: Path) -> Iterator[tuple[str, int]]:
     """(imported module, line) of every import statement in a module, relative imports resolved;
-    ``from package import submodule`` names the submodule."""
+    ``from package import submodule`` names the submodule. A deferred import
+    (``lazy.function("railval.x", "f")``, ``lazy.module("railval.x")``, railval.core.lazy)
+    counts as an import of its module: deferring a load does not change the layering."""
     tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
     package = name if _is_package(name) else name.rpartition(".")[0]
     for node in ast.walk(tree):
@@ -100,6 +102,11 @@ def _imports(name: str, path: Path) -> Iterator[tuple[str, int]]:
                     yield base, node.lineno
             else:
                 yield base, node.lineno
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+              and isinstance(node.func.value, ast.Name) and node.func.value.id == "lazy"
+              and node.func.attr in ("function", "module") and node.args
+              and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)):
+            yield node.args[0].value, node.lineno
 
 
 def _railval_target(imported: str) -> str | None:
@@ -442,6 +449,11 @@ def test_import_rules_fail_on_planted_violations(tmp_path):
         "report.py:4 imports railval.app.state.dashboard"]
     assert forbidden_imports("railval.app.state.planted", bad, ("panel", "bokeh")) == [
         "report.py:1 imports panel"]
+    deferred = tmp_path / "deferred.py"
+    deferred.write_text("from railval.core import lazy\n\n"
+                        "f = lazy.function('railval.db.repo', 'get_campaign')\n", encoding="utf-8")
+    assert forbidden_imports("railval.core.planted", deferred, ("railval.db",)) == [
+        "deferred.py:3 imports railval.db.repo"]
 
 
 def test_db_modules_are_at_most_700_lines():
