@@ -189,12 +189,16 @@ def _pin_first_use(database, rows, ring: KeyRing, report: VerifyReport) -> None:
     db_id = ident.get("database_id") or trust.new_database_id()
     fp, pk = next(iter(ring.items()))
     top = rows[max(rows)]
+    head = {k: top.get(k) for k in ("seq", "row_hash", "at_utc", "key_fingerprint",
+                                    "signature")}
+    wpath = trust.witness_file(db_id)
+    if top.get("signature") and wpath is not None:
+        integrity.append_witness(wpath, {**head, "database_id": db_id})
     doc = trust.update_anchor(
         database.url, db_id,
         pin={"fingerprint": fp, "public_key": public_key_hex(pk),
              "how": "first use: railval audit verify"},
-        head={k: top.get(k) for k in ("seq", "row_hash", "at_utc", "key_fingerprint",
-                                      "signature")})
+        head=head if top.get("signature") else None)
     report.notes.append(f"pinned key {fp} for database {doc['database_id']} in "
                         f"{trust.anchor_file(doc['database_id'])} (trust on first use)")
 
