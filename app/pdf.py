@@ -7,6 +7,7 @@ validation report (:mod:`railval.app.report`) and the audit report
 
 from __future__ import annotations
 
+import html
 import os
 import shutil
 import subprocess
@@ -21,6 +22,26 @@ CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "goo
 CHROMIUM_ARGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync")
 PDF_TIMEOUT_S = 120
+
+#: Print rules of the reports (appended to their CSS): A4 pages, and a wide table of class
+#: ``blocks`` laid out as one block per row, each cell on its own line headed by its
+#: ``data-label`` (its column's name) — so the PDF holds every field of the HTML, wrapped,
+#: and pages break between and inside blocks as needed (the header row, class ``head``, is
+#: left out: each line names its column). Ligatures are off so the PDF's text is the HTML's.
+PRINT_CSS = """
+@page { size: A4; margin: 14mm 12mm; }
+@media print {
+  body { margin: 0; font-size: 11px; font-variant-ligatures: none; }  /* fi, ff stay searchable text */
+  td, th { overflow-wrap: break-word; }  /* a long word breaks only where it would overflow */
+  td:last-child { overflow-wrap: anywhere; }  /* the free-text column gives way first */
+  table.blocks, table.blocks tbody, table.blocks tr, table.blocks td { display: block; border: none;
+    text-align: left; padding: 1px 0; }
+  table.blocks tr.head { display: none; }
+  table.blocks tr { border: 1px solid #ccc; margin: 0 0 8px; padding: 4px 8px; }
+  table.blocks td:empty { display: none; }
+  table.blocks td::before { content: attr(data-label) ": "; font-weight: bold; color: #444; }
+}
+"""
 
 
 class ReportError(RailvalError):
@@ -67,3 +88,9 @@ def html_to_pdf(document: str, timeout_s: float = PDF_TIMEOUT_S) -> bytes:
             raise ReportError(f"Chromium ({exe}) produced no PDF (exit {proc.returncode}): "
                               f"{proc.stderr.decode(errors='replace')[-400:]}")
         return out.read_bytes()
+
+
+def block_cell(value: str, cls: str, label: str) -> str:
+    """A cell of a ``blocks`` table (:data:`PRINT_CSS`): ``value`` (already escaped HTML)
+    with its column's name as ``data-label``, the heading of its line in print."""
+    return f"<td data-label='{html.escape(label, quote=True)}' class='{cls}'>{value}</td>"

@@ -31,7 +31,9 @@ import numpy as np
 
 from railval.app.pdf import (  # noqa: F401 - the report's writers, re-exported for callers
     CHROMIUM_ARGS,
+    PRINT_CSS,
     ReportError,
+    block_cell,
     find_chromium,
     html_to_pdf,
     write_html_or_pdf,
@@ -126,23 +128,7 @@ table { border-collapse: collapse; margin: 8px 0; } th, td { border: 1px solid #
 .hashes td, td.hash { font-family: 'DejaVu Sans Mono', monospace; font-size: 10px; }
 .charts { display: flex; flex-wrap: wrap; gap: 12px; } .note { color: #555; }
 @media print { h2 { page-break-after: avoid; } .worst { page-break-inside: avoid; } }
-@page { size: A4; margin: 14mm 12mm; }
-@media print {
-  body { margin: 0; font-size: 11px; font-variant-ligatures: none; }  /* fi, ff stay searchable text */
-  td, th { overflow-wrap: break-word; }  /* a long word breaks only where it would overflow */
-  td:last-child { overflow-wrap: anywhere; }  /* the free-text column gives way first */
-  table.blocks, table.blocks tbody, table.blocks tr, table.blocks td { display: block; border: none;
-    text-align: left; padding: 1px 0; }
-  table.blocks tr.head { display: none; }
-  table.blocks tr { border: 1px solid #ccc; margin: 0 0 8px; padding: 4px 8px; }
-  table.blocks td:empty { display: none; }
-  table.blocks td::before { content: attr(data-label) ": "; font-weight: bold; color: #444; }
-}
-""".replace("{pass_}", PASS_COLOR).replace("{fail}", FAIL_COLOR)
-#: The print rules above lay a wide table of class ``blocks`` out as one block per row, each
-#: cell on its own line headed by its ``data-label`` (its column's name), so the A4 PDF
-#: (:func:`railval.app.pdf.html_to_pdf`) holds every field of the HTML, wrapped, and pages
-#: break between and inside blocks as needed.
+""".replace("{pass_}", PASS_COLOR).replace("{fail}", FAIL_COLOR) + PRINT_CSS
 
 
 def diverging_color(value: float, limit: float = 2.0) -> str:
@@ -208,16 +194,10 @@ def signoff_rows_html(items: list[tuple[dict[str, Any], Any]]) -> str:
             (f"{_esc(d['printed_name'])} ({_esc(d['username'])})", "l"), (_esc(d["signed_at_utc"]), "l"),
             (_esc(d["meaning"]), "l"), (_esc(d["restrictions"] or "–"), "l"), (_esc(d["statement"] or "–"), "l"),
             (contrary_html(d), "l"), (_esc(d["evidence_sha256"]), "l hash"), (why, "l"))
-        rows.append("<tr>" + "".join(_cell(v, c, label) for (v, c), label in zip(cells, SIGNOFF_COLUMNS, strict=True))
+        rows.append("<tr>" + "".join(block_cell(v, c, label) for (v, c), label in zip(cells, SIGNOFF_COLUMNS, strict=True))
                     + "</tr>")
     head = "".join(f"<th class='{'l' if i else ''}'>{_esc(c)}</th>" for i, c in enumerate(SIGNOFF_COLUMNS))
     return "<table class='blocks signoffs'><tr class='head'>" + head + "</tr>" + "".join(rows) + "</table>"
-
-
-def _cell(value: str, cls: str, label: str) -> str:
-    """A table cell of a ``blocks`` table: ``value`` (already escaped) with its column's name
-    as ``data-label`` (the heading of the line in print)."""
-    return f"<td data-label='{_esc(label)}' class='{cls}'>{value}</td>"
 
 
 def _verdict_document(d: dict) -> dict:
