@@ -265,12 +265,19 @@ def _gain_kind(name: str) -> tuple[str, bool]:
     return stem or x, True
 
 
+#: share of a kind's channels whose gains all lie on one side of 1 that marks a common model error
+MOST = 0.75
+
+
 def not_sensor_faults(res: DiagnosisResult) -> dict[str, str]:
     """The campaign's redundancy rule (docs/diagnosis.md "Model or measurement?"): a gain
     candidate is no sensor fault when its interval of fitted values contains 1 (the sensor may
     read right), or when every channel of its kind wants the same gain — each single channel's
     fitted gain inside every other one's interval, away from 1: a model error common to all
-    those sensors (a mass, a stiffness) scales them alike, a sensor fault scales one. The
+    those sensors (a mass, a stiffness) scales them alike, a sensor fault scales one; likewise
+    when at least :data:`MOST` of three or more channels of the kind want a gain on the same
+    side of 1 (bootstrap interval beyond 1: on the trust bench another creep law in the truth
+    lowered every guiding force, and a side group's gain absorbed it). The
     interval is the bootstrap one (refit on resampled sections, Efron & Tibshirani 1993 §8.2):
     the widened interval also holds the lack-of-fit region, which grows with any model error
     the gain cannot remove. Name → reason."""
@@ -289,12 +296,16 @@ def not_sensor_faults(res: DiagnosisResult) -> dict[str, str]:
         if len(singles) < 2:
             continue
         alike = all(o.fitted_ci_bootstrap[0] <= c.fitted <= o.fitted_ci_bootstrap[1] for c in singles for o in singles)
-        if alike and all(c.fitted > 1 for c in singles) or alike and all(c.fitted < 1 for c in singles):
-            vals = sorted(c.fitted for c in singles)
-            for c in gains:
-                if _gain_kind(c.name)[0] == kind:
-                    out.setdefault(c.name, f"every {kind} channel wants the same gain ({vals[0]:.3g}–{vals[-1]:.3g}): "
-                                           "a model error common to those sensors, not a sensor fault")
+        same = alike and (all(c.fitted > 1 for c in singles) or all(c.fitted < 1 for c in singles))
+        up = sum(c.fitted_ci_bootstrap[0] > 1 for c in singles)
+        down = sum(c.fitted_ci_bootstrap[1] < 1 for c in singles)
+        vals = sorted(c.fitted for c in singles)
+        why = (f"every {kind} channel wants the same gain ({vals[0]:.3g}–{vals[-1]:.3g})" if same else
+               f"{max(up, down)} of the {len(singles)} {kind} channels want a gain {'above' if up > down else 'below'} 1"
+               if len(singles) >= 3 and max(up, down) >= MOST * len(singles) else "")
+        for c in gains:
+            if why and _gain_kind(c.name)[0] == kind:
+                out.setdefault(c.name, why + ": a model error common to those sensors, not a sensor fault")
     return out
 
 
