@@ -40,6 +40,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         return 0
     print(f"diagnosis of {args.campaign}/{args.config}: verdict {res.verdict.upper()} — {res.note}")
     print(f"noise floor (share of pure section scatter the candidates explain, 95 %): {res.noise_floor:.2f}")
+    for st in res.statements or []:
+        print(f"input ({st['kind']}): {st['text']}")
     print(f"{'rank':>4}  {'candidate':<28} {'kind':<9} {'held-out':>8} {'explained':>9}  fitted")
     for k, c in enumerate(res.candidates, 1):
         print(f"{k:>4}  {c.name:<28} {c.kind:<9} {c.held_out_explained:8.2f} {c.explained:9.2f}  {c.summary}")
