@@ -356,6 +356,7 @@ def test_startup_bench_times_the_verbs_against_the_baselines(capsys):
         row = figures[label]
         assert row["exit"] == 0 and row["heavy"] in ("none", "railval.db.models"), row
         assert 0 < row["to_dispatch_s"] <= row["to_verb_s"] <= row["best_s"] <= row["median_s"]
+        assert 0 < row["best_cpu_s"]
     assert figures["list"]["heavy"] == "none"
     assert "validate" not in figures  # --only
     assert main(["bench", "startup", "--only", "nonsense"]) == 2

@@ -6,6 +6,8 @@ in each round, so a change in the machine's load falls on all of them alike, and
 the median are reported. Per command:
 
 * ``best_s`` / ``median_s``: from the process's spawn to its exit (what a user waits for);
+* ``best_cpu_s``: the process's CPU time (user + system), which the other jobs of a shared
+  machine change far less than the wall time;
 * ``to_dispatch_s``: from the spawn to the verb's dispatch (the interpreter, the parser and the
   verb's command module loaded, arguments parsed) — the command line's own start-up;
 * ``to_verb_s``: from the spawn to the call of the verb's own function, after the permission
@@ -29,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -103,12 +106,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"time only these commands (of: {', '.join(COMMANDS)})")
 
 
-def _run(argv: list[str], env: dict, probe: bool) -> tuple[float, dict | None]:
-    """Wall time of one fresh process and, for a railval command (``probe``), its report."""
+def _run(argv: list[str], env: dict, probe: bool) -> tuple[tuple[float, float], dict | None]:
+    """(wall, CPU) time of one fresh process and, for a railval command (``probe``), its
+    report."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     spawned = time.time()
     t0 = time.perf_counter()
     proc = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=300)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     lines = [x for x in proc.stderr.splitlines() if x.startswith("STARTUP ")]
     if probe:
         if not lines:
@@ -118,10 +125,10 @@ def _run(argv: list[str], env: dict, probe: bool) -> tuple[float, dict | None]:
         for mark in ("dispatch", "verb"):
             at = report["marks"].get(mark)
             report[f"to_{mark}"] = None if at is None else at - spawned
-        return wall, report
+        return (wall, cpu), report
     if proc.returncode != 0:
         raise RuntimeError(f"baseline {argv[2]!r} failed: {proc.stderr[-500:]}")
-    return wall, None
+    return (wall, cpu), None
 
 
 def _initialise(url: str, env: dict) -> None:
@@ -131,8 +138,10 @@ def _initialise(url: str, env: dict) -> None:
         raise RuntimeError(f"railval init {url}: {proc.stderr[-500:]}")
 
 
-def _summary(walls: list[float], reports: list[dict]) -> dict:
-    out = {"best_s": round(min(walls), 3), "median_s": round(statistics.median(walls), 3)}
+def _summary(times: list[tuple[float, float]], reports: list[dict]) -> dict:
+    walls = [w for w, _ in times]
+    out = {"best_s": round(min(walls), 3), "median_s": round(statistics.median(walls), 3),
+           "best_cpu_s": round(min(c for _, c in times), 3)}
     if reports:
         for mark in ("dispatch", "verb"):
             at = [r[f"to_{mark}"] for r in reports if r[f"to_{mark}"] is not None]
@@ -158,17 +167,17 @@ def run(args: argparse.Namespace) -> dict:
                    for k, v in BASELINES.items()},
                 **{k: ([sys.executable, "-c", _PROBE, "--db", url, *COMMANDS[k]], True)
                    for k in labels}}
-        walls: dict[str, list[float]] = {k: [] for k in jobs}
+        times: dict[str, list[tuple[float, float]]] = {k: [] for k in jobs}
         reports: dict[str, list[dict]] = {k: [] for k in jobs}
         load_before = os.getloadavg()[0]
         for _ in range(args.repeat):  # the commands take turns in every round
             for label, (argv, probe) in jobs.items():
-                wall, report = _run(argv, env, probe)
-                walls[label].append(wall)
+                measured, report = _run(argv, env, probe)
+                times[label].append(measured)
                 if report is not None:
                     reports[label].append(report)
         load_after = os.getloadavg()[0]
     return {"load_1min_before": round(load_before, 2), "load_1min_after": round(load_after, 2),
             "cpus": os.cpu_count(), "repeat": args.repeat,
             "database": "empty SQLite (railval init)" if not args.db else "--db",
-            **{label: _summary(walls[label], reports[label]) for label in jobs}}
+            **{label: _summary(times[label], reports[label]) for label in jobs}}
