@@ -194,8 +194,8 @@ def signoff_rows_html(items: list[tuple[dict[str, Any], Any]]) -> str:
             (f"{_esc(d['printed_name'])} ({_esc(d['username'])})", "l"), (_esc(d["signed_at_utc"]), "l"),
             (_esc(d["meaning"]), "l"), (_esc(d["restrictions"] or "–"), "l"), (_esc(d["statement"] or "–"), "l"),
             (contrary_html(d), "l"), (_esc(d["evidence_sha256"]), "l hash"), (why, "l"))
-        rows.append("<tr>" + "".join(block_cell(v, c, label) for (v, c), label in zip(cells, SIGNOFF_COLUMNS, strict=True))
-                    + "</tr>")
+        rows.append("<tr>" + "".join(block_cell(v, c, label)
+                                     for (v, c), label in zip(cells, SIGNOFF_COLUMNS, strict=True)) + "</tr>")
     head = "".join(f"<th class='{'l' if i else ''}'>{_esc(c)}</th>" for i, c in enumerate(SIGNOFF_COLUMNS))
     return "<table class='blocks signoffs'><tr class='head'>" + head + "</tr>" + "".join(rows) + "</table>"
 

@@ -373,9 +373,10 @@ def curve_crossing(value, yes) -> tuple[float | None, str]:
     ``v``: ``v₅₀ = v_k + (v_{k+1} − v_k)(P_k − ½)/(P_k − P_{k+1})`` — the linearly
     interpolated isotonic estimate of a target quantile (Stylianou & Flournoy 2002,
     "Dose finding using the biased coin up-and-down design and isotonic regression",
-    Biometrics 58:171–177, §2.3). Points exactly at ½ form the segment where the curve equals
-    ½; its midpoint is returned — unless every point is at ½: ``(None, FLAT)``. This is the crossing of the line a chart draws through the
-    same points (straight segments in ``v``), so the reported value and the drawn curve agree.
+    Biometrics 58:171–177). Points exactly at ½ form the segment where the curve equals ½;
+    its midpoint is returned — unless every point is at ½: ``(None, FLAT)``. This is the
+    crossing of the line a chart draws through the same points (straight segments in ``v``),
+    so the reported value and the drawn curve agree.
 
     Parameters
     ----------
