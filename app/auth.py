@@ -36,7 +36,7 @@ from tornado.web import RequestHandler, decode_signed_value
 
 from railval.core.errors import RailvalError
 from railval.core.roles import Principal, open_principal
-from railval.db import users
+from railval.db import users, workshops
 
 COOKIE = "railval_session"
 SESSION_MAX_AGE_S = 8 * 3600
@@ -318,7 +318,7 @@ class InviteHandler(RequestHandler):
                 inv = users.check_invitation(s, token)
                 if pw != pw2:
                     raise InvalidParameter("the two passwords differ")
-                user = users.redeem_invitation(s, token, username=username, password=pw,
+                user = workshops.redeem_invitation(s, token, username=username, password=pw,
                                                display_name=display)
                 name = user.username
         except users.InvitationRefused as exc:

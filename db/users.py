@@ -308,11 +308,17 @@ def create_invitation(session: Session, *, role: str = "panelist", workshop_ref:
                       valid_for: dt.timedelta = INVITATION_VALIDITY, note: str = "",
                       actor: Any = "system") -> tuple[Invitation, str]:
     """A new single-use invitation → (row, token). The token is returned once, never stored.
-    ``workshop_ref``: the workshop the invitee joins (it must exist; panelists only)."""
-    from railval.db import workshops  # it imports this module
-
+    ``workshop_ref``: the workshop the invitee joins (:func:`railval.db.workshops.redeem_invitation`);
+    it must exist, and only a panelist joins a workshop this way."""
     check_roles([role])
-    workshop_ref = workshops.invitation_workshop(session, role, workshop_ref)
+    if workshop_ref is not None:
+        if role != "panelist":
+            raise InvalidParameter(
+                f"--workshop {workshop_ref!r}: an invitation joins its invitee to a workshop only "
+                f"with the role panelist, not {role!r}; invite with --role panelist")
+        if _workshop_id(session, str(workshop_ref)) is None:
+            raise NotFound(f"workshop {str(workshop_ref)!r} not found; create it first "
+                           "(`railval workshop create`)")
     if valid_for <= dt.timedelta(0):
         raise InvalidParameter(f"invitation validity {valid_for} must be positive")
     token = secrets.token_urlsafe(32)
@@ -342,16 +348,26 @@ def check_invitation(session: Session, token: str) -> Invitation:
         raise InvitationRefused(
             f"This invitation link expired on {audit.utc_stamp(_aware(inv.expires_at))[:16]} UTC; "
             "ask the organiser for a new one.")
-    from railval.db import workshops  # it imports this module
-
-    workshops.check_invited_workshop(session, inv)
+    if inv.workshop_ref is not None and inv.role == "panelist" \
+            and _workshop_id(session, inv.workshop_ref) is None:  # other names not shown
+        raise InvitationRefused(f"The workshop {inv.workshop_ref!r} of this invitation no longer "
+                                "exists; ask the organiser for a new one.")
     return inv
+
+
+def _workshop_id(session: Session, name: str) -> int | None:
+    """The id of the workshop ``name`` (``None`` when there is none); :mod:`railval.db.workshops`
+    imports this module, so the row is read here directly."""
+    from railval.db.models import Workshop
+
+    return session.scalar(select(Workshop.id).where(Workshop.name == name))
 
 
 def redeem_invitation(session: Session, token: str, *, username: str, password: str,
                       display_name: str = "") -> AppUser:
-    """Create the invitee's account with the invitation's role and mark the link used; a
-    panelist invited to a workshop takes part in it at once (its "My workshops" entry).
+    """Create the invitee's account with the invitation's role and mark the link used
+    (:func:`railval.db.workshops.redeem_invitation` also makes a panelist invited to a
+    workshop take part in it: what the ``/invite`` form calls).
 
     Raises :class:`InvitationRefused` (unknown, used, expired) — the caller records the
     refusal with :func:`record_refusal` in its own transaction — or
@@ -364,9 +380,6 @@ def redeem_invitation(session: Session, token: str, *, username: str, password: 
     inv.used_at = utcnow()
     inv.used_by = user.id
     session.flush()
-    from railval.db import workshops  # it imports this module
-
-    workshops.join_invited(session, inv, user.username)  # a panelist invited to a workshop
     audit.record(session, username, "invitation.redeem", f"invitation:{inv.id}",
                  detail={"role": inv.role, "workshop_ref": inv.workshop_ref, "user": username})
     return user

@@ -213,30 +213,16 @@ def invite(session: Session, workshop: Workshop, username: str, *, actor: Any = 
     return token
 
 
-def invitation_workshop(session: Session, role: str, workshop_ref: str | None) -> str | None:
-    """The workshop a new invitation (``railval user invite --workshop W``) names, checked
-    when it is made: the workshop exists, and only a panelist joins a workshop through an
-    invitation. Returns its name (``None`` without one); raises :class:`NotFound` or
-    :class:`InvalidParameter`."""
-    if workshop_ref is None:
-        return None
-    if role != "panelist":
-        raise InvalidParameter(
-            f"--workshop {workshop_ref!r}: an invitation joins its invitee to a workshop only "
-            f"with the role panelist, not {role!r}; invite with --role panelist")
-    return get_workshop(session, str(workshop_ref)).name
-
-
-def check_invited_workshop(session: Session, inv: Invitation) -> None:
-    """An open invitation of a panelist to a workshop is refused once the workshop no longer
-    exists (:class:`railval.db.users.InvitationRefused`, without naming other workshops to
-    the anonymous invitee), so that nobody fills in the form for nothing."""
-    if inv.workshop_ref is None or inv.role != "panelist":
-        return
-    if session.scalar(select(Workshop.id).where(Workshop.name == inv.workshop_ref)) is None:
-        raise users.InvitationRefused(
-            f"The workshop {inv.workshop_ref!r} of this invitation no longer exists; ask the "
-            "organiser for a new one.")
+def redeem_invitation(session: Session, token: str, *, username: str, password: str,
+                      display_name: str = "") -> AppUser:
+    """:func:`railval.db.users.redeem_invitation` (the account, the link used), and a panelist
+    invited to a workshop takes part in it at once (:func:`join_invited`): the ``/invite``
+    form's one call, in the caller's transaction."""
+    inv = users.check_invitation(session, token)
+    user = users.redeem_invitation(session, token, username=username, password=password,
+                                   display_name=display_name)
+    join_invited(session, inv, user.username)
+    return user
 
 
 def join_invited(session: Session, inv: Invitation, username: str) -> WorkshopReviewer | None:

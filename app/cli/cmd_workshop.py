@@ -49,6 +49,14 @@ def _list(text: str | None) -> list[str] | None:
     return [t.strip() for t in text.split(",") if t.strip()]
 
 
+#: what ``railval workshop invite --help`` says (the role is panelist; "reviewer" is the
+#: independent reviewer who signs off)
+_INVITE = ("Print a personal review link of workshop NAME for the panelist R (the role panelist: "
+           "answers in the own workshops only). A user name not yet known is created with the role "
+           "panelist and no password; an existing user must hold the role panelist. A new link "
+           "replaces the panelist's earlier one; the answers stay.")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     w = sub.add_parser("workshop", help="expert review workshops (plot sets, panelists, answers)")
     wsub = w.add_subparsers(dest="subverb", metavar="ACTION")
@@ -86,12 +94,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_plots)
 
-    i = wsub.add_parser("invite", help="a personal review link for a panelist",
-                        description="Print a personal review link of workshop NAME for the "
-                        "panelist R (the role panelist: answers in the own workshops only). A user "
-                        "name not yet known is created with the role panelist and no password; an "
-                        "existing user must hold the role panelist. A new link replaces the "
-                        "panelist's earlier one; the answers stay.")
+    i = wsub.add_parser("invite", help="a personal review link for a panelist", description=_INVITE)
     i.add_argument("name", metavar="NAME", help="workshop name")
     i.add_argument("--reviewer", required=True, metavar="R",
                    help="user name of the panelist (created with the role panelist when new)")
