@@ -1,18 +1,22 @@
 """Sign-in for ``railval serve``: a Bokeh/Tornado auth provider on the user table (docs/security.md).
 
 * ``/login`` (GET form, POST check) verifies the argon2id hash (:func:`railval.db.users.authenticate`:
-  rate limited, every failure recorded in the audit trail) and sets a signed session cookie
-  ``railval_session`` = ``username|issued-at`` (HMAC with the cookie secret, HttpOnly,
-  SameSite=Lax). Panel's built-in ``--basic-auth`` is not used: it compares plain text.
-* Every page load and every websocket connection re-checks the cookie: signature, age below
-  :data:`SESSION_MAX_AGE_S`, the user still exists, is enabled and its password did not
-  change after the cookie was issued (a later ``user passwd`` or ``user disable`` ends the
-  session at the next request).
-* ``/logout`` clears the cookie (``POST``; ``GET`` asks to confirm).
-* Every state-changing request (``POST``) carries Tornado's anti-forgery token
-  (``xsrf_cookies``; the forms hold it as ``_xsrf``, scripts send ``X-XSRFToken``); a
-  request from another site — another port of the same host included — is refused 403. ``/invite?token=…`` shows the single-use invitation form and
-  creates the invitee's account.
+  rate limited, every failure recorded in the audit trail), opens a session on the server
+  (a row of ``app_session``, :func:`railval.db.users.open_session`) and sets the signed
+  session cookie ``railval_session`` = the session's random id (HMAC with the cookie
+  secret, HttpOnly, SameSite=Lax). Panel's built-in ``--basic-auth`` is not used: it
+  compares plain text.
+* Every page load, websocket connection and ``POST`` re-checks the cookie: signature, then
+  one indexed read of the session row with its user (:func:`railval.db.users.session_principal`):
+  not ended, not past :data:`SESSION_MAX_AGE_S`, the user enabled. ``POST /logout`` ends the
+  session on the server (a copy of the cookie is refused afterwards); ``user disable``,
+  ``user passwd`` and ``user role`` end every session of the user.
+* Every state-changing request (``POST``) carries the anti-forgery token bound to the
+  session (or, on the sign-in and invitation forms, to a pre-session id in its own signed
+  cookie) and comes from the app's own origin (:class:`railval.app.security.SessionBoundXsrf`);
+  a page of another origin — another port of the same host included, which can toss cookies —
+  is refused 403. ``/invite?token=…`` shows the single-use invitation form and creates the
+  invitee's account.
 * With **no user** in the database the provider lets every request through as the local user
   (open single-user mode) — :func:`check_startup` allows that only on a loopback address.
 
@@ -27,18 +31,18 @@ import html
 import ipaddress
 import os
 import secrets
-import time
 from pathlib import Path
 from typing import Any
 
 from bokeh.server.auth_provider import AuthProvider
 from tornado.web import RequestHandler, decode_signed_value
 
+from railval.app.security import SESSION_COOKIE, SessionBoundXsrf
 from railval.core.errors import RailvalError
 from railval.core.roles import Principal, open_principal
 from railval.db import users, workshops
 
-COOKIE = "railval_session"
+COOKIE = SESSION_COOKIE
 SESSION_MAX_AGE_S = 8 * 3600
 LOGIN_URL = "/login"
 LOGOUT_URL = "/logout"
@@ -104,38 +108,37 @@ class RailvalAuth(AuthProvider):
         super().__init__()
 
     # -- cookie -------------------------------------------------------------------------
-    def issue(self, handler: RequestHandler, username: str) -> None:
-        value = f"{username}|{time.time():.3f}"
-        handler.set_signed_cookie(COOKIE, value, expires_days=None, httponly=True,
-                                  samesite="Lax", secure=handler.request.protocol == "https")
+    def open_session(self, session, user) -> str:
+        """A new server-side session of ``user`` in ``session``'s transaction → its id."""
+        return users.open_session(session, user, max_age_s=self.max_age_s)
+
+    def issue(self, handler: RequestHandler, session_id: str, username: str) -> None:
+        """Set the session cookie of ``session_id`` (made by :meth:`open_session`)."""
+        secure = handler.request.protocol == "https"
+        handler.set_signed_cookie(COOKIE, session_id, expires_days=None, httponly=True,
+                                  samesite="Lax", secure=secure)
         # Panel's pn.state.user reads the signed cookie "user" with the same secret
         handler.set_signed_cookie("user", username, expires_days=None, httponly=True,
-                                  samesite="Lax", secure=handler.request.protocol == "https")
+                                  samesite="Lax", secure=secure)
+
+    def session_id(self, raw: str | None) -> str | None:
+        """The session id of a raw cookie value when its signature holds, else None."""
+        if not raw:
+            return None
+        decoded = decode_signed_value(self.secret, COOKIE, raw, max_age_days=1)
+        return None if decoded is None else decoded.decode("utf-8", "replace")
 
     def principal_from_cookie(self, raw: str | None) -> Principal | None:
-        """The principal of a raw cookie value, or None when it is invalid, expired or the
-        user was disabled / changed password since; open mode when the database has no user."""
+        """The principal of a raw cookie value: its session is read on the server (one
+        indexed read) and must be open, unexpired and its user enabled; else None. Open
+        mode when the database has no user."""
+        sid = self.session_id(raw)
         with self.database.session() as s:
-            if not users.has_users(s):
-                return open_principal()
-            if not raw:
-                return None
-            decoded = decode_signed_value(self.secret, COOKIE, raw, max_age_days=1)
-            if decoded is None:
-                return None
-            try:
-                username, issued = decoded.decode("utf-8").rsplit("|", 1)
-                issued_at = float(issued)
-            except ValueError:
-                return None
-            if time.time() - issued_at > self.max_age_s:
-                return None
-            user = users.find_user(s, username)
-            if user is None or user.disabled or user.password_hash is None:
-                return None
-            if users.password_changed_at(s, username) > issued_at:
-                return None
-            return users.principal(user)
+            if sid is not None:
+                p = users.session_principal(s, sid)
+                if p is not None:
+                    return p
+            return None if users.has_users(s) else open_principal()
 
     @property
     def get_user(self):
@@ -198,7 +201,7 @@ def _client(handler: RequestHandler) -> str:
     return handler.request.remote_ip or ""
 
 
-class LoginHandler(RequestHandler):
+class LoginHandler(SessionBoundXsrf, RequestHandler):
     auth: RailvalAuth
 
     def _form(self, message: str = "", username: str = "", ok: str = "") -> None:
@@ -224,12 +227,14 @@ class LoginHandler(RequestHandler):
         password = self.get_argument("password", "")
         with self.auth.database.session(actor=username or "(anonymous)") as s:
             result = users.authenticate(s, username, password, source=_client(self))
+            if result.ok:
+                sid = self.auth.open_session(s, result.user)
         if not result.ok:
             self.set_status(403 if "disabled" in result.message else
                             429 if "Too many" in result.message else 401)
             self._form(result.message, username)
             return
-        self.auth.issue(self, result.user.username)
+        self.auth.issue(self, sid, result.user.username)
         nxt = self.get_argument("next", "/app")
         if nxt in ("/app", "/", "") or not nxt.startswith("/") or nxt.startswith("//"):
             from railval.app.navigation import landing
@@ -238,9 +243,10 @@ class LoginHandler(RequestHandler):
         self.redirect(nxt)
 
 
-class LogoutHandler(RequestHandler):
+class LogoutHandler(SessionBoundXsrf, RequestHandler):
     """``GET /logout`` asks to confirm (a form with the anti-forgery token); ``POST``
-    signs out. A link or a page elsewhere cannot sign a user out."""
+    signs out: the session ends on the server (a copied cookie is refused afterwards). A
+    link or a page elsewhere cannot sign a user out."""
 
     auth: RailvalAuth
 
@@ -254,9 +260,11 @@ class LogoutHandler(RequestHandler):
     def post(self) -> None:
         from railval.db import audit
 
+        sid = self.auth.session_id(self.get_cookie(COOKIE))
         p = self.auth.principal_from_cookie(self.get_cookie(COOKIE))
-        if p is not None and not p.open_mode:
-            with self.auth.database.session(actor=p.username) as s:
+        if sid is not None and p is not None and not p.open_mode:
+            with self.auth.database.session(actor=p.username, write=True) as s:
+                users.end_session(s, sid, "logout")
                 audit.record(s, p.username, "logout", f"user:{p.username}",
                              detail={"source": _client(self)})
         self.clear_cookie(COOKIE)
@@ -264,7 +272,7 @@ class LogoutHandler(RequestHandler):
         self.redirect(f"{LOGIN_URL}?out=1")
 
 
-class InviteHandler(RequestHandler):
+class InviteHandler(SessionBoundXsrf, RequestHandler):
     """``/invite?token=…``: the invitee chooses a user name and password (single use)."""
 
     def initialize(self, auth: RailvalAuth) -> None:
@@ -321,6 +329,7 @@ class InviteHandler(RequestHandler):
                 user = workshops.redeem_invitation(s, token, username=username, password=pw,
                                                display_name=display)
                 name = user.username
+                sid = self.auth.open_session(s, user)
         except users.InvitationRefused as exc:
             self._refuse(token, str(exc))
             return
@@ -330,7 +339,7 @@ class InviteHandler(RequestHandler):
             self.set_status(400)
             self._form(token, inv, str(exc), username, display)
             return
-        self.auth.issue(self, name)
+        self.auth.issue(self, sid, name)
         from railval.app.navigation import landing
 
         with self.auth.database.session() as s:

@@ -252,8 +252,9 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     X-Forwarded-For / X-Real-Ip headers (Tornado ``xheaders``), so the sign-in rate limit per
     address counts clients, not the proxy; only behind a proxy that sets these headers.
     Every response carries the security headers of :mod:`railval.app.security`; every
-    ``POST`` of the sign-in and workshop pages must carry the anti-forgery token (Tornado
-    ``xsrf_cookies``; :data:`railval.app.security.XSRF_COOKIE`); Bokeh
+    ``POST`` of the sign-in and workshop pages must come from this server's origin and carry
+    the anti-forgery token bound to the session (Tornado ``xsrf_cookies`` with
+    :class:`railval.app.security.SessionBoundXsrf` on the handlers); Bokeh
     session ids are signed (a forged one is refused); websockets are accepted only from
     ``allow_websocket_origin`` — never from any origin (``*``). ``GET /health`` reports whether
     this process reaches its database; ``admin``: Panel's admin page at ``/admin``, for users

@@ -16,15 +16,20 @@ requests, signed session ids.
   - ``X-Content-Type-Options: nosniff``, ``X-Frame-Options: DENY`` (older browsers),
     ``Referrer-Policy: no-referrer``.
 
-* Cross-site request forgery: ``railval serve`` turns on Tornado's ``xsrf_cookies``, so
-  every ``POST`` (sign-in, sign-out, invitation, workshop forms, the reviewer's answers)
-  must carry the token of the ``_xsrf`` cookie as the form field ``_xsrf`` or the header
-  ``X-XSRFToken``. The cookie is :data:`XSRF_COOKIE` (HttpOnly, SameSite=Strict); pages
-  hand the token to their forms and scripts (:func:`with_xsrf`). A page of another origin —
-  also another port of the same host, which browsers count as the same *site* and so send
-  SameSite cookies to — cannot read the token: its requests are refused with 403 before
-  any handler runs. Panel's own callbacks travel over the websocket, whose Origin is
-  checked against ``--allow-websocket-origin``.
+* Cross-site request forgery (:class:`SessionBoundXsrf`, on every handler that takes a
+  ``POST``): the anti-forgery token is an HMAC-SHA256 under the cookie secret of the
+  signed-in session's id (:data:`SESSION_COOKIE`), or — on the sign-in and invitation forms
+  and a review link opened without signing in — of a pre-session id held in its own signed
+  cookie :data:`PRESESSION_COOKIE`. No value a page of the same *site* can set makes a valid
+  token: another port of the same host may toss cookies (browsers do not separate them by
+  port), but it can neither read the session id nor sign a cookie. Every ``POST`` must carry
+  the token (form field ``_xsrf`` or header ``X-XSRFToken``), and a browser's request must
+  come from the app's own origin (:func:`foreign_origin`): ``Sec-Fetch-Site`` other than
+  ``same-origin``, or without it an ``Origin`` whose host:port differs from the request's
+  ``Host``, is refused with 403 before any handler runs (a client that sends neither — not a
+  browser — is judged by the token alone). Pages hand the token to their forms and scripts (:func:`with_xsrf`). Panel's own
+  callbacks travel over the websocket, whose Origin is checked against
+  ``--allow-websocket-origin``.
 
 * :class:`NoAutoload` refuses Bokeh's ``<app>/autoload.js`` (404, no body from Bokeh):
   railval is never embedded in another page, and that script — which another page may
@@ -43,10 +48,13 @@ requests, signed session ids.
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import logging
 import os
 import re
 import secrets
+from urllib.parse import urlsplit
 
 CSP = ("default-src 'self'; "
        "script-src 'self' 'unsafe-inline' 'unsafe-eval'; "
@@ -64,8 +72,105 @@ HEADERS = {
 }
 
 
-#: Tornado ``xsrf_cookie_kwargs``: the token cookie is never read by scripts (pages carry the
-#: token themselves) and never sent with a request another site starts
+#: the signed-in session's cookie (:mod:`railval.app.auth`): a random session id, signed
+SESSION_COOKIE = "railval_session"
+#: the signed pre-session id of a browser that is not signed in (sign-in and invitation
+#: forms, review links): the anti-forgery token of those forms is bound to it
+PRESESSION_COOKIE = "railval_presession"
+
+
+def forgery_token(secret: str | bytes, kind: str, ident: str) -> str:
+    """The anti-forgery token of a session (``kind`` ``session``) or pre-session
+    (``pre``) id: HMAC-SHA256 (RFC 2104) of ``railval-xsrf|kind|id`` under the cookie
+    secret, hex."""
+    key = secret.encode() if isinstance(secret, str) else secret
+    return hmac.new(key, f"railval-xsrf|{kind}|{ident}".encode(), hashlib.sha256).hexdigest()
+
+
+def foreign_origin(headers, host: str) -> str:
+    """Why a request's browser headers show that another origin started it ("" when they do
+    not). ``Sec-Fetch-Site`` (W3C Fetch Metadata; sent by current browsers to
+    potentially trustworthy origins: https and loopback) decides when present: only
+    ``same-origin`` passes — the pages' ``Referrer-Policy: no-referrer`` makes the browser
+    send ``Origin: null`` even on the app's own forms (Fetch standard, "serializing a request
+    origin"). Without it an ``Origin`` must name ``host`` (the request's ``Host``, host:port;
+    the scheme is left out, a proxy may end TLS); ``null`` is refused."""
+    site = headers.get("Sec-Fetch-Site")
+    if site is not None:
+        return "" if site == "same-origin" else f"Sec-Fetch-Site is {site!r}"
+    origin = headers.get("Origin")
+    if origin is not None:
+        netloc = urlsplit(origin).netloc if origin != "null" else "null"
+        if netloc.lower() != (host or "").lower():
+            return f"Origin {origin!r} is not this server ({host})"
+    return ""
+
+
+class SessionBoundXsrf:
+    """Tornado ``RequestHandler`` mixin: Tornado's ``xsrf_token`` and
+    ``check_xsrf_cookie`` replaced by a token bound to the session (module docstring).
+    ``accepts_presession_token``: the handler acts on the authority of something other
+    than the session (a review link), so the pre-session token is accepted as well."""
+
+    accepts_presession_token = False
+
+    def _rv_secret(self) -> str | bytes | None:
+        return self.application.settings.get("cookie_secret")
+
+    def _rv_session_id(self) -> str | None:
+        raw = self.get_signed_cookie(SESSION_COOKIE, max_age_days=1)
+        return raw.decode("utf-8", "replace") if raw else None
+
+    def _rv_presession_id(self, create: bool) -> str | None:
+        raw = self.get_signed_cookie(PRESESSION_COOKIE, max_age_days=1)
+        if raw:
+            return raw.decode("utf-8", "replace")
+        pending = getattr(self, "_rv_new_presession", None)
+        if pending is None and create:
+            pending = self._rv_new_presession = secrets.token_urlsafe(24)
+            self.set_signed_cookie(PRESESSION_COOKIE, pending, expires_days=None, httponly=True,
+                                   samesite="Strict",
+                                   secure=self.request.protocol == "https")
+        return pending
+
+    @property
+    def xsrf_token(self) -> bytes:
+        secret = self._rv_secret()
+        if secret is None:  # served without a cookie secret: Tornado's own token
+            return super().xsrf_token  # type: ignore[misc]
+        sid = self._rv_session_id()
+        if sid:
+            return forgery_token(secret, "session", sid).encode("ascii")
+        return forgery_token(secret, "pre", self._rv_presession_id(create=True)).encode("ascii")
+
+    def check_xsrf_cookie(self) -> None:
+        from tornado.web import HTTPError
+
+        secret = self._rv_secret()
+        if secret is None:
+            return super().check_xsrf_cookie()  # type: ignore[misc]
+        why = foreign_origin(self.request.headers, self.request.host)
+        if why:
+            raise HTTPError(403, "XSRF refused: %s", why)
+        given = (self.get_argument("_xsrf", None) or self.request.headers.get("X-Xsrftoken")
+                 or self.request.headers.get("X-Csrftoken"))
+        if not given:
+            raise HTTPError(403, "XSRF refused: the anti-forgery token is missing")
+        sid = self._rv_session_id()
+        expected = [forgery_token(secret, "session", sid)] if sid else []
+        if not sid or self.accepts_presession_token:
+            pre = self._rv_presession_id(create=False)
+            if pre:
+                expected.append(forgery_token(secret, "pre", pre))
+        if not any(hmac.compare_digest(given.encode("utf-8", "replace"), e.encode("ascii"))
+                   for e in expected):
+            raise HTTPError(403, "XSRF refused: the anti-forgery token does not belong to "
+                                 "this session")
+
+
+#: Tornado ``xsrf_cookie_kwargs`` of a handler without :class:`SessionBoundXsrf` (none of
+#: railval's own takes a ``POST``): the token cookie is never read by scripts and never sent
+#: with a request another site starts
 XSRF_COOKIE = {"httponly": True, "samesite": "Strict"}
 
 _POST_FORM = re.compile(r"(<form\b[^>]*\bmethod\s*=\s*['\"]?post['\"]?[^>]*>)", re.IGNORECASE)

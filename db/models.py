@@ -279,6 +279,25 @@ class UserRole(Base):
     user: Mapped[AppUser] = relationship(back_populates="roles")
 
 
+class AppSession(Base):
+    """A signed-in browser session that the server can end (docs/security.md). The session
+    cookie carries a random id, only its SHA-256 is stored (``id_sha256``, unique: every
+    request reads one row by it). ``ended_at`` is set by sign-out and, for every open
+    session of the user, by a disable, password change or role change; ``end_reason`` says
+    which. A session past ``expires_at`` or ended is refused."""
+
+    __tablename__ = "app_session"
+    __table_args__ = (Index("ix_app_session_user", "user_id"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    id_sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("app_user.id", ondelete="CASCADE"))
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    expires_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True))
+    ended_at: Mapped[dt.datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+    end_reason: Mapped[str] = mapped_column(String(40), default="")
+
+
 class Invitation(Base):
     """A single-use invitation link; only the SHA-256 of its random token is stored."""
 

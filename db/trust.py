@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import functools
 import ipaddress
 import json
 import os
@@ -107,6 +108,7 @@ def _loopback(host: str) -> bool:
         return False
 
 
+@functools.lru_cache(maxsize=256)
 def location(url: str) -> str | None:
     """The configured place of a database, spelled one way (``None``: in-memory SQLite)."""
     parsed = make_url(url)

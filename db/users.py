@@ -26,13 +26,13 @@ from typing import Any
 
 from argon2 import PasswordHasher
 from argon2.exceptions import InvalidHashError, VerificationError, VerifyMismatchError
-from sqlalchemy import func, select
-from sqlalchemy.orm import Session, selectinload
+from sqlalchemy import func, select, update
+from sqlalchemy.orm import Session, joinedload, selectinload
 
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
-from railval.core.roles import ROLES, Principal, check_roles
+from railval.core.roles import ROLES, Principal, check_roles, require
 from railval.db import audit
-from railval.db.models import AppUser, Invitation, UserRole, utcnow
+from railval.db.models import AppSession, AppUser, Invitation, UserRole, utcnow
 
 __all__ = [
     "InvitationRefused",
@@ -42,12 +42,18 @@ __all__ = [
     "create_user",
     "disable",
     "enable",
+    "end_session",
+    "end_sessions",
     "get_user",
     "has_admin",
     "has_users",
     "list_users",
+    "live_principal",
+    "open_session",
     "principal",
     "redeem_invitation",
+    "require_live",
+    "session_principal",
     "set_password",
     "set_roles",
     "verify_password",
@@ -127,9 +133,13 @@ def list_users(session: Session) -> list[AppUser]:
                                 .order_by(AppUser.username)))
 
 
-def get_user(session: Session, username: str) -> AppUser:
-    user = session.scalar(select(AppUser).options(selectinload(AppUser.roles))
-                          .where(AppUser.username == username))
+def get_user(session: Session, username: str, *, lock: bool = False) -> AppUser:
+    """The user ``username`` (:class:`NotFound` when missing). ``lock``: its row is locked
+    ``FOR UPDATE`` until the transaction ends (PostgreSQL; SQLite's write transaction holds
+    the whole database): a write that re-reads the user ``FOR SHARE``
+    (:func:`live_principal`) waits for the change and then sees it."""
+    query = select(AppUser).options(selectinload(AppUser.roles)).where(AppUser.username == username)
+    user = session.scalar(query.with_for_update() if lock else query)
     if user is None:
         raise NotFound(f"user {username!r} not found")
     return user
@@ -168,11 +178,12 @@ def create_user(session: Session, username: str, *, display_name: str = "",
 def set_roles(session: Session, username: str, roles: list[str] | tuple[str, ...], *,
               actor: Any = "system", reason: str = "") -> AppUser:
     """Replace the user's roles by ``roles``."""
-    user = get_user(session, username)
+    user = get_user(session, username, lock=True)
     roles = check_roles(roles)
     before = user_state(user)
     user.roles = [UserRole(role=r) for r in roles]
     session.flush()
+    end_sessions(session, user.id, "user.roles")
     audit.record(session, actor, "user.roles", f"user:{username}", before, user_state(user),
                  reason, detail={"roles": roles})
     return user
@@ -180,10 +191,11 @@ def set_roles(session: Session, username: str, roles: list[str] | tuple[str, ...
 
 def disable(session: Session, username: str, *, actor: Any = "system", reason: str = "") -> AppUser:
     """Disable a user: they can no longer sign in and hold no permission."""
-    user = get_user(session, username)
+    user = get_user(session, username, lock=True)
     before = user_state(user)
     user.disabled = True
     session.flush()
+    end_sessions(session, user.id, "user.disable")
     audit.record(session, actor, "user.disable", f"user:{username}", before, user_state(user),
                  reason)
     return user
@@ -201,13 +213,92 @@ def enable(session: Session, username: str, *, actor: Any = "system", reason: st
 
 def set_password(session: Session, username: str, password: str, *, actor: Any = "system",
                  reason: str = "") -> AppUser:
-    user = get_user(session, username)
+    user = get_user(session, username, lock=True)
     before = user_state(user)
     user.password_hash = hash_password(password)
     session.flush()
+    end_sessions(session, user.id, "user.password")
     audit.record(session, actor, "user.password", f"user:{username}", before, user_state(user),
                  reason)
     return user
+
+
+# -- sessions the server can end (docs/security.md, "Sessions") --------------------------
+def session_hash(session_id: str) -> str:
+    """The stored form of a session id: its SHA-256 (hex)."""
+    return hashlib.sha256((session_id or "").encode("utf-8")).hexdigest()
+
+
+def open_session(session: Session, user: AppUser, *, max_age_s: float) -> str:
+    """A new session of ``user`` valid for ``max_age_s`` seconds → its random id (256 bits;
+    returned once for the cookie, only its SHA-256 is stored)."""
+    session_id = secrets.token_urlsafe(32)
+    now = utcnow()
+    session.add(AppSession(id_sha256=session_hash(session_id), user_id=user.id, created_at=now,
+                           expires_at=now + dt.timedelta(seconds=max_age_s), end_reason=""))
+    session.flush()
+    return session_id
+
+
+def session_principal(session: Session, session_id: str) -> Principal | None:
+    """The principal of a live session: one read by the unique hash (joined with the user and
+    its roles); None when the id is unknown, the session ended or expired, or the user is
+    disabled or has no password."""
+    row = session.execute(
+        select(AppSession.expires_at, AppSession.ended_at, AppUser)
+        .join(AppUser, AppUser.id == AppSession.user_id)
+        .where(AppSession.id_sha256 == session_hash(session_id))
+        .options(joinedload(AppUser.roles))).unique().first()
+    if row is None:
+        return None
+    expires_at, ended_at, user = row
+    if ended_at is not None or _aware(expires_at) <= dt.datetime.now(dt.UTC):
+        return None
+    if user.disabled or user.password_hash is None:
+        return None
+    return principal(user)
+
+
+def end_session(session: Session, session_id: str, reason: str = "logout") -> bool:
+    """End one session (sign-out); True when it was open."""
+    n = session.execute(update(AppSession).where(
+        AppSession.id_sha256 == session_hash(session_id), AppSession.ended_at.is_(None))
+        .values(ended_at=utcnow(), end_reason=reason[:40])).rowcount
+    return bool(n)
+
+
+def end_sessions(session: Session, user_id: int, reason: str) -> int:
+    """End every open session of a user (disable, password or role change) → how many."""
+    return int(session.execute(update(AppSession).where(
+        AppSession.user_id == user_id, AppSession.ended_at.is_(None))
+        .values(ended_at=utcnow(), end_reason=reason[:40])).rowcount or 0)
+
+
+def live_principal(session: Session, user_id: int) -> Principal | None:
+    """The user as stored now, read inside the caller's write transaction with a shared
+    row lock (``FOR SHARE`` on PostgreSQL): a disable, password or role change
+    (:func:`get_user` with ``lock``) either commits before it — and is seen — or waits
+    until this transaction has committed. None when the user no longer exists; a disabled
+    user's principal holds no role."""
+    user = session.scalar(select(AppUser).options(selectinload(AppUser.roles))
+                          .where(AppUser.id == user_id).with_for_update(read=True))
+    return None if user is None else principal(user)
+
+
+def require_live(session: Session, actor: Any, action: str) -> None:
+    """Refuse a write (:class:`railval.core.errors.PermissionDenied`) unless ``actor`` — a
+    principal of a stored user — may still do ``action`` as the database says now (re-read
+    by :func:`live_principal` in the caller's write transaction, never a cached principal).
+    Actors that are no stored user (open single-user mode, the CLI's ``system``) pass."""
+    user_id = getattr(actor, "user_id", None)
+    if user_id is None or getattr(actor, "open_mode", False):
+        return
+    now = live_principal(session, user_id)
+    if now is None:
+        from railval.core.errors import PermissionDenied
+
+        raise PermissionDenied(f"user {actor.username!r} no longer exists")
+    require(now, action)
 
 
 # -- passwords and sign-in ---------------------------------------------------------------

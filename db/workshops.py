@@ -27,7 +27,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
-from railval.core.roles import Principal
+from railval.core.roles import PermissionDenied, Principal, allowed
 from railval.core.workshop import review_order
 from railval.db import audit, users
 from railval.db.models import (
@@ -284,13 +284,48 @@ def own_answers(session: Session, reviewer_id: int) -> dict[int, WorkshopAnswer]
         select(WorkshopAnswer).where(WorkshopAnswer.reviewer_id == reviewer_id))}
 
 
+class AnswerOutcome(str):
+    """What :func:`record_answer` did — ``"new"``, ``"changed"`` or ``"repeated"`` — with
+    the answer stored before a change (``previous``: True/False, None when unknown) and
+    when it was given or last changed (``previous_at``)."""
+
+    previous: bool | None = None
+    previous_at: dt.datetime | None = None
+
+    @classmethod
+    def of(cls, outcome: str, previous: Any = None) -> AnswerOutcome:
+        out = cls(outcome)
+        if previous is not None:
+            out.previous, out.previous_at = bool(previous[0]), _aware(previous[1])
+        return out
+
+
+def answer_refusal(session: Session, ctx: ReviewerContext) -> str:
+    """Why the reviewer's user may not answer now ("" when they may), read in the write
+    transaction with a shared lock on the user row (:func:`railval.db.users.live_principal`):
+    a disable or role change committed before this answer is seen; one in progress waits
+    for the answer's commit or is waited for. Never the principal of ``ctx``, which the
+    caller may have cached."""
+    user_id = ctx.principal.user_id
+    if user_id is None:
+        return ""
+    now = users.live_principal(session, user_id)
+    if now is None or not allowed(now, "workshop.answer"):
+        return (f"the account {ctx.username!r} is disabled or may no longer answer in "
+                "workshops; answers are not taken")
+    return ""
+
+
 def record_answer(session: Session, ctx: ReviewerContext, position: int, answer: bool, *,
-                  seconds: float, comment: str = "", submission: str = "") -> str:
+                  seconds: float, comment: str = "", submission: str = "") -> AnswerOutcome:
     """Store the reviewer's answer at ``position`` of their sequence; returns ``"new"``,
-    ``"changed"`` or ``"repeated"`` (the same submission seen before: nothing written).
+    ``"changed"`` or ``"repeated"`` (the same submission seen before: nothing written) as an
+    :class:`AnswerOutcome` that also holds the answer a change replaced.
 
     Refused (:class:`WorkshopClosed`) when the workshop is closed or the reviewer has
-    finished; :class:`InvalidParameter` for a position outside the sequence.
+    finished, and (:class:`railval.core.errors.PermissionDenied`) when the reviewer's
+    account is disabled or lost the panelist role — read again in this transaction
+    (:func:`answer_refusal`); :class:`InvalidParameter` for a position outside the sequence.
 
     Call it in a unit of work of its own opened with ``session(write=True)`` (``ctx`` read in
     an earlier one; :func:`railval.app.services.workshop_review.record_answer`): on SQLite
@@ -306,9 +341,15 @@ def record_answer(session: Session, ctx: ReviewerContext, position: int, answer:
         raise InvalidParameter(f"seconds must be ≥ 0, got {seconds!r}")
     comment = (comment or "")[:2000]
     submission = (submission or "")[:64]
+    refusal = answer_refusal(session, ctx)
+    if refusal:
+        raise PermissionDenied(refusal)
     plot_id, rep = ctx.sequence[position]
     now = utcnow()
     where = [WorkshopAnswer.reviewer_id == ctx.reviewer_id, WorkshopAnswer.position == position]
+    # the stored answer (row locked until commit): what a change replaces, for the reviewer
+    previous = session.execute(select(WorkshopAnswer.answer, WorkshopAnswer.updated_at)
+                               .where(*where).with_for_update()).first()
 
     def change() -> str | None:
         # one atomic UPDATE (row lock / write lock): concurrent changes of one place never
@@ -353,7 +394,7 @@ def record_answer(session: Session, ctx: ReviewerContext, position: int, answer:
         raise WorkshopClosed(f"workshop {ctx.workshop_name!r} is closed; answers are not taken")
     if finished is not None:
         raise WorkshopClosed("you have finished this review; answers are final")
-    return outcome
+    return AnswerOutcome.of(outcome, previous if outcome == "changed" else None)
 
 
 def finish(session: Session, ctx: ReviewerContext) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import datetime as dt
 import http.cookiejar
+import re
 import time
 import urllib.error
 import urllib.parse
@@ -35,21 +36,22 @@ class Client:
         return self._open(urllib.request.Request(self.base + path))
 
     def post(self, path: str, *, forged: bool = False, **form: str) -> tuple[int, str, str]:
-        """POST a form with the anti-forgery token of the ``_xsrf`` cookie (as the app's
-        own forms do); ``forged``: without it, as a page of another site would."""
+        """POST a form with the anti-forgery token the app's pages hand out for this
+        client's session (as its own forms do); ``forged``: without it, as a page of
+        another site would."""
         if not forged:
             form = {"_xsrf": self.xsrf(), **form}
         data = urllib.parse.urlencode(form).encode()
         return self._open(urllib.request.Request(self.base + path, data=data))
 
     def xsrf(self) -> str:
-        """The ``_xsrf`` cookie's token (fetched with the sign-in page when missing)."""
-        for _ in range(2):
-            tok = next((c.value for c in self.jar if c.name == "_xsrf"), None)
-            if tok:
-                return tok
-            self.get("/login")
-        raise AssertionError("the sign-in page set no _xsrf cookie")
+        """The anti-forgery token of this client's current session (or pre-session), as the
+        sign-in page's form holds it."""
+        _status, body, _ = self.get("/login")
+        m = re.search(r'name="_xsrf" value="([^"]+)"', body)
+        if m is None:
+            raise AssertionError("the sign-in page holds no anti-forgery token")
+        return m.group(1)
 
     def _open(self, req) -> tuple[int, str, str]:
         try:
@@ -197,18 +199,25 @@ def test_session_cookie_expires_and_forged_cookies_are_refused(database):
     from tornado.web import create_signed_value
 
     from railval.app.auth import COOKIE, RailvalAuth
+    from railval.db.models import AppSession
 
     with database.session() as s:
-        users.create_user(s, "eng", password="engineer pw", roles=["engineer"])
+        user = users.create_user(s, "eng", password="engineer pw", roles=["engineer"])
+        sid = users.open_session(s, user, max_age_s=60)
+        old_sid = users.open_session(s, user, max_age_s=60)
+        s.query(AppSession).filter_by(id_sha256=users.session_hash(old_sid)).update(
+            {"expires_at": dt.datetime.now(dt.UTC) - dt.timedelta(seconds=1)})
     auth = RailvalAuth(database, SECRET, max_age_s=60)
-    fresh = create_signed_value(SECRET, COOKIE, f"eng|{time.time():.3f}").decode()
-    old = create_signed_value(SECRET, COOKIE, f"eng|{time.time() - 61:.3f}").decode()
-    forged = create_signed_value("y" * 40, COOKIE, f"eng|{time.time():.3f}").decode()
+    fresh = create_signed_value(SECRET, COOKIE, sid).decode()
+    old = create_signed_value(SECRET, COOKIE, old_sid).decode()
+    forged = create_signed_value("y" * 40, COOKIE, sid).decode()
+    unknown = create_signed_value(SECRET, COOKIE, "not-a-session-of-this-server").decode()
     assert auth.principal_from_cookie(fresh).roles == frozenset({"engineer"})
     assert auth.principal_from_cookie(old) is None  # older than the session lifetime
     assert auth.principal_from_cookie(forged) is None  # signed with another secret
+    assert auth.principal_from_cookie(unknown) is None  # signed, but no session on the server
     assert auth.principal_from_cookie(None) is None
-    assert auth.principal_from_cookie("eng|0") is None  # unsigned
+    assert auth.principal_from_cookie(sid) is None  # unsigned
 
 
 def test_app_sign_in_reaches_the_workshop_pages_with_their_role_check(server):
@@ -248,12 +257,19 @@ def test_workshop_sign_in_ends_at_the_next_request_after_revocation(server):
     with database.session() as s:
         users.set_roles(s, "org", ["engineer"], actor="admin")
         users.set_password(s, "org2", "another password", actor="admin")
-    status, body, _ = org.get("/workshops/new")
-    assert status == 403 and "may not open" in body
+    # a role change ends the session on the server too: sign in again, with the new roles
+    status, body, final = org.get("/workshops/new")
+    assert "/login?next=" in final and 'name="password"' in body
     status, body, final = org2.get("/workshops/new")
     assert "/login?next=" in final and 'name="password"' in body
+    assert org.post("/login", username="org", password="organiser pw", next="/app")[0] == 200
+    status, body, _ = org.get("/workshops/new")
+    assert status == 403 and "may not open" in body
     with database.session() as s:
         users.set_roles(s, "org", ["organiser"], actor="admin")
+    assert org.post("/login", username="org", password="organiser pw", next="/workshops")[0] == 200
+    assert org.get("/workshops/new")[0] == 200
+    with database.session() as s:
         users.disable(s, "org", actor="admin")
     status, body, final = org.get("/workshops/new")
     assert "/login?next=" in final

@@ -49,7 +49,9 @@ def test_writes_take_the_write_lock_and_reads_do_not(sqlite_database, begins):
     assert begins == ["BEGIN"]
     assert workshop_review.record_answer(db, ctx, 0, True, seconds=1.5) == "new"
     assert begins[-1] == "BEGIN IMMEDIATE"
-    assert workshop_review.answers(db, ctx.reviewer_id) == {0: {"answer": True, "comment": ""}}
+    stored = workshop_review.answers(db, ctx.reviewer_id)
+    assert list(stored) == [0] and stored[0]["answer"] is True and stored[0]["comment"] == ""
+    assert stored[0]["changes"] == 0 and stored[0]["updated_at"].endswith("Z")
     assert begins[-1] == "BEGIN"
     assert workshop_admin.set_status(db, "W", "closed", actor="org") == "closed"
     assert begins[-1] == "BEGIN IMMEDIATE"

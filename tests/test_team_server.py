@@ -19,7 +19,7 @@ import uuid
 import pytest
 from sqlalchemy import func, select
 
-from railval.app.bench.bench_workshop import xsrf_of
+from railval.app.bench.bench_workshop import xsrf_headers, xsrf_of
 from railval.app.bench.topology import Topology, insecure_context, nginx_binary
 from railval.db import users
 from tests.browser_support import block_fonts, require_browser
@@ -108,8 +108,7 @@ def _post_answer(base: str, token: str, position: int, answer: bool, submission:
             continue
         req = urllib.request.Request(f"{base}/review/{token}/answer", data=body, method="POST",
                                      headers={"Content-Type": "application/json",
-                                              "Cookie": f"_xsrf={xsrf['cookie']}",
-                                              "X-XSRFToken": xsrf["token"]})
+                                              **xsrf_headers(xsrf)})
         try:
             with urllib.request.urlopen(req, timeout=20, context=insecure_context()) as r:
                 doc = json.loads(r.read())

@@ -270,6 +270,8 @@ def test_deleted_or_truncated_witness_fails(setup, capsys, tmp_path):
     w.write_text("".join(lines[:-1]))  # truncated: the newest head gone
     rc, out = verify(setup.url, capsys)
     assert rc == 1 and "the witness file was truncated or rewound" in out, out
+    rc, bout = bundle_verdict(setup.url, capsys, tmp_path / "bundle-after")
+    assert rc == 1 and "the witness file was truncated or rewound" in bout, bout
     w.unlink()
     rc, out = verify(setup.url, capsys)
     assert rc == 1 and "no witness file: it was deleted" in out, out

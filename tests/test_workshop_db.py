@@ -38,7 +38,7 @@ def test_concurrent_submissions_of_one_place_store_one_answer(database):
             with database.session() as s:
                 ctx = wsdb.reviewer_by_token(s, t1)
             barrier.wait(10)
-            with database.session() as s:
+            with database.session(write=True) as s:  # as record_answer's docstring asks
                 wsdb.record_answer(s, ctx, k % 2, k % 3 == 0, seconds=1.0, submission=f"s{k}")
         except BaseException as exc:  # noqa: BLE001 - collected for the assertion
             errors.append(exc)

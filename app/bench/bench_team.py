@@ -43,7 +43,7 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from railval.app.bench.bench_workshop import xsrf_of
+from railval.app.bench.bench_workshop import xsrf_headers, xsrf_of
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -81,8 +81,7 @@ def _reviewer(host: str, port: int, token: str, n: int, out: list[float], errors
     if xsrf is None:
         errors.append(f"no anti-forgery token on /review/… (HTTP {resp.status})")
         return
-    headers = {"Content-Type": "application/json", "Cookie": f"_xsrf={xsrf['cookie']}",
-               "X-XSRFToken": xsrf["token"]}
+    headers = {"Content-Type": "application/json", **xsrf_headers(xsrf)}
     for i in range(n):
         body = json.dumps({"position": i, "answer": "yes" if i % 2 else "no", "seconds": 1.0,
                            "submission": uuid.uuid4().hex})

@@ -117,16 +117,23 @@ def _setup(url: str, campaign: str | None, n_plots: int, n_reviewers: int) -> di
 
 
 def xsrf_of(set_cookie: str | None, page: bytes) -> dict[str, str] | None:
-    """The anti-forgery cookie and token a review page hands out (its ``_xsrf`` cookie and the
-    ``xsrf-token`` meta element), as the page's script sends them with an answer: POST with
-    ``Cookie: _xsrf=<cookie>`` and ``X-XSRFToken: <token>``; ``None`` when either is missing."""
+    """The pre-session cookie and anti-forgery token a review page hands out (its signed
+    ``railval_presession`` cookie and the ``xsrf-token`` meta element,
+    :class:`railval.app.security.SessionBoundXsrf`), as the browser sends them with an
+    answer: POST with ``Cookie: railval_presession=<cookie>`` (:func:`xsrf_headers`) and
+    ``X-XSRFToken: <token>``; ``None`` when either is missing."""
     import re
 
-    cookie = re.search(r"_xsrf=([^;]+)", set_cookie or "")
+    cookie = re.search(r"railval_presession=([^;]+)", set_cookie or "")
     token = re.search(rb'name="xsrf-token" content="([^"]+)"', page)
     if cookie and token:
         return {"cookie": cookie.group(1), "token": token.group(1).decode()}
     return None
+
+
+def xsrf_headers(xsrf: dict[str, str]) -> dict[str, str]:
+    """The headers of a ``POST`` carrying what :func:`xsrf_of` found."""
+    return {"Cookie": f"railval_presession={xsrf['cookie']}", "X-XSRFToken": xsrf["token"]}
 
 
 class _Reviewer(threading.Thread):
@@ -145,8 +152,7 @@ class _Reviewer(threading.Thread):
     def _req(self, conn, method: str, path: str, body: bytes | None = None) -> tuple[int, bytes]:
         headers = {"Content-Type": "application/json"} if body is not None else {}
         if method == "POST" and self.xsrf:  # as the review page's script sends it
-            headers.update({"Cookie": f"_xsrf={self.xsrf['cookie']}",
-                            "X-XSRFToken": self.xsrf["token"]})
+            headers.update(xsrf_headers(self.xsrf))
         conn.request(method, path, body=body, headers=headers)
         resp = conn.getresponse()
         raw = resp.read()

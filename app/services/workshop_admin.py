@@ -3,7 +3,8 @@ workshop pages and the ``workshop`` verbs show and change, each call one unit of
 
 Pages and verbs call these functions, never :mod:`railval.db.workshops` (docs/design.md §2:
 services are the only door to the database); a call that writes opens
-``session(write=True)``.
+``session(write=True)``; an organiser's write re-reads the organiser inside it
+(:func:`railval.db.users.require_live`), never trusting the principal the page resolved.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from railval.db import repo
+from railval.db import repo, users
 from railval.db import workshops as wsdb
 
 
@@ -65,12 +66,14 @@ def plots(database, name: str) -> dict[str, Any]:
 def invite(database, name: str, reviewer: str, *, actor: Any) -> str:
     """A new personal link token of ``reviewer`` in workshop ``name`` (replaces an earlier one)."""
     with database.session(write=True) as s:
+        users.require_live(s, actor, "workshop.run")  # the organiser as stored now
         return wsdb.invite(s, wsdb.get_workshop(s, name), reviewer, actor=actor)
 
 
 def set_status(database, name: str, status: str, *, actor: Any) -> str:
     """Open or close workshop ``name``; returns the stored status."""
     with database.session(write=True) as s:
+        users.require_live(s, actor, "workshop.run")  # the organiser as stored now
         return wsdb.set_status(s, wsdb.get_workshop(s, name), status, actor=actor).status
 
 

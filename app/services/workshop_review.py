@@ -12,10 +12,10 @@ from __future__ import annotations
 from typing import Any
 
 from railval.db import workshops as wsdb
-from railval.db.workshops import ReviewerContext, WorkshopClosed
+from railval.db.workshops import AnswerOutcome, ReviewerContext, WorkshopClosed
 
-__all__ = ["ReviewerContext", "WorkshopClosed", "answers", "context", "finish", "plot_image",
-           "record_answer"]
+__all__ = ["AnswerOutcome", "ReviewerContext", "WorkshopClosed", "answers", "context", "finish",
+           "plot_image", "record_answer"]
 
 
 def context(database, token: str) -> ReviewerContext | None:
@@ -25,9 +25,11 @@ def context(database, token: str) -> ReviewerContext | None:
 
 
 def answers(database, reviewer_id: int) -> dict[int, dict[str, Any]]:
-    """place → ``{"answer": bool, "comment": str}`` of one reviewer's stored answers."""
+    """place → ``{"answer": bool, "comment": str, "changes": int, "updated_at": str}`` of
+    one reviewer's stored answers (``updated_at`` ISO 8601 UTC, when given or last changed)."""
     with database.session() as s:
-        return {i: {"answer": bool(a.answer), "comment": a.comment}
+        return {i: {"answer": bool(a.answer), "comment": a.comment, "changes": int(a.changes or 0),
+                    "updated_at": wsdb.utc_text(a.updated_at)}
                 for i, a in wsdb.own_answers(s, reviewer_id).items()}
 
 
@@ -38,9 +40,12 @@ def plot_image(database, workshop_id: int, plot_id: int) -> tuple[bytes, str]:
 
 
 def record_answer(database, ctx: ReviewerContext, position: int, answer: bool, *,
-                  seconds: float, comment: str = "", submission: str = "") -> str:
+                  seconds: float, comment: str = "", submission: str = "") -> AnswerOutcome:
     """Store one answer (:func:`railval.db.workshops.record_answer`) in a unit of work that
-    writes; returns ``"new"``, ``"changed"`` or ``"repeated"``."""
+    writes; returns ``"new"``, ``"changed"`` (with the answer it replaced) or
+    ``"repeated"``. The reviewer's account is read again inside that unit of work: a
+    disable committed before it refuses the answer
+    (:class:`railval.core.roles.PermissionDenied`), whatever ``ctx`` says."""
     with database.session(write=True) as s:
         return wsdb.record_answer(s, ctx, position, answer, seconds=seconds, comment=comment,
                                   submission=submission)
@@ -55,4 +60,9 @@ def finish(database, token: str, may_answer) -> None:
         ctx = wsdb.reviewer_by_token(s, token)
         if ctx is None or not may_answer(ctx):
             raise NotFound("review link not valid")
+        refusal = wsdb.answer_refusal(s, ctx)  # the account as stored now, row locked
+        if refusal:
+            from railval.core.roles import PermissionDenied
+
+            raise PermissionDenied(refusal)
         wsdb.finish(s, ctx)

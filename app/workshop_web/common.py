@@ -19,6 +19,7 @@ from urllib.parse import quote
 import tornado.web
 from tornado.ioloop import IOLoop
 
+from railval.app.security import SessionBoundXsrf
 from railval.core.roles import Principal, allowed
 
 COOKIE = "railval_user"
@@ -43,6 +44,7 @@ button.chosen{outline:4px solid #f5b700} .muted{color:#666} .err{color:#b42318;f
 .bar{height:10px;background:#dde;border-radius:5px;overflow:hidden;min-width:120px}.bar>div{height:100%;background:#0b5394}
 textarea{width:100%;max-width:990px;font-size:15px} .row{display:flex;gap:12px;align-items:center;margin:10px 0;flex-wrap:wrap}
 code{background:#eef;padding:2px 4px;word-break:break-all}
+.rv-changed:not(:empty){background:#fff4e5;border:1px solid #e0a030;padding:6px 10px;border-radius:4px;display:inline-block}
 """
 
 
@@ -147,7 +149,10 @@ def _principal_for(database, signed: tuple[str, float] | None, local: bool) -> P
     return cookie_principal(database, signed, local)
 
 
-class _Base(tornado.web.RequestHandler):
+class _Base(SessionBoundXsrf, tornado.web.RequestHandler):
+    """Every ``POST`` carries the anti-forgery token bound to the session and comes from
+    this server's origin (:class:`railval.app.security.SessionBoundXsrf`)."""
+
     def initialize(self, database, auth=None) -> None:
         self.database = database
         self.auth = auth  # the app's sign-in (railval.app.auth.RailvalAuth) when served with it
@@ -173,12 +178,13 @@ class _Base(tornado.web.RequestHandler):
         return super().finish(chunk)
 
     def write_error(self, status_code: int, **kwargs: Any) -> None:
-        """A refused forgery (403 from the token check) answers in the request's language:
-        JSON for scripts, a page for forms; other errors as Tornado does."""
+        """A refused forgery (403 from the token or origin check) answers in the request's
+        language: JSON for scripts, a page for forms; other errors as Tornado does."""
         exc = kwargs.get("exc_info", (None, None))[1]
         if status_code == 403 and "XSRF" in str(getattr(exc, "log_message", "") or ""):
-            msg = ("refused: this request did not come from a railval page (anti-forgery "
-                   "token missing or wrong); reload the page and try again")
+            msg = ("refused: this request did not come from a railval page of this server "
+                   "(another origin, or an anti-forgery token missing or not of this "
+                   "session); reload the page and try again")
             if "json" in (self.request.headers.get("Content-Type") or ""):
                 self.json({"error": msg}, 403)
             else:

@@ -14,7 +14,7 @@ from railval.app.workshop_web.common import (
     run,
 )
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
-from railval.core.roles import allowed
+from railval.core.roles import PermissionDenied, allowed
 
 # -------------------------------------------------------------------------- reviewer
 #: seconds a personal link's context (reviewer, workshop status, sequence) is reused before
@@ -60,11 +60,16 @@ def _state(database, ctx) -> dict[str, Any]:
     return {"total": total, "answered": len(own), "next": nxt, "finished": ctx.finished,
             "status": ctx.workshop_status, "blind": ctx.blind,
             "workshop": None if ctx.blind else ctx.workshop_name,
-            "answers": {str(i): {"answer": "yes" if a["answer"] else "no", "comment": a["comment"]}
+            "answers": {str(i): {"answer": "yes" if a["answer"] else "no", "comment": a["comment"],
+                                 "changes": a["changes"], "at": a["updated_at"]}
                         for i, a in own.items()}}
 
 
 class _ReviewerBase(_Base):
+    #: the personal link is the credential: a page opened by link alone carries the
+    #: pre-session anti-forgery token (railval.app.security.SessionBoundXsrf)
+    accepts_presession_token = True
+
     async def context(self, token: str):
         ctx = await run(_ctx, self.database, token)
         if ctx is None or not allowed(ctx.principal, "workshop.answer"):
@@ -81,6 +86,12 @@ let st = null, pos = 0, shownAt = performance.now(), busy = false;
 const $ = (id) => document.getElementById(id);
 function uid() { return (self.crypto && crypto.randomUUID) ? crypto.randomUUID()
   : Date.now().toString(36) + Math.random().toString(36).slice(2); }
+function cap(a) { return a === 'yes' ? 'Yes' : 'No'; }
+function hhmm(iso) { const d = iso ? new Date(iso) : new Date();
+  return String(d.getHours()).padStart(2, '0') + ':' + String(d.getMinutes()).padStart(2, '0'); }
+async function refresh() {
+  const r = await fetch(base + '/state', {cache: 'no-store'});
+  if (r.ok) { st = await r.json(); return true; } return false; }
 function firstOpen(from) { for (let i = from; i < st.total; i++) if (!st.answers[i]) return i;
   for (let i = 0; i < st.total; i++) if (!st.answers[i]) return i; return st.total; }
 function show() {
@@ -103,7 +114,8 @@ function show() {
   $('yes').classList.toggle('chosen', !!a && a.answer === 'yes');
   $('no').classList.toggle('chosen', !!a && a.answer === 'no');
   $('comment').value = a ? a.comment : '';
-  $('prevnote').textContent = a ? ('Your answer: ' + a.answer + ' (press Yes or No to change it)') : '';
+  $('prevnote').textContent = a ? ('Your answer: ' + cap(a.answer) + (a.changes ? ' (changed, last at '
+    + hhmm(a.at) + ')' : '') + ' — press Yes or No to change it') : '';
   $('backbtn').disabled = pos === 0;
   const img = $('plot');
   img.dataset.position = pos;
@@ -131,11 +143,19 @@ async function answer(value) {
   busy = true;
   const body = {position: pos, answer: value, comment: $('comment').value,
                 seconds: Math.max(0, (performance.now() - shownAt) / 1000), submission: uid()};
+  const at = pos;
   const doc = await post('/answer', body);
   busy = false;
   if (!doc) return;
-  st.answers[pos] = {answer: value, comment: body.comment};
-  pos = firstOpen(pos + 1);
+  // another tab (or an earlier visit) had answered this plot otherwise: say so, keep both
+  if (doc.stored === 'changed' && doc.previous && doc.previous !== value) {
+    $('changed').textContent = 'Plot ' + (at + 1) + ': you changed your answer from '
+      + cap(doc.previous) + ' to ' + cap(value) + ' at ' + hhmm(doc.at) + ' (the answer '
+      + cap(doc.previous) + ' was stored at ' + hhmm(doc.previous_at) + ').';
+  } else { $('changed').textContent = ''; }
+  st.answers[at] = {answer: value, comment: body.comment,
+                    changes: doc.stored === 'changed' ? 1 : 0, at: doc.at};
+  pos = firstOpen(at + 1);
   show();
 }
 async function finish() {
@@ -153,9 +173,11 @@ document.addEventListener('keydown', (e) => {
   else if (e.key === 'n' || e.key === 'N') { e.preventDefault(); answer('no'); }
   else if (e.key === 'ArrowLeft') { $('backbtn').click(); }
 });
+// a tab coming back to the front shows what other tabs stored meanwhile
+document.addEventListener('visibilitychange', async () => {
+  if (document.visibilityState === 'visible' && st && !busy && await refresh()) show(); });
 (async () => {
-  const r = await fetch(base + '/state', {cache: 'no-store'});
-  st = await r.json();
+  await refresh();
   pos = firstOpen(st.next);
   document.body.dataset.ready = '1';
   show();
@@ -175,6 +197,7 @@ Answer with the buttons or the keys <kbd>y</kbd> / <kbd>n</kbd>; <kbd>←</kbd> 
 Every answer is saved at once; you can close the page and come back with the same link.</p>
 <div class='row'><span>Answered <span id='answered'>0</span></span>
 <div class='bar' style='width:300px'><div id='bar' style='width:0'></div></div></div>
+<p id='changed' class='rv-changed' role='status'></p>
 <section id='review'>
 <div class='row'><strong>Plot <span id='progress'>…</span></strong>
 <span id='prevnote' class='muted'></span></div>
@@ -189,7 +212,25 @@ Every answer is saved at once; you can close the page and come back with the sam
 <button id='back' hidden>← go back</button> <button id='finish' class='yes' hidden>Finish</button></section>
 <p id='msg' class='err'></p>"""
         self.set_header("Cache-Control", "no-store")
-        self.finish(page(title, body, user=ctx.username, script=_REVIEW_JS))
+        html_page = page(title, body, user=ctx.username, script=_REVIEW_JS)
+        if await self.signed_in():  # one click ends the session on the server (POST /logout)
+            html_page = html_page.replace("</header>", _SIGN_OUT + "</header>", 1)
+        self.finish(html_page)
+
+    async def signed_in(self) -> bool:
+        """True when the request carries a live session of the app's sign-in."""
+        from railval.app.auth import COOKIE as APP_COOKIE
+
+        raw = self.get_cookie(APP_COOKIE) if self.auth is not None else None
+        if not raw:
+            return False
+        p = await run(self.auth.principal_from_cookie, raw)
+        return p is not None and not p.open_mode
+
+
+_SIGN_OUT = ("<form method='post' action='/logout' class='rv-review-signout' style='margin:0'>"
+             "<button type='submit' id='review-signout' style='font-size:14px;padding:3px 10px'>"
+             "Sign out</button></form>")
 
 
 class ReviewState(_ReviewerBase):
@@ -254,7 +295,24 @@ def _answer(database, token: str, body: dict[str, Any]) -> dict[str, Any]:
     outcome = workshop_review.record_answer(database, ctx, position, ans == "yes", seconds=seconds,
                                             comment=str(body.get("comment") or ""),
                                             submission=str(body.get("submission") or ""))
-    return {"stored": outcome, "position": position}
+    doc = {"stored": str(outcome), "position": position, "at": _utc_now()}
+    if outcome.previous is not None:  # the answer this one replaced (another tab's, maybe)
+        doc["previous"] = "yes" if outcome.previous else "no"
+        doc["previous_at"] = _iso(outcome.previous_at)
+    return doc
+
+
+def _utc_now() -> str:
+    import datetime as dt
+
+    return _iso(dt.datetime.now(dt.UTC))
+
+
+def _iso(when) -> str | None:
+    """ISO 8601 UTC with a ``Z`` (the browser shows it in local time)."""
+    if when is None:
+        return None
+    return when.strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 def _finish(database, token: str) -> dict[str, Any]:
@@ -266,6 +324,8 @@ def _finish(database, token: str) -> dict[str, Any]:
 
 
 class ReviewAnswer(_Base):
+    accepts_presession_token = True
+
     async def post(self, token: str) -> None:
         from railval.app.services.workshop_review import WorkshopClosed
 
@@ -280,6 +340,8 @@ class ReviewAnswer(_Base):
             self.json(await run(_answer, self.database, token, body))
         except NotFound as exc:
             self.json({"error": str(exc)}, 404)
+        except PermissionDenied as exc:
+            self.json({"error": str(exc)}, 403)
         except WorkshopClosed as exc:
             self.json({"error": str(exc)}, 409)
         except RailvalError as exc:
@@ -287,10 +349,14 @@ class ReviewAnswer(_Base):
 
 
 class ReviewFinish(_Base):
+    accepts_presession_token = True
+
     async def post(self, token: str) -> None:
         try:
             self.json(await run(_finish, self.database, token))
         except NotFound as exc:
             self.json({"error": str(exc)}, 404)
+        except PermissionDenied as exc:
+            self.json({"error": str(exc)}, 403)
         except RailvalError as exc:
             self.json({"error": str(exc)}, 400)
