@@ -10,7 +10,7 @@ real browser (Playwright driving Debian's Chromium) against the served app on lo
   window widths;
 * Sign-off form: no decision is chosen until the reviewer chooses; a missing decision and a
   contrary decision without justification are refused next to the form in the page's words;
-  the status reads "signature valid"; the audit row of the sign-off carries the contrary mark;
+  the status reads "SIGNATURE VALID"; the audit row of the sign-off carries the contrary mark;
 * dashboard: all 12 quantity rows in view without scrolling inside the table, numbers as
   people write them; the workshop form explains "hidden repeats" and the automatic-scaling
   share.
@@ -184,7 +184,7 @@ def test_signoff_form_has_no_default_decision_and_refuses_in_the_page_words(page
     card = main.locator(".rv-signoff").first
     card.wait_for(timeout=TIMEOUT_MS)
     status = card.locator(".rv-signoff-status").inner_text().strip()
-    assert status == "signature valid", status  # not a bare "VALID" beside "CONTRARY …"
+    assert status == "SIGNATURE VALID", status  # not a bare "VALID" beside "CONTRARY …"
     assert "CONTRARY TO THE OBJECTIVE VERDICT" in card.inner_text()
     assert refusal.inner_text().strip() == ""
     # the next sign-off starts without a decision too

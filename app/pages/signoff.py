@@ -35,9 +35,9 @@ CONTRARY_TAG = ("<span class='rv-contrary' style='background:#b3261e;color:#fff;
 
 
 def status_label(status: str) -> str:
-    """A sign-off's status as a reader must take it: the *signature*'s state ("signature
-    valid": the evidence is unchanged), never a bare "VALID" that reads as "validated"."""
-    return f"signature {status}"
+    """A sign-off's status as a reader must take it: the *signature*'s state ("SIGNATURE
+    VALID": the evidence is unchanged), never a bare "VALID" that reads as "validated"."""
+    return f"SIGNATURE {status.upper()}"
 
 
 #: what the reviewer must do, in the page's words, for each refusal of the signing rules
