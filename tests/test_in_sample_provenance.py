@@ -138,3 +138,33 @@ def test_a_calibration_with_held_out_sections_names_them(diagnosed):
     assert prov["in_sample"] and prov["fitted_by"] == {"split": "calibration"}
     assert prov["held_out_sections"] == ids[8:]
     assert prov["held_out_check"].startswith(f"held-out check: sections {', '.join(ids[8:])}")
+
+
+def test_signing_refusals_follow_the_in_sample_decision_and_read_in_the_page_words(diagnosed):
+    """The sign-off rules take the same in-sample decision: accepting the in-sample
+    configuration (or the NOT VALIDATED baseline) without a justification is refused, and the
+    page words the server's refusal without the CLI flag; nothing is stored."""
+    db, backend, _ = diagnosed
+    from railval.app.pages.signoff import refusal_text
+    from railval.app.services.signoff import SignoffRefused, sign
+    from railval.db import signoff as db_signoff
+    from railval.db import users
+
+    with db.session(write=True) as s:
+        users.create_user(s, "rev39", display_name="Rita Thirty-Nine", password="reviewer pw 39",
+                          roles=["reviewer"])
+    view = view_of(backend.validation("ins", "fitted"))
+    for config in ("baseline", "fitted"):
+        with pytest.raises(SignoffRefused) as err:
+            sign(db, "rev39", "reviewer pw 39", "ins", config, decision="validated")
+        raw = str(err.value)
+        assert "(--justification TEXT)" in raw  # the CLI's wording
+        text = refusal_text(raw)
+        assert text.startswith("A decision contrary to the objective verdict needs a justification: ")
+        assert "--" not in text and "Justification box" in text
+        if config == "fitted" and view.validated:
+            assert "in-sample" in text  # contrary because the verdict is in-sample
+    assert refusal_text("sign-off refused: decision '': choose one of validated, restricted, "
+                        "not-validated").startswith("Choose a decision")
+    with db.session() as s:
+        assert db_signoff.list_signoffs(s) == []
