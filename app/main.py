@@ -20,6 +20,8 @@ from pathlib import Path
 from typing import Any
 
 import panel as pn
+import param
+from panel.reactive import ReactiveHTML
 
 from railval.app import security
 from railval.app.pages.audit import AuditPage
@@ -139,17 +141,86 @@ def user_box(app: AppState) -> pn.pane.HTML:
         f"<a href='/logout' class='rv-logout'>Sign out</a></div>", sizing_mode="stretch_width")
 
 
-def areas_box(principal: Principal) -> pn.pane.HTML:
-    """Links to the web areas outside the Panel pages the user may open (the workshop pages;
-    :mod:`railval.app.navigation`), or nothing."""
-    from railval.app.navigation import entries
+class NavBar(ReactiveHTML):
+    """The one navigation in the app's header: the bar of
+    :func:`railval.app.navigation.nav_html` (same elements, classes and :data:`NAV_CSS
+    <railval.app.navigation.NAV_CSS>` as on the workshop pages), built in the browser from
+    :func:`~railval.app.navigation.nav_items` with text nodes only (no markup from the
+    server). An app page's entry is a button that sets :attr:`page` (the session switches
+    page without reloading); the workshop areas are links. A ReactiveHTML component: its
+    scripts run under the app's content security policy (no ``blob:`` module)."""
 
-    links = "".join(f"<li><a class='rv-area' href='{html.escape(e.href, quote=True)}'>"
-                    f"{html.escape(e.title)}</a></li>"
-                    for e in entries(principal) if e.kind == "area")
-    return pn.pane.HTML(f"<div class='rv-areas' style='font-size:14px'><b>Workshop pages</b>"
-                        f"<ul style='margin:4px 0;padding-left:18px'>{links}</ul></div>"
-                        if links else "", sizing_mode="stretch_width", margin=(0, 10))
+    items = param.List(default=[], doc="the entries (nav_items)")
+    page = param.String(default="", doc="the page the user clicked")
+
+    _template = '<div id="bar" class="rv-navbox"></div>'
+    _scripts = {
+        "render": """bar.addEventListener('click', (e) => {
+  const b = e.target.closest('button[data-page]');
+  if (b) { data.page = b.dataset.page; }
+});
+self.items();""",
+        "items": """bar.textContent = '';
+const nav = document.createElement('nav');
+nav.className = 'rv-nav';
+nav.setAttribute('aria-label', 'railval');
+let areas = null;
+for (const it of data.items) {
+  const el = document.createElement(it.kind === 'page' ? 'button' : 'a');
+  el.className = 'rv-nav-link' + (it.current ? ' rv-current' : '') + (it.kind === 'area' ? ' rv-area' : '');
+  el.textContent = it.title;
+  if (it.current) el.setAttribute('aria-current', 'page');
+  if (it.kind === 'page') { el.type = 'button'; el.dataset.page = it.name; }
+  else { el.href = it.href; }
+  if (it.kind === 'area') {
+    if (areas === null) { areas = document.createElement('span'); areas.className = 'rv-areas'; }
+    areas.appendChild(el);
+  } else { nav.appendChild(el); }
+}
+if (areas !== null) nav.appendChild(areas);
+bar.appendChild(nav);""",
+    }
+
+
+def nav_bar(app: AppState) -> NavBar:
+    """The header's navigation of ``app``'s user, the current page marked, kept in step
+    with the session's page both ways."""
+    from railval.app.navigation import NAV_CSS, nav_items
+
+    bar = NavBar(items=nav_items(app.principal, app.page), page=app.page,
+                 stylesheets=[NAV_CSS], sizing_mode="stretch_width", margin=(4, 10))
+
+    def clicked(event) -> None:
+        if event.new in PAGE_CLASSES and app.page_allowed(event.new):
+            app.page = event.new
+
+    def moved(*_) -> None:
+        bar.items = nav_items(app.principal, app.page)
+        bar.page = app.page
+    bar.param.watch(clicked, ["page"])
+    app.param.watch(moved, ["page"])
+    return bar
+
+
+def jobs_box(app: AppState) -> pn.pane.HTML:
+    """The user's running and recently finished jobs (:func:`railval.app.state.jobs.jobs_of`),
+    each with the link to its result — also those started before a reload or in another
+    tab; refreshed every 2 s in a served session and whenever the status changes."""
+    from railval.app.navigation import NAV_CSS, jobs_html
+    from railval.app.state.jobs import jobs_of
+
+    pane = pn.pane.HTML(jobs_html(jobs_of(app.principal.username)), stylesheets=[NAV_CSS],
+                        css_classes=["rv-jobs-pane"], sizing_mode="stretch_width", margin=(0, 10))
+
+    def refresh(*_) -> None:
+        text = jobs_html(jobs_of(app.principal.username))
+        if text != pane.object:
+            pane.object = text
+    app.param.watch(refresh, ["status", "busy"])
+    doc = pn.state.curdoc
+    if doc is not None and doc.session_context is not None:
+        pn.state.add_periodic_callback(refresh, period=2000)
+    return pane
 
 
 def _session_args() -> dict[str, str]:
@@ -207,12 +278,8 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
     pages = Pages(app)
     allowed_pages = app.pages_allowed()
     if not allowed_pages:  # e.g. a panelist: no app page, only their workshop areas
-        return pn.Column(user_box(app), areas_box(app.principal),
-                         css_classes=["rv-no-pages"], sizing_mode="stretch_width")
-    nav = pn.widgets.RadioButtonGroup(
-        options={PAGE_TITLES[p]: p for p in allowed_pages}, value=app.page, orientation="vertical",
-        color="light", sizing_mode="stretch_width", css_classes=["rv-nav"])
-    nav.link(app, value="page", bidirectional=True)
+        return pn.Column(pn.Row(nav_bar(app), styles={"background": ACCENT}), user_box(app),
+                         jobs_box(app), css_classes=["rv-no-pages"], sizing_mode="stretch_width")
     main = pn.Column(sizing_mode="stretch_width", css_classes=["rv-main"])
 
     def show(*_):
@@ -225,14 +292,13 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
         user_box(app),
         pn.widgets.Select.from_param(app.param.campaign, name="Campaign"),
         pn.widgets.Select.from_param(app.param.configuration, name="Configuration"),
-        pn.pane.Markdown("**Pages**", margin=(10, 10, 0, 10)),
-        nav,
-        areas_box(app.principal),
+        jobs_box(app),
         pn.layout.Divider(),
         status_area(app),
     ]
     template = pn.template.FastListTemplate(
-        title="railval — model validation (EN 14363)", sidebar=sidebar, main=[main],
+        title="railval", sidebar=sidebar, main=[main],
+        header=[nav_bar(app)],
         accent=ACCENT, header_background=ACCENT, sidebar_width=300, main_layout=None,
         raw_css=_css(), theme_toggle=False,
     )

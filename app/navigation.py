@@ -88,6 +88,13 @@ NAV_CSS = """
 """
 
 
+def nav_items(principal: Principal, current: str = "") -> list[dict[str, Any]]:
+    """The entries of :func:`nav_html` as data (``title``, ``name``, ``href``, ``kind``,
+    ``current``): the Panel app builds the same bar from them in the browser."""
+    return [{"title": e.title, "name": e.name, "href": e.href, "kind": e.kind,
+             "current": e.name == current or e.href == current} for e in entries(principal)]
+
+
 def nav_html(principal: Principal, current: str = "", *, in_app: bool = False,
              selection: Mapping[str, str | None] | None = None) -> str:
     """The navigation bar of ``principal``: ``<nav class="rv-nav">`` with the app pages, then

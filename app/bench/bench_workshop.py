@@ -19,6 +19,12 @@ analysis time of all answers (``railval.core.review.analyse``), and ``railval au
 rows and whether it holds). With ``--url`` of a database
 that already holds the workshop ``bench``, it is reused (new reviewers) instead of rendered
 again. ``--think`` adds a reviewer's look at each plot before the answer.
+
+``--create-only N`` times only the creation of a ``--plots`` workshop, N times each way and
+alternating (other work on the machine then weighs on both alike): A renders a figure made
+for every plot, one after the other in this process (the renderer before figure reuse and the
+render pool), B the current renderer (:func:`railval.app.services.workshop_render.render_many`);
+each run reports its total and rendering time and the 1-minute load average at its end.
 """
 
 from __future__ import annotations
@@ -50,6 +56,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="mean seconds a reviewer looks at a plot before answering "
                              "(uniform 0.5–1.5 × this; default 0: back-to-back requests)")
     parser.add_argument("--keep", action="store_true", help="keep the temporary folder")
+    parser.add_argument("--create-only", type=int, default=0, metavar="N",
+                        help="only time the creation of a --plots workshop, N times each way, "
+                             "alternating: A = one figure per plot in this process (the renderer "
+                             "before figure reuse and the pool), B = the current renderer; no "
+                             "server, no reviewers")
 
 
 def _rss_kib(pid: int) -> int:
@@ -200,8 +211,79 @@ class _Reviewer(threading.Thread):
             conn.close()
 
 
+def _choice(db, campaign: str, n_plots: int) -> dict[str, list[str]]:
+    """Configurations, sections and kinds of the first ``n_plots`` planned plots."""
+    from railval.app.services import workshops as ws
+
+    with db.session() as s:
+        chosen = ws.plan(s, campaign)[:n_plots]
+    return {"configurations": sorted({p.configuration for p in chosen}),
+            "sections": sorted({p.section for p in chosen}),
+            "kinds": sorted({p.kind for p in chosen})}
+
+
+def _timed_create(db, name: str, campaign: str, choice: dict, legacy: bool) -> dict[str, Any]:
+    """One creation, timed, with the renderer of ``legacy`` (A) or the current one (B);
+    the render cache is emptied first so that both render every plot."""
+    from railval.app.services import workshop_render as wr
+    from railval.app.services import workshops as ws
+
+    wr.clear_cache()
+    saved = wr.render_png, wr.RENDER_WORKERS
+    if legacy:  # a figure made for every plot, one plot after the other in this process
+        wr.render_png, wr.RENDER_WORKERS = wr.render_fresh, 1
+    marks: dict[str, float] = {}
+    t0 = time.perf_counter()
+
+    def progress(stage: str, fraction: float, info: dict | None = None) -> None:
+        marks.setdefault(stage, time.perf_counter() - t0)
+    try:
+        out = ws.create(db, name, campaign, **choice, repeats=0.0, progress=progress)
+    finally:
+        wr.render_png, wr.RENDER_WORKERS = saved
+    total = time.perf_counter() - t0
+    return {"way": "A" if legacy else "B", "plots": out["plots"], "create_s": round(total, 2),
+            "render_s": round(total - marks.get("rendering plots", 0.0), 2),
+            "loadavg_1min": round(os.getloadavg()[0], 2)}
+
+
+def run_create_only(args: argparse.Namespace) -> dict[str, Any]:
+    """``--create-only N``: A and B alternately N times each on one database (a first,
+    untimed creation fills the validation results' cache both then read)."""
+    from railval.app.services.synth import DEMO_NAME, ensure_demo
+    from railval.db.engine import connect
+
+    folder = Path(tempfile.mkdtemp(prefix="railval-bench-wsc-"))
+    db = connect(args.url or f"sqlite:///{folder / 'bench.db'}")
+    db.init()
+    campaign = args.campaign
+    if campaign is None:
+        ensure_demo(db)
+        campaign = DEMO_NAME
+    choice = _choice(db, campaign, args.plots)
+    tag = f"{int(time.time()) % 100000:05d}"
+    warm = _timed_create(db, f"bench-warm-{tag}", campaign, choice, legacy=False)
+    runs = []
+    for i in range(args.create_only):
+        for legacy in (True, False):
+            runs.append(_timed_create(db, f"bench-{'a' if legacy else 'b'}{i}-{tag}", campaign,
+                                      choice, legacy))
+    db.dispose()
+    from railval.app.services.workshop_render import RENDER_WORKERS
+
+    a = [r["create_s"] for r in runs if r["way"] == "A"]
+    b = [r["create_s"] for r in runs if r["way"] == "B"]
+    return {"plots": runs[0]["plots"] if runs else warm["plots"], "render_workers": RENDER_WORKERS,
+            "warm_up": warm, "runs": runs, "A_create_s": [min(a), max(a)] if a else None,
+            "B_create_s": [min(b), max(b)] if b else None, "cpu_count": os.cpu_count(),
+            "database": str(db.engine.url).split(":")[0]}
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from railval.app.main import free_port
+
+    if getattr(args, "create_only", 0):
+        return run_create_only(args)
 
     folder = Path(tempfile.mkdtemp(prefix="railval-bench-ws-"))
     url = args.url or f"sqlite:///{folder / 'bench.db'}"

@@ -46,6 +46,26 @@ def plan_counts(database, campaign: str, configurations: Sequence[str] | None,
     return {"plots": len(planned), "by_kind": ws.count_by_kind(planned)}
 
 
+def check_new(database, name: str, campaign: str, *, configurations: Sequence[str],
+              sections: Sequence[str], kinds: Sequence[str], scaling: str, repeats: float,
+              auto_share: float, actor: Any) -> int:
+    """Refuse a new workshop's choices before its creation job starts (the checks
+    :func:`railval.app.services.workshops.create` makes first: permission, name, options, an
+    existing name, a choice that gives no plot) with the same
+    :class:`~railval.core.errors.InvalidParameter`; returns the number of plots."""
+    from railval.app.services import workshops as ws
+    from railval.core.errors import InvalidParameter
+
+    ws._check_options(name, scaling, "auto", repeats, auto_share, actor)
+    with database.session() as s:
+        ws._refuse_existing(s, name)
+        n = len(ws.plan(s, campaign, configurations, sections, kinds))
+    if n == 0:
+        raise InvalidParameter("this choice of configurations, sections and kinds gives no plot "
+                               "(no section has the channels of the chosen kinds on both sides)")
+    return n
+
+
 def status(database, name: str) -> dict[str, Any]:
     """The workshop's status with every reviewer's progress
     (:func:`railval.app.services.workshops.status_document`)."""

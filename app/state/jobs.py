@@ -300,13 +300,21 @@ class JobRunner:
         self.state.progress = 0.0
         self.state.set_status(f"{title}: started", "info")
         job = _Job(self.state, title, work, on_done, dispatch or _direct, cancel, reserves,
-                   track(self.state.principal.username, title, self._link(reserves)))
+                   track(self.state.principal.username, self._label(title, reserves),
+                         self._link(reserves)))
         if not background:
             job.run()
             return None
         self.thread = threading.Thread(target=job.run, name=f"railval-job-{title}", daemon=True)
         self.thread.start()
         return self.thread
+
+    def _label(self, title: str, reserves: tuple[str, str] | None) -> str:
+        """The job as the user's job list names it: ``diagnosis of baseline (demo)``."""
+        st = self.state
+        conf = reserves[1] if reserves is not None else getattr(st, "configuration", None)
+        camp = getattr(st, "campaign", None)
+        return f"{title} of {conf} ({camp})" if conf and camp else title
 
     def _link(self, reserves: tuple[str, str] | None) -> str:
         """Where the job's result is shown: the page it was started on, with its campaign and

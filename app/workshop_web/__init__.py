@@ -22,10 +22,14 @@ Organiser (signed-in user with ``workshop.run``; analysis needs ``workshop.resul
 * ``/workshops`` list, ``/workshops/new`` create form (count before creating),
   ``/workshops/{name}`` progress, links, close/reopen, ``/workshops/{name}/analysis``,
   ``/workshops/login``, ``/workshops/logout`` (served with the app: redirects to the app's
-  ``/login`` and ``/logout`` — one sign-in).
+  ``/login`` and ``/logout`` — one sign-in). Creating a workshop is a job of the organiser:
+  ``/workshops/{name}`` shows its progress until it is stored (``/workshops/{name}/creation``,
+  JSON) and the list shows it "being created, n of N".
 
 Panelist (signed in, ``workshop.answer``): ``/workshops/mine`` lists the own workshops;
 ``POST /workshops/mine/{name}/open`` issues a fresh personal link and opens it.
+Every signed-in user: ``/workshops/mine/jobs`` (JSON) lists the own running and recently
+finished jobs (workshop creations, the app's diagnoses and calibrations).
 
 Every page carries the app's one navigation (:mod:`railval.app.navigation`) and every
 ``POST`` (forms and the reviewer's JSON answers) the anti-forgery token
@@ -56,7 +60,9 @@ from railval.app.workshop_web.analysis import (
 )
 from railval.app.workshop_web.common import Login, Logout
 from railval.app.workshop_web.organiser import (
+    MyJobs,
     MyWorkshops,
+    WorkshopCreation,
     WorkshopList,
     WorkshopNew,
     WorkshopPage,
@@ -95,6 +101,7 @@ def routes(database, auth=None) -> list[tuple]:
         *sign_in,
         (r"/workshops/?", WorkshopList, kw),
         (r"/workshops/mine", MyWorkshops, kw),
+        (r"/workshops/mine/jobs", MyJobs, kw),
         (rf"/workshops/mine/{name}/open", MyWorkshops, kw),
         (r"/workshops/new", WorkshopNew, kw),
         (r"/workshops/plan", WorkshopPlan, kw),
@@ -102,6 +109,7 @@ def routes(database, auth=None) -> list[tuple]:
         (rf"/workshops/{name}/status", _StatusOrPost, kw),
         (rf"/workshops/{name}/invite", _InvitePost, kw),
         (rf"/workshops/{name}/analysis", WorkshopAnalysis, kw),
+        (rf"/workshops/{name}/creation", WorkshopCreation, kw),
         (rf"/workshops/{name}/plot/(\d+)", WorkshopPlotImage, kw),
         (rf"/workshops/{name}", WorkshopPage, kw),
     ]

@@ -32,8 +32,6 @@ _CSS = """
 body{font-family:'DejaVu Sans',Arial,sans-serif;margin:0;background:#f6f7f9;color:#1b1b1b}
 header{background:#0b5394;color:#fff;padding:10px 20px;display:flex;gap:20px;align-items:center;flex-wrap:wrap}
 header a{color:#fff} header .rv-home{text-decoration:none;font-size:18px}
-.rv-nav{display:flex;gap:4px;flex-wrap:wrap}.rv-nav a{text-decoration:none;padding:3px 8px;border-radius:4px;font-size:14px}
-.rv-nav a:hover{background:rgba(255,255,255,.18)}.rv-nav a.rv-current{background:#fff;color:#0b5394}
 .rv-who{font-size:14px} main{padding:16px 24px;max-width:1200px;margin:auto}
 table{border-collapse:collapse;background:#fff} td,th{border:1px solid #ccd;padding:4px 8px;text-align:left}
 th{background:#eef1f6} .num{text-align:right;font-variant-numeric:tabular-nums}
@@ -70,19 +68,18 @@ def _pct(x: Any) -> str:
 
 
 def nav_html(principal: Principal | None, current: str = "") -> str:
-    """The one navigation (:mod:`railval.app.navigation`) as header links, the signed-in
-    user and the sign-out link; empty without a principal (a reviewer's personal link)."""
+    """The one navigation (:func:`railval.app.navigation.nav_html`, every entry a link) in
+    the header, the signed-in user and the sign-out link; empty without a principal (a
+    reviewer's personal link)."""
     if principal is None:
         return ""
-    from railval.app.navigation import entries
+    from railval.app.navigation import nav_html as one_nav
 
-    links = "".join(
-        f"<a class='rv-nav-link{' rv-current' if e.href == current else ''}' "
-        f"href='{esc(e.href)}'>{esc(e.title)}</a>" for e in entries(principal))
+    links = one_nav(principal, current)
     who = ("open single-user mode" if principal.open_mode else
            f"{principal.printed_name} ({', '.join(sorted(principal.roles)) or 'no role'})")
     out = "" if principal.open_mode else " <a class='rv-logout' href='/logout'>Sign out</a>"
-    return (f"<nav class='rv-nav'>{links}</nav>"
+    return (f"{links}"
             f"<span class='rv-who' style='margin-left:auto'>{esc(who)}{out}</span>")
 
 
@@ -90,16 +87,51 @@ def page(title: str, body: str, *, user: Principal | str = "", script: str = "",
          current: str = "") -> str:
     """A workshop page in the app's frame: the same header colour, title and navigation
     as the Panel app (:func:`nav_html` when ``user`` is a principal), then ``body``."""
+    from railval.app.navigation import NAV_CSS
+
+    jobs = ""
     if isinstance(user, Principal):
+        from railval.app.navigation import jobs_html
+        from railval.app.state.jobs import jobs_of
+
         head = nav_html(user, current)
+        jobs = f"<div id='rv-jobs-box'>{jobs_html(jobs_of(user.username))}</div>"
+        script = _JOBS_JS + script
     else:
         head = (f"<span style='margin-left:auto'>{esc(user)}</span>" if user else "")
     return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'>"
             f"<meta name='viewport' content='width=device-width,initial-scale=1'>"
-            f"<title>railval — {esc(title)}</title><style>{_CSS}</style></head><body>"
+            f"<title>railval — {esc(title)}</title><style>{_CSS}{NAV_CSS}</style></head><body>"
             f"<header><a class='rv-home' href='/app'><strong>railval</strong></a>"
-            f"<span class='rv-title'>{esc(title)}</span>{head}</header><main>{body}</main>"
+            f"<span class='rv-title'>{esc(title)}</span>{head}</header><main>{jobs}{body}</main>"
             f"{'<script>' + script + '</script>' if script else ''}</body></html>")
+
+
+#: keeps the "Your jobs" box of a workshop page current while one of the user's jobs runs
+_JOBS_JS = r"""
+(function () {
+  const box = document.getElementById('rv-jobs-box');
+  function esc(t) { const d = document.createElement('div'); d.textContent = String(t); return d.innerHTML.replace(/"/g, '&quot;').replace(/'/g, '&#39;'); }
+  function line(j) {
+    let what = j.state === 'running' ? (j.total ? (j.done || 0) + ' of ' + j.total : Math.round(100 * j.fraction) + ' %') : j.state;
+    let t = j.title + ': ' + what + ' · ' + Math.round(j.elapsed_s) + ' s';
+    if (j.state === 'failed' && j.error) t += ' — ' + j.error;
+    return t;
+  }
+  async function refresh() {
+    try {
+      const r = await fetch('/workshops/mine/jobs', {cache: 'no-store'});
+      if (!r.ok) return;
+      const jobs = (await r.json()).jobs;
+      box.innerHTML = jobs.length ? '<div class="rv-jobs"><b>Your jobs</b><ul>' + jobs.map(j =>
+        '<li class="rv-job rv-job-' + esc(j.state) + '" data-state="' + esc(j.state) + '"><a href="' +
+        esc(j.link) + '">' + esc(line(j)) + '</a></li>').join('') + '</ul></div>' : '';
+      if (jobs.some(j => j.state === 'running' || j.state === 'queued')) setTimeout(refresh, 1500);
+    } catch (e) { setTimeout(refresh, 5000); }
+  }
+  if (box && box.querySelector('[data-state="running"], [data-state="queued"]')) setTimeout(refresh, 1500);
+})();
+"""
 
 
 async def run(fn, *args, **kw):

@@ -1,5 +1,10 @@
-"""Organiser pages: workshop list, create form with the plot count, progress, links,
-close/reopen."""
+"""Organiser pages: workshop list, create form with the plot count, creation as a job with
+its progress, links, close/reopen.
+
+Length: the organiser's path through one workshop — form, creation job, the page that shows
+the job and then the workshop — reads as one flow; the creation job's pieces are small
+helpers of these handlers.
+"""
 
 from __future__ import annotations
 
@@ -35,7 +40,8 @@ class WorkshopList(_OrganiserBase):
         rows = await run(_list_doc, self.database)
         runs = allowed(p, "workshop.run")  # else results only: the analysis pages
         tail = "" if runs else "/analysis"
-        trs = "".join(
+        trs = _creating_rows(p.username, {r["name"] for r in rows}) if runs else ""
+        trs += "".join(
             f"<tr><td><a href='/workshops/{quote(r['name'], safe='')}{tail}'>{esc(r['name'])}</a></td>"
             f"<td>{esc(r['campaign'])}</td><td>{esc(r['status'])}</td>"
             f"<td>{'yes' if r['blind'] else 'no'}</td><td class='num'>{r['reviewers']}</td>"
@@ -45,6 +51,33 @@ class WorkshopList(_OrganiserBase):
                 f"<table><tr><th>workshop</th><th>campaign</th><th>status</th><th>blind</th>"
                 f"<th>reviewers</th><th>answers</th></tr>{trs}</table>")
         self.finish(page("Workshops", body, user=p, current="/workshops"))
+
+
+def _creation_text(job: dict[str, Any]) -> str:
+    """A creation job's state in words: ``being created, 240 of 576`` (plots rendered)."""
+    if job["state"] == "failed":
+        return f"creation failed: {job['error']}"
+    if job["state"] == "queued":
+        return "being created (queued)"
+    if job.get("total"):
+        return f"being created, {job.get('done') or 0} of {job['total']}"
+    return f"being created ({job.get('message') or 'starting'})"
+
+
+def _creating_rows(username: str, stored: set[str]) -> str:
+    """Table rows of ``username``'s workshops being created (or whose creation failed)."""
+    from railval.app.state.jobs import jobs_of
+
+    out = []
+    for j in jobs_of(username):
+        name = j.get("workshop")
+        if not name or name in stored or j["state"] in ("done", "cancelled"):
+            continue
+        out.append(f"<tr class='rv-creating' data-state='{esc(j['state'])}'><td><a href='"
+                   f"/workshops/{quote(name, safe='')}'>{esc(name)}</a></td><td></td>"
+                   f"<td class='rv-creating-state'>{esc(_creation_text(j))}</td>"
+                   f"<td></td><td class='num'></td><td class='num'></td></tr>")
+    return "".join(out)
 
 
 def _form_choices(database) -> dict[str, Any]:
@@ -96,7 +129,7 @@ async function preview() {
 }
 document.getElementById('previewbtn').onclick = preview;
 form.campaign.onchange = fill; form.onsubmit = () => { document.getElementById('create').disabled = true;
-  document.getElementById('count').textContent += ' — rendering, please wait…'; };
+  document.getElementById('count').textContent += ' — starting the creation…'; };
 fill();
 """
 
@@ -185,26 +218,58 @@ EN 14363 test zone</option><option value='workshop'>same range per kind over the
         self.finish(page("New workshop", body, user=p, script=_NEW_JS))
 
     async def post(self) -> None:
-        from railval.app.services import workshops as ws
-
+        """Check the choices, start the creation as a job of this user (plots rendered n of
+        N on the workshop's page and in the list) and go to the workshop's page at once."""
         p = await self.require("workshop.run")
         if p is None:
             return
         a = _args(self)
         try:
             name = (a.get("name") or [""])[0]
-            await run(ws.create, self.database, name, (a.get("campaign") or [""])[0],
-                      configurations=a.get("configurations") or ["(none chosen)"],
-                      sections=a.get("sections") or ["(none chosen)"],
-                      kinds=a.get("kinds") or ["(none chosen)"], blind=bool(a.get("blind")),
-                      repeats=float((a.get("repeats") or ["0.1"])[0]),
-                      auto_share=float((a.get("auto_share") or ["0"])[0]),
-                      scaling=(a.get("scaling") or ["zone"])[0], actor=p)
+            campaign = (a.get("campaign") or [""])[0]
+            opts = _create_options(a)
+            await run(_check_new, self.database, name, campaign, opts, p)
+            _start_creation(self.database, name, campaign, opts, p)
         except (RailvalError, ValueError) as exc:
             self.set_status(400)
             await self.get(message=str(exc))
             return
         self.redirect(f"/workshops/{quote(name, safe='')}")
+
+
+def _create_options(a: dict[str, list[str]]) -> dict[str, Any]:
+    """The form's choices as :func:`railval.app.services.workshops.create` takes them."""
+    def number(field: str, default: str) -> float:
+        raw = (a.get(field) or [default])[0]
+        try:
+            return float(raw)
+        except ValueError:
+            raise InvalidParameter(f"{field}: {raw!r} is not a number") from None
+    return {"configurations": a.get("configurations") or ["(none chosen)"],
+            "sections": a.get("sections") or ["(none chosen)"],
+            "kinds": a.get("kinds") or ["(none chosen)"], "blind": bool(a.get("blind")),
+            "repeats": number("repeats", "0.1"), "auto_share": number("auto_share", "0"),
+            "scaling": (a.get("scaling") or ["zone"])[0]}
+
+
+def _check_new(database, name: str, campaign: str, opts: dict[str, Any], actor) -> int:
+    from railval.app.services.workshop_admin import check_new
+
+    return check_new(database, name, campaign, configurations=opts["configurations"],
+                     sections=opts["sections"], kinds=opts["kinds"], scaling=opts["scaling"],
+                     repeats=opts["repeats"], auto_share=opts["auto_share"], actor=actor)
+
+
+def _start_creation(database, name: str, campaign: str, opts: dict[str, Any], actor) -> None:
+    """Create the workshop in a job of ``actor``'s (:func:`railval.app.state.jobs.start_tracked`):
+    nothing is stored until every plot is rendered, so a failure leaves nothing behind."""
+    from railval.app.services import workshops as ws
+    from railval.app.state.jobs import start_tracked
+
+    def work(progress):
+        return ws.create(database, name, campaign, **opts, actor=actor, progress=progress)
+    start_tracked(actor.username, f"Create workshop {name}", work,
+                  link=f"/workshops/{quote(name, safe='')}", workshop=name)
 
 
 def _status_doc(database, name: str) -> dict[str, Any]:
@@ -251,6 +316,59 @@ class WorkshopStatus(_OrganiserBase):
             self.json({"error": str(exc)}, 404)
 
 
+_CREATION_JS = r"""
+const wname = document.body.dataset.workshop;
+async function poll() {
+  try {
+    const r = await fetch('/workshops/' + encodeURIComponent(wname) + '/creation', {cache: 'no-store'});
+    if (!r.ok) { location.reload(); return; }
+    const j = await r.json();
+    const box = document.getElementById('creation');
+    box.dataset.state = j.state;
+    if (j.state === 'done') { location.reload(); return; }
+    let t = j.state === 'failed' ? 'creation failed: ' + j.error :
+            j.state === 'queued' ? 'being created (queued)' :
+            j.total ? 'being created, ' + (j.done || 0) + ' of ' + j.total : 'being created (' + (j.message || 'starting') + ')';
+    document.getElementById('creation-text').textContent = t + ' · ' + Math.round(j.elapsed_s) + ' s';
+    document.getElementById('creation-bar').style.width = (100 * j.fraction) + '%';
+    if (j.state !== 'failed') setTimeout(poll, 700);
+  } catch (e) { setTimeout(poll, 2000); }
+}
+setTimeout(poll, 300);
+"""
+
+
+class WorkshopCreation(_OrganiserBase):
+    """``GET /workshops/{name}/creation``: the signed-in user's job creating ``name`` (JSON:
+    state, fraction, done, total, elapsed_s, error); 404 when the user creates none."""
+
+    async def get(self, name: str) -> None:
+        from railval.app.state.jobs import workshop_job
+
+        p = await self.require("workshop.run")
+        if p is None:
+            return
+        job = workshop_job(p.username, name)
+        if job is None:
+            self.json({"error": f"you are creating no workshop {name!r}"}, 404)
+            return
+        self.json(job)
+
+
+class MyJobs(_OrganiserBase):
+    """``GET /workshops/mine/jobs``: the signed-in user's running and recently finished jobs
+    (:func:`railval.app.state.jobs.jobs_of`; never another user's)."""
+
+    async def get(self) -> None:
+        from railval.app.state.jobs import jobs_of
+
+        p = await self.principal()
+        if p is None:
+            self.json({"error": "not signed in"}, 401)
+            return
+        self.json({"jobs": jobs_of(p.username)})
+
+
 def _invite(database, name: str, reviewer: str, actor) -> str:
     from railval.app.services.workshop_admin import invite
 
@@ -272,8 +390,9 @@ class WorkshopPage(_OrganiserBase):
         try:
             d = await run(_status_doc, self.database, name)
         except NotFound as exc:
-            self.set_status(404)
-            self.finish(page("Workshop", f"<p class='err'>{esc(exc)}</p>", user=p))
+            if not self._creation_page(p, name):
+                self.set_status(404)
+                self.finish(page("Workshop", f"<p class='err'>{esc(exc)}</p>", user=p))
             return
         q = quote(name, safe="")
         toggle = ("close", "Close workshop") if d["status"] == "open" else ("reopen", "Reopen workshop")
@@ -301,6 +420,28 @@ answers <strong id='nanswers'>{d['answers']}</strong></p>
 <p class='muted'>A new link replaces the reviewer's earlier one. Answers stay with the reviewer.</p>"""
         html_page = page(f"Workshop {name}", body, user=p, script=_STATUS_JS)
         self.finish(html_page.replace("<body>", f"<body data-workshop='{esc(name)}'>", 1))
+
+    def _creation_page(self, p, name: str) -> bool:
+        """The page of a workshop this user is creating: its progress, live (or the error of
+        a failed creation); False when the user creates no workshop of that name."""
+        from railval.app.state.jobs import workshop_job
+
+        job = workshop_job(p.username, name)
+        if job is None or job["state"] == "done":
+            return False
+        failed = job["state"] == "failed"
+        body = (f"<h2>{esc(name)}</h2><div id='creation' data-state='{esc(job['state'])}'>"
+                f"<p id='creation-text'>{esc(_creation_text(job))} · {job['elapsed_s']:.0f} s</p>"
+                f"<div class='bar' style='max-width:600px'><div id='creation-bar' style='width:"
+                f"{100 * job['fraction']:.0f}%'></div></div>"
+                + ("<p class='err'>Nothing was stored. <a href='/workshops/new'>Try again</a></p>"
+                   if failed else
+                   "<p class='muted'>You can leave this page: the workshop is created in the "
+                   "background and listed under Workshops; nothing is stored until every plot "
+                   "is rendered.</p>") + "</div>")
+        html_page = page(f"Workshop {name}", body, user=p, script="" if failed else _CREATION_JS)
+        self.finish(html_page.replace("<body>", f"<body data-workshop='{esc(name)}'>", 1))
+        return True
 
     async def post(self, name: str, action: str) -> None:
         p = await self.require("workshop.run")
