@@ -104,3 +104,18 @@ def test_redundancy_rule_most_channels_of_a_kind_below_one_is_a_model_error():
     bogie = [_cand(f"gain Y_w{n}{s}", 0.75 if n > 2 else 1.0, (0.72, 0.78) if n > 2 else (0.97, 1.03))
              for n in (1, 2, 3, 4) for s in "LR"] + [_cand("gain Y_bogie2", 0.75, (0.73, 0.77))]
     assert "gain Y_bogie2" not in not_sensor_faults(_res(bogie))
+
+
+def test_redundancy_rule_the_same_wheelset_of_the_other_bogie_alike_is_a_model_error():
+    """Both leading wheelsets (1 and 3) want Y × ≈ 0.91 (a softer flange contact in the truth):
+    no sensor fault; wheelset 1 at 1.25 with wheelset 3 at 1.02 is one."""
+    lead = [_cand("gain Y_w1", 0.908, (0.89, 0.93)), _cand("gain Y_w3", 0.93, (0.91, 0.95)),
+            _cand("gain Y_w2", 1.06, (1.03, 1.09))]
+    out = not_sensor_faults(_res(lead))
+    assert "gain Y_w1" in out and "other bogie" in out["gain Y_w1"] and "gain Y_w2" not in out
+    fault = [_cand("gain Y_w1", 1.25, (1.2, 1.3)), _cand("gain Y_w3", 1.02, (1.01, 1.03))]
+    assert "gain Y_w1" not in not_sensor_faults(_res(fault))
+    from railval.app.services.diagnosis_measurement import _counterpart
+
+    assert [_counterpart(x) for x in ("Y_w1L", "Q_w4", "Y_bogie2", "Y_L", "az_cb_b1")] == \
+        ["Y_w3L", "Q_w2", "Y_bogie1", None, None]

@@ -7,6 +7,8 @@ gain of a car body sensor against its redundant channel at the other end.
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -277,11 +279,15 @@ def not_sensor_faults(res: DiagnosisResult) -> dict[str, str]:
     those sensors (a mass, a stiffness) scales them alike, a sensor fault scales one; likewise
     when at least :data:`MOST` of three or more channels of the kind want a gain on the same
     side of 1 (bootstrap interval beyond 1: on the trust bench another creep law in the truth
-    lowered every guiding force, and a side group's gain absorbed it). The
+    lowered every guiding force, and a side group's gain absorbed it); and when the same group
+    on the other bogie (wheelset 1 ↔ 3, 2 ↔ 4: they run in the same conditions) wants a gain on
+    the same side of 1, at least half as large in log — the wheels' analogue of the two car
+    body ends (a softer flange contact in the truth lowered both leading wheelsets' Y). The
     interval is the bootstrap one (refit on resampled sections, Efron & Tibshirani 1993 §8.2):
     the widened interval also holds the lack-of-fit region, which grows with any model error
     the gain cannot remove. Name → reason."""
     gains = [c for c in res.candidates if c.kind == "measurement" and c.parameter == "gain"]
+    by_name = {c.name: c for c in gains}
     out: dict[str, str] = {}
     by_kind: dict[str, list] = {}
     for c in gains:
@@ -306,7 +312,28 @@ def not_sensor_faults(res: DiagnosisResult) -> dict[str, str]:
         for c in gains:
             if why and _gain_kind(c.name)[0] == kind:
                 out.setdefault(c.name, why + ": a model error common to those sensors, not a sensor fault")
+    for c in gains:
+        other = by_name.get(f"gain {_counterpart(c.name.removeprefix('gain '))}")
+        if other is None or c.name in out or not (c.fitted > 0 and other.fitted > 0):
+            continue
+        lo, hi = other.fitted_ci_bootstrap
+        same_side = (lo > 1 and c.fitted > 1) or (hi < 1 and c.fitted < 1)
+        if same_side and abs(math.log(other.fitted)) >= 0.5 * abs(math.log(c.fitted)):
+            out[c.name] = (f"{other.name.removeprefix('gain ')} of the other bogie wants a gain alike "
+                           f"({other.fitted:.3g} against {c.fitted:.3g}): a model error common to both bogies "
+                           "(a contact, a creep law), not a sensor fault")
     return out
+
+
+def _counterpart(group: str) -> str | None:
+    """The same force group on the other bogie of a four-wheelset vehicle: wheelset 1 ↔ 3,
+    2 ↔ 4 (``Y_w1L`` ↔ ``Y_w3L``, ``Q_w2`` ↔ ``Q_w4``), ``Y_bogie1`` ↔ ``Y_bogie2``."""
+    k, _, rest = group.partition("_")
+    if rest in ("bogie1", "bogie2"):
+        return f"{k}_bogie{3 - int(rest[-1])}"
+    if rest[:1] == "w" and rest[1:2] in "1234" and rest[1:2]:
+        return f"{k}_w{ {'1': '3', '2': '4', '3': '1', '4': '2'}[rest[1]] }{rest[2:]}"
+    return None
 
 
 def apply_redundancy_rule(res: DiagnosisResult) -> dict[str, str]:
