@@ -27,7 +27,7 @@ from typing import Any
 from argon2 import PasswordHasher
 from argon2.exceptions import InvalidHashError, VerificationError, VerifyMismatchError
 from sqlalchemy import func, select, update
-from sqlalchemy.orm import Session, joinedload, selectinload
+from sqlalchemy.orm import Session, selectinload
 
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
 from railval.core.roles import ROLES, Principal, check_roles, require
@@ -242,21 +242,24 @@ def open_session(session: Session, user: AppUser, *, max_age_s: float) -> str:
 
 def session_principal(session: Session, session_id: str) -> Principal | None:
     """The principal of a live session: one read by the unique hash (joined with the user and
-    its roles); None when the id is unknown, the session ended or expired, or the user is
-    disabled or has no password."""
-    row = session.execute(
-        select(AppSession.expires_at, AppSession.ended_at, AppUser)
+    its roles, plain columns: no ORM objects are built); None when the id is unknown, the
+    session ended or expired, or the user is disabled or has no password."""
+    rows = session.execute(
+        select(AppSession.expires_at, AppSession.ended_at, AppUser.id, AppUser.username,
+               AppUser.display_name, AppUser.disabled, AppUser.password_hash.is_not(None),
+               UserRole.role)
         .join(AppUser, AppUser.id == AppSession.user_id)
-        .where(AppSession.id_sha256 == session_hash(session_id))
-        .options(joinedload(AppUser.roles))).unique().first()
-    if row is None:
+        .outerjoin(UserRole, UserRole.user_id == AppUser.id)
+        .where(AppSession.id_sha256 == session_hash(session_id))).all()
+    if not rows:
         return None
-    expires_at, ended_at, user = row
+    expires_at, ended_at, user_id, username, display, disabled, has_password, _ = rows[0]
     if ended_at is not None or _aware(expires_at) <= dt.datetime.now(dt.UTC):
         return None
-    if user.disabled or user.password_hash is None:
+    if disabled or not has_password:
         return None
-    return principal(user)
+    return Principal(username, frozenset(r[-1] for r in rows if r[-1]), display_name=display,
+                     user_id=user_id)
 
 
 def end_session(session: Session, session_id: str, reason: str = "logout") -> bool:
@@ -276,13 +279,19 @@ def end_sessions(session: Session, user_id: int, reason: str) -> int:
 
 def live_principal(session: Session, user_id: int) -> Principal | None:
     """The user as stored now, read inside the caller's write transaction with a shared
-    row lock (``FOR SHARE`` on PostgreSQL): a disable, password or role change
+    row lock (``FOR SHARE OF app_user`` on PostgreSQL): a disable, password or role change
     (:func:`get_user` with ``lock``) either commits before it — and is seen — or waits
     until this transaction has committed. None when the user no longer exists; a disabled
-    user's principal holds no role."""
-    user = session.scalar(select(AppUser).options(selectinload(AppUser.roles))
-                          .where(AppUser.id == user_id).with_for_update(read=True))
-    return None if user is None else principal(user)
+    user's principal holds no role. One read of plain columns (user and roles)."""
+    rows = session.execute(
+        select(AppUser.username, AppUser.display_name, AppUser.disabled, UserRole.role)
+        .outerjoin(UserRole, UserRole.user_id == AppUser.id)
+        .where(AppUser.id == user_id).with_for_update(read=True, of=AppUser)).all()
+    if not rows:
+        return None
+    username, display, disabled, _ = rows[0]
+    roles = frozenset() if disabled else frozenset(r[-1] for r in rows if r[-1])
+    return Principal(username, roles, display_name=display, user_id=user_id)
 
 
 def require_live(session: Session, actor: Any, action: str) -> None:
