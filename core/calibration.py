@@ -39,7 +39,7 @@ import numpy as np
 from scipy.linalg import eigh
 from scipy.optimize import differential_evolution, minimize
 
-from railval.core.errors import CalibrationDidNotConverge, InvalidParameter
+from railval.core.errors import CalibrationDidNotConverge, InvalidParameter, RailvalError
 from railval.core.modal import pair_modes
 from railval.core.sim.vehicles import template_parameters
 
@@ -144,7 +144,7 @@ class _Counted:
         return value if math.isfinite(value) else 1e12
 
 
-class _BudgetSpent(Exception):
+class _BudgetSpent(RailvalError):
     """The local polish used its evaluation budget."""
 
 
