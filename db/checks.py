@@ -11,12 +11,14 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
+from railval.core.errors import RailvalError
+
 #: tolerated deviation of a time stamp from the uniform grid t0 + i/fs, as a fraction of
 #: the sampling period (a logger with 1 % jitter is still "equally spaced")
 TIME_JITTER_FRACTION = 0.01
 
 
-class RecordingProblem(Exception):
+class RecordingProblem(RailvalError):
     """A check failed; ``field`` names the column or key, the message says bound and value."""
 
     def __init__(self, field: str, message: str):

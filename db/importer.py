@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 from sqlalchemy import insert, select
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy.exc import IntegrityError as UniqueViolation
 from sqlalchemy.orm import Session
 
 from railval.core.errors import CampaignFormatError, InvalidParameter
@@ -535,7 +535,7 @@ def import_campaign(database_or_session: Any, folder: str | Path,
         else:
             with database_or_session.session(write=True) as session:
                 write_validated(session, vc)
-    except IntegrityError:
+    except UniqueViolation:
         # a concurrent import of the same name committed first (PostgreSQL; on SQLite the
         # write lock taken at BEGIN makes the second import see the first): same message
         # as the check in write_validated

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from sqlalchemy import case, func, select, update
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy.exc import IntegrityError as UniqueViolation
 from sqlalchemy.orm import Session
 
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
@@ -382,7 +382,7 @@ def record_answer(session: Session, ctx: ReviewerContext, position: int, answer:
                     answer=bool(answer), comment=comment, seconds=float(seconds),
                     submission=submission, source="web", answered_at=now, updated_at=now))
             outcome = "new"
-        except IntegrityError:  # a concurrent first submission of the same place won
+        except UniqueViolation:  # a concurrent first submission of the same place won
             outcome = change() or "repeated"
     # the stored state decides, not ``ctx`` (which a caller may have cached): checked after
     # the write, inside the same transaction, so a refusal rolls the write back
