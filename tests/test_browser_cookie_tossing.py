@@ -337,6 +337,6 @@ def test_two_tabs_on_one_plot_show_the_answer_they_replaced(browser, app):
     tab_a.bring_to_front()
     tab_a.evaluate("document.dispatchEvent(new Event('visibilitychange'))")
     tab_a.locator("#backbtn").click()
-    tab_a.locator("#prevnote", has_text="Your answer: No (changed, last at").wait_for(
+    tab_a.locator("#prevnote", has_text="Your answer: no (changed, last at").wait_for(
         timeout=TIMEOUT_MS)
     ctx.close()

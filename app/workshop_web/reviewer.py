@@ -114,8 +114,8 @@ function show() {
   $('yes').classList.toggle('chosen', !!a && a.answer === 'yes');
   $('no').classList.toggle('chosen', !!a && a.answer === 'no');
   $('comment').value = a ? a.comment : '';
-  $('prevnote').textContent = a ? ('Your answer: ' + cap(a.answer) + (a.changes ? ' (changed, last at '
-    + hhmm(a.at) + ')' : '') + ' — press Yes or No to change it') : '';
+  $('prevnote').textContent = a ? ('Your answer: ' + a.answer + (a.changes ? ' (changed, last at '
+    + hhmm(a.at) + ')' : '') + ' (press Yes or No to change it)') : '';
   $('backbtn').disabled = pos === 0;
   const img = $('plot');
   img.dataset.position = pos;
