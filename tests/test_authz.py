@@ -161,6 +161,9 @@ def test_callbacks_and_jobs_are_checked_on_the_server(demo_db, role, monkeypatch
     so = SignoffPage(app)
     app.set_status("")
     monkeypatch.setattr("railval.app.services.signoff.sign", stub("sign"))
+    # a complete form (the page has no default decision), so only the role decides
+    so.decision.value = "not-validated"
+    so.justification.value = "held-out sections show the lateral error"
     so.sign(background=False)
     assert ("sign" in stub.ran) == (role in CALLBACKS["signoff.create"])
     with demo_db.session() as s:  # no job of a denied role wrote anything
