@@ -438,8 +438,11 @@ def _score(base: SectionEvidence, fams: list[CandidateFamily], validated: bool, 
     res.interface_support = [x.to_dict() for x in support.values()]
     relative_gains(res)
     no_fault = apply_redundancy_rule(res)
-    pool, left_out = cause_pool([f for f in fams if any(c.name == f.name and c.significant for c in res.candidates)],
-                                res, support, MASS_PARAMETERS)
+    # the pool: candidates beyond the noise floor on the whole residual, and the best of every
+    # family that has one (a second cause may be small beside the first but lead its family)
+    leads = {f["top"][0]["name"] for f in res.families if f["top"] and f["verdict"] in ("cause", "uncertain")}
+    pool, left_out = cause_pool([f for f in fams if f.name in leads or any(
+        c.name == f.name and c.significant for c in res.candidates)], res, support, MASS_PARAMETERS)
     # input-side statements: the generated track's level, the contact geometry (core/diagnosis/inputs.py)
     track = sorted(e for e, spec in EFFECTS.items() if spec.input_side == "track")
     res.statements = [x for x in [track_statement(res, track)] if x]
