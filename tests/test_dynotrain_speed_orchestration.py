@@ -10,6 +10,7 @@ import threading
 import pytest
 
 from railval.app.services import validation as service
+from railval.app.services.validation_exec import source_chunks
 from railval.core import workers
 from railval.core.errors import InvalidParameter
 from railval.db.importer import import_campaign
@@ -18,12 +19,12 @@ from tests.factories import write_demo_campaign
 
 def test_chunks_are_near_equal_and_measurement_first():
     todo = {"a": [f"S{i}" for i in range(17)], None: [f"S{i}" for i in range(12)]}
-    chunks = service._chunks(todo, 8)
+    chunks = source_chunks(todo, 8)
     assert [c[0] for c in chunks] == [None, None, "a", "a", "a"]
     assert [len(c[1]) for c in chunks] == [6, 6, 5, 6, 6]
     assert [s for c in chunks if c[0] == "a" for s in c[1]] == todo["a"]
-    assert service._chunks({"a": ["S1"]}, 8) == [("a", ["S1"])]
-    assert service._chunks({}, 8) == []
+    assert source_chunks({"a": ["S1"]}, 8) == [("a", ["S1"])]
+    assert source_chunks({}, 8) == []
 
 
 def test_row_threads_override_is_per_context():

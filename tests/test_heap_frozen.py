@@ -1,5 +1,5 @@
 """The validation services leave the heap alive on entry out of the garbage collector's passes
-while they run (app/services/validation.py ``_heap_frozen``) and give it back afterwards, also
+while they run (app/services/validation_exec.py ``heap_frozen``) and give it back afterwards, also
 when validations nest or run on several threads at once."""
 
 import gc
@@ -8,6 +8,7 @@ import threading
 import pytest
 
 from railval.app.services import validation as V
+from railval.app.services.validation_exec import heap_frozen
 
 
 @pytest.fixture(autouse=True)
@@ -19,7 +20,7 @@ def _no_frozen_heap():
 
 def test_frozen_inside_and_given_back_after():
     keep = [{"x": 1}]  # a container alive on entry
-    with V._heap_frozen():
+    with heap_frozen():
         assert gc.get_freeze_count() > 0
         assert not any(o is keep for o in gc.get_objects())
     assert gc.get_freeze_count() == 0
@@ -31,16 +32,16 @@ def test_nested_and_concurrent_uses_unfreeze_when_the_last_ends():
     seen = []
 
     def other():
-        with V._heap_frozen():
+        with heap_frozen():
             inner_started.set()
             outer_may_end.wait(10)
         seen.append(gc.get_freeze_count())
 
-    with V._heap_frozen():
+    with heap_frozen():
         t = threading.Thread(target=other)
         t.start()
         assert inner_started.wait(10)
-        with V._heap_frozen():
+        with heap_frozen():
             pass
         assert gc.get_freeze_count() > 0  # the nested context ended, the others have not
     assert gc.get_freeze_count() > 0  # the thread's validation still runs

@@ -10,7 +10,8 @@ import pytest
 from sqlalchemy import select, update
 
 from railval.app.cli import main
-from railval.app.services.validation import source_cache_keys, validate_configuration
+from railval.app.services.validation import validate_configuration
+from railval.app.services.validation_rows import source_cache_keys
 from railval.db import codec, integrity, repo
 from railval.db.importer import import_campaign
 from railval.db.models import Channel, Recording, ResultCache, Section, Signal

@@ -14,6 +14,7 @@ from sqlalchemy import select, update
 
 from railval.app.bench import bench_dynotrain as bench
 from railval.app.services import validation as V
+from railval.app.services import validation_rows
 from railval.db import integrity, repo
 from railval.db.engine import connect
 from railval.db.models import Channel, Configuration, Recording, Section, Signal
@@ -44,7 +45,7 @@ def test_plan_keys_equal_the_per_source_keys(tiny):
         want = {}
         for name, ref in [(None, None), *((r.name, r) for r in refs)]:
             want |= {(name, sid): k for sid, k in
-                     V.source_cache_keys(s, camp, ref, secs, order=4).items()}
+                     validation_rows.source_cache_keys(s, camp, ref, secs, order=4).items()}
     assert keys == want and len(keys) == 3 * 4
     assert list(keys) == list(want)  # measurement first, then the configurations in order
     assert len(recs) == 12 and sum(map(len, by_rec.values())) == 12 * len(bench.CHANNELS)

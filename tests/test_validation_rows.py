@@ -8,6 +8,7 @@ import pytest
 from sqlalchemy import func, select
 
 from railval.app.services import validation as service
+from railval.app.services import validation_rows
 from railval.db import integrity, repo
 from railval.db.importer import import_campaign
 from railval.db.models import ResultCache
@@ -27,12 +28,12 @@ def test_keys_from_the_rows_are_the_source_cache_keys(demo):
         secs = repo.section_infos(s, camp)
         rows = repo.seal_rows_many(s, camp, [conf.id])
         for order in (4, 5):
-            keys = service._keys_from_rows(rows, [(None, None), (conf.name, conf.id)], secs,
+            keys = validation_rows.keys_from_rows(rows, [(None, None), (conf.name, conf.id)], secs,
                                            order)
             assert {sid: k for (src, sid), k in keys.items() if src is None} == \
-                service.source_cache_keys(s, camp, None, secs, order=order)
+                validation_rows.source_cache_keys(s, camp, None, secs, order=order)
             assert {sid: k for (src, sid), k in keys.items() if src == "variant1"} == \
-                service.source_cache_keys(s, camp, conf, secs, order=order)
+                validation_rows.source_cache_keys(s, camp, conf, secs, order=order)
             assert len(keys) == 2 * len(secs)
 
 

@@ -8,6 +8,7 @@ import json
 import pytest
 
 from railval.app.services import validation as service
+from railval.app.services import validation_exec
 from railval.core import en14363
 from railval.core.en14363 import section_cache_key
 from railval.core.errors import NotFound
@@ -46,7 +47,7 @@ def counting(monkeypatch):
 
 def test_validate_configuration_and_cache(database, campaign_folder, counting):
     import_campaign(database, campaign_folder)
-    reads = -(-12 // service._PIPELINE_CHUNK)  # blob queries per source of 12 sections
+    reads = -(-12 // validation_exec.PIPELINE_CHUNK)  # blob queries per source of 12 sections
     with database.session() as s:
         first = service.validate_configuration(s, "demo", "baseline", n_boot=200)
     assert counting == {"processed": 24, "loads": 2 * reads}  # 12 measured + 12 simulated

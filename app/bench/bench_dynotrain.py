@@ -280,7 +280,8 @@ def _time_new(database, sets: dict, order: int | None) -> tuple:
     the process's verified-array cache emptied (:data:`railval.db.codec.VERIFIED`), so the
     figure never profits from an earlier run. Returns (elapsed s, split, result, load
     average, CPU s)."""
-    from railval.app.services.validation import source_cache_keys, validate_configuration
+    from railval.app.services.validation import validate_configuration
+    from railval.app.services.validation_rows import source_cache_keys
     from railval.core.stages import collect
     from railval.db import codec, repo
 
