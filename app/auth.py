@@ -225,7 +225,7 @@ class LoginHandler(SessionBoundXsrf, RequestHandler):
         self.set_header("Cache-Control", "no-store")
         username = self.get_argument("username", "")
         password = self.get_argument("password", "")
-        with self.auth.database.session(actor=username or "(anonymous)") as s:
+        with self.auth.database.session(actor=username or "(anonymous)", write=True) as s:
             result = users.authenticate(s, username, password, source=_client(self))
             if result.ok:
                 sid = self.auth.open_session(s, result.user)
@@ -279,7 +279,7 @@ class InviteHandler(SessionBoundXsrf, RequestHandler):
         self.auth = auth
 
     def _refuse(self, token: str, message: str) -> None:
-        with self.auth.database.session(actor="(anonymous)") as s:
+        with self.auth.database.session(actor="(anonymous)", write=True) as s:
             users.record_refusal(s, token, message, source=_client(self))
         self.set_status(403)
         self.write(_page("invitation", f'<h1>railval</h1><div class="msg" role="alert">'
@@ -322,7 +322,7 @@ class InviteHandler(SessionBoundXsrf, RequestHandler):
         display = self.get_argument("display_name", "").strip()
         pw, pw2 = self.get_argument("password", ""), self.get_argument("password2", "")
         try:
-            with self.auth.database.session(actor=username or "(anonymous)") as s:
+            with self.auth.database.session(actor=username or "(anonymous)", write=True) as s:
                 inv = users.check_invitation(s, token)
                 if pw != pw2:
                     raise InvalidParameter("the two passwords differ")
