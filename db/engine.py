@@ -12,9 +12,16 @@ else the embedded SQLite file ``sqlite:///railval.db`` in the working directory.
   to mean the same driver.
 
 ``Database.session()`` is one unit of work: it commits when the block ends normally and
-rolls back when it raises; ``session(write=True)`` is a unit of work that writes (on SQLite
-it takes the write lock at ``BEGIN IMMEDIATE``, so concurrent writers wait their turn). ``Database.init()`` migrates the schema to the newest Alembic
-revision (idempotent); ``ensure_initialised()`` is the cheap check the CLI runs first.
+rolls back when it raises; ``session(write=True)`` (:meth:`Database.write_session`) is a unit
+of work that writes (on SQLite it takes the write lock at ``BEGIN IMMEDIATE``, so concurrent
+writers wait their turn) — the one write door. :meth:`Database.read_session` (and
+``session()`` while :attr:`Database.read_only_reads` is set) is a read session the database
+itself keeps from writing: SQLite ``PRAGMA query_only = ON`` on its connection (set back OFF
+at the ``BEGIN`` of any other unit of work on that pooled connection, so the pragma never
+leaks into a write), PostgreSQL ``SET TRANSACTION READ ONLY`` as the first statement of the
+transaction. A write there raises :class:`WriteInReadSession`. ``Database.init()`` migrates
+the schema to the newest Alembic revision (idempotent); ``ensure_initialised()`` is the cheap
+check the CLI runs first.
 """
 
 from __future__ import annotations
@@ -27,6 +34,7 @@ from pathlib import Path
 
 from sqlalchemy import Engine, create_engine, event, inspect, text
 from sqlalchemy.engine import make_url
+from sqlalchemy.exc import DBAPIError
 from sqlalchemy.orm import Session, sessionmaker
 from sqlalchemy.pool import StaticPool
 
@@ -59,6 +67,15 @@ def acting_as(actor: str) -> Iterator[None]:
         yield
     finally:
         _current_actor.reset(token)
+
+
+class WriteInReadSession(RailvalError):
+    """A unit of work opened as a read session tried to write; writes go through
+    ``Database.session(write=True)`` (:meth:`Database.write_session`)."""
+
+
+#: what SQLite (``query_only``) and PostgreSQL (``READ ONLY`` transaction) say about a refused write
+_READ_ONLY_REFUSALS = ("attempt to write a readonly database", "read-only transaction")
 
 
 class DatabaseNotInitialised(RailvalError):
@@ -101,8 +118,22 @@ def _sqlite_begin(conn) -> None:
     # deferred transaction that reads and then writes cannot wait — SQLite refuses its
     # upgrade at once with "database is locked" when another writer got in between
     # (SQLAlchemy docs, "Serializable isolation / Savepoints / Transactional DDL" of pysqlite).
-    write = conn.get_execution_options().get("railval_write", False)
+    # query_only is a property of the connection, not of the transaction: it is set at every
+    # BEGIN, ON for a read session and OFF for anything else, so a pooled connection (or the
+    # one shared connection of an in-memory database) never carries it into a write.
+    options = conn.get_execution_options()
+    write = options.get("railval_write", False)
+    read_only = options.get("railval_read_only", False) and not write
+    conn.exec_driver_sql(f"PRAGMA query_only = {'ON' if read_only else 'OFF'}")
     conn.exec_driver_sql("BEGIN IMMEDIATE" if write else "BEGIN")
+
+
+def _postgresql_begin(conn) -> None:
+    # psycopg begins the transaction implicitly at the first statement, so this statement
+    # is the transaction's first: the read session's transaction is READ ONLY (PostgreSQL
+    # docs, SET TRANSACTION); it ends with the transaction, so the pooled connection is clean.
+    if conn.get_execution_options().get("railval_read_only", False):
+        conn.exec_driver_sql("SET TRANSACTION READ ONLY")
 
 
 class Database:
@@ -114,6 +145,11 @@ class Database:
         self._sessions = sessionmaker(engine, expire_on_commit=False)
         self._write_sessions = sessionmaker(engine.execution_options(railval_write=True),
                                             expire_on_commit=False)
+        self._read_sessions = sessionmaker(engine.execution_options(railval_read_only=True),
+                                           expire_on_commit=False)
+        #: when set, ``session()`` without ``write=True`` is a read session the database keeps
+        #: from writing (:meth:`read_session`); the tests set it to find writes in read sessions
+        self.read_only_reads = False
         self._initialised = False
         #: who the audit trail names for changes made through :meth:`session` when the
         #: caller names nobody (the CLI sets ``cli:<OS user>``, the web app the signed-in user)
@@ -124,25 +160,49 @@ class Database:
         return self.engine.dialect.name
 
     @contextmanager
-    def session(self, actor: str | None = None, *, write: bool = False) -> Iterator[Session]:
+    def session(self, actor: str | None = None, *, write: bool = False,
+                read_only: bool | None = None) -> Iterator[Session]:
         """One unit of work: commit on success, roll back on any exception.
 
         ``actor`` (else the one set by :func:`acting_as`, else :attr:`actor`) is kept in ``session.info["actor"]``: the audit rows
         written in this unit of work name it (:func:`railval.db.audit.actor_of`).
         ``write=True`` for a unit of work that writes: on SQLite it starts with
         ``BEGIN IMMEDIATE`` so concurrent writers queue (up to the 30 s busy timeout)
-        instead of failing; on PostgreSQL it is the same as a read session.
+        instead of failing; on PostgreSQL it is a plain transaction. ``read_only=True`` (the
+        default while :attr:`read_only_reads` is set; never with ``write=True``): a read session
+        the database refuses to write in — a write raises :class:`WriteInReadSession`.
         """
-        session = (self._write_sessions if write else self._sessions)()
+        if read_only is None:
+            read_only = self.read_only_reads and not write
+        if write and read_only:
+            raise ValueError("a unit of work is either write=True or read_only=True")
+        factory = (self._write_sessions if write else
+                   self._read_sessions if read_only else self._sessions)
+        session = factory()
         session.info["actor"] = actor or _current_actor.get() or self.actor
+        session.info["read_only"] = read_only
         try:
             yield session
             session.commit()
-        except BaseException:
+        except BaseException as exc:
             session.rollback()
+            if read_only and isinstance(exc, DBAPIError) and any(
+                    m in str(exc.orig) for m in _READ_ONLY_REFUSALS):
+                raise WriteInReadSession(
+                    f"a write in a read session of {self.safe_url} was refused by the database "
+                    f"({str(exc.orig).strip().splitlines()[0]}): write through "
+                    "session(write=True)") from exc
             raise
         finally:
             session.close()
+
+    def read_session(self, actor: str | None = None):
+        """A read session: :meth:`session` with ``read_only=True``."""
+        return self.session(actor, read_only=True)
+
+    def write_session(self, actor: str | None = None):
+        """The write door: :meth:`session` with ``write=True``."""
+        return self.session(actor, write=True)
 
     # -- migrations ---------------------------------------------------------------------
     def _alembic_config(self):
@@ -253,6 +313,7 @@ def connect(url: str | None = None, *, echo: bool = False) -> Database:
         event.listen(engine, "begin", _sqlite_begin)
     elif parsed.get_backend_name() == "postgresql":
         engine = create_engine(url, echo=echo, pool_pre_ping=True)
+        event.listen(engine, "begin", _postgresql_begin)
     else:
         raise RailvalError(
             f"database URL {parsed.render_as_string(hide_password=True)} has an unsupported "

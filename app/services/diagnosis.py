@@ -94,7 +94,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                                     values_per_parameter=values_per_parameter, effects=effects, workers=workers,
                                     **options)
     if store:
-        with session_of(database_or_session) as s:
+        with session_of(database_or_session, write=True) as s:  # the write door
             row = runs.store_run(s, campaign_id=ids[0], configuration_id=ids[1], kind="diagnosis",
                                  inputs_sha256=inputs_sha,
                                  settings={**settings, "data_sha256": data_sha, "version": DIAGNOSIS_VERSION},

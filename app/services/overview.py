@@ -6,6 +6,11 @@ returns plain data: campaign and configuration lists, a campaign's layout
 (:class:`CampaignOverview`), one section's signals, content hashes, the lineage, a
 configuration's validation and curve metrics, the sign-offs with their status, the evidence
 check. :func:`acting_as` names the user a background job's changes are recorded as.
+
+Reads open read sessions the database refuses to write in (``read_session``: SQLite
+``query_only``, PostgreSQL ``READ ONLY`` transaction); :func:`validation` (fills the result
+cache) and :func:`metrics` (stores its run) write, so they go through the write door
+``session(write=True)`` (docs/database.md).
 """
 
 from __future__ import annotations
@@ -69,12 +74,12 @@ class CampaignOverview:
 
 
 def campaign_names(database) -> list[str]:
-    with database.session() as s:
+    with database.read_session() as s:
         return [c.name for c in repo.list_campaigns(s)]
 
 
 def configurations(database, campaign: str) -> list[ConfigInfo]:
-    with database.session() as s:
+    with database.read_session() as s:
         confs = list(repo.list_configurations(s, campaign))
         names = {c.id: c.name for c in confs}
         return [ConfigInfo(name=c.name, parent=names.get(c.parent_id),
@@ -84,7 +89,7 @@ def configurations(database, campaign: str) -> list[ConfigInfo]:
 
 def overview(database, campaign: str) -> CampaignOverview:
     """Sections, vehicle, channels and configurations of a campaign."""
-    with database.session() as s:
+    with database.read_session() as s:
         camp = repo.get_campaign(s, campaign)
         sections = list(repo.section_infos(s, camp))
         vehicle = dict(repo.vehicle_info(s, camp))
@@ -98,7 +103,7 @@ def overview(database, campaign: str) -> CampaignOverview:
 def signals(database, campaign: str, config: str | None, section: str,
             channels: list[str] | None = None):
     """One section's SignalSet of the measurement (``config`` None) or a configuration."""
-    with database.session() as s:
+    with database.read_session() as s:
         camp = repo.get_campaign(s, campaign)
         sets = repo.load_signalsets(s, camp, config=config, sections=[section], channels=channels)
     if section not in sets:
@@ -109,13 +114,13 @@ def signals(database, campaign: str, config: str | None, section: str,
 
 def hashes(database, campaign: str, config: str | None) -> dict[str, dict[str, str]]:
     """section → channel → SHA-256 of the stored samples (no blob read)."""
-    with database.session() as s:
+    with database.read_session() as s:
         return repo.signal_hashes(s, campaign, config)
 
 
 def lineage(database, campaign: str, config: str) -> list[str]:
     """Names from the root configuration down to ``config``."""
-    with database.session() as s:
+    with database.read_session() as s:
         camp = repo.get_campaign(s, campaign)
         return [c.name for c in repo.lineage(s, camp, config)]
 
@@ -123,7 +128,7 @@ def lineage(database, campaign: str, config: str) -> list[str]:
 def require_evidence(database, campaign: str, config: str) -> None:
     """Every blob of the measurement and of ``config`` against its hash and seal
     (:func:`railval.db.repo.require_evidence`); raises on the first mismatch."""
-    with database.session() as s:
+    with database.read_session() as s:
         repo.require_evidence(s, campaign, config, blobs=True)
 
 
@@ -134,7 +139,7 @@ def signoff_items(database, campaign: str | None = None, config: str | None = No
     from railval.app.services.signoff import statuses
     from railval.db import signoff as db_signoff
 
-    with database.session() as s:
+    with database.read_session() as s:
         return [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, config)]
 
 
@@ -145,7 +150,7 @@ def audit_and_signoffs(database) -> tuple[list[tuple[dict[str, Any], Any]], list
     from railval.db import audit
     from railval.db import signoff as db_signoff
 
-    with database.session() as s:
+    with database.read_session() as s:
         items = [(db_signoff.as_dict(so), st) for so, st in statuses(s)]
         return items, list(audit.iter_rows(s))
 
@@ -154,7 +159,7 @@ def validation(database, campaign: str, config: str, **kw: Any) -> ValidationRes
     """:func:`railval.app.services.validation.validate_configuration` in one unit of work."""
     from railval.app.services.validation import validate_configuration
 
-    with database.session() as s:
+    with database.session(write=True) as s:  # fills the result cache
         return validate_configuration(s, campaign, config, **kw)
 
 
@@ -163,7 +168,7 @@ def metrics(database, campaign: str, config: str, sections: Sequence[str] | None
     """:func:`railval.app.services.metrics.metrics_for_configuration` in one unit of work."""
     from railval.app.services.metrics import metrics_for_configuration
 
-    with database.session() as s:
+    with database.session(write=True) as s:  # stores the metrics run
         return metrics_for_configuration(s, campaign, config, sections, channels, **kw)
 
 
@@ -179,6 +184,6 @@ def acting_as(username: str) -> Iterator[None]:
 
 def in_session(database, service: Any, *args: Any, **kw: Any) -> Any:
     """``service(session, *args, **kw)`` — a service function that takes a session — in one
-    unit of work of its own (read-only)."""
-    with database.session() as s:
+    read session of its own (the database refuses a write in it)."""
+    with database.read_session() as s:
         return service(s, *args, **kw)

@@ -64,7 +64,8 @@ def cards(database, name: str, *, groups: Sequence[str] = (), actor: Principal |
 
     if isinstance(actor, Principal):
         require(actor, "workshop.results")
-    with database.session() as session:
+    # fills the result cache and stores metrics runs: the write door, not a read session
+    with database.session(write=True) as session:
         mine, w = _yes_shares(session, name)
         others = []
         for g in groups:
@@ -128,7 +129,7 @@ def card_choices(database, campaign: str, config: str) -> dict[str, tuple[str, i
     from railval.db import workshops as wsdb
 
     out: dict[str, tuple[str, int]] = {}
-    with database.session() as session:
+    with database.read_session() as session:
         for w in wsdb.list_workshops(session):
             if w.campaign.name != campaign:
                 continue
@@ -164,7 +165,7 @@ def report_cards(database, name: str, config: str, plot_ids: Sequence[int], *,
     doc = cards(database, name, groups=groups, actor=actor)
     by_id = {c["plot"]: c for c in doc["cards"]}
     out = []
-    with database.session() as session:
+    with database.read_session() as session:
         w = wsdb.get_workshop(session, name)
         for pid in plot_ids:
             c = by_id.get(int(pid))
