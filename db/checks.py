@@ -168,10 +168,12 @@ def _unit_hint(ratio: float) -> str:
 
 
 def _check_wheel_load(name: str, values: np.ndarray, unit: str, q0_kn: float) -> None:
-    """The mean of the vertical wheel force channel ``name`` (kN) within
-    :data:`Q_MEAN_FACTOR` of Q0."""
+    """The magnitude of the mean of the vertical wheel force channel ``name`` (kN) within
+    :data:`Q_MEAN_FACTOR` of Q0. The sign is not checked here: a transducer wired with
+    reversed polarity reads −Q, a measurement fault that the diagnosis names (its ``sign``
+    candidate, docs/diagnosis.md), not a unit error."""
     mean = float(np.mean(np.asarray(values, dtype=np.float64)))
-    if not (q0_kn / Q_MEAN_FACTOR <= mean <= q0_kn * Q_MEAN_FACTOR):
+    if not (q0_kn / Q_MEAN_FACTOR <= abs(mean) <= q0_kn * Q_MEAN_FACTOR):
         hint = _unit_hint(q0_kn / mean if mean else float("inf"))
         raise RecordingProblem(
             name, f"mean vertical wheel force Q of channel {name!r} is {mean:.4g} kN (unit "

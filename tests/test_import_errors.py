@@ -554,3 +554,17 @@ def test_declared_size_cap_other_formats(good_db, folder, ext, monkeypatch):
     assert info.value.file == str(folder / "measured" / f"S01.{ext}")
     assert info.value.field in cols
     assert _snapshot(good_db) == before
+
+
+def test_reversed_polarity_wheel_load_channel_imports(good_db, folder):
+    """A Q transducer wired with reversed polarity reads −Q (mean ≈ −Q0): its unit is right,
+    so the import keeps it as measured and the diagnosis names the fault (its sign
+    candidate); only the magnitude of the mean is held against Q0."""
+    _declare_channel(folder, "Q_w2R", "kN", scale=-1.0)
+    raw = read_table(folder / "measured" / "S01.csv")["Q_w2R"]
+    assert raw.mean() < 0
+    vc = validate_campaign_folder(folder)
+    from railval.db import codec
+
+    stored = codec.decode(vc.recordings[0].signals["Q_w2R"][0])
+    assert np.array_equal(stored, raw)
