@@ -53,8 +53,9 @@ def contrary_reason(decision: str, validated: bool, in_sample: bool) -> str | No
     if decision == "not-validated" and validated:
         return "the decision rejects the model while the objective verdict is VALIDATED"
     if decision in ACCEPTING and in_sample:
-        return ("the decision accepts an in-sample verdict (the configuration was calibrated "
-                "on sections the verdict evaluates)")
+        return ("the decision accepts an in-sample verdict (the parameters of the configuration "
+                "or an ancestor were fitted, by a calibration or a diagnosis, on sections the "
+                "verdict evaluates)")
     return None
 
 
