@@ -137,7 +137,8 @@ def job_line(job: Mapping[str, Any]) -> str:
         what = _STATE_TEXT.get(state, state)
     text = f"{job['title']}: {what} · {job['elapsed_s']:.0f} s"
     if state == "failed" and job.get("error"):
-        text += f" — {job['error']}"
+        err = job["error"]
+        text += f" — {err if len(err) <= 160 else err[:159] + '…'}"  # the whole on its page
     return text
 
 

@@ -115,7 +115,7 @@ _JOBS_JS = r"""
   function line(j) {
     let what = j.state === 'running' ? (j.total ? (j.done || 0) + ' of ' + j.total : Math.round(100 * j.fraction) + ' %') : j.state;
     let t = j.title + ': ' + what + ' · ' + Math.round(j.elapsed_s) + ' s';
-    if (j.state === 'failed' && j.error) t += ' — ' + j.error;
+    if (j.state === 'failed' && j.error) t += ' — ' + (j.error.length <= 160 ? j.error : j.error.slice(0, 159) + '…');
     return t;
   }
   async function refresh() {
