@@ -7,6 +7,9 @@ modal calibration from identified modes ([ref 3]).
   evaluated through an optional ``map``-like executor) followed by a bounded local polish
   (``scipy.optimize.minimize``, Powell — derivative-free, so it tolerates the slightly
   non-smooth objectives of percentile-based EN quantities).
+* :func:`railval.core.calibration_local.calibrate_local` fits 1–3 parameters in few
+  evaluations by least squares on the residual vector of :func:`validation_residuals`, whose
+  squared norm is :func:`validation_objective`.
 * :func:`validation_objective` is the scalar form of the DynoTRAIN verdict (docs/design.md §3).
 * :func:`calibrate_modal` fits model parameters to identified natural frequencies and mode
   shapes: numerical modes are paired with experimental ones by highest MAC and the objective
@@ -110,6 +113,8 @@ class CalibrationResult:
     specs: list[ParameterSpec] = field(default_factory=list)
     elapsed_s: float = 0.0
     extra: dict[str, Any] = field(default_factory=dict)
+    method: str = "global"
+    tolerance: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         out = {
@@ -124,6 +129,8 @@ class CalibrationResult:
             "message": self.message,
             "history": list(self.history),
             "elapsed_s": self.elapsed_s,
+            "method": self.method,
+            "tolerance": dict(self.tolerance),
         }
         out.update(self.extra)
         return out
@@ -265,7 +272,8 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
     if raise_on_failure and not converged:
         raise CalibrationDidNotConverge(f"differential evolution stopped after {nfev} evaluations: {message}")
     return CalibrationResult(f.params(x_best), f_best, obj_start, nfev,
-                             converged, message, history, specs, time.perf_counter() - t0)
+                             converged, message, history, specs, time.perf_counter() - t0, method="global",
+                             tolerance={"tol": tol, "maxiter": maxiter, "stopped_by": "tol" if converged else "maxiter"})
 
 
 def validation_objective(mean_norm: Mapping[str, float], std_norm: Mapping[str, float], *,
@@ -308,6 +316,24 @@ def validation_objective(mean_norm: Mapping[str, float], std_norm: Mapping[str, 
             v = max(a, b)
         total += v * v
     return total
+
+
+def validation_residuals(mean_norm: Mapping[str, float], std_norm: Mapping[str, float]) -> np.ndarray:
+    """Residual vector of the DynoTRAIN verdict: r_q = max(|mean_norm_q|, std_norm_q), one entry
+    per quantity in ``mean_norm`` order (non-finite entries → 0, as :func:`validation_objective`
+    skips them), so that Σ r_q² is exactly :func:`validation_objective` (docs/design.md §3,
+    Polach & Böttcher 2014 §5: a quantity passes when both normalised values are ≤ 1).
+
+    Examples
+    --------
+    >>> validation_residuals({"Q_max": 0.5, "Y_max": -2.0}, {"Q_max": 1.0, "Y_max": 0.1}).tolist()
+    [1.0, 2.0]
+    """
+    out = []
+    for q, m in mean_norm.items():
+        a, b = abs(float(m)), float(std_norm.get(q, 0.0))
+        out.append(max(a, b) if math.isfinite(a) and math.isfinite(b) else 0.0)
+    return np.asarray(out, dtype=float)
 
 
 # --------------------------------------------------------------------------- modal calibration

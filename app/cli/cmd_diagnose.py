@@ -85,13 +85,15 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         start.setdefault(effect, {})[pname] = float(value)
     res = calibrate(_db(args), args.campaign, args.config, args.effect, args.new_name, params=args.params,
                     progress=Progress(), scheduler=args.scheduler, seed=args.seed, replace=args.replace,
-                    start=start or None, fit_sections=args.fit_sections, holdout=args.holdout, split=args.split)
+                    start=start or None, fit_sections=args.fit_sections, holdout=args.holdout, split=args.split,
+                    method="global" if args.global_search else "local")
     d = res.to_dict()
     if args.json:
         emit_json(d)
         return 0
     print(f"stored configuration {args.new_name} (parent {args.config}); objective "
           f"{d['objective_start']} → {d['objective']:.4g} in {d['n_evaluations']} simulations")
+    print(f"optimizer ({d['method']}): {d['message']}")
     for k, v in d["parameters"].items():
         print(f"  {k} = {v:.5g} {d['units'].get(k, '')}")
     print("lineage (largest normalised error): " + " → ".join(
@@ -171,6 +173,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="hold these sections out of the fit and validate on them")
     split.add_argument("--split", action="store_true",
                        help="hold out one section per zone and fold (every zone on both sides where possible)")
+    c.add_argument("--global", dest="global_search", action="store_true",
+                   help="differential evolution + Powell polish (multi-modal cases) instead of the default "
+                        "scan + trust-region least squares")
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=_cmd_calibrate)
 

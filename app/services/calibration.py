@@ -11,6 +11,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from railval.app.services.batch import BatchExecutor
 from railval.app.services.campaign_context import (
     CampaignContext,
@@ -32,8 +34,10 @@ from railval.core.calibration import (
     CalibrationResult,
     ParameterSpec,
     validation_objective,
+    validation_residuals,
 )
 from railval.core.calibration import calibrate as fit_parameters
+from railval.core.calibration_local import calibrate_local
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.sim.effects import EFFECTS, unmet_requirement
 from railval.core.validation import normalised_errors, validate
@@ -56,10 +60,12 @@ class _Objective:
                 effects.setdefault(owner, {})[pname] = float(params[key])
         return effects, model
 
-    def __call__(self, params: Mapping[str, float]) -> float:
-        """The objective; ``inf`` where the simulation diverges (a channel holds non-finite
-        values), which the search treats as its worst point (core.calibration penalty) instead
-        of aborting the whole calibration — observed for the coach with track_flexibility at
+    def residuals(self, params: Mapping[str, float]) -> np.ndarray:
+        """Residual vector r_q = max(|mean_norm_q|, std_norm_q) of the DynoTRAIN quantities
+        (:func:`railval.core.calibration.validation_residuals`; Σ r² is the objective below);
+        ``inf`` entries where the simulation diverges (a channel holds non-finite values),
+        which the search treats as its worst point (core.calibration penalty) instead of
+        aborting the whole calibration — observed for the coach with track_flexibility at
         k_vertical 300 MN/m and k_lateral ≤ 2 MN/m (docs/diagnosis.md "The hidden-effect test")."""
         effects, model = self.split(params)
         try:
@@ -67,10 +73,25 @@ class _Objective:
         except InvalidSignal as exc:
             if "non-finite" not in str(exc):
                 raise
-            return math.inf
+            return np.full(1, math.inf)
         vr = validate_values(self.ctx, vals)
-        return validation_objective({q: r.mean_norm for q, r in vr.quantities.items()},
+        return validation_residuals({q: r.mean_norm for q, r in vr.quantities.items()},
                                     {q: r.std_norm for q, r in vr.quantities.items()})
+
+    def __call__(self, params: Mapping[str, float]) -> float:
+        """Σ r_q² (:func:`railval.core.calibration.validation_objective`); ``inf`` where diverged."""
+        r = self.residuals(params)
+        return float(r @ r) if np.all(np.isfinite(r)) else math.inf
+
+
+class _Residuals:
+    """Picklable residual-vector view of an :class:`_Objective` (for the worker processes)."""
+
+    def __init__(self, objective: _Objective):
+        self.objective = objective
+
+    def __call__(self, params: Mapping[str, float]) -> np.ndarray:
+        return self.objective.residuals(params)
 
 
 def calibrate(database: Any, campaign: str, config: str, effects: list[str], new_name: str, *,
@@ -79,13 +100,14 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
               workers: int | None = None,
               start: Mapping[str, Mapping[str, float]] | None = None, replace: bool = False,
               fit_sections: Sequence[str] | None = None, holdout: Sequence[str] | None = None,
-              split: bool = False) -> CalibrationResult:
+              split: bool = False, method: str = "local") -> CalibrationResult:
     """Add ``effects`` to configuration ``config`` (effect ids, or ``"model.NAME"`` for a
     vehicle-template parameter candidate as :func:`diagnose` names it), fit their parameters
     (all of them, or only ``params`` — names ``"effect.param"``/``"param"`` of the effects, or
     ``"model.NAME"``) to the validation objective
-    (:func:`railval.core.calibration.validation_objective`) with differential evolution and a local
-    polish (``start``: the start point of the fitted parameters and the value of those not
+    (:func:`railval.core.calibration.validation_objective`) — ``method="local"``: scan/start then
+    trust-region least squares (:func:`railval.core.calibration_local.calibrate_local`);
+    ``"global"``: differential evolution and a Powell polish for multi-modal cases (``start``: the start point of the fitted parameters and the value of those not
     fitted), store the result as configuration ``new_name`` (parent ``config``) with its
     simulated signals, and return the :class:`CalibrationResult` whose ``to_dict()`` holds the
     new configuration's ``validation`` and the ``lineage`` (root → new, normalised error of
@@ -102,6 +124,8 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     The campaign and configuration are resolved once here (docs/design.md §2); every step
     below takes the references. Steps: load, plan (:func:`_plan`), fit, judge
     (:func:`_judge`), store (:func:`_store`)."""
+    if method not in ("local", "global"):
+        raise InvalidParameter(f"calibrate method must be 'local' or 'global', got {method!r}")
     report(progress, "load", 0.0, campaign=campaign, config=config)
     with session_of(database) as s:
         camp, conf = repo.resolve(s, campaign, config)
@@ -117,10 +141,14 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
     objective = _Objective(_restrict(ctx, fit_ids) if held_ids else ctx, plan.base_effects, conf_params,
                            plan.targets)
     with BatchExecutor(scheduler, workers) as ex:
-        res = fit_parameters(objective, plan.specs, seed=seed, popsize=popsize, maxiter=maxiter,
-                            polish_maxfev=polish_maxfev,
-                            workers=ex if ex.backend != "serial" else None,
-                            progress=lambda st, f, i: report(progress, f"calibrate:{st}", 0.05 + 0.85 * f, **i))
+        pool = ex if ex.backend != "serial" else None
+        def prog(st: str, f: float, i: dict) -> None:
+            report(progress, f"calibrate:{st}", 0.05 + 0.85 * f, **i)
+        if method == "global":
+            res = fit_parameters(objective, plan.specs, seed=seed, popsize=popsize, maxiter=maxiter,
+                                 polish_maxfev=polish_maxfev, workers=pool, progress=prog)
+        else:
+            res = calibrate_local(_Residuals(objective), plan.specs, seed=seed, workers=pool, progress=prog)
     eff, model = objective.split(res.parameters)
     report(progress, "store", 0.92)
     sets = simulate_context(ctx, eff, model)
