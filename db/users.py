@@ -7,7 +7,8 @@ stored; an invitation is single-use and expires. Every change appends an audit r
 same transaction (:func:`railval.db.audit.record`). Roles are the names of
 :data:`railval.core.roles.ROLES`.
 
-Sign-in (:func:`authenticate`) is rate limited from the audit trail itself: after
+Sign-in (:func:`login_state` read, :func:`check_password` outside any transaction,
+:func:`record_login` write; :func:`authenticate` runs the three in one session) is rate limited from the audit trail itself: after
 :data:`MAX_FAILURES_PER_USER` failed sign-ins of one user name (or
 :data:`MAX_FAILURES_PER_SOURCE` from one client address) within :data:`FAILURE_WINDOW`,
 further attempts are refused until the window has passed; every failure and every refusal
@@ -37,7 +38,9 @@ from railval.db.models import AppSession, AppUser, Invitation, UserRole, utcnow
 __all__ = [
     "InvitationRefused",
     "LoginResult",
+    "LoginState",
     "authenticate",
+    "check_password",
     "create_invitation",
     "create_user",
     "disable",
@@ -49,8 +52,10 @@ __all__ = [
     "has_users",
     "list_users",
     "live_principal",
+    "login_state",
     "open_session",
     "principal",
+    "record_login",
     "redeem_invitation",
     "require_live",
     "session_principal",
@@ -345,14 +350,30 @@ def password_changed_at(session: Session, username: str) -> float:
 
 @dataclass(frozen=True)
 class LoginResult:
-    """Outcome of :func:`authenticate`: ``user`` on success, else a message to show."""
+    """Outcome of :func:`authenticate` / :func:`record_login`: ``user`` on success, else a
+    message to show; ``reason``: ``ok``, ``rate limit``, ``account disabled``, ``account
+    changed`` or ``wrong user name or password``."""
 
     user: AppUser | None
     message: str
+    reason: str = "ok"
 
     @property
     def ok(self) -> bool:
         return self.user is not None
+
+
+@dataclass(frozen=True)
+class LoginState:
+    """What a sign-in reads before the password is verified (:func:`login_state`): the user's
+    id, stored hash and disabled flag as they were, and whether the rate limit already
+    refuses. :func:`record_login` re-checks them in the write transaction."""
+
+    username: str
+    user_id: int | None
+    stored_hash: str | None
+    disabled: bool
+    limited: bool
 
 
 def _failures(session: Session, username: str, source: str) -> tuple[int, int]:
@@ -363,40 +384,102 @@ def _failures(session: Session, username: str, source: str) -> tuple[int, int]:
     return per_user, per_source
 
 
+def _limited(session: Session, username: str, source: str) -> tuple[bool, int]:
+    per_user, per_source = _failures(session, username, source)
+    return (per_user >= MAX_FAILURES_PER_USER
+            or bool(source and per_source >= MAX_FAILURES_PER_SOURCE)), per_user
+
+
+def login_state(session: Session, username: str, source: str = "") -> LoginState:
+    """The read half of a sign-in (a read session: no write lock is taken)."""
+    username = (username or "").strip()[:100]
+    limited, _ = _limited(session, username, source)
+    row = session.execute(select(AppUser.id, AppUser.password_hash, AppUser.disabled)
+                          .where(AppUser.username == username)).first()
+    if row is None:
+        return LoginState(username, None, None, False, limited)
+    return LoginState(username, row[0], row[1], bool(row[2]), limited)
+
+
+def check_password(stored_hash: str | None, password: str) -> bool:
+    """True when ``password`` matches ``stored_hash`` (argon2id). With no hash (unknown user,
+    no password) a dummy hash is verified, so that the answer takes as long. Touches no
+    database: call it with no transaction open (the hash costs 0.1–0.5 s)."""
+    try:
+        _hasher.verify(stored_hash or _dummy_hash(), password or "")
+    except (VerifyMismatchError, VerificationError, InvalidHashError):
+        return False
+    return stored_hash is not None
+
+
+def rehash(stored_hash: str | None, password: str) -> str | None:
+    """A new hash of a verified ``password`` when the hasher's parameters changed since
+    ``stored_hash`` was made, else None (no transaction needed)."""
+    if stored_hash is not None and _hasher.check_needs_rehash(stored_hash):
+        return _hasher.hash(password)
+    return None
+
+
+def record_login(session: Session, state: LoginState, right: bool, *, source: str = "",
+                 new_hash: str | None = None, record_success: bool = True) -> LoginResult:
+    """The write half of a sign-in: ``right`` is the outcome of :func:`check_password` on
+    ``state.stored_hash``. In the caller's write transaction, re-reads the rate-limit counts
+    and the user (row locked ``FOR UPDATE`` on PostgreSQL): a limit reached meanwhile refuses
+    (``login.refused``); a password, disabled flag or user changed since :func:`login_state`
+    refuses (``login.refused``, reason ``account changed``) — the verified hash is no longer
+    the stored one. Records every failure and refusal in the audit trail; the caller commits
+    whatever the outcome."""
+    username = state.username
+    obj = f"user:{username or '(empty)'}"
+    actor = username or "(anonymous)"
+    limited, per_user = _limited(session, username, source)
+    if limited:
+        minutes = int(FAILURE_WINDOW.total_seconds() // 60)
+        audit.record(session, actor, "login.refused", obj, reason="rate limit",
+                     detail={"source": source, "failures": per_user})
+        return LoginResult(None, f"Too many failed sign-ins; try again in {minutes} minutes.",
+                           "rate limit")
+    user = session.scalar(select(AppUser).options(selectinload(AppUser.roles))
+                          .where(AppUser.username == username).with_for_update())
+    now = ((user.id, user.password_hash, bool(user.disabled)) if user is not None
+           else (None, None, False))
+    if now != (state.user_id, state.stored_hash, state.disabled):
+        audit.record(session, actor, "login.refused", obj, reason="account changed",
+                     detail={"source": source})
+        return LoginResult(None, "Your account changed while you were signing in; "
+                                 "sign in again.", "account changed")
+    if right and user is not None and not user.disabled:
+        if new_hash is not None:
+            user.password_hash = new_hash
+        if record_success:
+            audit.record(session, username, "login.ok", obj, detail={"source": source})
+        return LoginResult(user, "")
+    if right:  # the right password of a disabled account
+        audit.record(session, username, "login.failed", obj, reason="account disabled",
+                     detail={"source": source})
+        return LoginResult(None, "This account is disabled; ask an administrator.",
+                           "account disabled")
+    audit.record(session, actor, "login.failed", obj,
+                 reason="wrong user name or password", detail={"source": source})
+    return LoginResult(None, "Wrong user name or password.", "wrong user name or password")
+
+
 def authenticate(session: Session, username: str, password: str, *, source: str = "",
                  record_success: bool = True) -> LoginResult:
-    """Check a sign-in; records every failure and refusal in the audit trail.
+    """Check a sign-in in one transaction (:func:`login_state`, :func:`check_password`,
+    :func:`record_login`); records every failure and refusal in the audit trail.
 
+    The web sign-in does not use it: :mod:`railval.app.services.sessions` verifies the hash
+    between a read and a short write session, so that no write lock is held for the hash.
     The caller commits ``session`` whatever the outcome (the audit row of a failure must
     persist). Messages say what to do without revealing whether a user name exists — except
     for a disabled account, which is only reported after the right password.
     """
-    username = (username or "").strip()[:100]
-    obj = f"user:{username or '(empty)'}"
-    per_user, per_source = _failures(session, username, source)
-    if per_user >= MAX_FAILURES_PER_USER or (source and per_source >= MAX_FAILURES_PER_SOURCE):
-        minutes = int(FAILURE_WINDOW.total_seconds() // 60)
-        audit.record(session, username or "(anonymous)", "login.refused", obj,
-                     reason="rate limit", detail={"source": source, "failures": per_user})
-        return LoginResult(None, f"Too many failed sign-ins; try again in {minutes} minutes.")
-    user = find_user(session, username)
-    ok = verify_password(session, username, password) is not None
-    if ok:
-        if record_success:
-            audit.record(session, username, "login.ok", obj, detail={"source": source})
-        return LoginResult(user, "")
-    if user is not None and user.disabled and user.password_hash is not None:
-        try:
-            right = _hasher.verify(user.password_hash, password or "")
-        except (VerifyMismatchError, VerificationError, InvalidHashError):
-            right = False
-        if right:
-            audit.record(session, username, "login.failed", obj, reason="account disabled",
-                         detail={"source": source})
-            return LoginResult(None, "This account is disabled; ask an administrator.")
-    audit.record(session, username or "(anonymous)", "login.failed", obj,
-                 reason="wrong user name or password", detail={"source": source})
-    return LoginResult(None, "Wrong user name or password.")
+    state = login_state(session, username, source)
+    right = False if state.limited else check_password(state.stored_hash, password)
+    new_hash = rehash(state.stored_hash, password) if right else None
+    return record_login(session, state, right, source=source, new_hash=new_hash,
+                        record_success=record_success)
 
 
 # -- invitations -------------------------------------------------------------------------
