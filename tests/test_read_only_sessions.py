@@ -139,3 +139,40 @@ def test_sign_in_writes_through_the_write_door(database, monkeypatch):
         assert "login.ok" in actions and "login.failed" in actions
     finally:
         database.read_only_reads = False
+
+
+@pytest.mark.parametrize("service", ["validation", "metrics"])
+def test_a_computation_that_ends_with_a_cache_write_does_not_hold_the_write_lock(
+        sqlite_database, monkeypatch, service):
+    """The overview's validation and metrics read, compute and end with a short write (result
+    cache, metrics run). On SQLite a unit of work opened with ``BEGIN IMMEDIATE`` would hold
+    the database's write lock for the whole computation, and every reviewer's answer would
+    wait behind it: a writer that starts while the computation runs must finish at once."""
+    import threading
+    import time
+
+    from railval.app.services import metrics as metrics_service
+    from railval.app.services import overview
+    from railval.app.services import validation as validation_service
+
+    def slow(session, *args, **kw):
+        session.execute(text("SELECT count(*) FROM app_user")).scalar()
+        started.set()
+        time.sleep(0.8)  # the computation
+        return "done"
+
+    started = threading.Event()
+    monkeypatch.setattr(validation_service, "validate_configuration", slow)
+    monkeypatch.setattr(metrics_service, "metrics_for_configuration", slow)
+    out = {}
+    worker = threading.Thread(target=lambda: out.setdefault(
+        "r", getattr(overview, service)(sqlite_database, "demo", "baseline")))
+    worker.start()
+    assert started.wait(10)
+    t0 = time.perf_counter()
+    with sqlite_database.session(write=True) as s:  # a reviewer's answer, say
+        users.create_user(s, "answering", roles=["panelist"])
+    waited = time.perf_counter() - t0
+    worker.join(10)
+    assert out["r"] == "done"
+    assert waited < 0.5, f"the writer waited {waited:.2f} s for the {service} computation"

@@ -9,8 +9,9 @@ check. :func:`acting_as` names the user a background job's changes are recorded 
 
 Reads open read sessions the database refuses to write in (``read_session``: SQLite
 ``query_only``, PostgreSQL ``READ ONLY`` transaction); :func:`validation` (fills the result
-cache) and :func:`metrics` (stores its run) write, so they go through the write door
-``session(write=True)`` (docs/database.md).
+cache) and :func:`metrics` (stores its run) end with a short write: they open a deferred
+unit of work (``session(read_only=False)``), which takes SQLite's write lock only at that
+write, not for the whole computation (docs/database.md).
 """
 
 from __future__ import annotations
@@ -159,7 +160,10 @@ def validation(database, campaign: str, config: str, **kw: Any) -> ValidationRes
     """:func:`railval.app.services.validation.validate_configuration` in one unit of work."""
     from railval.app.services.validation import validate_configuration
 
-    with database.session(write=True) as s:  # fills the result cache
+    # a read that may end with a short write (the result cache, best effort): a deferred
+    # unit of work takes the write lock only at that write, so reviewers' answers never wait
+    # for the validation's computation (docs/database.md, "One write door")
+    with database.session(read_only=False) as s:
         return validate_configuration(s, campaign, config, **kw)
 
 
@@ -168,7 +172,8 @@ def metrics(database, campaign: str, config: str, sections: Sequence[str] | None
     """:func:`railval.app.services.metrics.metrics_for_configuration` in one unit of work."""
     from railval.app.services.metrics import metrics_for_configuration
 
-    with database.session(write=True) as s:  # stores the metrics run
+    # a read that ends with a short write (the metrics run): deferred, as in :func:`validation`
+    with database.session(read_only=False) as s:
         return metrics_for_configuration(s, campaign, config, sections, channels, **kw)
 
 
