@@ -24,6 +24,7 @@ from railval.app.services.diagnosis_evidence import scan_points
 from railval.app.services.diagnosis_measurement import MEASUREMENT_PREFIXES
 from railval.app.services.stored_runs import data_inputs, digests, run_info
 from railval.core.diagnosis import PARAMETER_CANDIDATES, DiagnosisResult
+from railval.core.diagnosis.lineage import ancestor_entry, lineage_statement
 from railval.core.en14363 import PROCESSING_VERSION
 from railval.core.sim.effects import EFFECTS
 from railval.db import repo, runs
@@ -32,7 +33,7 @@ from railval.db import repo, runs
 #: version): a change of the procedure computes afresh instead of reusing an older run
 DIAGNOSIS_VERSION = f"diagnosis/7+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets; 5: sign/swap/shift; 6: interface and mass rules; 7: passed-over causes, force gains, track input, contact statement
 
-__all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnosis_fit_record", "diagnosis_runs", "diagnosis_simulations",
+__all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnosis_fit_record", "diagnosis_lineage", "diagnosis_runs", "diagnosis_simulations",
            "latest_diagnosis", "scan_points"]
 
 
@@ -78,6 +79,7 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         if stored is not None:
             res = DiagnosisResult.from_dict(stored.result)
             res.run = run_info(stored, reused=True, current_data_sha256=data_sha)
+            res.lineage = diagnosis_lineage(s, campaign, config, res.to_dict(with_signatures=True))
             if progress is not None:
                 progress("done", 1.0, {"stored_run": stored.id})
             return res
@@ -101,7 +103,57 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
                                  result=res.to_dict(with_signatures=True),
                                  seconds=time.perf_counter() - started, actor=actor)
             res.run = run_info(row, reused=False, current_data_sha256=data_sha)
+    with session_of(database_or_session) as s:
+        res.lineage = diagnosis_lineage(s, campaign, config, res.to_dict(with_signatures=True))
     return res
+
+
+def _diagnosis_before(session: Any, conf: Any, before: Any = None) -> Any:
+    """The newest stored diagnosis of ``conf`` made before ``before`` (the child's creation:
+    the diagnosis the calibration started from), else the newest one; None when never diagnosed."""
+    rows = runs.list_runs(session, conf.id, "diagnosis")
+    if before is not None:
+        for r in rows:
+            if r.created_at is not None and r.created_at <= before:
+                return r
+    return rows[0] if rows else None
+
+
+def diagnosis_lineage(session: Any, campaign: str, config: str, result: dict[str, Any]) -> dict[str, Any] | None:
+    """The lineage of diagnoses of ``config`` (None for a configuration without a parent):
+    ``ancestors`` — every configuration from the root to ``config``'s parent with its diagnosis
+    (run id, verdict, top cause) — and, for a configuration fitted by a calibration or a
+    diagnosis (``Configuration.calibration``), ``statement``: what is left of the parent's
+    residual and whether the library explains it (:func:`lineage_statement`); ``result`` is
+    ``config``'s diagnosis as a dict."""
+    chain = repo.lineage(session, campaign, config)
+    if len(chain) < 2:
+        return None
+    conf, parent = chain[-1], chain[-2]
+    ancestors = []
+    for i, c in enumerate(chain[:-1]):
+        row = _diagnosis_before(session, c, chain[i + 1].created_at)
+        ancestors.append(ancestor_entry(c.name, row.id if row is not None else None,
+                                        row.result if row is not None else None,
+                                        row.created_at.isoformat(timespec="seconds") if row is not None
+                                        and row.created_at else ""))
+    out: dict[str, Any] = {"configuration": conf.name, "parent": parent.name, "ancestors": ancestors,
+                           "statement": None}
+    rec = conf.calibration or {}
+    if rec.get("parameters"):
+        names = list(rec["parameters"])
+        values = {}
+        for n in names:
+            owner, _, par = n.partition(".")
+            src = (conf.parameters or {}) if owner == "model" else ((conf.effects or {}).get(owner) or {})
+            if par in src:
+                values[n] = src[par]
+        prow = _diagnosis_before(session, parent, conf.created_at)
+        out["statement"] = lineage_statement(result, prow.result if prow is not None else None,
+                                             parent_configuration=parent.name,
+                                             parent_run=prow.id if prow is not None else None,
+                                             fitted=names, fitted_values=values)
+    return out
 
 
 def diagnosis_runs(session: Any, campaign: str, config: str) -> list[dict[str, Any]]:
@@ -132,6 +184,7 @@ def latest_diagnosis(session: Any, campaign: str, config: str) -> DiagnosisResul
     data_sha, _ = digests(data_inputs(session, campaign, config), {}, DIAGNOSIS_VERSION)
     res = DiagnosisResult.from_dict(row.result)
     res.run = run_info(row, reused=True, current_data_sha256=data_sha)
+    res.lineage = diagnosis_lineage(session, campaign, config, row.result)
     return res
 
 

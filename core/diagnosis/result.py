@@ -113,7 +113,7 @@ _TYPED: tuple[tuple[str, str], ...] = (
     ("values_per_parameter", "values_per_parameter"), ("simulations", "simulations"),
     ("stored_residual_norm", "stored_residual_norm"), ("simulated_residual_norm", "simulated_residual_norm"),
     ("effects_simulated", "effects_simulated"), ("skipped", "skipped"), ("next_step", "next"), ("run", "run"),
-    ("statements", "statements"),
+    ("statements", "statements"), ("lineage", "lineage"),
 )
 
 
@@ -158,6 +158,10 @@ class DiagnosisResult:
     #: ``text``): which input of the simulation differs and what data replace it
     #: (:mod:`railval.core.diagnosis.inputs`)
     statements: list[dict[str, Any]] | None = None
+    #: a calibrated configuration's diagnosis read against its parent's: ``ancestors`` (every
+    #: diagnosed configuration of the lineage, root first) and ``statement``
+    #: (:func:`railval.core.diagnosis.lineage.lineage_statement`); filled at every read, not stored
+    lineage: dict[str, Any] | None = None
 
     def to_dict(self, with_signatures: bool = False) -> dict[str, Any]:
         """Plain dict; ``with_signatures`` adds the residual's components (``labels``,
