@@ -102,7 +102,7 @@ def heavy(module_db_url, tmp_path_factory):
     db.dispose()
 
 
-def test_child_diagnosis_names_parent_diagnosis_and_remaining_share(heavy):
+def test_child_diagnosis_names_parent_diagnosis_and_remaining_share(heavy, module_db_url, capsys):
     from railval.app.services.calibration import calibrate
     from railval.app.services.diagnosis import diagnose, latest_diagnosis
 
@@ -124,3 +124,18 @@ def test_child_diagnosis_names_parent_diagnosis_and_remaining_share(heavy):
     with heavy.session() as s:
         again = latest_diagnosis(s, "heavy", "baseline+mass")
     assert again.lineage["statement"]["remaining_share"] == pytest.approx(st["remaining_share"])
+    # the CLI (the stored run reused): the text and --json carry the same statement
+    from railval.app.cli import main
+
+    capsys.readouterr()
+    assert main(["--db", module_db_url, "diagnose", "heavy", "--config", "baseline+mass",
+                 "--candidates", *CANDS]) == 0
+    out = capsys.readouterr().out
+    assert f"lineage of diagnoses: baseline #{parent.run['id']} " in out and "→ baseline+mass" in out
+    assert "after calibration: after calibrating model.m_carbody" in out and "within the section scatter" in out
+    assert main(["--db", module_db_url, "diagnose", "heavy", "--config", "baseline+mass", "--json",
+                 "--candidates", *CANDS]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["lineage"]["statement"]["parent_diagnosis"] == parent.run["id"]
+    print(f"remaining share {st['remaining_share']:.3f}, parent expected {st['expected_remaining']}, "
+          f"parent top explains {parent.candidates[0].held_out_explained:.3f}", file=__import__("sys").stderr)

@@ -40,6 +40,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         return 0
     print(f"diagnosis of {args.campaign}/{args.config}: verdict {res.verdict.upper()} — {res.note}")
     print(f"noise floor (share of pure section scatter the candidates explain, 95 %): {res.noise_floor:.2f}")
+    _print_lineage(res.lineage)
     for st in res.statements or []:
         print(f"input ({st['kind']}): {st['text']}")
     print(f"{'rank':>4}  {'candidate':<28} {'kind':<9} {'held-out':>8} {'explained':>9}  fitted")
@@ -69,6 +70,18 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     if res.next_step and res.next_step.get("text"):
         print(f"next: {res.next_step['text']}")
     return 0
+
+
+def _print_lineage(lineage: dict | None) -> None:
+    """The lineage of diagnoses (root first) and what is left after the calibration."""
+    if not lineage:
+        return
+    print("lineage of diagnoses: " + " → ".join(
+        f"{a['configuration']} " + (f"#{a['diagnosis']} {str(a['verdict']).upper()}"
+                                     + (f" {a['top']}" if a["top"] else "") if a["diagnosis"] else "(not diagnosed)")
+        for a in lineage["ancestors"]) + f" → {lineage['configuration']}")
+    if lineage.get("statement"):
+        print(f"after calibration: {lineage['statement']['text']}")
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
