@@ -1,13 +1,14 @@
 """Sign-in for ``railval serve``: a Bokeh/Tornado auth provider on the user table (docs/security.md).
 
-* ``/login`` (GET form, POST check) verifies the argon2id hash (:func:`railval.db.users.authenticate`:
-  rate limited, every failure recorded in the audit trail), opens a session on the server
-  (a row of ``app_session``, :func:`railval.db.users.open_session`) and sets the signed
+* ``/login`` (GET form, POST check) signs in through the one sign-in of
+  :func:`railval.app.services.sessions.sign_in` (argon2id verified outside any transaction,
+  rate limited, every failure recorded in the audit trail; a session on the server, a row
+  of ``app_session``) and sets the signed
   session cookie ``railval_session`` = the session's random id (HMAC with the cookie
   secret, HttpOnly, SameSite=Lax). Panel's built-in ``--basic-auth`` is not used: it
   compares plain text.
 * Every page load, websocket connection and ``POST`` re-checks the cookie: signature, then
-  one indexed read of the session row with its user (:func:`railval.db.users.session_principal`):
+  one indexed read of the session row with its user (:func:`railval.app.services.sessions.principal`):
   not ended, not past :data:`SESSION_MAX_AGE_S`, the user enabled. ``POST /logout`` ends the
   session on the server (a copy of the cookie is refused afterwards); ``user disable``,
   ``user passwd`` and ``user role`` end every session of the user.
@@ -17,8 +18,13 @@
   a page of another origin — another port of the same host included, which can toss cookies —
   is refused 403. ``/invite?token=…`` shows the single-use invitation form and creates the
   invitee's account.
-* With **no user** in the database the provider lets every request through as the local user
-  (open single-user mode) — :func:`check_startup` allows that only on a loopback address.
+* While **no user has a password** (nobody could sign in) a request from the loopback interface
+  without proxy headers passes as the local user (open single-user mode: the one rule of
+  :func:`railval.app.services.sessions.is_open`, also used by the workshop pages);
+  :func:`check_startup` refuses to serve on any other address then.
+
+This module holds the HTTP side only (forms, cookies, headers); every database read and write
+goes through :mod:`railval.app.services.sessions`.
 
 The cookie secret comes from ``$RAILVAL_COOKIE_SECRET`` or the file named by
 ``$RAILVAL_COOKIE_SECRET_FILE`` (or ``--cookie-secret-file``); without either a random secret
@@ -39,8 +45,8 @@ from tornado.web import RequestHandler, decode_signed_value
 
 from railval.app.security import SESSION_COOKIE, SessionBoundXsrf
 from railval.core.errors import RailvalError
-from railval.core.roles import Principal, open_principal
-from railval.db import users, workshops
+from railval.app.services import sessions
+from railval.core.roles import Principal
 
 COOKIE = SESSION_COOKIE
 SESSION_MAX_AGE_S = 8 * 3600
@@ -58,6 +64,18 @@ def is_loopback(address: str) -> bool:
         return address == "localhost"
     try:
         return ipaddress.ip_address(address).is_loopback
+    except ValueError:
+        return False
+
+
+def is_local_request(request) -> bool:
+    """True when ``request`` (a Tornado request, or Bokeh's proxy of one) came from a loopback
+    address and carries no proxy header (a proxy on the same host connects from loopback)."""
+    headers = getattr(request, "headers", None) or {}
+    if any(h in headers for h in ("X-Forwarded-For", "X-Real-Ip", "Forwarded")):
+        return False
+    try:
+        return ipaddress.ip_address(getattr(request, "remote_ip", "") or "").is_loopback
     except ValueError:
         return False
 
@@ -83,18 +101,18 @@ def cookie_secret(path: str | None = None) -> tuple[str, str]:
 
 
 def check_startup(database, address: str) -> bool:
-    """True when the database holds users; raises :class:`StartupRefused` when there are none
-    and ``address`` is not a loopback address."""
-    with database.session() as s:
-        has = users.has_users(s)
+    """True when sign-in is required (some user has a password); raises
+    :class:`StartupRefused` when not and ``address`` is not a loopback address (open mode
+    serves loopback requests only, and nobody else could sign in)."""
+    has = sessions.sign_in_required(database)
     if not has and not is_loopback(address):
         raise StartupRefused(
-            f"refusing to serve on {address}: the database {database.safe_url} has no users, so "
-            "anyone reaching the server could act without signing in. Create the first admin "
+            f"refusing to serve on {address}: the database {database.safe_url} has no users "
+            "with a password, so nobody could sign in. Create the first admin "
             "with `railval user add NAME --role admin` (then engineers, reviewers…), or serve "
             "on 127.0.0.1 for open single-user mode.")
     if has:  # made at start-up, so that the first unknown name is answered as slowly as a known one
-        users._dummy_hash()
+        sessions.warm_up()
     return has
 
 
@@ -108,10 +126,6 @@ class RailvalAuth(AuthProvider):
         super().__init__()
 
     # -- cookie -------------------------------------------------------------------------
-    def open_session(self, session, user) -> str:
-        """A new server-side session of ``user`` in ``session``'s transaction → its id."""
-        return users.open_session(session, user, max_age_s=self.max_age_s)
-
     def issue(self, handler: RequestHandler, session_id: str, username: str) -> None:
         """Set the session cookie of ``session_id`` (made by :meth:`open_session`)."""
         secure = handler.request.protocol == "https"
@@ -128,23 +142,26 @@ class RailvalAuth(AuthProvider):
         decoded = decode_signed_value(self.secret, COOKIE, raw, max_age_days=1)
         return None if decoded is None else decoded.decode("utf-8", "replace")
 
-    def principal_from_cookie(self, raw: str | None) -> Principal | None:
+    def principal_from_cookie(self, raw: str | None, local: bool = False) -> Principal | None:
         """The principal of a raw cookie value: its session is read on the server (one
-        indexed read) and must be open, unexpired and its user enabled; else None. Open
-        mode when the database has no user."""
-        sid = self.session_id(raw)
-        with self.database.session() as s:
-            if sid is not None:
-                p = users.session_principal(s, sid)
-                if p is not None:
-                    return p
-            return None if users.has_users(s) else open_principal()
+        indexed read) and must be open, unexpired and its user enabled; else the open-mode
+        principal when ``local`` (:func:`is_local_request`) and no user has a password
+        (:func:`railval.app.services.sessions.principal`); else None."""
+        return sessions.principal(self.database, self.session_id(raw), local)
+
+    def principal_of(self, request) -> Principal | None:
+        """The principal of a request (Tornado's, or Bokeh's session request): its cookie
+        and whether it came from the loopback interface."""
+        cookies = getattr(request, "cookies", None) or {}
+        raw = cookies.get(COOKIE)
+        raw = getattr(raw, "value", raw)
+        return self.principal_from_cookie(raw, is_local_request(request))
 
     @property
     def get_user(self):
         def get_user(handler: RequestHandler):
             raw = handler.get_cookie(COOKIE)
-            p = self.principal_from_cookie(raw)
+            p = self.principal_from_cookie(raw, is_local_request(handler.request))
             return None if p is None else p.username
         return get_user
 
@@ -225,21 +242,18 @@ class LoginHandler(SessionBoundXsrf, RequestHandler):
         self.set_header("Cache-Control", "no-store")
         username = self.get_argument("username", "")
         password = self.get_argument("password", "")
-        with self.auth.database.session(actor=username or "(anonymous)", write=True) as s:
-            result = users.authenticate(s, username, password, source=_client(self))
-            if result.ok:
-                sid = self.auth.open_session(s, result.user)
+        result = sessions.sign_in(self.auth.database, username, password,
+                                  source=_client(self), max_age_s=self.auth.max_age_s)
         if not result.ok:
-            self.set_status(403 if "disabled" in result.message else
-                            429 if "Too many" in result.message else 401)
+            self.set_status({"account disabled": 403, "rate limit": 429}.get(result.reason, 401))
             self._form(result.message, username)
             return
-        self.auth.issue(self, sid, result.user.username)
+        self.auth.issue(self, result.session_id, result.username)
         nxt = self.get_argument("next", "/app")
         if nxt in ("/app", "/", "") or not nxt.startswith("/") or nxt.startswith("//"):
             from railval.app.navigation import landing
 
-            nxt = landing(users.principal(result.user))
+            nxt = landing(result.principal)
         self.redirect(nxt)
 
 
@@ -258,15 +272,10 @@ class LogoutHandler(SessionBoundXsrf, RequestHandler):
 <p style="margin-top:14px"><a href="/app">Back to the app</a></p>"""))
 
     def post(self) -> None:
-        from railval.db import audit
-
         sid = self.auth.session_id(self.get_cookie(COOKIE))
         p = self.auth.principal_from_cookie(self.get_cookie(COOKIE))
         if sid is not None and p is not None and not p.open_mode:
-            with self.auth.database.session(actor=p.username, write=True) as s:
-                users.end_session(s, sid, "logout")
-                audit.record(s, p.username, "logout", f"user:{p.username}",
-                             detail={"source": _client(self)})
+            sessions.sign_out(self.auth.database, sid, p.username, source=_client(self))
         self.clear_cookie(COOKIE)
         self.clear_cookie("user")
         self.redirect(f"{LOGIN_URL}?out=1")
@@ -279,24 +288,24 @@ class InviteHandler(SessionBoundXsrf, RequestHandler):
         self.auth = auth
 
     def _refuse(self, token: str, message: str) -> None:
-        with self.auth.database.session(actor="(anonymous)", write=True) as s:
-            users.record_refusal(s, token, message, source=_client(self))
+        sessions.refuse_invitation(self.auth.database, token, message, source=_client(self))
         self.set_status(403)
         self.write(_page("invitation", f'<h1>railval</h1><div class="msg" role="alert">'
                                        f'{html.escape(message)}</div>'
                                        f'<p><a href="{LOGIN_URL}">Sign in</a></p>'))
 
-    def _form(self, token: str, inv, message: str = "", username: str = "",
-              display: str = "") -> None:
+    def _form(self, token: str, inv: tuple[str, str | None], message: str = "",
+              username: str = "", display: str = "") -> None:
         msg = f'<div class="msg" role="alert">{html.escape(message)}</div>' if message else ""
-        ws = (f" to workshop {html.escape(str(inv.workshop_ref))}" if inv.workshop_ref else "")
+        role, workshop_ref = inv
+        ws = (f" to workshop {html.escape(str(workshop_ref))}" if workshop_ref else "")
         self.write(_page("invitation", f"""<h1>railval</h1>
-<p class="sub">You are invited as <b>{html.escape(inv.role)}</b>{ws}. Choose your sign-in.</p>
+<p class="sub">You are invited as <b>{html.escape(role)}</b>{ws}. Choose your sign-in.</p>
 {msg}<form method="post" action="{INVITE_URL}">{self.xsrf_form_html()}
 <input type="hidden" name="token" value="{html.escape(token, quote=True)}">
 <label for="username">User name</label><input id="username" name="username" value="{html.escape(username, quote=True)}">
 <label for="display_name">Printed name</label><input id="display_name" name="display_name" value="{html.escape(display, quote=True)}">
-<label for="password">Password (at least {users.MIN_PASSWORD_LENGTH} characters)</label>
+<label for="password">Password (at least {sessions.MIN_PASSWORD_LENGTH} characters)</label>
 <input id="password" name="password" type="password" autocomplete="new-password">
 <label for="password2">Repeat password</label>
 <input id="password2" name="password2" type="password" autocomplete="new-password">
@@ -306,9 +315,8 @@ class InviteHandler(SessionBoundXsrf, RequestHandler):
         self.set_header("Cache-Control", "no-store")
         token = self.get_argument("token", "")
         try:
-            with self.auth.database.session() as s:
-                inv = users.check_invitation(s, token)
-        except users.InvitationRefused as exc:
+            inv = sessions.check_invitation(self.auth.database, token)
+        except sessions.InvitationRefused as exc:
             self._refuse(token, str(exc))
             return
         self._form(token, inv)
@@ -322,25 +330,18 @@ class InviteHandler(SessionBoundXsrf, RequestHandler):
         display = self.get_argument("display_name", "").strip()
         pw, pw2 = self.get_argument("password", ""), self.get_argument("password2", "")
         try:
-            with self.auth.database.session(actor=username or "(anonymous)", write=True) as s:
-                inv = users.check_invitation(s, token)
-                if pw != pw2:
-                    raise InvalidParameter("the two passwords differ")
-                user = workshops.redeem_invitation(s, token, username=username, password=pw,
-                                               display_name=display)
-                name = user.username
-                sid = self.auth.open_session(s, user)
-        except users.InvitationRefused as exc:
+            p, sid = sessions.redeem(self.auth.database, token, username=username, password=pw,
+                                     password2=pw2, display_name=display,
+                                     max_age_s=self.auth.max_age_s)
+        except sessions.InvitationRefused as exc:
             self._refuse(token, str(exc))
             return
         except InvalidParameter as exc:
-            with self.auth.database.session() as s:
-                inv = users.check_invitation(s, token)
+            inv = sessions.check_invitation(self.auth.database, token)
             self.set_status(400)
             self._form(token, inv, str(exc), username, display)
             return
-        self.auth.issue(self, sid, name)
+        self.auth.issue(self, sid, p.username)
         from railval.app.navigation import landing
 
-        with self.auth.database.session() as s:
-            self.redirect(landing(users.principal(users.get_user(s, name))))
+        self.redirect(landing(p))

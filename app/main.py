@@ -243,18 +243,15 @@ def select_from_query(app: AppState, args: Mapping[str, str]) -> None:
         app.page = page
 
 
-def _session_cookie() -> str | None:
-    """The raw session cookie of the current Bokeh session's request."""
-    from railval.app.auth import COOKIE
-
+def _session_request() -> Any:
+    """The request of the current Bokeh session (its cookies, headers and client address)."""
     ctx = pn.state.curdoc.session_context if pn.state.curdoc is not None else None
-    cookies = dict(getattr(getattr(ctx, "request", None), "cookies", None) or {})
-    return cookies.get(COOKIE)
+    return getattr(ctx, "request", None)
 
 
 def session_principal(auth: Any) -> Principal | None:
     """The principal of the current Bokeh session, from its request's session cookie."""
-    return auth.principal_from_cookie(_session_cookie())
+    return auth.principal_of(_session_request())
 
 
 def build_app(database: Any, page: str = "overview", principal: Principal | None = None,
@@ -270,7 +267,7 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
             return pn.Column(pn.pane.Alert("Your session has ended. <a href='/login'>Sign in</a>.",
                                            alert_type="warning"))
         # access ends at the next action: the user is re-read from this cookie (docs/security.md)
-        recheck = functools.partial(auth.principal_from_cookie, _session_cookie())
+        recheck = functools.partial(auth.principal_of, _session_request())
     app = AppState(Backend(database), principal=principal, recheck=recheck)
     if page != "overview":
         app.page = page

@@ -19,8 +19,8 @@ SECRET = "s" * 48
 
 def session_for(database, username: str, *, max_age_s: int = 3600):
     auth = RailvalAuth(database, SECRET, max_age_s=max_age_s)
-    with database.session() as s:
-        sid = auth.open_session(s, users.get_user(s, username))
+    with database.session(write=True) as s:
+        sid = users.open_session(s, users.get_user(s, username), max_age_s=max_age_s)
     cookie = create_signed_value(SECRET, COOKIE, sid).decode()
     principal = auth.principal_from_cookie(cookie)
     assert principal is not None
