@@ -64,8 +64,7 @@ def cards(database, name: str, *, groups: Sequence[str] = (), actor: Principal |
 
     if isinstance(actor, Principal):
         require(actor, "workshop.results")
-    # fills the result cache and stores metrics runs at its end: a deferred unit of work
-    # (the write lock only at those writes, not while the cards are computed)
+    # deferred: SQLite's write lock only at the final cache/run writes (docs/database.md)
     with database.session(read_only=False) as session:
         mine, w = _yes_shares(session, name)
         others = []
