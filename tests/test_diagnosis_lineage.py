@@ -102,15 +102,28 @@ def heavy(module_db_url, tmp_path_factory):
     db.dispose()
 
 
-def test_child_diagnosis_names_parent_diagnosis_and_remaining_share(heavy, module_db_url, capsys):
-    from railval.app.services.calibration import calibrate
-    from railval.app.services.diagnosis import diagnose, latest_diagnosis
+_DONE: dict[int, tuple] = {}
 
-    parent = diagnose(heavy, "heavy", "baseline", effects=CANDS)
+
+def _parent_and_child(db):
+    """Diagnose the baseline, calibrate its named cause with ``split`` (fit on half the
+    sections of each zone, judged on the other half), diagnose the child (once per database)."""
+    from railval.app.services.calibration import calibrate
+    from railval.app.services.diagnosis import diagnose
+
+    if id(db) not in _DONE:
+        parent = diagnose(db, "heavy", "baseline", effects=CANDS)
+        calibrate(db, "heavy", "baseline", ["model.m_carbody"], "baseline+mass", split=True)
+        _DONE[id(db)] = (parent, diagnose(db, "heavy", "baseline+mass", effects=CANDS))
+    return _DONE[id(db)]
+
+
+def test_child_diagnosis_names_parent_diagnosis_and_remaining_share(heavy, module_db_url, capsys):
+    from railval.app.services.diagnosis import latest_diagnosis
+
+    parent, child = _parent_and_child(heavy)
     assert parent.lineage is None  # a root configuration has no lineage
     assert parent.candidates[0].name == "model.m_carbody", parent.note
-    calibrate(heavy, "heavy", "baseline", ["model.m_carbody"], "baseline+mass", split=True)
-    child = diagnose(heavy, "heavy", "baseline+mass", effects=CANDS)
     lin = child.to_dict()["lineage"]
     st = lin["statement"]
     assert lin["parent"] == "baseline" and st["parent_diagnosis"] == parent.run["id"]
@@ -139,3 +152,33 @@ def test_child_diagnosis_names_parent_diagnosis_and_remaining_share(heavy, modul
     assert doc["lineage"]["statement"]["parent_diagnosis"] == parent.run["id"]
     print(f"remaining share {st['remaining_share']:.3f}, parent expected {st['expected_remaining']}, "
           f"parent top explains {parent.candidates[0].held_out_explained:.3f}", file=__import__("sys").stderr)
+
+
+def test_diagnose_page_shows_the_lineage_of_diagnoses(heavy, page):
+    """The Diagnose page of the calibrated child: the statement of what is left after the
+    calibration and the lineage table (the parent's diagnosis with its top cause, then this one)."""
+    import re
+
+    from tests.browser_support import element_screenshot, nav, open_app, require_browser, served_app
+
+    require_browser()
+    parent, _ = _parent_and_child(heavy)
+    with served_app(heavy) as url:
+        open_app(page, url)
+        page.locator("select", has=page.locator("option", has_text="baseline+mass")).first.select_option(
+            "baseline+mass")
+        nav(page, "Diagnose & model workshop")
+        main = page.locator(".rv-main")
+        main.get_by_text(re.compile(r"After calibration: after calibrating model\.m_carbody \(parent baseline, "
+                                    rf"diagnosis #{parent.run['id']}\), the remaining residual is 0\.\d\d of "
+                                    r"the parent's")).wait_for(timeout=120_000)
+        main.get_by_text("Lineage of diagnoses (root first)").wait_for(timeout=120_000)
+        rows = main.locator(".rv-diagnosis-lineage .tabulator-row")
+        rows.first.wait_for(timeout=120_000)
+        assert rows.count() == 2
+        cells = [rows.nth(i).locator(".tabulator-cell[tabulator-field='configuration']").inner_text().strip()
+                 for i in range(2)]
+        assert cells == ["baseline", "baseline+mass"]
+        assert rows.first.locator(".tabulator-cell[tabulator-field='top cause']").inner_text().strip() == \
+            "model.m_carbody"
+        element_screenshot(main, "diagnose-lineage")

@@ -192,7 +192,7 @@ class DiagnosePage(PageBase):
         if left:
             extra.append(message("Not in the cause set: " + "; ".join(f"{x['name']} — {x['reason']}" for x in left),
                                  "warning"))
-        extra += self._families()
+        extra += self._lineage() + self._families()
         in_config = [s for s in self.state.skipped if s["kind"] == "configuration"]
         candidates = [s for s in self.state.skipped if s["kind"] != "configuration"]
         if in_config:
@@ -238,6 +238,32 @@ class DiagnosePage(PageBase):
                  for f in fams if f["structural"]["flag"]]
         return [pn.pane.Markdown("#### Per quantity family"),
                 table(df, height=40 + 32 * len(df), css_classes=["rv-families"]), *notes]
+
+    def _lineage(self) -> list:
+        """The diagnoses of the configuration's ancestors (root first: verdict, top cause) and
+        what is left of the parent's residual after the calibration (docs/diagnosis.md "Lineage")."""
+        lin = self.state.lineage
+        if not lin:
+            return []
+        top = (self.state.candidates or [{}])[0]
+        rows = [*lin.get("ancestors", []), {"configuration": lin.get("configuration"),
+                                            "diagnosis": self.state.stored_run.get("id"), "verdict": self.state.verdict,
+                                            "top": top.get("effect"), "held_out_explained": top.get("held_out_explained"),
+                                            "created_at": "this diagnosis"}]
+        df = pd.DataFrame([{
+            "configuration": a["configuration"],
+            "diagnosis": f"#{a['diagnosis']}" if a.get("diagnosis") else a.get("created_at") or "not diagnosed",
+            "verdict": a.get("verdict") or "-", "top cause": a.get("top") or "-",
+            "held-out (%)": round(100 * float(a["held_out_explained"]), 1)
+            if a.get("held_out_explained") is not None else None} for a in rows])
+        out = [pn.pane.Markdown("#### Lineage of diagnoses (root first)"),
+               table(df, height=40 + 32 * len(df), css_classes=["rv-diagnosis-lineage"])]
+        st = lin.get("statement")
+        if st and st.get("text"):
+            level = {"within scatter": "success", "explained": "info", "uncertain": "warning",
+                     "beyond library": "danger"}.get(st.get("status"), "info")
+            out.insert(0, message("After calibration: " + st["text"], level))
+        return out
 
     def _run_line(self) -> list:
         """Which stored run is shown: when, with which settings, how long it took."""

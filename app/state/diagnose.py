@@ -37,6 +37,8 @@ class DiagnoseState(param.Parameterized):
     causes = param.List(default=[], doc="the cause set: name, kind, parameter, fitted, held_out_share")
     cause_set = param.Dict(default={}, doc="the cause set's held-out share, whether the rest is scatter, why it stopped")
     families = param.List(default=[], doc="per quantity family: verdict, top candidates, structural flag")
+    lineage = param.Dict(default={}, doc=(
+        "the diagnoses of the configuration's ancestors and what is left after its calibration"))
     skipped = param.List(default=[], doc=(
         "candidates left out because they cannot apply to the campaign: name, kind, one-line reason"))
     # diagnosis settings (app.services.diagnosis.diagnose)
@@ -81,6 +83,7 @@ class DiagnoseState(param.Parameterized):
         self.skipped = []
         self.causes = []
         self.families = []
+        self.lineage = {}
         self.residual = {}
         self.stored_run = {}
         self.diagnosis_run = {}
@@ -209,6 +212,7 @@ class DiagnoseState(param.Parameterized):
         self.causes = list(result.causes or [])
         self.cause_set = dict(result.cause_set or {})
         self.families = list(result.families or [])
+        self.lineage = dict(result.lineage or {})
         self.diagnosis_run = {"simulations": result.simulations, "values_per_parameter": result.values_per_parameter,
                               "configuration": result.configuration}
         self.stored_run = dict(result.run or {})
