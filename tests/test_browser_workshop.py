@@ -323,7 +323,11 @@ def test_organiser_page_live_progress_invite_close_and_analysis(browser, env):
     page.wait_for_selector("body[data-refreshed]", timeout=TIMEOUT_MS)
     rows = page.locator("#progress tr")
     assert rows.count() == 6
-    assert "10 of 10" in page.locator("#progress tr", has_text="ra").inner_text()
+    ra_row = page.locator("#progress tr", has_text="ra").inner_text()
+    assert "10 of 10" in ra_row
+    # the total counts the hidden repeats: the page says so next to it (8 plots + 2 repeats)
+    plots = int(page.locator("h2 + p").inner_text().split(" plots")[0].rsplit("·", 1)[1])
+    assert f"({plots} plots + {10 - plots} hidden repeats)" in ra_row, ra_row
     # live: an answer given elsewhere shows up without reloading
     rctx, rpage = _open(browser, _link(env, "rpw"))
     _answer_key(rpage, "y")

@@ -290,7 +290,9 @@ async function refresh() {
     const tb = document.getElementById('progress'); tb.innerHTML = '';
     for (const rv of d.reviewers) {
       const tr = document.createElement('tr');
-      const cells = [rv.reviewer, rv.answered + ' of ' + rv.total, '', rv.finished ? 'finished' : '',
+      const rep = rv.total - d.plots;  // the hidden repeats count in the reviewer's total
+      const cells = [rv.reviewer, rv.answered + ' of ' + rv.total + (rep > 0 ? ' (' + d.plots
+                     + ' plots + ' + rep + ' hidden repeats)' : ''), '', rv.finished ? 'finished' : '',
                      rv.last_answer_at ? rv.last_answer_at.slice(0, 19).replace('T', ' ') : '—'];
       cells.forEach((c, i) => { const td = document.createElement('td');
         if (i === 2) { td.innerHTML = '<div class="bar"><div></div></div>';
