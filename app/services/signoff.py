@@ -290,9 +290,11 @@ def sign(database, username: str, password: str, campaign: str, config: str, *,
     A wrong password is recorded (``login.failed``) and counts towards the sign-in rate
     limit. Raises :class:`SignoffRefused` or :class:`PermissionDenied`.
     """
-    with database.session(actor=username, write=True) as s:  # a failure is recorded
-        result = users.authenticate(s, username, password, source=source or "signoff",
-                                    record_success=False)
+    from railval.app.services import sessions
+
+    # the one sign-in: the hash is verified outside the write transaction, a failure recorded
+    result = sessions.sign_in(database, username, password, source=source or "signoff",
+                              record_success=False)
     if not result.ok:
         raise SignoffRefused(f"sign-off refused: {result.message}")
     with database.session(actor=username, write=True) as s:

@@ -70,17 +70,22 @@ def invite(database, *, role: str, workshop: str | None, days: float) -> tuple[s
 
 
 def sign_in(database, username: str, password: str, *, source: str = "") -> tuple[bool, str]:
-    """Check a password (argon2id, rate-limited; :func:`railval.db.users.authenticate`) →
-    (ok, message). Writes: a failed attempt is recorded."""
-    with database.session(write=True) as s:
-        res = users.authenticate(s, username, password, source=source)
-        return res.ok, res.message
+    """Check a password through the one sign-in (:func:`railval.app.services.sessions.sign_in`:
+    argon2id outside any transaction, rate-limited) → (ok, message). A failed attempt is
+    recorded."""
+    from railval.app.services import sessions
+
+    res = sessions.sign_in(database, username, password, source=source)
+    return res.ok, res.message
 
 
 def cookie_principal(database, signed: tuple[str, float] | None, local: bool) -> Principal | None:
     """The user of a signed cookie ``(user, issued at)``, re-read on every request: disabled,
     or password changed after the cookie was issued → nobody; on the loopback while no user
-    has a password: the open single-user principal."""
+    has a password: the open single-user principal (the one open-mode rule,
+    :func:`railval.app.services.sessions.is_open`)."""
+    from railval.app.services import sessions
+
     with database.session() as s:
         if signed:
             username, issued = signed
@@ -88,9 +93,7 @@ def cookie_principal(database, signed: tuple[str, float] | None, local: bool) ->
             if (user is not None and not user.disabled
                     and users.password_changed_at(s, username) <= issued):
                 return users.principal(user)
-        if local and users.count_with_password(s) == 0:
-            return open_principal()
-    return None
+    return open_principal() if sessions.is_open(database, local) else None
 
 
 def principal_of(database, actor: str) -> Principal | str:
