@@ -8,8 +8,8 @@
   secret, HttpOnly, SameSite=Lax). Panel's built-in ``--basic-auth`` is not used: it
   compares plain text.
 * Every page load, websocket connection and ``POST`` re-checks the cookie: signature, then
-  one indexed read of the session row with its user (:func:`railval.app.services.sessions.principal`):
-  not ended, not past :data:`SESSION_MAX_AGE_S`, the user enabled. ``POST /logout`` ends the
+  one indexed read of the session row with its user
+  (:func:`railval.app.services.sessions.principal`): not ended, not past :data:`SESSION_MAX_AGE_S`, the user enabled. ``POST /logout`` ends the
   session on the server (a copy of the cookie is refused afterwards); ``user disable``,
   ``user passwd`` and ``user role`` end every session of the user.
 * Every state-changing request (``POST``) carries the anti-forgery token bound to the

@@ -8,7 +8,8 @@ same transaction (:func:`railval.db.audit.record`). Roles are the names of
 :data:`railval.core.roles.ROLES`.
 
 Sign-in (:func:`login_state` read, :func:`check_password` outside any transaction,
-:func:`record_login` write; :func:`authenticate` runs the three in one session) is rate limited from the audit trail itself: after
+:func:`record_login` write; :func:`authenticate` runs the three in one session) is rate
+limited from the audit trail itself: after
 :data:`MAX_FAILURES_PER_USER` failed sign-ins of one user name (or
 :data:`MAX_FAILURES_PER_SOURCE` from one client address) within :data:`FAILURE_WINDOW`,
 further attempts are refused until the window has passed; every failure and every refusal

@@ -88,10 +88,10 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     start_background()
     if has_users:
         _secret, origin = cookie_secret(args.cookie_secret_file)
-        print(f"railval serve: sign-in required (users in the database); cookie secret: {origin}",
+        print(f"railval serve: sign-in required (a user has a password); cookie secret: {origin}",
               file=sys.stderr, flush=True)
     else:
-        print("railval serve: open single-user mode (no users in the database; loopback only)",
+        print("railval serve: open single-user mode (no user with a password; loopback requests only)",
               file=sys.stderr, flush=True)
     if not args.no_demo:
         print(f"railval serve: {seed_demo(database)}", file=sys.stderr, flush=True)
