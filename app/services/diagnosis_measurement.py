@@ -20,48 +20,63 @@ from railval.core.diagnosis import CandidateFamily, DiagnosisResult, SectionEvid
 def offset_families(ctx: Any, sets: Mapping[str, Any], measurement: bool | Sequence[str], base: SectionEvidence,
                      result: tuple, meas_bands: Mapping, sections: Sequence[tuple[str, int]], limits: Mapping[str, float],
                      skipped: list[dict]) -> dict[str, CandidateFamily]:
-    """The ``offset CHANNEL`` candidates (:mod:`railval.core.diagnosis.measurement`) named in
-    ``measurement`` (not part of the default set); a channel whose offset the EN filter removes
-    is left out with that reason. The measured statistics are
-    re-evaluated from the recorded signals at every offset node (no simulation)."""
-    from railval.core.diagnosis.measurement import (
-        OFFSET_NODES,
-        offset_blind,
-        offset_components,
-        offset_family,
-        offset_measured,
-        offset_scale,
-    )
-    from railval.core.types import channel_kind
+    """The ``offset CHANNEL`` and ``offset GROUP`` candidates (:mod:`railval.core.diagnosis.measurement`)
+    named in ``measurement`` (not part of the default set): one channel, or a wheel-force group
+    of :func:`railval.core.diagnosis.measurement.force_gain_groups` (wheelset ``Q_w1``, side
+    ``Y_L``, bogie ``Q_bogie1``: every channel of it reads the truth + the same c — one
+    amplifier zeroed wrong); a channel whose offset the EN filter removes is left out with that
+    reason. The measured statistics are re-evaluated from the recorded signals at every offset
+    node (no simulation)."""
+    from railval.core.diagnosis.measurement import OFFSET_NODES, force_gain_groups, offset_blind, offset_components
 
-    pairs, sim_bands = result
+    pairs, _ = result
     used = {ch: offset_components(pairs, ch) for ch in ctx.channels}
     used = {ch: comps for ch, comps in used.items() if comps}
     if measurement is True:  # by name only (docs/diagnosis.md: a gain of a wheel force channel,
         return {}            # for which there is no candidate, is taken for an offset with confidence)
-    wanted = sorted(m.removeprefix("offset ") for m in measurement if m.startswith("offset "))
+    groups = {g: tuple(c for c in chans if c in used) for g, chans in force_gain_groups(ctx.channels).items()}
     out: dict[str, CandidateFamily] = {}
-    todo = []
-    for ch in wanted:
-        why = (offset_blind(ch) if ch in used else
-               "not a channel of this campaign that a measured quantity is formed from")
+    for ch in sorted(m.removeprefix("offset ") for m in measurement if m.startswith("offset ")):
+        members = (ch,) if ch in used else groups.get(ch) or ()
+        why = (offset_blind(ch) if ch in used else "" if members else
+               "not a channel (nor a wheel-force group) of this campaign that a measured quantity is formed from")
+        scale = float(np.median([_offset_scale(sets, c) for c in members])) if members and not why else 0.0
+        if not why and not scale > 0:
+            why = "the channel is constant"
         if why:
             skipped.append({"name": f"offset {ch}", "kind": "measurement", "reason": why})
-        else:
-            todo.append(ch)
-    if not todo:
-        return out
-    for ch in todo:
-        scale = offset_scale(sets, ch)
-        if not scale > 0:
-            skipped.append({"name": f"offset {ch}", "kind": "measurement", "reason": "the channel is constant"})
             continue
-        comps = used[ch]
-        measured = [(f * scale, offset_measured(sets, ctx.sections, ch, f * scale, comps)) for f in OFFSET_NODES]
-        kind = channel_kind(ch)
-        out[f"offset {ch}"] = offset_family(base, pairs, sim_bands, meas_bands, sections, ch,
-                                            kind.unit if kind else "", measured, limits, bands=ctx.bands)
+        out[f"offset {ch}"] = _offset_group_family(ctx, sets, base, result, meas_bands, sections, limits, ch,
+                                                   members, sorted({x for c in members for x in used[c]}),
+                                                   [f * scale for f in OFFSET_NODES])
     return out
+
+
+def _offset_scale(sets: Mapping[str, Any], channel: str) -> float:
+    from railval.core.diagnosis.measurement import offset_scale
+
+    return offset_scale(sets, channel)
+
+
+def _offset_group_family(ctx: Any, sets: Mapping[str, Any], base: SectionEvidence, result: tuple,
+                         meas_bands: Mapping, sections: Sequence[tuple[str, int]], limits: Mapping[str, float],
+                         name: str, members: Sequence[str], comps: Sequence[tuple[str, str]],
+                         offsets: Sequence[float]) -> CandidateFamily:
+    """``offset NAME``: every channel of ``members`` reads the truth + c, the measurement's
+    statistics re-evaluated at every c of ``offsets``."""
+    from railval.core.diagnosis.measurement import offset_family, offset_measured, remapped_measurement
+    from railval.core.types import channel_kind
+
+    pairs, sim_bands = result
+    g_set = set(members)
+    if len(members) == 1:
+        measured = [(c, offset_measured(sets, ctx.sections, members[0], c, comps)) for c in offsets]
+    else:
+        measured = [(c, remapped_measurement(sets, ctx.sections, lambda _s, ch, _ss, c=c: {
+            k: (x - c if k in g_set else x) for k, x in ch.items()}, comps)) for c in offsets]
+    kind = channel_kind(members[0])
+    return offset_family(base, pairs, sim_bands, meas_bands, sections, name, kind.unit if kind else "", measured,
+                         limits, bands=ctx.bands, group=None if len(members) == 1 and name == members[0] else members)
 
 
 def shared_gain(ctx: Any, sets: Mapping[str, Any], channel: str, base: SectionEvidence, result: tuple,
@@ -258,9 +273,9 @@ def discrete_families(ctx: Any, sets: Mapping[str, Any], sim_sets: Mapping[str, 
 
 
 def _gain_kind(name: str) -> tuple[str, bool]:
-    """(kind, single channel) of a ``gain X`` candidate: ``Y``/``Q`` for the wheel-force
-    groups (single: one wheel ``Y_w1L``), the channel stem for an accelerometer (``az_cb``)."""
-    x = name.removeprefix("gain ")
+    """(kind, single channel) of a ``gain X`` or ``offset X`` candidate: ``Y``/``Q`` for the
+    wheel-force groups (single: one wheel ``Y_w1L``), the channel stem for an accelerometer (``az_cb``)."""
+    x = name.partition(" ")[2]
     if x[:2] in ("Y_", "Q_"):
         return x[0], x[-1] in "LR" and x[3:-1].isdigit() and x[2] == "w"
     stem, _, end = x.rpartition("_")
@@ -270,59 +285,73 @@ def _gain_kind(name: str) -> tuple[str, bool]:
 #: share of a kind's channels whose gains all lie on one side of 1 that marks a common model error
 MOST = 0.75
 
+#: the measurement candidates the redundancy rule judges: parameter → (value of a sensor that
+#: reads right, what it reads wrong by: the logarithm of a gain, the offset itself)
+_READS_RIGHT: dict[str, tuple[float, Any]] = {"gain": (1.0, math.log), "offset": (0.0, float)}
+
 
 def not_sensor_faults(res: DiagnosisResult) -> dict[str, str]:
-    """The campaign's redundancy rule (docs/diagnosis.md "Model or measurement?"): a gain
-    candidate is no sensor fault when its interval of fitted values contains 1 (the sensor may
-    read right), or when every channel of its kind wants the same gain — each single channel's
-    fitted gain inside every other one's interval, away from 1: a model error common to all
-    those sensors (a mass, a stiffness) scales them alike, a sensor fault scales one; likewise
-    when at least :data:`MOST` of three or more channels of the kind want a gain on the same
-    side of 1 (bootstrap interval beyond 1: on the trust bench another creep law in the truth
-    lowered every guiding force, and a side group's gain absorbed it); and when the same group
-    on the other bogie (wheelset 1 ↔ 3, 2 ↔ 4: they run in the same conditions) wants a gain on
-    the same side of 1, at least half as large in log — the wheels' analogue of the two car
-    body ends (a softer flange contact in the truth lowered both leading wheelsets' Y). The
-    interval is the bootstrap one (refit on resampled sections, Efron & Tibshirani 1993 §8.2):
-    the widened interval also holds the lack-of-fit region, which grows with any model error
-    the gain cannot remove. Name → reason."""
-    gains = [c for c in res.candidates if c.kind == "measurement" and c.parameter == "gain"]
-    by_name = {c.name: c for c in gains}
+    """The campaign's redundancy rule (docs/diagnosis.md "Model or measurement?"), for the gain
+    candidates (reference 1) and the offset candidates (reference 0) alike: a candidate is no
+    sensor fault when its interval of fitted values contains the reference (the sensor may read
+    right), or when every channel of its kind wants the same value — each single channel's
+    fitted value inside every other one's interval, on one side of the reference: a model error
+    common to all those sensors (a mass, a stiffness) scales or shifts them alike, a sensor
+    fault one; likewise when at least :data:`MOST` of three or more channels of the kind want a
+    value on the same side (bootstrap interval beyond the reference: on the trust bench another
+    creep law in the truth lowered every guiding force, and a side group's gain absorbed it);
+    and when the same group on the other bogie (wheelset 1 ↔ 3, 2 ↔ 4: they run in the same
+    conditions) wants a value on the same side, at least half as far from the reference (in log
+    for a gain) — the wheels' analogue of the two car body ends (a softer flange contact in the
+    truth lowered both leading wheelsets' Y). The interval is the bootstrap one (refit on
+    resampled sections, Efron & Tibshirani 1993 §8.2): the widened interval also holds the
+    lack-of-fit region, which grows with any model error the candidate cannot remove. Name → reason."""
     out: dict[str, str] = {}
+    for parameter, (ref, dev) in _READS_RIGHT.items():
+        cands = [c for c in res.candidates if c.kind == "measurement" and c.parameter == parameter]
+        _no_fault_of(cands, parameter, ref, dev, out)
+    return out
+
+
+def _no_fault_of(cands: Sequence[Any], parameter: str, ref: float, dev: Any, out: dict[str, str]) -> None:
+    """:func:`not_sensor_faults` for the candidates of one ``parameter`` (``gain``/``offset``)."""
+    what = {"gain": "gains", "offset": "offsets"}[parameter]
+    a = {"gain": "a gain", "offset": "an offset"}[parameter]
+    by_name = {c.name: c for c in cands}
     by_kind: dict[str, list] = {}
-    for c in gains:
+    for c in cands:
         kind, single = _gain_kind(c.name)
         if single:
             by_kind.setdefault(kind, []).append(c)
         lo, hi = c.fitted_ci_bootstrap
-        if lo is not None and hi is not None and lo <= 1.0 <= hi:
-            out[c.name] = (f"its bootstrap interval of fitted gains {lo:.3g}–{hi:.3g} contains 1: the sensor may "
-                           "read right")
+        if lo is not None and hi is not None and lo <= ref <= hi:
+            out[c.name] = (f"its bootstrap interval of fitted {what} {lo:.3g}–{hi:.3g} contains {ref:g}: the sensor "
+                           "may read right")
     for kind, singles in by_kind.items():
         if len(singles) < 2:
             continue
         alike = all(o.fitted_ci_bootstrap[0] <= c.fitted <= o.fitted_ci_bootstrap[1] for c in singles for o in singles)
-        same = alike and (all(c.fitted > 1 for c in singles) or all(c.fitted < 1 for c in singles))
-        up = sum(c.fitted_ci_bootstrap[0] > 1 for c in singles)
-        down = sum(c.fitted_ci_bootstrap[1] < 1 for c in singles)
+        same = alike and (all(c.fitted > ref for c in singles) or all(c.fitted < ref for c in singles))
+        up = sum(c.fitted_ci_bootstrap[0] > ref for c in singles)
+        down = sum(c.fitted_ci_bootstrap[1] < ref for c in singles)
         vals = sorted(c.fitted for c in singles)
-        why = (f"every {kind} channel wants the same gain ({vals[0]:.3g}–{vals[-1]:.3g})" if same else
-               f"{max(up, down)} of the {len(singles)} {kind} channels want a gain {'above' if up > down else 'below'} 1"
+        why = (f"every {kind} channel wants the same {parameter} ({vals[0]:.3g}–{vals[-1]:.3g})" if same else
+               f"{max(up, down)} of the {len(singles)} {kind} channels want {a} "
+               f"{'above' if up > down else 'below'} {ref:g}"
                if len(singles) >= 3 and max(up, down) >= MOST * len(singles) else "")
-        for c in gains:
+        for c in cands:
             if why and _gain_kind(c.name)[0] == kind:
                 out.setdefault(c.name, why + ": a model error common to those sensors, not a sensor fault")
-    for c in gains:
-        other = by_name.get(f"gain {_counterpart(c.name.removeprefix('gain '))}")
-        if other is None or c.name in out or not (c.fitted > 0 and other.fitted > 0):
+    for c in cands:
+        other = by_name.get(f"{parameter} {_counterpart(c.name.partition(' ')[2])}")
+        if other is None or c.name in out or (parameter == "gain" and not (c.fitted > 0 and other.fitted > 0)):
             continue
         lo, hi = other.fitted_ci_bootstrap
-        same_side = (lo > 1 and c.fitted > 1) or (hi < 1 and c.fitted < 1)
-        if same_side and abs(math.log(other.fitted)) >= 0.5 * abs(math.log(c.fitted)):
-            out[c.name] = (f"{other.name.removeprefix('gain ')} of the other bogie wants a gain alike "
+        same_side = (lo > ref and c.fitted > ref) or (hi < ref and c.fitted < ref)
+        if same_side and abs(dev(other.fitted)) >= 0.5 * abs(dev(c.fitted)):
+            out[c.name] = (f"{other.name.partition(' ')[2]} of the other bogie wants {a} alike "
                            f"({other.fitted:.3g} against {c.fitted:.3g}): a model error common to both bogies "
                            "(a contact, a creep law), not a sensor fault")
-    return out
 
 
 def _counterpart(group: str) -> str | None:
@@ -337,7 +366,7 @@ def _counterpart(group: str) -> str | None:
 
 
 def apply_redundancy_rule(res: DiagnosisResult) -> dict[str, str]:
-    """Flag the gain candidates that are no sensor fault (:func:`not_sensor_faults`); a top
+    """Flag the gain and offset candidates that are no sensor fault (:func:`not_sensor_faults`); a top
     ``cause`` among them becomes ``uncertain``. Returns name → reason (left out of the cause set)."""
     out = not_sensor_faults(res)
     for c in res.candidates:

@@ -175,9 +175,11 @@ def offset_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]],
                   sim_bands: Mapping[str, Mapping[str, np.ndarray]], meas_bands: Mapping[str, Mapping[str, np.ndarray]],
                   sections: Sequence[tuple[str, int]], channel: str, unit: str,
                   measured: Sequence[tuple[float, Mapping[tuple[str, str, str], float]]],
-                  std_limits: Mapping[str, float], *, bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ
-                  ) -> CandidateFamily:
-    """The measurement candidate "``channel`` reads the true value + c" along c (linear scale):
+                  std_limits: Mapping[str, float], *, bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ,
+                  group: Sequence[str] | None = None) -> CandidateFamily:
+    """The measurement candidate "``channel`` reads the true value + c" along c (linear scale);
+    with ``group`` (a wheel-force group named ``channel``, :func:`force_gain_groups`) every
+    channel of the group reads the truth + the same c:
     ``measured`` — (c, :func:`offset_measured` at c) per node — corrects the pairs
     (:func:`corrected_pairs`); the band powers are unchanged (the Welch segments remove the
     mean)."""
@@ -186,9 +188,11 @@ def offset_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]],
     comps = sorted({(q, p) for _, m in measured for _, q, p in m})
     return CandidateFamily(
         "measurement", f"offset {channel}", "offset", values, evidence, (min(values), max(values)), log=False,
-        reference=0.0, unit=unit, title=f"channel {channel} reads",
-        explanation=(f"the measurement, not the model: channel {channel} reads the true value + c (a zero set "
-                     f"wrong, a bridge out of balance); it changes {', '.join(sorted({q for q, _ in comps}))} "
+        reference=0.0, unit=unit, title=f"channel {channel} reads" if not group else f"channels {', '.join(group)} read",
+        explanation=(f"the measurement, not the model: "
+                     + (f"channel {channel} reads" if not group else f"the channels {', '.join(group)} read")
+                     + " the true value + c (a zero set "
+                     f"wrong, a bridge out of balance{'' if not group else ', one amplifier zeroed wrong'}); it changes {', '.join(sorted({q for q, _ in comps}))} "
                      "— the other wheel or wheelset measures what the model should match"))
 
 
