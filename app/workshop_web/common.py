@@ -7,7 +7,6 @@ import base64
 import hashlib
 import hmac
 import html
-import ipaddress
 import json
 import os
 import secrets
@@ -165,12 +164,11 @@ def _unsign(cookie: str | None) -> tuple[str, float] | None:
 
 
 def _is_local(handler: tornado.web.RequestHandler) -> bool:
-    if any(h in handler.request.headers for h in ("X-Forwarded-For", "X-Real-Ip", "Forwarded")):
-        return False
-    try:
-        return ipaddress.ip_address(handler.request.remote_ip).is_loopback
-    except ValueError:
-        return False
+    """Loopback and no proxy header: the same test as the app's (open-mode rule of
+    :func:`railval.app.services.sessions.is_open`)."""
+    from railval.app.auth import is_local_request
+
+    return is_local_request(handler.request)
 
 
 def _principal_for(database, signed: tuple[str, float] | None, local: bool) -> Principal | None:
