@@ -130,9 +130,10 @@ def user_box(app: AppState) -> pn.pane.HTML:
         return pn.pane.HTML(
             "<div class='rv-open-mode' style='background:#fff4e5;border:1px solid #e0a030;"
             "padding:6px 8px;border-radius:4px;font-size:13px'><b>Open single-user mode</b>: "
-            "this database has no users, so anyone who reaches this server (loopback only) "
-            "acts as the local user and nothing asks for a password. Add users with "
-            "<code>railval user add NAME --role admin</code> to require sign-in.</div>",
+            "no user of this database has a password, so every request from this computer "
+            "(loopback only) acts as the local user and nothing asks for a password. Add a "
+            "user with a password (<code>railval user add NAME --role admin</code>) to "
+            "require sign-in.</div>",
             sizing_mode="stretch_width")
     roles = ", ".join(sorted(p.roles)) or "no role"
     return pn.pane.HTML(
