@@ -38,7 +38,6 @@ def test_readme_verb_list_names_init():
     assert verbs.index("railval init") < verbs.index("railval synth")
 
 
-@pytest.mark.skipif(shutil.which("git") is None, reason="git is not installed")
 def test_secrets_beside_the_database_are_ignored(tmp_path):
     repo = tmp_path / "clone"
     repo.mkdir()
