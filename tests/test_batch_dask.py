@@ -71,7 +71,7 @@ def test_process_pool_equals_serial(serial_results):
 def test_dask_local_cluster_equals_serial(serial_results):
     distributed = pytest.importorskip("dask.distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address=":0") as cluster:
         got = run_tasks(_tasks(), scheduler=cluster.scheduler_address)
         with BatchExecutor(cluster.scheduler_address) as ex:
             assert ex.backend == "dask"

@@ -17,7 +17,7 @@ from railval.app.cli import main
 def cluster():
     distributed = pytest.importorskip("dask.distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as lc:
+                                  dashboard_address=":0") as lc:
         yield lc.scheduler_address
 
 

@@ -229,7 +229,7 @@ def test_batch_validation_on_a_dask_cluster_equals_local(team):
     with db.session(write=True) as s:  # the cluster computes everything again
         s.query(ResultCache).delete()
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address=":0") as cluster:
         dask = validate_configurations(db, "demo", ["baseline"], n_boot=100,
                                        scheduler=cluster.scheduler_address, chunk_sections=2)
     def verdict(result) -> dict:  # without the cache counts (provenance, not the verdict)

@@ -210,7 +210,7 @@ def _dask_run(database, args: argparse.Namespace, pool_results: dict) -> dict:
     from railval.db import repo
 
     with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster:
+                      dashboard_address=":0") as cluster:
         with database.session() as session:
             repo.cache_delete(session, prefix="en14363:")
         load = os.getloadavg()[0]
