@@ -18,12 +18,22 @@ test session: read it, never modify it (copy it first).
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
 
 import pytest
+
+# The suite's signing keys, seal secrets, trust anchors and witnesses go to a configuration
+# folder of its own (db/integrity.py, db/trust.py: ``$XDG_CONFIG_HOME/railval``), never to the
+# user's: a test run must neither read a real server's anchors nor leave thousands of its own.
+_CONFIG_HOME = tempfile.mkdtemp(prefix="railval-test-config-")
+os.environ["XDG_CONFIG_HOME"] = _CONFIG_HOME
+atexit.register(shutil.rmtree, _CONFIG_HOME, True)
 
 PG_SERVER_URL = os.environ.get(
     "RAILVAL_TEST_PG", "postgresql+psycopg://postgres@127.0.0.1:5432/test"
