@@ -136,6 +136,10 @@ def _postgresql_begin(conn) -> None:
         conn.exec_driver_sql("SET TRANSACTION READ ONLY")
 
 
+#: the first schema revision whose audit rows and sign-offs are signed
+SIGNING_REVISION = "0007_signatures"
+
+
 class Database:
     """A connected database: engine, session factory, migrations."""
 
@@ -244,12 +248,26 @@ class Database:
         """Create or upgrade the schema to the newest revision; returns that revision."""
         from alembic import command
 
+        before = self.current_revision()
         cfg = self._alembic_config()
         with self.engine.begin() as conn:
             cfg.attributes["connection"] = conn
             command.upgrade(cfg, "head")
         self._initialised = True
+        if before is not None and before < SIGNING_REVISION:
+            self._seal_legacy_trail(before)
         return self.head_revision()
+
+    def _seal_legacy_trail(self, before: str) -> None:
+        """A database from before signed audit rows (revision ``before``): the upgrade states
+        in a signed ``audit.seal`` row that the earlier rows and sign-offs were written
+        unsigned, binding them as found (docs/audit.md); without it they would read as edited
+        outside railval."""
+        from railval.db import audit
+
+        with self.session(actor="railval upgrade", write=True) as s:
+            audit.seal(s, "railval upgrade", f"rows written before signing existed (revision "
+                                             f"{before}), sealed at the upgrade")
 
     def ensure_initialised(self, *, upgrade: bool = False) -> None:
         """Raise :class:`DatabaseNotInitialised` unless the schema is at the newest revision.

@@ -160,7 +160,7 @@ def test_reload_during_a_diagnosis_finds_the_job_and_its_result(page, app):
     page.locator(".rv-status", has_text="diagnosis").wait_for(timeout=TIMEOUT_MS)
     page.reload()
     page.locator(".rv-nav").wait_for(timeout=TIMEOUT_MS)
-    job = page.locator(".rv-jobs .rv-job", has_text="diagnosis of")
+    job = page.locator(".rv-jobs .rv-job", has_text="diagnosis of").first
     job.wait_for(timeout=TIMEOUT_MS)
     screenshot(page, "jobs-after-reload-running")
     # ended (done, or failed with its reason shown in the list): one click to its page

@@ -41,7 +41,7 @@ def test_registry_has_the_nine_effects_with_complete_metadata():
 def test_unknown_effect_and_out_of_bounds_parameter_raise_precise_errors():
     with pytest.raises(InvalidParameter, match="unknown effect id 'frictoin'"):
         resolve_effects({"frictoin": {}})
-    with pytest.raises(InvalidParameter, match=r"effect 'conicity'.*'conicity' = 0\.9.*\[0\.01, 0\.6\]"):
+    with pytest.raises(InvalidParameter, match=r"effect 'conicity'.*'conicity' = 0\.9.*\[0\.015, 0\.6\]"):
         resolve_effects({"conicity": {"conicity": 0.9}})
     with pytest.raises(InvalidParameter, match="unknown parameter 'mu_x'"):
         resolve_effects({"wheel_rail_friction": {"mu_x": 0.3}})

@@ -161,7 +161,7 @@ _LIST = [
         "profiles give another equivalent conicity. Higher conicity shortens the kinematic "
         "wavelength (Klingel), raises the bogie's lateral activity and the car body lateral "
         "accelerations on straight track, and improves steering in curves.",
-        _p(Param("conicity", "-", 0.35, 0.01, 0.6, "equivalent conicity", scale="log",
+        _p(Param("conicity", "-", 0.35, 0.015, 0.6, "equivalent conicity", scale="log",
                  plausible=(0.02, 0.5),
                  plausible_source="EN 15302 equivalent conicity at 3 mm amplitude: new S1002/UIC60 1:40 "
                                   "≈ 0.05–0.2, worn wheel–rail pairs from ≈ 0.02 (flat tread cone 1:40 on a "
