@@ -173,6 +173,17 @@ class _Budgeted:
         return value
 
 
+def checked_specs(specs: Sequence[ParameterSpec]) -> list[ParameterSpec]:
+    """``specs`` as a list: at least one parameter, names unique (else :class:`InvalidParameter`)."""
+    specs = list(specs)
+    if not specs:
+        raise InvalidParameter("calibrate needs at least one parameter, got none")
+    names = [s.name for s in specs]
+    if len(set(names)) != len(names):
+        raise InvalidParameter(f"parameter names must be unique, got {names}")
+    return specs
+
+
 def max_evaluations(n_parameters: int, popsize: int, maxiter: int, polish_maxfev: int,
                     start: bool = True) -> int:
     """Upper bound of the objective calls of :func:`calibrate`: the start point, scipy's
@@ -219,12 +230,7 @@ def calibrate(objective: Callable[[dict[str, float]], float], specs: Sequence[Pa
     -------
     CalibrationResult
         ``n_evaluations`` excludes the start point's call (total bound: :func:`max_evaluations`)."""
-    specs = list(specs)
-    if not specs:
-        raise InvalidParameter("calibrate needs at least one parameter, got none")
-    names = [s.name for s in specs]
-    if len(set(names)) != len(names):
-        raise InvalidParameter(f"parameter names must be unique, got {names}")
+    specs = checked_specs(specs)
     f = _Counted(objective, specs)
     bounds = [(s.to_search(s.lower), s.to_search(s.upper)) for s in specs]
     x0 = None

@@ -25,8 +25,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from railval.core.calibration import CalibrationResult, ParameterSpec, Progress
-from railval.core.errors import InvalidParameter
+from railval.core.calibration import CalibrationResult, ParameterSpec, Progress, checked_specs
 
 #: residual entry standing for a diverged simulation (non-finite residuals)
 _DIVERGED = 1e6
@@ -137,7 +136,7 @@ def calibrate_local(residuals: Callable[[dict[str, float]], np.ndarray], specs: 
         ``method`` ``"local"``; ``tolerance`` {ftol, xtol, gtol, max_nfev, stopped_by, status,
         start_from};
         ``n_evaluations`` counts every distinct residual evaluation (scan and start included)."""
-    specs = _checked(specs)
+    specs = checked_specs(specs)
     bounds = np.array([(s.to_search(s.lower), s.to_search(s.upper)) for s in specs], dtype=float)
     memo = _Memo(_Vector(residuals, specs), workers)
     t0 = time.perf_counter()
@@ -171,13 +170,3 @@ def calibrate_local(residuals: Callable[[dict[str, float]], np.ndarray], specs: 
     return CalibrationResult(memo.f.params(memo.best_x), memo.best_cost, obj_start, memo.calls,
                              int(res.status) > 0, message, history, specs, time.perf_counter() - t0,
                              method="local", tolerance=tolerance)
-
-
-def _checked(specs: Sequence[ParameterSpec]) -> list[ParameterSpec]:
-    specs = list(specs)
-    if not specs:
-        raise InvalidParameter("calibrate needs at least one parameter, got none")
-    names = [s.name for s in specs]
-    if len(set(names)) != len(names):
-        raise InvalidParameter(f"parameter names must be unique, got {names}")
-    return specs
