@@ -49,6 +49,12 @@ def app(tmp_path_factory):
                               roles=[role])
         users.create_user(s, "org2", display_name="Other Organiser", password=_pw("org2"),
                           roles=["organiser"])
+    # the job list is this process's (the app is served in a thread of the test process):
+    # jobs other test modules ran as a user of the same name (test_authz runs a diagnosis as
+    # u_engineer from the overview) are not this server's users' jobs
+    from railval.app.state import jobs
+    with jobs._JOBS_LOCK:
+        jobs._JOBS.clear()
     # one render process: the creation takes long enough to watch its progress
     old = workshop_render.RENDER_WORKERS
     workshop_render.RENDER_WORKERS = 1
