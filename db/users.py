@@ -28,7 +28,7 @@ from typing import Any
 
 from argon2 import PasswordHasher
 from argon2.exceptions import InvalidHashError, VerificationError, VerifyMismatchError
-from sqlalchemy import func, select, update
+from sqlalchemy import delete, func, or_, select, update
 from sqlalchemy.orm import Session, selectinload
 
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
@@ -235,11 +235,22 @@ def session_hash(session_id: str) -> str:
     return hashlib.sha256((session_id or "").encode("utf-8")).hexdigest()
 
 
+#: how long a session row is kept after it ended or expired (who was signed in when, for an
+#: inquiry); older rows of a user are deleted when that user signs in again
+SESSION_KEEP_DAYS = 30
+
+
 def open_session(session: Session, user: AppUser, *, max_age_s: float) -> str:
     """A new session of ``user`` valid for ``max_age_s`` seconds → its random id (256 bits;
-    returned once for the cookie, only its SHA-256 is stored)."""
+    returned once for the cookie, only its SHA-256 is stored). The user's session rows that
+    ended or expired more than :data:`SESSION_KEEP_DAYS` ago are deleted (the table holds the
+    live sessions and a month of history, not every sign-in ever made)."""
     session_id = secrets.token_urlsafe(32)
     now = utcnow()
+    cutoff = now - dt.timedelta(days=SESSION_KEEP_DAYS)
+    session.execute(delete(AppSession).where(
+        AppSession.user_id == user.id,
+        or_(AppSession.expires_at < cutoff, AppSession.ended_at < cutoff)))
     session.add(AppSession(id_sha256=session_hash(session_id), user_id=user.id, created_at=now,
                            expires_at=now + dt.timedelta(seconds=max_age_s), end_reason=""))
     session.flush()

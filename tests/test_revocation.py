@@ -66,3 +66,33 @@ def test_reads_are_rechecked_within_a_few_seconds(database, monkeypatch):
     assert app.page_allowed("dashboard")  # cached: read less than ACCESS_RECHECK_S ago
     monkeypatch.setattr(app, "_checked_at", time.monotonic() - ACCESS_RECHECK_S)
     assert not app.page_allowed("dashboard") and app.status == ACCESS_ENDED
+
+
+def test_old_session_rows_are_deleted_when_the_user_signs_in_again(database):
+    """The app_session table keeps the live sessions and SESSION_KEEP_DAYS of history: rows
+    that expired or ended before that are deleted at the user's next sign-in, recent ones
+    and other users' rows stay."""
+    import datetime as dt
+
+    from sqlalchemy import select, update
+
+    from railval.db.models import AppSession, utcnow
+
+    with database.session(write=True) as s:
+        for name in ("old", "other"):
+            users.create_user(s, name, password=f"{name} password", roles=["engineer"])
+        ids = {k: users.open_session(s, users.get_user(s, n), max_age_s=3600)
+               for k, n in (("expired", "old"), ("ended", "old"), ("recent", "old"),
+                            ("other", "other"))}
+        long_ago = utcnow() - dt.timedelta(days=users.SESSION_KEEP_DAYS + 1)
+        s.execute(update(AppSession).where(AppSession.id_sha256 == users.session_hash(
+            ids["expired"])).values(created_at=long_ago, expires_at=long_ago))
+        s.execute(update(AppSession).where(AppSession.id_sha256.in_(
+            [users.session_hash(ids[k]) for k in ("ended", "other")])).values(ended_at=long_ago))
+    with database.session(write=True) as s:
+        users.open_session(s, users.get_user(s, "old"), max_age_s=3600)
+        kept = set(s.scalars(select(AppSession.id_sha256)))
+    assert users.session_hash(ids["expired"]) not in kept
+    assert users.session_hash(ids["ended"]) not in kept
+    assert users.session_hash(ids["recent"]) in kept and users.session_hash(ids["other"]) in kept
+    assert len(kept) == 3
