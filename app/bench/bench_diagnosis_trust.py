@@ -31,6 +31,10 @@ model the diagnosis simulates:
       (right answer: the track input, never a vehicle parameter as ``cause``);
   (w) worn secondary dampers, where an implausible candidate (a damper series stiffness) ranks
       ahead (the cause set must carry on past it);
+  (p) measured profiles: the truth runs on a nonlinear rolling-radius difference table (new
+      pairs with a flange rise, worn pairs with a contact jump) while every candidate model
+      uses the template's linear conicity (right answer: the contact-geometry statement; a
+      single conicity as the ``cause`` counts as confidently wrong);
   some cases of (g), (t) and (w) with the truth's other creep law of (f).
 
 Every case is synthesised (:func:`~railval.core.sim.synth.build_campaign`), written and
@@ -45,7 +49,7 @@ passes validation is flagged (plausibility or held-out check).
 Per class also (:func:`class_scores`): named as cause, named in the set, ``uncertain`` with the
 right top, confidently wrong.
 
-``railval bench diagnosis_trust [--cases N] [--classes a b c d e f m g t r w] [--workers 2] [--calibrate-wrong]``
+``railval bench diagnosis_trust [--cases N] [--classes a b c d e f m g t r w p] [--workers 2] [--calibrate-wrong]``
 """
 
 from __future__ import annotations
@@ -235,6 +239,49 @@ CASES["w"] = [
 ]
 
 
+
+def profile_table(cone: float, rise_at_mm: float, *, jump_mm: float = 0.0, jump_at_mm: float = 0.0,
+                  worn_cone: float | None = None, label: str = "") -> dict[str, Any]:
+    """A Δr(y) table (template parameter ``contact_geometry``, y 0–12 mm, mirrored): a tread cone
+    ``cone`` (Δr = 2·cone·y), a jump of ``jump_mm`` at ``jump_at_mm`` (over 0.1 mm; a worn
+    hollow tread's contact jump) after which the slope is ``worn_cone``, and a steep rise
+    towards the flange from ``rise_at_mm`` (slope 0.8, then 3 beyond 1.5 mm more)."""
+    ys = sorted({0.0, rise_at_mm, rise_at_mm + 1.5, 12.0} | ({jump_at_mm, jump_at_mm + 0.1} if jump_mm else set()))
+    out = []
+    for y in ys:
+        lam = cone
+        dr = 2.0 * cone * min(y, jump_at_mm) if jump_mm else 2.0 * cone * min(y, rise_at_mm)
+        if jump_mm and y > jump_at_mm:
+            dr += jump_mm * min(1.0, (y - jump_at_mm) / 0.1)
+            lam = worn_cone if worn_cone is not None else cone
+            dr += 2.0 * lam * max(0.0, min(y, rise_at_mm) - jump_at_mm - 0.1)
+        dr += 0.8 * max(0.0, min(y, rise_at_mm + 1.5) - rise_at_mm) + 3.0 * max(0.0, y - rise_at_mm - 1.5)
+        out.append(round(dr, 6))
+    return {"y_mm": ys, "delta_r_mm": out, "source": label}
+
+
+# (p) the measured profiles differ (a nonlinear Δr(y) table in the truth) while the candidate
+# models use the template's linear conicity 0.15: a reference-like new pair (tread cone ≈ 0.12,
+# steep rise towards the flange) and worn pairs (tread cone ≈ 0.025 with a 2 mm jump at 2.5 mm);
+# right answer: the contact geometry (statement), never a single conicity as the cause
+_NEW = profile_table(0.12, 5.0, label="new, cone 0.12")
+_WORN = profile_table(0.025, 6.0, jump_mm=2.0, jump_at_mm=2.5, worn_cone=0.04, label="worn, cone 0.025, 2 mm jump at 2.5 mm")
+CASES["p"] = [
+    ("new profiles: cone 0.12, flange rise from 5 mm", {"truth_parameters": {"contact_geometry": _NEW}}, "conicity"),
+    ("worn profiles: cone 0.025, 2 mm jump at 2.5 mm", {"truth_parameters": {"contact_geometry": _WORN}}, "conicity"),
+    ("worn profiles: cone 0.03, 1.5 mm jump at 3 mm",
+     {"truth_parameters": {"contact_geometry": profile_table(0.03, 6.0, jump_mm=1.5, jump_at_mm=3.0, worn_cone=0.05,
+                                                             label="worn, cone 0.03, 1.5 mm jump at 3 mm")}},
+     "conicity"),
+    ("new profiles: cone 0.10, flange rise from 4 mm, seed 5",
+     {"seed": 5, "truth_parameters": {"contact_geometry": profile_table(0.10, 4.0, label="new, cone 0.10")}}, "conicity"),
+    ("worn profiles (2 mm jump at 2.5 mm), creep law differs",
+     {"truth_parameters": {**_POLACH, "contact_geometry": _WORN}}, "conicity"),
+    ("worn profiles (2 mm jump at 2.5 mm), seed 7", {"seed": 7, "truth_parameters": {"contact_geometry": _WORN}},
+     "conicity"),
+]
+
+
 def truth_sets(truth: str | None) -> list[list[str]]:
     """The right answers of a case: alternatives separated by " | ", each the "+"-joined names
     that must all be found."""
@@ -300,6 +347,10 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
     rec["passed_over"] = [x["name"] for x in (d.get("cause_set") or {}).get("passed_over") or []]
     rec["structural_named"] = [f["name"] for f in d.get("families") or [] if f["structural"]["flag"]]
     rec["confident_wrong"] = (d["verdict"] == "cause" and not right) or any(x not in truths for x in causes)
+    if klass == "p":  # a profile difference answered by a single conicity as the cause is wrong
+        rec["contact_geometry"] = "contact geometry" in rec["statements"]
+        rec["conicity_as_cause"] = d["verdict"] == "cause" and right
+        rec["confident_wrong"] = rec["confident_wrong"] or rec["conicity_as_cause"]
     rec["explained_wrong"] = bool(top and top["explained"] >= 0.5 and not right)
     if calibrate_wrong and top is not None and not right:
         cal = calibrate(database, name, "baseline", [top["name"]], "calibrated", split=True, popsize=3, maxiter=2,
@@ -372,6 +423,9 @@ def class_scores(rs: list[dict]) -> dict[str, float]:
     share = lambda xs, key: sum(bool(r.get(key)) for r in xs) / len(xs) if xs else 0.0
     out = {"named_as_cause": share(on, "named_as_cause"), "named_in_set": share(on, "named_in_set"),
            "uncertain_right_top": share(on, "uncertain_right_top"), "confident_wrong": share(rs, "confident_wrong")}
+    if any(r["class"] == "p" for r in rs):
+        out["contact_geometry"] = share(rs, "contact_geometry")
+        out["conicity_as_cause"] = share(rs, "conicity_as_cause")
     track = [r for r in on if "track_level" in r["truth"]]
     if track:
         out["track_input"] = sum("track input" in (r.get("statements") or []) or
@@ -398,6 +452,9 @@ def format_table(records: list[dict], summary: dict) -> str:
             fig += (f"; named as cause {100 * s['named_as_cause']:.0f} %, in the set {100 * s['named_in_set']:.0f} %, "
                     f"uncertain with the right top {100 * s['uncertain_right_top']:.0f} %, confidently wrong "
                     f"{100 * s['confident_wrong']:.0f} %")
+            if "contact_geometry" in s:
+                fig += (f"; contact geometry stated {100 * s['contact_geometry']:.0f} %, a single conicity as "
+                        f"cause {100 * s['conicity_as_cause']:.0f} %")
             if "track_input" in s:
                 fig += (f"; track input {100 * s['track_input']:.0f} %, vehicle parameter as cause "
                         f"{100 * s['vehicle_parameter_cause']:.0f} %")

@@ -20,7 +20,11 @@ parameter or an effect value as the cause.
   sits at a bound of the search range, outside the plausible range, or leaves a residual
   beyond the section scatter (it explains only part), the statement is "the contact geometry
   differs: supply measured wheel and rail profiles (or their rolling-radius difference)" and
-  the verdict is at most ``uncertain``.
+  the verdict is at most ``uncertain``. A conicity that explains everything gets the same
+  statement and verdict: a profile difference is never answered by a single conicity as the
+  ``cause`` (one conicity stands for a profile pair at one amplitude only; issue 40). A
+  configuration that carries measured profiles (a Δr(y) table) has no conicity candidate
+  (``app/services/diagnosis_evidence.py``, ``profile_skipped``).
 
 Section scatter: the 95th percentile of the weighted norm² of the bootstrap deviation of the
 residual (Efron & Tibshirani 1993 §8.2, zone-stratified resamples as in
@@ -98,22 +102,21 @@ def track_statement(res: DiagnosisResult, track: Iterable[str]) -> dict[str, Any
 
 def contact_statement(res: DiagnosisResult, base: SectionEvidence, scatter: float,
                       covered: bool = False) -> dict[str, Any] | None:
-    """Apply the contact-geometry rule to ``res`` (verdict and note); the statement or None.
+    """Apply the contact-geometry rule to ``res`` (verdict and note); the statement or None
+    (None only when the best candidate is no contact candidate or the verdict is ``none``).
     ``covered``: the conicity is in a cause set that leaves only section scatter (the rest is
     explained by the set's other causes, so the conicity does not explain "only part")."""
     if not res.candidates or res.candidates[0].name not in CONTACT_CANDIDATES or res.verdict == "none":
         return None
     c = res.candidates[0]
-    if covered and c.plausible and not c.at_bound:
-        return None
     w = base.pattern().weights()
     left = float(np.sum((w * c.remaining(res.residual)) ** 2))
     why = ("its fit lies at a bound of the search range" if c.at_bound else
            "its fitted value is outside the plausible range" if not c.plausible else
            f"it explains only part of the residual ({c.held_out_explained:.2f} held-out; what remains is beyond "
-           "the section scatter)" if left > scatter and c.held_out_explained < FULL else "")
-    if not why:
-        return None
+           "the section scatter)" if left > scatter and c.held_out_explained < FULL and not covered else
+           f"it explains {c.held_out_explained:.2f} held-out, but one conicity stands for a profile pair at one "
+           "amplitude only (EN 15302); measured profiles decide")
     text = f"{CONTACT_TEXT}: the best equivalent conicity {c.fitted:.3g} is no answer — {why}"
     if res.verdict == "cause":
         res.verdict = "uncertain"

@@ -115,6 +115,10 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
     RRD = np.zeros((2, 3))
     RRD[1, 0] = 1.0
     if vehicle.contact is not None:
+        if "conicity" in ef:
+            raise InvalidParameter(f"effect 'conicity' and the measured profiles' table "
+                                   f"({vehicle.contact.source or 'contact_geometry'}) both set the contact "
+                                   "geometry; give one of them")
         # measured profiles (core/sim/profiles.py): Δr(y) (and Δγ(y)) replace the conicity
         # and the flange-root slope; the flange contact stays the spring beyond the clearance
         RRD = vehicle.contact.kernel_array()
