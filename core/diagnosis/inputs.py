@@ -22,7 +22,8 @@ parameter or an effect value as the cause.
   differs: supply measured wheel and rail profiles (or their rolling-radius difference)" and
   the verdict is at most ``uncertain``. A conicity that explains everything gets the same
   statement and verdict: a profile difference is never answered by a single conicity as the
-  ``cause`` (one conicity stands for a profile pair at one amplitude only; issue 40). A
+  ``cause`` (one conicity stands for a profile pair at one amplitude only; issue 40); under a
+  ``none`` verdict a significant conicity on top gets the statement as a note. A
   configuration that carries measured profiles (a Δr(y) table) has no conicity candidate
   (``app/services/diagnosis_evidence.py``, ``profile_skipped``).
 
@@ -103,12 +104,16 @@ def track_statement(res: DiagnosisResult, track: Iterable[str]) -> dict[str, Any
 def contact_statement(res: DiagnosisResult, base: SectionEvidence, scatter: float,
                       covered: bool = False) -> dict[str, Any] | None:
     """Apply the contact-geometry rule to ``res`` (verdict and note); the statement or None
-    (None only when the best candidate is no contact candidate or the verdict is ``none``).
+    (None when the best candidate is no contact candidate, or the verdict is ``none`` and the
+    conicity is not significant; a significant conicity under a ``none`` verdict — the
+    configuration passes and it explains less than half — gets the statement, the verdict stays).
     ``covered``: the conicity is in a cause set that leaves only section scatter (the rest is
     explained by the set's other causes, so the conicity does not explain "only part")."""
-    if not res.candidates or res.candidates[0].name not in CONTACT_CANDIDATES or res.verdict == "none":
+    if not res.candidates or res.candidates[0].name not in CONTACT_CANDIDATES:
         return None
     c = res.candidates[0]
+    if res.verdict == "none" and not c.significant:
+        return None
     w = base.pattern().weights()
     left = float(np.sum((w * c.remaining(res.residual)) ** 2))
     why = ("its fit lies at a bound of the search range" if c.at_bound else
