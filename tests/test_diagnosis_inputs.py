@@ -103,3 +103,28 @@ def test_conicity_that_explains_only_part_is_a_contact_geometry_statement():
     res = diagnose_evidence(base, fams, n_boot=60)
     st = contact_statement(res, base, scatter_level(base, 60))
     assert st is not None and "bound" in st["text"] and res.verdict != "cause"
+
+
+def test_an_interface_candidate_on_top_with_a_conicity_alike_gets_the_contact_statement():
+    """An interface candidate leads but is not the cause (the interface rule made the verdict
+    ``uncertain``) and the conicity explains alike: the contact-geometry statement names both;
+    not when the interface candidate is the cause, nor when the conicity explains something else."""
+    base, fams = _families([(("track_flexibility", "effect"), A), (("conicity", "effect"), A)], [(1.0, A)])
+    res = diagnose_evidence(base, fams, n_boot=60)
+    top = res.candidates[0].name
+    assert {c.name for c in res.candidates[:2]} == {"track_flexibility", "conicity"}
+    if top == "conicity":  # equal evidence: the order is the engine's; make the interface one lead
+        res.candidates[0], res.candidates[1] = res.candidates[1], res.candidates[0]
+    res.verdict = "cause"  # (as if it had support outside the guiding forces)
+    assert contact_statement(res, base, scatter_level(base, 60), interface={"track_flexibility"}) is None
+    res.verdict, res.note = "uncertain", "uncertain: track_flexibility is supported by the guiding forces only"
+    st = contact_statement(res, base, scatter_level(base, 60), interface={"track_flexibility"})
+    assert st is not None and st["candidates"] == ["conicity", "track_flexibility"]
+    assert st["text"].startswith(CONTACT_TEXT) and "explain alike" in st["text"] and res.verdict == "uncertain"
+    assert res.note.endswith(st["text"])
+    # the conicity explains another direction: no statement
+    base, fams = _families([(("track_flexibility", "effect"), A), (("conicity", "effect"), B)], [(1.0, A), (0.2, B)])
+    res = diagnose_evidence(base, fams, n_boot=60)
+    assert res.candidates[0].name == "track_flexibility"
+    res.verdict = "uncertain"
+    assert contact_statement(res, base, scatter_level(base, 60), interface={"track_flexibility"}) is None

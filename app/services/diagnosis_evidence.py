@@ -466,7 +466,8 @@ def _score(base: SectionEvidence, fams: list[CandidateFamily], validated: bool, 
     cs["left_out"] = left_out
     res.cause_set = cs
     covered = any(x["name"] == "conicity" for x in res.causes) and bool(cs["remaining_within_noise"])
-    res.statements += [x for x in [contact_statement(res, base, scatter_level(base, n_boot, seed), covered)] if x]
+    res.statements += [x for x in [contact_statement(res, base, scatter_level(base, n_boot, seed), covered,
+                                                     interface=set(support))] if x]
     return res
 
 
