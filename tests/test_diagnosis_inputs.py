@@ -78,7 +78,8 @@ def test_track_input_replaces_a_vehicle_parameter_as_the_cause():
 
 def test_conicity_that_explains_only_part_is_a_contact_geometry_statement():
     """conicity removes A but the residual also holds B (no candidate): not ``cause`` conicity
-    but the contact-geometry statement; conicity explaining everything stays the cause."""
+    but the contact-geometry statement; conicity explaining everything gets the statement too
+    (a profile difference is never answered by a single conicity as the cause, issue 40)."""
     base, fams = _families([(("conicity", "effect"), A)], [(1.0, A), (0.6, B)])
     res = diagnose_evidence(base, fams, n_boot=60)
     assert res.candidates[0].name == "conicity"
@@ -87,10 +88,43 @@ def test_conicity_that_explains_only_part_is_a_contact_geometry_statement():
     assert res.verdict != "cause"
     base, fams = _families([(("conicity", "effect"), A)], [(1.0, A)])
     res = diagnose_evidence(base, fams, n_boot=60)
+    assert res.verdict == "cause" and res.candidates[0].held_out_explained > 0.9
+    st = contact_statement(res, base, scatter_level(base, 60))
+    assert st is not None and st["text"].startswith(CONTACT_TEXT) and "one amplitude only" in st["text"]
+    assert res.verdict == "uncertain" and res.note.startswith("uncertain: " + CONTACT_TEXT)
+    # another best candidate: no contact statement, the verdict stays
+    base, fams = _families([(("model.c_secondary_z", "parameter"), A), (("conicity", "effect"), B)], [(1.0, A)])
+    res = diagnose_evidence(base, fams, n_boot=60)
     assert res.verdict == "cause" and contact_statement(res, base, scatter_level(base, 60)) is None
+    assert res.verdict == "cause"
     # at a bound of its search range: the statement too
     base, fams = _families([(("conicity", "effect"), A)], [(1.9, A)], bounds=(0.0, 1.2),
                            values=(0.0, 0.4, 0.8, 1.2))
     res = diagnose_evidence(base, fams, n_boot=60)
     st = contact_statement(res, base, scatter_level(base, 60))
     assert st is not None and "bound" in st["text"] and res.verdict != "cause"
+
+
+def test_an_interface_candidate_on_top_with_a_conicity_alike_gets_the_contact_statement():
+    """An interface candidate leads but is not the cause (the interface rule made the verdict
+    ``uncertain``) and the conicity explains alike: the contact-geometry statement names both;
+    not when the interface candidate is the cause, nor when the conicity explains something else."""
+    base, fams = _families([(("track_flexibility", "effect"), A), (("conicity", "effect"), A)], [(1.0, A)])
+    res = diagnose_evidence(base, fams, n_boot=60)
+    top = res.candidates[0].name
+    assert {c.name for c in res.candidates[:2]} == {"track_flexibility", "conicity"}
+    if top == "conicity":  # equal evidence: the order is the engine's; make the interface one lead
+        res.candidates[0], res.candidates[1] = res.candidates[1], res.candidates[0]
+    res.verdict = "cause"  # (as if it had support outside the guiding forces)
+    assert contact_statement(res, base, scatter_level(base, 60), interface={"track_flexibility"}) is None
+    res.verdict, res.note = "uncertain", "uncertain: track_flexibility is supported by the guiding forces only"
+    st = contact_statement(res, base, scatter_level(base, 60), interface={"track_flexibility"})
+    assert st is not None and st["candidates"] == ["conicity", "track_flexibility"]
+    assert st["text"].startswith(CONTACT_TEXT) and "explain alike" in st["text"] and res.verdict == "uncertain"
+    assert res.note.endswith(st["text"])
+    # the conicity explains another direction: no statement
+    base, fams = _families([(("track_flexibility", "effect"), A), (("conicity", "effect"), B)], [(1.0, A), (0.2, B)])
+    res = diagnose_evidence(base, fams, n_boot=60)
+    assert res.candidates[0].name == "track_flexibility"
+    res.verdict = "uncertain"
+    assert contact_statement(res, base, scatter_level(base, 60), interface={"track_flexibility"}) is None

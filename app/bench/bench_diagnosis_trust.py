@@ -31,6 +31,10 @@ model the diagnosis simulates:
       (right answer: the track input, never a vehicle parameter as ``cause``);
   (w) worn secondary dampers, where an implausible candidate (a damper series stiffness) ranks
       ahead (the cause set must carry on past it);
+  (p) measured profiles: the truth runs on a nonlinear rolling-radius difference table (new
+      pairs with a flange rise, worn pairs with a contact jump) while every candidate model
+      uses the template's linear conicity (right answer: the contact-geometry statement; a
+      single conicity as the ``cause`` counts as confidently wrong);
   some cases of (g), (t) and (w) with the truth's other creep law of (f).
 
 Every case is synthesised (:func:`~railval.core.sim.synth.build_campaign`), written and
@@ -45,7 +49,7 @@ passes validation is flagged (plausibility or held-out check).
 Per class also (:func:`class_scores`): named as cause, named in the set, ``uncertain`` with the
 right top, confidently wrong.
 
-``railval bench diagnosis_trust [--cases N] [--classes a b c d e f m g t r w] [--workers 2] [--calibrate-wrong]``
+``railval bench diagnosis_trust [--cases N] [--classes a b c d e f m g t r w p] [--workers 2] [--calibrate-wrong]``
 """
 
 from __future__ import annotations
@@ -55,6 +59,8 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
+from railval.app.bench.trust_profiles import profile_cases
 
 #: the truth-only contact of class (e): flange contact stiffness ÷4, Kalker creep coefficients at
 #: the lower end of their range (a different wheel–rail contact than the candidates' model)
@@ -235,6 +241,10 @@ CASES["w"] = [
 ]
 
 
+
+CASES["p"] = profile_cases(_POLACH)
+
+
 def truth_sets(truth: str | None) -> list[list[str]]:
     """The right answers of a case: alternatives separated by " | ", each the "+"-joined names
     that must all be found."""
@@ -300,6 +310,10 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
     rec["passed_over"] = [x["name"] for x in (d.get("cause_set") or {}).get("passed_over") or []]
     rec["structural_named"] = [f["name"] for f in d.get("families") or [] if f["structural"]["flag"]]
     rec["confident_wrong"] = (d["verdict"] == "cause" and not right) or any(x not in truths for x in causes)
+    if klass == "p":  # a profile difference answered by a single conicity as the cause is wrong
+        rec["contact_geometry"] = "contact geometry" in rec["statements"]
+        rec["conicity_as_cause"] = d["verdict"] == "cause" and right
+        rec["confident_wrong"] = rec["confident_wrong"] or rec["conicity_as_cause"]
     rec["explained_wrong"] = bool(top and top["explained"] >= 0.5 and not right)
     if calibrate_wrong and top is not None and not right:
         cal = calibrate(database, name, "baseline", [top["name"]], "calibrated", split=True, popsize=3, maxiter=2,
@@ -372,6 +386,9 @@ def class_scores(rs: list[dict]) -> dict[str, float]:
     share = lambda xs, key: sum(bool(r.get(key)) for r in xs) / len(xs) if xs else 0.0
     out = {"named_as_cause": share(on, "named_as_cause"), "named_in_set": share(on, "named_in_set"),
            "uncertain_right_top": share(on, "uncertain_right_top"), "confident_wrong": share(rs, "confident_wrong")}
+    if any(r["class"] == "p" for r in rs):
+        out["contact_geometry"] = share(rs, "contact_geometry")
+        out["conicity_as_cause"] = share(rs, "conicity_as_cause")
     track = [r for r in on if "track_level" in r["truth"]]
     if track:
         out["track_input"] = sum("track input" in (r.get("statements") or []) or
@@ -398,6 +415,9 @@ def format_table(records: list[dict], summary: dict) -> str:
             fig += (f"; named as cause {100 * s['named_as_cause']:.0f} %, in the set {100 * s['named_in_set']:.0f} %, "
                     f"uncertain with the right top {100 * s['uncertain_right_top']:.0f} %, confidently wrong "
                     f"{100 * s['confident_wrong']:.0f} %")
+            if "contact_geometry" in s:
+                fig += (f"; contact geometry stated {100 * s['contact_geometry']:.0f} %, a single conicity as "
+                        f"cause {100 * s['conicity_as_cause']:.0f} %")
             if "track_input" in s:
                 fig += (f"; track input {100 * s['track_input']:.0f} %, vehicle parameter as cause "
                         f"{100 * s['vehicle_parameter_cause']:.0f} %")

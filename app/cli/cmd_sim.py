@@ -1,7 +1,8 @@
 """CLI verbs ``simulate`` and ``synth`` (docs/design.md §6, §7).
 
-``railval simulate CAMPAIGN --config NAME [--parent P] [--effect ID[:k=v,...]]... [--param k=v]... [--replace]``
-    simulate every section with the built-in simulator and store the configuration.
+``railval simulate CAMPAIGN --config NAME [--parent P] [--effect ID[:k=v,...]]... [--param k=v]... [--rrd FILE] [--replace]``
+    simulate every section with the built-in simulator and store the configuration (``--rrd``:
+    measured profiles' rolling-radius difference table instead of the conicity).
 ``railval synth [--name N] [--vehicle coach|wagon] [--hidden EFFECT[=VALUE]]... [--seed S]
 [--reveal FILE] [--out DIR] [--sections N]``
     build a synthetic campaign with hidden effect(s) and import it.
@@ -52,15 +53,23 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from railval.app.services.simulation import simulate_configuration
 
     effects = dict(parse_effect(e) for e in args.effect or [])
-    params = dict(parse_param(p) for p in args.param or [])
+    params: dict = dict(parse_param(p) for p in args.param or [])
+    if args.rrd:
+        from railval.app.services.simulation import contact_geometry_file
+        from railval.core.sim.vehicles import CONTACT_PARAMETER
+
+        params[CONTACT_PARAMETER] = contact_geometry_file(args.rrd)
     res = simulate_configuration(_db(args), args.campaign, args.config, parent=args.parent, effects=effects,
                                  parameters=params, replace=args.replace, workers=args.workers,
                                  scheduler=args.scheduler, progress=Progress())
     if args.json:
         emit_json(res)
     else:
+        table = res["parameters"].get("contact_geometry")
         print(f"stored configuration {res['configuration']!r} of {res['campaign']!r} "
-              f"({res['sections']} sections; effects: {', '.join(res['effects']) or 'none'})")
+              f"({res['sections']} sections; effects: {', '.join(res['effects']) or 'none'}"
+              + (f"; measured profiles {table['source']!r}, equivalent conicity "
+                 f"{res['equivalent_conicity']:.3f} at 3 mm" if table else "") + ")")
     return 0
 
 
@@ -89,6 +98,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--effect", action="append", metavar="ID[:k=v,...]",
                    help=f"switch an effect on (repeatable); ids: {', '.join(EFFECT_IDS)}")
     p.add_argument("--param", action="append", metavar="k=v", help="vehicle template parameter override")
+    p.add_argument("--rrd", metavar="FILE", default=None,
+                   help="measured profiles: rolling-radius difference table (CSV y_mm,delta_r_mm[,delta_gamma_rad], "
+                        "EN 15302) used instead of the conicity; stored with the configuration")
     p.add_argument("--replace", action="store_true", help="overwrite an existing configuration NAME")
     p.add_argument("--workers", type=int, default=None,
                    help="processes (default: 2 for long runs above 1500 s simulated, else 1)")

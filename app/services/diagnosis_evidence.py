@@ -260,7 +260,7 @@ def _load(database_or_session: Any, campaign: str, config: str, effects: Sequenc
     if unknown:
         raise InvalidParameter(f"unknown effect(s) {unknown}; known: {sorted(registry)}")
     template = str(ctx.vehicle.get("template") or "coach")
-    skipped = inapplicable_effects(ctx, conf_effects, effects)
+    skipped = inapplicable_effects(ctx, conf_effects, effects) + profile_skipped(conf_params, effects)
     # an effect of the configuration itself that cannot apply: simulated without it, said so
     in_config, conf_skipped = runnable_effects(ctx, conf_effects, config)
     todo = [e for e in (effects if effects is not None else registry) if e not in conf_effects
@@ -466,8 +466,27 @@ def _score(base: SectionEvidence, fams: list[CandidateFamily], validated: bool, 
     cs["left_out"] = left_out
     res.cause_set = cs
     covered = any(x["name"] == "conicity" for x in res.causes) and bool(cs["remaining_within_noise"])
-    res.statements += [x for x in [contact_statement(res, base, scatter_level(base, n_boot, seed), covered)] if x]
+    res.statements += [x for x in [contact_statement(res, base, scatter_level(base, n_boot, seed), covered,
+                                                     interface=set(support))] if x]
     return res
+
+
+def profile_skipped(conf_params: Mapping[str, Any], effects: Sequence[str] | None) -> list[dict]:
+    """The contact-geometry candidates (``conicity``) left out, with the reason, when the
+    configuration carries measured profiles (template parameter ``contact_geometry``, a Δr(y)
+    table: docs/diagnosis.md "Contact geometry"): the simulator then uses the table, a conicity
+    changes nothing; ``[]`` without a table or when no such candidate is asked for."""
+    from railval.core.diagnosis.inputs import CONTACT_CANDIDATES
+    from railval.core.sim.vehicles import CONTACT_PARAMETER
+
+    table = conf_params.get(CONTACT_PARAMETER) or conf_params.get("model." + CONTACT_PARAMETER)
+    if not table:
+        return []
+    src = table.get("source") if isinstance(table, Mapping) else None
+    return [{"name": e, "kind": "effect",
+             "reason": f"the configuration carries measured profiles (rolling-radius difference table"
+                       f"{' ' + repr(src) if src else ''}): the simulator uses the table, not a conicity"}
+            for e in sorted(CONTACT_CANDIDATES) if effects is None or e in effects]
 
 
 def inapplicable_effects(ctx: Any, conf_effects: Mapping[str, Any], effects: Sequence[str] | None) -> list[dict]:

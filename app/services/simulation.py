@@ -24,6 +24,31 @@ def simulation_inputs(session: Any, campaign: Any) -> dict[str, Any]:
     return {}
 
 
+def contact_geometry_file(path: str) -> dict[str, Any]:
+    """The template parameter ``contact_geometry`` from a rolling-radius difference file
+    (``y_mm,delta_r_mm[,delta_gamma_rad]``, docs/simulator.md "Contact geometry as data"):
+    the checked table with its file name and SHA-256. Raises
+    :class:`railval.core.errors.InvalidParameter` naming the file (and line) when it cannot be
+    read or is malformed — before anything is simulated or stored."""
+    import hashlib
+    from pathlib import Path
+
+    from railval.core.errors import InvalidParameter
+    from railval.core.sim.profiles import parse_csv
+
+    p = Path(path)
+    try:
+        raw = p.read_bytes()
+        text = raw.decode("utf-8-sig")
+    except OSError as exc:
+        raise InvalidParameter(f"contact geometry file {str(p)!r} cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise InvalidParameter(f"contact geometry file {str(p)!r}: not UTF-8 text ({exc.reason} at byte "
+                               f"{exc.start})") from None
+    table = parse_csv(text, p.name)
+    return {**table.to_dict(), "sha256": hashlib.sha256(raw).hexdigest()}
+
+
 def simulate_configuration(database: Any, campaign: str, name: str, *, parent: str | None = None,
                            effects: Mapping[str, Mapping[str, float]] | None = None,
                            parameters: Mapping[str, float] | None = None, description: str | None = None,
@@ -87,6 +112,11 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
                                  calibration=dict(calibration) if calibration else None)
     if progress:
         progress("done", 1.0, {})
-    return {"campaign": camp_name, "configuration": name, "parent": parent, "effects": eff,
-            "parameters": par, "sections": len(sets),
-            "calibration": dict(calibration) if calibration else None}
+    out = {"campaign": camp_name, "configuration": name, "parent": parent, "effects": eff,
+           "parameters": par, "sections": len(sets),
+           "calibration": dict(calibration) if calibration else None}
+    if par.get("contact_geometry"):
+        from railval.core.sim.profiles import check_table, equivalent_conicity
+
+        out["equivalent_conicity"] = equivalent_conicity(check_table(par["contact_geometry"]))
+    return out

@@ -20,7 +20,16 @@ parameter or an effect value as the cause.
   sits at a bound of the search range, outside the plausible range, or leaves a residual
   beyond the section scatter (it explains only part), the statement is "the contact geometry
   differs: supply measured wheel and rail profiles (or their rolling-radius difference)" and
-  the verdict is at most ``uncertain``.
+  the verdict is at most ``uncertain``. A conicity that explains everything gets the same
+  statement and verdict: a profile difference is never answered by a single conicity as the
+  ``cause`` (one conicity stands for a profile pair at one amplitude only; issue 40); under a
+  ``none`` verdict a significant conicity on top gets the statement as a note; so does an
+  interface candidate on top that is not the ``cause`` (a friction, track stiffness or
+  primary guidance stiffness supported by the guiding forces only) when a significant conicity
+  explains alike (held-out within ``ALIKE_MARGIN``): the guiding forces cannot tell them from a
+  contact difference, the verdict stays. A
+  configuration that carries measured profiles (a Δr(y) table) has no conicity candidate
+  (``app/services/diagnosis_evidence.py``, ``profile_skipped``).
 
 Section scatter: the 95th percentile of the weighted norm² of the bootstrap deviation of the
 residual (Efron & Tibshirani 1993 §8.2, zone-stratified resamples as in
@@ -96,24 +105,47 @@ def track_statement(res: DiagnosisResult, track: Iterable[str]) -> dict[str, Any
     return {"kind": "track input", "candidates": [c.name for c in found], "text": text}
 
 
-def contact_statement(res: DiagnosisResult, base: SectionEvidence, scatter: float,
-                      covered: bool = False) -> dict[str, Any] | None:
-    """Apply the contact-geometry rule to ``res`` (verdict and note); the statement or None.
-    ``covered``: the conicity is in a cause set that leaves only section scatter (the rest is
-    explained by the set's other causes, so the conicity does not explain "only part")."""
-    if not res.candidates or res.candidates[0].name not in CONTACT_CANDIDATES or res.verdict == "none":
+def _contact_alike(res: DiagnosisResult, interface: Iterable[str]) -> dict[str, Any] | None:
+    """The statement when an interface candidate that is not the ``cause`` leads and a
+    significant conicity explains alike (within ``ALIKE_MARGIN`` held-out): the guiding forces
+    cannot tell that candidate from a contact difference (module docstring)."""
+    best = res.candidates[0]
+    cone = next((c for c in res.candidates if c.name in CONTACT_CANDIDATES), None)
+    if (res.verdict == "cause" or best.name not in set(interface) or cone is None or not cone.significant
+            or cone.held_out_explained < best.held_out_explained - ALIKE_MARGIN):
         return None
+    text = (f"{CONTACT_TEXT}: {best.name} ({best.held_out_explained:.2f} held-out) and the equivalent conicity "
+            f"{cone.fitted:.3g} ({cone.held_out_explained:.2f}) explain alike, and one conicity stands for a profile "
+            "pair at one amplitude only (EN 15302)")
+    res.note = (res.note + "; " if res.note else "") + text
+    return {"kind": "contact geometry", "candidates": [cone.name, best.name], "text": text}
+
+
+def contact_statement(res: DiagnosisResult, base: SectionEvidence, scatter: float,
+                      covered: bool = False, interface: Iterable[str] = ()) -> dict[str, Any] | None:
+    """Apply the contact-geometry rule to ``res`` (verdict and note); the statement or None
+    (None when the best candidate is no contact candidate, or the verdict is ``none`` and the
+    conicity is not significant; a significant conicity under a ``none`` verdict — the
+    configuration passes and it explains less than half — gets the statement, the verdict stays).
+    ``covered``: the conicity is in a cause set that leaves only section scatter (the rest is
+    explained by the set's other causes, so the conicity does not explain "only part").
+    ``interface``: the interface candidates; one of them on top, not the ``cause``, with a
+    significant conicity alike gets the statement too (:func:`_contact_alike`)."""
+    if not res.candidates:
+        return None
+    if res.candidates[0].name not in CONTACT_CANDIDATES:
+        return _contact_alike(res, interface)
     c = res.candidates[0]
-    if covered and c.plausible and not c.at_bound:
+    if res.verdict == "none" and not c.significant:
         return None
     w = base.pattern().weights()
     left = float(np.sum((w * c.remaining(res.residual)) ** 2))
     why = ("its fit lies at a bound of the search range" if c.at_bound else
            "its fitted value is outside the plausible range" if not c.plausible else
            f"it explains only part of the residual ({c.held_out_explained:.2f} held-out; what remains is beyond "
-           "the section scatter)" if left > scatter and c.held_out_explained < FULL else "")
-    if not why:
-        return None
+           "the section scatter)" if left > scatter and c.held_out_explained < FULL and not covered else
+           f"it explains {c.held_out_explained:.2f} held-out, but one conicity stands for a profile pair at one "
+           "amplitude only (EN 15302); measured profiles decide")
     text = f"{CONTACT_TEXT}: the best equivalent conicity {c.fitted:.3g} is no answer — {why}"
     if res.verdict == "cause":
         res.verdict = "uncertain"

@@ -46,7 +46,9 @@ F11, F22, Q0, MU, SAT, TFLEX, KTZ, CTZ, KTY = range(12, 21)
 FLEX, FLEX_W, FLEX_Z, FLEX_M, ZSENS, S_START, PHI_S1, PHI_S2, XS1, XS2 = range(21, 31)
 Y_INIT, Z_INIT, TH_INIT = range(31, 34)  # initial conditions (verification tests)
 POL_KA, POL_KS = range(34, 36)  # Polach reduction factors (SC[SAT] == 2: Polach creep law)
-NSC = 36
+# contact geometry as data (core/sim/profiles.py): > 0 = Δr (and Δγ) from the table RRD
+RRD_ON, RRD_GAM = range(36, 38)
+NSC = 38
 
 # --- connection columns (CONN array)
 (C_P, C_C, C_X, C_B, C_ZP, C_ZC, C_KX, C_KY, C_KZ, C_CZ, C_CY, C_BYD, C_CYD, C_KSYD, C_KSZ,
@@ -154,14 +156,37 @@ def _locate(s, s0, inv_ds, n):
     return i, f - i
 
 
+@njit(cache=True, inline="always")
+def table_value(T, col, y):
+    """Column ``col`` of the table ``T`` (rows sorted by ``T[:, 0]``) at ``y``: linear
+    interpolation, the end segments extended beyond the table (binary search for the segment)."""
+    n = T.shape[0]
+    lo = 0
+    if y >= T[n - 1, 0]:
+        lo = n - 2
+    elif y > T[0, 0]:
+        hi = n - 1
+        while hi - lo > 1:
+            mid = (lo + hi) >> 1
+            if T[mid, 0] <= y:
+                lo = mid
+            else:
+                hi = mid
+    w = (y - T[lo, 0]) / (T[lo + 1, 0] - T[lo, 0])
+    return T[lo, col] + w * (T[lo + 1, col] - T[lo, col])
+
+
 @njit(cache=True)
-def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR, n_steps, dt, decim, out):
+def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR, n_steps, dt, decim, out, RRD):
     """Integrate ``n_steps`` steps of ``dt`` s; write ``out[n_steps // decim, nch]`` block means.
 
     ``massd``/``free``: (n_bodies, 6) masses/inertias and free flags for y, z, φ, θ, ψ, x.
     ``TR``: track arrays on the grid ``s_arr0 + k·ds`` (columns ``T_*``: curvature, cant angle,
     vertical level and its first two derivatives in s, cross level and derivatives, alignment,
     gauge).
+    ``RRD``: the contact geometry table (n, 3): y (m), Δr = r_L − r_R (m), Δγ = γ_L − γ_R (rad),
+    used when ``SC[RRD_ON]`` > 0 instead of the conicity and flange-root slopes (Δγ when
+    ``SC[RRD_GAM]`` > 0 instead of the contact-angle slope); any (≥ 2, 3) array otherwise.
     Output columns: per wheelset i: Y_L, Y_R, Q_L, Q_R (kN) at 4i..4i+3; then car body ay at
     sensor 1, 2, az at sensor 1, 2 (m/s²); then per bogie ay, az (m/s²); if ``out`` has more
     columns: the wheelsets' lateral displacements (m), car body z (m), pitch (rad), lateral y
@@ -222,6 +247,8 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR,
     q[0, 3] = SC[TH_INIT]
     ncol_std = 4 * nw + 4 + 2 * nb
     tflex = SC[TFLEX] > 0.0
+    rrd = SC[RRD_ON] > 0.0
+    rgam = SC[RRD_GAM] > 0.0
     kty = SC[KTY]
     # flange contact in series with the rail's lateral stiffness (track_flexibility): counted once,
     # the tread forces deflect the rail by Y/k_rail (dtr), the flange force through the series spring
@@ -425,8 +452,16 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR,
             yrel = yw - 0.5 * (dtr[i, 0] + dtr[i, 1])
             eL = yrel - 0.5 * gai - SC[YFR]
             eR = -yrel - 0.5 * gai - SC[YFR]
-            drL = SC[LAM] * yrel + (SC[LAM2] * eL if eL > 0.0 else 0.0)
-            drR = -SC[LAM] * yrel + (SC[LAM2] * eR if eR > 0.0 else 0.0)
+            if rrd:
+                # measured profiles: Δr(y) interpolated in the table, each wheel's position on its
+                # rail shifted by half the gauge deviation (r_L − r0 = Δr(y − g/2)/2, r_R − r0 =
+                # −Δr(y + g/2)/2 for a symmetric pair); only the difference enters the creepages
+                # (the wheelset's free spin takes the mean radius), split ±1/2 over the wheels
+                drL = 0.25 * (table_value(RRD, 1, yrel - 0.5 * gai) + table_value(RRD, 1, yrel + 0.5 * gai))
+                drR = -drL
+            else:
+                drL = SC[LAM] * yrel + (SC[LAM2] * eL if eL > 0.0 else 0.0)
+                drR = -SC[LAM] * yrel + (SC[LAM2] * eR if eR > 0.0 else 0.0)
             xiL = -drL / r0 - b0 * u[k, 4] / v - b0 * kb[k]
             xiR = -drR / r0 + b0 * u[k, 4] / v + b0 * kb[k]
             xiy = u[k, 0] / v - q[k, 4]
@@ -457,8 +492,9 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR,
             # creep damping coefficients (secant, saturation included), integrated exponentially
             cimp[k, 0] = SC[F22] * (fL * sL + fR * sR) / v
             cimp[k, 4] = SC[F11] * b0 * b0 * (fL * sL + fR * sR) / v
-            YL = fyL - max(QL, 0.0) * (SC[GAM0] + SC[EPSG] * yrel)
-            YR = fyR + max(QR, 0.0) * (SC[GAM0] - SC[EPSG] * yrel)
+            eg = 0.5 * table_value(RRD, 2, yrel) if rgam else SC[EPSG] * yrel
+            YL = fyL - max(QL, 0.0) * (SC[GAM0] + eg)
+            YR = fyR + max(QR, 0.0) * (SC[GAM0] - eg)
             if tflex:
                 # each rail deflects quasi-statically under its tread force (massless lateral track;
                 # the wheel pushes the rail with −Y: a rail deflects by −Y/k_rail); a second pass
@@ -467,8 +503,9 @@ def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR,
                 dtr[i, 0] = -YL / kty
                 dtr[i, 1] = -YR / kty
                 yrel = yw - 0.5 * (dtr[i, 0] + dtr[i, 1])
-                YL = fyL - max(QL, 0.0) * (SC[GAM0] + SC[EPSG] * yrel)
-                YR = fyR + max(QR, 0.0) * (SC[GAM0] - SC[EPSG] * yrel)
+                eg = 0.5 * table_value(RRD, 2, yrel) if rgam else SC[EPSG] * yrel
+                YL = fyL - max(QL, 0.0) * (SC[GAM0] + eg)
+                YR = fyR + max(QR, 0.0) * (SC[GAM0] - eg)
                 dtr[i, 0] = -YL / kty
                 dtr[i, 1] = -YR / kty
             dL = (yw - dtr[i, 0]) - 0.5 * gai - SC[CLEAR]

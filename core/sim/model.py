@@ -17,6 +17,9 @@ Wheel–rail contact (per wheel, :mod:`railval.core.sim.kernel`)
   Y_n,R = +Q_R·(γ0 − e·y_rel), e = ε/b0 with Wickens' contact angle parameter ε, so the
   wheelset's gravitational stiffness is W·ε/b0 (Wickens, *Fundamentals of rail vehicle
   dynamics*, 2003, ch. 2).
+* Measured profiles (template parameter ``contact_geometry``, :mod:`railval.core.sim.profiles`):
+  Δr(y_rel) interpolated linearly in the EN 15302 table replaces 2·λe·y_rel and the flange-root
+  term, r_L − r0 = Δr/2 = −(r_R − r0); a Δγ column replaces 2·e·y_rel in the normal forces.
 * Flange contact: lateral spring k_flange beyond the clearance (+ half the gauge deviation).
 * Rigid track: wheelset vertical position and roll follow the rail (level ± cross level/2);
   Q_L + Q_R and Q_L − Q_R follow from the wheelset's vertical and roll equilibrium including the
@@ -84,6 +87,8 @@ class Assembly:
     ws_body: np.ndarray
     bogie_body: np.ndarray
     names: list = field(default_factory=list)
+    #: contact geometry table for the kernel (``SC[RRD_ON]`` says whether it is used)
+    RRD: np.ndarray = field(default_factory=lambda: np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
 
 
 def _conn_row(**kw) -> np.ndarray:
@@ -107,7 +112,19 @@ def assemble(vehicle: VehicleModel, effects: Mapping[str, Mapping[str, float]], 
     nb, nw = vehicle.n_bogies, vehicle.n_wheelsets
     bogie_body = np.arange(1, 1 + nb, dtype=np.int64)
     ws_body = np.arange(1 + nb, 1 + nb + nw, dtype=np.int64)
-    return Assembly(SC, massd, free, xabs, CONN, ws_body, bogie_body)
+    RRD = np.zeros((2, 3))
+    RRD[1, 0] = 1.0
+    if vehicle.contact is not None:
+        if "conicity" in ef:
+            raise InvalidParameter(f"effect 'conicity' and the measured profiles' table "
+                                   f"({vehicle.contact.source or 'contact_geometry'}) both set the contact "
+                                   "geometry; give one of them")
+        # measured profiles (core/sim/profiles.py): Δr(y) (and Δγ(y)) replace the conicity
+        # and the flange-root slope; the flange contact stays the spring beyond the clearance
+        RRD = vehicle.contact.kernel_array()
+        SC[K.RRD_ON] = 1.0
+        SC[K.RRD_GAM] = 1.0 if vehicle.contact.delta_gamma_rad is not None else 0.0
+    return Assembly(SC, massd, free, xabs, CONN, ws_body, bogie_body, RRD=RRD)
 
 
 def _bodies(vehicle: VehicleModel, tflex: bool) -> tuple[np.ndarray, np.ndarray, float]:
@@ -442,7 +459,7 @@ def run_assembled(asm: Assembly, veh: VehicleModel, section: TrackSection, *, fs
     TR = np.ascontiguousarray(np.column_stack([tr["kap"], tr["phit"], tr["zv"], tr["zv1"], tr["zv2"], tr["cl"],
                                                tr["cl1"], tr["cl2"], tr["ya"], tr["ga"]]))
     K.run_kernel(asm.SC, asm.massd, asm.free, asm.xabs, asm.CONN, asm.ws_body, asm.bogie_body,
-                 tr["s0"], DS, TR, n_steps, dt, decim, out)
+                 tr["s0"], DS, TR, n_steps, dt, decim, out, asm.RRD)
     t = np.arange(n_out) / fs_out + (decim - 1) / 2 * dt
     chans = {n: np.ascontiguousarray(out[:, j]) for j, n in enumerate(names)}
     ss = SignalSet(fs=float(fs_out), time_s=t, distance_m=asm.SC[K.S_START] + v * t, channels=chans)

@@ -43,6 +43,10 @@ from dataclasses import dataclass, field, replace
 
 from railval.core.errors import InvalidParameter
 from railval.core.sim.params import Param, resolve
+from railval.core.sim.profiles import ContactTable, check_table
+
+#: the template parameter that carries a measured profile pair's Δr(y) table (not a scalar)
+CONTACT_PARAMETER = "contact_geometry"
 
 G = 9.81  #: gravitational acceleration, m/s²
 
@@ -260,12 +264,18 @@ class VehicleModel:
 
     template: str = "coach"
     parameters: dict[str, float] = field(default_factory=dict)
+    #: the measured profiles' contact geometry (template parameter ``contact_geometry``, a
+    #: table: :mod:`railval.core.sim.profiles`); ``None``: the linear conicity
+    contact: ContactTable | None = None
 
     def __post_init__(self):
         if self.template not in TEMPLATES:
             raise InvalidParameter(f"vehicle template {self.template!r} is unknown; known: {sorted(TEMPLATES)}")
-        self.parameters = resolve(f"vehicle template {self.template!r}", TEMPLATES[self.template],
-                                  self.parameters)
+        params = dict(self.parameters)
+        table = params.pop(CONTACT_PARAMETER, None)
+        if table is not None:
+            self.contact = table if isinstance(table, ContactTable) else check_table(table, CONTACT_PARAMETER)
+        self.parameters = resolve(f"vehicle template {self.template!r}", TEMPLATES[self.template], params)
 
     @classmethod
     def from_any(cls, obj, overrides: dict | None = None) -> VehicleModel:
@@ -273,6 +283,8 @@ class VehicleModel:
         template name; ``overrides`` (e.g. ``model.NAME`` calibration values) win."""
         if isinstance(obj, VehicleModel):
             tmpl, params = obj.template, dict(obj.parameters)
+            if obj.contact is not None:
+                params[CONTACT_PARAMETER] = obj.contact
         elif isinstance(obj, str):
             tmpl, params = obj, {}
         else:
