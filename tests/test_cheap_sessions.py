@@ -97,3 +97,23 @@ def test_template_has_no_busy_spinner_and_one_sidebar_root(tmp_path):
     assert t.busy_indicator is None
     assert len(t.sidebar) == 1
     db.dispose()
+
+
+def test_overview_tables_are_made_once_per_shared_overview(tmp_path):
+    from railval.app.main import build_app
+    from railval.app.pages.overview import overview_tables
+
+    db = demo_database(tmp_path)
+    a, b = build_app(db), build_app(db)
+    ov = a.railval_state.overview
+    assert b.railval_state.overview is ov
+    first = overview_tables(ov)
+    assert overview_tables(ov) is first  # kept on the shared overview
+    sections, channels, n = first
+    assert n == len(ov.channels) and channels.count("<tr>") == n + 1  # header + one row per channel
+    assert sections.count("<tr>") == len(ov.sections) + 1
+    # rows sorted by zone, as the page always showed them
+    order = [s.id for s in sorted(ov.sections, key=lambda s: (s.zone, s.id))]
+    assert [sections.index(f"<td>{sid}</td>") for sid in order] == sorted(
+        sections.index(f"<td>{sid}</td>") for sid in order)
+    db.dispose()
