@@ -68,8 +68,15 @@ class DeniedPage(pn.viewable.Viewer):
         return self.view
 
 
+@functools.cache
+def _css_text() -> str | None:
+    return CSS_FILE.read_text(encoding="utf-8") if CSS_FILE.exists() else None
+
+
 def _css() -> list[str]:
-    return [CSS_FILE.read_text(encoding="utf-8")] if CSS_FILE.exists() else []
+    """The app's stylesheet, read once per process and shared by every session."""
+    text = _css_text()
+    return [text] if text is not None else []
 
 
 def status_area(app: AppState) -> pn.Column:
@@ -295,10 +302,16 @@ def build_app(database: Any, page: str = "overview", principal: Principal | None
         status_area(app),
     ]
     template = pn.template.FastListTemplate(
-        title="railval", sidebar=sidebar, main=[main],
+        # the sidebar as one root: the template adds every item as a root of the document, and
+        # Bokeh walks all of the document's models again for each root (Document.add_root)
+        title="railval", sidebar=[pn.Column(*sidebar, sizing_mode="stretch_width", margin=0)], main=[main],
         header=[nav_bar(app)],
         accent=ACCENT, header_background=ACCENT, sidebar_width=300, main_layout=None,
         raw_css=_css(), theme_toggle=False,
+        # no busy spinner: Panel keeps every session's spinner in one process-wide list and
+        # sets all of them on any session's callback (panel/io/state.py, _update_busy), a
+        # websocket message to every open session each time another one's jobs list refreshes
+        busy_indicator=None,
     )
     template.railval_state = app  # for tests and the benchmark
     template.railval_pages = pages
@@ -373,10 +386,16 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
 SERVE_ENV: dict[str, str] = {"PYTHONMALLOC": "malloc"}
 
 
+#: a trim is scheduled and has not run yet (sessions closing together share one trim)
+_trim_pending = False
+
+
 def _trim() -> None:
     import ctypes
     import gc
 
+    global _trim_pending
+    _trim_pending = False
     gc.collect()
     try:
         ctypes.CDLL("libc.so.6").malloc_trim(0)
@@ -394,8 +413,12 @@ def release_memory(session_context: Any) -> None:
     are reused by the next sessions (bokeh/bokeh #11477)."""
     from tornado.ioloop import IOLoop
 
+    global _trim_pending
+    if _trim_pending:  # one trim after a wave of closed sessions, not one per session (8
+        return         # sessions closing together cost 7.8 s of the server's time, docs/app.md)
     try:
         IOLoop.current().call_later(2.0, _trim)
+        _trim_pending = True
     except RuntimeError:  # no event loop (tests calling it directly)
         _trim()
 

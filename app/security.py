@@ -229,11 +229,12 @@ class NoAutoload:
 
 
 def transforms() -> list:
-    """The server's output transforms: autoload.js refused, Tornado's default gzip, then
-    the security headers."""
-    from tornado.web import GZipContentEncoding
+    """The server's output transforms: autoload.js refused, Tornado's gzip (static files
+    compressed once per process, :class:`railval.app.static_cache.CachedGZip`), then the
+    security headers."""
+    from railval.app.static_cache import CachedGZip
 
-    return [NoAutoload, GZipContentEncoding, SecurityHeaders]
+    return [NoAutoload, CachedGZip, SecurityHeaders]
 
 
 def use_local_fonts() -> None:

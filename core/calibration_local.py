@@ -26,9 +26,13 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from railval.core.calibration import CalibrationResult, ParameterSpec, Progress, checked_specs
+from railval.core.errors import InvalidParameter
 
 #: residual entry standing for a diverged simulation (non-finite residuals)
 _DIVERGED = 1e6
+
+#: residual evaluations the trust-region stage may spend (``least_squares``' ``max_nfev``)
+MAX_NFEV = 30
 
 _TRF_STATUS = {-1: "improper input", 0: "evaluation budget (max_nfev) spent", 1: "gtol", 2: "ftol",
                3: "xtol", 4: "ftol and xtol"}
@@ -79,11 +83,40 @@ def _scan_points(bounds: np.ndarray, n: int, seed: int) -> list[np.ndarray]:
     hypercube of 4·n + 1 points (McKay, Beckman & Conover 1979)."""
     lo, hi = bounds[:, 0], bounds[:, 1]
     if n == 1:
-        return [np.array([lo[0] + (k + 0.5) / 5 * (hi[0] - lo[0])]) for k in range(5)]
+        return [np.array([lo[0] + (k + 0.5) / 5 * (hi[0] - lo[0])]) for k in range(scan_size(1))]
     from scipy.stats import qmc
 
-    u = qmc.LatinHypercube(d=n, seed=seed).random(4 * n + 1)
+    u = qmc.LatinHypercube(d=n, seed=seed).random(scan_size(n))
     return [lo + row * (hi - lo) for row in u]
+
+
+def scan_size(n_parameters: int) -> int:
+    """Points of the coarse scan of :func:`_scan_points`: 5 for one parameter, else 4·n + 1."""
+    return 5 if n_parameters == 1 else 4 * n_parameters + 1
+
+
+def local_max_evaluations(n_parameters: int, max_nfev: int = MAX_NFEV, start: bool = True) -> int:
+    """Upper bound of the distinct residual evaluations of :func:`calibrate_local` (its
+    ``n_evaluations``): the scan (:func:`scan_size`), the start point, and the trust-region
+    stage — ``least_squares`` evaluates the residuals at most ``max_nfev`` times and the
+    Jacobian at most as often (at the start and after each accepted step, SciPy reference
+    documentation of ``least_squares``: ``nfev``, ``njev``), each Jacobian costing one
+    evaluation per parameter beside the point already evaluated (the forward differences of
+    :func:`calibrate_local`).
+
+    Parameters
+    ----------
+    n_parameters, max_nfev : int
+    start : bool
+        Whether a start point is evaluated (every parameter has a start value).
+
+    Returns
+    -------
+    int
+    """
+    if n_parameters < 1:
+        raise InvalidParameter(f"n_parameters must be at least 1, got {n_parameters}")
+    return scan_size(n_parameters) + int(start) + max_nfev * (1 + n_parameters)
 
 
 def _start(memo: _Memo, specs: Sequence[ParameterSpec], bounds: np.ndarray,
@@ -104,7 +137,7 @@ def _start(memo: _Memo, specs: Sequence[ParameterSpec], bounds: np.ndarray,
 
 def calibrate_local(residuals: Callable[[dict[str, float]], np.ndarray], specs: Sequence[ParameterSpec], *,
                     seed: int = 0, ftol: float = 1e-3, xtol: float = 1e-3, gtol: float = 1e-6,
-                    max_nfev: int = 30, rel_step: float = 1e-2, workers: Callable | None = None,
+                    max_nfev: int = MAX_NFEV, rel_step: float = 1e-2, workers: Callable | None = None,
                     progress: Progress | None = None) -> CalibrationResult:
     """Fit bounded parameters by trust-region reflective least squares on a residual vector.
 

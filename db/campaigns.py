@@ -24,7 +24,7 @@ from railval.core.names import check_name
 from railval.core.types import SectionInfo
 from railval.core.zones import zone_for_radius
 from railval.db import audit
-from railval.db.models import Campaign, Channel, Configuration, Recording, Section, Signal, Vehicle
+from railval.db.models import AuditEvent, Campaign, Channel, Configuration, Recording, Section, Signal, Vehicle
 
 
 # -- references --------------------------------------------------------------------------
@@ -331,3 +331,17 @@ def campaign_summary(session: Session, campaign: CampaignArg) -> dict[str, Any]:
                             "effects": sorted(x.effects)} for x in confs],
         "n_signals": int(n_signals or 0),
     }
+
+
+def catalogue_stamp(session: Session) -> tuple:
+    """A stamp of what a campaign overview is made of, in one query: row count and largest id
+    of the campaign, vehicle, section, channel and configuration tables (any row added or
+    deleted changes it), the largest recording id (a configuration replaced in place gets
+    new recordings) and the largest audit-trail id (every stored change is audited,
+    docs/audit.md). The web app's process-wide cache of campaign lists and overviews
+    (docs/app.md, "Cheap sessions") recomputes an entry when it changes."""
+    parts = []
+    for model in (Campaign, Vehicle, Section, Channel, Configuration):
+        parts += [select(func.count(model.id)).scalar_subquery(), select(func.max(model.id)).scalar_subquery()]
+    parts += [select(func.max(m.id)).scalar_subquery() for m in (Recording, AuditEvent)]
+    return tuple(session.execute(select(*parts)).one())

@@ -102,12 +102,13 @@ def test_calibration_settings_fit_subset_keep_the_rest(workshop):
     st.fit_parameters = ["clearance_mm"]
     st.popsize, st.maxiter, st.polish_maxfev, st.seed = 3, 1, 4, 7
     bound = st.calibration_simulations()
-    assert bound == 1 + 5 * 2 + 4 + 1  # start, max(5, 3·1) members × (1 + 1 generations), polish, stored run
+    assert bound == 5 + 1 + 30 * 2 + 1  # the local fit: scan, start, 30 trust-region steps × (1 + 1 column), stored run
     st.run_calibration(calibrate=True, background=False)
     assert app.status_level != "error", app.status
     res = st.last_result
     assert list(res["parameters"]) == ["lateral_bumpstop.clearance_mm"]  # only the chosen one fitted
-    assert res["n_evaluations"] + 2 <= bound  # + the start point and the stored run
+    assert res["n_evaluations"] + 1 == res["simulations"] <= bound  # + the stored run
+    assert res["simulations_at_most"] == bound  # the service announced what the page showed
     conf = _config(app, "bumpstop-fit")
     assert conf.effects["lateral_bumpstop"]["stiffness_kN_mm"] == pytest.approx(0.7)  # kept as set
     assert conf.effects["lateral_bumpstop"]["clearance_mm"] == pytest.approx(

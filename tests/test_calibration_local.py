@@ -109,3 +109,38 @@ def test_cli_split_hidden_friction_fits_truth_and_reports_tolerance(tmp_path, ca
     held = [o["lineage"][-1]["held_out"]["max_error"] for o in (loc, out["global"])]
     assert held[0] <= held[1] + 0.02, held
     assert loc["n_evaluations"] < out["global"]["n_evaluations"]
+
+
+class _Counted:
+    """A residual that counts its own calls (each distinct evaluation of the fit calls it once)."""
+
+    def __init__(self, f):
+        self.f, self.calls = f, 0
+
+    def __call__(self, p):
+        self.calls += 1
+        return self.f(p)
+
+
+def _rosenbrock(p):
+    # curved valley: trf needs many steps from a far start, so a small budget is spent
+    return np.array([10 * (p["b"] - p["a"] ** 2), 1 - p["a"]])
+
+
+def test_evaluation_bound_holds_when_the_budget_is_spent():
+    """local_max_evaluations: scan (5 or 4n+1) + start + max_nfev·(1 + n), by hand."""
+    from railval.core.calibration_local import local_max_evaluations
+
+    assert local_max_evaluations(1) == 5 + 1 + 30 * 2
+    assert local_max_evaluations(2) == 9 + 1 + 30 * 3
+    assert local_max_evaluations(3, max_nfev=10, start=False) == 13 + 10 * 4
+    with pytest.raises(InvalidParameter, match="at least 1"):
+        local_max_evaluations(0)
+    for nfev in (2, 4, 8):
+        f = _Counted(_rosenbrock)
+        specs = [ParameterSpec("a", -2.0, 2.0, start=-1.9), ParameterSpec("b", -1.0, 4.0, start=3.9)]
+        res = calibrate_local(f, specs, max_nfev=nfev, ftol=1e-12, xtol=1e-12, gtol=1e-12)
+        assert res.n_evaluations == f.calls  # every distinct evaluation counted
+        assert res.tolerance["stopped_by"] == "evaluation budget (max_nfev) spent"
+        assert f.calls <= local_max_evaluations(2, max_nfev=nfev)
+        assert f.calls > local_max_evaluations(2, max_nfev=nfev) - 2 * nfev  # the bound is not loose by more

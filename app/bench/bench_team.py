@@ -102,21 +102,36 @@ def _reviewer(host: str, port: int, token: str, n: int, out: list[float], errors
     conn.close()
 
 
-def _open_sessions(browser, base: str, n: int, times: list[float]):
+def _cpu_s(pids: list[int]) -> float:
+    """CPU time (user + system) the app processes have used so far."""
+    import psutil
+
+    return sum(sum(psutil.Process(p).cpu_times()[:2]) for p in pids)
+
+
+def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list[float] | None = None):
     """``n`` engineer sessions, one browser context each, opened one after another; returns
-    the pages and the RSS after the first (modules, caches and campaign data loaded)."""
+    the pages and the RSS after the first (modules, caches and campaign data loaded).
+    ``cpu``: per session, the app processes' CPU seconds from the sign-in click until the
+    navigation shows plus 0.5 s (the websocket's last messages) — the server's cost of one new
+    session (the sign-in's password hash included; the first session, which loads modules and
+    caches once, left out)."""
     pages, warm = [], None
-    for _ in range(n):
+    for k in range(n):
         ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900})
         page = ctx.new_page()
         page.route("**/fonts.g*/**", lambda route: route.abort())
         page.goto(f"{base}/login")
         page.fill("#username", "eng")
         page.fill("#password", "engineer password")
+        c0 = _cpu_s(_PIDS)
         t0 = time.perf_counter()
         page.click("#signin")
         page.locator(".rv-nav").wait_for(timeout=120_000)
         times.append((time.perf_counter() - t0) * 1000)
+        time.sleep(0.5)
+        if cpu is not None and k > 0:
+            cpu.append(_cpu_s(_PIDS) - c0)
         pages.append(page)
         if warm is None:
             time.sleep(2.0)
@@ -197,10 +212,11 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
 
     pids = [p.pid for p in topo.apps.values()]
     _PIDS[:] = pids
-    m: dict[str, Any] = {"before": _rss_mb(pids), "first_page": [], "rtt": [], "errors": []}
+    m: dict[str, Any] = {"before": _rss_mb(pids), "first_page": [], "rtt": [], "errors": [],
+                         "cpu": []}
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
-        pages, m["warm"] = _open_sessions(browser, topo.url, args.engineers, m["first_page"])
+        pages, m["warm"] = _open_sessions(browser, topo.url, args.engineers, m["first_page"], m["cpu"])
         m["per_process"] = {}
         for page in pages:
             pid = page.evaluate("() => fetch('/health').then(r => r.json()).then(d => d.process)")
@@ -241,6 +257,9 @@ def _figures(args: argparse.Namespace, m: dict[str, Any], stored: int, answers: 
     return {
         "first_panel_page_ms": {"p50": _pct(m["first_page"], 50), "p95": _pct(m["first_page"], 95),
                                 "max": round(max(m["first_page"]), 1)},
+        "server_cpu_per_new_session_s": {
+            "p50": round(statistics.median(m["cpu"]), 3), "mean": round(statistics.fmean(m["cpu"]), 3),
+            "max": round(max(m["cpu"]), 3)} if m["cpu"] else None,
         "panel_sessions_per_process": sorted(m["per_process"].values()),
         "answer_round_trip_ms": {"p50": _pct(m["rtt"], 50), "p95": _pct(m["rtt"], 95),
                                  "max": round(max(m["rtt"]), 1)},

@@ -86,6 +86,7 @@ def _print_lineage(lineage: dict | None) -> None:
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from railval.app.services.calibration import calibrate
+    from railval.app.services.calibration_plan import start_text, tolerance_text
 
     start: dict[str, dict[str, float]] = {}
     for item in args.start or []:
@@ -107,6 +108,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     print(f"stored configuration {args.new_name} (parent {args.config}); objective "
           f"{d['objective_start']} → {d['objective']:.4g} in {d['n_evaluations']} simulations")
     print(f"optimizer ({d['method']}): {d['message']}")
+    print(tolerance_text(d))
+    if start_text(d):
+        print(start_text(d))
     for k, v in d["parameters"].items():
         print(f"  {k} = {v:.5g} {d['units'].get(k, '')}")
     print("lineage (largest normalised error): " + " → ".join(
@@ -178,7 +182,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--replace", action="store_true", help="overwrite NEW if it exists")
     c.add_argument("--start", nargs="+", default=None, metavar="EFFECT.PARAM=VALUE",
-                   help="start values of the search (e.g. the values diagnose fitted; model.PARAM=VALUE too)")
+                   help="start values of the search (model.PARAM=VALUE too); an effect or parameter "
+                        "without one starts from the values the newest stored diagnosis of --config fitted")
     split = c.add_mutually_exclusive_group()
     split.add_argument("--fit-sections", nargs="+", default=None, metavar="S",
                        help="fit on these sections only; validate on the others (held-out)")

@@ -103,19 +103,25 @@ table.rv-table tr:nth-child(even) td { background: #fafbfc; }
 """
 
 
-def html_table(df: pd.DataFrame, css_class: str = "", max_height: int | None = None) -> pn.pane.HTML:
-    """A static HTML table (one light model, no table widget): for read-only lists shown
-    on page load. Cells are escaped; numbers right-aligned."""
+def table_markup(df: pd.DataFrame, css_class: str = "") -> str:
+    """The markup of :func:`html_table`: cells escaped, numbers right-aligned."""
     numeric = {c for c in df.columns if pd.api.types.is_numeric_dtype(df[c])}
     head = "".join(f"<th>{html.escape(str(c))}</th>" for c in df.columns)
     rows = "".join(
         "<tr>" + "".join(f"<td class='num'>{html.escape(str(v))}</td>" if c in numeric
                          else f"<td>{html.escape(str(v))}</td>" for c, v in zip(df.columns, rec, strict=True))
         + "</tr>" for rec in df.itertuples(index=False))
+    return (f"<table class='rv-table {html.escape(css_class)}'><thead><tr>{head}</tr></thead>"
+            f"<tbody>{rows}</tbody></table>")
+
+
+def html_table(df: pd.DataFrame | str, css_class: str = "", max_height: int | None = None) -> pn.pane.HTML:
+    """A static HTML table (one light model, no table widget): for read-only lists shown
+    on page load. Cells are escaped; numbers right-aligned. ``df`` may be the markup of
+    :func:`table_markup` made before (shared by sessions)."""
     style = {"overflow-y": "auto", "max-height": f"{max_height}px"} if max_height else {}
-    return pn.pane.HTML(f"<table class='rv-table {html.escape(css_class)}'><thead><tr>{head}</tr></thead>"
-                        f"<tbody>{rows}</tbody></table>", sizing_mode="stretch_width",
-                        stylesheets=[HTML_TABLE_CSS], styles=style)
+    markup = df if isinstance(df, str) else table_markup(df, css_class)
+    return pn.pane.HTML(markup, sizing_mode="stretch_width", stylesheets=[HTML_TABLE_CSS], styles=style)
 
 
 DV_LABEL = "mean D_v / std limit (–)"

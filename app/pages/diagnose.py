@@ -18,6 +18,7 @@ from railval.app import plots
 from railval.app.pages._common import PageBase, bounded_input, make_dispatch, message, table, where_map
 from railval.app.pages.dashboard import validation_view
 from railval.app.security import plain_message
+from railval.app.services.calibration_plan import start_text, tolerance_text
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 from railval.app.svg_charts import svg_paired_hbars
 
@@ -153,7 +154,8 @@ class DiagnosePage(PageBase):
                                      "(each candidate effect parameter over its bounds, one linearised "
                                      "simulation per model parameter, a few refinements).")
         self.cal_estimate.object = (f"**Calibrate** simulates the campaign at most {n_cal} times "
-                                    "(start point, population × generations, polish, final run).")
+                                    "(scan, start point, trust-region steps with their Jacobians, final run; "
+                                    "it usually stops far earlier at its tolerance).")
 
     def _show_candidates(self) -> None:
         cands = self.state.candidates
@@ -414,7 +416,9 @@ class DiagnosePage(PageBase):
                else f"fitted {r['objective']:.3g}")
         text = (f"{config}: {r['effect']} calibrated from {r['parent']}: {fitted}. Objective (Σ over "
                 f"quantities of the squared worst normalised error) {obj}; "
-                f"{r.get('n_evaluations', 0) + 2} campaign simulations.")
+                f"{r.get('simulations', r.get('n_evaluations', 0) + 2)} campaign simulations. "
+                + "".join(f"{line[0].upper()}{line[1:]}. " for line in (tolerance_text(r), start_text(r)) if line)
+                ).rstrip()
         if r.get("in_sample"):
             text += " Its verdict is in-sample (fitted on all sections)."
         elif r.get("held_out_sections"):

@@ -9,7 +9,7 @@ import pandas as pd
 import panel as pn
 
 from railval.app import plots
-from railval.app.pages._common import PageBase, html_table, message
+from railval.app.pages._common import PageBase, html_table, message, table_markup
 from railval.app.security import no_external_images
 from railval.app.state import CampaignOverview, unit_label
 from railval.core.coverage import MIN_POSITIONS, MIN_SECTIONS_PER_ZONE
@@ -34,6 +34,27 @@ def lineage_tree_html(ov: CampaignOverview, selected: str | None = None) -> str:
     return ("<ul class='rv-tree'>" + "".join(node(r) for r in roots) + "</ul>")
 
 
+def overview_tables(ov: CampaignOverview) -> tuple[str, str, int]:
+    """The markup of the sections table (sorted by zone) and of the channels table, and the
+    channel count — made once per overview and kept on it: the overview is shared read-only
+    by the sessions of a process (docs/app.md, "Cheap sessions"), so is its markup."""
+    cached = getattr(ov, "_tables_markup", None)
+    if cached is not None:
+        return cached
+    sec_df = pd.DataFrame([{
+        "section": s.id, "country": s.country,
+        "radius (m)": "straight" if (not s.radius_m or math.isinf(s.radius_m)) else round(s.radius_m),
+        "cant (mm)": s.cant_mm, "speed (km/h)": s.speed_kmh, "zone": s.zone,
+        "evaluated from (m)": round(s.eval_start_m, 1), "to (m)": round(s.eval_end_m, 1),
+        "evaluated length (m)": round(s.eval_end_m - s.eval_start_m, 1),
+    } for s in ov.sections]).sort_values(["zone", "section"]) if ov.sections else pd.DataFrame()
+    ch_df = pd.DataFrame([{"channel": c["name"], "kind": c["kind"], "position": c["position"],
+                           "unit": unit_label(c["unit"])} for c in ov.channels])
+    cached = (table_markup(sec_df, "rv-sections"), table_markup(ch_df, "rv-channels"), len(ch_df))
+    ov._tables_markup = cached
+    return cached
+
+
 class OverviewPage(PageBase):
     name_ = "overview"
 
@@ -54,15 +75,7 @@ class OverviewPage(PageBase):
                else message(f"Coverage holds: {len(ov.sections)} sections, every zone ≥ "
                             f"{MIN_SECTIONS_PER_ZONE} sections, ≥ {MIN_POSITIONS} signals per channel "
                             "kind.", "success"))
-        sec_df = pd.DataFrame([{
-            "section": s.id, "country": s.country,
-            "radius (m)": "straight" if (not s.radius_m or math.isinf(s.radius_m)) else round(s.radius_m),
-            "cant (mm)": s.cant_mm, "speed (km/h)": s.speed_kmh, "zone": s.zone,
-            "evaluated from (m)": round(s.eval_start_m, 1), "to (m)": round(s.eval_end_m, 1),
-            "evaluated length (m)": round(s.eval_end_m - s.eval_start_m, 1),
-        } for s in ov.sections]).sort_values(["zone", "section"]) if ov.sections else pd.DataFrame()
-        ch_df = pd.DataFrame([{"channel": c["name"], "kind": c["kind"], "position": c["position"],
-                               "unit": unit_label(c["unit"])} for c in ov.channels])
+        sections_html, channels_html, n_channels = overview_tables(ov)
         zone_plot = pn.pane.Bokeh(plots.zone_coverage(ov.zone_counts(), need=MIN_SECTIONS_PER_ZONE), sizing_mode="stretch_width")
         tree = pn.pane.HTML(lineage_tree_html(ov, self.app.configuration), sizing_mode="stretch_width",
                             stylesheets=[TREE_CSS])
@@ -73,9 +86,9 @@ class OverviewPage(PageBase):
             pn.Row(pn.Column(zone_plot, sizing_mode="stretch_width"),
                    pn.Column(pn.pane.Markdown("#### Configurations and lineage"), tree,
                              sizing_mode="stretch_width"), sizing_mode="stretch_width"),
-            pn.pane.Markdown("#### Sections (by zone)"), html_table(sec_df, "rv-sections", max_height=520),
+            pn.pane.Markdown("#### Sections (by zone)"), html_table(sections_html, max_height=520),
             # every channel shown (no inner scroll hiding half of them), the count in the heading
-            pn.pane.Markdown(f"#### Channels ({len(ch_df)})"), html_table(ch_df, "rv-channels"),
+            pn.pane.Markdown(f"#### Channels ({n_channels})"), html_table(channels_html),
         ]
 
 

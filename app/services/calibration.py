@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from railval.app.services.batch import BatchExecutor
+from railval.app.services.calibration_plan import calibration_simulations, diagnosis_flags, diagnosis_start
 from railval.app.services.campaign_context import (
     CampaignContext,
     Progress,
@@ -134,10 +135,12 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
         conf_effects, conf_params, _ = configuration_of(s, camp, conf)
         # the parent's own evidence, to judge what the calibration adds on sections it has not seen
         parent_vals = section_values(repo.load_signalsets(s, camp, conf), ctx.sections)
-        support = _diagnosis_flags(s, camp, conf, list(effects))
-    start_values = _start_values(start)
+        support = diagnosis_flags(s, camp, conf, list(effects))
+        start_values, start_source = diagnosis_start(s, conf, list(effects), _start_values(start))
     fit_ids, held_ids = _calibration_split(ctx, fit_sections, holdout, split)
     plan = _plan(ctx, conf, effects, params, start_values, conf_effects, conf_params)
+    bound = calibration_simulations(len(plan.specs), method, popsize=popsize, maxiter=maxiter, polish_maxfev=polish_maxfev)
+    report(progress, f"plan: {len(plan.specs)} parameter(s), at most {bound} campaign simulations", 0.04)
     objective = _Objective(_restrict(ctx, fit_ids) if held_ids else ctx, plan.base_effects, conf_params,
                            plan.targets)
     with BatchExecutor(scheduler, workers) as ex:
@@ -159,7 +162,10 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
               "parameters": [s.name for s in plan.specs]}
     res.extra["lineage"] = _store(database, ctx, camp, conf, new_name, plan, res.objective, eff, model, sets,
                                   record, replace, vr_full)
+    start_source["started_from"] = res.tolerance.get("start_from", "start")
     res.extra.update({"configuration": new_name, "parent": conf.name, "effects": eff,
+                      "simulations": res.n_evaluations + (1 if method == "local" else 2),
+                      "simulations_at_most": bound, "start_source": start_source,
                       "model_parameters": model, "validation": vr_full.to_dict(),
                       "validation_held_out": vr_held.to_dict() if vr_held is not None else None,
                       "fit_sections": fit_ids, "held_out_sections": held_ids, "in_sample": not held_ids,
@@ -394,41 +400,6 @@ def _parent_flags(vr_parent: Any, vr_parent_held: Any, vr_held: Any) -> list[str
                          f"{HELD_OUT_GAIN:.0%} ({before:.3g} → {after:.3g}): no held-out evidence that this candidate "
                          "is a cause; the model may be compensating for something else")
     return flags
-
-
-def _diagnosis_flags(session: Any, camp: repo.CampaignRef, conf: repo.ConfigRef,
-                     candidates: Sequence[str]) -> list[str]:
-    """Whether the newest stored diagnosis of the parent ``conf`` supports calibrating
-    ``candidates`` (effect ids or ``model.NAME``): no flag when its verdict is ``cause`` for one
-    of them; a flag when it answered ``none`` or ``uncertain`` or named another cause; a note
-    when the parent was never diagnosed (docs/diagnosis.md "Calibration")."""
-    from railval.app.services.diagnosis import latest_diagnosis
-
-    campaign, config = camp.name, conf.name
-    diag = latest_diagnosis(session, campaign, config)
-    names = ", ".join(candidates)
-    if diag is None:
-        return [(f"note: {config} has no stored diagnosis, so nothing here shows that {names} is the "
-                f"cause; run railval diagnose {campaign} --config {config}")]
-    d = diag.to_dict()
-    verdict = d.get("verdict") or ""
-    # the best candidate: a parameter candidate's ``name`` (``model.NAME``), else its effect id
-    top = (diag.candidates[0].name or diag.candidates[0].effect) if diag.candidates else ""
-    run = d.get("run") or {}
-    when = f" of {run['created_at']}" if run.get("created_at") else ""
-    stale = " (computed on data that have changed since)" if run.get("current") is False else ""
-    if verdict == "cause" and top in candidates:
-        return []
-    if verdict == "none":
-        why = "found no cause beyond the section-to-section scatter (verdict none)"
-    elif verdict == "uncertain":
-        why = f"could not single out a cause (verdict uncertain, best {top})"
-    elif verdict == "cause":
-        why = f"named {top}, not {names}, as the cause"
-    else:  # a diagnosis stored before verdicts existed
-        return []
-    return [(f"the diagnosis of {config}{when}{stale} {why}: no diagnostic evidence that {names} is a cause; "
-            "the model may be compensating for something else")]
 
 
 def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float]) -> ParameterSpec:

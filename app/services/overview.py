@@ -16,7 +16,9 @@ write, not for the whole computation (docs/database.md).
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -99,6 +101,46 @@ def overview(database, campaign: str) -> CampaignOverview:
         name, desc = camp.name, camp.description or ""
     return CampaignOverview(name=name, description=desc, vehicle=vehicle, sections=sections,
                             channels=chans, configurations=configurations(database, campaign))
+
+
+#: a shared entry (:func:`shared`) is recomputed after this long even when the stamp is unchanged
+#: (an edit in place, e.g. a description, adds or deletes no row)
+SHARED_MAX_AGE_S = 30.0
+#: most entries kept (campaign lists and overviews of every database the process serves)
+SHARED_MAX_ENTRIES = 256
+_shared: dict[tuple, tuple[float, tuple, Any]] = {}
+_shared_lock = threading.Lock()
+
+
+def shared(database, key: tuple, make: Callable[[], Any]) -> Any:
+    """``make()``, computed once per process and shared by every session while the database's
+    :func:`railval.db.repo.catalogue_stamp` is unchanged and at most :data:`SHARED_MAX_AGE_S`
+    old (docs/app.md, "Cheap sessions"): a new Panel session reads the stamp (one query)
+    instead of the campaign list and overview. The value is shared: callers must not change it."""
+    with database.read_session() as s:
+        stamp = repo.catalogue_stamp(s)
+    k = (database.url, *key)
+    now = time.monotonic()
+    with _shared_lock:
+        hit = _shared.get(k)
+    if hit is not None and hit[1] == stamp and now - hit[0] < SHARED_MAX_AGE_S:
+        return hit[2]
+    value = make()
+    with _shared_lock:
+        if len(_shared) >= SHARED_MAX_ENTRIES:
+            _shared.clear()
+        _shared[k] = (now, stamp, value)
+    return value
+
+
+def shared_campaign_names(database) -> list[str]:
+    """:func:`campaign_names` through the process-wide cache (:func:`shared`); a copy."""
+    return list(shared(database, ("campaigns",), lambda: campaign_names(database)))
+
+
+def shared_overview(database, campaign: str) -> CampaignOverview:
+    """:func:`overview` through the process-wide cache (:func:`shared`); read-only."""
+    return shared(database, ("overview", campaign), lambda: overview(database, campaign))
 
 
 def signals(database, campaign: str, config: str | None, section: str,

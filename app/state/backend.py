@@ -46,13 +46,17 @@ class Backend:
 
     # -- campaign data (railval.app.services.overview)
     def campaigns(self) -> list[str]:
-        return overview_service.campaign_names(self.database)
+        """Campaign names, shared by the sessions of this process while the database's
+        catalogue is unchanged (:func:`railval.app.services.overview.shared`)."""
+        return overview_service.shared_campaign_names(self.database)
 
     def configurations(self, campaign: str) -> list[ConfigInfo]:
         return overview_service.configurations(self.database, campaign)
 
     def overview(self, campaign: str) -> CampaignOverview:
-        return overview_service.overview(self.database, campaign)
+        """The campaign's layout, shared read-only by the sessions of this process while the
+        database's catalogue is unchanged (:func:`railval.app.services.overview.shared`)."""
+        return overview_service.shared_overview(self.database, campaign)
 
     def signals(self, campaign: str, config: str | None, section: str,
                 channels: list[str] | None = None):

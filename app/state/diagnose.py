@@ -8,9 +8,9 @@ from typing import Any
 import numpy as np
 import param
 
+from railval.app.services.calibration_plan import calibration_simulations
 from railval.app.services.diagnosis import diagnosis_simulations
 from railval.app.state.app import AppState
-from railval.core.calibration import max_evaluations
 from railval.core.diagnosis import Component, PatternGrid, pattern_grids
 from railval.core.validation import normalised_errors
 
@@ -149,10 +149,11 @@ class DiagnoseState(param.Parameterized):
                                      parameters=not self.candidate_effects)
 
     def calibration_simulations(self) -> int:
-        """Upper bound of the campaign simulations a calibration runs: the optimiser's
-        (``railval.core.calibration.max_evaluations``) plus the final stored run."""
+        """Upper bound of the campaign simulations the page's calibration (the local fit)
+        runs: :func:`railval.app.services.calibration_plan.calibration_simulations`, the
+        estimate the CLI announces too."""
         n = len(self.fit_parameters or self.param.fit_parameters.objects) or 1
-        return max_evaluations(n, self.popsize, self.maxiter, self.polish_maxfev) + 1
+        return calibration_simulations(n, "local")
 
     def effect_catalogue(self) -> list[dict[str, Any]]:
         return self.app.backend.effects()
