@@ -46,10 +46,10 @@ from railval.core.diagnosis import (
     CandidateFamily,
     DiagnosisResult,
     SectionEvidence,
-    band_powers,
     diagnose_evidence,
     diagnose_families,
     scan_values,
+    section_band_powers,
     section_evidence,
 )
 from railval.core.diagnosis.causes import cause_set
@@ -130,10 +130,11 @@ def parameter_plan(ctx: Any, conf_params: Mapping[str, float]) -> list[dict[str,
 
 
 # --------------------------------------------------------------------------- workers
-def _evaluate_sections(task: tuple[Any, dict, dict]) -> tuple[list[dict], dict[str, dict[str, np.ndarray]]]:
-    """Worker task: simulate with ``effects`` and model ``parameters``; return the validation
-    pairs (section, zone, quantity, position, D_norm) and the band powers per section and
-    acceleration channel."""
+def _evaluate_sections(ctx: Any, job: tuple[dict, dict]) -> tuple[list[dict], dict[str, dict[str, np.ndarray]]]:
+    """Worker task: simulate the campaign ``ctx`` (shared once per worker,
+    :meth:`railval.app.services.batch.BatchExecutor.map`) with the job's ``effects`` and model
+    ``parameters``; return the validation pairs (section, zone, quantity, position, D_norm) and
+    the band powers per section and acceleration channel (one Welch call per section)."""
     from railval.app.services.campaign_context import (
         ACC_CHANNELS,
         section_values,
@@ -141,23 +142,22 @@ def _evaluate_sections(task: tuple[Any, dict, dict]) -> tuple[list[dict], dict[s
         validate_values,
     )
 
-    ctx, effects, parameters = task
+    effects, parameters = job
     sets = simulate_context(ctx, effects, parameters)
     vr = validate_values(ctx, section_values(sets, ctx.sections))
     pairs = vr.pairs[["section", "zone", "quantity", "position", "D_norm", "M", "S"]].to_dict("records")
-    bands = {sid: {ch: band_powers(ss.channels[ch], ss.fs, ctx.bands, 10.0) for ch in ACC_CHANNELS
-                   if ch in ss.channels} for sid, ss in sets.items()}
+    bands = {sid: section_band_powers({ch: ss.channels[ch] for ch in ACC_CHANNELS if ch in ss.channels},
+                                      ss.fs, ctx.bands, 10.0) for sid, ss in sets.items()}
     return pairs, bands
 
 
-def measured_section_bands(session: Any, ctx: Any) -> dict[str, dict[str, np.ndarray]]:
-    """Band powers of the measurement per section and acceleration channel."""
+def measured_section_bands(ctx: Any, measured: Mapping[str, Any]) -> dict[str, dict[str, np.ndarray]]:
+    """Band powers of the measurement (``measured``: section id → SignalSet, decoded once per
+    diagnosis) per section and acceleration channel."""
     from railval.app.services.campaign_context import ACC_CHANNELS
-    from railval.db import repo
 
-    sets = repo.load_signalsets(session, ctx.campaign, None, channels=[c for c in ACC_CHANNELS if c in ctx.channels])
-    return {sid: {ch: band_powers(ss.channels[ch], ss.fs, ctx.bands, 10.0) for ch in ss.channels}
-            for sid, ss in sets.items()}
+    return {sid: section_band_powers({ch: ss.channels[ch] for ch in ACC_CHANNELS if ch in ss.channels},
+                                     ss.fs, ctx.bands, 10.0) for sid, ss in measured.items()}
 
 
 # --------------------------------------------------------------------------- rank_causes
@@ -181,7 +181,7 @@ class _Request:
     plan: list[dict[str, Any]]
 
 
-def rank_causes(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
+def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progress: Progress | None = None,
              scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
              parameters: Sequence[str] | None = None, include_parameters: bool = True,
              measurement: bool | Sequence[str] = True,
@@ -201,16 +201,18 @@ def rank_causes(database_or_session: Any, campaign: str, config: str, *, progres
     from railval.app.services.campaign_context import band_sums, residual_pattern, section_values
     from railval.app.services.campaign_context import report as _report
 
-    _report(progress, "load", 0.0, campaign=campaign, config=config)
+    from railval.db.repo import config_name
+
+    _report(progress, "load", 0.0, campaign=getattr(campaign, "name", campaign), config=config_name(config))
     req = _load(database_or_session, campaign, config, effects, parameters, include_parameters, measurement)
-    ctx = req.ctx
+    ctx, config = req.ctx, req.config
     stored_residual, vr = residual_pattern(ctx, section_values(req.config_sets, ctx.sections),
                                            band_sums(req.config_sets, ctx.bands))
     tasks, index = _tasks(req, values_per_parameter)
     total = len(tasks) + (refine if req.plan else 0)
     _report(progress, "simulate", 0.05, tasks=total)
     with BatchExecutor(scheduler, workers) as ex:
-        results = ex.map(_evaluate_sections, tasks,
+        results = ex.map(_evaluate_sections, tasks, shared=ctx,
                          progress=lambda d, t: _report(progress, "simulate", 0.05 + 0.8 * d / total, done=d, total=total))
         base, fams = _candidates(req, results, index, vr, measurement)
         n_sim = len(tasks) + _refine(ex, req, base, fams, bool(vr.validated), refine, folds, seed)
@@ -228,19 +230,20 @@ def rank_causes(database_or_session: Any, campaign: str, config: str, *, progres
         res.note += "; left out: " + "; ".join(f"{s['name']} ({s['reason']})" for s in req.skipped)
     if req.conf_skipped:
         res.note += "; " + "; ".join(f"effect {s['name']} {s['reason']}" for s in req.conf_skipped)
-    res.next_step = next_step(res, campaign, config)
+    res.next_step = next_step(res, ctx.campaign, config)
     _report(progress, "done", 1.0)
     return res
 
 
-def _load(database_or_session: Any, campaign: str, config: str, effects: Sequence[str] | None,
+def _load(database_or_session: Any, campaign: Any, config: Any, effects: Sequence[str] | None,
           parameters: Sequence[str] | None, include_parameters: bool,
           measurement: bool | Sequence[str]) -> _Request:
-    """Read the campaign and configuration; the candidate effects that can apply and the
-    parameter plan (``parameter_plan`` once)."""
+    """Read the campaign and configuration (names resolved once, unless given as the references
+    of :func:`railval.db.repo.resolve`; the measurement decoded once); the candidate effects
+    that can apply and the parameter plan (``parameter_plan`` once)."""
     from railval.app.services.campaign_context import (
         configuration_of,
-        load_context,
+        load_context_and_measurement,
         runnable_effects,
         session_of,
     )
@@ -248,13 +251,15 @@ def _load(database_or_session: Any, campaign: str, config: str, effects: Sequenc
     from railval.db import repo
 
     with session_of(database_or_session) as s:
-        ctx = load_context(s, campaign)
-        conf_effects, conf_params, _ = configuration_of(s, campaign, config)
-        config_sets = repo.load_signalsets(s, campaign, config)
-        meas_bands = measured_section_bands(s, ctx)
-        named = bool(measurement) and (measurement is not True or bool(DISCRETE_DEFAULTS))
-        # named offsets and gains of shared channels re-evaluate the measurement from its signals
-        measured_sets = repo.load_signalsets(s, campaign, None) if named else {}
+        campaign, ref = repo.resolve(s, campaign, config)
+        config = ref.name
+        ctx, measured = load_context_and_measurement(s, campaign)
+        conf_effects, conf_params, _ = configuration_of(s, campaign, ref)
+        config_sets = repo.load_signalsets(s, campaign, ref)
+    meas_bands = measured_section_bands(ctx, measured)
+    named = bool(measurement) and (measurement is not True or bool(DISCRETE_DEFAULTS))
+    # named offsets and gains of shared channels re-evaluate the measurement from its signals
+    measured_sets = measured if named else {}
     registry = EFFECTS
     unknown = [e for e in (effects or ()) if e not in registry]
     if unknown:
@@ -283,7 +288,7 @@ def _tasks(req: _Request, values_per_parameter: int) -> tuple[list[tuple], list[
     perturbed value per parameter candidate) and, per candidate value, which one it uses."""
     from railval.core.sim.effects import EFFECTS
 
-    tasks: list[tuple] = [(req.ctx, req.in_config, req.conf_params)]
+    tasks: list[tuple] = [(req.in_config, req.conf_params)]
     index: list[tuple] = []
     unique: dict[str, int] = {}
     for e in req.todo:
@@ -293,11 +298,11 @@ def _tasks(req: _Request, values_per_parameter: int) -> tuple[list[tuple], list[
             key = json.dumps({**req.in_config, e: point}, sort_keys=True)
             if key not in unique:
                 unique[key] = len(tasks)
-                tasks.append((req.ctx, {**req.in_config, e: point}, req.conf_params))
+                tasks.append(({**req.in_config, e: point}, req.conf_params))
             index.append(("effect", e, pname, v, defaults, unique[key]))
     for p in req.plan:
         index.append(("parameter", p["name"], p["parameter"], p["perturbed"], {}, len(tasks)))
-        tasks.append((req.ctx, req.in_config, {**req.conf_params, p["parameter"]: p["perturbed"]}))
+        tasks.append((req.in_config, {**req.conf_params, p["parameter"]: p["perturbed"]}))
     return tasks, index
 
 
@@ -419,7 +424,8 @@ def _refine(ex: Any, req: _Request, base: SectionEvidence, fams: list[CandidateF
     if not redo:
         return 0
     sections = [(s.id, int(s.zone)) for s in req.ctx.sections]
-    more = ex.map(_evaluate_sections, [(req.ctx, req.in_config, {**req.conf_params, f.parameter: v}) for f, v in redo])
+    more = ex.map(_evaluate_sections, [(req.in_config, {**req.conf_params, f.parameter: v}) for f, v in redo],
+                  shared=req.ctx)
     for (fam, v), res in zip(redo, more, strict=True):
         fam.values.append(v)
         fam.evidence.append(section_evidence(res[0], res[1], req.meas_bands, sections, value_key="D_norm", like=base))
