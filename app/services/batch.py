@@ -163,7 +163,7 @@ class BatchExecutor:
             if shared is None:
                 futs = client.map(func, items, pure=False)
             else:
-                futs = client.map(_apply_shared, items, func=func, shared=self._token(shared), pure=False)
+                futs = client.map(_apply_shared, items, task=func, shared=self._token(shared), pure=False)
             futures = {f: k for k, f in enumerate(futs)}
         results: list[Any] = [None] * total
         if self.backend == "process":
@@ -198,8 +198,8 @@ def _with_shared(token: str, func: Callable[..., Any], item: Any) -> Any:
     return func(_SHARED[token], item)
 
 
-def _apply_shared(item: Any, func: Callable[..., Any], shared: Any) -> Any:
-    return func(shared, item)
+def _apply_shared(item: Any, task: Callable[..., Any], shared: Any) -> Any:
+    return task(shared, item)
 
 
 def start_context() -> Any:
