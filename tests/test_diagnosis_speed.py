@@ -83,3 +83,38 @@ def test_shared_map_on_a_dask_cluster_scatters_once():
             got = ex.map(_task, list(range(12)), shared=shared)
     assert [r[2] for r in got] == [2.0 * i for i in range(12)]
     assert all(n <= 1 for _, n, _ in got)
+
+
+_PRELOAD_SCRIPT = """
+import sys, threading
+from railval.app.services.batch import BatchExecutor
+
+def main():
+    out = []
+    def run():  # from a background thread, as the Panel app runs a diagnosis: forkserver
+        with BatchExecutor(None, 2) as ex:
+            out.extend(ex.map(_loaded, [0, 1, 2, 3]))
+    th = threading.Thread(target=run)
+    th.start()
+    th.join()
+    print(sorted(set(out)))
+
+def _loaded(_):
+    return "railval.core.sim.model" in sys.modules
+
+if __name__ == "__main__":
+    main()
+"""
+
+
+def test_forkserver_workers_start_with_the_simulator_imported(tmp_path):
+    """From a background thread the pool uses the forkserver, which imports the simulator once
+    (``FORKSERVER_PRELOAD``): a worker sees it loaded before its first task imports anything."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "preload_check.py"
+    script.write_text(_PRELOAD_SCRIPT)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[True]"

@@ -182,6 +182,10 @@ class BatchExecutor:
     __call__ = map
 
 
+#: modules the forkserver imports once for the workers it starts (``__main__`` as by default)
+FORKSERVER_PRELOAD = ("__main__", "railval.core.sim.model", "railval.core.en14363",
+                      "railval.app.services.diagnosis_evidence", "railval.app.services.campaign_context")
+
 #: objects shared with this worker process by :meth:`BatchExecutor.map` (token → object)
 _SHARED: dict[str, Any] = {}
 
@@ -212,7 +216,11 @@ def start_context() -> Any:
         t.name.startswith("railval-rows") for t in others)
     if quiet and "fork" in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("fork")
-    return multiprocessing.get_context("forkserver")
+    ctx = multiprocessing.get_context("forkserver")
+    # the forkserver imports the simulator, the EN chain and the diagnosis once; every worker it
+    # forks then starts with them (takes effect when this process starts its forkserver)
+    ctx.set_forkserver_preload(list(FORKSERVER_PRELOAD))
+    return ctx
 
 
 def _call(task: tuple[Callable[..., Any], Sequence[Any], dict[str, Any]]) -> Any:
