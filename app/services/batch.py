@@ -134,6 +134,18 @@ class BatchExecutor:
         return self._shared[1]
 
     # -- work
+    def start(self, shared: Any = None) -> None:
+        """Start the workers now, in the calling thread, holding ``shared`` for later
+        :meth:`map` calls — also from other threads: a worker's parent-death signal
+        (:mod:`railval.core.workers`) follows the thread that started it, so a pool launched
+        by a thread that ends would lose its workers; and from the main thread the pool forks
+        (:func:`start_context`)."""
+        if self.backend == "process":
+            pool = self._process_pool(*((self._token(shared), shared) if shared is not None else ()))
+            list(pool.map(_noop, range(self.workers)))
+        elif self.backend == "dask" and shared is not None:
+            self._token(shared)
+
     def map(self, func: Callable[..., Any], items: Iterable[Any], progress: Progress | None = None,
             *, shared: Any = None) -> list[Any]:
         """``[func(item) for item in items]`` on the back end, in order (with ``shared``:
@@ -196,6 +208,10 @@ def _init_worker(base: dict[str, Any], token: str, shared: Any) -> None:
     base["initializer"](*base["initargs"])
     _SHARED.clear()
     _SHARED[token] = shared
+
+
+def _noop(item: Any) -> Any:
+    return item
 
 
 def _with_shared(token: str, func: Callable[..., Any], item: Any) -> Any:
