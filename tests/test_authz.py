@@ -135,6 +135,8 @@ def test_callbacks_and_jobs_are_checked_on_the_server(demo_db, role, monkeypatch
     stub = _Stub()
     for name in ("diagnose", "calibrate", "simulate"):
         monkeypatch.setattr(app.backend, name, stub(name))
+    # "Run diagnosis" runs the diagnosis and lists the stored runs in one call (names resolved once)
+    monkeypatch.setattr(app.backend, "diagnose_and_list", stub("diagnose"))
     d = DiagnoseState(app)
     d.effect = d.param.effect.objects[0] if d.param.effect.objects else "yaw_damper_degraded"
     outcomes = {}

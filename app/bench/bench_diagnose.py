@@ -1,6 +1,10 @@
 """Diagnosis and calibration speed: diagnose one configuration with effects and template
-parameters as candidates (target ≤ 30 s) and calibrate one effect (target ≤ 120 s) on a
-synthetic 12-section coach campaign, 2 workers.
+parameters as candidates (target ≤ 5 s on a quiet machine, issue 41) and calibrate one effect
+(target ≤ 120 s) on a synthetic 12-section coach campaign, 2 workers.
+
+The same diagnosis is then run on a Dask ``LocalCluster`` with 1 and with 2 worker processes
+(one thread each; warmed first, so the figures are the diagnosis and not the workers' start)
+and the speed-up printed (``--no-dask``: skipped); the three diagnoses must agree.
 
 Baseline measured in the same run: one simulation + evaluation of the whole campaign (the unit
 of work both jobs repeat), so the figures can be read as "number of campaign simulations".
@@ -10,6 +14,7 @@ The campaign is synthesised into a temporary SQLite database (or ``--db``) with 
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -20,6 +25,44 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=2, help="process-pool workers (default 2)")
     parser.add_argument("--scheduler", default=None, help="Dask scheduler address instead of the pool")
     parser.add_argument("--values", type=int, default=3, help="diagnose: values per parameter (default 3)")
+    parser.add_argument("--no-dask", action="store_true", help="skip the LocalCluster runs with 1 and 2 workers")
+
+
+def _warm_worker() -> bool:
+    """Run on every Dask worker before it is timed: import the simulator and the EN chain and
+    load their compiled kernels (one short section simulated and evaluated)."""
+    from railval.core.en14363 import evaluate_section
+    from railval.core.sim import TrackSection, VehicleModel, simulate_section
+    from railval.core.types import SectionInfo
+
+    track = TrackSection("W", speed_kmh=80, radius_m=400, cant_mm=100, straight_in_m=100, transition_in_m=50,
+                         curve_m=150, transition_out_m=50, straight_out_m=100, seed=1)
+    ss = simulate_section(VehicleModel("coach"), track, {}, fs_out=200.0)
+    evaluate_section(ss, SectionInfo("W", 400, 100, 80, 3, 160.0, 290.0))
+    return True
+
+
+def dask_scaling(database, values: int) -> tuple[dict, list]:
+    """The diagnosis on a LocalCluster of 1 and of 2 worker processes: seconds, speed-up and
+    whether the rankings equal each other."""
+    from dask.distributed import Client, LocalCluster
+
+    from railval.app.services.diagnosis import diagnose
+
+    out: dict = {}
+    ranks = []
+    for n in (1, 2):
+        with LocalCluster(n_workers=n, threads_per_worker=1, dashboard_address=":0", processes=True) as cluster, \
+                Client(cluster) as client:
+            client.run(_warm_worker)
+            t0 = time.perf_counter()
+            d = diagnose(database, "bench", "baseline", scheduler=client, values_per_parameter=values,
+                         refresh=True, store=False)
+            out[f"dask_{n}_worker_s"] = round(time.perf_counter() - t0, 2)
+            ranks.append([(c.name, round(c.held_out_explained, 9)) for c in d.candidates])
+    out["dask_speed_up_2_vs_1"] = round(out["dask_1_worker_s"] / out["dask_2_worker_s"], 2)
+    out["dask_rankings_equal"] = ranks[0] == ranks[1]
+    return out, ranks[0]
 
 
 def run(args: argparse.Namespace) -> dict:
@@ -58,6 +101,10 @@ def run(args: argparse.Namespace) -> dict:
         cal = calibrate(database, "bench", "baseline", [effect], "calibrated", scheduler=scheduler,
                         workers=workers, start={effect: hidden.parameters})
         t_cal = time.perf_counter() - t0
+        scaling, dask_rank = ({}, None) if getattr(args, "no_dask", False) else dask_scaling(database, values)
+        if dask_rank is not None:
+            scaling["dask_ranking_equals_pool"] = dask_rank == [(c.name, round(c.held_out_explained, 9))
+                                                               for c in diag.candidates]
         database.dispose()
     return {
         "hidden_effect": effect,
@@ -67,7 +114,7 @@ def run(args: argparse.Namespace) -> dict:
         "baseline_one_campaign_simulation_s": round(t_one, 2),
         "diagnose_s": round(t_diag, 2),
         "diagnose_simulations": diag.simulations,
-        "diagnose_target_s": 30,
+        "diagnose_target_s": 5,
         "diagnose_simulations_per_s": round(diag.simulations / t_diag, 2),
         "diagnose_candidates": len(diag.candidates),
         "diagnose_verdict": diag.verdict,
@@ -79,4 +126,6 @@ def run(args: argparse.Namespace) -> dict:
         "calibrate_target_s": 120,
         "calibrated_parameters": cal.parameters,
         "objective_before_after": [cal.objective_start, cal.objective],
+        **scaling,
+        "load_1min": round(os.getloadavg()[0], 2),
     }

@@ -16,12 +16,23 @@ Results come back in task order and are identical whichever back end ran them (t
 context manager and can be reused for many ``map`` calls (the calibration optimiser maps one
 generation at a time); its ``map`` has the ``map(func, iterable)`` signature that
 ``scipy.optimize.differential_evolution(workers=...)`` accepts.
+
+``map(func, items, shared=obj)`` calls ``func(obj, item)``: ``obj`` (a campaign context of
+≈ 1 MB) travels once per worker, not once per task — the process pool's workers receive it
+with their start (a new pool when another object is shared), a Dask cluster gets it by
+``Client.scatter(..., broadcast=True)``. The process pool forks the workers when the calling
+thread is the main thread and no other thread than railval's own idle row threads runs (the
+CLI, the bench): the workers start with the caller's imported modules and compiled kernels
+instead of importing them again (measured in docs/diagnosis.md "Diagnosis speed"); from the
+Panel app's background threads it uses ``forkserver``.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import os
+import threading
+import uuid
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, Self
@@ -53,6 +64,8 @@ class BatchExecutor:
         self._client = None
         self._own_client = False
         self._pool: ProcessPoolExecutor | None = None
+        self._pool_token: str | None = None
+        self._shared: tuple[Any, Any] | None = None  # (object, its token / Dask future)
         if scheduler is None:
             self.backend = "serial" if workers == 1 else "process"
         elif isinstance(scheduler, str) and scheduler.lower() in ("serial", "local-serial"):
@@ -97,16 +110,46 @@ class BatchExecutor:
                 self._own_client = True
         return self._client
 
-    def _process_pool(self) -> ProcessPoolExecutor:
+    def _process_pool(self, token: str | None = None, shared: Any = None) -> ProcessPoolExecutor:
+        """The pool; a new one whose workers hold ``shared`` under ``token`` when they do not yet."""
+        if self._pool is not None and token is not None and token != self._pool_token:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=self.workers,
-                                             mp_context=multiprocessing.get_context("forkserver"),
-                                             **pool_kwargs())
+            kw = pool_kwargs()
+            if token is not None:
+                kw = {"initializer": _init_worker, "initargs": (kw, token, shared)}
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=start_context(), **kw)
+            self._pool_token = token
         return self._pool
 
+    def _token(self, shared: Any) -> Any:
+        """The token (process pool) or scattered future (Dask) of ``shared``, made once per object."""
+        if self._shared is None or self._shared[0] is not shared:
+            if self.backend == "dask":
+                ref = self._dask_client().scatter(shared, broadcast=True, hash=False)
+            else:
+                ref = uuid.uuid4().hex
+            self._shared = (shared, ref)
+        return self._shared[1]
+
     # -- work
-    def map(self, func: Callable[..., Any], items: Iterable[Any], progress: Progress | None = None) -> list[Any]:
-        """``[func(item) for item in items]`` on the back end, in order. ``progress(done, total)``
+    def start(self, shared: Any = None) -> None:
+        """Start the workers now, in the calling thread, holding ``shared`` for later
+        :meth:`map` calls — also from other threads: a worker's parent-death signal
+        (:mod:`railval.core.workers`) follows the thread that started it, so a pool launched
+        by a thread that ends would lose its workers; and from the main thread the pool forks
+        (:func:`start_context`)."""
+        if self.backend == "process":
+            pool = self._process_pool(*((self._token(shared), shared) if shared is not None else ()))
+            list(pool.map(_noop, range(self.workers)))
+        elif self.backend == "dask" and shared is not None:
+            self._token(shared)
+
+    def map(self, func: Callable[..., Any], items: Iterable[Any], progress: Progress | None = None,
+            *, shared: Any = None) -> list[Any]:
+        """``[func(item) for item in items]`` on the back end, in order (with ``shared``:
+        ``func(shared, item)``, ``shared`` sent once per worker). ``progress(done, total)``
         is called in the calling thread after every finished task."""
         items = list(items)
         total = len(items)
@@ -115,16 +158,24 @@ class BatchExecutor:
         if self.backend == "serial" or total == 1 and self.backend == "process":
             out = []
             for k, item in enumerate(items):
-                out.append(func(item))
+                out.append(func(item) if shared is None else func(shared, item))
                 if progress:
                     progress(k + 1, total)
             return out
         if self.backend == "process":
-            pool = self._process_pool()
-            futures = {pool.submit(func, item): k for k, item in enumerate(items)}
+            if shared is None:
+                pool = self._process_pool()
+                futures = {pool.submit(func, item): k for k, item in enumerate(items)}
+            else:
+                token = self._token(shared)
+                pool = self._process_pool(token, shared)
+                futures = {pool.submit(_with_shared, token, func, item): k for k, item in enumerate(items)}
         else:
             client = self._dask_client()
-            futs = client.map(func, items, pure=False)
+            if shared is None:
+                futs = client.map(func, items, pure=False)
+            else:
+                futs = client.map(_apply_shared, items, task=func, shared=self._token(shared), pure=False)
             futures = {f: k for k, f in enumerate(futs)}
         results: list[Any] = [None] * total
         if self.backend == "process":
@@ -141,6 +192,51 @@ class BatchExecutor:
 
     # scipy's differential_evolution calls workers(func, iterable)
     __call__ = map
+
+
+#: modules the forkserver imports once for the workers it starts (``__main__`` as by default)
+FORKSERVER_PRELOAD = ("__main__", "railval.core.sim.model", "railval.core.en14363",
+                      "railval.app.services.diagnosis_evidence", "railval.app.services.campaign_context")
+
+#: objects shared with this worker process by :meth:`BatchExecutor.map` (token → object)
+_SHARED: dict[str, Any] = {}
+
+
+def _init_worker(base: dict[str, Any], token: str, shared: Any) -> None:
+    """Process-pool initializer: the usual one (:func:`railval.core.workers.pool_kwargs`), then
+    keep the shared object of this pool."""
+    base["initializer"](*base["initargs"])
+    _SHARED.clear()
+    _SHARED[token] = shared
+
+
+def _noop(item: Any) -> Any:
+    return item
+
+
+def _with_shared(token: str, func: Callable[..., Any], item: Any) -> Any:
+    return func(_SHARED[token], item)
+
+
+def _apply_shared(item: Any, task: Callable[..., Any], shared: Any) -> Any:
+    return task(shared, item)
+
+
+def start_context() -> Any:
+    """``fork`` when the calling thread is the main thread and every other thread is one of
+    railval's idle row threads (:func:`railval.core.workers.split_rows`, which forget their
+    pool in a forked child): the workers start with this process's modules and compiled
+    kernels; ``forkserver`` otherwise (the Panel app's background threads)."""
+    others = [t for t in threading.enumerate() if t is not threading.current_thread()]
+    quiet = threading.current_thread() is threading.main_thread() and all(
+        t.name.startswith("railval-rows") for t in others)
+    if quiet and "fork" in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("fork")
+    ctx = multiprocessing.get_context("forkserver")
+    # the forkserver imports the simulator, the EN chain and the diagnosis once; every worker it
+    # forks then starts with them (takes effect when this process starts its forkserver)
+    ctx.set_forkserver_preload(list(FORKSERVER_PRELOAD))
+    return ctx
 
 
 def _call(task: tuple[Callable[..., Any], Sequence[Any], dict[str, Any]]) -> Any:

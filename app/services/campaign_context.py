@@ -98,6 +98,13 @@ def load_context(session: Any, campaign: repo.CampaignArg) -> CampaignContext:
     """Read the campaign's vehicle, sections and measurement; evaluate the measurement once.
     ``campaign``: a :class:`railval.db.repo.CampaignRef` resolved at the service's entrance
     (or, for callers that have not resolved it, its name)."""
+    return load_context_and_measurement(session, campaign)[0]
+
+
+def load_context_and_measurement(session: Any, campaign: repo.CampaignArg
+                                 ) -> tuple[CampaignContext, dict[str, SignalSet]]:
+    """:func:`load_context` and the measured signal sets it decoded (section id → SignalSet),
+    for a service that needs the signals too (the diagnosis: decoded once per diagnosis)."""
     camp = repo.get_campaign(session, campaign)
     sections = repo.section_infos(session, camp)
     vehicle = repo.vehicle_info(session, camp)
@@ -111,7 +118,7 @@ def load_context(session: Any, campaign: repo.CampaignArg) -> CampaignContext:
                           {sid: ss.fs for sid, ss in measured.items()},
                           ref=repo.CampaignRef(camp.id, camp.name))
     ctx.sim_inputs = dict(simulation_inputs(session, camp))
-    return ctx
+    return ctx, measured
 
 
 def validate_values(ctx: CampaignContext, sim_values: Mapping[str, Mapping], n_boot: int = 0) -> ValidationResult:

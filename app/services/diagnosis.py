@@ -33,7 +33,7 @@ from railval.db import repo, runs
 #: version): a change of the procedure computes afresh instead of reusing an older run
 DIAGNOSIS_VERSION = f"diagnosis/9+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets; 5: sign/swap/shift; 6: interface and mass rules; 7: passed-over causes, force gains, track input, contact statement; 8: group offsets, redundancy rule on offsets; 9: a conicity on top never the cause, conicity skipped with measured profiles
 
-__all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnosis_fit_record", "diagnosis_lineage", "diagnosis_runs", "diagnosis_simulations",
+__all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnose_and_list", "diagnosis_fit_record", "diagnosis_lineage", "diagnosis_runs", "diagnosis_simulations",
            "latest_diagnosis", "scan_points"]
 
 
@@ -53,37 +53,61 @@ def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3,
     return n
 
 
-def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
-             scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
-             workers: int | None = None, refresh: bool = False, store: bool = True, actor: str = "",
-             **options: Any) -> DiagnosisResult:
+def diagnose(database_or_session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg, *,
+             progress: Progress | None = None, scheduler: Any = None, values_per_parameter: int = 3,
+             effects: Sequence[str] | None = None, workers: int | None = None, refresh: bool = False,
+             store: bool = True, actor: str = "", **options: Any) -> DiagnosisResult:
     """Rank the causes of the residual of configuration ``config``: the effects it lacks and
     the vehicle-template parameters that may be mis-set, by the share of the residual they
     explain on held-out sections, with noise floor, plausibility, identifiability and a
     verdict (:func:`railval.app.services.diagnosis_evidence.rank_causes`). ``effects``: candidate
     names — effect ids and ``model.NAME`` parameters; given without any ``model.`` name, only
-    those effects are tried.
+    those effects are tried. ``campaign``/``config``: names (resolved here once, the entrance)
+    or the references of :func:`railval.db.repo.resolve`.
 
     A stored run with the same inputs (signal content hashes of both sides, section records,
     configuration, candidates, ``values_per_parameter``, options, :data:`DIAGNOSIS_VERSION`)
     is returned without simulating unless ``refresh``; every computed run is stored
     (``store``). ``result.run`` describes the stored run
     (:func:`railval.app.services.stored_runs.run_info`)."""
+    return _diagnose(database_or_session, campaign, config, progress=progress, scheduler=scheduler,
+                     values_per_parameter=values_per_parameter, effects=effects, workers=workers,
+                     refresh=refresh, store=store, actor=actor, options=options)[0]
+
+
+def diagnose_and_list(database_or_session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg,
+                      **kw: Any) -> tuple[DiagnosisResult, list[dict[str, Any]]]:
+    """:func:`diagnose` and then the stored diagnoses of ``config`` (:func:`diagnosis_runs`),
+    the names resolved once for both: what the Diagnose page's "Run diagnosis" shows."""
+    known = ("progress", "scheduler", "values_per_parameter", "effects", "workers", "refresh", "store", "actor")
+    args = {k: kw.pop(k) for k in known if k in kw}
+    args.setdefault("values_per_parameter", 3)
+    res, listed = _diagnose(database_or_session, campaign, config, **{
+        "progress": None, "scheduler": None, "effects": None, "workers": None, "refresh": False, "store": True,
+        "actor": "", **args}, options=kw, listed=True)
+    return res, listed or []
+
+
+def _diagnose(database_or_session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg, *,
+              progress: Progress | None, scheduler: Any, values_per_parameter: int,
+              effects: Sequence[str] | None, workers: int | None, refresh: bool, store: bool, actor: str,
+              options: dict[str, Any], listed: bool = False) -> tuple[DiagnosisResult, list | None]:
+    """:func:`diagnose` from the entrance on: the names resolved once into references, the
+    digest inputs hashed once; with ``listed`` also the stored runs (:func:`diagnosis_runs`)."""
     settings = {"values_per_parameter": int(values_per_parameter),
                 "effects": sorted(effects) if effects is not None else None,
                 "options": {k: options[k] for k in sorted(options)}}
     with session_of(database_or_session) as s:
-        conf = repo.get_configuration(s, campaign, config)
-        data_sha, inputs_sha = digests(data_inputs(s, campaign, config), settings, DIAGNOSIS_VERSION)
-        stored = None if refresh else runs.latest_run(s, conf.id, "diagnosis", inputs_sha)
+        camp, ref = repo.resolve(s, campaign, config)  # the entrance: the one lookup of each name
+        data_sha, inputs_sha = digests(data_inputs(s, camp, ref), settings, DIAGNOSIS_VERSION)
+        stored = None if refresh else runs.latest_run(s, ref.id, "diagnosis", inputs_sha)
         if stored is not None:
             res = DiagnosisResult.from_dict(stored.result)
             res.run = run_info(stored, reused=True, current_data_sha256=data_sha)
-            res.lineage = diagnosis_lineage(s, campaign, config, res.to_dict(with_signatures=True))
+            res.lineage = diagnosis_lineage(s, camp, ref, res.to_dict(with_signatures=True))
             if progress is not None:
                 progress("done", 1.0, {"stored_run": stored.id})
-            return res
-        ids = (conf.campaign_id, conf.id)
+            return res, diagnosis_runs(s, camp, ref, data_sha=data_sha) if listed else None
     started = time.perf_counter()
     if effects is not None:
         names = list(effects)
@@ -92,20 +116,20 @@ def diagnose(database_or_session: Any, campaign: str, config: str, *, progress: 
         options.setdefault("include_parameters", bool(params))
         options.setdefault("measurement", [n for n in names if n.startswith(MEASUREMENT_PREFIXES)] or False)
         effects = [n for n in names if not n.startswith(("model.", *MEASUREMENT_PREFIXES))]
-    res = diagnose_evidence_service(database_or_session, campaign, config, progress=progress, scheduler=scheduler,
+    res = diagnose_evidence_service(database_or_session, camp, ref, progress=progress, scheduler=scheduler,
                                     values_per_parameter=values_per_parameter, effects=effects, workers=workers,
                                     **options)
     if store:
         with session_of(database_or_session, write=True) as s:  # the write door
-            row = runs.store_run(s, campaign_id=ids[0], configuration_id=ids[1], kind="diagnosis",
+            row = runs.store_run(s, campaign_id=camp.id, configuration_id=ref.id, kind="diagnosis",
                                  inputs_sha256=inputs_sha,
                                  settings={**settings, "data_sha256": data_sha, "version": DIAGNOSIS_VERSION},
                                  result=res.to_dict(with_signatures=True),
                                  seconds=time.perf_counter() - started, actor=actor)
             res.run = run_info(row, reused=False, current_data_sha256=data_sha)
     with session_of(database_or_session) as s:
-        res.lineage = diagnosis_lineage(s, campaign, config, res.to_dict(with_signatures=True))
-    return res
+        res.lineage = diagnosis_lineage(s, camp, ref, res.to_dict(with_signatures=True))
+        return res, diagnosis_runs(s, camp, ref, data_sha=data_sha) if listed else None
 
 
 def _diagnosis_before(session: Any, conf: Any, before: Any = None) -> Any:
@@ -119,7 +143,7 @@ def _diagnosis_before(session: Any, conf: Any, before: Any = None) -> Any:
     return rows[0] if rows else None
 
 
-def diagnosis_lineage(session: Any, campaign: str, config: str, result: dict[str, Any]) -> dict[str, Any] | None:
+def diagnosis_lineage(session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg, result: dict[str, Any]) -> dict[str, Any] | None:
     """The lineage of diagnoses of ``config`` (None for a configuration without a parent):
     ``ancestors`` — every configuration from the root to ``config``'s parent with its diagnosis
     (run id, verdict, top cause) — and, for a configuration fitted by a calibration or a
@@ -156,15 +180,18 @@ def diagnosis_lineage(session: Any, campaign: str, config: str, result: dict[str
     return out
 
 
-def diagnosis_runs(session: Any, campaign: str, config: str) -> list[dict[str, Any]]:
+def diagnosis_runs(session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg, *,
+                   data_sha: str | None = None) -> list[dict[str, Any]]:
     """Stored diagnoses of ``config``, newest first: :func:`run_info` plus the top candidate,
     the share it explains, whether the two best are told apart and the run's verdict
     (``cause`` / ``uncertain`` / ``none``); ``current`` is false
-    when the signals or sections changed since the run."""
-    conf = repo.get_configuration(session, campaign, config)
-    data_sha, _ = digests(data_inputs(session, campaign, config), {}, DIAGNOSIS_VERSION)
+    when the signals or sections changed since the run (``data_sha``: the digest of the
+    current data when the caller has it, else computed here)."""
+    camp, ref = repo.resolve(session, campaign, config)
+    if data_sha is None:
+        data_sha, _ = digests(data_inputs(session, camp, ref), {}, DIAGNOSIS_VERSION)
     out = []
-    for r in runs.list_runs(session, conf.id, "diagnosis"):
+    for r in runs.list_runs(session, ref.id, "diagnosis"):
         cands = (r.result or {}).get("candidates") or []
         out.append({**run_info(r, reused=True, current_data_sha256=data_sha),
                     "top": cands[0]["effect"] if cands else "",
@@ -174,17 +201,17 @@ def diagnosis_runs(session: Any, campaign: str, config: str) -> list[dict[str, A
     return out
 
 
-def latest_diagnosis(session: Any, campaign: str, config: str) -> DiagnosisResult | None:
+def latest_diagnosis(session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg) -> DiagnosisResult | None:
     """The newest stored diagnosis of ``config`` (any settings), ``run`` saying
     whether its data are still current; None when never diagnosed."""
-    conf = repo.get_configuration(session, campaign, config)
-    row = runs.latest_run(session, conf.id, "diagnosis")
+    camp, ref = repo.resolve(session, campaign, config)
+    row = runs.latest_run(session, ref.id, "diagnosis")
     if row is None:
         return None
-    data_sha, _ = digests(data_inputs(session, campaign, config), {}, DIAGNOSIS_VERSION)
+    data_sha, _ = digests(data_inputs(session, camp, ref), {}, DIAGNOSIS_VERSION)
     res = DiagnosisResult.from_dict(row.result)
     res.run = run_info(row, reused=True, current_data_sha256=data_sha)
-    res.lineage = diagnosis_lineage(session, campaign, config, row.result)
+    res.lineage = diagnosis_lineage(session, camp, ref, row.result)
     return res
 
 

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from railval.app.services.campaign_context import effect_parameters
+from railval.app.services.diagnosis_next import next_step
 from railval.app.services.diagnosis_measurement import (
     DISCRETE_DEFAULTS,
     apply_redundancy_rule,
@@ -46,10 +47,10 @@ from railval.core.diagnosis import (
     CandidateFamily,
     DiagnosisResult,
     SectionEvidence,
-    band_powers,
     diagnose_evidence,
     diagnose_families,
     scan_values,
+    section_band_powers,
     section_evidence,
 )
 from railval.core.diagnosis.causes import cause_set
@@ -130,10 +131,11 @@ def parameter_plan(ctx: Any, conf_params: Mapping[str, float]) -> list[dict[str,
 
 
 # --------------------------------------------------------------------------- workers
-def _evaluate_sections(task: tuple[Any, dict, dict]) -> tuple[list[dict], dict[str, dict[str, np.ndarray]]]:
-    """Worker task: simulate with ``effects`` and model ``parameters``; return the validation
-    pairs (section, zone, quantity, position, D_norm) and the band powers per section and
-    acceleration channel."""
+def _evaluate_sections(ctx: Any, job: tuple[dict, dict]) -> tuple[list[dict], dict[str, dict[str, np.ndarray]]]:
+    """Worker task: simulate the campaign ``ctx`` (shared once per worker,
+    :meth:`railval.app.services.batch.BatchExecutor.map`) with the job's ``effects`` and model
+    ``parameters``; return the validation pairs (section, zone, quantity, position, D_norm) and
+    the band powers per section and acceleration channel (one Welch call per section)."""
     from railval.app.services.campaign_context import (
         ACC_CHANNELS,
         section_values,
@@ -141,23 +143,22 @@ def _evaluate_sections(task: tuple[Any, dict, dict]) -> tuple[list[dict], dict[s
         validate_values,
     )
 
-    ctx, effects, parameters = task
+    effects, parameters = job
     sets = simulate_context(ctx, effects, parameters)
     vr = validate_values(ctx, section_values(sets, ctx.sections))
     pairs = vr.pairs[["section", "zone", "quantity", "position", "D_norm", "M", "S"]].to_dict("records")
-    bands = {sid: {ch: band_powers(ss.channels[ch], ss.fs, ctx.bands, 10.0) for ch in ACC_CHANNELS
-                   if ch in ss.channels} for sid, ss in sets.items()}
+    bands = {sid: section_band_powers({ch: ss.channels[ch] for ch in ACC_CHANNELS if ch in ss.channels},
+                                      ss.fs, ctx.bands, 10.0) for sid, ss in sets.items()}
     return pairs, bands
 
 
-def measured_section_bands(session: Any, ctx: Any) -> dict[str, dict[str, np.ndarray]]:
-    """Band powers of the measurement per section and acceleration channel."""
+def measured_section_bands(ctx: Any, measured: Mapping[str, Any]) -> dict[str, dict[str, np.ndarray]]:
+    """Band powers of the measurement (``measured``: section id → SignalSet, decoded once per
+    diagnosis) per section and acceleration channel."""
     from railval.app.services.campaign_context import ACC_CHANNELS
-    from railval.db import repo
 
-    sets = repo.load_signalsets(session, ctx.campaign, None, channels=[c for c in ACC_CHANNELS if c in ctx.channels])
-    return {sid: {ch: band_powers(ss.channels[ch], ss.fs, ctx.bands, 10.0) for ch in ss.channels}
-            for sid, ss in sets.items()}
+    return {sid: section_band_powers({ch: ss.channels[ch] for ch in ACC_CHANNELS if ch in ss.channels},
+                                     ss.fs, ctx.bands, 10.0) for sid, ss in measured.items()}
 
 
 # --------------------------------------------------------------------------- rank_causes
@@ -181,7 +182,7 @@ class _Request:
     plan: list[dict[str, Any]]
 
 
-def rank_causes(database_or_session: Any, campaign: str, config: str, *, progress: Progress | None = None,
+def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progress: Progress | None = None,
              scheduler: Any = None, values_per_parameter: int = 3, effects: Sequence[str] | None = None,
              parameters: Sequence[str] | None = None, include_parameters: bool = True,
              measurement: bool | Sequence[str] = True,
@@ -201,18 +202,20 @@ def rank_causes(database_or_session: Any, campaign: str, config: str, *, progres
     from railval.app.services.campaign_context import band_sums, residual_pattern, section_values
     from railval.app.services.campaign_context import report as _report
 
-    _report(progress, "load", 0.0, campaign=campaign, config=config)
+    from railval.db.repo import config_name
+
+    _report(progress, "load", 0.0, campaign=getattr(campaign, "name", campaign), config=config_name(config))
     req = _load(database_or_session, campaign, config, effects, parameters, include_parameters, measurement)
-    ctx = req.ctx
+    ctx, config = req.ctx, req.config
     stored_residual, vr = residual_pattern(ctx, section_values(req.config_sets, ctx.sections),
                                            band_sums(req.config_sets, ctx.bands))
     tasks, index = _tasks(req, values_per_parameter)
     total = len(tasks) + (refine if req.plan else 0)
     _report(progress, "simulate", 0.05, tasks=total)
     with BatchExecutor(scheduler, workers) as ex:
-        results = ex.map(_evaluate_sections, tasks,
-                         progress=lambda d, t: _report(progress, "simulate", 0.05 + 0.8 * d / total, done=d, total=total))
-        base, fams = _candidates(req, results, index, vr, measurement)
+        results, base, measured = _simulate(ex, req, tasks, vr, measurement, lambda d, t: _report(
+            progress, "simulate", 0.05 + 0.8 * (d + 1) / total, done=d + 1, total=total))
+        base, fams = _candidates(req, results, index, vr, base, measured)
         n_sim = len(tasks) + _refine(ex, req, base, fams, bool(vr.validated), refine, folds, seed)
     _report(progress, "score", 0.9)
     res = _score(base, fams, bool(vr.validated), req.template, n_boot=n_boot, folds=folds, seed=seed)
@@ -228,19 +231,20 @@ def rank_causes(database_or_session: Any, campaign: str, config: str, *, progres
         res.note += "; left out: " + "; ".join(f"{s['name']} ({s['reason']})" for s in req.skipped)
     if req.conf_skipped:
         res.note += "; " + "; ".join(f"effect {s['name']} {s['reason']}" for s in req.conf_skipped)
-    res.next_step = next_step(res, campaign, config)
+    res.next_step = next_step(res, ctx.campaign, config)
     _report(progress, "done", 1.0)
     return res
 
 
-def _load(database_or_session: Any, campaign: str, config: str, effects: Sequence[str] | None,
+def _load(database_or_session: Any, campaign: Any, config: Any, effects: Sequence[str] | None,
           parameters: Sequence[str] | None, include_parameters: bool,
           measurement: bool | Sequence[str]) -> _Request:
-    """Read the campaign and configuration; the candidate effects that can apply and the
-    parameter plan (``parameter_plan`` once)."""
+    """Read the campaign and configuration (names resolved once, unless given as the references
+    of :func:`railval.db.repo.resolve`; the measurement decoded once); the candidate effects
+    that can apply and the parameter plan (``parameter_plan`` once)."""
     from railval.app.services.campaign_context import (
         configuration_of,
-        load_context,
+        load_context_and_measurement,
         runnable_effects,
         session_of,
     )
@@ -248,13 +252,15 @@ def _load(database_or_session: Any, campaign: str, config: str, effects: Sequenc
     from railval.db import repo
 
     with session_of(database_or_session) as s:
-        ctx = load_context(s, campaign)
-        conf_effects, conf_params, _ = configuration_of(s, campaign, config)
-        config_sets = repo.load_signalsets(s, campaign, config)
-        meas_bands = measured_section_bands(s, ctx)
-        named = bool(measurement) and (measurement is not True or bool(DISCRETE_DEFAULTS))
-        # named offsets and gains of shared channels re-evaluate the measurement from its signals
-        measured_sets = repo.load_signalsets(s, campaign, None) if named else {}
+        campaign, ref = repo.resolve(s, campaign, config)
+        config = ref.name
+        ctx, measured = load_context_and_measurement(s, campaign)
+        conf_effects, conf_params, _ = configuration_of(s, campaign, ref)
+        config_sets = repo.load_signalsets(s, campaign, ref)
+    meas_bands = measured_section_bands(ctx, measured)
+    named = bool(measurement) and (measurement is not True or bool(DISCRETE_DEFAULTS))
+    # named offsets and gains of shared channels re-evaluate the measurement from its signals
+    measured_sets = measured if named else {}
     registry = EFFECTS
     unknown = [e for e in (effects or ()) if e not in registry]
     if unknown:
@@ -283,7 +289,7 @@ def _tasks(req: _Request, values_per_parameter: int) -> tuple[list[tuple], list[
     perturbed value per parameter candidate) and, per candidate value, which one it uses."""
     from railval.core.sim.effects import EFFECTS
 
-    tasks: list[tuple] = [(req.ctx, req.in_config, req.conf_params)]
+    tasks: list[tuple] = [(req.in_config, req.conf_params)]
     index: list[tuple] = []
     unique: dict[str, int] = {}
     for e in req.todo:
@@ -293,24 +299,63 @@ def _tasks(req: _Request, values_per_parameter: int) -> tuple[list[tuple], list[
             key = json.dumps({**req.in_config, e: point}, sort_keys=True)
             if key not in unique:
                 unique[key] = len(tasks)
-                tasks.append((req.ctx, {**req.in_config, e: point}, req.conf_params))
+                tasks.append(({**req.in_config, e: point}, req.conf_params))
             index.append(("effect", e, pname, v, defaults, unique[key]))
     for p in req.plan:
         index.append(("parameter", p["name"], p["parameter"], p["perturbed"], {}, len(tasks)))
-        tasks.append((req.ctx, req.in_config, {**req.conf_params, p["parameter"]: p["perturbed"]}))
+        tasks.append((req.in_config, {**req.conf_params, p["parameter"]: p["perturbed"]}))
     return tasks, index
 
 
-def _candidates(req: _Request, results: Sequence, index: Sequence[tuple], vr: Any,
-                measurement: bool | Sequence[str]) -> tuple[SectionEvidence, list[CandidateFamily]]:
-    """Per-section evidence of the configuration and the candidate families (effects, parameters,
-    measurement candidates); candidates that move nothing the campaign measures go to
-    ``req.skipped``; of an effect's one-parameter families the one that explains most."""
+def _simulate(ex: Any, req: _Request, tasks: list[tuple], vr: Any, measurement: bool | Sequence[str],
+              progress: Any) -> tuple[list, SectionEvidence, dict[str, CandidateFamily]]:
+    """The campaign simulations, and meanwhile the measurement-side candidates: the workers
+    simulate ``tasks[1:]`` (a thread waits for them) while this thread simulates the
+    configuration itself (``tasks[0]``), its per-section evidence and, from it, the
+    measurement candidates — they need no other simulation (the measured signals re-evaluated
+    at their gain and offset nodes). Returns (results in task order, the configuration's
+    evidence, the measurement families); the same results as one map of every task."""
+    import threading
+
+    sections = [(s.id, int(s.zone)) for s in req.ctx.sections]
+    if ex.backend == "serial":
+        results = ex.map(_evaluate_sections, tasks, shared=req.ctx, progress=lambda d, t: progress(d - 1, t))
+        base = section_evidence(results[0][0], results[0][1], req.meas_bands, sections, value_key="D_norm")
+        return results, base, _measurement_families(req, results[0], base, sections, vr, measurement) \
+            if measurement else {}
+    ex.start(shared=req.ctx)  # in this thread: a pool started from the main thread forks
+    rest: list = []
+    failed: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            rest.extend(ex.map(_evaluate_sections, tasks[1:], shared=req.ctx, progress=progress))
+        except BaseException as exc:  # noqa: BLE001 - raised again in the calling thread
+            failed.append(exc)
+
+    waiter = threading.Thread(target=run, name="railval-diagnosis-map", daemon=True)
+    waiter.start()
+    try:
+        first = _evaluate_sections(req.ctx, tasks[0])
+        base = section_evidence(first[0], first[1], req.meas_bands, sections, value_key="D_norm")
+        measured = _measurement_families(req, first, base, sections, vr, measurement) if measurement else {}
+    finally:
+        waiter.join()
+    if failed:
+        raise failed[0]
+    return [first, *rest], base, measured
+
+
+def _candidates(req: _Request, results: Sequence, index: Sequence[tuple], vr: Any, base: SectionEvidence,
+                measured: Mapping[str, CandidateFamily]) -> tuple[SectionEvidence, list[CandidateFamily]]:
+    """Per-section evidence of the candidate values and the candidate families (effects,
+    parameters, then the ``measured`` candidates of :func:`_simulate`); candidates that move
+    nothing the campaign measures go to ``req.skipped``; of an effect's one-parameter families
+    the one that explains most."""
     from railval.core.sim.effects import EFFECTS
 
     ctx = req.ctx
     sections = [(s.id, int(s.zone)) for s in ctx.sections]
-    base = section_evidence(results[0][0], results[0][1], req.meas_bands, sections, value_key="D_norm")
 
     def evidence(k: int) -> SectionEvidence:
         return section_evidence(results[k][0], results[k][1], req.meas_bands, sections, value_key="D_norm", like=base)
@@ -336,8 +381,7 @@ def _candidates(req: _Request, results: Sequence, index: Sequence[tuple], vr: An
                 extrapolate=True, reference=pp["reference"], plausible=pp["plausible"],
                 plausible_source=pp["source"], unit=pp["unit"], title=pp["title"],
                 interface=pname in INTERFACE_PARAMETERS)
-    if measurement:
-        families.update(_measurement_families(req, results[0], base, sections, vr, measurement))
+    families.update(measured)
     blind = _without_effect(base, list(families.values()))
     req.skipped += [{"name": f.name, "kind": f.kind, "reason": "changes none of the quantities the campaign "
                      "measures at any simulated value"} for f in blind
@@ -419,7 +463,8 @@ def _refine(ex: Any, req: _Request, base: SectionEvidence, fams: list[CandidateF
     if not redo:
         return 0
     sections = [(s.id, int(s.zone)) for s in req.ctx.sections]
-    more = ex.map(_evaluate_sections, [(req.ctx, req.in_config, {**req.conf_params, f.parameter: v}) for f, v in redo])
+    more = ex.map(_evaluate_sections, [(req.in_config, {**req.conf_params, f.parameter: v}) for f, v in redo],
+                  shared=req.ctx)
     for (fam, v), res in zip(redo, more, strict=True):
         fam.values.append(v)
         fam.evidence.append(section_evidence(res[0], res[1], req.meas_bands, sections, value_key="D_norm", like=base))
@@ -539,53 +584,3 @@ def _best_per_effect(base: SectionEvidence, fams: list[CandidateFamily], validat
         best = max(res.candidates, key=lambda c: c.explained)
         out.append(next(f for f in group if f.parameter == best.parameter))
     return out
-
-
-def next_step(res: DiagnosisResult, campaign: str, config: str) -> dict[str, Any]:
-    """What to do next: calibrate the cause into a child configuration (then diagnose the
-    child), or, with no cause, what stays unexplained."""
-    verdict = res.verdict
-    if verdict == "none" or not res.candidates:
-        return {"action": "none", "text": "no candidate explains the residual; look at what stays unexplained "
-                                          "(quantities, zones, bands) — data, sensors or physics outside the library"}
-    all_causes = res.causes or []
-    sensors = [x for x in all_causes if x["kind"] == "measurement"]
-    summary = {c.name: c.summary for c in res.candidates}
-    check = ("; first check the measurement: " + "; ".join(
-        f"{x['name'].removeprefix('offset ')} reads ≈ the true value {x['fitted']:+.3g}" if x["parameter"] == "offset"
-        else summary.get(x["name"], x["name"]) if x["parameter"] in ("sign", "swap", "shift")
-        else f"{x['name'].removeprefix('gain ')} reads ≈ {x['fitted']:.3g} × the true value" for x in sensors)
-             ) if sensors else ""
-    if res.statements:  # an input of the simulation differs: data, not a model change (core/diagnosis/inputs.py)
-        return {"action": "supply data", "candidates": [n for x in res.statements for n in x["candidates"]],
-                "text": "; ".join(x["text"] for x in res.statements)
-                        + " — then diagnose again; no vehicle parameter is calibrated on an assumed input" + check}
-    causes = [x for x in all_causes if x["kind"] != "measurement"]
-    if sensors and not causes:
-        return {"action": "check measurement", "candidates": [x["name"] for x in sensors],
-                "text": "the measurement, not the model" + check + " (sensor calibration, amplifier gain) — "
-                        "correct the channel and import the campaign again before touching the model"}
-    if len(causes) > 1:  # a set of causes: calibrate them together
-        byname = {c.name: c for c in res.candidates}
-        eff = " ".join(f"--effect {x['name']}" for x in causes)
-        start = " ".join(f"{x['name']}={x['fitted']:.4g}" if x["kind"] == "parameter" else
-                         " ".join(f"{x['name']}.{k}={v:.4g}" for k, v in byname[x["name"]].parameters.items())
-                         for x in causes)
-        new = config + "".join(f"+{x['parameter'] if x['kind'] == 'parameter' else x['name']}" for x in causes)
-        cmd = f"railval calibrate {campaign} --config {config} {eff} --as {new} --start {start}"
-        return {"action": "calibrate", "candidates": [x["name"] for x in causes], "command": cmd,
-                "text": f"calibrate the {len(causes)} causes together into a child configuration, then diagnose "
-                        f"the child: {cmd}" + check}
-    c = res.candidates[0]
-    if c.kind == "measurement":
-        return {"action": "check measurement", "candidate": c.name,
-                "text": ("" if verdict == "cause" else "uncertain — ") + f"check the measurement first: {c.summary}"}
-    if c.kind == "effect":
-        start = " ".join(f"{c.name}.{k}={v:.4g}" for k, v in c.parameters.items())
-        cmd = f"railval calibrate {campaign} --config {config} --effect {c.name} --as {config}+{c.name} --start {start}"
-    else:
-        cmd = (f"railval calibrate {campaign} --config {config} --effect {c.name} --as {config}+{c.parameter} "
-               f"--start {c.name}={c.fitted:.4g}")
-    text = ("calibrate the cause into a child configuration, then diagnose the child: " if verdict == "cause" else
-            "uncertain — if you calibrate the best candidate, check its flags and held-out result: ")
-    return {"action": "calibrate", "candidate": c.name, "command": cmd, "text": text + cmd + check}

@@ -117,6 +117,12 @@ class Backend:
         """``railval.app.services.diagnosis.diagnose`` → DiagnosisResult (ranked candidates)."""
         return diagnosis_service.diagnose(self.database, campaign, config, progress=_stage_progress(progress), **kw)
 
+    def diagnose_and_list(self, campaign: str, config: str, progress: Callable | None = None, **kw: Any):
+        """(DiagnosisResult, the stored diagnoses of the configuration): the names resolved
+        once for both (``railval.app.services.diagnosis.diagnose_and_list``)."""
+        return diagnosis_service.diagnose_and_list(self.database, campaign, config,
+                                                   progress=_stage_progress(progress), **kw)
+
     def calibrate(self, campaign: str, config: str, effect: str, new_name: str,
                   progress: Callable | None = None, start: dict | None = None, **kw: Any):
         """Add ``effect``, fit its parameters (differential evolution + polish, starting from

@@ -186,10 +186,10 @@ class DiagnoseState(param.Parameterized):
             return None
 
         def work(progress):
-            return app.backend.diagnose(campaign, config, progress=progress, **settings)
+            return app.backend.diagnose_and_list(campaign, config, progress=progress, **settings)
 
-        def done(result):
-            self.runs = app.backend.diagnosis_runs(campaign, config)  # before the view redraws
+        def done(outcome):
+            result, self.runs = outcome  # the stored runs listed with it: before the view redraws
             self.show_diagnosis(result)
         return app.run_job("diagnosis", work, done, dispatch=dispatch, background=background,
                            action="diagnose")

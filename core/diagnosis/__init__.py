@@ -42,6 +42,7 @@ from railval.core.diagnosis.patterns import (
     difference_pairs,
     pattern_from_pairs,
     psd_band_pattern,
+    section_band_powers,
 )
 from railval.core.diagnosis.plausibility import plausibility_flags, separating_evidence
 from railval.core.diagnosis.result import DiagnosisResult, TrustedCandidate
@@ -73,6 +74,7 @@ __all__ = [
     "plausibility_flags",
     "psd_band_pattern",
     "scan_values",
+    "section_band_powers",
     "section_evidence",
     "separating_evidence",
     "where_grid",

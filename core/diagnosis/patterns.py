@@ -250,6 +250,32 @@ def band_powers(x: np.ndarray, fs: float, bands: Sequence[tuple[float, float]] =
     return np.array([float(np.sum(d[(f >= lo) & (f < hi)]) * df) for lo, hi in bands])
 
 
+def section_band_powers(channels: Mapping[str, np.ndarray], fs: float,
+                        bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ,
+                        segment_s: float = 10.0) -> dict[str, np.ndarray]:
+    """:func:`band_powers` of every channel of one section (equal lengths, e.g. the car body
+    acceleration channels of a :class:`railval.core.types.SignalSet`) from one Welch call over
+    all of them (:func:`railval.core.psd.welch_rows`, the settings of
+    :func:`railval.core.psd.welch_psd`): channel → power per band (unit²), equal to
+    :func:`band_powers` of each channel alone (tests/test_diagnosis_speed.py)."""
+    from railval.core.psd import welch_rows
+
+    names = list(channels)
+    if not names:
+        return {}
+    rows = [np.asarray(channels[n], dtype=float) for n in names]
+    if len({r.shape for r in rows}) != 1 or rows[0].ndim != 1:
+        raise InvalidSignal(f"section_band_powers: channels {names} must be 1-D arrays of one length, "
+                            f"got shapes {[r.shape for r in rows]}")
+    for n, r in zip(names, rows, strict=True):
+        if r.size < 8 or not np.all(np.isfinite(r)):
+            raise InvalidSignal(f"section_band_powers: channel {n!r} has fewer than 8 samples or NaN/inf")
+    f, d, _ = welch_rows(np.stack(rows), fs, segment_s)
+    df = f[1] - f[0]
+    masks = [(f >= lo) & (f < hi) for lo, hi in bands]
+    return {n: np.array([float(np.sum(d[k][m]) * df) for m in masks]) for k, n in enumerate(names)}
+
+
 def band_ratio_pattern(simulated: Mapping[str, np.ndarray], measured: Mapping[str, np.ndarray],
                        bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ) -> Pattern:
     """Log₂ ratio of band powers simulated/measured per acceleration channel and band.

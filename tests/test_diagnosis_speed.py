@@ -1,0 +1,120 @@
+"""The pieces of the faster diagnosis give the results of the slower ones: band powers of a
+section's channels from one Welch call equal each channel's own, and a batch map with a shared
+object returns what the serial map returns while the object reaches each worker once
+(docs/diagnosis.md "Diagnosis speed")."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from railval.app.services.batch import BatchExecutor
+from railval.core.diagnosis import DEFAULT_BANDS_HZ, band_powers, section_band_powers
+from railval.core.errors import InvalidSignal
+
+#: unpickles of :class:`Shared` in this process (a worker counts its own)
+UNPICKLED = [0]
+
+
+def _rebuild(payload):
+    UNPICKLED[0] += 1
+    return Shared(payload)
+
+
+class Shared:
+    """A shared object that counts how often a process unpickles it."""
+
+    def __init__(self, payload):
+        self.payload = payload
+
+    def __reduce__(self):
+        return _rebuild, (self.payload,)
+
+
+def _task(shared: Shared, item: int) -> tuple[int, int, float]:
+    return os.getpid(), UNPICKLED[0], float(shared.payload[item] * 2.0)
+
+
+def test_section_band_powers_equal_band_powers_of_each_channel():
+    rng = np.random.default_rng(3)
+    fs = 200.0
+    t = np.arange(int(60 * fs)) / fs
+    chans = {"ay_cb_b1": np.sin(2 * np.pi * 1.3 * t) + 0.3 * rng.standard_normal(t.size),
+             "az_cb_b2": 0.5 * np.sin(2 * np.pi * 7.0 * t) + 0.1 * rng.standard_normal(t.size)}
+    got = section_band_powers(chans, fs, DEFAULT_BANDS_HZ, 10.0)
+    for ch, x in chans.items():
+        np.testing.assert_allclose(got[ch], band_powers(x, fs, DEFAULT_BANDS_HZ, 10.0), rtol=1e-12, atol=0)
+    # independently: a sine of amplitude A carries A²/2 in the band holding its frequency
+    pure = section_band_powers({"s": np.sin(2 * np.pi * 7.0 * t)}, fs, [(5.0, 10.0)], 10.0)["s"][0]
+    assert pure == pytest.approx(0.5, rel=0.02)
+
+
+def test_section_band_powers_names_the_bad_channel():
+    good = np.zeros(4000)
+    with pytest.raises(InvalidSignal, match="'az_cb_b1'"):
+        section_band_powers({"ay_cb_b1": good, "az_cb_b1": np.r_[good[:-1], np.nan]}, 200.0)
+    with pytest.raises(InvalidSignal, match="one length"):
+        section_band_powers({"ay_cb_b1": good, "az_cb_b1": good[:100]}, 200.0)
+
+
+def test_shared_map_equals_serial_and_ships_the_object_once_per_worker():
+    shared = Shared(np.arange(40.0))
+    items = list(range(40))
+    with BatchExecutor("serial") as ex:
+        serial = [r[2] for r in ex.map(_task, items, shared=shared)]
+    with BatchExecutor(None, 2) as ex:
+        got = ex.map(_task, items, shared=shared)
+        again = ex.map(_task, items[:6], shared=shared)  # same object: the same workers, no new copy
+    assert [r[2] for r in got] == serial == [2.0 * i for i in items]
+    per_worker = {}
+    for pid, n, _ in got + again:
+        per_worker.setdefault(pid, set()).add(n)
+    assert all(max(ns) <= 1 for ns in per_worker.values()), per_worker  # not once per task
+
+
+def test_shared_map_on_a_dask_cluster_scatters_once():
+    distributed = pytest.importorskip("dask.distributed")
+    shared = Shared(np.arange(12.0))
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0") as cluster:
+        with BatchExecutor(cluster.scheduler_address) as ex:
+            got = ex.map(_task, list(range(12)), shared=shared)
+    assert [r[2] for r in got] == [2.0 * i for i in range(12)]
+    assert all(n <= 1 for _, n, _ in got)
+
+
+_PRELOAD_SCRIPT = """
+import sys, threading
+from railval.app.services.batch import BatchExecutor
+
+def main():
+    out = []
+    def run():  # from a background thread, as the Panel app runs a diagnosis: forkserver
+        with BatchExecutor(None, 2) as ex:
+            out.extend(ex.map(_loaded, [0, 1, 2, 3]))
+    th = threading.Thread(target=run)
+    th.start()
+    th.join()
+    print(sorted(set(out)))
+
+def _loaded(_):
+    return "railval.core.sim.model" in sys.modules
+
+if __name__ == "__main__":
+    main()
+"""
+
+
+def test_forkserver_workers_start_with_the_simulator_imported(tmp_path):
+    """From a background thread the pool uses the forkserver, which imports the simulator once
+    (``FORKSERVER_PRELOAD``): a worker sees it loaded before its first task imports anything."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "preload_check.py"
+    script.write_text(_PRELOAD_SCRIPT)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[True]"
