@@ -334,7 +334,7 @@ def _calibration_flags(ctx: CampaignContext, specs: Sequence[ParameterSpec], val
                        vr_full: Any, vr_held: Any) -> tuple[bool, list[str]]:
     """Plausibility of the fitted values (plausible range from the parameter registry, or at a
     search bound) and the in-sample / held-out caveats of the verdict."""
-    from railval.app.services.diagnosis_evidence import plausible_range, template_param
+    from railval.app.services.diagnosis_ranking import plausible_range, template_param
     from railval.core.diagnosis import plausibility_flags
 
     registry = EFFECTS
@@ -412,8 +412,7 @@ def _diagnosis_flags(session: Any, camp: repo.CampaignRef, conf: repo.ConfigRef,
                 f"cause; run railval diagnose {campaign} --config {config}")]
     d = diag.to_dict()
     verdict = d.get("verdict") or ""
-    # the best candidate: a parameter candidate's ``name`` (``model.NAME``), else its effect id
-    top = (diag.candidates[0].name or diag.candidates[0].effect) if diag.candidates else ""
+    top = diag.candidates[0].name if diag.candidates else ""  # effect id or model.NAME
     run = d.get("run") or {}
     when = f" of {run['created_at']}" if run.get("created_at") else ""
     stale = " (computed on data that have changed since)" if run.get("current") is False else ""
@@ -434,7 +433,7 @@ def _diagnosis_flags(session: Any, camp: repo.CampaignRef, conf: repo.ConfigRef,
 def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float]) -> ParameterSpec:
     """Search box of a template parameter: the diagnosis's box for its parameter candidates
     (log scale), else the modal box ([ref 3]) or ±30 %."""
-    from railval.app.services.diagnosis_evidence import parameter_plan
+    from railval.app.services.diagnosis_ranking import parameter_plan
 
     plan = {p["parameter"]: p for p in parameter_plan(ctx, conf_params)}
     if name in plan:
