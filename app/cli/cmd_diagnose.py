@@ -31,6 +31,7 @@ def _db(args: argparse.Namespace):
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
     from railval.app.services.diagnosis import diagnose
+    from railval.app.views import diagnosis_view_of
 
     res = diagnose(_db(args), args.campaign, args.config, progress=Progress(), scheduler=args.scheduler,
                    values_per_parameter=args.values, effects=args.candidates,
@@ -38,50 +39,56 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     if args.json:
         emit_json(res.to_dict())
         return 0
-    print(f"diagnosis of {args.campaign}/{args.config}: verdict {res.verdict.upper()} — {res.note}")
-    print(f"noise floor (share of pure section scatter the candidates explain, 95 %): {res.noise_floor:.2f}")
-    _print_lineage(res.lineage)
-    for st in res.statements or []:
-        print(f"input ({st['kind']}): {st['text']}")
+    view = diagnosis_view_of(res)
+    print(f"diagnosis of {args.campaign}/{args.config}: verdict {view.verdict.upper()} — {view.note}")
+    print(f"noise floor (share of pure section scatter the candidates explain, 95 %): {view.noise_floor:.2f}")
+    _print_lineage(view)
+    for kind, text in view.statements:
+        print(f"input ({kind}): {text}")
     print(f"{'rank':>4}  {'candidate':<28} {'kind':<9} {'held-out':>8} {'explained':>9}  fitted")
-    for k, c in enumerate(res.candidates, 1):
+    for k, c in enumerate(view.candidates, 1):
         print(f"{k:>4}  {c.name:<28} {c.kind:<9} {c.held_out_explained:8.2f} {c.explained:9.2f}  {c.summary}")
         print(f"{'':>6}fixes {', '.join(c.fixes) or '-'}; worsens {', '.join(c.worsens) or '-'}")
         for f in c.flags:
             print(f"{'':>6}! {f}")
-    if res.causes:
-        print("causes (greedy, joint refit; share added on held-out sections): " + ", ".join(
-            f"{c['name']} {c['held_out_share']:.2f}" for c in res.causes)
-              + f" — together {res.cause_set['held_out_explained']:.2f}")
-    for x in (res.cause_set or {}).get("left_out", []):
-        print(f"not in the cause set: {x['name']} — {x['reason']}")
-    for x in (res.cause_set or {}).get("passed_over", []):
-        print(f"passed over (the search carried on): {x['name']} — {x['reason']}")
-    for f in res.families or []:
-        best = f["top"][0] if f["top"] else None
-        print(f"family {f['title']} ({f['share']:.0%} of the residual): {f['verdict']}"
-              + (f", best {best['name']} {best['held_out_explained']:.2f} held-out" if best else "")
-              + (f" — STRUCTURAL: {f['structural']['reason']}" if f["structural"]["flag"] else ""))
-    for s in res.skipped or []:
-        print(f"left out: {s['name']} ({s['kind']}) — {s['reason']}")
-    if res.verdict == "none" and res.unexplained:
+    _print_causes(view)
+    for f in view.families:
+        print(f"family {f.title} ({f.share:.0%} of the residual): {f.verdict}"
+              + (f", best {f.best} {f.best_held_out:.2f} held-out" if f.best is not None else "")
+              + (f" — STRUCTURAL: {f.structural_reason}" if f.structural else ""))
+    for s in view.skipped:
+        print(f"left out: {s.name} ({s.kind}) — {s.reason}")
+    if view.verdict == "none" and view.unexplained:
         print("unexplained (largest components): " + "; ".join(
-            f"{u['component']} {u['residual']:+.2f}" for u in res.unexplained))
-    if res.next_step and res.next_step.get("text"):
-        print(f"next: {res.next_step['text']}")
+            f"{component} {residual:+.2f}" for component, residual in view.unexplained))
+    if view.next_text:
+        print(f"next: {view.next_text}")
     return 0
 
 
-def _print_lineage(lineage: dict | None) -> None:
-    """The lineage of diagnoses (root first) and what is left after the calibration."""
-    if not lineage:
+def _print_causes(view) -> None:
+    """The cause set (greedy, joint refit) and the candidates it left out or passed over."""
+    if view.causes:
+        print("causes (greedy, joint refit; share added on held-out sections): " + ", ".join(
+            f"{c.name} {c.held_out_share:.2f}" for c in view.causes)
+              + f" — together {view.cause_set.held_out_explained:.2f}")
+    for x in view.cause_set.left_out:
+        print(f"not in the cause set: {x.name} — {x.reason}")
+    for x in view.cause_set.passed_over:
+        print(f"passed over (the search carried on): {x.name} — {x.reason}")
+
+
+def _print_lineage(view) -> None:
+    """The lineage of diagnoses (root first) and what is left after the calibration
+    (a :class:`railval.app.views.DiagnosisView`)."""
+    if not view.has_lineage:
         return
     print("lineage of diagnoses: " + " → ".join(
-        f"{a['configuration']} " + (f"#{a['diagnosis']} {str(a['verdict']).upper()}"
-                                     + (f" {a['top']}" if a["top"] else "") if a["diagnosis"] else "(not diagnosed)")
-        for a in lineage["ancestors"]) + f" → {lineage['configuration']}")
-    if lineage.get("statement"):
-        print(f"after calibration: {lineage['statement']['text']}")
+        f"{a.configuration} " + (f"#{a.diagnosis} {str(a.verdict).upper()}"
+                                 + (f" {a.top}" if a.top else "") if a.diagnosis else "(not diagnosed)")
+        for a in view.ancestors) + f" → {view.lineage_configuration}")
+    if view.lineage_statement:
+        print(f"after calibration: {view.lineage_statement}")
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
