@@ -19,27 +19,32 @@ from __future__ import annotations
 import argparse
 
 from railval.app.cli import Progress, emit_json
+from railval.core import lazy
+from railval.core.errors import InvalidParameter
+
+# the services and records this module's verbs call, imported when a verb first uses
+# them (railval.core.lazy): `railval --help` and the other verbs never load them
+app_views = lazy.module("railval.app.views")
+calibration_service = lazy.module("railval.app.services.calibration")
+connect = lazy.function("railval.db.engine", "connect")  # the --db URL → its connection
+diagnosis_service = lazy.module("railval.app.services.diagnosis")
+modal_service = lazy.module("railval.app.services.modal")
 
 
 def _db(args: argparse.Namespace):
-    from railval.db.engine import connect
-
     database = connect(args.db)
     database.ensure_initialised()
     return database
 
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
-    from railval.app.services.diagnosis import diagnose
-    from railval.app.views import diagnosis_view_of
-
-    res = diagnose(_db(args), args.campaign, args.config, progress=Progress(), scheduler=args.scheduler,
+    res = diagnosis_service.diagnose(_db(args), args.campaign, args.config, progress=Progress(), scheduler=args.scheduler,
                    values_per_parameter=args.values, effects=args.candidates,
                    **({"include_parameters": False} if args.no_parameters else {}))
     if args.json:
         emit_json(res.to_dict())
         return 0
-    view = diagnosis_view_of(res)
+    view = app_views.diagnosis_view_of(res)
     print(f"diagnosis of {args.campaign}/{args.config}: verdict {view.verdict.upper()} — {view.note}")
     print(f"noise floor (share of pure section scatter the candidates explain, 95 %): {view.noise_floor:.2f}")
     _print_lineage(view)
@@ -92,18 +97,14 @@ def _print_lineage(view) -> None:
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from railval.app.services.calibration import calibrate
-
     start: dict[str, dict[str, float]] = {}
     for item in args.start or []:
         key, sep, value = item.partition("=")
         effect, dot, pname = key.partition(".")
         if not (sep and dot):
-            from railval.core.errors import InvalidParameter
-
             raise InvalidParameter(f"--start expects EFFECT.PARAM=VALUE or model.NAME=VALUE, got {item!r}")
         start.setdefault(effect, {})[pname] = float(value)
-    res = calibrate(_db(args), args.campaign, args.config, args.effect, args.new_name, params=args.params,
+    res = calibration_service.calibrate(_db(args), args.campaign, args.config, args.effect, args.new_name, params=args.params,
                     progress=Progress(), scheduler=args.scheduler, seed=args.seed, replace=args.replace,
                     start=start or None, fit_sections=args.fit_sections, holdout=args.holdout, split=args.split,
                     method="global" if args.global_search else "local")
@@ -134,9 +135,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_modal(args: argparse.Namespace) -> int:
-    from railval.app.services.modal import modal
-
-    d = modal(_db(args), args.campaign, sections=args.section, calibrate_params=args.calibrate,
+    d = modal_service.modal(_db(args), args.campaign, sections=args.section, calibrate_params=args.calibrate,
               progress=Progress())
     if args.json:
         emit_json(d)
