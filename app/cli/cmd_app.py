@@ -107,8 +107,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     print(f"railval serve: http://{args.address}:{args.port}/app (database {database.safe_url})",
           file=sys.stderr, flush=True)
     app_main.serve(database, port=args.port, address=args.address, show=args.show, allow_websocket_origin=origins,
-          cookie_secret_file=args.cookie_secret_file, behind_proxy=args.behind_proxy,
-          admin=args.admin)
+                   cookie_secret_file=args.cookie_secret_file, behind_proxy=args.behind_proxy,
+                   admin=args.admin)
     return 0
 
 
@@ -125,7 +125,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
         # the cards show answers: the workshop.results permission
         actor = users_service.principal_of(database, database_service.default_actor())
         cards = workshop_cards_service.report_cards(database, args.workshop, args.config, args.cards, groups=args.groups,
-                             actor=actor)
+                                                    actor=actor)
     rep = app_report.build_report(app_backend.Backend(database), args.campaign, args.config, worst_cases=args.worst, cards=cards)
     path = rep.write(args.out)
     if args.json:

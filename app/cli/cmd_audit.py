@@ -338,8 +338,8 @@ def _cmd_signoff_create(args) -> int:
                            "--justification TEXT; nothing was signed")
     password = app_cmd_user.read_password(args, confirm=False, prompt=f"Password of {username} (signature): ")
     rec = signoff_service.sign(database, username, password, args.campaign, args.config,
-               decision=args.decision, restrictions=args.restrictions,
-               statement=args.statement, justification=args.justification, source="cli")
+                               decision=args.decision, restrictions=args.restrictions,
+                               statement=args.statement, justification=args.justification, source="cli")
     if args.json:
         rec = {k: v for k, v in rec.items() if k != "manifest"}
         emit_json({**rec, "summary": summ})

@@ -39,8 +39,8 @@ def _db(args: argparse.Namespace):
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
     res = diagnosis_service.diagnose(_db(args), args.campaign, args.config, progress=Progress(), scheduler=args.scheduler,
-                   values_per_parameter=args.values, effects=args.candidates,
-                   **({"include_parameters": False} if args.no_parameters else {}))
+                                     values_per_parameter=args.values, effects=args.candidates,
+                                     **({"include_parameters": False} if args.no_parameters else {}))
     if args.json:
         emit_json(res.to_dict())
         return 0
@@ -105,9 +105,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             raise InvalidParameter(f"--start expects EFFECT.PARAM=VALUE or model.NAME=VALUE, got {item!r}")
         start.setdefault(effect, {})[pname] = float(value)
     res = calibration_service.calibrate(_db(args), args.campaign, args.config, args.effect, args.new_name, params=args.params,
-                    progress=Progress(), scheduler=args.scheduler, seed=args.seed, replace=args.replace,
-                    start=start or None, fit_sections=args.fit_sections, holdout=args.holdout, split=args.split,
-                    method="global" if args.global_search else "local")
+                                        progress=Progress(), scheduler=args.scheduler, seed=args.seed, replace=args.replace,
+                                        start=start or None, fit_sections=args.fit_sections, holdout=args.holdout, split=args.split,
+                                        method="global" if args.global_search else "local")
     d = res.to_dict()
     if args.json:
         emit_json(d)
@@ -136,7 +136,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 def _cmd_modal(args: argparse.Namespace) -> int:
     d = modal_service.modal(_db(args), args.campaign, sections=args.section, calibrate_params=args.calibrate,
-              progress=Progress())
+                            progress=Progress())
     if args.json:
         emit_json(d)
         return 0

@@ -69,8 +69,8 @@ def _cmd_metrics(args: argparse.Namespace) -> int:
     database.ensure_initialised()
     lowpass_hz = None if args.no_lowpass else args.lowpass
     df = overview_service.metrics(database, args.campaign, args.config, args.section, args.channel,
-                          lowpass_hz=lowpass_hz, max_lag_s=args.max_lag, families=args.family,
-                          part=args.part, subsample=args.subsample)
+                                  lowpass_hz=lowpass_hz, max_lag_s=args.max_lag, families=args.family,
+                                  part=args.part, subsample=args.subsample)
     names = core_metrics.metric_names(args.family)
     if args.json:
         rows = [{k: _clean(v) for k, v in rec.items()} for rec in df.to_dict(orient="records")]

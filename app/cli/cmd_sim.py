@@ -58,8 +58,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     effects = dict(parse_effect(e) for e in args.effect or [])
     params = dict(parse_param(p) for p in args.param or [])
     res = simulation_service.simulate_configuration(_db(args), args.campaign, args.config, parent=args.parent, effects=effects,
-                                 parameters=params, replace=args.replace, workers=args.workers,
-                                 scheduler=args.scheduler, progress=Progress())
+                                                    parameters=params, replace=args.replace, workers=args.workers,
+                                                    scheduler=args.scheduler, progress=Progress())
     if args.json:
         emit_json(res)
     else:
@@ -70,7 +70,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 def _cmd_synth(args: argparse.Namespace) -> int:
     res = synth_service.synth(_db(args), name=args.name, template=args.vehicle, hidden=args.hidden, seed=args.seed,
-                n_sections=args.sections, out=args.out, reveal=args.reveal, progress=Progress())
+                              n_sections=args.sections, out=args.out, reveal=args.reveal, progress=Progress())
     if args.json:
         emit_json(res)
     else:

@@ -125,7 +125,7 @@ def _database(args):
 def _cmd_add(args) -> int:
     password = None if args.no_password else read_password(args)
     name, roles = users_service.add(_database(args), args.name, display_name=args.display_name,
-                      password=password, roles=args.role, reason=args.reason)
+                                    password=password, roles=args.role, reason=args.reason)
     print(f"user {name} added (roles: {', '.join(roles) or 'none'})")
     return 0
 

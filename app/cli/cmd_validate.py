@@ -177,11 +177,11 @@ def cmd_validate(args: argparse.Namespace) -> int:
     database.ensure_initialised()
     if args.scheduler:
         (result,) = validation_service.validate_configurations(database, args.campaign, [args.config],
-                                            order=args.order, n_boot=args.boot, seed=args.seed,
-                                            scheduler=args.scheduler).values()
+                                                               order=args.order, n_boot=args.boot, seed=args.seed,
+                                                               scheduler=args.scheduler).values()
     else:
         result = overview_service.validation(database, args.campaign, args.config, order=args.order,
-                                     n_boot=args.boot, seed=args.seed)
+                                             n_boot=args.boot, seed=args.seed)
     if args.json:
         doc = result.to_dict()
         ins = app_views.view_of(result).in_sample
