@@ -251,6 +251,9 @@ class FamilyRow:
     best_held_out: float | None
     structural: bool
     structural_reason: str
+    #: where the structural misfit lies (empty unless ``structural``)
+    structural_quantities: tuple[str, ...] = ()
+    structural_zones: tuple[int, ...] = ()
 
     @classmethod
     def of(cls, d: Mapping[str, Any]) -> FamilyRow:
@@ -258,7 +261,9 @@ class FamilyRow:
         return cls(str(d["title"]), float(d["share"]), str(d["verdict"]),
                    None if top is None else str(top["name"]),
                    None if top is None else float(top["held_out_explained"]),
-                   bool(d["structural"]["flag"]), str(d["structural"]["reason"]))
+                   bool(d["structural"]["flag"]), str(d["structural"]["reason"]),
+                   tuple(str(q) for q in d["structural"].get("quantities") or ()),
+                   tuple(d["structural"].get("zones") or ()))
 
 
 @dataclass(frozen=True)
@@ -269,10 +274,15 @@ class Ancestor:
     diagnosis: int | None
     verdict: str | None
     top: str | None
+    #: the share the top candidate explains on held-out sections (None: not diagnosed)
+    held_out_explained: float | None = None
+    created_at: str = ""
 
     @classmethod
     def of(cls, d: Mapping[str, Any]) -> Ancestor:
-        return cls(str(d["configuration"]), d["diagnosis"], d["verdict"], d["top"])
+        held = d.get("held_out_explained")
+        return cls(str(d["configuration"]), d["diagnosis"], d["verdict"], d["top"],
+                   None if held is None else float(held), str(d.get("created_at") or ""))
 
 
 @dataclass(frozen=True)
@@ -359,6 +369,11 @@ class DiagnosisView:
     @property
     def lineage_configuration(self) -> str:
         return str((self.result.lineage or {}).get("configuration") or "")
+
+    @property
+    def lineage_status(self) -> str:
+        """The statement's status: within scatter, explained, uncertain or beyond library."""
+        return str(((self.result.lineage or {}).get("statement") or {}).get("status") or "")
 
     @property
     def lineage_statement(self) -> str:

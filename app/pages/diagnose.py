@@ -20,6 +20,7 @@ from railval.app.pages.dashboard import validation_view
 from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 from railval.app.svg_charts import svg_paired_hbars
+from railval.app.views import Ancestor
 
 
 #: the signature chart's value axis: what the residual is, and that it has no unit
@@ -156,16 +157,17 @@ class DiagnosePage(PageBase):
                                     "(start point, population × generations, polish, final run).")
 
     def _show_candidates(self) -> None:
-        cands = self.state.candidates
+        view = self.state.view  # the diagnosis's typed fields (railval.app.views.DiagnosisView)
+        cands = view.candidates if view is not None else []
         if not cands and not self.state.verdict:
             self.candidates_box.objects = [pn.pane.Markdown("*No diagnosis yet — press **Run diagnosis**.*")]
             return
         df = pd.DataFrame([{
-            "#": i + 1, "candidate": c["effect"], "kind": c.get("kind", "effect"),
-            "held-out": round(100 * float(c["held_out_explained"]), 1),
-            "in-sample": round(100 * float(c["explained"]), 1),
-            "plausible": "yes" if c.get("plausible", True) else "no", "flags": len(c.get("flags") or []),
-            "fitted parameters": ", ".join(f"{k} = {v:.4g}" for k, v in (c.get("parameters") or {}).items()),
+            "#": i + 1, "candidate": c.name, "kind": c.kind,
+            "held-out": round(100 * float(c.held_out_explained), 1),
+            "in-sample": round(100 * float(c.explained), 1),
+            "plausible": "yes" if c.plausible else "no", "flags": len(c.flags),
+            "fitted parameters": ", ".join(f"{k} = {v:.4g}" for k, v in c.parameters.items()),
         } for i, c in enumerate(cands)])
         extra = []
         note = self.state.diagnosis_note
@@ -176,31 +178,21 @@ class DiagnosePage(PageBase):
                     "none": "No candidate explains the residual"}.get(verdict, verdict)
             text = f"{head}: {note}" + (f" (noise floor {nf:.2f})" if nf is not None and "noise floor" not in note else "")
             extra.append(message(text, {"cause": "success", "uncertain": "warning"}.get(verdict, "danger")))
-            if verdict == "none" and self.state.unexplained:
+            if verdict == "none" and view is not None and view.unexplained:
                 extra.append(message("Unexplained: " + "; ".join(
-                    f"{u['component']} {u['residual']:+.2f}" for u in self.state.unexplained), "info"))
+                    f"{component} {residual:+.2f}" for component, residual in view.unexplained), "info"))
         elif note:
             extra.append(message(note, "info" if self.state.separable else "warning"))
-        if self.state.causes:
-            together = (self.state.cause_set or {}).get("held_out_explained")
-            extra.append(message(
-                f"Causes found together ({len(self.state.causes)}; share of the residual each adds on held-out "
-                "sections): " + ", ".join(f"{c['name']} {100 * c['held_out_share']:.0f} %" for c in self.state.causes)
-                + (f"; together {100 * together:.0f} %" if together is not None else ""),
-                "success" if len(self.state.causes) > 1 else "info"))
-        left = (self.state.cause_set or {}).get("left_out") or []
-        if left:
-            extra.append(message("Not in the cause set: " + "; ".join(f"{x['name']} — {x['reason']}" for x in left),
-                                 "warning"))
-        extra += self._lineage() + self._families()
-        in_config = [s for s in self.state.skipped if s["kind"] == "configuration"]
-        candidates = [s for s in self.state.skipped if s["kind"] != "configuration"]
+        extra += self._cause_set(view) + self._lineage() + self._families(view)
+        skipped = view.skipped if view is not None else []
+        in_config = [s for s in skipped if s.kind == "configuration"]
+        candidates = [s for s in skipped if s.kind != "configuration"]
         if in_config:
             extra.append(message("Configuration simulated without (cannot apply to this campaign): " + "; ".join(
-                f"{s['name']} — {s['reason']}" for s in in_config), "warning"))
+                f"{s.name} — {s.reason}" for s in in_config), "warning"))
         if candidates:
             extra.append(message("Left out (cannot apply to this campaign): " + "; ".join(
-                f"{s['name']} — {s['reason']}" for s in candidates), "info"))
+                f"{s.name} — {s.reason}" for s in candidates), "info"))
         # the verdict first: a reader must not scroll past 20 candidates to learn how sure it is
         # 890 px in all: fits the main area at 1280 px (what it fixes and worsens: below, per candidate)
         widths = {"#": 40, "candidate": 165, "kind": 85, "held-out": 100, "in-sample": 105,
@@ -215,54 +207,70 @@ class DiagnosePage(PageBase):
                      layout="fit_columns")] if cands else []),
             *self._earlier_runs(), self.candidate_box,
         ]
-        ranked = [c["effect"] for c in cands]
+        ranked = [c.name for c in cands]
         rest = [e for e in self.state.param.effect.objects if e not in ranked]
         self.state.param.effect.objects = ranked + rest
         self._show_candidate()
 
-    def _families(self) -> list:
+    @staticmethod
+    def _cause_set(view) -> list:
+        """The cause set (each member's added held-out share, the joint share) and the
+        candidates it left out, from the diagnosis's view model."""
+        if view is None:
+            return []
+        out, causes, cause_set = [], view.causes, view.cause_set
+        if causes:
+            out.append(message(
+                f"Causes found together ({len(causes)}; share of the residual each adds on held-out "
+                "sections): " + ", ".join(f"{c.name} {100 * c.held_out_share:.0f} %" for c in causes)
+                + f"; together {100 * cause_set.held_out_explained:.0f} %",
+                "success" if len(causes) > 1 else "info"))
+        if cause_set.left_out:
+            out.append(message("Not in the cause set: " + "; ".join(
+                f"{x.name} — {x.reason}" for x in cause_set.left_out), "warning"))
+        return out
+
+    @staticmethod
+    def _families(view) -> list:
         """Per quantity family: its share of the residual, verdict, best candidate and whether
         its behaviour differs structurally (docs/diagnosis.md "Per family")."""
-        fams = self.state.families
+        fams = view.families if view is not None else []
         if not fams:
             return []
         df = pd.DataFrame([{
-            "family": f["title"], "share of residual (%)": round(100 * float(f["share"]), 1),
-            "verdict": f["verdict"] + (" (structural)" if f["structural"]["flag"] else ""),
-            "best candidate": f["top"][0]["name"] if f["top"] else "",
-            "held-out (%)": round(100 * float(f["top"][0]["held_out_explained"]), 1) if f["top"] else None,
-            "where": (", ".join(f["structural"]["quantities"]) + "; zones "
-                      + ", ".join(map(str, f["structural"]["zones"]))) if f["structural"]["flag"] else "",
+            "family": f.title, "share of residual (%)": round(100 * f.share, 1),
+            "verdict": f.verdict + (" (structural)" if f.structural else ""),
+            "best candidate": f.best or "",
+            "held-out (%)": round(100 * f.best_held_out, 1) if f.best_held_out is not None else None,
+            "where": (", ".join(f.structural_quantities) + "; zones "
+                      + ", ".join(map(str, f.structural_zones))) if f.structural else "",
         } for f in fams])
-        notes = [message(f"{f['title']}: {f['structural']['reason']}", "warning")
-                 for f in fams if f["structural"]["flag"]]
+        notes = [message(f"{f.title}: {f.structural_reason}", "warning") for f in fams if f.structural]
         return [pn.pane.Markdown("#### Per quantity family"),
                 table(df, height=40 + 32 * len(df), css_classes=["rv-families"]), *notes]
 
     def _lineage(self) -> list:
         """The diagnoses of the configuration's ancestors (root first: verdict, top cause) and
         what is left of the parent's residual after the calibration (docs/diagnosis.md "Lineage")."""
-        lin = self.state.lineage
-        if not lin:
+        view = self.state.view
+        if view is None or not view.has_lineage:
             return []
-        top = (self.state.candidates or [{}])[0]
-        rows = [*lin.get("ancestors", []), {"configuration": lin.get("configuration"),
-                                            "diagnosis": self.state.stored_run.get("id"), "verdict": self.state.verdict,
-                                            "top": top.get("effect"), "held_out_explained": top.get("held_out_explained"),
-                                            "created_at": "this diagnosis"}]
+        top = view.candidates[0] if view.candidates else None
+        rows = [*view.ancestors, Ancestor(
+            view.lineage_configuration, self.state.stored_run.get("id"), view.verdict,
+            top.name if top else None, top.held_out_explained if top else None, "this diagnosis")]
         df = pd.DataFrame([{
-            "configuration": a["configuration"],
-            "diagnosis": f"#{a['diagnosis']}" if a.get("diagnosis") else a.get("created_at") or "not diagnosed",
-            "verdict": a.get("verdict") or "-", "top cause": a.get("top") or "-",
-            "held-out (%)": round(100 * float(a["held_out_explained"]), 1)
-            if a.get("held_out_explained") is not None else None} for a in rows])
+            "configuration": a.configuration,
+            "diagnosis": f"#{a.diagnosis}" if a.diagnosis else a.created_at or "not diagnosed",
+            "verdict": a.verdict or "-", "top cause": a.top or "-",
+            "held-out (%)": round(100 * a.held_out_explained, 1)
+            if a.held_out_explained is not None else None} for a in rows])
         out = [pn.pane.Markdown("#### Lineage of diagnoses (root first)"),
                table(df, height=40 + 32 * len(df), css_classes=["rv-diagnosis-lineage"])]
-        st = lin.get("statement")
-        if st and st.get("text"):
+        if view.lineage_statement:
             level = {"within scatter": "success", "explained": "info", "uncertain": "warning",
-                     "beyond library": "danger"}.get(st.get("status"), "info")
-            out.insert(0, message("After calibration: " + st["text"], level))
+                     "beyond library": "danger"}.get(view.lineage_status, "info")
+            out.insert(0, message("After calibration: " + view.lineage_statement, level))
         return out
 
     def _run_line(self) -> list:
