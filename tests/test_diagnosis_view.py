@@ -101,7 +101,8 @@ def _result() -> DiagnosisResult:
                    "passed_over": []},
         families=[{"title": "lateral", "share": 0.7, "verdict": "cause",
                    "top": [{"name": "model.c_secondary_z", "held_out_explained": 0.5}],
-                   "structural": {"flag": True, "reason": "every zone"}},
+                   "structural": {"flag": True, "reason": "every zone", "quantities": ["Y_qst"],
+                                  "zones": [2, 3]}},
                   {"title": "vertical", "share": 0.3, "verdict": "none", "top": [],
                    "structural": {"flag": False, "reason": ""}}],
         skipped=[{"name": "measured_irregularities", "kind": "effect", "reason": "no track data"}],
@@ -109,7 +110,7 @@ def _result() -> DiagnosisResult:
         statements=[{"kind": "track input", "text": "measured track"}],
         lineage={"configuration": "b+c", "statement": {"text": "left 0.2"},
                  "ancestors": [{"configuration": "b", "diagnosis": 3, "verdict": "cause",
-                                "top": "conicity"}]})
+                                "top": "conicity", "held_out_explained": 0.4}]})
 
 
 def test_the_view_reads_every_part_into_typed_rows():
@@ -119,14 +120,15 @@ def test_the_view_reads_every_part_into_typed_rows():
     assert view.cause_set.held_out_explained == 0.55
     assert view.cause_set.left_out == (Named("conicity", "alike"),) and view.cause_set.passed_over == ()
     assert view.families == [
-        FamilyRow("lateral", 0.7, "cause", "model.c_secondary_z", 0.5, True, "every zone"),
+        FamilyRow("lateral", 0.7, "cause", "model.c_secondary_z", 0.5, True, "every zone",
+                  ("Y_qst",), (2, 3)),
         FamilyRow("vertical", 0.3, "none", None, None, False, "")]
     assert view.skipped == [Named("measured_irregularities", "no track data", "effect")]
     assert view.unexplained == [("Y_qst zone 2 w1L", -1.5)]
     assert view.statements == [("track input", "measured track")]
     assert view.next_text == "calibrate model.c_secondary_z"
     assert view.has_lineage and view.lineage_configuration == "b+c"
-    assert view.ancestors == [Ancestor("b", 3, "cause", "conicity")]
+    assert view.ancestors == [Ancestor("b", 3, "cause", "conicity", 0.4)]
     assert view.lineage_statement == "left 0.2"
     assert view.candidate("model.c_secondary_z").fitted == 9000.0 and view.candidate("x") is None
     row = view.residual_row()
