@@ -117,7 +117,7 @@ class DiagnosePage(PageBase):
             catalogue, available = {}, []
             self.app.set_status(plain_message(exc, "diagnose"), "warning")
         self._catalogue = catalogue
-        ranked = [c["effect"] for c in self.state.candidates]
+        ranked = [c.name for c in self.state.view.candidates] if self.state.view is not None else []
         self.state.param.effect.objects = ranked + [e for e in available if e not in ranked]
         if self.state.effect not in self.state.param.effect.objects:
             self.state.effect = (self.state.param.effect.objects or [None])[0]
@@ -307,35 +307,38 @@ class DiagnosePage(PageBase):
     def _show_candidate(self) -> None:
         """The chosen effect (the top candidate unless another is chosen): why, its signature
         per quantity group, and where the residual lies now and after adding it."""
-        cands = self.state.candidates
-        cand = next((c for c in cands if c["effect"] == self.state.effect), cands[0] if cands else None)
+        view = self.state.view
+        cands = view.candidates if view is not None else []
+        cand = view.candidate(self.state.effect) if view is not None else None
+        if cand is None and cands:
+            cand = cands[0]  # the top candidate unless another is chosen
         if cand is None:
             self.candidate_box.objects = []
             return
         rank = cands.index(cand) + 1
         items: list[Any] = [
-            pn.pane.Markdown(f"#### Candidate {rank}: {html.escape(cand['effect'])} — explains "
-                             f"{100 * float(cand['explained']):.1f} % of the residual"),
-            pn.pane.Markdown(f"**Why {html.escape(cand['effect'])}?** {html.escape(cand.get('explanation', ''))}",
+            pn.pane.Markdown(f"#### Candidate {rank}: {html.escape(cand.name)} — explains "
+                             f"{100 * float(cand.explained):.1f} % of the residual"),
+            pn.pane.Markdown(f"**Why {html.escape(cand.name)}?** {html.escape(cand.explanation)}",
                              sizing_mode="stretch_width"),
-            *([pn.pane.Markdown(f"**Fitted value** {cand['fitted']:.4g} (interval: bootstrap over sections 5–95 %, widened to the values fitted on "
+            *([pn.pane.Markdown(f"**Fitted value** {cand.fitted:.4g} (interval: bootstrap over sections 5–95 %, widened to the values fitted on "
                                 f"each held-out fold: "
-                                f"{cand['fitted_ci'][0]:.4g}–{cand['fitted_ci'][1]:.4g})"
-                                + (f"; the model's value {cand['reference']:.4g}" if cand.get("reference") else ""),
+                                f"{cand.fitted_ci[0]:.4g}–{cand.fitted_ci[1]:.4g})"
+                                + (f"; the model's value {cand.reference:.4g}" if cand.reference else ""),
                                 sizing_mode="stretch_width")]
-              if cand.get("fitted_ci") and all(np.isfinite(cand["fitted_ci"])) else []),
+              if all(np.isfinite(cand.fitted_ci)) else []),
             pn.pane.Markdown(f"**Fixes** (quantity groups whose residual falls by a fifth or more): "
-                             f"{html.escape(', '.join(cand.get('fixes') or []) or 'none')}. **Worsens**: "
-                             f"{html.escape(', '.join(cand.get('worsens') or []) or 'none')}.",
+                             f"{html.escape(', '.join(cand.fixes) or 'none')}. **Worsens**: "
+                             f"{html.escape(', '.join(cand.worsens) or 'none')}.",
                              sizing_mode="stretch_width"),
-            *[message(str(f), "warning") for f in (cand.get("flags") or [])],
-            pn.pane.HTML(signature_chart(cand), css_classes=["rv-signature"], styles={"overflow-x": "auto"},
-                         sizing_mode="stretch_width"),
+            *[message(str(f), "warning") for f in cand.flags],
+            pn.pane.HTML(signature_chart(cand.to_dict()), css_classes=["rv-signature"],
+                         styles={"overflow-x": "auto"}, sizing_mode="stretch_width"),
         ]
-        where = self.state.where(cand["effect"])
+        where = self.state.where(cand.name)
         if where:
             (q_now, p_now), (q_after, p_after) = where["now"], where["after"]
-            after = f"with {cand['effect']} (fitted)"
+            after = f"with {cand.name} (fitted)"
             items += [
                 pn.pane.Markdown("**Where the model fails, and what is left with the candidate** — mean "
                                  "normalised D_v per quantity and EN 14363 zone (positions averaged); the "
@@ -362,7 +365,8 @@ class DiagnosePage(PageBase):
             self.param_box.objects = []
             return
         self.explain.object = f"**{html.escape(str(eff['title']))}** — {html.escape(str(eff['explanation']))}"
-        fitted = next((c.get("parameters", {}) for c in self.state.candidates if c["effect"] == eff["name"]), {})
+        chosen = self.state.view.candidate(eff["name"]) if self.state.view is not None else None
+        fitted = chosen.parameters if chosen is not None else {}
         widgets = []
         for p in eff["parameters"]:
             lo, hi = p["bounds"]
