@@ -235,7 +235,7 @@ def gather_report(backend: Any, campaign: str, config: str) -> ReportInputs:
     """Check every blob of the evidence against its hash and seal, then read the validation
     (through ``backend``, exactly as the dashboard shows it), the campaign, the lineage, the
     content hashes and the sign-offs."""
-    overview_service.require_evidence(backend.database, campaign, config)
+    overview_service.require_sealed(backend.database, campaign, config)
     result = backend.validation(campaign, config)
     signoffs = (overview_service.signoff_items(backend.database, campaign, config)
                 if hasattr(backend, "session") else None)

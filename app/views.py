@@ -15,13 +15,17 @@ No UI library is imported: pages turn these rows into widgets, the report into H
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from railval.core.coverage import Coverage
 from railval.core.en14363 import PROCESSING_VERSION
 from railval.core.validation import STD_DEFINITION, QuantityResult, ValidationResult
+
+if TYPE_CHECKING:  # the diagnosis package is imported by the services that run it
+    from railval.core.diagnosis import DiagnosisResult, TrustedCandidate
 
 
 @dataclass(frozen=True)
@@ -181,3 +185,204 @@ def view_of(result: ValidationResult) -> ValidationView:
     if not isinstance(result, ValidationResult):
         raise TypeError(f"a ValidationResult is needed, got {type(result).__name__}")
     return ValidationView(result)
+
+
+# -- the diagnosis ----------------------------------------------------------------------
+# The dict-shaped parts of a DiagnosisResult (families, cause set, lineage, …) are read here,
+# once, into typed rows: pages, state and CLI read the rows' fields, so a renamed key of the
+# documented ``railval diagnose --json`` contract (docs/diagnosis.md) raises here.
+
+
+@dataclass(frozen=True)
+class Named:
+    """A candidate named with a reason: skipped, left out of or passed over by the cause set."""
+
+    name: str
+    reason: str
+    kind: str = ""
+
+    @classmethod
+    def of(cls, d: Mapping[str, Any]) -> Named:
+        return cls(str(d["name"]), str(d["reason"]), str(d.get("kind") or ""))
+
+
+@dataclass(frozen=True)
+class Cause:
+    """One member of the cause set: what adding it raised the held-out share by."""
+
+    name: str
+    kind: str
+    parameter: str
+    fitted: float | None
+    held_out_share: float
+
+    @classmethod
+    def of(cls, d: Mapping[str, Any]) -> Cause:
+        fitted = d.get("fitted")
+        return cls(str(d["name"]), str(d["kind"]), str(d.get("parameter") or ""),
+                   None if fitted is None else float(fitted), float(d["held_out_share"]))
+
+
+@dataclass(frozen=True)
+class CauseSet:
+    """The cause set's joint held-out share and the candidates it left out or passed over."""
+
+    held_out_explained: float
+    left_out: tuple[Named, ...]
+    passed_over: tuple[Named, ...]
+
+    @classmethod
+    def of(cls, d: Mapping[str, Any] | None) -> CauseSet:
+        d = d or {}
+        return cls(float(d.get("held_out_explained") or 0.0),
+                   tuple(Named.of(x) for x in d.get("left_out") or []),
+                   tuple(Named.of(x) for x in d.get("passed_over") or []))
+
+
+@dataclass(frozen=True)
+class FamilyRow:
+    """One quantity family: its share of the residual, verdict, best candidate and whether
+    the misfit is structural (no candidate of the library can remove it)."""
+
+    title: str
+    share: float
+    verdict: str
+    best: str | None
+    best_held_out: float | None
+    structural: bool
+    structural_reason: str
+    #: where the structural misfit lies (empty unless ``structural``)
+    structural_quantities: tuple[str, ...] = ()
+    structural_zones: tuple[int, ...] = ()
+
+    @classmethod
+    def of(cls, d: Mapping[str, Any]) -> FamilyRow:
+        top = d["top"][0] if d["top"] else None
+        return cls(str(d["title"]), float(d["share"]), str(d["verdict"]),
+                   None if top is None else str(top["name"]),
+                   None if top is None else float(top["held_out_explained"]),
+                   bool(d["structural"]["flag"]), str(d["structural"]["reason"]),
+                   tuple(str(q) for q in d["structural"].get("quantities") or ()),
+                   tuple(d["structural"].get("zones") or ()))
+
+
+@dataclass(frozen=True)
+class Ancestor:
+    """A configuration of the lineage with its newest diagnosis (None: not diagnosed)."""
+
+    configuration: str
+    diagnosis: int | None
+    verdict: str | None
+    top: str | None
+    #: the share the top candidate explains on held-out sections (None: not diagnosed)
+    held_out_explained: float | None = None
+    created_at: str = ""
+
+    @classmethod
+    def of(cls, d: Mapping[str, Any]) -> Ancestor:
+        held = d.get("held_out_explained")
+        return cls(str(d["configuration"]), d["diagnosis"], d["verdict"], d["top"],
+                   None if held is None else float(held), str(d.get("created_at") or ""))
+
+
+@dataclass(frozen=True)
+class DiagnosisView:
+    """One diagnosis as every view shows it: the typed fields of
+    :class:`railval.core.diagnosis.DiagnosisResult` with its dict-shaped parts read into rows
+    (:class:`Cause`, :class:`CauseSet`, :class:`FamilyRow`, :class:`Named`, :class:`Ancestor`)."""
+
+    result: DiagnosisResult
+
+    @property
+    def verdict(self) -> str:
+        return str(self.result.verdict)
+
+    @property
+    def note(self) -> str:
+        return str(self.result.note)
+
+    @property
+    def noise_floor(self) -> float:
+        return float(self.result.noise_floor)
+
+    @property
+    def candidates(self) -> list[TrustedCandidate]:
+        """The ranked :class:`railval.core.diagnosis.TrustedCandidate` objects."""
+        return list(self.result.candidates)
+
+    def candidate_rows(self) -> list[dict[str, Any]]:
+        """The candidates as the page's tables take them: each one's documented JSON fields
+        with its fitted signature (``TrustedCandidate.to_dict(with_signatures=True)``)."""
+        return [c.to_dict(with_signatures=True) for c in self.result.candidates]
+
+    def residual_row(self) -> dict[str, Any]:
+        """The residual as the page's plots take it: its norm, group norms, labels, values
+        and components (the ``residual`` of ``DiagnosisResult.to_dict(with_signatures=True)``)."""
+        residual = self.result.residual
+        return {"norm": math.sqrt(residual.norm2()), "groups": residual.group_norms(),
+                **residual.to_dict()}
+
+    def candidate(self, name: str | None) -> TrustedCandidate | None:
+        """The ranked candidate called ``name`` (None when there is none)."""
+        return next((c for c in self.result.candidates if c.name == name), None)
+
+    @property
+    def causes(self) -> list[Cause]:
+        return [Cause.of(c) for c in self.result.causes or []]
+
+    @property
+    def cause_set(self) -> CauseSet:
+        return CauseSet.of(self.result.cause_set)
+
+    @property
+    def families(self) -> list[FamilyRow]:
+        return [FamilyRow.of(f) for f in self.result.families or []]
+
+    @property
+    def skipped(self) -> list[Named]:
+        return [Named.of(s) for s in self.result.skipped or []]
+
+    @property
+    def unexplained(self) -> list[tuple[str, float]]:
+        """(component, residual) of what the best candidate leaves (largest first)."""
+        return [(str(u["component"]), float(u["residual"])) for u in self.result.unexplained]
+
+    @property
+    def statements(self) -> list[tuple[str, str]]:
+        """Input-side statements as (kind, text)."""
+        return [(str(s["kind"]), str(s["text"])) for s in self.result.statements or []]
+
+    @property
+    def next_text(self) -> str:
+        """The next step's sentence ('' when none)."""
+        return str((self.result.next_step or {}).get("text") or "")
+
+    @property
+    def has_lineage(self) -> bool:
+        """The configuration has a lineage to show (it was derived from another)."""
+        return bool(self.result.lineage)
+
+    @property
+    def ancestors(self) -> list[Ancestor]:
+        return [Ancestor.of(a) for a in (self.result.lineage or {}).get("ancestors") or []]
+
+    @property
+    def lineage_configuration(self) -> str:
+        return str((self.result.lineage or {}).get("configuration") or "")
+
+    @property
+    def lineage_status(self) -> str:
+        """The statement's status: within scatter, explained, uncertain or beyond library."""
+        return str(((self.result.lineage or {}).get("statement") or {}).get("status") or "")
+
+    @property
+    def lineage_statement(self) -> str:
+        """What is left after the calibration, read against the parent's diagnosis."""
+        return str(((self.result.lineage or {}).get("statement") or {}).get("text") or "")
+
+
+def diagnosis_view_of(result: DiagnosisResult) -> DiagnosisView:
+    """The view model of a diagnosis result."""
+    if not (hasattr(result, "candidates") and hasattr(result, "verdict")):
+        raise TypeError(f"a DiagnosisResult is needed, got {type(result).__name__}")
+    return DiagnosisView(result)

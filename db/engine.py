@@ -12,14 +12,16 @@ else the embedded SQLite file ``sqlite:///railval.db`` in the working directory.
   to mean the same driver.
 
 ``Database.session()`` is one unit of work: it commits when the block ends normally and
-rolls back when it raises; ``session(write=True)`` (:meth:`Database.write_session`) is a unit
-of work that writes (on SQLite it takes the write lock at ``BEGIN IMMEDIATE``, so concurrent
-writers wait their turn) — the one write door. :meth:`Database.read_session` (and
-``session()`` while :attr:`Database.read_only_reads` is set) is a read session the database
-itself keeps from writing: SQLite ``PRAGMA query_only = ON`` on its connection (set back OFF
-at the ``BEGIN`` of any other unit of work on that pooled connection, so the pragma never
-leaks into a write), PostgreSQL ``SET TRANSACTION READ ONLY`` as the first statement of the
-transaction. A write there raises :class:`WriteInReadSession`. ``Database.init()`` migrates
+rolls back when it raises. It is a read session unless it says it writes: the database itself
+keeps it from writing — SQLite ``PRAGMA query_only = ON`` on its connection (set back OFF at
+the ``BEGIN`` of any write unit of work on that pooled connection, so the pragma never leaks
+into a write), PostgreSQL ``SET TRANSACTION READ ONLY`` as the first statement of the
+transaction; a write there raises :class:`WriteInReadSession`. The one write door is
+``session(write=True)`` (:meth:`Database.write_session`): on SQLite it takes the write lock at
+``BEGIN IMMEDIATE``, so concurrent writers wait their turn; ``write_session(deferred=True)``
+(``session(write=True, deferred=True)``) is a unit of work that reads and computes first and
+ends with a short write — a plain ``BEGIN``, SQLite's lock taken only at that write.
+``Database.init()`` migrates
 the schema to the newest Alembic revision (idempotent); ``ensure_initialised()`` is the cheap
 check the CLI runs first.
 """
@@ -70,8 +72,8 @@ def acting_as(actor: str) -> Iterator[None]:
 
 
 class WriteInReadSession(RailvalError):
-    """A unit of work opened as a read session tried to write; writes go through
-    ``Database.session(write=True)`` (:meth:`Database.write_session`)."""
+    """A read session (every unit of work not opened with ``write=True``) tried to write;
+    writes go through ``Database.session(write=True)`` (:meth:`Database.write_session`)."""
 
 
 #: what SQLite (``query_only``) and PostgreSQL (``READ ONLY`` transaction) say about a refused write
@@ -122,10 +124,10 @@ def _sqlite_begin(conn) -> None:
     # BEGIN, ON for a read session and OFF for anything else, so a pooled connection (or the
     # one shared connection of an in-memory database) never carries it into a write.
     options = conn.get_execution_options()
-    write = options.get("railval_write", False)
+    write = options.get("railval_write", False)  # True, "deferred" or False
     read_only = options.get("railval_read_only", False) and not write
     conn.exec_driver_sql(f"PRAGMA query_only = {'ON' if read_only else 'OFF'}")
-    conn.exec_driver_sql("BEGIN IMMEDIATE" if write else "BEGIN")
+    conn.exec_driver_sql("BEGIN IMMEDIATE" if write is True else "BEGIN")
 
 
 def _postgresql_begin(conn) -> None:
@@ -146,14 +148,12 @@ class Database:
     def __init__(self, url: str, engine: Engine):
         self.url = url
         self.engine = engine
-        self._sessions = sessionmaker(engine, expire_on_commit=False)
+        #: a deferred write: plain ``BEGIN``, query_only OFF (:meth:`write_session`)
+        self._deferred_write_sessions = sessionmaker(engine, expire_on_commit=False)
         self._write_sessions = sessionmaker(engine.execution_options(railval_write=True),
                                             expire_on_commit=False)
         self._read_sessions = sessionmaker(engine.execution_options(railval_read_only=True),
                                            expire_on_commit=False)
-        #: when set, ``session()`` without ``write=True`` is a read session the database keeps
-        #: from writing (:meth:`read_session`); the tests set it to find writes in read sessions
-        self.read_only_reads = False
         self._initialised = False
         #: who the audit trail names for changes made through :meth:`session` when the
         #: caller names nobody (the CLI sets ``cli:<OS user>``, the web app the signed-in user)
@@ -165,23 +165,26 @@ class Database:
 
     @contextmanager
     def session(self, actor: str | None = None, *, write: bool = False,
-                read_only: bool | None = None) -> Iterator[Session]:
+                deferred: bool = False) -> Iterator[Session]:
         """One unit of work: commit on success, roll back on any exception.
 
-        ``actor`` (else the one set by :func:`acting_as`, else :attr:`actor`) is kept in ``session.info["actor"]``: the audit rows
-        written in this unit of work name it (:func:`railval.db.audit.actor_of`).
-        ``write=True`` for a unit of work that writes: on SQLite it starts with
-        ``BEGIN IMMEDIATE`` so concurrent writers queue (up to the 30 s busy timeout)
-        instead of failing; on PostgreSQL it is a plain transaction. ``read_only=True`` (the
-        default while :attr:`read_only_reads` is set; never with ``write=True``): a read session
-        the database refuses to write in — a write raises :class:`WriteInReadSession`.
+        ``actor`` (else the one set by :func:`acting_as`, else :attr:`actor`) is kept in
+        ``session.info["actor"]``: the audit rows written in this unit of work name it
+        (:func:`railval.db.audit.actor_of`).
+        Without ``write=True`` it is a read session the database refuses to write in (SQLite
+        ``query_only``, PostgreSQL ``READ ONLY`` transaction): a write raises
+        :class:`WriteInReadSession` and nothing is stored. ``write=True`` is the one write
+        door: on SQLite it starts with ``BEGIN IMMEDIATE`` so concurrent writers queue (up to
+        the 30 s busy timeout) instead of failing; on PostgreSQL it is a plain transaction.
+        ``deferred=True`` (only with ``write=True``): a unit of work that reads and computes
+        and ends with a short write — a plain ``BEGIN``, so SQLite's write lock is taken at that
+        write, not for the whole computation (docs/database.md, "One write door").
         """
-        if read_only is None:
-            read_only = self.read_only_reads and not write
-        if write and read_only:
-            raise ValueError("a unit of work is either write=True or read_only=True")
-        factory = (self._write_sessions if write else
-                   self._read_sessions if read_only else self._sessions)
+        if deferred and not write:
+            raise ValueError("deferred=True is a kind of write unit of work: write=True with it")
+        read_only = not write
+        factory = (self._read_sessions if read_only else
+                   self._deferred_write_sessions if deferred else self._write_sessions)
         session = factory()
         session.info["actor"] = actor or _current_actor.get() or self.actor
         session.info["read_only"] = read_only
@@ -201,12 +204,12 @@ class Database:
             session.close()
 
     def read_session(self, actor: str | None = None):
-        """A read session: :meth:`session` with ``read_only=True``."""
-        return self.session(actor, read_only=True)
+        """A read session: the same as :meth:`session` without ``write=True``."""
+        return self.session(actor)
 
-    def write_session(self, actor: str | None = None):
-        """The write door: :meth:`session` with ``write=True``."""
-        return self.session(actor, write=True)
+    def write_session(self, actor: str | None = None, *, deferred: bool = False):
+        """The write door: :meth:`session` with ``write=True`` (and ``deferred``)."""
+        return self.session(actor, write=True, deferred=deferred)
 
     # -- migrations ---------------------------------------------------------------------
     def _alembic_config(self):

@@ -13,8 +13,8 @@ rows onto another's. Two seals, both HMAC-SHA256 (RFC 2104, FIPS 198-1) with a s
   ``seal = HMAC(secret, recording id, channel id, content hash, the recording's distance
   hash, fs, t0, n)``; a rescaled signal with a recomputed SHA-256, a blob moved to another
   recording, or a changed distance axis no longer matches its seal.
-  :func:`railval.db.repo.verify_evidence` checks the seals (and, with ``blobs=True``, the
-  content hashes) of what a report or a sign-off rests on; :func:`railval.db.evidence.verify_storage`
+  :func:`railval.db.repo.verify_seals` checks the seals (and, with ``blobs=True``, the
+  content hashes) of what a report or a sign-off rests on; :func:`railval.db.seals.verify_storage`
   checks a whole database (``railval verify``).
 
 **Signing key** (:func:`signing_key`): an Ed25519 private key (RFC 8032, ``cryptography``)

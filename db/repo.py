@@ -4,7 +4,7 @@ namespace (``from railval.db import repo; repo.load_signalsets(...)``).
 They live by concept in :mod:`railval.db.campaigns` (references, campaign and configuration
 lookups, summaries), :mod:`railval.db.signals` (reading and adding signals, content hashes),
 :mod:`railval.db.configurations` (storing and deleting configurations),
-:mod:`railval.db.evidence` (seals and content hashes checked) and :mod:`railval.db.cache` (the
+:mod:`railval.db.seals` (seals and content hashes checked) and :mod:`railval.db.cache` (the
 result cache); this module re-exports them.
 
 All functions take an open :class:`sqlalchemy.orm.Session` (from
@@ -58,14 +58,14 @@ from railval.db.configurations import (
     delete_configuration,
     store_configuration,
 )
-from railval.db.evidence import (
+from railval.db.seals import (
     hash_rows_many,
     raise_problems,
-    require_evidence,
-    require_evidence_many,
+    require_sealed,
+    require_sealed_many,
     seal_problems,
     seal_rows_many,
-    verify_evidence,
+    verify_seals,
     verify_signals,
     verify_storage,
 )
@@ -116,8 +116,8 @@ __all__ = [
     "load_signalsets",
     "raise_problems",
     "recording_meta",
-    "require_evidence",
-    "require_evidence_many",
+    "require_sealed",
+    "require_sealed_many",
     "resolve",
     "row_counts",
     "seal_problems",
@@ -130,7 +130,7 @@ __all__ = [
     "store_configuration",
     "stored_blobs",
     "vehicle_info",
-    "verify_evidence",
+    "verify_seals",
     "verify_signals",
     "verify_storage",
 ]

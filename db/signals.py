@@ -110,7 +110,7 @@ def fetch_signalsets(
     the blob: on SQLite the row's overflow chain is walked for the content hash anyway);
     the returned function then carries ``seals`` = [(recording id, channel, content hash,
     seal or None)] of the signal rows read, for the caller to check
-    (:func:`railval.db.evidence.seal_problems`).
+    (:func:`railval.db.seals.seal_problems`).
     """
     c = campaign_ref(session, campaign)
     kind = None if config is None else "id" if isinstance(config, ConfigRef) else "name"

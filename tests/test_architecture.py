@@ -103,11 +103,16 @@ def _imports(name: str, path: Path) -> Iterator[tuple[str, int]]:
                     yield base, node.lineno
             else:
                 yield base, node.lineno
-        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
-              and isinstance(node.func.value, ast.Name) and node.func.value.id == "lazy"
-              and node.func.attr in ("function", "module") and node.args
-              and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)):
+        elif _is_lazy(node):
             yield node.args[0].value, node.lineno
+
+
+def _is_lazy(node: ast.AST) -> bool:
+    """``lazy.function("railval.x", "f")`` or ``lazy.module("railval.x")`` (railval.core.lazy)."""
+    return (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+            and isinstance(node.func.value, ast.Name) and node.func.value.id == "lazy"
+            and node.func.attr in ("function", "module") and bool(node.args)
+            and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str))
 
 
 def _railval_target(imported: str) -> str | None:
@@ -368,11 +373,14 @@ def database_imports(name: str, path: Path) -> list[str]:
     for imported, line in _imports(name, path):
         if not (imported == "railval.db" or imported.startswith("railval.db.")):
             continue
-        node = next(n for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))
-                    and n.lineno == line)
+        node = next(n for n in ast.walk(tree) if getattr(n, "lineno", None) == line and (
+            isinstance(n, (ast.Import, ast.ImportFrom)) or _is_lazy(n)))
         if (isinstance(node, ast.ImportFrom) and imported == allowed_from
                 and {a.name for a in node.names} <= allowed_names):
             continue
+        if (_is_lazy(node) and node.func.attr == "function" and imported == allowed_from
+                and len(node.args) > 1 and getattr(node.args[1], "value", None) in allowed_names):
+            continue  # lazy.function("railval.db.engine", "connect")
         out.append(f"{_rel(path)}::{where.get(line, '<module>')} imports {imported}")
     return out
 

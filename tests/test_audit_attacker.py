@@ -56,7 +56,7 @@ def setup(database, campaign_dir, tmp_path, monkeypatch):
     from railval.db import integrity
 
     integrity.forget_keys()
-    with database.session(actor="admin") as s:
+    with database.session(actor="admin", write=True) as s:
         users.create_user(s, "admin", password="admin password", roles=["admin"], actor="admin")
         users.create_user(s, "eng", password="engineer password", roles=["engineer"],
                           actor="admin")

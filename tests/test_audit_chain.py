@@ -29,7 +29,7 @@ def test_chain_hash_matches_an_independent_computation():
 
 
 def test_record_appends_a_verifiable_chain(database):
-    with database.session() as s:
+    with database.session(write=True) as s:
         for i in range(5):
             audit.record(s, "tester", "thing.change", f"thing:{i}", {"v": i}, {"v": i + 1},
                          reason=f"step {i}")
@@ -45,10 +45,10 @@ def test_record_appends_a_verifiable_chain(database):
 
 def test_audit_row_rolls_back_with_the_change(database):
     with pytest.raises(RuntimeError):
-        with database.session() as s:
+        with database.session(write=True) as s:
             audit.record(s, "tester", "thing.change", "thing:1")
             raise RuntimeError("the change failed")
-    with database.session() as s:
+    with database.session(write=True) as s:
         assert audit.count(s) == 0 and audit.head(s) == (0, GENESIS)
         audit.record(s, "tester", "thing.change", "thing:1")
     with database.session() as s:
@@ -65,7 +65,7 @@ def test_audit_row_rolls_back_with_the_change(database):
 def test_database_refuses_update_and_delete_of_audit_rows(database, statement):
     if statement.startswith("TRUNCATE") and database.dialect == "sqlite":
         statement = "DELETE FROM audit_event"
-    with database.session() as s:
+    with database.session(write=True) as s:
         audit.record(s, "tester", "thing.change", "thing:1")
         s.execute(text(
             "INSERT INTO signoff (campaign, configuration, username, printed_name, signed_at_utc,"
@@ -73,7 +73,7 @@ def test_database_refuses_update_and_delete_of_audit_rows(database, statement):
             " software_version) VALUES ('c', 'k', 'u', 'U', 't', 'm', 'not-validated', '', '',"
             " :h, '{}', '0')"), {"h": "0" * 64})
     with pytest.raises(DBAPIError, match="append-only"):
-        with database.session() as s:
+        with database.session(write=True) as s:
             s.execute(text(statement))
     with database.session() as s:
         assert [r["actor"] for r in audit.iter_rows(s)] == ["system", "tester"]
@@ -88,11 +88,11 @@ def test_import_store_and_delete_are_audited_with_content_hashes(database, tmp_p
     write_demo_campaign(tmp_path / "c", n_sections=12, fs=50.0, n_configs=2)
     database.actor = "importer"
     import_campaign(database, tmp_path / "c")
-    with database.session(actor="eng") as s:
+    with database.session(actor="eng", write=True) as s:
         conf = repo.get_configuration(s, "demo", "variant1")
         state = repo.configuration_state(s, conf)
         repo.delete_configuration(s, "demo", "variant1", reason="superseded")
-    with database.session(actor="eng") as s:
+    with database.session(actor="eng", write=True) as s:
         repo.delete_campaign(s, "demo", reason="test over")
     with database.session() as s:
         every = list(audit.iter_rows(s))

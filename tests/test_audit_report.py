@@ -29,7 +29,7 @@ def signed_db(tmp_path_factory):
     db.init()
     db.actor = "eng"
     import_campaign(db, root / "demo")
-    with db.session(actor="admin") as s:
+    with db.session(actor="admin", write=True) as s:
         users.create_user(s, "rev", display_name="Rita <Reviewer>", password="reviewer pw",
                           roles=["reviewer"], actor="admin")
         users.create_user(s, "ass", password="assessor pw", roles=["assessor"], actor="admin")
@@ -39,7 +39,7 @@ def signed_db(tmp_path_factory):
     sign(db, "rev", "reviewer pw", "demo", "variant1", decision="not-validated",
          statement="yaw damper & <b>lateral</b> mismatch",
          justification="workshop <i>panel</i> rejected the lateral plots")
-    with db.session() as s:  # the engineer changes variant1's parameters afterwards
+    with db.session(write=True) as s:  # the engineer changes variant1's parameters afterwards
         conf = repo.get_configuration(s, "demo", "variant1")
         params = {**(conf.parameters or {}), "changed_after_signing": 1.0}
         s.execute(text("UPDATE configuration SET parameters = :p WHERE id = :i"),

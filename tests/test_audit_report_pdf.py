@@ -42,7 +42,7 @@ def signed(tmp_path_factory):
     db.init()
     db.actor = "eng"
     import_campaign(db, root / "demo")
-    with db.session(actor="admin") as s:
+    with db.session(actor="admin", write=True) as s:
         users.create_user(s, "rev", display_name="Zoë <Reviewer> & Söhne", password="reviewer pw",
                           roles=["reviewer"], actor="admin")
     sign(db, "rev", "reviewer pw", "demo", "baseline", decision="restricted", restrictions=RESTRICTIONS,
@@ -50,7 +50,7 @@ def signed(tmp_path_factory):
     # variant1 passes the objective limits: rejecting it is contrary and needs a justification
     sign(db, "rev", "reviewer pw", "demo", "variant1", decision="not-validated",
          statement="yaw damper & <b>lateral</b> mismatch", justification=JUSTIFICATION)
-    with db.session() as s:  # the engineer changes variant1's parameters afterwards: stale
+    with db.session(write=True) as s:  # the engineer changes variant1's parameters afterwards: stale
         conf = repo.get_configuration(s, "demo", "variant1")
         params = {**(conf.parameters or {}), "changed_after_signing": 1.0}
         s.execute(text("UPDATE configuration SET parameters = :p WHERE id = :i"),

@@ -35,7 +35,7 @@ def signed(database, campaign_dir):
     """Demo campaign imported, a reviewer who signed ``baseline`` off."""
     database.actor = "eng"
     import_campaign(database, campaign_dir)
-    with database.session(actor="admin") as s:
+    with database.session(actor="admin", write=True) as s:
         users.create_user(s, "rev", display_name="Rita Reviewer", password=PW,
                           roles=["reviewer"], actor="admin")
         users.create_user(s, "ass", password="assessor pw", roles=["assessor"], actor="admin")
@@ -46,7 +46,7 @@ def signed(database, campaign_dir):
 
 def drop_triggers(database) -> None:
     """What a database-level attacker does before rewriting history."""
-    with database.session() as s:
+    with database.session(write=True) as s:
         for table in ("audit_event", "signoff"):
             if database.dialect == "sqlite":
                 s.execute(text(f"DROP TRIGGER {table}_no_update"))
@@ -70,14 +70,14 @@ def test_untouched_database_verifies_and_signoff_is_valid(signed):
             ("rev", "signoff.create")]
     assert rec["printed_name"] == "Rita Reviewer" and rec["signed_at_utc"].endswith("Z")
     assert rec["evidence_sha256"] in rec["meaning"] and "validated" in rec["meaning"]
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:
         assert status(s, db_signoff.get(s, rec["id"])).status == "valid"
 
 
 def test_flipped_byte_in_an_audit_row_is_named(signed):
     database, _ = signed
     drop_triggers(database)
-    with database.session() as s:
+    with database.session(write=True) as s:
         s.execute(text("UPDATE audit_event SET actor = 'evx' WHERE seq = 2"))
     report = verify(database)
     assert not report.ok
@@ -89,10 +89,10 @@ def test_flipped_byte_in_an_audit_row_is_named(signed):
 def test_deleted_row_is_named(signed):
     database, _ = signed
     with pytest.raises(Exception, match="append-only"):
-        with database.session() as s:
+        with database.session(write=True) as s:
             s.execute(text("DELETE FROM audit_event WHERE seq = 2"))
     drop_triggers(database)
-    with database.session() as s:
+    with database.session(write=True) as s:
         s.execute(text("DELETE FROM audit_event WHERE seq = 2"))
     first = verify(database).findings[0]
     assert first.kind == "chain" and "row seq 3" in first.where and "field seq" in first.where
@@ -105,7 +105,7 @@ def test_truncated_tail_is_caught_with_a_checkpoint(signed, tmp_path):
     assert main(["--db", database.url, "--as", "ass", "audit", "checkpoint", str(cp_file)]) == 0
     cp = json.loads(cp_file.read_text())
     drop_triggers(database)
-    with database.session() as s:  # a careful attacker also rewinds the head
+    with database.session(write=True) as s:  # a careful attacker also rewinds the head
         s.execute(text("DELETE FROM audit_event WHERE seq >= :n"), {"n": cp["seq"] - 1})
         prev = s.execute(text("SELECT row_hash FROM audit_event WHERE seq = :n"),
                          {"n": cp["seq"] - 2}).scalar_one()
@@ -123,7 +123,7 @@ def test_truncated_tail_is_caught_with_a_checkpoint(signed, tmp_path):
 
 def test_changed_signal_byte_is_named_and_signoff_stays_bound(signed):
     database, rec = signed
-    with database.session() as s:
+    with database.session(write=True) as s:
         sid, blob = s.execute(text(
             "SELECT signal.id, signal.blob FROM signal JOIN recording ON "
             "signal.recording_id = recording.id WHERE recording.configuration_id IS NULL "
@@ -136,7 +136,7 @@ def test_changed_signal_byte_is_named_and_signoff_stays_bound(signed):
     assert "campaign 'demo', measurement, section" in sig.where and "channel" in sig.where
     assert "does not decompress" in sig.found  # the flipped byte broke a zlib stream
     # an attacker who re-encodes changed samples produces a valid blob: the hash catches it
-    with database.session() as s:
+    with database.session(write=True) as s:
         a = codec.decode(s.execute(text("SELECT blob FROM signal WHERE id = :i"),
                                    {"i": sid + 1}).scalar_one())
         a[10] += 1e-3
@@ -151,14 +151,14 @@ def test_changed_signal_byte_is_named_and_signoff_stays_bound(signed):
 
 def test_parameter_changed_after_signoff_makes_it_stale(signed, capsys):
     database, rec = signed
-    with database.session() as s:
+    with database.session(write=True) as s:
         conf = repo.get_configuration(s, "demo", "baseline")
         params = dict(conf.parameters or {})
         key = sorted(params)[0] if params else "k_y"
         params[key] = (params.get(key) or 1.0) * 1.01 if isinstance(params.get(key, 1.0), float) else 1.0
         s.execute(text("UPDATE configuration SET parameters = :p WHERE id = :i"),
                   {"p": json.dumps(params), "i": conf.id})
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:
         st = status(s, db_signoff.get(s, rec["id"]))
     assert st.status == "stale"
     assert any(r.startswith("configuration_record.parameters") for r in st.reasons), st.reasons
@@ -173,7 +173,7 @@ def test_parameter_changed_after_signoff_makes_it_stale(signed, capsys):
 def test_rewritten_signoff_decision_is_named(signed):
     database, rec = signed
     drop_triggers(database)
-    with database.session() as s:
+    with database.session(write=True) as s:
         s.execute(text("UPDATE signoff SET evidence_sha256 = :h"), {"h": "f" * 64})
     (f,) = [f for f in verify(database).findings if f.kind == "signoff"]
     assert "manifest" in f.where and f.expected == "f" * 64
@@ -196,11 +196,11 @@ def test_bundle_verifies_offline_and_names_a_break(signed, tmp_path):
 
 def test_signing_needs_the_password_the_role_and_independence(signed):
     database, _ = signed
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.create_user(s, "eng2", password="engineer pw", roles=["engineer", "reviewer"])
     with pytest.raises(SignoffRefused, match="Wrong user name or password"):
         sign(database, "rev", "not the password", "demo", "variant1", decision="validated")
-    with database.session(actor="eng2") as s:
+    with database.session(actor="eng2", write=True) as s:
         conf = repo.get_configuration(s, "demo", "variant1")
         sets = repo.load_signalsets(s, "demo", "variant1")
         repo.store_configuration(s, "demo", "variant1", parent="baseline", effects=conf.effects,

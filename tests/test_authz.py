@@ -85,7 +85,7 @@ def demo_db(tmp_path_factory):
     db = connect(f"sqlite:///{root / 'authz.db'}")
     db.init()
     import_campaign(db, root / "demo")
-    with db.session() as s:
+    with db.session(write=True) as s:
         for role in ROLES:
             users.create_user(s, f"u_{role}", password=f"{role} password", roles=[role])
     yield db

@@ -18,7 +18,7 @@ def _state(db) -> dict:
     from railval.app.services.signoff import statuses
     from railval.db.models import Signal, Signoff
 
-    with db.session() as s:
+    with db.write_session(deferred=True) as s:
         return {"signals": sorted(s.scalars(select(Signal.sha256)).all()),
                 "evidence": sorted(s.scalars(select(Signoff.evidence_sha256)).all()),
                 "valid": [st.valid for _, st in statuses(s)]}
@@ -57,7 +57,7 @@ def test_backup_then_restore_into_empty_database(db_url, target_url, tmp_path, c
     write_demo_campaign(tmp_path / "demo", n_sections=4, fs=50.0, n_configs=1)
     db.actor = "eng"
     import_campaign(db, tmp_path / "demo")
-    with db.session(actor="adm") as s:
+    with db.session(actor="adm", write=True) as s:
         users.create_user(s, "adm", password="admin password 1", roles=["admin"])
         users.create_user(s, "rev", password="reviewer password", roles=["reviewer"])
     sign(db, "rev", "reviewer password", "demo", "baseline", decision="validated", statement="ok",

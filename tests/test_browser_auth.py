@@ -45,7 +45,7 @@ def app(tmp_path_factory):
 
     os.environ["RAILVAL_COOKIE_SECRET"] = "x" * 48
     db = demo_database(tmp_path_factory.mktemp("browser-auth"))
-    with db.session() as s:
+    with db.session(write=True) as s:
         for role in ROLES:
             users.create_user(s, f"u_{role}", display_name=f"User {role}",
                               password=f"{role} password", roles=[role])

@@ -43,7 +43,7 @@ def app(tmp_path_factory):
 
     os.environ["RAILVAL_COOKIE_SECRET"] = "z" * 48
     db = demo_database(tmp_path_factory.mktemp("browser-jobs"), n_configs=2)
-    with db.session() as s:
+    with db.session(write=True) as s:
         for role in ROLES:
             users.create_user(s, f"u_{role}", display_name=f"User {role}", password=_pw(role),
                               roles=[role])

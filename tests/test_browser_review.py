@@ -44,7 +44,7 @@ def app(tmp_path_factory):
     os.environ["RAILVAL_COOKIE_SECRET"] = "y" * 48
     db = demo_database(tmp_path_factory.mktemp("browser-review"), n_configs=1)
     ws.create(db, "W1", "demo", sections=["S01"], kinds=["Y_time"], repeats=0.0)
-    with db.session() as s:
+    with db.session(write=True) as s:
         users.create_user(s, "org", display_name="Olga Organiser", password=PW["org"],
                           roles=["organiser"])
         users.create_user(s, "rev", display_name="Rita Reviewer", password=PW["rev"],

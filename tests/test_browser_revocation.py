@@ -34,7 +34,7 @@ def app(tmp_path_factory):
 
     os.environ["RAILVAL_COOKIE_SECRET"] = "r" * 48
     db = demo_database(tmp_path_factory.mktemp("browser-revocation"))
-    with db.session() as s:
+    with db.session(write=True) as s:
         users.create_user(s, "adm", password="admin password", roles=["admin"])
         users.create_user(s, "eng", display_name="Erik Engineer", password="engineer password",
                           roles=["engineer"])

@@ -88,7 +88,7 @@ def env(tmp_path_factory):
                        + "".join(f"expert{r},{p},{'yes' if r == 0 else 'no'},3,\n" for r in range(2) for p in bx))
     ws.import_answers(db, "BX", answers)
     tokens = {}
-    with db.session() as s:
+    with db.session(write=True) as s:
         users.create_user(s, "orga", password="organiser-pass", roles=["organiser"])
         users.create_user(s, "rpw", password="reviewer-pass", roles=["panelist"])
         bw, bb = wsdb.get_workshop(s, "BW"), wsdb.get_workshop(s, "BB")

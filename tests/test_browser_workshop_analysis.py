@@ -46,7 +46,7 @@ def env(tmp_path_factory):
     sections = [f"S{i:02d}" for i in range(1, 13)]
     ws.create(db, "BIG", "demo", sections=sections, kinds=["Y_time", "Q_time"], repeats=0.0)
     ws.create(db, "ONE", "demo", sections=sections[:3], kinds=["Y_time", "Q_time"], repeats=0.0)
-    with db.session() as s:
+    with db.session(write=True) as s:
         big = [(p.id, p.deviation) for p in wsdb.plots(s, wsdb.get_workshop(s, "BIG"))]
         one = [(p.id, p.deviation) for p in wsdb.plots(s, wsdb.get_workshop(s, "ONE"))]
         users.create_user(s, "orga", password="organiser-pass", roles=["organiser"])

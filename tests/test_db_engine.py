@@ -40,7 +40,7 @@ def _declared(name, type_, _parent) -> bool:
 
 
 def test_init_is_idempotent(database):
-    with database.session() as s:
+    with database.session(write=True) as s:
         s.add(Campaign(name="kept", manifest={}))
     assert database.init() == database.head_revision()
     with database.session() as s:
@@ -58,29 +58,29 @@ def test_ensure_initialised(db_url):
 
 
 def test_session_commits_or_rolls_back(database):
-    with pytest.raises(ZeroDivisionError), database.session() as s:
+    with pytest.raises(ZeroDivisionError), database.session(write=True) as s:
         s.add(Campaign(name="lost", manifest={}))
         s.flush()
         _ = 1 / 0
-    with database.session() as s:
+    with database.session(write=True) as s:
         s.add(Campaign(name="stored", manifest={}))
     with database.session() as s:
         assert [c.name for c in s.query(Campaign)] == ["stored"]
 
 
 def test_foreign_keys_and_cascades_are_enforced(database):
-    with pytest.raises(IntegrityError), database.session() as s:
+    with pytest.raises(IntegrityError), database.session(write=True) as s:
         s.add(Section(campaign_id=999, section_id="S1", speed_kmh=100, eval_start_m=0,
                       eval_end_m=1))
         s.flush()
     blob, sha = codec.encode(codec.np.arange(3.0))
-    with database.session() as s:
+    with database.session(write=True) as s:
         c = Campaign(name="c", manifest={})
         sec = Section(section_id="S1", speed_kmh=100, eval_start_m=0, eval_end_m=1)
         c.sections.append(sec)
         s.add(c)
         s.add(Recording(section=sec, fs=1.0, n=3, distance_blob=blob, distance_sha256=sha))
-    with database.session() as s:  # deleting the campaign at the SQL level cascades
+    with database.session(write=True) as s:  # deleting the campaign at the SQL level cascades
         s.execute(text("DELETE FROM campaign"))
     with database.session() as s:
         assert s.query(Section).count() == 0 and s.query(Recording).count() == 0
@@ -88,7 +88,7 @@ def test_foreign_keys_and_cascades_are_enforced(database):
 
 def test_one_measurement_per_section(database):
     blob, sha = codec.encode(codec.np.arange(3.0))
-    with database.session() as s:
+    with database.session(write=True) as s:
         c = Campaign(name="c", manifest={})
         sec = Section(section_id="S1", speed_kmh=100, eval_start_m=0, eval_end_m=1)
         conf = Configuration(name="sim")
@@ -98,7 +98,7 @@ def test_one_measurement_per_section(database):
         s.add(Recording(section=sec, fs=1.0, n=3, distance_blob=blob, distance_sha256=sha))
         s.add(Recording(section=sec, configuration=conf, fs=1.0, n=3, distance_blob=blob,
                         distance_sha256=sha))
-    with pytest.raises(IntegrityError), database.session() as s:
+    with pytest.raises(IntegrityError), database.session(write=True) as s:
         sec = s.query(Section).one()
         s.add(Recording(section=sec, fs=1.0, n=3, distance_blob=blob, distance_sha256=sha))
         s.flush()
@@ -127,7 +127,7 @@ def test_sqlite_ddl_is_transactional(tmp_path):
 def test_in_memory_sqlite_shares_one_database():
     database = connect("sqlite://")
     database.init()
-    with database.session() as s:
+    with database.session(write=True) as s:
         s.add(Campaign(name="m", manifest={}))
     with database.session() as s:
         assert s.query(Campaign).count() == 1

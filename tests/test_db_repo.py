@@ -199,7 +199,7 @@ def _scaled(sets: dict[str, SignalSet], gain: float) -> dict[str, SignalSet]:
 
 def test_store_configuration_round_trip_and_replace(writable_demo):
     demo = writable_demo
-    with demo.session() as s:
+    with demo.session(write=True) as s:
         base = repo.load_signalsets(s, "demo", "baseline", sections=["S01", "S04"])
         new = _scaled(base, 1.01)
         conf = repo.store_configuration(
@@ -207,7 +207,7 @@ def test_store_configuration_round_trip_and_replace(writable_demo):
             parameters={"k": 1.0}, description="calibrated", signalsets=new)
         assert new["S01"].hashes["Y_w1L"] == codec.content_hash(new["S01"].channels["Y_w1L"])
         conf_id = conf.id
-    with demo.session() as s:
+    with demo.session(write=True) as s:
         assert [c.name for c in repo.lineage(s, "demo", "fitted")] == ["baseline", "variant1", "fitted"]
         got = repo.load_signalsets(s, "demo", "fitted")
         assert sorted(got) == ["S01", "S04"]
@@ -215,12 +215,12 @@ def test_store_configuration_round_trip_and_replace(writable_demo):
         with pytest.raises(InvalidParameter, match="already exists"):
             repo.store_configuration(s, "demo", "fitted", parent=None, effects={}, parameters={},
                                      description="", signalsets=new)
-    with demo.session() as s:
+    with demo.session(write=True) as s:
         again = repo.store_configuration(
             s, "demo", "fitted", parent="baseline", effects={}, parameters={"k": 2.0},
             description="refit", signalsets=_scaled(base, 0.99), replace=True)
         assert again.id == conf_id
-    with demo.session() as s:
+    with demo.session(write=True) as s:
         got = repo.load_signalsets(s, "demo", "fitted")
         np.testing.assert_allclose(got["S01"].channels["Y_w1L"], base["S01"].channels["Y_w1L"] * 0.99)
         assert [c.name for c in repo.lineage(s, "demo", "fitted")] == ["baseline", "fitted"]
@@ -260,10 +260,10 @@ def test_store_configuration_rejects_bad_signals(shared_demo, case, exc, match):
     with sqlite_database.session() as s:
         base = repo.load_signalsets(s, "demo", "baseline", sections=["S01"])
         before = repo.row_counts(s)
-    with pytest.raises(exc, match=match), sqlite_database.session() as s:
+    with pytest.raises(exc, match=match), sqlite_database.session(write=True) as s:
         repo.store_configuration(s, "demo", "bad", parent="baseline", effects={}, parameters={},
                                  description="", signalsets=_bad_sets(base, case))
-    with pytest.raises(NotFound, match="parent|'nope'"), sqlite_database.session() as s:
+    with pytest.raises(NotFound, match="parent|'nope'"), sqlite_database.session(write=True) as s:
         repo.store_configuration(s, "demo", "bad", parent="nope", effects={}, parameters={},
                                  description="", signalsets=base)
     with sqlite_database.session() as s:
@@ -271,11 +271,11 @@ def test_store_configuration_rejects_bad_signals(shared_demo, case, exc, match):
 
 
 def test_result_cache_upsert(database):
-    with database.session() as s:
+    with database.session(write=True) as s:
         assert repo.cache_get(s, "k") is None
         repo.cache_put(s, "k", b"one")
         repo.cache_put(s, "k", b"two")  # same transaction
-    with database.session() as s:
+    with database.session(write=True) as s:
         repo.cache_put(s, "k", b"three")  # new transaction, existing row
         repo.cache_put(s, "other", b"\x00\xff")
     with database.session() as s:
@@ -284,9 +284,9 @@ def test_result_cache_upsert(database):
 
 
 def test_result_cache_put_many_upserts_in_one_statement(database):
-    with database.session() as s:
+    with database.session(write=True) as s:
         repo.cache_put(s, "a", b"old")
-    with database.session() as s:
+    with database.session(write=True) as s:
         assert repo.cache_get(s, "a") == b"old"  # transaction begun before counting
         with QueryCounter(database.engine) as q:
             repo.cache_put_many(s, {"a": b"new", "b": b"\x01", "c": b""})
@@ -301,7 +301,7 @@ def test_verify_signals_finds_a_changed_sample(writable_demo):
 
     from railval.db.models import Channel, Recording, Section, Signal
 
-    with writable_demo.session() as s:
+    with writable_demo.session(write=True) as s:
         assert repo.verify_signals(s, "demo") == []
         assert len(repo.load_signalsets(s, "demo", sections=["S03"], verify=True)) == 1
         sig_id = s.scalar(
@@ -361,9 +361,9 @@ def test_a_reference_to_a_deleted_configuration_is_not_found(writable_demo):
 def test_repo_namespace_keeps_every_name_its_callers_use():
     """``from railval.db import repo; repo.X`` for every X the repository's modules define; the
     storage check has one name (``verify_storage``; ``verify_database`` is the audit service's)."""
-    from railval.db import cache, campaigns, configurations, evidence, signals
+    from railval.db import cache, campaigns, configurations, seals, signals
 
-    for module in (cache, campaigns, configurations, evidence, signals):
+    for module in (cache, campaigns, configurations, seals, signals):
         public = [n for n, v in vars(module).items() if callable(v) and not n.startswith("_")
                   and getattr(v, "__module__", "") == module.__name__]
         assert public and all(getattr(repo, n) is getattr(module, n) for n in public), module.__name__

@@ -12,7 +12,7 @@ from railval.db.models import AnalysisRun, Campaign, Configuration
 
 
 def _config(database):
-    with database.session() as s:
+    with database.session(write=True) as s:
         c = Campaign(name="c", manifest={})
         s.add(c)
         s.flush()
@@ -32,7 +32,7 @@ def test_inputs_digest_is_the_sha256_of_canonical_json():
 
 def test_runs_survive_sessions_and_match_by_inputs(database):
     cid, fid = _config(database)
-    with database.session() as s:
+    with database.session(write=True) as s:
         runs.store_run(s, campaign_id=cid, configuration_id=fid, kind="diagnosis",
                        inputs_sha256="a" * 64, settings={"n": 1}, result={"top": "x"}, seconds=3)
         runs.store_run(s, campaign_id=cid, configuration_id=fid, kind="diagnosis",
@@ -49,10 +49,10 @@ def test_runs_survive_sessions_and_match_by_inputs(database):
 
 def test_runs_go_with_their_configuration(database):
     cid, fid = _config(database)
-    with database.session() as s:
+    with database.session(write=True) as s:
         runs.store_run(s, campaign_id=cid, configuration_id=fid, kind="metrics",
                        inputs_sha256="a" * 64, settings={}, result={})
-    with database.session() as s:
+    with database.session(write=True) as s:
         s.delete(s.get(Configuration, fid))
     with database.session() as s:
         assert s.query(AnalysisRun).count() == 0

@@ -279,7 +279,7 @@ def store_definition_sensitive_configuration(database, campaign: str = "demo",
     for sid, ss in measured.items():
         ch = {c: (k * x if c.startswith("Y_") else x) for c, x in ss.channels.items()}
         scaled[sid] = SignalSet(ss.fs, ss.time_s, ss.distance_m, ch)
-    with database.session() as s:
+    with database.session(write=True) as s:
         repo.store_configuration(s, campaign, name, parent=None, effects={}, parameters={},
                                  description=f"measurement with Y scaled by {k:.4f}",
                                  signalsets=scaled)
@@ -294,7 +294,7 @@ def test_stored_configuration_is_definition_sensitive(sqlite_database, tmp_path)
     manifest = write_demo_campaign(tmp_path / "demo", n_sections=12, n_configs=1)
     import_campaign(sqlite_database, manifest.parent)
     k = store_definition_sensitive_configuration(sqlite_database)
-    with sqlite_database.session() as s:
+    with sqlite_database.write_session(deferred=True) as s:
         res = validate_configuration(s, "demo", "scaled", n_boot=0)
     q = res.quantities["SumY_max"]
     # S = k·M exactly after the linear chain: D_v = (k − 1)·|M_v|

@@ -102,7 +102,7 @@ def test_diagnosis_ranks_the_true_effect_first():
     fams[0].explanation = "friction in the suspension"
     res = diagnose_evidence(base, fams, n_boot=20)
     first, second = res.candidates
-    assert first.effect == "A" and first.explained == pytest.approx(1.0, abs=1e-3)
+    assert first.name == "A" and first.explained == pytest.approx(1.0, abs=1e-3)
     assert first.parameters == {"k": pytest.approx(0.6, abs=0.005), "c": 3.0}
     assert second.explained == pytest.approx(0.0, abs=1e-12)  # b ⟂ a: fitted at v = 0
     assert set(first.fixes) == {"Y_qst", "az_rms"} and first.worsens == []
@@ -119,7 +119,7 @@ def test_worsens_is_reported():
     c = np.array([1.0, 2.0, 1.5, 1.5, 0.0, 0.0])
     fams.append(_family("C", "x", [0.0, 0.5, 1.0], r, c))
     res = diagnose_evidence(base, fams, n_boot=0)
-    cand = next(c for c in res.candidates if c.effect == "C")
+    cand = next(c for c in res.candidates if c.name == "C")
     assert "Q_max" in cand.worsens and "Y_qst" in cand.fixes
 
 
@@ -130,7 +130,7 @@ def test_indistinguishable_effects_are_flagged_with_evidence():
     a2 = a + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.3])  # differs only in "az_rms zone 4 p"
     fams.append(_family("A2", "k", [0.0, 0.5, 1.0], r, a2))
     res = diagnose_evidence(base, fams, n_boot=0)
-    assert [c.effect for c in res.candidates[:2]] == ["A", "A2"]
+    assert [c.name for c in res.candidates[:2]] == ["A", "A2"]
     assert not res.separable and res.verdict == "uncertain"
     assert res.evidence[0]["component"] == "az_rms zone 4 p"
     assert "A2" in res.note

@@ -70,7 +70,7 @@ def test_unmet_requirement_names_the_missing_track_data_and_unmeasured_quantitie
 
 def test_default_candidates_leave_out_measured_irregularities_with_a_reason(plain):
     from railval.app.services.campaign_context import load_context
-    from railval.app.services.diagnosis_evidence import inapplicable_effects
+    from railval.app.services.diagnosis_ranking import inapplicable_effects
 
     with plain.session() as s:
         ctx = load_context(s, NAME)
@@ -344,12 +344,12 @@ def test_next_step_calibrates_a_cause_set_together_and_the_cli_accepts_it():
     import argparse
 
     from railval.app.cli.cmd_diagnose import register
-    from railval.app.services.diagnosis_evidence import next_step
+    from railval.app.services.diagnosis_ranking import next_step
     from railval.core.diagnosis import DiagnosisResult, Pattern, TrustedCandidate
 
     pat = Pattern(["Y_qst zone 1 w1L"], ["Y_qst"], [1.0])
     mk = lambda name, kind, params, fitted, parameter: TrustedCandidate(
-        name, 0.5, params, [], [], "", pat, 0.5, kind=kind, name=name, fitted=fitted, parameter=parameter)
+        name, 0.5, params, [], [], "", pat, 0.5, kind=kind, fitted=fitted, parameter=parameter)
     cands = [mk("conicity", "effect", {"conicity": 0.45}, 0.45, "conicity"),
              mk("model.c_secondary_z", "parameter", {"c_secondary_z": 9000.0}, 9000.0, "c_secondary_z"),
              mk("gain az_cb_b1", "measurement", {"gain": 1.3}, 1.3, "gain")]

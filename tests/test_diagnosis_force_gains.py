@@ -59,7 +59,7 @@ def test_power_law_of_each_statistic_equals_the_statistics_of_the_scaled_signals
 def _cand(name, fitted, ci):
     pat = Pattern(["x"], ["x"], np.zeros(1), [Component("pair", "az_rms", 1, "b1")])
     wide = (ci[0] - 0.2, ci[1] + 0.2)  # the widened interval holds 1 in every case: the rule reads the bootstrap one
-    return TrustedCandidate(name, 0.8, {}, [], [], "", pat, 0.0, kind="measurement", name=name, parameter="gain",
+    return TrustedCandidate(name, 0.8, {}, [], [], "", pat, 0.0, kind="measurement", parameter="gain",
                             fitted=fitted, fitted_ci=wide, fitted_ci_bootstrap=ci, significant=True,
                             held_out_explained=0.8)
 

@@ -80,9 +80,9 @@ def test_a_common_offset_on_every_channel_is_not_a_sensor_fault(planted):
 
 
 def _cand(name: str, fitted: float, ci: tuple[float, float]) -> TrustedCandidate:
-    return TrustedCandidate(effect=name, explained=0.5, parameters={}, fixes=[], worsens=[], explanation="",
+    return TrustedCandidate(name=name, explained=0.5, parameters={}, fixes=[], worsens=[], explanation="",
                             signature=Pattern(labels=["a"], groups=["a"], values=np.zeros(1)), residual_after=0.0,
-                            kind="measurement", name=name, parameter="offset", fitted=fitted,
+                            kind="measurement", parameter="offset", fitted=fitted,
                             fitted_ci=ci, fitted_ci_bootstrap=ci)
 
 

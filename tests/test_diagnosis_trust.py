@@ -345,7 +345,7 @@ def test_fitted_interval_includes_the_values_fitted_on_every_fold():
     assert lo <= min(blo, *c.fold_values) and hi >= max(bhi, *c.fold_values)
     # every fold's training sections fit near the truth: the folds see the same cause
     assert all(abs(v - 1.0) < 0.15 for v in c.fold_values)
-    d = c.to_dict(with_signature=True)
+    d = c.to_dict(with_signatures=True)
     from railval.core.diagnosis import TrustedCandidate
 
     back = TrustedCandidate.from_dict(d)

@@ -183,7 +183,7 @@ def test_class_r_a_rougher_track_without_measured_geometry_is_the_track_input(da
     st = next(x for x in d["statements"] if x["kind"] == "track input")
     assert set(st["candidates"]) <= {"track_level_vertical", "track_level_lateral"}
     # the same campaign with measured geometry: the candidate is skipped with its reason
-    from railval.app.services.diagnosis_evidence import inapplicable_effects
+    from railval.app.services.diagnosis_ranking import inapplicable_effects
     from types import SimpleNamespace
 
     ctx = SimpleNamespace(vehicle={"template": "coach"}, layouts={"S1": {"irregularities": {"ds_m": 0.25}}},

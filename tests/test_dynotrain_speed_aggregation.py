@@ -215,7 +215,7 @@ def test_vectorised_equals_reference_on_the_demo_campaign(sqlite_database, tmp_p
 
     write_demo_campaign(tmp_path / "c", n_configs=2, fs=200.0)
     import_campaign(sqlite_database, tmp_path / "c")
-    with sqlite_database.session() as s:
+    with sqlite_database.write_session(deferred=True) as s:
         secs = repo.section_infos(s, "demo")
         veh = repo.vehicle_info(s, "demo")
         mv = source_values(s, "demo", None, secs)

@@ -37,7 +37,7 @@ def test_threads_and_processes_agree_on_the_bench_data(tmp_path):
     try:
         runs = []
         for backend in ("threads", "processes"):
-            with db.session() as s:
+            with db.session(write=True) as s:
                 repo.cache_delete(s, prefix="en14363:")
             runs.append(validate_configurations(db, "dynotrain-bench", n_boot=30, workers=2,
                                                 chunk_sections=2, backend=backend))

@@ -57,7 +57,7 @@ def test_backends_equal_single_validation(sqlite_database, tmp_path, backend, mo
                                            chunk_sections=5, backend=backend)
     assert sorted(judged) == sorted(many) and len(judged) == len(set(judged)) == 3
     for name, res in many.items():
-        with sqlite_database.session() as s:
+        with sqlite_database.write_session(deferred=True) as s:
             single = service.validate_configuration(s, "demo", name, n_boot=50)
         assert single.info["sections_simulated"] == {"cached": 12, "computed": 0}
         a, b = res.to_dict(), single.to_dict()
@@ -96,7 +96,7 @@ def test_forged_configuration_signal_refused_before_any_verdict(sqlite_database,
     judged = []
     monkeypatch.setattr(service, "_verdict", lambda *a, **kw: judged.append(a) or None)
     with pytest.raises(integrity.IntegrityError,
-                       match="evidence of 'variant1'.*section S05, configuration 'variant1', "
+                       match="stored signals of 'variant1'.*section S05, configuration 'variant1', "
                              "Q_w2R"):
         service.validate_configurations(sqlite_database, "demo", n_boot=0, workers=2,
                                         chunk_sections=4, backend=backend)
@@ -117,7 +117,7 @@ def test_single_validation_checks_seals_while_processing_and_caches_nothing(sqli
 
     write_demo_campaign(tmp_path / "c", n_configs=2, fs=200.0)
     import_campaign(sqlite_database, tmp_path / "c")
-    with sqlite_database.session() as s:
+    with sqlite_database.write_session(deferred=True) as s:
         service.validate_configuration(s, "demo", "baseline", n_boot=0)
     with sqlite_database.session() as s:
         cached_before = s.scalar(select(func.count()).select_from(ResultCache))
@@ -128,9 +128,9 @@ def test_single_validation_checks_seals_while_processing_and_caches_nothing(sqli
         s.execute(update(Signal).where(Signal.id == sig_id).values(blob=forged, sha256=sha))
     with pytest.raises(integrity.IntegrityError,
                        match="section S02, configuration 'variant1', Y_w1L: fails its seal"), \
-            sqlite_database.session() as s:
+            sqlite_database.write_session(deferred=True) as s:
         service.validate_configuration(s, "demo", "variant1", n_boot=0)
-    with sqlite_database.session() as s:
+    with sqlite_database.write_session(deferred=True) as s:
         assert s.scalar(select(func.count()).select_from(ResultCache)) == cached_before
         res = service.validate_configuration(s, "demo", "baseline", n_boot=0)
     assert res.info["sections_simulated"] == {"cached": 12, "computed": 0}
@@ -159,7 +159,7 @@ def test_forged_seal_read_by_the_workers_is_refused(sqlite_database, tmp_path, h
     judged = []
     monkeypatch.setattr(service, "_verdict", lambda *a, **kw: judged.append(a) or None)
     with pytest.raises(integrity.IntegrityError,
-                       match=r"evidence of 'variant1' is not intact \(1 problem\(s\)\): "
+                       match=r"stored signals of 'variant1' are not intact \(1 problem\(s\)\): "
                              "section S02, configuration 'variant1', Y_w1L: fails its seal"):
         service.validate_configurations(sqlite_database, "demo", n_boot=0, workers=2,
                                         chunk_sections=4)
@@ -169,7 +169,7 @@ def test_forged_seal_read_by_the_workers_is_refused(sqlite_database, tmp_path, h
     with sqlite_database.session() as s:  # the same message as the full check gives
         with pytest.raises(integrity.IntegrityError, match="fails its seal"):
             names = [c.name for c in repo.list_configurations(s, "demo")]
-            repo.require_evidence_many(s, "demo", names, blobs=False)
+            repo.require_sealed_many(s, "demo", names, blobs=False)
 
 
 def _variant1_signal(session, section: str, channel: str):

@@ -16,7 +16,7 @@ def test_health_reports_the_process_and_refuses_an_old_schema(sqlite_database):
     from railval.app.main import served
     from railval.db import users
 
-    with sqlite_database.session() as s:  # sign-in required everywhere else
+    with sqlite_database.session(write=True) as s:  # sign-in required everywhere else
         users.create_user(s, "adm", password="admin password 1", roles=["admin"])
     with served(sqlite_database) as url:
         base = url.rsplit("/app", 1)[0]

@@ -86,7 +86,7 @@ def check_hidden_effect(tmp_path, effect: str, *, template: str = "coach", candi
     The diagnosis ranks template parameters (``model.*``) beside the effects; the hidden
     effect must be the first candidate of all."""
     database, truth = make_campaign(tmp_path, [item or effect], template=template, seed=seed)
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:
         base = validate_configuration(s, "hidden", "baseline", n_boot=0)
     row = {"effect": effect, "template": template, "item": item or effect,
            "max_error_before": _max_error(base), "worst_before": _worst(base)}
@@ -116,7 +116,7 @@ def check_hidden_effect(tmp_path, effect: str, *, template: str = "coach", candi
         cal = _cli(database, capsys, "calibrate", "hidden", "--config", "baseline", "--effect", effect,
                    "--as", "calibrated", "--start", *[f"{effect}.{k}={v}" for k, v in first["parameters"].items()])
         assert {"validated", "coverage", "quantities"} <= set(cal["validation"])
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:
         after = validate_configuration(s, "hidden", "calibrated", n_boot=0)
     before_err, after_err = _max_error(base), _max_error(after)
     all_pass = all(q.passed for q in after.quantities.values())
@@ -248,7 +248,7 @@ def test_baseline_passes_where_no_value_fails(tmp_path, case):
     for k, item in enumerate(BASELINE_PASSES[case][:2]):
         (tmp_path / str(k)).mkdir()
         database, _ = make_campaign(tmp_path / str(k), [item], template=template)
-        with database.session() as s:
+        with database.write_session(deferred=True) as s:
             base = validate_configuration(s, "hidden", "baseline", n_boot=0)
         print(json.dumps({"template": template, "item": item, "max_error_before": _max_error(base),
                           "worst_before": _worst(base)}))
@@ -259,7 +259,7 @@ def test_baseline_passes_where_no_value_fails(tmp_path, case):
 def test_two_hidden_effects_both_in_top_three(tmp_path):
     database, _ = make_campaign(tmp_path, ["conicity", "friction_damping"])
     diag = diagnose(database, "hidden", "baseline", workers=1)
-    top3 = [c.effect for c in diag.candidates[:3]]
+    top3 = [c.name for c in diag.candidates[:3]]
     print(json.dumps({"top3": top3, "explained": [c.explained for c in diag.candidates[:3]],
                       "verdict": diag.verdict}))
     assert {"conicity", "friction_damping"} <= set(top3), top3
@@ -281,9 +281,9 @@ def test_mis_set_baseline_still_ranks_hidden_effect_first(tmp_path, factor):
         ctx = load_context(s, "hidden")
         effects = dict(repo.get_configuration(s, "hidden", "baseline").effects)
     sets = simulate_context(ctx, effects, params)
-    with database.session() as s:
+    with database.session(write=True) as s:
         repo.store_configuration(s, "hidden", "misset", parent="baseline", effects=effects,
                                  parameters=params, description="mis-set", signalsets=sets)
     diag = diagnose(database, "hidden", "misset", workers=1)
-    print(json.dumps({"factor": factor, "top3": [c.effect for c in diag.candidates[:3]]}))
-    assert diag.candidates[0].effect == "parasitic_yaw_stiffness", [c.effect for c in diag.candidates]
+    print(json.dumps({"factor": factor, "top3": [c.name for c in diag.candidates[:3]]}))
+    assert diag.candidates[0].name == "parasitic_yaw_stiffness", [c.name for c in diag.candidates]

@@ -253,7 +253,7 @@ def test_failure_while_writing_rolls_back_everything(good_db, folder):
     blob, sha, prov = next(iter(vc.recordings[-1].signals.values()))
     vc.recordings[-1].signals["not_a_channel"] = (blob, sha, prov)  # fails after the flush
     before = _snapshot(good_db)
-    with pytest.raises(KeyError), good_db.session() as s:
+    with pytest.raises(KeyError), good_db.session(write=True) as s:
         write_validated(s, vc)
     assert _snapshot(good_db) == before
 

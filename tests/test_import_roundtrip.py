@@ -50,7 +50,7 @@ def test_round_trip_both_backends(database, tmp_path, fmt):
                        [(c.name, c.parent_id is not None, c.parameters)
                         for c in repo.list_configurations(s, "demo")])
         measured = repo.load_signalsets(s, "demo")
-    with database.session() as s:  # delete (cascades to every row of it), then re-import
+    with database.session(write=True) as s:  # delete (cascades to every row of it), then re-import
         s.delete(repo.get_campaign(s, "demo"))
     with database.session() as s:  # the append-only audit trail keeps its rows: the
         counts = repo.row_counts(s)  # database's signed identity and the import
@@ -77,7 +77,7 @@ def test_every_format_imports_and_exports_exactly(sqlite_database, tmp_path, fmt
     import_campaign(sqlite_database, src)
     first = _all_hashes(sqlite_database, "demo")
     assert first == _expected_hashes(src)
-    with sqlite_database.session() as s:
+    with sqlite_database.session(write=True) as s:
         export_campaign(s, "demo", tmp_path / "out", fmt=fmt)
         s.delete(repo.get_campaign(s, "demo"))
     import_campaign(sqlite_database, tmp_path / "out")

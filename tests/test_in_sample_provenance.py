@@ -108,7 +108,7 @@ def test_dashboard_report_and_signoff_summary_label_it_the_same_way(diagnosed):
     assert "In-sample" in html and "fitted by a diagnosis on 12 of these sections" in html
     assert "No held-out check is possible" in html
     assert "In-sample" not in build_report(backend, "ins", "by-hand", worst_cases=1).html
-    with db.session() as s:
+    with db.write_session(deferred=True) as s:
         o = signing_summary(s, "ins", "fitted")["objective"]
         oh = signing_summary(s, "ins", "by-hand")["objective"]
     assert o["in_sample"] and o["in_sample_note"].startswith("fitted's parameters were fitted by a diagnosis")

@@ -32,7 +32,7 @@ def db(database, campaign_dir):
 
 
 def _verdict(db):
-    with db.session() as s:
+    with db.write_session(deferred=True) as s:
         r = validate_configuration(s, "demo", "baseline", n_boot=0)
     return r.validated, json.dumps(r.to_dict()["quantities"], sort_keys=True, default=str)
 
@@ -99,11 +99,11 @@ def test_flipped_byte_is_refused_when_the_evidence_is_read(db):
         b[-5] ^= 0x01
         s.execute(update(Signal).where(Signal.id == sid_).values(blob=bytes(b)))
     with db.session() as s:
-        problems = repo.verify_evidence(s, "demo", "baseline")
+        problems = repo.verify_seals(s, "demo", "baseline")
         assert [(p["section"], p["configuration"], p["channel"]) for p in problems] == [
             ("S03", None, "Y_w1L")]
         with pytest.raises(integrity.IntegrityError, match="not intact"):
-            repo.require_evidence(s, "demo", "baseline")
+            repo.require_sealed(s, "demo", "baseline")
     # not cached yet: validate decodes the blob and checks it against its hash
     from railval.core.errors import InvalidSignal
 
@@ -133,7 +133,7 @@ def test_report_refuses_damaged_evidence_and_digest_covers_the_verdict(db, monke
         b = bytearray(blob)
         b[-9] ^= 0x10
         s.execute(update(Signal).where(Signal.id == sid_).values(blob=bytes(b)))
-    with pytest.raises(integrity.IntegrityError, match="evidence of 'baseline' is not intact"):
+    with pytest.raises(integrity.IntegrityError, match="stored signals of 'baseline' are not intact"):
         build_report(Backend(db), "demo", "baseline", worst_cases=0)
 
 

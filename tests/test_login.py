@@ -64,7 +64,7 @@ class Client:
 @pytest.fixture
 def server(database, monkeypatch):
     monkeypatch.setenv("RAILVAL_COOKIE_SECRET", SECRET)
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.create_user(s, "eng", display_name="Eng One", password="engineer pw",
                           roles=["engineer"])
         users.create_user(s, "gone", password="disabled pw", roles=["engineer"])
@@ -126,7 +126,7 @@ def test_brute_force_hits_the_rate_limit(server):
 
 def test_invitation_single_use_and_expiry(server):
     database, base = server
-    with database.session() as s:
+    with database.session(write=True) as s:
         _inv, token = users.create_invitation(s, actor="eng")  # (to a workshop: test_invite_to_workshop)
         old, old_token = users.create_invitation(s, actor="eng")
         s.query(Invitation).filter_by(id=old.id).update(
@@ -158,7 +158,7 @@ def test_session_ends_when_the_password_changes(server):
     c.post("/login", username="eng", password="engineer pw")
     assert c.get("/app")[2].endswith("/app")
     time.sleep(0.01)
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.set_password(s, "eng", "a new password")
     assert "/login" in c.get("/app")[2]
 
@@ -176,7 +176,7 @@ def test_no_users_open_mode_on_loopback_only(db_url):
     from railval.app.cli import main
 
     assert main(["--db", db_url, "serve", "--address", "0.0.0.0", "--no-demo"]) == 2
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.create_user(s, "admin", password="admin password", roles=["admin"])
     assert check_startup(database, "0.0.0.0") is True
     database.dispose()
@@ -184,7 +184,7 @@ def test_no_users_open_mode_on_loopback_only(db_url):
 
 def test_behind_proxy_the_rate_limit_counts_the_forwarded_client(database, monkeypatch):
     monkeypatch.setenv("RAILVAL_COOKIE_SECRET", SECRET)
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.create_user(s, "eng", password="engineer pw", roles=["engineer"])
     with served(database, behind_proxy=True) as url:
         c = Client(url.rsplit("/app", 1)[0])
@@ -201,7 +201,7 @@ def test_session_cookie_expires_and_forged_cookies_are_refused(database):
     from railval.app.auth import COOKIE, RailvalAuth
     from railval.db.models import AppSession
 
-    with database.session() as s:
+    with database.session(write=True) as s:
         user = users.create_user(s, "eng", password="engineer pw", roles=["engineer"])
         sid = users.open_session(s, user, max_age_s=60)
         old_sid = users.open_session(s, user, max_age_s=60)
@@ -225,7 +225,7 @@ def test_app_sign_in_reaches_the_workshop_pages_with_their_role_check(server):
     pages without a second sign-in when the role allows it, and is refused (403) when not;
     after logout the workshop pages ask for a sign-in again."""
     database, base = server
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.create_user(s, "org", password="organiser pw", roles=["organiser"])
     org = Client(base)
     assert org.post("/login", username="org", password="organiser pw", next="/app")[0] == 200
@@ -246,7 +246,7 @@ def test_workshop_sign_in_ends_at_the_next_request_after_revocation(server):
     """The one sign-in's cookie on the workshop pages: a role removed refuses at the next request, a
     changed password or a disabled account sends the open session back to the sign-in."""
     database, base = server
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.create_user(s, "org", password="organiser pw", roles=["organiser"])
         users.create_user(s, "org2", password="organiser2 pw", roles=["organiser"])
     org, org2 = Client(base), Client(base)
@@ -254,7 +254,7 @@ def test_workshop_sign_in_ends_at_the_next_request_after_revocation(server):
     assert org2.post("/login", username="org2", password="organiser2 pw",
                      next="/workshops")[0] == 200
     assert org.get("/workshops/new")[0] == 200 and org2.get("/workshops/new")[0] == 200
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.set_roles(s, "org", ["engineer"], actor="admin")
         users.set_password(s, "org2", "another password", actor="admin")
     # a role change ends the session on the server too: sign in again, with the new roles
@@ -265,11 +265,11 @@ def test_workshop_sign_in_ends_at_the_next_request_after_revocation(server):
     assert org.post("/login", username="org", password="organiser pw", next="/app")[0] == 200
     status, body, _ = org.get("/workshops/new")
     assert status == 403 and "may not open" in body
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.set_roles(s, "org", ["organiser"], actor="admin")
     assert org.post("/login", username="org", password="organiser pw", next="/workshops")[0] == 200
     assert org.get("/workshops/new")[0] == 200
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.disable(s, "org", actor="admin")
     status, body, final = org.get("/workshops/new")
     assert "/login?next=" in final

@@ -32,7 +32,7 @@ def test_service_rows_match_direct_comparison(demo_db):
 
     db, _ = demo_db
     chans = ["Y_w1L", "ay_cb_b1"]
-    with db.session() as s:
+    with db.write_session(deferred=True) as s:
         df = metrics_for_configuration(s, "demo", "baseline", ["S02"], chans,
                                        families=["sprague_geers", "area"])
         meas = repo.load_signalsets(s, "demo", None, ["S02"], chans)["S02"]
@@ -55,7 +55,7 @@ def test_service_rows_match_direct_comparison(demo_db):
 
 def test_service_evaluated_part_is_shorter(demo_db):
     db, _ = demo_db
-    with db.session() as s:
+    with db.write_session(deferred=True) as s:
         whole = metrics_for_configuration(s, "demo", "baseline", ["S01"], ["Q_w1L"], families=["area"])
         part = metrics_for_configuration(s, "demo", "baseline", ["S01"], ["Q_w1L"], families=["area"],
                                          part="evaluated")
@@ -64,7 +64,7 @@ def test_service_evaluated_part_is_shorter(demo_db):
 
 def test_service_unknown_section(demo_db):
     db, _ = demo_db
-    with db.session() as s, pytest.raises(NotFound, match="S99"):
+    with db.write_session(deferred=True) as s, pytest.raises(NotFound, match="S99"):
         metrics_for_configuration(s, "demo", "baseline", ["S99"])
 
 

@@ -53,7 +53,7 @@ def test_store_configuration_refuses_unsafe_name(sqlite_database, tmp_path):
 
     write_demo_campaign(tmp_path / "c", n_sections=1, fmt="parquet", seed=3, name="c")
     import_campaign(sqlite_database, tmp_path / "c")
-    with sqlite_database.session() as s:
+    with sqlite_database.session(write=True) as s:
         sets = repo.load_signalsets(s, "c", "baseline")
         before = repo.row_counts(s)
         with pytest.raises(InvalidParameter, match="holds the character '<'"):

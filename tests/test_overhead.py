@@ -2,7 +2,7 @@
 source read at once, the seals of many configurations checked from two queries and a
 one-shot HMAC. Each is compared with an independent computation: the per-source key path
 (:func:`source_cache_keys`), ``hmac.new`` (RFC 2104), and the one-configuration check
-(:func:`repo.require_evidence`), and a forged or missing seal is still refused."""
+(:func:`repo.require_sealed`), and a forged or missing seal is still refused."""
 
 from __future__ import annotations
 
@@ -53,12 +53,12 @@ def test_plan_keys_equal_the_per_source_keys(tiny):
 
 
 def test_many_configurations_equal_one_at_a_time(tiny):
-    with tiny.session() as s:
+    with tiny.session(write=True) as s:
         repo.cache_delete(s, prefix="en14363:")
     many = V.validate_configurations(tiny, "dynotrain-bench", ["c001", "c000"], n_boot=30)
     assert list(many) == ["c001", "c000"]
     for name, res in many.items():
-        with tiny.session() as s:
+        with tiny.write_session(deferred=True) as s:
             one = V.validate_configuration(s, "dynotrain-bench", name, n_boot=30)
         a, b = res.to_dict(), one.to_dict()
         for d in (a, b):
@@ -93,10 +93,10 @@ def test_a_broken_seal_is_refused_with_the_single_check_message(tiny, config, se
     try:
         with tiny.session() as s:
             with pytest.raises(integrity.IntegrityError) as single:
-                repo.require_evidence(s, "dynotrain-bench", "c001", blobs=False)
+                repo.require_sealed(s, "dynotrain-bench", "c001", blobs=False)
             with pytest.raises(integrity.IntegrityError) as many:
-                repo.require_evidence_many(s, "dynotrain-bench", ["c000", "c001"], blobs=False)
-            repo.require_evidence_many(s, "dynotrain-bench", ["c002"] if config else [],
+                repo.require_sealed_many(s, "dynotrain-bench", ["c000", "c001"], blobs=False)
+            repo.require_sealed_many(s, "dynotrain-bench", ["c002"] if config else [],
                                        blobs=False)
         assert str(many.value) == str(single.value) if config else "'c000'" in str(many.value)
         assert why in str(single.value) and "section S02, " in str(single.value)
@@ -106,7 +106,7 @@ def test_a_broken_seal_is_refused_with_the_single_check_message(tiny, config, se
         with tiny.session(write=True) as s:
             s.execute(update(Signal).where(Signal.id == sid).values(provenance=prov))
     with tiny.session() as s:
-        repo.require_evidence_many(s, "dynotrain-bench", ["c000", "c001", "c002"], blobs=False)
+        repo.require_sealed_many(s, "dynotrain-bench", ["c000", "c001", "c002"], blobs=False)
 
 
 def test_values_under_equal_value_under_per_pair(tiny):
@@ -166,16 +166,16 @@ def imported(database, tmp_path):
 def test_seal_read_by_the_database_refuses_a_forged_seal_on_every_backend(imported):
     chan = bench.CHANNELS[0]
     with imported.session() as s:
-        repo.require_evidence_many(s, "dynotrain-bench", ["c000"], blobs=False)
+        repo.require_sealed_many(s, "dynotrain-bench", ["c000"], blobs=False)
     with imported.session(write=True) as s:
         sid, prov = _signal(s, "S02", "c000", chan)
         s.execute(update(Signal).where(Signal.id == sid)
                   .values(provenance={**prov, "seal": "v2:" + "0" * 64}))
     with imported.session() as s:
         with pytest.raises(integrity.IntegrityError, match="fails its seal") as single:
-            repo.require_evidence(s, "dynotrain-bench", "c000", blobs=False)
+            repo.require_sealed(s, "dynotrain-bench", "c000", blobs=False)
         with pytest.raises(integrity.IntegrityError) as many:
-            repo.require_evidence_many(s, "dynotrain-bench", ["c000"], blobs=False)
+            repo.require_sealed_many(s, "dynotrain-bench", ["c000"], blobs=False)
     assert str(many.value) == str(single.value)
     with pytest.raises(integrity.IntegrityError, match="fails its seal"):
         V.validate_configurations(imported, "dynotrain-bench", ["c000"], n_boot=0)

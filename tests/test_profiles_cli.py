@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from railval.app.cli import main
-from railval.app.services.diagnosis_evidence import profile_skipped
+from railval.app.services.diagnosis_ranking import profile_skipped
 
 GOOD = "# worn pair, measured\ny_mm,delta_r_mm\n0,0\n2.5,0.125\n2.6,2.125\n6,2.4\n7.5,3.6\n12,17.1\n"
 

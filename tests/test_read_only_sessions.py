@@ -1,13 +1,15 @@
 """Read sessions the database keeps from writing, and one write door (SQLite and PostgreSQL).
 
-A read session (``Database.read_session()``, or ``session()`` while ``read_only_reads`` is
-set) runs with SQLite ``PRAGMA query_only = ON`` / a PostgreSQL ``READ ONLY`` transaction: a
-write planted in it raises :class:`railval.db.engine.WriteInReadSession` and stores nothing,
-and the pooled connection carries no read-only state into the next write session. With the
-enforcement on for every plain ``session()``, the services that used to write inside read
-sessions — the diagnosis store, the overview's validation (result cache) and metrics (stored
-run), the workshop cards and the sign-in — still work: their writes go through
-``session(write=True)``.
+Every unit of work not opened with ``write=True`` — ``Database.session()``,
+``read_session()`` — is a read session: it runs with SQLite ``PRAGMA query_only = ON`` / a
+PostgreSQL ``READ ONLY`` transaction, a write planted in it raises
+:class:`railval.db.engine.WriteInReadSession` and stores nothing, and the pooled connection
+carries no read-only state into the next write session. The services that write — the
+diagnosis store, the overview's validation (result cache) and metrics (stored run), the
+workshop cards and the sign-in — go through ``session(write=True)`` (``write_session()``,
+``deferred=True`` for a computation that ends with a short write). The static half — no write
+found in the body of a read session anywhere in the source — is
+tests/test_architecture_write_door.py.
 """
 
 from __future__ import annotations
@@ -39,11 +41,9 @@ def test_a_write_planted_in_a_read_session_is_refused_by_the_database(database):
     with pytest.raises(WriteInReadSession):  # an ORM object flushed at commit
         with database.read_session() as s:
             users.create_user(s, "planted2", roles=["engineer"])
-    with pytest.raises(WriteInReadSession):  # enforcement switched on for plain session()
-        database.read_only_reads = True
+    with pytest.raises(WriteInReadSession):  # the plain session() is a read session
         with database.session() as s:
             s.execute(insert(AppUser).values(username="planted3", display_name="x"))
-    database.read_only_reads = False
     assert _user_count(database) == before
 
 
@@ -55,15 +55,17 @@ def test_pooled_connections_never_carry_read_only_into_a_write(database):
         with database.session(write=True) as s:
             assert _read_only_flag(s, dialect) is False
             users.create_user(s, f"door{_}", roles=["engineer"])
-        with database.session() as s:  # the plain unit of work, enforcement off
+        with database.session() as s:  # the plain unit of work reads only
+            assert _read_only_flag(s, dialect) is True
+        with database.write_session(deferred=True) as s:  # read, compute, short write
             assert _read_only_flag(s, dialect) is False
     # the engine's own connections (migrations, revision check) are not read-only either
     with database.read_session():
         pass
     database.init()
     assert _user_count(database) >= 3
-    with pytest.raises(ValueError, match="either write=True or read_only=True"):
-        with database.session(write=True, read_only=True):
+    with pytest.raises(ValueError, match="write=True with it"):
+        with database.session(deferred=True):
             pass
 
 
@@ -80,22 +82,18 @@ def test_overview_validation_metrics_and_cards_write_through_the_write_door(data
     manifest = write_demo_campaign(tmp_path / "demo", n_sections=4, n_configs=1, name="demo")
     import_campaign(database, manifest.parent)
     ws.create(database, "PZ", "demo", sections=["S01", "S04"], kinds=["Y_time"], repeats=0.0)
-    database.read_only_reads = True
-    try:
-        res = overview.validation(database, "demo", "baseline", n_boot=10)
-        with database.session() as s:
-            cached = s.scalar(select(func.count()).select_from(ResultCache))
-        assert res is not None and cached > 0
-        df = overview.metrics(database, "demo", "baseline")
-        with database.session() as s:
-            conf = overview.repo.get_configuration(s, "demo", "baseline")
-            assert len(runs.list_runs(s, conf.id, "metrics")) == 1
-        assert len(df) > 0
-        doc = workshop_cards.cards(database, "PZ")
-        assert doc["cards"] and all(c["en"] for c in doc["cards"])
-        assert overview.campaign_names(database) == ["demo"]
-    finally:
-        database.read_only_reads = False
+    res = overview.validation(database, "demo", "baseline", n_boot=10)
+    with database.session() as s:
+        cached = s.scalar(select(func.count()).select_from(ResultCache))
+    assert res is not None and cached > 0
+    df = overview.metrics(database, "demo", "baseline")
+    with database.session() as s:
+        conf = overview.repo.get_configuration(s, "demo", "baseline")
+        assert len(runs.list_runs(s, conf.id, "metrics")) == 1
+    assert len(df) > 0
+    doc = workshop_cards.cards(database, "PZ")
+    assert doc["cards"] and all(c["en"] for c in doc["cards"])
+    assert overview.campaign_names(database) == ["demo"]
 
 
 def test_diagnosis_store_writes_through_the_write_door(database):
@@ -103,16 +101,12 @@ def test_diagnosis_store_writes_through_the_write_door(database):
     from railval.app.services.synth import synth
 
     synth(database, name="demo", template="coach", hidden=["conicity"], seed=1, n_sections=12)
-    database.read_only_reads = True
-    try:
-        first = diagnosis_service.diagnose(database, "demo", "baseline", effects=["conicity"],
-                                           values_per_parameter=2, workers=1)
-        assert first.run["reused"] is False
-        with database.session() as s:
-            listed = diagnosis_service.diagnosis_runs(s, "demo", "baseline")
-        assert [r["id"] for r in listed] == [first.run["id"]]
-    finally:
-        database.read_only_reads = False
+    first = diagnosis_service.diagnose(database, "demo", "baseline", effects=["conicity"],
+                                       values_per_parameter=2, workers=1)
+    assert first.run["reused"] is False
+    with database.session() as s:
+        listed = diagnosis_service.diagnosis_runs(s, "demo", "baseline")
+    assert [r["id"] for r in listed] == [first.run["id"]]
 
 
 def test_sign_in_writes_through_the_write_door(database, monkeypatch):
@@ -124,21 +118,17 @@ def test_sign_in_writes_through_the_write_door(database, monkeypatch):
     with database.session(write=True) as s:
         users.create_user(s, "eng", display_name="Eng One", password="engineer pw",
                           roles=["engineer"])
-    database.read_only_reads = True
-    try:
-        with served(database) as url:
-            c = Client(url.rsplit("/app", 1)[0])
-            status, _body, final = c.post("/login", username="eng", password="wrong pw",
-                                          next="/app")
-            assert status == 401
-            status, _body, final = c.post("/login", username="eng", password="engineer pw",
-                                          next="/app")
-            assert status == 200 and final.endswith("/app"), final
-        with database.session() as s:
-            actions = [r["action"] for r in audit.iter_rows(s)]
-        assert "login.ok" in actions and "login.failed" in actions
-    finally:
-        database.read_only_reads = False
+    with served(database) as url:
+        c = Client(url.rsplit("/app", 1)[0])
+        status, _body, final = c.post("/login", username="eng", password="wrong pw",
+                                      next="/app")
+        assert status == 401
+        status, _body, final = c.post("/login", username="eng", password="engineer pw",
+                                      next="/app")
+        assert status == 200 and final.endswith("/app"), final
+    with database.session() as s:
+        actions = [r["action"] for r in audit.iter_rows(s)]
+    assert "login.ok" in actions and "login.failed" in actions
 
 
 @pytest.mark.parametrize("service", ["validation", "metrics"])

@@ -29,14 +29,14 @@ def session_for(database, username: str, *, max_age_s: int = 3600):
 
 
 def test_disable_password_role_and_expiry_end_open_sessions(database):
-    with database.session() as s:
+    with database.session(write=True) as s:
         for name in ("eng", "eng2", "rev"):
             users.create_user(s, name, password=f"{name} password",
                               roles=["reviewer"] if name == "rev" else ["engineer"])
     eng, eng2, rev = (session_for(database, n) for n in ("eng", "eng2", "rev"))
     expiring = session_for(database, "eng2", max_age_s=1)
     assert eng.guard("simulate") and eng2.guard("calibrate") and rev.guard("signoff.create")
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.disable(s, "eng", actor="admin")
         users.set_password(s, "eng2", "a new password", actor="admin")
         users.set_roles(s, "rev", ["assessor"], actor="admin")
@@ -46,7 +46,7 @@ def test_disable_password_role_and_expiry_end_open_sessions(database):
     # a role change ends the session on the server as well (docs/security.md, "Sessions")
     assert not rev.guard("signoff.create") and rev.access_ended and rev.status == ACCESS_ENDED
     # an ended session stays ended, also for reads and after the user is enabled again
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.enable(s, "eng", actor="admin")
     assert not eng.allowed("data.read") and not eng.page_allowed("overview")
     assert not eng.guard("data.read")
@@ -57,11 +57,11 @@ def test_disable_password_role_and_expiry_end_open_sessions(database):
 
 
 def test_reads_are_rechecked_within_a_few_seconds(database, monkeypatch):
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.create_user(s, "eng", password="eng password", roles=["engineer"])
     app = session_for(database, "eng")
     assert app.page_allowed("dashboard")
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.disable(s, "eng", actor="admin")
     assert app.page_allowed("dashboard")  # cached: read less than ACCESS_RECHECK_S ago
     monkeypatch.setattr(app, "_checked_at", time.monotonic() - ACCESS_RECHECK_S)

@@ -107,7 +107,7 @@ def _workshop(database) -> str:
 @pytest.fixture
 def server(database, monkeypatch):
     monkeypatch.setenv("RAILVAL_COOKIE_SECRET", SECRET)
-    with database.session() as s:
+    with database.session(write=True) as s:
         for name in ("org", "org2", "org3", "org4"):
             users.create_user(s, name, password=f"{name} password", roles=["organiser"])
     token = _workshop(database)
@@ -141,7 +141,7 @@ def test_copied_cookie_is_refused_after_sign_out_disable_password_and_role_chang
     stolen_token = clients["org"].token("/workshops/W")
     status, _, _ = clients["org"].post("/logout", {})
     assert status == 302
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.disable(s, "org2", actor="admin")
         users.set_password(s, "org3", "a new password", actor="admin")
         users.set_roles(s, "org4", ["organiser", "engineer"], actor="admin")
@@ -258,7 +258,7 @@ def test_disabled_panelists_next_answer_is_refused(server):
     database, base, token = server
     status, doc = _answer(base, token, 0, "yes")
     assert status == 200 and doc["stored"] == "new"
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.disable(s, "pan", actor="admin")
     # at once: the link's cached context still names an enabled panelist, the write does not
     status, doc = _answer(base, token, 1, "no")
@@ -296,11 +296,11 @@ def test_answer_during_a_disable_waits_for_it_and_is_refused(database):
     with database.session() as s:
         assert s.scalar(select(func.count()).select_from(WorkshopAnswer)) == 0
     # an answer whose transaction committed first is kept; the next one is refused
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.enable(s, "pan", actor="admin")
     with database.session(write=True) as s:
         assert wsdb.record_answer(s, ctx, 0, True, seconds=1.0) == "new"
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.disable(s, "pan", actor="admin")
     with pytest.raises(PermissionDenied), database.session(write=True) as s:
         wsdb.record_answer(s, ctx, 1, True, seconds=1.0)

@@ -41,7 +41,7 @@ def demo(database, tmp_path):
     # 11 sections: one zone has 2 sections, so the objective verdict is NOT VALIDATED
     write_demo_campaign(tmp_path / "demo", n_sections=11, fs=100.0, n_configs=1)
     import_campaign(database, tmp_path / "demo")
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.create_user(s, "boss", password=PW["boss"], roles=["admin"])
         users.create_user(s, "eng", password=PW["eng"], roles=["engineer"])
         users.create_user(s, "rev", password=PW["rev"], roles=["reviewer"],
@@ -70,7 +70,7 @@ def test_cli_contract_reviewer_panelist_contrary(demo, capsys, monkeypatch, tmp_
     from railval.app.services.stored_runs import data_inputs, digests
     from railval.db import repo, runs
 
-    with db.session() as s:
+    with db.session(write=True) as s:
         conf = repo.get_configuration(s, "demo", "baseline")
         data_sha, _ = digests(data_inputs(s, "demo", "baseline"), {}, DIAGNOSIS_VERSION)
         run_id = runs.store_run(s, campaign_id=conf.campaign_id, configuration_id=conf.id,
@@ -217,7 +217,7 @@ def test_open_mode_import_answers_then_first_admin(database, tmp_path, capsys, m
         assert row and "first admin" in row[0]["reason"]
         assert users.find_user(s, "boss2") is None and users.find_user(s, "x") is None
     # a disabled admin is no admin: the first-admin door opens again
-    with database.session() as s:
+    with database.session(write=True) as s:
         users.disable(s, "boss", actor="boss")
     code, _, err = run(capsys, monkeypatch, "--db", url, "user", "add", "boss3", "--role",
                        "admin", "--password-stdin", stdin="third password\n")
@@ -243,7 +243,7 @@ def test_migration_turns_workshop_only_reviewers_into_panelists(db_url, tmp_path
     write_demo_campaign(tmp_path / "demo", n_sections=12, fs=100.0, n_configs=1)
     import_campaign(db, tmp_path / "demo")
     _workshop(db, tmp_path)
-    with db.session() as s:
+    with db.session(write=True) as s:
         for name in ("only_ws", "signer_ws", "plain_rev"):
             users.create_user(s, name, password="password " + name, roles=["panelist"])
         w = wsdb.get_workshop(s, "W")
@@ -288,7 +288,7 @@ def test_validated_decision_on_an_in_sample_verdict_is_contrary(sqlite_database,
     monkeypatch.delenv("RAILVAL_USER", raising=False)
     write_demo_campaign(tmp_path / "demo", n_sections=12, fs=100.0, n_configs=1)
     import_campaign(db, tmp_path / "demo")
-    with db.session() as s:
+    with db.session(write=True) as s:
         users.create_user(s, "rev", password=PW["rev"], roles=["reviewer"])
     with db.engine.begin() as conn:  # as `railval calibrate` records the fit's sections
         conn.execute(text("UPDATE configuration SET calibration = :c WHERE name = 'baseline'"),

@@ -58,11 +58,11 @@ EN = {"checks", "filter", "statistics", "alternatives", "supplementary"}
 
 
 def test_validation_reports_every_stage(stored):
-    with collect() as cold, stored.session() as s:
+    with collect() as cold, stored.write_session(deferred=True) as s:
         validate_configuration(s, "demo", "baseline", n_boot=200)
     assert EN | {"database", "decode", "cache_pack", "aggregation", "bootstrap"} <= set(cold.seconds)
     assert all(v >= 0 for v in cold.seconds.values())
-    with collect() as warm, stored.session() as s:
+    with collect() as warm, stored.write_session(deferred=True) as s:
         validate_configuration(s, "demo", "baseline", n_boot=200)
     assert "cache_unpack" in warm.seconds and not EN & set(warm.seconds)  # all from the cache
 

@@ -43,11 +43,11 @@ def test_diagnosis_is_stored_and_reused(synth_demo, monkeypatch):
     kw = {"effects": ["conicity"], "values_per_parameter": 2, "workers": 1}
     first = diagnosis_service.diagnose(demo, "demo", "baseline", **kw)
     assert first.run["reused"] is False and first.run["current"] is True
-    monkeypatch.setattr(diagnosis_service, "diagnose_evidence_service", _no_simulation)
+    monkeypatch.setattr(diagnosis_service, "rank_causes", _no_simulation)
     again = diagnosis_service.diagnose(demo, "demo", "baseline", **kw)
     assert again.run["reused"] is True
     assert again.run["id"] == first.run["id"]
-    assert [c.effect for c in again.candidates] == [c.effect for c in first.candidates]
+    assert [c.name for c in again.candidates] == [c.name for c in first.candidates]
     assert again.candidates[0].explained == pytest.approx(first.candidates[0].explained, rel=1e-12)
     np.testing.assert_allclose(again.residual.values, first.residual.values, rtol=1e-12)
     # the whole ranking reads back as stored (NaN compared as null, as stored)
@@ -61,31 +61,31 @@ def test_diagnosis_is_stored_and_reused(synth_demo, monkeypatch):
     with demo.session() as s:  # a new session (reload, second tab) finds it
         listed = diagnosis_service.diagnosis_runs(s, "demo", "baseline")
         latest = diagnosis_service.latest_diagnosis(s, "demo", "baseline")
-    assert len(listed) == 1 and listed[0]["top"] == first.candidates[0].effect
+    assert len(listed) == 1 and listed[0]["top"] == first.candidates[0].name
     assert listed[0]["settings"]["values_per_parameter"] == 2 and listed[0]["current"] is True
     assert isinstance(latest, DiagnosisResult) and latest.run["id"] == first.run["id"]
 
 
 def test_metrics_are_stored_reused_and_recomputed_when_inputs_change(demo, monkeypatch):
     args = ("demo", "baseline", ["S02"], ["Y_w1L", "ay_cb_b1"])
-    with demo.session() as s:
+    with demo.write_session(deferred=True) as s:
         first = metrics_service.metrics_for_configuration(s, *args, families=["sprague_geers"])
     assert first.attrs["run"]["reused"] is False
     calls = []
     real = metrics_service._compute
     monkeypatch.setattr(metrics_service, "_compute", lambda *a, **k: calls.append(1) or real(*a, **k))
-    with demo.session() as s:  # a new session: the stored run, not a computation
+    with demo.write_session(deferred=True) as s:  # a new session: the stored run, not a computation
         again = metrics_service.metrics_for_configuration(s, *args, families=["sprague_geers"])
         assert metrics_service.stored_metrics(s, *args, families=["sprague_geers"]) is not None
         assert metrics_service.stored_metrics(s, *args, families=["area"]) is None
     assert calls == [] and again.attrs["run"]["reused"] is True
     pd.testing.assert_frame_equal(again, first, check_exact=False, rtol=1e-12)
-    with demo.session() as s:  # other settings: computed and stored as a second run
+    with demo.write_session(deferred=True) as s:  # other settings: computed and stored as a second run
         metrics_service.metrics_for_configuration(s, *args, families=["sprague_geers"], max_lag_s=1.0)
     assert calls == [1]
     # a re-imported measured signal (another content hash) computes afresh; the earlier
     # runs are listed as no longer current
-    with demo.session() as s:
+    with demo.session(write=True) as s:
         from sqlalchemy import select
 
         from railval.db.models import Channel, Recording, Section, Signal
@@ -96,7 +96,7 @@ def test_metrics_are_stored_reused_and_recomputed_when_inputs_change(demo, monke
                         .where(Section.section_id == "S02", Channel.name == "Y_w1L",
                                Recording.configuration_id.is_(None))).one()
         sig.sha256 = "0" * 64
-    with demo.session() as s:
+    with demo.write_session(deferred=True) as s:
         metrics_service.metrics_for_configuration(s, *args, families=["sprague_geers"])
         listed = metrics_service.metrics_runs(s, "demo", "baseline")
     assert calls == [1, 1]

@@ -52,12 +52,12 @@ def team(tmp_path_factory):
         write_demo_campaign(folder, n_sections=4, fs=50.0, n_configs=1)
         db.actor = "eng"
         import_campaign(db, folder)
-        with db.session(actor="admin") as s:
+        with db.session(actor="admin", write=True) as s:
             users.create_user(s, "admin", password="admin password 1", roles=["admin"])
             users.create_user(s, "eng", password="engineer password", roles=["engineer"])
         wsvc.create(db, "W", "demo", kinds=["Y_time"], repeats=0.0, actor="admin")
         tokens = {}
-        with db.session() as s:
+        with db.session(write=True) as s:
             w = wsdb.get_workshop(s, "W")
             for k in range(REVIEWERS):
                 tokens[f"r{k}"] = wsdb.invite(s, w, f"r{k}", seed=k)

@@ -64,7 +64,7 @@ def setup(database, campaign_dir, tmp_path, monkeypatch):
     monkeypatch.delenv("RAILVAL_TRUST_DIR", raising=False)
     monkeypatch.delenv("RAILVAL_TRUST_ANCHOR_FILE", raising=False)
     integrity.forget_keys()
-    with database.session(actor="admin") as s:
+    with database.session(actor="admin", write=True) as s:
         users.create_user(s, "admin", password="admin password", roles=["admin"], actor="admin")
         users.create_user(s, "rev", display_name="Rita Reviewer", password=PW,
                           roles=["reviewer"], actor="admin")

@@ -38,7 +38,7 @@ def test_previous_release_database_migrates_on_start_with_nothing_lost(release_d
     try:
         db.ensure_initialised(upgrade=True)  # what `railval serve` does on start
         assert db.current_revision() == db.head_revision()
-        with db.session() as s:
+        with db.write_session(deferred=True) as s:
             assert sorted(s.scalars(select(Signal.sha256)).all()) == expected["signal_hashes"]
             assert sorted(u.username for u in users.list_users(s)) == expected["users"]
             assert [c.name for c in repo.list_campaigns(s)] == expected["campaigns"]

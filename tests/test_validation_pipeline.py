@@ -18,7 +18,7 @@ def test_many_configurations_refuse_a_forged_signal(database, tmp_path):
     write_demo_campaign(tmp_path / "c", n_sections=12, fmt="csv", n_configs=2, fs=200.0)
     import_campaign(database, tmp_path / "c")
     many = validate_configurations(database, "demo", n_boot=0)
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:
         single = validate_configuration(s, "demo", "variant1", n_boot=0)
     assert many["variant1"].info["sections_simulated"] == {"cached": 0, "computed": 12}
     assert single.info["sections_simulated"] == {"cached": 12, "computed": 0}

@@ -44,7 +44,7 @@ def test_configuration_stored_again_while_validated(demo, monkeypatch):
     PostgreSQL (read committed): the blobs read are the new ones, which the keys and the
     checked seals do not name — refused, nothing cached. Either way a second run judges the
     new samples."""
-    with demo.session() as s:
+    with demo.write_session(deferred=True) as s:
         service.validate_configuration(s, "demo", "baseline", n_boot=0)  # measurement cached
         cached_before = s.scalar(select(func.count()).select_from(ResultCache))
         camp, _ = repo.resolve(s, "demo", "variant1")
@@ -67,10 +67,10 @@ def test_configuration_stored_again_while_validated(demo, monkeypatch):
 
     monkeypatch.setattr(service.repo, "cache_get_many", store_meanwhile)
     if demo.engine.dialect.name == "sqlite":
-        with demo.session() as s:
+        with demo.write_session(deferred=True) as s:
             old = service.validate_configuration(s, "demo", "variant1", n_boot=0)
         monkeypatch.setattr(service.repo, "cache_get_many", real)
-        with demo.session() as s:
+        with demo.write_session(deferred=True) as s:
             again = service.validate_configuration(s, "demo", "variant1", n_boot=0)
             first = service.validate_configuration(s, "demo", "baseline", n_boot=0)
         assert stored and old.info["sections_simulated"]["computed"] == len(sets)
@@ -79,9 +79,9 @@ def test_configuration_stored_again_while_validated(demo, monkeypatch):
         assert first.info["sections_simulated"]["computed"] == 0
         return
     with pytest.raises(integrity.IntegrityError, match="changed while it was validated"), \
-            demo.session() as s:
+            demo.write_session(deferred=True) as s:
         service.validate_configuration(s, "demo", "variant1", n_boot=0)
-    with demo.session() as s:
+    with demo.write_session(deferred=True) as s:
         assert s.scalar(select(func.count()).select_from(ResultCache)) == cached_before
         res = service.validate_configuration(s, "demo", "variant1", n_boot=0)
     assert stored and res.info["sections_simulated"]["computed"] == len(sets)

@@ -48,7 +48,7 @@ def counting(monkeypatch):
 def test_validate_configuration_and_cache(database, campaign_folder, counting):
     import_campaign(database, campaign_folder)
     reads = -(-12 // validation_exec.PIPELINE_CHUNK)  # blob queries per source of 12 sections
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:
         first = service.validate_configuration(s, "demo", "baseline", n_boot=200)
     assert counting == {"processed": 24, "loads": 2 * reads}  # 12 measured + 12 simulated
     assert first.info["sections_measured"] == {"cached": 0, "computed": 12}
@@ -56,7 +56,7 @@ def test_validate_configuration_and_cache(database, campaign_folder, counting):
     json.dumps(doc, allow_nan=False)
     assert doc["coverage"]["ok"] and doc["coverage"]["sections"] == 12
 
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:
         again = service.validate_configuration(s, "demo", "baseline", n_boot=200)
     # nothing processed, no blob read: both sides came from the cache
     assert counting == {"processed": 24, "loads": 2 * reads}
@@ -64,20 +64,20 @@ def test_validate_configuration_and_cache(database, campaign_folder, counting):
     strip = lambda d: {k: v for k, v in d.items() if k != "info"}
     assert strip(again.to_dict()) == strip(doc)
 
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:
         other = service.validate_configuration(s, "demo", "variant1", n_boot=200)
     # a new configuration costs only its own 12 sections; the measured side is cached
     assert counting == {"processed": 36, "loads": 3 * reads}
     assert other.info["sections_measured"] == {"cached": 12, "computed": 0}
 
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:
         service.validate_configuration(s, "demo", "variant1", n_boot=0, order=2)
     assert counting["processed"] == 60  # another filter order is another key
 
 
 def test_service_equals_in_memory_path(database, campaign_folder):
     import_campaign(database, campaign_folder)
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:
         db_result = service.validate_configuration(s, "demo", "baseline", n_boot=100, seed=3)
         sections = repo.section_infos(s, "demo")
         vehicle = repo.vehicle_info(s, "demo")
@@ -110,7 +110,7 @@ def test_cache_key_changes_with_content_and_range():
 
 def test_unknown_names(sqlite_database, campaign_folder):
     import_campaign(sqlite_database, campaign_folder)
-    with sqlite_database.session() as s:
+    with sqlite_database.write_session(deferred=True) as s:
         with pytest.raises(NotFound, match="configuration 'nope' not found"):
             service.validate_configuration(s, "demo", "nope")
         with pytest.raises(NotFound, match="campaign 'x' not found"):
@@ -125,7 +125,7 @@ def test_validate_configurations_equals_single(sqlite_database, tmp_path, worker
                                            chunk_sections=5)
     assert list(many) == ["baseline", "variant1"]
     for name, res in many.items():
-        with sqlite_database.session() as s:
+        with sqlite_database.write_session(deferred=True) as s:
             single = service.validate_configuration(s, "demo", name, n_boot=50)
         # the single call found every section in the cache the batch call wrote
         assert single.info["sections_measured"] == {"cached": 12, "computed": 0}

@@ -70,7 +70,7 @@ def test_upload_equals_cli_import(campaign_dir, db_url, tmp_path, capsys):
             assert repo.verify_storage(s)["ok"]
             web_after = ev.after_sha256
         web_hashes = signal_hashes(web)
-        with web.session() as s:  # room for the second round
+        with web.session(write=True) as s:  # room for the second round
             from railval.db.models import Campaign
 
             s.delete(s.scalar(select(Campaign).where(Campaign.name == "demo")))

@@ -14,7 +14,7 @@ from sqlalchemy.exc import IntegrityError
 
 
 def _workshop(database, n_plots: int = 6):
-    with database.session() as s:
+    with database.session(write=True) as s:
         camp = Campaign(name="c")
         s.add(camp)
         s.flush()
@@ -59,7 +59,7 @@ def test_concurrent_submissions_of_one_place_store_one_answer(database):
 
 def test_own_answers_only_and_campaign_kept(database):
     t1, t2 = _workshop(database)
-    with database.session() as s:
+    with database.session(write=True) as s:
         a, b = wsdb.reviewer_by_token(s, t1), wsdb.reviewer_by_token(s, t2)
         wsdb.record_answer(s, a, 0, True, seconds=1.0, submission="x")
         wsdb.record_answer(s, b, 0, False, seconds=1.0, submission="y")
@@ -69,7 +69,7 @@ def test_own_answers_only_and_campaign_kept(database):
         assert {p: x.answer for p, x in wsdb.own_answers(s, b.reviewer_id).items()} == {0: False, 1: False}
         prog = {r["reviewer"]: (r["answered"], r["yes"]) for r in wsdb.progress(s, wsdb.get_workshop(s, "W"))}
         assert prog == {"alice": (1, 1), "bob": (2, 0)}
-    with pytest.raises(IntegrityError), database.session() as s:
+    with pytest.raises(IntegrityError), database.session(write=True) as s:
         s.delete(s.scalar(select(Campaign)))
         s.flush()
     with database.session() as s:

@@ -34,7 +34,7 @@ def made(tmp_path_factory):
                         auto_share=0.25, seed=3)
     from railval.db import users
 
-    with db.session() as s:  # the CLI's acting user once the database has users
+    with db.session(write=True) as s:  # the CLI's acting user once the database has users
         users.create_user(s, "orga", password="organiser-pass", roles=["organiser"])
         users.create_user(s, "revx", roles=["panelist"])
     yield db, summary, folder
@@ -190,13 +190,13 @@ def test_rendering_is_deterministic(made):
 
 def test_answers_are_idempotent_and_refused_when_closed(made):
     db, _, _ = made
-    with db.session() as s:
+    with db.session(write=True) as s:
         w = wsdb.get_workshop(s, "W")
         wsdb.invite(s, w, "idem", seed=5)
-    with db.session() as s:
+    with db.session(write=True) as s:
         r = s.scalar(select(WorkshopReviewer).join(AppUser).where(AppUser.username == "idem"))
         token = wsdb.invite(s, wsdb.get_workshop(s, "W"), "idem")
-    with db.session() as s:
+    with db.session(write=True) as s:
         ctx = wsdb.reviewer_by_token(s, token)
         assert ctx.reviewer_id == r.id and len(ctx.sequence) > 0
         assert wsdb.record_answer(s, ctx, 0, True, seconds=3.0, submission="a1") == "new"
@@ -204,11 +204,11 @@ def test_answers_are_idempotent_and_refused_when_closed(made):
         assert wsdb.record_answer(s, ctx, 0, False, seconds=2.0, submission="a2") == "changed"
         with pytest.raises(InvalidParameter, match="outside"):
             wsdb.record_answer(s, ctx, 10_000, True, seconds=1.0)
-    with db.session() as s:
+    with db.session(write=True) as s:
         a = s.scalars(select(WorkshopAnswer).where(WorkshopAnswer.reviewer_id == r.id)).all()
         assert len(a) == 1 and a[0].answer is False and a[0].seconds == 5.0 and a[0].changes == 1
         wsdb.set_status(s, wsdb.get_workshop(s, "W"), "closed")
-    with db.session() as s:
+    with db.session(write=True) as s:
         ctx = wsdb.reviewer_by_token(s, token)
         with pytest.raises(wsdb.WorkshopClosed):
             wsdb.record_answer(s, ctx, 1, True, seconds=1.0)
@@ -359,7 +359,7 @@ def test_plot_cards_reuse_validate_and_metrics_and_show_both_groups(made, tmp_pa
     assert cli(["--db", db.url, "--as", "orga", "workshop", "cards", "CP", "--groups", "CE", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["groups"] == ["CP", "CE"] and len(doc["cards"]) == len(keys)
-    with db.session() as s:
+    with db.write_session(deferred=True) as s:
         pairs = validate_configuration(s, "demo", "baseline", n_boot=0).pairs
     capsys.readouterr()
     assert cli(["--db", db.url, "--as", "orga", "metrics", "demo", "--config", "baseline",

@@ -171,7 +171,7 @@ def build(data: Path, n_configs: int, n_sections: int, n: int, fs: float) -> dic
     import_campaign(database, folder)
     for k in range(1, n_configs):
         sets = _config_sets(rng, n_sections, n, fs, 1.0 + 0.1 * rng.standard_normal())
-        with database.session() as session:
+        with database.session(write=True) as session:
             repo.store_configuration(session, "dynotrain-bench", f"c{k:03d}", parent=None,
                                      effects={}, parameters={}, description="",
                                      signalsets=sets)
@@ -211,7 +211,7 @@ def _dask_run(database, args: argparse.Namespace, pool_results: dict) -> dict:
 
     with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
                       dashboard_address=":0") as cluster:
-        with database.session() as session:
+        with database.session(write=True) as session:
             repo.cache_delete(session, prefix="en14363:")
         load = os.getloadavg()[0]
         t0 = time.perf_counter()
@@ -229,7 +229,7 @@ def _all_configurations(database, args: argparse.Namespace) -> dict:
     from railval.core.stages import collect
     from railval.db import repo
 
-    with database.session() as session:
+    with database.session(write=True) as session:
         repo.cache_delete(session, prefix="en14363:")
     load_before = os.getloadavg()[0]
     cpu0 = _cpu_seconds()
@@ -286,11 +286,11 @@ def _time_new(database, sets: dict, order: int | None) -> tuple:
     from railval.db import codec, repo
 
     if order is None:
-        with database.session() as session:
+        with database.session(write=True) as session:
             repo.store_configuration(session, "dynotrain-bench", "new", parent=None,
                                      effects={}, parameters={}, description="",
                                      signalsets=sets, replace=True)
-        with database.session() as session:
+        with database.session(write=True) as session:
             secs = repo.section_infos(session, "dynotrain-bench")
             stale = [*source_cache_keys(session, "dynotrain-bench", "new", secs).values(),
                      *source_cache_keys(session, "dynotrain-bench", "new", secs,
@@ -302,7 +302,7 @@ def _time_new(database, sets: dict, order: int | None) -> tuple:
     load = os.getloadavg()[0]
     cpu0 = _cpu_seconds()
     t0 = time.perf_counter()
-    with collect() as split, database.session() as session:
+    with collect() as split, database.write_session(deferred=True) as session:
         res = validate_configuration(session, "dynotrain-bench", "new", n_boot=1000,
                                      **({} if order is None else {"order": order}))
     return time.perf_counter() - t0, split.seconds, res, load, _cpu_seconds() - cpu0
@@ -364,7 +364,7 @@ def run(args: argparse.Namespace) -> dict:
     else:
         # measured side cached (computed here, untimed, if an earlier run left it out) and
         # this process warmed as in a running app server
-        with database.session() as session:
+        with database.write_session(deferred=True) as session:
             validate_configuration(session, "dynotrain-bench", "c000", n_boot=1000)
     out["new_config"] = _new_configuration(database, args, max(1, int(getattr(args, "repeat", 1))))
     database.dispose()

@@ -95,7 +95,7 @@ def _setup(url: str, campaign: str | None, n_plots: int, n_reviewers: int) -> di
         ensure_demo(db)
         campaign = DEMO_NAME
     tag = f"{int(time.time()) % 100000:05d}"
-    with db.session() as s:
+    with db.session(write=True) as s:
         existing = s.scalar(select(Workshop).where(Workshop.name == "bench"))
         if existing is not None:  # reuse the rendered workshop, new reviewers
             n = len(wsdb.plots(s, existing))
@@ -118,7 +118,7 @@ def _setup(url: str, campaign: str | None, n_plots: int, n_reviewers: int) -> di
                         kinds=kinds, repeats=0.0)
     create_s = time.perf_counter() - t0
     tokens = {}
-    with db.session() as s:
+    with db.session(write=True) as s:
         w = wsdb.get_workshop(s, "bench")
         for i in range(n_reviewers):
             tokens[f"bench{tag}-{i:02d}"] = wsdb.invite(s, w, f"bench{tag}-{i:02d}", seed=i)

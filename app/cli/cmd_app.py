@@ -20,6 +20,20 @@ import argparse
 import sys
 
 from railval.app.cli import emit_json
+from railval.core import lazy
+from railval.core.errors import InvalidParameter
+
+# the services and records this module's verbs call, imported when a verb first uses
+# them (railval.core.lazy): `railval --help` and the other verbs never load them
+app_auth = lazy.module("railval.app.auth")
+app_backend = lazy.module("railval.app.state.backend")
+app_main = lazy.module("railval.app.main")
+app_report = lazy.module("railval.app.report")
+campaign_data_service = lazy.module("railval.app.services.campaign_data")
+database_service = lazy.module("railval.app.services.database")
+users_service = lazy.module("railval.app.services.users")
+warmup_service = lazy.module("railval.app.services.warmup")
+workshop_cards_service = lazy.module("railval.app.services.workshop_cards")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -56,16 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(url: str | None, upgrade: bool):
-    from railval.app.services.database import open_database
-
-    return open_database(url, upgrade=upgrade)
+    return database_service.open_database(url, upgrade=upgrade)
 
 
 def seed_demo(database) -> str:
     """Seed the demo campaign into an empty database (H4's synth service); returns a message."""
-    from railval.app.services.campaign_data import has_campaigns
-
-    if has_campaigns(database):
+    if campaign_data_service.has_campaigns(database):
         return "database holds campaigns; demo not seeded"
     try:
         from railval.app.services.synth import ensure_demo
@@ -76,18 +86,14 @@ def seed_demo(database) -> str:
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
-    from railval.app.auth import check_startup, cookie_secret
-    from railval.app.main import serve
-
     database = _database(args.db, upgrade=True)
-    has_users = check_startup(database, args.address)
-    from railval.app.services.warmup import start_background
+    has_users = app_auth.check_startup(database, args.address)
 
     # compiles the validation kernels on a fresh installation (≈ 25 s of one core) while the
     # demo is seeded and the server starts, instead of during the first Validate
-    start_background()
+    warmup_service.start_background()
     if has_users:
-        _secret, origin = cookie_secret(args.cookie_secret_file)
+        _secret, origin = app_auth.cookie_secret(args.cookie_secret_file)
         print(f"railval serve: sign-in required (a user has a password); cookie secret: {origin}",
               file=sys.stderr, flush=True)
     else:
@@ -100,35 +106,27 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         origins = list(args.allow_websocket_origin) + [f"{args.address}:{args.port}", f"localhost:{args.port}"]
     print(f"railval serve: http://{args.address}:{args.port}/app (database {database.safe_url})",
           file=sys.stderr, flush=True)
-    serve(database, port=args.port, address=args.address, show=args.show, allow_websocket_origin=origins,
-          cookie_secret_file=args.cookie_secret_file, behind_proxy=args.behind_proxy,
-          admin=args.admin)
+    app_main.serve(database, port=args.port, address=args.address, show=args.show, allow_websocket_origin=origins,
+                   cookie_secret_file=args.cookie_secret_file, behind_proxy=args.behind_proxy,
+                   admin=args.admin)
     return 0
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from railval.app.report import ReportError, build_report
-    from railval.app.state.backend import Backend
-
     if Path(args.out).suffix.lower() not in (".html", ".htm", ".pdf"):
-        raise ReportError(f"--out {args.out}: extension must be .html or .pdf")
+        raise app_report.ReportError(f"--out {args.out}: extension must be .html or .pdf")
     database = _database(args.db, upgrade=False)
     cards = None
     if args.cards or args.workshop:
-        from railval.app.services.database import default_actor
-        from railval.app.services.users import principal_of
-        from railval.app.services.workshop_cards import report_cards
-        from railval.core.errors import InvalidParameter
-
         if not (args.cards and args.workshop):
             raise InvalidParameter("--workshop and --cards go together: the workshop and its plot ids")
         # the cards show answers: the workshop.results permission
-        actor = principal_of(database, default_actor())
-        cards = report_cards(database, args.workshop, args.config, args.cards, groups=args.groups,
-                             actor=actor)
-    rep = build_report(Backend(database), args.campaign, args.config, worst_cases=args.worst, cards=cards)
+        actor = users_service.principal_of(database, database_service.default_actor())
+        cards = workshop_cards_service.report_cards(database, args.workshop, args.config, args.cards, groups=args.groups,
+                                                    actor=actor)
+    rep = app_report.build_report(app_backend.Backend(database), args.campaign, args.config, worst_cases=args.worst, cards=cards)
     path = rep.write(args.out)
     if args.json:
         emit_json({**rep.to_dict(), "file": str(path)})

@@ -31,6 +31,15 @@ import sys
 
 from railval.app.cli import emit_json
 from railval.core.errors import RailvalError
+from railval.core import lazy
+
+# the services and records this module's verbs call, imported when a verb first uses
+# them (railval.core.lazy): `railval --help` and the other verbs never load them
+app_audit_report = lazy.module("railval.app.audit_report")
+app_cmd_user = lazy.module("railval.app.cli.cmd_user")
+audit_service = lazy.module("railval.app.services.audit")
+database_service = lazy.module("railval.app.services.database")
+signoff_service = lazy.module("railval.app.services.signoff")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -128,28 +137,22 @@ def _register_signoff(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(args):
-    from railval.app.services.database import open_database
-
-    return open_database(args.db)
+    return database_service.open_database(args.db)
 
 
 def _cmd_checkpoint(args) -> int:
-    from railval.app.services.audit import write_checkpoint
-
-    doc = write_checkpoint(_database(args), args.file)
+    doc = audit_service.write_checkpoint(_database(args), args.file)
     print(f"checkpoint written to {args.file}: {doc['seq']} rows, head {doc['row_hash']}")
     return 0
 
 
 def _cmd_verify(args) -> int:
-    from railval.app.services import audit as svc
-
-    checkpoint = svc.read_checkpoint(args.checkpoint) if args.checkpoint else None
+    checkpoint = audit_service.read_checkpoint(args.checkpoint) if args.checkpoint else None
     if args.bundle:
-        report = svc.verify_bundle(args.bundle, checkpoint, public_key=args.public_key,
+        report = audit_service.verify_bundle(args.bundle, checkpoint, public_key=args.public_key,
                                    trust_fingerprints=args.trust_fingerprint)
     else:
-        report = svc.verify_database(_database(args), checkpoint, signals=not args.quick,
+        report = audit_service.verify_database(_database(args), checkpoint, signals=not args.quick,
                                      full=not args.quick, witness=args.witness,
                                      use_witness=not args.no_witness,
                                      public_key=args.public_key,
@@ -190,9 +193,7 @@ def _print_report(report, checkpoint) -> None:
 
 
 def _cmd_key(args) -> int:
-    from railval.app.services.audit import key_info
-
-    info = key_info(_database(args))
+    info = audit_service.key_info(_database(args))
     if args.json:
         emit_json(info)
         return 0
@@ -210,10 +211,7 @@ def _cmd_key(args) -> int:
 
 
 def _cmd_rotate_key(args) -> int:
-    from railval.app.services.audit import rotate_key
-    from railval.app.services.database import default_actor
-
-    done = rotate_key(_database(args), default_actor(), args.reason)
+    done = audit_service.rotate_key(_database(args), database_service.default_actor(), args.reason)
     print(f"signing key rotated at audit row {done['seq']}: {done['old_fingerprint']} → "
           f"{done['new_fingerprint']}; the new key is pinned; the old private key is at "
           f"{done['old_key_file']} — move it offline")
@@ -221,28 +219,21 @@ def _cmd_rotate_key(args) -> int:
 
 
 def _cmd_seal(args) -> int:
-    from railval.app.services.audit import seal
-    from railval.app.services.database import default_actor
-
-    seq, h, n = seal(_database(args), default_actor(), args.reason)
+    seq, h, n = audit_service.seal(_database(args), database_service.default_actor(), args.reason)
     print(f"sealed: signed head seq {seq} {h} (over {n} unsigned earlier rows); "
           "kept in the witness file")
     return 0
 
 
 def _cmd_export(args) -> int:
-    from railval.app.services.audit import export_bundle
-
-    head = export_bundle(_database(args), args.dir)
+    head = audit_service.export_bundle(_database(args), args.dir)
     print(f"audit bundle written to {args.dir}: {head['rows']} rows, head {head['row_hash']}; "
           f"check it with `railval audit verify --bundle {args.dir}`")
     return 0
 
 
 def _cmd_log(args) -> int:
-    from railval.app.services.audit import trail
-
-    rows = trail(_database(args), actor=args.actor, object_prefix=args.object)
+    rows = audit_service.trail(_database(args), actor=args.actor, object_prefix=args.object)
     if args.json:
         emit_json({"rows": rows})
         return 0
@@ -256,11 +247,9 @@ def _cmd_log(args) -> int:
 def _cmd_report(args) -> int:
     from pathlib import Path
 
-    from railval.app.audit_report import build_audit_report
-
     if Path(args.out).suffix.lower() not in (".html", ".htm", ".pdf"):
         raise RailvalError(f"--out {args.out}: extension must be .html or .pdf")
-    rep = build_audit_report(_database(args))
+    rep = app_audit_report.build_audit_report(_database(args))
     path = rep.write(args.out)
     print(f"audit report ({rep.chain_status}) written to {path}")
     return 0
@@ -268,18 +257,14 @@ def _cmd_report(args) -> int:
 
 # -- sign-off ----------------------------------------------------------------------------
 def _signer(args) -> str:
-    from railval.app.services.database import default_actor
-
-    who = default_actor()
+    who = database_service.default_actor()
     if who.startswith("cli:"):
         raise RailvalError("name the signer with --as USER or RAILVAL_USER")
     return who
 
 
 def _summary(args) -> dict:
-    from railval.app.services.signoff import summary_of
-
-    return summary_of(_database(args), args.campaign, args.config)
+    return signoff_service.summary_of(_database(args), args.campaign, args.config)
 
 
 def _num(v, fmt: str = "+.3f") -> str:
@@ -340,9 +325,6 @@ def _cmd_signoff_summary(args) -> int:
 
 
 def _cmd_signoff_create(args) -> int:
-    from railval.app.cli.cmd_user import read_password
-    from railval.app.services.signoff import sign
-
     database = _database(args)
     username = _signer(args)
     summ = _summary(args)
@@ -354,10 +336,10 @@ def _cmd_signoff_create(args) -> int:
     if contrary and not args.justification.strip():
         raise RailvalError(f"{contrary}: a decision contrary to the objective verdict needs "
                            "--justification TEXT; nothing was signed")
-    password = read_password(args, confirm=False, prompt=f"Password of {username} (signature): ")
-    rec = sign(database, username, password, args.campaign, args.config,
-               decision=args.decision, restrictions=args.restrictions,
-               statement=args.statement, justification=args.justification, source="cli")
+    password = app_cmd_user.read_password(args, confirm=False, prompt=f"Password of {username} (signature): ")
+    rec = signoff_service.sign(database, username, password, args.campaign, args.config,
+                               decision=args.decision, restrictions=args.restrictions,
+                               statement=args.statement, justification=args.justification, source="cli")
     if args.json:
         rec = {k: v for k, v in rec.items() if k != "manifest"}
         emit_json({**rec, "summary": summ})
@@ -385,9 +367,7 @@ def _print_signoff(rec: dict, status: str, reasons: list[str]) -> None:
 
 
 def _cmd_signoff_list(args) -> int:
-    from railval.app.services.signoff import records
-
-    items = records(_database(args), args.campaign, args.config)
+    items = signoff_service.records(_database(args), args.campaign, args.config)
     if args.json:
         emit_json({"signoffs": [{**{k: v for k, v in d.items() if k != "manifest"},
                                  "status": st.status, "stale_reasons": st.reasons}
@@ -404,9 +384,7 @@ def _cmd_signoff_list(args) -> int:
 
 
 def _cmd_signoff_show(args) -> int:
-    from railval.app.services.signoff import record
-
-    rec, st = record(_database(args), args.id)
+    rec, st = signoff_service.record(_database(args), args.id)
     if args.json:
         emit_json({**rec, "status": st.status, "stale_reasons": st.reasons})
     else:

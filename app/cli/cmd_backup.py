@@ -15,6 +15,11 @@ from __future__ import annotations
 import argparse
 
 from railval.app.cli import emit_json
+from railval.core import lazy
+
+# the services and records this module's verbs call, imported when a verb first uses
+# them (railval.core.lazy): `railval --help` and the other verbs never load them
+database_service = lazy.module("railval.app.services.database")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,9 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_backup(args: argparse.Namespace) -> int:
-    from railval.app.services.database import backup
-
-    doc = backup(args.db, args.folder)
+    doc = database_service.backup(args.db, args.folder)
     if args.json:
         emit_json(doc)
     else:
@@ -41,9 +44,7 @@ def cmd_backup(args: argparse.Namespace) -> int:
 
 
 def cmd_restore(args: argparse.Namespace) -> int:
-    from railval.app.services.database import restore
-
-    doc = restore(args.db, args.folder)
+    doc = database_service.restore(args.db, args.folder)
     if args.json:
         emit_json(doc)
     else:

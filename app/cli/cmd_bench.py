@@ -12,16 +12,15 @@ import argparse
 import importlib
 import pkgutil
 
+from railval.app import bench as bench_package
 from railval.app.cli import emit_json
 from railval.core.errors import NotFound
 
 
 def available() -> dict[str, str]:
     """Benchmark name → first docstring line, from the ``railval.app.bench.bench_*`` modules."""
-    import railval.app.bench
-
     out = {}
-    for info in sorted(pkgutil.iter_modules(railval.app.bench.__path__), key=lambda m: m.name):
+    for info in sorted(pkgutil.iter_modules(bench_package.__path__), key=lambda m: m.name):
         if info.name.startswith("bench_"):
             out[info.name[len("bench_"):]] = info.name
     return out

@@ -22,7 +22,14 @@ from __future__ import annotations
 import argparse
 import time
 
-from railval.app.cli import Progress, emit_json
+from railval.app.cli import Progress, authorize, emit_json
+from railval.core import lazy
+
+# the services and records this module's verbs call, imported when a verb first uses
+# them (railval.core.lazy): `railval --help` and the other verbs never load them
+campaign_data_service = lazy.module("railval.app.services.campaign_data")
+catalogue_service = lazy.module("railval.app.services.catalogue")
+database_service = lazy.module("railval.app.services.database")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -66,15 +73,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(args: argparse.Namespace, *, upgrade: bool = True):
-    from railval.app.services.database import open_database
-
-    return open_database(args.db, upgrade=upgrade)
+    return database_service.open_database(args.db, upgrade=upgrade)
 
 
 def cmd_init(args: argparse.Namespace) -> int:
-    from railval.app.services.database import initialise
-
-    doc = initialise(args.db)
+    doc = database_service.initialise(args.db)
     if args.json:
         emit_json(doc)
     else:
@@ -84,8 +87,6 @@ def cmd_init(args: argparse.Namespace) -> int:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    from railval.app.services import campaign_data
-
     database = _database(args)
     bar = Progress()
 
@@ -96,7 +97,7 @@ def cmd_import(args: argparse.Namespace) -> int:
 
     t = time.perf_counter()
     if args.into:
-        conf = campaign_data.import_configuration_folder(database, args.into, args.folder,
+        conf = campaign_data_service.import_configuration_folder(database, args.into, args.folder,
                                                          progress=progress)
         doc = {"campaign": args.into, "configuration": conf,
                "seconds": round(time.perf_counter() - t, 3)}
@@ -106,7 +107,7 @@ def cmd_import(args: argparse.Namespace) -> int:
             print(f"imported configuration {conf!r} into campaign {args.into!r} in "
                   f"{doc['seconds']:.1f} s")
         return 0
-    name = campaign_data.import_folder(database, args.folder, progress=progress)
+    name = campaign_data_service.import_folder(database, args.folder, progress=progress)
     elapsed = time.perf_counter() - t
     doc = _summary(database, name)
     doc["seconds"] = round(elapsed, 3)
@@ -120,9 +121,7 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from railval.app.services.campaign_data import export
-
-    path = export(_database(args, upgrade=False), args.name, args.folder, fmt=args.format)
+    path = campaign_data_service.export(_database(args, upgrade=False), args.name, args.folder, fmt=args.format)
     if args.json:
         emit_json({"campaign": args.name, "manifest": str(path), "format": args.format})
     else:
@@ -131,9 +130,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def _summary(database, name_or_campaign) -> dict:
-    from railval.app.services.campaign_data import summary
-
-    return summary(database, name_or_campaign)
+    return campaign_data_service.summary(database, name_or_campaign)
 
 
 def _zones_text(zones: dict[str, int]) -> str:
@@ -147,16 +144,12 @@ def cmd_list(args: argparse.Namespace) -> int:
     verb, ``authorizes_itself``), migrations, the ORM's campaign summaries."""
     import os
 
-    from railval.app.services import catalogue
-
-    docs, safe_url = catalogue.fast(args.db, args.as_user or os.environ.get("RAILVAL_USER"))
+    docs, safe_url = catalogue_service.fast(args.db, args.as_user or os.environ.get("RAILVAL_USER"))
     if docs is None:
-        from railval.app.cli import authorize
-
         args.authorizes_itself = False
         authorize(args)
         database = _database(args)
-        docs = catalogue.summaries(database)
+        docs = catalogue_service.summaries(database)
         safe_url = database.safe_url
     if args.json:
         emit_json({"database": safe_url, "campaigns": docs})
@@ -174,11 +167,9 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
-    from railval.app.services.campaign_data import verify
-
     database = _database(args, upgrade=False)
     t = time.perf_counter()
-    doc = verify(database, blobs=not args.no_blobs)
+    doc = campaign_data_service.verify(database, blobs=not args.no_blobs)
     doc["seconds"] = round(time.perf_counter() - t, 3)
     doc["database"] = database.safe_url
     if args.json:

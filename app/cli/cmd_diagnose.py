@@ -19,88 +19,96 @@ from __future__ import annotations
 import argparse
 
 from railval.app.cli import Progress, emit_json
+from railval.core import lazy
+from railval.core.errors import InvalidParameter
+
+# the services and records this module's verbs call, imported when a verb first uses
+# them (railval.core.lazy): `railval --help` and the other verbs never load them
+app_views = lazy.module("railval.app.views")
+calibration_service = lazy.module("railval.app.services.calibration")
+calibration_plan = lazy.module("railval.app.services.calibration_plan")
+connect = lazy.function("railval.db.engine", "connect")  # the --db URL → its connection
+diagnosis_service = lazy.module("railval.app.services.diagnosis")
+modal_service = lazy.module("railval.app.services.modal")
 
 
 def _db(args: argparse.Namespace):
-    from railval.db.engine import connect
-
     database = connect(args.db)
     database.ensure_initialised()
     return database
 
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
-    from railval.app.services.diagnosis import diagnose
-
-    res = diagnose(_db(args), args.campaign, args.config, progress=Progress(), scheduler=args.scheduler,
-                   values_per_parameter=args.values, effects=args.candidates,
-                   **({"include_parameters": False} if args.no_parameters else {}))
+    res = diagnosis_service.diagnose(_db(args), args.campaign, args.config, progress=Progress(), scheduler=args.scheduler,
+                                     values_per_parameter=args.values, effects=args.candidates,
+                                     **({"include_parameters": False} if args.no_parameters else {}))
     if args.json:
         emit_json(res.to_dict())
         return 0
-    print(f"diagnosis of {args.campaign}/{args.config}: verdict {res.verdict.upper()} — {res.note}")
-    print(f"noise floor (share of pure section scatter the candidates explain, 95 %): {res.noise_floor:.2f}")
-    _print_lineage(res.lineage)
-    for st in res.statements or []:
-        print(f"input ({st['kind']}): {st['text']}")
+    view = app_views.diagnosis_view_of(res)
+    print(f"diagnosis of {args.campaign}/{args.config}: verdict {view.verdict.upper()} — {view.note}")
+    print(f"noise floor (share of pure section scatter the candidates explain, 95 %): {view.noise_floor:.2f}")
+    _print_lineage(view)
+    for kind, text in view.statements:
+        print(f"input ({kind}): {text}")
     print(f"{'rank':>4}  {'candidate':<28} {'kind':<9} {'held-out':>8} {'explained':>9}  fitted")
-    for k, c in enumerate(res.candidates, 1):
+    for k, c in enumerate(view.candidates, 1):
         print(f"{k:>4}  {c.name:<28} {c.kind:<9} {c.held_out_explained:8.2f} {c.explained:9.2f}  {c.summary}")
         print(f"{'':>6}fixes {', '.join(c.fixes) or '-'}; worsens {', '.join(c.worsens) or '-'}")
         for f in c.flags:
             print(f"{'':>6}! {f}")
-    if res.causes:
-        print("causes (greedy, joint refit; share added on held-out sections): " + ", ".join(
-            f"{c['name']} {c['held_out_share']:.2f}" for c in res.causes)
-              + f" — together {res.cause_set['held_out_explained']:.2f}")
-    for x in (res.cause_set or {}).get("left_out", []):
-        print(f"not in the cause set: {x['name']} — {x['reason']}")
-    for x in (res.cause_set or {}).get("passed_over", []):
-        print(f"passed over (the search carried on): {x['name']} — {x['reason']}")
-    for f in res.families or []:
-        best = f["top"][0] if f["top"] else None
-        print(f"family {f['title']} ({f['share']:.0%} of the residual): {f['verdict']}"
-              + (f", best {best['name']} {best['held_out_explained']:.2f} held-out" if best else "")
-              + (f" — STRUCTURAL: {f['structural']['reason']}" if f["structural"]["flag"] else ""))
-    for s in res.skipped or []:
-        print(f"left out: {s['name']} ({s['kind']}) — {s['reason']}")
-    if res.verdict == "none" and res.unexplained:
+    _print_causes(view)
+    for f in view.families:
+        print(f"family {f.title} ({f.share:.0%} of the residual): {f.verdict}"
+              + (f", best {f.best} {f.best_held_out:.2f} held-out" if f.best is not None else "")
+              + (f" — STRUCTURAL: {f.structural_reason}" if f.structural else ""))
+    for s in view.skipped:
+        print(f"left out: {s.name} ({s.kind}) — {s.reason}")
+    if view.verdict == "none" and view.unexplained:
         print("unexplained (largest components): " + "; ".join(
-            f"{u['component']} {u['residual']:+.2f}" for u in res.unexplained))
-    if res.next_step and res.next_step.get("text"):
-        print(f"next: {res.next_step['text']}")
+            f"{component} {residual:+.2f}" for component, residual in view.unexplained))
+    if view.next_text:
+        print(f"next: {view.next_text}")
     return 0
 
 
-def _print_lineage(lineage: dict | None) -> None:
-    """The lineage of diagnoses (root first) and what is left after the calibration."""
-    if not lineage:
+def _print_causes(view) -> None:
+    """The cause set (greedy, joint refit) and the candidates it left out or passed over."""
+    if view.causes:
+        print("causes (greedy, joint refit; share added on held-out sections): " + ", ".join(
+            f"{c.name} {c.held_out_share:.2f}" for c in view.causes)
+              + f" — together {view.cause_set.held_out_explained:.2f}")
+    for x in view.cause_set.left_out:
+        print(f"not in the cause set: {x.name} — {x.reason}")
+    for x in view.cause_set.passed_over:
+        print(f"passed over (the search carried on): {x.name} — {x.reason}")
+
+
+def _print_lineage(view) -> None:
+    """The lineage of diagnoses (root first) and what is left after the calibration
+    (a :class:`railval.app.views.DiagnosisView`)."""
+    if not view.has_lineage:
         return
     print("lineage of diagnoses: " + " → ".join(
-        f"{a['configuration']} " + (f"#{a['diagnosis']} {str(a['verdict']).upper()}"
-                                     + (f" {a['top']}" if a["top"] else "") if a["diagnosis"] else "(not diagnosed)")
-        for a in lineage["ancestors"]) + f" → {lineage['configuration']}")
-    if lineage.get("statement"):
-        print(f"after calibration: {lineage['statement']['text']}")
+        f"{a.configuration} " + (f"#{a.diagnosis} {str(a.verdict).upper()}"
+                                 + (f" {a.top}" if a.top else "") if a.diagnosis else "(not diagnosed)")
+        for a in view.ancestors) + f" → {view.lineage_configuration}")
+    if view.lineage_statement:
+        print(f"after calibration: {view.lineage_statement}")
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from railval.app.services.calibration import calibrate
-    from railval.app.services.calibration_plan import start_text, tolerance_text
-
     start: dict[str, dict[str, float]] = {}
     for item in args.start or []:
         key, sep, value = item.partition("=")
         effect, dot, pname = key.partition(".")
         if not (sep and dot):
-            from railval.core.errors import InvalidParameter
-
             raise InvalidParameter(f"--start expects EFFECT.PARAM=VALUE or model.NAME=VALUE, got {item!r}")
         start.setdefault(effect, {})[pname] = float(value)
-    res = calibrate(_db(args), args.campaign, args.config, args.effect, args.new_name, params=args.params,
-                    progress=Progress(), scheduler=args.scheduler, seed=args.seed, replace=args.replace,
-                    start=start or None, fit_sections=args.fit_sections, holdout=args.holdout, split=args.split,
-                    method="global" if args.global_search else "local")
+    res = calibration_service.calibrate(_db(args), args.campaign, args.config, args.effect, args.new_name, params=args.params,
+                                        progress=Progress(), scheduler=args.scheduler, seed=args.seed, replace=args.replace,
+                                        start=start or None, fit_sections=args.fit_sections, holdout=args.holdout, split=args.split,
+                                        method="global" if args.global_search else "local")
     d = res.to_dict()
     if args.json:
         emit_json(d)
@@ -108,9 +116,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     print(f"stored configuration {args.new_name} (parent {args.config}); objective "
           f"{d['objective_start']} → {d['objective']:.4g} in {d['n_evaluations']} simulations")
     print(f"optimizer ({d['method']}): {d['message']}")
-    print(tolerance_text(d))
-    if start_text(d):
-        print(start_text(d))
+    print(calibration_plan.tolerance_text(d))
+    if calibration_plan.start_text(d):
+        print(calibration_plan.start_text(d))
     for k, v in d["parameters"].items():
         print(f"  {k} = {v:.5g} {d['units'].get(k, '')}")
     print("lineage (largest normalised error): " + " → ".join(
@@ -131,10 +139,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_modal(args: argparse.Namespace) -> int:
-    from railval.app.services.modal import modal
-
-    d = modal(_db(args), args.campaign, sections=args.section, calibrate_params=args.calibrate,
-              progress=Progress())
+    d = modal_service.modal(_db(args), args.campaign, sections=args.section, calibrate_params=args.calibrate,
+                            progress=Progress())
     if args.json:
         emit_json(d)
         return 0

@@ -18,6 +18,15 @@ import math
 from typing import Any
 
 from railval.app.cli import LazyChoices, emit_json
+from railval.core import lazy
+
+# the services and records this module's verbs call, imported when a verb first uses
+# them (railval.core.lazy): `railval --help` and the other verbs never load them
+core_errors = lazy.module("railval.core.errors")
+core_metrics = lazy.module("railval.core.metrics")
+connect = lazy.function("railval.db.engine", "connect")  # the --db URL → its connection
+metrics_service = lazy.module("railval.app.services.metrics")
+overview_service = lazy.module("railval.app.services.overview")
 
 #: headline columns of the text table: (metric, width, format)
 _TABLE = (("sg_M", "SG M", 6, "+.3f"), ("sg_P", "SG P", 5, ".3f"), ("sg_C", "SG C", 5, ".3f"),
@@ -43,11 +52,8 @@ def _clean(v: Any) -> Any:
 
 
 def _cmd_metrics(args: argparse.Namespace) -> int:
-    from railval.core.errors import InvalidParameter
-    from railval.core.metrics import METRICS, metric_names, registry_table
-
     if args.list:
-        rows = registry_table()
+        rows = core_metrics.registry_table()
         if args.json:
             emit_json({"metrics": rows})
             return 0
@@ -57,28 +63,24 @@ def _cmd_metrics(args: argparse.Namespace) -> int:
                   f"{r['label']} — {r['source']}")
         return 0
     if not args.campaign or not args.config:
-        raise InvalidParameter("metrics needs CAMPAIGN and --config NAME (or --list)")
-
-    from railval.app.services import overview
-    from railval.app.services.metrics import summary
-    from railval.db.engine import connect
+        raise core_errors.InvalidParameter("metrics needs CAMPAIGN and --config NAME (or --list)")
 
     database = connect(args.db)
     database.ensure_initialised()
     lowpass_hz = None if args.no_lowpass else args.lowpass
-    df = overview.metrics(database, args.campaign, args.config, args.section, args.channel,
-                          lowpass_hz=lowpass_hz, max_lag_s=args.max_lag, families=args.family,
-                          part=args.part, subsample=args.subsample)
-    names = metric_names(args.family)
+    df = overview_service.metrics(database, args.campaign, args.config, args.section, args.channel,
+                                  lowpass_hz=lowpass_hz, max_lag_s=args.max_lag, families=args.family,
+                                  part=args.part, subsample=args.subsample)
+    names = core_metrics.metric_names(args.family)
     if args.json:
         rows = [{k: _clean(v) for k, v in rec.items()} for rec in df.to_dict(orient="records")]
         emit_json({
             "campaign": args.campaign, "config": args.config,
             "settings": {"lowpass_hz": lowpass_hz, "max_lag_s": args.max_lag, "part": args.part,
                          "subsample": args.subsample, "families": args.family},
-            "metrics": [METRICS[n].to_dict() for n in names],
+            "metrics": [core_metrics.METRICS[n].to_dict() for n in names],
             "rows": rows,
-            "summary": summary(df),
+            "summary": metrics_service.summary(df),
         })
         return 0
     cols = [c for c in _TABLE if c[0] in names]
@@ -108,9 +110,7 @@ def _cmd_metrics(args: argparse.Namespace) -> int:
 
 
 def _families() -> list[str]:
-    from railval.core.metrics import FAMILIES
-
-    return sorted(FAMILIES)
+    return sorted(core_metrics.FAMILIES)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

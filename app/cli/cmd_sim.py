@@ -16,12 +16,19 @@ import argparse
 
 from railval.app.cli import Progress, emit_json
 from railval.core.errors import InvalidParameter
+from railval.core import lazy
+
+# the services and records this module's verbs call, imported when a verb first uses
+# them (railval.core.lazy): `railval --help` and the other verbs never load them
+core_effects = lazy.module("railval.core.sim.effects")
+core_vehicles = lazy.module("railval.core.sim.vehicles")
+database_service = lazy.module("railval.app.services.database")
+simulation_service = lazy.module("railval.app.services.simulation")
+synth_service = lazy.module("railval.app.services.synth")
 
 
 def _db(args: argparse.Namespace):
-    from railval.app.services.database import open_database
-
-    return open_database(args.db)
+    return database_service.open_database(args.db)
 
 
 def parse_effect(item: str) -> tuple[str, dict[str, float]]:
@@ -50,18 +57,13 @@ def parse_param(item: str) -> tuple[str, float]:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from railval.app.services.simulation import simulate_configuration
-
     effects = dict(parse_effect(e) for e in args.effect or [])
     params: dict = dict(parse_param(p) for p in args.param or [])
     if args.rrd:
-        from railval.app.services.simulation import contact_geometry_file
-        from railval.core.sim.vehicles import CONTACT_PARAMETER
-
-        params[CONTACT_PARAMETER] = contact_geometry_file(args.rrd)
-    res = simulate_configuration(_db(args), args.campaign, args.config, parent=args.parent, effects=effects,
-                                 parameters=params, replace=args.replace, workers=args.workers,
-                                 scheduler=args.scheduler, progress=Progress())
+        params[core_vehicles.CONTACT_PARAMETER] = simulation_service.contact_geometry_file(args.rrd)
+    res = simulation_service.simulate_configuration(_db(args), args.campaign, args.config, parent=args.parent, effects=effects,
+                                                    parameters=params, replace=args.replace, workers=args.workers,
+                                                    scheduler=args.scheduler, progress=Progress())
     if args.json:
         emit_json(res)
     else:
@@ -74,10 +76,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
-    from railval.app.services.synth import synth
-
-    res = synth(_db(args), name=args.name, template=args.vehicle, hidden=args.hidden, seed=args.seed,
-                n_sections=args.sections, out=args.out, reveal=args.reveal, progress=Progress())
+    res = synth_service.synth(_db(args), name=args.name, template=args.vehicle, hidden=args.hidden, seed=args.seed,
+                              n_sections=args.sections, out=args.out, reveal=args.reveal, progress=Progress())
     if args.json:
         emit_json(res)
     else:
@@ -88,15 +88,13 @@ def _cmd_synth(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from railval.core.sim.effects import EFFECT_IDS
-
     p = sub.add_parser("simulate", help="simulate a configuration with the built-in simulator and store it",
                        description="Simulate every section of CAMPAIGN and store configuration NAME.")
     p.add_argument("campaign", metavar="CAMPAIGN")
     p.add_argument("--config", required=True, metavar="NAME", help="name of the configuration to store")
     p.add_argument("--parent", metavar="P", default=None, help="parent configuration (its effects are kept)")
     p.add_argument("--effect", action="append", metavar="ID[:k=v,...]",
-                   help=f"switch an effect on (repeatable); ids: {', '.join(EFFECT_IDS)}")
+                   help=f"switch an effect on (repeatable); ids: {', '.join(core_effects.EFFECT_IDS)}")
     p.add_argument("--param", action="append", metavar="k=v", help="vehicle template parameter override")
     p.add_argument("--rrd", metavar="FILE", default=None,
                    help="measured profiles: rolling-radius difference table (CSV y_mm,delta_r_mm[,delta_gamma_rad], "

@@ -24,6 +24,12 @@ from pathlib import Path
 from railval.app.cli import emit_json
 from railval.core.errors import RailvalError
 from railval.core.roles import ROLES
+from railval.core import lazy
+
+# the services and records this module's verbs call, imported when a verb first uses
+# them (railval.core.lazy): `railval --help` and the other verbs never load them
+database_service = lazy.module("railval.app.services.database")
+users_service = lazy.module("railval.app.services.users")
 
 
 def _password_options(p: argparse.ArgumentParser) -> None:
@@ -113,25 +119,19 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(args):
-    from railval.app.services.database import open_database
-
-    return open_database(args.db, upgrade=True)
+    return database_service.open_database(args.db, upgrade=True)
 
 
 def _cmd_add(args) -> int:
-    from railval.app.services import users
-
     password = None if args.no_password else read_password(args)
-    name, roles = users.add(_database(args), args.name, display_name=args.display_name,
-                      password=password, roles=args.role, reason=args.reason)
+    name, roles = users_service.add(_database(args), args.name, display_name=args.display_name,
+                                    password=password, roles=args.role, reason=args.reason)
     print(f"user {name} added (roles: {', '.join(roles) or 'none'})")
     return 0
 
 
 def _cmd_list(args) -> int:
-    from railval.app.services import users
-
-    rows = users.rows(_database(args))
+    rows = users_service.rows(_database(args))
     if args.json:
         emit_json({"users": rows})
         return 0
@@ -148,46 +148,36 @@ def _cmd_list(args) -> int:
 
 
 def _cmd_disable(args) -> int:
-    from railval.app.services import users
-
-    users.set_disabled(_database(args), args.name, True, reason=args.reason)
+    users_service.set_disabled(_database(args), args.name, True, reason=args.reason)
     print(f"user {args.name} disabled")
     return 0
 
 
 def _cmd_enable(args) -> int:
-    from railval.app.services import users
-
-    users.set_disabled(_database(args), args.name, False, reason=args.reason)
+    users_service.set_disabled(_database(args), args.name, False, reason=args.reason)
     print(f"user {args.name} enabled")
     return 0
 
 
 def _cmd_passwd(args) -> int:
-    from railval.app.services import users
-
     database = _database(args)
-    users.require_user(database, args.name)
+    users_service.require_user(database, args.name)
     password = read_password(args)
-    users.set_password(database, args.name, password, reason=args.reason)
+    users_service.set_password(database, args.name, password, reason=args.reason)
     print(f"password of {args.name} set")
     return 0
 
 
 def _cmd_role(args) -> int:
-    from railval.app.services import users
-
-    name, roles = users.set_roles(_database(args), args.name, args.roles, reason=args.reason)
+    name, roles = users_service.set_roles(_database(args), args.name, args.roles, reason=args.reason)
     print(f"user {name}: roles {', '.join(roles) or 'none'}")
     return 0
 
 
 def _cmd_invite(args) -> int:
-    from railval.app.services import users
-
     if args.days <= 0:
         raise RailvalError(f"--days {args.days}: must be positive")
-    token, expires = users.invite(_database(args), role=args.role, workshop=args.workshop,
+    token, expires = users_service.invite(_database(args), role=args.role, workshop=args.workshop,
                                   days=args.days)
     link = f"{args.base_url.rstrip('/')}/invite?token={token}"
     if args.json:

@@ -22,6 +22,15 @@ import argparse
 from typing import TYPE_CHECKING
 
 from railval.app.cli import emit_json
+from railval.core import lazy
+
+# the services and records this module's verbs call, imported when a verb first uses
+# them (railval.core.lazy): `railval --help` and the other verbs never load them
+app_views = lazy.module("railval.app.views")
+core_quantities = lazy.module("railval.core.quantities")
+connect = lazy.function("railval.db.engine", "connect")  # the --db URL → its connection
+overview_service = lazy.module("railval.app.services.overview")
+validation_service = lazy.module("railval.app.services.validation")
 
 if TYPE_CHECKING:
     from railval.core.coverage import Coverage
@@ -75,10 +84,7 @@ def _fmt(x: float | None, spec: str = ".3g") -> str:
 
 def format_result(result: ValidationResult) -> str:
     """Human-readable table of a validation (the view model of :mod:`railval.app.views`)."""
-    from railval.app.views import view_of
-    from railval.core.quantities import QUANTITIES
-
-    view = view_of(result)
+    view = app_views.view_of(result)
     lines = []
     info = view.info
     lines.append(f"validation of {info.get('campaign', '?')} / {info.get('configuration', '?')}")
@@ -88,7 +94,7 @@ def format_result(result: ValidationResult) -> str:
                  f"{'std':>9} {'limit':>7}  {'|mean|/limit':<21} {'std/limit':<21} "
                  f"{'95 % CI mean':>15} {'95 % CI std':>13}  result")
     for q in view.quantities:
-        lines += _quantity_lines(q, QUANTITIES[q["quantity"]].unit)
+        lines += _quantity_lines(q, core_quantities.QUANTITIES[q["quantity"]].unit)
     lines += _coverage_lines(view.coverage)
     for w in view.warnings:
         lines.append(f"warning: {w}")
@@ -167,25 +173,18 @@ def format_supplementary(rows: list[dict]) -> list[str]:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from railval.app.services import overview
-    from railval.db.engine import connect
-
     database = connect(args.db)
     database.ensure_initialised()
     if args.scheduler:
-        from railval.app.services.validation import validate_configurations
-
-        (result,) = validate_configurations(database, args.campaign, [args.config],
-                                            order=args.order, n_boot=args.boot, seed=args.seed,
-                                            scheduler=args.scheduler).values()
+        (result,) = validation_service.validate_configurations(database, args.campaign, [args.config],
+                                                               order=args.order, n_boot=args.boot, seed=args.seed,
+                                                               scheduler=args.scheduler).values()
     else:
-        result = overview.validation(database, args.campaign, args.config, order=args.order,
-                                     n_boot=args.boot, seed=args.seed)
+        result = overview_service.validation(database, args.campaign, args.config, order=args.order,
+                                             n_boot=args.boot, seed=args.seed)
     if args.json:
-        from railval.app.views import view_of  # loads the verdict's module: once there is one
-
         doc = result.to_dict()
-        ins = view_of(result).in_sample
+        ins = app_views.view_of(result).in_sample
         doc["in_sample"] = ins is not None
         # which fit makes it in-sample and the held-out check (None when not in-sample)
         doc["in_sample_provenance"] = ins.to_dict() if ins is not None else None

@@ -33,14 +33,21 @@ import argparse
 import sys
 
 from railval.app.cli import Progress, emit_json
+from railval.core import lazy
+
+# the services and records this module's verbs call, imported when a verb first uses
+# them (railval.core.lazy): `railval --help` and the other verbs never load them
+core_workshop = lazy.module("railval.core.workshop")
+database_service = lazy.module("railval.app.services.database")
+workshop_admin_service = lazy.module("railval.app.services.workshop_admin")
+workshop_cards_service = lazy.module("railval.app.services.workshop_cards")
+workshops_service = lazy.module("railval.app.services.workshops")
 
 
 def _actor() -> str:
     """The acting user of this command (``--as`` / ``$RAILVAL_USER``, checked by the CLI),
     else ``cli:<OS user>``: the name in the audit trail."""
-    from railval.app.services.database import default_actor
-
-    return default_actor()
+    return database_service.default_actor()
 
 
 def _list(text: str | None) -> list[str] | None:
@@ -138,9 +145,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _database(url: str | None):
-    from railval.app.services.database import open_database
-
-    return open_database(url)
+    return database_service.open_database(url)
 
 
 def _flat(values: list[str] | None) -> list[str] | None:
@@ -150,14 +155,10 @@ def _flat(values: list[str] | None) -> list[str] | None:
 
 
 def _create(args: argparse.Namespace) -> int:
-    from railval.app.services import workshops as ws
-    from railval.app.services.workshop_admin import plan_counts
-    from railval.core.workshop import DEFAULT_SCALING, check_scaling
-
-    scaling = check_scaling(args.scaling or DEFAULT_SCALING)
+    scaling = core_workshop.check_scaling(args.scaling or core_workshop.DEFAULT_SCALING)
     database = _database(args.db)
     configs, sections, kinds = _flat(args.configurations), _flat(args.sections), _flat(args.kinds)
-    planned = plan_counts(database, args.campaign, configs, sections, kinds)
+    planned = workshop_admin_service.plan_counts(database, args.campaign, configs, sections, kinds)
     n_plots, counts = planned["plots"], planned["by_kind"]
     if args.dry_run:
         doc = {"name": args.name, "campaign": args.campaign, "plots": n_plots,
@@ -171,7 +172,7 @@ def _create(args: argparse.Namespace) -> int:
     if not args.json:
         print(f"creating workshop {args.name}: {n_plots} plots "
               f"({', '.join(f'{k} {n}' for k, n in counts.items())})", file=sys.stderr, flush=True)
-    out = ws.create(database, args.name, args.campaign, configurations=configs,
+    out = workshops_service.create(database, args.name, args.campaign, configurations=configs,
                     sections=sections, kinds=kinds, blind=args.blind, repeats=args.repeats,
                     auto_share=args.auto_share, seed=args.seed, scaling=scaling,
                     twin_scaling=args.twin_scaling, actor=_actor(), progress=Progress())
@@ -186,9 +187,7 @@ def _create(args: argparse.Namespace) -> int:
 
 
 def _kinds(args: argparse.Namespace) -> int:
-    from railval.app.services.workshops import describe_kinds
-
-    kinds = describe_kinds()
+    kinds = workshops_service.describe_kinds()
     if args.json:
         emit_json({"kinds": kinds})
     else:
@@ -198,9 +197,7 @@ def _kinds(args: argparse.Namespace) -> int:
 
 
 def _plots(args: argparse.Namespace) -> int:
-    from railval.app.services.workshop_admin import plots
-
-    doc = plots(_database(args.db), args.name)
+    doc = workshop_admin_service.plots(_database(args.db), args.name)
     if args.json:
         emit_json(doc)
     else:
@@ -212,11 +209,8 @@ def _plots(args: argparse.Namespace) -> int:
 
 
 def _invite(args: argparse.Namespace) -> int:
-    from railval.app.services.workshop_admin import invite
-    from railval.app.services.workshops import review_link
-
-    token = invite(_database(args.db), args.name, args.reviewer, actor=_actor())
-    link = review_link(args.base_url, token)
+    token = workshop_admin_service.invite(_database(args.db), args.name, args.reviewer, actor=_actor())
+    link = workshops_service.review_link(args.base_url, token)
     if args.json:
         emit_json({"workshop": args.name, "reviewer": args.reviewer, "link": link})
     else:
@@ -225,9 +219,7 @@ def _invite(args: argparse.Namespace) -> int:
 
 
 def _status(args: argparse.Namespace) -> int:
-    from railval.app.services.workshop_admin import status
-
-    doc = status(_database(args.db), args.name)
+    doc = workshop_admin_service.status(_database(args.db), args.name)
     if args.json:
         emit_json(doc)
     else:
@@ -240,17 +232,13 @@ def _status(args: argparse.Namespace) -> int:
 
 
 def _set_status(args: argparse.Namespace) -> int:
-    from railval.app.services.workshop_admin import set_status
-
-    status = set_status(_database(args.db), args.name, args.status, actor=_actor())
+    status = workshop_admin_service.set_status(_database(args.db), args.name, args.status, actor=_actor())
     print(f"workshop {args.name} is {status}")
     return 0
 
 
 def _import(args: argparse.Namespace) -> int:
-    from railval.app.services.workshops import import_answers
-
-    out = import_answers(_database(args.db), args.name, args.file, actor=_actor())
+    out = workshops_service.import_answers(_database(args.db), args.name, args.file, actor=_actor())
     if args.json:
         emit_json({"workshop": args.name, **out})
     else:
@@ -260,17 +248,13 @@ def _import(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from railval.app.services.workshops import export_answers
-
-    n = export_answers(_database(args.db), args.name, args.file)
+    n = workshops_service.export_answers(_database(args.db), args.name, args.file)
     print(f"{n} answers of {args.name} written to {args.file}")
     return 0
 
 
 def _cards(args: argparse.Namespace) -> int:
-    from railval.app.services.workshop_cards import cards
-
-    doc = cards(_database(args.db), args.name, groups=_flat(args.groups) or [], actor=_actor())
+    doc = workshop_cards_service.cards(_database(args.db), args.name, groups=_flat(args.groups) or [], actor=_actor())
     if args.json:
         emit_json(doc)
         return 0
@@ -287,9 +271,7 @@ def _cards(args: argparse.Namespace) -> int:
 
 
 def _analyse(args: argparse.Namespace) -> int:
-    from railval.app.services.workshops import analyse
-
-    doc = analyse(_database(args.db), args.name)
+    doc = workshops_service.analyse(_database(args.db), args.name)
     if args.json:
         emit_json(doc)
     else:

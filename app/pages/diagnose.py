@@ -21,6 +21,7 @@ from railval.app.security import plain_message
 from railval.app.services.calibration_plan import start_text, tolerance_text
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 from railval.app.svg_charts import svg_paired_hbars
+from railval.app.views import Ancestor
 
 
 #: the signature chart's value axis: what the residual is, and that it has no unit
@@ -117,7 +118,7 @@ class DiagnosePage(PageBase):
             catalogue, available = {}, []
             self.app.set_status(plain_message(exc, "diagnose"), "warning")
         self._catalogue = catalogue
-        ranked = [c["effect"] for c in self.state.candidates]
+        ranked = [c.name for c in self.state.view.candidates] if self.state.view is not None else []
         self.state.param.effect.objects = ranked + [e for e in available if e not in ranked]
         if self.state.effect not in self.state.param.effect.objects:
             self.state.effect = (self.state.param.effect.objects or [None])[0]
@@ -158,16 +159,17 @@ class DiagnosePage(PageBase):
                                     "it usually stops far earlier at its tolerance).")
 
     def _show_candidates(self) -> None:
-        cands = self.state.candidates
+        view = self.state.view  # the diagnosis's typed fields (railval.app.views.DiagnosisView)
+        cands = view.candidates if view is not None else []
         if not cands and not self.state.verdict:
             self.candidates_box.objects = [pn.pane.Markdown("*No diagnosis yet — press **Run diagnosis**.*")]
             return
         df = pd.DataFrame([{
-            "#": i + 1, "candidate": c["effect"], "kind": c.get("kind", "effect"),
-            "held-out": round(100 * float(c["held_out_explained"]), 1),
-            "in-sample": round(100 * float(c["explained"]), 1),
-            "plausible": "yes" if c.get("plausible", True) else "no", "flags": len(c.get("flags") or []),
-            "fitted parameters": ", ".join(f"{k} = {v:.4g}" for k, v in (c.get("parameters") or {}).items()),
+            "#": i + 1, "candidate": c.name, "kind": c.kind,
+            "held-out": round(100 * float(c.held_out_explained), 1),
+            "in-sample": round(100 * float(c.explained), 1),
+            "plausible": "yes" if c.plausible else "no", "flags": len(c.flags),
+            "fitted parameters": ", ".join(f"{k} = {v:.4g}" for k, v in c.parameters.items()),
         } for i, c in enumerate(cands)])
         extra = []
         note = self.state.diagnosis_note
@@ -178,31 +180,21 @@ class DiagnosePage(PageBase):
                     "none": "No candidate explains the residual"}.get(verdict, verdict)
             text = f"{head}: {note}" + (f" (noise floor {nf:.2f})" if nf is not None and "noise floor" not in note else "")
             extra.append(message(text, {"cause": "success", "uncertain": "warning"}.get(verdict, "danger")))
-            if verdict == "none" and self.state.unexplained:
+            if verdict == "none" and view is not None and view.unexplained:
                 extra.append(message("Unexplained: " + "; ".join(
-                    f"{u['component']} {u['residual']:+.2f}" for u in self.state.unexplained), "info"))
+                    f"{component} {residual:+.2f}" for component, residual in view.unexplained), "info"))
         elif note:
             extra.append(message(note, "info" if self.state.separable else "warning"))
-        if self.state.causes:
-            together = (self.state.cause_set or {}).get("held_out_explained")
-            extra.append(message(
-                f"Causes found together ({len(self.state.causes)}; share of the residual each adds on held-out "
-                "sections): " + ", ".join(f"{c['name']} {100 * c['held_out_share']:.0f} %" for c in self.state.causes)
-                + (f"; together {100 * together:.0f} %" if together is not None else ""),
-                "success" if len(self.state.causes) > 1 else "info"))
-        left = (self.state.cause_set or {}).get("left_out") or []
-        if left:
-            extra.append(message("Not in the cause set: " + "; ".join(f"{x['name']} — {x['reason']}" for x in left),
-                                 "warning"))
-        extra += self._lineage() + self._families()
-        in_config = [s for s in self.state.skipped if s["kind"] == "configuration"]
-        candidates = [s for s in self.state.skipped if s["kind"] != "configuration"]
+        extra += self._cause_set(view) + self._lineage() + self._families(view)
+        skipped = view.skipped if view is not None else []
+        in_config = [s for s in skipped if s.kind == "configuration"]
+        candidates = [s for s in skipped if s.kind != "configuration"]
         if in_config:
             extra.append(message("Configuration simulated without (cannot apply to this campaign): " + "; ".join(
-                f"{s['name']} — {s['reason']}" for s in in_config), "warning"))
+                f"{s.name} — {s.reason}" for s in in_config), "warning"))
         if candidates:
             extra.append(message("Left out (cannot apply to this campaign): " + "; ".join(
-                f"{s['name']} — {s['reason']}" for s in candidates), "info"))
+                f"{s.name} — {s.reason}" for s in candidates), "info"))
         # the verdict first: a reader must not scroll past 20 candidates to learn how sure it is
         # 890 px in all: fits the main area at 1280 px (what it fixes and worsens: below, per candidate)
         widths = {"#": 40, "candidate": 165, "kind": 85, "held-out": 100, "in-sample": 105,
@@ -217,54 +209,70 @@ class DiagnosePage(PageBase):
                      layout="fit_columns")] if cands else []),
             *self._earlier_runs(), self.candidate_box,
         ]
-        ranked = [c["effect"] for c in cands]
+        ranked = [c.name for c in cands]
         rest = [e for e in self.state.param.effect.objects if e not in ranked]
         self.state.param.effect.objects = ranked + rest
         self._show_candidate()
 
-    def _families(self) -> list:
+    @staticmethod
+    def _cause_set(view) -> list:
+        """The cause set (each member's added held-out share, the joint share) and the
+        candidates it left out, from the diagnosis's view model."""
+        if view is None:
+            return []
+        out, causes, cause_set = [], view.causes, view.cause_set
+        if causes:
+            out.append(message(
+                f"Causes found together ({len(causes)}; share of the residual each adds on held-out "
+                "sections): " + ", ".join(f"{c.name} {100 * c.held_out_share:.0f} %" for c in causes)
+                + f"; together {100 * cause_set.held_out_explained:.0f} %",
+                "success" if len(causes) > 1 else "info"))
+        if cause_set.left_out:
+            out.append(message("Not in the cause set: " + "; ".join(
+                f"{x.name} — {x.reason}" for x in cause_set.left_out), "warning"))
+        return out
+
+    @staticmethod
+    def _families(view) -> list:
         """Per quantity family: its share of the residual, verdict, best candidate and whether
         its behaviour differs structurally (docs/diagnosis.md "Per family")."""
-        fams = self.state.families
+        fams = view.families if view is not None else []
         if not fams:
             return []
         df = pd.DataFrame([{
-            "family": f["title"], "share of residual (%)": round(100 * float(f["share"]), 1),
-            "verdict": f["verdict"] + (" (structural)" if f["structural"]["flag"] else ""),
-            "best candidate": f["top"][0]["name"] if f["top"] else "",
-            "held-out (%)": round(100 * float(f["top"][0]["held_out_explained"]), 1) if f["top"] else None,
-            "where": (", ".join(f["structural"]["quantities"]) + "; zones "
-                      + ", ".join(map(str, f["structural"]["zones"]))) if f["structural"]["flag"] else "",
+            "family": f.title, "share of residual (%)": round(100 * f.share, 1),
+            "verdict": f.verdict + (" (structural)" if f.structural else ""),
+            "best candidate": f.best or "",
+            "held-out (%)": round(100 * f.best_held_out, 1) if f.best_held_out is not None else None,
+            "where": (", ".join(f.structural_quantities) + "; zones "
+                      + ", ".join(map(str, f.structural_zones))) if f.structural else "",
         } for f in fams])
-        notes = [message(f"{f['title']}: {f['structural']['reason']}", "warning")
-                 for f in fams if f["structural"]["flag"]]
+        notes = [message(f"{f.title}: {f.structural_reason}", "warning") for f in fams if f.structural]
         return [pn.pane.Markdown("#### Per quantity family"),
                 table(df, height=40 + 32 * len(df), css_classes=["rv-families"]), *notes]
 
     def _lineage(self) -> list:
         """The diagnoses of the configuration's ancestors (root first: verdict, top cause) and
         what is left of the parent's residual after the calibration (docs/diagnosis.md "Lineage")."""
-        lin = self.state.lineage
-        if not lin:
+        view = self.state.view
+        if view is None or not view.has_lineage:
             return []
-        top = (self.state.candidates or [{}])[0]
-        rows = [*lin.get("ancestors", []), {"configuration": lin.get("configuration"),
-                                            "diagnosis": self.state.stored_run.get("id"), "verdict": self.state.verdict,
-                                            "top": top.get("effect"), "held_out_explained": top.get("held_out_explained"),
-                                            "created_at": "this diagnosis"}]
+        top = view.candidates[0] if view.candidates else None
+        rows = [*view.ancestors, Ancestor(
+            view.lineage_configuration, self.state.stored_run.get("id"), view.verdict,
+            top.name if top else None, top.held_out_explained if top else None, "this diagnosis")]
         df = pd.DataFrame([{
-            "configuration": a["configuration"],
-            "diagnosis": f"#{a['diagnosis']}" if a.get("diagnosis") else a.get("created_at") or "not diagnosed",
-            "verdict": a.get("verdict") or "-", "top cause": a.get("top") or "-",
-            "held-out (%)": round(100 * float(a["held_out_explained"]), 1)
-            if a.get("held_out_explained") is not None else None} for a in rows])
+            "configuration": a.configuration,
+            "diagnosis": f"#{a.diagnosis}" if a.diagnosis else a.created_at or "not diagnosed",
+            "verdict": a.verdict or "-", "top cause": a.top or "-",
+            "held-out (%)": round(100 * a.held_out_explained, 1)
+            if a.held_out_explained is not None else None} for a in rows])
         out = [pn.pane.Markdown("#### Lineage of diagnoses (root first)"),
                table(df, height=40 + 32 * len(df), css_classes=["rv-diagnosis-lineage"])]
-        st = lin.get("statement")
-        if st and st.get("text"):
+        if view.lineage_statement:
             level = {"within scatter": "success", "explained": "info", "uncertain": "warning",
-                     "beyond library": "danger"}.get(st.get("status"), "info")
-            out.insert(0, message("After calibration: " + st["text"], level))
+                     "beyond library": "danger"}.get(view.lineage_status, "info")
+            out.insert(0, message("After calibration: " + view.lineage_statement, level))
         return out
 
     def _run_line(self) -> list:
@@ -301,35 +309,38 @@ class DiagnosePage(PageBase):
     def _show_candidate(self) -> None:
         """The chosen effect (the top candidate unless another is chosen): why, its signature
         per quantity group, and where the residual lies now and after adding it."""
-        cands = self.state.candidates
-        cand = next((c for c in cands if c["effect"] == self.state.effect), cands[0] if cands else None)
+        view = self.state.view
+        cands = view.candidates if view is not None else []
+        cand = view.candidate(self.state.effect) if view is not None else None
+        if cand is None and cands:
+            cand = cands[0]  # the top candidate unless another is chosen
         if cand is None:
             self.candidate_box.objects = []
             return
         rank = cands.index(cand) + 1
         items: list[Any] = [
-            pn.pane.Markdown(f"#### Candidate {rank}: {html.escape(cand['effect'])} — explains "
-                             f"{100 * float(cand['explained']):.1f} % of the residual"),
-            pn.pane.Markdown(f"**Why {html.escape(cand['effect'])}?** {html.escape(cand.get('explanation', ''))}",
+            pn.pane.Markdown(f"#### Candidate {rank}: {html.escape(cand.name)} — explains "
+                             f"{100 * float(cand.explained):.1f} % of the residual"),
+            pn.pane.Markdown(f"**Why {html.escape(cand.name)}?** {html.escape(cand.explanation)}",
                              sizing_mode="stretch_width"),
-            *([pn.pane.Markdown(f"**Fitted value** {cand['fitted']:.4g} (interval: bootstrap over sections 5–95 %, widened to the values fitted on "
+            *([pn.pane.Markdown(f"**Fitted value** {cand.fitted:.4g} (interval: bootstrap over sections 5–95 %, widened to the values fitted on "
                                 f"each held-out fold: "
-                                f"{cand['fitted_ci'][0]:.4g}–{cand['fitted_ci'][1]:.4g})"
-                                + (f"; the model's value {cand['reference']:.4g}" if cand.get("reference") else ""),
+                                f"{cand.fitted_ci[0]:.4g}–{cand.fitted_ci[1]:.4g})"
+                                + (f"; the model's value {cand.reference:.4g}" if cand.reference else ""),
                                 sizing_mode="stretch_width")]
-              if cand.get("fitted_ci") and all(np.isfinite(cand["fitted_ci"])) else []),
+              if all(np.isfinite(cand.fitted_ci)) else []),
             pn.pane.Markdown(f"**Fixes** (quantity groups whose residual falls by a fifth or more): "
-                             f"{html.escape(', '.join(cand.get('fixes') or []) or 'none')}. **Worsens**: "
-                             f"{html.escape(', '.join(cand.get('worsens') or []) or 'none')}.",
+                             f"{html.escape(', '.join(cand.fixes) or 'none')}. **Worsens**: "
+                             f"{html.escape(', '.join(cand.worsens) or 'none')}.",
                              sizing_mode="stretch_width"),
-            *[message(str(f), "warning") for f in (cand.get("flags") or [])],
-            pn.pane.HTML(signature_chart(cand), css_classes=["rv-signature"], styles={"overflow-x": "auto"},
-                         sizing_mode="stretch_width"),
+            *[message(str(f), "warning") for f in cand.flags],
+            pn.pane.HTML(signature_chart(cand.to_dict()), css_classes=["rv-signature"],
+                         styles={"overflow-x": "auto"}, sizing_mode="stretch_width"),
         ]
-        where = self.state.where(cand["effect"])
+        where = self.state.where(cand.name)
         if where:
             (q_now, p_now), (q_after, p_after) = where["now"], where["after"]
-            after = f"with {cand['effect']} (fitted)"
+            after = f"with {cand.name} (fitted)"
             items += [
                 pn.pane.Markdown("**Where the model fails, and what is left with the candidate** — mean "
                                  "normalised D_v per quantity and EN 14363 zone (positions averaged); the "
@@ -356,7 +367,8 @@ class DiagnosePage(PageBase):
             self.param_box.objects = []
             return
         self.explain.object = f"**{html.escape(str(eff['title']))}** — {html.escape(str(eff['explanation']))}"
-        fitted = next((c.get("parameters", {}) for c in self.state.candidates if c["effect"] == eff["name"]), {})
+        chosen = self.state.view.candidate(eff["name"]) if self.state.view is not None else None
+        fitted = chosen.parameters if chosen is not None else {}
         widgets = []
         for p in eff["parameters"]:
             lo, hi = p["bounds"]

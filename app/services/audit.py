@@ -36,23 +36,20 @@ from typing import Any
 
 from railval.app.services.audit_checks import (
     Finding,
-    KeyRing,
     VerifyReport,
     _check_chain,
     _check_row_signatures,
     _check_signoffs,
     _check_witness,
-    apply_rotations,
     check_anchor,
-    known_public_keys,
     witness_signed_from,
 )
 from railval.app.services.audit_trust import (
     _check_trail,
     _fingerprints,
-    _parse_public_keys,
     _pin_first_use,
     _witness_lines,
+    bundle_ring,
     key_info,
     rotate_key,
     trusted_keys,
@@ -103,7 +100,7 @@ def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
     t0 = time.perf_counter()
     report = VerifyReport(source=database.safe_url)
     fps = _fingerprints(trust_fingerprints)
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:  # may fill the result cache
         rows, ring, explicit = _check_trail(database, s, report, checkpoint, witness=witness,
                                             use_witness=use_witness, public_key=public_key,
                                             fingerprints=fps)
@@ -252,7 +249,7 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, 
                 yield r
 
     by_seq = _check_chain(read(), report, checkpoint)
-    keys = _bundle_ring(root, rows, public_key, fps, report)
+    keys = bundle_ring(root, rows, public_key, fps, report)
     report.keys, report.trust = list(keys), keys.describe()
     lines = _witness_lines(root / "witness.jsonl", report,
                            quiet=(root / "anchor.json").is_file() or not rows)
@@ -291,30 +288,6 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, 
                 "; ".join(diffs)))
     report.seconds = time.perf_counter() - t0
     return report
-
-
-def _bundle_ring(root: Path, rows: dict[int, dict[str, Any]], public_key: str | None,
-                 fps: list[str], report: VerifyReport) -> KeyRing:
-    """The keys a bundle is verified with (see :func:`verify_bundle`)."""
-    known = known_public_keys(rows)
-    if public_key or fps:
-        ring = KeyRing(_parse_public_keys(public_key) if public_key else {},
-                       "--public-key" if public_key else "")
-        for fp in fps:
-            if fp in known and fp not in ring:
-                ring[fp], ring.windows[fp] = known[fp], [1, float("inf")]
-                ring.how[fp] = "--trust-fingerprint"
-            elif fp not in ring:
-                report.findings.append(Finding(
-                    "signature", f"--trust-fingerprint {fp[:16]}…", "a public key with this "
-                    "fingerprint in the trail's identity or key rotation rows", "none"))
-    else:
-        ring = KeyRing(_parse_public_keys(str(root / "key.json")), "the bundle's key.json")
-        report.notes.append(f"trusting the public key in the bundle (fingerprint "
-                            f"{', '.join(ring)}); compare with the fingerprint the "
-                            "server's owner published (`railval audit key`), or pass "
-                            "--public-key / --trust-fingerprint")
-    return apply_rotations(ring, rows)
 
 
 def seal(database, actor: str, reason: str = "") -> tuple[int, str, int]:

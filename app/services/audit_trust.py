@@ -86,6 +86,27 @@ def _key_rows(session) -> dict[int, dict[str, Any]]:
     return {int(r["seq"]): r for r in audit.key_rows(session)}
 
 
+def explicit_ring(public_key: str | None, fingerprints: list[str],
+                  known: dict[str, Any], report: VerifyReport, where: str) -> KeyRing:
+    """The key ring an assessor names: the keys of ``--public-key`` (a hex key or a key file)
+    and, for each ``--trust-fingerprint``, the key of that fingerprint in ``known``; a
+    fingerprint found nowhere is a finding (``where``: the places ``known`` came from). The one
+    home of this rule for a live database (:func:`_resolve_trust`) and an exported bundle
+    (:func:`bundle_ring`)."""
+    ring = KeyRing(_parse_public_keys(public_key) if public_key else {},
+                   "--public-key" if public_key else "")
+    for fp in fingerprints:
+        if fp in known and fp not in ring:
+            ring[fp], ring.windows[fp] = known[fp], [1, float("inf")]
+            ring.how[fp] = "--trust-fingerprint"
+    missing = [fp for fp in fingerprints if fp not in ring]
+    if missing:
+        report.findings.append(Finding(
+            "signature", "--trust-fingerprint " + ", ".join(f[:16] + "…" for f in missing),
+            f"a public key with this fingerprint ({where})", "none"))
+    return ring
+
+
 def _resolve_trust(database, rows: dict[int, dict[str, Any]], report: VerifyReport,
                    public_key: str | None, fingerprints: list[str]
                    ) -> tuple[KeyRing, tuple[Path, dict[str, Any]] | None, bool]:
@@ -97,18 +118,9 @@ def _resolve_trust(database, rows: dict[int, dict[str, Any]], report: VerifyRepo
         current = integrity.current_public_key(database.url)
         if current is not None:
             known.setdefault(key_fingerprint(current), current)
-        ring = KeyRing(_parse_public_keys(public_key) if public_key else {},
-                       "--public-key" if public_key else "")
-        for fp in fingerprints:
-            if fp in known and fp not in ring:
-                ring[fp], ring.windows[fp] = known[fp], [1, float("inf")]
-                ring.how[fp] = "--trust-fingerprint"
-        missing = [fp for fp in fingerprints if fp not in ring]
-        if missing:
-            report.findings.append(Finding(
-                "signature", "--trust-fingerprint " + ", ".join(f[:16] + "…" for f in missing),
-                "a public key with this fingerprint (in the trail's identity or key rotation "
-                "rows, or the server's key file)", "none"))
+        ring = explicit_ring(public_key, fingerprints, known, report,
+                             "in the trail's identity or key rotation rows, or the server's "
+                             "key file")
     elif how == "first use" and rows:
         report.notes.append(
             f"trust on first use: no pin for this database existed in {trust.trust_dir()}; "
@@ -116,6 +128,23 @@ def _resolve_trust(database, rows: dict[int, dict[str, Any]], report: VerifyRepo
             "verifies")
     apply_rotations(ring, rows)
     return ring, found, explicit
+
+
+def bundle_ring(root: Path, rows: dict[int, dict[str, Any]], public_key: str | None,
+                fps: list[str], report: VerifyReport) -> KeyRing:
+    """The keys an exported audit bundle ``root`` is verified with: the assessor's
+    (:func:`explicit_ring`, the fingerprints looked up in the trail's rows), else the bundle's
+    own ``key.json`` with a note to compare its fingerprint; the trail's rotations applied."""
+    if public_key or fps:
+        ring = explicit_ring(public_key, fps, known_public_keys(rows), report,
+                             "in the trail's identity or key rotation rows")
+    else:
+        ring = KeyRing(_parse_public_keys(str(root / "key.json")), "the bundle's key.json")
+        report.notes.append(f"trusting the public key in the bundle (fingerprint "
+                            f"{', '.join(ring)}); compare with the fingerprint the "
+                            "server's owner published (`railval audit key`), or pass "
+                            "--public-key / --trust-fingerprint")
+    return apply_rotations(ring, rows)
 
 
 def _witness_for(database, rows, found, witness: str | None):

@@ -196,7 +196,7 @@ class BatchExecutor:
 
 #: modules the forkserver imports once for the workers it starts (``__main__`` as by default)
 FORKSERVER_PRELOAD = ("__main__", "railval.core.sim.model", "railval.core.en14363",
-                      "railval.app.services.diagnosis_evidence", "railval.app.services.campaign_context")
+                      "railval.app.services.diagnosis_ranking", "railval.app.services.campaign_context")
 
 #: objects shared with this worker process by :meth:`BatchExecutor.map` (token → object)
 _SHARED: dict[str, Any] = {}

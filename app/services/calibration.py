@@ -340,7 +340,7 @@ def _calibration_flags(ctx: CampaignContext, specs: Sequence[ParameterSpec], val
                        vr_full: Any, vr_held: Any) -> tuple[bool, list[str]]:
     """Plausibility of the fitted values (plausible range from the parameter registry, or at a
     search bound) and the in-sample / held-out caveats of the verdict."""
-    from railval.app.services.diagnosis_evidence import plausible_range, template_param
+    from railval.app.services.diagnosis_ranking import plausible_range, template_param
     from railval.core.diagnosis import plausibility_flags
 
     registry = EFFECTS
@@ -405,7 +405,7 @@ def _parent_flags(vr_parent: Any, vr_parent_held: Any, vr_held: Any) -> list[str
 def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float]) -> ParameterSpec:
     """Search box of a template parameter: the diagnosis's box for its parameter candidates
     (log scale), else the modal box ([ref 3]) or ±30 %."""
-    from railval.app.services.diagnosis_evidence import parameter_plan
+    from railval.app.services.diagnosis_ranking import parameter_plan
 
     plan = {p["parameter"]: p for p in parameter_plan(ctx, conf_params)}
     if name in plan:

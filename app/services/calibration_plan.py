@@ -117,8 +117,7 @@ def diagnosis_flags(session: Any, camp: Any, conf: Any,
                 f"cause; run railval diagnose {campaign} --config {config}")]
     d = diag.to_dict()
     verdict = d.get("verdict") or ""
-    # the best candidate: a parameter candidate's ``name`` (``model.NAME``), else its effect id
-    top = (diag.candidates[0].name or diag.candidates[0].effect) if diag.candidates else ""
+    top = diag.candidates[0].name if diag.candidates else ""  # effect id or model.NAME
     run = d.get("run") or {}
     when = f" of {run['created_at']}" if run.get("created_at") else ""
     stale = " (computed on data that have changed since)" if run.get("current") is False else ""

@@ -1,7 +1,7 @@
 """Service: rank the effects missing from a configuration and the vehicle-template
 parameters that may be mis-set by the share of its residual they explain on held-out
 sections (docs/design.md §7, docs/diagnosis.md, :mod:`railval.core.diagnosis`); the
-simulations and the scoring are in :mod:`railval.app.services.diagnosis_evidence`.
+simulations and the scoring are in :mod:`railval.app.services.diagnosis_ranking`.
 
 The Panel app calls :func:`diagnose` from a background thread with a ``progress(stage,
 fraction, info)`` callback; the CLI prints the same callbacks on stderr. The simulations of
@@ -19,8 +19,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from railval.app.services.campaign_context import Progress, session_of
-from railval.app.services.diagnosis_evidence import rank_causes as diagnose_evidence_service
-from railval.app.services.diagnosis_evidence import scan_points
+from railval.app.services.diagnosis_ranking import rank_causes
+from railval.app.services.diagnosis_ranking import scan_points
 from railval.app.services.diagnosis_measurement import MEASUREMENT_PREFIXES
 from railval.app.services.stored_runs import data_inputs, digests, run_info
 from railval.core.diagnosis import PARAMETER_CANDIDATES, DiagnosisResult
@@ -60,7 +60,7 @@ def diagnose(database_or_session: Any, campaign: repo.CampaignArg, config: repo.
     """Rank the causes of the residual of configuration ``config``: the effects it lacks and
     the vehicle-template parameters that may be mis-set, by the share of the residual they
     explain on held-out sections, with noise floor, plausibility, identifiability and a
-    verdict (:func:`railval.app.services.diagnosis_evidence.rank_causes`). ``effects``: candidate
+    verdict (:func:`railval.app.services.diagnosis_ranking.rank_causes`). ``effects``: candidate
     names — effect ids and ``model.NAME`` parameters; given without any ``model.`` name, only
     those effects are tried. ``campaign``/``config``: names (resolved here once, the entrance)
     or the references of :func:`railval.db.repo.resolve`.
@@ -116,7 +116,7 @@ def _diagnose(database_or_session: Any, campaign: repo.CampaignArg, config: repo
         options.setdefault("include_parameters", bool(params))
         options.setdefault("measurement", [n for n in names if n.startswith(MEASUREMENT_PREFIXES)] or False)
         effects = [n for n in names if not n.startswith(("model.", *MEASUREMENT_PREFIXES))]
-    res = diagnose_evidence_service(database_or_session, camp, ref, progress=progress, scheduler=scheduler,
+    res = rank_causes(database_or_session, camp, ref, progress=progress, scheduler=scheduler,
                                     values_per_parameter=values_per_parameter, effects=effects, workers=workers,
                                     **options)
     if store:

@@ -1,7 +1,7 @@
 """The next step a diagnosis proposes (docs/diagnosis.md "Diagnosis"): calibrate its cause or
 causes into a child configuration (the ``railval calibrate`` command), check the measurement,
 supply data, or say what stays unexplained. Read by
-:func:`railval.app.services.diagnosis_evidence.rank_causes`.
+:func:`railval.app.services.diagnosis_ranking.rank_causes`.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ check. :func:`acting_as` names the user a background job's changes are recorded 
 Reads open read sessions the database refuses to write in (``read_session``: SQLite
 ``query_only``, PostgreSQL ``READ ONLY`` transaction); :func:`validation` (fills the result
 cache) and :func:`metrics` (stores its run) end with a short write: they open a deferred
-unit of work (``session(read_only=False)``), which takes SQLite's write lock only at that
+unit of work (``write_session(deferred=True)``), which takes SQLite's write lock only at that
 write, not for the whole computation (docs/database.md).
 """
 
@@ -168,11 +168,11 @@ def lineage(database, campaign: str, config: str) -> list[str]:
         return [c.name for c in repo.lineage(s, camp, config)]
 
 
-def require_evidence(database, campaign: str, config: str) -> None:
+def require_sealed(database, campaign: str, config: str) -> None:
     """Every blob of the measurement and of ``config`` against its hash and seal
-    (:func:`railval.db.repo.require_evidence`); raises on the first mismatch."""
+    (:func:`railval.db.repo.require_sealed`); raises on the first mismatch."""
     with database.read_session() as s:
-        repo.require_evidence(s, campaign, config, blobs=True)
+        repo.require_sealed(s, campaign, config, blobs=True)
 
 
 def signoff_items(database, campaign: str | None = None, config: str | None = None
@@ -182,7 +182,7 @@ def signoff_items(database, campaign: str | None = None, config: str | None = No
     from railval.app.services.signoff import statuses
     from railval.db import signoff as db_signoff
 
-    with database.read_session() as s:
+    with database.write_session(deferred=True) as s:  # may fill the result cache
         return [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, config)]
 
 
@@ -193,7 +193,7 @@ def audit_and_signoffs(database) -> tuple[list[tuple[dict[str, Any], Any]], list
     from railval.db import audit
     from railval.db import signoff as db_signoff
 
-    with database.read_session() as s:
+    with database.write_session(deferred=True) as s:  # may fill the result cache
         items = [(db_signoff.as_dict(so), st) for so, st in statuses(s)]
         return items, list(audit.iter_rows(s))
 
@@ -205,7 +205,7 @@ def validation(database, campaign: str, config: str, **kw: Any) -> ValidationRes
     # a read that may end with a short write (the result cache, best effort): a deferred
     # unit of work takes the write lock only at that write, so reviewers' answers never wait
     # for the validation's computation (docs/database.md, "One write door")
-    with database.session(read_only=False) as s:
+    with database.write_session(deferred=True) as s:
         return validate_configuration(s, campaign, config, **kw)
 
 
@@ -215,7 +215,7 @@ def metrics(database, campaign: str, config: str, sections: Sequence[str] | None
     from railval.app.services.metrics import metrics_for_configuration
 
     # a read that ends with a short write (the metrics run): deferred, as in :func:`validation`
-    with database.session(read_only=False) as s:
+    with database.write_session(deferred=True) as s:
         return metrics_for_configuration(s, campaign, config, sections, channels, **kw)
 
 

@@ -406,7 +406,7 @@ def signing_summary(session: Session, campaign: str, config: str) -> dict[str, A
 # -- units of work for the pages and verbs (they reach the database only through these) --
 def summary_of(database, campaign: str, config: str) -> dict[str, Any]:
     """:func:`signing_summary` in a unit of work of its own."""
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:  # may fill the result cache
         return signing_summary(s, campaign, config)
 
 
@@ -414,13 +414,13 @@ def records(database, campaign: str | None = None, config: str | None = None
             ) -> list[tuple[dict[str, Any], SignoffStatus]]:
     """Every sign-off (of ``campaign``, ``configuration`` when given) as its record
     (:func:`railval.db.signoff.as_dict`) with its status, oldest first."""
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:  # may fill the result cache
         return [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, config)]
 
 
 def record(database, signoff_id: int) -> tuple[dict[str, Any], SignoffStatus]:
     """One sign-off's record with its status; :class:`NotFound` for an unknown id."""
-    with database.session() as s:
+    with database.write_session(deferred=True) as s:  # may fill the result cache
         so = db_signoff.get(s, signoff_id)
         st = status(s, so)
         return db_signoff.as_dict(so), st

@@ -387,7 +387,7 @@ def validate_configuration(session: Session, campaign_name: str, config: str, *,
     are read, decoded and processed as one pipeline (:func:`read_and_process`, the
     measurement's chunks first), every blob row read checked against those rows
     (:class:`SameRows`). The seals of both sides' signals are checked on the same rows
-    (as :func:`railval.db.repo.require_evidence` without blobs checks them) before the
+    (as :func:`railval.db.repo.require_sealed` without blobs checks them) before the
     verdict, while the sections are processed: a signal changed outside railval raises
     :class:`railval.db.integrity.IntegrityError` instead of giving a verdict (and nothing
     is cached). Raises :class:`railval.core.errors.NotFound` for unknown names. The heap

@@ -4,7 +4,7 @@ hashes (no blob read) and the seal checks made on them, for
 
 A cache key is :func:`railval.core.en14363.section_cache_key` of a section's recording
 (evaluated range, fs, n, distance-axis hash, sorted channel content hashes, filter order);
-a seal is checked as :func:`railval.db.repo.require_evidence` checks it without blobs
+a seal is checked as :func:`railval.db.repo.require_sealed` checks it without blobs
 (:func:`railval.db.repo.seal_problems`). A row read with the blobs must be the row the key
 and the seal check were made from (:class:`SameRows`), else
 :class:`railval.db.integrity.IntegrityError`.
@@ -64,14 +64,14 @@ def keys_from_rows(rows: tuple[list, dict], sources: list[tuple[str | None, int 
 def _require_seals(database, plan) -> None:
     """The seals of every configuration's evidence and of the measurement (checked once), as
     :func:`railval.app.services.validation.validate_configuration` checks them
-    (:func:`railval.db.repo.require_evidence` without reading blobs)."""
+    (:func:`railval.db.repo.require_sealed` without reading blobs)."""
     with stage("database"), database.session() as session:
-        repo.require_evidence_many(session, plan.name, plan.names, blobs=False,
+        repo.require_sealed_many(session, plan.name, plan.names, blobs=False,
                                    rows=plan.evidence)
 
 
 class SealCheck:
-    """The seals of the evidence of every verdict, checked once before the first verdict as
+    """The seals of the stored signals of every verdict, checked once before the first verdict as
     :func:`_require_seals` checks them, but from the signal rows the chunks read where it
     can (``add``: the seals :func:`railval.db.repo.fetch_signalsets` read with the blobs)
     instead of a second walk of the signal table (on SQLite the seal lies after the blob:
@@ -142,7 +142,7 @@ class SealCheck:
 
 
 def check_row_seals(session: Session, camp, conf, rows: tuple[list, dict]) -> None:
-    """The check of :func:`railval.db.repo.require_evidence` without blobs — every seal of
+    """The check of :func:`railval.db.repo.require_sealed` without blobs — every seal of
     the measurement's and the configuration's signals — on the rows ``rows`` read for the
     cache keys (:func:`railval.db.repo.seal_rows_many`) instead of reading them again. On a
     problem the full check runs and raises its error (should it find none, the problems
@@ -152,7 +152,7 @@ def check_row_seals(session: Session, camp, conf, rows: tuple[list, dict]) -> No
     found = (problems([r for r in recs if r[2] is None], by_rec)
              + problems([r for r in recs if r[2] is not None], by_rec))
     if found:
-        repo.require_evidence(session, camp, conf, blobs=False)
+        repo.require_sealed(session, camp, conf, blobs=False)
         repo.raise_problems(conf, found)
 
 
@@ -184,5 +184,5 @@ class SameRows:
 
                 raise IntegrityError(
                     f"campaign {self.camp.name!r}: section {sid}, {chan or 'distance_m'} of "
-                    f"the evidence of {self.conf.name!r} changed while it was validated; "
+                    f"the stored signals of {self.conf.name!r} changed while it was validated; "
                     "nothing was cached — validate again")

@@ -65,7 +65,7 @@ def cards(database, name: str, *, groups: Sequence[str] = (), actor: Principal |
     if isinstance(actor, Principal):
         require(actor, "workshop.results")
     # deferred: SQLite's write lock only at the final cache/run writes (docs/database.md)
-    with database.session(read_only=False) as session:
+    with database.write_session(deferred=True) as session:
         mine, w = _yes_shares(session, name)
         others = []
         for g in groups:

@@ -289,7 +289,7 @@ def scaling_preview(database, campaign: str, configurations: Sequence[str] | Non
 
     if isinstance(actor, Principal):
         require(actor, "workshop.run")
-    with database.session() as session:
+    with database.write_session(deferred=True) as session:  # may fill the result cache
         camp = repo.get_campaign(session, campaign)
         planned = plan(session, camp.name, configurations, sections, kinds)
         if not planned:
@@ -433,7 +433,7 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
     from railval.db import workshops as wsdb
 
     _check_options(name, scaling, twin_scaling, repeats, auto_share, actor)
-    with database.session() as session:
+    with database.write_session(deferred=True) as session:  # may fill the result cache
         g = _gather(session, name, campaign, configurations, sections, kinds, progress)
     facts = g.facts
     keys, scales, groups = _scaled(facts, g.curves, g.infos, scaling)

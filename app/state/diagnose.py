@@ -11,7 +11,8 @@ import param
 from railval.app.services.calibration_plan import calibration_simulations
 from railval.app.services.diagnosis import diagnosis_simulations
 from railval.app.state.app import AppState
-from railval.core.diagnosis import Component, PatternGrid, pattern_grids
+from railval.app.views import DiagnosisView, diagnosis_view_of
+from railval.core.diagnosis import PatternGrid, pattern_grids
 from railval.core.validation import normalised_errors
 
 
@@ -21,6 +22,8 @@ class DiagnoseState(param.Parameterized):
     name_edited = param.Boolean(default=False, doc=(
         "the user typed the new configuration's name; until then it follows the chosen effect"))
     candidates = param.List(default=[])
+    view = param.ClassSelector(class_=DiagnosisView, default=None, allow_None=True, doc=(
+        "the shown diagnosis as its view model (typed fields; None before a diagnosis)"))
     parameters = param.Dict(default={}, doc="manually set parameters of the chosen effect")
     last_new_configuration = param.String(default="")
     last_result = param.Dict(default={}, doc="to_dict() of the last calibration or re-simulation")
@@ -79,6 +82,7 @@ class DiagnoseState(param.Parameterized):
 
     def _reset(self) -> None:
         self.candidates = []
+        self.view = None
         self.verdict = ""
         self.skipped = []
         self.causes = []
@@ -114,14 +118,14 @@ class DiagnoseState(param.Parameterized):
         candidate (residual − its signature), each as a quantity × zone grid and a PSD
         band grid (:func:`pattern_grids`). Empty before a diagnosis."""
         effect = effect or self.effect
-        cand = next((c for c in self.candidates if c["effect"] == effect), None)
-        res = self.residual
-        if cand is None or "components" not in res or "signature" not in cand:
+        cand = self.view.candidate(effect) if self.view is not None else None
+        residual = self.view.result.residual if self.view is not None else None
+        if cand is None or residual is None or residual.components is None:
             return {}
-        components = [Component.from_dict(c) for c in res["components"]]
-        now = np.asarray(res["values"], float)
-        after = now - np.asarray(cand["signature"]["values"], float)
-        return {"now": pattern_grids(components, now), "after": pattern_grids(components, after)}
+        now = residual.values
+        after = now - cand.signature.values
+        return {"now": pattern_grids(residual.components, now),
+                "after": pattern_grids(residual.components, after)}
 
     def _effect_changed(self) -> None:
         eff = next((e for e in self.effect_catalogue() if e["name"] == self.effect), None)
@@ -198,9 +202,9 @@ class DiagnoseState(param.Parameterized):
         """Show a diagnosis (computed now or stored, a
         :class:`railval.core.diagnosis.DiagnosisResult`): ranked candidates, residual, verdict,
         families, cause set, candidates left out — from the result's typed fields."""
-        d = result.to_dict(with_signatures=True)  # candidates and residual as the page's tables take them
-        cands = list(d["candidates"])
-        self.residual = dict(d["residual"])
+        view = diagnosis_view_of(result)
+        cands = view.candidate_rows()  # the page's tables (with each fitted signature)
+        self.residual = view.residual_row()
         note = result.note
         if not result.separable and not note:
             note = "the two best candidates explain nearly the same; see the evidence"
@@ -218,11 +222,13 @@ class DiagnoseState(param.Parameterized):
                               "configuration": result.configuration}
         self.stored_run = dict(result.run or {})
         names = self.available_effects() if cands else []
-        order = [c["effect"] for c in cands] + [n for n in names if n not in {c["effect"] for c in cands}]
+        ranked = [c.name for c in view.candidates]
+        order = ranked + [n for n in names if n not in ranked]
         self.param.effect.objects = order
         if order:  # the top candidate chosen before the ranking is shown
             self.effect = order[0]
             self._suggest_name()
+        self.view = view
         self.candidates = cands
         if not cands:  # a diagnosis with nothing to rank (every candidate left out): the page shows why
             self.param.trigger("candidates")
@@ -238,8 +244,9 @@ class DiagnoseState(param.Parameterized):
         name = self.new_name if (self.name_edited and self.new_name.strip()) else self.suggested_name()
         params = dict(self.parameters)
         if effect is not None and effect.startswith("model."):  # a parameter candidate: start at its fitted value
-            cand = next((c for c in self.candidates if c.get("name") == effect), None)
-            params = {effect[6:]: float(cand["fitted"])} if cand and cand.get("fitted") is not None else {}
+            cand = self.view.candidate(effect) if self.view is not None else None
+            params = ({effect[6:]: float(cand.fitted)} if cand is not None and np.isfinite(cand.fitted)
+                      else {})
         if effect is None:
             app.set_status("choose an effect to add first", "warning")
             return None

@@ -203,7 +203,7 @@ def _score(fam: CandidateFamily, st: _Setup, change: float) -> tuple[TrustedCand
         fam.name, explained, params, sorted(fixes, key=lambda g: after[g] - before[g]),
         sorted(worsens, key=lambda g: before[g] - after[g]), expl,
         Pattern(residual.labels, residual.groups, st.r_full - Pk, residual.components), math.sqrt(cost),
-        {g: (before[g], after[g]) for g in before}, kind=fam.kind, name=fam.name,
+        {g: (before[g], after[g]) for g in before}, kind=fam.kind,
         held_out_explained=held, explained_ci=ci, plausible=ok, at_bound=at_edge, flags=flags,
         summary=summary, reference=fam.reference, fitted=v, parameter=fam.parameter,
         fitted_ci=_widened(lo_ci, hi_ci, fold_values, _lack_of_fit_range(curve, P_full, st.w, k, cost, residual)),

@@ -29,7 +29,7 @@ parameter or an effect value as the cause.
   explains alike (held-out within ``ALIKE_MARGIN``): the guiding forces cannot tell them from a
   contact difference, the verdict stays. A
   configuration that carries measured profiles (a Δr(y) table) has no conicity candidate
-  (``app/services/diagnosis_evidence.py``, ``profile_skipped``).
+  (``app/services/diagnosis_ranking.py``, ``profile_skipped``).
 
 Section scatter: the 95th percentile of the weighted norm² of the bootstrap deviation of the
 residual (Efron & Tibshirani 1993 §8.2, zone-stratified resamples as in

@@ -24,9 +24,11 @@ class TrustedCandidate:
     """One ranked explanation: the effect or parameter, the share of the residual its fitted
     signature explains (in-sample, its bootstrap interval, on held-out sections), the fitted
     parameters, quantities it fixes/worsens (residual RMS before → after per group), its
-    physical explanation, its fitted signature and its plausibility."""
+    physical explanation, its fitted signature and its plausibility. ``name``: the effect id,
+    ``model.PARAM`` or the measurement candidate — what ``calibrate --effect`` accepts (the
+    JSON carries it as ``name`` and, for older readers, as ``effect``: docs/diagnosis.md)."""
 
-    effect: str
+    name: str
     explained: float
     parameters: dict[str, float]
     fixes: list[str]
@@ -36,7 +38,6 @@ class TrustedCandidate:
     residual_after: float
     group_change: dict[str, tuple[float, float]] = field(default_factory=dict)
     kind: str = "effect"
-    name: str = ""
     held_out_explained: float = 0.0
     explained_ci: tuple[float, float] = (0.0, 0.0)
     significant: bool = False
@@ -62,12 +63,14 @@ class TrustedCandidate:
         """The residual left after this candidate at its fitted value, r − s."""
         return residual.values - self.signature.values
 
-    def to_dict(self, with_signature: bool = False) -> dict[str, Any]:
-        d = {"effect": self.name or self.effect, "explained": self.explained, "parameters": dict(self.parameters),
+    def to_dict(self, with_signatures: bool = False) -> dict[str, Any]:
+        """The JSON document (docs/diagnosis.md); ``with_signatures``: with the fitted
+        signature (the spelling of :meth:`DiagnosisResult.to_dict`)."""
+        d = {"effect": self.name, "explained": self.explained, "parameters": dict(self.parameters),
              "fixes": list(self.fixes), "worsens": list(self.worsens), "explanation": self.explanation,
              "residual_after": self.residual_after,
              "quantities": {g: {"before": a, "after": b} for g, (a, b) in self.group_change.items()}}
-        if with_signature:
+        if with_signatures:
             d["signature"] = self.signature.to_dict()
         d.update({"kind": self.kind, "name": self.name,
              "held_out_explained": self.held_out_explained,
@@ -81,15 +84,15 @@ class TrustedCandidate:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> TrustedCandidate:
-        """Inverse of :meth:`to_dict` with ``with_signature=True`` (a stored run read back)."""
+        """Inverse of :meth:`to_dict` with ``with_signatures=True`` (a stored run read back)."""
         ci = d.get("explained_ci") or (0.0, 0.0)
         return cls(
-            effect=d["effect"], explained=_num(d["explained"]),
+            name=d.get("name") or d["effect"], explained=_num(d["explained"]),
             parameters={k: _num(v) for k, v in d["parameters"].items()},
             fixes=list(d["fixes"]), worsens=list(d["worsens"]), explanation=d["explanation"],
             signature=Pattern.from_dict(d["signature"]), residual_after=_num(d["residual_after"]),
             group_change={g: (_num(v["before"]), _num(v["after"])) for g, v in d.get("quantities", {}).items()},
-            kind=d.get("kind", "effect"), name=d.get("name", d["effect"]),
+            kind=d.get("kind", "effect"),
             held_out_explained=_num(d.get("held_out_explained", 0.0)), explained_ci=(_num(ci[0]), _num(ci[1])),
             significant=bool(d.get("significant")), plausible=bool(d.get("plausible", True)),
             at_bound=bool(d.get("at_bound")), flags=list(d.get("flags") or []), summary=d.get("summary", ""),
@@ -170,7 +173,7 @@ class DiagnosisResult:
                                     "groups": self.residual.group_norms()}
         if with_signatures:
             residual.update(self.residual.to_dict())
-        d = {"candidates": [c.to_dict(with_signature=with_signatures) for c in self.candidates],
+        d = {"candidates": [c.to_dict(with_signatures=with_signatures) for c in self.candidates],
              "separable": self.separable, "evidence": list(self.evidence), "note": self.note,
              "residual": residual}
         d.update({key: getattr(self, attr) for attr, key in _TYPED if getattr(self, attr) is not None})

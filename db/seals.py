@@ -1,4 +1,4 @@
-"""Checking stored evidence: every signal's seal (:mod:`railval.db.integrity`) and content
+"""Checking the seals of stored signals: every signal's seal (:mod:`railval.db.integrity`) and content
 hash, per campaign, per configuration (what a verdict rests on) or for the whole database.
 
 ``campaign`` is a :data:`railval.db.campaigns.CampaignArg` and ``config`` a
@@ -185,12 +185,12 @@ def _seal_problems(c: Campaign | CampaignRef, names: dict[int, str], recs: list,
     return problems
 
 
-def verify_evidence(session: Session, campaign: CampaignArg, config: ConfigArg, *,
-                    blobs: bool = True) -> list[dict[str, Any]]:
+def verify_seals(session: Session, campaign: CampaignArg, config: ConfigArg, *,
+                 blobs: bool = True) -> list[dict[str, Any]]:
     """Check what a verdict on configuration ``config`` rests on — the measurement's and the
     configuration's signals: every seal (:mod:`railval.db.integrity`) and, with ``blobs``,
     every content hash. Returns one record per problem (``section``, ``configuration``,
-    ``channel``, ``error``); empty when the evidence is intact. Reports and sign-offs call it
+    ``channel``, ``error``); empty when the signals are intact. Reports and sign-offs call it
     before they state a verdict."""
     c = campaign_ref(session, campaign)
     conf = get_configuration(session, c, config)
@@ -205,16 +205,16 @@ def verify_evidence(session: Session, campaign: CampaignArg, config: ConfigArg, 
             + _source_problems(session, c, config, secret, blobs))
 
 
-def require_evidence(session: Session, campaign: CampaignArg, config: ConfigArg, *,
-                     blobs: bool = True) -> None:
-    """:func:`verify_evidence`, raising :class:`railval.db.integrity.IntegrityError` that names
+def require_sealed(session: Session, campaign: CampaignArg, config: ConfigArg, *,
+                   blobs: bool = True) -> None:
+    """:func:`verify_seals`, raising :class:`railval.db.integrity.IntegrityError` that names
     the first problems and how many there are."""
-    _raise_problems(config, verify_evidence(session, campaign, config, blobs=blobs))
+    _raise_problems(config, verify_seals(session, campaign, config, blobs=blobs))
 
 
-def require_evidence_many(session: Session, campaign: CampaignArg, configs: list[ConfigArg], *,
-                          blobs: bool = True, rows: tuple[list, dict] | None = None) -> None:
-    """:func:`require_evidence` for several configurations of one campaign, in their order,
+def require_sealed_many(session: Session, campaign: CampaignArg, configs: list[ConfigArg], *,
+                        blobs: bool = True, rows: tuple[list, dict] | None = None) -> None:
+    """:func:`require_sealed` for several configurations of one campaign, in their order,
     with the measurement's signals checked once instead of once per configuration. Seals
     only (``blobs=False``): the rows of the measurement and of every configuration are read
     by two queries in all (:func:`seal_rows_many`), or taken from ``rows`` (what
@@ -260,9 +260,9 @@ def seal_rows_many(session: Session, campaign: CampaignArg, config_ids: list[int
 
 
 def seal_problems(session: Session, campaign: CampaignArg) -> Callable[[list, dict], list]:
-    """The check of :func:`require_evidence_many` on rows the caller already holds:
+    """The check of :func:`require_sealed_many` on rows the caller already holds:
     returns ``problems(recs, by_rec)`` — the seal problems (records as
-    :func:`verify_evidence`'s) of the recordings ``recs`` of one source with their signal
+    :func:`verify_seals`'s) of the recordings ``recs`` of one source with their signal
     rows ``by_rec`` (the form of :func:`seal_rows_many`), every seal checked
     (:func:`integrity.check_signal_seals`). The secret and the configuration names are
     read once, here."""
@@ -273,8 +273,8 @@ def seal_problems(session: Session, campaign: CampaignArg) -> Callable[[list, di
 
 
 def raise_problems(config: ConfigArg, problems: list[dict[str, Any]]) -> None:
-    """Raise :class:`railval.db.integrity.IntegrityError` as :func:`require_evidence` does
-    when ``problems`` (records of :func:`verify_evidence`) is not empty."""
+    """Raise :class:`railval.db.integrity.IntegrityError` as :func:`require_sealed` does
+    when ``problems`` (records of :func:`verify_seals`) is not empty."""
     _raise_problems(config, problems)
 
 
@@ -322,7 +322,7 @@ def _raise_problems(config: ConfigArg, problems: list[dict[str, Any]]) -> None:
                           f"{'configuration ' + repr(p['configuration']) if p['configuration'] else 'measurement'}, "
                           f"{p['channel']}: {p['error']}" for p in problems[:3])
         raise integrity.IntegrityError(
-            f"the evidence of {config_name(config)!r} is not intact ({len(problems)} problem(s)): {first}; "
+            f"the stored signals of {config_name(config)!r} are not intact ({len(problems)} problem(s)): {first}; "
             "check the database with `railval verify`")
 
 

@@ -1,4 +1,4 @@
-"""The trustworthy diagnosis service (issue 16): effects AND vehicle-template parameters as
+"""The diagnosis ranking service (issue 16): effects AND vehicle-template parameters as
 candidate causes, each simulated once per value over the whole campaign, scored with
 :func:`railval.core.diagnosis.diagnose_evidence` (held-out share over zone-stratified folds,
 bootstrap noise floor, plausibility, identifiability, verdict).

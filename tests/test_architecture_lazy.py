@@ -1,0 +1,74 @@
+"""Start-up speed in one place (docs/design.md §2, docs/app.md "command-line start-up"): a
+CLI verb module (``app/cli/cmd_*.py``) binds the services and records its verbs call at its
+top with ``railval.core.lazy`` (``x_service = lazy.module("railval.app.services.x")``), so
+no verb function imports railval modules in its body — read with ``ast``, checked against a
+planted violation. ``railval --help`` and a verb still load only what they use
+(tests/test_cli_startup.py).
+
+The one function-body import left is the optional demo seed (``cmd_app.seed_demo``), which
+answers an ``ImportError`` with a sentence.
+"""
+
+from __future__ import annotations
+
+import ast
+import textwrap
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+#: ``file::function`` allowed a function-body railval import, and why
+ALLOWED = {"app/cli/cmd_app.py::seed_demo": "guarded by `except ImportError` (optional demo)"}
+
+
+def body_imports(path: Path, root: Path = ROOT) -> list[str]:
+    """``file::function:line module`` of every railval import inside a function body."""
+    rel = str(path.relative_to(root))
+    out = []
+    for fn in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if not isinstance(fn, ast.FunctionDef | ast.AsyncFunctionDef):
+            continue
+        for node in ast.walk(fn):
+            modules = ([node.module or ""] if isinstance(node, ast.ImportFrom)
+                       else [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+            for m in modules:
+                if (m == "railval" or m.startswith("railval.")) \
+                        and f"{rel}::{fn.name}" not in ALLOWED:
+                    out.append(f"{rel}::{fn.name}:{node.lineno} {m}")
+    return sorted(set(out))
+
+
+def verb_modules(root: Path = ROOT) -> list[Path]:
+    return sorted((root / "app" / "cli").glob("cmd_*.py"))
+
+
+def test_verb_functions_import_no_railval_module_in_their_body():
+    found = [x for p in verb_modules() for x in body_imports(p)]
+    assert found == [], "bind these at the module's top with railval.core.lazy:\n" + "\n".join(found)
+
+
+def test_every_verb_module_binds_its_services_lazily():
+    for path in verb_modules():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        top = [n for n in tree.body if isinstance(n, ast.ImportFrom)
+               and (n.module or "").startswith("railval.app.services")]
+        assert top == [], f"{path.name}: a service imported at the top loads it for every verb"
+
+
+def test_the_rule_finds_a_planted_body_import(tmp_path):
+    (tmp_path / "app" / "cli").mkdir(parents=True)
+    planted = tmp_path / "app" / "cli" / "cmd_planted.py"
+    planted.write_text(textwrap.dedent("""
+        import argparse
+
+        def cmd_x(args):
+            import json
+            from railval.app.services.overview import validation
+            return validation(args.db)
+
+        def seed_demo(database):
+            import railval.app.services.synth
+        """), encoding="utf-8")
+    assert body_imports(planted, tmp_path) == [
+        "app/cli/cmd_planted.py::cmd_x:6 railval.app.services.overview",
+        "app/cli/cmd_planted.py::seed_demo:10 railval.app.services.synth"]  # only cmd_app's is allowed
+    assert [p.name for p in verb_modules(tmp_path)] == ["cmd_planted.py"]
