@@ -165,9 +165,17 @@ def test_metrics_report_and_workshop_pages(page, app_url):
     from railval.app.services.calibration_plan import calibration_simulations
 
     assert before in {calibration_simulations(n) for n in (1, 2, 3)}, before
-    generations = main.locator(".rv-cal-settings input").nth(2)  # population, generations, polish, seed
+    # population, generations, polish and seed belong to the global search: not editable
+    # with the local fit, editable once "Global search" is ticked, and then they set the cost
+    generations = main.locator(".rv-cal-settings .bk-input:not([type=checkbox])").nth(2)
+    assert generations.is_disabled()
+    main.locator(".rv-cal-settings input[type=checkbox]").first.check()
+    page.wait_for_function("el => !el.disabled", arg=generations.element_handle(),
+                           timeout=PAGE_TIMEOUT_MS)
     generations.fill("10")
     generations.press("Enter")
-    page.wait_for_timeout(1500)  # the global search's settings leave the local fit's cost as it was
-    assert int(re.search(r"at most (\d+)", cost.inner_text()).group(1)) == before
+    main.get_by_text(re.compile(r"population × generations of differential evolution")).wait_for(
+        timeout=PAGE_TIMEOUT_MS)
+    page.wait_for_timeout(1500)
+    assert int(re.search(r"at most (\d+)", cost.inner_text()).group(1)) > before
     screenshot(page, "workshop")

@@ -43,6 +43,20 @@ def test_page_estimate_is_the_local_fit_estimate(tmp_path):
     st.fit_parameters = ["clearance_mm"]
     st.popsize, st.maxiter = 40, 200  # the global search's settings do not change the local fit's cost
     assert st.calibration_simulations() == calibration_simulations(1) == 67
+    # the page's "Global search" box: the estimate becomes differential evolution's with the
+    # page's settings, and the calibration asks the service for that method
+    st.global_search = True
+    st.popsize, st.maxiter, st.polish_maxfev = 3, 2, 4
+    assert st.calibration_simulations() == calibration_simulations(
+        1, "global", popsize=3, maxiter=2, polish_maxfev=4) == 1 + 5 * 3 + 4 + 1
+    # (start, a population of max(5, 3·1) initially and for 2 generations, polish, stored run)
+    seen = {}
+    st.app.backend.calibrate = lambda *a, **kw: seen.update(kw)
+    st.run_calibration(calibrate=True, background=False)
+    assert seen["method"] == "global" and seen["popsize"] == 3, seen
+    st.global_search = False
+    st.run_calibration(calibrate=True, background=False)
+    assert seen["method"] == "local"
     db.dispose()
 
 

@@ -73,22 +73,29 @@ class DiagnosePage(PageBase):
                    bounded_input(st.param.values_per_parameter, "Scan values per parameter", app, width=200)),
             self.diag_estimate, title="Diagnosis settings", collapsed=True, sizing_mode="stretch_width",
             css_classes=["rv-diag-settings"])
+        # population, generations, polish and seed drive the global search only: editable when it is chosen
+        self.global_inputs = [
+            bounded_input(st.param.popsize, "Population per parameter", app, width=170, disabled=True),
+            bounded_input(st.param.maxiter, "Generations (at most)", app, width=170, disabled=True),
+            bounded_input(st.param.polish_maxfev, "Polish simulations (at most)", app, width=190, disabled=True),
+            bounded_input(st.param.seed, "Seed", app, width=110, disabled=True)]
         self.cal_settings = pn.Card(
             pn.FlexBox(
                 pn.widgets.MultiChoice.from_param(st.param.fit_parameters,
                                                   name="Parameters to fit (none chosen: all; others keep the values set)",
                                                   width=420),
-                bounded_input(st.param.popsize, "Population per parameter", app, width=170),
-                bounded_input(st.param.maxiter, "Generations (at most)", app, width=170),
-                bounded_input(st.param.polish_maxfev, "Polish simulations (at most)", app, width=190),
-                bounded_input(st.param.seed, "Seed", app, width=110),
+                pn.widgets.Checkbox.from_param(st.param.global_search, name="Global search (differential "
+                                               "evolution + local polish) instead of the local fit", width=420),
+                *self.global_inputs,
                 pn.widgets.Checkbox.from_param(st.param.split, name="Hold out one section per zone "
                                                "(judge the fit on sections it has not seen)", width=420)),
-            self.cal_estimate, title="Calibration settings (differential evolution + local polish)",
+            self.cal_estimate, title="Calibration settings (local trust-region fit; global search optional)",
             collapsed=True, sizing_mode="stretch_width", css_classes=["rv-cal-settings"])
         st.param.watch(lambda e: self._show_estimates(), ["candidate_effects", "values_per_parameter",
                                                           "fit_parameters", "popsize", "maxiter",
-                                                          "polish_maxfev", "effect"])
+                                                          "polish_maxfev", "effect", "global_search"])
+        st.param.watch(self._method_changed, ["global_search"])
+        self._method_changed()
         self.param_box = pn.Column(sizing_mode="stretch_width")
         self.explain = pn.pane.Markdown("", sizing_mode="stretch_width")
         self.candidates_box = pn.Column(sizing_mode="stretch_width")
@@ -143,6 +150,11 @@ class DiagnosePage(PageBase):
             self.result_box,
         ]
 
+    def _method_changed(self, *_: Any) -> None:
+        """The global search's inputs are editable only while the global search is chosen."""
+        for widget in self.global_inputs:
+            widget.disabled = not self.state.global_search
+
     def _show_estimates(self) -> None:
         """The cost of the next diagnosis and calibration, in campaign simulations."""
         try:
@@ -154,9 +166,11 @@ class DiagnosePage(PageBase):
         self.diag_estimate.object = (f"**Run diagnosis** simulates the campaign {n_diag} times at most "
                                      "(each candidate effect parameter over its bounds, one linearised "
                                      "simulation per model parameter, a few refinements).")
-        self.cal_estimate.object = (f"**Calibrate** simulates the campaign at most {n_cal} times "
-                                    "(scan, start point, trust-region steps with their Jacobians, final run; "
-                                    "it usually stops far earlier at its tolerance).")
+        how = ("population × generations of differential evolution, the local polish and the final run"
+               if self.state.global_search else
+               "scan, start point, trust-region steps with their Jacobians, final run; it usually stops "
+               "far earlier at its tolerance")
+        self.cal_estimate.object = f"**Calibrate** simulates the campaign at most {n_cal} times ({how})."
 
     def _show_candidates(self) -> None:
         view = self.state.view  # the diagnosis's typed fields (railval.app.views.DiagnosisView)

@@ -52,6 +52,9 @@ class DiagnoseState(param.Parameterized):
     # calibration settings (app.services.diagnosis.calibrate → core.calibration.calibrate)
     fit_parameters = param.ListSelector(default=[], objects=[], doc=(
         "parameters of the chosen effect to fit; none chosen = all; the others keep the values set"))
+    global_search = param.Boolean(default=False, doc=(
+        "calibrate by a global search (differential evolution + local polish) instead of the local "
+        "trust-region fit from the diagnosis's values; population, generations and polish apply to it only"))
     popsize = param.Integer(default=5, bounds=(2, 40), doc="differential evolution: population per parameter")
     maxiter = param.Integer(default=5, bounds=(1, 200), doc="differential evolution: generations at most")
     polish_maxfev = param.Integer(default=20, bounds=(0, 1000), doc="local polish: simulations at most")
@@ -152,12 +155,18 @@ class DiagnoseState(param.Parameterized):
         return diagnosis_simulations(effects, self.values_per_parameter, template,
                                      parameters=not self.candidate_effects)
 
+    def calibration_method(self) -> str:
+        """``local`` (the trust-region fit) or ``global`` (differential evolution + polish)."""
+        return "global" if self.global_search else "local"
+
     def calibration_simulations(self) -> int:
-        """Upper bound of the campaign simulations the page's calibration (the local fit)
-        runs: :func:`railval.app.services.calibration_plan.calibration_simulations`, the
-        estimate the CLI announces too."""
+        """Upper bound of the campaign simulations the page's calibration runs (the local fit,
+        or the global search with the page's population, generations and polish):
+        :func:`railval.app.services.calibration_plan.calibration_simulations`, the estimate
+        the CLI announces too."""
         n = len(self.fit_parameters or self.param.fit_parameters.objects) or 1
-        return calibration_simulations(n, "local")
+        return calibration_simulations(n, self.calibration_method(), popsize=self.popsize,
+                                       maxiter=self.maxiter, polish_maxfev=self.polish_maxfev)
 
     def effect_catalogue(self) -> list[dict[str, Any]]:
         return self.app.backend.effects()
@@ -252,7 +261,7 @@ class DiagnoseState(param.Parameterized):
             return None
 
         settings = {"popsize": self.popsize, "maxiter": self.maxiter, "polish_maxfev": self.polish_maxfev,
-                    "seed": self.seed, **({"split": True} if self.split else {}),
+                    "seed": self.seed, "method": self.calibration_method(), **({"split": True} if self.split else {}),
                     "params": ([f"{effect}.{p}" for p in self.fit_parameters] or None)
                     if not (effect or "").startswith("model.") else None}
         if calibrate and not app.within_cost_cap("calibration", self.calibration_simulations()):
