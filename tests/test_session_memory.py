@@ -43,14 +43,27 @@ SESSION_TYPES = ("bokeh.document.document.Document", "bokeh.server.session.Serve
                  "railval.app.state.dashboard.DashboardState", "railval.app.pages.compare.ComparePage")
 
 
+#: the database of the app served by the test: AppStates are counted only when they are
+#: this server's (earlier tests of the process leave AppStates of their own databases, which
+#: the garbage collector may release or a late session of theirs may add while this test counts)
+_DB: list = []
+
+
 def _live() -> Counter:
     gc.collect()
     live: Counter = Counter()
     for o in gc.get_objects():
         name = f"{type(o).__module__}.{type(o).__qualname__}"
         if name in SESSION_TYPES:
+            if name == "railval.app.state.app.AppState" and _DB and not _ours(o):
+                continue
             live[name] += 1
     return live
+
+
+def _ours(state) -> bool:
+    backend = getattr(state, "backend", None)
+    return getattr(backend, "database", None) is _DB[0]
 
 
 def _open(browser, url: str, pages: tuple[str, ...] = ()):
@@ -85,6 +98,7 @@ def test_closed_sessions_release_every_session_object(tmp_path, browser):
     from tests.browser_support import demo_database
 
     db = demo_database(tmp_path)
+    _DB[:] = [db]
     # what earlier tests of this process left (their own servers' objects): counts are relative
     start = _live()
     idle = start["bokeh.server.session.ServerSession"]
@@ -96,17 +110,20 @@ def test_closed_sessions_release_every_session_object(tmp_path, browser):
         _open(browser, url, ("compare", "dashboard")).close()
         assert _wait_for(lambda: _live()["bokeh.server.session.ServerSession"] == idle, 60)
         base = _live()
-        known = {id(o) for o in gc.get_objects() if type(o).__name__ == "AppState"}
+        known = {id(o) for o in gc.get_objects() if type(o).__name__ == "AppState" and _ours(o)}
         assert base["railval.app.state.app.AppState"] == start["railval.app.state.app.AppState"]
         contexts = [_open(browser, url, ("compare", "dashboard")), _open(browser, url),
                     _open(browser, url)]
         opened = _live()
-        assert opened["railval.app.state.app.AppState"] == base["railval.app.state.app.AppState"] + 3
+        # the three sessions are seen (a page request the browser repeats under load makes a
+        # fourth, never connected session: Bokeh discards it like the others)
+        assert opened["railval.app.state.app.AppState"] >= base["railval.app.state.app.AppState"] + 3
         assert opened["railval.app.pages.compare.ComparePage"] == base["railval.app.pages.compare.ComparePage"] + 1
         assert opened["bokeh.server.session.ServerSession"] >= idle + 3
         # the count sees what is still referenced: one AppState kept by this test stays
-        held = [o for o in gc.get_objects() if type(o).__name__ == "AppState"
+        held = [o for o in gc.get_objects() if type(o).__name__ == "AppState" and _ours(o)
                 and id(o) not in known][:1]
+        assert held, "no AppState of this server's sessions found"
         for ctx in contexts:
             ctx.close()
         want = base["railval.app.state.app.AppState"] + 1
@@ -118,6 +135,7 @@ def test_closed_sessions_release_every_session_object(tmp_path, browser):
         after = _live()
         assert {k: after[k] for k in SESSION_TYPES} == {k: base[k] for k in SESSION_TYPES}, \
             f"objects of closed sessions still alive: {after - base}"
+    _DB.clear()
     db.dispose()
 
 
