@@ -115,8 +115,10 @@ def test_closed_sessions_release_every_session_object(tmp_path, browser):
         contexts = [_open(browser, url, ("compare", "dashboard")), _open(browser, url),
                     _open(browser, url)]
         opened = _live()
-        # the three sessions are seen (a page request the browser repeats under load makes a
-        # fourth, never connected session: Bokeh discards it like the others)
+        # the three sessions are seen; when another browser test ran before in the same
+        # browser, a fourth session of this server appears (reproduced with test_browser_app
+        # before this test, cause not found): it is discarded like the others, which the
+        # exact release check below holds
         assert opened["railval.app.state.app.AppState"] >= base["railval.app.state.app.AppState"] + 3
         assert opened["railval.app.pages.compare.ComparePage"] == base["railval.app.pages.compare.ComparePage"] + 1
         assert opened["bokeh.server.session.ServerSession"] >= idle + 3
