@@ -69,6 +69,7 @@ class ServerProcess:
 @pytest.fixture(scope="module")
 def env(tmp_path_factory):
     require_browser()
+    from railval.app.services import workshop_answers as wa
     from railval.app.services import workshops as ws
     from railval.db import users
     from railval.db import workshops as wsdb
@@ -86,7 +87,7 @@ def env(tmp_path_factory):
     answers = folder / "bx.csv"
     answers.write_text("reviewer,plot,answer,seconds,comment\n"
                        + "".join(f"expert{r},{p},{'yes' if r == 0 else 'no'},3,\n" for r in range(2) for p in bx))
-    ws.import_answers(db, "BX", answers)
+    wa.import_answers(db, "BX", answers)
     tokens = {}
     with db.session(write=True) as s:
         users.create_user(s, "orga", password="organiser-pass", roles=["organiser"])

@@ -35,6 +35,7 @@ def _crossing(values: list[float], yes: list[float]) -> float:
 @pytest.fixture(scope="module")
 def env(tmp_path_factory):
     require_browser()
+    from railval.app.services import workshop_answers as wa
     from railval.app.services import workshops as ws
     from railval.db import users
     from railval.db import workshops as wsdb
@@ -56,11 +57,11 @@ def env(tmp_path_factory):
     rows = [f"{r},{pid},{'yes' if d is not None and d < cut else 'no'},4,"
             for r, cut in cuts.items() for pid, d in big]
     (folder / "big.csv").write_text("reviewer,plot,answer,seconds,comment\n" + "\n".join(rows) + "\n")
-    ws.import_answers(db, "BIG", folder / "big.csv")
+    wa.import_answers(db, "BIG", folder / "big.csv")
     odevs = sorted(d for _, d in one if d is not None)
     rows = [f"solo,{pid},{'yes' if d is not None and d < odevs[6] else 'no'},4," for pid, d in one]
     (folder / "one.csv").write_text("reviewer,plot,answer,seconds,comment\n" + "\n".join(rows) + "\n")
-    ws.import_answers(db, "ONE", folder / "one.csv")
+    wa.import_answers(db, "ONE", folder / "one.csv")
     with served_app(db) as url:
         yield {"db": db, "base": url.rsplit("/app", 1)[0], "big": len(big), "one": len(one)}
     db.dispose()
@@ -76,7 +77,7 @@ def _analysis_page(browser, env, name: str):
 
 
 def test_figure_is_the_plotted_crossing_and_carries_its_n(browser, env):
-    from railval.app.services.workshops import analyse
+    from railval.app.services.workshop_answers import analyse
 
     doc = analyse(env["db"], "BIG")
     thr = doc["threshold"]

@@ -16,6 +16,7 @@ import io
 import numpy as np
 import pytest
 from railval.app.cli import main as cli
+from railval.app.services import workshop_answers as wa
 from railval.app.services import workshops as ws
 from railval.core.errors import CampaignFormatError
 from railval.db import users
@@ -71,10 +72,10 @@ def test_workshop_export_quotes_formulas_and_keeps_numbers(workshop_db, tmp_path
     src = tmp_path / "answers.csv"
     with src.open("w", newline="", encoding="utf-8") as fh:
         wr = csv.writer(fh)
-        wr.writerow(ws.CSV_COLUMNS)
+        wr.writerow(wa.CSV_COLUMNS)
         for (reviewer, plot), comment in typed.items():
             wr.writerow([reviewer, plot, "yes", "12.5", comment])
-    ws.import_answers(db, "W", src)  # stored as typed: the comment is the panelist's text
+    wa.import_answers(db, "W", src)  # stored as typed: the comment is the panelist's text
     with db.session(write=True) as s:  # a CR survives the review form, not a text-mode file read
         answer = s.scalar(select(WorkshopAnswer).where(WorkshopAnswer.comment == "\n=1+1"))
         answer.comment = "\r=1+1"
@@ -102,7 +103,7 @@ def test_workshop_export_quotes_formulas_and_keeps_numbers(workshop_db, tmp_path
             assert fields[col["plot"]].isdigit() and fields[col["seconds"]] == "12.5"
             assert fields[col["position"]].isdigit()
     # the import reads the exported comments back exactly as typed
-    back = {(r["reviewer"], r["plot"]): r["comment"] for r in ws.parse_answers_csv(raw, "export.csv")}
+    back = {(r["reviewer"], r["plot"]): r["comment"] for r in wa.parse_answers_csv(raw, "export.csv")}
     assert back == typed
 
 

@@ -11,6 +11,7 @@ import json
 import pytest
 from railval.app.cli import main as cli
 from railval.app.services import workshop_cards
+from railval.app.services import workshop_answers as wa
 from railval.app.services import workshops as ws
 from railval.core.errors import InvalidParameter
 from railval.core.workshop import PLOT_KINDS
@@ -159,12 +160,12 @@ def test_zone_scaling_keeps_straight_track_readable(made, capsys, tmp_path):
         for r in twins:
             assert r.render["scale"] == whole_scales[r.kind] and r.render["scale_key"] == r.kind
         answers = [("tw", r.id, "yes", 2, "") for r in rows]
-    ws.import_answers(db, "WT", _write(tmp_path / "wt.csv", answers))
+    wa.import_answers(db, "WT", _write(tmp_path / "wt.csv", answers))
     with db.session() as s:
-        frame, _ = ws.analysis_frames(s, "WT")
+        frame, _ = wa.analysis_frames(s, "WT")
     assert sorted(frame["scaling"].unique()) == ["auto", "fixed"]
     assert set(frame.loc[frame["scaling"] == "auto", "plot"]) == {r.twin_id for r in twins}
-    assert ws.analyse(db, "WT")["scaling_effect"]["pairs"] == 4
+    assert wa.analyse(db, "WT")["scaling_effect"]["pairs"] == 4
     with db.session() as s:
         w = wsdb.get_workshop(s, "WW")
         assert set(w.scales) == set(kinds) and w.settings["scaling"] == "workshop"
@@ -245,7 +246,7 @@ def test_import_bad_rows_store_nothing(made, tmp_path, rows, message):
     path = _write(tmp_path / "answers.csv", rows)
     before = (_count(db, WorkshopAnswer), _count(db, WorkshopReviewer), _count(db, AppUser))
     with pytest.raises(InvalidParameter, match=message):
-        ws.import_answers(db, "W", path)
+        wa.import_answers(db, "W", path)
     assert (_count(db, WorkshopAnswer), _count(db, WorkshopReviewer), _count(db, AppUser)) == before
 
 
@@ -253,7 +254,7 @@ def test_import_bad_header_and_cli_error(made, tmp_path, capsys):
     db, _, _ = made
     path = _write(tmp_path / "a.csv", [("x", "1", "yes", "1")], header=("reviewer", "plot", "answer", "seconds"))
     with pytest.raises(InvalidParameter, match="line 1: missing column"):
-        ws.import_answers(db, "W", path)
+        wa.import_answers(db, "W", path)
     assert cli(["--db", db.url, "--as", "orga", "workshop", "import-answers", "W", str(path)]) == 2
     assert "missing column(s) comment" in capsys.readouterr().err
 
@@ -271,7 +272,7 @@ def test_import_export_and_analyse_round_trip(made, tmp_path, capsys):
             rows.append((name, str(p.id), "yes" if yes else "no", f"{4 + i}", "on paper, \"quoted\""))
     path = _write(tmp_path / "paper.csv", rows)
     before_users = _count(db, AppUser)
-    out = ws.import_answers(db, "W", path)
+    out = wa.import_answers(db, "W", path)
     assert out == {"answers": len(rows), "reviewers": 4, "new_users": 4}
     assert _count(db, AppUser) == before_users + 4
     with db.session() as s:
@@ -280,12 +281,12 @@ def test_import_export_and_analyse_round_trip(made, tmp_path, capsys):
     # importing the same file again is refused (already answered), nothing stored
     n = _count(db, WorkshopAnswer)
     with pytest.raises(InvalidParameter, match="line 2, column plot: reviewer 'paper1' has already"):
-        ws.import_answers(db, "W", path)
+        wa.import_answers(db, "W", path)
     assert _count(db, WorkshopAnswer) == n
     exp = tmp_path / "export.csv"
     assert cli(["--db", db.url, "--as", "orga", "workshop", "export", "W", str(exp)]) == 0
     got = list(csv.DictReader(exp.open(encoding="utf-8")))
-    assert set(ws.EXPORT_COLUMNS) == set(got[0])
+    assert set(wa.EXPORT_COLUMNS) == set(got[0])
     paper = [r for r in got if r["reviewer"].startswith("paper")]
     assert len(paper) == len(rows)
     assert {(r["reviewer"], r["plot"], r["answer"], float(r["seconds"]), r["comment"]) for r in paper} == \
@@ -353,8 +354,8 @@ def test_plot_cards_reuse_validate_and_metrics_and_show_both_groups(made, tmp_pa
     part = [(f"cp{r}", plots["CP"][k], "yes" if (r + i) % 2 == 0 else "no", 5, "")
             for r in range(3) for i, k in enumerate(keys)]
     expt = [(f"ce{r}", plots["CE"][k], "no", 4, "") for r in range(2) for k in keys]
-    ws.import_answers(db, "CP", _write(tmp_path / "cp.csv", part))
-    ws.import_answers(db, "CE", _write(tmp_path / "ce.csv", expt))
+    wa.import_answers(db, "CP", _write(tmp_path / "cp.csv", part))
+    wa.import_answers(db, "CE", _write(tmp_path / "ce.csv", expt))
     capsys.readouterr()
     assert cli(["--db", db.url, "--as", "orga", "workshop", "cards", "CP", "--groups", "CE", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -440,7 +441,7 @@ def test_zone_scaling_and_cards_on_each_backend(database, tmp_path):
         w = wsdb.get_workshop(s, "PZ")
         assert w.settings["scaling"] == "zone" and w.scales == out["scales"]
         ids = [p.id for p in wsdb.plots(s, w)]
-    ws.import_answers(database, "PZ", _write(tmp_path / "a.csv", [("pg1", i, "yes", 2, "") for i in ids]))
+    wa.import_answers(database, "PZ", _write(tmp_path / "a.csv", [("pg1", i, "yes", 2, "") for i in ids]))
     doc = workshop_cards.cards(database, "PZ")
     assert [c["plot"] for c in doc["cards"]] == ids
     assert all(c["yes_share"] == 1.0 and c["answers"] == 1 and c["en"] and c["sg"]["C"] is not None

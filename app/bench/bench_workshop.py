@@ -322,7 +322,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     answer_ms = [x for t in threads for x in t.answer_ms]
     image_ms = [x for t in threads for x in t.image_ms]
     t = time.perf_counter()
-    from railval.app.services.workshops import analyse
+    from railval.app.services.workshop_answers import analyse
     from railval.db.engine import connect
 
     db = connect(url)

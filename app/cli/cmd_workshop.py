@@ -42,6 +42,7 @@ database_service = lazy.module("railval.app.services.database")
 workshop_admin_service = lazy.module("railval.app.services.workshop_admin")
 workshop_cards_service = lazy.module("railval.app.services.workshop_cards")
 workshops_service = lazy.module("railval.app.services.workshops")
+workshop_answers_service = lazy.module("railval.app.services.workshop_answers")
 
 
 def _actor() -> str:
@@ -238,7 +239,7 @@ def _set_status(args: argparse.Namespace) -> int:
 
 
 def _import(args: argparse.Namespace) -> int:
-    out = workshops_service.import_answers(_database(args.db), args.name, args.file, actor=_actor())
+    out = workshop_answers_service.import_answers(_database(args.db), args.name, args.file, actor=_actor())
     if args.json:
         emit_json({"workshop": args.name, **out})
     else:
@@ -248,7 +249,7 @@ def _import(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    n = workshops_service.export_answers(_database(args.db), args.name, args.file)
+    n = workshop_answers_service.export_answers(_database(args.db), args.name, args.file)
     print(f"{n} answers of {args.name} written to {args.file}")
     return 0
 
@@ -271,7 +272,7 @@ def _cards(args: argparse.Namespace) -> int:
 
 
 def _analyse(args: argparse.Namespace) -> int:
-    doc = workshops_service.analyse(_database(args.db), args.name)
+    doc = workshop_answers_service.analyse(_database(args.db), args.name)
     if args.json:
         emit_json(doc)
     else:

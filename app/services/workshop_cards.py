@@ -13,7 +13,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from railval.app.services.workshops import analysis_frames
+from railval.app.services.workshop_answers import analysis_frames
 from railval.core.errors import InvalidParameter
 from railval.core.quantities import QUANTITIES
 from railval.core.roles import Principal, require

@@ -20,7 +20,7 @@ from railval.core.errors import RailvalError
 
 # -------------------------------------------------------------------------- analysis
 def _analysis(database, name: str, actor) -> dict[str, Any]:
-    from railval.app.services.workshops import analyse
+    from railval.app.services.workshop_answers import analyse
 
     return analyse(database, name, actor=actor, with_plots=True)
 
