@@ -20,6 +20,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from railval.app.services.calibration_plan import start_text, tolerance_text
 from railval.core.coverage import Coverage
 from railval.core.en14363 import PROCESSING_VERSION
 from railval.core.validation import STD_DEFINITION, QuantityResult, ValidationResult
@@ -283,6 +284,94 @@ class Ancestor:
         held = d.get("held_out_explained")
         return cls(str(d["configuration"]), d["diagnosis"], d["verdict"], d["top"],
                    None if held is None else float(held), str(d.get("created_at") or ""))
+
+
+@dataclass(frozen=True)
+class StoredDiagnosis:
+    """One stored diagnosis run as the Diagnose page lists it
+    (:func:`railval.app.services.diagnosis.diagnosis_runs`, or the shown run's
+    :func:`railval.app.services.stored_runs.run_info` without the ranking's fields)."""
+
+    created_at: str
+    seconds: float
+    values_per_parameter: int | None
+    #: the candidates chosen for the run; None: every candidate
+    chosen: tuple[str, ...] | None
+    reused: bool = False
+    #: whether the signals and sections are unchanged since the run (None: not known)
+    current: bool | None = None
+    top: str = ""
+    explained: float | None = None
+    separable: bool = True
+    verdict: str | None = None
+
+    @classmethod
+    def of(cls, d: Mapping[str, Any]) -> StoredDiagnosis:
+        settings = d.get("settings") or {}
+        chosen = settings.get("effects")
+        values = settings.get("values_per_parameter")
+        explained = d.get("explained")
+        current = d.get("current")
+        return cls(str(d.get("created_at") or ""), float(d.get("seconds") or 0.0),
+                   None if values is None else int(values), None if chosen is None else tuple(chosen),
+                   bool(d.get("reused")), None if current is None else bool(current), str(d.get("top") or ""),
+                   None if explained is None else float(explained), bool(d.get("separable", True)),
+                   d.get("verdict"))
+
+    @property
+    def candidates_text(self) -> str:
+        """The candidates the run tried, as a reader sees them."""
+        n = len(self.chosen or ())
+        return "every candidate" if self.chosen is None else f"{n} chosen candidate{'s' if n != 1 else ''}"
+
+
+@dataclass(frozen=True)
+class CalibrationOutcome:
+    """The last calibration or re-simulation the Diagnose page started (``to_dict()`` of its
+    result with ``kind``, ``effect``, ``configuration`` and ``parent`` added by the state):
+    what the page's one-line summary reads."""
+
+    kind: str
+    configuration: str
+    parent: str
+    effect: str
+    #: (name, value, unit) of every fitted parameter
+    fitted: tuple[tuple[str, float, str], ...] = ()
+    objective: float | None = None
+    objective_start: float | None = None
+    simulations: int = 0
+    in_sample: bool = False
+    held_out_sections: tuple[str, ...] = ()
+    #: the largest normalised error on the held-out sections: (parent's, fitted configuration's)
+    held_out_max_error: tuple[float, float] | None = None
+    flags: tuple[str, ...] = ()
+    #: the lines on the tolerance reached and where the fit started ('' when not known)
+    tolerance: str = ""
+    start: str = ""
+    #: a re-simulation with values a stored diagnosis fitted: the parameters and sections
+    diagnosis_parameters: tuple[str, ...] = ()
+    diagnosis_sections: int = 0
+
+    @classmethod
+    def of(cls, d: Mapping[str, Any]) -> CalibrationOutcome:
+        units = d.get("units") or {}
+        fitted = tuple((str(k), float(v), str(units.get(k) or "")) for k, v in (d.get("parameters") or {}).items())
+        held = ((d.get("lineage") or [{}])[-1] or {}).get("held_out") or {}
+        pair = ((float(held["parent_max_error"]), float(held["max_error"]))
+                if held.get("max_error") is not None and held.get("parent_max_error") is not None else None)
+        fit = d.get("calibration") or {}
+        by_diagnosis = fit.get("fitted_by") == "diagnosis"
+        calibrated = d.get("kind") != "re-simulation"
+        return cls(str(d.get("kind") or ""), str(d.get("configuration") or ""), str(d.get("parent") or ""),
+                   str(d.get("effect") or ""), fitted,
+                   None if d.get("objective") is None else float(d["objective"]),
+                   None if d.get("objective_start") is None else float(d["objective_start"]),
+                   int(d["simulations"] if d.get("simulations") is not None else (d.get("n_evaluations") or 0) + 2), bool(d.get("in_sample")),
+                   tuple(str(x) for x in d.get("held_out_sections") or ()), pair,
+                   tuple(str(f) for f in d.get("flags") or ()),
+                   tolerance_text(d) if calibrated else "", start_text(d) if calibrated else "",
+                   tuple(str(x) for x in fit.get("parameters") or ()) if by_diagnosis else (),
+                   len(fit.get("fit_sections") or ()) if by_diagnosis else 0)
 
 
 @dataclass(frozen=True)

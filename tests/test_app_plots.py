@@ -172,9 +172,8 @@ def test_signature_chart_of_a_candidate():
 
     from railval.app.pages.diagnose import SIGNATURE_AXIS, signature_chart
 
-    cand = {"effect": "friction_damping",
-            "quantities": {"az_rms": {"before": 1.4, "after": 0.3}, "Y_qst": {"before": 0.2, "after": 0.25}}}
-    svg = signature_chart(cand)
+    quantities = {"az_rms": (1.4, 0.3), "Y_qst": (0.2, 0.25)}
+    svg = signature_chart("friction_damping", quantities)
     labels = re.findall(r'class="label">([^<]+)<', svg)
     assert labels == ["Y_qst", "az_rms"]  # EN quantity order
     bars = re.findall(r'<title>(\S+) (before|after \(fitted\)): ([0-9.]+)</title>', svg)
@@ -184,8 +183,8 @@ def test_signature_chart_of_a_candidate():
     assert "dimensionless" in SIGNATURE_AXIS and "std limit" in SIGNATURE_AXIS and SIGNATURE_AXIS in svg
     assert "friction_damping" in svg and "rotate(" not in svg
     h2 = int(re.search(r'height="(\d+)"', svg).group(1))
-    more = dict(cand["quantities"], Q_qst={"before": 0.5, "after": 0.4})
-    h3 = int(re.search(r'height="(\d+)"', signature_chart({**cand, "quantities": more})).group(1))
+    more = dict(quantities, Q_qst=(0.5, 0.4))
+    h3 = int(re.search(r'height="(\d+)"', signature_chart("friction_damping", more)).group(1))
     assert h3 - h2 == 30  # one row per quantity, whatever the window
 
 

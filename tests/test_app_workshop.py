@@ -113,3 +113,15 @@ def test_calibration_settings_fit_subset_keep_the_rest(workshop):
     assert conf.effects["lateral_bumpstop"]["stiffness_kN_mm"] == pytest.approx(0.7)  # kept as set
     assert conf.effects["lateral_bumpstop"]["clearance_mm"] == pytest.approx(
         res["parameters"]["lateral_bumpstop.clearance_mm"])
+    # the page's summary line reads the outcome's typed fields (app.views.CalibrationOutcome)
+    from types import SimpleNamespace
+
+    from railval.app.pages.diagnose import DiagnosePage
+
+    text = DiagnosePage._last_result_text(SimpleNamespace(state=st), "bumpstop-fit")
+    fitted = res["parameters"]["lateral_bumpstop.clearance_mm"]
+    assert text.startswith(f"bumpstop-fit: lateral_bumpstop calibrated from {res['parent']}: "
+                           f"clearance_mm = {fitted:.4g} mm. "), text
+    assert f"fitted {res['objective']:.3g}" in text and f"{res['simulations']} campaign simulations" in text
+    assert "Tolerance: stopped by" in text and text.endswith("Next: diagnose bumpstop-fit — press **Run diagnosis**.")
+    assert DiagnosePage._last_result_text(SimpleNamespace(state=st), "other") == ""

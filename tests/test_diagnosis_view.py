@@ -14,10 +14,12 @@ import pytest
 
 from railval.app.views import (
     Ancestor,
+    CalibrationOutcome,
     Cause,
     DiagnosisView,
     FamilyRow,
     Named,
+    StoredDiagnosis,
     diagnosis_view_of,
 )
 from railval.core.diagnosis import DiagnosisResult, Pattern, TrustedCandidate
@@ -33,11 +35,10 @@ DIAGNOSIS_KEYS = frozenset({
 #: (file, functions or None for the whole module) that must read the view, not dicts
 READERS = (("app/state/diagnose.py", None),
            ("app/cli/cmd_diagnose.py", ("_cmd_diagnose", "_print_causes", "_print_lineage")))
-#: the Diagnose page reads the view's fields; what it still reads by key — the signature
-#: chart's candidate row, the stored runs' list and the calibration's result — is held at a
-#: ceiling that only shrinks
+#: the Diagnose page reads the view's fields, the stored runs through ``StoredDiagnosis`` and
+#: the last calibration through ``CalibrationOutcome``: no key read is left
 PAGE = "app/pages/diagnose.py"
-PAGE_CEILING = 11
+PAGE_CEILING = 0
 
 
 def key_reads(source: str, functions: tuple[str, ...] | None = None) -> list[str]:
@@ -148,3 +149,31 @@ def test_an_empty_diagnosis_has_empty_rows_and_a_wrong_object_is_refused():
     assert view.cause_set.left_out == () and view.next_text == "" and not view.has_lineage
     with pytest.raises(TypeError, match="DiagnosisResult is needed, got dict"):
         diagnosis_view_of({"verdict": "cause"})
+
+
+def test_stored_runs_and_the_last_calibration_read_into_typed_rows():
+    """The Diagnose page's list of stored runs and its summary of the last calibration read
+    typed rows; a missing ranking (the shown run's ``run_info``) gives the defaults."""
+    listed = StoredDiagnosis.of({"id": 3, "created_at": "2026-11-28T08:00:00", "seconds": 21.6, "reused": True,
+                                 "settings": {"values_per_parameter": 3, "effects": ["a", "model.m"]},
+                                 "current": False, "top": "friction_damping", "explained": 0.91,
+                                 "separable": False, "verdict": "uncertain"})
+    assert (listed.values_per_parameter, listed.chosen, listed.current, listed.top, listed.explained,
+            listed.separable, listed.verdict) == (3, ("a", "model.m"), False, "friction_damping", 0.91, False,
+                                                  "uncertain")
+    assert listed.candidates_text == "2 chosen candidates"
+    shown = StoredDiagnosis.of({"created_at": "x", "seconds": 1.0, "settings": {"effects": None}})
+    assert shown.candidates_text == "every candidate" and shown.current is None and shown.explained is None
+    out = CalibrationOutcome.of({
+        "kind": "calibration", "configuration": "c2", "parent": "c1", "effect": "friction_damping",
+        "parameters": {"friction_damping.force_kN": 2.5}, "units": {"friction_damping.force_kN": "kN"},
+        "objective": 0.07, "objective_start": 0.2, "n_evaluations": 11, "held_out_sections": ["S03"],
+        "lineage": [{"held_out": {"max_error": 0.8, "parent_max_error": 1.6}}], "flags": ["note: x"],
+        "tolerance": {"stopped_by": "xtol", "xtol": 1e-3}, "converged": True})
+    assert out.fitted == (("friction_damping.force_kN", 2.5, "kN"),) and out.simulations == 13
+    assert out.held_out_max_error == (1.6, 0.8) and out.held_out_sections == ("S03",)
+    assert out.tolerance.startswith("tolerance: stopped by xtol") and out.diagnosis_parameters == ()
+    resim = CalibrationOutcome.of({"kind": "re-simulation", "configuration": "c3", "parent": "c1", "effect": "e",
+                                   "calibration": {"fitted_by": "diagnosis", "parameters": ["e.k"],
+                                                   "fit_sections": ["S01", "S02"]}})
+    assert (resim.diagnosis_parameters, resim.diagnosis_sections, resim.tolerance) == (("e.k",), 2, "")

@@ -8,6 +8,7 @@ new configuration's dashboard beside its parent's, and the error along the linea
 from __future__ import annotations
 
 import html
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -18,10 +19,9 @@ from railval.app import plots
 from railval.app.pages._common import PageBase, bounded_input, make_dispatch, message, table, where_map
 from railval.app.pages.dashboard import validation_view
 from railval.app.security import plain_message
-from railval.app.services.calibration_plan import start_text, tolerance_text
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 from railval.app.svg_charts import svg_paired_hbars
-from railval.app.views import Ancestor
+from railval.app.views import Ancestor, CalibrationOutcome, StoredDiagnosis
 
 
 #: the signature chart's value axis: what the residual is, and that it has no unit
@@ -29,18 +29,19 @@ SIGNATURE_AXIS = ("residual rms, normalised: D_v / std limit (PSD groups: log2 P
                   "— dimensionless")
 
 
-def signature_chart(candidate: dict[str, Any]) -> str:
-    """Residual RMS per quantity group before/after adding the candidate (its signature on
-    the residual pattern) as a grouped horizontal bar chart (inline SVG,
-    :func:`railval.app.svg_charts.svg_paired_hbars`): one before/after pair per quantity, EN
-    quantity order then PSD groups, labels horizontal, a fixed height per group."""
+def signature_chart(name: str, group_change: Mapping[str, tuple[float, float]]) -> str:
+    """Residual RMS per quantity group before/after adding candidate ``name``
+    (``TrustedCandidate.group_change``: its signature on the residual pattern) as a grouped
+    horizontal bar chart (inline SVG, :func:`railval.app.svg_charts.svg_paired_hbars`): one
+    before/after pair per quantity, EN quantity order then PSD groups, labels horizontal, a
+    fixed height per group."""
     from railval.core.quantities import QUANTITY_IDS
 
     order = {q: i for i, q in enumerate(QUANTITY_IDS)}  # the quantities in EN order, then PSD groups
-    groups = sorted((candidate.get("quantities") or {}).items(), key=lambda kv: (order.get(kv[0], 99), kv[0]))
-    return svg_paired_hbars([g for g, _ in groups], [float(c["before"]) for _, c in groups],
-                            [float(c["after"]) for _, c in groups],
-                            title=f"Signature of {candidate['effect']}: residual before → after",
+    groups = sorted(group_change.items(), key=lambda kv: (order.get(kv[0], 99), kv[0]))
+    return svg_paired_hbars([g for g, _ in groups], [float(before) for _, (before, _after) in groups],
+                            [float(after) for _, (_before, after) in groups],
+                            title=f"Signature of {name}: residual before → after",
                             xlabel=SIGNATURE_AXIS, names=("before", "after (fitted)"),
                             colors=(plots.FAIL_COLOR, plots.PASS_COLOR))
 
@@ -291,32 +292,31 @@ class DiagnosePage(PageBase):
 
     def _run_line(self) -> list:
         """Which stored run is shown: when, with which settings, how long it took."""
-        run = self.state.stored_run
-        if not run:
+        if not self.state.stored_run:
             return []
-        st = run.get("settings", {})
-        text = (f"Stored diagnosis of {run.get('created_at', '').replace('T', ' ')} UTC "
-                f"({st.get('values_per_parameter')} values per parameter, "
-                f"{_candidates_text(st)}; computed in {run.get('seconds', 0):.0f} s"
-                f"{', reused without simulating' if run.get('reused') else ''}).")
-        if run.get("current") is False:
+        run = StoredDiagnosis.of(self.state.stored_run)
+        text = (f"Stored diagnosis of {run.created_at.replace('T', ' ')} UTC "
+                f"({run.values_per_parameter} values per parameter, "
+                f"{run.candidates_text}; computed in {run.seconds:.0f} s"
+                f"{', reused without simulating' if run.reused else ''}).")
+        if run.current is False:
             return [message(text + " The signals or sections changed since: run the diagnosis again.", "warning")]
         return [pn.pane.Markdown(html.escape(text), css_classes=["rv-stored-run"])]
 
     def _earlier_runs(self) -> list:
         """Every stored diagnosis of the configuration (newest first)."""
-        rows = self.state.runs
+        rows = [StoredDiagnosis.of(r) for r in self.state.runs]
         if len(rows) < 2:
             return []
         df = pd.DataFrame([{
-            "time (UTC)": r["created_at"].replace("T", " "),
-            "values per parameter": r["settings"].get("values_per_parameter"),
-            "candidates": _candidates_text(r["settings"]),
-            "top candidate": r["top"],
-            "explained (%)": round(100 * float(r["explained"]), 1) if r["explained"] is not None else None,
-            "separable": "yes" if r["separable"] else "no",
-            "data current": "yes" if r.get("current") else "no (signals changed)",
-            "seconds": round(r["seconds"], 1)} for r in rows])
+            "time (UTC)": r.created_at.replace("T", " "),
+            "values per parameter": r.values_per_parameter,
+            "candidates": r.candidates_text,
+            "top candidate": r.top,
+            "explained (%)": round(100 * r.explained, 1) if r.explained is not None else None,
+            "separable": "yes" if r.separable else "no",
+            "data current": "yes" if r.current else "no (signals changed)",
+            "seconds": round(r.seconds, 1)} for r in rows])
         return [pn.pane.Markdown("#### Earlier diagnoses of this configuration"),
                 table(df, height=40 + 32 * min(len(df), 8), css_classes=["rv-diagnosis-runs"])]
 
@@ -348,7 +348,7 @@ class DiagnosePage(PageBase):
                              f"{html.escape(', '.join(cand.worsens) or 'none')}.",
                              sizing_mode="stretch_width"),
             *[message(str(f), "warning") for f in cand.flags],
-            pn.pane.HTML(signature_chart(cand.to_dict()), css_classes=["rv-signature"],
+            pn.pane.HTML(signature_chart(cand.name, cand.group_change), css_classes=["rv-signature"],
                          styles={"overflow-x": "auto"}, sizing_mode="stretch_width"),
         ]
         where = self.state.where(cand.name)
@@ -422,47 +422,39 @@ class DiagnosePage(PageBase):
 
     def _last_result_text(self, config: str) -> str:
         """One line on the job that made ``config``: fitted values, objective, simulations."""
-        r = self.state.last_result
-        if not r or r.get("configuration") != config:
+        if not self.state.last_result:
             return ""
-        if r["kind"] == "re-simulation":
-            text = f"{config}: {r['parent']} + {r['effect']} re-simulated with the parameters set."
-            fit = r.get("calibration") or {}
-            if fit.get("fitted_by") == "diagnosis":
-                text += (f" Its verdict is in-sample: {', '.join(fit.get('parameters') or [])} took the values the "
-                         f"diagnosis fitted on all {len(fit.get('fit_sections') or [])} sections, so no held-out "
+        r = CalibrationOutcome.of(self.state.last_result)
+        if r.configuration != config:
+            return ""
+        if r.kind == "re-simulation":
+            text = f"{config}: {r.parent} + {r.effect} re-simulated with the parameters set."
+            if r.diagnosis_parameters:
+                text += (f" Its verdict is in-sample: {', '.join(r.diagnosis_parameters)} took the values the "
+                         f"diagnosis fitted on all {r.diagnosis_sections} sections, so no held-out "
                          "check is possible for it; for one, tick 'Hold out one section per zone' in the "
                          "calibration settings and press 'Add, calibrate & re-simulate'.")
             return text
-        units = r.get("units") or {}
-        fitted = ", ".join(f"{k.split('.', 1)[-1]} = {v:.4g}{' ' + unit_label(units[k]) if units.get(k) else ''}"
-                           for k, v in (r.get("parameters") or {}).items())
-        start = r.get("objective_start")
-        obj = (f"at the start values {start:.3g}, fitted {r['objective']:.3g}" if start is not None
-               else f"fitted {r['objective']:.3g}")
-        text = (f"{config}: {r['effect']} calibrated from {r['parent']}: {fitted}. Objective (Σ over "
+        fitted = ", ".join(f"{k.split('.', 1)[-1]} = {v:.4g}{' ' + unit_label(unit) if unit else ''}"
+                           for k, v, unit in r.fitted)
+        objective = f"{r.objective:.3g}" if r.objective is not None else "?"
+        obj = (f"at the start values {r.objective_start:.3g}, fitted {objective}" if r.objective_start is not None
+               else f"fitted {objective}")
+        text = (f"{config}: {r.effect} calibrated from {r.parent}: {fitted}. Objective (Σ over "
                 f"quantities of the squared worst normalised error) {obj}; "
-                f"{r.get('simulations', r.get('n_evaluations', 0) + 2)} campaign simulations. "
-                + "".join(f"{line[0].upper()}{line[1:]}. " for line in (tolerance_text(r), start_text(r)) if line)
+                f"{r.simulations} campaign simulations. "
+                + "".join(f"{line[0].upper()}{line[1:]}. " for line in (r.tolerance, r.start) if line)
                 ).rstrip()
-        if r.get("in_sample"):
+        if r.in_sample:
             text += " Its verdict is in-sample (fitted on all sections)."
-        elif r.get("held_out_sections"):
-            text += f" Fitted without sections {', '.join(r['held_out_sections'])} (held out)."
-            held = ((r.get("lineage") or [{}])[-1] or {}).get("held_out") or {}
-            if held.get("max_error") is not None and held.get("parent_max_error") is not None:
+        elif r.held_out_sections:
+            text += f" Fitted without sections {', '.join(r.held_out_sections)} (held out)."
+            if r.held_out_max_error is not None:
                 text += (f" On the held-out sections the largest normalised error went from "
-                         f"{held['parent_max_error']:.2f} to {held['max_error']:.2f}.")
-        for f in r.get("flags") or []:
-            f = str(f)
+                         f"{r.held_out_max_error[0]:.2f} to {r.held_out_max_error[1]:.2f}.")
+        for f in r.flags:
             if f.startswith("note:"):
                 text += f" Note: {f[5:].strip()}."
             elif not f.startswith("in-sample"):
                 text += f" Warning: {f}."
         return text + f" Next: diagnose {config} — press **Run diagnosis**."
-
-
-def _candidates_text(settings: dict) -> str:
-    """The candidates a stored diagnosis tried, as a reader sees them."""
-    eff = settings.get("effects")
-    return "every candidate" if eff is None else f"{len(eff)} chosen candidate{'s' if len(eff) != 1 else ''}"
