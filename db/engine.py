@@ -333,6 +333,9 @@ def connect(url: str | None = None, *, echo: bool = False) -> Database:
         event.listen(engine, "connect", _sqlite_pragmas)
         event.listen(engine, "begin", _sqlite_begin)
     elif parsed.get_backend_name() == "postgresql":
+        from railval.db.models import declare_postgresql_options
+
+        declare_postgresql_options()
         engine = create_engine(url, echo=echo, pool_pre_ping=True)
         event.listen(engine, "begin", _postgresql_begin)
     else:

@@ -176,7 +176,8 @@ except SystemExit as exc:
 sys.stdout.flush()
 loaded = {"heavy": sorted(m for m in %r if m in sys.modules),
           "cmd": sorted(m.rsplit(".", 1)[1] for m in sys.modules
-                        if m.startswith("railval.app.cli.cmd_"))}
+                        if m.startswith("railval.app.cli.cmd_")),
+          "pg_dialect": "sqlalchemy.dialects.postgresql" in sys.modules}
 sys.stderr.write("\\nPROBE " + json.dumps({"code": code, **loaded}) + "\\n")
 """ % (NOT_AT_START,)
 
@@ -223,6 +224,34 @@ def test_listed_verb_starts_by_need(empty_db, label):
         assert report["code"] == code, out
     assert report["heavy"] == [], (label, report)
     assert report["cmd"] == [module], (label, report)
+    if empty_db.startswith("sqlite"):  # SQLAlchemy's PostgreSQL dialect (five drivers) not
+        assert not report["pg_dialect"], (label, report)
+
+
+_PARTIAL_INDEX_PROBE = """
+import sys
+from sqlalchemy.dialects import postgresql
+from sqlalchemy.schema import CreateIndex
+from railval.db.models import Recording
+from railval.db.engine import connect
+index = next(i for i in Recording.__table__.indexes if i.name == "uq_recording_measured")
+print(CreateIndex(index).compile(dialect=postgresql.dialect()))
+connect(sys.argv[1])
+print(CreateIndex(index).compile(dialect=postgresql.dialect()))
+"""
+
+
+def test_postgresql_condition_of_the_partial_index_comes_with_a_postgresql_engine():
+    """The models declare only the SQLite condition of ``uq_recording_measured`` (so a start on
+    SQLite does not import the PostgreSQL dialect); connecting to PostgreSQL adds its
+    condition before any DDL. In a fresh interpreter the index is plain before and partial
+    after (connect makes the engine; it does not need the server)."""
+    proc = subprocess.run([sys.executable, "-c", _PARTIAL_INDEX_PROBE,
+                           "postgresql+psycopg://nobody@127.0.0.1:1/none"],
+                          capture_output=True, text=True, timeout=120, check=True)
+    before, after = proc.stdout.strip().splitlines()
+    assert before == "CREATE UNIQUE INDEX uq_recording_measured ON recording (section_id)"
+    assert after == before + " WHERE configuration_id IS NULL"
 
 
 def test_help_lists_every_verb_of_the_table():

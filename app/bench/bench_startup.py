@@ -21,6 +21,12 @@ verb that reads the database through the ORM) and ``import scipy.signal`` (what 
 when a service imported the filters at its top). The 1-minute load average is printed before
 and after: on a shared machine compare figures taken at a similar load.
 
+Bytecode: with ``PYTHONDONTWRITEBYTECODE`` set (as in the development shells here) Python
+writes no ``.pyc`` for railval's own modules, so every start compiles them from source (the
+site packages were compiled at install); ``--bytecode cached`` unsets it for the timed
+processes after one warm-up run, which is what an installed railval does. The report names the
+mode (``bytecode``).
+
 The database is a fresh, empty SQLite file made by ``railval init`` (untimed) unless
 ``railval --db URL bench startup`` names one. Goal (docs/app.md, command-line start-up):
 every listed verb reaches its own work within 0.3 s of launch on a quiet machine.
@@ -104,6 +110,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fresh processes per command, best and median reported (default 7)")
     parser.add_argument("--only", nargs="+", default=None, metavar="LABEL",
                         help=f"time only these commands (of: {', '.join(COMMANDS)})")
+    parser.add_argument("--bytecode", choices=("env", "cached"), default="env",
+                        help="env: as the environment says (PYTHONDONTWRITEBYTECODE); cached: "
+                             "railval's modules compiled once to .pyc before timing")
 
 
 def _run(argv: list[str], env: dict, probe: bool) -> tuple[tuple[float, float], dict | None]:
@@ -158,7 +167,12 @@ def run(args: argparse.Namespace) -> dict:
     unknown = [x for x in labels if x not in COMMANDS]
     if unknown:
         raise InvalidParameter(f"--only: unknown command(s) {unknown}; known: {list(COMMANDS)}")
-    env = {k: v for k, v in os.environ.items() if k != "RAILVAL_DEBUG"}
+    drop = {"RAILVAL_DEBUG"}
+    if args.bytecode == "cached":
+        drop.add("PYTHONDONTWRITEBYTECODE")
+    env = {k: v for k, v in os.environ.items() if k not in drop}
+    bytecode = ("compiled at every start (PYTHONDONTWRITEBYTECODE)"
+                if env.get("PYTHONDONTWRITEBYTECODE") else "cached .pyc")
     with tempfile.TemporaryDirectory(prefix="railval-startup-") as tmp:
         url = args.db or f"sqlite:///{Path(tmp) / 'empty.db'}"
         if not args.db:
@@ -169,6 +183,9 @@ def run(args: argparse.Namespace) -> dict:
                    for k in labels}}
         times: dict[str, list[tuple[float, float]]] = {k: [] for k in jobs}
         reports: dict[str, list[dict]] = {k: [] for k in jobs}
+        if args.bytecode == "cached":  # one untimed run of each writes the .pyc files
+            for argv, _probe in jobs.values():
+                subprocess.run(argv, capture_output=True, env=env, timeout=300, check=False)
         load_before = os.getloadavg()[0]
         for _ in range(args.repeat):  # the commands take turns in every round
             for label, (argv, probe) in jobs.items():
@@ -178,6 +195,6 @@ def run(args: argparse.Namespace) -> dict:
                     reports[label].append(report)
         load_after = os.getloadavg()[0]
     return {"load_1min_before": round(load_before, 2), "load_1min_after": round(load_after, 2),
-            "cpus": os.cpu_count(), "repeat": args.repeat,
+            "cpus": os.cpu_count(), "repeat": args.repeat, "bytecode": bytecode,
             "database": "empty SQLite (railval init)" if not args.db else "--db",
             **{label: _summary(times[label], reports[label]) for label in jobs}}
