@@ -54,8 +54,6 @@ def _ref(spec: wr.PlotSpec) -> bytes:
 
 def _pixels(png: bytes) -> np.ndarray:
     """The RGB pixels of a PNG as Pillow decodes it (a decoder independent of ours)."""
-    from PIL import Image
-
     return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
 
 
@@ -87,12 +85,20 @@ def test_encode_png_is_a_valid_png_of_exactly_the_pixels():
     png = wr.encode_png(rgba)
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
     assert np.array_equal(_pixels(png), rgba[..., :3])
-    from PIL import Image
-
     assert Image.open(io.BytesIO(png)).info["dpi"] == pytest.approx((100, 100), abs=0.01)
     rgba[0, 0, 3] = 254  # a transparent pixel would be lost in RGB: refused
     with pytest.raises(ValueError, match="transparent"):
         wr.encode_png(rgba)
+
+
+def test_render_version_is_stored_and_keys_the_cache(monkeypatch):
+    spec = _specs(1)[0]
+    params = wr.render_parameters({"id": "k", "domain": "time"}, spec.scale, scaling="fixed",
+                                  title="t", x_label="x", y_label="y", extra={})
+    assert params["render_version"] == wr.RENDER_VERSION == 2
+    key = wr.content_key(spec)
+    monkeypatch.setattr(wr, "RENDER_VERSION", 1)
+    assert wr.content_key(spec) != key  # bytes of version 1 are never served for version 2
 
 
 def test_process_pool_gives_the_same_bytes_in_order_and_renders_duplicates_once(monkeypatch):
