@@ -47,6 +47,7 @@ matplotlib.use("Agg", force=False)
 import numpy as np
 from matplotlib.figure import Figure
 from railval.app.scales import MEASURED_COLOR, SIM_COLORS
+from railval.app.services.workshop_glyphs import install as install_glyphs
 from railval.core.workshop import Scale
 
 #: how the stored PNG bytes are made (stored with each plot's render parameters and part of
@@ -94,7 +95,7 @@ class _Canvas:
         m, s = STYLE["measurement"], STYLE["simulation"]
         with matplotlib.rc_context(_RC):
             fig = Figure(figsize=(STYLE["width_in"], STYLE["height_in"]), dpi=STYLE["dpi"])
-            FigureCanvasAgg(fig)
+            install_glyphs(FigureCanvasAgg(fig).get_renderer())  # kept glyph bitmaps
             ax = fig.add_subplot(1, 1, 1)
             ax.set_axisbelow(True)
             ax.grid(True, color=STYLE["grid_color"], linewidth=0.6)
