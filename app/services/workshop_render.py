@@ -149,8 +149,8 @@ class _Canvas:
         with matplotlib.rc_context(_RC):
             bg = self._background(scale, x_label, y_label)
             canvas.restore_region(bg)
-            self.meas.set_data(*_pixel_columns(self.ax, x_meas, y_meas))
-            self.sim.set_data(*_pixel_columns(self.ax, x_sim, y_sim))
+            self.meas.set_data(x_meas, y_meas)
+            self.sim.set_data(x_sim, y_sim)
             self.title.set_text(title)
             renderer = canvas.get_renderer()
             self.ax._update_title_position(renderer)  # where a full draw puts it
@@ -190,11 +190,6 @@ def encode_png(rgba: np.ndarray) -> bytes:
                      chunk(b"pHYs", struct.pack(">IIB", ppm, ppm, 1)),
                      chunk(b"IDAT", zlib.compress(rows.tobytes(), PNG_LEVEL)),
                      chunk(b"IEND", b"")))
-
-
-def _pixel_columns(ax, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The line as drawn (identity for now)."""
-    return x, y
 
 
 _LOCAL = threading.local()
