@@ -11,47 +11,16 @@ import json
 import threading
 import time
 
-import matplotlib
 import numpy as np
 import pytest
-from matplotlib.figure import Figure
+from PIL import Image
+from railval.app.bench.bench_workshop import legacy_png
 from railval.app.services import workshop_render as wr
 from railval.app.services import workshops as ws
 from railval.app.state import jobs
 from railval.core.errors import InvalidParameter
 from railval.core.workshop import AxisRange, Scale
 from railval.db import workshops as wsdb
-
-
-def _reference_png(x_meas, y_meas, x_sim, y_sim, scale, *, title, x_label, y_label) -> bytes:
-    """The plot as the renderer drew it before figures were reused: a new figure per plot
-    (the code of ``render_png`` before the change, kept here as the reference)."""
-    st = wr.STYLE
-    with matplotlib.rc_context(wr._RC):
-        fig = Figure(figsize=(st["width_in"], st["height_in"]), dpi=st["dpi"])
-        ax = fig.add_subplot(1, 1, 1)
-        ax.set_axisbelow(True)
-        ax.grid(True, color=st["grid_color"], linewidth=0.6)
-        m, s = st["measurement"], st["simulation"]
-        ax.plot(x_meas, y_meas, color=m["color"], linewidth=m["linewidth"], zorder=m["zorder"],
-                label=m["label"])
-        ax.plot(x_sim, y_sim, color=s["color"], linewidth=s["linewidth"], zorder=s["zorder"],
-                label=s["label"])
-        if scale.y.log:
-            ax.set_yscale("log")
-        else:
-            ax.set_yticks(wr._ticks(scale.y.lo, scale.y.hi, scale.y.step))
-        ax.set_xticks(wr._ticks(scale.x.lo, scale.x.hi, scale.x.step))
-        ax.set_xlim(scale.x.lo, scale.x.hi)
-        ax.set_ylim(scale.y.lo, scale.y.hi)
-        ax.set_xlabel(x_label)
-        ax.set_ylabel(y_label)
-        ax.set_title(title, loc="left")
-        ax.legend(loc=st["legend"], frameon=True, framealpha=0.9)
-        fig.subplots_adjust(left=0.09, right=0.98, top=0.91, bottom=0.11)
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=st["dpi"], metadata={"Software": None})
-    return buf.getvalue()
 
 
 def _specs(n: int) -> list[wr.PlotSpec]:
@@ -78,17 +47,58 @@ def _specs(n: int) -> list[wr.PlotSpec]:
 
 
 def _ref(spec: wr.PlotSpec) -> bytes:
-    return _reference_png(spec.x_meas, spec.y_meas, spec.x_sim, spec.y_sim, spec.scale,
-                          title=spec.title, x_label=spec.x_label, y_label=spec.y_label)
+    """The plot as render version 1 drew it (a figure per plot, matplotlib's PNG writer)."""
+    return legacy_png(spec.x_meas, spec.y_meas, spec.x_sim, spec.y_sim, spec.scale,
+                      title=spec.title, x_label=spec.x_label, y_label=spec.y_label)
 
 
-def test_reused_figure_gives_the_bytes_of_a_fresh_figure():
+def _pixels(png: bytes) -> np.ndarray:
+    """The RGB pixels of a PNG as Pillow decodes it (a decoder independent of ours)."""
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+
+
+def _same_pixels(a: list[bytes], b: list[bytes]) -> bool:
+    return len(a) == len(b) and all(np.array_equal(_pixels(x), _pixels(y))
+                                    for x, y in zip(a, b, strict=True))
+
+
+def test_reused_figure_and_blitted_background_give_the_pixels_of_a_fresh_figure():
+    """Render version 2 (static parts blitted, own PNG writer) draws exactly the pixels of
+    a figure made for each plot and saved by matplotlib (render version 1); the bytes differ
+    (RGB, Up filter, zlib level 1) but are the same for the same inputs."""
     specs = _specs(9)
-    # drawn one after the other on the thread's reused figures (linear and log interleaved)
+    # drawn one after the other on the thread's reused figures (linear and log interleaved,
+    # two y ranges: backgrounds are reused and switched)
     reused = [wr.render_png(s.x_meas, s.y_meas, s.x_sim, s.y_sim, s.scale, title=s.title,
                             x_label=s.x_label, y_label=s.y_label) for s in specs]
-    assert reused == [_ref(s) for s in specs]
+    assert _same_pixels(reused, [_ref(s) for s in specs])
     assert len(set(reused)) == len(reused)  # nine different plots
+    again = [wr.render_fresh(s.x_meas, s.y_meas, s.x_sim, s.y_sim, s.scale, title=s.title,
+                             x_label=s.x_label, y_label=s.y_label) for s in reversed(specs)]
+    assert again[::-1] == reused  # deterministic: same inputs, same bytes, in any order
+
+
+def test_encode_png_is_a_valid_png_of_exactly_the_pixels():
+    rng = np.random.default_rng(3)
+    rgba = np.full((7, 5, 4), 255, np.uint8)
+    rgba[..., :3] = rng.integers(0, 256, (7, 5, 3), dtype=np.uint8)
+    png = wr.encode_png(rgba)
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert np.array_equal(_pixels(png), rgba[..., :3])
+    assert Image.open(io.BytesIO(png)).info["dpi"] == pytest.approx((100, 100), abs=0.01)
+    rgba[0, 0, 3] = 254  # a transparent pixel would be lost in RGB: refused
+    with pytest.raises(ValueError, match="transparent"):
+        wr.encode_png(rgba)
+
+
+def test_render_version_is_stored_and_keys_the_cache(monkeypatch):
+    spec = _specs(1)[0]
+    params = wr.render_parameters({"id": "k", "domain": "time"}, spec.scale, scaling="fixed",
+                                  title="t", x_label="x", y_label="y", extra={})
+    assert params["render_version"] == wr.RENDER_VERSION == 2
+    key = wr.content_key(spec)
+    monkeypatch.setattr(wr, "RENDER_VERSION", 1)
+    assert wr.content_key(spec) != key  # bytes of version 1 are never served for version 2
 
 
 def test_process_pool_gives_the_same_bytes_in_order_and_renders_duplicates_once(monkeypatch):
@@ -98,7 +108,8 @@ def test_process_pool_gives_the_same_bytes_in_order_and_renders_duplicates_once(
     doubled = specs + specs[:3]  # three plots twice: rendered once each
     seen: list[tuple[int, int]] = []
     out = wr.render_many(doubled, lambda d, t: seen.append((d, t)), workers=2)
-    assert out == [_ref(s) for s in doubled]
+    assert _same_pixels(out, [_ref(s) for s in doubled])
+    assert out[10:] == out[:3]
     assert seen[-1] == (13, 13) and all(t == 13 for _, t in seen)
     assert [d for d, _ in seen] == sorted(d for d, _ in seen)
     # a second call finds every plot in the cache: nothing is rendered again

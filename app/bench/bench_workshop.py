@@ -222,6 +222,42 @@ def _choice(db, campaign: str, n_plots: int) -> dict[str, list[str]]:
             "kinds": sorted({p.kind for p in chosen})}
 
 
+def legacy_png(x_meas, y_meas, x_sim, y_sim, scale, *, title: str, x_label: str,
+               y_label: str) -> bytes:
+    """A review plot as render version 1 drew it (way A): a new figure for the plot, the
+    whole figure drawn, saved with matplotlib's PNG writer (RGBA, zlib level 6)."""
+    import io
+
+    import matplotlib
+    from matplotlib.figure import Figure
+    from railval.app.services import workshop_render as wr
+
+    st, m, s = wr.STYLE, wr.STYLE["measurement"], wr.STYLE["simulation"]
+    with matplotlib.rc_context(wr._RC):
+        fig = Figure(figsize=(st["width_in"], st["height_in"]), dpi=st["dpi"])
+        ax = fig.add_subplot(1, 1, 1)
+        ax.set_axisbelow(True)
+        ax.grid(True, color=st["grid_color"], linewidth=0.6)
+        for x, y, look in ((x_meas, y_meas, m), (x_sim, y_sim, s)):
+            ax.plot(x, y, color=look["color"], linewidth=look["linewidth"],
+                    zorder=look["zorder"], label=look["label"])
+        if scale.y.log:
+            ax.set_yscale("log")
+        else:
+            ax.set_yticks(wr._ticks(scale.y.lo, scale.y.hi, scale.y.step))
+        ax.set_xticks(wr._ticks(scale.x.lo, scale.x.hi, scale.x.step))
+        ax.set_xlim(scale.x.lo, scale.x.hi)
+        ax.set_ylim(scale.y.lo, scale.y.hi)
+        ax.set_xlabel(x_label)
+        ax.set_ylabel(y_label)
+        ax.set_title(title, loc="left")
+        ax.legend(loc=st["legend"], frameon=True, framealpha=0.9)
+        fig.subplots_adjust(left=0.09, right=0.98, top=0.91, bottom=0.11)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=st["dpi"], metadata={"Software": None})
+    return buf.getvalue()
+
+
 def _timed_create(db, name: str, campaign: str, choice: dict, legacy: bool) -> dict[str, Any]:
     """One creation, timed, with the renderer of ``legacy`` (A) or the current one (B);
     the render cache is emptied first so that both render every plot."""
@@ -231,7 +267,7 @@ def _timed_create(db, name: str, campaign: str, choice: dict, legacy: bool) -> d
     wr.clear_cache()
     saved = wr.render_png, wr.RENDER_WORKERS
     if legacy:  # a figure made for every plot, one plot after the other in this process
-        wr.render_png, wr.RENDER_WORKERS = wr.render_fresh, 1
+        wr.render_png, wr.RENDER_WORKERS = legacy_png, 1
     marks: dict[str, float] = {}
     t0 = time.perf_counter()
 

@@ -68,16 +68,16 @@ def check_new(database, name: str, campaign: str, *, configurations: Sequence[st
 
 def status(database, name: str) -> dict[str, Any]:
     """The workshop's status with every reviewer's progress
-    (:func:`railval.app.services.workshops.status_document`)."""
-    from railval.app.services.workshops import status_document
+    (:func:`railval.app.services.workshop_documents.status_document`)."""
+    from railval.app.services.workshop_documents import status_document
 
     with database.session() as s:
         return status_document(s, name)
 
 
 def plots(database, name: str) -> dict[str, Any]:
-    """The workshop's plots (:func:`railval.app.services.workshops.plots_document`)."""
-    from railval.app.services.workshops import plots_document
+    """The workshop's plots (:func:`railval.app.services.workshop_documents.plots_document`)."""
+    from railval.app.services.workshop_documents import plots_document
 
     with database.session() as s:
         return plots_document(s, name)

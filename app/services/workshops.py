@@ -15,9 +15,8 @@ The answers' side — the CSV import and export and the analysis — is
 :mod:`railval.app.services.workshop_cards`; the rendering
 :mod:`railval.app.services.workshop_render`.
 
-Length: one workshop's plot set from plan to stored rows in one place — the plot facts that
-:func:`create` builds (kind, section, configuration, channel, scale key) and the documents
-that read them back.
+The documents that read a stored workshop back (status, plot list, kinds, review link) are
+:mod:`railval.app.services.workshop_documents` (their names stay importable from here).
 """
 
 from __future__ import annotations
@@ -29,6 +28,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from railval.app.services.workshop_documents import (
+    describe_kinds,
+    kind_labels,
+    plots_document,
+    review_link,
+    status_document,
+    workshop_scaling,
+)
 from railval.core import lazy
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.quantities import QUANTITIES
@@ -464,53 +471,11 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
             "ranges": list(groups.values())}
 
 
-def workshop_scaling(settings: dict[str, Any] | None) -> str:
-    """The scaling a stored workshop was rendered with; workshops made before the choice
-    existed kept one range per kind over the whole workshop."""
-    return (settings or {}).get("scaling", "workshop")
-
-
 def _exists_query(name: str):
     from railval.db.models import Workshop
     from sqlalchemy import select
 
     return select(Workshop.id).where(Workshop.name == name)
-
-
-def plots_document(session, name: str) -> dict[str, Any]:
-    """The ``workshop plots NAME --json`` document."""
-    from railval.db import workshops as wsdb
-
-    w = wsdb.get_workshop(session, name)
-    return {"workshop": w.name, "plots": [
-        {"id": p.id, "kind": p.kind, "section": p.section, "configuration": p.configuration,
-         "channel": p.channel, "deviation": p.deviation, "sg_c": p.sg_c, "scaling": p.scaling,
-         "twin": p.twin_id, "image_sha256": p.image_sha256}
-        for p in wsdb.plots(session, w)]}
-
-
-def status_document(session, name: str) -> dict[str, Any]:
-    from railval.db import workshops as wsdb
-
-    w = wsdb.get_workshop(session, name)
-    prog = wsdb.progress(session, w)
-    return {"workshop": w.name, "campaign": w.campaign.name, "status": w.status,
-            "blind": bool(w.blind), "plots": len(wsdb.plots(session, w)),
-            "repeats": w.repeat_share, "scaling": workshop_scaling(w.settings), "reviewers": prog,
-            "answers": sum(r["answered"] for r in prog)}
-
-
-def review_link(base_url: str, token: str) -> str:
-    return f"{base_url.rstrip('/')}/review/{token}"
-
-
-def kind_labels() -> dict[str, str]:
-    return {k: PLOT_KINDS[k].label for k in PLOT_KIND_IDS}
-
-
-def describe_kinds() -> list[dict[str, Any]]:
-    return [{"id": k.id, "label": k.label, "domain": k.domain, "positions": list(k.positions),
-             "quantities": list(k.quantities), "table1": k.table1} for k in PLOT_KINDS.values()]
 
 
 __all__ = ["PlannedPlot", "count_by_kind", "create", "describe_kinds", "flat_share", "get_kind",

@@ -82,7 +82,7 @@ def _creating_rows(username: str, stored: set[str]) -> str:
 
 def _form_choices(database) -> dict[str, Any]:
     from railval.app.services.workshop_admin import campaign_choices
-    from railval.app.services.workshops import describe_kinds
+    from railval.app.services.workshop_documents import describe_kinds
 
     return {"campaigns": campaign_choices(database), "kinds": describe_kinds()}
 
