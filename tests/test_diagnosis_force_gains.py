@@ -192,3 +192,35 @@ def test_group_gain_evidence_equals_the_corrected_pairs_evidence_exactly():
                                 like=base)
         assert np.array_equal(ev.sums, want.sums) and np.array_equal(ev.counts, want.counts), g
         assert ev.labels == want.labels
+
+
+def test_single_channel_gain_evidence_equals_the_per_node_evidence_exactly():
+    """Independent expectation: at every node, :func:`gain_pairs` (M/g) and the channel's band
+    powers divided by g² through :func:`section_evidence` — equal bit for bit to the array path
+    of :func:`gain_family`; another channel's band powers stay."""
+    from railval.core.diagnosis.evidence import section_evidence
+    from railval.core.diagnosis.measurement import GAIN_NODES, gain_family, gain_pairs
+
+    rng = np.random.default_rng(12)
+    limits = {"az_rms": 0.2, "ay_rms": 0.3}
+    pairs = []
+    for k in range(6):
+        for q, p in (("az_rms", "b1"), ("az_rms", "b2"), ("ay_rms", "b1")):
+            m, s = float(rng.normal(1, 0.5)), float(rng.normal(1, 0.5))
+            pairs.append({"section": f"S{k}", "quantity": q, "zone": 1 + k % 2, "position": p, "M": m, "S": s,
+                          "D_norm": (s - m) * np.copysign(1.0, m) / limits[q]})
+    sections = [(f"S{k}", 1 + k % 2) for k in range(6)]
+    bands = ((0.5, 2.0), (2.0, 8.0))
+    sim = {f"S{k}": {c: rng.uniform(0.1, 2, 2) for c in ("az_cb_b1", "az_cb_b2")} for k in range(6)}
+    meas = {f"S{k}": {c: rng.uniform(0.1, 2, 2) for c in ("az_cb_b1", "az_cb_b2")} for k in range(6)}
+    base = section_evidence(pairs, sim, meas, sections, bands=bands, value_key="D_norm")
+    comps = [("az_rms", "b1")]
+    fam = gain_family(base, pairs, sim, meas, sections, "az_cb_b1", comps, limits, bands=bands)
+    for g, ev in zip(GAIN_NODES, fam.evidence, strict=True):
+        mb = {sid: {ch: (p / g ** 2 if ch == "az_cb_b1" else p) for ch, p in chans.items()} for sid, chans in meas.items()}
+        want = section_evidence(gain_pairs(pairs, comps, g, limits), sim, mb, sections, bands=bands,
+                                value_key="D_norm", like=base)
+        for a in ("sums", "counts", "sim_power", "meas_power"):
+            assert np.array_equal(getattr(ev, a), getattr(want, a)), (g, a)
+        assert np.array_equal(ev.values(), want.values())
+    assert not np.array_equal(fam.evidence[0].meas_power, base.meas_power)

@@ -97,14 +97,22 @@ class PairRecords:
         v = self.D.copy()
         with np.errstate(invalid="ignore"):
             v[changed] = np.where(m != 0, (s - m) * np.copysign(1.0, m), s) / self.limit[changed]
-        row = {sid: k for k, sid in enumerate(like.sections)}
-        col = {lab: j for j, lab in enumerate(like.labels[:like.n_pair])}
-        ij = np.array([(row.get(sid, -1), col.get(lab, -1)) for sid, lab in self.where], int).reshape(-1, 2)
+        ij = self._cells(like)
         ok = np.isfinite(v) & (ij[:, 0] >= 0) & (ij[:, 1] >= 0)
         sums, counts = np.zeros_like(like.sums), np.zeros_like(like.counts)
         np.add.at(sums, (ij[ok, 0], ij[ok, 1]), v[ok])
         np.add.at(counts, (ij[ok, 0], ij[ok, 1]), 1.0)
         return replace(like, sums=sums, counts=counts)
+
+    def _cells(self, like: SectionEvidence) -> np.ndarray:
+        """(section row, component column) of every record in ``like``'s layout (−1: not in it)."""
+        layout = (tuple(like.sections), tuple(like.labels[:like.n_pair]))
+        if getattr(self, "_layout", None) != layout:
+            row = {sid: k for k, sid in enumerate(like.sections)}
+            col = {lab: j for j, lab in enumerate(like.labels[:like.n_pair])}
+            self._ij = np.array([(row.get(sid, -1), col.get(lab, -1)) for sid, lab in self.where], int).reshape(-1, 2)
+            self._layout = layout
+        return self._ij
 
 
 def gain_pairs(pairs: Iterable[Mapping[str, Any]], components: Sequence[tuple[str, str]], gain: float,
@@ -123,12 +131,17 @@ def gain_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]],
                 values: Sequence[float] = GAIN_NODES) -> CandidateFamily:
     """The measurement candidate "``channel`` reads g × the true value" along g (log scale):
     its evidence at every node of ``values`` (module docstring)."""
+    plain = section_evidence(pairs, sim_bands, meas_bands, sections, bands=bands, value_key="D_norm", like=base)
+    recs = PairRecords(pairs, std_limits)
+    comp = set(components)
+    inside = [(str(r["quantity"]), str(r["position"])) in comp for r in recs.pairs]
+    cols = [j for j, lab in enumerate(plain.labels[plain.n_pair:]) if lab.startswith(f"psd {channel} ")]
     evidence = []
-    for g in values:
-        mb = {sid: {ch: (np.asarray(p, float) / g ** 2 if ch == channel else p) for ch, p in chans.items()}
-              for sid, chans in meas_bands.items()}
-        evidence.append(section_evidence(gain_pairs(pairs, components, g, std_limits), sim_bands, mb, sections,
-                                         bands=bands, value_key="D_norm", like=base))
+    for g in values:  # M' = M/g (gain_pairs); the channel's band powers P/g² element by element
+        ev = recs.evidence(plain, [float(r["M"]) / g if k else None for r, k in zip(recs.pairs, inside, strict=True)])
+        ev.meas_power = plain.meas_power.copy()
+        ev.meas_power[:, cols] = plain.meas_power[:, cols] / g ** 2
+        evidence.append(ev)
     return CandidateFamily(
         "measurement", f"gain {channel}", "gain", list(values), evidence, GAIN_BOUNDS, log=True, reference=1.0,
         unit="×", title=f"channel {channel} reads",
