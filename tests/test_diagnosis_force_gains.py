@@ -119,3 +119,108 @@ def test_redundancy_rule_the_same_wheelset_of_the_other_bogie_alike_is_a_model_e
 
     assert [_counterpart(x) for x in ("Y_w1L", "Q_w4", "Y_bogie2", "Y_L", "az_cb_b1")] == \
         ["Y_w3L", "Q_w2", "Y_bogie1", None, None]
+
+
+def test_batched_group_reevaluation_equals_each_groups_own_evaluation(sqlite_database):
+    """On a synthetic campaign's recorded signals: the re-evaluations of every force group
+    done in one batch (:func:`group_gain_reevaluations`, shared between a wheel and the side
+    holding it) equal the group's own :func:`remapped_measurement` with its channels divided
+    by g, for every group, component and node (to 1e-12, relative); ΣY with one wheel scaled
+    differs from the unscaled value, so the comparison sees the gain."""
+    from railval.app.services.campaign_context import load_context_and_measurement
+    from railval.app.services.synth import synth
+    from railval.core.diagnosis.measurement import FORCE_GAIN_NODES, group_gain_reevaluations
+
+    synth(sqlite_database, name="fg", hidden=["friction_damping"], seed=3)
+    with sqlite_database.session() as s:
+        ctx, sets = load_context_and_measurement(s, "fg")
+    sections = ctx.sections[:4]  # four sections keep the test short
+    groups = force_gain_groups(ctx.channels)
+    comps = sorted({(q, f"ws{n}") for q in ("SumY_qst", "SumY_max") for n in (1, 2)}
+                   | {("YQ_max", "w1L"), ("Y_qst", "w2R")})
+    redo = group_gain_reevaluations(sets, sections, groups, comps)
+    base = remapped_measurement(sets, sections, lambda _s, c, _ss: c, comps)
+    checked = 0
+    for name, group in groups.items():
+        other = [c for c in comps if gain_degree(*c, group) is None]
+        for g in FORCE_GAIN_NODES:
+            got = redo[name](g, other)
+            want = remapped_measurement(sets, sections, lambda _s, c, _ss, g=g, group=group: {
+                k: (x / g if k in group else x) for k, x in c.items()}, other)
+            assert got.keys() == want.keys()
+            for k, v in want.items():
+                assert got[k] == pytest.approx(v, rel=1e-12, abs=1e-12), (name, g, k)
+                if g != 1.0:
+                    assert abs(v - base[k]) > 1e-9 * abs(base[k]), (name, g, k)
+                checked += 1
+    assert checked >= 2 * 4 * len(FORCE_GAIN_NODES)  # the wheel and side groups of Y, two ΣY statistics
+
+
+def test_group_gain_evidence_equals_the_corrected_pairs_evidence_exactly():
+    """Independent expectation: at every node the evidence of :func:`corrected_pairs` (M/g^d,
+    ΣY from the re-evaluation, a zero and a NaN measurement among the records) through
+    :func:`section_evidence` — equal bit for bit to the array path of :func:`group_gain_family`."""
+    from railval.core.diagnosis.evidence import section_evidence
+    from railval.core.diagnosis.measurement import FORCE_GAIN_NODES, corrected_pairs, group_gain_family
+
+    rng = np.random.default_rng(11)
+    comps = [("Y_qst", "w1L"), ("YQ_max", "w1L"), ("SumY_max", "ws1"), ("Q_qst", "w1R"), ("az_rms", "b1")]
+    limits = {"Y_qst": 4.0, "YQ_max": 0.1, "SumY_max": 6.0, "Q_qst": 9.0, "az_rms": 0.2}
+    pairs = []
+    for k in range(8):
+        for q, p in comps:
+            m, s = float(rng.normal(3, 2)), float(rng.normal(3, 2))
+            m = 0.0 if (k, q) == (2, "Y_qst") else (float("nan") if (k, q) == (5, "Q_qst") else m)
+            d = (s - m) * np.copysign(1.0, m) if m != 0 else s
+            pairs.append({"section": f"S{k}", "quantity": q, "zone": 1 + k % 2, "position": p, "M": m, "S": s,
+                          "D_norm": d / limits[q]})
+    sections = [(f"S{k}", 1 + k % 2) for k in range(8)]
+    base = section_evidence(pairs, {}, {}, sections, value_key="D_norm")
+    redo_vals = {g: {(f"S{k}", "SumY_max", "ws1"): float(rng.normal(2, 1)) for k in range(8) if k != 3}
+                 for g in FORCE_GAIN_NODES}
+    group = ("Y_w1L", "Q_w1R")
+    fam = group_gain_family(base, pairs, {}, {}, sections, "x", group, limits, lambda g, c: redo_vals[g])
+    degs = {c: gain_degree(*c, group) for c in comps}
+    assert degs[("YQ_max", "w1L")] == 1 and degs[("SumY_max", "ws1")] is None and degs[("az_rms", "b1")] == 0
+    for g, ev in zip(FORCE_GAIN_NODES, fam.evidence, strict=True):
+        def measured(r, g=g):
+            d = degs[(r["quantity"], r["position"])]
+            if d == 0:
+                return None
+            return redo_vals[g].get((r["section"], r["quantity"], r["position"])) if d is None else r["M"] / g ** d
+        want = section_evidence(corrected_pairs(pairs, measured, limits), {}, {}, sections, value_key="D_norm",
+                                like=base)
+        assert np.array_equal(ev.sums, want.sums) and np.array_equal(ev.counts, want.counts), g
+        assert ev.labels == want.labels
+
+
+def test_single_channel_gain_evidence_equals_the_per_node_evidence_exactly():
+    """Independent expectation: at every node, :func:`gain_pairs` (M/g) and the channel's band
+    powers divided by g² through :func:`section_evidence` — equal bit for bit to the array path
+    of :func:`gain_family`; another channel's band powers stay."""
+    from railval.core.diagnosis.evidence import section_evidence
+    from railval.core.diagnosis.measurement import GAIN_NODES, gain_family, gain_pairs
+
+    rng = np.random.default_rng(12)
+    limits = {"az_rms": 0.2, "ay_rms": 0.3}
+    pairs = []
+    for k in range(6):
+        for q, p in (("az_rms", "b1"), ("az_rms", "b2"), ("ay_rms", "b1")):
+            m, s = float(rng.normal(1, 0.5)), float(rng.normal(1, 0.5))
+            pairs.append({"section": f"S{k}", "quantity": q, "zone": 1 + k % 2, "position": p, "M": m, "S": s,
+                          "D_norm": (s - m) * np.copysign(1.0, m) / limits[q]})
+    sections = [(f"S{k}", 1 + k % 2) for k in range(6)]
+    bands = ((0.5, 2.0), (2.0, 8.0))
+    sim = {f"S{k}": {c: rng.uniform(0.1, 2, 2) for c in ("az_cb_b1", "az_cb_b2")} for k in range(6)}
+    meas = {f"S{k}": {c: rng.uniform(0.1, 2, 2) for c in ("az_cb_b1", "az_cb_b2")} for k in range(6)}
+    base = section_evidence(pairs, sim, meas, sections, bands=bands, value_key="D_norm")
+    comps = [("az_rms", "b1")]
+    fam = gain_family(base, pairs, sim, meas, sections, "az_cb_b1", comps, limits, bands=bands)
+    for g, ev in zip(GAIN_NODES, fam.evidence, strict=True):
+        mb = {sid: {ch: (p / g ** 2 if ch == "az_cb_b1" else p) for ch, p in chans.items()} for sid, chans in meas.items()}
+        want = section_evidence(gain_pairs(pairs, comps, g, limits), sim, mb, sections, bands=bands,
+                                value_key="D_norm", like=base)
+        for a in ("sums", "counts", "sim_power", "meas_power"):
+            assert np.array_equal(getattr(ev, a), getattr(want, a)), (g, a)
+        assert np.array_equal(ev.values(), want.values())
+    assert not np.array_equal(fam.evidence[0].meas_power, base.meas_power)

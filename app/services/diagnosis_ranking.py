@@ -426,20 +426,15 @@ def force_gain_families(req: _Request, result0: tuple, base: SectionEvidence, se
     bogie, :func:`railval.core.diagnosis.measurement.force_gain_groups`): all of them by default,
     those named otherwise; judged on the measurement corrected by the power law of each
     quantity, ΣY of a group holding one wheel of it re-evaluated from the signals."""
-    from railval.core.diagnosis.measurement import group_gain_family, remapped_measurement
+    from railval.core.diagnosis.measurement import group_gain_family, group_gain_reevaluations
 
+    chosen = {n: g for n, g in groups.items() if wanted is None or n in wanted}
+    comps = sorted({(str(r["quantity"]), str(r["position"])) for r in result0[0]})
+    redo = group_gain_reevaluations(req.measured_sets, req.ctx.sections, chosen, comps) if chosen else {}
     out: dict[str, CandidateFamily] = {}
-    for name, group in groups.items():
-        if wanted is not None and name not in wanted:
-            continue
-        g_set = set(group)
-
-        def redo(g: float, comps: Sequence[tuple[str, str]], g_set: set = g_set) -> dict:
-            return remapped_measurement(req.measured_sets, req.ctx.sections, lambda _s, ch, _ss: {
-                c: (x / g if c in g_set else x) for c, x in ch.items()}, comps)
-
-        fam = group_gain_family(base, result0[0], result0[1], req.meas_bands, sections, name, group, limits, redo,
-                                bands=req.ctx.bands)
+    for name, group in chosen.items():
+        fam = group_gain_family(base, result0[0], result0[1], req.meas_bands, sections, name, group, limits,
+                                redo[name], bands=req.ctx.bands)
         if fam is not None:
             out[fam.name] = fam
     return out

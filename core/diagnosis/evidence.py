@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -44,10 +44,20 @@ class SectionEvidence:
     sim_power: np.ndarray
     meas_power: np.ndarray
     components: list[Component] | None = None
+    _memo: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def values(self, weights: np.ndarray | None = None) -> np.ndarray:
-        """Pattern values for section weights (shape (S,) → (n,), or (B, S) → (B, n))."""
+        """Pattern values for section weights (shape (S,) → (n,), or (B, S) → (B, n)), read-only.
+        Remembered per weights (a diagnosis asks the same evidence — the reference
+        simulation shared by many candidates — for the same folds and resamples again)."""
         w = np.ones(len(self.sections)) if weights is None else np.asarray(weights, float)
+        key = (w.shape, w.tobytes())
+        if key not in self._memo:
+            self._memo[key] = self._values(w)
+            self._memo[key].flags.writeable = False
+        return self._memo[key]
+
+    def _values(self, w: np.ndarray) -> np.ndarray:
         W = np.atleast_2d(w)
         s, c = W @ self.sums, W @ self.counts
         pv = np.divide(s, c, out=np.zeros_like(s), where=c > 0)
@@ -89,14 +99,7 @@ def section_evidence(pairs: Iterable[Mapping[str, Any]], sim_bands: Mapping[str,
     else:
         labels, groups, n_pair = list(like.labels), list(like.groups), like.n_pair
         comps = None if like.components is None else list(like.components)
-    col = {lab: j for j, lab in enumerate(labels[:n_pair])}
-    sums = np.zeros((len(sids), n_pair))
-    counts = np.zeros((len(sids), n_pair))
-    for i, (q, z, p), v in recs:
-        j = col.get(f"{q} zone {z} {p}")
-        if j is not None:
-            sums[i, j] += v
-            counts[i, j] += 1
+    sums, counts = _pair_sums(recs, {lab: j for j, lab in enumerate(labels[:n_pair])}, len(sids), n_pair)
     nb = len(labels) - n_pair
     sim_p, meas_p = np.zeros((len(sids), nb)), np.zeros((len(sids), nb))
     bcol = {lab: j for j, lab in enumerate(labels[n_pair:])}
@@ -112,6 +115,25 @@ def section_evidence(pairs: Iterable[Mapping[str, Any]], sim_bands: Mapping[str,
     return SectionEvidence(sids, [int(z) for _, z in sections], labels, groups, n_pair, sums, counts, sim_p, meas_p,
                            comps)
 
+
+def _pair_sums(recs: Sequence[tuple[int, tuple[str, int, str], float]], col: Mapping[str, int], n_sec: int,
+               n_pair: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sum and count of the values per (section row, component column), each component's label
+    formatted once; ``np.add.at`` adds in record order, so the sums equal the loop's ``+=``."""
+    cols: dict[tuple[str, int, str], int] = {}
+    keep = []
+    for i, key, v in recs:
+        j = cols.get(key)
+        if j is None:
+            j = cols[key] = col.get(f"{key[0]} zone {key[1]} {key[2]}", -1)
+        if j >= 0:
+            keep.append((i, j, v))
+    sums, counts = np.zeros((n_sec, n_pair)), np.zeros((n_sec, n_pair))
+    if keep:
+        i, j, v = (np.array(x) for x in zip(*keep, strict=True))
+        np.add.at(sums, (i, j), v.astype(float))
+        np.add.at(counts, (i, j), 1.0)
+    return sums, counts
 
 
 def zone_folds(zones: Sequence[int], k: int = 3) -> list[np.ndarray]:

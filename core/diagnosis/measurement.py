@@ -68,6 +68,53 @@ def corrected_pairs(pairs: Iterable[Mapping[str, Any]], measured: Callable[[Mapp
     return out
 
 
+class PairRecords:
+    """The validation pairs as arrays, for the evidence of many corrected measurements
+    (:meth:`evidence`) without copying the records: per record its section and component
+    (``section``, ``quantity``, ``zone``, ``position``), S, M, ``D_norm`` and the quantity's
+    std limit."""
+
+    def __init__(self, pairs: Iterable[Mapping[str, Any]], std_limits: Mapping[str, float]):
+        self.pairs = list(pairs)
+        p = self.pairs
+        self.S = np.array([float(r["S"]) for r in p])
+        self.M = np.array([float(r["M"]) for r in p])
+        self.D = np.array([float(r["D_norm"]) for r in p])
+        self.limit = np.array([float(std_limits.get(str(r["quantity"]), np.nan)) for r in p])
+        self.where = [(str(r["section"]), f"{r['quantity']} zone {int(r['zone'])} {r['position']}") for r in p]
+
+    def evidence(self, like: SectionEvidence, measured: Sequence[float | None]) -> SectionEvidence:
+        """:func:`section_evidence` (``value_key="D_norm"``, layout and band powers of ``like``)
+        of :func:`corrected_pairs` with record k's measurement corrected to ``measured[k]``
+        (None: unchanged): the same IEEE operations element-wise — D' = (S − M')·sign(M'),
+        = S where M' = 0, divided by the std limit — and the sums added in record order
+        (``np.add.at``), so the result equals the per-record computation exactly."""
+        from dataclasses import replace
+
+        changed = np.array([m is not None for m in measured], bool)
+        m = np.array([np.nan if x is None else float(x) for x in measured])[changed]
+        s = self.S[changed]
+        v = self.D.copy()
+        with np.errstate(invalid="ignore"):
+            v[changed] = np.where(m != 0, (s - m) * np.copysign(1.0, m), s) / self.limit[changed]
+        ij = self._cells(like)
+        ok = np.isfinite(v) & (ij[:, 0] >= 0) & (ij[:, 1] >= 0)
+        sums, counts = np.zeros_like(like.sums), np.zeros_like(like.counts)
+        np.add.at(sums, (ij[ok, 0], ij[ok, 1]), v[ok])
+        np.add.at(counts, (ij[ok, 0], ij[ok, 1]), 1.0)
+        return replace(like, sums=sums, counts=counts)
+
+    def _cells(self, like: SectionEvidence) -> np.ndarray:
+        """(section row, component column) of every record in ``like``'s layout (−1: not in it)."""
+        layout = (tuple(like.sections), tuple(like.labels[:like.n_pair]))
+        if getattr(self, "_layout", None) != layout:
+            row = {sid: k for k, sid in enumerate(like.sections)}
+            col = {lab: j for j, lab in enumerate(like.labels[:like.n_pair])}
+            self._ij = np.array([(row.get(sid, -1), col.get(lab, -1)) for sid, lab in self.where], int).reshape(-1, 2)
+            self._layout = layout
+        return self._ij
+
+
 def gain_pairs(pairs: Iterable[Mapping[str, Any]], components: Sequence[tuple[str, str]], gain: float,
                std_limits: Mapping[str, float]) -> list[dict[str, Any]]:
     """The validation pairs with the measurement of ``components`` corrected for a channel
@@ -84,12 +131,17 @@ def gain_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]],
                 values: Sequence[float] = GAIN_NODES) -> CandidateFamily:
     """The measurement candidate "``channel`` reads g × the true value" along g (log scale):
     its evidence at every node of ``values`` (module docstring)."""
+    plain = section_evidence(pairs, sim_bands, meas_bands, sections, bands=bands, value_key="D_norm", like=base)
+    recs = PairRecords(pairs, std_limits)
+    comp = set(components)
+    inside = [(str(r["quantity"]), str(r["position"])) in comp for r in recs.pairs]
+    cols = [j for j, lab in enumerate(plain.labels[plain.n_pair:]) if lab.startswith(f"psd {channel} ")]
     evidence = []
-    for g in values:
-        mb = {sid: {ch: (np.asarray(p, float) / g ** 2 if ch == channel else p) for ch, p in chans.items()}
-              for sid, chans in meas_bands.items()}
-        evidence.append(section_evidence(gain_pairs(pairs, components, g, std_limits), sim_bands, mb, sections,
-                                         bands=bands, value_key="D_norm", like=base))
+    for g in values:  # M' = M/g (gain_pairs); the channel's band powers P/g² element by element
+        ev = recs.evidence(plain, [float(r["M"]) / g if k else None for r, k in zip(recs.pairs, inside, strict=True)])
+        ev.meas_power = plain.meas_power.copy()
+        ev.meas_power[:, cols] = plain.meas_power[:, cols] / g ** 2
+        evidence.append(ev)
     return CandidateFamily(
         "measurement", f"gain {channel}", "gain", list(values), evidence, GAIN_BOUNDS, log=True, reference=1.0,
         unit="×", title=f"channel {channel} reads",
@@ -254,19 +306,45 @@ def remapped_measurement(signalsets: Mapping[str, SignalSet], sections: Sequence
     ``remap(section, channels, signalset)`` → the corrected channels of that section (only the
     channels the components use are passed and evaluated; a section whose remap returns the
     channels unchanged is evaluated as stored). ``(section, quantity, position)`` → M'."""
+    return remapped_measurements(signalsets, sections, [(remap, components)])[0]
+
+
+#: signal sets per EN call of :func:`remapped_measurements` (bounds the memory of one call)
+REMAP_BATCH = 96
+
+
+def remapped_measurements(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo],
+                          requests: Sequence[tuple[Callable[[str, Mapping[str, np.ndarray], SignalSet],
+                                                            Mapping[str, np.ndarray]], Sequence[tuple[str, str]]]]
+                          ) -> list[dict[tuple[str, str, str], float]]:
+    """:func:`remapped_measurement` of many ``(remap, components)`` requests in few EN calls:
+    the remapped signal sets of all requests go to :func:`railval.core.en14363.evaluate_batch`
+    together (:data:`REMAP_BATCH` at a time). Each section's values depend on its own signals
+    only ("Results equal :func:`evaluate_section` on each section alone"), so every request's
+    values equal those of its own call exactly. Only the readings of the components are
+    wanted: the other readings and the PSD bands are not computed."""
     from dataclasses import replace
 
-    from railval.core.en14363 import evaluate_present
+    from railval.core.en14363 import evaluate_batch
     from railval.core.quantities import QUANTITIES
 
-    need = {c for q, p in components for c in QUANTITIES[q].channels(p)}
-    fixed = {}
-    for sid, ss in signalsets.items():
-        chans = {c: np.asarray(x, float) for c, x in ss.channels.items() if c in need}
-        if chans:
-            fixed[sid] = replace(ss, channels=dict(remap(sid, chans, ss)))
-    vals = evaluate_present(fixed, sections)
-    return {(sid, q, p): float(v[(q, p)]) for sid, v in vals.items() for q, p in components if (q, p) in v}
+    by_id = {s.id: s for s in sections}
+    jobs = []  # (request index, section id, signal set)
+    for i, (remap, components) in enumerate(requests):
+        need = {c for q, p in components for c in QUANTITIES[q].channels(p)}
+        for sec in sections:
+            ss = signalsets.get(sec.id)
+            chans = {c: np.asarray(x, float) for c, x in ss.channels.items() if c in need} if ss is not None else {}
+            if chans:
+                jobs.append((i, sec.id, replace(ss, channels=dict(remap(sec.id, chans, ss)))))
+    out: list[dict[tuple[str, str, str], float]] = [{} for _ in requests]
+    for j0 in range(0, len(jobs), REMAP_BATCH):
+        part = jobs[j0:j0 + REMAP_BATCH]
+        vals = evaluate_batch([ss for _, _, ss in part], [by_id[sid] for _, sid, _ in part],
+                              alternatives=False, supplementary=False)
+        for (i, sid, _), v in zip(part, vals, strict=True):
+            out[i].update({(sid, q, p): float(v[(q, p)]) for q, p in requests[i][1] if (q, p) in v})
+    return out
 
 
 def discrete_evidence(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]], sim_bands: Mapping,
@@ -495,6 +573,42 @@ def gain_degree(quantity: str, position: str, group: Iterable[str]) -> int | Non
     return None
 
 
+def group_gain_reevaluations(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo],
+                              groups: Mapping[str, Sequence[str]], components: Sequence[tuple[str, str]],
+                              values: Sequence[float] = FORCE_GAIN_NODES
+                              ) -> dict[str, Callable[[float, Sequence[tuple[str, str]]], dict]]:
+    """The ``reevaluate`` of :func:`group_gain_family` for every group at once: the components
+    of ``components`` without a power law for a group (:func:`gain_degree` None: ΣY with one
+    of its wheels in the group) re-evaluated from the signals with the group's channels
+    divided by each g of ``values``, all in one batched EN evaluation
+    (:func:`remapped_measurements`). A component's value depends only on its own channels, so
+    it is evaluated once per (its channels in the group, g) — a wheel and the side holding it
+    share ΣY of that wheelset — and each group reads the value the per-group re-evaluation
+    gives, exactly."""
+    from railval.core.quantities import QUANTITIES
+
+    units: dict[frozenset, set[tuple[str, str]]] = {}
+    for group in groups.values():
+        for q, p in components:
+            if gain_degree(q, p, group) is None:
+                units.setdefault(frozenset(set(QUANTITIES[q].channels(p)) & set(group)), set()).add((q, p))
+    keys = [(u, g) for u in sorted(units, key=sorted) for g in values]
+    reqs = [(lambda _s, ch, _ss, u=u, g=g: {c: (x / g if c in u else x) for c, x in ch.items()}, sorted(units[u]))
+            for u, g in keys]
+    found = dict(zip(keys, remapped_measurements(signalsets, sections, reqs), strict=True))
+
+    def reevaluate_for(group: Sequence[str]) -> Callable[[float, Sequence[tuple[str, str]]], dict]:
+        def reevaluate(g: float, comps: Sequence[tuple[str, str]]) -> dict:
+            out = {}
+            for q, p in comps:
+                vals = found[(frozenset(set(QUANTITIES[q].channels(p)) & set(group)), g)]
+                out.update({k: v for k, v in vals.items() if k[1:] == (q, p)})
+            return out
+        return reevaluate
+
+    return {name: reevaluate_for(group) for name, group in groups.items()}
+
+
 def group_gain_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]], sim_bands: Mapping,
                       meas_bands: Mapping, sections: Sequence[tuple[str, int]], name: str, group: Sequence[str],
                       std_limits: Mapping[str, float],
@@ -511,19 +625,19 @@ def group_gain_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]],
     if not deg:
         return None
     other = [c for c, d in deg.items() if d is None]
+    recs = PairRecords(pairs, std_limits)
+    keys = [(str(r["section"]), str(r["quantity"]), str(r["position"])) for r in recs.pairs]
+    first = None
     evidence = []
     for gv in values:
         redo = reevaluate(gv, other) if other else {}
-
-        def measured(r: Mapping[str, Any], gv: float = gv, redo: Mapping = redo) -> float | None:
-            key = (str(r["quantity"]), str(r["position"]))
-            if key not in deg:
-                return None
-            d = deg[key]
-            return redo.get((str(r["section"]), *key)) if d is None else float(r["M"]) / gv ** d
-
-        evidence.append(section_evidence(corrected_pairs(pairs, measured, std_limits), sim_bands, meas_bands,
-                                         sections, bands=bands, value_key="D_norm", like=base))
+        m_new = [(redo.get(k) if deg[k[1:]] is None else float(r["M"]) / gv ** deg[k[1:]])
+                 if k[1:] in deg else None for k, r in zip(keys, recs.pairs, strict=True)]
+        if first is None:  # the band powers and the component layout: the same at every node
+            it = iter(m_new)
+            first = section_evidence(corrected_pairs(recs.pairs, lambda _r: next(it), std_limits), sim_bands,
+                                     meas_bands, sections, bands=bands, value_key="D_norm", like=base)
+        evidence.append(recs.evidence(first, m_new))
     qs = ", ".join(sorted({q for q, _ in deg}))
     return CandidateFamily(
         "measurement", f"gain {name}", "gain", list(values), evidence, GAIN_BOUNDS, log=True, reference=1.0,
