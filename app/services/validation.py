@@ -425,7 +425,7 @@ def _validate_configuration(session: Session, campaign_name: str, config: str, o
     def meanwhile() -> None:  # while the sections are processed: what only the verdict needs
         with stage("database"):
             later["vehicle"] = repo.vehicle_info(session, camp)
-            later["provenance"] = calibration_provenance(session, camp, config)
+            later["provenance"] = calibration_provenance(session, camp, conf)
             if check_seals:
                 check_row_seals(session, camp, conf, rows)
 
