@@ -69,3 +69,16 @@ def test_cli_validate_resolves_each_name_once(synth_demo, lookups, capsys, json_
     assert rc == 0 and "baseline" in capsys.readouterr().out
     assert len(lookups["campaign"]) == 1, lookups["campaign"]
     assert len(lookups["configuration"]) == 1, lookups["configuration"]
+
+
+def test_signing_summary_resolves_each_name_once(synth_demo, lookups):  # noqa: F811
+    """What a signer sees (the sign-off page, ``railval signoff create``): the verdict, the
+    newest diagnosis and the sign-offs, from one resolve (it was three of each name)."""
+    from railval.app.services.signoff import signing_summary
+
+    _clear(lookups)
+    with synth_demo.write_session(deferred=True) as s:
+        summary = signing_summary(s, "demo", "baseline")
+    assert summary["configuration"] == "baseline" and "objective" in summary
+    assert len(lookups["campaign"]) == 1, lookups["campaign"]
+    assert len(lookups["configuration"]) == 1, lookups["configuration"]
