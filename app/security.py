@@ -55,6 +55,7 @@ import os
 import re
 import secrets
 from urllib.parse import urlsplit
+import html as _html
 
 CSP = ("default-src 'self'; "
        "script-src 'self' 'unsafe-inline' 'unsafe-eval'; "
@@ -180,8 +181,6 @@ def with_xsrf(page_html: str, token: str) -> str:
     """``page_html`` with the anti-forgery token in every ``POST`` form (hidden field
     ``_xsrf``) and in ``<meta name="xsrf-token">`` for scripts (they send it as
     ``X-XSRFToken``). ``token`` is Tornado's ``RequestHandler.xsrf_token``."""
-    import html as _html
-
     tok = _html.escape(token, quote=True)
     out = _POST_FORM.sub(lambda m: m.group(1) + f'<input type="hidden" name="_xsrf" value="{tok}">',
                          page_html)

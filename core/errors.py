@@ -24,6 +24,8 @@ exception → 1.
     │                                                    imported as ``UniqueViolation``)
     ├── RecordingProblem              db/checks.py       a recording check failed (``field``)
     ├── DatabaseNotInitialised        db/engine.py       schema missing or older: ``railval init``
+    ├── WriteInReadSession            db/engine.py       a write in a read session (the write
+    │                                                    door: ``session(write=True)``)
     ├── SettingError                  db/settings.py     a ``*_FILE`` setting cannot be read
     ├── BackupError                   db/backup.py       a backup cannot be written or restored
     ├── InvitationRefused             db/users.py        invitation unknown, expired or used

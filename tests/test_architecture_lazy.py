@@ -72,3 +72,57 @@ def test_the_rule_finds_a_planted_body_import(tmp_path):
         "app/cli/cmd_planted.py::cmd_x:6 railval.app.services.overview",
         "app/cli/cmd_planted.py::seed_demo:10 railval.app.services.synth"]  # only cmd_app's is allowed
     assert [p.name for p in verb_modules(tmp_path)] == ["cmd_planted.py"]
+
+
+# -- in-function imports in app/ (issue 42): a ceiling that only comes down -----------------
+#: in-function ``import`` statements in app/ (every module, railval or not). 357 before the
+#: imports of modules already loaded by their importer (or light standard-library modules)
+#: moved to the modules' tops; the rest defer a heavy library, break an import cycle or
+#: keep a page/service out of start-up. Lower it when you move more; never raise it.
+FUNCTION_IMPORT_CEILING = 317
+
+
+def function_imports(root: Path = ROOT) -> list[str]:
+    """``file:line statement`` of every import statement inside a function body in app/."""
+    out = []
+    for path in sorted((root / "app").rglob("*.py")):
+        rel = str(path.relative_to(root))
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        seen: set[int] = set()
+        for fn in ast.walk(tree):
+            if isinstance(fn, ast.FunctionDef | ast.AsyncFunctionDef):
+                for node in ast.walk(fn):
+                    if isinstance(node, ast.Import | ast.ImportFrom) and id(node) not in seen:
+                        seen.add(id(node))  # a nested function's import counted once
+                        out.append(f"{rel}:{node.lineno} {ast.unparse(node)}")
+    return out
+
+
+def test_function_imports_in_app_stay_under_the_ceiling():
+    found = function_imports()
+    assert len(found) <= FUNCTION_IMPORT_CEILING, (
+        f"{len(found)} in-function imports in app/ (ceiling {FUNCTION_IMPORT_CEILING}): import "
+        "at the module's top, or bind with railval.core.lazy where start-up matters")
+
+
+def test_the_function_import_count_sees_a_planted_import(tmp_path):
+    (tmp_path / "app" / "services").mkdir(parents=True)
+    (tmp_path / "app" / "services" / "planted.py").write_text(textwrap.dedent("""
+        import json
+
+        def f():
+            import os
+
+            def g():
+                from railval.db import repo
+                return repo
+            return os, g
+
+        class C:
+            def m(self):
+                import numpy as np
+                return np
+        """), encoding="utf-8")
+    assert function_imports(tmp_path) == ["app/services/planted.py:5 import os",
+                                          "app/services/planted.py:8 from railval.db import repo",
+                                          "app/services/planted.py:14 import numpy as np"]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import ast
 import builtins
 import importlib
+import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -119,3 +120,28 @@ def test_one_class_is_named_integrity_error():
     from railval.core.errors import RailvalError
     from railval.db.integrity import IntegrityError
     assert issubclass(IntegrityError, RailvalError)
+
+
+def undrawn(sources: dict[str, str]) -> list[str]:
+    """``file::Class`` of every railval exception the tree drawn in core/errors.py's docstring
+    does not name (with its file, unless it is a class of core/errors.py itself)."""
+    doc = ast.get_docstring(ast.parse(sources["core/errors.py"])) or ""
+    lines = doc.splitlines()
+    out = []
+    for key in exception_classes(sources):
+        path, _, name = key.partition("::")
+        drawn = [x for x in lines if re.search(rf"\b{re.escape(name)}\b", x)]
+        if not drawn or (path != "core/errors.py" and not any(path in x for x in drawn)):
+            out.append(key)
+    return sorted(out)
+
+
+def test_the_tree_in_core_errors_names_every_exception():
+    assert undrawn(_sources()) == []
+
+
+def test_an_exception_missing_from_the_drawn_tree_is_found():
+    planted = dict(_sources())
+    planted["db/planted.py"] = ("from railval.core.errors import RailvalError\n\n\n"
+                                "class Planted(RailvalError):\n    pass\n")
+    assert undrawn(planted) == ["db/planted.py::Planted"]

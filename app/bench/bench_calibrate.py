@@ -19,6 +19,7 @@ import os
 import tempfile
 import time
 from pathlib import Path
+import json
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -61,7 +62,5 @@ def run(args: argparse.Namespace) -> dict:
 
 
 def _truth(path: Path, effect: str) -> dict:
-    import json
-
     data = json.loads(path.read_text(encoding="utf-8"))
     return dict(data.get("hidden_effects", {}).get(effect, {}))

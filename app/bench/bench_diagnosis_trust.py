@@ -59,6 +59,8 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
+import json
+import sys
 
 from railval.app.bench.trust_profiles import profile_cases
 
@@ -339,8 +341,6 @@ def flagged(calibration: dict) -> bool:
 
 def _records_in(path: str | None) -> dict[tuple[str, str], dict]:
     """The finished (not failed) cases of an earlier run's JSON-lines file, by (class, case)."""
-    import json
-
     if not path or not Path(path).is_file():
         return {}
     recs = [json.loads(line) for line in Path(path).read_text(encoding="utf-8").splitlines() if line.strip()]
@@ -457,15 +457,11 @@ def run(args: argparse.Namespace, progress=None) -> dict:
                        "right": False, "confident_wrong": False, "explained_wrong": False, "diagnose_s": 0.0}
             records.append(rec)
             if getattr(args, "out", None):
-                import json
-
                 with open(args.out, "a", encoding="utf-8") as fh:
                     fh.write(json.dumps(rec, default=str) + "\n")
             if progress is not None:
                 progress(j + 1, len(todo), rec)
             else:
-                import sys
-
                 print(f"[{j + 1}/{len(todo)}] ({k}) {label}: {rec['verdict']}, top {rec['top']} "
                       f"explained {rec['top_explained']:.2f} held-out {rec['top_held_out']:.2f} "
                       f"(noise floor {rec['noise_floor']:.2f}; {rec['diagnose_s']} s)", file=sys.stderr, flush=True)

@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SignalSet
+from railval.core.types import SectionInfo
 
 CHANNELS = [f"{k}_{p}" for p in WHEEL_POSITIONS for k in ("Y", "Q")] + [
     f"{k}_cb_{b}" for b in BODY_POSITIONS for k in ("ay", "az")]
@@ -313,7 +314,6 @@ def _new_configuration(database, args: argparse.Namespace, repeat: int) -> dict:
     # warm this process (compiled filter kernel loaded from numba's cache, imports), as in a
     # running app server; the all-configurations run above used the worker processes
     from railval.core.en14363 import evaluate_batch
-    from railval.core.types import SectionInfo
 
     warm = _config_sets(np.random.default_rng(1), 1, 4000, args.fs, 1.0)["S01"]
     evaluate_batch([warm], [SectionInfo("W", 0, 0, 90, 1, 50.0, 150.0)])

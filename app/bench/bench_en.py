@@ -33,14 +33,17 @@ from __future__ import annotations
 
 import argparse
 import time
+import os
 
 import numpy as np
 import scipy.integrate
 import scipy.signal
+import numba
 
 from railval.core.en14363 import evaluate_batch
 from railval.core.filters import design
 from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
+from railval.core import filters
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -120,10 +123,6 @@ FLOPS_PER_SECTION_SAMPLE = 9  # y = b0·x + z0; z0 = b1·x − a1·y + z1; z1 = 
 
 def machine_limits(repeat: int = 3) -> dict:
     """Memory bandwidth and the scalar / SIMD rate of the biquad recursion on this machine."""
-    import numba
-
-    from railval.core import filters
-
     a = np.ones(16 * 1024 * 1024)
     b = np.empty_like(a)
     t_copy, _ = _best(lambda: np.copyto(b, a), repeat)
@@ -171,8 +170,6 @@ def _best(fn, repeat: int, clock=time.perf_counter) -> tuple[float, object]:
 
 
 def run(args: argparse.Namespace) -> dict:
-    import os
-
     from railval.core.workers import thread_count
 
     sets, infos = make_sections(args.sections, args.samples, args.fs)

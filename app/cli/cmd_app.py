@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from railval.app.cli import emit_json
 from railval.core import lazy
@@ -113,8 +114,6 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     if Path(args.out).suffix.lower() not in (".html", ".htm", ".pdf"):
         raise app_report.ReportError(f"--out {args.out}: extension must be .html or .pdf")
     database = _database(args.db, upgrade=False)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from railval.app.cli import emit_json
 from railval.core.errors import RailvalError
@@ -245,8 +246,6 @@ def _cmd_log(args) -> int:
 
 
 def _cmd_report(args) -> int:
-    from pathlib import Path
-
     if Path(args.out).suffix.lower() not in (".html", ".htm", ".pdf"):
         raise RailvalError(f"--out {args.out}: extension must be .html or .pdf")
     rep = app_audit_report.build_audit_report(_database(args))

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import time
+import os
 
 from railval.app.cli import Progress, authorize, emit_json
 from railval.core import lazy
@@ -142,8 +143,6 @@ def cmd_list(args: argparse.Namespace) -> int:
     (:mod:`railval.app.services.catalogue`: no SQLAlchemy, ORM or migrations imported), else
     through the ordinary path: :func:`railval.app.cli.authorize` (skipped by ``main`` for this
     verb, ``authorizes_itself``), migrations, the ORM's campaign summaries."""
-    import os
-
     docs, safe_url = catalogue_service.fast(args.db, args.as_user or os.environ.get("RAILVAL_USER"))
     if docs is None:
         args.authorizes_itself = False

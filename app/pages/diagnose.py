@@ -22,6 +22,7 @@ from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 from railval.app.svg_charts import svg_paired_hbars
 from railval.app.views import Ancestor, CalibrationOutcome, StoredDiagnosis
+from railval.core.quantities import QUANTITY_IDS
 
 
 #: the signature chart's value axis: what the residual is, and that it has no unit
@@ -35,8 +36,6 @@ def signature_chart(name: str, group_change: Mapping[str, tuple[float, float]]) 
     horizontal bar chart (inline SVG, :func:`railval.app.svg_charts.svg_paired_hbars`): one
     before/after pair per quantity, EN quantity order then PSD groups, labels horizontal, a
     fixed height per group."""
-    from railval.core.quantities import QUANTITY_IDS
-
     order = {q: i for i, q in enumerate(QUANTITY_IDS)}  # the quantities in EN order, then PSD groups
     groups = sorted(group_change.items(), key=lambda kv: (order.get(kv[0], 99), kv[0]))
     return svg_paired_hbars([g for g, _ in groups], [float(before) for _, (before, _after) in groups],

@@ -35,6 +35,7 @@ from railval.app.services.audit_checks import (
 from railval.core.errors import RailvalError
 from railval.core.integrity import key_fingerprint, public_key_from_hex, public_key_hex
 from railval.db import audit, integrity, trust
+from railval.core.integrity import rotation_message, sign
 
 
 def _parse_public_keys(public_key: str) -> dict[str, Any]:
@@ -266,8 +267,6 @@ def rotate_key(database, actor: str, reason: str = "") -> dict[str, Any]:
     countersigned by the new one; then the new key file and its pin (docs/audit.md)."""
     from cryptography.hazmat.primitives import serialization
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
-
-    from railval.core.integrity import rotation_message, sign
 
     path = integrity.signing_key_path(database.url)
     if path is None:

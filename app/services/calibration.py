@@ -10,6 +10,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
+from dataclasses import replace
 
 import numpy as np
 
@@ -43,6 +44,8 @@ from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.sim.effects import EFFECTS, unmet_requirement
 from railval.core.validation import normalised_errors, validate
 from railval.db import repo
+from railval.core.diagnosis import zone_folds
+from railval.core.diagnosis import plausibility_flags
 
 
 class _Objective:
@@ -300,8 +303,6 @@ def _store(database: Any, ctx: CampaignContext, camp: repo.CampaignRef, conf: re
 
 def _restrict(ctx: CampaignContext, ids: Sequence[str]) -> CampaignContext:
     """The campaign context on a subset of its sections."""
-    from dataclasses import replace
-
     keep = set(ids)
     return replace(ctx, sections=[s for s in ctx.sections if s.id in keep],
                    measured_values={k: v for k, v in ctx.measured_values.items() if k in keep})
@@ -312,8 +313,6 @@ def _calibration_split(ctx: CampaignContext, fit_sections: Sequence[str] | None,
     """(fit section ids, held-out section ids) from the user's choice; unknown ids name the
     known ones. ``split``: the first zone-stratified fold of :func:`railval.core.diagnosis.zone_folds`
     is held out (one section per zone and fold, every zone on both sides where it has ≥ 2)."""
-    from railval.core.diagnosis import zone_folds
-
     ids = [s.id for s in ctx.sections]
     given = [*(fit_sections or []), *(holdout or [])]
     bad = [x for x in given if x not in ids]
@@ -341,7 +340,6 @@ def _calibration_flags(ctx: CampaignContext, specs: Sequence[ParameterSpec], val
     """Plausibility of the fitted values (plausible range from the parameter registry, or at a
     search bound) and the in-sample / held-out caveats of the verdict."""
     from railval.app.services.diagnosis_ranking import plausible_range, template_param
-    from railval.core.diagnosis import plausibility_flags
 
     registry = EFFECTS
     template = str(ctx.vehicle.get("template") or "coach")

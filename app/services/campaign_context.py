@@ -33,6 +33,7 @@ from railval.core.types import SectionInfo, SignalSet
 from railval.core.validation import ValidationResult, validate
 from railval.db import repo
 from railval.db.engine import connect
+from railval.core.supplementary import supplementary_pattern
 
 Progress = Callable[[str, float, dict[str, Any]], None]
 
@@ -132,8 +133,6 @@ def residual_pattern(ctx: CampaignContext, sim_values: Mapping[str, Mapping],
     """Pattern (normalised D_v per quantity × zone × position + log₂ band-power ratios + the
     bogie-frame supplementary quantities, :func:`railval.core.supplementary.supplementary_pattern`)
     and the :class:`railval.core.validation.ValidationResult` (no bootstrap) of simulated values."""
-    from railval.core.supplementary import supplementary_pattern
-
     vr = validate_values(ctx, sim_values)
     pairs = vr.pairs.to_dict("records")
     pat = pattern_from_pairs(pairs, value_key="D_norm")

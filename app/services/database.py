@@ -7,6 +7,7 @@ The CLI's verbs and ``railval serve`` call these instead of :mod:`railval.db.eng
 from __future__ import annotations
 
 from typing import Any
+from sqlalchemy import inspect
 
 from railval.db import engine
 
@@ -44,8 +45,6 @@ def default_actor() -> str:
 
 def has_user_table(database) -> bool:
     """True when the schema holds the user table (a database migrated far enough)."""
-    from sqlalchemy import inspect
-
     return "app_user" in inspect(database.engine).get_table_names()
 
 

@@ -27,8 +27,10 @@ import json
 from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
+from urllib.parse import urlencode
 
 from sqlalchemy.orm import Session
+import numpy as np
 
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
 from railval.core.integrity import (
@@ -62,8 +64,6 @@ def software_version() -> str:
 def _plain(obj: Any) -> Any:
     """JSON-clean copy: numpy scalars → Python, non-finite floats → their repr string."""
     def default(v):
-        import numpy as np
-
         if isinstance(v, np.generic):
             return v.item()
         if isinstance(v, np.ndarray):
@@ -340,16 +340,13 @@ def signing_summary(session: Session, campaign: str, config: str) -> dict[str, A
     their status, links to the evidence pages, and per decision whether it would be
     contrary to the objective verdict. Computed with the settings the signature binds
     (:data:`SETTINGS`)."""
-    from urllib.parse import urlencode
-
     from railval.app.services.diagnosis import diagnosis_runs
     from railval.app.services.validation import validate_configuration
     from railval.app.views import InSample
     from railval.db import workshops as wsdb
 
-    camp = repo.get_campaign(session, campaign)
-    conf = repo.get_configuration(session, camp, config)
-    res = validate_configuration(session, camp.name, conf.name, order=SETTINGS["filter_order"],
+    camp, conf = repo.resolve(session, campaign, config)  # once: the references travel on
+    res = validate_configuration(session, camp, conf, order=SETTINGS["filter_order"],
                                  n_boot=SETTINGS["n_boot"], seed=SETTINGS["seed"])
     d = _plain({k: v for k, v in res.to_dict().items() if k != "info"})
     info = res.info
@@ -360,7 +357,7 @@ def signing_summary(session: Session, campaign: str, config: str) -> dict[str, A
     cov = d["coverage"]
     in_sample = bool(info.get("in_sample"))
     ins = InSample.of(info)
-    runs = diagnosis_runs(session, camp.name, conf.name)
+    runs = diagnosis_runs(session, camp, conf)
     newest = runs[0] if runs else None
     diagnosis = None if newest is None else {
         "run": newest["id"], "created_at": newest["created_at"], "top": newest["top"],

@@ -10,9 +10,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from typing import Any
+import hashlib
+from pathlib import Path
 
 from railval.core.errors import NotFound
 from railval.core.sim import resolve_effects, simulate_campaign
+from railval.core.errors import InvalidParameter
+from railval.core.sim.profiles import parse_csv
+from railval.core.sim.profiles import check_table, equivalent_conicity
 
 Progress = Callable[[str, float, dict], None]
 
@@ -30,12 +35,6 @@ def contact_geometry_file(path: str) -> dict[str, Any]:
     the checked table with its file name and SHA-256. Raises
     :class:`railval.core.errors.InvalidParameter` naming the file (and line) when it cannot be
     read or is malformed — before anything is simulated or stored."""
-    import hashlib
-    from pathlib import Path
-
-    from railval.core.errors import InvalidParameter
-    from railval.core.sim.profiles import parse_csv
-
     p = Path(path)
     try:
         raw = p.read_bytes()
@@ -116,7 +115,5 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
            "parameters": par, "sections": len(sets),
            "calibration": dict(calibration) if calibration else None}
     if par.get("contact_geometry"):
-        from railval.core.sim.profiles import check_table, equivalent_conicity
-
         out["equivalent_conicity"] = equivalent_conicity(check_table(par["contact_geometry"]))
     return out

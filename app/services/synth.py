@@ -18,11 +18,14 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+import shutil
 
 import numpy as np
 
 from railval.core.sim.synth import SynthCampaign, build_campaign, parse_hidden
 from railval.core.types import CHANNEL_KINDS, split_channel
+from railval.core.workers import process_alive
+from railval.core.errors import CampaignFormatError
 
 DEMO_NAME = "demo-coach"
 DEMO_HIDDEN = ["parasitic_yaw_stiffness"]
@@ -84,10 +87,6 @@ def remove_stale_folders(base: str | Path | None = None) -> list[Path]:
     """Remove the temporary folders of synth runs whose process no longer exists (a run
     killed with SIGKILL cannot remove its own, ≈ 70 MB each); returns the removed paths.
     Called at the start of every synth run."""
-    import shutil
-
-    from railval.core.workers import process_alive
-
     removed = []
     for path in Path(base or tempfile.gettempdir()).glob(f"{TEMP_PREFIX}*-*"):
         pid = path.name[len(TEMP_PREFIX):].split("-", 1)[0]
@@ -112,7 +111,6 @@ def synth(database: Any, *, name: str = "synth", template: str = "coach", hidden
         if progress:
             progress(stage, frac, info)
 
-    from railval.core.errors import CampaignFormatError
     from railval.db import repo
     from railval.db.campaigns import check_campaign_name
 

@@ -325,8 +325,6 @@ def calibration_provenance(session: Session, campaign, config: str | repo.Config
     ``diagnosis``), ``fit_sections`` and ``held_out_sections`` (union over the lineage;
     held-out = never fitted to) and ``held_out_check``: how to judge the fit on sections it
     has not seen ("" when not in-sample; :func:`held_out_check`)."""
-    from railval.db import repo
-
     fitted: set[str] = set()
     held: set[str] = set()
     calibrated, fitted_by, parents, effects = [], {}, {}, {}
@@ -374,11 +372,14 @@ def held_out_check(campaign: str, prov: dict, parents: dict[str, str | None],
             "'Add, calibrate & re-simulate')")
 
 
-def validate_configuration(session: Session, campaign_name: str, config: str, *,
+def validate_configuration(session: Session, campaign_name: repo.CampaignArg,
+                           config: repo.ConfigArg, *,
                            order: int = DEFAULT_ORDER, n_boot: int = 1000,
                            seed: int = 0, check_seals: bool = True) -> ValidationResult:
     """Validate configuration ``config`` of ``campaign_name`` against the measurement.
 
+    ``campaign_name``/``config``: the names (resolved here, once) or the references of an
+    entrance that resolved them (:func:`railval.db.repo.resolve`; no further lookup).
     ``order``: Butterworth prototype order of both filters; ``n_boot``/``seed``: bootstrap of
     the normalised values. The result's ``info`` records how many sections of each side
     came from the cache. Both sides' signal rows (content hashes and seals, no blob) are
@@ -400,7 +401,8 @@ def validate_configuration(session: Session, campaign_name: str, config: str, *,
                                        check_seals)
 
 
-def _validate_configuration(session: Session, campaign_name: str, config: str, order: int,
+def _validate_configuration(session: Session, campaign_name: repo.CampaignArg,
+                            config: repo.ConfigArg, order: int,
                             n_boot: int, seed: int, check_seals: bool) -> ValidationResult:
     """:func:`validate_configuration` with the order checked and the heap frozen."""
     with stage("database"):
@@ -425,7 +427,7 @@ def _validate_configuration(session: Session, campaign_name: str, config: str, o
     def meanwhile() -> None:  # while the sections are processed: what only the verdict needs
         with stage("database"):
             later["vehicle"] = repo.vehicle_info(session, camp)
-            later["provenance"] = calibration_provenance(session, camp, config)
+            later["provenance"] = calibration_provenance(session, camp, conf)
             if check_seals:
                 check_row_seals(session, camp, conf, rows)
 

@@ -24,8 +24,12 @@ import threading
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from typing import Any
+import ctypes
+from collections import deque
 
 from sqlalchemy.orm import Session
+import numpy as np
+from sqlalchemy.engine import make_url
 
 from railval.core import lazy
 from railval.core.stages import collect, in_context, stage
@@ -33,6 +37,9 @@ from railval.core.types import SectionInfo
 from railval.core.workers import row_threads, thread_count
 from railval.db import repo
 from railval.db.engine import connect
+from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SignalSet
+from railval.db import codec
+from railval.core.workers import pool_kwargs
 
 # the EN 14363 processing loads numba and scipy.signal: imported when the first section is
 # processed
@@ -164,10 +171,6 @@ def _warm_kernels(order: int) -> None:
     ≈ 0.25 s) by processing one small synthetic section: in the main process before it forks
     the workers (they inherit them), or in a worker that came without them (Dask); timed as
     the stage ``worker_start`` by ``railval bench dynotrain``."""
-    import numpy as np
-
-    from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SignalSet
-
     n, fs = 2000, 500.0
     t = np.arange(n) / fs
     noise = np.random.default_rng(0).standard_normal(n)
@@ -176,8 +179,6 @@ def _warm_kernels(order: int) -> None:
     channels |= {f"{k}_cb_{b}": 0.3 * noise for b in BODY_POSITIONS for k in ("ay", "az")}
     en14363.evaluate_batch([SignalSet(fs, t, 25.0 * t, channels)],
                            [SectionInfo("warm-up", 0.0, 0.0, 90.0, 1, 10.0, 90.0)], order=order)
-    from railval.db import codec
-
     codec.decode(*codec.encode(noise))  # the codec's kernel (db/codec_planes.py)
     _WORKER_WARM.add(order)
 
@@ -202,13 +203,9 @@ def _worker_process_setup() -> None:
     * glibc keeps the freed heap for the next chunk instead of returning it to the kernel
       (``mallopt``; without it each chunk's blobs were faulted in again). Not glibc: skipped.
     """
-    from railval.db import codec
-
     codec.VERIFIED.limit_bytes = 0
     codec.VERIFIED.clear()
     try:
-        import ctypes
-
         mallopt = ctypes.CDLL(None).mallopt
         mallopt(-1, _WORKER_TRIM_BYTES)  # M_TRIM_THRESHOLD
         mallopt(-3, _WORKER_MMAP_BYTES)  # M_MMAP_THRESHOLD
@@ -282,8 +279,6 @@ def process_chunks(database, plan, chunks: list[tuple[str | None, list[str]]], o
     ``collect_chunk(chunk, (packed values, stage seconds))`` per chunk, in chunk order."""
     by_id = {s.id: s for s in plan.sections}
     if scheduler is not None and chunks:
-        from sqlalchemy.engine import make_url
-
         from railval.app.services.batch import BatchExecutor
 
         url = make_url(database.url).set(password=None).render_as_string(hide_password=False)
@@ -296,8 +291,6 @@ def process_chunks(database, plan, chunks: list[tuple[str | None, list[str]]], o
     elif workers > 1 and len(chunks) > 1 and backend == "threads":
         _process_threads(database, plan, chunks, order, workers, collect_chunk)
     elif workers > 1 and len(chunks) > 1:
-        from railval.core.workers import pool_kwargs
-
         threads = max(1, thread_count() // workers)
         if _WARM_BEFORE_FORK and not _WORKER_WARM:
             # loaded once here, the kernels come with the fork to every worker
@@ -331,8 +324,6 @@ def _process_threads(database, plan, chunks: list[tuple[str | None, list[str]]],
     """``workers`` threads of this process decode and process the chunks (the compiled
     kernels release the GIL) while this thread reads the blobs of the next chunks (at most
     ``workers + 1`` read ahead) and collects the finished ones."""
-    from collections import deque
-
     by_id = {s.id: s for s in plan.sections}
     row = max(1, thread_count() // workers)
     pending: deque = deque()

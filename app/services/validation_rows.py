@@ -22,6 +22,7 @@ from railval.core.processing import DEFAULT_ORDER
 from railval.core.stages import stage
 from railval.core.types import SectionInfo
 from railval.db import repo
+from railval.db.integrity import IntegrityError
 
 section_cache_key = lazy.function("railval.core.en14363", "section_cache_key")
 
@@ -180,8 +181,6 @@ class SameRows:
         for rid, sid, chan, sha, fs, t0, n in decode.read:
             got = sha if chan is not None else (sha, fs, t0, n)
             if expected.get((rid, chan)) != got:
-                from railval.db.integrity import IntegrityError
-
                 raise IntegrityError(
                     f"campaign {self.camp.name!r}: section {sid}, {chan or 'distance_m'} of "
                     f"the stored signals of {self.conf.name!r} changed while it was validated; "
