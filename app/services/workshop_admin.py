@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from railval.app.services.workshop_documents import plots_document, status_document
 from railval.db import repo, users
 from railval.db import workshops as wsdb
 
@@ -69,7 +70,6 @@ def check_new(database, name: str, campaign: str, *, configurations: Sequence[st
 def status(database, name: str) -> dict[str, Any]:
     """The workshop's status with every reviewer's progress
     (:func:`railval.app.services.workshop_documents.status_document`)."""
-    from railval.app.services.workshop_documents import status_document
 
     with database.session() as s:
         return status_document(s, name)
@@ -77,7 +77,6 @@ def status(database, name: str) -> dict[str, Any]:
 
 def plots(database, name: str) -> dict[str, Any]:
     """The workshop's plots (:func:`railval.app.services.workshop_documents.plots_document`)."""
-    from railval.app.services.workshop_documents import plots_document
 
     with database.session() as s:
         return plots_document(s, name)

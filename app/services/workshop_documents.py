@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from railval.core.workshop import PLOT_KIND_IDS, PLOT_KINDS
+from railval.db import workshops as wsdb
 
 
 def workshop_scaling(settings: dict[str, Any] | None) -> str:
@@ -17,7 +18,6 @@ def workshop_scaling(settings: dict[str, Any] | None) -> str:
 
 def plots_document(session, name: str) -> dict[str, Any]:
     """The ``workshop plots NAME --json`` document."""
-    from railval.db import workshops as wsdb
 
     w = wsdb.get_workshop(session, name)
     return {"workshop": w.name, "plots": [
@@ -28,7 +28,6 @@ def plots_document(session, name: str) -> dict[str, Any]:
 
 
 def status_document(session, name: str) -> dict[str, Any]:
-    from railval.db import workshops as wsdb
 
     w = wsdb.get_workshop(session, name)
     prog = wsdb.progress(session, w)

@@ -24,6 +24,8 @@ from collections import OrderedDict
 from types import MethodType
 from typing import Any
 
+import numpy as np
+
 #: glyph bitmaps a renderer keeps (oldest dropped first); a review plot's texts use a few
 #: hundred (characters × sub-pixel positions)
 GLYPHS = 20000
@@ -74,7 +76,6 @@ def _rasterise(self, font, size, glyph_index, slant, extend, flags, mode, aa: bo
                tx: int, ty: int) -> tuple[Any, int, int]:
     """FreeType's bitmap of one glyph at the sub-pixel part of ``(tx, ty)``, with its left
     and top relative to the whole-pixel part (matplotlib's calls, angle 0)."""
-    import numpy as np
 
     font.set_size(size, self.dpi)
     font._set_transform(

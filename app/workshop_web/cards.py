@@ -7,6 +7,7 @@ from __future__ import annotations
 import html
 from typing import Any
 
+from railval.app.services.workshop_documents import kind_labels
 from railval.app.workshop_web.common import _fmt, _pct, esc
 
 #: the cards' filters: show a card when it matches every chosen value
@@ -79,7 +80,6 @@ def card_html(c: dict[str, Any], src: str, labels: dict[str, str], *, lazy: bool
 def cards_html(doc: dict[str, Any]) -> str:
     """The plot cards with their filters (kind, zone, configuration, agreement) and the
     choice of a second reviewer group (a GET form: it changes nothing)."""
-    from railval.app.services.workshop_documents import kind_labels
 
     labels = kind_labels()
     cards = doc.get("cards", [])
@@ -111,7 +111,6 @@ def cards_html(doc: dict[str, Any]) -> str:
 def report_section(cards: list[dict[str, Any]]) -> str:
     """The chosen cards (:func:`railval.app.services.workshop_cards.report_cards`) as a
     self-contained section of the validation report (images embedded)."""
-    from railval.app.services.workshop_documents import kind_labels
 
     labels = kind_labels()
     out = [f"<h2>Expert review: plot cards</h2><style>{CARD_CSS}</style>"

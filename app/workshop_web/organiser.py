@@ -14,6 +14,7 @@ from urllib.parse import quote
 
 import tornado.web
 
+from railval.app.services.workshop_documents import describe_kinds
 from railval.app.workshop_web.common import (
     _OrganiserBase,
     esc,
@@ -82,7 +83,6 @@ def _creating_rows(username: str, stored: set[str]) -> str:
 
 def _form_choices(database) -> dict[str, Any]:
     from railval.app.services.workshop_admin import campaign_choices
-    from railval.app.services.workshop_documents import describe_kinds
 
     return {"campaigns": campaign_choices(database), "kinds": describe_kinds()}
 
