@@ -95,7 +95,7 @@ def test_render_version_is_stored_and_keys_the_cache(monkeypatch):
     spec = _specs(1)[0]
     params = wr.render_parameters({"id": "k", "domain": "time"}, spec.scale, scaling="fixed",
                                   title="t", x_label="x", y_label="y", extra={})
-    assert params["render_version"] == wr.RENDER_VERSION == 2
+    assert params["render_version"] == wr.RENDER_VERSION == 3
     key = wr.content_key(spec)
     monkeypatch.setattr(wr, "RENDER_VERSION", 1)
     assert wr.content_key(spec) != key  # bytes of version 1 are never served for version 2
@@ -218,3 +218,32 @@ def test_cli_create_reports_progress_on_stderr_and_keeps_the_json(db, capsys):
     doc = json.loads(captured.out)
     assert doc["name"] == "JC" and doc["stored"] is True and doc["plots"] == 4
     assert "[100.0 %] rendering plots 4/4" in captured.err  # progress on stderr only
+
+
+def test_a_long_title_and_the_last_x_tick_label_stay_inside_the_plot():
+    """A title naming a long vehicle and configuration is wrapped onto at most three lines
+    that fit above the axes, and the last x tick label ("2000") lies within the figure
+    (render versions 1 and 2 cut both at the right edge): extents measured by matplotlib's
+    own renderer on the reused figure after the plot is drawn."""
+    from railval.core.workshop import PLOT_KINDS
+
+    kind = next(iter(PLOT_KINDS.values()))
+    title = ws._title(kind, "w1L", blind=False, vehicle="Coach (Manchester benchmark vehicle 1 based)",
+                      config="baseline+parasitic_yaw_stiffness+lateral_bumpstop+friction_damping", section="S01")
+    lines = title.split("\n")
+    assert 2 <= len(lines) <= 3 and lines[0].endswith("— section S01"), lines
+    assert "".join(lines[1:]).replace(" ", "") == (
+        "Coach (Manchester benchmark vehicle 1 based), configuration "
+        "baseline+parasitic_yaw_stiffness+lateral_bumpstop+friction_damping").replace(" ", "")
+    assert ws._title(kind, "w1L", blind=True, vehicle="V", config="C", section="S").count("\n") == 0
+    x = np.linspace(0.0, 2000.0, 800)
+    canvas = wr._Canvas(False)
+    canvas.draw(x, np.sin(x / 90) * 10, x, np.cos(x / 90) * 10, Scale(AxisRange(0.0, 2000.0, 500.0),
+                AxisRange(-20.0, 20.0, 10.0)), title=title, x_label="distance in m", y_label="Y in kN")
+    renderer = canvas.fig.canvas.get_renderer()
+    fig_box = canvas.fig.bbox
+    t = canvas.title.get_window_extent(renderer)
+    assert fig_box.x0 <= t.x0 and t.x1 <= fig_box.x1 and t.y1 <= fig_box.y1, (t, fig_box)
+    assert t.y0 >= canvas.ax.get_window_extent(renderer).y1  # above the axes, not over the data
+    last = [lab for lab in canvas.ax.get_xticklabels() if lab.get_text()][-1]
+    assert last.get_text() == "2000" and last.get_window_extent(renderer).x1 <= fig_box.x1

@@ -225,7 +225,9 @@ def _choice(db, campaign: str, n_plots: int) -> dict[str, list[str]]:
 def legacy_png(x_meas, y_meas, x_sim, y_sim, scale, *, title: str, x_label: str,
                y_label: str) -> bytes:
     """A review plot as render version 1 drew it (way A): a new figure for the plot, the
-    whole figure drawn, saved with matplotlib's PNG writer (RGBA, zlib level 6)."""
+    whole figure drawn, saved with matplotlib's PNG writer (RGBA, zlib level 6); with the
+    current :data:`STYLE` (margins of version 3), so its pixels are the reference of the
+    current renderer's."""
     import io
 
     import matplotlib
@@ -252,7 +254,7 @@ def legacy_png(x_meas, y_meas, x_sim, y_sim, scale, *, title: str, x_label: str,
         ax.set_ylabel(y_label)
         ax.set_title(title, loc="left")
         ax.legend(loc=st["legend"], frameon=True, framealpha=0.9)
-        fig.subplots_adjust(left=0.09, right=0.98, top=0.91, bottom=0.11)
+        fig.subplots_adjust(**st["margins"])
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=st["dpi"], metadata={"Software": None})
     return buf.getvalue()

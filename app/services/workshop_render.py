@@ -53,8 +53,10 @@ from railval.core.workshop import Scale
 #: how the stored PNG bytes are made (stored with each plot's render parameters and part of
 #: :func:`content_key`): 1 — the whole figure drawn per plot, matplotlib's PNG writer (RGBA,
 #: zlib level 6); 2 — the static parts drawn once per scale and labels and restored,
-#: :func:`encode_png` (RGB, Up filter, zlib level 1). The pixels of 1 and 2 are identical.
-RENDER_VERSION = 2
+#: :func:`encode_png` (RGB, Up filter, zlib level 1). The pixels of 1 and 2 are identical;
+#: 3 — the title on up to three lines and the axes narrowed to hold it and the last x tick label
+#: (:data:`STYLE` ``margins``; 1 and 2 cut long titles and that label at the figure's edge).
+RENDER_VERSION = 3
 
 #: the look of every review plot (stored with each plot's render parameters)
 STYLE: dict[str, Any] = {
@@ -68,6 +70,9 @@ STYLE: dict[str, Any] = {
     "simulation": {"label": "simulation", "color": SIM_COLORS[0], "linewidth": 1.1, "zorder": 3},
     "legend": "upper right",
     "grid_color": "#d9d9d9",
+    #: the axes within the figure: room above for a title of up to three lines, right of the
+    #: axes for the half of the last x tick label that lies beyond it
+    "margins": {"left": 0.09, "right": 0.96, "top": 0.86, "bottom": 0.11},
 }
 
 _RC = {
@@ -106,7 +111,7 @@ class _Canvas:
             if log:
                 ax.set_yscale("log")
             self.legend = ax.legend(loc=STYLE["legend"], frameon=True, framealpha=0.9)
-            fig.subplots_adjust(left=0.09, right=0.98, top=0.91, bottom=0.11)
+            fig.subplots_adjust(**STYLE["margins"])
         self.fig, self.ax = fig, ax
         self.title = ax._left_title  # what set_title(..., loc="left") sets
         self._backgrounds: OrderedDict[tuple, Any] = OrderedDict()

@@ -22,6 +22,7 @@ The documents that read a stored workshop back (status, plot list, kinds, review
 from __future__ import annotations
 
 import math
+import textwrap
 import random
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -182,12 +183,21 @@ def _sg_c(m_sig: np.ndarray, m_ss, s_sig: np.ndarray, s_ss) -> float | None:
     return float(c) if math.isfinite(c) else None
 
 
+#: characters of a review plot's title line (≈ 9.3 px a character of the 13 pt title: the
+#: 860 px above the axes hold about 95)
+TITLE_LINE_CHARS = 88
+
+
 def _title(kind, position: str, *, blind: bool, vehicle: str, config: str,
            section: str) -> str:
+    """The plot's title: what is shown, and unless blind the section, vehicle and
+    configuration on up to two more lines (wrapped at :data:`TITLE_LINE_CHARS`; a longer
+    vehicle and configuration name ends in "…" — the plot list and the cards carry it whole)."""
     what = f"{kind.label[:1].upper()}{kind.label[1:]}, {_POSITION_TEXT.get(position, position)}"
     if blind:
         return what
-    return f"{what} — {vehicle}, configuration {config}, section {section}"
+    rest = textwrap.wrap(f"{vehicle}, configuration {config}", TITLE_LINE_CHARS, max_lines=2, placeholder=" …")
+    return "\n".join([f"{what} — section {section}", *rest])
 
 
 # ------------------------------------------------------------------------- create
