@@ -24,6 +24,7 @@ the manifest rebuilt from the database today has the same hash, and *stale* othe
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
@@ -149,13 +150,36 @@ def _short(h: Any) -> str:
     return str(h)[:12] + "…" if isinstance(h, str) and len(h) == 64 else json.dumps(h)[:80]
 
 
+#: relative tolerance of a recomputed validation result against the signed one: the inputs
+#: (content hashes, processing, configuration) are compared exactly; the result is recomputed
+#: from them, and another numpy/scipy build may sum in another order (the last one or two of
+#: the 16 digits of a float64; IEEE 754 addition is not associative) — such a result is the
+#: same evidence, a difference beyond 1e-9 is not
+RESULT_REL_TOL = 1e-9
+
+
+def same_numbers(a: Any, b: Any, rel_tol: float = RESULT_REL_TOL) -> bool:
+    """``a`` and ``b`` (JSON values) equal, with numbers equal within ``rel_tol`` relative
+    (``math.isclose``, absolute 1e-12 near zero); keys, lengths, strings, booleans and None exact."""
+    if isinstance(a, bool) or isinstance(b, bool) or a is None or b is None:
+        return type(a) is type(b) and a == b
+    if isinstance(a, int | float) and isinstance(b, int | float):
+        return math.isclose(a, b, rel_tol=rel_tol, abs_tol=1e-12) or (a != a and b != b)
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(same_numbers(a[k], b[k], rel_tol) for k in a)
+    if isinstance(a, list | tuple) and isinstance(b, list | tuple):
+        return len(a) == len(b) and all(same_numbers(x, y, rel_tol) for x, y in zip(a, b))
+    return a == b
+
+
 def manifest_differences(signed: dict[str, Any], now: dict[str, Any], *,
                          keys: tuple[str, ...] | None = None, limit: int = 5) -> list[str]:
-    """Readable differences between two manifests (first ``limit`` per part)."""
+    """Readable differences between two manifests (first ``limit`` per part); the recomputed
+    ``result`` is compared within :data:`RESULT_REL_TOL` (:func:`same_numbers`), the inputs exactly."""
     out: list[str] = []
     for key in keys or tuple(sorted(set(signed) | set(now))):
         a, b = signed.get(key), now.get(key)
-        if a == b:
+        if a == b or (key == "result" and same_numbers(a, b)):
             continue
         if key in ("measurement", "simulation") and isinstance(a, dict) and isinstance(b, dict):
             n = 0
