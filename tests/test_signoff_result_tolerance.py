@@ -36,6 +36,7 @@ def test_same_numbers_is_exact_on_everything_but_numbers():
     assert not same_numbers({"a": 1.0}, {"b": 1.0})
     assert not same_numbers([1.0, 2.0], [1.0])
     assert not same_numbers(True, 1)
+    assert not same_numbers(10**10, 10**10 + 1)  # a count is compared exactly
     assert not same_numbers(None, 0.0)
     assert same_numbers(float("nan"), float("nan"))
     assert not same_numbers(0.0, 1e-9)

@@ -163,6 +163,8 @@ def same_numbers(a: Any, b: Any, rel_tol: float = RESULT_REL_TOL) -> bool:
     (``math.isclose``, absolute 1e-12 near zero); keys, lengths, strings, booleans and None exact."""
     if isinstance(a, bool) or isinstance(b, bool) or a is None or b is None:
         return type(a) is type(b) and a == b
+    if isinstance(a, int) and isinstance(b, int):  # counts (n, sections): exact
+        return a == b
     if isinstance(a, int | float) and isinstance(b, int | float):
         return math.isclose(a, b, rel_tol=rel_tol, abs_tol=1e-12) or (a != a and b != b)
     if isinstance(a, dict) and isinstance(b, dict):
