@@ -29,7 +29,6 @@ this process creates.
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import os
 import struct
@@ -47,8 +46,9 @@ matplotlib.use("Agg", force=False)
 import numpy as np
 from matplotlib.figure import Figure
 from railval.app.scales import MEASURED_COLOR, SIM_COLORS
+from railval.app.services.batch import FORKSERVER_PRELOAD, start_context
 from railval.app.services.workshop_glyphs import install as install_glyphs
-from railval.core.workshop import Scale
+from railval.core.workshop import AxisRange, Scale
 
 #: how the stored PNG bytes are made (stored with each plot's render parameters and part of
 #: :func:`content_key`): 1 — the whole figure drawn per plot, matplotlib's PNG writer (RGBA,
@@ -330,8 +330,7 @@ def render_many(specs: Sequence[PlotSpec], progress: Callable[[int, int], None] 
     def report() -> None:
         if progress is not None:
             progress(sum(1 for k in keys if k in out), total)
-    if out:
-        report()
+    report()  # rendering starts (plots found in the cache counted)
     order = list(todo)
     chunks = [order[i:i + CHUNK] for i in range(0, len(order), CHUNK)]
     n_workers = RENDER_WORKERS if workers is None else max(1, workers)
@@ -350,17 +349,48 @@ def _run_chunks(chunks: list[list[str]], todo: dict[str, PlotSpec], workers: int
         for ks in chunks:
             yield ks, _render_chunk([todo[k] for k in ks])
         return
-    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     from railval.core.workers import pool_kwargs
 
-    ctx = multiprocessing.get_context("forkserver")
+    ctx = pool_context()
     with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx,
                              **pool_kwargs()) as pool:
         futures = {pool.submit(_render_chunk, [todo[k] for k in ks]): ks for ks in chunks}
         for f in as_completed(futures):
             yield futures[f], f.result()
+
+
+def pool_context():
+    """How the render pool's workers start (:func:`railval.app.services.batch.start_context`):
+    from a quiet main thread (the CLI, the bench) ``fork`` — after :func:`warm`, so every
+    worker starts with matplotlib imported, this thread's two figures made and their glyph
+    bitmaps kept instead of importing, making and rasterising them again; otherwise (the
+    server's job threads) ``forkserver``, which imports this module (and matplotlib) once
+    for all the workers it starts, when this process starts it."""
+    ctx = start_context()
+    if ctx.get_start_method() == "fork":
+        warm()
+    else:
+        ctx.set_forkserver_preload([*FORKSERVER_PRELOAD, __name__])
+    return ctx
+
+
+#: the title of :func:`warm`'s plots: the characters of review plot titles
+_WARM_TITLE = ("Guiding force Y, wheelset 1 left wheel — section S01\n"
+               "Vehicle (bogie), configuration baseline 0123456789 …")
+
+
+def warm() -> None:
+    """Make this thread's linear and logarithmic figures and keep the glyph bitmaps of a
+    typical title, the legend and the tick labels (a worker forked afterwards starts with
+    them). Nothing is kept but figures and glyphs: a plot's pixels do not depend on what was
+    drawn before (tests/test_workshop_jobs.py)."""
+    x = np.array([0.0, 1.0])
+    for log in (False, True):
+        y = AxisRange(1e-3, 1.0, 10.0, log=True) if log else AxisRange(-1.0, 1.0, 0.5)
+        render_png(x, x / 2 + 0.1, x, x / 3 + 0.1, Scale(AxisRange(0.0, 1.0, 0.25), y),
+                   title=_WARM_TITLE, x_label="distance in m", y_label="force in kN")
 
 
 def _ticks(lo: float, hi: float, step: float) -> np.ndarray:

@@ -1,0 +1,47 @@
+"""The render pool's start (docs/workshops.md "Rendering speed"): workers forked from a warmed
+process and workers started by the forkserver give exactly the bytes of rendering in one
+process, and a forked worker starts with the parent's figures and glyph bitmaps."""
+
+from __future__ import annotations
+
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+
+import pytest
+
+from railval.app.services import workshop_render as wr
+from tests.test_workshop_jobs import _ref, _same_pixels, _specs
+
+
+def _probe(_: int) -> dict:
+    """In a worker, before it renders anything: what it started with."""
+    canvases = getattr(wr._LOCAL, "canvases", {})
+    return {"canvases": sorted(canvases),
+            "glyphs": [len(c.fig.canvas.get_renderer()._railval_glyphs) for c in canvases.values()]}
+
+
+@pytest.mark.parametrize("method", ["fork", "forkserver"])
+def test_pool_bytes_equal_the_serial_render(monkeypatch, method):
+    monkeypatch.setattr(wr, "POOL_MIN_PLOTS", 4)
+    monkeypatch.setattr(wr, "start_context", lambda: multiprocessing.get_context(method))
+    specs = _specs(12)
+    doubled = specs + specs[:4]
+    wr.clear_cache()
+    serial = wr.render_many(doubled, workers=1)
+    wr.clear_cache()
+    used = []
+    real = wr.pool_context
+    monkeypatch.setattr(wr, "pool_context", lambda: used.append(real()) or used[-1])
+    pooled = wr.render_many(doubled, workers=2)
+    assert [c.get_start_method() for c in used] == [method]  # the pool did run
+    assert pooled == serial
+    assert _same_pixels(pooled[:3], [_ref(s) for s in specs[:3]])  # matplotlib's own pixels
+
+
+def test_a_forked_worker_starts_with_the_warm_figures(monkeypatch):
+    monkeypatch.setattr(wr, "start_context", lambda: multiprocessing.get_context("fork"))
+    ctx = wr.pool_context()
+    with ProcessPoolExecutor(1, mp_context=ctx) as pool:
+        got = pool.submit(_probe, 0).result()
+    assert got["canvases"] == [False, True]  # linear and logarithmic figures made
+    assert all(n > 50 for n in got["glyphs"])  # the title's, legend's and ticks' glyphs kept
