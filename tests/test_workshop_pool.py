@@ -40,6 +40,7 @@ def test_pool_bytes_equal_the_serial_render(monkeypatch, method):
 
 def test_a_forked_worker_starts_with_the_warm_figures(monkeypatch):
     monkeypatch.setattr(wr, "start_context", lambda: multiprocessing.get_context("fork"))
+    monkeypatch.setattr(wr._LOCAL, "canvases", {}, raising=False)  # nothing rendered before
     ctx = wr.pool_context()
     with ProcessPoolExecutor(1, mp_context=ctx) as pool:
         got = pool.submit(_probe, 0).result()
