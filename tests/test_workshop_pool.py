@@ -7,9 +7,11 @@ from __future__ import annotations
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 
+import numpy as np
 import pytest
 
 from railval.app.services import workshop_render as wr
+from railval.core.workshop import AxisRange, Scale
 from tests.test_workshop_jobs import _ref, _same_pixels, _specs
 
 
@@ -46,3 +48,22 @@ def test_a_forked_worker_starts_with_the_warm_figures(monkeypatch):
         got = pool.submit(_probe, 0).result()
     assert got["canvases"] == [False, True]  # linear and logarithmic figures made
     assert all(n > 50 for n in got["glyphs"])  # the title's, legend's and ticks' glyphs kept
+
+
+def test_a_y_offset_text_moves_the_title_as_in_matplotlibs_own_draw():
+    """A scale whose y tick labels need an offset text ("+1e3" above the axis, where the
+    left-aligned title is): the title is placed clear of it as a full draw places it, on a
+    figure that drew plots without offset text before (and back)."""
+    x = np.linspace(0.0, 500.0, 400)
+    y = 1000.25 + 0.2 * np.sin(x / 40)
+    offset = Scale(AxisRange(0.0, 500.0, 100.0), AxisRange(1000.0, 1000.5, 0.1))
+    title = "Wheel load Q, wheelset 1 left wheel — section S01\nVehicle, configuration c1"
+    plain = _specs(2)
+    specs = [plain[0], wr.PlotSpec(x, y, x, y + 0.05, offset, title, "distance in m", "Q in kN"),
+             plain[1], wr.PlotSpec(x, y - 0.1, x, y, offset, "short", "distance in m", "Q in kN")]
+    canvas = wr._Canvas(False)
+    _, shown = canvas._background(offset, "distance in m", "Q in kN")
+    assert shown  # the offset text is there at this scale
+    got = [wr.render_png(s.x_meas, s.y_meas, s.x_sim, s.y_sim, s.scale, title=s.title,
+                         x_label=s.x_label, y_label=s.y_label) for s in specs]
+    assert _same_pixels(got, [_ref(s) for s in specs])

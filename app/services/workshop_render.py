@@ -115,6 +115,7 @@ class _Canvas:
         self.fig, self.ax = fig, ax
         self.title = ax._left_title  # what set_title(..., loc="left") sets
         self._backgrounds: OrderedDict[tuple, Any] = OrderedDict()
+        self._axes_key: tuple | None = None  # the scale and labels the axes are set to
 
     def _dynamic(self) -> list:
         """The artists drawn per plot, in the z-order of a full draw (measurement 2, spines
@@ -126,17 +127,19 @@ class _Canvas:
         ax = self.ax
         ax.set_xlim(scale.x.lo, scale.x.hi)  # the lines' data coordinates
         ax.set_ylim(scale.y.lo, scale.y.hi)
+        if key != self._axes_key:  # the axes' ticks and labels of this scale (the title's
+            self._axes_key = key   # place may depend on them: the y offset text)
+            if not scale.y.log:
+                ax.set_yticks(_ticks(scale.y.lo, scale.y.hi, scale.y.step))
+            ax.set_xticks(_ticks(scale.x.lo, scale.x.hi, scale.x.step))
+            ax.set_xlim(scale.x.lo, scale.x.hi)
+            ax.set_ylim(scale.y.lo, scale.y.hi)
+            ax.set_xlabel(x_label)
+            ax.set_ylabel(y_label)
         got = self._backgrounds.get(key)
         if got is not None:
             self._backgrounds.move_to_end(key)
             return got
-        if not scale.y.log:
-            ax.set_yticks(_ticks(scale.y.lo, scale.y.hi, scale.y.step))
-        ax.set_xticks(_ticks(scale.x.lo, scale.x.hi, scale.x.step))
-        ax.set_xlim(scale.x.lo, scale.x.hi)
-        ax.set_ylim(scale.y.lo, scale.y.hi)
-        ax.set_xlabel(x_label)
-        ax.set_ylabel(y_label)
         self.title.set_text("")  # (an empty title is not placed by the full draw)
         for a in self._dynamic():
             a.set_visible(False)
