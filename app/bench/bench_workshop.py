@@ -24,7 +24,9 @@ again. ``--think`` adds a reviewer's look at each plot before the answer.
 alternating (other work on the machine then weighs on both alike): A renders a figure made
 for every plot, one after the other in this process (the renderer before figure reuse and the
 render pool), B the current renderer (:func:`railval.app.services.workshop_render.render_many`);
-each run reports its total and rendering time and the 1-minute load average at its end.
+each run reports its total and rendering time (from the render's start — "0 of N plots
+rendered" — to the end of the creation: the pool's start, the plots and their storing) and
+the 1-minute load average at its end.
 """
 
 from __future__ import annotations
