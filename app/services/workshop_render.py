@@ -19,8 +19,9 @@ which then draws only its lines, spines, title and legend, in the order of a ful
 pixels are those of a figure made for the plot alone (:func:`render_fresh`;
 tests/test_workshop_jobs.py compares them with matplotlib's own rendering). The PNG is written
 by :func:`encode_png` (RGB, Up filter, zlib level 1 run-length). :func:`render_many` renders
-a workshop's plots on a pool of :data:`RENDER_WORKERS` processes (``forkserver``; the
-workers end with their parent, :mod:`railval.core.workers`) and renders plots of identical
+a workshop's plots on a pool of :data:`RENDER_WORKERS` processes (forked after :func:`warm`
+from a quiet main thread, else from the ``forkserver``: :func:`pool_context`; the workers end
+with their parent, :mod:`railval.core.workers`) and renders plots of identical
 content (the SHA-256 of everything that decides the pixels, :func:`content_key`) once —
 within a workshop and, through a bounded cache (:data:`CACHE_BYTES`), across the workshops
 this process creates.
