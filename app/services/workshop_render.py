@@ -418,7 +418,10 @@ def warm() -> None:
     """Make this thread's linear and logarithmic figures and keep the glyph bitmaps of a
     typical title, the legend and the tick labels (a worker forked afterwards starts with
     them). Nothing is kept but figures and glyphs: a plot's pixels do not depend on what was
-    drawn before (tests/test_workshop_jobs.py)."""
+    drawn before (tests/test_workshop_jobs.py). Nothing to do once this thread has drawn on
+    both figures."""
+    if len(getattr(_LOCAL, "canvases", {})) == 2:
+        return
     x = np.array([0.0, 1.0])
     for log in (False, True):
         y = AxisRange(1e-3, 1.0, 10.0, log=True) if log else AxisRange(-1.0, 1.0, 0.5)
