@@ -49,10 +49,15 @@ from railval.app.scales import (
 from railval.app.services import overview as overview_service
 from railval.app.svg_charts import svg_bars, svg_lines
 from railval.app.views import ValidationView, view_of
+from railval.core import lazy
 from railval.core.coverage import Coverage
 from railval.core.diagnosis import where_grid
 from railval.core.en14363 import quantity_trace
 from railval.core.quantities import QUANTITIES
+
+#: deferred (railval.core.lazy): the workshop plot cards (Matplotlib, the workshop
+#: services) only for a report that shows a workshop
+report_section = lazy.function("railval.app.workshop_web.cards", "report_section")
 
 #: points per trace of the report's line charts
 SVG_POINTS = 1200
@@ -289,8 +294,6 @@ def build_report(backend: Any, campaign: str, config: str, worst_cases: int = 3,
         h.extend(_worst_case_plots(backend, campaign, config, inputs.result, inputs.overview,
                                    worst_cases))
     if cards:
-        from railval.app.workshop_web.cards import report_section
-
         h.append(report_section(cards))
     if inputs.signoffs is not None:  # independent sign-offs of this configuration, with their status
         h.append("<h2>Sign-offs</h2><p class='note'>Each sign-off is bound to the SHA-256 of its "

@@ -50,12 +50,20 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import html as _html
 import logging
 import os
 import re
 import secrets
 from urllib.parse import urlsplit
-import html as _html
+
+from railval.core import lazy
+from railval.core.errors import RailvalError
+
+#: deferred (railval.core.lazy): ``railval --help`` reaches this module; the static-file
+#: cache (Tornado) and the settings table only when the server runs
+static_cache = lazy.module("railval.app.static_cache")
+setting = lazy.function("railval.db.settings", "setting")
 
 CSP = ("default-src 'self'; "
        "script-src 'self' 'unsafe-inline' 'unsafe-eval'; "
@@ -231,9 +239,7 @@ def transforms() -> list:
     """The server's output transforms: autoload.js refused, Tornado's gzip (static files
     compressed once per process, :class:`railval.app.static_cache.CachedGZip`), then the
     security headers."""
-    from railval.app.static_cache import CachedGZip
-
-    return [NoAutoload, CachedGZip, SecurityHeaders]
+    return [NoAutoload, static_cache.CachedGZip, SecurityHeaders]
 
 
 def use_local_fonts() -> None:
@@ -249,7 +255,6 @@ def session_secret() -> str:
     """Secret for signing Bokeh session ids: ``$BOKEH_SECRET_KEY`` (or the file
     ``$BOKEH_SECRET_KEY_FILE``), ``$RAILVAL_SESSION_SECRET`` or a random one for this server
     process. Several app processes behind one proxy need the same one."""
-    from railval.db.settings import setting
 
     return (setting("BOKEH_SECRET_KEY") or os.environ.get("RAILVAL_SESSION_SECRET")
             or secrets.token_urlsafe(32))
@@ -277,7 +282,6 @@ def plain_message(exc: BaseException, context: str = "") -> str:
     error with its traceback goes to the server log (logger ``railval.app``)."""
     from sqlalchemy.exc import SQLAlchemyError
 
-    from railval.core.errors import RailvalError
 
     _log.error("%s%s", f"{context}: " if context else "", type(exc).__name__, exc_info=exc)
     if isinstance(exc, RailvalError):

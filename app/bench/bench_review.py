@@ -23,6 +23,15 @@ import warnings
 
 import numpy as np
 
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs
+analyse = lazy.function("railval.core.review", "analyse")
+fit_rasch = lazy.function("railval.core.review", "fit_rasch")
+krippendorff_alpha_nominal = lazy.function("railval.core.review", "krippendorff_alpha_nominal")
+simulate_workshop = lazy.function("railval.core.review", "simulate_workshop")
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reviewers", type=int, default=50, help="reviewers (default 50)")
@@ -51,7 +60,6 @@ def _best(func, repeat: int) -> tuple[float, float]:
 def run(args: argparse.Namespace) -> dict:
     import krippendorff
 
-    from railval.core.review import analyse, fit_rasch, krippendorff_alpha_nominal, simulate_workshop
 
     rep = max(1, int(args.repeat))
     w = simulate_workshop(int(args.reviewers), int(args.plots), seed=0, strictness_sd=1.5,

@@ -32,7 +32,15 @@ import pkgutil
 import sys
 import traceback
 
+from railval.core import lazy
 from railval.core.errors import RailvalError
+
+#: deferred (railval.core.lazy): ``railval --help`` loads this module alone; the database
+#: services, the roles table and the user check only once a verb is dispatched
+database_message = lazy.function("railval.app.security", "database_message")
+db_service = lazy.module("railval.app.services.database")
+roles = lazy.module("railval.core.roles")
+check_cli = lazy.function("railval.app.services.users", "check_cli")
 
 
 #: every verb → the module of app/cli whose ``register`` adds it; a command line naming a verb
@@ -187,8 +195,6 @@ class Progress:
 
 
 def _database_message(exc: Exception) -> str:
-    from railval.app.security import database_message
-
     return database_message(exc)
 
 
@@ -212,11 +218,8 @@ def authorize(args: argparse.Namespace) -> None:
     import getpass
     import os
 
-    from railval.app.services import database as db_service
-    from railval.core.roles import CLI_ACTIONS
-
     verb = verb_name(args)
-    action = CLI_ACTIONS[verb]
+    action = roles.CLI_ACTIONS[verb]
     who = args.as_user or os.environ.get("RAILVAL_USER")
     db_service.set_default_actor(who or f"cli:{getpass.getuser()}")
     if action is None or getattr(args, "bundle", None):  # a bundle is checked without the database
@@ -225,7 +228,6 @@ def authorize(args: argparse.Namespace) -> None:
     try:
         if database.current_revision() is None or not db_service.has_user_table(database):
             return
-        from railval.app.services.users import check_cli  # the ORM models: once there are users
 
         # while nobody can manage users (e.g. open-mode `workshop import-answers` created
         # panelists), whoever runs the CLI on the database may add the first admin
