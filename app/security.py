@@ -64,6 +64,10 @@ from railval.core.errors import RailvalError
 #: cache (Tornado) and the settings table only when the server runs
 static_cache = lazy.module("railval.app.static_cache")
 setting = lazy.function("railval.db.settings", "setting")
+#: Tornado, Panel and SQLAlchemy: loaded by the server (and a database error) that uses them
+tornado_web = lazy.module("tornado.web")
+panel_fast = lazy.module("panel.theme.fast")
+sa_exc = lazy.module("sqlalchemy.exc")
 
 CSP = ("default-src 'self'; "
        "script-src 'self' 'unsafe-inline' 'unsafe-eval'; "
@@ -153,18 +157,16 @@ class SessionBoundXsrf:
         return forgery_token(secret, "pre", self._rv_presession_id(create=True)).encode("ascii")
 
     def check_xsrf_cookie(self) -> None:
-        from tornado.web import HTTPError
-
         secret = self._rv_secret()
         if secret is None:
             return super().check_xsrf_cookie()  # type: ignore[misc]
         why = foreign_origin(self.request.headers, self.request.host)
         if why:
-            raise HTTPError(403, "XSRF refused: %s", why)
+            raise tornado_web.HTTPError(403, "XSRF refused: %s", why)
         given = (self.get_argument("_xsrf", None) or self.request.headers.get("X-Xsrftoken")
                  or self.request.headers.get("X-Csrftoken"))
         if not given:
-            raise HTTPError(403, "XSRF refused: the anti-forgery token is missing")
+            raise tornado_web.HTTPError(403, "XSRF refused: the anti-forgery token is missing")
         sid = self._rv_session_id()
         expected = [forgery_token(secret, "session", sid)] if sid else []
         if not sid or self.accepts_presession_token:
@@ -173,7 +175,7 @@ class SessionBoundXsrf:
                 expected.append(forgery_token(secret, "pre", pre))
         if not any(hmac.compare_digest(given.encode("utf-8", "replace"), e.encode("ascii"))
                    for e in expected):
-            raise HTTPError(403, "XSRF refused: the anti-forgery token does not belong to "
+            raise tornado_web.HTTPError(403, "XSRF refused: the anti-forgery token does not belong to "
                                  "this session")
 
 
@@ -246,9 +248,8 @@ def use_local_fonts() -> None:
     """Drop the Google Fonts stylesheet from Panel's Fast design (the FastListTemplate's):
     the page then uses the system fonts of ``static/railval.css``. (Panel resolves a design's
     resources by its class name, so a subclass cannot simply leave the font out.)"""
-    from panel.theme.fast import Fast
-
-    Fast._resources = {k: v for k, v in Fast._resources.items() if k != "font"}
+    fast = panel_fast.Fast
+    fast._resources = {k: v for k, v in fast._resources.items() if k != "font"}
 
 
 def session_secret() -> str:
@@ -280,13 +281,10 @@ def plain_message(exc: BaseException, context: str = "") -> str:
     """What the status area shows of an error: railval's own message (it names the input at
     fault), a plain sentence for database errors, else only the error's kind. The full
     error with its traceback goes to the server log (logger ``railval.app``)."""
-    from sqlalchemy.exc import SQLAlchemyError
-
-
     _log.error("%s%s", f"{context}: " if context else "", type(exc).__name__, exc_info=exc)
     if isinstance(exc, RailvalError):
         return str(exc)
-    if isinstance(exc, SQLAlchemyError):
+    if isinstance(exc, sa_exc.SQLAlchemyError):
         return database_message(exc)
     return f"internal error ({type(exc).__name__}); the details are in the server log"
 

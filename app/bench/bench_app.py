@@ -42,6 +42,12 @@ served = lazy.function("railval.app.main", "served")
 connect = lazy.function("railval.db.engine", "connect")
 import_campaign = lazy.function("railval.db.importer", "import_campaign")
 report = lazy.module("railval.app.report")
+#: third-party libraries of the benchmark's own steps, loaded when they run
+hv = lazy.module("holoviews")
+pn = lazy.module("panel")
+mp = lazy.module("multiprocessing")
+bokeh_serialization = lazy.module("bokeh.core.serialization")
+playwright_sync = lazy.module("playwright.sync_api")
 
 CHANNELS = ("Y_w1L", "Q_w1L", "Y_w1R", "Q_w1R", "ay_cb_b1", "az_cb_b1")
 RADII = (0.0, 1200.0, 500.0, 300.0)  # one section per EN 14363 zone
@@ -103,10 +109,6 @@ def _pct(values: list[float], q: float) -> float:
 
 
 def _switching(database, switches: int) -> dict:
-    import holoviews as hv
-    from bokeh.core.serialization import Serializer
-
-
     template = build_app(database)
     app = template.railval_state
     page = template.railval_pages["compare"]
@@ -128,7 +130,7 @@ def _switching(database, switches: int) -> dict:
             # what the server then sends: the new data sources, serialised
             for fig in [*page.view.series, page.view.psd]:
                 for src in fig.sources:
-                    Serializer().encode(src.data)
+                    bokeh_serialization.Serializer().encode(src.data)
             return time.perf_counter() - t0
         if mode == "holoviews":
             series, psd = build_compare_objects(page.state)
@@ -170,12 +172,6 @@ def _spin(stop) -> None:
 
 
 def _first_page(database, loads: int, cpu_load: int = 0) -> dict:
-    import multiprocessing as mp
-
-    import holoviews as hv
-    import panel as pn
-    from playwright.sync_api import sync_playwright
-
     def bare():
         return pn.template.FastListTemplate(
             title="bare", main=[pn.pane.HoloViews(hv.Curve(np.arange(100.0)), sizing_mode="stretch_width")])
@@ -203,7 +199,7 @@ def _first_page(database, loads: int, cpu_load: int = 0) -> dict:
                 f"{label}baseline_bare_template_median_s": statistics.median(bare_first)}
 
     out: dict = {"loads": loads}
-    with sync_playwright() as pw:
+    with playwright_sync.sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=report.find_chromium(),
                                     args=list(report.CHROMIUM_ARGS))
         port = free_port()

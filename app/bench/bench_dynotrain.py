@@ -66,6 +66,8 @@ validate_configuration = lazy.function("railval.app.services.validation", "valid
 source_cache_keys = lazy.function("railval.app.services.validation_rows", "source_cache_keys")
 codec = lazy.module("railval.db.codec")
 evaluate_batch = lazy.function("railval.core.en14363", "evaluate_batch")
+#: third-party libraries of the benchmark's own steps, loaded when they run
+dask_distributed = lazy.module("dask.distributed")
 
 CHANNELS = [f"{k}_{p}" for p in WHEEL_POSITIONS for k in ("Y", "Q")] + [
     f"{k}_cb_{b}" for b in BODY_POSITIONS for k in ("ay", "az")]
@@ -214,10 +216,7 @@ def _dask_run(database, args: argparse.Namespace, pool_results: dict) -> dict:
     """The all-configurations run again on a Dask ``LocalCluster`` of ``--workers`` worker
     processes (``--scheduler`` path, cache emptied first), in the same run as the process
     pool; the results must be equal."""
-    from dask.distributed import LocalCluster
-
-
-    with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+    with dask_distributed.LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
                       dashboard_address=":0") as cluster:
         with database.session(write=True) as session:
             repo.cache_delete(session, prefix="en14363:")

@@ -31,6 +31,9 @@ analyse = lazy.function("railval.core.review", "analyse")
 fit_rasch = lazy.function("railval.core.review", "fit_rasch")
 krippendorff_alpha_nominal = lazy.function("railval.core.review", "krippendorff_alpha_nominal")
 simulate_workshop = lazy.function("railval.core.review", "simulate_workshop")
+#: third-party libraries of the benchmark's own steps, loaded when they run
+krippendorff = lazy.module("krippendorff")
+sm = lazy.module("statsmodels.api")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -58,9 +61,6 @@ def _best(func, repeat: int) -> tuple[float, float]:
 
 
 def run(args: argparse.Namespace) -> dict:
-    import krippendorff
-
-
     rep = max(1, int(args.repeat))
     w = simulate_workshop(int(args.reviewers), int(args.plots), seed=0, strictness_sd=1.5,
                           repeat_share=float(args.repeats), auto_share=float(args.auto), auto_shift=0.5)
@@ -77,8 +77,6 @@ def run(args: argparse.Namespace) -> dict:
     rasch = _best(lambda: fit_rasch(r_idx, p_idx, y, n_reviewers=n_r, n_plots=n_p), rep)
     glm_t = None
     if args.glm:
-        import statsmodels.api as sm
-
         design = np.zeros((y.size, n_p + n_r - 1))
         design[np.arange(y.size), p_idx] = 1.0
         for k in range(n_r - 1):

@@ -30,6 +30,7 @@ import logging
 import os
 import pkgutil
 import sys
+import time
 import traceback
 
 from railval.core import lazy
@@ -40,6 +41,9 @@ from railval.core.errors import RailvalError
 database_message = lazy.function("railval.app.security", "database_message")
 db_service = lazy.module("railval.app.services.database")
 roles = lazy.module("railval.core.roles")
+np = lazy.module("numpy")  # a --json document with numpy values
+getpass = lazy.module("getpass")  # the OS user, once a verb is authorised (not for `list`)
+sa_exc = lazy.module("sqlalchemy.exc")  # a database error turned into its message
 check_cli = lazy.function("railval.app.services.users", "check_cli")
 
 
@@ -148,8 +152,6 @@ def emit_json(document: object) -> None:
 
 
 def _json_default(value: object) -> object:
-    import numpy as np
-
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):
@@ -173,8 +175,6 @@ class Progress:
         self._stage: str | None = None
 
     def __call__(self, stage: str, fraction: float, info: dict | None = None) -> None:
-        import time
-
         info = info or {}
         extra = ""
         if "best" in info:
@@ -215,9 +215,6 @@ def authorize(args: argparse.Namespace) -> None:
     """
     if getattr(args, "authorizes_itself", False):  # `list`: checked in its verb (cmd_list)
         return
-    import getpass
-    import os
-
     verb = verb_name(args)
     action = roles.CLI_ACTIONS[verb]
     who = args.as_user or os.environ.get("RAILVAL_USER")
@@ -271,10 +268,8 @@ def main(argv: list[str] | None = None) -> int:
     except RailvalError as exc:
         error, message, code = exc, str(exc), 2
     except Exception as exc:  # noqa: BLE001 - the one place that turns any error into a message
-        from sqlalchemy.exc import SQLAlchemyError
-
         error = exc
-        if isinstance(exc, SQLAlchemyError):
+        if isinstance(exc, sa_exc.SQLAlchemyError):
             message = _database_message(exc)
         elif isinstance(exc, OSError) and exc.strerror:
             message = f"{exc.strerror}" + (f": {exc.filename}" if exc.filename else "")

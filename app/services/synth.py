@@ -117,7 +117,6 @@ def synth(database: Any, *, name: str = "synth", template: str = "coach", hidden
         if progress:
             progress(stage, frac, info)
 
-
     check_campaign_name(name)  # also no digits only: that reads as another campaign's id
     with database.session() as s:  # before minutes of simulation, not after
         if any(c.name == name for c in repo.list_campaigns(s)):

@@ -22,6 +22,7 @@ spreadsheet_text = lazy.function("railval.db.io.formats", "spreadsheet_text")
 wsdb = lazy.module("railval.db.workshops")
 spreadsheet_safe = lazy.function("railval.db.io.formats", "spreadsheet_safe")
 core_analyse = lazy.function("railval.core.review", "analyse")
+pd = lazy.module("pandas")
 
 CSV_COLUMNS = ("reviewer", "plot", "answer", "seconds", "comment")
 EXPORT_COLUMNS = (*CSV_COLUMNS, "answered_at", "updated_at", "position", "repeat", "scaling",
@@ -158,7 +159,7 @@ def analysis_frames(session, name: str):
 
     w = wsdb.get_workshop(session, name)
     rows = wsdb.answer_rows(session, w)
-    import pandas as pd  # after the look-up: an unknown workshop is answered at once
+    # pandas loads at its first use, after the look-up: an unknown workshop is answered at once
     answers = pd.DataFrame(
         [{"reviewer": r["reviewer"],
           "plot": r["twin"] if r["scaling"] != "fixed" and r["twin"] is not None else r["plot"],
