@@ -55,12 +55,9 @@ from railval.core.diagnosis import where_grid
 from railval.core.en14363 import quantity_trace
 from railval.core.quantities import QUANTITIES
 
-#: deferred (railval.core.lazy): the workshop plot cards (Matplotlib, the workshop
-#: services) only for a report that shows a workshop
+#: deferred (railval.core.lazy): the workshop cards and Bokeh, when a report shows them
 report_section = lazy.function("railval.app.workshop_web.cards", "report_section")
-#: Bokeh's palettes only for a heat-map colour
 bokeh_palettes = lazy.module("bokeh.palettes")
-
 #: points per trace of the report's line charts
 SVG_POINTS = 1200
 
@@ -142,9 +139,9 @@ def diverging_color(value: float, limit: float = 2.0) -> str:
     """Cell colour of a signed value on the fixed scale ±``limit`` (ColorBrewer RdBu, 11
     classes, from Bokeh's palettes): red above zero, blue below, white near zero; the app's
     heat maps use the same scale."""
-    palette = bokeh_palettes.RdBu11  # dark blue … white … dark red
     if not math.isfinite(value):
         return "#ffffff"
+    palette = bokeh_palettes.RdBu11  # dark blue … white … dark red
     i = round((min(max(value / limit, -1.0), 1.0) + 1.0) / 2.0 * (len(palette) - 1))
     return palette[i]
 
