@@ -60,8 +60,8 @@ from urllib.parse import urlsplit
 from railval.core import lazy
 from railval.core.errors import RailvalError
 
-#: deferred (railval.core.lazy): ``railval --help`` reaches this module; the static-file
-#: cache (Tornado) and the settings table only when the server runs
+#: deferred (railval.core.lazy): the CLI's database messages use this module; the
+#: static-file cache (Tornado, ~130 more modules) and the settings only when the server runs
 static_cache = lazy.module("railval.app.static_cache")
 setting = lazy.function("railval.db.settings", "setting")
 #: Tornado, Panel and SQLAlchemy: loaded by the server (and a database error) that uses them

@@ -59,7 +59,8 @@ from railval.core.errors import RailvalError
 from railval.db import audit, integrity, repo
 from railval.db import signoff as db_signoff
 
-#: deferred (railval.core.lazy): the sign-off service imports this module (a cycle)
+#: deferred (railval.core.lazy): the sign-off service only for the checks that recompute
+#: sign-offs
 svc = lazy.module("railval.app.services.signoff")
 manifest_differences = lazy.function("railval.app.services.signoff", "manifest_differences")
 

@@ -16,8 +16,9 @@ from railval.core.calibration import max_evaluations
 from railval.core.calibration_local import local_max_evaluations
 from railval.core.errors import InvalidParameter
 
-#: deferred (railval.core.lazy): the diagnosis service imports this module (a cycle);
-#: the stored runs only for a plan that reads the newest diagnosis
+#: deferred (railval.core.lazy): the diagnosis service and the stored runs (the ORM models;
+#: 170–450 more modules) only for a plan that reads the newest diagnosis (app/views.py
+#: imports this module for two texts)
 runs = lazy.module("railval.db.runs")
 latest_diagnosis = lazy.function("railval.app.services.diagnosis", "latest_diagnosis")
 

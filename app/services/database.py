@@ -13,8 +13,8 @@ from sqlalchemy import inspect
 from railval.core import lazy
 from railval.db import engine
 
-#: deferred (railval.core.lazy): backup and restore only for those verbs (``railval
-#: --help`` and every verb load this module)
+#: deferred (railval.core.lazy): backup and restore (the ORM models) only for those verbs;
+#: every verb that opens a database loads this module
 write_backup = lazy.function("railval.db.backup", "backup")
 read_backup = lazy.function("railval.db.backup", "restore")
 

@@ -49,9 +49,9 @@ from railval.db import audit, integrity, repo, trust, users
 from railval.db import signoff as db_signoff
 from railval.db.models import Signoff
 
-#: deferred (railval.core.lazy): validation (numba, scipy), diagnosis, sign-in and the
-#: workshop tables only for the requests that reach them; validation and sessions import
-#: this module's neighbours (a cycle)
+#: deferred (railval.core.lazy): validation, diagnosis and the view model (numba, scipy:
+#: up to ~890 more modules), sign-in and the workshop tables only for the requests that
+#: reach them, not for `railval signoff list`
 validate_configuration = lazy.function("railval.app.services.validation", "validate_configuration")
 sessions = lazy.module("railval.app.services.sessions")
 calibration_provenance = lazy.function("railval.app.services.validation", "calibration_provenance")

@@ -28,8 +28,8 @@ from railval.core.sim.synth import SynthCampaign, build_campaign, parse_hidden
 from railval.core.types import CHANNEL_KINDS, split_channel
 from railval.core.workers import process_alive
 
-#: deferred (railval.core.lazy): the importer, the table writer and the ORM models only for
-#: the synthetic campaign's import (``railval --help`` lists ``synth`` through this module)
+#: deferred (railval.core.lazy): the importer, the table writer and the ORM models (about
+#: 190 more modules) only for the synthetic campaign's import
 write_table = lazy.function("railval.db.io", "write_table")
 import_campaign = lazy.function("railval.db.importer", "import_campaign")
 repo = lazy.module("railval.db.repo")

@@ -17,7 +17,8 @@ from railval.core.errors import RailvalError
 from railval.core.roles import Principal, open_principal, require
 from railval.db import audit, users
 
-#: deferred (railval.core.lazy): the sign-in service imports this module (a cycle)
+#: deferred (railval.core.lazy): the sign-in service (92 more modules) only for the calls
+#: that reach it, not for `railval user list`
 sessions = lazy.module("railval.app.services.sessions")
 
 

@@ -17,7 +17,7 @@ from railval.core.errors import InvalidParameter
 from railval.core.roles import Principal, require
 
 #: deferred (railval.core.lazy): the spreadsheet formats, the workshop tables and the
-#: review statistics (scipy, statsmodels) only for the export and the analysis
+#: review statistics only for the export and the analysis
 spreadsheet_text = lazy.function("railval.db.io.formats", "spreadsheet_text")
 wsdb = lazy.module("railval.db.workshops")
 spreadsheet_safe = lazy.function("railval.db.io.formats", "spreadsheet_safe")
