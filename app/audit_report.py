@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from railval.app.report import CSS, _esc, html_to_pdf, signoff_rows_html, write_html_or_pdf
+from railval.app.services.audit import key_info, verify_database
 from railval.app.services.overview import audit_and_signoffs
 
 
@@ -36,7 +37,6 @@ class AuditReport:
 
 def build_audit_report(database) -> AuditReport:
     """Build the report from the database (chain checked quickly, sign-off statuses)."""
-    from railval.app.services.audit import key_info, verify_database
 
     check = verify_database(database, signals=False, full=False)
     chain_findings = [f for f in check.findings

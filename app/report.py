@@ -49,11 +49,15 @@ from railval.app.scales import (
 from railval.app.services import overview as overview_service
 from railval.app.svg_charts import svg_bars, svg_lines
 from railval.app.views import ValidationView, view_of
+from railval.core import lazy
 from railval.core.coverage import Coverage
 from railval.core.diagnosis import where_grid
 from railval.core.en14363 import quantity_trace
 from railval.core.quantities import QUANTITIES
 
+#: deferred (railval.core.lazy): the workshop cards and Bokeh, when a report shows them
+report_section = lazy.function("railval.app.workshop_web.cards", "report_section")
+bokeh_palettes = lazy.module("bokeh.palettes")
 #: points per trace of the report's line charts
 SVG_POINTS = 1200
 
@@ -135,12 +139,11 @@ def diverging_color(value: float, limit: float = 2.0) -> str:
     """Cell colour of a signed value on the fixed scale ±``limit`` (ColorBrewer RdBu, 11
     classes, from Bokeh's palettes): red above zero, blue below, white near zero; the app's
     heat maps use the same scale."""
-    from bokeh.palettes import RdBu11  # dark blue … white … dark red
-
     if not math.isfinite(value):
         return "#ffffff"
-    i = round((min(max(value / limit, -1.0), 1.0) + 1.0) / 2.0 * (len(RdBu11) - 1))
-    return RdBu11[i]
+    palette = bokeh_palettes.RdBu11  # dark blue … white … dark red
+    i = round((min(max(value / limit, -1.0), 1.0) + 1.0) / 2.0 * (len(palette) - 1))
+    return palette[i]
 
 
 def where_table(grid: Any, limit: float = 2.0) -> str:
@@ -289,8 +292,6 @@ def build_report(backend: Any, campaign: str, config: str, worst_cases: int = 3,
         h.extend(_worst_case_plots(backend, campaign, config, inputs.result, inputs.overview,
                                    worst_cases))
     if cards:
-        from railval.app.workshop_web.cards import report_section
-
         h.append(report_section(cards))
     if inputs.signoffs is not None:  # independent sign-offs of this configuration, with their status
         h.append("<h2>Sign-offs</h2><p class='note'>Each sign-off is bound to the SHA-256 of its "

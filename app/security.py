@@ -50,12 +50,24 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import html as _html
 import logging
 import os
 import re
 import secrets
 from urllib.parse import urlsplit
-import html as _html
+
+from railval.core import lazy
+from railval.core.errors import RailvalError
+
+#: deferred (railval.core.lazy): the CLI's database messages use this module; the
+#: static-file cache (Tornado, ~130 more modules) and the settings only when the server runs
+static_cache = lazy.module("railval.app.static_cache")
+setting = lazy.function("railval.db.settings", "setting")
+#: Tornado, Panel and SQLAlchemy: loaded by the server (and a database error) that uses them
+tornado_web = lazy.module("tornado.web")
+panel_fast = lazy.module("panel.theme.fast")
+sa_exc = lazy.module("sqlalchemy.exc")
 
 CSP = ("default-src 'self'; "
        "script-src 'self' 'unsafe-inline' 'unsafe-eval'; "
@@ -145,18 +157,16 @@ class SessionBoundXsrf:
         return forgery_token(secret, "pre", self._rv_presession_id(create=True)).encode("ascii")
 
     def check_xsrf_cookie(self) -> None:
-        from tornado.web import HTTPError
-
         secret = self._rv_secret()
         if secret is None:
             return super().check_xsrf_cookie()  # type: ignore[misc]
         why = foreign_origin(self.request.headers, self.request.host)
         if why:
-            raise HTTPError(403, "XSRF refused: %s", why)
+            raise tornado_web.HTTPError(403, "XSRF refused: %s", why)
         given = (self.get_argument("_xsrf", None) or self.request.headers.get("X-Xsrftoken")
                  or self.request.headers.get("X-Csrftoken"))
         if not given:
-            raise HTTPError(403, "XSRF refused: the anti-forgery token is missing")
+            raise tornado_web.HTTPError(403, "XSRF refused: the anti-forgery token is missing")
         sid = self._rv_session_id()
         expected = [forgery_token(secret, "session", sid)] if sid else []
         if not sid or self.accepts_presession_token:
@@ -165,7 +175,7 @@ class SessionBoundXsrf:
                 expected.append(forgery_token(secret, "pre", pre))
         if not any(hmac.compare_digest(given.encode("utf-8", "replace"), e.encode("ascii"))
                    for e in expected):
-            raise HTTPError(403, "XSRF refused: the anti-forgery token does not belong to "
+            raise tornado_web.HTTPError(403, "XSRF refused: the anti-forgery token does not belong to "
                                  "this session")
 
 
@@ -231,25 +241,21 @@ def transforms() -> list:
     """The server's output transforms: autoload.js refused, Tornado's gzip (static files
     compressed once per process, :class:`railval.app.static_cache.CachedGZip`), then the
     security headers."""
-    from railval.app.static_cache import CachedGZip
-
-    return [NoAutoload, CachedGZip, SecurityHeaders]
+    return [NoAutoload, static_cache.CachedGZip, SecurityHeaders]
 
 
 def use_local_fonts() -> None:
     """Drop the Google Fonts stylesheet from Panel's Fast design (the FastListTemplate's):
     the page then uses the system fonts of ``static/railval.css``. (Panel resolves a design's
     resources by its class name, so a subclass cannot simply leave the font out.)"""
-    from panel.theme.fast import Fast
-
-    Fast._resources = {k: v for k, v in Fast._resources.items() if k != "font"}
+    fast = panel_fast.Fast
+    fast._resources = {k: v for k, v in fast._resources.items() if k != "font"}
 
 
 def session_secret() -> str:
     """Secret for signing Bokeh session ids: ``$BOKEH_SECRET_KEY`` (or the file
     ``$BOKEH_SECRET_KEY_FILE``), ``$RAILVAL_SESSION_SECRET`` or a random one for this server
     process. Several app processes behind one proxy need the same one."""
-    from railval.db.settings import setting
 
     return (setting("BOKEH_SECRET_KEY") or os.environ.get("RAILVAL_SESSION_SECRET")
             or secrets.token_urlsafe(32))
@@ -275,14 +281,10 @@ def plain_message(exc: BaseException, context: str = "") -> str:
     """What the status area shows of an error: railval's own message (it names the input at
     fault), a plain sentence for database errors, else only the error's kind. The full
     error with its traceback goes to the server log (logger ``railval.app``)."""
-    from sqlalchemy.exc import SQLAlchemyError
-
-    from railval.core.errors import RailvalError
-
     _log.error("%s%s", f"{context}: " if context else "", type(exc).__name__, exc_info=exc)
     if isinstance(exc, RailvalError):
         return str(exc)
-    if isinstance(exc, SQLAlchemyError):
+    if isinstance(exc, sa_exc.SQLAlchemyError):
         return database_message(exc)
     return f"internal error ({type(exc).__name__}); the details are in the server log"
 

@@ -39,7 +39,7 @@ from railval.core.integrity import (
     signoff_record_hash,
 )
 from railval.db import integrity, trust
-from railval.db.models import AuditEvent, AuditHead
+from railval.db.models import AuditEvent, AuditHead, Signoff
 
 __all__ = ["GENESIS", "actor_of", "head", "iter_rows", "record", "row_dict", "utc_stamp"]
 
@@ -234,8 +234,6 @@ def seal(session: Session, actor: Any, reason: str = "") -> AuditEvent:
     """Append a signed ``audit.seal`` row: it signs the head over every earlier row (those
     written before signing was enabled included) and is kept in the witness file. Its
     detail names the record hash of every unsigned sign-off, binding their decisions too."""
-    from railval.db.models import Signoff
-
     unsigned = int(session.scalar(select(func.count()).select_from(AuditEvent)
                                   .where(AuditEvent.signature.is_(None))) or 0)
     legacy = {str(so.id): signoff_record_hash({k: getattr(so, k) for k in SIGNOFF_RECORD_FIELDS})

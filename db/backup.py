@@ -48,6 +48,8 @@ from sqlalchemy.engine import make_url
 
 from railval.core.errors import RailvalError
 from railval.db import audit, integrity, trust
+from railval.db.models import Signal
+from railval.db.settings import setting
 
 FORMAT = "railval-backup/1"
 MANIFEST = "backup.json"
@@ -97,8 +99,6 @@ def _run(cmd: list[str], env: dict[str, str]) -> None:
 
 
 def _facts(database) -> dict[str, Any]:
-    from railval.db.models import Signal
-
     with database.session() as s:
         seq, row_hash = audit.head(s)
         signals = s.scalar(select(func.count()).select_from(Signal))
@@ -240,8 +240,6 @@ def read_manifest(folder: str | Path) -> dict[str, Any]:
 
 def _install_secret(database, secret: bytes) -> str:
     """Make ``secret`` the seal secret of ``database``; returns where it lives."""
-    from railval.db.settings import setting
-
     current = setting("RAILVAL_SECRET_KEY")
     if current is not None:
         if current.encode() != secret:

@@ -24,7 +24,17 @@ from railval.core.names import check_name
 from railval.core.types import SectionInfo
 from railval.core.zones import zone_for_radius
 from railval.db import audit
-from railval.db.models import AuditEvent, Campaign, Channel, Configuration, Recording, Section, Signal, Vehicle
+from railval.db.models import (
+    AuditEvent,
+    Base,
+    Campaign,
+    Channel,
+    Configuration,
+    Recording,
+    Section,
+    Signal,
+    Vehicle,
+)
 
 
 # -- references --------------------------------------------------------------------------
@@ -297,8 +307,6 @@ def count_signals(session: Session, campaign: CampaignArg) -> int:
 
 def row_counts(session: Session) -> dict[str, int]:
     """Number of rows per table (used by tests and ``railval list``)."""
-    from railval.db.models import Base
-
     return {
         name: int(session.scalar(select(func.count()).select_from(table)) or 0)
         for name, table in sorted(Base.metadata.tables.items())

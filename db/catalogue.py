@@ -29,6 +29,7 @@ from urllib.parse import urlsplit, urlunsplit
 
 from railval.core.roles import CLI_ACTIONS, Principal, allowed
 from railval.core.zones import zone_for_radius
+from railval.db.settings import setting
 
 _VERSIONS = Path(__file__).with_name("migrations") / "versions"
 _REV = re.compile(r"^(down_revision|revision)\b[^=]*=\s*(?:['\"]([^'\"]*)['\"]|None)", re.MULTILINE)
@@ -182,8 +183,6 @@ def resolve_url(url: str | None) -> str:
     SQLAlchemy: argument, else ``$RAILVAL_DB``, else ``sqlite:///railval.db``; PostgreSQL
     URLs get the psycopg driver and ``$RAILVAL_DB_PASSWORD`` when they hold no password."""
     from urllib.parse import quote
-
-    from railval.db.settings import setting
 
     url = url or setting("RAILVAL_DB") or "sqlite:///railval.db"
     if url.startswith(("postgresql://", "postgres://")):

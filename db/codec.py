@@ -56,8 +56,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from railval.core import lazy
 from railval.core.buffers import BufferPool
 from railval.core.errors import InvalidSignal
+
+#: deferred (railval.core.lazy): the worker-thread helpers only for a read of many blobs
+split_rows = lazy.function("railval.core.workers", "split_rows")
+thread_count = lazy.function("railval.core.workers", "thread_count")
 
 MAGIC = b"RVA1"
 CODEC_RAW = 0
@@ -318,8 +323,6 @@ def decode_many(items: Sequence[tuple[bytes, str | None]]) -> list[np.ndarray]:
                 out[i] = _decode_cached(items[i][0], items[i][1], out[i], heads[i])
             except InvalidSignal as exc:
                 failed.append((i, str(exc)))
-
-    from railval.core.workers import split_rows, thread_count
 
     threads = min(thread_count(), n // MIN_BLOBS_PER_THREAD)
     if threads <= 1 or threading.current_thread().name.startswith("railval-rows"):

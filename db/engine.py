@@ -40,7 +40,17 @@ from sqlalchemy.exc import DBAPIError
 from sqlalchemy.orm import Session, sessionmaker
 from sqlalchemy.pool import StaticPool
 
+from railval.core import lazy
 from railval.core.errors import RailvalError
+from railval.db.settings import setting
+
+#: deferred (railval.core.lazy): the ORM models (and the audit trail, which imports them)
+#: load with a PostgreSQL engine or a legacy trail's sealing, not with every connection (the
+#: fast path of ``railval list`` reads the catalogue without them); the migration scripts'
+#: head (read by the catalogue module) only when a revision is compared
+audit = lazy.module("railval.db.audit")
+declare_postgresql_options = lazy.function("railval.db.models", "declare_postgresql_options")
+scripts_head = lazy.function("railval.db.catalogue", "head_revision")
 
 DEFAULT_URL = "sqlite:///railval.db"
 MIGRATIONS = Path(__file__).with_name("migrations")
@@ -88,8 +98,6 @@ def resolve_url(url: str | None = None) -> str:
     """Argument, else ``$RAILVAL_DB`` (or its ``_FILE``), else :data:`DEFAULT_URL`; normalises
     PostgreSQL URLs and adds ``$RAILVAL_DB_PASSWORD`` (or its ``_FILE``) to a URL without
     password (:mod:`railval.db.settings`)."""
-    from railval.db.settings import setting
-
     url = url or setting("RAILVAL_DB") or DEFAULT_URL
     if url.startswith(("postgresql://", "postgres://")):
         url = "postgresql+psycopg://" + url.split("://", 1)[1]
@@ -224,8 +232,6 @@ class Database:
         """The newest migration revision, read from the scripts without importing Alembic
         (:func:`railval.db.catalogue.head_revision`; Alembic's ScriptDirectory when the
         scripts do not form one linear head)."""
-        from railval.db.catalogue import head_revision as scripts_head
-
         head = scripts_head()
         if head is None:
             from alembic.script import ScriptDirectory
@@ -266,8 +272,6 @@ class Database:
         in a signed ``audit.seal`` row that the earlier rows and sign-offs were written
         unsigned, binding them as found (docs/audit.md); without it they would read as edited
         outside railval."""
-        from railval.db import audit
-
         with self.session(actor="railval upgrade", write=True) as s:
             audit.seal(s, "railval upgrade", f"rows written before signing existed (revision "
                                              f"{before}), sealed at the upgrade")
@@ -333,8 +337,6 @@ def connect(url: str | None = None, *, echo: bool = False) -> Database:
         event.listen(engine, "connect", _sqlite_pragmas)
         event.listen(engine, "begin", _sqlite_begin)
     elif parsed.get_backend_name() == "postgresql":
-        from railval.db.models import declare_postgresql_options
-
         declare_postgresql_options()
         engine = create_engine(url, echo=echo, pool_pre_ping=True)
         event.listen(engine, "begin", _postgresql_begin)

@@ -34,7 +34,7 @@ from railval.core.errors import CampaignFormatError, InvalidParameter
 from railval.core.names import NAME_PATTERN, name_problem
 from railval.core.types import BODY_POSITIONS, CHANNEL_KINDS, WHEEL_POSITIONS
 from railval.core.zones import zone_for_radius
-from railval.db import audit, codec, integrity
+from railval.db import audit, codec, integrity, repo
 from railval.db.campaigns import check_campaign_name
 from railval.db.checks import (
     RecordingProblem,
@@ -598,8 +598,6 @@ def validate_configuration_folder(session: Session, campaign: str, folder: str |
     """Check a configuration's files against the stored campaign ``campaign`` (its channels,
     units, sections, the measured channels of each section, Q0) with the checks of a campaign
     import. Writes nothing."""
-    from railval.db import repo
-
     folder = Path(folder)
     camp = repo.get_campaign(session, campaign)
     m = camp.manifest

@@ -51,7 +51,13 @@ from pathlib import Path
 
 from sqlalchemy.engine import make_url
 
+from railval.core import lazy
 from railval.core.errors import RailvalError
+from railval.db.settings import setting
+
+#: deferred (railval.core.lazy): the signing key's fingerprint needs the cryptography
+#: package, which only a signing or a key check loads
+key_fingerprint = lazy.function("railval.core.integrity", "key_fingerprint")
 
 MAC_BYTES = 32
 MIN_SECRET_CHARS = 32
@@ -91,8 +97,6 @@ def secret_path(url: str) -> Path | None:
 
 def secret_for(url: str) -> bytes:
     """The server secret for database ``url`` (see the module docstring)."""
-    from railval.db.settings import setting
-
     env = setting("RAILVAL_SECRET_KEY")
     if env is not None:
         if len(env) < MIN_SECRET_CHARS:
@@ -290,8 +294,6 @@ FORGET_HOOKS: list = []
 def signer_for(url: str) -> tuple:
     """(private key, its fingerprint) for database ``url``, cached per URL and key
     settings (the per-row cost of signing is then the signature alone)."""
-    from railval.core.integrity import key_fingerprint
-
     ck = (url, os.environ.get("RAILVAL_SIGNING_KEY_FILE"), os.environ.get("XDG_CONFIG_HOME"))
     got = _signers.get(ck)
     if got is None:
@@ -331,8 +333,6 @@ def current_public_key(url: str):
 
 def secret_exists(url: str) -> bool:
     """Is the seal secret of ``url`` at hand without creating it?"""
-    from railval.db.settings import setting
-
     if setting("RAILVAL_SECRET_KEY") is not None:
         return True
     path = secret_path(url)

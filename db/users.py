@@ -32,9 +32,17 @@ from sqlalchemy import delete, func, or_, select, update
 from sqlalchemy.orm import Session, selectinload
 
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
-from railval.core.roles import ROLES, Principal, check_roles, require
+from railval.core.roles import ROLES, PermissionDenied, Principal, check_roles, require
 from railval.db import audit
-from railval.db.models import AppSession, AppUser, Invitation, UserRole, utcnow
+from railval.db.models import (
+    AppSession,
+    AppUser,
+    AuditEvent,
+    Invitation,
+    UserRole,
+    Workshop,
+    utcnow,
+)
 
 __all__ = [
     "InvitationRefused",
@@ -321,8 +329,6 @@ def require_live(session: Session, actor: Any, action: str) -> None:
         return
     now = live_principal(session, user_id)
     if now is None:
-        from railval.core.errors import PermissionDenied
-
         raise PermissionDenied(f"user {actor.username!r} no longer exists")
     require(now, action)
 
@@ -350,8 +356,6 @@ def verify_password(session: Session, username: str, password: str) -> AppUser |
 def password_changed_at(session: Session, username: str) -> float:
     """POSIX time of the user's last password change or disabling (0 if never): sessions
     issued before it end (:mod:`railval.app.auth`)."""
-    from railval.db.models import AuditEvent
-
     last = session.scalar(select(func.max(AuditEvent.at_utc)).where(
         AuditEvent.object == f"user:{username}",
         AuditEvent.action.in_(("user.password", "user.disable"))))
@@ -553,8 +557,6 @@ def check_invitation(session: Session, token: str) -> Invitation:
 def _workshop_id(session: Session, name: str) -> int | None:
     """The id of the workshop ``name`` (``None`` when there is none); :mod:`railval.db.workshops`
     imports this module, so the row is read here directly."""
-    from railval.db.models import Workshop
-
     return session.scalar(select(Workshop.id).where(Workshop.name == name))
 
 

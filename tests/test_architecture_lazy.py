@@ -7,6 +7,9 @@ planted violation. ``railval --help`` and a verb still load only what they use
 
 The one function-body import left is the optional demo seed (``cmd_app.seed_demo``), which
 answers an ``ImportError`` with a sentence.
+
+Over all of app/ (issue 42), in-function imports stay under a ceiling that only comes down, and
+every file that still holds some is listed in :data:`REMAINING` with its number and reason.
 """
 
 from __future__ import annotations
@@ -75,11 +78,48 @@ def test_the_rule_finds_a_planted_body_import(tmp_path):
 
 
 # -- in-function imports in app/ (issue 42): a ceiling that only comes down -----------------
-#: in-function ``import`` statements in app/ (every module, railval or not). 357 before the
-#: imports of modules already loaded by their importer (or light standard-library modules)
-#: moved to the modules' tops; the rest defer a heavy library, break an import cycle or
-#: keep a page/service out of start-up. Lower it when you move more; never raise it.
-FUNCTION_IMPORT_CEILING = 317
+#: in-function ``import`` statements in app/ (every module, railval or not). 357 at first; 317
+#: after the imports of modules already loaded by their importer moved to the tops; 177 after
+#: app/bench, app/cli, app/services and app/*.py bound the rest at their tops (a plain import
+#: where the module is loaded with its importer or light, else ``railval.core.lazy``).
+#: Lower it when you move more; never raise it.
+FUNCTION_IMPORT_CEILING = 177
+
+_OTHER_ROUND = "its owner's branch this round; the same rule applies when it moves"
+#: every file that still imports in a function body: file → (statements, why). The sum is the
+#: ceiling; a file not listed here, or holding more than its number, fails
+#: :func:`test_every_remaining_function_import_is_listed_with_its_reason`.
+REMAINING: dict[str, tuple[int, str]] = {
+    "app/cli/cmd_app.py": (1, "seed_demo: the optional demo seed, `except ImportError` (ALLOWED)"),
+    # files another helper owns in this round (issue 42 leaves them to the merge)
+    "app/auth.py": (3, _OTHER_ROUND),
+    "app/main.py": (11, _OTHER_ROUND),
+    "app/bench/bench_diagnose.py": (11, _OTHER_ROUND),
+    "app/bench/bench_team.py": (16, _OTHER_ROUND),
+    "app/bench/bench_workshop.py": (26, _OTHER_ROUND),
+    "app/pages/_common.py": (1, _OTHER_ROUND),
+    "app/pages/audit.py": (2, _OTHER_ROUND),
+    "app/pages/dashboard.py": (2, _OTHER_ROUND),
+    "app/pages/importer.py": (2, _OTHER_ROUND),
+    "app/pages/signoff.py": (4, _OTHER_ROUND),
+    "app/services/batch.py": (2, _OTHER_ROUND + " (Dask, only with a scheduler)"),
+    "app/services/diagnosis_measurement.py": (8, _OTHER_ROUND),
+    "app/services/diagnosis_ranking.py": (17, _OTHER_ROUND),
+    "app/services/sessions.py": (1, _OTHER_ROUND),
+    "app/services/workshop_cards.py": (8, _OTHER_ROUND),
+    "app/services/workshop_glyphs.py": (2, _OTHER_ROUND + " (Matplotlib's Agg and FreeType)"),
+    "app/services/workshop_render.py": (4, _OTHER_ROUND + " (Matplotlib in the render workers)"),
+    "app/services/workshops.py": (11, _OTHER_ROUND),
+    "app/state/jobs.py": (1, _OTHER_ROUND),
+    "app/state/report.py": (2, _OTHER_ROUND),
+    # the workshop's web handlers: not in this round's list (app/bench, app/cli, app/services,
+    # app/*.py, db/)
+    "app/workshop_web/analysis.py": (8, "workshop web pages, a later round"),
+    "app/workshop_web/cards.py": (1, "workshop web pages, a later round"),
+    "app/workshop_web/common.py": (9, "workshop web pages, a later round"),
+    "app/workshop_web/organiser.py": (16, "workshop web pages, a later round"),
+    "app/workshop_web/reviewer.py": (8, "workshop web pages, a later round"),
+}
 
 
 def function_imports(root: Path = ROOT) -> list[str]:
@@ -96,6 +136,24 @@ def function_imports(root: Path = ROOT) -> list[str]:
                         seen.add(id(node))  # a nested function's import counted once
                         out.append(f"{rel}:{node.lineno} {ast.unparse(node)}")
     return out
+
+
+def beyond_remaining(root: Path = ROOT, remaining: dict = REMAINING) -> dict[str, tuple[int, int]]:
+    """file → (in-function imports found, number listed) of every file holding more than
+    :data:`REMAINING` lists for it."""
+    per_file: dict[str, int] = {}
+    for x in function_imports(root):
+        per_file[x.split(":", 1)[0]] = per_file.get(x.split(":", 1)[0], 0) + 1
+    return {f: (n, remaining.get(f, (0, ""))[0]) for f, n in per_file.items()
+            if n > remaining.get(f, (0, ""))[0]}
+
+
+def test_every_remaining_function_import_is_listed_with_its_reason():
+    assert beyond_remaining() == {}, (
+        "in-function imports beyond REMAINING (file: found, listed): move them to the module's "
+        "top or bind them with railval.core.lazy")
+    assert sum(n for n, _ in REMAINING.values()) == FUNCTION_IMPORT_CEILING
+    assert all(why for _, why in REMAINING.values())
 
 
 def test_function_imports_in_app_stay_under_the_ceiling():
@@ -126,3 +184,8 @@ def test_the_function_import_count_sees_a_planted_import(tmp_path):
     assert function_imports(tmp_path) == ["app/services/planted.py:5 import os",
                                           "app/services/planted.py:8 from railval.db import repo",
                                           "app/services/planted.py:14 import numpy as np"]
+    # a file not in REMAINING, and a listed file holding one more than its number
+    assert beyond_remaining(tmp_path) == {"app/services/planted.py": (3, 0)}
+    assert beyond_remaining(tmp_path, {"app/services/planted.py": (2, "why")}) == {
+        "app/services/planted.py": (3, 2)}
+    assert beyond_remaining(tmp_path, {"app/services/planted.py": (3, "why")}) == {}

@@ -29,6 +29,26 @@ from pathlib import Path
 
 import numpy as np
 
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs
+write_table = lazy.function("railval.db.io", "write_table")
+plots = lazy.module("railval.app.plots")
+build_app = lazy.function("railval.app.main", "build_app")
+build_compare_objects = lazy.function("railval.app.pages.compare", "build_compare_objects")
+free_port = lazy.function("railval.app.main", "free_port")
+served = lazy.function("railval.app.main", "served")
+connect = lazy.function("railval.db.engine", "connect")
+import_campaign = lazy.function("railval.db.importer", "import_campaign")
+report = lazy.module("railval.app.report")
+#: third-party libraries of the benchmark's own steps, loaded when they run
+hv = lazy.module("holoviews")
+pn = lazy.module("panel")
+mp = lazy.module("multiprocessing")
+bokeh_serialization = lazy.module("bokeh.core.serialization")
+playwright_sync = lazy.module("playwright.sync_api")
+
 CHANNELS = ("Y_w1L", "Q_w1L", "Y_w1R", "Q_w1R", "ay_cb_b1", "az_cb_b1")
 RADII = (0.0, 1200.0, 500.0, 300.0)  # one section per EN 14363 zone
 
@@ -45,7 +65,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def write_campaign(folder: Path, seconds: float, fs: float) -> None:
     """A minimal valid campaign folder: 4 sections, measured + 2 configurations."""
-    from railval.db.io import write_table
 
     rng = np.random.default_rng(7)
     n = round(seconds * fs)
@@ -90,13 +109,6 @@ def _pct(values: list[float], q: float) -> float:
 
 
 def _switching(database, switches: int) -> dict:
-    import holoviews as hv
-    from bokeh.core.serialization import Serializer
-
-    from railval.app import plots
-    from railval.app.main import build_app
-    from railval.app.pages.compare import build_compare_objects
-
     template = build_app(database)
     app = template.railval_state
     page = template.railval_pages["compare"]
@@ -118,7 +130,7 @@ def _switching(database, switches: int) -> dict:
             # what the server then sends: the new data sources, serialised
             for fig in [*page.view.series, page.view.psd]:
                 for src in fig.sources:
-                    Serializer().encode(src.data)
+                    bokeh_serialization.Serializer().encode(src.data)
             return time.perf_counter() - t0
         if mode == "holoviews":
             series, psd = build_compare_objects(page.state)
@@ -160,15 +172,6 @@ def _spin(stop) -> None:
 
 
 def _first_page(database, loads: int, cpu_load: int = 0) -> dict:
-    import multiprocessing as mp
-
-    import holoviews as hv
-    import panel as pn
-    from playwright.sync_api import sync_playwright
-
-    from railval.app.main import free_port, served
-    from railval.app.report import CHROMIUM_ARGS, find_chromium
-
     def bare():
         return pn.template.FastListTemplate(
             title="bare", main=[pn.pane.HoloViews(hv.Curve(np.arange(100.0)), sizing_mode="stretch_width")])
@@ -196,8 +199,9 @@ def _first_page(database, loads: int, cpu_load: int = 0) -> dict:
                 f"{label}baseline_bare_template_median_s": statistics.median(bare_first)}
 
     out: dict = {"loads": loads}
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=find_chromium(), args=list(CHROMIUM_ARGS))
+    with playwright_sync.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=report.find_chromium(),
+                                    args=list(report.CHROMIUM_ARGS))
         port = free_port()
         server = pn.serve({"bare": bare}, port=port, address="127.0.0.1", threaded=True, show=False)
         try:
@@ -228,9 +232,6 @@ def _first_page(database, loads: int, cpu_load: int = 0) -> dict:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from railval.db.engine import connect
-    from railval.db.importer import import_campaign
-
     with tempfile.TemporaryDirectory(prefix="railval-bench-app-") as tmp:
         root = Path(tmp)
         write_campaign(root / "campaign", args.seconds, args.fs)
@@ -239,12 +240,10 @@ def run(args: argparse.Namespace) -> dict:
         import_campaign(database, root / "campaign")
         out = {"compare_switch": _switching(database, args.switches)}
         if not args.no_browser:
-            from railval.app.report import ReportError, find_chromium
-
             try:
-                find_chromium()
+                report.find_chromium()
                 out["first_page"] = _first_page(database, args.loads, args.cpu_load)
-            except ReportError as exc:
+            except report.ReportError as exc:
                 out["first_page"] = {"skipped": str(exc)}
         database.dispose()
     return out

@@ -15,11 +15,19 @@ method on a quiet 2-core machine.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import tempfile
 import time
 from pathlib import Path
-import json
+
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs
+calibrate = lazy.function("railval.app.services.calibration", "calibrate")
+synth = lazy.function("railval.app.services.synth", "synth")
+connect = lazy.function("railval.db.engine", "connect")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,10 +38,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from railval.app.services.calibration import calibrate
-    from railval.app.services.synth import synth
-    from railval.db.engine import connect
-
     effect = getattr(args, "effect", "friction_damping")
     param = getattr(args, "param", None)
     workers = getattr(args, "workers", 2)

@@ -55,14 +55,24 @@ right top, confidently wrong.
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
-import json
-import sys
 
 from railval.app.bench.trust_profiles import profile_cases
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs
+calibrate = lazy.function("railval.app.services.calibration", "calibrate")
+diagnose = lazy.function("railval.app.services.diagnosis", "diagnose")
+write_folder = lazy.function("railval.app.services.synth", "write_folder")
+build_campaign = lazy.function("railval.core.sim.synth", "build_campaign")
+import_campaign = lazy.function("railval.db.importer", "import_campaign")
+connect = lazy.function("railval.db.engine", "connect")
 
 #: the truth-only contact of class (e): flange contact stiffness ÷4, Kalker creep coefficients at
 #: the lower end of their range (a different wheel–rail contact than the candidates' model)
@@ -273,11 +283,6 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
              candidates: list[str] | None = None, n_sections: int = 12) -> dict:
     """Synthesise, import and diagnose one case; return its record. ``candidates``: restrict
     the diagnosis (effect ids and ``model.PARAM``; the CI subset uses a few)."""
-    from railval.app.services.calibration import calibrate
-    from railval.app.services.diagnosis import diagnose
-    from railval.app.services.synth import write_folder
-    from railval.core.sim.synth import build_campaign
-    from railval.db.importer import import_campaign
 
     kw = {"seed": 3, "hidden": {}, **kwargs}
     t0 = time.perf_counter()
@@ -431,8 +436,6 @@ def format_table(records: list[dict], summary: dict) -> str:
 
 
 def run(args: argparse.Namespace, progress=None) -> dict:
-    from railval.db.engine import connect
-
     n = max(1, min(int(getattr(args, "cases", 10)), 10))
     classes = list(getattr(args, "classes", ["a", "b", "c", "d"]))
     records = []

@@ -51,8 +51,23 @@ from pathlib import Path
 
 import numpy as np
 
-from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SignalSet
-from railval.core.types import SectionInfo
+from railval.core import lazy
+from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs
+repo = lazy.module("railval.db.repo")
+connect = lazy.function("railval.db.engine", "connect")
+import_campaign = lazy.function("railval.db.importer", "import_campaign")
+write_table = lazy.function("railval.db.io", "write_table")
+validate_configurations = lazy.function("railval.app.services.validation", "validate_configurations")
+collect = lazy.function("railval.core.stages", "collect")
+validate_configuration = lazy.function("railval.app.services.validation", "validate_configuration")
+source_cache_keys = lazy.function("railval.app.services.validation_rows", "source_cache_keys")
+codec = lazy.module("railval.db.codec")
+evaluate_batch = lazy.function("railval.core.en14363", "evaluate_batch")
+#: third-party libraries of the benchmark's own steps, loaded when they run
+dask_distributed = lazy.module("dask.distributed")
 
 CHANNELS = [f"{k}_{p}" for p in WHEEL_POSITIONS for k in ("Y", "Q")] + [
     f"{k}_cb_{b}" for b in BODY_POSITIONS for k in ("ay", "az")]
@@ -116,10 +131,6 @@ def _config_sets(rng, n_sections, n, fs, gain) -> dict[str, SignalSet]:
 
 def build(data: Path, n_configs: int, n_sections: int, n: int, fs: float) -> dict:
     """Build (or reuse) the benchmark database; returns the build record."""
-    from railval.db import repo
-    from railval.db.engine import connect
-    from railval.db.importer import import_campaign
-    from railval.db.io import write_table
 
     spec = {"configs": n_configs, "sections": n_sections, "samples": n, "fs": fs,
             "channels": len(CHANNELS), "seed": 0}
@@ -205,12 +216,7 @@ def _dask_run(database, args: argparse.Namespace, pool_results: dict) -> dict:
     """The all-configurations run again on a Dask ``LocalCluster`` of ``--workers`` worker
     processes (``--scheduler`` path, cache emptied first), in the same run as the process
     pool; the results must be equal."""
-    from dask.distributed import LocalCluster
-
-    from railval.app.services.validation import validate_configurations
-    from railval.db import repo
-
-    with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
+    with dask_distributed.LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,
                       dashboard_address=":0") as cluster:
         with database.session(write=True) as session:
             repo.cache_delete(session, prefix="en14363:")
@@ -226,9 +232,6 @@ def _dask_run(database, args: argparse.Namespace, pool_results: dict) -> dict:
 
 def _all_configurations(database, args: argparse.Namespace) -> dict:
     """Every configuration validated with an empty result cache (``all``)."""
-    from railval.app.services.validation import validate_configurations
-    from railval.core.stages import collect
-    from railval.db import repo
 
     with database.session(write=True) as session:
         repo.cache_delete(session, prefix="en14363:")
@@ -281,10 +284,6 @@ def _time_new(database, sets: dict, order: int | None) -> tuple:
     the process's verified-array cache emptied (:data:`railval.db.codec.VERIFIED`), so the
     figure never profits from an earlier run. Returns (elapsed s, split, result, load
     average, CPU s)."""
-    from railval.app.services.validation import validate_configuration
-    from railval.app.services.validation_rows import source_cache_keys
-    from railval.core.stages import collect
-    from railval.db import codec, repo
 
     if order is None:
         with database.session(write=True) as session:
@@ -313,7 +312,6 @@ def _new_configuration(database, args: argparse.Namespace, repeat: int) -> dict:
     """``new_config``: one new configuration, measured side cached / nothing cached."""
     # warm this process (compiled filter kernel loaded from numba's cache, imports), as in a
     # running app server; the all-configurations run above used the worker processes
-    from railval.core.en14363 import evaluate_batch
 
     warm = _config_sets(np.random.default_rng(1), 1, 4000, args.fs, 1.0)["S01"]
     evaluate_batch([warm], [SectionInfo("W", 0, 0, 90, 1, 50.0, 150.0)])
@@ -348,8 +346,6 @@ def _new_configuration(database, args: argparse.Namespace, repeat: int) -> dict:
 
 def run(args: argparse.Namespace) -> dict:
     """The benchmark: build or reuse the data, then the figures of the module docstring."""
-    from railval.app.services.validation import validate_configuration
-    from railval.db.engine import connect
 
     data = Path(args.data)
     record = build(data, args.configs, args.sections, args.samples, args.fs)

@@ -32,18 +32,22 @@ the result written once) and how far the measured filter stage is from each.
 from __future__ import annotations
 
 import argparse
-import time
 import os
+import time
 
+import numba
 import numpy as np
 import scipy.integrate
 import scipy.signal
-import numba
 
+from railval.core import filters, lazy
 from railval.core.en14363 import evaluate_batch
 from railval.core.filters import design
 from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
-from railval.core import filters
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs
+thread_count = lazy.function("railval.core.workers", "thread_count")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -170,8 +174,6 @@ def _best(fn, repeat: int, clock=time.perf_counter) -> tuple[float, object]:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from railval.core.workers import thread_count
-
     sets, infos = make_sections(args.sections, args.samples, args.fs)
     evaluate_batch(sets[:1], infos[:1], order=args.order)  # compile / warm the caches
     load = [os.getloadavg()[0]]

@@ -24,6 +24,17 @@ from pathlib import Path
 
 import numpy as np
 
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs
+write_table = lazy.function("railval.db.io", "write_table")
+codec = lazy.module("railval.db.codec")
+repo = lazy.module("railval.db.repo")
+connect = lazy.function("railval.db.engine", "connect")
+import_campaign = lazy.function("railval.db.importer", "import_campaign")
+validate_campaign_folder = lazy.function("railval.db.importer", "validate_campaign_folder")
+
 CHANNELS = [f"{k}_{p}" for p in ("w1L", "w1R", "w2L", "w2R") for k in ("Y", "Q")] + [
     f"{k}_{p}" for p in ("b1", "b2") for k in ("ay_cb", "az_cb")]
 
@@ -43,7 +54,6 @@ def _smooth_noise(rng: np.random.Generator, n: int, width: int = 8) -> np.ndarra
 
 def write_campaign(folder: Path, sections: int, seconds: float, fs: float, fmt: str) -> None:
     """A minimal valid campaign (straight sections, measured data only)."""
-    from railval.db.io import write_table
 
     rng = np.random.default_rng(0)
     n = int(seconds * fs)
@@ -72,10 +82,6 @@ def write_campaign(folder: Path, sections: int, seconds: float, fs: float, fmt: 
 
 
 def run(args: argparse.Namespace) -> dict:
-    from railval.db import codec, repo
-    from railval.db.engine import connect
-    from railval.db.importer import import_campaign, validate_campaign_folder
-
     with tempfile.TemporaryDirectory(prefix="railval-bench-io-") as tmp:
         root = Path(tmp)
         folder = root / "campaign"

@@ -23,6 +23,18 @@ import warnings
 
 import numpy as np
 
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs
+analyse = lazy.function("railval.core.review", "analyse")
+fit_rasch = lazy.function("railval.core.review", "fit_rasch")
+krippendorff_alpha_nominal = lazy.function("railval.core.review", "krippendorff_alpha_nominal")
+simulate_workshop = lazy.function("railval.core.review", "simulate_workshop")
+#: third-party libraries of the benchmark's own steps, loaded when they run
+krippendorff = lazy.module("krippendorff")
+sm = lazy.module("statsmodels.api")
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reviewers", type=int, default=50, help="reviewers (default 50)")
@@ -49,10 +61,6 @@ def _best(func, repeat: int) -> tuple[float, float]:
 
 
 def run(args: argparse.Namespace) -> dict:
-    import krippendorff
-
-    from railval.core.review import analyse, fit_rasch, krippendorff_alpha_nominal, simulate_workshop
-
     rep = max(1, int(args.repeat))
     w = simulate_workshop(int(args.reviewers), int(args.plots), seed=0, strictness_sd=1.5,
                           repeat_share=float(args.repeats), auto_share=float(args.auto), auto_shift=0.5)
@@ -69,8 +77,6 @@ def run(args: argparse.Namespace) -> dict:
     rasch = _best(lambda: fit_rasch(r_idx, p_idx, y, n_reviewers=n_r, n_plots=n_p), rep)
     glm_t = None
     if args.glm:
-        import statsmodels.api as sm
-
         design = np.zeros((y.size, n_p + n_r - 1))
         design[np.arange(y.size), p_idx] = 1.0
         for k in range(n_r - 1):

@@ -22,6 +22,14 @@ import tempfile
 import time
 from pathlib import Path
 
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs
+VehicleModel = lazy.function("railval.core.sim", "VehicleModel")
+simulate_campaign = lazy.function("railval.core.sim", "simulate_campaign")
+sim_synth = lazy.module("railval.core.sim.synth")
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=2, help="processes for the campaign run")
@@ -33,9 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _all_effects() -> dict:
-    from railval.core.sim.synth import HIDDEN_DEFAULTS
-
-    return {k: dict(v) for k, v in HIDDEN_DEFAULTS.items()}
+    return {k: dict(v) for k, v in sim_synth.HIDDEN_DEFAULTS.items()}
 
 
 #: timing code run by the current and the reference interpreter alike (public API only)
@@ -89,16 +95,13 @@ def _reference_package(commit: str, tmp: Path) -> str:
 
 
 def run(args: argparse.Namespace | None = None) -> dict:
-    from railval.core.sim import VehicleModel, simulate_campaign
-    from railval.core.sim.synth import build_campaign, parse_hidden
-
     workers = getattr(args, "workers", 2)
     n_sections = getattr(args, "sections", 12)
     repeat = getattr(args, "repeat", 3)
     ref_commit = getattr(args, "reference_commit", None)
     rounds = getattr(args, "rounds", 2)
     veh = VehicleModel("coach")
-    sc = build_campaign(hidden=parse_hidden(["friction_damping"]), seed=11, n_sections=n_sections)
+    sc = sim_synth.build_campaign(hidden=sim_synth.parse_hidden(["friction_damping"]), seed=11, n_sections=n_sections)
     tracks = [s.track for s in sc.sections]
     curve = next(t for t in tracks if t.is_curve and t.speed_kmh < 120)
     straight = next(t for t in tracks if not t.is_curve and t.speed_kmh >= 180)

@@ -13,7 +13,9 @@ the median are reported. Per command:
 * ``to_verb_s``: from the spawn to the call of the verb's own function, after the permission
   check (which opens the database through SQLAlchemy);
 * ``heavy``: which of the heavy libraries (scipy.signal, scipy.stats, pandas, numba, the
-  plotting libraries, Alembic, statsmodels, SQLAlchemy's ORM models) the command imported.
+  plotting libraries, Alembic, statsmodels, SQLAlchemy's ORM models) the command imported;
+* ``modules``: how many modules the process had loaded at its exit (the probe's own included:
+  compare counts of one version against another, not against other probes).
 
 Baselines timed in the same rounds: ``python -c pass`` (the interpreter with this
 environment's site packages), ``import sqlalchemy.orm and railval.db.models`` (the floor of a
@@ -101,7 +103,8 @@ except SystemExit as exc:
     code = exc.code
 sys.stdout.flush()
 heavy = [m for m in %r if m in sys.modules]
-sys.stderr.write("\\nSTARTUP " + json.dumps({"code": code, "marks": marks, "heavy": heavy}) + "\\n")
+sys.stderr.write("\\nSTARTUP " + json.dumps({"code": code, "marks": marks, "heavy": heavy,
+                                            "modules": len(sys.modules)}) + "\\n")
 """ % (HEAVY,)
 
 
@@ -157,6 +160,7 @@ def _summary(times: list[tuple[float, float]], reports: list[dict]) -> dict:
             out[f"to_{mark}_s"] = round(min(at), 3) if at else "n/a (help printed)"
         out["exit"] = reports[-1]["code"]
         out["heavy"] = ", ".join(reports[-1]["heavy"]) or "none"
+        out["modules"] = reports[-1].get("modules")
     return out
 
 

@@ -28,6 +28,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Self
 
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): the app module (Panel, Bokeh) runs in the served processes,
+#: not in the one that starts them
+app_main = lazy.module("railval.app.main")
+
 REPO = Path(__file__).resolve().parents[2]
 TEMPLATE = REPO / "deploy" / "nginx" / "railval.conf.template"
 _VAR = re.compile(r"\$\{(RAILVAL_[A-Z0-9_]+)\}")
@@ -89,11 +95,9 @@ class Topology:
         return f"https://127.0.0.1:{self.port}"
 
     def _env(self) -> dict[str, str]:
-        from railval.app.main import SERVE_ENV
-
         env = {k: v for k, v in os.environ.items()
                if not k.startswith(("RAILVAL_", "BOKEH_SECRET", "PYTHONMALLOC"))}
-        env.update(SERVE_ENV if self.app_env is None else self.app_env)
+        env.update(app_main.SERVE_ENV if self.app_env is None else self.app_env)
         env.update(RAILVAL_DB=self.db_url, PYTHONUNBUFFERED="1")
         for name in ("RAILVAL_SECRET_KEY", "RAILVAL_COOKIE_SECRET", "BOKEH_SECRET_KEY"):
             env[f"{name}_FILE"] = str(self.workdir / "secrets" / name.lower())

@@ -30,9 +30,21 @@ import logging
 import os
 import pkgutil
 import sys
+import time
 import traceback
 
+from railval.core import lazy
 from railval.core.errors import RailvalError
+
+#: deferred (railval.core.lazy): ``railval --help`` loads this module alone; the database
+#: services, the roles table and the user check only once a verb is dispatched
+database_message = lazy.function("railval.app.security", "database_message")
+db_service = lazy.module("railval.app.services.database")
+roles = lazy.module("railval.core.roles")
+np = lazy.module("numpy")  # a --json document with numpy values
+getpass = lazy.module("getpass")  # the OS user, once a verb is authorised (not for `list`)
+sa_exc = lazy.module("sqlalchemy.exc")  # a database error turned into its message
+check_cli = lazy.function("railval.app.services.users", "check_cli")
 
 
 #: every verb → the module of app/cli whose ``register`` adds it; a command line naming a verb
@@ -140,8 +152,6 @@ def emit_json(document: object) -> None:
 
 
 def _json_default(value: object) -> object:
-    import numpy as np
-
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):
@@ -165,8 +175,6 @@ class Progress:
         self._stage: str | None = None
 
     def __call__(self, stage: str, fraction: float, info: dict | None = None) -> None:
-        import time
-
         info = info or {}
         extra = ""
         if "best" in info:
@@ -187,8 +195,6 @@ class Progress:
 
 
 def _database_message(exc: Exception) -> str:
-    from railval.app.security import database_message
-
     return database_message(exc)
 
 
@@ -209,14 +215,8 @@ def authorize(args: argparse.Namespace) -> None:
     """
     if getattr(args, "authorizes_itself", False):  # `list`: checked in its verb (cmd_list)
         return
-    import getpass
-    import os
-
-    from railval.app.services import database as db_service
-    from railval.core.roles import CLI_ACTIONS
-
     verb = verb_name(args)
-    action = CLI_ACTIONS[verb]
+    action = roles.CLI_ACTIONS[verb]
     who = args.as_user or os.environ.get("RAILVAL_USER")
     db_service.set_default_actor(who or f"cli:{getpass.getuser()}")
     if action is None or getattr(args, "bundle", None):  # a bundle is checked without the database
@@ -225,7 +225,6 @@ def authorize(args: argparse.Namespace) -> None:
     try:
         if database.current_revision() is None or not db_service.has_user_table(database):
             return
-        from railval.app.services.users import check_cli  # the ORM models: once there are users
 
         # while nobody can manage users (e.g. open-mode `workshop import-answers` created
         # panelists), whoever runs the CLI on the database may add the first admin
@@ -269,10 +268,8 @@ def main(argv: list[str] | None = None) -> int:
     except RailvalError as exc:
         error, message, code = exc, str(exc), 2
     except Exception as exc:  # noqa: BLE001 - the one place that turns any error into a message
-        from sqlalchemy.exc import SQLAlchemyError
-
         error = exc
-        if isinstance(exc, SQLAlchemyError):
+        if isinstance(exc, sa_exc.SQLAlchemyError):
             message = _database_message(exc)
         elif isinstance(exc, OSError) and exc.strerror:
             message = f"{exc.strerror}" + (f": {exc.filename}" if exc.filename else "")

@@ -54,9 +54,15 @@ from railval.app.services.audit_trust import (
     rotate_key,
     trusted_keys,
 )
+from railval.core import lazy
 from railval.core.errors import RailvalError
 from railval.db import audit, integrity, repo
 from railval.db import signoff as db_signoff
+
+#: deferred (railval.core.lazy): the sign-off service only for the checks that recompute
+#: sign-offs
+svc = lazy.module("railval.app.services.signoff")
+manifest_differences = lazy.function("railval.app.services.signoff", "manifest_differences")
 
 __all__ = ["BUNDLE_FORMAT", "export_bundle", "key_info", "newest", "read_checkpoint",
            "rotate_key", "seal", "trail", "trusted_keys", "verify_bundle", "verify_database",
@@ -129,7 +135,6 @@ def verify_database(database, checkpoint: dict[str, Any] | None = None, *,
 def _check_evidence(s, report: VerifyReport, rows, ring, *, signals: bool, full: bool,
                     seals: bool) -> None:
     """Signal blobs and seals, and every sign-off (record, audit row, evidence)."""
-    from railval.app.services import signoff as svc
 
     broken: set[tuple[str, str | None, str, str]] = set()
     doc = repo.verify_storage(s, blobs=signals, seals=seals)
@@ -171,7 +176,6 @@ def _check_evidence(s, report: VerifyReport, rows, ring, *, signals: bool, full:
 
 def export_bundle(database, folder: str | Path) -> dict[str, Any]:
     """Write the offline bundle into ``folder`` (created; must be empty if it exists)."""
-    from railval.app.services import signoff as svc
 
     out = Path(folder)
     if out.exists() and any(out.iterdir()):
@@ -224,7 +228,6 @@ def verify_bundle(folder: str | Path, checkpoint: dict[str, Any] | None = None, 
     the fingerprints; without them the bundle's ``key.json`` is trusted and a note says to
     compare its fingerprint. Older keys are trusted only through the trail's countersigned
     ``key.rotate`` rows."""
-    from railval.app.services.signoff import manifest_differences
 
     t0 = time.perf_counter()
     root = Path(folder)

@@ -32,10 +32,20 @@ from railval.app.services.audit_checks import (
     known_public_keys,
     witness_signed_from,
 )
+from railval.core import lazy
 from railval.core.errors import RailvalError
-from railval.core.integrity import key_fingerprint, public_key_from_hex, public_key_hex
+from railval.core.integrity import (
+    key_fingerprint,
+    public_key_from_hex,
+    public_key_hex,
+    rotation_message,
+    sign,
+)
 from railval.db import audit, integrity, trust
-from railval.core.integrity import rotation_message, sign
+
+#: deferred (railval.core.lazy): the key classes only for a key rotation
+serialization = lazy.module("cryptography.hazmat.primitives.serialization")
+ed25519 = lazy.module("cryptography.hazmat.primitives.asymmetric.ed25519")
 
 
 def _parse_public_keys(public_key: str) -> dict[str, Any]:
@@ -265,14 +275,11 @@ def key_info(database) -> dict[str, Any]:
 def rotate_key(database, actor: str, reason: str = "") -> dict[str, Any]:
     """Replace the signing key: a ``key.rotate`` row signed by the current (trusted) key and
     countersigned by the new one; then the new key file and its pin (docs/audit.md)."""
-    from cryptography.hazmat.primitives import serialization
-    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
-
     path = integrity.signing_key_path(database.url)
     if path is None:
         raise RailvalError("an in-memory database has no key file to rotate")
     old = integrity.signing_key(database.url)
-    new = Ed25519PrivateKey.generate()
+    new = ed25519.Ed25519PrivateKey.generate()
     ofp, nfp = key_fingerprint(old.public_key()), key_fingerprint(new.public_key())
     staged = Path(f"{path}.new")
     try:

@@ -8,14 +8,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
-from dataclasses import replace
 
 import numpy as np
 
 from railval.app.services.batch import BatchExecutor
-from railval.app.services.calibration_plan import calibration_simulations, diagnosis_flags, diagnosis_start
+from railval.app.services.calibration_plan import (
+    calibration_simulations,
+    diagnosis_flags,
+    diagnosis_start,
+)
 from railval.app.services.campaign_context import (
     CampaignContext,
     Progress,
@@ -30,6 +33,7 @@ from railval.app.services.campaign_context import (
     simulate_context,
     validate_values,
 )
+from railval.app.services.diagnosis_ranking import parameter_plan, plausible_range, template_param
 from railval.core.calibration import (
     COACH_MODAL_DEFAULTS,
     COACH_MODAL_PARAMETERS,
@@ -40,12 +44,11 @@ from railval.core.calibration import (
 )
 from railval.core.calibration import calibrate as fit_parameters
 from railval.core.calibration_local import calibrate_local
+from railval.core.diagnosis import plausibility_flags, zone_folds
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.sim.effects import EFFECTS, unmet_requirement
 from railval.core.validation import normalised_errors, validate
 from railval.db import repo
-from railval.core.diagnosis import zone_folds
-from railval.core.diagnosis import plausibility_flags
 
 
 class _Objective:
@@ -339,7 +342,6 @@ def _calibration_flags(ctx: CampaignContext, specs: Sequence[ParameterSpec], val
                        vr_full: Any, vr_held: Any) -> tuple[bool, list[str]]:
     """Plausibility of the fitted values (plausible range from the parameter registry, or at a
     search bound) and the in-sample / held-out caveats of the verdict."""
-    from railval.app.services.diagnosis_ranking import plausible_range, template_param
 
     registry = EFFECTS
     template = str(ctx.vehicle.get("template") or "coach")
@@ -403,7 +405,6 @@ def _parent_flags(vr_parent: Any, vr_parent_held: Any, vr_held: Any) -> list[str
 def _model_spec(name: str, ctx: CampaignContext, conf_params: Mapping[str, float]) -> ParameterSpec:
     """Search box of a template parameter: the diagnosis's box for its parameter candidates
     (log scale), else the modal box ([ref 3]) or ±30 %."""
-    from railval.app.services.diagnosis_ranking import parameter_plan
 
     plan = {p["parameter"]: p for p in parameter_plan(ctx, conf_params)}
     if name in plan:

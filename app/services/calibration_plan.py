@@ -11,9 +11,16 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from railval.core import lazy
 from railval.core.calibration import max_evaluations
 from railval.core.calibration_local import local_max_evaluations
 from railval.core.errors import InvalidParameter
+
+#: deferred (railval.core.lazy): the diagnosis service and the stored runs (the ORM models;
+#: 170–450 more modules) only for a plan that reads the newest diagnosis (app/views.py
+#: imports this module for two texts)
+runs = lazy.module("railval.db.runs")
+latest_diagnosis = lazy.function("railval.app.services.diagnosis", "latest_diagnosis")
 
 
 def calibration_simulations(n_parameters: int, method: str = "local", *, popsize: int = 5, maxiter: int = 5,
@@ -40,7 +47,6 @@ def diagnosis_start(session: Any, conf: Any, candidates: Sequence[str],
     ``model.NAME`` candidate's fitted value; docs/diagnosis.md "Calibration"). Returns the
     start values and where they came from: ``{"given": [...], "diagnoses": [{"candidate",
     "diagnosis" (stored run id), "created_at", "values"}], "defaults": [...]}``."""
-    from railval.db import runs
 
     out = {k: dict(v) for k, v in given.items()}
     source: dict[str, Any] = {"given": [], "diagnoses": [], "defaults": []}
@@ -107,7 +113,6 @@ def diagnosis_flags(session: Any, camp: Any, conf: Any,
     ``candidates`` (effect ids or ``model.NAME``): no flag when its verdict is ``cause`` for one
     of them; a flag when it answered ``none`` or ``uncertain`` or named another cause; a note
     when the parent was never diagnosed (docs/diagnosis.md "Calibration")."""
-    from railval.app.services.diagnosis import latest_diagnosis
 
     campaign, config = camp.name, conf.name
     diag = latest_diagnosis(session, campaign, config)

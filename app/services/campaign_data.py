@@ -12,7 +12,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from railval.core import lazy
 from railval.db import repo
+
+#: deferred (railval.core.lazy): the importer and exporter (readers, pandas) only for
+#: an import or export
+import_campaign = lazy.function("railval.db.importer", "import_campaign")
+import_configuration = lazy.function("railval.db.importer", "import_configuration")
+export_campaign = lazy.function("railval.db.exporter", "export_campaign")
 
 Progress = Callable[[int, int, str], None]
 
@@ -20,7 +27,6 @@ Progress = Callable[[int, int, str], None]
 def import_folder(database, folder: str | Path, *, progress: Progress | None = None) -> str:
     """Validate the campaign folder completely, then store it in one unit of work
     (:func:`railval.db.importer.import_campaign`); returns the campaign name."""
-    from railval.db.importer import import_campaign
 
     return import_campaign(database, folder, progress=progress)
 
@@ -29,14 +35,12 @@ def import_configuration_folder(database, campaign: str, folder: str | Path, *,
                                 progress: Progress | None = None) -> str:
     """Add a configuration's simulated files to the stored ``campaign``
     (:func:`railval.db.importer.import_configuration`); returns the configuration name."""
-    from railval.db.importer import import_configuration
 
     return import_configuration(database, campaign, folder, progress=progress)
 
 
 def export(database, campaign: str, folder: str | Path, *, fmt: str = "parquet") -> Path:
     """Write a stored campaign as a re-importable campaign folder; returns its manifest."""
-    from railval.db.exporter import export_campaign
 
     with database.session() as s:
         return export_campaign(s, campaign, folder, fmt=fmt)

@@ -11,11 +11,17 @@ from __future__ import annotations
 
 from typing import Any
 
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): the fast path of ``railval list`` answers from the
+#: catalogue table without the ORM models; the repository only when it must fall back
+catalogue = lazy.module("railval.db.catalogue")
+repo = lazy.module("railval.db.repo")
+
 
 def fast(db_url: str | None, who: str | None) -> tuple[list[dict[str, Any]] | None, str]:
     """(the catalogue or None when the ordinary path must answer, the URL with its password
     hidden) for the database named by ``db_url`` (else ``$RAILVAL_DB``)."""
-    from railval.db import catalogue
 
     url = catalogue.resolve_url(db_url)
     return catalogue.read_catalogue(url, who), catalogue.safe_url(url)
@@ -23,7 +29,6 @@ def fast(db_url: str | None, who: str | None) -> tuple[list[dict[str, Any]] | No
 
 def summaries(database) -> list[dict[str, Any]]:
     """The ordinary path: every campaign's summary through the ORM, ordered by name."""
-    from railval.db import repo
 
     with database.session() as s:
         return [repo.campaign_summary(s, c.id) for c in repo.list_campaigns(s)]

@@ -7,9 +7,16 @@ The CLI's verbs and ``railval serve`` call these instead of :mod:`railval.db.eng
 from __future__ import annotations
 
 from typing import Any
+
 from sqlalchemy import inspect
 
+from railval.core import lazy
 from railval.db import engine
+
+#: deferred (railval.core.lazy): backup and restore (the ORM models) only for those verbs;
+#: every verb that opens a database loads this module
+write_backup = lazy.function("railval.db.backup", "backup")
+read_backup = lazy.function("railval.db.backup", "restore")
 
 
 def open_database(url: str | None, *, upgrade: bool | None = False):
@@ -50,7 +57,6 @@ def has_user_table(database) -> bool:
 
 def backup(url: str | None, folder: str) -> dict[str, Any]:
     """Back the database at ``url`` up into ``folder`` (:func:`railval.db.backup.backup`)."""
-    from railval.db.backup import backup as write_backup
 
     database = engine.connect(url)
     try:
@@ -62,7 +68,6 @@ def backup(url: str | None, folder: str) -> dict[str, Any]:
 def restore(url: str | None, folder: str) -> dict[str, Any]:
     """Restore the backup in ``folder`` into the empty database at ``url``
     (:func:`railval.db.backup.restore`)."""
-    from railval.db.backup import restore as read_backup
 
     database = engine.connect(url)
     try:

@@ -21,12 +21,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from railval.app.services.stored_runs import data_inputs, digests, run_info
 from railval.core.errors import InvalidParameter, NotFound
 from railval.core.metrics import compare_signalsets, cut_evaluated, metric_names
 from railval.core.metrics.compare import DEFAULT_LOWPASS_HZ
 from railval.core.metrics.sync import DEFAULT_MAX_LAG_S
 from railval.core.types import CHANNEL_KINDS, SectionInfo, split_channel
-from railval.db import repo
+from railval.db import repo, runs
 
 PARTS = ("section", "evaluated")
 
@@ -87,9 +88,6 @@ def metrics_for_configuration(session: Any, campaign: repo.CampaignArg, config: 
     ``df.attrs["run"]`` describes the stored run (:func:`railval.app.services.stored_runs.run_info`).
     Campaign and configuration are resolved once here (:func:`railval.db.repo.resolve`).
     """
-    from railval.app.services.stored_runs import data_inputs, digests, run_info
-    from railval.db import runs
-
     if part not in PARTS:
         raise InvalidParameter(f"part must be one of {PARTS}, got {part!r}")
     campaign, _ = repo.resolve(session, campaign)
@@ -130,9 +128,6 @@ def stored_metrics(session: Any, campaign: repo.CampaignArg, config: repo.Config
                    subsample: bool = False) -> pd.DataFrame | None:
     """The stored metrics of exactly these inputs (as :func:`metrics_for_configuration`
     would return them), or None when they were never computed: nothing is computed."""
-    from railval.app.services.stored_runs import data_inputs, digests, run_info
-    from railval.db import runs
-
     campaign, config = repo.resolve(session, campaign, config)
     conf = repo.get_configuration(session, campaign, config)
     settings = _run_settings(sections, channels, lowpass_hz, max_lag_s, families, part, subsample)
@@ -149,9 +144,6 @@ def stored_metrics(session: Any, campaign: repo.CampaignArg, config: repo.Config
 def metrics_runs(session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg) -> list[dict[str, Any]]:
     """Stored metrics runs of ``config``, newest first (:func:`run_info` plus the rows);
     ``current`` is false when the signals or sections it read changed since."""
-    from railval.app.services.stored_runs import data_inputs, digests, run_info
-    from railval.db import runs
-
     campaign, config = repo.resolve(session, campaign, config)
     conf = repo.get_configuration(session, campaign, config)
     data_sha: dict[str, str] = {}

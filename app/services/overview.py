@@ -23,6 +23,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from railval.core import lazy
 from railval.core.coverage import (
     MIN_POSITIONS,
     MIN_SECTIONS,
@@ -31,7 +32,15 @@ from railval.core.coverage import (
 )
 from railval.core.errors import NotFound
 from railval.core.types import ZONES, SectionInfo
-from railval.db import repo
+from railval.db import audit, repo
+
+#: services and modules only some requests reach, loaded at their first use (validation and
+#: metrics bring numba, scipy and pandas; the sign-offs only the sign-off and audit views read)
+signoff_service = lazy.module("railval.app.services.signoff")
+validation_service = lazy.module("railval.app.services.validation")
+metrics_service = lazy.module("railval.app.services.metrics")
+db_signoff = lazy.module("railval.db.signoff")
+db_engine = lazy.module("railval.db.engine")
 
 if TYPE_CHECKING:  # the verdict's module loads numba: imported by the validation itself
     from railval.core.validation import ValidationResult
@@ -81,17 +90,22 @@ def campaign_names(database) -> list[str]:
         return [c.name for c in repo.list_campaigns(s)]
 
 
+def _configurations(session, campaign: repo.CampaignArg) -> list[ConfigInfo]:
+    confs = list(repo.list_configurations(session, campaign))
+    names = {c.id: c.name for c in confs}
+    return [ConfigInfo(name=c.name, parent=names.get(c.parent_id),
+                       effects=dict(c.effects or {}), description=c.description or "")
+            for c in confs]
+
+
 def configurations(database, campaign: str) -> list[ConfigInfo]:
     with database.read_session() as s:
-        confs = list(repo.list_configurations(s, campaign))
-        names = {c.id: c.name for c in confs}
-        return [ConfigInfo(name=c.name, parent=names.get(c.parent_id),
-                           effects=dict(c.effects or {}), description=c.description or "")
-                for c in confs]
+        return _configurations(s, repo.campaign_ref(s, campaign))
 
 
 def overview(database, campaign: str) -> CampaignOverview:
-    """Sections, vehicle, channels and configurations of a campaign."""
+    """Sections, vehicle, channels and configurations of a campaign, in one unit of work that
+    looks the campaign up once."""
     with database.read_session() as s:
         camp = repo.get_campaign(s, campaign)
         sections = list(repo.section_infos(s, camp))
@@ -99,8 +113,9 @@ def overview(database, campaign: str) -> CampaignOverview:
         chans = [{"name": ch.name, "kind": ch.kind, "position": ch.position, "unit": ch.unit}
                  for ch in repo.channels(s, camp)]
         name, desc = camp.name, camp.description or ""
+        confs = _configurations(s, camp)
     return CampaignOverview(name=name, description=desc, vehicle=vehicle, sections=sections,
-                            channels=chans, configurations=configurations(database, campaign))
+                            channels=chans, configurations=confs)
 
 
 #: a shared entry (:func:`shared`) is recomputed after this long even when the stamp is unchanged
@@ -147,8 +162,8 @@ def signals(database, campaign: str, config: str | None, section: str,
             channels: list[str] | None = None):
     """One section's SignalSet of the measurement (``config`` None) or a configuration."""
     with database.read_session() as s:
-        camp = repo.get_campaign(s, campaign)
-        sets = repo.load_signalsets(s, camp, config=config, sections=[section], channels=channels)
+        camp, conf = repo.resolve(s, campaign, config)
+        sets = repo.load_signalsets(s, camp, config=conf, sections=[section], channels=channels)
     if section not in sets:
         raise NotFound(f"section {section!r} has no recording for "
                        f"{'the measurement' if config is None else 'configuration ' + repr(config)}")
@@ -158,74 +173,65 @@ def signals(database, campaign: str, config: str | None, section: str,
 def hashes(database, campaign: str, config: str | None) -> dict[str, dict[str, str]]:
     """section → channel → SHA-256 of the stored samples (no blob read)."""
     with database.read_session() as s:
-        return repo.signal_hashes(s, campaign, config)
+        camp, conf = repo.resolve(s, campaign, config)
+        return repo.signal_hashes(s, camp, conf)
 
 
 def lineage(database, campaign: str, config: str) -> list[str]:
     """Names from the root configuration down to ``config``."""
     with database.read_session() as s:
-        camp = repo.get_campaign(s, campaign)
-        return [c.name for c in repo.lineage(s, camp, config)]
+        camp, conf = repo.resolve(s, campaign, config)
+        return [c.name for c in repo.lineage(s, camp, conf)]
 
 
 def require_sealed(database, campaign: str, config: str) -> None:
     """Every blob of the measurement and of ``config`` against its hash and seal
     (:func:`railval.db.repo.require_sealed`); raises on the first mismatch."""
     with database.read_session() as s:
-        repo.require_sealed(s, campaign, config, blobs=True)
+        camp, conf = repo.resolve(s, campaign, config)
+        repo.require_sealed(s, camp, conf, blobs=True)
 
 
 def signoff_items(database, campaign: str | None = None, config: str | None = None
                   ) -> list[tuple[dict[str, Any], Any]]:
     """The sign-offs (of one campaign/configuration, or all) as ``(record dict,
     SignoffStatus)``."""
-    from railval.app.services.signoff import statuses
-    from railval.db import signoff as db_signoff
-
     with database.write_session(deferred=True) as s:  # may fill the result cache
-        return [(db_signoff.as_dict(so), st) for so, st in statuses(s, campaign, config)]
+        return [(db_signoff.as_dict(so), st)
+                for so, st in signoff_service.statuses(s, campaign, config)]
 
 
 def audit_and_signoffs(database) -> tuple[list[tuple[dict[str, Any], Any]], list[Any]]:
     """Every sign-off with its status and every audit row, read in one unit of work (the
     audit report)."""
-    from railval.app.services.signoff import statuses
-    from railval.db import audit
-    from railval.db import signoff as db_signoff
-
     with database.write_session(deferred=True) as s:  # may fill the result cache
-        items = [(db_signoff.as_dict(so), st) for so, st in statuses(s)]
+        items = [(db_signoff.as_dict(so), st) for so, st in signoff_service.statuses(s)]
         return items, list(audit.iter_rows(s))
 
 
 def validation(database, campaign: str, config: str, **kw: Any) -> ValidationResult:
     """:func:`railval.app.services.validation.validate_configuration` in one unit of work."""
-    from railval.app.services.validation import validate_configuration
-
     # a read that may end with a short write (the result cache, best effort): a deferred
     # unit of work takes the write lock only at that write, so reviewers' answers never wait
     # for the validation's computation (docs/database.md, "One write door")
     with database.write_session(deferred=True) as s:
-        return validate_configuration(s, campaign, config, **kw)
+        return validation_service.validate_configuration(s, campaign, config, **kw)
 
 
 def metrics(database, campaign: str, config: str, sections: Sequence[str] | None = None,
             channels: Sequence[str] | None = None, **kw: Any):
     """:func:`railval.app.services.metrics.metrics_for_configuration` in one unit of work."""
-    from railval.app.services.metrics import metrics_for_configuration
-
     # a read that ends with a short write (the metrics run): deferred, as in :func:`validation`
     with database.write_session(deferred=True) as s:
-        return metrics_for_configuration(s, campaign, config, sections, channels, **kw)
+        return metrics_service.metrics_for_configuration(s, campaign, config, sections,
+                                                         channels, **kw)
 
 
 @contextmanager
 def acting_as(username: str) -> Iterator[None]:
     """Within the block, database changes are recorded as ``username``
     (:func:`railval.db.engine.acting_as`)."""
-    from railval.db.engine import acting_as as db_acting_as
-
-    with db_acting_as(username):
+    with db_engine.acting_as(username):
         yield
 
 

@@ -30,9 +30,10 @@ from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 from urllib.parse import urlencode
 
-from sqlalchemy.orm import Session
 import numpy as np
+from sqlalchemy.orm import Session
 
+from railval.core import lazy
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
 from railval.core.integrity import (
     apply_rotations,
@@ -47,6 +48,16 @@ from railval.core.roles import PermissionDenied, require
 from railval.db import audit, integrity, repo, trust, users
 from railval.db import signoff as db_signoff
 from railval.db.models import Signoff
+
+#: deferred (railval.core.lazy): validation, diagnosis and the view model (numba, scipy:
+#: up to ~890 more modules), sign-in and the workshop tables only for the requests that
+#: reach them, not for `railval signoff list`
+validate_configuration = lazy.function("railval.app.services.validation", "validate_configuration")
+sessions = lazy.module("railval.app.services.sessions")
+calibration_provenance = lazy.function("railval.app.services.validation", "calibration_provenance")
+diagnosis_runs = lazy.function("railval.app.services.diagnosis", "diagnosis_runs")
+InSample = lazy.function("railval.app.views", "InSample")
+wsdb = lazy.module("railval.db.workshops")
 
 SCHEMA = "railval-evidence/1"
 #: the processing settings a sign-off is computed with (the defaults of ``railval validate``)
@@ -108,7 +119,6 @@ def input_manifest(session: Session, campaign: str, config: str,
 def validation_result(session: Session, campaign: str, config: str,
                       settings: dict[str, Any] | None = None) -> dict[str, Any]:
     """The validation result (values, limits, verdict) as it enters the manifest."""
-    from railval.app.services.validation import validate_configuration
 
     settings = {**SETTINGS, **(settings or {})}
     res = validate_configuration(session, campaign, config,
@@ -316,7 +326,6 @@ def sign(database, username: str, password: str, campaign: str, config: str, *,
     A wrong password is recorded (``login.failed``) and counts towards the sign-in rate
     limit. Raises :class:`SignoffRefused` or :class:`PermissionDenied`.
     """
-    from railval.app.services import sessions
 
     # the one sign-in: the hash is verified outside the write transaction, a failure recorded
     result = sessions.sign_in(database, username, password, source=source or "signoff",
@@ -348,8 +357,6 @@ def sign(database, username: str, password: str, campaign: str, config: str, *,
 
 
 def _in_sample(session: Session, campaign, config: str) -> bool:
-    from railval.app.services.validation import calibration_provenance
-
     return bool(calibration_provenance(session, campaign, config)["in_sample"])
 
 
@@ -366,10 +373,6 @@ def signing_summary(session: Session, campaign: str, config: str) -> dict[str, A
     their status, links to the evidence pages, and per decision whether it would be
     contrary to the objective verdict. Computed with the settings the signature binds
     (:data:`SETTINGS`)."""
-    from railval.app.services.diagnosis import diagnosis_runs
-    from railval.app.services.validation import validate_configuration
-    from railval.app.views import InSample
-    from railval.db import workshops as wsdb
 
     camp, conf = repo.resolve(session, campaign, config)  # once: the references travel on
     res = validate_configuration(session, camp, conf, order=SETTINGS["filter_order"],

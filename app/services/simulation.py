@@ -8,16 +8,20 @@ the database through :mod:`railval.db.repo`.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
-from typing import Any
 import hashlib
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
-from railval.core.errors import NotFound
+from railval.app.services.batch import BatchExecutor
+from railval.core import lazy
+from railval.core.errors import InvalidParameter, NotFound
 from railval.core.sim import resolve_effects, simulate_campaign
-from railval.core.errors import InvalidParameter
-from railval.core.sim.profiles import parse_csv
-from railval.core.sim.profiles import check_table, equivalent_conicity
+from railval.core.sim.profiles import check_table, equivalent_conicity, parse_csv
+
+#: deferred (railval.core.lazy): the ORM models (railval.db.repo) load with the first
+#: database read
+repo = lazy.module("railval.db.repo")
 
 Progress = Callable[[str, float, dict], None]
 
@@ -63,7 +67,6 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
     here (:func:`railval.db.repo.resolve`). ``calibration``: the sections its parameters were
     fitted on, stored as ``Configuration.calibration`` (values taken from a diagnosis:
     :func:`railval.app.services.diagnosis.diagnosis_fit_record`)."""
-    from railval.db import repo
 
     with database.session() as s:
         camp, _ = repo.resolve(s, campaign)
@@ -94,8 +97,6 @@ def simulate_configuration(database: Any, campaign: str, name: str, *, parent: s
             progress("simulate", 0.9 * done / total, {"done": done, "total": total})
 
     if scheduler is not None:
-        from railval.app.services.batch import BatchExecutor
-
         with BatchExecutor(scheduler) as ex:
             sets = simulate_campaign(vehicle, secs, layouts=layouts, effects=eff, parameters=par,
                                      channels=channels, fs=fs, workers=ex.map, progress=cb)

@@ -14,18 +14,26 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
-import shutil
 
 import numpy as np
 
+from railval.core import lazy
+from railval.core.errors import CampaignFormatError
 from railval.core.sim.synth import SynthCampaign, build_campaign, parse_hidden
 from railval.core.types import CHANNEL_KINDS, split_channel
 from railval.core.workers import process_alive
-from railval.core.errors import CampaignFormatError
+
+#: deferred (railval.core.lazy): the importer, the table writer and the ORM models (about
+#: 190 more modules) only for the synthetic campaign's import
+write_table = lazy.function("railval.db.io", "write_table")
+import_campaign = lazy.function("railval.db.importer", "import_campaign")
+repo = lazy.module("railval.db.repo")
+check_campaign_name = lazy.function("railval.db.campaigns", "check_campaign_name")
 
 DEMO_NAME = "demo-coach"
 DEMO_HIDDEN = ["parasitic_yaw_stiffness"]
@@ -45,7 +53,6 @@ def _json_safe(obj: Any) -> Any:
 
 def write_folder(sc: SynthCampaign, folder: str | Path, *, ext: str = "parquet") -> Path:
     """Write ``sc`` as a campaign folder; return the folder path."""
-    from railval.db.io import write_table
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -105,14 +112,10 @@ def synth(database: Any, *, name: str = "synth", template: str = "coach", hidden
     ``friction_damping``. ``out``: keep the folder there (else a temporary folder). ``reveal``:
     write the truth as JSON to this file.
     """
-    from railval.db.importer import import_campaign
 
     def rep(stage: str, frac: float, **info):
         if progress:
             progress(stage, frac, info)
-
-    from railval.db import repo
-    from railval.db.campaigns import check_campaign_name
 
     check_campaign_name(name)  # also no digits only: that reads as another campaign's id
     with database.session() as s:  # before minutes of simulation, not after
@@ -141,7 +144,6 @@ def ensure_demo(database: Any, progress: Progress | None = None) -> str | None:
     """Seed the demo campaign (coach, hidden parasitic yaw stiffness: the model underestimates the
     guiding forces in tight curves) when the database holds no campaign. Returns its name, or
     ``None`` when the database already had campaigns. Takes a few seconds."""
-    from railval.db import repo
 
     with database.session() as s:
         if repo.list_campaigns(s):

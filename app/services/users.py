@@ -12,9 +12,14 @@ import datetime as dt
 from dataclasses import dataclass
 from typing import Any
 
+from railval.core import lazy
 from railval.core.errors import RailvalError
 from railval.core.roles import Principal, open_principal, require
 from railval.db import audit, users
+
+#: deferred (railval.core.lazy): the sign-in service (92 more modules) only for the calls
+#: that reach it, not for `railval user list`
+sessions = lazy.module("railval.app.services.sessions")
 
 
 def add(database, name: str, *, display_name: str = "", password: str | None,
@@ -73,7 +78,6 @@ def sign_in(database, username: str, password: str, *, source: str = "") -> tupl
     """Check a password through the one sign-in (:func:`railval.app.services.sessions.sign_in`:
     argon2id outside any transaction, rate-limited) → (ok, message). A failed attempt is
     recorded."""
-    from railval.app.services import sessions
 
     res = sessions.sign_in(database, username, password, source=source)
     return res.ok, res.message
@@ -84,7 +88,6 @@ def cookie_principal(database, signed: tuple[str, float] | None, local: bool) ->
     or password changed after the cookie was issued → nobody; on the loopback while no user
     has a password: the open single-user principal (the one open-mode rule,
     :func:`railval.app.services.sessions.is_open`)."""
-    from railval.app.services import sessions
 
     with database.session() as s:
         if signed:

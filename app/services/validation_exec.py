@@ -18,28 +18,29 @@ the blobs, which the caller checks (:mod:`railval.app.services.validation_rows`)
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import gc
 import os
 import threading
+from collections import deque
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from typing import Any
-import ctypes
-from collections import deque
 
-from sqlalchemy.orm import Session
 import numpy as np
 from sqlalchemy.engine import make_url
+from sqlalchemy.orm import Session
 
 from railval.core import lazy
 from railval.core.stages import collect, in_context, stage
-from railval.core.types import SectionInfo
-from railval.core.workers import row_threads, thread_count
-from railval.db import repo
+from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SectionInfo, SignalSet
+from railval.core.workers import pool_kwargs, row_threads, thread_count
+from railval.db import codec, repo
 from railval.db.engine import connect
-from railval.core.types import BODY_POSITIONS, WHEEL_POSITIONS, SignalSet
-from railval.db import codec
-from railval.core.workers import pool_kwargs
+
+#: deferred (railval.core.lazy): the process-pool executor (Dask) only for a run with a
+#: scheduler
+BatchExecutor = lazy.function("railval.app.services.batch", "BatchExecutor")
 
 # the EN 14363 processing loads numba and scipy.signal: imported when the first section is
 # processed
@@ -279,8 +280,6 @@ def process_chunks(database, plan, chunks: list[tuple[str | None, list[str]]], o
     ``collect_chunk(chunk, (packed values, stage seconds))`` per chunk, in chunk order."""
     by_id = {s.id: s for s in plan.sections}
     if scheduler is not None and chunks:
-        from railval.app.services.batch import BatchExecutor
-
         url = make_url(database.url).set(password=None).render_as_string(hide_password=False)
         with BatchExecutor(scheduler) as ex:
             packed = ex.map(_evaluate_chunk_task, [(url, plan.name, c[0],

@@ -33,6 +33,15 @@ import time
 
 import numpy as np
 
+from railval.core import lazy
+from railval.core.types import CHANNELS, SectionInfo, SignalSet
+
+#: deferred (railval.core.lazy): the warm-up child loads the EN chain inside its timed step
+#: ("import_s"); the server process that starts it imports none of them
+codec = lazy.module("railval.db.codec")
+en14363 = lazy.module("railval.core.en14363")
+bootstrap = lazy.module("railval.core.bootstrap")
+
 #: environment variable that switches the background warm-up off (any non-empty value but "0")
 NO_WARMUP_ENV = "RAILVAL_NO_WARMUP"
 
@@ -40,9 +49,6 @@ NO_WARMUP_ENV = "RAILVAL_NO_WARMUP"
 def _sections(rng: np.random.Generator):
     """Two sections (a curve and a straight) with every channel of the registry, stored and
     read back by the codec as a validation reads them."""
-    from railval.core.types import CHANNELS, SectionInfo, SignalSet
-    from railval.db import codec
-
     fs, n = 200.0, 4000
     out_sets, infos = [], []
     for k, (radius, zone) in enumerate(((500.0, 3), (0.0, 1))):
@@ -66,15 +72,12 @@ def warm() -> dict[str, float]:
     """Compile or load the kernels of a validation (module docstring); returns the seconds
     of each step."""
     t0 = time.perf_counter()
-    from railval.core.en14363 import evaluate_batch
-
+    evaluate_batch, bootstrap_norm_ci = en14363.evaluate_batch, bootstrap.bootstrap_norm_ci
     t_import = time.perf_counter()
     sets, infos = _sections(np.random.default_rng(0))
     t_codec = time.perf_counter()
     evaluate_batch(sets, infos)
     # the verdict's bootstrap kernel, for the index arrays a validation gives it
-    from railval.core.bootstrap import bootstrap_norm_ci
-
     bootstrap_norm_ci(np.random.default_rng(1).standard_normal(17), 1.0, 1.0, n_boot=1000,
                       seed_key=(0, 17))
     t_en = time.perf_counter()

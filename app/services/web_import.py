@@ -22,8 +22,13 @@ from io import BytesIO
 from pathlib import Path, PurePosixPath
 from typing import Any
 
+from railval.core import lazy
 from railval.core.errors import CampaignFormatError
 from railval.core.roles import Principal, require
+
+#: deferred (railval.core.lazy): the importer (readers, pandas) only when a zip is imported
+acting_as = lazy.function("railval.db.engine", "acting_as")
+importer = lazy.module("railval.db.importer")
 
 #: largest zip accepted, in MB (stated on the page; the websocket message cap of ``railval
 #: serve`` is set from it)
@@ -89,14 +94,12 @@ def import_zip(database: Any, principal: Principal, data: bytes, name: str = "up
                progress: Callable[[int, int, str], None] | None = None) -> str:
     """Unpack and import the campaign zip ``data`` as ``principal`` (needs ``data.import``);
     returns the campaign name."""
-    from railval.db.engine import acting_as
-    from railval.db.importer import import_campaign
 
     require(principal, "data.import")
     with tempfile.TemporaryDirectory(prefix="railval-upload-") as tmp:
         folder = unpack(data, Path(tmp), name)
         with acting_as(principal.username):
-            return import_campaign(database, folder, progress=progress)
+            return importer.import_campaign(database, folder, progress=progress)
 
 
 def import_configuration_zip(database: Any, principal: Principal, campaign: str, data: bytes,
@@ -105,11 +108,8 @@ def import_configuration_zip(database: Any, principal: Principal, campaign: str,
     """Unpack a configuration's files (``configuration.json`` + data files) and import them
     into the stored ``campaign`` as ``principal`` (``railval import DIR --into CAMPAIGN``);
     returns the configuration name."""
-    from railval.db.engine import acting_as
-    from railval.db.importer import CONFIGURATION_MANIFEST, import_configuration
-
     require(principal, "data.import")
     with tempfile.TemporaryDirectory(prefix="railval-upload-") as tmp:
-        folder = unpack(data, Path(tmp), name, CONFIGURATION_MANIFEST)
+        folder = unpack(data, Path(tmp), name, importer.CONFIGURATION_MANIFEST)
         with acting_as(principal.username):
-            return import_configuration(database, campaign, folder, progress=progress)
+            return importer.import_configuration(database, campaign, folder, progress=progress)

@@ -12,7 +12,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from railval.app.services import workshops as ws
 from railval.app.services.workshop_documents import plots_document, status_document
+from railval.core.errors import InvalidParameter
 from railval.db import repo, users
 from railval.db import workshops as wsdb
 
@@ -40,7 +42,6 @@ def campaign_choices(database) -> dict[str, dict[str, list[str]]]:
 def plan_counts(database, campaign: str, configurations: Sequence[str] | None,
                 sections: Sequence[str] | None, kinds: Sequence[str] | None) -> dict[str, Any]:
     """``{"plots": n, "by_kind": {kind: n}}`` of the plots a workshop of these choices gets."""
-    from railval.app.services import workshops as ws
 
     with database.session() as s:
         planned = ws.plan(s, campaign, configurations, sections, kinds)
@@ -54,8 +55,6 @@ def check_new(database, name: str, campaign: str, *, configurations: Sequence[st
     :func:`railval.app.services.workshops.create` makes first: permission, name, options, an
     existing name, a choice that gives no plot) with the same
     :class:`~railval.core.errors.InvalidParameter`; returns the number of plots."""
-    from railval.app.services import workshops as ws
-    from railval.core.errors import InvalidParameter
 
     ws._check_options(name, scaling, "auto", repeats, auto_share, actor)
     with database.session() as s:

@@ -12,8 +12,17 @@ import math
 from pathlib import Path
 from typing import Any
 
+from railval.core import lazy
 from railval.core.errors import InvalidParameter
 from railval.core.roles import Principal, require
+
+#: deferred (railval.core.lazy): the spreadsheet formats, the workshop tables and the
+#: review statistics only for the export and the analysis
+spreadsheet_text = lazy.function("railval.db.io.formats", "spreadsheet_text")
+wsdb = lazy.module("railval.db.workshops")
+spreadsheet_safe = lazy.function("railval.db.io.formats", "spreadsheet_safe")
+core_analyse = lazy.function("railval.core.review", "analyse")
+pd = lazy.module("pandas")
 
 CSV_COLUMNS = ("reviewer", "plot", "answer", "seconds", "comment")
 EXPORT_COLUMNS = (*CSV_COLUMNS, "answered_at", "updated_at", "position", "repeat", "scaling",
@@ -29,7 +38,6 @@ def parse_answers_csv(text: str, source_name: str = "FILE") -> list[dict[str, An
     problem names the line and the column; duplicate (reviewer, plot, repeat) rows are
     refused naming both lines. A comment escaped by :func:`export_answers` against formula
     injection is read back as it was written."""
-    from railval.db.io.formats import spreadsheet_text
 
     reader = csv.reader(io.StringIO(text))
     try:
@@ -102,7 +110,6 @@ def parse_answers_csv(text: str, source_name: str = "FILE") -> list[dict[str, An
 def import_answers(database, name: str, path: str | Path, *,
                    actor: Principal | str = "system") -> dict[str, int]:
     """Import an answers CSV into workshop ``name``: all rows or none."""
-    from railval.db import workshops as wsdb
 
     if isinstance(actor, Principal):
         require(actor, "workshop.run")
@@ -126,8 +133,6 @@ def export_answers(database, name: str, path: str | Path) -> int:
     ``=HYPERLINK(…)``) get a leading single quote (:func:`railval.db.io.formats.spreadsheet_safe`,
     OWASP CSV injection); numbers stay unquoted numbers. :func:`parse_answers_csv` reads the
     comment back unchanged."""
-    from railval.db import workshops as wsdb
-    from railval.db.io.formats import spreadsheet_safe
 
     with database.session() as session:
         rows = wsdb.answer_rows(session, wsdb.get_workshop(session, name))
@@ -151,11 +156,10 @@ def analysis_frames(session, name: str):
     fixed plot with ``scaling`` = ``auto`` (the pairing the scaling effect needs). plots: the fixed plots, ``plot, kind,
     deviation, sg_c`` (NaN where none).
     """
-    from railval.db import workshops as wsdb
 
     w = wsdb.get_workshop(session, name)
     rows = wsdb.answer_rows(session, w)
-    import pandas as pd  # after the look-up: an unknown workshop is answered at once
+    # pandas loads at its first use, after the look-up: an unknown workshop is answered at once
     answers = pd.DataFrame(
         [{"reviewer": r["reviewer"],
           "plot": r["twin"] if r["scaling"] != "fixed" and r["twin"] is not None else r["plot"],
@@ -183,7 +187,6 @@ def analyse(database, name: str, *, actor: Principal | str = "system",
         answers, plots = analysis_frames(session, name)
     if answers.empty:
         raise InvalidParameter(f"workshop {name!r} has no answers yet")
-    from railval.core.review import analyse as core_analyse  # scipy.stats: once there is work
     result = core_analyse(answers, plots)
     doc = {"workshop": name, **result.to_dict()}
     if with_plots:

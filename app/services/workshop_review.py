@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from railval.core.errors import NotFound
+from railval.core.roles import PermissionDenied
 from railval.db import workshops as wsdb
 from railval.db.workshops import AnswerOutcome, ReviewerContext, WorkshopClosed
 
@@ -54,7 +56,6 @@ def record_answer(database, ctx: ReviewerContext, position: int, answer: bool, *
 def finish(database, token: str, may_answer) -> None:
     """Mark the reviewer of ``token`` finished; ``may_answer(ctx)`` decides whether the link
     still counts (:class:`railval.core.errors.NotFound` when not)."""
-    from railval.core.errors import NotFound
 
     with database.session(write=True) as s:
         ctx = wsdb.reviewer_by_token(s, token)
@@ -62,7 +63,5 @@ def finish(database, token: str, may_answer) -> None:
             raise NotFound("review link not valid")
         refusal = wsdb.answer_refusal(s, ctx)  # the account as stored now, row locked
         if refusal:
-            from railval.core.roles import PermissionDenied
-
             raise PermissionDenied(refusal)
         wsdb.finish(s, ctx)

@@ -25,6 +25,8 @@ from collections.abc import Sequence
 import sqlalchemy as sa
 from alembic import op
 
+from railval.db import audit
+
 revision: str = "0008_panelists"
 down_revision: str | Sequence[str] | None = "0007_signatures"
 branch_labels: str | Sequence[str] | None = None
@@ -46,8 +48,6 @@ def _state(conn, user_id: int) -> dict:
 
 def upgrade() -> None:
     from sqlalchemy.orm import Session
-
-    from railval.db import audit
 
     conn = op.get_bind()
     session = Session(bind=conn)
