@@ -19,14 +19,13 @@ from collections.abc import Sequence
 from typing import Any
 
 from railval.app.services.campaign_context import Progress, session_of
-from railval.app.services.diagnosis_ranking import rank_causes
-from railval.app.services.diagnosis_ranking import scan_points
 from railval.app.services.diagnosis_measurement import MEASUREMENT_PREFIXES
+from railval.app.services.diagnosis_ranking import rank_causes, scan_points
 from railval.app.services.stored_runs import data_inputs, digests, run_info
 from railval.core.diagnosis import PARAMETER_CANDIDATES, DiagnosisResult
 from railval.core.diagnosis.lineage import ancestor_entry, lineage_statement
 from railval.core.en14363 import PROCESSING_VERSION
-from railval.core.sim.effects import EFFECTS
+from railval.core.sim.effects import EFFECTS, is_neutral
 from railval.db import repo, runs
 
 #: version of the diagnosis procedure in the stored runs' digest (with the EN processing
@@ -49,7 +48,8 @@ def diagnosis_simulations(effects: Sequence[str], values_per_parameter: int = 3,
         if template and template not in EFFECTS[e].templates:
             continue
         n += len({json.dumps(point, sort_keys=True)
-                  for _, _, point, _ in scan_points(EFFECTS[e], values_per_parameter)})
+                  for _, _, point, _ in scan_points(EFFECTS[e], values_per_parameter)
+                  if not is_neutral(EFFECTS[e], point)})  # neutral points reuse the configuration's run
     return n
 
 

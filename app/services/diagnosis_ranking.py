@@ -33,7 +33,6 @@ from typing import Any
 import numpy as np
 
 from railval.app.services.campaign_context import effect_parameters
-from railval.app.services.diagnosis_next import next_step
 from railval.app.services.diagnosis_measurement import (
     DISCRETE_DEFAULTS,
     apply_redundancy_rule,
@@ -42,6 +41,7 @@ from railval.app.services.diagnosis_measurement import (
     relative_gains,
     shared_gain,
 )
+from railval.app.services.diagnosis_next import next_step
 from railval.core.diagnosis import (
     PARAMETER_CANDIDATES,
     CandidateFamily,
@@ -56,11 +56,16 @@ from railval.core.diagnosis import (
 from railval.core.diagnosis.causes import cause_set
 from railval.core.diagnosis.engine import STRONG
 from railval.core.diagnosis.fit import INTERFACE_PARAMETERS, MASS_PARAMETERS
-from railval.core.diagnosis.inputs import contact_statement, scatter_level, track_first_pool, track_statement
+from railval.core.diagnosis.inputs import (
+    contact_statement,
+    scatter_level,
+    track_first_pool,
+    track_statement,
+)
 from railval.core.diagnosis.measurement import force_gain_groups, gain_channels, gain_family
 from railval.core.diagnosis.support import apply_interface_rule, cause_pool, outside_support
 from railval.core.errors import InvalidParameter
-from railval.core.sim.effects import EFFECTS, Effect
+from railval.core.sim.effects import EFFECTS, Effect, is_neutral
 
 Progress = Any
 
@@ -201,7 +206,6 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
     from railval.app.services.batch import BatchExecutor
     from railval.app.services.campaign_context import band_sums, residual_pattern, section_values
     from railval.app.services.campaign_context import report as _report
-
     from railval.db.repo import config_name
 
     _report(progress, "load", 0.0, campaign=getattr(campaign, "name", campaign), config=config_name(config))
@@ -286,7 +290,9 @@ def _load(database_or_session: Any, campaign: Any, config: Any, effects: Sequenc
 
 def _tasks(req: _Request, values_per_parameter: int) -> tuple[list[tuple], list[tuple]]:
     """The simulations (the configuration first, then every effect scan point once, then one
-    perturbed value per parameter candidate) and, per candidate value, which one it uses."""
+    perturbed value per parameter candidate) and, per candidate value, which one it uses; a scan
+    point at which the effect is neutral (:func:`railval.core.sim.effects.is_neutral`: the
+    simulator computes exactly what it computes without it) uses the configuration's own run."""
     from railval.core.sim.effects import EFFECTS
 
     tasks: list[tuple] = [(req.in_config, req.conf_params)]
@@ -296,6 +302,9 @@ def _tasks(req: _Request, values_per_parameter: int) -> tuple[list[tuple], list[
         spec = EFFECTS[e]
         defaults = {k: float(q["default"]) for k, q in effect_parameters(spec).items()}
         for pname, v, point, _p in scan_points(spec, values_per_parameter):
+            if is_neutral(spec, point):  # simulates exactly as the configuration itself: its run
+                index.append(("effect", e, pname, v, defaults, 0))
+                continue
             key = json.dumps({**req.in_config, e: point}, sort_keys=True)
             if key not in unique:
                 unique[key] = len(tasks)
@@ -357,8 +366,13 @@ def _candidates(req: _Request, results: Sequence, index: Sequence[tuple], vr: An
     ctx = req.ctx
     sections = [(s.id, int(s.zone)) for s in ctx.sections]
 
-    def evidence(k: int) -> SectionEvidence:
-        return section_evidence(results[k][0], results[k][1], req.meas_bands, sections, value_key="D_norm", like=base)
+    made: dict[int, SectionEvidence] = {}
+
+    def evidence(k: int) -> SectionEvidence:  # once per simulation (a shared one: the same object)
+        if k not in made:
+            made[k] = section_evidence(results[k][0], results[k][1], req.meas_bands, sections, value_key="D_norm",
+                                       like=base)
+        return made[k]
 
     families: dict[str, CandidateFamily] = {}
     for kind, name, pname, v, defaults, k in index:

@@ -13,12 +13,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
 from railval.core.diagnosis.evidence import SectionEvidence, zone_bootstrap, zone_folds
-from railval.core.diagnosis.fit import CandidateFamily, _Curve, _fit, _min_cost
+from railval.core.diagnosis.fit import (
+    CandidateFamily,
+    _Curve,
+    _fit_costs,
+    _fit_folds,
+    _min_cost_rows,
+)
 from railval.core.diagnosis.patterns import Pattern, component_parts
 from railval.core.diagnosis.plausibility import plausibility_flags, separating_evidence
 from railval.core.diagnosis.result import DiagnosisResult, TrustedCandidate
@@ -96,10 +103,12 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
         Ranked candidates, noise floor, identifiability evidence and verdict.
     """
     setup = _Setup(base, n_boot, folds, seed)
+    fits = [_Fit(fam, setup) for fam in families]
+    _bootstrap_all(fits, setup)
     cands: list[TrustedCandidate] = []
     noise_share = np.zeros((len(families), n_boot))
-    for fi, fam in enumerate(families):
-        cand, noise_share[fi] = _score(fam, setup, change)
+    for fi, fit in enumerate(fits):
+        cand, noise_share[fi] = _score(fit, setup, change)
         cands.append(cand)
     noise_floor = float(np.percentile(noise_share.max(axis=0), 95)) if n_boot and families else 0.0
     within_noise = bool(n_boot and setup.r2 <= float(np.percentile(setup.noise2, 95)))
@@ -135,53 +144,105 @@ class _Setup:
         self.noise = self.R_boot - self.r_full[None, :]
         self.noise2 = np.sum((self.noise * self.w) ** 2, axis=1)
         self.before = self.residual.group_norms()
+        self.rb2 = np.sum((self.w * self.R_boot) ** 2, axis=1)
+        self.train = [1.0 - m for m in self.masks]
+        self.test_den = [float(np.sum((self.w * base.values(m)) ** 2)) for m in self.masks]
+
+
+class _Fit:
+    """One candidate against a :class:`_Setup`: its curve, the fit on all sections (best fine-grid
+    index ``k``, cost, pattern ``Pk``, the cost at every fine-grid point), the held-out share
+    and fold values; :func:`_bootstrap_all` adds the bootstrap (``boot``, ``v_ci``,
+    ``noise_share``)."""
+
+    def __init__(self, fam: CandidateFamily, st: _Setup):
+        self.fam = fam
+        self.curve = curve = _Curve(fam)
+        self.P_full = np.stack([e.values() for e in fam.evidence])
+        self.k, self.costs, self.Pk = _fit_costs(curve, self.P_full, st.w)
+        self.cost = float(self.costs[self.k])
+        self.v = curve.value(self.k)
+        self.held, self.fold_values = _held_out(curve, fam, st)
+        self.boot: list[float] = []
+        self.v_ci = (self.v, self.v)
+        self.noise_share = np.zeros(0)
 
 
 def _held_out(curve: _Curve, fam: CandidateFamily, st: _Setup) -> tuple[float, list[float]]:
     """Held-out share (value fitted on the training sections of each fold, scored on its test
-    sections; Hastie, Tibshirani & Friedman 2009 §7.10) and the value fitted in each fold."""
+    sections; Hastie, Tibshirani & Friedman 2009 §7.10) and the value fitted in each fold:
+    1 − Σ_f ‖w·P_f(v*_f)‖² / Σ_f ‖w·r_f‖², the folds' fits in one array operation."""
+    if not st.masks:
+        return 0.0, []
+    P_tr = np.stack([np.stack([e.values(tr) for e in fam.evidence]) for tr in st.train])
+    kts = _fit_folds(curve, P_tr, st.w)
     num = den = 0.0
     fold_values: list[float] = []
-    for m in st.masks:
-        P_tr = np.stack([e.values(1.0 - m) for e in fam.evidence])
-        kt, _, _ = _fit(curve, P_tr, st.w)
+    for i, m in enumerate(st.masks):
+        kt = int(kts[i])
         fold_values.append(curve.value(kt))
-        P_te = curve.patterns(np.stack([e.values(m) for e in fam.evidence]))[kt]
-        r_te = st.base.values(m)
+        P_te = curve.pattern_at(np.stack([e.values(m) for e in fam.evidence]), kt)
         num += float(np.sum((st.w * P_te) ** 2))
-        den += float(np.sum((st.w * r_te) ** 2))
+        den += st.test_den[i]
     return (float(np.clip(1 - num / den, 0.0, 1.0)) if den > 0 else 0.0), fold_values
 
 
-def _bootstrap(curve: _Curve, fam: CandidateFamily, P_full: np.ndarray, st: _Setup, v: float
-               ) -> tuple[list[float], tuple[float, float], np.ndarray]:
-    """Refit on every resample of the sections (Efron & Tibshirani 1993 §8.2): explained shares,
-    the 5–95 % interval of the fitted value, and the share of pure scatter n_b the candidate's
-    change P(v) − r explains on each resample (its contribution to the noise floor)."""
-    if not st.n_boot:
-        return [], (v, v), np.zeros(0)
-    P_boot = np.stack([e.values(st.Wb) for e in fam.evidence], axis=1)  # (B, K, n), family order
-    rb2 = np.sum((st.w * st.R_boot) ** 2, axis=1)
-    cb, vb = _min_cost(curve, P_boot, st.w, argmin=True)
-    boot = [1 - c / d if d > 0 else 0.0 for c, d in zip(cb, rb2, strict=True)]
-    v_ci = (float(np.percentile(vb, 5)), float(np.percentile(vb, 95)))
-    # the candidate's change P(v) − r added to pure scatter n_b: nodes P_k − r + n_b
-    cn = _min_cost(curve, P_full[None, :, :] - st.r_full[None, None, :] + st.noise[:, None, :], st.w)
+#: rows × nodes × components of one stacked minimisation in :func:`_bootstrap_all` (memory bound)
+_CHUNK = 1 << 22
+
+
+def _bootstrap_all(fits: Sequence[_Fit], st: _Setup) -> None:
+    """Refit every candidate on every resample of the sections (Efron & Tibshirani 1993 §8.2):
+    explained shares, the 5–95 % interval of the fitted value, and the share of pure scatter
+    n_b the candidate's change P(v) − r explains on each resample (its contribution to the
+    noise floor). The minimisations of all candidates with the same number of simulated values
+    run stacked in one :func:`railval.core.diagnosis.fit._min_cost_rows` call (per chunk), each
+    candidate's rows computed exactly as alone."""
+    B = st.n_boot
+    if not B:
+        return
+    by_k: dict[int, list[_Fit]] = {}
+    for f in fits:
+        by_k.setdefault(f.curve.u.size, []).append(f)
+    for K, group in by_k.items():
+        per = max(1, _CHUNK // (2 * B * K * st.r_full.size))
+        for c0 in range(0, len(group), per):
+            chunk = group[c0:c0 + per]
+            X = np.concatenate([_nodes(f, st) for f in chunk])
+            U = np.repeat(np.stack([f.curve.u for f in chunk]), 2 * B, axis=0)
+            lo = np.repeat([float(f.curve.fine[0]) for f in chunk], 2 * B)
+            hi = np.repeat([float(f.curve.fine[-1]) for f in chunk], 2 * B)
+            best, where = _min_cost_rows(X, U, lo, hi)
+            for i, f in enumerate(chunk):
+                s = 2 * B * i
+                _bootstrap_finish(f, st, best[s:s + B], np.array(where[s:s + B]), best[s + B:s + 2 * B])
+
+
+def _nodes(f: _Fit, st: _Setup) -> np.ndarray:
+    """The weighted nodes (2B, K, n) in curve order of one candidate's bootstrap minimisations:
+    its patterns on every resample, then its change P_k − r added to pure scatter n_b."""
+    P_boot = np.stack([e.values(st.Wb) for e in f.fam.evidence], axis=1)  # (B, K, n), family order
+    noise = f.P_full[None, :, :] - st.r_full[None, None, :] + st.noise[:, None, :]
+    order = f.curve.order
+    return np.concatenate([P_boot[:, order, :] * st.w, noise[:, order, :] * st.w])
+
+
+def _bootstrap_finish(f: _Fit, st: _Setup, cb: np.ndarray, where_b: np.ndarray, cn: np.ndarray) -> None:
+    vb = f.curve.values_at(where_b)
+    f.boot = [1 - c / d if d > 0 else 0.0 for c, d in zip(cb, st.rb2, strict=True)]
+    f.v_ci = (float(np.percentile(vb, 5)), float(np.percentile(vb, 95)))
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(st.noise2 > 0, 1 - cn / st.noise2, 0.0)
-    return boot, v_ci, np.maximum(share, 0.0)
+    f.noise_share = np.maximum(share, 0.0)
 
 
-def _score(fam: CandidateFamily, st: _Setup, change: float) -> tuple[TrustedCandidate, np.ndarray]:
+def _score(fit: _Fit, st: _Setup, change: float) -> tuple[TrustedCandidate, np.ndarray]:
     """One candidate: the fit on all sections, held-out share, bootstrap, plausibility; and its
     share of pure scatter per resample."""
-    curve = _Curve(fam)
-    P_full = np.stack([e.values() for e in fam.evidence])
-    k, cost, Pk = _fit(curve, P_full, st.w)
-    v = curve.value(k)
+    fam, curve, k, cost, Pk, v = fit.fam, fit.curve, fit.k, fit.cost, fit.Pk, fit.v
     explained = float(np.clip(1 - cost / st.r2, 0.0, 1.0))
-    held, fold_values = _held_out(curve, fam, st)
-    boot, v_ci, noise_share = _bootstrap(curve, fam, P_full, st, v)
+    held, fold_values = fit.held, fit.fold_values
+    boot, v_ci, noise_share = fit.boot, fit.v_ci, fit.noise_share
     ci = (float(np.clip(np.percentile(boot, 5), 0, 1)), float(np.clip(np.percentile(boot, 95), 0, 1))) \
         if boot else (explained, explained)
     before, residual = st.before, st.residual
@@ -206,7 +267,7 @@ def _score(fam: CandidateFamily, st: _Setup, change: float) -> tuple[TrustedCand
         {g: (before[g], after[g]) for g in before}, kind=fam.kind,
         held_out_explained=held, explained_ci=ci, plausible=ok, at_bound=at_edge, flags=flags,
         summary=summary, reference=fam.reference, fitted=v, parameter=fam.parameter,
-        fitted_ci=_widened(lo_ci, hi_ci, fold_values, _lack_of_fit_range(curve, P_full, st.w, k, cost, residual)),
+        fitted_ci=_widened(lo_ci, hi_ci, fold_values, _lack_of_fit_range(curve, fit.costs, k, cost, residual)),
         fitted_ci_bootstrap=(lo_ci, hi_ci),
         fold_values=fold_values, clearly_implausible=bool(clearly))
     return cand, noise_share
@@ -274,21 +335,19 @@ def _verdict(best: TrustedCandidate | None, alike: Sequence[dict[str, Any]], *, 
                      f"held-out sections ({best.explained:.2f} in-sample; noise floor {noise_floor:.2f})")
 
 
-def _lack_of_fit_range(curve: _Curve, P: np.ndarray, w: np.ndarray, k: int, cost: float, residual: Pattern,
+def _lack_of_fit_range(curve: _Curve, c: np.ndarray, k: int, cost: float, residual: Pattern,
                        level: float = 0.90) -> tuple[float, float]:
     """Values whose remaining residual is within the lack-of-fit region of the best fit:
     ‖P(v)‖²_W ≤ ‖P(v*)‖²_W·(1 + F_{1, n−1}(level)/(n − 1)) with n the number of quantity
     groups (the components of one group are strongly correlated; each group carries weight 1,
     so n is taken as the effective number of observations — an assumption). The region grows
     with what the candidate leaves unexplained, so it reflects model error, not only section
-    scatter (Bates & Watts 1988 §6.1, likelihood region of a nonlinear least-squares fit)."""
-    from scipy.stats import f as f_dist
-
+    scatter (Bates & Watts 1988 §6.1, likelihood region of a nonlinear least-squares fit).
+    ``c``: the cost ‖w·P(v)‖² at every fine-grid point (the fit's)."""
     n = len(set(residual.groups))
     if n < 3:
         return curve.value(k), curve.value(k)
-    limit = cost * (1.0 + float(f_dist.ppf(level, 1, n - 1)) / (n - 1))
-    c = np.sum((curve.patterns(P) * w) ** 2, axis=1)
+    limit = cost * (1.0 + _f_ppf(level, n - 1) / (n - 1))
     lo = k
     while lo > 0 and c[lo - 1] <= limit:
         lo -= 1
@@ -296,6 +355,14 @@ def _lack_of_fit_range(curve: _Curve, P: np.ndarray, w: np.ndarray, k: int, cost
     while hi < c.size - 1 and c[hi + 1] <= limit:
         hi += 1
     return curve.value(lo), curve.value(hi)
+
+
+@lru_cache(maxsize=64)
+def _f_ppf(level: float, dof: int) -> float:
+    """F_{1, dof}(level), the quantile of the F distribution (scipy), remembered per degree of freedom."""
+    from scipy.stats import f as f_dist
+
+    return float(f_dist.ppf(level, 1, dof))
 
 
 def _widened(lo: float, hi: float, folds: Sequence[float], lack: tuple[float, float]) -> tuple[float, float]:

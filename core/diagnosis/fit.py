@@ -111,6 +111,17 @@ class _Curve:
         P = P[self.order]
         return P[self.idx] * (1 - self.t)[:, None] + P[self.idx + 1] * self.t[:, None]
 
+    def pattern_at(self, P: np.ndarray, k: int) -> np.ndarray:
+        """Row ``k`` of :meth:`patterns` alone (the same values)."""
+        P = P[self.order]
+        i, t = self.idx[k], self.t[k]
+        return P[i] * (1 - t) + P[i + 1] * t
+
+    def values_at(self, u: np.ndarray) -> np.ndarray:
+        """Parameter values of points ``u`` on the curve's axis, clipped to the range."""
+        vals = np.exp(u) if self.log else u
+        return np.clip(vals, self.range[0], self.range[1])
+
     def value(self, k: int) -> float:
         """The value at fine-grid point ``k``: the range's ends exactly at the ends, inside the
         range elsewhere (exp(log(bound)) may round past the bound by one ulp, which a later
@@ -127,38 +138,64 @@ def _min_cost(curve: _Curve, P: np.ndarray, w: np.ndarray, argmin: bool = False)
     minimised in closed form and clipped to the segment; the first and last segments extend
     to the ends of the range when the family extrapolates). ``argmin=True``: also the values
     (in the parameter's unit, inside the range) where the minima lie."""
-    P = P[:, curve.order, :] * w
-    u = curve.u
-    lo_end, hi_end = float(curve.fine[0]), float(curve.fine[-1])
-    best = np.full(P.shape[0], np.inf)
-    where = np.full(P.shape[0], lo_end)
-    for j in range(u.size - 1):
-        du = u[j + 1] - u[j]
-        t_lo = (lo_end - u[j]) / du if j == 0 else 0.0
-        t_hi = (hi_end - u[j]) / du if j == u.size - 2 else 1.0
-        if t_hi < t_lo:
-            continue
-        a, d = P[:, j, :], P[:, j + 1, :] - P[:, j, :]
+    X = P[:, curve.order, :] * w
+    rows = X.shape[0]
+    best, where = _min_cost_rows(X, np.broadcast_to(curve.u, (rows, curve.u.size)),
+                                 np.full(rows, float(curve.fine[0])), np.full(rows, float(curve.fine[-1])))
+    if not argmin:
+        return best
+    return best, curve.values_at(where)
+
+
+def _min_cost_rows(X: np.ndarray, U: np.ndarray, lo_end: np.ndarray, hi_end: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_min_cost` of node sets of many curves at once, one curve per row: ``X`` (R, K, n)
+    weighted nodes in each curve's order, ``U`` (R, K) its u nodes, ``lo_end``/``hi_end`` (R,)
+    the ends of its range in u → (minimum cost, u where it lies). Every row is computed with the
+    same floating-point operations as one curve alone (row-wise elementwise operations and sums
+    over the last axis), so rows of several candidates stacked give bit-identical results."""
+    R, K = X.shape[0], X.shape[1]
+    best = np.full(R, np.inf)
+    where = np.array(lo_end, float, copy=True)
+    zero, one = np.zeros(R), np.ones(R)
+    for j in range(K - 1):
+        du = U[:, j + 1] - U[:, j]
+        t_lo = (lo_end - U[:, j]) / du if j == 0 else zero
+        t_hi = (hi_end - U[:, j]) / du if j == K - 2 else one
+        live = ~(t_hi < t_lo)
+        a, d = X[:, j, :], X[:, j + 1, :] - X[:, j, :]
         dd = np.sum(d * d, axis=1)
         ad = np.sum(a * d, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(dd > 0, -ad / dd, t_lo)
         t = np.clip(t, t_lo, t_hi)
         cost = np.sum((a + t[:, None] * d) ** 2, axis=1)
-        better = cost < best
-        where = np.where(better, u[j] + t * du, where)
-        best = np.minimum(best, cost)
-    if not argmin:
-        return best
-    vals = np.exp(where) if curve.log else where
-    return best, np.clip(vals, curve.range[0], curve.range[1])
+        better = (cost < best) & live
+        where = np.where(better, U[:, j] + t * du, where)
+        best = np.where(live, np.minimum(best, cost), best)
+    return best, where
 
 
 def _fit(curve: _Curve, P: np.ndarray, w: np.ndarray) -> tuple[int, float, np.ndarray]:
+    k, costs, Pk = _fit_costs(curve, P, w)
+    return k, float(costs[k]), Pk
+
+
+def _fit_costs(curve: _Curve, P: np.ndarray, w: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+    """The fine-grid fit: best index, the cost at every fine-grid point, the best pattern."""
     Pf = curve.patterns(P)
     cost = np.sum((Pf * w) ** 2, axis=1)
     k = int(np.argmin(cost))
-    return k, float(cost[k]), Pf[k]
+    return k, cost, Pf[k]
+
+
+def _fit_folds(curve: _Curve, P: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The fine-grid index of the best fit of several node sets ``P`` (F, K, n) at once (the
+    training sections of every fold): the same values as :func:`_fit` on each."""
+    P = P[:, curve.order]
+    t = curve.t[None, :, None]
+    Pf = P[:, curve.idx] * (1 - curve.t)[None, :, None] + P[:, curve.idx + 1] * t
+    return np.argmin(np.sum((Pf * w) ** 2, axis=2), axis=1)
 
 
 def scan_values(lower: float, upper: float, default: float, n: int, log: bool = False) -> list[float]:

@@ -53,6 +53,12 @@ class Effect:
     #: the effect stands for an input of the simulation, not for the vehicle (``"track"``: the
     #: track irregularities; docs/diagnosis.md "Track input")
     input_side: str = ""
+    #: parameter values at which the simulator computes exactly what it computes without the
+    #: effect (bit for bit; core/sim/model.py: ``friction_damping`` and
+    #: ``parasitic_yaw_stiffness`` enter as a force/stiffness read with default 0 when absent,
+    #: ``track_level_*`` multiplies the generated irregularities by ``factor``, and 1.0·x = x):
+    #: a diagnosis reuses the configuration's own simulation there (:func:`is_neutral`)
+    neutral: dict[str, float] | None = None
 
     def to_dict(self) -> dict:
         return {"id": self.id, "title": self.title, "explanation": self.explanation,
@@ -81,7 +87,8 @@ _LIST = [
                                   "emergency springs, sliding pads) of the order of 0.5–2 kN per spring; for the "
                                   "wagon it adds to the native 0.05–0.08 × static load of leaf springs and links")),
         ("ay_rms", "az_rms", "ay_max", "az_max"), (1, 2, 3, 4), ((2.0, 10.0),),
-        source="Saint-Venant element (spring k_stick in series with a Coulomb slider); Iwnicki 2006 ch. 7"),
+        source="Saint-Venant element (spring k_stick in series with a Coulomb slider); Iwnicki 2006 ch. 7",
+        neutral={"force_kN": 0.0}),
     Effect(
         "damper_series_stiffness", "Damper with series stiffness (Maxwell element)",
         "Real hydraulic dampers sit on rubber end bushes and contain compressible oil, so each "
@@ -198,7 +205,7 @@ _LIST = [
                                   "span about 0.5–3 × the low level (assumption)")),
         qs, (1, 2, 3, 4), ((0.4, 10.0),),
         source="ERRI B176 RP1 1989 spectra (core/sim/track.py), amplitude scaled per direction",
-        excludes_layout=("irregularities",), input_side="track")
+        excludes_layout=("irregularities",), input_side="track", neutral={"factor": 1.0})
       for d, what, qs in (("vertical", "vertical level and cross level",
                            ("az_rms", "az_max", "Q_max", "ay_rms", "ay_max")),
                           ("lateral", "alignment and gauge",
@@ -216,7 +223,8 @@ _LIST = [
                                   "an air-spring bogie, 0.1–2 MN·m/rad; Polach & Böttcher 2014 §2 name "
                                   "parasitic suspension stiffness an unknown the modellers must estimate")),
         ("Y_qst", "YQ_qst", "SumY_qst", "Y_max", "YQ_max", "SumY_max"), (3, 4), (),
-        source="rotational spring between car body and bogie; Iwnicki 2006 ch. 7 (bogie yaw resistance)", interface=True),
+        source="rotational spring between car body and bogie; Iwnicki 2006 ch. 7 (bogie yaw resistance)", interface=True,
+        neutral={"k_yaw_kNm_rad": 0.0}),
     Effect(
         "lateral_bumpstop", "Secondary lateral clearance and bump stop",
         "The car body's lateral travel on the secondary suspension is limited by bump stops after "
@@ -237,6 +245,13 @@ _LIST = [
 
 EFFECTS: dict[str, Effect] = {e.id: e for e in _LIST}
 EFFECT_IDS: tuple[str, ...] = tuple(EFFECTS)
+
+
+def is_neutral(effect: Effect, point: Mapping[str, float]) -> bool:
+    """Whether the effect at parameter values ``point`` simulates exactly as without it
+    (:attr:`Effect.neutral`; tests/test_effects_neutral.py compares the signals bit for bit)."""
+    return effect.neutral is not None and all(
+        k in point and float(point[k]) == float(v) for k, v in effect.neutral.items())
 
 
 def get_effect(effect_id: str) -> Effect:
