@@ -362,7 +362,7 @@ def test_lack_of_fit_region_grows_with_what_the_fit_leaves():
 
     from railval.core.diagnosis import Pattern
     from railval.core.diagnosis.engine import _lack_of_fit_range
-    from railval.core.diagnosis.fit import _Curve, _fit
+    from railval.core.diagnosis.fit import _Curve, _fit_costs
 
     n = 6
     labels, groups = [f"q{i} zone 1 p" for i in range(n)], [f"q{i}" for i in range(n)]
@@ -374,8 +374,8 @@ def test_lack_of_fit_region_grows_with_what_the_fit_leaves():
     curve = _Curve(fam, n_fine=30001)
     P = np.stack([r - v * a for v in vals])
     w = np.ones(n)
-    k, cost, _ = _fit(curve, P, w)
-    lo, hi = _lack_of_fit_range(curve, P, w, k, cost, Pattern(labels, groups, r))
+    k, costs, _ = _fit_costs(curve, P, w)
+    lo, hi = _lack_of_fit_range(curve, costs, k, float(costs[k]), Pattern(labels, groups, r))
     half = np.linalg.norm(e) * np.sqrt(f_dist.ppf(0.90, 1, n - 1) / (n - 1)) / np.linalg.norm(a)
     assert lo == pytest.approx(0.8 - half, abs=2e-4) and hi == pytest.approx(0.8 + half, abs=2e-4)
 
