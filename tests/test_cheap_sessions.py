@@ -192,3 +192,27 @@ def test_zone_chart_is_static_markup_made_once_per_overview(tmp_path):
     kinds = {type(o).__name__ for o in page.body.select()}
     assert "Bokeh" not in kinds and "HTML" in kinds
     db.dispose()
+
+
+def test_status_area_is_one_pane_until_a_job_runs(tmp_path):
+    """The status message is escaped markup coloured by its level; the progress bar and the
+    cancel button are made when the session's first job starts, then follow ``busy``."""
+    import panel as pn
+
+    from railval.app.main import STATUS_COLOURS, status_area
+    from railval.app.state import AppState, Backend
+
+    db = demo_database(tmp_path)
+    app = AppState(Backend(db))
+    area = status_area(app)
+    assert len(area.objects) == 1 and "Ready." in area.objects[0].object
+    app.set_status("cannot open <b>x</b>", "error")
+    text = area.objects[0].object
+    assert "cannot open &lt;b&gt;x&lt;/b&gt;" in text and STATUS_COLOURS["error"][0] in text
+    app.busy, app.progress = True, 0.42
+    bar, cancel = area.objects[1:]
+    assert isinstance(bar, pn.indicators.Progress) and bar.visible and bar.value == 42
+    assert cancel.visible
+    app.busy = False
+    assert not bar.visible and not cancel.visible and len(area.objects) == 3
+    db.dispose()
