@@ -191,6 +191,11 @@ def test_zone_chart_is_static_markup_made_once_per_overview(tmp_path):
     page.show()
     kinds = {type(o).__name__ for o in page.body.select()}
     assert "Bokeh" not in kinds and "HTML" in kinds
+    # the description, then one pane: coverage, zone chart, lineage (selection marked), tables
+    desc, rest = page.body.objects
+    for part in ("Coverage holds", "rv-zone-chart", "<b class='rv-selected'>baseline</b>",
+                 "table class='rv-table rv-sections'", "Channels ("):
+        assert part in rest.object
     db.dispose()
 
 

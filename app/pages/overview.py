@@ -8,7 +8,7 @@ import math
 import pandas as pd
 import panel as pn
 
-from railval.app.pages._common import PageBase, html_table, message, table_markup
+from railval.app.pages._common import HTML_TABLE_CSS, PageBase, message, table_markup
 from railval.app.scales import FAIL_COLOR, LIMIT_COLOR, PASS_COLOR
 from railval.app.security import no_external_images
 from railval.app.state import CampaignOverview, unit_label
@@ -119,26 +119,40 @@ class OverviewPage(PageBase):
             f"`{html.escape(str(v.get('template', '')))}`"
         )
         short = ov.coverage_shortfalls()
-        cov = (message("Coverage shortfalls: " + "; ".join(short), "danger") if short
-               else message(f"Coverage holds: {len(ov.sections)} sections, every zone ≥ "
-                            f"{MIN_SECTIONS_PER_ZONE} sections, ≥ {MIN_POSITIONS} signals per channel "
-                            "kind.", "success"))
-        sections_html, channels_html, n_channels = overview_tables(ov)
-        # static markup shared by the sessions (no Bokeh figure: ≈ 20 models per session)
-        zone_plot = pn.pane.HTML(zone_chart(ov), sizing_mode="stretch_width", css_classes=["rv-zones"])
-        tree = pn.pane.HTML(lineage_tree_html(ov, self.app.configuration), sizing_mode="stretch_width",
-                            stylesheets=[TREE_CSS])
+        cov = (("danger", "Coverage shortfalls: " + "; ".join(short)) if short
+               else ("success", (f"Coverage holds: {len(ov.sections)} sections, every zone ≥ "
+                     f"{MIN_SECTIONS_PER_ZONE} sections, ≥ {MIN_POSITIONS} signals per channel kind.")))
         desc = pn.pane.Markdown(f"### {html.escape(ov.name)}\n{no_external_images(html.escape(ov.description))}\n\n{vehicle_md}",
                                 sizing_mode="stretch_width")
-        self.body.objects = [
-            desc, cov,
-            pn.Row(pn.Column(zone_plot, sizing_mode="stretch_width"),
-                   pn.Column(pn.pane.Markdown("#### Configurations and lineage"), tree,
-                             sizing_mode="stretch_width"), sizing_mode="stretch_width"),
-            pn.pane.Markdown("#### Sections (by zone)"), html_table(sections_html, max_height=520),
+        # the rest of the page is one HTML pane (one Bokeh model instead of ten panes and
+        # layouts per session); its pieces but the lineage's selection are shared markup
+        self.body.objects = [desc, pn.pane.HTML(overview_markup(ov, self.app.configuration, *cov),
+                                                sizing_mode="stretch_width",
+                                                stylesheets=[HTML_TABLE_CSS, TREE_CSS, OVERVIEW_CSS])]
+
+
+def overview_markup(ov: CampaignOverview, selected: str | None, level: str, coverage: str) -> str:
+    """The overview below the description: the coverage message (``level``: success or
+    danger), the zone chart beside the configurations' lineage (``selected`` marked), the
+    sections table (by zone, scrolled beyond 520 px) and every channel."""
+    sections_html, channels_html, n_channels = overview_tables(ov)
+    return (f"<div class='rv-coverage rv-coverage-{level}'>{html.escape(coverage)}</div>"
+            f"<div class='rv-overview-row'><div class='rv-overview-cell'>{zone_chart(ov)}</div>"
+            "<div class='rv-overview-cell'><h4>Configurations and lineage</h4>"
+            f"{lineage_tree_html(ov, selected)}</div></div>"
+            f"<h4>Sections (by zone)</h4><div style='overflow-y:auto;max-height:520px'>{sections_html}</div>"
             # every channel shown (no inner scroll hiding half of them), the count in the heading
-            pn.pane.Markdown(f"#### Channels ({n_channels})"), html_table(channels_html),
-        ]
+            f"<h4>Channels ({n_channels})</h4><div>{channels_html}</div>")
+
+
+OVERVIEW_CSS = """
+.rv-coverage { margin: 5px 0; padding: 10px 12px; border-radius: 4px; font-size: 14px; }
+.rv-coverage-success { background: #d4edda; color: #155724; border: 1px solid #c3e6cb; }
+.rv-coverage-danger { background: #f8d7da; color: #721c24; border: 1px solid #f5c6cb; }
+.rv-overview-row { display: flex; flex-wrap: wrap; gap: 16px; }
+.rv-overview-cell { flex: 1 1 380px; min-width: 0; }
+h4 { margin: 14px 0 6px 0; font-size: 16px; }
+"""
 
 
 TREE_CSS = """
