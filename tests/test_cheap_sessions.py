@@ -182,7 +182,7 @@ def test_zone_chart_is_static_markup_made_once_per_overview(tmp_path):
     bar_tops = [float(y) for y in re.findall(r"rv-zone-bar[^>]* y='([0-9.]+)'", svg)]
     assert need_y == pytest.approx(bar_tops[0])
     ticks = re.findall(r"text-anchor='end'>(\d+)</text>", svg)
-    assert ticks == [str(t) for t in range(0, 6)]  # counts: integer ticks 0..max+1
+    assert ticks == [str(t) for t in range(6)]  # counts: integer ticks 0..max+1
 
     db = demo_database(tmp_path)
     a, b = AppState(Backend(db)), AppState(Backend(db))
@@ -192,7 +192,7 @@ def test_zone_chart_is_static_markup_made_once_per_overview(tmp_path):
     kinds = {type(o).__name__ for o in page.body.select()}
     assert "Bokeh" not in kinds and "HTML" in kinds
     # the description, then one pane: coverage, zone chart, lineage (selection marked), tables
-    desc, rest = page.body.objects
+    _desc, rest = page.body.objects
     for part in ("Coverage holds", "rv-zone-chart", "<b class='rv-selected'>baseline</b>",
                  "table class='rv-table rv-sections'", "Channels ("):
         assert part in rest.object
