@@ -21,6 +21,7 @@ from typing import Any
 
 import panel as pn
 import param
+from bokeh.settings import settings as bokeh_settings
 from panel.reactive import ReactiveHTML
 
 from railval.app import security
@@ -41,7 +42,9 @@ CSS_FILE = STATIC / "railval.css"
 ACCENT = "#0b5394"
 
 security.use_local_fonts()
-pn.extension("tabulator", notifications=False, design="native", sizing_mode="stretch_width")
+# browser_info off: nothing reads it, and it is one more model and document root per session
+pn.extension("tabulator", notifications=False, design="native", sizing_mode="stretch_width",
+             browser_info=False)
 
 PAGE_CLASSES = {
     "overview": OverviewPage, "compare": ComparePage, "dashboard": DashboardPage,
@@ -79,29 +82,52 @@ def _css() -> list[str]:
     return [text] if text is not None else []
 
 
+#: colours of the status message per level (background, text, border: Bootstrap 4's alerts,
+#: the look of ``pn.pane.Alert`` that the status area used before)
+STATUS_COLOURS = {"info": ("#d1ecf1", "#0c5460", "#bee5eb"), "success": ("#d4edda", "#155724", "#c3e6cb"),
+                  "warning": ("#fff3cd", "#856404", "#ffeeba"), "error": ("#f8d7da", "#721c24", "#f5c6cb")}
+
+
+def status_markup(status: str, level: str) -> str:
+    """The status message as markup (escaped), coloured by its level; "Ready." when empty."""
+    if not status:
+        return "<div class='rv-status' style='color:#666'>Ready.</div>"
+    bg, fg, border = STATUS_COLOURS[level]
+    return (f"<div class='rv-status rv-status-{level}' role='status' style='background:{bg};"
+            f"color:{fg};border:1px solid {border};border-radius:4px;padding:8px 10px'>"
+            f"{html.escape(status)}</div>")
+
+
 def status_area(app: AppState) -> pn.Column:
-    """Status message (level-coloured) and a progress bar shown while a job runs."""
-    kinds = {"info": "info", "success": "success", "warning": "warning", "error": "danger"}
+    """Status message (level-coloured) and a progress bar with a cancel button while a job
+    runs. The message is one HTML pane rewritten on change; the bar and the button are made
+    when the session's first job starts (most sessions never run one)."""
+    pane = pn.pane.HTML(status_markup(app.status, app.status_level), sizing_mode="stretch_width",
+                        margin=(5, 5))
+    area = pn.Column(pane, sizing_mode="stretch_width")
+    job_widgets: list[Any] = []
 
-    def alert(status: str, level: str) -> Any:
-        if not status:
-            return pn.pane.Markdown("Ready.", styles={"color": "#666"}, css_classes=["rv-status"])
-        return pn.pane.Alert(html.escape(status), alert_type=kinds[level], css_classes=["rv-status"],
-                             sizing_mode="stretch_width", margin=(5, 5))
+    def message(*_) -> None:
+        pane.object = status_markup(app.status, app.status_level)
 
-    bar = pn.indicators.Progress(value=0, max=100, sizing_mode="stretch_width", visible=False,
-                                 css_classes=["rv-progress"], bar_color="info")
-
-    cancel = pn.widgets.Button(name="Cancel job", button_type="warning", visible=False,
-                               width=120, css_classes=["rv-cancel"])
-    cancel.on_click(lambda _: app.cancel_job())
-
-    def sync(*_):
+    def sync(*_) -> None:
+        if not job_widgets:
+            if not app.busy:
+                return
+            bar = pn.indicators.Progress(value=0, max=100, sizing_mode="stretch_width", visible=False,
+                                         css_classes=["rv-progress"], bar_color="info")
+            cancel = pn.widgets.Button(name="Cancel job", button_type="warning", visible=False,
+                                       width=120, css_classes=["rv-cancel"])
+            cancel.on_click(lambda _: app.cancel_job())
+            job_widgets.extend([bar, cancel])
+            area.extend(job_widgets)
+        bar, cancel = job_widgets
         bar.visible = cancel.visible = app.busy
         bar.value = round(app.progress * 100)
+    app.param.watch(message, ["status", "status_level"])
     app.param.watch(sync, ["busy", "progress"])
-    return pn.Column(pn.bind(alert, app.param.status, app.param.status_level), bar, cancel,
-                     sizing_mode="stretch_width")
+    sync()
+    return area
 
 
 class Pages(Mapping[str, Any]):
@@ -354,6 +380,10 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
 
     extra = (list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database, auth)
              + [(r"/health", HealthHandler, {"database": database})])
+    # Bokeh checks every model of a new session's document for layout warnings, which it only
+    # logs (bokeh.application.Application.initialize_document, setting ``validate_doc``): 11 %
+    # of a session's build in a profile (docs/app.md, "Cheap sessions"); off in served processes
+    bokeh_settings.perform_document_validation.set_value(False)
     if release_memory not in getattr(pn.state, "_on_session_destroyed", []):
         pn.state.on_session_destroyed(release_memory)
     if admin:

@@ -341,15 +341,25 @@ def campaign_summary(session: Session, campaign: CampaignArg) -> dict[str, Any]:
     }
 
 
+#: audit actions (prefixes) that change no campaign, vehicle, section, channel or
+#: configuration: sign-ins and sign-outs, users and their roles, invitations, workshops,
+#: backups. Any other action, one added later included, counts as a possible change.
+NOT_CATALOGUE_ACTIONS = ("login.", "logout", "user.", "invitation.", "workshop.", "database.backup")
+
+
 def catalogue_stamp(session: Session) -> tuple:
     """A stamp of what a campaign overview is made of, in one query: row count and largest id
     of the campaign, vehicle, section, channel and configuration tables (any row added or
     deleted changes it), the largest recording id (a configuration replaced in place gets
-    new recordings) and the largest audit-trail id (every stored change is audited,
-    docs/audit.md). The web app's process-wide cache of campaign lists and overviews
-    (docs/app.md, "Cheap sessions") recomputes an entry when it changes."""
+    new recordings) and the largest id of an audit-trail row that may change the catalogue
+    (every stored change is audited, docs/audit.md; the rows of :data:`NOT_CATALOGUE_ACTIONS` —
+    sign-ins, users, invitations, workshops — are left out, so that a sign-in does not make
+    the next session recompute). The web app's process-wide cache of campaign lists and
+    overviews (docs/app.md, "Cheap sessions") recomputes an entry when it changes."""
     parts = []
     for model in (Campaign, Vehicle, Section, Channel, Configuration):
         parts += [select(func.count(model.id)).scalar_subquery(), select(func.max(model.id)).scalar_subquery()]
-    parts += [select(func.max(m.id)).scalar_subquery() for m in (Recording, AuditEvent)]
+    catalogue_audit = select(func.max(AuditEvent.id)).where(
+        *(AuditEvent.action.not_like(f"{prefix}%") for prefix in NOT_CATALOGUE_ACTIONS))
+    parts += [select(func.max(Recording.id)).scalar_subquery(), catalogue_audit.scalar_subquery()]
     return tuple(session.execute(select(*parts)).one())

@@ -78,7 +78,9 @@ class Campaign(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     description: Mapped[str] = mapped_column(Text, default="")
     zone1_min_radius_m: Mapped[float] = mapped_column(Float, default=5000.0)
-    manifest: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    #: the imported campaign manifest (with the synthetic campaign ≈ 0.7 MB of JSON): loaded
+    #: only when read (``deferred``), not with every lookup of the campaign by name or id
+    manifest: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict, deferred=True)
     created_at: Mapped[dt.datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
     vehicle: Mapped[Vehicle | None] = relationship(

@@ -58,7 +58,8 @@ def open_app(page, url: str, timeout_ms: float = 60_000) -> None:
     page.set_viewport_size(VIEWPORT)
     block_fonts(page)
     page.goto(url)
-    page.locator("canvas").first.wait_for(state="attached", timeout=timeout_ms)
+    # the first chart: a canvas, or the overview's zone chart (static SVG)
+    page.locator("canvas, .rv-zone-chart").first.wait_for(state="attached", timeout=timeout_ms)
 
 
 def nav(page, title: str) -> None:

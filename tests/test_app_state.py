@@ -289,7 +289,7 @@ def test_pages_are_built_on_first_view_and_refresh_when_shown(demo_db):
     assert overview._stale
     app.page = "overview"
     assert not overview._stale
-    tree = overview.body.objects[2][1][1].object  # lineage tree beside the zone chart
+    tree = overview.body.objects[1].object  # the pane below the description: lineage beside the zone chart
     assert f"<b class='rv-selected'>{other}</b>" in tree
     assert set(pages) == {"overview", "compare", "dashboard", "metrics", "diagnose", "report",
                           "signoff", "audit", "import"}

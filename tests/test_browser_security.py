@@ -55,7 +55,7 @@ def test_hostile_names_stay_text_and_nothing_leaves_the_host(page, app_url):
     response = page.goto(app_url)
     assert response.headers["content-security-policy"] == CSP
     assert response.headers["x-content-type-options"] == "nosniff"
-    page.locator("canvas").first.wait_for(state="attached", timeout=120_000)
+    page.locator("canvas, .rv-zone-chart").first.wait_for(state="attached", timeout=120_000)
     page.locator(".rv-main h2", has_text="Campaign overview").wait_for(timeout=120_000)
     nav(page, "Compare signals")
     page.locator(".rv-main h2", has_text="Compare").wait_for(timeout=120_000)

@@ -40,10 +40,12 @@ import tempfile
 import threading
 import time
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from railval.app.bench.bench_workshop import xsrf_headers, xsrf_of
+from railval.app.bench.topology import REPO, Topology
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,6 +62,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "deployment's PYTHONMALLOC=malloc (railval.app.main.SERVE_ENV), to compare")
     parser.add_argument("--pg", default="postgresql://postgres@127.0.0.1:5432/test",
                         help="PostgreSQL database in which a fresh schema is used")
+    parser.add_argument("--ref", default=None, metavar="COMMIT",
+                        help="A/B in one run: the first app process runs the code of COMMIT (git "
+                        "archive, first on its PYTHONPATH), the others the working tree's; the "
+                        "first page and the CPU per new session are also printed per code")
 
 
 def _rss_mb(pids: list[int]) -> dict[int, float]:
@@ -109,7 +115,13 @@ def _cpu_s(pids: list[int]) -> float:
     return sum(sum(psutil.Process(p).cpu_times()[:2]) for p in pids)
 
 
-def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | None = None):
+def _serving_pid(page) -> int:
+    """The app process that serves ``page``'s session (nginx keeps a browser on one process)."""
+    return int(page.evaluate("() => fetch('/health').then(r => r.json()).then(d => d.process)"))
+
+
+def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | None = None,
+                   served_by: list | None = None):
     """``n`` engineer sessions, one browser context each, opened one after another; returns
     the pages and the RSS after the first (modules, caches and campaign data loaded).
     ``cpu``: per session, the app processes' CPU seconds from the sign-in click until the
@@ -118,7 +130,8 @@ def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | N
     caches once, left out), as (raw CPU-s, background CPU-s per s, window s): the background is
     what the processes burn with the sessions already open (their periodic refreshes, the
     reviewers' answers), read over 1 s before the click, so that ``raw − background × window``
-    is the new session's own cost."""
+    is the new session's own cost; with the serving process's own CPU-s (``own``) last.
+    ``served_by``: per session, the process that served it (after the CPU is read)."""
     pages, warm = [], None
     for k in range(n):
         ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900})
@@ -129,7 +142,7 @@ def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | N
         page.fill("#password", "engineer password")
         b0, tb = _cpu_s(_PIDS), time.perf_counter()
         time.sleep(1.0)
-        c0 = _cpu_s(_PIDS)
+        c0, each0 = _cpu_s(_PIDS), {p: _cpu_s([p]) for p in _PIDS}
         t0 = time.perf_counter()
         background = (c0 - b0) / (t0 - tb)
         page.click("#signin")
@@ -137,7 +150,10 @@ def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | N
         times.append((time.perf_counter() - t0) * 1000)
         time.sleep(0.5)
         if cpu is not None and k > 0:
-            cpu.append((_cpu_s(_PIDS) - c0, background, time.perf_counter() - t0))
+            each = {p: _cpu_s([p]) - each0[p] for p in _PIDS}
+            cpu.append((_cpu_s(_PIDS) - c0, background, time.perf_counter() - t0, each))
+        if served_by is not None:
+            served_by.append(_serving_pid(page))
         pages.append(page)
         if warm is None:
             time.sleep(2.0)
@@ -148,10 +164,38 @@ def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | N
 _PIDS: list[int] = []
 
 
+def _export(commit: str, work: Path) -> str:
+    """The code of ``commit`` (``git archive`` of this checkout) laid out as the ``railval``
+    namespace (``railval/app``, ``railval/core``, ``railval/db``) in ``work``; returns the
+    folder to put first on ``PYTHONPATH``. The database schema must be the same as the tree's."""
+    import subprocess
+
+    src, pkg = work / "ref-src", work / "ref-pkg"
+    src.mkdir(parents=True)
+    (pkg / "railval").mkdir(parents=True)
+    archive = subprocess.run(["git", "-C", str(REPO), "archive", commit], check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(src)], input=archive, check=True)
+    for part in ("app", "core", "db"):
+        (pkg / "railval" / part).symlink_to(src / part)
+    return str(pkg)
+
+
+@dataclass
+class _RefTopology(Topology):
+    """The team topology whose first app process runs the code at ``ref_path`` (``--ref``)."""
+
+    ref_path: str = ""
+
+    def _env(self) -> dict[str, str]:
+        env = super()._env()
+        if self.ref_path and not self.apps:  # start_app: the first app process
+            env["PYTHONPATH"] = self.ref_path
+        return env
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     import psycopg
-
-    from railval.app.bench.topology import Topology
 
     schema = f"bench_{uuid.uuid4().hex[:10]}"
     with psycopg.connect(args.pg, autocommit=True) as conn:
@@ -161,14 +205,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     figures: dict[str, Any] = {"reviewers": args.reviewers, "engineers": args.engineers,
                                "app_processes": args.apps, "answers_per_reviewer": args.answers,
                                "allocator": "pymalloc" if args.pymalloc else "malloc", "admin_page": args.admin}
-    topo = Topology(url, work / "site", n_apps=args.apps, app_env={} if args.pymalloc else None,
-                    admin=args.admin)
+    topo = _RefTopology(url, work / "site", n_apps=args.apps, app_env={} if args.pymalloc else None,
+                        admin=args.admin, ref_path=_export(args.ref, work) if args.ref else "")
+    if args.ref:
+        figures["ref"] = args.ref
     try:
         db, tokens, answers = _seed(args, url, topo)
         figures["answers_per_reviewer"] = answers
         topo.start()
         m = _drive(args, topo, tokens, answers)
         figures.update(_figures(args, m, _stored_answers(db), answers))
+        if args.ref:
+            figures["per_code"] = _per_code(m, next(iter(topo.apps.values())).pid)
         db.dispose()
         with open("/proc/loadavg") as fh:
             figures["loadavg_at_end"] = fh.read().split()[:3]
@@ -222,10 +270,11 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
                          "cpu": []}
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
-        pages, m["warm"] = _open_sessions(browser, topo.url, args.engineers, m["first_page"], m["cpu"])
+        m["served_by"] = []
+        pages, m["warm"] = _open_sessions(browser, topo.url, args.engineers, m["first_page"], m["cpu"],
+                                          m["served_by"])
         m["per_process"] = {}
-        for page in pages:
-            pid = page.evaluate("() => fetch('/health').then(r => r.json()).then(d => d.process)")
+        for pid in m["served_by"]:
             m["per_process"][pid] = m["per_process"].get(pid, 0) + 1
         m["open"] = _rss_mb(pids)
         threads = [threading.Thread(target=_reviewer, args=("127.0.0.1", topo.port, t, answers,
@@ -264,15 +313,36 @@ def _stats(values: list[float]) -> dict[str, float] | None:
             "max": round(max(values), 3)}
 
 
+def _per_code(m: dict[str, Any], ref_pid: int) -> dict[str, Any]:
+    """``--ref``: the first page and the CPU per new session split by the code that served the
+    session (``ref``: the first app process; ``tree``: the others). A process's first session
+    (its imports and caches) is left out of both; ``own_cpu_s`` is the serving process's CPU
+    alone, ``all_cpu_s`` both processes' (as ``server_cpu_per_new_session_s``)."""
+    seen: set[int] = set()
+    out: dict[str, dict[str, list[float]]] = {c: {"first_page_ms": [], "own_cpu_s": [], "all_cpu_s": []}
+                                              for c in ("ref", "tree")}
+    for k, pid in enumerate(m["served_by"]):
+        if pid not in seen:
+            seen.add(pid)
+            continue
+        code = out["ref" if pid == ref_pid else "tree"]
+        code["first_page_ms"].append(m["first_page"][k])
+        raw, _bg, _w, each = m["cpu"][k - 1]  # no CPU reading for the very first session
+        code["own_cpu_s"].append(each[pid])
+        code["all_cpu_s"].append(raw)
+    return {c: {"sessions": len(v["own_cpu_s"]), **{key: _stats(vals) for key, vals in v.items()}}
+            for c, v in out.items()}
+
+
 def _figures(args: argparse.Namespace, m: dict[str, Any], stored: int, answers: int) -> dict[str, Any]:
     """The printed figures from the raw readings of :func:`_drive`."""
     total = lambda key: round(sum(m[key].values()), 1)
     return {
         "first_panel_page_ms": {"p50": _pct(m["first_page"], 50), "p95": _pct(m["first_page"], 95),
                                 "max": round(max(m["first_page"]), 1)},
-        "server_cpu_per_new_session_s": _stats([raw for raw, _, _ in m["cpu"]]),
-        "background_cpu_s_per_s": _stats([bg for _, bg, _ in m["cpu"]]),
-        "server_cpu_per_new_session_net_s": _stats([raw - bg * w for raw, bg, w in m["cpu"]]),
+        "server_cpu_per_new_session_s": _stats([raw for raw, *_ in m["cpu"]]),
+        "background_cpu_s_per_s": _stats([bg for _, bg, *_ in m["cpu"]]),
+        "server_cpu_per_new_session_net_s": _stats([raw - bg * w for raw, bg, w, _ in m["cpu"]]),
         "panel_sessions_per_process": sorted(m["per_process"].values()),
         "answer_round_trip_ms": {"p50": _pct(m["rtt"], 50), "p95": _pct(m["rtt"], 95),
                                  "max": round(max(m["rtt"]), 1)},
