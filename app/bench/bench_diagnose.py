@@ -19,6 +19,22 @@ import tempfile
 import time
 from pathlib import Path
 
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs (in a Dask worker too: ``_warm_worker``)
+evaluate_section = lazy.function("railval.core.en14363", "evaluate_section")
+sim = lazy.module("railval.core.sim")
+SectionInfo = lazy.function("railval.core.types", "SectionInfo")
+dask_distributed = lazy.module("dask.distributed")
+diagnose = lazy.function("railval.app.services.diagnosis", "diagnose")
+calibrate = lazy.function("railval.app.services.calibration", "calibrate")
+evaluate_effects = lazy.function("railval.app.services.campaign_context", "evaluate_effects")
+load_context = lazy.function("railval.app.services.campaign_context", "load_context")
+synth = lazy.function("railval.app.services.synth", "synth")
+repo = lazy.module("railval.db.repo")
+connect = lazy.function("railval.db.engine", "connect")
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--effect", default="friction_damping", help="hidden effect (default friction_damping)")
@@ -31,13 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _warm_worker() -> bool:
     """Run on every Dask worker before it is timed: import the simulator and the EN chain and
     load their compiled kernels (one short section simulated and evaluated)."""
-    from railval.core.en14363 import evaluate_section
-    from railval.core.sim import TrackSection, VehicleModel, simulate_section
-    from railval.core.types import SectionInfo
-
-    track = TrackSection("W", speed_kmh=80, radius_m=400, cant_mm=100, straight_in_m=100, transition_in_m=50,
+    track = sim.TrackSection("W", speed_kmh=80, radius_m=400, cant_mm=100, straight_in_m=100, transition_in_m=50,
                          curve_m=150, transition_out_m=50, straight_out_m=100, seed=1)
-    ss = simulate_section(VehicleModel("coach"), track, {}, fs_out=200.0)
+    ss = sim.simulate_section(sim.VehicleModel("coach"), track, {}, fs_out=200.0)
     evaluate_section(ss, SectionInfo("W", 400, 100, 80, 3, 160.0, 290.0))
     return True
 
@@ -45,15 +57,11 @@ def _warm_worker() -> bool:
 def dask_scaling(database, values: int) -> tuple[dict, list]:
     """The diagnosis on a LocalCluster of 1 and of 2 worker processes: seconds, speed-up and
     whether the rankings equal each other."""
-    from dask.distributed import Client, LocalCluster
-
-    from railval.app.services.diagnosis import diagnose
-
     out: dict = {}
     ranks = []
     for n in (1, 2):
-        with LocalCluster(n_workers=n, threads_per_worker=1, dashboard_address=":0", processes=True) as cluster, \
-                Client(cluster) as client:
+        with dask_distributed.LocalCluster(n_workers=n, threads_per_worker=1, dashboard_address=":0", processes=True) as cluster, \
+                dask_distributed.Client(cluster) as client:
             client.run(_warm_worker)
             t0 = time.perf_counter()
             d = diagnose(database, "bench", "baseline", scheduler=client, values_per_parameter=values,
@@ -66,13 +74,6 @@ def dask_scaling(database, values: int) -> tuple[dict, list]:
 
 
 def run(args: argparse.Namespace) -> dict:
-    from railval.app.services.calibration import calibrate
-    from railval.app.services.campaign_context import evaluate_effects, load_context
-    from railval.app.services.diagnosis import diagnose
-    from railval.app.services.synth import synth
-    from railval.db import repo
-    from railval.db.engine import connect
-
     effect = getattr(args, "effect", "friction_damping")
     workers = getattr(args, "workers", 2)
     scheduler = getattr(args, "scheduler", None)

@@ -32,10 +32,14 @@ Python's own allocator instead, for comparison.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import http.client
+import io
 import json
+import os
 import ssl
 import statistics
+import subprocess
 import tempfile
 import threading
 import time
@@ -44,8 +48,25 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sqlalchemy import func, select
+
 from railval.app.bench.bench_workshop import xsrf_headers, xsrf_of
 from railval.app.bench.topology import REPO, Topology
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs (the CLI's ``main`` also because the
+#: command line imports this module)
+psutil = lazy.module("psutil")
+psycopg = lazy.module("psycopg")
+playwright_sync = lazy.module("playwright.sync_api")
+cli_main = lazy.function("railval.app.cli", "main")
+workshops_service = lazy.module("railval.app.services.workshops")
+users = lazy.module("railval.db.users")
+wsdb = lazy.module("railval.db.workshops")
+connect = lazy.function("railval.db.engine", "connect")
+report = lazy.module("railval.app.report")
+models = lazy.module("railval.db.models")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -69,8 +90,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _rss_mb(pids: list[int]) -> dict[int, float]:
-    import psutil
-
     return {p: round(psutil.Process(p).memory_info().rss / 1048576, 1) for p in pids}
 
 
@@ -110,8 +129,6 @@ def _reviewer(host: str, port: int, token: str, n: int, out: list[float], errors
 
 def _cpu_s(pids: list[int]) -> float:
     """CPU time (user + system) the app processes have used so far."""
-    import psutil
-
     return sum(sum(psutil.Process(p).cpu_times()[:2]) for p in pids)
 
 
@@ -168,8 +185,6 @@ def _export(commit: str, work: Path) -> str:
     """The code of ``commit`` (``git archive`` of this checkout) laid out as the ``railval``
     namespace (``railval/app``, ``railval/core``, ``railval/db``) in ``work``; returns the
     folder to put first on ``PYTHONPATH``. The database schema must be the same as the tree's."""
-    import subprocess
-
     src, pkg = work / "ref-src", work / "ref-pkg"
     src.mkdir(parents=True)
     (pkg / "railval").mkdir(parents=True)
@@ -195,8 +210,6 @@ class _RefTopology(Topology):
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    import psycopg
-
     schema = f"bench_{uuid.uuid4().hex[:10]}"
     with psycopg.connect(args.pg, autocommit=True) as conn:
         conn.execute(f'CREATE SCHEMA "{schema}"')
@@ -230,26 +243,16 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 def _seed(args: argparse.Namespace, url: str, topo: Any) -> tuple[Any, list[str], int]:
     """A fresh database with the synthetic campaign, an engineer and a workshop of Y plots with
     one invitation per reviewer: (database, the reviewers' tokens, answers per reviewer)."""
-    import contextlib
-    import io
-    import os
-
-    from railval.app.cli import main
-    from railval.app.services import workshops as wsvc
-    from railval.db import users
-    from railval.db import workshops as wsdb
-    from railval.db.engine import connect
-
     topo.workdir.mkdir(parents=True)
     topo._secrets()
     os.environ["RAILVAL_SECRET_KEY_FILE"] = str(topo.workdir / "secrets" / "railval_secret_key")
     with contextlib.redirect_stdout(io.StringIO()):  # stdout is the figures' JSON
-        assert main(["--db", url, "init"]) == 0
-        assert main(["--db", url, "synth", "--name", "demo", "--sections", "12"]) == 0
+        assert cli_main(["--db", url, "init"]) == 0
+        assert cli_main(["--db", url, "synth", "--name", "demo", "--sections", "12"]) == 0
     db = connect(url)
     with db.session(write=True) as s:
         users.create_user(s, "eng", password="engineer password", roles=["engineer"])
-    wsvc.create(db, "W", "demo", kinds=["Y_time"], repeats=0.0)
+    workshops_service.create(db, "W", "demo", kinds=["Y_time"], repeats=0.0)
     with db.session(write=True) as s:
         w = wsdb.get_workshop(s, "W")
         tokens = [wsdb.invite(s, w, f"r{k}", seed=k) for k in range(args.reviewers)]
@@ -260,16 +263,12 @@ def _seed(args: argparse.Namespace, url: str, topo: Any) -> tuple[Any, list[str]
 def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int) -> dict[str, Any]:
     """Engineers' Panel sessions in Chromium, reviewers answering over their own connections,
     the sessions closed and a second wave opened; the raw timings and memory readings."""
-    from playwright.sync_api import sync_playwright
-
-    from railval.app.report import CHROMIUM_ARGS
-
     pids = [p.pid for p in topo.apps.values()]
     _PIDS[:] = pids
     m: dict[str, Any] = {"before": _rss_mb(pids), "first_page": [], "rtt": [], "errors": [],
                          "cpu": []}
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+    with playwright_sync.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=report.CHROMIUM_ARGS)
         m["served_by"] = []
         pages, m["warm"] = _open_sessions(browser, topo.url, args.engineers, m["first_page"], m["cpu"],
                                           m["served_by"])
@@ -298,12 +297,8 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
 
 
 def _stored_answers(db: Any) -> int:
-    from sqlalchemy import func, select
-
-    from railval.db.models import WorkshopAnswer
-
     with db.session() as s:
-        return int(s.scalar(select(func.count()).select_from(WorkshopAnswer)))
+        return int(s.scalar(select(func.count()).select_from(models.WorkshopAnswer)))
 
 
 def _stats(values: list[float]) -> dict[str, float] | None:

@@ -33,8 +33,12 @@ from __future__ import annotations
 
 import argparse
 import http.client
+import io
 import json
 import os
+import random
+import re
+import shutil
 import statistics
 import subprocess
 import sys
@@ -44,6 +48,24 @@ import time
 import urllib.request
 from pathlib import Path
 from typing import Any
+
+from sqlalchemy import select
+
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
+#: docstring; what the benchmark runs loads when it runs (matplotlib only for way A's plots)
+workshops_service = lazy.module("railval.app.services.workshops")
+workshop_render = lazy.module("railval.app.services.workshop_render")
+synth_service = lazy.module("railval.app.services.synth")
+analyse = lazy.function("railval.app.services.workshop_answers", "analyse")
+verify_database = lazy.function("railval.app.services.audit", "verify_database")
+free_port = lazy.function("railval.app.main", "free_port")
+wsdb = lazy.module("railval.db.workshops")
+models = lazy.module("railval.db.models")
+connect = lazy.function("railval.db.engine", "connect")
+matplotlib = lazy.module("matplotlib")
+Figure = lazy.function("matplotlib.figure", "Figure")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -83,29 +105,21 @@ def _summary(ms: list[float]) -> dict[str, float]:
 
 
 def _setup(url: str, campaign: str | None, n_plots: int, n_reviewers: int) -> dict[str, Any]:
-    from railval.app.services import workshops as ws
-    from railval.db import workshops as wsdb
-    from railval.db.engine import connect
-    from railval.db.models import Workshop
-    from sqlalchemy import select
-
     db = connect(url)
     db.init()
     if campaign is None:
-        from railval.app.services.synth import DEMO_NAME, ensure_demo
-
-        ensure_demo(db)
-        campaign = DEMO_NAME
+        synth_service.ensure_demo(db)
+        campaign = synth_service.DEMO_NAME
     tag = f"{int(time.time()) % 100000:05d}"
     with db.session(write=True) as s:
-        existing = s.scalar(select(Workshop).where(Workshop.name == "bench"))
+        existing = s.scalar(select(models.Workshop).where(models.Workshop.name == "bench"))
         if existing is not None:  # reuse the rendered workshop, new reviewers
             n = len(wsdb.plots(s, existing))
             tokens = {f"bench{tag}-{i:02d}": wsdb.invite(s, existing, f"bench{tag}-{i:02d}", seed=i)
                       for i in range(n_reviewers)}
             return {"tokens": tokens, "plots": n, "create_s": None, "campaign": campaign,
                     "planned": n}
-        planned = ws.plan(s, campaign)
+        planned = workshops_service.plan(s, campaign)
     if len(planned) < n_plots:
         raise SystemExit(f"campaign {campaign} gives only {len(planned)} plots, {n_plots} asked")
     # the first n plots in plan order: whole (configuration, section) plot sets
@@ -114,9 +128,9 @@ def _setup(url: str, campaign: str | None, n_plots: int, n_reviewers: int) -> di
     configs = sorted({p.configuration for p in chosen})
     kinds = sorted({p.kind for p in chosen})
     with db.session() as s:
-        n_all = len(ws.plan(s, campaign, configs, sections, kinds))
+        n_all = len(workshops_service.plan(s, campaign, configs, sections, kinds))
     t0 = time.perf_counter()
-    summary = ws.create(db, "bench", campaign, configurations=configs, sections=sections,
+    summary = workshops_service.create(db, "bench", campaign, configurations=configs, sections=sections,
                         kinds=kinds, repeats=0.0)
     create_s = time.perf_counter() - t0
     tokens = {}
@@ -135,8 +149,6 @@ def xsrf_of(set_cookie: str | None, page: bytes) -> dict[str, str] | None:
     :class:`railval.app.security.SessionBoundXsrf`), as the browser sends them with an
     answer: POST with ``Cookie: railval_presession=<cookie>`` (:func:`xsrf_headers`) and
     ``X-XSRFToken: <token>``; ``None`` when either is missing."""
-    import re
-
     cookie = re.search(r"railval_presession=([^;]+)", set_cookie or "")
     token = re.search(rb'name="xsrf-token" content="([^"]+)"', page)
     if cookie and token:
@@ -174,8 +186,6 @@ class _Reviewer(threading.Thread):
         return resp.status, raw
 
     def run(self) -> None:
-        import random
-
         rng = random.Random(self.index)
         base = f"/review/{self.token}"
         conn = http.client.HTTPConnection("127.0.0.1", self.port, timeout=60)
@@ -215,10 +225,8 @@ class _Reviewer(threading.Thread):
 
 def _choice(db, campaign: str, n_plots: int) -> dict[str, list[str]]:
     """Configurations, sections and kinds of the first ``n_plots`` planned plots."""
-    from railval.app.services import workshops as ws
-
     with db.session() as s:
-        chosen = ws.plan(s, campaign)[:n_plots]
+        chosen = workshops_service.plan(s, campaign)[:n_plots]
     return {"configurations": sorted({p.configuration for p in chosen}),
             "sections": sorted({p.section for p in chosen}),
             "kinds": sorted({p.kind for p in chosen})}
@@ -230,14 +238,8 @@ def legacy_png(x_meas, y_meas, x_sim, y_sim, scale, *, title: str, x_label: str,
     whole figure drawn, saved with matplotlib's PNG writer (RGBA, zlib level 6); with the
     current :data:`STYLE` (margins of version 3), so its pixels are the reference of the
     current renderer's."""
-    import io
-
-    import matplotlib
-    from matplotlib.figure import Figure
-    from railval.app.services import workshop_render as wr
-
-    st, m, s = wr.STYLE, wr.STYLE["measurement"], wr.STYLE["simulation"]
-    with matplotlib.rc_context(wr._RC):
+    st, m, s = workshop_render.STYLE, workshop_render.STYLE["measurement"], workshop_render.STYLE["simulation"]
+    with matplotlib.rc_context(workshop_render._RC):
         fig = Figure(figsize=(st["width_in"], st["height_in"]), dpi=st["dpi"])
         ax = fig.add_subplot(1, 1, 1)
         ax.set_axisbelow(True)
@@ -248,8 +250,8 @@ def legacy_png(x_meas, y_meas, x_sim, y_sim, scale, *, title: str, x_label: str,
         if scale.y.log:
             ax.set_yscale("log")
         else:
-            ax.set_yticks(wr._ticks(scale.y.lo, scale.y.hi, scale.y.step))
-        ax.set_xticks(wr._ticks(scale.x.lo, scale.x.hi, scale.x.step))
+            ax.set_yticks(workshop_render._ticks(scale.y.lo, scale.y.hi, scale.y.step))
+        ax.set_xticks(workshop_render._ticks(scale.x.lo, scale.x.hi, scale.x.step))
         ax.set_xlim(scale.x.lo, scale.x.hi)
         ax.set_ylim(scale.y.lo, scale.y.hi)
         ax.set_xlabel(x_label)
@@ -265,6 +267,8 @@ def legacy_png(x_meas, y_meas, x_sim, y_sim, scale, *, title: str, x_label: str,
 def _timed_create(db, name: str, campaign: str, choice: dict, legacy: bool) -> dict[str, Any]:
     """One creation, timed, with the renderer of ``legacy`` (A) or the current one (B);
     the render cache is emptied first so that both render every plot."""
+    # the real modules, not the lazy stand-ins: the renderer is swapped by assignment, which a
+    # stand-in would keep for itself (railval.core.lazy forwards reads only)
     from railval.app.services import workshop_render as wr
     from railval.app.services import workshops as ws
 
@@ -290,16 +294,13 @@ def _timed_create(db, name: str, campaign: str, choice: dict, legacy: bool) -> d
 def run_create_only(args: argparse.Namespace) -> dict[str, Any]:
     """``--create-only N``: A and B alternately N times each on one database (a first,
     untimed creation fills the validation results' cache both then read)."""
-    from railval.app.services.synth import DEMO_NAME, ensure_demo
-    from railval.db.engine import connect
-
     folder = Path(tempfile.mkdtemp(prefix="railval-bench-wsc-"))
     db = connect(args.url or f"sqlite:///{folder / 'bench.db'}")
     db.init()
     campaign = args.campaign
     if campaign is None:
-        ensure_demo(db)
-        campaign = DEMO_NAME
+        synth_service.ensure_demo(db)
+        campaign = synth_service.DEMO_NAME
     choice = _choice(db, campaign, args.plots)
     tag = f"{int(time.time()) % 100000:05d}"
     warm = _timed_create(db, f"bench-warm-{tag}", campaign, choice, legacy=False)
@@ -309,19 +310,15 @@ def run_create_only(args: argparse.Namespace) -> dict[str, Any]:
             runs.append(_timed_create(db, f"bench-{'a' if legacy else 'b'}{i}-{tag}", campaign,
                                       choice, legacy))
     db.dispose()
-    from railval.app.services.workshop_render import RENDER_WORKERS
-
     a = [r["create_s"] for r in runs if r["way"] == "A"]
     b = [r["create_s"] for r in runs if r["way"] == "B"]
-    return {"plots": runs[0]["plots"] if runs else warm["plots"], "render_workers": RENDER_WORKERS,
+    return {"plots": runs[0]["plots"] if runs else warm["plots"], "render_workers": workshop_render.RENDER_WORKERS,
             "warm_up": warm, "runs": runs, "A_create_s": [min(a), max(a)] if a else None,
             "B_create_s": [min(b), max(b)] if b else None, "cpu_count": os.cpu_count(),
             "database": str(db.engine.url).split(":")[0]}
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from railval.app.main import free_port
-
     if getattr(args, "create_only", 0):
         return run_create_only(args)
 
@@ -362,14 +359,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     answer_ms = [x for t in threads for x in t.answer_ms]
     image_ms = [x for t in threads for x in t.image_ms]
     t = time.perf_counter()
-    from railval.app.services.workshop_answers import analyse
-    from railval.db.engine import connect
-
     db = connect(url)
     doc = analyse(db, "bench")  # every answer of the workshop (earlier runs included)
     analyse_s = time.perf_counter() - t
-    from railval.app.services.audit import verify_database
-
     check = verify_database(db, signals=False, full=False)  # every answer is a signed row
     db.dispose()
     out = {
@@ -390,8 +382,6 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "cpu_count": os.cpu_count(), "loadavg_1min": round(os.getloadavg()[0], 2),
     }
     if not args.keep and args.url is None:
-        import shutil
-
         shutil.rmtree(folder, ignore_errors=True)
     else:
         out["folder"] = str(folder)
@@ -400,15 +390,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 def _check(url: str, threads: list[_Reviewer]) -> tuple[int, int, int, int]:
     """(stored, lost, duplicated, wrong value) from the database against what was sent."""
-    from railval.db.engine import connect
-    from railval.db.models import AppUser, WorkshopAnswer, WorkshopReviewer
-    from sqlalchemy import select
-
     db = connect(url)
     with db.session() as s:
-        rows = s.execute(select(AppUser.username, WorkshopAnswer.position, WorkshopAnswer.answer)
-                         .join(WorkshopReviewer, WorkshopAnswer.reviewer_id == WorkshopReviewer.id)
-                         .join(AppUser, WorkshopReviewer.user_id == AppUser.id)).all()
+        rows = s.execute(select(models.AppUser.username, models.WorkshopAnswer.position, models.WorkshopAnswer.answer)
+                         .join(models.WorkshopReviewer, models.WorkshopAnswer.reviewer_id == models.WorkshopReviewer.id)
+                         .join(models.AppUser, models.WorkshopReviewer.user_id == models.AppUser.id)).all()
     db.dispose()
     names = {t.name for t in threads}
     rows = [r for r in rows if r[0] in names]
