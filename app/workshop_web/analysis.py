@@ -6,6 +6,10 @@ import base64
 import io
 from typing import Any
 
+import numpy as np
+
+from railval.app.services.workshop_answers import analyse
+from railval.app.services.workshop_cards import cards
 from railval.app.workshop_web.cards import CARDS_JS, cards_html
 from railval.app.workshop_web.common import (
     _fmt,
@@ -15,13 +19,19 @@ from railval.app.workshop_web.common import (
     page,
     run,
 )
+from railval.core import lazy
+from railval.core import workshop as workshop_core
 from railval.core.errors import RailvalError
+
+#: deferred (railval.core.lazy): the workshop administration (20 modules more than these pages),
+#: the review statistics and matplotlib load on the first page that uses them
+workshop_admin = lazy.module("railval.app.services.workshop_admin")
+yes_curve = lazy.function("railval.core.review", "yes_curve")
+Figure = lazy.function("matplotlib.figure", "Figure")
 
 
 # -------------------------------------------------------------------------- analysis
 def _analysis(database, name: str, actor) -> dict[str, Any]:
-    from railval.app.services.workshop_answers import analyse
-
     return analyse(database, name, actor=actor, with_plots=True)
 
 
@@ -74,11 +84,6 @@ def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | N
     (solid), the likeliest logistic link's curve (:func:`railval.core.review.yes_curve`,
     dashed: the sensitivity), the value at 50 % with its interval, and the limit; returned
     as a PNG data URL."""
-    import numpy as np
-    from matplotlib.figure import Figure
-
-    from railval.core.review import yes_curve
-
     thr = doc.get("threshold") or {}
     at50 = thr.get("deviation_at_50" if column == "deviation" else "sg_c_at_50")
     ci = thr.get("ci" if column == "deviation" else "sg_c_ci")
@@ -125,11 +130,8 @@ def threshold_png(doc: dict[str, Any], column: str, label: str, limit: float | N
 
 
 def _cards(database, name: str, groups: list[str], actor) -> dict[str, Any]:
-    from railval.app.services.workshop_admin import sibling_workshops
-    from railval.app.services.workshop_cards import cards
-
     doc = cards(database, name, groups=groups, actor=actor)
-    doc["others"] = sibling_workshops(database, name)
+    doc["others"] = workshop_admin.sibling_workshops(database, name)
     return doc
 
 
@@ -169,9 +171,7 @@ class WorkshopPlotImage(_OrganiserBase):
 
 
 def _plot_image(database, name: str, plot_id: int) -> tuple[bytes, str]:
-    from railval.app.services.workshop_admin import plot_image
-
-    return plot_image(database, name, plot_id)
+    return workshop_admin.plot_image(database, name, plot_id)
 
 
 def _share_of(row: dict[str, Any], end: str) -> str:
@@ -201,9 +201,8 @@ def _scaling_html(sc: dict[str, Any] | None) -> str:
 
 def analysis_html(doc: dict[str, Any]) -> str:
     """The analysis document as HTML tables and charts (all values escaped)."""
-    from railval.core.workshop import PLOT_KINDS
-
-    t1 = "".join(f"<tr><td>{esc(PLOT_KINDS[r['kind']].label if r['kind'] in PLOT_KINDS else r['kind'])}"
+    kinds = workshop_core.PLOT_KINDS
+    t1 = "".join(f"<tr><td>{esc(kinds[r['kind']].label if r['kind'] in kinds else r['kind'])}"
                  f" <span class='muted'>({esc(r['kind'])})</span></td><td class='num'>{r['plots']}</td>"
                  f"<td class='num'>{r.get('answers', '—')}</td><td class='num'>{r.get('reviewers', '—')}</td>"
                  f"<td class='num'>{_share_of(r, 'min')}</td><td class='num'>{_share_of(r, 'max')}</td></tr>"

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import html
 from typing import Any
+from urllib.parse import quote
 
 from railval.app.services.workshop_documents import kind_labels
 from railval.app.workshop_web.common import _fmt, _pct, esc
@@ -97,8 +98,6 @@ def cards_html(doc: dict[str, Any]) -> str:
                      f"{' checked' if o in chosen else ''}> {esc(o)}</label> " for o in doc.get("others", []))
     compare = (f"<form method='get' id='groupform'>Other reviewer groups (workshops over the same plots): "
                f"{others}<button type='submit'>Show their shares</button></form>") if others else ""
-    from urllib.parse import quote
-
     base = f"/workshops/{quote(doc['workshop'], safe='')}/plot/"
     body = "".join(card_html(c, f"{base}{int(c['plot'])}", labels) for c in cards)
     return (f"<h3>Plot cards</h3><style>{CARD_CSS}</style>{compare}"

@@ -18,8 +18,16 @@ from urllib.parse import quote
 import tornado.web
 from tornado.ioloop import IOLoop
 
-from railval.app.security import SessionBoundXsrf
+from railval.app.security import SessionBoundXsrf, with_xsrf
+from railval.app.services import users as users_service
+from railval.core import lazy
 from railval.core.roles import Principal, allowed
+
+#: deferred (railval.core.lazy): the navigation and the jobs list import the Panel app's side
+#: (≈ 1 280 modules more than these pages), the app's sign-in 32; loaded on first use
+navigation = lazy.module("railval.app.navigation")
+jobs_state = lazy.module("railval.app.state.jobs")
+app_auth = lazy.module("railval.app.auth")
 
 COOKIE = "railval_user"
 COOKIE_DAYS = 1
@@ -72,9 +80,7 @@ def nav_html(principal: Principal | None, current: str = "") -> str:
     reviewer's personal link)."""
     if principal is None:
         return ""
-    from railval.app.navigation import nav_html as one_nav
-
-    links = one_nav(principal, current)
+    links = navigation.nav_html(principal, current)
     who = ("open single-user mode" if principal.open_mode else
            f"{principal.printed_name} ({', '.join(sorted(principal.roles)) or 'no role'})")
     out = "" if principal.open_mode else " <a class='rv-logout' href='/logout'>Sign out</a>"
@@ -86,21 +92,16 @@ def page(title: str, body: str, *, user: Principal | str = "", script: str = "",
          current: str = "") -> str:
     """A workshop page in the app's frame: the same header colour, title and navigation
     as the Panel app (:func:`nav_html` when ``user`` is a principal), then ``body``."""
-    from railval.app.navigation import NAV_CSS
-
     jobs = ""
     if isinstance(user, Principal):
-        from railval.app.navigation import jobs_html
-        from railval.app.state.jobs import jobs_of
-
         head = nav_html(user, current)
-        jobs = f"<div id='rv-jobs-box'>{jobs_html(jobs_of(user.username))}</div>"
+        jobs = f"<div id='rv-jobs-box'>{navigation.jobs_html(jobs_state.jobs_of(user.username))}</div>"
         script = _JOBS_JS + script
     else:
         head = (f"<span style='margin-left:auto'>{esc(user)}</span>" if user else "")
     return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'>"
             f"<meta name='viewport' content='width=device-width,initial-scale=1'>"
-            f"<title>railval — {esc(title)}</title><style>{_CSS}{NAV_CSS}</style></head><body>"
+            f"<title>railval — {esc(title)}</title><style>{_CSS}{navigation.NAV_CSS}</style></head><body>"
             f"<header><a class='rv-home' href='/app'><strong>railval</strong></a>"
             f"<span class='rv-title'>{esc(title)}</span>{head}</header><main>{jobs}{body}</main>"
             f"{'<script>' + script + '</script>' if script else ''}</body></html>")
@@ -166,17 +167,13 @@ def _unsign(cookie: str | None) -> tuple[str, float] | None:
 def _is_local(handler: tornado.web.RequestHandler) -> bool:
     """Loopback and no proxy header: the same test as the app's (open-mode rule of
     :func:`railval.app.services.sessions.is_open`)."""
-    from railval.app.auth import is_local_request
-
-    return is_local_request(handler.request)
+    return app_auth.is_local_request(handler.request)
 
 
 def _principal_for(database, signed: tuple[str, float] | None, local: bool) -> Principal | None:
     """The user of a workshop cookie (user, issued at), re-read from the database on every
     request (:func:`railval.app.services.users.cookie_principal`)."""
-    from railval.app.services.users import cookie_principal
-
-    return cookie_principal(database, signed, local)
+    return users_service.cookie_principal(database, signed, local)
 
 
 class _Base(SessionBoundXsrf, tornado.web.RequestHandler):
@@ -202,8 +199,6 @@ class _Base(SessionBoundXsrf, tornado.web.RequestHandler):
         """Finish the response; an HTML page gets the anti-forgery token in its ``POST``
         forms and for its scripts (:func:`railval.app.security.with_xsrf`)."""
         if isinstance(chunk, str) and chunk.startswith("<!doctype html>"):
-            from railval.app.security import with_xsrf
-
             chunk = with_xsrf(chunk, self.xsrf_token.decode("ascii"))
         return super().finish(chunk)
 
@@ -231,9 +226,7 @@ class _OrganiserBase(_Base):
         expiry and password-change checks) is recognised here too; else this page's own
         sign-in cookie."""
         if self.auth is not None:
-            from railval.app.auth import COOKIE as APP_COOKIE
-
-            raw = self.get_cookie(APP_COOKIE)
+            raw = self.get_cookie(app_auth.COOKIE)
             if raw:
                 p = await run(self.auth.principal_from_cookie, raw)
                 if p is not None:
@@ -265,15 +258,13 @@ class Login(_Base):
         self.finish(page("Sign in", _login_form(nxt, "")))
 
     async def post(self) -> None:
-        from railval.app.services.users import sign_in
-
         nxt = self.get_argument("next", "/workshops")
         if not nxt.startswith("/") or nxt.startswith("//"):
             nxt = "/workshops"
         username = self.get_argument("username", "")
         password = self.get_argument("password", "")
 
-        ok, message = await run(sign_in, self.database, username, password,
+        ok, message = await run(users_service.sign_in, self.database, username, password,
                                 source=self.request.remote_ip or "")
         if not ok:
             self.set_status(401)

@@ -14,6 +14,7 @@ from urllib.parse import quote
 
 import tornado.web
 
+from railval.app.services import workshops as workshops_service
 from railval.app.services.workshop_documents import describe_kinds
 from railval.app.workshop_web.common import (
     _OrganiserBase,
@@ -22,15 +23,19 @@ from railval.app.workshop_web.common import (
     run,
 )
 from railval.app.workshop_web.reviewer import clear_contexts
+from railval.core import lazy
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
 from railval.core.roles import allowed
+
+#: deferred (railval.core.lazy): the jobs list imports the Panel app's side (≈ 1 280 modules more
+#: than these pages), the workshop administration 20; loaded on first use
+jobs_state = lazy.module("railval.app.state.jobs")
+workshop_admin = lazy.module("railval.app.services.workshop_admin")
 
 
 # -------------------------------------------------------------------------- organiser
 def _list_doc(database) -> list[dict[str, Any]]:
-    from railval.app.services.workshop_admin import overview
-
-    return overview(database)
+    return workshop_admin.overview(database)
 
 
 class WorkshopList(_OrganiserBase):
@@ -67,10 +72,8 @@ def _creation_text(job: dict[str, Any]) -> str:
 
 def _creating_rows(username: str, stored: set[str]) -> str:
     """Table rows of ``username``'s workshops being created (or whose creation failed)."""
-    from railval.app.state.jobs import jobs_of
-
     out = []
-    for j in jobs_of(username):
+    for j in jobs_state.jobs_of(username):
         name = j.get("workshop")
         if not name or name in stored or j["state"] in ("done", "cancelled"):
             continue
@@ -82,9 +85,7 @@ def _creating_rows(username: str, stored: set[str]) -> str:
 
 
 def _form_choices(database) -> dict[str, Any]:
-    from railval.app.services.workshop_admin import campaign_choices
-
-    return {"campaigns": campaign_choices(database), "kinds": describe_kinds()}
+    return {"campaigns": workshop_admin.campaign_choices(database), "kinds": describe_kinds()}
 
 
 _NEW_JS = r"""
@@ -135,13 +136,11 @@ fill();
 
 
 def _plan_doc(database, args: dict[str, list[str]]) -> dict[str, Any]:
-    from railval.app.services.workshop_admin import plan_counts
-
     # the form sends the ticked boxes only: a group with none ticked gives no plot
     if not all(args.get(g) for g in ("configurations", "sections", "kinds")):
         return {"plots": 0, "by_kind": {}}
-    return plan_counts(database, (args.get("campaign") or [""])[0], args["configurations"],
-                       args["sections"], args["kinds"])
+    return workshop_admin.plan_counts(database, (args.get("campaign") or [""])[0],
+                                      args["configurations"], args["sections"], args["kinds"])
 
 
 def _args(handler: tornado.web.RequestHandler) -> dict[str, list[str]]:
@@ -160,12 +159,11 @@ class WorkshopPlan(_OrganiserBase):
 
 
 def _preview_doc(database, args: dict[str, list[str]], actor) -> dict[str, Any]:
-    from railval.app.services import workshops as ws
-
     if not all(args.get(g) for g in ("configurations", "sections", "kinds")):
         return {"plots": 0, "scalings": {}}
-    return ws.scaling_preview(database, (args.get("campaign") or [""])[0], args["configurations"],
-                              args["sections"], args["kinds"], actor=actor)
+    return workshops_service.scaling_preview(database, (args.get("campaign") or [""])[0],
+                                             args["configurations"], args["sections"], args["kinds"],
+                                             actor=actor)
 
 
 class WorkshopScalingPreview(_OrganiserBase):
@@ -253,29 +251,23 @@ def _create_options(a: dict[str, list[str]]) -> dict[str, Any]:
 
 
 def _check_new(database, name: str, campaign: str, opts: dict[str, Any], actor) -> int:
-    from railval.app.services.workshop_admin import check_new
-
-    return check_new(database, name, campaign, configurations=opts["configurations"],
-                     sections=opts["sections"], kinds=opts["kinds"], scaling=opts["scaling"],
-                     repeats=opts["repeats"], auto_share=opts["auto_share"], actor=actor)
+    return workshop_admin.check_new(database, name, campaign, configurations=opts["configurations"],
+                                    sections=opts["sections"], kinds=opts["kinds"], scaling=opts["scaling"],
+                                    repeats=opts["repeats"], auto_share=opts["auto_share"], actor=actor)
 
 
 def _start_creation(database, name: str, campaign: str, opts: dict[str, Any], actor) -> None:
     """Create the workshop in a job of ``actor``'s (:func:`railval.app.state.jobs.start_tracked`):
     nothing is stored until every plot is rendered, so a failure leaves nothing behind."""
-    from railval.app.services import workshops as ws
-    from railval.app.state.jobs import start_tracked
-
     def work(progress):
-        return ws.create(database, name, campaign, **opts, actor=actor, progress=progress)
-    start_tracked(actor.username, f"Create workshop {name}", work,
-                  link=f"/workshops/{quote(name, safe='')}", workshop=name)
+        return workshops_service.create(database, name, campaign, **opts, actor=actor, progress=progress)
+
+    jobs_state.start_tracked(actor.username, f"Create workshop {name}", work,
+                             link=f"/workshops/{quote(name, safe='')}", workshop=name)
 
 
 def _status_doc(database, name: str) -> dict[str, Any]:
-    from railval.app.services.workshop_admin import status
-
-    return status(database, name)
+    return workshop_admin.status(database, name)
 
 
 _STATUS_JS = r"""
@@ -345,12 +337,10 @@ class WorkshopCreation(_OrganiserBase):
     state, fraction, done, total, elapsed_s, error); 404 when the user creates none."""
 
     async def get(self, name: str) -> None:
-        from railval.app.state.jobs import workshop_job
-
         p = await self.require("workshop.run")
         if p is None:
             return
-        job = workshop_job(p.username, name)
+        job = jobs_state.workshop_job(p.username, name)
         if job is None:
             self.json({"error": f"you are creating no workshop {name!r}"}, 404)
             return
@@ -362,25 +352,19 @@ class MyJobs(_OrganiserBase):
     (:func:`railval.app.state.jobs.jobs_of`; never another user's)."""
 
     async def get(self) -> None:
-        from railval.app.state.jobs import jobs_of
-
         p = await self.principal()
         if p is None:
             self.json({"error": "not signed in"}, 401)
             return
-        self.json({"jobs": jobs_of(p.username)})
+        self.json({"jobs": jobs_state.jobs_of(p.username)})
 
 
 def _invite(database, name: str, reviewer: str, actor) -> str:
-    from railval.app.services.workshop_admin import invite
-
-    return invite(database, name, reviewer, actor=actor)
+    return workshop_admin.invite(database, name, reviewer, actor=actor)
 
 
 def _set_status(database, name: str, status: str, actor) -> None:
-    from railval.app.services.workshop_admin import set_status
-
-    set_status(database, name, status, actor=actor)
+    workshop_admin.set_status(database, name, status, actor=actor)
     clear_contexts()
 
 
@@ -426,9 +410,7 @@ answers <strong id='nanswers'>{d['answers']}</strong></p>
     def _creation_page(self, p, name: str) -> bool:
         """The page of a workshop this user is creating: its progress, live (or the error of
         a failed creation); False when the user creates no workshop of that name."""
-        from railval.app.state.jobs import workshop_job
-
-        job = workshop_job(p.username, name)
+        job = jobs_state.workshop_job(p.username, name)
         if job is None or job["state"] == "done":
             return False
         failed = job["state"] == "failed"
@@ -469,15 +451,11 @@ answers <strong id='nanswers'>{d['answers']}</strong></p>
 
 # -------------------------------------------------------------------------- my workshops
 def _mine(database, username: str) -> list[dict[str, Any]]:
-    from railval.app.services.workshop_admin import participations
-
-    return participations(database, username)
+    return workshop_admin.participations(database, username)
 
 
 def _own_link(database, name: str, username: str) -> str:
-    from railval.app.services.workshop_admin import own_link
-
-    return own_link(database, name, username)
+    return workshop_admin.own_link(database, name, username)
 
 
 class MyWorkshops(_OrganiserBase):

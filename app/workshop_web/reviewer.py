@@ -2,19 +2,26 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import hashlib
 import json
 import threading
 import time
 from typing import Any
 
+from railval.app.services import workshop_review
 from railval.app.workshop_web.common import (
     _Base,
     page,
     run,
 )
+from railval.core import lazy
 from railval.core.errors import InvalidParameter, NotFound, RailvalError
 from railval.core.roles import PermissionDenied, allowed
+
+#: deferred (railval.core.lazy): the app's sign-in (32 modules more than these pages), loaded on
+#: the first request that carries its cookie
+app_auth = lazy.module("railval.app.auth")
 
 # -------------------------------------------------------------------------- reviewer
 #: seconds a personal link's context (reviewer, workshop status, sequence) is reused before
@@ -35,8 +42,6 @@ def clear_contexts() -> None:
 
 
 def _ctx(database, token: str):
-    from railval.app.services import workshop_review
-
     key = hashlib.sha256(token.encode()).hexdigest()
     now = time.monotonic()
     with _cache_lock:
@@ -52,8 +57,6 @@ def _ctx(database, token: str):
 
 
 def _state(database, ctx) -> dict[str, Any]:
-    from railval.app.services import workshop_review
-
     own = workshop_review.answers(database, ctx.reviewer_id)
     total = len(ctx.sequence)
     nxt = next((i for i in range(total) if i not in own), total)
@@ -219,9 +222,7 @@ Every answer is saved at once; you can close the page and come back with the sam
 
     async def signed_in(self) -> bool:
         """True when the request carries a live session of the app's sign-in."""
-        from railval.app.auth import COOKIE as APP_COOKIE
-
-        raw = self.get_cookie(APP_COOKIE) if self.auth is not None else None
+        raw = self.get_cookie(app_auth.COOKIE) if self.auth is not None else None
         if not raw:
             return False
         p = await run(self.auth.principal_from_cookie, raw)
@@ -241,8 +242,6 @@ class ReviewState(_ReviewerBase):
 
 
 def _image_at(database, ctx, position: int) -> tuple[bytes, str]:
-    from railval.app.services import workshop_review
-
     key = (ctx.workshop_id, ctx.sequence[position][0])
     with _cache_lock:
         hit = _images.get(key)
@@ -277,8 +276,6 @@ class ReviewImage(_ReviewerBase):
 
 
 def _answer(database, token: str, body: dict[str, Any]) -> dict[str, Any]:
-    from railval.app.services import workshop_review
-
     ctx = _ctx(database, token)
     if ctx is None or not allowed(ctx.principal, "workshop.answer"):
         raise NotFound("review link not valid")
@@ -303,8 +300,6 @@ def _answer(database, token: str, body: dict[str, Any]) -> dict[str, Any]:
 
 
 def _utc_now() -> str:
-    import datetime as dt
-
     return _iso(dt.datetime.now(dt.UTC))
 
 
@@ -316,8 +311,6 @@ def _iso(when) -> str | None:
 
 
 def _finish(database, token: str) -> dict[str, Any]:
-    from railval.app.services import workshop_review
-
     workshop_review.finish(database, token, lambda ctx: allowed(ctx.principal, "workshop.answer"))
     clear_contexts()
     return {"finished": True}
@@ -327,8 +320,6 @@ class ReviewAnswer(_Base):
     accepts_presession_token = True
 
     async def post(self, token: str) -> None:
-        from railval.app.services.workshop_review import WorkshopClosed
-
         try:
             body = json.loads(self.request.body or b"{}")
         except ValueError:
@@ -342,7 +333,7 @@ class ReviewAnswer(_Base):
             self.json({"error": str(exc)}, 404)
         except PermissionDenied as exc:
             self.json({"error": str(exc)}, 403)
-        except WorkshopClosed as exc:
+        except workshop_review.WorkshopClosed as exc:
             self.json({"error": str(exc)}, 409)
         except RailvalError as exc:
             self.json({"error": str(exc)}, 400)
