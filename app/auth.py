@@ -43,9 +43,10 @@ from typing import Any
 from bokeh.server.auth_provider import AuthProvider
 from tornado.web import RequestHandler, decode_signed_value
 
+from railval.app.navigation import landing
 from railval.app.security import SESSION_COOKIE, SessionBoundXsrf
-from railval.core.errors import RailvalError
 from railval.app.services import sessions
+from railval.core.errors import InvalidParameter, RailvalError
 from railval.core.roles import Principal
 
 COOKIE = SESSION_COOKIE
@@ -251,8 +252,6 @@ class LoginHandler(SessionBoundXsrf, RequestHandler):
         self.auth.issue(self, result.session_id, result.username)
         nxt = self.get_argument("next", "/app")
         if nxt in ("/app", "/", "") or not nxt.startswith("/") or nxt.startswith("//"):
-            from railval.app.navigation import landing
-
             nxt = landing(result.principal)
         self.redirect(nxt)
 
@@ -322,8 +321,6 @@ class InviteHandler(SessionBoundXsrf, RequestHandler):
         self._form(token, inv)
 
     def post(self) -> None:
-        from railval.core.errors import InvalidParameter
-
         self.set_header("Cache-Control", "no-store")
         token = self.get_argument("token", "")
         username = self.get_argument("username", "").strip()
@@ -342,6 +339,4 @@ class InviteHandler(SessionBoundXsrf, RequestHandler):
             self._form(token, inv, str(exc), username, display)
             return
         self.auth.issue(self, sid, p.username)
-        from railval.app.navigation import landing
-
         self.redirect(landing(p))

@@ -9,7 +9,9 @@ Pages are one module each under ``app/pages``; their state lives in ``app/state/
 
 from __future__ import annotations
 
+import ctypes
 import functools
+import gc
 import html
 import socket
 import time
@@ -23,8 +25,12 @@ import panel as pn
 import param
 from bokeh.settings import settings as bokeh_settings
 from panel.reactive import ReactiveHTML
+from tornado.ioloop import IOLoop
 
 from railval.app import security
+from railval.app.auth import SESSION_MAX_AGE_S, RailvalAuth, check_startup, cookie_secret
+from railval.app.health import HealthHandler, admin_only
+from railval.app.navigation import NAV_CSS, jobs_html, nav_items
 from railval.app.pages.audit import AuditPage
 from railval.app.pages.compare import ComparePage
 from railval.app.pages.dashboard import DashboardPage
@@ -34,7 +40,11 @@ from railval.app.pages.metrics import MetricsPage
 from railval.app.pages.overview import OverviewPage
 from railval.app.pages.report import ReportPage
 from railval.app.pages.signoff import SignoffPage
+from railval.app.services.web_import import MAX_UPLOAD_MB
 from railval.app.state import PAGE_TITLES, AppState, Backend
+from railval.app.state.jobs import jobs_of
+from railval.app.workshop_web import routes
+from railval.core.errors import InvalidParameter
 from railval.core.roles import PAGE_ACTIONS, Principal
 
 STATIC = Path(__file__).resolve().parent.parent / "static"
@@ -219,8 +229,6 @@ bar.appendChild(nav);""",
 def nav_bar(app: AppState) -> NavBar:
     """The header's navigation of ``app``'s user, the current page marked, kept in step
     with the session's page both ways."""
-    from railval.app.navigation import NAV_CSS, nav_items
-
     bar = NavBar(items=nav_items(app.principal, app.page), page=app.page,
                  stylesheets=[NAV_CSS], sizing_mode="stretch_width", margin=(4, 10))
 
@@ -240,9 +248,6 @@ def jobs_box(app: AppState) -> pn.pane.HTML:
     """The user's running and recently finished jobs (:func:`railval.app.state.jobs.jobs_of`),
     each with the link to its result — also those started before a reload or in another
     tab; refreshed every 2 s in a served session and whenever the status changes."""
-    from railval.app.navigation import NAV_CSS, jobs_html
-    from railval.app.state.jobs import jobs_of
-
     pane = pn.pane.HTML(jobs_html(jobs_of(app.principal.username)), stylesheets=[NAV_CSS],
                         css_classes=["rv-jobs-pane"], sizing_mode="stretch_width", margin=(0, 10))
 
@@ -362,22 +367,15 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     ``allow_websocket_origin`` — never from any origin (``*``). ``GET /health`` reports whether
     this process reaches its database; ``admin``: Panel's admin page at ``/admin``, for users
     with the ``admin`` role only (:mod:`railval.app.health`)."""
-    from railval.app.auth import SESSION_MAX_AGE_S, RailvalAuth, check_startup, cookie_secret
-
     origins = allow_websocket_origin or [f"{address}:{port}", f"localhost:{port}", f"127.0.0.1:{port}"]
     if any(o.strip() == "*" or o.strip().startswith("*:") for o in origins):
         # checked before anything else starts: '*' lets any web site drive a session
-        from railval.core.errors import InvalidParameter
-
         raise InvalidParameter("--allow-websocket-origin '*' would let any web site drive a "
                                "session (cross-site websocket hijacking); name the host[:port] "
                                "the users' browsers connect to")
     check_startup(database, address)
     secret, _origin = cookie_secret(cookie_secret_file)
     auth = RailvalAuth(database, secret, max_age_s=session_max_age_s or SESSION_MAX_AGE_S)
-    from railval.app.health import HealthHandler, admin_only
-    from railval.app.workshop_web import routes
-
     extra = (list(kw.pop("extra_patterns", [])) + auth.extra_patterns() + routes(database, auth)
              + [(r"/health", HealthHandler, {"database": database})])
     # Bokeh checks every model of a new session's document for layout warnings, which it only
@@ -389,8 +387,6 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
     if admin:
         pn.config.authorize_callback = admin_only(lambda: session_principal(auth))
         kw["admin"] = True
-    from railval.app.services.web_import import MAX_UPLOAD_MB
-
     # the Import page's zip travels base64-encoded in one websocket message (4/3 of its size)
     kw.setdefault("websocket_max_message_size", (MAX_UPLOAD_MB * 4 // 3 + 8) * 1024 * 1024)
     if behind_proxy:
@@ -421,9 +417,6 @@ _trim_pending = False
 
 
 def _trim() -> None:
-    import ctypes
-    import gc
-
     global _trim_pending
     _trim_pending = False
     gc.collect()
@@ -441,8 +434,6 @@ def release_memory(session_context: Any) -> None:
     (holoviz/panel #8189). It returns the sessions' memory only when Python's objects live in
     glibc's heap (:data:`SERVE_ENV`); under pymalloc the freed arenas stay with the process and
     are reused by the next sessions (bokeh/bokeh #11477)."""
-    from tornado.ioloop import IOLoop
-
     global _trim_pending
     if _trim_pending:  # one trim after a wave of closed sessions, not one per session (8
         return         # sessions closing together cost 7.8 s of the server's time, docs/app.md)

@@ -14,6 +14,7 @@ from panel.io.state import set_curdoc
 from railval.app import plots
 from railval.app.security import plain_message
 from railval.app.state import PAGE_TITLES, AppState
+from railval.core.roles import PAGE_ACTIONS
 
 TABLE_STYLE = {"font-size": "13px"}
 
@@ -176,8 +177,6 @@ class PageBase(pn.viewable.Viewer):
         message (:func:`railval.app.security.plain_message`), never raised."""
         self._stale = False
         if not self.app.page_allowed(self.name_):  # server side, whatever the browser sent
-            from railval.core.roles import PAGE_ACTIONS
-
             self.body.objects = [message(self.app.denial(PAGE_ACTIONS[self.name_]), "danger")]
             return
         if self.app.campaign is None:

@@ -13,6 +13,12 @@ import panel as pn
 
 from railval.app.pages._common import PageBase, html_table, message
 from railval.app.state import AppState
+from railval.core import lazy
+
+#: deferred (railval.core.lazy): the audit report's builder (HTML and PDF) and the audit
+#: service until the page is shown or a report downloaded, not when the app's pages load
+build_audit_report = lazy.function("railval.app.audit_report", "build_audit_report")
+audit_service = lazy.module("railval.app.services.audit")
 
 ROWS_SHOWN = 200
 
@@ -37,8 +43,6 @@ class AuditPage(PageBase):
                                               label="Audit report (PDF)", color="primary", width=220)
 
     def _report(self):
-        from railval.app.audit_report import build_audit_report
-
         return build_audit_report(self.app.backend.database)
 
     def _html_bytes(self):
@@ -59,11 +63,9 @@ class AuditPage(PageBase):
         super().safe_refresh()
 
     def refresh(self) -> None:
-        from railval.app.services.audit import newest, verify_database
-
-        check = verify_database(self.app.backend.database, signals=False, full=False)
+        check = audit_service.verify_database(self.app.backend.database, signals=False, full=False)
         chain = [f for f in check.findings if f.kind in ("chain", "head", "signature", "witness")]
-        rows, n = newest(self.app.backend.database, ROWS_SHOWN)
+        rows, n = audit_service.newest(self.app.backend.database, ROWS_SHOWN)
         objs = [message(f"Hash chain intact: {check.rows} rows, head {check.head_hash[:16]}…, "
                         f"{check.signed_rows} signed (key {', '.join(k[:16] for k in check.keys)}…)"
                         if not chain else f"Hash chain BROKEN: {chain[0]}",

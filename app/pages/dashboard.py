@@ -9,9 +9,11 @@ from typing import Any
 import holoviews as hv
 import pandas as pd
 import panel as pn
+from bokeh.models.widgets.tables import NumberFormatter
 
 from railval.app import plots
 from railval.app.pages._common import PageBase, message, table, where_map
+from railval.app.pages.signoff import signoff_banner
 from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState, unit_label
 from railval.app.views import ValidationView
@@ -109,8 +111,6 @@ def summary_table(rows: list[dict[str, Any]]) -> pn.widgets.Tabulator:
     """The quantity table: human headers, FAIL coloured, columns fitted to their content,
     every row shown (no height: the table grows with its rows, no scrolling inside it),
     numbers formatted for people (:data:`NUMBER_FORMAT`)."""
-    from bokeh.models.widgets.tables import NumberFormatter
-
     df = summary_frame(rows)
     # every column inside the page width: headers wrap, the name column takes the rest
     widths = {c: 72 for c in df.columns}  # 892 px in all: fits the main area at 1280 px
@@ -226,8 +226,6 @@ class DashboardPage(PageBase):
             worst = max(summary.quantities,
                         key=lambda r: max(abs(r["mean_norm"]), abs(r["std_norm"])), default=None)
             self.state.quantity = worst["quantity"] if worst else None
-        from railval.app.pages.signoff import signoff_banner
-
         self.body.objects = [
             signoff_banner(self.app, config),
             col,

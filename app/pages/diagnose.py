@@ -16,14 +16,20 @@ import pandas as pd
 import panel as pn
 
 from railval.app import plots
-from railval.app.pages._common import PageBase, bounded_input, make_dispatch, message, table, where_map
+from railval.app.pages._common import (
+    PageBase,
+    bounded_input,
+    make_dispatch,
+    message,
+    table,
+    where_map,
+)
 from railval.app.pages.dashboard import validation_view
 from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 from railval.app.svg_charts import svg_paired_hbars
 from railval.app.views import Ancestor, CalibrationOutcome, StoredDiagnosis
 from railval.core.quantities import QUANTITY_IDS
-
 
 #: the signature chart's value axis: what the residual is, and that it has no unit
 SIGNATURE_AXIS = ("residual rms, normalised: D_v / std limit (PSD groups: log2 PSD ratio) "

@@ -15,9 +15,10 @@ import html
 import panel as pn
 
 from railval.app.pages._common import PageBase, make_dispatch, message
-from railval.app.services.web_import import MAX_UPLOAD_MB
+from railval.app.services.web_import import MAX_UPLOAD_MB, import_configuration_zip, import_zip
 from railval.app.state import AppState
 from railval.core.errors import RailvalError
+from railval.core.roles import PAGE_ACTIONS
 
 
 class ImportPage(PageBase):
@@ -39,8 +40,6 @@ class ImportPage(PageBase):
     def safe_refresh(self) -> None:  # an empty database is this page's normal case
         self._stale = False
         if not self.app.page_allowed(self.name_):
-            from railval.core.roles import PAGE_ACTIONS
-
             self.body.objects = [message(self.app.denial(PAGE_ACTIONS[self.name_]), "danger")]
             return
         self.refresh()
@@ -77,8 +76,6 @@ class ImportPage(PageBase):
         self._show("warning", html.escape(text[:1].upper() + text[1:]) + ".")
 
     def start(self) -> None:
-        from railval.app.services.web_import import import_configuration_zip, import_zip
-
         data, name = self.file.value, self.file.filename or "upload.zip"
         if not data:
             self._warn("choose a zip file first")

@@ -9,7 +9,6 @@ import io
 import panel as pn
 
 from railval.app.pages._common import PageBase, bounded_input
-from railval.app.pages._common import PageBase
 from railval.app.security import plain_message
 from railval.app.state import AppState, ReportState
 

@@ -23,7 +23,13 @@ import panel as pn
 
 from railval.app.pages._common import PageBase, html_table, make_dispatch, message
 from railval.app.state import PAGE_TITLES, AppState
+from railval.core import lazy
 from railval.core.errors import RailvalError
+
+#: deferred (railval.core.lazy): the sign-off service (records, evidence, signing: 14 more
+#: modules) until a sign-off is listed or signed, not when the app's pages load; read as
+#: ``signoff_service.sign`` at each call, so a test's stand-in on the real module is seen
+signoff_service = lazy.module("railval.app.services.signoff")
 
 #: the decision list's first entry: nothing chosen yet
 NO_DECISION = "— choose a decision —"
@@ -97,9 +103,7 @@ def signoff_card(rec: dict, status: str, reasons: list[str]) -> pn.pane.HTML:
 
 def signoff_banner(app: AppState, config: str | None) -> pn.pane.HTML:
     """One line per sign-off of ``config`` with its status (dashboard), escaped."""
-    from railval.app.services.signoff import records
-
-    items = records(app.backend.database, app.campaign, config)
+    items = signoff_service.records(app.backend.database, app.campaign, config)
     if not items:
         return pn.pane.HTML("<div class='rv-signoff-banner' style='color:#555;font-size:13px'>"
                             "Not signed off.</div>", sizing_mode="stretch_width")
@@ -279,17 +283,16 @@ class SignoffPage(PageBase):
         database = app.backend.database
 
         def work(progress):
-            from railval.app.services.signoff import SignoffRefused, sign
-
             progress(0.1, "checking the password and building the evidence")
             try:
-                return sign(database, username, password, campaign, config, decision=decision,
-                            restrictions=restrictions, statement=statement,
-                            justification=justification, source="web")
+                return signoff_service.sign(database, username, password, campaign, config,
+                                            decision=decision, restrictions=restrictions,
+                                            statement=statement, justification=justification,
+                                            source="web")
             except RailvalError as exc:  # a refusal: next to the form, in the page's words
                 text = refusal_text(str(exc))
                 show(lambda: self.show_refusal(text))
-                raise SignoffRefused(text) from None
+                raise signoff_service.SignoffRefused(text) from None
 
         def done(rec):
             self.restrictions.value = ""
@@ -306,16 +309,13 @@ class SignoffPage(PageBase):
                            action="signoff.create")
 
     def items(self):
-        from railval.app.services.signoff import records
-
-        return records(self.app.backend.database, self.app.campaign)
+        return signoff_service.records(self.app.backend.database, self.app.campaign)
 
     def load_summary(self) -> dict | None:
-        from railval.app.services.signoff import summary_of
-
         if self.app.campaign is None or self.app.configuration is None:
             return None
-        return summary_of(self.app.backend.database, self.app.campaign, self.app.configuration)
+        return signoff_service.summary_of(self.app.backend.database, self.app.campaign,
+                                          self.app.configuration)
 
     def refresh(self) -> None:
         items = self.items()
