@@ -37,8 +37,13 @@ from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, Self
 
+from railval.core import lazy
 from railval.core.errors import InvalidParameter
 from railval.core.workers import pool_kwargs
+
+#: deferred (railval.core.lazy): dask.distributed (a Dask client, ~530 modules) only for a
+#: map with a scheduler
+distributed = lazy.module("dask.distributed")
 
 DEFAULT_WORKERS = 2
 
@@ -94,7 +99,7 @@ class BatchExecutor:
     def _dask_client(self):
         if self._client is None:
             try:
-                from dask.distributed import Client
+                Client = distributed.Client
             except ImportError as exc:  # pragma: no cover - dask is a declared extra
                 raise InvalidParameter(
                     f"--scheduler {self._scheduler!r} needs dask.distributed (pip install 'railval[dask]')"
@@ -181,9 +186,7 @@ class BatchExecutor:
         if self.backend == "process":
             done_iter = as_completed(futures)
         else:
-            from dask.distributed import as_completed as dask_as_completed
-
-            done_iter = dask_as_completed(list(futures))
+            done_iter = distributed.as_completed(list(futures))
         for done, fut in enumerate(done_iter, start=1):
             results[futures[fut]] = fut.result()
             if progress:

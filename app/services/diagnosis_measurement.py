@@ -8,13 +8,35 @@ gain of a car body sensor against its redundant channel at the other end.
 from __future__ import annotations
 
 import math
-
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from railval.core.diagnosis import CandidateFamily, DiagnosisResult, SectionEvidence
+from railval.core.diagnosis.measurement import (
+    GAIN_NODES,
+    OFFSET_NODES,
+    discrete_evidence,
+    discrete_family,
+    force_gain_groups,
+    offset_blind,
+    offset_components,
+    offset_family,
+    offset_measured,
+    offset_scale,
+    reevaluated_measurement,
+    remapped_measurement,
+    section_lag,
+    shared_gain_family,
+    shifted_measured,
+    sign_blind,
+    signed_measured,
+    swap_pairs,
+    swapped_bands,
+    swapped_measured,
+)
+from railval.core.types import channel_kind
 
 
 def offset_families(ctx: Any, sets: Mapping[str, Any], measurement: bool | Sequence[str], base: SectionEvidence,
@@ -27,8 +49,6 @@ def offset_families(ctx: Any, sets: Mapping[str, Any], measurement: bool | Seque
     amplifier zeroed wrong); a channel whose offset the EN filter removes is left out with that
     reason. The measured statistics are re-evaluated from the recorded signals at every offset
     node (no simulation)."""
-    from railval.core.diagnosis.measurement import OFFSET_NODES, force_gain_groups, offset_blind, offset_components
-
     pairs, _ = result
     used = {ch: offset_components(pairs, ch) for ch in ctx.channels}
     used = {ch: comps for ch, comps in used.items() if comps}
@@ -53,8 +73,6 @@ def offset_families(ctx: Any, sets: Mapping[str, Any], measurement: bool | Seque
 
 
 def _offset_scale(sets: Mapping[str, Any], channel: str) -> float:
-    from railval.core.diagnosis.measurement import offset_scale
-
     return offset_scale(sets, channel)
 
 
@@ -64,9 +82,6 @@ def _offset_group_family(ctx: Any, sets: Mapping[str, Any], base: SectionEvidenc
                          offsets: Sequence[float]) -> CandidateFamily:
     """``offset NAME``: every channel of ``members`` reads the truth + c, the measurement's
     statistics re-evaluated at every c of ``offsets``."""
-    from railval.core.diagnosis.measurement import offset_family, offset_measured, remapped_measurement
-    from railval.core.types import channel_kind
-
     pairs, sim_bands = result
     g_set = set(members)
     if len(members) == 1:
@@ -85,14 +100,6 @@ def shared_gain(ctx: Any, sets: Mapping[str, Any], channel: str, base: SectionEv
     """``gain CHANNEL`` named for a low-pass channel that shares its quantities (a wheel force):
     the measurement re-evaluated from the signals at every gain node; None where the channel is
     not one (:mod:`railval.core.diagnosis.measurement`)."""
-    from railval.core.diagnosis.measurement import (
-        GAIN_NODES,
-        offset_blind,
-        offset_components,
-        reevaluated_measurement,
-        shared_gain_family,
-    )
-
     pairs, sim_bands = result
     comps = offset_components(pairs, channel) if channel in ctx.channels else []
     if not comps or offset_blind(channel) or not sets:
@@ -152,14 +159,6 @@ def _wanted(ctx: Any, measurement: bool | Sequence[str], defaults: Sequence[str]
 
 def _sign_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | str:
     """``sign CHANNEL``: the family, or why it cannot apply."""
-    from railval.core.diagnosis.measurement import (
-        discrete_evidence,
-        discrete_family,
-        offset_components,
-        sign_blind,
-        signed_measured,
-    )
-
     ctx, pairs = k["ctx"], k["pairs"]
     comps = offset_components(pairs, arg) if arg in ctx.channels else []
     why = sign_blind(arg, comps)
@@ -175,15 +174,6 @@ def _sign_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | st
 
 def _swap_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | str:
     """``swap A B``: the family, or why it cannot apply."""
-    from railval.core.diagnosis.measurement import (
-        discrete_evidence,
-        discrete_family,
-        offset_components,
-        swap_pairs,
-        swapped_bands,
-        swapped_measured,
-    )
-
     ctx, pairs = k["ctx"], k["pairs"]
     a, _, b = arg.partition(" ")
     pp = swap_pairs(a, b, ctx.channels)
@@ -205,13 +195,6 @@ def _swap_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | st
 
 def _shift_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | str:
     """``shift SECTION``: the family, or why it cannot apply."""
-    from railval.core.diagnosis.measurement import (
-        discrete_evidence,
-        discrete_family,
-        section_lag,
-        shifted_measured,
-    )
-
     ctx, sets, sim_sets = k["ctx"], k["sets"], k["sim_sets"]
     sec = next((s for s in ctx.sections if s.id == arg), None)
     if sec is None or arg not in sets or arg not in sim_sets:
@@ -278,7 +261,7 @@ def _gain_kind(name: str) -> tuple[str, bool]:
     x = name.partition(" ")[2]
     if x[:2] in ("Y_", "Q_"):
         return x[0], x[-1] in "LR" and x[3:-1].isdigit() and x[2] == "w"
-    stem, _, end = x.rpartition("_")
+    stem, _, _end = x.rpartition("_")
     return stem or x, True
 
 

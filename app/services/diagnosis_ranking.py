@@ -26,13 +26,28 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from railval.app.services.campaign_context import effect_parameters
+from railval.app.services.batch import BatchExecutor
+from railval.app.services.campaign_context import (
+    ACC_CHANNELS,
+    band_sums,
+    configuration_of,
+    effect_parameters,
+    load_context_and_measurement,
+    residual_pattern,
+    runnable_effects,
+    section_values,
+    session_of,
+    simulate_context,
+    validate_values,
+)
+from railval.app.services.campaign_context import report as _report
 from railval.app.services.diagnosis_measurement import (
     DISCRETE_DEFAULTS,
     apply_redundancy_rule,
@@ -57,15 +72,25 @@ from railval.core.diagnosis.causes import cause_set
 from railval.core.diagnosis.engine import STRONG
 from railval.core.diagnosis.fit import INTERFACE_PARAMETERS, MASS_PARAMETERS
 from railval.core.diagnosis.inputs import (
+    CONTACT_CANDIDATES,
     contact_statement,
     scatter_level,
     track_first_pool,
     track_statement,
 )
-from railval.core.diagnosis.measurement import force_gain_groups, gain_channels, gain_family
+from railval.core.diagnosis.measurement import (
+    force_gain_groups,
+    gain_channels,
+    gain_family,
+    group_gain_family,
+    group_gain_reevaluations,
+)
 from railval.core.diagnosis.support import apply_interface_rule, cause_pool, outside_support
 from railval.core.errors import InvalidParameter
-from railval.core.sim.effects import EFFECTS, Effect, is_neutral
+from railval.core.sim.effects import EFFECTS, Effect, is_neutral, unmet_requirement
+from railval.core.sim.vehicles import CONTACT_PARAMETER, template_parameters
+from railval.db import repo
+from railval.db.repo import config_name
 
 Progress = Any
 
@@ -93,8 +118,6 @@ def plausible_range(param: Any) -> tuple[tuple[float, float] | None, str]:
 
 
 def template_param(template: str, name: str) -> Any:
-    from railval.core.sim.vehicles import template_parameters
-
     for p in template_parameters(template):
         if p.name == name:
             return p
@@ -141,13 +164,6 @@ def _evaluate_sections(ctx: Any, job: tuple[dict, dict]) -> tuple[list[dict], di
     :meth:`railval.app.services.batch.BatchExecutor.map`) with the job's ``effects`` and model
     ``parameters``; return the validation pairs (section, zone, quantity, position, D_norm) and
     the band powers per section and acceleration channel (one Welch call per section)."""
-    from railval.app.services.campaign_context import (
-        ACC_CHANNELS,
-        section_values,
-        simulate_context,
-        validate_values,
-    )
-
     effects, parameters = job
     sets = simulate_context(ctx, effects, parameters)
     vr = validate_values(ctx, section_values(sets, ctx.sections))
@@ -160,8 +176,6 @@ def _evaluate_sections(ctx: Any, job: tuple[dict, dict]) -> tuple[list[dict], di
 def measured_section_bands(ctx: Any, measured: Mapping[str, Any]) -> dict[str, dict[str, np.ndarray]]:
     """Band powers of the measurement (``measured``: section id → SignalSet, decoded once per
     diagnosis) per section and acceleration channel."""
-    from railval.app.services.campaign_context import ACC_CHANNELS
-
     return {sid: section_band_powers({ch: ss.channels[ch] for ch in ACC_CHANNELS if ch in ss.channels},
                                      ss.fs, ctx.bands, 10.0) for sid, ss in measured.items()}
 
@@ -203,11 +217,6 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
     ``parameters``: template names or ``model.NAME``; ``include_parameters=False``:
     effects only). Steps: load, simulate the candidates, build their evidence, refine the
     best parameter candidates, score (:func:`_score`)."""
-    from railval.app.services.batch import BatchExecutor
-    from railval.app.services.campaign_context import band_sums, residual_pattern, section_values
-    from railval.app.services.campaign_context import report as _report
-    from railval.db.repo import config_name
-
     _report(progress, "load", 0.0, campaign=getattr(campaign, "name", campaign), config=config_name(config))
     req = _load(database_or_session, campaign, config, effects, parameters, include_parameters, measurement)
     ctx, config = req.ctx, req.config
@@ -246,15 +255,6 @@ def _load(database_or_session: Any, campaign: Any, config: Any, effects: Sequenc
     """Read the campaign and configuration (names resolved once, unless given as the references
     of :func:`railval.db.repo.resolve`; the measurement decoded once); the candidate effects
     that can apply and the parameter plan (``parameter_plan`` once)."""
-    from railval.app.services.campaign_context import (
-        configuration_of,
-        load_context_and_measurement,
-        runnable_effects,
-        session_of,
-    )
-    from railval.core.sim.effects import EFFECTS
-    from railval.db import repo
-
     with session_of(database_or_session) as s:
         campaign, ref = repo.resolve(s, campaign, config)
         config = ref.name
@@ -293,8 +293,6 @@ def _tasks(req: _Request, values_per_parameter: int) -> tuple[list[tuple], list[
     perturbed value per parameter candidate) and, per candidate value, which one it uses; a scan
     point at which the effect is neutral (:func:`railval.core.sim.effects.is_neutral`: the
     simulator computes exactly what it computes without it) uses the configuration's own run."""
-    from railval.core.sim.effects import EFFECTS
-
     tasks: list[tuple] = [(req.in_config, req.conf_params)]
     index: list[tuple] = []
     unique: dict[str, int] = {}
@@ -324,8 +322,6 @@ def _simulate(ex: Any, req: _Request, tasks: list[tuple], vr: Any, measurement: 
     measurement candidates — they need no other simulation (the measured signals re-evaluated
     at their gain and offset nodes). Returns (results in task order, the configuration's
     evidence, the measurement families); the same results as one map of every task."""
-    import threading
-
     sections = [(s.id, int(s.zone)) for s in req.ctx.sections]
     if ex.backend == "serial":
         results = ex.map(_evaluate_sections, tasks, shared=req.ctx, progress=lambda d, t: progress(d - 1, t))
@@ -361,8 +357,6 @@ def _candidates(req: _Request, results: Sequence, index: Sequence[tuple], vr: An
     parameters, then the ``measured`` candidates of :func:`_simulate`); candidates that move
     nothing the campaign measures go to ``req.skipped``; of an effect's one-parameter families
     the one that explains most."""
-    from railval.core.sim.effects import EFFECTS
-
     ctx = req.ctx
     sections = [(s.id, int(s.zone)) for s in ctx.sections]
 
@@ -440,8 +434,6 @@ def force_gain_families(req: _Request, result0: tuple, base: SectionEvidence, se
     bogie, :func:`railval.core.diagnosis.measurement.force_gain_groups`): all of them by default,
     those named otherwise; judged on the measurement corrected by the power law of each
     quantity, ΣY of a group holding one wheel of it re-evaluated from the signals."""
-    from railval.core.diagnosis.measurement import group_gain_family, group_gain_reevaluations
-
     chosen = {n: g for n, g in groups.items() if wanted is None or n in wanted}
     comps = sorted({(str(r["quantity"]), str(r["position"])) for r in result0[0]})
     redo = group_gain_reevaluations(req.measured_sets, req.ctx.sections, chosen, comps) if chosen else {}
@@ -530,9 +522,6 @@ def profile_skipped(conf_params: Mapping[str, Any], effects: Sequence[str] | Non
     configuration carries measured profiles (template parameter ``contact_geometry``, a Δr(y)
     table: docs/diagnosis.md "Contact geometry"): the simulator then uses the table, a conicity
     changes nothing; ``[]`` without a table or when no such candidate is asked for."""
-    from railval.core.diagnosis.inputs import CONTACT_CANDIDATES
-    from railval.core.sim.vehicles import CONTACT_PARAMETER
-
     table = conf_params.get(CONTACT_PARAMETER) or conf_params.get("model." + CONTACT_PARAMETER)
     if not table:
         return []
@@ -548,8 +537,6 @@ def inapplicable_effects(ctx: Any, conf_effects: Mapping[str, Any], effects: Seq
     "effect", "reason"}`` with a one-line reason (:func:`railval.core.sim.effects.unmet_requirement`:
     track data the sections do not carry, quantities the campaign does not measure); effects
     of another vehicle template are named only when asked for (``effects``)."""
-    from railval.core.sim.effects import EFFECTS, unmet_requirement
-
     template = str(ctx.vehicle.get("template") or "coach")
     measured = {q for values in ctx.measured_values.values() for q, _ in values}
     out = []

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from railval.core.errors import InvalidParameter
 from railval.core.roles import Principal, open_principal
 from railval.db import audit, users, workshops
 
@@ -112,8 +113,6 @@ def redeem(database, token: str, *, username: str, password: str, password2: str
     """Create the invitee's account (:func:`railval.db.workshops.redeem_invitation`) and open
     its session → (principal, session id). Raises ``InvitationRefused`` or
     :class:`railval.core.errors.InvalidParameter` (nothing stored then)."""
-    from railval.core.errors import InvalidParameter
-
     with database.session(actor=username or "(anonymous)", write=True) as s:
         users.check_invitation(s, token)
         if password != password2:

@@ -35,7 +35,7 @@ from urllib.parse import urlencode
 
 from railval.app.security import plain_message
 from railval.app.services.overview import acting_as
-from railval.core.errors import RailvalError
+from railval.core.errors import InvalidParameter, RailvalError
 
 #: jobs (simulation, calibration, diagnosis, metrics) running at once in this server, over
 #: all browser sessions (``$RAILVAL_MAX_JOBS``, default 1: one calibration already keeps the
@@ -174,8 +174,6 @@ def start_tracked(user: str, title: str, work: Callable[[Callable[..., None]], A
     job list; ``progress(stage, fraction, info)`` with ``info`` ``{"done", "total"}`` when the
     work counts. Refused with :class:`~railval.core.errors.InvalidParameter` while another job
     creates the same workshop."""
-    from railval.core.errors import InvalidParameter
-
     with _JOBS_LOCK:
         if workshop is not None and any(r.workshop == workshop and r.active for r in _JOBS.values()):
             raise InvalidParameter(f"workshop {workshop!r} is already being created; wait for "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import param
 
 from railval.app.report import build_report
+from railval.app.services.workshop_cards import card_choices, chosen_cards
 from railval.app.state.app import AppState
 
 
@@ -21,8 +22,6 @@ class ReportState(param.Parameterized):
     def card_choices(self) -> dict[str, tuple[str, int]]:
         """The plot cards of this configuration's workshops a user with ``workshop.results``
         may choose (label → (workshop, plot id)); none for others."""
-        from railval.app.services.workshop_cards import card_choices
-
         if not self.app.allowed("workshop.results"):
             return {}
         return card_choices(self.app.backend.database, self.app.campaign, self.app.configuration)
@@ -30,8 +29,6 @@ class ReportState(param.Parameterized):
     def build(self):
         cards = None
         if self.cards:
-            from railval.app.services.workshop_cards import chosen_cards
-
             choices = self.card_choices()
             cards = chosen_cards(self.app.backend.database, self.app.configuration,
                                  [choices[c] for c in self.cards if c in choices],
