@@ -25,6 +25,8 @@ from types import MethodType
 from typing import Any
 
 import numpy as np
+from matplotlib.backends.backend_agg import get_hinting_flag
+from matplotlib.ft2font import RenderMode
 
 #: glyph bitmaps a renderer keeps (oldest dropped first); a review plot's texts use a few
 #: hundred (characters × sub-pixel positions)
@@ -45,9 +47,6 @@ def _draw_glyphs(self: Any, gc, x, y, angle, glyphs, boxes) -> None:
     bitmaps; anything else is drawn by the renderer's own method."""
     if angle or boxes:
         return self._railval_own(gc, x, y, angle, glyphs, boxes)
-    from matplotlib.backends.backend_agg import get_hinting_flag
-    from matplotlib.ft2font import RenderMode
-
     kept: OrderedDict = self._railval_glyphs
     flags = get_hinting_flag()
     aa = bool(gc.get_antialiased())
