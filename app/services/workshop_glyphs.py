@@ -33,13 +33,52 @@ from matplotlib.ft2font import RenderMode
 GLYPHS = 20000
 
 
+#: text layouts (the glyphs and their positions of one line of text) a renderer keeps; a
+#: workshop's titles repeat their lines across sections and configurations, the legend's two
+#: labels are the same in every plot
+LAYOUTS = 2000
+
+
 def install(renderer: Any) -> None:
-    """Make ``renderer`` (a ``RendererAgg``) keep glyph bitmaps across draws."""
+    """Make ``renderer`` (a ``RendererAgg``) keep glyph bitmaps and text layouts across draws."""
     if getattr(renderer, "_railval_glyphs", None) is not None:
         return
     renderer._railval_glyphs = OrderedDict()
+    renderer._railval_layouts = OrderedDict()
     renderer._railval_own = renderer._draw_text_glyphs_and_boxes
     renderer._draw_text_glyphs_and_boxes = MethodType(_draw_glyphs, renderer)
+    renderer._railval_own_text = renderer.draw_text
+    renderer.draw_text = MethodType(_draw_text, renderer)
+
+
+def _draw_text(self: Any, gc, x, y, s, prop, angle, ismath=False, mtext=None) -> None:
+    """``RendererAgg.draw_text`` with the line's layout (FreeType's glyph indices and
+    positions, ``FT2Font._layout``) kept by font file, size, dpi, text, hinting, features and
+    language — what the layout depends on; the same glyphs are drawn at the same places.
+    Mathtext is drawn by the renderer's own method."""
+    if ismath:
+        return self._railval_own_text(gc, x, y, s, prop, angle, ismath=ismath, mtext=mtext)
+    font = self._prepare_font(prop)
+    flags = get_hinting_flag()
+    features = mtext.get_fontfeatures() if mtext is not None else None
+    language = mtext.get_language() if mtext is not None else None
+    size = prop.get_size_in_points()
+    key = (id(font), font.fname, size, self.dpi, s, str(flags),
+           tuple(features) if features is not None else None, language)
+    kept: OrderedDict = self._railval_layouts
+    got = kept.get(key)
+    if got is None:
+        items = font._layout(s, flags=flags, features=features, language=language)
+        got = kept[key] = (font, tuple((item.ft_object, item.glyph_index, item.x, item.y)
+                                       for item in items))  # (the font kept: its id stays its own)
+        if len(kept) > LAYOUTS:
+            kept.popitem(last=False)
+    else:
+        kept.move_to_end(key)
+    self._draw_text_glyphs_and_boxes(
+        gc, x, y, angle,
+        ((ft_object, size, glyph_index, 0, 1, gx, gy) for ft_object, glyph_index, gx, gy in got[1]),
+        [])
 
 
 def _draw_glyphs(self: Any, gc, x, y, angle, glyphs, boxes) -> None:
