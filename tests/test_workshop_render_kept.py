@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.offsetbox import OffsetBox
 
 from railval.app.services import workshop_glyphs
 from railval.app.services import workshop_render as wr
@@ -60,7 +61,7 @@ def test_a_kept_legend_layout_is_computed_once_per_renderer_size_and_dpi():
         def __init__(self, dpi):
             self.width, self.height, self.dpi = 1000, 560, dpi
 
-    kept = wr._kept(lambda r: calls.append(r.dpi) or len(calls))
+    kept = workshop_glyphs._kept(lambda r: calls.append(r.dpi) or len(calls))
     a, b = Renderer(100), Renderer(200)
     assert [kept(a), kept(a), kept(b), kept(Renderer(100))] == [1, 1, 2, 1]
     assert calls == [100, 200]
@@ -72,7 +73,7 @@ def test_the_legend_boxes_of_a_canvas_keep_their_layout():
     while todo:
         box = todo.pop()
         boxes.append(box)
-        todo += [c for c in box.get_children() if isinstance(c, wr.OffsetBox)]
+        todo += [c for c in box.get_children() if isinstance(c, OffsetBox)]
     assert len(boxes) >= 5  # the packers, the two handles' areas and the two labels
     assert all("get_bbox" in b.__dict__ for b in boxes)
 

@@ -49,12 +49,12 @@ matplotlib.use("Agg", force=False)
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.offsetbox import OffsetBox
 from PIL import Image
 
 from railval.app.scales import MEASURED_COLOR, SIM_COLORS
 from railval.app.services.batch import FORKSERVER_PRELOAD, start_context
 from railval.app.services.workshop_glyphs import install as install_glyphs
+from railval.app.services.workshop_glyphs import keep_layout
 from railval.core.workers import pool_kwargs
 from railval.core.workshop import AxisRange, Scale
 
@@ -117,7 +117,7 @@ class _Canvas:
             if log:
                 ax.set_yscale("log")
             self.legend = ax.legend(loc=STYLE["legend"], frameon=True, framealpha=0.9)
-            _keep_layout(self.legend._legend_box)
+            keep_layout(self.legend._legend_box)  # the same for every plot
             fig.subplots_adjust(**STYLE["margins"])
         self.fig, self.ax = fig, ax
         self.title = ax._left_title  # what set_title(..., loc="left") sets
@@ -198,33 +198,6 @@ class _Canvas:
             ax._update_title_position(renderer)
         finally:
             del ax.yaxis.get_tightbbox
-
-
-def _keep_layout(box) -> None:
-    """Make ``box`` (the legend's packed boxes) and the boxes in it keep their layout — the
-    bounding box and the children's offsets (``OffsetBox.get_bbox`` and
-    ``_get_bbox_and_child_offsets``), per renderer size and dpi: the legend's labels, handles
-    and place in the axes are the same for every plot of a canvas, and recomputing their
-    layout (every label's text extent) took a fifth of a plot's drawing. The legend is drawn
-    from the same numbers at the same places: the same pixels (tests/test_workshop_jobs.py)."""
-    for name in ("get_bbox", "_get_bbox_and_child_offsets"):
-        if name not in box.__dict__:
-            setattr(box, name, _kept(getattr(box, name)))
-    for child in box.get_children():
-        if isinstance(child, OffsetBox):
-            _keep_layout(child)
-
-
-def _kept(own: Callable):
-    """``own(renderer)``, computed once per renderer size and dpi."""
-    memo: dict[tuple, Any] = {}
-
-    def kept(renderer):
-        key = (renderer.width, renderer.height, renderer.dpi)
-        if key not in memo:
-            memo[key] = own(renderer)
-        return memo[key]
-    return kept
 
 
 def _no_tightbbox(renderer=None, *, for_layout_only=False) -> None:
