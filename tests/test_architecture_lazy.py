@@ -83,23 +83,16 @@ def test_the_rule_finds_a_planted_body_import(tmp_path):
 #: app/bench, app/cli, app/services and app/*.py bound the rest at their tops (a plain import
 #: where the module is loaded with its importer or light, else ``railval.core.lazy``); 125 after
 #: the diagnosis, team and workshop benchmarks did the same; 83 after the workshop's web handlers;
-#: 31 fewer after the diagnosis services, batch, sessions and the jobs and report states.
-#: Lower it when you move more; never raise it.
-FUNCTION_IMPORT_CEILING = 27  # 83 - 25 (h12: the Panel app's entrance and pages) - 31 (h10)
+#: 1 after the Panel app's entrance and pages (25), the diagnosis services, batch, sessions and
+#: the jobs and report states (31) and the workshop services and benchmark (26): only the
+#: optional demo seed's guarded import is left. Never raise it.
+FUNCTION_IMPORT_CEILING = 1
 
-_OTHER_ROUND = "not moved yet (issue 42 left these files to a later round); the same rule applies"
 #: every file that still imports in a function body: file → (statements, why). The sum is the
 #: ceiling; a file not listed here, or holding more than its number, fails
 #: :func:`test_every_remaining_function_import_is_listed_with_its_reason`.
 REMAINING: dict[str, tuple[int, str]] = {
     "app/cli/cmd_app.py": (1, "seed_demo: the optional demo seed, `except ImportError` (ALLOWED)"),
-    "app/bench/bench_workshop.py": (2, "_timed_create swaps the renderer by assignment on the real "
-                                       "module (a lazy stand-in forwards reads only)"),
-    # the workshop services
-    "app/services/workshop_cards.py": (8, _OTHER_ROUND),
-    "app/services/workshop_glyphs.py": (2, _OTHER_ROUND + " (Matplotlib's Agg and FreeType)"),
-    "app/services/workshop_render.py": (3, _OTHER_ROUND + " (Matplotlib in the render workers)"),
-    "app/services/workshops.py": (11, _OTHER_ROUND),
 }
 
 

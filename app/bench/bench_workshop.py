@@ -32,6 +32,7 @@ the 1-minute load average at its end.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import http.client
 import io
 import json
@@ -267,24 +268,17 @@ def legacy_png(x_meas, y_meas, x_sim, y_sim, scale, *, title: str, x_label: str,
 def _timed_create(db, name: str, campaign: str, choice: dict, legacy: bool) -> dict[str, Any]:
     """One creation, timed, with the renderer of ``legacy`` (A) or the current one (B);
     the render cache is emptied first so that both render every plot."""
-    # the real modules, not the lazy stand-ins: the renderer is swapped by assignment, which a
-    # stand-in would keep for itself (railval.core.lazy forwards reads only)
-    from railval.app.services import workshop_render as wr
-    from railval.app.services import workshops as ws
-
-    wr.clear_cache()
-    saved = wr.render_png, wr.RENDER_WORKERS
-    if legacy:  # a figure made for every plot, one plot after the other in this process
-        wr.render_png, wr.RENDER_WORKERS = legacy_png, 1
+    workshop_render.clear_cache()
+    # legacy: a figure made for every plot, one plot after the other in this process
+    way = workshop_render.serial_renderer(legacy_png) if legacy else contextlib.nullcontext()
     marks: dict[str, float] = {}
     t0 = time.perf_counter()
 
     def progress(stage: str, fraction: float, info: dict | None = None) -> None:
         marks.setdefault(stage, time.perf_counter() - t0)
-    try:
-        out = ws.create(db, name, campaign, **choice, repeats=0.0, progress=progress)
-    finally:
-        wr.render_png, wr.RENDER_WORKERS = saved
+    with way:
+        out = workshops_service.create(db, name, campaign, **choice, repeats=0.0,
+                                       progress=progress)
     total = time.perf_counter() - t0
     return {"way": "A" if legacy else "B", "plots": out["plots"], "create_s": round(total, 2),
             "render_s": round(total - marks.get("rendering plots", 0.0), 2),

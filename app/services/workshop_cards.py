@@ -9,22 +9,31 @@ deviation; the chosen cards for the validation report (their HTML:
 
 from __future__ import annotations
 
+import base64
 import math
 from collections.abc import Sequence
 from typing import Any
 
 from railval.app.services.workshop_answers import analysis_frames
+from railval.core import lazy
 from railval.core.errors import InvalidParameter
 from railval.core.quantities import QUANTITIES
 from railval.core.roles import Principal, require
 from railval.core.workshop import PLOT_KINDS
 
+#: deferred (railval.core.lazy): the database's workshop and campaign modules (SQLAlchemy and
+#: the models) — bound like workshop_answers', loaded when a card is first read
+wsdb = lazy.module("railval.db.workshops")
+repo = lazy.module("railval.db.repo")
+#: deferred (railval.core.lazy): the EN 14363 chain and the Sprague–Geers metric (scipy.signal,
+#: numba, pandas), loaded only when cards are computed (not by `workshop report` choices)
+validate_configuration = lazy.function("railval.app.services.validation", "validate_configuration")
+metrics_for_configuration = lazy.function("railval.app.services.metrics", "metrics_for_configuration")
+
 
 def _yes_shares(session, name: str) -> tuple[dict[tuple, dict[str, Any]], Any]:
     """Per fixed plot of workshop ``name`` (keyed by kind, section, configuration, channel)
     its share of Yes over the first answers and their number; and the workshop."""
-    from railval.db import workshops as wsdb
-
     answers, _ = analysis_frames(session, name)
     first = answers[~answers["repeat"] & (answers["scaling"] == "fixed")]
     counts = first.groupby("plot")["answer"].agg(["sum", "count"])
@@ -57,11 +66,6 @@ def cards(database, name: str, *, groups: Sequence[str] = (), actor: Principal |
     invited experts beside the partners); each card's ``groups`` lists every workshop's
     ``yes_share`` and ``answers`` on the plot with the same kind, section, configuration
     and channel (``null`` where that workshop lacks the plot)."""
-    from railval.app.services.metrics import metrics_for_configuration
-    from railval.app.services.validation import validate_configuration
-    from railval.db import repo
-    from railval.db import workshops as wsdb
-
     if isinstance(actor, Principal):
         require(actor, "workshop.results")
     # deferred: SQLite's write lock only at the final cache/run writes (docs/database.md)
@@ -126,8 +130,6 @@ def card_choices(database, campaign: str, config: str) -> dict[str, tuple[str, i
     """Every fixed plot of the workshops on ``campaign`` that shows ``configuration``, as
     ``{label: (workshop, plot id)}`` for the report page's choice (labels such as
     ``"W · plot 12 · Y_time S01 Y_w1L"``); reads plot rows only, no image."""
-    from railval.db import workshops as wsdb
-
     out: dict[str, tuple[str, int]] = {}
     with database.read_session() as session:
         for w in wsdb.list_workshops(session):
@@ -158,10 +160,6 @@ def report_cards(database, name: str, config: str, plot_ids: Sequence[int], *,
     each card of :func:`cards` with ``image_png`` (the stored, reviewed bytes) and
     ``image_sha256``. A plot id that is not a fixed plot of the workshop, or belongs to
     another configuration, is refused by name; nothing else is read then."""
-    import base64
-
-    from railval.db import workshops as wsdb
-
     doc = cards(database, name, groups=groups, actor=actor)
     by_id = {c["plot"]: c for c in doc["cards"]}
     out = []

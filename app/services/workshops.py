@@ -22,13 +22,15 @@ The documents that read a stored workshop back (status, plot list, kinds, review
 from __future__ import annotations
 
 import math
-import textwrap
 import random
+import textwrap
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from sqlalchemy import select
+
 from railval.app.services.workshop_documents import (
     describe_kinds,
     kind_labels,
@@ -58,16 +60,28 @@ from railval.core.workshop import (
     group_scales,
     is_flat,
     kind_scale,
+    nice_range,
     plot_deviation,
     plots_for,
     scale_key,
 )
+from railval.db import workshops as wsdb
+from railval.db.models import Workshop
 
 # the filters, the PSD and the Sprague–Geers metric load numba, scipy.signal and pandas: bound
 # here, imported when a plot is first rendered (not by `workshop analyse`, `status`, …)
 filtfilt_rows = lazy.function("railval.core.filters", "filtfilt_rows")
 common_grid = lazy.function("railval.core.metrics.grid", "common_grid")
 sprague_geers = lazy.function("railval.core.metrics.sprague_geers", "sprague_geers")
+#: deferred (railval.core.lazy): the campaign queries (railval.db.repo and what it imports),
+#: read when a workshop is planned or created, not by the status and plot-list documents
+repo = lazy.module("railval.db.repo")
+#: deferred (railval.core.lazy): the validation service (the EN 14363 chain, its pools and
+#: cache) is read only when a workshop's objective deviations are computed
+source_values = lazy.function("railval.app.services.validation", "source_values")
+#: deferred (railval.core.lazy): Matplotlib and the render pool, loaded when plots are rendered
+#: (not by `workshop plan`, `status`, `analyse`, …)
+workshop_render = lazy.module("railval.app.services.workshop_render")
 welch_psd = lazy.function("railval.core.psd", "welch_psd")
 
 DEFAULT_REPEATS = 0.1
@@ -103,8 +117,6 @@ def plan(session, campaign: str, configurations: Sequence[str] | None = None,
          kinds: Sequence[str] | None = None) -> list[PlannedPlot]:
     """Every plot of the choice (default: all configurations, sections and kinds), in
     configuration → section → kind → position order. Reads channel names only."""
-    from railval.db import repo
-
     camp = repo.get_campaign(session, campaign)
     configs = _check_choice("configuration(s)", configurations,
                             [c.name for c in repo.list_configurations(session, camp)])
@@ -206,9 +218,6 @@ def _collect(session, camp, planned: Sequence[PlannedPlot], infos, *, objective:
     """Read and low-pass every planned plot's signals: per plot its facts (kind, section,
     zone, configuration, channel, position and — with ``objective`` — deviation and
     Sprague–Geers C) and its two curves."""
-    from railval.app.services.validation import source_values
-    from railval.db import repo
-
     used_secs = sorted({p.section for p in planned}, key=list(infos).index)
     used_cfgs = list(dict.fromkeys(p.configuration for p in planned))
     if objective:
@@ -295,8 +304,6 @@ def scaling_preview(database, campaign: str, configurations: Sequence[str] | Non
                     *, actor: Principal | str = "system") -> dict[str, Any]:
     """What each scaling would give, before anything is rendered: per scaling the ranges per
     kind (and zone) and the share of flat plots per kind (the organiser's form)."""
-    from railval.db import repo
-
     if isinstance(actor, Principal):
         require(actor, "workshop.run")
     with database.write_session(deferred=True) as session:  # may fill the result cache
@@ -316,8 +323,6 @@ def scaling_preview(database, campaign: str, configurations: Sequence[str] | Non
 def _check_options(name: str, scaling: str, twin_scaling: str, repeats: float, auto_share: float,
                    actor: Principal | str) -> None:
     """Refuse a workshop's options before anything is read (:class:`InvalidParameter`)."""
-    from railval.db import workshops as wsdb
-
     if isinstance(actor, Principal):
         require(actor, "workshop.run")
     wsdb.check_name(name)
@@ -352,8 +357,6 @@ class _Gathered:
 def _gather(session, name: str, campaign: str, configurations, sections, kinds,
             progress: Callable[..., None] | None) -> _Gathered:
     """Read and filter the signals of the planned plots (step 1 of :func:`create`)."""
-    from railval.db import repo
-
     _refuse_existing(session, name)
     camp = repo.get_campaign(session, campaign)
     planned = plan(session, camp.name, configurations, sections, kinds)
@@ -372,8 +375,6 @@ def _gather(session, name: str, campaign: str, configurations, sections, kinds,
 
 def _own_scale(k, cm: _Curve, cs: _Curve) -> Scale:
     """The per-plot automatic scaling of the presentation experiment."""
-    from railval.core.workshop import nice_range
-
     own = kind_scale(k.domain, [_extent(k, cm), _extent(k, cs)])
     if k.domain == "time":
         own = Scale(nice_range(min(cm.x.min(), cs.x.min()), max(cm.x.max(), cs.x.max())), own.y)
@@ -387,10 +388,8 @@ def _render_rows(g: _Gathered, jobs: list[tuple[int, str]], fixed: tuple[list[st
     (fact index, ``fixed`` | ``auto`` | the twin's scaling); the PNGs on the render pool
     (:func:`railval.app.services.workshop_render.render_many`), progress as plots rendered
     n of N."""
-    from railval.app.services.workshop_render import PlotSpec, render_many, render_parameters
-
     rows: list[dict[str, Any]] = []
-    specs: list[PlotSpec] = []
+    specs: list[workshop_render.PlotSpec] = []
     for i, plot_scaling in jobs:
         f, (cm, cs) = g.facts[i], g.curves[i]
         k = PLOT_KINDS[f["kind"]]
@@ -402,8 +401,8 @@ def _render_rows(g: _Gathered, jobs: list[tuple[int, str]], fixed: tuple[list[st
             key, scale = None, _own_scale(k, cm, cs)
         title = _title(k, f["position"], blind=blind, vehicle=g.vehicle["name"] or g.campaign,
                        config=f["configuration"], section=f["section"])
-        specs.append(PlotSpec(cm.x, cm.y, cs.x, cs.y, scale, title, k.x_label, k.y_label))
-        params = render_parameters(k.to_dict(), scale, scaling=plot_scaling, title=title,
+        specs.append(workshop_render.PlotSpec(cm.x, cm.y, cs.x, cs.y, scale, title, k.x_label, k.y_label))
+        params = workshop_render.render_parameters(k.to_dict(), scale, scaling=plot_scaling, title=title,
                                    x_label=k.x_label, y_label=k.y_label,
                                    extra={"lowpass_hz": LOWPASS_HZ,
                                           "psd_segment_s": PSD_SEGMENT_S if k.domain == "psd" else None,
@@ -416,7 +415,7 @@ def _render_rows(g: _Gathered, jobs: list[tuple[int, str]], fixed: tuple[list[st
         if progress is not None:
             progress("rendering plots", 0.5 + 0.5 * done / max(1, total),
                      {"done": done, "total": total})
-    for row, image in zip(rows, render_many(specs, rendered), strict=True):
+    for row, image in zip(rows, workshop_render.render_many(specs, rendered), strict=True):
         row["image"] = image
     return rows
 
@@ -440,8 +439,6 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
     (one ``session(write=True)``, so the write lock is held only while storing: a failure
     before leaves nothing stored). ``progress(stage, fraction, info)`` is called as the work
     advances; while rendering, ``info`` is ``{"done": n, "total": N}`` (plots rendered)."""
-    from railval.db import workshops as wsdb
-
     _check_options(name, scaling, twin_scaling, repeats, auto_share, actor)
     with database.write_session(deferred=True) as session:  # may fill the result cache
         g = _gather(session, name, campaign, configurations, sections, kinds, progress)
@@ -482,9 +479,6 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
 
 
 def _exists_query(name: str):
-    from railval.db.models import Workshop
-    from sqlalchemy import select
-
     return select(Workshop.id).where(Workshop.name == name)
 
 
