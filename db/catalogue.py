@@ -35,11 +35,12 @@ _VERSIONS = Path(__file__).with_name("migrations") / "versions"
 _REV = re.compile(r"^(down_revision|revision)\b[^=]*=\s*(?:['\"]([^'\"]*)['\"]|None)", re.MULTILINE)
 
 
-def head_revision() -> str | None:
-    """The newest migration revision (None when the scripts do not form one linear head)."""
+def head_revision(versions: Path = _VERSIONS) -> str | None:
+    """The newest migration revision of the scripts in ``versions`` (this code's by default;
+    None when the scripts do not form one linear head)."""
     revisions: set[str] = set()
     parents: set[str] = set()
-    for path in _VERSIONS.glob("*.py"):
+    for path in versions.glob("*.py"):
         found = {m.group(1): m.group(2) for m in _REV.finditer(path.read_text("utf-8"))}
         if found.get("revision"):
             revisions.add(found["revision"])

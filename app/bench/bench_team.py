@@ -53,10 +53,14 @@ from sqlalchemy import func, select
 from railval.app.bench.bench_workshop import xsrf_headers, xsrf_of
 from railval.app.bench.topology import REPO, Topology
 from railval.core import lazy
+from railval.core.errors import InvalidParameter
+from railval.db.catalogue import head_revision
 
 #: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
 #: docstring; what the benchmark runs loads when it runs (the CLI's ``main`` also because the
 #: command line imports this module)
+#: the migration scripts, relative to a checkout: one database schema per set of them
+MIGRATIONS = Path("db") / "migrations" / "versions"
 psutil = lazy.module("psutil")
 psycopg = lazy.module("psycopg")
 playwright_sync = lazy.module("playwright.sync_api")
@@ -191,9 +195,27 @@ def _export(commit: str, work: Path) -> str:
     archive = subprocess.run(["git", "-C", str(REPO), "archive", commit], check=True,
                              capture_output=True).stdout
     subprocess.run(["tar", "-x", "-C", str(src)], input=archive, check=True)
+    check_same_schema(commit, src)
     for part in ("app", "core", "db"):
         (pkg / "railval" / part).symlink_to(src / part)
     return str(pkg)
+
+
+def check_same_schema(commit: str, ref_src: Path, tree: Path = REPO) -> None:
+    """Refuse ``--ref COMMIT`` when its database schema is not the working tree's: both codes
+    serve one database, so their migration scripts (``db/migrations/versions``) must be the
+    same files with the same content. Raises :class:`InvalidParameter` naming the scripts that
+    differ and both heads."""
+    def scripts(root: Path) -> dict[str, bytes]:
+        return {p.name: p.read_bytes() for p in (root / MIGRATIONS).glob("*.py")}
+
+    ref, ours = scripts(ref_src), scripts(tree)
+    differ = sorted(n for n in ref.keys() | ours.keys() if ref.get(n) != ours.get(n))
+    if differ:
+        raise InvalidParameter(
+            f"--ref {commit}: its database migrations differ from the working tree's in "
+            f"{', '.join(differ)} (head {head_revision(ref_src / MIGRATIONS)} against "
+            f"{head_revision(tree / MIGRATIONS)}); the two codes cannot share one database")
 
 
 @dataclass
