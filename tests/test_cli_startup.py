@@ -390,3 +390,23 @@ def test_startup_bench_times_the_verbs_against_the_baselines(capsys):
     assert "validate" not in figures  # --only
     assert main(["bench", "startup", "--only", "nonsense"]) == 2
     assert "--only: unknown command(s) ['nonsense']" in capsys.readouterr().err
+
+
+def test_review_plot_metrics_leave_pandas_unloaded():
+    """``workshop create`` computes each plot's Sprague–Geers C with
+    :mod:`railval.core.metrics.sprague_geers` on a :mod:`railval.core.metrics.grid` grid: that
+    must not import pandas (≈ 0.7 s of a fresh process) through the package's ``compare``
+    module, which reads pandas only for its tables; the tables still come as DataFrames."""
+    code = ("import sys\n"
+            "import railval.core.metrics as m\n"
+            "from railval.core.metrics.grid import common_grid\n"
+            "from railval.core.metrics.sprague_geers import sprague_geers\n"
+            "import numpy as np\n"
+            "x = np.sin(np.arange(400) / 9.0)\n"
+            "sprague_geers(x, 1.1 * x)\n"
+            "print('pandas' in sys.modules)\n"
+            "r = m.compare(x, 1.1 * x, 200.0).to_pandas()\n"
+            "print(type(r).__module__.split('.')[0], 'pandas' in sys.modules)\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["False", "pandas", "True"]

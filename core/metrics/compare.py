@@ -14,16 +14,20 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import pandas as pd
 import scipy.signal
 
-from railval.core import filters
+from railval.core import filters, lazy
 from railval.core.errors import InvalidParameter, InvalidSignal, NotFound
 from railval.core.metrics.grid import common_grid
 from railval.core.metrics.iso18571 import ISOParameters
 from railval.core.metrics.registry import FAMILIES, METRICS, metric_names, resolve_families
 from railval.core.metrics.sync import DEFAULT_MAX_LAG_S, SyncResult, apply_lag, estimate_lag
 from railval.core.types import SectionInfo, SignalSet
+
+#: deferred (railval.core.lazy): only the tables of :func:`compare_signalsets` and
+#: :meth:`ComparisonResult.to_pandas` need pandas (≈ 0.7 s to import); the review plots'
+#: Sprague–Geers values import this package and never reach them
+pd = lazy.module("pandas")
 
 DEFAULT_LOWPASS_HZ = 20.0
 
