@@ -26,7 +26,10 @@ for every plot, one after the other in this process (the renderer before figure 
 render pool), B the current renderer (:func:`railval.app.services.workshop_render.render_many`);
 each run reports its total and rendering time (from the render's start — "0 of N plots
 rendered" — to the end of the creation: the pool's start, the plots and their storing) and
-the 1-minute load average at its end.
+the 1-minute load average at its end. Then N times C: the same creation by ``railval workshop
+create`` in a fresh process, timed from launch to exit (the interpreter, the imports — scipy.signal,
+matplotlib, SQLAlchemy, numba —, the render pool's start and the creation): what a user of the
+command line waits, where A and B time a process that has created a workshop before.
 """
 
 from __future__ import annotations
@@ -84,8 +87,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--create-only", type=int, default=0, metavar="N",
                         help="only time the creation of a --plots workshop, N times each way, "
                              "alternating: A = one figure per plot in this process (the renderer "
-                             "before figure reuse and the pool), B = the current renderer; no "
-                             "server, no reviewers")
+                             "before figure reuse and the pool), B = the current renderer; then "
+                             "N times `railval workshop create` in a fresh process (C: what a "
+                             "user of the command line waits, imports and render pool start "
+                             "included); no server, no reviewers")
 
 
 def _rss_kib(pid: int) -> int:
@@ -285,9 +290,27 @@ def _timed_create(db, name: str, campaign: str, choice: dict, legacy: bool) -> d
             "loadavg_1min": round(os.getloadavg()[0], 2)}
 
 
+def _timed_cli_create(url: str, name: str, campaign: str, choice: dict) -> dict[str, Any]:
+    """One ``railval workshop create`` of the same plots in a fresh process (way C), timed
+    from launch to exit: the interpreter's start, the imports, the render pool's start and the
+    creation — what a user of the command line waits."""
+    argv = [sys.executable, "-m", "railval.app", "--db", url, "workshop", "create", name,
+            "--campaign", campaign, "--configurations", *choice["configurations"],
+            "--sections", *choice["sections"], "--kinds", *choice["kinds"], "--repeats", "0"]
+    t0 = time.perf_counter()
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=600, check=False)
+    total = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"railval workshop create {name} exited {proc.returncode}: {proc.stderr[-2000:]}")
+    made = re.search(r"created: (\d+) plots", proc.stdout)
+    return {"way": "C", "plots": int(made.group(1)) if made else None, "create_s": round(total, 2),
+            "loadavg_1min": round(os.getloadavg()[0], 2)}
+
+
 def run_create_only(args: argparse.Namespace) -> dict[str, Any]:
     """``--create-only N``: A and B alternately N times each on one database (a first,
-    untimed creation fills the validation results' cache both then read)."""
+    untimed creation fills the validation results' cache both then read), then N creations
+    by the command line in fresh processes (C)."""
     folder = Path(tempfile.mkdtemp(prefix="railval-bench-wsc-"))
     db = connect(args.url or f"sqlite:///{folder / 'bench.db'}")
     db.init()
@@ -303,12 +326,17 @@ def run_create_only(args: argparse.Namespace) -> dict[str, Any]:
         for legacy in (True, False):
             runs.append(_timed_create(db, f"bench-{'a' if legacy else 'b'}{i}-{tag}", campaign,
                                       choice, legacy))
+    url = str(db.engine.url.render_as_string(hide_password=False))
     db.dispose()
+    for i in range(args.create_only):
+        runs.append(_timed_cli_create(url, f"bench-c{i}-{tag}", campaign, choice))
     a = [r["create_s"] for r in runs if r["way"] == "A"]
     b = [r["create_s"] for r in runs if r["way"] == "B"]
+    c = [r["create_s"] for r in runs if r["way"] == "C"]
     return {"plots": runs[0]["plots"] if runs else warm["plots"], "render_workers": workshop_render.RENDER_WORKERS,
             "warm_up": warm, "runs": runs, "A_create_s": [min(a), max(a)] if a else None,
-            "B_create_s": [min(b), max(b)] if b else None, "cpu_count": os.cpu_count(),
+            "B_create_s": [min(b), max(b)] if b else None,
+            "C_cli_create_s": [min(c), max(c)] if c else None, "cpu_count": os.cpu_count(),
             "database": str(db.engine.url).split(":")[0]}
 
 
