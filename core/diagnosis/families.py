@@ -33,7 +33,7 @@ import numpy as np
 from railval.core.diagnosis.engine import STRONG, diagnose_evidence
 from railval.core.diagnosis.evidence import SectionEvidence
 from railval.core.diagnosis.fit import CandidateFamily
-from railval.core.errors import InvalidSignal
+from railval.core.errors import InvalidParameter, InvalidSignal
 
 #: family → (title, EN 14363 signal kinds of :class:`railval.core.quantities.Quantity` ``signal``,
 #: pattern groups beyond the EN quantities)
@@ -100,12 +100,18 @@ def _top(c: Any) -> dict[str, Any]:
 
 def diagnose_families(base: SectionEvidence, families: Sequence[CandidateFamily], *, validated: bool = False,
                       n_boot: int = 100, folds: int = 3, seed: int = 0, strong: float = STRONG,
-                      n_top: int = 3) -> list[dict[str, Any]]:
+                      n_top: int = 3, names: Sequence[str] | None = None) -> list[dict[str, Any]]:
     """Per quantity family present in ``base``: ``name``, ``title``, ``quantities`` (its
     groups), ``share`` (its part of the weighted residual ‖r‖²), ``verdict`` and ``note`` of
     :func:`diagnose_evidence` on its components, ``top`` (the ``n_top`` best candidates:
     name, kind, held-out and in-sample shares, fitted value and interval, plausibility) and
-    ``structural`` (``flag``, ``quantities``, ``zones``, ``reason``; module docstring)."""
+    ``structural`` (``flag``, ``quantities``, ``zones``, ``reason``; module docstring).
+    ``names``: only these quantity families (in :data:`QUANTITY_FAMILIES` order); each family
+    is judged on its own components alone, so the families can be judged apart (on separate
+    workers) and put together in that order with the same result."""
+    unknown = sorted(set(names or ()) - set(QUANTITY_FAMILIES))
+    if unknown:
+        raise InvalidParameter(f"diagnose_families: unknown quantity families {unknown}; known: {list(QUANTITY_FAMILIES)}")
     groups = list(base.groups)
     fam_of = [family_of(g) for g in groups]
     r = base.values()
@@ -114,7 +120,7 @@ def diagnose_families(base: SectionEvidence, families: Sequence[CandidateFamily]
     out = []
     for name, (title, _, _) in QUANTITY_FAMILIES.items():
         keep = [f == name for f in fam_of]
-        if not any(keep):
+        if not any(keep) or (names is not None and name not in names):
             continue
         sub = restrict(base, keep)
         subfams = [replace(f, evidence=[restrict(e, keep) for e in f.evidence]) for f in families]
