@@ -524,6 +524,9 @@ def simulate_campaign(vehicle, sections: Sequence, *, layouts: Mapping[str, dict
         Output rate in Hz.
     workers : int, callable or None
     progress : callable or None
+    end_m : mapping of str to float or None
+        Per section id, the distance (m) at which its run stops (:func:`simulate_section`);
+        sections not named, or ``None``, run to their end.
     **_ignored
         Further keywords, ignored.
 
