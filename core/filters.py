@@ -501,3 +501,36 @@ def settling_check(time_s: np.ndarray, eval_mask: np.ndarray, fs: float, kind: s
     if run_out < d.settling_s:
         out.append(SettlingWarning(d.label, "run-out", run_out, d.settling_s, section))
     return out
+
+
+#: multiple of the slowest EN filter's settling time (+ padding) a shortened run keeps after the
+#: evaluated range (:func:`run_out_s`); measured on the bench campaign (12 sections, 768 EN and
+#: supplementary values, 2026-11-28): largest relative change against the whole run 5.0·10⁻²
+#: at 1×, 1.8·10⁻² at 1.5×, 5.7·10⁻³ at 2×, 1.3·10⁻³ at 2.5×, 6.8·10⁻⁴ at 3× (docs/diagnosis.md
+#: "Only the evaluated span (issue 41, round 5)")
+RUN_OUT_FACTOR = 2.0
+
+
+def run_out_s(fs: float, order: int = DEFAULT_ORDER, factor: float | None = None) -> float:
+    """The run-out (s) after the evaluated range that a simulation ending early must keep so
+    the EN values in the range are those of the whole section: ``factor`` (default
+    :data:`RUN_OUT_FACTOR`, ≥ 1) × the longest settling time of the EN filters
+    (:data:`FILTER_KINDS`, :attr:`FilterDesign.settling_s`: one pass's impulse response below
+    :data:`SETTLING_LEVEL` of its peak; at 200 Hz the band-pass 0.4–10 Hz, 2.44 s, against the
+    low-pass 20 Hz, 0.12 s) plus the odd extension of the filtfilt padding (:attr:`FilterDesign.edge`
+    samples) and one sample.
+
+    Why: the only step of the EN chain that reads samples after the evaluated range is the
+    backward pass of the zero-phase filtering (EN 14363:2005 on-track tests: low-pass 20 Hz for
+    the forces, band-pass 0.4–10 Hz for the accelerations; Polach & Böttcher 2014 Table 2); the
+    forward pass is causal and the sliding means and percentiles use the range only
+    (:mod:`railval.core.en_section`). A backward pass started ``run_out_s`` after the range
+    has decayed below ``SETTLING_LEVEL`` of its start transient when it reaches the range — the
+    same criterion :func:`settling_check` applies to every section's run-out, so a shortened run
+    raises no settling warning a whole one would not."""
+    f = RUN_OUT_FACTOR if factor is None else float(factor)
+    if not f >= 1.0:
+        raise InvalidParameter(f"run-out factor must be >= 1 (the settling time itself), got {factor!r}")
+    longest = max(design(float(fs), k, order).settling_s + design(float(fs), k, order).edge / float(fs)
+                  for k in FILTER_KINDS)
+    return f * longest + 1.0 / float(fs)

@@ -27,13 +27,14 @@ from railval.core.diagnosis import (
 )
 from railval.core.en14363 import evaluate_present
 from railval.core.errors import NotFound
+from railval.core.filters import run_out_s
 from railval.core.sim import simulate_campaign
 from railval.core.sim.effects import EFFECTS, Effect, unmet_requirement
+from railval.core.supplementary import supplementary_pattern
 from railval.core.types import SectionInfo, SignalSet
 from railval.core.validation import ValidationResult, validate
 from railval.db import repo
 from railval.db.engine import connect
-from railval.core.supplementary import supplementary_pattern
 
 Progress = Callable[[str, float, dict[str, Any]], None]
 
@@ -140,12 +141,36 @@ def residual_pattern(ctx: CampaignContext, sim_values: Mapping[str, Mapping],
                           supplementary_pattern(vr.supplementary.get("pairs", ()))), vr
 
 
+def evaluated_span_end(ctx: CampaignContext) -> dict[str, float]:
+    """Section id → distance (m) where the diagnosis's runs stop: the evaluated range's end plus
+    the EN filters' run-out (:func:`railval.core.filters.run_out_s` at the section's rate)
+    travelled at the section's speed."""
+    return {s.id: float(s.eval_end_m) + run_out_s(ctx.fs.get(s.id, 200.0)) * float(s.speed_kmh) / 3.6
+            for s in ctx.sections}
+
+
+def cut_to(ss: SignalSet, end_m: float) -> SignalSet:
+    """The samples of ``ss`` up to distance ``end_m`` (m), inclusive: a measured section cut where a
+    run stopped at ``end_m`` ends (the same track span on both sides); ``ss`` itself when it ends
+    before."""
+    n = int(np.searchsorted(ss.distance_m, end_m, side="right"))
+    if n >= len(ss):
+        return ss
+    return SignalSet(fs=ss.fs, time_s=ss.time_s[:n], distance_m=ss.distance_m[:n],
+                     channels={k: x[:n] for k, x in ss.channels.items()})
+
+
 def simulate_context(ctx: CampaignContext, effects: Mapping[str, Mapping[str, float]],
-                     parameters: Mapping[str, float] | None = None) -> dict[str, SignalSet]:
-    """Simulate every section of the campaign with the built-in simulator."""
+                     parameters: Mapping[str, float] | None = None, *,
+                     evaluated_only: bool = False) -> dict[str, SignalSet]:
+    """Simulate every section of the campaign with the built-in simulator; ``evaluated_only``:
+    each run stops at :func:`evaluated_span_end` (the diagnosis: its EN values equal the whole
+    run's — docs/diagnosis.md "Only the evaluated span" — and its band powers are taken over the
+    same span of the measurement)."""
     return simulate_campaign(ctx.vehicle, ctx.sections, layouts=ctx.layouts, effects=dict(effects),
                              parameters=dict(parameters or {}), channels=ctx.channels,
-                             fs=ctx.fs, **ctx.sim_inputs)
+                             fs=ctx.fs, end_m=evaluated_span_end(ctx) if evaluated_only else None,
+                             **ctx.sim_inputs)
 
 
 def evaluate_effects(task: tuple[CampaignContext, dict, dict]) -> tuple[dict, dict]:

@@ -39,7 +39,9 @@ from railval.app.services.campaign_context import (
     ACC_CHANNELS,
     band_sums,
     configuration_of,
+    cut_to,
     effect_parameters,
+    evaluated_span_end,
     load_context_and_measurement,
     residual_pattern,
     runnable_effects,
@@ -165,9 +167,12 @@ def _evaluate_sections(ctx: Any, job: tuple[dict, dict]) -> tuple[list[dict], di
     """Worker task: simulate the campaign ``ctx`` (shared once per worker,
     :meth:`railval.app.services.batch.BatchExecutor.map`) with the job's ``effects`` and model
     ``parameters``; return the validation pairs (section, zone, quantity, position, D_norm) and
-    the band powers per section and acceleration channel (one Welch call per section)."""
+    the band powers per section and acceleration channel (one Welch call per section). Each run
+    stops at the evaluated range's end plus the EN filters' run-out
+    (:func:`railval.app.services.campaign_context.evaluated_span_end`): the band powers cover
+    that span, as :func:`measured_section_bands` does on the measured side."""
     effects, parameters = job
-    sets = simulate_context(ctx, effects, parameters)
+    sets = simulate_context(ctx, effects, parameters, evaluated_only=True)
     vr = validate_values(ctx, section_values(sets, ctx.sections))
     pairs = vr.pairs[["section", "zone", "quantity", "position", "D_norm", "M", "S"]].to_dict("records")
     bands = {sid: section_band_powers({ch: ss.channels[ch] for ch in ACC_CHANNELS if ch in ss.channels},
@@ -177,9 +182,16 @@ def _evaluate_sections(ctx: Any, job: tuple[dict, dict]) -> tuple[list[dict], di
 
 def measured_section_bands(ctx: Any, measured: Mapping[str, Any]) -> dict[str, dict[str, np.ndarray]]:
     """Band powers of the measurement (``measured``: section id → SignalSet, decoded once per
-    diagnosis) per section and acceleration channel."""
-    return {sid: section_band_powers({ch: ss.channels[ch] for ch in ACC_CHANNELS if ch in ss.channels},
-                                     ss.fs, ctx.bands, 10.0) for sid, ss in measured.items()}
+    diagnosis) per section and acceleration channel, over the span the diagnosis simulates: each
+    section cut at :func:`railval.app.services.campaign_context.evaluated_span_end`, where the
+    simulated runs of :func:`_evaluate_sections` stop (like compared with like)."""
+    end = evaluated_span_end(ctx)
+    out = {}
+    for sid, ss in measured.items():
+        cut = cut_to(ss, end[sid]) if sid in end else ss
+        out[sid] = section_band_powers({ch: cut.channels[ch] for ch in ACC_CHANNELS if ch in cut.channels},
+                                       cut.fs, ctx.bands, 10.0)
+    return out
 
 
 # --------------------------------------------------------------------------- rank_causes

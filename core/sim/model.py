@@ -381,7 +381,7 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
                      effects: Mapping[str, Mapping[str, float]] | None = None, *, fs_out: float = 200.0,
                      seed: int | None = None, parameters: Mapping[str, float] | None = None,
                      channels: Sequence[str] | None = None, nuisance: Mapping[str, float] | None = None,
-                     speed_factor: float = 1.0, refine: int = 1) -> SignalSet:
+                     speed_factor: float = 1.0, refine: int = 1, end_m: float | None = None) -> SignalSet:
     """Simulate one section; return a :class:`railval.core.types.SignalSet` at ``fs_out`` Hz.
 
     ``effects``: ``{effect id: {param: value}}`` (see :mod:`railval.core.sim.effects`; defaults filled,
@@ -390,7 +390,10 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
     section carries measured ones. ``parameters``: vehicle template overrides (``model.NAME``
     or ``NAME``). ``nuisance`` and ``speed_factor`` are used by the synthetic-data generator
     (truth model) only. ``refine`` multiplies the number of integration steps (accuracy
-    checks). Distance axis = car body centre position from the section start (m).
+    checks). Distance axis = car body centre position from the section start (m). ``end_m``:
+    stop once the car body centre has travelled that far (shorter than the section: the
+    samples up to it are those of the whole run — the kernel integrates forward in time and
+    the track input is built for the whole section either way).
 
     Parameters
     ----------
@@ -407,6 +410,8 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
     nuisance : mapping of str to float or None
     speed_factor : float
     refine : int
+    end_m : float or None
+        Distance (m) at which the run stops; ``None`` = the section's end.
 
     Returns
     -------
@@ -430,8 +435,9 @@ def simulate_section(vehicle: VehicleModel | Mapping | str, section: TrackSectio
         {d: ef[f"track_level_{d}"]["factor"] for d in ("vertical", "lateral") if f"track_level_{d}" in ef}
     v = section.speed_ms * float(speed_factor)
     asm = assemble(veh, ef, v, nuisance)
+    duration = None if end_m is None else min(float(end_m), section.length_m) / v
     ss, _ = run_assembled(asm, veh, section, fs_out=fs_out, use_measured=use_meas, scale=scale, refine=refine,
-                          level=level)
+                          level=level, duration_s=duration)
     if channels is not None:
         want = set(channels)
         ss.channels = {k: x for k, x in ss.channels.items() if k in want}
@@ -485,16 +491,17 @@ def _pool(workers: int) -> ProcessPoolExecutor:
 
 
 def _run_one(task):
-    veh, sec, effects, fs, channels, nuisance, speed_factor = task
+    veh, sec, effects, fs, channels, nuisance, speed_factor, end_m = task
     return simulate_section(veh, sec, effects, fs_out=fs, channels=channels, nuisance=nuisance,
-                            speed_factor=speed_factor)
+                            speed_factor=speed_factor, end_m=end_m)
 
 
 def simulate_campaign(vehicle, sections: Sequence, *, layouts: Mapping[str, dict | None] | None = None,
                       effects: Mapping[str, Mapping[str, float]] | None = None,
                       parameters: Mapping[str, float] | None = None, channels: Sequence[str] | None = None,
                       fs: float | Mapping[str, float] = 200.0, workers: int | None = None,
-                      progress=None, **_ignored) -> dict[str, SignalSet]:
+                      progress=None, end_m: Mapping[str, float] | None = None,
+                      **_ignored) -> dict[str, SignalSet]:
     """Simulate every section; ``sections`` are :class:`TrackSection` or
     :class:`railval.core.types.SectionInfo` (then ``layouts[id]`` gives the layout record). Returns
     ``{section id: SignalSet}``. ``fs``: one rate or ``{section id: rate}``.
@@ -517,6 +524,9 @@ def simulate_campaign(vehicle, sections: Sequence, *, layouts: Mapping[str, dict
         Output rate in Hz.
     workers : int, callable or None
     progress : callable or None
+    end_m : mapping of str to float or None
+        Per section id, the distance (m) at which its run stops (:func:`simulate_section`);
+        sections not named, or ``None``, run to their end.
     **_ignored
         Further keywords, ignored.
 
@@ -528,12 +538,12 @@ def simulate_campaign(vehicle, sections: Sequence, *, layouts: Mapping[str, dict
     ef = resolve_effects(dict(effects or {}))
     secs = [s if isinstance(s, TrackSection) else TrackSection.from_info(s, (layouts or {}).get(s.id))
             for s in sections]
-    tasks = [(veh, s, ef, float(fs.get(s.id, 200.0) if isinstance(fs, Mapping) else fs), channels, None, 1.0)
-             for s in secs]
+    tasks = [(veh, s, ef, float(fs.get(s.id, 200.0) if isinstance(fs, Mapping) else fs), channels, None, 1.0,
+              (end_m or {}).get(s.id)) for s in secs]
     if workers is None:
         # a process pool pays off only for long runs (measured: 12 sections / 350 s simulated
         # take 0.6–1.4 s serially, the pool's start and result transfer cost ~0.3–0.8 s)
-        sim_s = sum(s.length_m / s.speed_ms for s in secs)
+        sim_s = sum(min(t[7] or s.length_m, s.length_m) / s.speed_ms for s, t in zip(secs, tasks, strict=True))
         big = sim_s > POOL_MIN_SIMULATED_S and len(tasks) > 2
         workers = min(2, os.cpu_count() or 1) if (mp.current_process().name == "MainProcess" and big) else 1
     out: dict[str, SignalSet] = {}
