@@ -45,7 +45,7 @@ bokeh_bundle = lazy.module("bokeh.embed.bundle")
 #: the snippet's file name in the folder given to :func:`prepare`
 SNIPPET = "railval-static.conf"
 #: files compressed ahead (``gzip_static``): the types browsers fetch as text
-GZIP_SUFFIXES = (".js", ".mjs", ".css", ".json", ".svg", ".map", ".html", ".txt")
+GZIP_SUFFIXES = (".js", ".mjs", ".css", ".json", ".svg", ".html", ".txt")
 GZIP_TYPES = ("text/javascript", "application/javascript", "text/css", "application/json",
               "image/svg+xml", "text/html", "text/plain")
 #: Cache-Control of a static response, by whether its URL is versioned (``?v=``)

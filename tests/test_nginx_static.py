@@ -138,9 +138,9 @@ def test_static_files_through_nginx_are_the_apps_and_carry_its_headers(site):
         assert ngx["cache-control"] == (nginx_static.CACHE_VERSIONED if versioned
                                         else nginx_static.CACHE_UNVERSIONED), path
     # compressed for a browser, whole for a client without gzip
-    status, ngx, body = _get(_via_nginx(site), STATIC_URLS[0])
+    _status, ngx, body = _get(_via_nginx(site), STATIC_URLS[0])
     assert ngx.get("content-encoding") == "gzip"
-    status, plain, plain_body = _get(_via_nginx(site), STATIC_URLS[0], gzip_ok=False)
+    _status, plain, plain_body = _get(_via_nginx(site), STATIC_URLS[0], gzip_ok=False)
     assert "content-encoding" not in plain and plain_body == body
     for path in MISSING_URLS:
         a_status, app, _ = _get(_direct(site), path)
@@ -220,7 +220,7 @@ def test_traversal_never_leaves_the_static_folders(site):
     target here, the packages' ``__init__.py`` and /etc/passwd, holds these words)."""
     before = len(_log(site))
     for path in TRAVERSALS:
-        status, headers, body = _get(_via_nginx(site), path)
+        status, _headers, body = _get(_via_nginx(site), path)
         assert status in (400, 403, 404), (path, status)
         assert b"root:" not in body and b"import" not in body, path
     for status, upstream, request in _log(site)[before:]:
