@@ -91,10 +91,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="nginx site template instead of deploy/nginx/railval.conf.template "
                         "(an older one, to compare; e.g. `git show COMMIT:deploy/nginx/"
                         "railval.conf.template > FILE`)")
-    parser.add_argument("--static-copy", action="store_true",
-                        help="nginx reads static files copied with .gz files beside them "
-                        "(railval nginx-static --copy, as the containers do) instead of the "
-                        "packages' folders")
+    parser.add_argument("--static-in-place", action="store_true",
+                        help="nginx reads the packages' static folders and compresses each "
+                        "response (railval nginx-static --in-place) instead of copies with .gz "
+                        "files beside them (the default, as deployed)")
     parser.add_argument("--ref", default=None, metavar="COMMIT",
                         help="A/B in one run: the first app process runs the code of COMMIT (git "
                         "archive, first on its PYTHONPATH), the others the working tree's; the "
@@ -257,7 +257,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     topo = _RefTopology(url, work / "site", n_apps=args.apps, app_env={} if args.pymalloc else None,
                         admin=args.admin, ref_path=_export(args.ref, work) if args.ref else "",
                         template=Path(args.nginx_template) if args.nginx_template else TEMPLATE,
-                        static_copy=args.static_copy)
+                        static_copy=not args.static_in_place)
     figures["nginx_template"] = str(topo.template.name if topo.template == TEMPLATE
                                     else topo.template)
     if args.ref:
