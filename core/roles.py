@@ -83,7 +83,7 @@ PAGE_ACTIONS: dict[str, str] = {
 #: CLI verb (``railval VERB`` or ``railval VERB SUBVERB``) → the action it needs when the
 #: database holds users; None = no data access checked (schema, server, benchmarks)
 CLI_ACTIONS: dict[str, str | None] = {
-    "init": None, "serve": None, "bench": None,
+    "init": None, "serve": None, "nginx-static": None, "bench": None,
     "backup": "data.backup", "restore": None,  # restore: into an empty database only
     "list": "data.read", "metrics": "data.read", "report": "report.download",
     "import": "data.import", "synth": "data.import", "export": "data.export",

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from railval.app import nginx_static
 from railval.app.bench.topology import TEMPLATE, nginx_binary, render, self_signed
 from tests.conftest import require_program
 
@@ -85,7 +86,16 @@ def test_nginx_template_with_the_compose_values_passes_nginx_t(tmp_path):
     binary = require_program(nginx_binary(), "nginx missing (apt-get install nginx-light)")
     env = _compose()["services"]["proxy"]["environment"]
     cert, key = self_signed(tmp_path)
-    values = {**{k: str(v) for k, v in env.items()},
+    # the one-shot `static` service writes the folder the proxy mounts: its files here
+    static = _compose()["services"]["static"]
+    folder = static["command"][2]
+    assert static["command"] == ["railval", "nginx-static", folder]  # copies with .gz files
+    assert f"static:{folder}:ro" in _compose()["services"]["proxy"]["volumes"]
+    made = nginx_static.prepare(tmp_path / "static", copy=False)
+    assert env["RAILVAL_STATIC_CONF"] == f"{folder}/{nginx_static.SNIPPET}"
+    assert (env["RAILVAL_BOKEH_STATIC"], env["RAILVAL_PANEL_STATIC"]) == (f"{folder}/bokeh/",
+                                                                         f"{folder}/panel/")
+    values = {**{k: str(v) for k, v in env.items()}, **made,
               "RAILVAL_TLS_CERT": str(cert), "RAILVAL_TLS_KEY": str(key),
               # container names do not resolve here: the same lines on loopback
               "RAILVAL_APP_SERVERS": re.sub(r"app\d+:", "127.0.0.1:", env["RAILVAL_APP_SERVERS"]),

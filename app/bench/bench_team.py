@@ -51,7 +51,7 @@ from typing import Any
 from sqlalchemy import func, select
 
 from railval.app.bench.bench_workshop import xsrf_headers, xsrf_of
-from railval.app.bench.topology import REPO, Topology
+from railval.app.bench.topology import REPO, TEMPLATE, Topology
 from railval.core import lazy
 from railval.core.errors import InvalidParameter
 from railval.db.catalogue import head_revision
@@ -87,6 +87,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "deployment's PYTHONMALLOC=malloc (railval.app.main.SERVE_ENV), to compare")
     parser.add_argument("--pg", default="postgresql://postgres@127.0.0.1:5432/test",
                         help="PostgreSQL database in which a fresh schema is used")
+    parser.add_argument("--nginx-template", default=None, metavar="FILE",
+                        help="nginx site template instead of deploy/nginx/railval.conf.template "
+                        "(an older one, to compare; e.g. `git show COMMIT:deploy/nginx/"
+                        "railval.conf.template > FILE`)")
+    parser.add_argument("--static-in-place", action="store_true",
+                        help="nginx reads the packages' static folders and compresses each "
+                        "response (railval nginx-static --in-place) instead of copies with .gz "
+                        "files beside them (the default, as deployed)")
     parser.add_argument("--ref", default=None, metavar="COMMIT",
                         help="A/B in one run: the first app process runs the code of COMMIT (git "
                         "archive, first on its PYTHONPATH), the others the working tree's; the "
@@ -134,6 +142,12 @@ def _reviewer(host: str, port: int, token: str, n: int, out: list[float], errors
 def _cpu_s(pids: list[int]) -> float:
     """CPU time (user + system) the app processes have used so far."""
     return sum(sum(psutil.Process(p).cpu_times()[:2]) for p in pids)
+
+
+def _group_cpu_s(leader: int) -> float:
+    """CPU time (user + system) of nginx: its master process and workers (one process group)."""
+    lead = psutil.Process(leader)
+    return sum(sum(p.cpu_times()[:2]) for p in [lead, *lead.children(recursive=True)])
 
 
 def _serving_pid(page) -> int:
@@ -241,15 +255,22 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                                "app_processes": args.apps, "answers_per_reviewer": args.answers,
                                "allocator": "pymalloc" if args.pymalloc else "malloc", "admin_page": args.admin}
     topo = _RefTopology(url, work / "site", n_apps=args.apps, app_env={} if args.pymalloc else None,
-                        admin=args.admin, ref_path=_export(args.ref, work) if args.ref else "")
+                        admin=args.admin, ref_path=_export(args.ref, work) if args.ref else "",
+                        template=Path(args.nginx_template) if args.nginx_template else TEMPLATE,
+                        static_copy=not args.static_in_place)
+    figures["nginx_template"] = str(topo.template.name if topo.template == TEMPLATE
+                                    else topo.template)
     if args.ref:
         figures["ref"] = args.ref
     try:
         db, tokens, answers = _seed(args, url, topo)
         figures["answers_per_reviewer"] = answers
         topo.start()
+        nginx0 = _group_cpu_s(topo.nginx.pid)
         m = _drive(args, topo, tokens, answers)
         figures.update(_figures(args, m, _stored_answers(db), answers))
+        # nginx's CPU over the whole run (static files, TLS, proxying): not in the app's figures
+        figures["nginx_cpu_s"] = round(_group_cpu_s(topo.nginx.pid) - nginx0, 2)
         if args.ref:
             figures["per_code"] = _per_code(m, next(iter(topo.apps.values())).pid)
         db.dispose()

@@ -4,7 +4,8 @@ TLS (a self-signed certificate made by ``openssl``). Used by the topology test
 (tests/test_team_server.py) and ``railval bench team``.
 
 ``Topology(db_url, workdir, n_apps=2).start()`` renders the nginx template exactly as a site
-does (only the ``${RAILVAL_*}`` names are substituted, like envsubst in the nginx image),
+does (only the ``${RAILVAL_*}`` names are substituted, like envsubst in the nginx image; the
+static folders and the security-header snippet from :func:`railval.app.nginx_static.prepare`),
 writes the secrets to files (the app reads ``*_FILE`` settings, :mod:`railval.db.settings`),
 starts the app processes and nginx, and waits until ``/health`` answers through the proxy.
 """
@@ -33,6 +34,7 @@ from railval.core import lazy
 #: deferred (railval.core.lazy): the app module (Panel, Bokeh) runs in the served processes,
 #: not in the one that starts them
 app_main = lazy.module("railval.app.main")
+nginx_static = lazy.module("railval.app.nginx_static")
 
 REPO = Path(__file__).resolve().parents[2]
 TEMPLATE = REPO / "deploy" / "nginx" / "railval.conf.template"
@@ -50,6 +52,15 @@ def render(template: str, values: dict[str, str]) -> str:
     if missing:
         raise KeyError(f"no value for {', '.join(missing)}")
     return _VAR.sub(lambda m: values[m.group(1)], template)
+
+
+def readable(folder: Path) -> None:
+    """Let every user traverse to ``folder``: ``o+x`` on each of its ancestors lacking it (a
+    ``mkdtemp`` folder is 0700; nginx's workers run as another user)."""
+    for p in folder.parents:
+        mode = p.stat().st_mode
+        if not mode & 0o001:
+            p.chmod(mode | 0o001)
 
 
 def free_port() -> int:
@@ -86,6 +97,11 @@ class Topology:
     app_env: dict[str, str] | None = None
     #: Panel's admin page on the app processes (it keeps a record of every session it saw)
     admin: bool = True
+    #: the nginx site template (``--nginx-template`` of ``railval bench team``: an older one)
+    template: Path = TEMPLATE
+    #: static folders copied with ``.gz`` files beside them (``railval nginx-static``, ≈ 15 s)
+    #: instead of nginx reading the packages' folders and compressing itself (tests: quicker)
+    static_copy: bool = False
     apps: dict[int, subprocess.Popen] = field(default_factory=dict)
     nginx: subprocess.Popen | None = None
     port: int = 0
@@ -131,7 +147,10 @@ class Topology:
         self.port = free_port()
         ports = [free_port() for _ in range(self.n_apps)]
         cert, key = self_signed(self.workdir)
-        site = render(TEMPLATE.read_text(), {
+        if self.static_copy:  # nginx's workers (user nobody under root) read the copies
+            readable(self.workdir / "static")
+        site = render(self.template.read_text(), {
+            **nginx_static.prepare(self.workdir / "static", copy=self.static_copy),
             "RAILVAL_HOST": "127.0.0.1", "RAILVAL_HTTPS_PORT": f"127.0.0.1:{self.port}",
             "RAILVAL_TLS_CERT": str(cert), "RAILVAL_TLS_KEY": str(key),
             "RAILVAL_APP_SERVERS": "\n    ".join(
@@ -143,7 +162,10 @@ class Topology:
         (ng / "nginx.conf").write_text(
             "worker_processes 1;\npid nginx.pid;\nerror_log logs/error.log warn;\n"
             "events { worker_connections 1024; }\nhttp {\n"
-            "  access_log logs/access.log;\n"
+            # which requests an app process answered: $upstream_addr is "-" for the static
+            # files nginx answers itself (tests/test_nginx_static.py)
+            "  log_format railval '$status $upstream_addr \"$request\"';\n"
+            "  access_log logs/access.log railval;\n"
             "  client_body_temp_path tmp/body; proxy_temp_path tmp/proxy;\n"
             "  fastcgi_temp_path tmp/fcgi; uwsgi_temp_path tmp/uwsgi; scgi_temp_path tmp/scgi;\n"
             "  include railval.conf;\n}\n")

@@ -50,7 +50,7 @@ check_cli = lazy.function("railval.app.services.users", "check_cli")
 #: every verb → the module of app/cli whose ``register`` adds it; a command line naming a verb
 #: imports only that module (tests/test_cli_startup.py checks the table against the modules)
 VERBS: dict[str, str] = {
-    "serve": "cmd_app", "report": "cmd_app",
+    "serve": "cmd_app", "report": "cmd_app", "nginx-static": "cmd_app",
     "audit": "cmd_audit", "signoff": "cmd_audit",
     "backup": "cmd_backup", "restore": "cmd_backup",
     "bench": "cmd_bench",
