@@ -112,6 +112,7 @@ def diagnose_families(base: SectionEvidence, families: Sequence[CandidateFamily]
     unknown = sorted(set(names or ()) - set(QUANTITY_FAMILIES))
     if unknown:
         raise InvalidParameter(f"diagnose_families: unknown quantity families {unknown}; known: {list(QUANTITY_FAMILIES)}")
+    only = None if names is None else set(names)
     groups = list(base.groups)
     fam_of = [family_of(g) for g in groups]
     r = base.values()
@@ -120,7 +121,7 @@ def diagnose_families(base: SectionEvidence, families: Sequence[CandidateFamily]
     out = []
     for name, (title, _, _) in QUANTITY_FAMILIES.items():
         keep = [f == name for f in fam_of]
-        if not any(keep) or (names is not None and name not in names):
+        if not any(keep) or (only is not None and name not in only):
             continue
         sub = restrict(base, keep)
         subfams = [replace(f, evidence=[restrict(e, keep) for e in f.evidence]) for f in families]
