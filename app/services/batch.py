@@ -151,47 +151,60 @@ class BatchExecutor:
         elif self.backend == "dask" and shared is not None:
             self._token(shared)
 
+    def submit(self, func: Callable[..., Any], items: Iterable[Any], *, shared: Any = None) -> list[Any]:
+        """Hand ``func`` of every item to the back end now, without waiting (with ``shared``:
+        ``func(shared, item)``, ``shared`` sent once per worker); one handle per item, for
+        :meth:`gather`. The workers take the items in this order, after those handed over
+        before. Serial: each item runs when it is first gathered."""
+        items = list(items)
+        if self.backend == "serial":
+            return [_Deferred(func, item, shared) for item in items]
+        if self.backend == "process":
+            if shared is None:
+                pool = self._process_pool()
+                return [pool.submit(func, item) for item in items]
+            token = self._token(shared)
+            pool = self._process_pool(token, shared)
+            return [pool.submit(_with_shared, token, func, item) for item in items]
+        client = self._dask_client()
+        if shared is None:
+            return list(client.map(func, items, pure=False))
+        return list(client.map(_apply_shared, items, task=func, shared=self._token(shared), pure=False))
+
+    def gather(self, handles: Sequence[Any], progress: Progress | None = None) -> list[Any]:
+        """The results of :meth:`submit`'s ``handles``, in their order; ``progress(done, total)``
+        after every finished one, in the calling thread. Several threads may gather the same
+        handles (the waiting is the futures' own)."""
+        total = len(handles)
+        if not total:
+            return []
+        if self.backend == "serial" or progress is None:
+            out = []
+            for k, h in enumerate(handles, start=1):
+                out.append(h.result())
+                if progress:
+                    progress(k, total)
+            return out
+        where = {h: k for k, h in enumerate(handles)}
+        done_iter = as_completed(where) if self.backend == "process" else distributed.as_completed(list(where))
+        results: list[Any] = [None] * total
+        for done, fut in enumerate(done_iter, start=1):
+            results[where[fut]] = fut.result()
+            progress(done, total)
+        return results
+
     def map(self, func: Callable[..., Any], items: Iterable[Any], progress: Progress | None = None,
             *, shared: Any = None) -> list[Any]:
         """``[func(item) for item in items]`` on the back end, in order (with ``shared``:
         ``func(shared, item)``, ``shared`` sent once per worker). ``progress(done, total)``
         is called in the calling thread after every finished task."""
         items = list(items)
-        total = len(items)
-        if total == 0:
-            return []
-        if self.backend == "serial" or total == 1 and self.backend == "process":
-            out = []
-            for k, item in enumerate(items):
-                out.append(func(item) if shared is None else func(shared, item))
-                if progress:
-                    progress(k + 1, total)
-            return out
-        if self.backend == "process":
-            if shared is None:
-                pool = self._process_pool()
-                futures = {pool.submit(func, item): k for k, item in enumerate(items)}
-            else:
-                token = self._token(shared)
-                pool = self._process_pool(token, shared)
-                futures = {pool.submit(_with_shared, token, func, item): k for k, item in enumerate(items)}
-        else:
-            client = self._dask_client()
-            if shared is None:
-                futs = client.map(func, items, pure=False)
-            else:
-                futs = client.map(_apply_shared, items, task=func, shared=self._token(shared), pure=False)
-            futures = {f: k for k, f in enumerate(futs)}
-        results: list[Any] = [None] * total
-        if self.backend == "process":
-            done_iter = as_completed(futures)
-        else:
-            done_iter = distributed.as_completed(list(futures))
-        for done, fut in enumerate(done_iter, start=1):
-            results[futures[fut]] = fut.result()
+        if len(items) == 1 and self.backend == "process":
+            items = [func(items[0]) if shared is None else func(shared, items[0])]
             if progress:
-                progress(done, total)
-        return results
+                progress(1, 1)
+            return items
+        return self.gather(self.submit(func, items, shared=shared), progress)
 
     # scipy's differential_evolution calls workers(func, iterable)
     __call__ = map
@@ -215,6 +228,23 @@ def _init_worker(base: dict[str, Any], token: str, shared: Any) -> None:
 
 def _noop(item: Any) -> Any:
     return item
+
+
+class _Deferred:
+    """A serial back end's handle (:meth:`BatchExecutor.submit`): ``func`` of the item, run
+    once, when its result is first asked for."""
+
+    def __init__(self, func: Callable[..., Any], item: Any, shared: Any):
+        self._call = (func, item, shared)
+        self._done = False
+        self._value: Any = None
+
+    def result(self) -> Any:
+        if not self._done:
+            func, item, shared = self._call
+            self._value = func(item) if shared is None else func(shared, item)
+            self._done, self._call = True, None
+        return self._value
 
 
 def _with_shared(token: str, func: Callable[..., Any], item: Any) -> Any:

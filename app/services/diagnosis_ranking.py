@@ -240,10 +240,10 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
     total = len(tasks) + (refine if req.plan else 0)
     _report(progress, "simulate", 0.05, tasks=total)
     with BatchExecutor(scheduler, workers) as ex:
-        results, base, measured = _simulate(ex, req, tasks, vr, measurement, lambda d, t: _report(
+        sims = _simulate(ex, req, tasks, index, vr, measurement, _Refinement(refine, folds, seed), lambda d, t: _report(
             progress, "simulate", 0.05 + 0.8 * (d + 1) / total, done=d + 1, total=total))
-        base, fams = _candidates(req, results, index, vr, base, measured)
-        n_sim = len(tasks) + _refine(ex, req, base, fams, bool(vr.validated), refine, folds, seed)
+        base, fams = _candidates(req, sims.results, index, vr, sims.base, sims.measured, sims.made)
+        n_sim = len(tasks) + _refine(req, base, fams, sims.redo, sims.refined)
         _report(progress, "score", 0.9)
         res = _score(base, fams, bool(vr.validated), req.template, n_boot=n_boot, folds=folds, seed=seed, ex=ex)
     res.campaign, res.configuration, res.validated = ctx.campaign, config, bool(vr.validated)
@@ -328,45 +328,117 @@ def _tasks(req: _Request, values_per_parameter: int) -> tuple[list[tuple], list[
     return tasks, index
 
 
-def _simulate(ex: Any, req: _Request, tasks: list[tuple], vr: Any, measurement: bool | Sequence[str],
-              progress: Any) -> tuple[list, SectionEvidence, dict[str, CandidateFamily]]:
-    """The campaign simulations, and meanwhile the measurement-side candidates: the workers
-    simulate ``tasks[1:]`` (a thread waits for them) while this thread simulates the
-    configuration itself (``tasks[0]``), its per-section evidence and, from it, the
-    measurement candidates — they need no other simulation (the measured signals re-evaluated
-    at their gain and offset nodes). Returns (results in task order, the configuration's
-    evidence, the measurement families); the same results as one map of every task."""
+@dataclass
+class _Refinement:
+    """How many parameter candidates are simulated again at their fitted value, and the folds
+    and seed of the first ranking that picks them (:func:`_refinement`)."""
+
+    count: int
+    folds: int
+    seed: int
+
+
+@dataclass
+class _Simulated:
+    """What :func:`_simulate` hands on: the campaign runs in task order, the configuration's
+    evidence, the measurement families, the parameter candidates' evidence (task index →
+    evidence), the refinement picked from them and its runs."""
+
+    results: list
+    base: SectionEvidence
+    measured: dict[str, CandidateFamily]
+    made: dict[int, SectionEvidence]
+    redo: list[tuple[str, float]]
+    refined: list
+
+
+def _simulate(ex: Any, req: _Request, tasks: list[tuple], index: Sequence[tuple], vr: Any,
+              measurement: bool | Sequence[str], refine: _Refinement, progress: Any) -> _Simulated:
+    """The campaign simulations, the measurement-side candidates and the refinement. The
+    workers take ``tasks[1:]``, the parameter candidates' runs first; meanwhile this thread
+    simulates the configuration (``tasks[0]``), its per-section evidence and, from it, the
+    measurement candidates (the measured signals re-evaluated at their gain and offset nodes),
+    then, once the parameter runs are in, picks the refinement from the parameter candidates
+    alone (:func:`_refinement`) and hands its runs to the workers behind the effects' runs — the
+    pool never waits for the first ranking. The same results as one map of every task followed
+    by the refinement (candidates are ranked each on its own)."""
     sections = [(s.id, int(s.zone)) for s in req.ctx.sections]
-    if ex.backend == "serial":
-        results = ex.map(_evaluate_sections, tasks, shared=req.ctx, progress=lambda d, t: progress(d - 1, t))
-        base = section_evidence(results[0][0], results[0][1], req.meas_bands, sections, value_key="D_norm")
-        return results, base, _measurement_families(req, results[0], base, sections, vr, measurement) \
-            if measurement else {}
+    params = [k for kind, *_, k in index if kind == "parameter"]
+    order = params + sorted(set(range(1, len(tasks))) - set(params))
     ex.start(shared=req.ctx)  # in this thread: a pool started from the main thread forks
+    handles = dict(zip(order, ex.submit(_evaluate_sections, [tasks[k] for k in order], shared=req.ctx),
+                       strict=True))
     rest: list = []
     failed: list[BaseException] = []
 
     def run() -> None:
         try:
-            rest.extend(ex.map(_evaluate_sections, tasks[1:], shared=req.ctx, progress=progress))
+            rest.extend(ex.gather([handles[k] for k in range(1, len(tasks))], progress=progress))
         except BaseException as exc:  # noqa: BLE001 - raised again in the calling thread
             failed.append(exc)
 
     waiter = threading.Thread(target=run, name="railval-diagnosis-map", daemon=True)
-    waiter.start()
+    if ex.backend != "serial":  # serial: every run in this thread, in task order
+        waiter.start()
     try:
         first = _evaluate_sections(req.ctx, tasks[0])
         base = section_evidence(first[0], first[1], req.meas_bands, sections, value_key="D_norm")
+        if ex.backend == "serial":
+            run()
         measured = _measurement_families(req, first, base, sections, vr, measurement) if measurement else {}
+        made = {k: section_evidence(*res, req.meas_bands, sections, value_key="D_norm", like=base)
+                for k, res in zip(params, ex.gather([handles[k] for k in params]), strict=True)}
+        redo = _refinement(req, base, index, made, bool(vr.validated), refine)
+        more = ex.submit(_evaluate_sections, [(req.in_config, {**req.conf_params, p: v}) for p, v in redo],
+                         shared=req.ctx)
     finally:
-        waiter.join()
+        if waiter.is_alive():
+            waiter.join()
     if failed:
         raise failed[0]
-    return [first, *rest], base, measured
+    refined = ex.gather(more, progress=lambda d, t: progress(len(tasks) - 1 + d, t))
+    return _Simulated([first, *rest], base, measured, made, redo, refined)
+
+
+def _refinement(req: _Request, base: SectionEvidence, index: Sequence[tuple], made: Mapping[int, SectionEvidence],
+                validated: bool, refine: _Refinement) -> list[tuple[str, float]]:
+    """(template parameter, value) of the ``refine.count`` best parameter candidates whose
+    fitted value lies > 10 % from a simulated one, best first. Ranked among the parameter
+    candidates alone: every candidate is scored on its own and the ranking is a stable sort, so
+    their order is the one they have among all candidates (the choice the full first ranking
+    made)."""
+    if not (req.plan and refine.count):
+        return []
+    fams = [_parameter_family(req, name, v, base, made[k]) for kind, name, _p, v, _d, k in index
+            if kind == "parameter"]
+    blind = _without_effect(base, fams)
+    fams = [f for f in fams if f not in blind]
+    first = diagnose_evidence(base, fams, validated=validated, n_boot=0, folds=refine.folds, seed=refine.seed)
+    redo: list[tuple[str, float]] = []
+    for c in first.candidates:
+        if len(redo) >= refine.count:
+            break
+        fam = next(f for f in fams if f.name == c.name)
+        v = c.fitted  # inside the bounds: core.diagnosis.fit._Curve.value clamps it
+        if min(abs(math.log(v / x)) for x in fam.values) > math.log(1.1):
+            redo.append((fam.parameter, v))
+    return redo
+
+
+def _parameter_family(req: _Request, name: str, value: float, base: SectionEvidence,
+                      evidence: SectionEvidence) -> CandidateFamily:
+    """The candidate family of template parameter ``name``: the model's value (the
+    configuration's run) and the perturbed ``value`` (its sensitivity run)."""
+    pp = next(x for x in req.plan if x["name"] == name)
+    return CandidateFamily(
+        "parameter", name, pp["parameter"], [pp["reference"], value], [base, evidence], pp["bounds"], log=True,
+        extrapolate=True, reference=pp["reference"], plausible=pp["plausible"], plausible_source=pp["source"],
+        unit=pp["unit"], title=pp["title"], interface=pp["parameter"] in INTERFACE_PARAMETERS)
 
 
 def _candidates(req: _Request, results: Sequence, index: Sequence[tuple], vr: Any, base: SectionEvidence,
-                measured: Mapping[str, CandidateFamily]) -> tuple[SectionEvidence, list[CandidateFamily]]:
+                measured: Mapping[str, CandidateFamily],
+                made: dict[int, SectionEvidence]) -> tuple[SectionEvidence, list[CandidateFamily]]:
     """Per-section evidence of the candidate values and the candidate families (effects,
     parameters, then the ``measured`` candidates of :func:`_simulate`); candidates that move
     nothing the campaign measures go to ``req.skipped``; of an effect's one-parameter families
@@ -397,12 +469,7 @@ def _candidates(req: _Request, results: Sequence, index: Sequence[tuple], vr: An
             families[key].values.append(v)
             families[key].evidence.append(evidence(k))
         else:
-            pp = next(x for x in req.plan if x["name"] == name)
-            families[name] = CandidateFamily(
-                "parameter", name, pname, [pp["reference"], v], [base, evidence(k)], pp["bounds"], log=True,
-                extrapolate=True, reference=pp["reference"], plausible=pp["plausible"],
-                plausible_source=pp["source"], unit=pp["unit"], title=pp["title"],
-                interface=pname in INTERFACE_PARAMETERS)
+            families[name] = _parameter_family(req, name, v, base, evidence(k))
     families.update(measured)
     blind = _without_effect(base, list(families.values()))
     req.skipped += [{"name": f.name, "kind": f.kind, "reason": "changes none of the quantities the campaign "
@@ -460,27 +527,13 @@ def force_gain_families(req: _Request, result0: tuple, base: SectionEvidence, se
     return out
 
 
-def _refine(ex: Any, req: _Request, base: SectionEvidence, fams: list[CandidateFamily], validated: bool,
-            refine: int, folds: int, seed: int) -> int:
-    """Simulate the ``refine`` best parameter candidates once more at their fitted value when it
-    lies > 10 % from a simulated one; returns the number of simulations added."""
-    if not (req.plan and refine):
-        return 0
-    first = diagnose_evidence(base, fams, validated=validated, n_boot=0, folds=folds, seed=seed)
-    redo = []
-    for c in first.candidates:
-        if c.kind != "parameter" or len(redo) >= refine:
-            continue
-        fam = next(f for f in fams if f.name == c.name)
-        v = c.fitted  # inside the bounds: core.diagnosis.fit._Curve.value clamps it
-        if min(abs(math.log(v / x)) for x in fam.values) > math.log(1.1):
-            redo.append((fam, v))
-    if not redo:
-        return 0
+def _refine(req: _Request, base: SectionEvidence, fams: list[CandidateFamily], redo: Sequence[tuple[str, float]],
+            refined: Sequence) -> int:
+    """Add the refinement's runs (:func:`_simulate`, picked by :func:`_refinement`) to their
+    parameter families; returns the number of simulations added."""
     sections = [(s.id, int(s.zone)) for s in req.ctx.sections]
-    more = ex.map(_evaluate_sections, [(req.in_config, {**req.conf_params, f.parameter: v}) for f, v in redo],
-                  shared=req.ctx)
-    for (fam, v), res in zip(redo, more, strict=True):
+    for (parameter, v), res in zip(redo, refined, strict=True):
+        fam = next(f for f in fams if f.kind == "parameter" and f.parameter == parameter)
         fam.values.append(v)
         fam.evidence.append(section_evidence(res[0], res[1], req.meas_bands, sections, value_key="D_norm", like=base))
     return len(redo)
