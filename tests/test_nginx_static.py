@@ -14,17 +14,15 @@ from __future__ import annotations
 
 import gzip
 import http.client
-import os
 import re
 import time
 
 import pytest
 
 from railval.app import nginx_static, security
-from railval.app.bench.topology import TEMPLATE, Topology, insecure_context, nginx_binary
-from railval.db import users
-from tests.browser_support import block_fonts, require_browser
-from tests.conftest import backend_url, require_program
+from railval.app.bench.topology import TEMPLATE, insecure_context
+from tests.browser_support import block_fonts
+from tests.topology_support import demo_topology
 
 pytestmark = [pytest.mark.browser, pytest.mark.postgres]
 TIMEOUT_MS = 60_000
@@ -59,33 +57,9 @@ TRAVERSALS = [
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
-    require_browser()
-    require_program(nginx_binary(), "nginx missing (apt-get install nginx-light)")
-    from railval.db.engine import connect
-    from railval.db.importer import import_campaign
-    from tests.factories import write_demo_campaign
-
-    work = tmp_path_factory.mktemp("nginx_static")
-    with backend_url("postgresql", work) as url:
-        topo = Topology(url, work / "site", n_apps=1, admin=False)
-        topo.workdir.mkdir()
-        topo._secrets()
-        os.environ["RAILVAL_SECRET_KEY_FILE"] = str(topo.workdir / "secrets" / "railval_secret_key")
-        db = connect(url)
-        db.init()
-        folder = work / "demo"
-        write_demo_campaign(folder, n_sections=2, fs=50.0, n_configs=1)
-        db.actor = "eng"
-        import_campaign(db, folder)
-        with db.session(actor="admin", write=True) as s:
-            users.create_user(s, "eng", password="engineer password", roles=["engineer"])
-        try:
-            topo.start()
-            yield topo
-        finally:
-            topo.stop()
-            db.dispose()
-            os.environ.pop("RAILVAL_SECRET_KEY_FILE", None)
+    with demo_topology(tmp_path_factory.mktemp("nginx_static"), n_sections=2, n_apps=1, admin=False,
+                       accounts=[("eng", "engineer password", "engineer")]) as (topo, _db, _):
+        yield topo
 
 
 def _get(conn_factory, path: str, gzip_ok: bool = True):

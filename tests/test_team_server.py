@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import json
-import os
 import time
 import urllib.error
 import urllib.request
@@ -20,54 +19,32 @@ import pytest
 from sqlalchemy import func, select
 
 from railval.app.bench.bench_workshop import xsrf_headers, xsrf_of
-from railval.app.bench.topology import Topology, insecure_context, nginx_binary
-from railval.db import users
-from tests.browser_support import block_fonts, require_browser
-from tests.conftest import backend_url, require_program
+from railval.app.bench.topology import insecure_context
+from tests.browser_support import block_fonts
+from tests.topology_support import demo_topology
 
 pytestmark = [pytest.mark.browser, pytest.mark.postgres]
 TIMEOUT_MS = 60_000
 REVIEWERS = 6
 
 
-@pytest.fixture(scope="module")
-def team(tmp_path_factory):
-    require_browser()
-    require_program(nginx_binary(), "nginx missing (apt-get install nginx-light)")
+def _workshop(db) -> dict[str, str]:
+    """Workshop W on the demo campaign with an invitation per reviewer: name → token."""
     from railval.app.services import workshops as wsvc
     from railval.db import workshops as wsdb
-    from railval.db.engine import connect
-    from railval.db.importer import import_campaign
-    from tests.factories import write_demo_campaign
 
-    work = tmp_path_factory.mktemp("team")
-    with backend_url("postgresql", work) as url:
-        topo = Topology(url, work / "site")
-        topo.workdir.mkdir()
-        topo._secrets()
-        os.environ["RAILVAL_SECRET_KEY_FILE"] = str(topo.workdir / "secrets" / "railval_secret_key")
-        db = connect(url)
-        db.init()
-        folder = work / "demo"
-        write_demo_campaign(folder, n_sections=4, fs=50.0, n_configs=1)
-        db.actor = "eng"
-        import_campaign(db, folder)
-        with db.session(actor="admin", write=True) as s:
-            users.create_user(s, "admin", password="admin password 1", roles=["admin"])
-            users.create_user(s, "eng", password="engineer password", roles=["engineer"])
-        wsvc.create(db, "W", "demo", kinds=["Y_time"], repeats=0.0, actor="admin")
-        tokens = {}
-        with db.session(write=True) as s:
-            w = wsdb.get_workshop(s, "W")
-            for k in range(REVIEWERS):
-                tokens[f"r{k}"] = wsdb.invite(s, w, f"r{k}", seed=k)
-        try:
-            topo.start()
-            yield topo, db, tokens
-        finally:
-            topo.stop()
-            db.dispose()
-            os.environ.pop("RAILVAL_SECRET_KEY_FILE", None)
+    wsvc.create(db, "W", "demo", kinds=["Y_time"], repeats=0.0, actor="admin")
+    with db.session(write=True) as s:
+        w = wsdb.get_workshop(s, "W")
+        return {f"r{k}": wsdb.invite(s, w, f"r{k}", seed=k) for k in range(REVIEWERS)}
+
+
+@pytest.fixture(scope="module")
+def team(tmp_path_factory):
+    accounts = [("admin", "admin password 1", "admin"), ("eng", "engineer password", "engineer")]
+    with demo_topology(tmp_path_factory.mktemp("team"), n_sections=4, accounts=accounts,
+                       prepare=_workshop) as (topo, db, tokens):
+        yield topo, db, tokens
 
 
 def _sign_in(context, base: str, username: str, password: str):
