@@ -98,7 +98,7 @@ def authorize(args):
     return _authorize(args)
 cli.authorize = authorize
 try:
-    code = cli.main(sys.argv[1:])
+    code = cli.main()  # as the program: argv from sys.argv
 except SystemExit as exc:
     code = exc.code
 sys.stdout.flush()

@@ -24,6 +24,7 @@ start-up).
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import json
 import logging
@@ -244,7 +245,18 @@ def first_admin(args: argparse.Namespace) -> bool:
 def main(argv: list[str] | None = None) -> int:
     """Run one verb. Errors print one line ``railval VERB: error: …`` on stderr (exit 2 for
     bad input, 1 for anything else); ``--debug`` (or ``RAILVAL_DEBUG=1``) adds the
-    traceback. Output piped into a reader that stops early (``| head``) ends quietly."""
+    traceback. Output piped into a reader that stops early (``| head``) ends quietly.
+
+    Called as the program (``argv`` not given: the ``railval`` command, ``python -m
+    railval.app``), the cyclic garbage collector pauses while the verb's modules are imported
+    and its permission checked, and what is alive then is frozen (``gc.freeze``: modules and
+    classes, kept for the whole process) before the verb runs with the collector back on: the
+    full collections the imports' many allocations set off cost ≈ 10 % of the start-up
+    (docs/app.md, "Start-up by need"), and the verb's own later collections no longer walk the
+    modules. Called with ``argv`` (tests, the benchmarks' own processes) nothing changes."""
+    program = argv is None
+    if program:
+        gc.disable()
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(chosen_verb(argv))
     args = parser.parse_args(argv)
@@ -254,6 +266,9 @@ def main(argv: list[str] | None = None) -> int:
     code = 1
     try:
         authorize(args)
+        if program:
+            gc.freeze()
+            gc.enable()
         code = int(args.func(args) or 0)
         sys.stdout.flush()
         return code
