@@ -16,6 +16,7 @@ import html
 import socket
 import time
 import urllib.request
+import weakref
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
@@ -25,7 +26,7 @@ import panel as pn
 import param
 from bokeh.settings import settings as bokeh_settings
 from panel.reactive import ReactiveHTML
-from tornado.ioloop import IOLoop
+from tornado.ioloop import IOLoop, PeriodicCallback
 
 from railval.app import security
 from railval.app.auth import SESSION_MAX_AGE_S, RailvalAuth, check_startup, cookie_secret
@@ -258,8 +259,44 @@ def jobs_box(app: AppState) -> pn.pane.HTML:
     app.param.watch(refresh, ["status", "busy"])
     doc = pn.state.curdoc
     if doc is not None and doc.session_context is not None:
-        pn.state.add_periodic_callback(refresh, period=2000)
+        _watch_jobs(doc, pane, app.principal.username)
     return pane
+
+
+#: the served sessions' job lists per server IOLoop (its id → document → the pane and the
+#: user), refreshed by one ticker per IOLoop (:func:`_tick_jobs`) instead of a Panel periodic
+#: callback per session: Panel books every periodic callback as a busy event on its
+#: process-wide state (``panel/io/state.py``, ``_add_busy_event``/``_remove_busy_event``, param
+#: updates each time), ≈ 10 % of a serving process's busy samples while sessions opened and
+#: closed (docs/app.md, "Sessions that close"), though the list itself rarely changes
+_JOB_PANES: dict[int, weakref.WeakKeyDictionary[Any, tuple[pn.pane.HTML, str]]] = {}
+_JOB_TICKERS: dict[int, PeriodicCallback] = {}
+JOBS_REFRESH_MS = 2000
+
+
+def _watch_jobs(doc: Any, pane: pn.pane.HTML, user: str) -> None:
+    """Refresh ``pane`` with ``user``'s job list every :data:`JOBS_REFRESH_MS` while ``doc``'s
+    session lives (the ticker of this server's IOLoop, started with its first session)."""
+    key = id(IOLoop.current())
+    panes = _JOB_PANES.setdefault(key, weakref.WeakKeyDictionary())
+    panes[doc] = (pane, user)
+    doc.on_session_destroyed(lambda _ctx: panes.pop(doc, None))
+    if key not in _JOB_TICKERS:
+        _JOB_TICKERS[key] = ticker = PeriodicCallback(functools.partial(_tick_jobs, panes), JOBS_REFRESH_MS)
+        ticker.start()
+
+
+def _tick_jobs(panes: weakref.WeakKeyDictionary[Any, tuple[pn.pane.HTML, str]]) -> None:
+    """One round of one server's job lists: a pane whose text changed is set in its own
+    document's next tick (under that document's lock); the others cost one lookup each."""
+    for doc, (pane, user) in list(panes.items()):
+        text = jobs_html(jobs_of(user))
+        if text != pane.object:
+            doc.add_next_tick_callback(functools.partial(_set_jobs, pane, text))
+
+
+def _set_jobs(pane: pn.pane.HTML, text: str) -> None:
+    pane.object = text
 
 
 def _session_args() -> dict[str, str]:
