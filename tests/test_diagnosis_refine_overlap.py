@@ -97,3 +97,21 @@ def test_parameter_runs_go_first_and_the_refinement_last(campaign, monkeypatch):
     assert all(len(c) == 1 for c in changed[:n_par])  # one perturbed template parameter each
     assert not any(changed[n_par:])  # then the effects' runs, at the model's values
     assert 1 <= len(refinement) <= KW["refine"]
+
+
+def test_the_workers_records_are_pandas_records():
+    """The validation table of a campaign run leaves a worker as records
+    (``diagnosis_ranking._records``): the same keys, values and Python types as pandas'
+    ``to_dict("records")``, NaN included."""
+    import numpy as np
+    import pandas as pd
+
+    frame = pd.DataFrame({"section": ["S01", "S02", "S03"], "zone": [1, 2, 4], "quantity": ["Y", "Q", "ay"],
+                          "position": ["w1L", "w2R", "cb1"], "D_norm": [0.25, np.nan, -1.5e-7],
+                          "M": [1.0, 2.0, np.inf], "S": [3.0, np.nan, 0.0], "extra": [9, 9, 9]})
+    cols = ("section", "zone", "quantity", "position", "D_norm", "M", "S")
+    ours = ranking._records(frame, cols)
+    theirs = frame[list(cols)].to_dict("records")
+    assert [list(r) for r in ours] == [list(r) for r in theirs]
+    assert repr(ours) == repr(theirs)
+    assert [[type(v) for v in r.values()] for r in ours] == [[type(v) for v in r.values()] for r in theirs]
