@@ -412,55 +412,37 @@ def test_review_plot_metrics_leave_pandas_unloaded():
     assert proc.stdout.split() == ["False", "pandas", "True"]
 
 
-#: records the collector's state while the permission is checked and when the verb runs
-_GC_PROBE = """
-import gc, json, sys
-import railval.app.cli as cli
-seen = {}
-_authorize = cli.authorize
-def authorize(args):
-    seen["enabled_in_authorize"] = gc.isenabled()
-    return _authorize(args)
-cli.authorize = authorize
-_build = cli.build_parser
-def build(verb=None):
-    parser = _build(verb)
-    parse = parser.parse_args
-    def parse_args(argv=None):
-        args = parse(argv)
-        func = args.func
-        def timed(a):
-            seen["enabled_in_verb"] = gc.isenabled()
-            seen["frozen_in_verb"] = gc.get_freeze_count()
-            return func(a)
-        args.func = timed
-        return args
-    parser.parse_args = parse_args
-    return parser
-cli.build_parser = build
-as_program = sys.argv[1] == "program"
-sys.argv = ["railval", *sys.argv[2:]]
-code = cli.main() if as_program else cli.main(sys.argv[1:])
-sys.stderr.write("\\nGC " + json.dumps(seen) + "\\n")
-"""
+def test_the_program_pauses_the_collector_until_the_verb_runs(tmp_path):
+    """As the ``railval`` program (the benchmark's probe runs it so) the collector is off while
+    the verb's modules load and its permission is checked, then the start-up's objects are
+    frozen and the collector is back on for the verb's own work."""
+    from railval.app.bench.bench_startup import _PROBE
 
-
-@pytest.mark.parametrize("mode", ["program", "called"])
-def test_the_program_pauses_the_collector_until_the_verb_runs(tmp_path, mode):
-    """As the ``railval`` program the collector is off while the verb's modules load and its
-    permission is checked, then the start-up's objects are frozen and the collector is back on
-    for the verb's own work; ``main(argv)`` called from Python (tests, benchmarks) leaves the
-    collector alone."""
     url = f"sqlite:///{tmp_path / 'gc.db'}"
-    out = subprocess.run([sys.executable, "-c", _GC_PROBE, mode, "--db", url, "user", "list"],
+    out = subprocess.run([sys.executable, "-c", _PROBE, "--db", url, "user", "list"],
                          capture_output=True, text=True, timeout=300, check=False)
-    line = next((x for x in out.stderr.splitlines() if x.startswith("GC ")), None)
+    line = next((x for x in out.stderr.splitlines() if x.startswith("STARTUP ")), None)
     assert line is not None, out.stderr[-2000:]
-    seen = json.loads(line[3:])
-    assert seen["enabled_in_verb"] is True
-    if mode == "program":
-        assert seen["enabled_in_authorize"] is False
-        assert seen["frozen_in_verb"] > 10_000  # SQLAlchemy's and railval's modules
-    else:
-        assert seen["enabled_in_authorize"] is True
-        assert seen["frozen_in_verb"] == 0
+    seen = json.loads(line[len("STARTUP "):])["collector"]
+    assert seen["on_at_dispatch"] is False
+    assert seen["on_at_verb"] is True
+    assert seen["frozen_at_verb"] > 10_000  # SQLAlchemy's and railval's modules
+
+
+def test_main_called_from_python_leaves_the_collector_alone(tmp_path, monkeypatch):
+    """``main(argv)`` from Python (tests, the benchmarks' own processes): no pause, no freeze."""
+    import gc
+
+    import railval.app.cli as cli
+
+    seen = {}
+    real = cli.authorize
+
+    def spy(args):
+        seen["on"] = gc.isenabled()
+        return real(args)
+    monkeypatch.setattr(cli, "authorize", spy)
+    frozen = gc.get_freeze_count()
+    assert main(["--db", f"sqlite:///{tmp_path / 'gc.db'}", "user", "list"]) == 0
+    assert seen == {"on": True}
+    assert gc.isenabled() and gc.get_freeze_count() == frozen

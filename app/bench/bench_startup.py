@@ -74,9 +74,10 @@ BASELINES: dict[str, str] = {
 
 #: runs ``railval ARGS`` as the entry point does, marking when the verb's function is called
 _PROBE = """
-import json, sys, time
+import gc, json, sys, time
 import railval.app.cli as cli
 marks = {}
+collector = {}
 _build = cli.build_parser
 def build(verb=None):
     parser = _build(verb)
@@ -86,6 +87,7 @@ def build(verb=None):
         func = args.func
         def timed(a):
             marks["verb"] = time.time()
+            collector.update(on_at_verb=gc.isenabled(), frozen_at_verb=gc.get_freeze_count())
             return func(a)
         args.func = timed
         return args
@@ -95,6 +97,7 @@ cli.build_parser = build
 _authorize = cli.authorize
 def authorize(args):
     marks["dispatch"] = time.time()
+    collector["on_at_dispatch"] = gc.isenabled()
     return _authorize(args)
 cli.authorize = authorize
 try:
@@ -104,7 +107,7 @@ except SystemExit as exc:
 sys.stdout.flush()
 heavy = [m for m in %r if m in sys.modules]
 sys.stderr.write("\\nSTARTUP " + json.dumps({"code": code, "marks": marks, "heavy": heavy,
-                                            "modules": len(sys.modules)}) + "\\n")
+                                            "modules": len(sys.modules), "collector": collector}) + "\\n")
 """ % (HEAVY,)
 
 
@@ -161,6 +164,11 @@ def _summary(times: list[tuple[float, float]], reports: list[dict]) -> dict:
         out["exit"] = reports[-1]["code"]
         out["heavy"] = ", ".join(reports[-1]["heavy"]) or "none"
         out["modules"] = reports[-1].get("modules")
+        col = reports[-1].get("collector") or {}
+        # off while the verb's modules loaded, on with the start-up frozen when it ran
+        out["collector_paused"] = ("n/a (help printed)" if "on_at_verb" not in col else
+                                   col.get("on_at_dispatch") is False and col["on_at_verb"]
+                                   and col.get("frozen_at_verb", 0) > 0)
     return out
 
 
