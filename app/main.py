@@ -9,14 +9,11 @@ Pages are one module each under ``app/pages``; their state lives in ``app/state/
 
 from __future__ import annotations
 
-import ctypes
 import functools
-import gc
 import html
 import socket
 import time
 import urllib.request
-import weakref
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
@@ -26,7 +23,6 @@ import panel as pn
 import param
 from bokeh.settings import settings as bokeh_settings
 from panel.reactive import ReactiveHTML
-from tornado.ioloop import IOLoop, PeriodicCallback
 
 from railval.app import security
 from railval.app.auth import SESSION_MAX_AGE_S, RailvalAuth, check_startup, cookie_secret
@@ -44,6 +40,7 @@ from railval.app.pages.signoff import SignoffPage
 from railval.app.services.web_import import MAX_UPLOAD_MB
 from railval.app.state import PAGE_TITLES, AppState, Backend
 from railval.app.state.jobs import jobs_of
+from railval.app.upkeep import freeze_startup_objects, release_memory, watch_jobs
 from railval.app.workshop_web import routes
 from railval.core.errors import InvalidParameter
 from railval.core.roles import PAGE_ACTIONS, Principal
@@ -259,44 +256,8 @@ def jobs_box(app: AppState) -> pn.pane.HTML:
     app.param.watch(refresh, ["status", "busy"])
     doc = pn.state.curdoc
     if doc is not None and doc.session_context is not None:
-        _watch_jobs(doc, pane, app.principal.username)
+        watch_jobs(doc, pane, app.principal.username)
     return pane
-
-
-#: the served sessions' job lists per server IOLoop (its id → document → the pane and the
-#: user), refreshed by one ticker per IOLoop (:func:`_tick_jobs`) instead of a Panel periodic
-#: callback per session: Panel books every periodic callback as a busy event on its
-#: process-wide state (``panel/io/state.py``, ``_add_busy_event``/``_remove_busy_event``, param
-#: updates each time), ≈ 10 % of a serving process's busy samples while sessions opened and
-#: closed (docs/app.md, "Sessions that close"), though the list itself rarely changes
-_JOB_PANES: dict[int, weakref.WeakKeyDictionary[Any, tuple[pn.pane.HTML, str]]] = {}
-_JOB_TICKERS: dict[int, PeriodicCallback] = {}
-JOBS_REFRESH_MS = 2000
-
-
-def _watch_jobs(doc: Any, pane: pn.pane.HTML, user: str) -> None:
-    """Refresh ``pane`` with ``user``'s job list every :data:`JOBS_REFRESH_MS` while ``doc``'s
-    session lives (the ticker of this server's IOLoop, started with its first session)."""
-    key = id(IOLoop.current())
-    panes = _JOB_PANES.setdefault(key, weakref.WeakKeyDictionary())
-    panes[doc] = (pane, user)
-    doc.on_session_destroyed(lambda _ctx: panes.pop(doc, None))
-    if key not in _JOB_TICKERS:
-        _JOB_TICKERS[key] = ticker = PeriodicCallback(functools.partial(_tick_jobs, panes), JOBS_REFRESH_MS)
-        ticker.start()
-
-
-def _tick_jobs(panes: weakref.WeakKeyDictionary[Any, tuple[pn.pane.HTML, str]]) -> None:
-    """One round of one server's job lists: a pane whose text changed is set in its own
-    document's next tick (under that document's lock); the others cost one lookup each."""
-    for doc, (pane, user) in list(panes.items()):
-        text = jobs_html(jobs_of(user))
-        if text != pane.object:
-            doc.add_next_tick_callback(functools.partial(_set_jobs, pane, text))
-
-
-def _set_jobs(pane: pn.pane.HTML, text: str) -> None:
-    pane.object = text
 
 
 def _session_args() -> dict[str, str]:
@@ -437,64 +398,6 @@ def serve(database: Any, port: int = 5006, address: str = "127.0.0.1", show: boo
                     extra_patterns=extra, transforms=security.transforms(),
                     sign_sessions=True, secret_key=security.session_secret().encode(),
                     xsrf_cookies=True, xsrf_cookie_kwargs=security.XSRF_COOKIE, **kw)
-
-
-#: Environment of a served app process, set by the deployment files (deploy/systemd/railval@.service,
-#: deploy/compose.yaml) and the team topology (app/bench/topology.py). ``PYTHONMALLOC=malloc``
-#: (Python docs, "Command line and environment": PYTHONMALLOC) hands Python's small objects to
-#: glibc malloc instead of pymalloc: a Panel session on its first page is ≈ 14 000 small objects
-#: (≈ 1.5 MiB of param and Bokeh properties, 60–150 B each) spread over pymalloc's 1 MiB arenas (CPython Objects/obmalloc.c,
-#: ARENA_BITS 20), and an arena goes back to the system only when every object in it is
-#: free, which long-lived objects allocated in between prevent; glibc's ``malloc_trim`` returns
-#: every free page instead. Measured (docs/app.md, "Memory after sessions close"): 10 sessions
-#: closed returned 85 % of their memory instead of 7 %, for ≈ 9 MiB more at start.
-SERVE_ENV: dict[str, str] = {"PYTHONMALLOC": "malloc"}
-
-
-def freeze_startup_objects() -> None:
-    """Collect the start-up's garbage, then move every object alive now — the modules, classes
-    and registries of Panel, Bokeh, pandas, SciPy and railval, ≈ 340 000 objects the collector
-    tracks — to the collector's permanent generation (``gc.freeze``, Python docs, "gc — Garbage
-    Collector interface"): they live as long as the process anyway. A full collection then walks
-    only what sessions allocate: Panel runs one after sessions are destroyed
-    (``panel/io/document.py``, ``_garbage_collect``) and :func:`release_memory` one per wave of
-    closed sessions, each ≈ 0.13 s of the server's CPU over the whole heap (docs/app.md,
-    "Sessions that close"); the interpreter's own full collections become as cheap. Called once,
-    before the server accepts a session, so no session's objects are frozen."""
-    gc.collect()
-    gc.freeze()
-
-
-#: a trim is scheduled and has not run yet (sessions closing together share one trim)
-_trim_pending = False
-
-
-def _trim() -> None:
-    global _trim_pending
-    _trim_pending = False
-    gc.collect()
-    try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):  # not glibc: nothing to trim
-        pass
-
-
-def release_memory(session_context: Any) -> None:
-    """When a Bokeh session is destroyed: shortly afterwards (once its document is released)
-    collect reference cycles and hand the freed heap back to the operating system (glibc
-    ``malloc_trim(0)``, which since glibc 2.8 releases free pages anywhere in the heap, man 3
-    malloc_trim); without it a process's resident memory stays at its peak after sessions close
-    (holoviz/panel #8189). It returns the sessions' memory only when Python's objects live in
-    glibc's heap (:data:`SERVE_ENV`); under pymalloc the freed arenas stay with the process and
-    are reused by the next sessions (bokeh/bokeh #11477)."""
-    global _trim_pending
-    if _trim_pending:  # one trim after a wave of closed sessions, not one per session (8
-        return         # sessions closing together cost 7.8 s of the server's time, docs/app.md)
-    try:
-        IOLoop.current().call_later(2.0, _trim)
-        _trim_pending = True
-    except RuntimeError:  # no event loop (tests calling it directly)
-        _trim()
 
 
 def free_port() -> int:

@@ -1,5 +1,5 @@
 """A serving process moves its start-up objects to the collector's permanent generation before
-the first session (``railval.app.main.freeze_startup_objects``, docs/app.md "Sessions that
+the first session (``railval.app.upkeep.freeze_startup_objects``, docs/app.md "Sessions that
 close"): the full collections Panel and railval run after sessions close then walk only what
 sessions allocated. Checked in a fresh interpreter, so the test process itself is not frozen."""
 

@@ -7,7 +7,7 @@ sessions close").
   first session closed (what a process loads once) and three more — one of them on the
   Compare and Dashboard pages — opened and closed: the counts return to those after the first.
 * A ``railval serve`` process started with the deployment's environment
-  (:data:`railval.app.main.SERVE_ENV`) hands the memory of closed sessions back to the system:
+  (:data:`railval.app.upkeep.SERVE_ENV`) hands the memory of closed sessions back to the system:
   its resident set falls again once Bokeh has discarded them (under pymalloc it stayed within
   7 % of the peak, measured in docs/app.md).
 * The deployment files set that environment for the app processes.
@@ -153,7 +153,8 @@ def test_served_process_returns_the_memory_of_closed_sessions(tmp_path, browser)
     ``release_memory``) the process's resident set gives back at least half of what the 8
     sessions added (pymalloc: 7 % of it, docs/app.md)."""
     require_browser()
-    from railval.app.main import SERVE_ENV, free_port
+    from railval.app.main import free_port
+    from railval.app.upkeep import SERVE_ENV
     from tests.browser_support import demo_database
 
     db = demo_database(tmp_path)
@@ -205,7 +206,7 @@ def _unit_environment(path: Path) -> dict[str, str]:
 
 
 def test_the_deployment_runs_app_processes_with_the_serve_environment():
-    from railval.app.main import SERVE_ENV
+    from railval.app.upkeep import SERVE_ENV
 
     unit = _unit_environment(DEPLOY / "systemd" / "railval@.service")
     assert {k: unit.get(k) for k in SERVE_ENV} == SERVE_ENV

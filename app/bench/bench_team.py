@@ -23,8 +23,8 @@ Memory: resident set (RSS) of every app process before phase 1, with one session
 first loads modules, caches and the campaign's data once), with all sessions open, and after
 they closed; "per further Panel session" = (all open − one open) / (engineers − 1). Closed
 sessions are discarded by Bokeh after ``unused-session-lifetime`` (15 s) at its next check
-(every 17 s); the app then collects and trims the heap (``railval.app.main.release_memory``).
-The app processes run with the deployment's environment (``railval.app.main.SERVE_ENV``:
+(every 17 s); the app then collects and trims the heap (``railval.app.upkeep.release_memory``).
+The app processes run with the deployment's environment (``railval.app.upkeep.SERVE_ENV``:
 Python objects in glibc's heap, so the trim returns them); ``--pymalloc`` runs them with
 Python's own allocator instead, for comparison.
 """
@@ -84,7 +84,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run the app processes with Panel's admin page (it keeps every session's record)")
     parser.add_argument("--pymalloc", action="store_true",
                         help="app processes with Python's own allocator instead of the "
-                        "deployment's PYTHONMALLOC=malloc (railval.app.main.SERVE_ENV), to compare")
+                        "deployment's PYTHONMALLOC=malloc (railval.app.upkeep.SERVE_ENV), to compare")
     parser.add_argument("--pg", default="postgresql://postgres@127.0.0.1:5432/test",
                         help="PostgreSQL database in which a fresh schema is used")
     parser.add_argument("--nginx-template", default=None, metavar="FILE",

@@ -33,7 +33,7 @@ from railval.core import lazy
 
 #: deferred (railval.core.lazy): the app module (Panel, Bokeh) runs in the served processes,
 #: not in the one that starts them
-app_main = lazy.module("railval.app.main")
+upkeep = lazy.module("railval.app.upkeep")
 nginx_static = lazy.module("railval.app.nginx_static")
 
 REPO = Path(__file__).resolve().parents[2]
@@ -93,7 +93,7 @@ class Topology:
     workdir: Path
     n_apps: int = 2
     extra_args: list[str] = field(default_factory=list)
-    #: environment of the app processes on top of the deployment's (railval.app.main.SERVE_ENV)
+    #: environment of the app processes on top of the deployment's (railval.app.upkeep.SERVE_ENV)
     app_env: dict[str, str] | None = None
     #: Panel's admin page on the app processes (it keeps a record of every session it saw)
     admin: bool = True
@@ -113,7 +113,7 @@ class Topology:
     def _env(self) -> dict[str, str]:
         env = {k: v for k, v in os.environ.items()
                if not k.startswith(("RAILVAL_", "BOKEH_SECRET", "PYTHONMALLOC"))}
-        env.update(app_main.SERVE_ENV if self.app_env is None else self.app_env)
+        env.update(upkeep.SERVE_ENV if self.app_env is None else self.app_env)
         env.update(RAILVAL_DB=self.db_url, PYTHONUNBUFFERED="1")
         for name in ("RAILVAL_SECRET_KEY", "RAILVAL_COOKIE_SECRET", "BOKEH_SECRET_KEY"):
             env[f"{name}_FILE"] = str(self.workdir / "secrets" / name.lower())
