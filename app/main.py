@@ -40,7 +40,7 @@ from railval.app.pages.signoff import SignoffPage
 from railval.app.services.web_import import MAX_UPLOAD_MB
 from railval.app.state import PAGE_TITLES, AppState, Backend
 from railval.app.state.jobs import jobs_of
-from railval.app.upkeep import freeze_startup_objects, release_memory, watch_jobs
+from railval.app.upkeep import freeze_startup_objects, release_memory
 from railval.app.workshop_web import routes
 from railval.core.errors import InvalidParameter
 from railval.core.roles import PAGE_ACTIONS, Principal
@@ -256,7 +256,7 @@ def jobs_box(app: AppState) -> pn.pane.HTML:
     app.param.watch(refresh, ["status", "busy"])
     doc = pn.state.curdoc
     if doc is not None and doc.session_context is not None:
-        watch_jobs(doc, pane, app.principal.username)
+        pn.state.add_periodic_callback(refresh, period=2000)
     return pane
 
 

@@ -1,22 +1,15 @@
 """What keeps a serving process lean while sessions come and go (docs/app.md, "Memory after
 sessions close", "Sessions that close"): the deployment's allocator (:data:`SERVE_ENV`), the
 start-up's objects frozen before the first session (:func:`freeze_startup_objects`), the heap
-collected and trimmed after a wave of closed sessions (:func:`release_memory`), and one
-job-list ticker per server instead of a periodic callback per session (:func:`watch_jobs`)."""
+collected and trimmed after a wave of closed sessions (:func:`release_memory`)."""
 
 from __future__ import annotations
 
 import ctypes
-import functools
 import gc
-import weakref
 from typing import Any
 
-import panel as pn
-from tornado.ioloop import IOLoop, PeriodicCallback
-
-from railval.app.navigation import jobs_html
-from railval.app.state.jobs import jobs_of
+from tornado.ioloop import IOLoop
 
 #: Environment of a served app process, set by the deployment files (deploy/systemd/railval@.service,
 #: deploy/compose.yaml) and the team topology (app/bench/topology.py). ``PYTHONMALLOC=malloc``
@@ -74,39 +67,3 @@ def release_memory(session_context: Any) -> None:
         _trim_pending = True
     except RuntimeError:  # no event loop (tests calling it directly)
         _trim()
-
-
-#: the served sessions' job lists per server IOLoop (its id → document → the pane and the
-#: user), refreshed by one ticker per IOLoop (:func:`_tick_jobs`) instead of a Panel periodic
-#: callback per session: Panel books every periodic callback as a busy event on its
-#: process-wide state (``panel/io/state.py``, ``_add_busy_event``/``_remove_busy_event``, param
-#: updates each time), ≈ 10 % of a serving process's busy samples while sessions opened and
-#: closed (docs/app.md, "Sessions that close"), though the list itself rarely changes
-_JOB_PANES: dict[int, weakref.WeakKeyDictionary[Any, tuple[pn.pane.HTML, str]]] = {}
-_JOB_TICKERS: dict[int, PeriodicCallback] = {}
-JOBS_REFRESH_MS = 2000
-
-
-def watch_jobs(doc: Any, pane: pn.pane.HTML, user: str) -> None:
-    """Refresh ``pane`` with ``user``'s job list every :data:`JOBS_REFRESH_MS` while ``doc``'s
-    session lives (the ticker of this server's IOLoop, started with its first session)."""
-    key = id(IOLoop.current())
-    panes = _JOB_PANES.setdefault(key, weakref.WeakKeyDictionary())
-    panes[doc] = (pane, user)
-    doc.on_session_destroyed(lambda _ctx: panes.pop(doc, None))
-    if key not in _JOB_TICKERS:
-        _JOB_TICKERS[key] = ticker = PeriodicCallback(functools.partial(_tick_jobs, panes), JOBS_REFRESH_MS)
-        ticker.start()
-
-
-def _tick_jobs(panes: weakref.WeakKeyDictionary[Any, tuple[pn.pane.HTML, str]]) -> None:
-    """One round of one server's job lists: a pane whose text changed is set in its own
-    document's next tick (under that document's lock); the others cost one lookup each."""
-    for doc, (pane, user) in list(panes.items()):
-        text = jobs_html(jobs_of(user))
-        if text != pane.object:
-            doc.add_next_tick_callback(functools.partial(_set_jobs, pane, text))
-
-
-def _set_jobs(pane: pn.pane.HTML, text: str) -> None:
-    pane.object = text
