@@ -16,6 +16,9 @@ the median are reported. Per command:
   plotting libraries, Alembic, statsmodels, SQLAlchemy's ORM models) the command imported;
 * ``modules``: how many modules the process had loaded at its exit (the probe's own included:
   compare counts of one version against another, not against other probes).
+* ``collector_paused``: whether the cyclic garbage collector was off during the permission
+  check and back on, with the start-up's objects frozen, when the verb ran (the program's
+  start-up, :func:`railval.app.cli.main`).
 
 Baselines timed in the same rounds: ``python -c pass`` (the interpreter with this
 environment's site packages), ``import sqlalchemy.orm and railval.db.models`` (the floor of a
