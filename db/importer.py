@@ -255,6 +255,7 @@ def _check_manifest(manifest: dict[str, Any], folder: Path) -> None:
         if unit not in UNITS_BY_KIND[kind]:
             raise bad(f"channels[{i}].unit", f"unknown unit {unit!r} for kind {kind!r}; known: "
                       f"{sorted(UNITS_BY_KIND[kind])}")
+    _check_vehicle(manifest["vehicle"], bad)
     boundary = float(manifest.get("zone1_min_radius_m", 5000.0))
     ids: set[str] = set()
     for i, s in enumerate(manifest["sections"]):
@@ -294,6 +295,27 @@ def _check_manifest(manifest: dict[str, Any], folder: Path) -> None:
                 raise bad(f"configurations[{i}].files.{sid}",
                           f"unknown section {sid!r}; sections: {sorted(ids)}")
             _data_path(folder, rel, f"configurations[{i}].files.{sid}")
+
+
+def _check_vehicle(vehicle: dict[str, Any], bad: Callable[[str, str], CampaignFormatError]) -> None:
+    """A vehicle naming a built-in simulator template (``coach``, ``wagon``) carries only that
+    template's parameters, each inside its bounds; refused here rather than by the first
+    simulation or diagnosis. Another template name is free text for an external model."""
+    from railval.core.sim.vehicles import TEMPLATES, VehicleModel, unknown_parameters
+
+    template, params = vehicle.get("template"), vehicle.get("parameters") or {}
+    if template not in TEMPLATES:
+        return
+    unknown = unknown_parameters(template, params)
+    if unknown:
+        known = sorted(p.name for p in TEMPLATES[template])
+        raise bad(f"vehicle.parameters.{unknown[0]}",
+                  f"{', '.join(map(repr, unknown))} {'is not a parameter' if len(unknown) == 1 else 'are not parameters'} "
+                  f"of vehicle template {template!r} (docs/simulator.md); known: {known}")
+    try:
+        VehicleModel(template, dict(params))
+    except InvalidParameter as exc:
+        raise bad("vehicle.parameters", str(exc)) from None
 
 
 LAYOUT_KEYS = ("straight_in_m", "transition_in_m", "curve_m", "transition_out_m",

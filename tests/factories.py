@@ -209,7 +209,7 @@ def write_demo_campaign(
             "name": "Demo coach", "kind": "passenger", "secondary_suspension": True,
             "Q0_kN": Q0_KN, "template": "coach",
             "parameters": {"m_carbody": 32000.0, "m_bogie": 2615.0, "m_wheelset": 1813.0,
-                           "bogie_centres_m": 19.0, "wheelbase_m": 2.56},
+                           "bogie_centres": 19.0, "wheelbase": 2.56},
         },
         "channels": [
             {"name": ch, "kind": ch.rpartition("_")[0], "position": ch.rpartition("_")[2],
@@ -218,8 +218,12 @@ def write_demo_campaign(
         ],
         "sections": sections,
         "configurations": [
-            {"name": cname, "parent": parent, "effects": {}, "parameters": dict(model),
-             "description": "nominal model" if parent is None else f"refined from {parent}",
+            {"name": cname, "parent": parent, "effects": {},
+             # a template parameter of the built-in simulator, so the demo can be diagnosed;
+             # the synthetic signals' own error factors are named in the description
+             "parameters": {"c_yaw_damper": round(250e3 * model["fdyn"], 1)},
+             "description": ("nominal model" if parent is None else f"refined from {parent}")
+             + " (synthetic error factors " + ", ".join(f"{k} {v:g}" for k, v in model.items()) + ")",
              "files": files_by_config[cname]}
             for cname, parent, model in configs
         ],

@@ -186,7 +186,7 @@ def test_configurations_and_lineage(demo):
     with demo.session() as s:
         assert [c.name for c in repo.list_configurations(s, "demo")] == ["baseline", "variant1"]
         assert [c.name for c in repo.lineage(s, "demo", "variant1")] == ["baseline", "variant1"]
-        assert repo.get_configuration(s, "demo", "variant1").parameters["qs"] == pytest.approx(1.035)
+        assert repo.get_configuration(s, "demo", "variant1").parameters["c_yaw_damper"] == pytest.approx(237500.0)
         with pytest.raises(NotFound, match="available: baseline, variant1"):
             repo.get_configuration(s, "demo", "x")
 

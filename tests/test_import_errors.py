@@ -236,6 +236,14 @@ MANIFEST_CASES = [
      "sections[0].radius_m", "below 250 m"),
     ("channel_name_vs_position", _set(["channels", 0, "position"], "w2L"), "campaign.json",
      "channels[0].name", "must be kind_position"),
+    # a vehicle naming a built-in template carries that template's parameters only ...
+    ("vehicle_parameter_unknown_to_template",
+     _set(["vehicle", "parameters", "bogie_centres_m"], 19.0), "campaign.json",
+     "vehicle.parameters.bogie_centres_m",
+     "'bogie_centres_m' is not a parameter of vehicle template 'coach'"),
+    # ... inside its bounds
+    ("vehicle_parameter_out_of_bounds", _set(["vehicle", "parameters", "m_carbody"], -5.0),
+     "campaign.json", "vehicle.parameters", "'m_carbody' = -5.0 kg is outside its bounds"),
 ]
 
 
@@ -246,6 +254,19 @@ def test_manifest_errors(good_db, folder, edit, file, field, match):
     edit(m)
     _save(folder, m)
     _expect(good_db, folder, file, field, match)
+
+
+def test_vehicle_of_an_external_template_keeps_its_own_parameters(sqlite_database, folder):
+    """Another template name is an external model's: its parameters are kept as given."""
+    m = _manifest(folder)
+    m["vehicle"]["template"] = "mbs-coach-v3"
+    m["vehicle"]["parameters"] = {"bogie_pivot_distance_m": 19.0}
+    m["name"] = "external"
+    _save(folder, m)
+    import_campaign(sqlite_database, folder)
+    with sqlite_database.session() as s:
+        vehicle = repo.get_campaign(s, "external").vehicle
+        assert (vehicle.template, vehicle.parameters) == ("mbs-coach-v3", {"bogie_pivot_distance_m": 19.0})
 
 
 def test_failure_while_writing_rolls_back_everything(good_db, folder):

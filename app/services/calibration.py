@@ -138,7 +138,7 @@ def calibrate(database: Any, campaign: str, config: str, effects: list[str], new
         camp, conf = repo.resolve(s, campaign, config)
         repo.check_new_configuration(s, camp, new_name, replace=replace)  # before fitting
         ctx = load_context(s, camp)
-        conf_effects, conf_params, _ = configuration_of(s, camp, conf)
+        conf_effects, conf_params, _ = configuration_of(s, camp, conf, simulated_in=ctx)
         # the parent's own evidence, to judge what the calibration adds on sections it has not seen
         parent_vals = section_values(repo.load_signalsets(s, camp, conf), ctx.sections)
         support = diagnosis_flags(s, camp, conf, list(effects))

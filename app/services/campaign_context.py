@@ -26,10 +26,11 @@ from railval.core.diagnosis import (
     pattern_from_pairs,
 )
 from railval.core.en14363 import evaluate_present
-from railval.core.errors import NotFound
+from railval.core.errors import InvalidParameter, NotFound
 from railval.core.filters import run_out_s
 from railval.core.sim import simulate_campaign
 from railval.core.sim.effects import EFFECTS, Effect, unmet_requirement
+from railval.core.sim.vehicles import template_for, unknown_parameters
 from railval.core.supplementary import supplementary_pattern
 from railval.core.types import SectionInfo, SignalSet
 from railval.core.validation import ValidationResult, validate
@@ -181,11 +182,32 @@ def evaluate_effects(task: tuple[CampaignContext, dict, dict]) -> tuple[dict, di
     return section_values(sets, ctx.sections), band_sums(sets, ctx.bands)
 
 
-def configuration_of(session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg) -> tuple[dict, dict, Any]:
+def configuration_of(session: Any, campaign: repo.CampaignArg, config: repo.ConfigArg,
+                     simulated_in: CampaignContext | None = None) -> tuple[dict, dict, Any]:
     """(effects, model parameters, row) of stored configuration ``config`` (a
-    :class:`railval.db.repo.ConfigRef` or its name)."""
+    :class:`railval.db.repo.ConfigRef` or its name). ``simulated_in``: the context the
+    configuration will be simulated in; its model parameters are then checked against the
+    vehicle's template first (:func:`check_model_parameters`)."""
     conf = repo.get_configuration(session, campaign, config)
+    if simulated_in is not None:
+        check_model_parameters(simulated_in, conf.name, dict(conf.parameters or {}))
     return dict(conf.effects or {}), dict(conf.parameters or {}), conf
+
+
+def check_model_parameters(ctx: CampaignContext, config: str, conf_params: Mapping[str, Any]) -> None:
+    """Refuse, before any simulation, a vehicle or configuration ``config`` whose model
+    parameters the built-in simulator's template does not know (e.g. an external model's own
+    names), naming which record holds which names: the diagnosis and calibration simulate
+    with that template (docs/simulator.md)."""
+    template = template_for(ctx.vehicle)
+    for owner, names in (("the campaign's vehicle", ctx.vehicle.get("parameters") or {}),
+                         (f"configuration {config!r}", conf_params)):
+        unknown = unknown_parameters(template, names)
+        if unknown:
+            raise InvalidParameter(
+                f"{owner} has parameters the built-in simulator's vehicle template {template!r} "
+                f"does not know: {', '.join(map(repr, unknown))}; the diagnosis and calibration "
+                "simulate with that template (docs/simulator.md lists its parameters)")
 
 
 def runnable_effects(ctx: CampaignContext, effects: Mapping[str, Any], config: str) -> tuple[dict, list[dict]]:

@@ -279,7 +279,7 @@ def _load(database_or_session: Any, campaign: Any, config: Any, effects: Sequenc
         campaign, ref = repo.resolve(s, campaign, config)
         config = ref.name
         ctx, measured = load_context_and_measurement(s, campaign)
-        conf_effects, conf_params, _ = configuration_of(s, campaign, ref)
+        conf_effects, conf_params, _ = configuration_of(s, campaign, ref, simulated_in=ctx)
         config_sets = repo.load_signalsets(s, campaign, ref)
     meas_bands = measured_section_bands(ctx, measured)
     named = bool(measurement) and (measurement is not True or bool(DISCRETE_DEFAULTS))

@@ -289,7 +289,7 @@ class VehicleModel:
             tmpl, params = obj, {}
         else:
             get = obj.get if hasattr(obj, "get") else (lambda k, d=None: getattr(obj, k, d))
-            tmpl = get("template") or ("wagon" if get("kind") == "freight" else "coach")
+            tmpl = template_for(obj)
             params = dict(get("parameters") or {})
         params.update({k.removeprefix("model."): v for k, v in (overrides or {}).items()})
         return cls(str(tmpl), params)
@@ -351,3 +351,17 @@ def template_parameters(template: str) -> tuple[Param, ...]:
     if template not in TEMPLATES:
         raise InvalidParameter(f"vehicle template {template!r} is unknown; known: {sorted(TEMPLATES)}")
     return TEMPLATES[template]
+
+
+def unknown_parameters(template: str, names) -> list[str]:
+    """The names among ``names`` that are not parameters of vehicle template ``template``
+    (the contact-geometry table counts as one; docs/simulator.md "Contact geometry as data")."""
+    known = {p.name for p in template_parameters(template)} | {CONTACT_PARAMETER}
+    return sorted(str(n) for n in names if str(n).removeprefix("model.") not in known)
+
+
+def template_for(vehicle) -> str:
+    """The template the built-in simulator uses for a vehicle record: its ``template``, else
+    ``wagon`` for freight and ``coach`` otherwise (as :meth:`VehicleModel.from_any`)."""
+    get = vehicle.get if hasattr(vehicle, "get") else (lambda k, d=None: getattr(vehicle, k, d))
+    return str(get("template") or ("wagon" if get("kind") == "freight" else "coach"))
