@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from railval.app.services.batch import BatchExecutor
-from railval.core.diagnosis import DEFAULT_BANDS_HZ, band_powers, section_band_powers
+from railval.core.diagnosis import DEFAULT_BANDS_HZ, band_powers, section_band_powers, sections_band_powers
 from railval.core.errors import InvalidSignal
 
 #: unpickles of :class:`Shared` in this process (a worker counts its own)
@@ -49,6 +49,65 @@ def test_section_band_powers_equal_band_powers_of_each_channel():
     # independently: a sine of amplitude A carries A²/2 in the band holding its frequency
     pure = section_band_powers({"s": np.sin(2 * np.pi * 7.0 * t)}, fs, [(5.0, 10.0)], 10.0)["s"][0]
     assert pure == pytest.approx(0.5, rel=0.02)
+
+
+def _sections(seed: int) -> tuple[dict, dict]:
+    """Sections of unequal lengths (odd and even, some shorter than a segment) and rates."""
+    rng = np.random.default_rng(seed)
+    sections, rates = {}, {}
+    for k, (seconds, fs) in enumerate([(23.7, 200.0), (31.0, 200.0), (6.3, 200.0), (18.45, 100.0), (40.0, 200.0)]):
+        n = int(seconds * fs) + k % 2
+        t = np.arange(n) / fs
+        sections[f"S{k:02d}"] = {ch: np.sin(2 * np.pi * (0.7 + j) * t) + rng.standard_normal(n) * (0.2 + 0.1 * j)
+                                 for j, ch in enumerate(("ay_cb_b1", "ay_cb_b2", "az_cb_b1", "az_cb_b2")[: 4 - k % 2])}
+        rates[f"S{k:02d}"] = fs
+    return sections, rates
+
+
+def test_sections_band_powers_are_each_sections_own_bit_for_bit():
+    """One Welch call over all sections gives every section's :func:`section_band_powers`,
+    same float bits. The blocking matters: estimated one channel at a time, 14 of these 18
+    channels differ in their last bits (a row's BLAS product depends on its block's row count)."""
+    sections, rates = _sections(5)
+    sections["empty"], rates["empty"] = {}, 200.0
+    got = sections_band_powers(sections, rates, DEFAULT_BANDS_HZ, 10.0)
+    assert list(got) == list(sections)
+    assert got["empty"] == {}
+    for sid, chans in sections.items():
+        if not chans:
+            continue
+        alone = section_band_powers(chans, rates[sid], DEFAULT_BANDS_HZ, 10.0)
+        assert list(got[sid]) == list(alone)
+        for ch in chans:
+            assert np.array_equal(got[sid][ch], alone[ch]), (sid, ch)
+
+
+def test_band_sums_equal_each_channels_own_band_powers_summed():
+    """The calibration's band sums: every channel estimated alone (:func:`band_powers`), summed
+    over the sections in their order — the same float bits as that loop."""
+    from railval.app.services.campaign_context import band_sums
+    from railval.core.types import SignalSet
+
+    sections, rates = _sections(9)
+    sets = {sid: SignalSet(fs=rates[sid], time_s=np.arange(len(next(iter(ch.values())))) / rates[sid],
+                           distance_m=np.arange(len(next(iter(ch.values())))) * 1.0, channels=ch)
+            for sid, ch in sections.items()}
+    expected: dict = {}
+    for ss in sets.values():
+        for ch in ("ay_cb_b1", "ay_cb_b2", "az_cb_b1", "az_cb_b2"):
+            if ch in ss.channels:
+                expected[ch] = expected.get(ch, 0.0) + band_powers(ss.channels[ch], ss.fs, DEFAULT_BANDS_HZ, 10.0)
+    got = band_sums(sets, DEFAULT_BANDS_HZ)
+    assert list(got) == list(expected)
+    for ch in expected:
+        assert np.array_equal(got[ch], expected[ch]), ch
+
+
+def test_sections_band_powers_names_the_bad_section_channel():
+    good = np.zeros(4000)
+    with pytest.raises(InvalidSignal, match="'az_cb_b1'"):
+        sections_band_powers({"S1": {"ay_cb_b1": good}, "S2": {"az_cb_b1": np.r_[good[:-1], np.inf]}},
+                             {"S1": 200.0, "S2": 200.0})
 
 
 def test_section_band_powers_names_the_bad_channel():

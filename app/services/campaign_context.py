@@ -21,9 +21,9 @@ from railval.app.services.simulation import simulation_inputs
 from railval.core.diagnosis import (
     DEFAULT_BANDS_HZ,
     Pattern,
-    band_powers,
     band_ratio_pattern,
     pattern_from_pairs,
+    sections_band_powers,
 )
 from railval.core.en14363 import evaluate_present
 from railval.core.errors import InvalidParameter, NotFound
@@ -82,13 +82,27 @@ class CampaignContext:
 
 
 def band_sums(signalsets: Mapping[str, SignalSet], bands) -> dict[str, np.ndarray]:
-    """Car body acceleration channel → band powers summed over the sections (10 s Welch segments)."""
+    """Car body acceleration channel → band powers summed over the sections (10 s Welch
+    segments): :func:`railval.core.diagnosis.band_powers` of every channel of every section,
+    each estimated alone (one-row blocks of one
+    :func:`railval.core.diagnosis.sections_band_powers` call: the same float bits), summed in
+    section order."""
+    keys = [(sid, ch) for sid, ss in signalsets.items() for ch in ACC_CHANNELS if ch in ss.channels]
+    powers = sections_band_powers({k: {k[1]: signalsets[k[0]].channels[k[1]]} for k in keys},
+                                  {k: signalsets[k[0]].fs for k in keys}, bands, 10.0)
     out: dict[str, np.ndarray] = {}
-    for ss in signalsets.values():
-        for ch in ACC_CHANNELS:
-            if ch in ss.channels:
-                out[ch] = out.get(ch, 0.0) + band_powers(ss.channels[ch], ss.fs, bands, 10.0)
+    for k in keys:
+        out[k[1]] = out.get(k[1], 0.0) + powers[k][k[1]]
     return out
+
+
+def acceleration_band_powers(signalsets: Mapping[str, SignalSet], bands) -> dict[str, dict[str, np.ndarray]]:
+    """Section id → car body acceleration channel → band powers (10 s Welch segments), each
+    section's channels in one block (:func:`railval.core.diagnosis.section_band_powers` of
+    every section, one :func:`railval.core.diagnosis.sections_band_powers` call)."""
+    return sections_band_powers({sid: {ch: ss.channels[ch] for ch in ACC_CHANNELS if ch in ss.channels}
+                                 for sid, ss in signalsets.items()},
+                                {sid: ss.fs for sid, ss in signalsets.items()}, bands, 10.0)
 
 
 def section_values(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo]) -> dict[str, dict]:

@@ -36,7 +36,7 @@ import numpy as np
 
 from railval.app.services.batch import BatchExecutor
 from railval.app.services.campaign_context import (
-    ACC_CHANNELS,
+    acceleration_band_powers,
     band_sums,
     configuration_of,
     cut_to,
@@ -69,7 +69,6 @@ from railval.core.diagnosis import (
     diagnose_evidence,
     diagnose_families,
     scan_values,
-    section_band_powers,
     section_evidence,
 )
 from railval.core.diagnosis.causes import cause_set
@@ -167,7 +166,7 @@ def _evaluate_sections(ctx: Any, job: tuple[dict, dict]) -> tuple[list[dict], di
     """Worker task: simulate the campaign ``ctx`` (shared once per worker,
     :meth:`railval.app.services.batch.BatchExecutor.map`) with the job's ``effects`` and model
     ``parameters``; return the validation pairs (section, zone, quantity, position, D_norm) and
-    the band powers per section and acceleration channel (one Welch call per section). Each run
+    the band powers per section and acceleration channel (one Welch call for all sections). Each run
     stops at the evaluated range's end plus the EN filters' run-out
     (:func:`railval.app.services.campaign_context.evaluated_span_end`): the band powers cover
     that span, as :func:`measured_section_bands` does on the measured side."""
@@ -175,9 +174,7 @@ def _evaluate_sections(ctx: Any, job: tuple[dict, dict]) -> tuple[list[dict], di
     sets = simulate_context(ctx, effects, parameters, evaluated_only=True)
     vr = validate_values(ctx, section_values(sets, ctx.sections))
     pairs = _records(vr.pairs, ("section", "zone", "quantity", "position", "D_norm", "M", "S"))
-    bands = {sid: section_band_powers({ch: ss.channels[ch] for ch in ACC_CHANNELS if ch in ss.channels},
-                                      ss.fs, ctx.bands, 10.0) for sid, ss in sets.items()}
-    return pairs, bands
+    return pairs, acceleration_band_powers(sets, ctx.bands)
 
 
 def _records(frame: Any, columns: Sequence[str]) -> list[dict[str, Any]]:
@@ -192,12 +189,8 @@ def measured_section_bands(ctx: Any, measured: Mapping[str, Any]) -> dict[str, d
     section cut at :func:`railval.app.services.campaign_context.evaluated_span_end`, where the
     simulated runs of :func:`_evaluate_sections` stop (like compared with like)."""
     end = evaluated_span_end(ctx)
-    out = {}
-    for sid, ss in measured.items():
-        cut = cut_to(ss, end[sid]) if sid in end else ss
-        out[sid] = section_band_powers({ch: cut.channels[ch] for ch in ACC_CHANNELS if ch in cut.channels},
-                                       cut.fs, ctx.bands, 10.0)
-    return out
+    return acceleration_band_powers({sid: cut_to(ss, end[sid]) if sid in end else ss
+                                     for sid, ss in measured.items()}, ctx.bands)
 
 
 # --------------------------------------------------------------------------- rank_causes

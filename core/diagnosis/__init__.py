@@ -43,6 +43,7 @@ from railval.core.diagnosis.patterns import (
     pattern_from_pairs,
     psd_band_pattern,
     section_band_powers,
+    sections_band_powers,
 )
 from railval.core.diagnosis.plausibility import plausibility_flags, separating_evidence
 from railval.core.diagnosis.result import DiagnosisResult, TrustedCandidate
@@ -75,6 +76,7 @@ __all__ = [
     "psd_band_pattern",
     "scan_values",
     "section_band_powers",
+    "sections_band_powers",
     "section_evidence",
     "separating_evidence",
     "where_grid",

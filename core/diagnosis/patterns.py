@@ -276,6 +276,39 @@ def section_band_powers(channels: Mapping[str, np.ndarray], fs: float,
     return {n: np.array([float(np.sum(d[k][m]) * df) for m in masks]) for k, n in enumerate(names)}
 
 
+def sections_band_powers(sections: Mapping[str, Mapping[str, np.ndarray]], fs: Mapping[str, float],
+                         bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ,
+                         segment_s: float = 10.0) -> dict[str, dict[str, np.ndarray]]:
+    """:func:`section_band_powers` of many sections at once: ``sections[sid]`` the channels
+    of one section (equal lengths within it), ``fs[sid]`` its rate in Hz; section id →
+    channel → power per band (unit²), every number equal (same float bits) to
+    :func:`section_band_powers` of that section alone. The Welch estimates of all sections go
+    through one :func:`railval.core.psd.welch_blocks` call (one block per section, its rows in
+    the section's channel order), which holds each block equal to
+    :func:`railval.core.psd.welch_rows` of it (tests/test_supp_exact.py); the band sums are the
+    same expression. A section with a bad channel raises as :func:`section_band_powers`
+    (the first such section, in order)."""
+    from railval.core.psd import welch_blocks
+
+    ids = [sid for sid, chans in sections.items() if chans]
+    blocks, names = [], []
+    for sid in ids:
+        chans = sections[sid]
+        rows = [np.asarray(chans[n], dtype=float) for n in chans]
+        if len({r.shape for r in rows}) != 1 or rows[0].ndim != 1 or any(
+                r.size < 8 or not np.all(np.isfinite(r)) for r in rows):
+            section_band_powers(chans, fs[sid], bands, segment_s)  # raises its precise error
+        blocks.append(np.stack(rows))
+        names.append(list(chans))
+    out: dict[str, dict[str, np.ndarray]] = {sid: {} for sid, chans in sections.items() if not chans}
+    for sid, chans, (f, d) in zip(ids, names, welch_blocks(blocks, [fs[sid] for sid in ids], segment_s),
+                                  strict=True):
+        df = f[1] - f[0]
+        masks = [(f >= lo) & (f < hi) for lo, hi in bands]
+        out[sid] = {n: np.array([float(np.sum(d[k][m]) * df) for m in masks]) for k, n in enumerate(chans)}
+    return {sid: out[sid] for sid in sections}
+
+
 def band_ratio_pattern(simulated: Mapping[str, np.ndarray], measured: Mapping[str, np.ndarray],
                        bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ) -> Pattern:
     """Log₂ ratio of band powers simulated/measured per acceleration channel and band.
