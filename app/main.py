@@ -50,6 +50,7 @@ CSS_FILE = STATIC / "railval.css"
 ACCENT = "#0b5394"
 
 security.use_local_fonts()
+security.no_math_typesetting()
 # browser_info off: nothing reads it, and it is one more model and document root per session
 pn.extension("tabulator", notifications=False, design="native", sizing_mode="stretch_width",
              browser_info=False)

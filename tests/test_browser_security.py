@@ -19,6 +19,9 @@ pytestmark = [pytest.mark.browser,
               pytest.mark.filterwarnings("ignore:reference already known:UserWarning")]
 PAYLOAD = '"><img src=x onerror="window.__xss=(window.__xss||0)+1">'
 TRACKER = "http://tracker.example/pixel.png"
+#: LaTeX in user text: MathJax's \href made a javascript: link of it while Markdown panes
+#: typeset math (app/security.py, no_math_typesetting)
+MATH = r"$$\href{javascript:window.__xss=(window.__xss||0)+1}{\text{the report}}$$"
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +36,7 @@ def app_url(tmp_path_factory):
         s.execute(update(Configuration).where(Configuration.name == "baseline")
                   .values(name=PAYLOAD))
         s.execute(update(Campaign).values(
-            description=f"tracked ![pixel]({TRACKER}) <img src='{TRACKER}'>"))
+            description=f"tracked ![pixel]({TRACKER}) <img src='{TRACKER}'> {MATH}"))
     with served_app(db) as url:
         yield url
     db.dispose()
@@ -72,6 +75,32 @@ def test_hostile_names_stay_text_and_nothing_leaves_the_host(page, app_url):
     assert hosts <= {"127.0.0.1"}, f"requests to other hosts: {sorted(hosts - {'127.0.0.1'})}"
     # the description's raw <img> is escaped and its Markdown image replaced: not even tried
     assert not blocked, blocked
+
+
+_LINKS_JS = """() => { const out = []; const walk = (n) => { if (n.shadowRoot) walk(n.shadowRoot);
+  for (const c of n.children || []) { const h = c.getAttribute && c.getAttribute('href');
+    if (h) out.push(h); if (c.tagName && c.tagName.toLowerCase().startsWith('mjx')) out.push('mjx');
+    walk(c); } }; walk(document.body); return out; }"""
+
+
+def test_latex_in_a_description_stays_text(page, app_url):
+    """A campaign description holding ``$$\\href{javascript:…}{…}$$`` is shown as those
+    characters: no MathJax output, no javascript: link (it used to be one, running script in
+    the app's origin when clicked), and MathJax's bundle is not even loaded."""
+    scripts: list[str] = []
+    page.on("requestfinished", lambda req: scripts.append(req.url) if req.resource_type == "script" else None)
+    page.set_viewport_size({"width": 1280, "height": 1000})
+    page.goto(app_url)
+    desc = page.locator(".rv-main", has_text="tracked").first
+    desc.wait_for(timeout=120_000)
+    page.wait_for_timeout(2000)
+    screenshot(page, "security-latex-description")
+    found = page.evaluate(_LINKS_JS)
+    assert "mjx" not in found
+    assert not [h for h in found if h.strip().lower().startswith("javascript:")], found
+    assert page.locator(".rv-main").get_by_text(MATH).count() == 1
+    assert scripts and not [u for u in scripts if "mathjax" in u.lower()], scripts
+    assert page.evaluate("window.__xss || 0") == 0
 
 
 def test_every_response_carries_the_headers(app_url):
