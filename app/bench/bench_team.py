@@ -16,8 +16,11 @@ Phases:
    database;
 3. the sessions are closed; after ``--settle`` seconds (Bokeh discards a disconnected session
    after ``unused-session-lifetime``, 15 s by default) the memory is read again;
-4. a second wave of as many sessions is opened: the memory it adds shows whether the first
-   wave's memory is reused.
+4. a second wave of as many sessions is opened by the same users, already signed in (each
+   browser context starts with the cookies of one of the first wave's): the memory it adds
+   shows whether the first wave's memory is reused, and its first pages and CPU are a new
+   session's alone — without the sign-in's argon2id hash, a deliberate cost paid once per
+   sign-in (docs/security.md), which the first wave's figures include.
 
 Memory: resident set (RSS) of every app process before phase 1, with one session open (the
 first loads modules, caches and the campaign's data once), with all sessions open, and after
@@ -156,7 +159,8 @@ def _serving_pid(page) -> int:
 
 
 def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | None = None,
-                   served_by: list | None = None):
+                   served_by: list | None = None, states: list | None = None,
+                   signed_in: list | None = None):
     """``n`` engineer sessions, one browser context each, opened one after another; returns
     the pages and the RSS after the first (modules, caches and campaign data loaded).
     ``cpu``: per session, the app processes' CPU seconds from the sign-in click until the
@@ -166,21 +170,29 @@ def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | N
     what the processes burn with the sessions already open (their periodic refreshes, the
     reviewers' answers), read over 1 s before the click, so that ``raw − background × window``
     is the new session's own cost; with the serving process's own CPU-s (``own``) last.
-    ``served_by``: per session, the process that served it (after the CPU is read)."""
+    ``served_by``: per session, the process that served it (after the CPU is read).
+    ``states``: receives each context's cookies once its page shows (Playwright's
+    ``storage_state``); ``signed_in``: such cookies, one per session — the session then opens
+    ``/app`` directly, without signing in, timed from the request."""
     pages, warm = [], None
     for k in range(n):
-        ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900})
+        ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900},
+                                  storage_state=signed_in[k] if signed_in else None)
         page = ctx.new_page()
         page.route("**/fonts.g*/**", lambda route: route.abort())
-        page.goto(f"{base}/login")
-        page.fill("#username", "eng")
-        page.fill("#password", "engineer password")
+        if not signed_in:
+            page.goto(f"{base}/login")
+            page.fill("#username", "eng")
+            page.fill("#password", "engineer password")
         b0, tb = _cpu_s(_PIDS), time.perf_counter()
         time.sleep(1.0)
         c0, each0 = _cpu_s(_PIDS), {p: _cpu_s([p]) for p in _PIDS}
         t0 = time.perf_counter()
         background = (c0 - b0) / (t0 - tb)
-        page.click("#signin")
+        if signed_in:
+            page.goto(f"{base}/app")
+        else:
+            page.click("#signin")
         page.locator(".rv-nav").wait_for(timeout=120_000)
         times.append((time.perf_counter() - t0) * 1000)
         time.sleep(0.5)
@@ -189,6 +201,8 @@ def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | N
             cpu.append((_cpu_s(_PIDS) - c0, background, time.perf_counter() - t0, each))
         if served_by is not None:
             served_by.append(_serving_pid(page))
+        if states is not None:
+            states.append(ctx.storage_state())
         pages.append(page)
         if warm is None:
             time.sleep(2.0)
@@ -309,12 +323,13 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
     pids = [p.pid for p in topo.apps.values()]
     _PIDS[:] = pids
     m: dict[str, Any] = {"before": _rss_mb(pids), "first_page": [], "rtt": [], "errors": [],
-                         "cpu": []}
+                         "cpu": [], "first_page_signed_in": [], "cpu_signed_in": []}
+    states: list = []
     with playwright_sync.sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=report.CHROMIUM_ARGS)
         m["served_by"] = []
         pages, m["warm"] = _open_sessions(browser, topo.url, args.engineers, m["first_page"], m["cpu"],
-                                          m["served_by"])
+                                          m["served_by"], states=states)
         m["per_process"] = {}
         for pid in m["served_by"]:
             m["per_process"][pid] = m["per_process"].get(pid, 0) + 1
@@ -332,8 +347,10 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
             page.context.close()
         time.sleep(args.settle)
         m["after"] = _rss_mb(pids)
-        # a second wave of the same number of sessions: is the memory reused?
-        _open_sessions(browser, topo.url, args.engineers, [])
+        # a second wave of the same number of sessions, the same users signed in already: is
+        # the memory reused, and what does a new session cost without the password hash?
+        _open_sessions(browser, topo.url, args.engineers, m["first_page_signed_in"],
+                       m["cpu_signed_in"], signed_in=states)
         m["second"] = _rss_mb(pids)
         browser.close()
     return m
@@ -381,6 +398,13 @@ def _figures(args: argparse.Namespace, m: dict[str, Any], stored: int, answers: 
         "server_cpu_per_new_session_s": _stats([raw for raw, *_ in m["cpu"]]),
         "background_cpu_s_per_s": _stats([bg for _, bg, *_ in m["cpu"]]),
         "server_cpu_per_new_session_net_s": _stats([raw - bg * w for raw, bg, w, _ in m["cpu"]]),
+        # the second wave: the same users opening the app again, signed in (no password hash)
+        "first_panel_page_signed_in_ms": {"p50": _pct(m["first_page_signed_in"], 50),
+                                          "p95": _pct(m["first_page_signed_in"], 95),
+                                          "max": round(max(m["first_page_signed_in"]), 1)},
+        "server_cpu_per_new_session_signed_in_s": _stats([raw for raw, *_ in m["cpu_signed_in"]]),
+        "server_cpu_per_new_session_signed_in_net_s": _stats(
+            [raw - bg * w for raw, bg, w, _ in m["cpu_signed_in"]]),
         "panel_sessions_per_process": sorted(m["per_process"].values()),
         "answer_round_trip_ms": {"p50": _pct(m["rtt"], 50), "p95": _pct(m["rtt"], 95),
                                  "max": round(max(m["rtt"]), 1)},
