@@ -427,6 +427,9 @@ def test_the_program_pauses_the_collector_until_the_verb_runs(tmp_path):
     assert seen["on_at_dispatch"] is False
     assert seen["on_at_verb"] is True
     assert seen["frozen_at_verb"] > 10_000  # SQLAlchemy's and railval's modules
+    # the verb done, the process ends without the collector walking what it left
+    assert seen["on_at_end"] is False
+    assert seen["frozen_at_end"] > seen["frozen_at_verb"]
 
 
 def test_main_called_from_python_leaves_the_collector_alone(tmp_path, monkeypatch):

@@ -107,6 +107,7 @@ try:
     code = cli.main()  # as the program: argv from sys.argv
 except SystemExit as exc:
     code = exc.code
+collector.update(on_at_end=gc.isenabled(), frozen_at_end=gc.get_freeze_count())
 sys.stdout.flush()
 heavy = [m for m in %r if m in sys.modules]
 sys.stderr.write("\\nSTARTUP " + json.dumps({"code": code, "marks": marks, "heavy": heavy,

@@ -242,6 +242,17 @@ def first_admin(args: argparse.Namespace) -> bool:
     return verb_name(args) == "user add" and "admin" in (getattr(args, "role", None) or [])
 
 
+def ending_without_collection() -> None:
+    """The verb has finished and the process is about to end: turn the cyclic collector off
+    and freeze what is alive, so that the interpreter's last collections at exit walk nothing
+    (the memory goes back to the system with the process). After a workshop's creation that
+    walk took ≈ 0.4 s of a 4.2 s command (docs/app.md "Command-line start-up"). Reference
+    counting still frees objects as the modules are torn down; only objects in reference
+    cycles keep their finalizers unrun, which Python never promised at exit."""
+    gc.disable()
+    gc.freeze()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one verb. Errors print one line ``railval VERB: error: …`` on stderr (exit 2 for
     bad input, 1 for anything else); ``--debug`` (or ``RAILVAL_DEBUG=1``) adds the
@@ -271,6 +282,8 @@ def main(argv: list[str] | None = None) -> int:
             gc.enable()
         code = int(args.func(args) or 0)
         sys.stdout.flush()
+        if program:
+            ending_without_collection()
         return code
     except BrokenPipeError:
         # the reader of stdout went away: send the rest of the output nowhere, no traceback
