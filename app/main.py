@@ -22,6 +22,7 @@ from typing import Any
 import panel as pn
 import param
 from bokeh.settings import settings as bokeh_settings
+from panel.io import resources as panel_resources
 from panel.reactive import ReactiveHTML
 
 from railval.app import security
@@ -49,8 +50,23 @@ STATIC = Path(__file__).resolve().parent.parent / "static"
 CSS_FILE = STATIC / "railval.css"
 ACCENT = "#0b5394"
 
+
+def no_math_typesetting() -> None:
+    """User text is shown as text: no pane typesets ``$$…$$``. Panel's Markdown panes (and
+    ``Alert``, a Markdown pane) typeset it with MathJax by default, and MathJax's ``\\href``
+    makes links — a campaign description ``$$\\href{javascript:…}{the report}$$`` was a link
+    that ran script in the app's origin when clicked (docs/security.md, threat model). The
+    Markdown pane's ``disable_math`` default is set (``HTML`` has it on already), and the
+    pages' resources are built without Bokeh's MathJax bundle: Panel adds it whenever a page
+    holds an HTML model, Bokeh when a model asks for math; both checks answer no. (Markdown's
+    model does not take ``disable_math``: without the bundle nothing typesets there.)"""
+    pn.pane.Markdown.param.disable_math.default = True
+    panel_resources._panel_use_mathjax = lambda roots: False
+    panel_resources._use_mathjax = lambda roots: False
+
+
 security.use_local_fonts()
-security.no_math_typesetting()
+no_math_typesetting()
 # browser_info off: nothing reads it, and it is one more model and document root per session
 pn.extension("tabulator", notifications=False, design="native", sizing_mode="stretch_width",
              browser_info=False)

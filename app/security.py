@@ -40,13 +40,6 @@ requests, signed session ids.
 * :func:`use_local_fonts` removes the Fast design's Google Fonts stylesheet: the page uses the system sans-serif fonts (``static/railval.css``) and makes no request
   to another host.
 
-* :func:`no_math_typesetting`: user text is shown as text. Panel's Markdown panes (and
-  ``Alert``, a Markdown pane) typeset ``$$…$$`` with MathJax by default, and MathJax's
-  ``\\href`` makes links — a campaign description ``$$\\href{javascript:…}{the report}$$``
-  became a link that ran script in the app's origin when clicked. No pane typesets math
-  (the panes' default), and the MathJax bundle is not sent at all (nothing would use it;
-  618 kB less JavaScript per first page).
-
 * :func:`session_secret` reads ``$BOKEH_SECRET_KEY`` (else ``$RAILVAL_SESSION_SECRET``)
   for ``railval serve``: Bokeh then signs session ids and refuses a forged one
   (``--session-ids signed``; Bokeh docs "Deployment: security"). Without it the server
@@ -257,19 +250,6 @@ def use_local_fonts() -> None:
     resources by its class name, so a subclass cannot simply leave the font out.)"""
     fast = panel_fast.Fast
     fast._resources = {k: v for k, v in fast._resources.items() if k != "font"}
-
-
-def no_math_typesetting() -> None:
-    """No Panel pane typesets ``$$…$$`` (module docstring): the Markdown pane's
-    ``disable_math`` default (shared by ``Alert``; ``HTML`` has it on already) set, and the
-    page's resources built without Bokeh's MathJax bundle — Panel adds it whenever a page
-    holds an HTML model, and Bokeh when a model requests math; both checks answer no."""
-    import panel as pn
-    from panel.io import resources
-
-    pn.pane.Markdown.param.disable_math.default = True
-    resources._panel_use_mathjax = lambda roots: False
-    resources._use_mathjax = lambda roots: False
 
 
 def session_secret() -> str:

@@ -20,7 +20,7 @@ pytestmark = [pytest.mark.browser,
 PAYLOAD = '"><img src=x onerror="window.__xss=(window.__xss||0)+1">'
 TRACKER = "http://tracker.example/pixel.png"
 #: LaTeX in user text: MathJax's \href made a javascript: link of it while Markdown panes
-#: typeset math (app/security.py, no_math_typesetting)
+#: typeset math (app/main.py, no_math_typesetting)
 MATH = r"$$\href{javascript:window.__xss=(window.__xss||0)+1}{\text{the report}}$$"
 
 

@@ -1,5 +1,5 @@
 """User text is shown as text: no Panel pane of the app typesets ``$$…$$`` and the page's
-resources leave MathJax out (app/security.py, ``no_math_typesetting``; the browser check is
+resources leave MathJax out (app/main.py, ``no_math_typesetting``; the browser check is
 tests/test_browser_security.py::test_latex_in_a_description_stays_text)."""
 
 from __future__ import annotations
