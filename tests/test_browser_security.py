@@ -99,6 +99,9 @@ def test_latex_in_a_description_stays_text(page, app_url):
     assert "mjx" not in found
     assert not [h for h in found if h.strip().lower().startswith("javascript:")], found
     assert page.locator(".rv-main").get_by_text(MATH).count() == 1
+    # the raw <img> beside it shows as typed too, not as a link holding escaped characters
+    assert page.locator(".rv-main").get_by_text(f"<img src='{TRACKER}'>").count() == 1
+    assert not [h for h in found if "tracker.example" in h], found
     assert scripts and not [u for u in scripts if "mathjax" in u.lower()], scripts
     assert page.evaluate("window.__xss || 0") == 0
 

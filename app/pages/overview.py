@@ -122,8 +122,11 @@ class OverviewPage(PageBase):
         cov = (("danger", "Coverage shortfalls: " + "; ".join(short)) if short
                else ("success", (f"Coverage holds: {len(ov.sections)} sections, every zone ≥ "
                      f"{MIN_SECTIONS_PER_ZONE} sections, ≥ {MIN_POSITIONS} signals per channel kind.")))
+        # no linkify: it took escaped characters into the links it made of bare addresses
+        # (``<img src='http://…'>`` showed as a link ending in ``&#x27;&gt;``); the text now
+        # shows as typed, written links ``[text](url)`` still work
         desc = pn.pane.Markdown(f"### {html.escape(ov.name)}\n{no_external_images(html.escape(ov.description))}\n\n{vehicle_md}",
-                                sizing_mode="stretch_width")
+                                sizing_mode="stretch_width", renderer_options={"linkify": False})
         # the rest of the page is one HTML pane (one Bokeh model instead of ten panes and
         # layouts per session); its pieces but the lineage's selection are shared markup
         self.body.objects = [desc, pn.pane.HTML(overview_markup(ov, self.app.configuration, *cov),
