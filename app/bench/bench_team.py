@@ -12,8 +12,10 @@ Phases:
    app's navigation shows ("first Panel page", ms);
 2. with those sessions open, every reviewer in its own thread posts ``--answers`` answers
    through the proxy over its own keep-alive HTTPS connection ("answer round trip": request
-   → the server's confirmation that the row is committed); answers lost counted from the
-   database;
+   → the server's confirmation that the row is committed; ``--think`` seconds before each);
+   answers lost counted from the database. With ``--during-answers N``, up to N further
+   sessions of the signed-in engineers open one after another meanwhile ("first Panel page
+   while reviewers answer": only those that started and ended with answers coming in);
 3. the sessions are closed; after ``--settle`` seconds (Bokeh discards a disconnected session
    after ``unused-session-lifetime``, 15 s by default) the memory is read again;
 4. a second wave of as many sessions is opened by the same users, already signed in (each
@@ -81,6 +83,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--engineers", type=int, default=20)
     parser.add_argument("--answers", type=int, default=20, help="answers per reviewer")
     parser.add_argument("--apps", type=int, default=2, help="app processes behind nginx")
+    parser.add_argument("--think", type=float, default=0.0, metavar="S",
+                        help="seconds each reviewer looks at a plot before answering (default 0: "
+                        "answers back to back)")
+    parser.add_argument("--during-answers", type=int, default=0, metavar="N",
+                        help="also open up to N sessions of the signed-in engineers while the "
+                        "reviewers answer, and time their first pages (use --think so that the "
+                        "answering lasts)")
     parser.add_argument("--settle", type=float, default=60.0,
                         help="seconds after the sessions closed before memory is read again")
     parser.add_argument("--admin", action="store_true",
@@ -112,7 +121,8 @@ def _pct(values: list[float], q: float) -> float:
     return round(statistics.quantiles(values, n=100, method="inclusive")[int(q) - 1], 1) if len(values) > 1 else values[0]
 
 
-def _reviewer(host: str, port: int, token: str, n: int, out: list[float], errors: list[str]) -> None:
+def _reviewer(host: str, port: int, token: str, n: int, out: list[float], errors: list[str],
+              think: float = 0.0) -> None:
     ctx = ssl._create_unverified_context()  # the run's self-signed certificate
     conn = http.client.HTTPSConnection(host, port, context=ctx, timeout=30)
     conn.request("GET", f"/review/{token}")  # the page hands out the anti-forgery token
@@ -123,6 +133,7 @@ def _reviewer(host: str, port: int, token: str, n: int, out: list[float], errors
         return
     headers = {"Content-Type": "application/json", **xsrf_headers(xsrf)}
     for i in range(n):
+        time.sleep(think)  # the reviewer looks at the plot
         body = json.dumps({"position": i, "answer": "yes" if i % 2 else "no", "seconds": 1.0,
                            "submission": uuid.uuid4().hex})
         t0 = time.perf_counter()
@@ -335,10 +346,14 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
             m["per_process"][pid] = m["per_process"].get(pid, 0) + 1
         m["open"] = _rss_mb(pids)
         threads = [threading.Thread(target=_reviewer, args=("127.0.0.1", topo.port, t, answers,
-                                                            m["rtt"], m["errors"])) for t in tokens]
+                                                            m["rtt"], m["errors"],
+                                                            getattr(args, "think", 0.0)))
+                   for t in tokens]
         t0 = time.perf_counter()
         for t in threads:
             t.start()
+        m["first_page_during"], m["during_open"] = _open_during(
+            browser, topo.url, states, threads, getattr(args, "during_answers", 0))
         for t in threads:
             t.join()
         m["wall"] = time.perf_counter() - t0
@@ -354,6 +369,29 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
         m["second"] = _rss_mb(pids)
         browser.close()
     return m
+
+
+def _open_during(browser, base: str, states: list, threads: list, n: int) -> tuple[list[float], int]:
+    """While the reviewers' ``threads`` answer: up to ``n`` sessions of the signed-in engineers
+    (their cookies ``states``, in turn), one after another, each timed from its ``/app``
+    request until the navigation shows and closed again; stops when the reviewers are done.
+    Returns the first pages (ms) of the sessions that started while answers were still coming
+    in, and how many sessions were open at the time (the first wave's)."""
+    times: list[float] = []
+    for k in range(n):
+        if not any(t.is_alive() for t in threads):
+            break
+        ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900},
+                                  storage_state=states[k % len(states)])
+        page = ctx.new_page()
+        page.route("**/fonts.g*/**", lambda route: route.abort())
+        t0 = time.perf_counter()
+        page.goto(f"{base}/app")
+        page.locator(".rv-nav").wait_for(timeout=120_000)
+        if any(t.is_alive() for t in threads):  # the answers went on throughout
+            times.append((time.perf_counter() - t0) * 1000)
+        ctx.close()
+    return times, len(states)
 
 
 def _stored_answers(db: Any) -> int:
@@ -405,6 +443,10 @@ def _figures(args: argparse.Namespace, m: dict[str, Any], stored: int, answers: 
         "server_cpu_per_new_session_signed_in_s": _stats([raw for raw, *_ in m["cpu_signed_in"]]),
         "server_cpu_per_new_session_signed_in_net_s": _stats(
             [raw - bg * w for raw, bg, w, _ in m["cpu_signed_in"]]),
+        **({"first_panel_page_during_answers_ms": {
+            "sessions": len(m["first_page_during"]), "engineers_open": m["during_open"],
+            "p50": _pct(m["first_page_during"], 50), "p95": _pct(m["first_page_during"], 95),
+            "max": round(max(m["first_page_during"]), 1)}} if m.get("first_page_during") else {}),
         "panel_sessions_per_process": sorted(m["per_process"].values()),
         "answer_round_trip_ms": {"p50": _pct(m["rtt"], 50), "p95": _pct(m["rtt"], 95),
                                  "max": round(max(m["rtt"]), 1)},
