@@ -10,6 +10,7 @@ from __future__ import annotations
 import re
 
 import pytest
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from tests.browser_support import (
     bokeh_sources,
@@ -106,7 +107,19 @@ def test_dashboard_drilldown_row_opens_compare(page, app_url):
     where = main.locator(".rv-where")
     where.locator("canvas").first.wait_for(state="attached", timeout=PAGE_TIMEOUT_MS)
     element_screenshot(main.locator(".rv-where-box"), "dashboard-where")
-    rows.first.locator(".tabulator-cell[tabulator-field='position']").click()
+    # the row's click opens Compare; on a loaded machine a click that lands before the
+    # table's handlers are bound is lost (seen once in CI), so it is given again while the
+    # dashboard is still there — what is asserted stays the same: Compare opens on that row
+    cell = rows.first.locator(".tabulator-cell[tabulator-field='position']")
+    compare = page.locator(".rv-main h2", has_text="Compare signals")
+    for _attempt in range(3):
+        cell.click()
+        try:
+            compare.wait_for(timeout=20_000)
+            break
+        except PlaywrightTimeout:
+            if not cell.is_visible():
+                break
     _wait_page(page, "Compare signals")
     shown = main.locator("select").first.evaluate("s => s.options[s.selectedIndex].text")
     assert shown == section
