@@ -16,7 +16,8 @@ the amplitude gain of the applied filter is ``|H(f)|²``; for the low-pass
 :func:`filtfilt_rows` filters every row of a 2-D array (many signals at once) with a compiled
 kernel that reproduces ``scipy.signal.sosfiltfilt`` exactly (odd extension of
 ``3·(2·n_sections + 1)`` samples at each end, steady-state initial conditions from
-``scipy.signal.sosfilt_zi``); designs are cached per ``(fs, kind, order)``.
+``scipy.signal.sosfilt_zi``); designs are cached per ``(fs, kind, order)`` in the process
+and, as scipy made them, on disk (:mod:`railval.core.design_store`).
 
 :func:`settling_check` reports — never silently — when the run-in before (or run-out after)
 the evaluated range is shorter than the filter settling time.
@@ -38,8 +39,9 @@ from functools import lru_cache
 import numba
 import numba.extending
 import numpy as np
-import scipy.signal
+import scipy
 
+from railval.core import design_store, lazy
 from railval.core.buffers import BufferPool
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.processing import DEFAULT_ORDER, check_order
@@ -50,6 +52,10 @@ BANDPASS_HZ = (0.4, 10.0)
 SETTLING_LEVEL = 0.01
 
 FILTER_KINDS = ("lowpass", "bandpass")
+
+#: imported when a design is first computed in this folder (railval.core.design_store keeps
+#: the designs made before: a process that only filters does not load scipy.signal)
+_signal = lazy.module("scipy.signal")
 
 
 @dataclass(frozen=True)
@@ -124,17 +130,37 @@ def design(fs: float, kind: str, order: int = DEFAULT_ORDER) -> FilterDesign:
     fs = float(fs)
     _check_design_args(fs, kind, order)
     order = int(order)
-    if kind == "lowpass":
-        sos = scipy.signal.butter(order, LOWPASS_HZ, btype="lowpass", fs=fs, output="sos")
-    else:
-        sos = scipy.signal.butter(order, list(BANDPASS_HZ), btype="bandpass", fs=fs, output="sos")
-    sos = np.ascontiguousarray(sos, dtype=np.float64)
-    zi = np.ascontiguousarray(scipy.signal.sosfilt_zi(sos), dtype=np.float64)
+    got = design_store.arrays(f"butterworth {kind} order {order} fs {fs!r} scipy {scipy.__version__}",
+                              lambda: _designed(fs, kind, order), ("sos", "zi", "settling_s"),
+                              check=lambda a: _plausible(a, kind, order))
+    sos = np.ascontiguousarray(got["sos"], dtype=np.float64)
+    zi = np.ascontiguousarray(got["zi"], dtype=np.float64)
     n_sections = sos.shape[0]
     ntaps = 2 * n_sections + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum()))
     edge = 3 * ntaps
-    settling_s = _settling_time(sos, fs)
-    return FilterDesign(kind, fs, order, sos, zi, edge, settling_s)
+    return FilterDesign(kind, fs, order, sos, zi, edge, float(got["settling_s"]))
+
+
+def _designed(fs: float, kind: str, order: int) -> dict[str, np.ndarray]:
+    """The design as ``scipy.signal`` makes it: ``butter`` in second-order sections, their
+    ``sosfilt_zi`` and the settling time of one pass (:func:`_settling_time`)."""
+    if kind == "lowpass":
+        sos = _signal.butter(order, LOWPASS_HZ, btype="lowpass", fs=fs, output="sos")
+    else:
+        sos = _signal.butter(order, list(BANDPASS_HZ), btype="bandpass", fs=fs, output="sos")
+    sos = np.ascontiguousarray(sos, dtype=np.float64)
+    zi = np.ascontiguousarray(_signal.sosfilt_zi(sos), dtype=np.float64)
+    return {"sos": sos, "zi": zi, "settling_s": np.float64(_settling_time(sos, fs))}
+
+
+def _plausible(a, kind: str, order: int) -> bool:
+    """A stored design of this kind and order: the shapes of ``butter``'s sections
+    (⌈N/2⌉ low-pass, N band-pass), finite numbers, a0 = 1 and a positive settling time."""
+    sos, zi, settling = a["sos"], a["zi"], a["settling_s"]
+    n = (order + 1) // 2 if kind == "lowpass" else order
+    return (sos.shape == (n, 6) and zi.shape == (n, 2) and settling.shape == ()
+            and bool(np.isfinite(sos).all() and np.isfinite(zi).all())
+            and bool((sos[:, 3] == 1.0).all()) and float(settling) > 0.0)
 
 
 def _settling_time(sos: np.ndarray, fs: float) -> float:
@@ -143,7 +169,7 @@ def _settling_time(sos: np.ndarray, fs: float) -> float:
     while True:
         impulse = np.zeros(n)
         impulse[0] = 1.0
-        h = np.abs(scipy.signal.sosfilt(sos, impulse))
+        h = np.abs(_signal.sosfilt(sos, impulse))
         above = np.flatnonzero(h > SETTLING_LEVEL * h.max())
         last = int(above[-1])
         if last < n - 10 or n > fs * 600:

@@ -21,10 +21,16 @@ from functools import lru_cache
 
 import numba
 import numpy as np
-from scipy import fft as _fft
-from scipy import signal as _signal
+import scipy
 
+from railval.core import design_store, lazy
 from railval.core.en_kernels import _welch_density
+
+#: imported when first used: ``scipy.signal`` for :func:`welch_rows` and for a window not yet
+#: in :mod:`railval.core.design_store` (a process that estimates PSDs with the windows made
+#: before does not load it), ``scipy.fft`` for the transforms of :func:`welch_blocks`
+_signal = lazy.module("scipy.signal")
+_fft = lazy.module("scipy.fft")
 from railval.core.errors import InvalidParameter, InvalidSignal
 
 
@@ -77,8 +83,10 @@ def welch_psd(values: np.ndarray, fs: float, segment_s: float = 10.0) -> PSD:
         raise InvalidParameter(f"welch_psd: fs must be a positive finite number of Hz, got {fs!r}")
     if not (segment_s > 0):
         raise InvalidParameter(f"welch_psd: segment_s must be > 0 s, got {segment_s!r}")
-    f, p, seg = welch_rows(x[np.newaxis, :], fs, segment_s)
-    return PSD(frequency_hz=f, density=p[0], segment_s=seg)
+    rows = x[np.newaxis, :]
+    nperseg = _checked_nperseg(rows, x.size, fs, segment_s)
+    f, p = welch_blocks([rows], fs, segment_s)[0]  # = welch_rows bit for bit (tests/test_supp_exact.py)
+    return PSD(frequency_hz=f, density=p[0], segment_s=nperseg / fs)
 
 
 def detrend_linear(segments: np.ndarray) -> np.ndarray:
@@ -180,17 +188,33 @@ def _welch_setup(nperseg: int, fs: float) -> tuple[np.ndarray, np.ndarray, np.nd
     same scipy calls (``scipy.signal.csd``: ``get_window("hann_periodic", nperseg)`` in a
     ``ShortTimeFFT`` scaled to ``"psd"``, i.e. divided by ``sqrt(Σw²·fs)`` summed by Python's
     ``sum``, one-sided, ``mfft = nperseg``): the scaled window, the frequencies, and the
-    centred index ``t`` of :func:`detrend_linear` with ``float(t @ t)``. Read only."""
-    sft = _signal.ShortTimeFFT(_signal.get_window("hann_periodic", nperseg),
-                               nperseg - nperseg // 2, fs, fft_mode="onesided", mfft=nperseg,
-                               scale_to="psd", phase_shift=None)
-    win = np.array(sft.win)
-    f = np.array(sft.f)
+    centred index ``t`` of :func:`detrend_linear` with ``float(t @ t)``. Read only. The window
+    and the frequencies, as scipy made them, are kept on disk (:mod:`railval.core.design_store`)."""
+    got = design_store.arrays(f"welch hann_periodic nperseg {int(nperseg)} fs {float(fs)!r} "
+                              f"scipy {scipy.__version__}", lambda: _scipy_window(nperseg, fs),
+                              ("win", "f"), check=lambda a: _plausible_window(a, nperseg))
+    win, f = got["win"], got["f"]
     t = np.arange(nperseg) - (nperseg - 1) / 2.0
     tt = float(t @ t)
     for a in (win, f, t):
         a.setflags(write=False)
     return win, f, t, tt
+
+
+def _scipy_window(nperseg: int, fs: float) -> dict[str, np.ndarray]:
+    sft = _signal.ShortTimeFFT(_signal.get_window("hann_periodic", nperseg),
+                               nperseg - nperseg // 2, fs, fft_mode="onesided", mfft=nperseg,
+                               scale_to="psd", phase_shift=None)
+    return {"win": np.array(sft.win), "f": np.array(sft.f)}
+
+
+def _plausible_window(a, nperseg: int) -> bool:
+    """A stored window of ``nperseg`` samples: its length, nperseg//2 + 1 frequencies from 0
+    Hz up, finite and non-negative."""
+    win, f = a["win"], a["f"]
+    return (win.shape == (nperseg,) and f.shape == (nperseg // 2 + 1,)
+            and bool(np.isfinite(win).all() and np.isfinite(f).all())
+            and bool((win >= 0.0).all()) and f[0] == 0.0 and bool((np.diff(f) > 0.0).all()))
 
 
 def welch_blocks(blocks: Sequence, fs: float | Sequence[float], segment_s: float = 10.0

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from PIL import Image
 from railval.app.bench.bench_workshop import legacy_png
+from railval.app.services import workshop_canvas as wc
 from railval.app.services import workshop_render as wr
 from railval.app.services import workshops as ws
 from railval.app.state import jobs
@@ -73,7 +74,7 @@ def test_reused_figure_and_blitted_background_give_the_pixels_of_a_fresh_figure(
                             x_label=s.x_label, y_label=s.y_label) for s in specs]
     assert _same_pixels(reused, [_ref(s) for s in specs])
     assert len(set(reused)) == len(reused)  # nine different plots
-    again = [wr.render_fresh(s.x_meas, s.y_meas, s.x_sim, s.y_sim, s.scale, title=s.title,
+    again = [wc.render_fresh(s.x_meas, s.y_meas, s.x_sim, s.y_sim, s.scale, title=s.title,
                              x_label=s.x_label, y_label=s.y_label) for s in reversed(specs)]
     assert again[::-1] == reused  # deterministic: same inputs, same bytes, in any order
 
@@ -82,13 +83,13 @@ def test_encode_png_is_a_valid_png_of_exactly_the_pixels():
     rng = np.random.default_rng(3)
     rgba = np.full((7, 5, 4), 255, np.uint8)
     rgba[..., :3] = rng.integers(0, 256, (7, 5, 3), dtype=np.uint8)
-    png = wr.encode_png(rgba)
+    png = wc.encode_png(rgba)
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
     assert np.array_equal(_pixels(png), rgba[..., :3])
     assert Image.open(io.BytesIO(png)).info["dpi"] == pytest.approx((100, 100), abs=0.01)
     rgba[0, 0, 3] = 254  # a transparent pixel would be lost in RGB: refused
     with pytest.raises(ValueError, match="transparent"):
-        wr.encode_png(rgba)
+        wc.encode_png(rgba)
 
 
 def test_render_version_is_stored_and_keys_the_cache(monkeypatch):
@@ -237,7 +238,7 @@ def test_a_long_title_and_the_last_x_tick_label_stay_inside_the_plot():
         "baseline+parasitic_yaw_stiffness+lateral_bumpstop+friction_damping").replace(" ", "")
     assert ws._title(kind, "w1L", blind=True, vehicle="V", config="C", section="S").count("\n") == 0
     x = np.linspace(0.0, 2000.0, 800)
-    canvas = wr._Canvas(False)
+    canvas = wc._Canvas(False)
     canvas.draw(x, np.sin(x / 90) * 10, x, np.cos(x / 90) * 10, Scale(AxisRange(0.0, 2000.0, 500.0),
                 AxisRange(-20.0, 20.0, 10.0)), title=title, x_label="distance in m", y_label="Y in kN")
     renderer = canvas.fig.canvas.get_renderer()

@@ -10,6 +10,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pytest
 
+from railval.app.services import workshop_canvas as wc
 from railval.app.services import workshop_render as wr
 from railval.core.workshop import AxisRange, Scale
 from tests.test_workshop_jobs import _ref, _same_pixels, _specs
@@ -17,7 +18,7 @@ from tests.test_workshop_jobs import _ref, _same_pixels, _specs
 
 def _probe(_: int) -> dict:
     """In a worker, before it renders anything: what it started with."""
-    canvases = getattr(wr._LOCAL, "canvases", {})
+    canvases = getattr(wc._LOCAL, "canvases", {})
     return {"canvases": sorted(canvases),
             "glyphs": [len(c.fig.canvas.get_renderer()._railval_glyphs) for c in canvases.values()]}
 
@@ -42,7 +43,7 @@ def test_pool_bytes_equal_the_serial_render(monkeypatch, method):
 
 def test_a_forked_worker_starts_with_the_warm_figures(monkeypatch):
     monkeypatch.setattr(wr, "start_context", lambda: multiprocessing.get_context("fork"))
-    monkeypatch.setattr(wr._LOCAL, "canvases", {}, raising=False)  # nothing rendered before
+    monkeypatch.setattr(wc._LOCAL, "canvases", {}, raising=False)  # nothing rendered before
     ctx = wr.pool_context()
     with ProcessPoolExecutor(1, mp_context=ctx) as pool:
         got = pool.submit(_probe, 0).result()
@@ -61,7 +62,7 @@ def test_a_y_offset_text_moves_the_title_as_in_matplotlibs_own_draw():
     plain = _specs(2)
     specs = [plain[0], wr.PlotSpec(x, y, x, y + 0.05, offset, title, "distance in m", "Q in kN"),
              plain[1], wr.PlotSpec(x, y - 0.1, x, y, offset, "short", "distance in m", "Q in kN")]
-    canvas = wr._Canvas(False)
+    canvas = wc._Canvas(False)
     _, shown = canvas._background(offset, "distance in m", "Q in kN")
     assert shown  # the offset text is there at this scale
     got = [wr.render_png(s.x_meas, s.y_meas, s.x_sim, s.y_sim, s.scale, title=s.title,

@@ -15,6 +15,7 @@ from matplotlib.figure import Figure
 from matplotlib.offsetbox import OffsetBox
 
 from railval.app.services import workshop_glyphs
+from railval.app.services import workshop_canvas as wc
 from railval.app.services import workshop_render as wr
 from railval.core.workshop import AxisRange, Scale
 
@@ -68,7 +69,7 @@ def test_a_kept_legend_layout_is_computed_once_per_renderer_size_and_dpi():
 
 
 def test_the_legend_boxes_of_a_canvas_keep_their_layout():
-    canvas = wr._Canvas(False)
+    canvas = wc._Canvas(False)
     boxes, todo = [], [canvas.legend._legend_box]
     while todo:
         box = todo.pop()
@@ -93,14 +94,14 @@ def test_encode_png_writes_the_rows_of_an_rgb_up_filter():
     rng = np.random.default_rng(11)
     rgba = np.full((9, 6, 4), 255, np.uint8)
     rgba[..., :3] = rng.integers(0, 256, (9, 6, 3), dtype=np.uint8)
-    png = wr.encode_png(rgba)
+    png = wc.encode_png(rgba)
     at = png.index(b"IDAT")
     size = int.from_bytes(png[at - 4:at], "big")
     assert zlib.decompress(png[at + 4:at + 4 + size]) == _reference_rows(rgba)
     # a strided view (not contiguous) gives the same bytes
     wide = np.full((9, 12, 4), 255, np.uint8)
     wide[:, ::2] = rgba
-    assert wr.encode_png(wide[:, ::2]) == png
+    assert wc.encode_png(wide[:, ::2]) == png
 
 
 def _spec(i: int) -> wr.PlotSpec:

@@ -178,7 +178,7 @@ def test_zone_scaling_keeps_straight_track_readable(made, capsys, tmp_path):
 
 def test_rendering_is_deterministic(made):
     import numpy as np
-    from railval.app.services.workshop_render import render_png
+    from railval.app.services.workshop_canvas import render_png
     from railval.core.workshop import Extent, kind_scale
 
     x = np.linspace(0, 100, 500)

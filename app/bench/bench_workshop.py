@@ -61,6 +61,7 @@ from railval.core import lazy
 #: docstring; what the benchmark runs loads when it runs (matplotlib only for way A's plots)
 workshops_service = lazy.module("railval.app.services.workshops")
 workshop_render = lazy.module("railval.app.services.workshop_render")
+workshop_canvas = lazy.module("railval.app.services.workshop_canvas")
 synth_service = lazy.module("railval.app.services.synth")
 analyse = lazy.function("railval.app.services.workshop_answers", "analyse")
 verify_database = lazy.function("railval.app.services.audit", "verify_database")
@@ -245,7 +246,7 @@ def legacy_png(x_meas, y_meas, x_sim, y_sim, scale, *, title: str, x_label: str,
     current :data:`STYLE` (margins of version 3), so its pixels are the reference of the
     current renderer's."""
     st, m, s = workshop_render.STYLE, workshop_render.STYLE["measurement"], workshop_render.STYLE["simulation"]
-    with matplotlib.rc_context(workshop_render._RC):
+    with matplotlib.rc_context(workshop_canvas._RC):
         fig = Figure(figsize=(st["width_in"], st["height_in"]), dpi=st["dpi"])
         ax = fig.add_subplot(1, 1, 1)
         ax.set_axisbelow(True)
@@ -256,8 +257,8 @@ def legacy_png(x_meas, y_meas, x_sim, y_sim, scale, *, title: str, x_label: str,
         if scale.y.log:
             ax.set_yscale("log")
         else:
-            ax.set_yticks(workshop_render._ticks(scale.y.lo, scale.y.hi, scale.y.step))
-        ax.set_xticks(workshop_render._ticks(scale.x.lo, scale.x.hi, scale.x.step))
+            ax.set_yticks(workshop_canvas._ticks(scale.y.lo, scale.y.hi, scale.y.step))
+        ax.set_xticks(workshop_canvas._ticks(scale.x.lo, scale.x.hi, scale.x.step))
         ax.set_xlim(scale.x.lo, scale.x.hi)
         ax.set_ylim(scale.y.lo, scale.y.hi)
         ax.set_xlabel(x_label)

@@ -176,7 +176,8 @@ def _create(args: argparse.Namespace) -> int:
     out = workshops_service.create(database, args.name, args.campaign, configurations=configs,
                     sections=sections, kinds=kinds, blind=args.blind, repeats=args.repeats,
                     auto_share=args.auto_share, seed=args.seed, scaling=scaling,
-                    twin_scaling=args.twin_scaling, actor=_actor(), progress=Progress())
+                    twin_scaling=args.twin_scaling, actor=_actor(), progress=Progress(),
+                    planned_plots=n_plots)
     if args.json:
         emit_json({**out, "stored": True})
     else:

@@ -21,6 +21,7 @@ The documents that read a stored workshop back (status, plot list, kinds, review
 
 from __future__ import annotations
 
+import contextlib
 import math
 import random
 import textwrap
@@ -383,7 +384,7 @@ def _own_scale(k, cm: _Curve, cs: _Curve) -> Scale:
 
 def _render_rows(g: _Gathered, jobs: list[tuple[int, str]], fixed: tuple[list[str], dict[str, Scale]],
                  twin: tuple[list[str], dict[str, Scale]] | None, *, blind: bool,
-                 progress: Callable[..., None] | None) -> list[dict[str, Any]]:
+                 progress: Callable[..., None] | None, pool=None) -> list[dict[str, Any]]:
     """Render every plot once at its scaling (step 2 of :func:`create`): ``jobs`` are
     (fact index, ``fixed`` | ``auto`` | the twin's scaling); the PNGs on the render pool
     (:func:`railval.app.services.workshop_render.render_many`), progress as plots rendered
@@ -415,7 +416,7 @@ def _render_rows(g: _Gathered, jobs: list[tuple[int, str]], fixed: tuple[list[st
         if progress is not None:
             progress("rendering plots", 0.5 + 0.5 * done / max(1, total),
                      {"done": done, "total": total})
-    for row, image in zip(rows, workshop_render.render_many(specs, rendered), strict=True):
+    for row, image in zip(rows, workshop_render.render_many(specs, rendered, pool=pool), strict=True):
         row["image"] = image
     return rows
 
@@ -425,7 +426,8 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
            blind: bool = False, repeats: float = DEFAULT_REPEATS, auto_share: float = 0.0,
            seed: int = 0, scaling: str = DEFAULT_SCALING, twin_scaling: str = "auto",
            actor: Principal | str = "system",
-           progress: Callable[..., None] | None = None) -> dict[str, Any]:
+           progress: Callable[..., None] | None = None,
+           planned_plots: int | None = None) -> dict[str, Any]:
     """Build, render and store a workshop; returns its summary (``name, plots, by_kind,
     scaling, scales, flat_share``). ``scaling``: ``zone`` (one range per kind within each
     EN 14363 test zone, the default) or ``workshop`` (one range per kind over the whole
@@ -433,26 +435,31 @@ def create(database, name: str, campaign: str, *, configurations: Sequence[str] 
     automatic scaling (the presentation experiment), chosen with ``seed``; ``twin_scaling``:
     how those twins are scaled — ``auto`` (per-plot ranges) or the other consistent scaling
     (``workshop`` beside ``zone`` or the reverse: the two scalings paired on the same plot;
-    the twin's ``scaling`` is then that name).
+    the twin's ``scaling`` is then that name). ``planned_plots``: the number of plots the
+    caller has planned (:func:`plan`); given, the render workers start before the signals
+    are read (:func:`railval.app.services.workshop_render.early_pool`).
 
     Steps: gather the signals (a read unit of work), scale and render (no database), store
     (one ``session(write=True)``, so the write lock is held only while storing: a failure
     before leaves nothing stored). ``progress(stage, fraction, info)`` is called as the work
     advances; while rendering, ``info`` is ``{"done": n, "total": N}`` (plots rendered)."""
     _check_options(name, scaling, twin_scaling, repeats, auto_share, actor)
-    with database.write_session(deferred=True) as session:  # may fill the result cache
-        g = _gather(session, name, campaign, configurations, sections, kinds, progress)
-    facts = g.facts
-    keys, scales, groups = _scaled(facts, g.curves, g.infos, scaling)
-    twin = None
-    if twin_scaling != "auto":
-        twin_keys, twin_scales, _ = _scaled(facts, g.curves, g.infos, twin_scaling)
-        twin = (twin_keys, twin_scales)
-    rng = random.Random(seed)
-    n_auto = round(auto_share * len(facts))
-    auto_idx = sorted(rng.sample(range(len(facts)), n_auto)) if n_auto else []
-    jobs = [(i, "fixed") for i in range(len(facts))] + [(i, twin_scaling) for i in auto_idx]
-    rows = _render_rows(g, jobs, (keys, scales), twin, blind=blind, progress=progress)
+    early = (workshop_render.early_pool(planned_plots + round(auto_share * planned_plots))
+             if planned_plots else contextlib.nullcontext())
+    with early as pool:
+        with database.write_session(deferred=True) as session:  # may fill the result cache
+            g = _gather(session, name, campaign, configurations, sections, kinds, progress)
+        facts = g.facts
+        keys, scales, groups = _scaled(facts, g.curves, g.infos, scaling)
+        twin = None
+        if twin_scaling != "auto":
+            twin_keys, twin_scales, _ = _scaled(facts, g.curves, g.infos, twin_scaling)
+            twin = (twin_keys, twin_scales)
+        rng = random.Random(seed)
+        n_auto = round(auto_share * len(facts))
+        auto_idx = sorted(rng.sample(range(len(facts)), n_auto)) if n_auto else []
+        jobs = [(i, "fixed") for i in range(len(facts))] + [(i, twin_scaling) for i in auto_idx]
+        rows = _render_rows(g, jobs, (keys, scales), twin, blind=blind, progress=progress, pool=pool)
     settings = {"campaign": g.campaign,
                 "configurations": list(dict.fromkeys(f["configuration"] for f in facts)),
                 "sections": list(dict.fromkeys(f["section"] for f in facts)),

@@ -226,8 +226,8 @@ EN 14363 test zone</option><option value='workshop'>same range per kind over the
             name = (a.get("name") or [""])[0]
             campaign = (a.get("campaign") or [""])[0]
             opts = _create_options(a)
-            await run(_check_new, self.database, name, campaign, opts, p)
-            _start_creation(self.database, name, campaign, opts, p)
+            planned = await run(_check_new, self.database, name, campaign, opts, p)
+            _start_creation(self.database, name, campaign, opts, p, planned)
         except (RailvalError, ValueError) as exc:
             self.set_status(400)
             await self.get(message=str(exc))
@@ -256,11 +256,14 @@ def _check_new(database, name: str, campaign: str, opts: dict[str, Any], actor) 
                                     repeats=opts["repeats"], auto_share=opts["auto_share"], actor=actor)
 
 
-def _start_creation(database, name: str, campaign: str, opts: dict[str, Any], actor) -> None:
+def _start_creation(database, name: str, campaign: str, opts: dict[str, Any], actor,
+                    planned: int | None = None) -> None:
     """Create the workshop in a job of ``actor``'s (:func:`railval.app.state.jobs.start_tracked`):
-    nothing is stored until every plot is rendered, so a failure leaves nothing behind."""
+    nothing is stored until every plot is rendered, so a failure leaves nothing behind.
+    ``planned``: the plots :func:`_check_new` counted (the render workers start at once)."""
     def work(progress):
-        return workshops_service.create(database, name, campaign, **opts, actor=actor, progress=progress)
+        return workshops_service.create(database, name, campaign, **opts, actor=actor, progress=progress,
+                                        planned_plots=planned)
 
     jobs_state.start_tracked(actor.username, f"Create workshop {name}", work,
                              link=f"/workshops/{quote(name, safe='')}", workshop=name)

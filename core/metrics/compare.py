@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import scipy.signal
 
 from railval.core import filters, lazy
 from railval.core.errors import InvalidParameter, InvalidSignal, NotFound
@@ -23,6 +22,9 @@ from railval.core.metrics.iso18571 import ISOParameters
 from railval.core.metrics.registry import FAMILIES, METRICS, metric_names, resolve_families
 from railval.core.metrics.sync import DEFAULT_MAX_LAG_S, SyncResult, apply_lag, estimate_lag
 from railval.core.types import SectionInfo, SignalSet
+
+#: imported when first used (railval.core.lazy): a command that never reaches it does not load it
+scipy_signal = lazy.module("scipy.signal")
 
 #: deferred (railval.core.lazy): only the tables of :func:`compare_signalsets` and
 #: :meth:`ComparisonResult.to_pandas` need pandas (≈ 0.7 s to import); the review plots'
@@ -178,8 +180,8 @@ def lowpass(data: np.ndarray, fs: float, cutoff_hz: float, order: int = 4) -> np
     data = np.atleast_2d(np.asarray(data, dtype=np.float64))
     if cutoff_hz == filters.LOWPASS_HZ:
         return filters.filtfilt_rows(data, fs, "lowpass", order)
-    sos = scipy.signal.butter(order, cutoff_hz, btype="lowpass", fs=fs, output="sos")
-    return scipy.signal.sosfiltfilt(sos, data, axis=-1)
+    sos = scipy_signal.butter(order, cutoff_hz, btype="lowpass", fs=fs, output="sos")
+    return scipy_signal.sosfiltfilt(sos, data, axis=-1)
 
 
 def compare_signalsets(measured: SignalSet, simulated: SignalSet, channels: Iterable[str] | None = None,

@@ -57,10 +57,13 @@ import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
-import scipy.stats
 
+from railval.core import lazy
 from railval.core.errors import InvalidParameter, InvalidSignal
 from railval.core.metrics._checks import as_signal
+
+#: imported when first used (railval.core.lazy): a command that never reaches it does not load it
+scipy_stats = lazy.module("scipy.stats")
 
 NEFF_METHODS = ("bartlett", "ar1")
 
@@ -178,7 +181,7 @@ def ks_pvalue(d: float, n1: float, n2: float) -> float:
     if not 0.0 <= d <= 1.0:
         raise InvalidParameter(f"KS distance must lie in [0, 1], got {d!r}")
     en = max(1, int(np.round(n1 * n2 / (n1 + n2))))
-    return float(np.clip(scipy.stats.kstwo.sf(d, en), 0.0, 1.0))
+    return float(np.clip(scipy_stats.kstwo.sf(d, en), 0.0, 1.0))
 
 
 def kolmogorov_smirnov(measured: np.ndarray, simulated: np.ndarray, *,
@@ -201,7 +204,7 @@ def kolmogorov_smirnov(measured: np.ndarray, simulated: np.ndarray, *,
     """
     m = as_signal(measured, "measured", min_len=3)
     c = as_signal(simulated, "simulated", min_len=3)
-    res = scipy.stats.ks_2samp(m, c)
+    res = scipy_stats.ks_2samp(m, c)
     d = float(res.statistic)
     n1 = effective_sample_size(m, neff_method)
     n2 = effective_sample_size(c, neff_method)
@@ -277,7 +280,7 @@ def anderson_darling(measured: np.ndarray, simulated: np.ndarray) -> ADResult:
         raise InvalidSignal("Anderson–Darling needs at least two distinct values in the pooled samples")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = scipy.stats.anderson_ksamp([m, c], variant="midrank")
+        res = scipy_stats.anderson_ksamp([m, c], variant="midrank")
     capped = any("p-value" in str(w.message) for w in caught)
     unexpected = [w for w in caught if "p-value" not in str(w.message)]
     for w in unexpected:  # re-raise anything we did not expect (pytest turns it into an error)

@@ -35,10 +35,13 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-import scipy.signal
 
+from railval.core import lazy
 from railval.core.errors import InvalidParameter
 from railval.core.metrics._checks import as_pair, positive
+
+#: imported when first used (railval.core.lazy): a command that never reaches it does not load it
+scipy_signal = lazy.module("scipy.signal")
 
 DEFAULT_MAX_LAG_S = 2.0
 #: correlation coefficients closer than this to the largest one count as ties (dimensionless)
@@ -137,7 +140,7 @@ def lag_correlations(measured: np.ndarray, simulated: np.ndarray, max_lag: int) 
     # scale-free and better conditioned prefix sums
     m = (m - m.mean()) / (np.abs(m).max() or 1.0)
     c = (c - c.mean()) / (np.abs(c).max() or 1.0)
-    full = scipy.signal.correlate(c, m, mode="full", method="auto")  # full[n-1+k] = Σ_i c[i+k] m[i]
+    full = scipy_signal.correlate(c, m, mode="full", method="auto")  # full[n-1+k] = Σ_i c[i+k] m[i]
     lags = np.arange(-max_lag, max_lag + 1)
     cross = full[n - 1 + lags]
     pm = np.concatenate([[0.0], np.cumsum(m)])
