@@ -101,3 +101,20 @@ def test_cli_creation_draws_on_early_workers_the_same_plots(demo):
         stored = {n: [(p.kind, p.section, p.channel, p.image_sha256)
                       for p in wsdb.plots(s, wsdb.get_workshop(s, n))] for n in ("E0", "E1", "E2")}
     assert stored["E1"] == stored["E0"] and stored["E2"] == stored["E0"]
+
+
+def test_tasks_keep_the_plots_of_one_background_together():
+    """Each task holds plots of one background (scale and labels), a group longer than the
+    fair share is cut, every plot is in exactly one task, the largest tasks go first."""
+    specs = _specs(30) + [s for s in _specs(30)[:6]]  # (repeated specs share a key)
+    todo = {wr.content_key(s): s for s in specs}
+    for workers in (1, 2, 3):
+        chunks = wr._chunks_by_background(todo, workers)
+        flat = [k for c in chunks for k in c]
+        assert sorted(flat) == sorted(todo) and len(flat) == len(set(flat))
+        fair = max(wr.CHUNK, -(-len(todo) // (2 * workers)))
+        assert all(len({wr.background_key(todo[k]) for k in c}) == 1 and len(c) <= fair for c in chunks)
+        assert [len(c) for c in chunks] == sorted((len(c) for c in chunks), reverse=True)
+        groups = {wr.background_key(s) for s in todo.values()}
+        assert len(chunks) <= sum(-(-sum(1 for s in todo.values() if wr.background_key(s) == g) // fair)
+                                  for g in groups)

@@ -186,15 +186,17 @@ def encode_png(rgba: np.ndarray) -> bytes:
         raise ValueError("review plot has transparent pixels; RGB would change them")
     h, w = px.shape[:2]
     # Up filter on all four channels (contiguous: fast; each byte minus the one above, the
-    # channels independent), then alpha dropped by Pillow's RGBA → RGB conversion (which
-    # copies R, G, B as they are) — the same bytes as filtering the RGB pixels, in half the time
+    # channels independent), then alpha dropped by Pillow's raw packer, which writes the RGBA
+    # image's R, G, B as they are ("RGB" raw mode of an "RGBA" image) — the same bytes as
+    # filtering the RGB pixels; packing straight from RGBA, without first converting the image
+    # to RGB, takes 8.0 instead of 10.2 ms of the whole encoding (demo plot, 200 alternating runs)
     up = np.empty_like(px)
     up[0] = px[0]
     np.subtract(px[1:], px[:-1], out=up[1:])  # uint8 arithmetic wraps: modulo 256
-    rgb = Image.frombuffer("RGBA", (w, h), up, "raw", "RGBA", 0, 1).convert("RGB")
+    rgb = Image.frombuffer("RGBA", (w, h), up, "raw", "RGBA", 0, 1).tobytes("raw", "RGB")
     rows = np.empty((h, 1 + 3 * w), np.uint8)
     rows[0, 0], rows[1:, 0] = 0, 2  # filter types: none, then Up
-    rows[:, 1:] = np.frombuffer(rgb.tobytes(), np.uint8).reshape(h, 3 * w)
+    rows[:, 1:] = np.frombuffer(rgb, np.uint8).reshape(h, 3 * w)
     ppm = round(STYLE["dpi"] / 0.0254)
 
     def chunk(kind: bytes, data: bytes) -> bytes:
