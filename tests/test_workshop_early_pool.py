@@ -48,10 +48,9 @@ def test_no_early_pool_where_the_plots_are_rendered_here(monkeypatch):
 
 def test_an_early_pool_is_shut_down_when_reading_fails(monkeypatch):
     monkeypatch.setattr(wr, "start_context", lambda: multiprocessing.get_context("fork"))
-    with pytest.raises(RuntimeError, match="reading failed"):
-        with wr.early_pool(64, workers=2) as pool:
-            procs = list(pool._processes.values())
-            raise RuntimeError("reading failed")
+    with pytest.raises(RuntimeError, match="reading failed"), wr.early_pool(64, workers=2) as pool:
+        procs = list(pool._processes.values())
+        raise RuntimeError("reading failed")
     for p in procs:
         p.join(timeout=30)
     assert procs and not any(p.is_alive() for p in procs)
@@ -84,12 +83,13 @@ def test_cli_creation_draws_on_early_workers_the_same_plots(demo):
     """``railval workshop create`` (fork: a quiet main thread) stores the PNG bytes a creation
     without the early workers stores, and its own process imported neither the backend nor
     scipy.signal (the second run: the first fills the design store)."""
-    db, folder = demo
+    db, _ = demo
     url = db.engine.url.render_as_string(hide_password=False)
     reports = []
     for name in ("E1", "E2"):
         proc = subprocess.run([sys.executable, "-c", _CREATE, "--db", url, "workshop", "create",
-                               name, *CHOICE], capture_output=True, text=True, timeout=600)
+                               name, *CHOICE], capture_output=True, text=True, timeout=600,
+                              check=False)
         assert proc.returncode == 0, proc.stderr
         reports.append(json.loads(proc.stdout.splitlines()[-1]))
     assert reports[1] == {"code": 0, "loaded": []}, reports

@@ -40,7 +40,7 @@ import numpy as np
 from railval.app.scales import MEASURED_COLOR, SIM_COLORS
 from railval.app.services.batch import FORKSERVER_PRELOAD, start_context
 from railval.core import lazy
-from railval.core.workers import exit_with_parent, pool_kwargs
+from railval.core.workers import exit_with_parent, keep_freed_memory
 from railval.core.workshop import Scale
 
 #: the drawing (matplotlib's figures and the Agg backend), imported where plots are drawn
@@ -251,7 +251,7 @@ def _run_chunks(chunks: list[list[str]], todo: dict[str, PlotSpec], workers: int
         return
     ctx = pool_context()
     with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx,
-                             **pool_kwargs()) as started:
+                             initializer=_render_worker, initargs=(os.getpid(),)) as started:
         yield from _on_pool(started, chunks, todo)
 
 
@@ -261,10 +261,19 @@ def _on_pool(pool: ProcessPoolExecutor, chunks: list[list[str]], todo: dict[str,
         yield futures[f], f.result()
 
 
-def _start_worker(parent: int) -> None:
-    """A worker of :func:`early_pool`: ends with its parent, then imports the drawing and
-    makes its figures (:func:`~railval.app.services.workshop_canvas.warm`)."""
+def _render_worker(parent: int) -> None:
+    """A worker of the pool :func:`render_many` starts: ends with its parent and keeps the
+    memory it frees for the next plot (:func:`railval.core.workers.keep_freed_memory`)."""
     exit_with_parent(parent)
+    keep_freed_memory()
+
+
+def _start_worker(parent: int) -> None:
+    """A worker of :func:`early_pool`: ends with its parent, keeps the memory it frees for
+    the next plot (:func:`railval.core.workers.keep_freed_memory`), then imports the drawing
+    and makes its figures (:func:`~railval.app.services.workshop_canvas.warm`)."""
+    exit_with_parent(parent)
+    keep_freed_memory()
     warm()
 
 
