@@ -118,3 +118,34 @@ def test_tasks_keep_the_plots_of_one_background_together():
         groups = {wr.background_key(s) for s in todo.values()}
         assert len(chunks) <= sum(-(-sum(1 for s in todo.values() if wr.background_key(s) == g) // fair)
                                   for g in groups)
+
+
+def test_a_server_job_thread_creates_on_early_forkserver_workers(demo, monkeypatch):
+    """As the organiser's page does: ``create`` with the planned count, called from a
+    thread that is not the main thread (the workers then start from the forkserver); the
+    stored PNGs are those of a creation without early workers."""
+    import threading
+
+    db, _ = demo
+    kinds = ["Y_time", "az_cb_psd"]
+    used = []
+    real = wr.start_context
+
+    def spy():
+        used.append(real())
+        return used[-1]
+    wr.clear_cache()
+    got: dict = {}
+    monkeypatch.setattr(wr, "start_context", spy)
+    t = threading.Thread(target=lambda: got.update(ws.create(
+        db, "F1", "demo", sections=["S03", "S04"], kinds=kinds, repeats=0.0, planned_plots=20)))
+    t.start()
+    t.join(600)
+    monkeypatch.undo()
+    assert got.get("plots", 0) >= wr.POOL_MIN_PLOTS and [c.get_start_method() for c in used] == ["forkserver"]
+    wr.clear_cache()
+    ws.create(db, "F0", "demo", sections=["S03", "S04"], kinds=kinds, repeats=0.0)
+    with db.session() as s:
+        stored = {n: [(p.kind, p.section, p.channel, p.image_sha256)
+                      for p in wsdb.plots(s, wsdb.get_workshop(s, n))] for n in ("F0", "F1")}
+    assert stored["F1"] == stored["F0"]
