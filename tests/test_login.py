@@ -242,6 +242,25 @@ def test_app_sign_in_reaches_the_workshop_pages_with_their_role_check(server):
     assert Client(base).get("/workshops/login?next=/workshops")[2].endswith("/login?next=/workshops")
 
 
+def test_an_empty_workshop_list_says_so_and_how_to_begin(server):
+    """No workshop yet: the list page says so instead of an empty table, with the way to
+    begin for an organiser (the button and the command) and who begins for an assessor."""
+    database, base = server
+    with database.session(write=True) as s:
+        users.create_user(s, "org2", password="organiser pw", roles=["organiser"])
+        users.create_user(s, "ass2", password="assessor pw", roles=["assessor"])
+    org = Client(base)
+    assert org.post("/login", username="org2", password="organiser pw", next="/workshops")[0] == 200
+    status, body, _ = org.get("/workshops")
+    assert status == 200 and "No workshop yet." in body and "<table" not in body
+    assert "href='/workshops/new'" in body and "railval workshop create" in body
+    ass = Client(base)
+    assert ass.post("/login", username="ass2", password="assessor pw", next="/workshops")[0] == 200
+    status, body, _ = ass.get("/workshops")
+    assert status == 200 and "No workshop yet. An organiser creates them." in body
+    assert "/workshops/new" not in body
+
+
 def test_workshop_sign_in_ends_at_the_next_request_after_revocation(server):
     """The one sign-in's cookie on the workshop pages: a role removed refuses at the next request, a
     changed password or a disabled account sends the open session back to the sign-in."""

@@ -53,9 +53,14 @@ class WorkshopList(_OrganiserBase):
             f"<td>{'yes' if r['blind'] else 'no'}</td><td class='num'>{r['reviewers']}</td>"
             f"<td class='num'>{r['answers']}</td></tr>" for r in rows)
         new = "<p><a class='btn' href='/workshops/new'>New workshop</a></p>" if runs else ""
-        body = (f"{new}"
-                f"<table><tr><th>workshop</th><th>campaign</th><th>status</th><th>blind</th>"
-                f"<th>reviewers</th><th>answers</th></tr>{trs}</table>")
+        if not trs:  # an empty table says nothing: say what there is and how to begin
+            hint = ("Create one with “New workshop” (or <code>railval workshop create</code>)."
+                    if runs else "An organiser creates them.")
+            body = f"{new}<p class='rv-empty muted'>No workshop yet. {hint}</p>"
+        else:
+            body = (f"{new}"
+                    f"<table><tr><th>workshop</th><th>campaign</th><th>status</th><th>blind</th>"
+                    f"<th>reviewers</th><th>answers</th></tr>{trs}</table>")
         self.finish(page("Workshops", body, user=p, current="/workshops"))
 
 
