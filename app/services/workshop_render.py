@@ -272,8 +272,7 @@ def _start_worker(parent: int) -> None:
     """A worker of :func:`early_pool`: ends with its parent, keeps the memory it frees for
     the next plot (:func:`railval.core.workers.keep_freed_memory`), then imports the drawing
     and makes its figures (:func:`~railval.app.services.workshop_canvas.warm`)."""
-    exit_with_parent(parent)
-    keep_freed_memory()
+    _render_worker(parent)
     warm()
 
 
