@@ -10,7 +10,6 @@ import platform
 from decimal import Decimal, getcontext
 
 import numpy as np
-import pytest
 from numba import njit
 
 from railval.core.sim.kernel import cbrt_positive
@@ -44,12 +43,18 @@ def _arguments() -> np.ndarray:
     return np.concatenate([wide, loads, twos, near1, subnormal])
 
 
-@pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="the bits are those of the GNU C Library's cbrt")
 def test_the_inline_cube_root_gives_the_c_librarys_bits():
+    """On the GNU C Library (where ``np.cbrt`` calls the generic ``cbrt`` the inline version
+    follows) every bit equal; on another C library, whose ``cbrt`` is its own, within 3 ulp of
+    it (both are cube roots to a few ulp; the kernel's runs then differ from ``np.cbrt``'s in the
+    last bits only)."""
     a = _arguments()
     mine, lib = _inline(a), _library(a)
-    differ = np.flatnonzero(mine.view(np.int64) != lib.view(np.int64))
-    assert differ.size == 0, f"{differ.size} of {a.size} differ, first at {a[differ[:3]]}"
+    if platform.libc_ver()[0] == "glibc":
+        differ = np.flatnonzero(mine.view(np.int64) != lib.view(np.int64))
+        assert differ.size == 0, f"{differ.size} of {a.size} differ, first at {a[differ[:3]]}"
+    else:
+        assert np.all(np.abs(mine - lib) <= 3 * np.spacing(lib))
 
 
 def test_the_inline_cube_root_is_a_cube_root_within_three_ulp():
