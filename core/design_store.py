@@ -18,6 +18,9 @@ process reads them instead of importing ``scipy.signal`` (docs/app.md, "Start-up
 * **Reading**: ``numpy.load`` without pickles; a file that cannot be read, lacks an array
   or fails the caller's ``check`` is computed again and replaced. Files are written to a
   temporary name and renamed, so a reader never sees half a file.
+* **Size**: at most :data:`MAX_FILES` files (≈ 13 kB each); a write beyond it removes the
+  files used longest ago (a read marks its file as used) down to three quarters of it, so a
+  process that filters at ever new rates cannot fill the disk.
 
 The arrays are those the library returned, bit for bit (``tests/test_design_store.py``).
 """
@@ -39,6 +42,8 @@ STORE = Path(__file__).resolve().parent / "__pycache__" / "railval-designs"
 STORE_ENV = "RAILVAL_DESIGN_STORE"
 #: the layout of the stored files; a new layout ignores the old files
 LAYOUT = 1
+#: most files the store keeps (the EN chain at a dozen rates needs ≈ 50; 512 ≈ 7 MB)
+MAX_FILES = 512
 
 
 def folder() -> Path | None:
@@ -83,6 +88,32 @@ def _write(path: Path, key: str, arrays: Mapping[str, np.ndarray]) -> None:
             os.unlink(tmp)
         except OSError:
             pass
+        return
+    _trim(path.parent)
+
+
+def _trim(base: Path) -> None:
+    """Remove the files used longest ago (modification time, which a read renews) while the
+    store holds more than :data:`MAX_FILES`, down to three quarters of it. Another process
+    trimming at the same time or a file gone meanwhile is no error."""
+    try:
+        files = list(base.glob("*.npz"))
+    except OSError:
+        return
+    if len(files) <= MAX_FILES:
+        return
+    aged = []
+    for f in files:
+        try:
+            aged.append((f.stat().st_mtime_ns, f))
+        except OSError:
+            continue
+    aged.sort()
+    for _, f in aged[:max(0, len(aged) - (3 * MAX_FILES) // 4)]:
+        try:
+            f.unlink()
+        except OSError:
+            pass
 
 
 def arrays(key: str, compute: Callable[[], Mapping[str, np.ndarray]], names: tuple[str, ...],
@@ -94,6 +125,10 @@ def arrays(key: str, compute: Callable[[], Mapping[str, np.ndarray]], names: tup
     if path is not None and path.is_file():
         got = _read(path, key, names)
         if got is not None and (check is None or check(got)):
+            try:
+                os.utime(path)  # used now: the last to go when the store is trimmed
+            except OSError:
+                pass
             return got
     made = {n: np.asarray(v) for n, v in compute().items()}
     if path is not None:
@@ -101,4 +136,4 @@ def arrays(key: str, compute: Callable[[], Mapping[str, np.ndarray]], names: tup
     return {n: made[n] for n in names}
 
 
-__all__ = ["LAYOUT", "STORE", "STORE_ENV", "arrays", "file_for", "folder"]
+__all__ = ["LAYOUT", "MAX_FILES", "STORE", "STORE_ENV", "arrays", "file_for", "folder"]

@@ -5,6 +5,7 @@ filters and estimates PSDs without importing scipy.signal."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -141,3 +142,28 @@ def test_a_process_that_finds_the_designs_does_not_import_scipy_signal(store, mo
     second = run()
     assert second["signal"] is False and second["stats"] is False
     assert second["sums"] == first["sums"]  # the same numbers either way
+
+
+def test_the_store_keeps_at_most_max_files_and_drops_those_used_longest_ago(store, monkeypatch):
+    """Beyond ``MAX_FILES`` a write removes the files used longest ago down to three quarters;
+    a file read recently stays, a removed one is computed again when asked for."""
+    monkeypatch.setattr(design_store, "MAX_FILES", 8)
+    made: list[str] = []
+
+    def get(k: int) -> np.ndarray:
+        def compute():
+            made.append(f"k{k}")
+            return {"x": np.full(3, float(k))}
+        return design_store.arrays(f"test key {k}", compute, ("x",))["x"]
+
+    for k in range(8):
+        get(k)
+    for k in range(8):  # key k last used at time k (long ago, in order)
+        p = design_store.file_for(f"test key {k}")
+        t = 1_000_000_000 + k
+        os.utime(p, (t, t))
+    assert float(get(0)[0]) == 0.0 and made.count("k0") == 1  # read from the store: now the newest
+    get(8)  # the ninth file: trimmed to 6
+    left = {k for k in range(9) if design_store.file_for(f"test key {k}").is_file()}
+    assert left == {0, 4, 5, 6, 7, 8}
+    assert float(get(1)[0]) == 1.0 and made.count("k1") == 2  # removed: computed again
