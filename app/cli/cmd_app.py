@@ -5,7 +5,9 @@
     migrate the database, seed the demo campaign (``railval.app.services.synth.ensure_demo``) into an
     empty database unless ``--no-demo``, and serve the web app until interrupted. A child
     process at low priority loads the validation's compiled kernels meanwhile, compiling them
-    on a fresh installation (:mod:`railval.app.services.warmup`; ``RAILVAL_NO_WARMUP=1`` skips it). With users in
+    on a fresh installation (:mod:`railval.app.services.warmup`; ``RAILVAL_NO_WARMUP=1`` skips it),
+    and the forkserver of the background jobs' process pools starts with the simulator's and
+    EN chain's kernels loaded (:func:`railval.app.services.batch.start_forkserver`). With users in
     the database every page needs sign-in (:mod:`railval.app.auth`); without users it serves
     open single-user mode on a loopback address only and refuses any other address.
 ``railval nginx-static DIR [--in-place]``
@@ -38,11 +40,13 @@ app_backend = lazy.module("railval.app.state.backend")
 app_main = lazy.module("railval.app.main")
 nginx_static = lazy.module("railval.app.nginx_static")
 app_report = lazy.module("railval.app.report")
+batch_service = lazy.module("railval.app.services.batch")
 campaign_data_service = lazy.module("railval.app.services.campaign_data")
 database_service = lazy.module("railval.app.services.database")
 users_service = lazy.module("railval.app.services.users")
 warmup_service = lazy.module("railval.app.services.warmup")
 workshop_cards_service = lazy.module("railval.app.services.workshop_cards")
+workshop_render = lazy.module("railval.app.services.workshop_render")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -119,6 +123,11 @@ def _cmd_serve(args: argparse.Namespace) -> int:
               file=sys.stderr, flush=True)
     if not args.no_demo:
         print(f"railval serve: {seed_demo(database)}", file=sys.stderr, flush=True)
+    # the forkserver of the background jobs' pools, started now with the simulator's and EN
+    # chain's kernels loaded and the workshop drawing imported: the first diagnosis,
+    # calibration or workshop does not wait for it (after the demo: its seeding compiles the
+    # simulator's kernel on a fresh installation, which the forkserver then only loads)
+    batch_service.start_forkserver([workshop_render.CANVAS])
     origins = None
     if args.allow_websocket_origin:
         origins = list(args.allow_websocket_origin) + [f"{args.address}:{args.port}", f"localhost:{args.port}"]

@@ -44,6 +44,8 @@ from railval.core.workers import pool_kwargs
 #: deferred (railval.core.lazy): dask.distributed (a Dask client, ~530 modules) only for a
 #: map with a scheduler
 distributed = lazy.module("dask.distributed")
+#: deferred: the forkserver's module (POSIX), for :func:`start_forkserver`
+forkserver = lazy.module("multiprocessing.forkserver")
 
 DEFAULT_WORKERS = 2
 
@@ -210,9 +212,12 @@ class BatchExecutor:
     __call__ = map
 
 
-#: modules the forkserver imports once for the workers it starts (``__main__`` as by default)
+#: modules the forkserver imports once for the workers it starts (``__main__`` as by default);
+#: the last runs one short campaign run, so the workers start with the compiled kernels loaded
+#: (:mod:`railval.app.services.forkserver_warm`)
 FORKSERVER_PRELOAD = ("__main__", "railval.core.sim.model", "railval.core.en14363",
-                      "railval.app.services.diagnosis_ranking", "railval.app.services.campaign_context")
+                      "railval.app.services.diagnosis_ranking", "railval.app.services.campaign_context",
+                      "railval.app.services.forkserver_warm")
 
 #: objects shared with this worker process by :meth:`BatchExecutor.map` (token → object)
 _SHARED: dict[str, Any] = {}
@@ -270,6 +275,19 @@ def start_context() -> Any:
     # forks then starts with them (takes effect when this process starts its forkserver)
     ctx.set_forkserver_preload(list(FORKSERVER_PRELOAD))
     return ctx
+
+
+def start_forkserver(extra: Sequence[str] = ()) -> bool:
+    """Start this process's ``forkserver`` now, with :data:`FORKSERVER_PRELOAD` and ``extra``
+    modules, instead of when the first pool of a background thread needs it: ``railval serve``
+    calls it once the demo is seeded, so the server's first diagnosis, calibration or
+    workshop does not wait for the forkserver's imports and kernel warm-up (≈ 3 CPU-s, run
+    beside the server's own start). Returns False where there is no forkserver (not POSIX)."""
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return False
+    forkserver.set_forkserver_preload([*FORKSERVER_PRELOAD, *extra])
+    forkserver.ensure_running()
+    return True
 
 
 def _call(task: tuple[Callable[..., Any], Sequence[Any], dict[str, Any]]) -> Any:
