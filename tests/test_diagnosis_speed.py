@@ -191,13 +191,17 @@ def test_forkserver_workers_start_with_the_simulator_imported_and_its_kernels_lo
 
 
 _EARLY_SCRIPT = """
-import sys, threading, time
+import subprocess, sys, threading, time
 from railval.app.services.batch import BatchExecutor, start_forkserver
 
-def main():
+def main(after):
+    warming = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(2)"]) if after else None
     t0 = time.perf_counter()
-    assert start_forkserver(["railval.app.services.workshop_canvas"])
+    assert start_forkserver(["railval.app.services.workshop_canvas"], after=warming)
     started = time.perf_counter() - t0
+    if warming is not None:
+        warming.wait()
+        time.sleep(0.5)  # the starting thread's turn
     out = []
     def run():  # a background job's pool, as the server runs it: the forkserver started above
         with BatchExecutor(None, 2) as ex:
@@ -205,28 +209,32 @@ def main():
     th = threading.Thread(target=run)
     th.start()
     th.join()
-    print(sorted(set(out)), started < 2.0)
+    print(sorted(set(out)), started < (0.5 if after else 2.0))
 
 def _state(_):
     from railval.core.sim import kernel
     return ("railval.app.services.workshop_canvas" in sys.modules, bool(kernel.run_kernel.overloads))
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1] == "after")
 """
 
 
-def test_the_forkserver_started_early_serves_the_later_pools(tmp_path):
-    """``railval serve`` starts the forkserver once the demo is seeded
-    (``batch.start_forkserver``, with the workshop drawing as an extra module): the call returns
-    without waiting for the forkserver's imports and warm-up, and a later pool of a background
-    thread forks its workers from that forkserver — they have the drawing module imported (which
-    the diagnosis pool's own preload list does not name) and the simulator's kernel loaded."""
+@pytest.mark.parametrize("after", ["now", "after"])
+def test_the_forkserver_started_early_serves_the_later_pools(tmp_path, after):
+    """``railval serve`` starts the forkserver once the demo is seeded and its warm-up child has
+    ended (``batch.start_forkserver``, with the workshop drawing as an extra module; ``after``:
+    the process to wait for, then the call returns at once and a thread starts the forkserver
+    when it has ended): the call does not wait for the forkserver's imports and warm-up, and a
+    later pool of a background thread forks its workers from that forkserver — they have the
+    drawing module imported (which the diagnosis pool's own preload list does not name) and the
+    simulator's kernel loaded."""
     import subprocess
     import sys
 
     script = tmp_path / "early_check.py"
     script.write_text(_EARLY_SCRIPT)
-    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, check=False)
+    done = subprocess.run([sys.executable, str(script), after], capture_output=True, text=True, timeout=300,
+                          check=False)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[(True, True)] True"

@@ -6,8 +6,8 @@
     empty database unless ``--no-demo``, and serve the web app until interrupted. A child
     process at low priority loads the validation's compiled kernels meanwhile, compiling them
     on a fresh installation (:mod:`railval.app.services.warmup`; ``RAILVAL_NO_WARMUP=1`` skips it),
-    and the forkserver of the background jobs' process pools starts with the simulator's and
-    EN chain's kernels loaded (:func:`railval.app.services.batch.start_forkserver`). With users in
+    and once it has ended the forkserver of the background jobs' process pools starts with the
+    simulator's and EN chain's kernels loaded (:func:`railval.app.services.batch.start_forkserver`). With users in
     the database every page needs sign-in (:mod:`railval.app.auth`); without users it serves
     open single-user mode on a loopback address only and refuses any other address.
 ``railval nginx-static DIR [--in-place]``
@@ -113,7 +113,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
     # compiles the validation kernels on a fresh installation (≈ 25 s of one core) while the
     # demo is seeded and the server starts, instead of during the first Validate
-    warmup_service.start_background()
+    warming = warmup_service.start_background()
     if has_users:
         _secret, origin = app_auth.cookie_secret(args.cookie_secret_file)
         print(f"railval serve: sign-in required (a user has a password); cookie secret: {origin}",
@@ -123,11 +123,11 @@ def _cmd_serve(args: argparse.Namespace) -> int:
               file=sys.stderr, flush=True)
     if not args.no_demo:
         print(f"railval serve: {seed_demo(database)}", file=sys.stderr, flush=True)
-    # the forkserver of the background jobs' pools, started now with the simulator's and EN
-    # chain's kernels loaded and the workshop drawing imported: the first diagnosis,
-    # calibration or workshop does not wait for it (after the demo: its seeding compiles the
-    # simulator's kernel on a fresh installation, which the forkserver then only loads)
-    batch_service.start_forkserver([workshop_render.CANVAS])
+    # the forkserver of the background jobs' pools, with the simulator's and EN chain's kernels
+    # loaded and the workshop drawing imported, started once the warm-up child has compiled or
+    # loaded the kernels: the first diagnosis, calibration or workshop does not wait for it,
+    # and on a fresh installation it does not compile beside the server's first pages
+    batch_service.start_forkserver([workshop_render.CANVAS], after=warming)
     origins = None
     if args.allow_websocket_origin:
         origins = list(args.allow_websocket_origin) + [f"{args.address}:{args.port}", f"localhost:{args.port}"]

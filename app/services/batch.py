@@ -277,16 +277,31 @@ def start_context() -> Any:
     return ctx
 
 
-def start_forkserver(extra: Sequence[str] = ()) -> bool:
-    """Start this process's ``forkserver`` now, with :data:`FORKSERVER_PRELOAD` and ``extra``
+def start_forkserver(extra: Sequence[str] = (), after: Any = None) -> bool:
+    """Start this process's ``forkserver`` with :data:`FORKSERVER_PRELOAD` and ``extra``
     modules, instead of when the first pool of a background thread needs it: ``railval serve``
     calls it once the demo is seeded, so the server's first diagnosis, calibration or
-    workshop does not wait for the forkserver's imports and kernel warm-up (≈ 3 CPU-s, run
-    beside the server's own start). Returns False where there is no forkserver (not POSIX)."""
+    workshop does not wait for the forkserver's imports and kernel warm-up (≈ 3 CPU-s).
+    ``after``: a process to wait for first (the server's low-priority warm-up child,
+    :mod:`railval.app.services.warmup`) — then a daemon thread starts the forkserver once it
+    has ended and this call returns at once: on a fresh installation the child compiles the
+    kernels at the lowest priority, and the forkserver, which runs at the server's, then only
+    loads them instead of compiling them beside the server's first pages. A pool needing the
+    forkserver before then starts it itself (the standard library serialises the two).
+    Returns False where there is no forkserver (not POSIX)."""
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return False
-    forkserver.set_forkserver_preload([*FORKSERVER_PRELOAD, *extra])
-    forkserver.ensure_running()
+
+    def start() -> None:
+        if after is not None:
+            after.wait()
+        forkserver.set_forkserver_preload([*FORKSERVER_PRELOAD, *extra])
+        forkserver.ensure_running()
+
+    if after is None:
+        start()
+    else:
+        threading.Thread(target=start, name="railval-forkserver-start", daemon=True).start()
     return True
 
 
