@@ -179,7 +179,7 @@ def test_forkserver_workers_start_with_the_simulator_imported_and_its_kernels_lo
     and makes one short campaign run (``FORKSERVER_PRELOAD``, ``forkserver_warm``): a worker
     sees the modules loaded and the simulator's, EN chain's and filters' compiled kernels in
     memory before its first task (without the warm-up each worker loaded them on its first
-    campaign run, 1.2–1.4 CPU-s)."""
+    campaign run, 1.4–1.9 CPU-s)."""
     import subprocess
     import sys
 

@@ -6,7 +6,7 @@ a re-simulation, a workshop's plots) forks its workers from the ``forkserver``
 (:func:`railval.app.services.batch.start_context`). The forkserver imports the modules of
 :data:`railval.app.services.batch.FORKSERVER_PRELOAD`, but numba loads a kernel from its disk
 cache only when it is first called — so every worker loaded the simulator's and the EN chain's
-kernels again on its first task: 1.2–1.4 CPU-s a worker against 0.3–0.45 for each later campaign
+kernels again on its first task: 1.4–1.9 CPU-s a worker against 0.3–0.5 for each later campaign
 run (measured in docs/diagnosis.md "Workers that start warm"), paid twice by every diagnosis
 started from the browser. :func:`warm_kernels` makes one short campaign run the way a worker
 does (simulate, EN values, validation, band powers); run in the forkserver, every worker it
@@ -43,7 +43,8 @@ def warm_kernels() -> float:
     measured = simulate_section(vehicle, track, {}, fs_out=200.0)
     sets = {"warm": measured}
     ctx = campaign_context.CampaignContext(
-        "warm", {**vehicle.to_dict(), "secondary_suspension": True}, [info], {}, campaign_context.section_values(sets, [info]),
+        "warm", {**vehicle.to_dict(), "secondary_suspension": True}, [info], {},
+        campaign_context.section_values(sets, [info]),
         campaign_context.band_sums(sets, campaign_context.DEFAULT_BANDS_HZ), list(measured.channels),
         {"warm": 200.0})
     _evaluate_sections(ctx, ({}, {}))

@@ -76,9 +76,10 @@ def cbrt_positive(x):
     coefficients, one Halley step u·(u³ + 2m)/(2u³ + m), the factor 2^(r/3) of the remainder
     r of e/3 (truncated, as C divides) and 2^(e div 3) by exact doublings (instead of
     ``ldexp``). Every operation is the library's, in its order, so the result is the same bits
-    (tests/test_sim_kernel_cbrt.py: 2 million arguments over 10⁻³⁰⁰…10³⁰⁰, within 3 ulp of the true root); the library call it
-    replaces cost the contact loop ≈ 14 % of the kernel's time (8 calls per step, every live
-    register saved around each). Zero, negative, infinite and NaN arguments go to ``np.cbrt``."""
+    (tests/test_sim_kernel_cbrt.py: 2 million arguments over 10⁻³⁰⁰…10³⁰⁰; within 3 ulp of the
+    true root); the library call it replaces cost the contact loop ≈ 14 % of the kernel's time
+    (8 calls per step, every live register saved around each; docs/diagnosis.md, round 8).
+    Zero, negative, infinite and NaN arguments go to ``np.cbrt``."""
     if not (0.0 < x < 1.7976931348623157e308):
         return np.cbrt(x)
     xm = x
