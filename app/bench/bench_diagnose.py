@@ -23,9 +23,7 @@ from railval.core import lazy
 
 #: deferred (railval.core.lazy): ``railval bench`` (the list) imports every benchmark module for its
 #: docstring; what the benchmark runs loads when it runs (in a Dask worker too: ``_warm_worker``)
-evaluate_section = lazy.function("railval.core.en14363", "evaluate_section")
-sim = lazy.module("railval.core.sim")
-SectionInfo = lazy.function("railval.core.types", "SectionInfo")
+forkserver_warm = lazy.module("railval.app.services.forkserver_warm")
 dask_distributed = lazy.module("dask.distributed")
 diagnose = lazy.function("railval.app.services.diagnosis", "diagnose")
 calibrate = lazy.function("railval.app.services.calibration", "calibrate")
@@ -45,13 +43,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _warm_worker() -> bool:
-    """Run on every Dask worker before it is timed: import the simulator and the EN chain and
-    load their compiled kernels (one short section simulated and evaluated)."""
-    track = sim.TrackSection("W", speed_kmh=80, radius_m=400, cant_mm=100, straight_in_m=100, transition_in_m=50,
-                         curve_m=150, transition_out_m=50, straight_out_m=100, seed=1)
-    ss = sim.simulate_section(sim.VehicleModel("coach"), track, {}, fs_out=200.0)
-    evaluate_section(ss, SectionInfo("W", 400, 100, 80, 3, 160.0, 290.0))
-    return True
+    """Run on every Dask worker before it is timed: the simulator's and the EN chain's compiled
+    kernels loaded by the same short campaign run the server's forkserver makes
+    (:mod:`railval.app.services.forkserver_warm`; its import runs it once, the call once more)."""
+    return forkserver_warm.warm_kernels() > 0
 
 
 def dask_scaling(database, values: int) -> tuple[dict, list]:

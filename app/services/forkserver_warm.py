@@ -13,7 +13,8 @@ does (simulate, EN values, validation, band powers); run in the forkserver, ever
 forks starts with the kernels in memory.
 
 Importing this module runs :func:`warm_kernels`: the forkserver's preload list takes module
-names only, so this module exists to be named there (and is imported by nothing else).
+names only, so this module exists to be named there (and the Dask bench's worker warm-up,
+``railval.app.bench.bench_diagnose._warm_worker``, calls :func:`warm_kernels`).
 """
 
 from __future__ import annotations
