@@ -3,6 +3,8 @@ real Dask distributed cluster (``LocalCluster`` with 2 worker processes)."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -78,6 +80,29 @@ def test_dask_local_cluster_equals_serial(serial_results):
             squares = ex.map(np.square, [1.0, 2.0, 3.0])
     _same(serial_results, got)
     assert squares == [1.0, 4.0, 9.0]
+
+
+def _blob_task(job):
+    blob, k = job
+    return len(blob), blob[:4], k
+
+
+def test_broadcast_sends_a_large_object_to_the_workers_once_not_inside_each_task():
+    """The diagnosis's families get their 19 MiB of evidence this way: on Dask a future that every
+    task's argument resolves (the object does not travel inside each task through the scheduler:
+    no "Sending large graph" warning), elsewhere the object itself."""
+    distributed = pytest.importorskip("dask.distributed")
+    blob = b"rail" + bytes(12 * 2**20)
+    with BatchExecutor("serial") as ex:
+        assert ex.broadcast(blob) is blob
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0") as cluster, BatchExecutor(cluster.scheduler_address) as ex, \
+            warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        ref = ex.broadcast(blob)
+        got = ex.map(_blob_task, [(ref, k) for k in range(4)])
+    assert got == [(len(blob), b"rail", k) for k in range(4)]
+    assert not [w for w in seen if "large graph" in str(w.message)], [str(w.message) for w in seen]
 
 
 def test_executor_is_a_differential_evolution_workers_map():

@@ -140,6 +140,16 @@ class BatchExecutor:
             self._shared = (shared, ref)
         return self._shared[1]
 
+    def broadcast(self, obj: Any) -> Any:
+        """``obj`` made ready for several tasks' arguments: on Dask scattered once to the workers
+        (``Client.scatter(broadcast=True)``; a worker lacking it fetches it from another; a task's
+        argument holding the future receives the object) instead of travelling inside each task's
+        description through the scheduler; the object itself on the other back ends (a pool
+        pickles it with each task)."""
+        if self.backend != "dask":
+            return obj
+        return self._dask_client().scatter(obj, broadcast=True, hash=False)
+
     # -- work
     def start(self, shared: Any = None) -> None:
         """Start the workers now, in the calling thread, holding ``shared`` for later
