@@ -574,7 +574,7 @@ def _ranked(ex: Any, base: SectionEvidence, fams: list[CandidateFamily], validat
             # a family missing from FAMILY_SPLIT (one added later) goes with the last part
             rest = tuple(n for n in QUANTITY_FAMILIES if not any(n in part for part in FAMILY_SPLIT))
             split = [*FAMILY_SPLIT[:-1], FAMILY_SPLIT[-1] + rest]
-            ref = ex.broadcast(blob)  # Dask: to each worker once, not inside each task through the scheduler
+            ref = ex.broadcast(blob)  # Dask: scattered once, not inside each task through the scheduler
             parts.extend(ex.map(_families_task, [(ref, names) for names in split]))
         except BaseException as exc:  # noqa: BLE001 - raised again in the calling thread
             failed.append(exc)
