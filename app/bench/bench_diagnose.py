@@ -8,6 +8,9 @@ and the speed-up printed (``--no-dask``: skipped); the three diagnoses must agre
 
 Baseline measured in the same run: one simulation + evaluation of the whole campaign (the unit
 of work both jobs repeat), so the figures can be read as "number of campaign simulations".
+The diagnosis's CPU seconds — its calling process's and its pool workers' (forked children,
+joined when it ends) — and the cores they kept busy on average: at the machine's core count the
+diagnosis is CPU-bound and only less CPU makes it faster.
 The campaign is synthesised into a temporary SQLite database (or ``--db``) with a hidden effect.
 """
 
@@ -15,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -31,6 +35,7 @@ evaluate_effects = lazy.function("railval.app.services.campaign_context", "evalu
 load_context = lazy.function("railval.app.services.campaign_context", "load_context")
 synth = lazy.function("railval.app.services.synth", "synth")
 repo = lazy.module("railval.db.repo")
+start_context = lazy.function("railval.app.services.batch", "start_context")
 connect = lazy.function("railval.db.engine", "connect")
 
 
@@ -47,6 +52,14 @@ def _warm_worker() -> bool:
     kernels loaded by the same short campaign run the server's forkserver makes
     (:mod:`railval.app.services.forkserver_warm`; its import runs it once, the call once more)."""
     return forkserver_warm.warm_kernels() > 0
+
+
+def _cpu() -> tuple[float, float]:
+    """CPU seconds (user + system) of this process and of its ended child processes: the pool's
+    workers are forked children, joined when the diagnosis closes its pool, so the difference
+    around a diagnosis is its calling process's and its workers' CPU time."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime, kids.ru_utime + kids.ru_stime
 
 
 def dask_scaling(database, values: int) -> tuple[dict, list]:
@@ -87,10 +100,15 @@ def run(args: argparse.Namespace) -> dict:
         t0 = time.perf_counter()
         evaluate_effects((ctx, effects, {}))
         t_one = time.perf_counter() - t0
-        t0 = time.perf_counter()
+        # the workers' CPU is read as this process's ended children's: true for forked workers only
+        # (a forkserver's workers are its children, not this process's)
+        forked = scheduler is None and start_context().get_start_method() == "fork"
+        t0, (own0, kids0) = time.perf_counter(), _cpu()
         diag = diagnose(database, "bench", "baseline", scheduler=scheduler, workers=workers,
                         values_per_parameter=values)
         t_diag = time.perf_counter() - t0
+        own1, kids1 = _cpu()
+        cpu_diag = {"calling_process": round(own1 - own0, 2), "workers": round(kids1 - kids0, 2)}
         first = diag.candidates[0]
         hidden = next((c for c in diag.candidates if c.name == effect), first)
         t0 = time.perf_counter()
@@ -112,6 +130,9 @@ def run(args: argparse.Namespace) -> dict:
         "diagnose_simulations": diag.simulations,
         "diagnose_target_s": 5,
         "diagnose_simulations_per_s": round(diag.simulations / t_diag, 2),
+        # CPU-bound when cores_busy ≈ the machine's cores: then only less CPU makes it faster
+        "diagnose_cpu_s": cpu_diag if forked else {"calling_process": cpu_diag["calling_process"]},
+        "diagnose_cores_busy": round(sum(cpu_diag.values()) / t_diag, 2) if forked else None,
         "diagnose_candidates": len(diag.candidates),
         "diagnose_verdict": diag.verdict,
         "diagnose_top": first.name,
