@@ -41,7 +41,8 @@ def _db(args: argparse.Namespace):
 def _cmd_diagnose(args: argparse.Namespace) -> int:
     res = diagnosis_service.diagnose(_db(args), args.campaign, args.config, progress=Progress(), scheduler=args.scheduler,
                                      values_per_parameter=args.values, effects=args.candidates,
-                                     **({"include_parameters": False} if args.no_parameters else {}))
+                                     **({"include_parameters": False} if args.no_parameters else {}),
+                                     **({"screen": args.screen} if args.screen is not None else {}))
     if args.json:
         emit_json(res.to_dict())
         return 0
@@ -173,6 +174,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(default: every effect of the library not in NAME and the template's parameters)")
     p.add_argument("--no-parameters", action="store_true",
                    help="try the effects only, not the vehicle template's parameters")
+    p.add_argument("--screen", type=int, default=None, metavar="K",
+                   help="screened diagnosis: simulate every effect and parameter candidate on 4 sections "
+                        "(one per test zone first), then only the K that explain most there on the whole "
+                        "campaign; the others are listed, not ranked (about half the simulation; "
+                        "docs/diagnosis.md \"Screened diagnosis\")")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_diagnose)
 

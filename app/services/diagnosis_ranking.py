@@ -24,6 +24,7 @@ record; splitting the steps over modules would pass that record across module bo
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import pickle
@@ -88,6 +89,7 @@ from railval.core.diagnosis.measurement import (
     group_gain_family,
     group_gain_reevaluations,
 )
+from railval.core.diagnosis.screen import SCREEN_SECTIONS, check_keep, screen_order, screen_sections
 from railval.core.diagnosis.support import apply_interface_rule, cause_pool, outside_support
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import EFFECTS, Effect, is_neutral, unmet_requirement
@@ -165,12 +167,16 @@ def parameter_plan(ctx: Any, conf_params: Mapping[str, float]) -> list[dict[str,
 def _evaluate_sections(ctx: Any, job: tuple[dict, dict]) -> tuple[list[dict], dict[str, dict[str, np.ndarray]]]:
     """Worker task: simulate the campaign ``ctx`` (shared once per worker,
     :meth:`railval.app.services.batch.BatchExecutor.map`) with the job's ``effects`` and model
-    ``parameters``; return the validation pairs (section, zone, quantity, position, D_norm) and
+    ``parameters`` (a third item: the ids of the only sections to simulate, a screen's);
+    return the validation pairs (section, zone, quantity, position, D_norm) and
     the band powers per section and acceleration channel (one Welch call for all sections). Each run
     stops at the evaluated range's end plus the EN filters' run-out
     (:func:`railval.app.services.campaign_context.evaluated_span_end`): the band powers cover
     that span, as :func:`measured_section_bands` does on the measured side."""
-    effects, parameters = job
+    effects, parameters, *only = job
+    if only and only[0] is not None:  # a screen's or the rest's sections (each section is its own run)
+        keep = set(only[0])
+        ctx = dataclasses.replace(ctx, sections=[s for s in ctx.sections if s.id in keep])
     sets = simulate_context(ctx, effects, parameters, evaluated_only=True)
     vr = validate_values(ctx, section_values(sets, ctx.sections))
     pairs = _records(vr.pairs, ("section", "zone", "quantity", "position", "D_norm", "M", "S"))
@@ -219,7 +225,7 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
              parameters: Sequence[str] | None = None, include_parameters: bool = True,
              measurement: bool | Sequence[str] = True,
              workers: int | None = None, n_boot: int = 100, folds: int = 3, refine: int = 3,
-             seed: int = 0) -> DiagnosisResult:
+             seed: int = 0, screen: int | None = None) -> DiagnosisResult:
     """Rank the effects missing from ``config`` and the template parameters that may be mis-set
     by the share of the residual they explain on held-out sections, with noise floor,
     plausibility, identifiability and a verdict (module docstring;
@@ -228,8 +234,10 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
     :mod:`railval.core.diagnosis.measurement` — all, none or those named; ``offset CHANNEL``
     only when named;
     ``parameters``: template names or ``model.NAME``; ``include_parameters=False``:
-    effects only). Steps: load, simulate the candidates, build their evidence, refine the
-    best parameter candidates, score (:func:`_score`)."""
+    effects only). ``screen``: simulate every effect and parameter candidate on a few sections
+    first and only the ``screen`` best on the whole campaign (:func:`_simulate_screened`; the
+    others are listed in ``result.screen``, not ranked). Steps: load, simulate the candidates,
+    build their evidence, refine the best parameter candidates, score (:func:`_score`)."""
     _report(progress, "load", 0.0, campaign=getattr(campaign, "name", campaign), config=config_name(config))
     req = _load(database_or_session, campaign, config, effects, parameters, include_parameters, measurement)
     ctx, config = req.ctx, req.config
@@ -238,11 +246,21 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
     tasks, index = _tasks(req, values_per_parameter)
     total = len(tasks) + (refine if req.plan else 0)
     _report(progress, "simulate", 0.05, tasks=total)
+    screened = screen is not None and _screenable(req, index, check_keep(screen))
     with BatchExecutor(scheduler, workers) as ex:
-        sims = _simulate(ex, req, tasks, index, vr, measurement, _Refinement(refine, folds, seed), lambda d, t: _report(
-            progress, "simulate", 0.05 + 0.8 * (d + 1) / total, done=d + 1, total=total))
+        if screened:
+            sims, index, screen_info = _simulate_screened(
+                ex, req, tasks, index, vr, measurement, _Refinement(refine, folds, seed), screen,
+                lambda lo, hi: lambda d, t: _report(progress, "simulate", lo + (hi - lo) * (d + 1) / max(t, 1),
+                                                    done=d + 1, total=t))
+        else:
+            sims = _simulate(ex, req, tasks, index, vr, measurement, _Refinement(refine, folds, seed),
+                             lambda d, t: _report(progress, "simulate", 0.05 + 0.8 * (d + 1) / total, done=d + 1,
+                                                  total=total))
         base, fams = _candidates(req, sims.results, index, vr, sims.base, sims.measured, sims.made)
         n_sim = len(tasks) + _refine(req, base, fams, sims.redo, sims.refined)
+        if screened:
+            n_sim = math.ceil(screen_info["section_runs"] / len(ctx.sections))
         _report(progress, "score", 0.9)
         res = _score(base, fams, bool(vr.validated), req.template, n_boot=n_boot, folds=folds, seed=seed, ex=ex)
     res.campaign, res.configuration, res.validated = ctx.campaign, config, bool(vr.validated)
@@ -252,6 +270,13 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
     res.stored_residual_norm = math.sqrt(stored_residual.norm2())
     res.simulated_residual_norm = math.sqrt(res.residual.norm2())
     res.effects_simulated = sorted(req.in_config)
+    if screen is not None:
+        res.screen = screen_info if screened else {"applied": False, "kept": screen, "reason": (
+            f"{len(ctx.sections)} sections, {len({x[1] for x in index})} simulated candidates: nothing to screen")}
+        if screened:
+            res.note += (f"; screened: {screen} of {screen_info['candidates']} simulated candidates kept after "
+                         f"{len(screen_info['sections'])} sections ({', '.join(screen_info['sections'])}), the "
+                         "others not ranked; noise floor over the kept and the measurement candidates")
     res.skipped = req.conf_skipped + req.skipped
     if req.skipped and not fams:
         res.note += "; left out: " + "; ".join(f"{s['name']} ({s['reason']})" for s in req.skipped)
@@ -399,6 +424,76 @@ def _simulate(ex: Any, req: _Request, tasks: list[tuple], index: Sequence[tuple]
     return _Simulated([first, *rest], base, measured, made, redo, refined)
 
 
+def _simulate_screened(ex: Any, req: _Request, tasks: list[tuple], index: Sequence[tuple], vr: Any,
+                       measurement: bool | Sequence[str], refine: _Refinement, keep: int,
+                       stage: Any) -> tuple[_Simulated, list[tuple], dict[str, Any]]:
+    """The screened diagnosis's simulations (docs/diagnosis.md "Screened diagnosis",
+    :mod:`railval.core.diagnosis.screen`): every candidate run on the screen sections while this
+    thread simulates the configuration on every section and builds the measurement candidates;
+    then the ``keep`` candidates that explain most on the screen on the other sections (each
+    section is its own run, so a kept candidate's runs are those of the whole diagnosis), then
+    the refinement among the kept parameter candidates. Returns what :func:`_simulate` returns,
+    the index of the kept candidates' values and the screen's record. ``stage(lo, hi)``: a
+    progress callback ``(done, total)`` over that part of the progress bar."""
+    sections = [(s.id, int(s.zone)) for s in req.ctx.sections]
+    on = screen_sections(sections)
+    rest = [sid for sid, _ in sections if sid not in set(on)]
+    ex.start(shared=req.ctx)
+    handles = ex.submit(_evaluate_sections, [(*tasks[k], on) for k in range(1, len(tasks))], shared=req.ctx)
+    first = _evaluate_sections(req.ctx, tasks[0])
+    base = section_evidence(first[0], first[1], req.meas_bands, sections, value_key="D_norm")
+    measured = _measurement_families(req, first, base, sections, vr, measurement) if measurement else {}
+    part = [first, *ex.gather(handles, progress=stage(0.05, 0.4))]
+    kept, out = _screen(req, index, part, base, on, bool(vr.validated), refine, keep)
+    later = sorted({k for _kind, name, *_, k in index if name in kept and k})
+    whole = ex.gather(ex.submit(_evaluate_sections, [(*tasks[k], rest) for k in later], shared=req.ctx),
+                      progress=stage(0.4, 0.75))
+    merged = {k: (part[k][0] + w[0], {**part[k][1], **w[1]}) for k, w in zip(later, whole, strict=True)}
+    results = [first] + [merged.get(k) for k in range(1, len(tasks))]
+    index = [x for x in index if x[1] in kept]
+    made = {k: section_evidence(*results[k], req.meas_bands, sections, value_key="D_norm", like=base)
+            for kind, *_, k in index if kind == "parameter"}
+    redo = _refinement(req, base, index, made, bool(vr.validated), refine)
+    refined = ex.gather(ex.submit(_evaluate_sections, [(req.in_config, {**req.conf_params, p: v}) for p, v in redo],
+                                  shared=req.ctx), progress=stage(0.75, 0.85))
+    info = {"applied": True, "kept": keep, "sections": on, "candidates": len(kept) + len(out),
+            "screened_out": out,
+            "section_runs": (len(tasks) - 1) * len(on) + len(later) * len(rest) + (1 + len(redo)) * len(sections),
+            "section_runs_whole": (len(tasks) + len(redo)) * len(sections)}
+    return _Simulated(results, base, measured, made, redo, refined), index, info
+
+
+def _screen(req: _Request, index: Sequence[tuple], part: Sequence[tuple], base: SectionEvidence,
+            on: Sequence[str], validated: bool, refine: _Refinement, keep: int) -> tuple[set[str], list[dict]]:
+    """(names kept, the screened-out candidates with their shares on the screen): the
+    candidates' families on the screen sections ``on`` (``part[k]``: task ``k``'s runs there, the
+    configuration's ``part[0]`` on every section), ordered by
+    :func:`railval.core.diagnosis.screen.screen_order`; a candidate that moves nothing on the
+    screen is screened out with share 0."""
+    sections = [(s.id, int(s.zone)) for s in req.ctx.sections if s.id in set(on)]
+    made: dict[int, SectionEvidence] = {}
+
+    def evidence(k: int) -> SectionEvidence:
+        if k not in made:
+            made[k] = section_evidence(part[k][0], part[k][1], req.meas_bands, sections, value_key="D_norm", like=base)
+        return made[k]
+
+    fams = list(_families(req, index, evidence, evidence(0)).values())
+    blind = _without_effect(evidence(0), fams)
+    fams = _best_per_effect(evidence(0), [f for f in fams if f not in blind], validated)
+    kept, out = screen_order(evidence(0), fams, keep, validated=validated, folds=refine.folds, seed=refine.seed)
+    ranked = set(kept) | {x["name"] for x in out}
+    out += [{"name": name, "kind": kind, "explained_on_screen": 0.0, "held_out_on_screen": 0.0}
+            for name, kind in dict.fromkeys((f.name, f.kind) for f in blind if f.name not in ranked)]
+    return set(kept), out
+
+
+def _screenable(req: _Request, index: Sequence[tuple], keep: int) -> bool:
+    """Whether a screen keeping ``keep`` candidates leaves anything out: more sections than a
+    screen simulates and more simulated candidates than it keeps."""
+    return len(req.ctx.sections) > SCREEN_SECTIONS and len({x[1] for x in index}) > keep
+
+
 def _refinement(req: _Request, base: SectionEvidence, index: Sequence[tuple], made: Mapping[int, SectionEvidence],
                 validated: bool, refine: _Refinement) -> list[tuple[str, float]]:
     """(template parameter, value) of the ``refine.count`` best parameter candidates whose
@@ -453,6 +548,19 @@ def _candidates(req: _Request, results: Sequence, index: Sequence[tuple], vr: An
                                        like=base)
         return made[k]
 
+    families = _families(req, index, evidence, base)
+    families.update(measured)
+    blind = _without_effect(base, list(families.values()))
+    req.skipped += [{"name": f.name, "kind": f.kind, "reason": "changes none of the quantities the campaign "
+                     "measures at any simulated value"} for f in blind
+                    if not any(s["name"] == f.name for s in req.skipped)]
+    # an effect with several parameters is one candidate: the parameter that explains most
+    return base, _best_per_effect(base, [f for f in families.values() if f not in blind], vr.validated)
+
+
+def _families(req: _Request, index: Sequence[tuple], evidence: Any, base: SectionEvidence) -> dict[str, CandidateFamily]:
+    """The effect families (one per effect parameter) and parameter families of the candidate
+    values in ``index``; ``evidence(k)``: the evidence of task ``k``, ``base`` the configuration's."""
     families: dict[str, CandidateFamily] = {}
     for kind, name, pname, v, defaults, k in index:
         if kind == "effect":
@@ -469,13 +577,7 @@ def _candidates(req: _Request, results: Sequence, index: Sequence[tuple], vr: An
             families[key].evidence.append(evidence(k))
         else:
             families[name] = _parameter_family(req, name, v, base, evidence(k))
-    families.update(measured)
-    blind = _without_effect(base, list(families.values()))
-    req.skipped += [{"name": f.name, "kind": f.kind, "reason": "changes none of the quantities the campaign "
-                     "measures at any simulated value"} for f in blind
-                    if not any(s["name"] == f.name for s in req.skipped)]
-    # an effect with several parameters is one candidate: the parameter that explains most
-    return base, _best_per_effect(base, [f for f in families.values() if f not in blind], vr.validated)
+    return families
 
 
 def _measurement_families(req: _Request, result0: tuple, base: SectionEvidence, sections: list,

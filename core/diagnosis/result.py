@@ -116,7 +116,7 @@ _TYPED: tuple[tuple[str, str], ...] = (
     ("values_per_parameter", "values_per_parameter"), ("simulations", "simulations"),
     ("stored_residual_norm", "stored_residual_norm"), ("simulated_residual_norm", "simulated_residual_norm"),
     ("effects_simulated", "effects_simulated"), ("skipped", "skipped"), ("next_step", "next"), ("run", "run"),
-    ("statements", "statements"), ("lineage", "lineage"),
+    ("statements", "statements"), ("lineage", "lineage"), ("screen", "screen"),
 )
 
 
@@ -165,6 +165,10 @@ class DiagnosisResult:
     #: diagnosed configuration of the lineage, root first) and ``statement``
     #: (:func:`railval.core.diagnosis.lineage.lineage_statement`); filled at every read, not stored
     lineage: dict[str, Any] | None = None
+    #: a screened diagnosis (``rank_causes(screen=K)``, docs/diagnosis.md "Screened diagnosis"):
+    #: ``applied``, ``kept``, the screen ``sections``, ``screened_out`` (name, kind, shares on the
+    #: screen) and the section runs made against a whole diagnosis's; ``None``: not screened
+    screen: dict[str, Any] | None = None
 
     def to_dict(self, with_signatures: bool = False) -> dict[str, Any]:
         """Plain dict; ``with_signatures`` adds the residual's components (``labels``,

@@ -1,0 +1,99 @@
+"""The screened diagnosis (issue 41, docs/diagnosis.md "Screened diagnosis"): every effect and
+parameter candidate simulated on the screen sections first, the best ``screen`` of them on the
+rest of the campaign. A kept candidate's runs must be those of the whole diagnosis (each section
+is its own run), so its shares and fitted value equal the whole diagnosis's exactly; the others
+are listed with their shares on the screen; bad ``screen`` values are refused by name."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from railval.app.services import diagnosis_ranking as ranking
+from railval.app.services.campaign_context import load_context
+from railval.core.diagnosis.screen import check_keep, screen_sections
+from railval.core.errors import InvalidParameter
+
+PARAMETERS = ["model.c_secondary_z", "model.k_secondary_z", "model.m_carbody", "model.c_yaw_damper",
+              "model.k_primary_y"]
+KW = {"effects": ["conicity", "friction_damping", "lateral_bumpstop"], "parameters": PARAMETERS,
+      "values_per_parameter": 2, "measurement": False, "n_boot": 20, "refine": 2}
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory):
+    from railval.app.services.synth import synth
+    from railval.db.engine import connect
+
+    db = connect(f"sqlite:///{tmp_path_factory.mktemp('screen') / 'screen.db'}")
+    db.init()
+    synth(db, name="demo", template="coach", hidden=["friction_damping"], seed=5, n_sections=12)
+    yield db
+    db.dispose()
+
+
+def test_screen_sections_cover_every_zone_first_and_keep_campaign_order():
+    secs = [("A", 1), ("B", 1), ("C", 2), ("D", 3), ("E", 3), ("F", 4), ("G", 2)]
+    assert screen_sections(secs, 4) == ["A", "C", "D", "F"]
+    assert screen_sections(secs, 6) == ["A", "B", "C", "D", "F", "G"]  # then the second of zones 1, 2, …
+    assert screen_sections(secs, 2) == ["A", "C"]
+    assert screen_sections(secs[:3], 4) == ["A", "B", "C"]
+
+
+@pytest.mark.parametrize("bad", [0, -3, True, 2.5, "8", None])
+def test_a_bad_screen_is_refused_by_name(bad):
+    with pytest.raises(InvalidParameter, match="screen"):
+        check_keep(bad)
+
+
+def test_runs_on_a_screen_and_on_the_rest_are_the_whole_run(campaign):
+    """Each section is its own run: the screen's and the rest's validation pairs and band powers
+    together are the whole campaign run's, bit for bit, section by section."""
+    with campaign.session() as s:
+        ctx = load_context(s, "demo")
+    job = ({"conicity": {"conicity": 0.3}}, {"c_secondary_z": 15000.0})
+    ids = [(x.id, int(x.zone)) for x in ctx.sections]
+    on = screen_sections(ids)
+    rest = [sid for sid, _ in ids if sid not in on]
+    whole = ranking._evaluate_sections(ctx, job)
+    a = ranking._evaluate_sections(ctx, (*job, on))
+    b = ranking._evaluate_sections(ctx, (*job, rest))
+    assert {r["section"] for r in a[0]} == set(on) and {r["section"] for r in b[0]} == set(rest)
+    for sid, _ in ids:
+        mine = [r for r in a[0] + b[0] if r["section"] == sid]
+        theirs = [r for r in whole[0] if r["section"] == sid]
+        assert mine == theirs, sid
+        got = {**a[1], **b[1]}[sid]
+        assert got.keys() == whole[1][sid].keys()
+        for ch in got:
+            assert np.array_equal(got[ch], whole[1][sid][ch]), (sid, ch)
+
+
+def test_screened_diagnosis_keeps_the_whole_diagnosis_figures_of_its_candidates(campaign):
+    whole = ranking.rank_causes(campaign, "demo", "baseline", workers=2, **KW)
+    screened = ranking.rank_causes(campaign, "demo", "baseline", workers=2, screen=4, **KW)
+    info = screened.screen
+    assert info["applied"] and info["kept"] == 4 and len(info["sections"]) == 4
+    kept = {c.name for c in screened.candidates}
+    out = {x["name"] for x in info["screened_out"]}
+    assert len(kept) == 4 and not kept & out
+    assert kept | out == {c.name for c in whole.candidates}  # every simulated candidate: kept or listed
+    by_name = {c.name: c for c in whole.candidates}
+    for c in screened.candidates:  # the same runs → the same fit, shares and intervals
+        w = by_name[c.name]
+        assert (c.explained, c.held_out_explained, c.fitted, c.explained_ci) == \
+               (w.explained, w.held_out_explained, w.fitted, w.explained_ci), c.name
+    assert screened.candidates[0].name == whole.candidates[0].name == "friction_damping"
+    assert screened.verdict == whole.verdict
+    assert info["section_runs"] < info["section_runs_whole"]
+    assert screened.simulations < whole.simulations
+    assert "screened: 4 of" in screened.note
+    # the order on the screen: no screened-out candidate explains more there than the last kept
+    assert all(x["explained_on_screen"] <= 1.0 for x in info["screened_out"])
+    assert whole.screen is None and "screen" not in whole.to_dict()
+
+
+def test_a_screen_that_would_leave_nothing_out_runs_the_whole_diagnosis(campaign):
+    res = ranking.rank_causes(campaign, "demo", "baseline", workers=1, screen=50, **KW)
+    assert res.screen["applied"] is False and "nothing to screen" in res.screen["reason"]
+    assert res.to_dict()["screen"]["kept"] == 50
