@@ -6,6 +6,8 @@ are listed with their shares on the screen; bad ``screen`` values are refused by
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -97,3 +99,22 @@ def test_a_screen_that_would_leave_nothing_out_runs_the_whole_diagnosis(campaign
     res = ranking.rank_causes(campaign, "demo", "baseline", workers=1, screen=50, **KW)
     assert res.screen["applied"] is False and "nothing to screen" in res.screen["reason"]
     assert res.to_dict()["screen"]["kept"] == 50
+
+
+def _doc(res) -> str:
+    d = res.to_dict()
+    d.pop("run", None)
+    return json.dumps(d, sort_keys=True, default=str)
+
+
+def test_screened_diagnosis_is_the_same_serial_pooled_and_on_a_dask_cluster(campaign):
+    """The screen's two stages and the refinement handed over in turn give one result whatever
+    runs them: every run in the calling thread, a process pool, a Dask LocalCluster."""
+    distributed = pytest.importorskip("distributed")
+    serial = ranking.rank_causes(campaign, "demo", "baseline", workers=1, screen=4, **KW)
+    pooled = ranking.rank_causes(campaign, "demo", "baseline", workers=2, screen=4, **KW)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
+            distributed.Client(cluster) as client:
+        dask = ranking.rank_causes(campaign, "demo", "baseline", scheduler=client, screen=4, **KW)
+    assert serial.screen["applied"]
+    assert _doc(serial) == _doc(pooled) == _doc(dask)

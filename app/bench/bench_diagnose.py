@@ -8,7 +8,9 @@ and the speed-up printed (``--no-dask``: skipped); the three diagnoses must agre
 
 Baseline measured in the same run: one simulation + evaluation of the whole campaign (the unit
 of work both jobs repeat), so the figures can be read as "number of campaign simulations".
-The diagnosis's CPU seconds — its calling process's and its pool workers' (forked children,
+The screened diagnosis (``--screen K``: every candidate on 4 sections first, the K best on the
+rest) is timed beside it and checked against it: verdict, top candidate, cause set, the kept
+candidates' held-out shares. The diagnosis's CPU seconds — its calling process's and its pool workers' (forked children,
 joined when it ends) — and the cores they kept busy on average: at the machine's core count the
 diagnosis is CPU-bound and only less CPU makes it faster.
 The campaign is synthesised into a temporary SQLite database (or ``--db``) with a hidden effect.
@@ -45,6 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scheduler", default=None, help="Dask scheduler address instead of the pool")
     parser.add_argument("--values", type=int, default=3, help="diagnose: values per parameter (default 3)")
     parser.add_argument("--no-dask", action="store_true", help="skip the LocalCluster runs with 1 and 2 workers")
+    parser.add_argument("--screen", type=int, default=8, metavar="K",
+                        help="also the screened diagnosis keeping K candidates (default 8; 0: skip)")
 
 
 def _warm_worker() -> bool:
@@ -60,6 +64,28 @@ def _cpu() -> tuple[float, float]:
     around a diagnosis is its calling process's and its workers' CPU time."""
     own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime, kids.ru_utime + kids.ru_stime
+
+
+def screened_diagnosis(database, whole, keep: int, scheduler, workers: int, values: int, forked: bool) -> dict:
+    """The screened diagnosis (``screen=keep``, docs/diagnosis.md "Screened diagnosis") of the
+    same configuration: seconds, CPU, section runs against the whole diagnosis's, and whether its
+    verdict, top candidate, cause set and the kept candidates' held-out shares equal ``whole``'s."""
+    if not keep:
+        return {}
+    t0, (own0, kids0) = time.perf_counter(), _cpu()
+    d = diagnose(database, "bench", "baseline", scheduler=scheduler, workers=workers, values_per_parameter=values,
+                 screen=keep)
+    wall = time.perf_counter() - t0
+    own1, kids1 = _cpu()
+    held = {c.name: c.held_out_explained for c in whole.candidates}
+    causes = [[c["name"] for c in r.causes or []] for r in (whole, d)]
+    cpu = {"calling_process": round(own1 - own0, 2), "workers": round(kids1 - kids0, 2)}
+    return {"diagnose_screened_s": round(wall, 2), "diagnose_screened_kept": keep,
+            "diagnose_screened_cpu_s": cpu if forked else {"calling_process": cpu["calling_process"]},
+            "diagnose_screened_section_runs": [d.screen.get("section_runs"), d.screen.get("section_runs_whole")],
+            "diagnose_screened_same_verdict_top_causes": (d.verdict, d.candidates[0].name, causes[1])
+            == (whole.verdict, whole.candidates[0].name, causes[0]),
+            "diagnose_screened_kept_shares_equal": all(held[c.name] == c.held_out_explained for c in d.candidates)}
 
 
 def dask_scaling(database, values: int) -> tuple[dict, list]:
@@ -111,6 +137,7 @@ def run(args: argparse.Namespace) -> dict:
         cpu_diag = {"calling_process": round(own1 - own0, 2), "workers": round(kids1 - kids0, 2)}
         first = diag.candidates[0]
         hidden = next((c for c in diag.candidates if c.name == effect), first)
+        screened = screened_diagnosis(database, diag, getattr(args, "screen", 8), scheduler, workers, values, forked)
         t0 = time.perf_counter()
         cal = calibrate(database, "bench", "baseline", [effect], "calibrated", scheduler=scheduler,
                         workers=workers, start={effect: hidden.parameters})
@@ -138,6 +165,7 @@ def run(args: argparse.Namespace) -> dict:
         "diagnose_top": first.name,
         "diagnose_explained": round(first.explained, 3),
         "diagnose_held_out": round(first.held_out_explained, 3),
+        **screened,
         "calibrate_s": round(t_cal, 2),
         "calibrate_simulations": cal.n_evaluations + 1,
         "calibrate_target_s": 10,

@@ -445,17 +445,20 @@ def _simulate_screened(ex: Any, req: _Request, tasks: list[tuple], index: Sequen
     measured = _measurement_families(req, first, base, sections, vr, measurement) if measurement else {}
     part = [first, *ex.gather(handles, progress=stage(0.05, 0.4))]
     kept, out = _screen(req, index, part, base, on, bool(vr.validated), refine, keep)
-    later = sorted({k for _kind, name, *_, k in index if name in kept and k})
-    whole = ex.gather(ex.submit(_evaluate_sections, [(*tasks[k], rest) for k in later], shared=req.ctx),
-                      progress=stage(0.4, 0.75))
-    merged = {k: (part[k][0] + w[0], {**part[k][1], **w[1]}) for k, w in zip(later, whole, strict=True)}
-    results = [first] + [merged.get(k) for k in range(1, len(tasks))]
     index = [x for x in index if x[1] in kept]
-    made = {k: section_evidence(*results[k], req.meas_bands, sections, value_key="D_norm", like=base)
-            for kind, *_, k in index if kind == "parameter"}
-    redo = _refinement(req, base, index, made, bool(vr.validated), refine)
-    refined = ex.gather(ex.submit(_evaluate_sections, [(req.in_config, {**req.conf_params, p: v}) for p, v in redo],
-                                  shared=req.ctx), progress=stage(0.75, 0.85))
+    params = [k for kind, *_, k in index if kind == "parameter"]
+    later = params + sorted({k for *_, k in index if k} - set(params))  # parameters first, as _simulate
+    handles = ex.submit(_evaluate_sections, [(*tasks[k], rest) for k in later], shared=req.ctx)
+    merged = {k: (part[k][0] + w[0], {**part[k][1], **w[1]})
+              for k, w in zip(params, ex.gather(handles[:len(params)]), strict=True)}
+    made = {k: section_evidence(*merged[k], req.meas_bands, sections, value_key="D_norm", like=base) for k in params}
+    redo = _refinement(req, base, index, made, bool(vr.validated), refine)  # while the effects' runs go on
+    more = ex.submit(_evaluate_sections, [(req.in_config, {**req.conf_params, p: v}) for p, v in redo],
+                     shared=req.ctx)
+    merged.update({k: (part[k][0] + w[0], {**part[k][1], **w[1]}) for k, w in zip(
+        later[len(params):], ex.gather(handles[len(params):], progress=stage(0.4, 0.75)), strict=True)})
+    results = [first] + [merged.get(k) for k in range(1, len(tasks))]
+    refined = ex.gather(more, progress=stage(0.75, 0.85))
     info = {"applied": True, "kept": keep, "sections": on, "candidates": len(kept) + len(out),
             "screened_out": out,
             "section_runs": (len(tasks) - 1) * len(on) + len(later) * len(rest) + (1 + len(redo)) * len(sections),
