@@ -432,6 +432,18 @@ class DiagnosisView:
         return [Named.of(s) for s in self.result.skipped or []]
 
     @property
+    def screened_out(self) -> list[Named]:
+        """The candidates a screened diagnosis did not rank (``result.screen``), each with the
+        share of the residual it explains on the screen sections (in-sample)."""
+        return [Named(str(x["name"]), f"{float(x['explained_on_screen']):.0%} on the screen", str(x.get("kind") or ""))
+                for x in (self.result.screen or {}).get("screened_out") or []]
+
+    @property
+    def screen_sections(self) -> list[str]:
+        """The sections every candidate of a screened diagnosis was simulated on."""
+        return [str(s) for s in (self.result.screen or {}).get("sections") or []]
+
+    @property
     def unexplained(self) -> list[tuple[str, float]]:
         """(component, residual) of what the best candidate leaves (largest first)."""
         return [(str(u["component"]), float(u["residual"])) for u in self.result.unexplained]

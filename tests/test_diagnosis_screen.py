@@ -118,3 +118,45 @@ def test_screened_diagnosis_is_the_same_serial_pooled_and_on_a_dask_cluster(camp
         dask = ranking.rank_causes(campaign, "demo", "baseline", scheduler=client, screen=4, **KW)
     assert serial.screen["applied"]
     assert _doc(serial) == _doc(pooled) == _doc(dask)
+
+
+def test_the_diagnose_page_runs_a_screened_diagnosis_and_lists_what_it_screened_out(campaign, monkeypatch):
+    """The page's "Screened" box hands ``screen`` = SCREEN_KEEP to the service (unticked: no
+    screen), and the page says which candidates the screen left out, with their shares."""
+    import panel as pn
+
+    from railval.app.pages.diagnose import DiagnosePage
+    from railval.app.state import AppState, Backend
+    from railval.core.diagnosis.screen import SCREEN_KEEP
+
+    app = AppState(Backend(campaign))
+    page = DiagnosePage(app)
+    seen: list[dict] = []
+    real = app.backend.diagnose_and_list
+
+    def spy(c, k, progress=None, **kw):
+        seen.append(dict(kw))
+        kw.update(effects=KW["effects"] + ["wheel_rail_friction", "parasitic_yaw_stiffness"] + PARAMETERS,
+                  values_per_parameter=2)
+        return real(c, k, progress=progress, **kw)
+    monkeypatch.setattr(app.backend, "diagnose_and_list", spy)
+    page.state.screened = True
+    page.state.run_diagnosis(background=False)
+    assert seen[-1]["screen"] == SCREEN_KEEP
+    res_screen = page.state.view.result.screen
+    assert res_screen["applied"] and len(page.state.candidates) == SCREEN_KEEP + len(
+        [c for c in page.state.view.candidates if c.kind == "measurement"])
+    text = " ".join(o.object for o in page.candidates_box.objects if isinstance(o, pn.pane.Alert))
+    assert "Screened out (simulated on " + ", ".join(res_screen["sections"]) in text
+    for x in res_screen["screened_out"]:
+        assert f"{x['name']} {x['explained_on_screen']:.0%}" in text
+    page.state.screened = False
+    page.state.run_diagnosis(background=False)
+    assert "screen" not in seen[-1]
+    assert page.state.view.result.screen is None
+    assert "Screened out" not in " ".join(o.object for o in page.candidates_box.objects if isinstance(o, pn.pane.Alert))
+
+
+def test_a_bad_screen_is_refused_before_the_campaign_is_read(campaign):
+    with pytest.raises(InvalidParameter, match="screen: .* got 0"):
+        ranking.rank_causes(campaign, "no such campaign", "baseline", screen=0)

@@ -65,6 +65,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
               + (f" — STRUCTURAL: {f.structural_reason}" if f.structural else ""))
     for s in view.skipped:
         print(f"left out: {s.name} ({s.kind}) — {s.reason}")
+    for s in view.screened_out:
+        print(f"screened out (simulated on {', '.join(view.screen_sections)} only): {s.name} ({s.kind}) — {s.reason}")
     if view.verdict == "none" and view.unexplained:
         print("unexplained (largest components): " + "; ".join(
             f"{component} {residual:+.2f}" for component, residual in view.unexplained))

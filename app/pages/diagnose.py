@@ -29,6 +29,7 @@ from railval.app.security import plain_message
 from railval.app.state import AppState, DashboardState, DiagnoseState, unit_label
 from railval.app.svg_charts import svg_paired_hbars
 from railval.app.views import Ancestor, CalibrationOutcome, StoredDiagnosis
+from railval.core.diagnosis.screen import SCREEN_KEEP, SCREEN_SECTIONS
 from railval.core.quantities import QUANTITY_IDS
 
 #: the signature chart's value axis: what the residual is, and that it has no unit
@@ -77,6 +78,10 @@ class DiagnosePage(PageBase):
                                                      name="Candidate effects (none chosen: every missing effect)",
                                                      width=480, css_classes=["rv-candidate-effects"]),
                    bounded_input(st.param.values_per_parameter, "Scan values per parameter", app, width=200)),
+            pn.widgets.Checkbox.from_param(st.param.screened, name=(
+                f"Screened: every candidate on {SCREEN_SECTIONS} sections first, only the {SCREEN_KEEP} best there "
+                "on all (about half the simulation; the others are listed, not ranked)"), width=700,
+                css_classes=["rv-screened"]),
             self.diag_estimate, title="Diagnosis settings", collapsed=True, sizing_mode="stretch_width",
             css_classes=["rv-diag-settings"])
         # population, generations, polish and seed drive the global search only: editable when it is chosen
@@ -215,6 +220,11 @@ class DiagnosePage(PageBase):
         if candidates:
             extra.append(message("Left out (cannot apply to this campaign): " + "; ".join(
                 f"{s.name} — {s.reason}" for s in candidates), "info"))
+        screened = view.screened_out if view is not None else []
+        if screened:
+            extra.append(message(f"Screened out (simulated on {', '.join(view.screen_sections)} only, not ranked; "
+                                 "share of the residual each explains there): " + "; ".join(
+                                     f"{s.name} {s.reason.split(' on ')[0]}" for s in screened), "info"))
         # the verdict first: a reader must not scroll past 20 candidates to learn how sure it is
         # 890 px in all: fits the main area at 1280 px (what it fixes and worsens: below, per candidate);
         # "#" beside its sort arrow and "measurement" in the kind column shown whole (browser test)

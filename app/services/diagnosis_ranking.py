@@ -238,6 +238,7 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
     first and only the ``screen`` best on the whole campaign (:func:`_simulate_screened`; the
     others are listed in ``result.screen``, not ranked). Steps: load, simulate the candidates,
     build their evidence, refine the best parameter candidates, score (:func:`_score`)."""
+    keep = None if screen is None else check_keep(screen)  # refused before anything is read
     _report(progress, "load", 0.0, campaign=getattr(campaign, "name", campaign), config=config_name(config))
     req = _load(database_or_session, campaign, config, effects, parameters, include_parameters, measurement)
     ctx, config = req.ctx, req.config
@@ -246,7 +247,7 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
     tasks, index = _tasks(req, values_per_parameter)
     total = len(tasks) + (refine if req.plan else 0)
     _report(progress, "simulate", 0.05, tasks=total)
-    screened = screen is not None and _screenable(req, index, check_keep(screen))
+    screened = keep is not None and _screenable(req, index, keep)
     with BatchExecutor(scheduler, workers) as ex:
         if screened:
             sims, index, screen_info = _simulate_screened(

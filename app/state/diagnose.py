@@ -13,6 +13,7 @@ from railval.app.services.diagnosis import diagnosis_simulations
 from railval.app.state.app import AppState
 from railval.app.views import DiagnosisView, diagnosis_view_of
 from railval.core.diagnosis import PatternGrid, pattern_grids
+from railval.core.diagnosis.screen import SCREEN_KEEP
 from railval.core.validation import normalised_errors
 
 
@@ -52,6 +53,9 @@ class DiagnoseState(param.Parameterized):
     # calibration settings (app.services.diagnosis.calibrate → core.calibration.calibrate)
     fit_parameters = param.ListSelector(default=[], objects=[], doc=(
         "parameters of the chosen effect to fit; none chosen = all; the others keep the values set"))
+    screened = param.Boolean(default=False, doc=(
+        "screened diagnosis: every candidate on a few sections first, the best SCREEN_KEEP on all "
+        "(docs/diagnosis.md \"Screened diagnosis\")"))
     global_search = param.Boolean(default=False, doc=(
         "calibrate by a global search (differential evolution + local polish) instead of the local "
         "trust-region fit from the diagnosis's values; population, generations and polish apply to it only"))
@@ -194,7 +198,8 @@ class DiagnoseState(param.Parameterized):
         campaign, config = app.campaign, app.configuration
 
         settings = {"values_per_parameter": self.values_per_parameter,
-                    "effects": list(self.candidate_effects) or None}
+                    "effects": list(self.candidate_effects) or None,
+                    **({"screen": SCREEN_KEEP} if self.screened else {})}
         if not app.within_cost_cap("diagnosis", self.diagnosis_simulations()):
             return None
 
