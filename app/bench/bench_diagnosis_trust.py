@@ -49,7 +49,7 @@ passes validation is flagged (plausibility or held-out check).
 Per class also (:func:`class_scores`): named as cause, named in the set, ``uncertain`` with the
 right top, confidently wrong.
 
-``railval bench diagnosis_trust [--cases N] [--classes a b c d e f m g t r w p] [--workers 2] [--calibrate-wrong]``
+``railval bench diagnosis_trust [--cases N] [--classes a b c d e f m g t r w p] [--workers 2] [--screen K] [--calibrate-wrong]``
 """
 
 from __future__ import annotations
@@ -273,6 +273,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="append each case's record to this JSON-lines file as soon as it is done")
     parser.add_argument("--resume", action="store_true",
                         help="take the cases already in --out from there and run only the others")
+    parser.add_argument("--screen", type=int, default=None, metavar="K",
+                        help="run the screened diagnosis keeping K candidates (docs/diagnosis.md)")
     parser.add_argument("--calibrate-wrong", action="store_true",
                         help="calibrate the top candidate where it is wrong (short search, --split) and "
                              "check a pass is flagged")
@@ -280,9 +282,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str, Any], truth: str | None, *,
              workers: int = 2, values: int = 3, oversample: int = 4, calibrate_wrong: bool = False,
-             candidates: list[str] | None = None, n_sections: int = 12) -> dict:
+             candidates: list[str] | None = None, n_sections: int = 12, screen: int | None = None) -> dict:
     """Synthesise, import and diagnose one case; return its record. ``candidates``: restrict
-    the diagnosis (effect ids and ``model.PARAM``; the CI subset uses a few)."""
+    the diagnosis (effect ids and ``model.PARAM``; the CI subset uses a few); ``screen``: the
+    screened diagnosis keeping that many candidates (docs/diagnosis.md "Screened diagnosis")."""
 
     kw = {"seed": 3, "hidden": {}, **kwargs}
     t0 = time.perf_counter()
@@ -292,7 +295,8 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
         import_campaign(database, Path(tmp) / name)
     t_synth = time.perf_counter() - t0
     t0 = time.perf_counter()
-    res = diagnose(database, name, "baseline", workers=workers, values_per_parameter=values, effects=candidates)
+    res = diagnose(database, name, "baseline", workers=workers, values_per_parameter=values, effects=candidates,
+                   **({"screen": screen} if screen else {}))
     t_diag = time.perf_counter() - t0
     d = res.to_dict()
     top = d["candidates"][0] if d["candidates"] else None
@@ -453,7 +457,8 @@ def run(args: argparse.Namespace, progress=None) -> dict:
                 rec = run_case(database, f"trust_{k}{i}", k, label, kwargs, truth,
                                workers=getattr(args, "workers", 2), values=getattr(args, "values", 3),
                                oversample=getattr(args, "oversample", 4),
-                               calibrate_wrong=getattr(args, "calibrate_wrong", False))
+                               calibrate_wrong=getattr(args, "calibrate_wrong", False),
+                               screen=getattr(args, "screen", None))
             except Exception as exc:  # noqa: BLE001 - one failing case is a finding, not the end of the bench
                 rec = {"class": k, "case": label, "truth": truth, "verdict": "error", "error": str(exc),
                        "noise_floor": 0.0, "top": None, "top_explained": 0.0, "top_held_out": 0.0,
