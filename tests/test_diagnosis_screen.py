@@ -140,7 +140,9 @@ def test_the_diagnose_page_runs_a_screened_diagnosis_and_lists_what_it_screened_
                   values_per_parameter=2)
         return real(c, k, progress=progress, **kw)
     monkeypatch.setattr(app.backend, "diagnose_and_list", spy)
+    assert "about half" not in page.diag_estimate.object
     page.state.screened = True
+    assert "screened, every candidate on 4 sections" in page.diag_estimate.object  # the cost shown
     page.state.run_diagnosis(background=False)
     assert seen[-1]["screen"] == SCREEN_KEEP
     res_screen = page.state.view.result.screen

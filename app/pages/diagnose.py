@@ -102,7 +102,7 @@ class DiagnosePage(PageBase):
                                                "(judge the fit on sections it has not seen)", width=420)),
             self.cal_estimate, title="Calibration settings (local trust-region fit; global search optional)",
             collapsed=True, sizing_mode="stretch_width", css_classes=["rv-cal-settings"])
-        st.param.watch(lambda e: self._show_estimates(), ["candidate_effects", "values_per_parameter",
+        st.param.watch(lambda e: self._show_estimates(), ["candidate_effects", "values_per_parameter", "screened",
                                                           "fit_parameters", "popsize", "maxiter",
                                                           "polish_maxfev", "effect", "global_search"])
         st.param.watch(self._method_changed, ["global_search"])
@@ -176,7 +176,10 @@ class DiagnosePage(PageBase):
             return
         self.diag_estimate.object = (f"**Run diagnosis** simulates the campaign {n_diag} times at most "
                                      "(each candidate effect parameter over its bounds, one linearised "
-                                     "simulation per model parameter, a few refinements).")
+                                     "simulation per model parameter, a few refinements)"
+                                     + ("; screened, every candidate on 4 sections and only the best "
+                                        f"{SCREEN_KEEP} on the others: about half of it." if self.state.screened
+                                        else "."))
         how = ("population × generations of differential evolution, the local polish and the final run"
                if self.state.global_search else
                "scan, start point, trust-region steps with their Jacobians, final run; it usually stops "
