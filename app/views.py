@@ -304,10 +304,13 @@ class StoredDiagnosis:
     explained: float | None = None
     separable: bool = True
     verdict: str | None = None
+    #: the candidates a screened run kept (``screen``, docs/diagnosis.md); None: not screened
+    screened: int | None = None
 
     @classmethod
     def of(cls, d: Mapping[str, Any]) -> StoredDiagnosis:
         settings = d.get("settings") or {}
+        screen = (settings.get("options") or {}).get("screen")
         chosen = settings.get("effects")
         values = settings.get("values_per_parameter")
         explained = d.get("explained")
@@ -316,13 +319,14 @@ class StoredDiagnosis:
                    None if values is None else int(values), None if chosen is None else tuple(chosen),
                    bool(d.get("reused")), None if current is None else bool(current), str(d.get("top") or ""),
                    None if explained is None else float(explained), bool(d.get("separable", True)),
-                   d.get("verdict"))
+                   d.get("verdict"), None if screen is None else int(screen))
 
     @property
     def candidates_text(self) -> str:
         """The candidates the run tried, as a reader sees them."""
         n = len(self.chosen or ())
-        return "every candidate" if self.chosen is None else f"{n} chosen candidate{'s' if n != 1 else ''}"
+        text = "every candidate" if self.chosen is None else f"{n} chosen candidate{'s' if n != 1 else ''}"
+        return text + (f", screened to the {self.screened} best" if self.screened else "")
 
 
 @dataclass(frozen=True)
