@@ -454,12 +454,14 @@ def _simulate_screened(ex: Any, req: _Request, tasks: list[tuple], index: Sequen
               for k, w in zip(params, ex.gather(handles[:len(params)]), strict=True)}
     made = {k: section_evidence(*merged[k], req.meas_bands, sections, value_key="D_norm", like=base) for k in params}
     redo = _refinement(req, base, index, made, bool(vr.validated), refine)  # while the effects' runs go on
-    more = ex.submit(_evaluate_sections, [(req.in_config, {**req.conf_params, p: v}) for p, v in redo],
-                     shared=req.ctx)
+    halves = [[sid for sid, _ in sections[h::2]] for h in (0, 1)]  # 2 tasks a run: both workers to the end
+    more = ex.submit(_evaluate_sections, [(req.in_config, {**req.conf_params, p: v}, half) for p, v in redo
+                                          for half in halves], shared=req.ctx)
     merged.update({k: (part[k][0] + w[0], {**part[k][1], **w[1]}) for k, w in zip(
         later[len(params):], ex.gather(handles[len(params):], progress=stage(0.4, 0.75)), strict=True)})
     results = [first] + [merged.get(k) for k in range(1, len(tasks))]
-    refined = ex.gather(more, progress=stage(0.75, 0.85))
+    got = ex.gather(more, progress=stage(0.75, 0.85))
+    refined = [(a[0] + b[0], {**a[1], **b[1]}) for a, b in zip(got[::2], got[1::2], strict=True)]
     info = {"applied": True, "kept": keep, "sections": on, "candidates": len(kept) + len(out),
             "screened_out": out,
             "section_runs": (len(tasks) - 1) * len(on) + len(later) * len(rest) + (1 + len(redo)) * len(sections),
