@@ -439,7 +439,8 @@ class DiagnosisView:
     def screened_out(self) -> list[Named]:
         """The candidates a screened diagnosis did not rank (``result.screen``), each with the
         share of the residual it explains on the screen sections (in-sample)."""
-        return [Named(str(x["name"]), f"{float(x['explained_on_screen']):.0%} on the screen", str(x.get("kind") or ""))
+        return [Named(str(x["name"]), f"{100 * float(x['explained_on_screen']):.1f} % on the screen",
+                      str(x.get("kind") or ""))
                 for x in (self.result.screen or {}).get("screened_out") or []]
 
     @property

@@ -151,7 +151,7 @@ def test_the_diagnose_page_runs_a_screened_diagnosis_and_lists_what_it_screened_
     text = " ".join(o.object for o in page.candidates_box.objects if isinstance(o, pn.pane.Alert))
     assert "Screened out (simulated on " + ", ".join(res_screen["sections"]) in text
     for x in res_screen["screened_out"]:
-        assert f"{x['name']} {x['explained_on_screen']:.0%}" in text
+        assert f"{x['name']} {100 * x['explained_on_screen']:.1f} %" in text
     line = " ".join(o.object for o in page.candidates_box.objects if "rv-stored-run" in (o.css_classes or []))
     assert f"10 chosen candidates, screened to the {SCREEN_KEEP} best" in line  # the stored run says it
     page.state.screened = False
