@@ -251,7 +251,7 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
     with BatchExecutor(scheduler, workers) as ex:
         if screened:
             sims, index, screen_info = _simulate_screened(
-                ex, req, tasks, index, vr, measurement, _Refinement(refine, folds, seed), screen,
+                ex, req, tasks, index, vr, measurement, _Refinement(refine, folds, seed), keep,
                 lambda lo, hi: lambda d, t: _report(progress, "simulate", lo + (hi - lo) * (d + 1) / max(t, 1),
                                                     done=d + 1, total=t))
         else:
@@ -450,23 +450,29 @@ def _simulate_screened(ex: Any, req: _Request, tasks: list[tuple], index: Sequen
     params = [k for kind, *_, k in index if kind == "parameter"]
     later = params + sorted({k for *_, k in index if k} - set(params))  # parameters first, as _simulate
     handles = ex.submit(_evaluate_sections, [(*tasks[k], rest) for k in later], shared=req.ctx)
-    merged = {k: (part[k][0] + w[0], {**part[k][1], **w[1]})
-              for k, w in zip(params, ex.gather(handles[:len(params)]), strict=True)}
+    merged = {k: _joined(part[k], w) for k, w in zip(params, ex.gather(handles[:len(params)]), strict=True)}
     made = {k: section_evidence(*merged[k], req.meas_bands, sections, value_key="D_norm", like=base) for k in params}
     redo = _refinement(req, base, index, made, bool(vr.validated), refine)  # while the effects' runs go on
     halves = [[sid for sid, _ in sections[h::2]] for h in (0, 1)]  # 2 tasks a run: both workers to the end
     more = ex.submit(_evaluate_sections, [(req.in_config, {**req.conf_params, p: v}, half) for p, v in redo
                                           for half in halves], shared=req.ctx)
-    merged.update({k: (part[k][0] + w[0], {**part[k][1], **w[1]}) for k, w in zip(
+    merged.update({k: _joined(part[k], w) for k, w in zip(
         later[len(params):], ex.gather(handles[len(params):], progress=stage(0.4, 0.75)), strict=True)})
     results = [first] + [merged.get(k) for k in range(1, len(tasks))]
     got = ex.gather(more, progress=stage(0.75, 0.85))
-    refined = [(a[0] + b[0], {**a[1], **b[1]}) for a, b in zip(got[::2], got[1::2], strict=True)]
+    refined = [_joined(a, b) for a, b in zip(got[::2], got[1::2], strict=True)]
     info = {"applied": True, "kept": keep, "sections": on, "candidates": len(kept) + len(out),
             "screened_out": out,
             "section_runs": (len(tasks) - 1) * len(on) + len(later) * len(rest) + (1 + len(redo)) * len(sections),
             "section_runs_whole": (len(tasks) + len(redo)) * len(sections)}
     return _Simulated(results, base, measured, made, redo, refined), index, info
+
+
+def _joined(a: tuple, b: tuple) -> tuple:
+    """One campaign run from two runs of :func:`_evaluate_sections` on disjoint sections: their
+    validation pairs one after the other, their band powers together (each section is its own
+    run, so a section's records and powers are those of the whole run)."""
+    return a[0] + b[0], {**a[1], **b[1]}
 
 
 def _screen(req: _Request, index: Sequence[tuple], part: Sequence[tuple], base: SectionEvidence,
