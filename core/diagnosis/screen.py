@@ -29,7 +29,7 @@ from railval.core.errors import InvalidParameter
 #: sections a screen simulates (one per test zone present first, then zone by zone)
 SCREEN_SECTIONS = 4
 #: candidates the Diagnose page's screened diagnosis keeps (the command line's ``--screen K``
-#: chooses); 8 kept the verdict, top and cause set of every trust-bench case measured
+#: chooses); 8 kept the verdict, top and cause set of every trust-bench case measured (45)
 SCREEN_KEEP = 8
 
 
