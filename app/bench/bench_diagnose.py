@@ -66,20 +66,26 @@ def _cpu() -> tuple[float, float]:
     return own.ru_utime + own.ru_stime, kids.ru_utime + kids.ru_stime
 
 
+def _timed(call) -> tuple:
+    """(result, wall seconds, CPU seconds of the calling process and of its joined forked workers)
+    of ``call()`` (:func:`_cpu` before and after)."""
+    t0, (own0, kids0) = time.perf_counter(), _cpu()
+    out = call()
+    wall = time.perf_counter() - t0
+    own1, kids1 = _cpu()
+    return out, wall, {"calling_process": round(own1 - own0, 2), "workers": round(kids1 - kids0, 2)}
+
+
 def screened_diagnosis(database, whole, keep: int, scheduler, workers: int, values: int, forked: bool) -> dict:
     """The screened diagnosis (``screen=keep``, docs/diagnosis.md "Screened diagnosis") of the
     same configuration: seconds, CPU, section runs against the whole diagnosis's, and whether its
     verdict, top candidate, cause set and the kept candidates' held-out shares equal ``whole``'s."""
     if not keep:
         return {}
-    t0, (own0, kids0) = time.perf_counter(), _cpu()
-    d = diagnose(database, "bench", "baseline", scheduler=scheduler, workers=workers, values_per_parameter=values,
-                 screen=keep)
-    wall = time.perf_counter() - t0
-    own1, kids1 = _cpu()
+    d, wall, cpu = _timed(lambda: diagnose(database, "bench", "baseline", scheduler=scheduler, workers=workers,
+                                           values_per_parameter=values, screen=keep))
     held = {c.name: c.held_out_explained for c in whole.candidates}
     causes = [[c["name"] for c in r.causes or []] for r in (whole, d)]
-    cpu = {"calling_process": round(own1 - own0, 2), "workers": round(kids1 - kids0, 2)}
     return {"diagnose_screened_s": round(wall, 2), "diagnose_screened_kept": keep,
             "diagnose_screened_cpu_s": cpu if forked else {"calling_process": cpu["calling_process"]},
             "diagnose_screened_section_runs": [d.screen.get("section_runs"), d.screen.get("section_runs_whole")],
@@ -129,12 +135,8 @@ def run(args: argparse.Namespace) -> dict:
         # the workers' CPU is read as this process's ended children's: true for forked workers only
         # (a forkserver's workers are its children, not this process's)
         forked = scheduler is None and start_context().get_start_method() == "fork"
-        t0, (own0, kids0) = time.perf_counter(), _cpu()
-        diag = diagnose(database, "bench", "baseline", scheduler=scheduler, workers=workers,
-                        values_per_parameter=values)
-        t_diag = time.perf_counter() - t0
-        own1, kids1 = _cpu()
-        cpu_diag = {"calling_process": round(own1 - own0, 2), "workers": round(kids1 - kids0, 2)}
+        diag, t_diag, cpu_diag = _timed(lambda: diagnose(database, "bench", "baseline", scheduler=scheduler,
+                                                         workers=workers, values_per_parameter=values))
         first = diag.candidates[0]
         hidden = next((c for c in diag.candidates if c.name == effect), first)
         screened = screened_diagnosis(database, diag, getattr(args, "screen", 8), scheduler, workers, values, forked)
