@@ -96,6 +96,90 @@ def test_screened_diagnosis_keeps_the_whole_diagnosis_figures_of_its_candidates(
     assert whole.screen is None and "screen" not in whole.to_dict()
 
 
+def _evidence(sections, zones, sums, counts, sim, meas):
+    from railval.core.diagnosis.evidence import SectionEvidence
+
+    return SectionEvidence(list(sections), list(zones), ["q1", "q2", "psd a 1-2 Hz"], ["q1", "q2", "psd a"], 2,
+                           np.asarray(sums, float), np.asarray(counts, float), np.asarray(sim, float),
+                           np.asarray(meas, float))
+
+
+def test_a_stand_in_is_the_candidate_on_the_screen_and_its_zone_change_elsewhere():
+    """Sections A, B (zone 1), C, D (zone 2); the screen A, C. Off the screen a section takes the
+    configuration's values moved by the change of its zone's screen section: worked by hand."""
+    from railval.core.diagnosis.screen import stand_in
+
+    secs, zones = ["A", "B", "C", "D"], [1, 1, 2, 2]
+    base = _evidence(secs, zones, [[1.0, 2.0], [3.0, 0.0], [0.5, 4.0], [2.0, 1.0]],
+                     [[2, 1], [3, 0], [1, 2], [2, 1]], [[10.0], [20.0], [30.0], [40.0]], [[5.0], [6.0], [7.0], [8.0]])
+    screen_base = _evidence(["A", "C"], [1, 2], [[1.0, 2.0], [0.5, 4.0]], [[2, 1], [1, 2]], [[10.0], [30.0]],
+                            [[5.0], [7.0]])
+    cand = _evidence(["A", "C"], [1, 2], [[3.0, 2.5], [2.5, 3.0]], [[2, 1], [1, 2]], [[15.0], [15.0]],
+                     [[5.0], [7.0]])
+    got = stand_in(base, screen_base, cand)
+    # A, C: the candidate's own evidence
+    assert got.sums[0].tolist() == [3.0, 2.5] and got.sums[2].tolist() == [2.5, 3.0]
+    assert got.sim_power[0, 0] == 15.0 and got.sim_power[2, 0] == 15.0
+    # B (zone 1, from A): mean shifts +1.0 (q1: 3/2 − 1/2) and +0.5 (q2: 2.5 − 2); B has no q2 data
+    # (zone 2's shift, +2.0, would give 9.0: the zone decides)
+    assert got.sums[1].tolist() == [3.0 + 1.0 * 3, 0.0] and got.counts[1].tolist() == [3.0, 0.0]
+    # D (zone 2, from C): q1 +2.0 (2.5 − 0.5), q2 −0.5 (3/2 − 4/2); power × 0.5 (15 / 30)
+    assert got.sums[3].tolist() == [2.0 + 2.0 * 2, 1.0 - 0.5 * 1]
+    assert got.sim_power[1, 0] == 20.0 * 1.5 and got.sim_power[3, 0] == 40.0 * 0.5
+    assert np.array_equal(got.meas_power, base.meas_power)
+
+
+def test_a_stand_in_equals_the_whole_evidence_where_every_section_of_a_zone_changes_alike():
+    from railval.core.diagnosis.screen import stand_in
+
+    rng = np.random.default_rng(4)
+    secs, zones = ["A", "B", "C", "D", "E", "F"], [1, 1, 1, 2, 2, 3]
+    counts = rng.integers(1, 4, size=(6, 2)).astype(float)
+    base_mean, power = rng.normal(size=(6, 2)), rng.uniform(1, 9, size=(6, 1))
+    zone_shift = {1: [0.5, -0.25], 2: [-1.0, 0.75], 3: [0.125, 0.5]}
+    zone_scale = {1: 2.0, 2: 0.5, 3: 4.0}
+    shift = np.array([zone_shift[z] for z in zones])
+    scale = np.array([[zone_scale[z]] for z in zones])
+    meas = rng.uniform(1, 9, size=(6, 1))
+    base = _evidence(secs, zones, base_mean * counts, counts, power, meas)
+    whole = _evidence(secs, zones, (base_mean + shift) * counts, counts, power * scale, meas)
+    on = [0, 3, 5]  # A, D, F: every zone once
+    pick = lambda ev: _evidence([secs[i] for i in on], [zones[i] for i in on], ev.sums[on], ev.counts[on],
+                                ev.sim_power[on], ev.meas_power[on])
+    got = stand_in(base, pick(base), pick(whole))
+    assert np.allclose(got.values(), whole.values(), rtol=0, atol=1e-12)
+    assert np.allclose(got.sums, whole.sums, rtol=0, atol=1e-12) and np.array_equal(got.counts, whole.counts)
+
+
+def test_the_screened_noise_floor_counts_the_screened_out_candidates(campaign):
+    """The floor is a maximum over candidates: with the screened-out candidates' stand-ins it is
+    at least the floor over the kept and the measurement candidates alone (what the screen gave
+    before), and the stand-ins are never ranked."""
+    from railval.core.diagnosis import diagnose_evidence
+
+    captured = {}
+    real = ranking._score
+
+    def spy(base, fams, *a, **k):
+        captured["base"], captured["fams"] = base, list(fams)
+        return real(base, fams, *a, **k)
+
+    from unittest import mock
+
+    with mock.patch.object(ranking, "_score", spy):
+        screened = ranking.rank_causes(campaign, "demo", "baseline", workers=2, screen=4, **KW)
+    fams = captured["fams"]
+    stand_ins = [f for f in fams if f.floor_only]
+    out = {x["name"] for x in screened.screen["screened_out"] if x["explained_on_screen"] > 0}
+    assert {f.name for f in stand_ins} == out and screened.screen["floor_stand_ins"] == len(out) > 0
+    assert all(len(e.sections) == 12 for f in stand_ins for e in f.evidence)
+    assert not {c.name for c in screened.candidates} & out
+    without = diagnose_evidence(captured["base"], [f for f in fams if not f.floor_only], n_boot=KW["n_boot"],
+                                folds=3, seed=0)
+    assert screened.noise_floor >= without.noise_floor
+    assert "noise floor over every candidate" in screened.note
+
+
 def test_a_screen_that_would_leave_nothing_out_runs_the_whole_diagnosis(campaign):
     res = ranking.rank_causes(campaign, "demo", "baseline", workers=1, screen=50, **KW)
     assert res.screen["applied"] is False and "nothing to screen" in res.screen["reason"]

@@ -47,9 +47,10 @@ and wrong"), and — with ``--calibrate-wrong`` — whether a wrong candidate's 
 passes validation is flagged (plausibility or held-out check).
 
 Per class also (:func:`class_scores`): named as cause, named in the set, ``uncertain`` with the
-right top, confidently wrong.
+right top, confidently wrong. With ``--screen K --against-whole`` every case is diagnosed screened
+and whole (:func:`whole_of`): where verdict, top or cause set differ, and how the noise floor moved.
 
-``railval bench diagnosis_trust [--cases N] [--classes a b c d e f m g t r w p] [--workers 2] [--screen K] [--calibrate-wrong]``
+``railval bench diagnosis_trust [--cases N] [--classes a b c d e f m g t r w p] [--workers 2] [--screen K [--against-whole]] [--calibrate-wrong]``
 """
 
 from __future__ import annotations
@@ -275,6 +276,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="take the cases already in --out from there and run only the others")
     parser.add_argument("--screen", type=int, default=None, metavar="K",
                         help="run the screened diagnosis keeping K candidates (docs/diagnosis.md)")
+    parser.add_argument("--against-whole", action="store_true",
+                        help="with --screen: also the whole diagnosis of every case; print where they differ")
     parser.add_argument("--calibrate-wrong", action="store_true",
                         help="calibrate the top candidate where it is wrong (short search, --split) and "
                              "check a pass is flagged")
@@ -282,10 +285,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str, Any], truth: str | None, *,
              workers: int = 2, values: int = 3, oversample: int = 4, calibrate_wrong: bool = False,
-             candidates: list[str] | None = None, n_sections: int = 12, screen: int | None = None) -> dict:
+             candidates: list[str] | None = None, n_sections: int = 12, screen: int | None = None,
+             against_whole: bool = False) -> dict:
     """Synthesise, import and diagnose one case; return its record. ``candidates``: restrict
     the diagnosis (effect ids and ``model.PARAM``; the CI subset uses a few); ``screen``: the
-    screened diagnosis keeping that many candidates (docs/diagnosis.md "Screened diagnosis")."""
+    screened diagnosis keeping that many candidates (docs/diagnosis.md "Screened diagnosis");
+    ``against_whole``: with ``screen``, also the whole diagnosis of the case (:func:`whole_of`)."""
 
     kw = {"seed": 3, "hidden": {}, **kwargs}
     t0 = time.perf_counter()
@@ -326,6 +331,11 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
         rec["conicity_as_cause"] = d["verdict"] == "cause" and right
         rec["confident_wrong"] = rec["confident_wrong"] or rec["conicity_as_cause"]
     rec["explained_wrong"] = bool(top and top["explained"] >= 0.5 and not right)
+    if screen and against_whole:
+        t0 = time.perf_counter()
+        whole = diagnose(database, name, "baseline", workers=workers, values_per_parameter=values,
+                         effects=candidates).to_dict()
+        rec["whole"] = whole_of(d, whole, time.perf_counter() - t0)
     if calibrate_wrong and top is not None and not right:
         cal = calibrate(database, name, "baseline", [top["name"]], "calibrated", split=True, popsize=3, maxiter=2,
                         polish_maxfev=5, workers=workers, replace=True,
@@ -338,6 +348,19 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
         rec["wrong_calibration_held_out_validated"] = held.get("validated")
         rec["wrong_calibration_flags"] = list(cd["flags"])
     return rec
+
+
+def whole_of(screened: dict, whole: dict, seconds: float) -> dict:
+    """The whole diagnosis of a case beside its screened one: verdict, top, cause set, noise
+    floor, seconds, and whether verdict, top and cause set are the same and how far the noise
+    floor moved (screened − whole)."""
+    causes = lambda d: sorted(c["name"] for c in d.get("causes") or [])
+    top = lambda d: d["candidates"][0]["name"] if d["candidates"] else None
+    return {"verdict": whole["verdict"], "top": top(whole), "causes": causes(whole),
+            "noise_floor": whole["noise_floor"], "diagnose_s": round(seconds, 1),
+            "same": (screened["verdict"], top(screened), causes(screened)) == (whole["verdict"], top(whole),
+                                                                                causes(whole)),
+            "floor_change": round(screened["noise_floor"] - whole["noise_floor"], 4)}
 
 
 def flagged(calibration: dict) -> bool:
@@ -378,6 +401,12 @@ def summarise(records: list[dict]) -> dict:
         out[k] = item
     out["confident_wrong"] = sum(r["confident_wrong"] for r in records) / max(1, len(records))
     out["explained_ge_0_5_and_wrong"] = sum(r["explained_wrong"] for r in records) / max(1, len(records))
+    paired = [r["whole"] for r in records if r.get("whole")]
+    if paired:
+        ch = [w["floor_change"] for w in paired]
+        out["against_whole"] = {"cases": len(paired), "same_verdict_top_causes": sum(w["same"] for w in paired),
+                                "floor_lower": sum(c < -1e-9 for c in ch), "floor_higher": sum(c > 1e-9 for c in ch),
+                                "floor_change_min": min(ch), "floor_change_max": max(ch)}
     passes = [r for r in records if r.get("wrong_calibration_passes")]
     if passes:
         out["wrong_calibrations_passing"] = len(passes)
@@ -433,6 +462,14 @@ def format_table(records: list[dict], summary: dict) -> str:
             lines.append(f"class ({k}) n={s['n']}: {fig}; verdicts {s['verdicts']}")
     lines.append(f"confident wrong (verdict cause and wrong): {100 * summary['confident_wrong']:.0f} %; "
                  f"explained ≥ 0.5 and wrong: {100 * summary['explained_ge_0_5_and_wrong']:.0f} %")
+    if "against_whole" in summary:
+        a = summary["against_whole"]
+        lines.append(f"screened against whole: verdict, top and cause set the same in {a['same_verdict_top_causes']} of "
+                     f"{a['cases']}; noise floor lower in {a['floor_lower']}, higher in {a['floor_higher']} "
+                     f"(change {a['floor_change_min']:+.3f} … {a['floor_change_max']:+.3f})")
+        lines += [f"  differs: ({r['class']}) {r['case']}: screened {r['verdict']} {r['top']} {r.get('causes')}, whole "
+                  f"{r['whole']['verdict']} {r['whole']['top']} {r['whole']['causes']}"
+                  for r in records if r.get("whole") and not r["whole"]["same"]]
     if "wrong_calibrations_passing" in summary:
         lines.append(f"wrong calibrations that pass: {summary['wrong_calibrations_passing']}, flagged "
                      f"{100 * summary['of_those_flagged']:.0f} %")
@@ -458,7 +495,8 @@ def run(args: argparse.Namespace, progress=None) -> dict:
                                workers=getattr(args, "workers", 2), values=getattr(args, "values", 3),
                                oversample=getattr(args, "oversample", 4),
                                calibrate_wrong=getattr(args, "calibrate_wrong", False),
-                               screen=getattr(args, "screen", None))
+                               screen=getattr(args, "screen", None),
+                               against_whole=getattr(args, "against_whole", False))
             except Exception as exc:  # noqa: BLE001 - one failing case is a finding, not the end of the bench
                 rec = {"class": k, "case": label, "truth": truth, "verdict": "error", "error": str(exc),
                        "noise_floor": 0.0, "top": None, "top_explained": 0.0, "top_held_out": 0.0,

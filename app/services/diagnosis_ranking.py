@@ -30,7 +30,7 @@ import math
 import pickle
 import threading
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -89,7 +89,13 @@ from railval.core.diagnosis.measurement import (
     group_gain_family,
     group_gain_reevaluations,
 )
-from railval.core.diagnosis.screen import SCREEN_SECTIONS, check_keep, screen_order, screen_sections
+from railval.core.diagnosis.screen import (
+    SCREEN_SECTIONS,
+    check_keep,
+    floor_stand_ins,
+    screen_order,
+    screen_sections,
+)
 from railval.core.diagnosis.support import apply_interface_rule, cause_pool, outside_support
 from railval.core.errors import InvalidParameter
 from railval.core.sim.effects import EFFECTS, Effect, is_neutral, unmet_requirement
@@ -263,7 +269,8 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
         if screened:
             n_sim = math.ceil(screen_info["section_runs"] / len(ctx.sections))
         _report(progress, "score", 0.9)
-        res = _score(base, fams, bool(vr.validated), req.template, n_boot=n_boot, folds=folds, seed=seed, ex=ex)
+        res = _score(base, fams + sims.floor, bool(vr.validated), req.template, n_boot=n_boot, folds=folds,
+                     seed=seed, ex=ex)
     res.campaign, res.configuration, res.validated = ctx.campaign, config, bool(vr.validated)
     res.effects_in_configuration = sorted(req.conf_effects)
     res.parameters_in_configuration = dict(req.conf_params)
@@ -277,7 +284,8 @@ def rank_causes(database_or_session: Any, campaign: Any, config: Any, *, progres
         if screened:
             res.note += (f"; screened: {screen} of {screen_info['candidates']} simulated candidates kept after "
                          f"{len(screen_info['sections'])} sections ({', '.join(screen_info['sections'])}), the "
-                         "others not ranked; noise floor over the kept and the measurement candidates")
+                         "others not ranked; noise floor over every candidate, the screened-out ones' on the "
+                         "other sections estimated from the screen section of the same test zone")
     res.skipped = req.conf_skipped + req.skipped
     if req.skipped and not fams:
         res.note += "; left out: " + "; ".join(f"{s['name']} ({s['reason']})" for s in req.skipped)
@@ -367,7 +375,7 @@ class _Refinement:
 class _Simulated:
     """What :func:`_simulate` hands on: the campaign runs in task order, the configuration's
     evidence, the measurement families, the parameter candidates' evidence (task index →
-    evidence), the refinement picked from them and its runs."""
+    evidence), the refinement picked from them and its runs (and a screen's ``floor``)."""
 
     results: list
     base: SectionEvidence
@@ -375,6 +383,8 @@ class _Simulated:
     made: dict[int, SectionEvidence]
     redo: list[tuple[str, float]]
     refined: list
+    #: a screened diagnosis's screened-out candidates as floor-only stand-ins (:func:`_screen`)
+    floor: list[CandidateFamily] = field(default_factory=list)
 
 
 def _simulate(ex: Any, req: _Request, tasks: list[tuple], index: Sequence[tuple], vr: Any,
@@ -445,7 +455,7 @@ def _simulate_screened(ex: Any, req: _Request, tasks: list[tuple], index: Sequen
     base = section_evidence(first[0], first[1], req.meas_bands, sections, value_key="D_norm")
     measured = _measurement_families(req, first, base, sections, vr, measurement) if measurement else {}
     part = [first, *ex.gather(handles, progress=stage(0.05, 0.4))]
-    kept, out = _screen(req, index, part, base, on, bool(vr.validated), refine, keep)
+    kept, out, floor = _screen(req, index, part, base, on, bool(vr.validated), refine, keep)
     index = [x for x in index if x[1] in kept]
     params = [k for kind, *_, k in index if kind == "parameter"]
     later = params + sorted({k for *_, k in index if k} - set(params))  # parameters first, as _simulate
@@ -462,10 +472,10 @@ def _simulate_screened(ex: Any, req: _Request, tasks: list[tuple], index: Sequen
     got = ex.gather(more, progress=stage(0.75, 0.85))
     refined = [_joined(a, b) for a, b in zip(got[::2], got[1::2], strict=True)]
     info = {"applied": True, "kept": keep, "sections": on, "candidates": len(kept) + len(out),
-            "screened_out": out,
+            "screened_out": out, "floor_stand_ins": len(floor),
             "section_runs": (len(tasks) - 1) * len(on) + len(later) * len(rest) + (1 + len(redo)) * len(sections),
             "section_runs_whole": (len(tasks) + len(redo)) * len(sections)}
-    return _Simulated(results, base, measured, made, redo, refined), index, info
+    return _Simulated(results, base, measured, made, redo, refined, floor), index, info
 
 
 def _joined(a: tuple, b: tuple) -> tuple:
@@ -476,12 +486,14 @@ def _joined(a: tuple, b: tuple) -> tuple:
 
 
 def _screen(req: _Request, index: Sequence[tuple], part: Sequence[tuple], base: SectionEvidence,
-            on: Sequence[str], validated: bool, refine: _Refinement, keep: int) -> tuple[set[str], list[dict]]:
-    """(names kept, the screened-out candidates with their shares on the screen): the
-    candidates' families on the screen sections ``on`` (``part[k]``: task ``k``'s runs there, the
-    configuration's ``part[0]`` on every section), ordered by
+            on: Sequence[str], validated: bool, refine: _Refinement,
+            keep: int) -> tuple[set[str], list[dict], list[CandidateFamily]]:
+    """(names kept, the screened-out candidates with their shares on the screen, their
+    floor-only stand-ins over every section): the candidates' families on the screen sections
+    ``on`` (``part[k]``: task ``k``'s runs there, the configuration's ``part[0]`` on every
+    section; ``base`` the configuration's evidence on every section), ordered by
     :func:`railval.core.diagnosis.screen.screen_order`; a candidate that moves nothing on the
-    screen is screened out with share 0."""
+    screen is screened out with share 0 (and has no stand-in: it moves no pattern)."""
     sections = [(s.id, int(s.zone)) for s in req.ctx.sections if s.id in set(on)]
     made: dict[int, SectionEvidence] = {}
 
@@ -495,9 +507,10 @@ def _screen(req: _Request, index: Sequence[tuple], part: Sequence[tuple], base: 
     fams = _best_per_effect(evidence(0), [f for f in fams if f not in blind], validated)
     kept, out = screen_order(evidence(0), fams, keep, validated=validated, folds=refine.folds, seed=refine.seed)
     ranked = set(kept) | {x["name"] for x in out}
+    floor = floor_stand_ins(base, evidence(0), [f for f in fams if f.name not in kept])
     out += [{"name": name, "kind": kind, "explained_on_screen": 0.0, "held_out_on_screen": 0.0}
             for name, kind in dict.fromkeys((f.name, f.kind) for f in blind if f.name not in ranked)]
-    return set(kept), out
+    return set(kept), out, floor
 
 
 def _screenable(req: _Request, index: Sequence[tuple], keep: int) -> bool:
@@ -720,8 +733,8 @@ def _score(base: SectionEvidence, fams: list[CandidateFamily], validated: bool, 
     # the pool: candidates beyond the noise floor on the whole residual, and the best of every
     # family that has one (a second cause may be small beside the first but lead its family)
     leads = {f["top"][0]["name"] for f in res.families if f["top"] and f["verdict"] in ("cause", "uncertain")}
-    pool, left_out = cause_pool([f for f in fams if f.name in leads or any(
-        c.name == f.name and c.significant for c in res.candidates)], res, support, MASS_PARAMETERS)
+    pool, left_out = cause_pool([f for f in fams if not f.floor_only and (f.name in leads or any(
+        c.name == f.name and c.significant for c in res.candidates))], res, support, MASS_PARAMETERS)
     # input-side statements: the generated track's level, the contact geometry (core/diagnosis/inputs.py)
     track = sorted(e for e, spec in EFFECTS.items() if spec.input_side == "track")
     res.statements = [x for x in [track_statement(res, track)] if x]

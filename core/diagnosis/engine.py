@@ -68,7 +68,8 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
     * noise floor: the share of pure section scatter n_b = r(w_b) − r (bootstrap deviation of
       the residual) that the best candidate can explain, 95th percentile over the resamples —
       what the candidates "explain" when there is nothing but scatter; a candidate is
-      significant when the lower end (5 %) of its bootstrap interval exceeds it;
+      significant when the lower end (5 %) of its bootstrap interval exceeds it; families
+      marked ``floor_only`` (a screened diagnosis's stand-ins) count here and nowhere else;
     * plausibility flags (:func:`plausibility_flags`), identifiability of the two best
       (:func:`separating_evidence`);
     * ``verdict``: ``none`` (residual within the section scatter, nothing significant, or the
@@ -108,6 +109,9 @@ def diagnose_evidence(base: SectionEvidence, families: Sequence[CandidateFamily]
     cands: list[TrustedCandidate] = []
     noise_share = np.zeros((len(families), n_boot))
     for fi, fit in enumerate(fits):
+        if fit.fam.floor_only:  # a screened-out candidate's stand-in: its share of scatter only
+            noise_share[fi] = fit.noise_share
+            continue
         cand, noise_share[fi] = _score(fit, setup, change)
         cands.append(cand)
     noise_floor = float(np.percentile(noise_share.max(axis=0), 95)) if n_boot and families else 0.0
@@ -162,7 +166,7 @@ class _Fit:
         self.k, self.costs, self.Pk = _fit_costs(curve, self.P_full, st.w)
         self.cost = float(self.costs[self.k])
         self.v = curve.value(self.k)
-        self.held, self.fold_values = _held_out(curve, fam, st)
+        self.held, self.fold_values = (0.0, []) if fam.floor_only else _held_out(curve, fam, st)
         self.boot: list[float] = []
         self.v_ci = (self.v, self.v)
         self.noise_share = np.zeros(0)

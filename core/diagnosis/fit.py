@@ -80,6 +80,9 @@ class CandidateFamily:
     #: acts on the wheel–rail interface (effect registry ``Effect.interface`` or
     #: :data:`INTERFACE_PARAMETERS`): needs support outside the guiding forces to be a cause
     interface: bool = False
+    #: evidence standing in for a screened-out candidate (core/diagnosis/screen.py ``stand_in``):
+    #: counted in the noise floor, never ranked
+    floor_only: bool = False
 
 
 def _u(v: np.ndarray | float, log: bool):

@@ -19,7 +19,10 @@ in-sample share is optimistic: it orders the candidates here, it does not judge 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
+
+import numpy as np
 
 from railval.core.diagnosis.engine import diagnose_evidence
 from railval.core.diagnosis.evidence import SectionEvidence
@@ -71,3 +74,52 @@ def screen_order(base: SectionEvidence, families: Sequence[CandidateFamily], kee
     out = [{"name": c.name, "kind": kind[c.name], "explained_on_screen": round(float(c.explained), 4),
             "held_out_on_screen": round(float(c.held_out_explained), 4)} for c in order[keep:]]
     return [c.name for c in order[:keep]], out
+
+
+def stand_in(base: SectionEvidence, screen_base: SectionEvidence, candidate: SectionEvidence) -> SectionEvidence:
+    """A screened-out candidate's evidence on every section of ``base`` (the configuration's),
+    for its part in the noise floor only (docs/diagnosis.md "Screened diagnosis"): on a screen
+    section its own evidence (``candidate``, over the screen sections of ``screen_base``, the
+    configuration's on them); on any other section the configuration's evidence moved by the
+    change the candidate makes on the screen section of the same EN 14363 test zone (the first
+    of that zone on the screen, or the first screen section when the zone is not on it) — the
+    mean normalised difference of each quantity component shifted by the same amount (sums
+    shifted by that change × the section's own count) and each band's simulated power scaled
+    by the same factor; the measured powers are the measurement's. Components without data on
+    either section are left as the configuration's. Exact where every section of a zone
+    changes alike; an estimate otherwise (measured against the whole diagnosis on the trust
+    bench, docs/diagnosis.md)."""
+    on = {sid: i for i, sid in enumerate(screen_base.sections)}
+    zone_of = dict(zip(screen_base.sections, screen_base.zones, strict=True))
+    first = {}
+    for sid in screen_base.sections:
+        first.setdefault(zone_of[sid], on[sid])
+    rows = np.array([on[sid] if sid in on else first.get(z, 0) for sid, z in zip(base.sections, base.zones,
+                                                                                   strict=True)])
+    cs, cc = candidate.sums[rows], candidate.counts[rows]
+    bs, bc = screen_base.sums[rows], screen_base.counts[rows]
+    ok = (cc > 0) & (bc > 0) & (base.counts > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shift = np.where(ok, cs / np.where(cc > 0, cc, 1.0) - bs / np.where(bc > 0, bc, 1.0), 0.0)
+        scale = np.where((screen_base.sim_power[rows] > 0) & (candidate.sim_power[rows] > 0),
+                         candidate.sim_power[rows] / np.where(screen_base.sim_power[rows] > 0,
+                                                              screen_base.sim_power[rows], 1.0), 1.0)
+    sums, counts = base.sums + shift * base.counts, base.counts.copy()
+    sim_power = base.sim_power * scale
+    own = np.array([sid in on for sid in base.sections])
+    sums[own], counts[own], sim_power[own] = cs[own], cc[own], candidate.sim_power[rows][own]
+    return SectionEvidence(list(base.sections), list(base.zones), list(base.labels), list(base.groups), base.n_pair,
+                           sums, counts, sim_power, base.meas_power.copy(),
+                           None if base.components is None else list(base.components))
+
+
+def floor_stand_ins(base: SectionEvidence, screen_base: SectionEvidence,
+                    families: Sequence[CandidateFamily]) -> list[CandidateFamily]:
+    """The screened-out candidate ``families`` (evidence over the screen sections) as
+    floor-only families over every section (:func:`stand_in`; ``floor_only``: counted in the
+    noise floor, never ranked)."""
+    out = []
+    for f in families:
+        ev = [base if e is screen_base else stand_in(base, screen_base, e) for e in f.evidence]
+        out.append(replace(f, evidence=ev, floor_only=True))
+    return out

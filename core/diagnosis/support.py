@@ -72,7 +72,7 @@ def outside_support(base: SectionEvidence, families: Sequence[CandidateFamily], 
     (module docstring): ``{name: Support}``; empty when no candidate is an interface one."""
     from railval.core.diagnosis.engine import diagnose_evidence
 
-    names = [f.name for f in families if f.interface]
+    names = [f.name for f in families if f.interface and not f.floor_only]
     if not names:
         return {}
     keep = np.array([family_of(g) != GUIDING for g in base.groups], bool)
