@@ -249,3 +249,39 @@ def test_the_diagnose_page_runs_a_screened_diagnosis_and_lists_what_it_screened_
 def test_a_bad_screen_is_refused_before_the_campaign_is_read(campaign):
     with pytest.raises(InvalidParameter, match="screen: .* got 0"):
         ranking.rank_causes(campaign, "no such campaign", "baseline", screen=0)
+
+
+def test_a_floor_only_family_counts_in_the_noise_floor_exactly_as_a_ranked_one_and_is_not_ranked():
+    """Two candidates ranked give a floor; the same two with the second marked ``floor_only`` give
+    the same floor (its scatter rows alone, the same arithmetic), the first's figures unchanged,
+    and only the first ranked."""
+    from dataclasses import replace
+
+    from railval.core.diagnosis import diagnose_evidence
+    from railval.core.diagnosis.fit import CandidateFamily
+
+    rng = np.random.default_rng(11)
+    secs, zones = [f"S{i}" for i in range(8)], [1, 1, 1, 1, 2, 2, 2, 2]
+    counts = np.full((8, 2), 2.0)
+    meas = rng.uniform(1, 2, size=(8, 1))
+
+    def ev(mean, power):
+        return _evidence(secs, zones, mean * counts, counts, power, meas)
+
+    base_mean = rng.normal(1.0, 0.4, size=(8, 2))
+    base = ev(base_mean, meas * 1.5)
+    fams = []
+    for j, name in enumerate(["one", "two"]):
+        direction = rng.normal(size=2) * (1.0 if j == 0 else 0.3)
+        values = [0.5, 1.0, 2.0]
+        evidence = [ev(base_mean - v * direction, meas * (1.5 - 0.1 * v * (j + 1))) for v in values]
+        fams.append(CandidateFamily("effect", name, "p", values, evidence, (0.5, 2.0)))
+    both = diagnose_evidence(base, fams, n_boot=40, folds=2, seed=1)
+    alone = diagnose_evidence(base, fams[:1], n_boot=40, folds=2, seed=1)
+    marked = diagnose_evidence(base, [fams[0], replace(fams[1], floor_only=True)], n_boot=40, folds=2, seed=1)
+    assert [c.name for c in marked.candidates] == ["one"]
+    assert marked.noise_floor == both.noise_floor
+    assert both.noise_floor != alone.noise_floor  # the second candidate matters to the floor here
+    one = next(c for c in both.candidates if c.name == "one")
+    assert (marked.candidates[0].held_out_explained, marked.candidates[0].explained_ci) == \
+           (one.held_out_explained, one.explained_ci)

@@ -212,22 +212,30 @@ def _bootstrap_all(fits: Sequence[_Fit], st: _Setup) -> None:
         per = max(1, _CHUNK // (2 * B * K * st.r_full.size))
         for c0 in range(0, len(group), per):
             chunk = group[c0:c0 + per]
+            rows = [B if f.fam.floor_only else 2 * B for f in chunk]  # a stand-in: its scatter rows only
             X = np.concatenate([_nodes(f, st) for f in chunk])
-            U = np.repeat(np.stack([f.curve.u for f in chunk]), 2 * B, axis=0)
-            lo = np.repeat([float(f.curve.fine[0]) for f in chunk], 2 * B)
-            hi = np.repeat([float(f.curve.fine[-1]) for f in chunk], 2 * B)
+            U = np.repeat(np.stack([f.curve.u for f in chunk]), rows, axis=0)
+            lo = np.repeat([float(f.curve.fine[0]) for f in chunk], rows)
+            hi = np.repeat([float(f.curve.fine[-1]) for f in chunk], rows)
             best, where = _min_cost_rows(X, U, lo, hi)
-            for i, f in enumerate(chunk):
-                s = 2 * B * i
-                _bootstrap_finish(f, st, best[s:s + B], np.array(where[s:s + B]), best[s + B:s + 2 * B])
+            s = 0
+            for f, n in zip(chunk, rows, strict=True):
+                if f.fam.floor_only:
+                    _scatter_share(f, st, best[s:s + B])
+                else:
+                    _bootstrap_finish(f, st, best[s:s + B], np.array(where[s:s + B]), best[s + B:s + 2 * B])
+                s += n
 
 
 def _nodes(f: _Fit, st: _Setup) -> np.ndarray:
     """The weighted nodes (2B, K, n) in curve order of one candidate's bootstrap minimisations:
-    its patterns on every resample, then its change P_k − r added to pure scatter n_b."""
-    P_boot = np.stack([e.values(st.Wb) for e in f.fam.evidence], axis=1)  # (B, K, n), family order
+    its patterns on every resample, then its change P_k − r added to pure scatter n_b (a
+    ``floor_only`` family: the latter (B, K, n) alone)."""
     noise = f.P_full[None, :, :] - st.r_full[None, None, :] + st.noise[:, None, :]
     order = f.curve.order
+    if f.fam.floor_only:
+        return noise[:, order, :] * st.w
+    P_boot = np.stack([e.values(st.Wb) for e in f.fam.evidence], axis=1)  # (B, K, n), family order
     return np.concatenate([P_boot[:, order, :] * st.w, noise[:, order, :] * st.w])
 
 
@@ -235,6 +243,12 @@ def _bootstrap_finish(f: _Fit, st: _Setup, cb: np.ndarray, where_b: np.ndarray, 
     vb = f.curve.values_at(where_b)
     f.boot = [1 - c / d if d > 0 else 0.0 for c, d in zip(cb, st.rb2, strict=True)]
     f.v_ci = (float(np.percentile(vb, 5)), float(np.percentile(vb, 95)))
+    _scatter_share(f, st, cn)
+
+
+def _scatter_share(f: _Fit, st: _Setup, cn: np.ndarray) -> None:
+    """The share of pure scatter n_b the candidate explains on each resample, 1 − cost / ‖w·n_b‖²
+    (0 where there is no scatter; never below 0)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(st.noise2 > 0, 1 - cn / st.noise2, 0.0)
     f.noise_share = np.maximum(share, 0.0)
