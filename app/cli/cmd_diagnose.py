@@ -1,9 +1,11 @@
 """CLI verbs ``diagnose``, ``calibrate`` and ``modal`` (docs/design.md §7, §8).
 
-``railval diagnose CAMPAIGN --config NAME [--json] [--scheduler ADDR] [--candidates E|model.P …]``
+``railval diagnose CAMPAIGN --config NAME [--json] [--scheduler ADDR] [--candidates E|model.P …] [--screen K | --whole]``
     rank the effects missing from a configuration and the template parameters that may be
     mis-set by the share of its residual they explain on held-out sections; verdict
-    cause / uncertain / none against the noise floor; the next step.
+    cause / uncertain / none against the noise floor; the next step. Screened by default
+    (every candidate on a few sections first, the best K on all: docs/diagnosis.md "Screened
+    diagnosis"); ``--whole`` simulates every candidate on every section.
 ``railval calibrate CAMPAIGN --config NAME --effect E|model.P [--effect …] --as NEW [--params P …]
 [--fit-sections S … | --holdout S … | --split]``
     add and fit effects or parameters, store NEW (parent NAME) and print its validation (in-sample
@@ -30,6 +32,7 @@ calibration_plan = lazy.module("railval.app.services.calibration_plan")
 connect = lazy.function("railval.db.engine", "connect")  # the --db URL → its connection
 diagnosis_service = lazy.module("railval.app.services.diagnosis")
 modal_service = lazy.module("railval.app.services.modal")
+screen_rules = lazy.module("railval.core.diagnosis.screen")  # SCREEN_KEEP: the default K
 
 
 def _db(args: argparse.Namespace):
@@ -42,7 +45,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     res = diagnosis_service.diagnose(_db(args), args.campaign, args.config, progress=Progress(), scheduler=args.scheduler,
                                      values_per_parameter=args.values, effects=args.candidates,
                                      **({"include_parameters": False} if args.no_parameters else {}),
-                                     **({"screen": args.screen} if args.screen is not None else {}))
+                                     **({} if args.whole else {"screen": screen_rules.SCREEN_KEEP
+                                                               if args.screen is None else args.screen}))
     if args.json:
         emit_json(res.to_dict())
         return 0
@@ -176,11 +180,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(default: every effect of the library not in NAME and the template's parameters)")
     p.add_argument("--no-parameters", action="store_true",
                    help="try the effects only, not the vehicle template's parameters")
-    p.add_argument("--screen", type=int, default=None, metavar="K",
-                   help="screened diagnosis: simulate every effect and parameter candidate on 4 sections "
-                        "(one per test zone first), then only the K that explain most there on the whole "
-                        "campaign; the others are listed, not ranked (about half the simulation; "
-                        "docs/diagnosis.md \"Screened diagnosis\")")
+    how = p.add_mutually_exclusive_group()
+    how.add_argument("--screen", type=int, default=None, metavar="K",
+                     help="simulate every effect and parameter candidate on a few sections (one per test zone "
+                          "first), then only the K that explain most there on the whole campaign; the others are "
+                          "listed, not ranked, and counted in the noise floor (about half the simulation; "
+                          "default: the Diagnose page's K; docs/diagnosis.md \"Screened diagnosis\")")
+    how.add_argument("--whole", action="store_true",
+                     help="simulate every candidate on every section (no screen; about twice the time)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_diagnose)
 

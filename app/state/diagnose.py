@@ -53,9 +53,9 @@ class DiagnoseState(param.Parameterized):
     # calibration settings (app.services.diagnosis.calibrate → core.calibration.calibrate)
     fit_parameters = param.ListSelector(default=[], objects=[], doc=(
         "parameters of the chosen effect to fit; none chosen = all; the others keep the values set"))
-    screened = param.Boolean(default=False, doc=(
-        "screened diagnosis: every candidate on a few sections first, the best SCREEN_KEEP on all "
-        "(docs/diagnosis.md \"Screened diagnosis\")"))
+    screened = param.Boolean(default=True, doc=(
+        "screened diagnosis (the default): every candidate on a few sections first, the best SCREEN_KEEP "
+        "on all (docs/diagnosis.md \"Screened diagnosis\"); off: every candidate on every section"))
     global_search = param.Boolean(default=False, doc=(
         "calibrate by a global search (differential evolution + local polish) instead of the local "
         "trust-region fit from the diagnosis's values; population, generations and polish apply to it only"))
