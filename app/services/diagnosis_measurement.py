@@ -8,16 +8,18 @@ gain of a car body sensor against its redundant channel at the other end.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from railval.core.diagnosis import CandidateFamily, DiagnosisResult, SectionEvidence
+from railval.core.diagnosis.evidence import section_evidence
 from railval.core.diagnosis.measurement import (
     GAIN_NODES,
     OFFSET_NODES,
-    discrete_evidence,
+    PairRecords,
     discrete_family,
     force_gain_groups,
     offset_blind,
@@ -25,16 +27,17 @@ from railval.core.diagnosis.measurement import (
     offset_family,
     offset_measured,
     offset_scale,
+    packed_measurements,
     reevaluated_measurement,
     remapped_measurement,
     section_lag,
     shared_gain_family,
     shifted_measured,
     sign_blind,
-    signed_measured,
+    signed_request,
     swap_pairs,
     swapped_bands,
-    swapped_measured,
+    swapped_request,
 )
 from railval.core.types import channel_kind
 
@@ -49,11 +52,11 @@ def offset_families(ctx: Any, sets: Mapping[str, Any], measurement: bool | Seque
     amplifier zeroed wrong); a channel whose offset the EN filter removes is left out with that
     reason. The measured statistics are re-evaluated from the recorded signals at every offset
     node (no simulation)."""
+    if measurement is True:  # by name only (docs/diagnosis.md: a gain of a wheel force channel,
+        return {}            # for which there is no candidate, is taken for an offset with confidence)
     pairs, _ = result
     used = {ch: offset_components(pairs, ch) for ch in ctx.channels}
     used = {ch: comps for ch, comps in used.items() if comps}
-    if measurement is True:  # by name only (docs/diagnosis.md: a gain of a wheel force channel,
-        return {}            # for which there is no candidate, is taken for an offset with confidence)
     groups = {g: tuple(c for c in chans if c in used) for g, chans in force_gain_groups(ctx.channels).items()}
     out: dict[str, CandidateFamily] = {}
     for ch in sorted(m.removeprefix("offset ") for m in measurement if m.startswith("offset ")):
@@ -157,23 +160,21 @@ def _wanted(ctx: Any, measurement: bool | Sequence[str], defaults: Sequence[str]
     return wanted, True  # a default candidate that does not apply is not worth a line
 
 
-def _sign_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | str:
-    """``sign CHANNEL``: the family, or why it cannot apply."""
+def _sign_family(name: str, arg: str, k: dict[str, Any]) -> _Plan | str:
+    """``sign CHANNEL``: how to build the family, or why it cannot apply."""
     ctx, pairs = k["ctx"], k["pairs"]
     comps = offset_components(pairs, arg) if arg in ctx.channels else []
     why = sign_blind(arg, comps)
     if why:
         return why
-    ev = discrete_evidence(k["base"], pairs, k["sim_bands"], k["meas_bands"], k["sections"],
-                           signed_measured(k["sets"], ctx.sections, arg, comps), k["limits"], bands=ctx.bands)
-    return discrete_family(
+    return _Plan(signed_request(arg, comps), None, k["meas_bands"], lambda ev: discrete_family(
         name, "sign", -1.0, ev, half_width=0.01, title=f"channel {arg} reads with reversed sign",
         explanation=(f"the measurement, not the model: channel {arg} reads −1 × the true value (polarity of "
-                     f"the sensor or bridge reversed); it changes {', '.join(sorted({q for q, _ in comps}))}"))
+                     f"the sensor or bridge reversed); it changes {', '.join(sorted({q for q, _ in comps}))}")))
 
 
-def _swap_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | str:
-    """``swap A B``: the family, or why it cannot apply."""
+def _swap_family(name: str, arg: str, k: dict[str, Any]) -> _Plan | str:
+    """``swap A B``: how to build the family, or why it cannot apply."""
     ctx, pairs = k["ctx"], k["pairs"]
     a, _, b = arg.partition(" ")
     pp = swap_pairs(a, b, ctx.channels)
@@ -182,19 +183,17 @@ def _swap_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | st
         return (f"{a} and {b} are not two channels (or positions) of the same kind this campaign "
                 "measures a quantity with")
     mb = swapped_bands(k["meas_bands"], pp)
-    ev = discrete_evidence(k["base"], pairs, k["sim_bands"], mb, k["sections"],
-                           swapped_measured(k["sets"], ctx.sections, pp, comps), k["limits"], bands=ctx.bands)
     which = ", ".join(f"{x}↔{y}" for x, y in pp)
     bands = any(x in ctx.channels and x[:2] in ("ay", "az") for x, _ in pp)
-    return discrete_family(
+    return _Plan(swapped_request(pp, comps), None, mb, lambda ev: discrete_family(
         name, "swap", 1.0, ev, half_width=0.01, title=f"{a} and {b} recorded each other's position ({which})",
         explanation=(f"the measurement, not the model: the sensors of {a} and {b} are exchanged ({which}); "
                      f"it changes {', '.join(sorted({q for q, _ in comps}))} at both positions"
-                     + (" and their band powers" if bands else "")))
+                     + (" and their band powers" if bands else ""))))
 
 
-def _shift_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | str:
-    """``shift SECTION``: the family, or why it cannot apply."""
+def _shift_family(name: str, arg: str, k: dict[str, Any]) -> _Plan | str:
+    """``shift SECTION``: how to build the family, or why it cannot apply."""
     ctx, sets, sim_sets = k["ctx"], k["sets"], k["sim_sets"]
     sec = next((s for s in ctx.sections if s.id == arg), None)
     if sec is None or arg not in sets or arg not in sim_sets:
@@ -207,16 +206,31 @@ def _shift_family(name: str, arg: str, k: dict[str, Any]) -> CandidateFamily | s
         return f"the channels agree on a lag of {lag['lag']:+.4f} s, less than one sample"
     comps = sorted({(q, p) for r in k["pairs"] if str(r["section"]) == arg
                     for q, p in [(str(r["quantity"]), str(r["position"]))]})
-    ev = discrete_evidence(k["base"], k["pairs"], k["sim_bands"], k["meas_bands"], k["sections"],
-                           shifted_measured(sets, ctx.sections, arg, lag["lag"], comps), k["limits"],
-                           bands=ctx.bands)
-    return discrete_family(
-        name, "shift", lag["lag"], ev, half_width=max(lag["spread"], 0.5 / fs), unit="s",
-        title=f"section {arg} recorded {lag['lag']:+.3f} s late",
-        explanation=(f"the measurement, not the model: every channel of section {arg} trails the simulation "
-                     f"by {lag['lag']:+.3f} s (cross-correlation of {len(lag['lags'])} channels, spread "
-                     f"{lag['spread']:.3f} s — a time base or trigger set wrong); re-aligned, the section's "
-                     "quantities are evaluated on the right stretch of track"))
+
+    def family(ev: SectionEvidence) -> CandidateFamily:
+        return discrete_family(
+            name, "shift", lag["lag"], ev, half_width=max(lag["spread"], 0.5 / fs), unit="s",
+            title=f"section {arg} recorded {lag['lag']:+.3f} s late",
+            explanation=(f"the measurement, not the model: every channel of section {arg} trails the simulation "
+                         f"by {lag['lag']:+.3f} s (cross-correlation of {len(lag['lags'])} channels, spread "
+                         f"{lag['spread']:.3f} s — a time base or trigger set wrong); re-aligned, the section's "
+                         "quantities are evaluated on the right stretch of track"))
+
+    # one section re-evaluated (the others stay as measured): a call of its own
+    return _Plan(None, lambda: shifted_measured(sets, ctx.sections, arg, lag["lag"], comps), k["meas_bands"], family)
+
+
+@dataclass
+class _Plan:
+    """A discrete candidate that applies: its re-evaluation — a ``(remap, components)``
+    request of all sections (evaluated with the other candidates' requests,
+    :func:`railval.core.diagnosis.reevaluation.packed_measurements`) or a call of its own
+    (``measure``) — the measured band powers its evidence takes, and the family of the evidence."""
+
+    request: tuple | None
+    measure: Callable[[], Mapping[tuple[str, str, str], float]] | None
+    meas_bands: Mapping
+    family: Callable[[SectionEvidence], CandidateFamily]
 
 
 _DISCRETE_BUILDERS = {"sign": _sign_family, "swap": _swap_family, "shift": _shift_family}
@@ -234,19 +248,34 @@ def discrete_families(ctx: Any, sets: Mapping[str, Any], sim_sets: Mapping[str, 
     car body ends and the two wheels of every wheelset; ``"shift"``: every section whose
     channels agree on a lag of at least one sample; ``"sign"``: every wheel force channel).
     What cannot apply is left out with its reason in ``skipped``; a named shift of a section
-    without a consistent lag too."""
+    without a consistent lag too. The sign and swap re-evaluations of all candidates run in one
+    batched EN evaluation, those touching disjoint channels in one signal set
+    (:func:`railval.core.diagnosis.reevaluation.packed_measurements`), and each evidence is
+    built from the records as arrays (:class:`railval.core.diagnosis.measurement.PairRecords`,
+    equal to :func:`railval.core.diagnosis.measurement.discrete_evidence` exactly)."""
     wanted, quiet = _wanted(ctx, measurement, defaults)
     if not wanted or not sets:
         return {}
     pairs, sim_bands = result
     k = {"ctx": ctx, "sets": sets, "sim_sets": sim_sets, "base": base, "pairs": pairs, "sim_bands": sim_bands,
          "meas_bands": meas_bands, "sections": sections, "limits": limits}
+    plans = [(name, _DISCRETE_BUILDERS[name.partition(" ")[0]](name, name.partition(" ")[2], k)) for name in wanted]
+    batched = [p for _, p in plans if isinstance(p, _Plan) and p.request is not None]
+    measured = dict(zip(map(id, batched), packed_measurements(sets, ctx.sections, [p.request for p in batched]),
+                        strict=True))
+    recs = PairRecords(pairs, limits) if any(isinstance(p, _Plan) for _, p in plans) else None
+    likes: dict[int, SectionEvidence] = {}  # the band powers and layout of the evidence, per measured bands
     out: dict[str, CandidateFamily] = {}
-    for name in wanted:
-        kind, _, arg = name.partition(" ")
-        fam = _DISCRETE_BUILDERS[kind](name, arg, k)
-        if not isinstance(fam, str) and np.array_equal(fam.evidence[1].values(), base.values()):
-            fam = "changes none of the quantities the campaign measures"
+    for name, plan in plans:
+        fam: CandidateFamily | str = plan
+        if isinstance(plan, _Plan):
+            m = measured[id(plan)] if plan.request is not None else plan.measure()
+            if id(plan.meas_bands) not in likes:
+                likes[id(plan.meas_bands)] = section_evidence([], sim_bands, plan.meas_bands, sections,
+                                                              bands=ctx.bands, value_key="D_norm", like=base)
+            fam = plan.family(recs.reevaluated(likes[id(plan.meas_bands)], m))
+            if np.array_equal(fam.evidence[1].values(), base.values()):
+                fam = "changes none of the quantities the campaign measures"
         if isinstance(fam, str):
             if not quiet:
                 skipped.append({"name": name, "kind": "measurement", "reason": fam})

@@ -86,7 +86,7 @@ from railval.core.diagnosis.measurement import (
     force_gain_groups,
     gain_channels,
     gain_family,
-    group_gain_family,
+    group_gain_families,
     group_gain_reevaluations,
 )
 from railval.core.diagnosis.screen import (
@@ -644,13 +644,9 @@ def force_gain_families(req: _Request, result0: tuple, base: SectionEvidence, se
     chosen = {n: g for n, g in groups.items() if wanted is None or n in wanted}
     comps = sorted({(str(r["quantity"]), str(r["position"])) for r in result0[0]})
     redo = group_gain_reevaluations(req.measured_sets, req.ctx.sections, chosen, comps) if chosen else {}
-    out: dict[str, CandidateFamily] = {}
-    for name, group in chosen.items():
-        fam = group_gain_family(base, result0[0], result0[1], req.meas_bands, sections, name, group, limits,
-                                redo[name], bands=req.ctx.bands)
-        if fam is not None:
-            out[fam.name] = fam
-    return out
+    fams = group_gain_families(base, result0[0], result0[1], req.meas_bands, sections, chosen, limits, redo,
+                               bands=req.ctx.bands)
+    return {fam.name: fam for fam in fams.values()}
 
 
 def _refine(req: _Request, base: SectionEvidence, fams: list[CandidateFamily], redo: Sequence[tuple[str, float]],

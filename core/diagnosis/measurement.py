@@ -27,6 +27,7 @@ import numpy as np
 from railval.core.diagnosis.evidence import SectionEvidence, section_evidence
 from railval.core.diagnosis.fit import CandidateFamily
 from railval.core.diagnosis.patterns import DEFAULT_BANDS_HZ
+from railval.core.diagnosis.reevaluation import packed_measurements, remapped_measurement
 from railval.core.types import SectionInfo, SignalSet
 
 #: search range of a channel gain (reads g × the true value), log scale; simulated nodes
@@ -82,6 +83,8 @@ class PairRecords:
         self.D = np.array([float(r["D_norm"]) for r in p])
         self.limit = np.array([float(std_limits.get(str(r["quantity"]), np.nan)) for r in p])
         self.where = [(str(r["section"]), f"{r['quantity']} zone {int(r['zone'])} {r['position']}") for r in p]
+        #: (section, quantity, position) of every record, the keys of a re-evaluated measurement
+        self.keys = [(str(r["section"]), str(r["quantity"]), str(r["position"])) for r in p]
 
     def evidence(self, like: SectionEvidence, measured: Sequence[float | None]) -> SectionEvidence:
         """:func:`section_evidence` (``value_key="D_norm"``, layout and band powers of ``like``)
@@ -89,10 +92,22 @@ class PairRecords:
         (None: unchanged): the same IEEE operations element-wise — D' = (S − M')·sign(M'),
         = S where M' = 0, divided by the std limit — and the sums added in record order
         (``np.add.at``), so the result equals the per-record computation exactly."""
-        from dataclasses import replace
-
         changed = np.array([m is not None for m in measured], bool)
         m = np.array([np.nan if x is None else float(x) for x in measured])[changed]
+        return self.evidence_of(like, changed, m)
+
+    def reevaluated(self, like: SectionEvidence, measured: Mapping[tuple[str, str, str], float]) -> SectionEvidence:
+        """:meth:`evidence` with the measurement of each record whose ``(section, quantity,
+        position)`` ``measured`` holds corrected to that value (a re-evaluation from the signals,
+        :func:`remapped_measurement`): :func:`section_evidence` of :func:`corrected_pairs` with
+        ``measured.get`` of the key, exactly."""
+        return self.evidence(like, [measured.get(k) for k in self.keys])
+
+    def evidence_of(self, like: SectionEvidence, changed: np.ndarray, m: np.ndarray) -> SectionEvidence:
+        """:meth:`evidence` with the records ``changed`` (boolean, one per record) corrected to
+        ``m`` (their corrected measurements M', in record order)."""
+        from dataclasses import replace
+
         s = self.S[changed]
         v = self.D.copy()
         with np.errstate(invalid="ignore"):
@@ -241,7 +256,7 @@ def offset_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]],
     return CandidateFamily(
         "measurement", f"offset {channel}", "offset", values, evidence, (min(values), max(values)), log=False,
         reference=0.0, unit=unit, title=f"channel {channel} reads" if not group else f"channels {', '.join(group)} read",
-        explanation=(f"the measurement, not the model: "
+        explanation=("the measurement, not the model: "
                      + (f"channel {channel} reads" if not group else f"the channels {', '.join(group)} read")
                      + " the true value + c (a zero set "
                      f"wrong, a bridge out of balance{'' if not group else ', one amplifier zeroed wrong'}); it changes {', '.join(sorted({q for q, _ in comps}))} "
@@ -299,54 +314,6 @@ def discrete_family(name: str, parameter: str, value: float, evidence: SectionEv
                            explanation=explanation)
 
 
-def remapped_measurement(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo],
-                         remap: Callable[[str, Mapping[str, np.ndarray], SignalSet], Mapping[str, np.ndarray]],
-                         components: Sequence[tuple[str, str]]) -> dict[tuple[str, str, str], float]:
-    """The measurement's EN values of ``components`` re-evaluated from the signals after
-    ``remap(section, channels, signalset)`` → the corrected channels of that section (only the
-    channels the components use are passed and evaluated; a section whose remap returns the
-    channels unchanged is evaluated as stored). ``(section, quantity, position)`` → M'."""
-    return remapped_measurements(signalsets, sections, [(remap, components)])[0]
-
-
-#: signal sets per EN call of :func:`remapped_measurements` (bounds the memory of one call)
-REMAP_BATCH = 96
-
-
-def remapped_measurements(signalsets: Mapping[str, SignalSet], sections: Sequence[SectionInfo],
-                          requests: Sequence[tuple[Callable[[str, Mapping[str, np.ndarray], SignalSet],
-                                                            Mapping[str, np.ndarray]], Sequence[tuple[str, str]]]]
-                          ) -> list[dict[tuple[str, str, str], float]]:
-    """:func:`remapped_measurement` of many ``(remap, components)`` requests in few EN calls:
-    the remapped signal sets of all requests go to :func:`railval.core.en14363.evaluate_batch`
-    together (:data:`REMAP_BATCH` at a time). Each section's values depend on its own signals
-    only ("Results equal :func:`evaluate_section` on each section alone"), so every request's
-    values equal those of its own call exactly. Only the readings of the components are
-    wanted: the other readings and the PSD bands are not computed."""
-    from dataclasses import replace
-
-    from railval.core.en14363 import evaluate_batch
-    from railval.core.quantities import QUANTITIES
-
-    by_id = {s.id: s for s in sections}
-    jobs = []  # (request index, section id, signal set)
-    for i, (remap, components) in enumerate(requests):
-        need = {c for q, p in components for c in QUANTITIES[q].channels(p)}
-        for sec in sections:
-            ss = signalsets.get(sec.id)
-            chans = {c: np.asarray(x, float) for c, x in ss.channels.items() if c in need} if ss is not None else {}
-            if chans:
-                jobs.append((i, sec.id, replace(ss, channels=dict(remap(sec.id, chans, ss)))))
-    out: list[dict[tuple[str, str, str], float]] = [{} for _ in requests]
-    for j0 in range(0, len(jobs), REMAP_BATCH):
-        part = jobs[j0:j0 + REMAP_BATCH]
-        vals = evaluate_batch([ss for _, _, ss in part], [by_id[sid] for _, sid, _ in part],
-                              alternatives=False, supplementary=False)
-        for (i, sid, _), v in zip(part, vals, strict=True):
-            out[i].update({(sid, q, p): float(v[(q, p)]) for q, p in requests[i][1] if (q, p) in v})
-    return out
-
-
 def discrete_evidence(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]], sim_bands: Mapping,
                       meas_bands: Mapping, sections: Sequence[tuple[str, int]],
                       measured: Mapping[tuple[str, str, str], float], std_limits: Mapping[str, float], *,
@@ -381,8 +348,13 @@ def signed_measured(signalsets: Mapping[str, SignalSet], sections: Sequence[Sect
                     components: Sequence[tuple[str, str]]) -> dict[tuple[str, str, str], float]:
     """The measurement's EN values of ``components`` with ``channel`` read with the opposite
     sign (the channel's polarity reversed: x → −x), re-evaluated from the signals."""
-    return remapped_measurement(signalsets, sections,
-                                lambda _s, ch, _ss: {c: (-x if c == channel else x) for c, x in ch.items()}, components)
+    return remapped_measurement(signalsets, sections, *signed_request(channel, components))
+
+
+def signed_request(channel: str, components: Sequence[tuple[str, str]]) -> tuple[Callable, Sequence[tuple[str, str]]]:
+    """The ``(remap, components)`` request of :func:`signed_measured` (for
+    :func:`packed_measurements`)."""
+    return (lambda _s, ch, _ss: {c: (-x if c == channel else x) for c, x in ch.items()}), components
 
 
 # ----------------------------------------------------------------------------- position swap
@@ -405,13 +377,20 @@ def swapped_measured(signalsets: Mapping[str, SignalSet], sections: Sequence[Sec
                      ) -> dict[tuple[str, str, str], float]:
     """The measurement's EN values of ``components`` with the channels of every pair exchanged
     (the sensors recorded each other's position), re-evaluated from the signals."""
+    return remapped_measurement(signalsets, sections, *swapped_request(pairs, components))
+
+
+def swapped_request(pairs: Sequence[tuple[str, str]], components: Sequence[tuple[str, str]]
+                    ) -> tuple[Callable, Sequence[tuple[str, str]]]:
+    """The ``(remap, components)`` request of :func:`swapped_measured` (for
+    :func:`packed_measurements`): each channel of a pair reads its partner's recorded samples."""
     other = {**{x: y for x, y in pairs}, **{y: x for x, y in pairs}}
 
     def remap(_sid: str, ch: Mapping[str, np.ndarray], ss: SignalSet) -> dict[str, np.ndarray]:
         full = {c: np.asarray(ss.channels[other.get(c, c)], float) for c in ch}
         return full
 
-    return remapped_measurement(signalsets, sections, remap, components)
+    return remap, components
 
 
 def swapped_bands(meas_bands: Mapping[str, Mapping[str, np.ndarray]], pairs: Sequence[tuple[str, str]]
@@ -581,10 +560,11 @@ def group_gain_reevaluations(signalsets: Mapping[str, SignalSet], sections: Sequ
     of ``components`` without a power law for a group (:func:`gain_degree` None: ΣY with one
     of its wheels in the group) re-evaluated from the signals with the group's channels
     divided by each g of ``values``, all in one batched EN evaluation
-    (:func:`remapped_measurements`). A component's value depends only on its own channels, so
+    (:func:`packed_measurements`). A component's value depends only on its own channels, so
     it is evaluated once per (its channels in the group, g) — a wheel and the side holding it
-    share ΣY of that wheelset — and each group reads the value the per-group re-evaluation
-    gives, exactly."""
+    share ΣY of that wheelset — and those of other wheelsets at the same g share one signal
+    set (ΣY of wheelsets 1–4 with their left wheels divided by g: one evaluation, not four);
+    each group reads the value the per-group re-evaluation gives, exactly."""
     from railval.core.quantities import QUANTITIES
 
     units: dict[frozenset, set[tuple[str, str]]] = {}
@@ -595,7 +575,7 @@ def group_gain_reevaluations(signalsets: Mapping[str, SignalSet], sections: Sequ
     keys = [(u, g) for u in sorted(units, key=sorted) for g in values]
     reqs = [(lambda _s, ch, _ss, u=u, g=g: {c: (x / g if c in u else x) for c, x in ch.items()}, sorted(units[u]))
             for u, g in keys]
-    found = dict(zip(keys, remapped_measurements(signalsets, sections, reqs), strict=True))
+    found = dict(zip(keys, packed_measurements(signalsets, sections, reqs), strict=True))
 
     def reevaluate_for(group: Sequence[str]) -> Callable[[float, Sequence[tuple[str, str]]], dict]:
         def reevaluate(g: float, comps: Sequence[tuple[str, str]]) -> dict:
@@ -619,29 +599,60 @@ def group_gain_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]],
     (log scale): the measured statistics corrected to M/g^d (:func:`gain_degree`), those without
     a power law from ``reevaluate(g, components)`` (the signals re-evaluated with the group's
     channels divided by g). None when no measured quantity uses the group."""
+    return group_gain_families(base, pairs, sim_bands, meas_bands, sections, {name: group}, std_limits,
+                               {name: reevaluate}, bands=bands, values=values).get(name)
+
+
+def group_gain_families(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]], sim_bands: Mapping,
+                        meas_bands: Mapping, sections: Sequence[tuple[str, int]], groups: Mapping[str, Sequence[str]],
+                        std_limits: Mapping[str, float],
+                        reevaluations: Mapping[str, Callable[[float, Sequence[tuple[str, str]]],
+                                                             Mapping[tuple[str, str, str], float]]],
+                        *, bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ,
+                        values: Sequence[float] = FORCE_GAIN_NODES) -> dict[str, CandidateFamily]:
+    """:func:`group_gain_family` of every group of ``groups`` (name → channels; ``reevaluations``:
+    name → its ``reevaluate``, :func:`group_gain_reevaluations`), the groups no measured
+    quantity uses left out. The records (:class:`PairRecords`), their components and the
+    band powers and component layout of the evidence are formed once for all groups (they
+    are the same at every node of every group); per group and node the corrected measurement
+    M/g^d is one array division per degree d — g^d the same Python power, M/g^d the same IEEE
+    division as per record — so the evidence equals the per-record computation exactly."""
     comps = sorted({(str(r["quantity"]), str(r["position"])) for r in pairs})
-    deg = {c: gain_degree(c[0], c[1], group) for c in comps}
-    deg = {c: d for c, d in deg.items() if d != 0}
-    if not deg:
-        return None
-    other = [c for c, d in deg.items() if d is None]
     recs = PairRecords(pairs, std_limits)
-    keys = [(str(r["section"]), str(r["quantity"]), str(r["position"])) for r in recs.pairs]
-    first = None
-    evidence = []
-    for gv in values:
-        redo = reevaluate(gv, other) if other else {}
-        m_new = [(redo.get(k) if deg[k[1:]] is None else float(r["M"]) / gv ** deg[k[1:]])
-                 if k[1:] in deg else None for k, r in zip(keys, recs.pairs, strict=True)]
-        if first is None:  # the band powers and the component layout: the same at every node
-            it = iter(m_new)
-            first = section_evidence(corrected_pairs(recs.pairs, lambda _r: next(it), std_limits), sim_bands,
-                                     meas_bands, sections, bands=bands, value_key="D_norm", like=base)
-        evidence.append(recs.evidence(first, m_new))
-    qs = ", ".join(sorted({q for q, _ in deg}))
-    return CandidateFamily(
-        "measurement", f"gain {name}", "gain", list(values), evidence, GAIN_BOUNDS, log=True, reference=1.0,
-        unit="×", title=f"channel(s) {', '.join(group)} read",
-        explanation=(f"the measurement, not the model: the force channel(s) {', '.join(group)} read g × the true "
-                     f"value (a transducer calibration or amplifier gain of an instrumented wheelset set wrong); "
-                     f"it changes {qs} — the other wheels measure what the model should match"))
+    comp_index = {c: j for j, c in enumerate(comps)}
+    rec_comp = np.array([comp_index[k[1:]] for k in recs.keys], dtype=np.int64)
+    plain: list[SectionEvidence] = []
+    out: dict[str, CandidateFamily] = {}
+    for name, group in groups.items():
+        deg = {c: d for c in comps if (d := gain_degree(c[0], c[1], group)) != 0}
+        if not deg:
+            continue
+        if not plain:  # the band powers and the component layout: the same at every node of every group
+            plain.append(section_evidence([], sim_bands, meas_bands, sections, bands=bands, value_key="D_norm",
+                                          like=base))
+        other = [c for c, d in deg.items() if d is None]
+        powers = {d: np.isin(rec_comp, [comp_index[c] for c, e in deg.items() if e == d])
+                  for d in sorted({d for d in deg.values() if d is not None})}
+        redone = np.flatnonzero(np.isin(rec_comp, [comp_index[c] for c in other]))
+        evidence = []
+        for gv in values:
+            redo = reevaluations[name](gv, other) if other else {}
+            changed = np.zeros(rec_comp.size, bool)
+            m = np.zeros(rec_comp.size)
+            for d, where in powers.items():  # M/g^d (the records' own division, Python g ** d)
+                m[where] = recs.M[where] / gv ** d
+                changed |= where
+            for k in redone:  # ΣY re-evaluated; a record without a value stays as measured
+                x = redo.get(recs.keys[k])
+                if x is not None:
+                    m[k], changed[k] = float(x), True
+            evidence.append(recs.evidence_of(plain[0], changed, m[changed]))
+        qs = ", ".join(sorted({q for q, _ in deg}))
+        out[name] = CandidateFamily(
+            "measurement", f"gain {name}", "gain", list(values), evidence, GAIN_BOUNDS, log=True, reference=1.0,
+            unit="×", title=f"channel(s) {', '.join(group)} read",
+            explanation=(f"the measurement, not the model: the force channel(s) {', '.join(group)} read g × the "
+                         f"true value (a transducer calibration or amplifier gain of an instrumented wheelset set "
+                         f"wrong); it changes {qs} — the other wheels measure what the model should match"))
+    return out
+
