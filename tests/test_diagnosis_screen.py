@@ -206,8 +206,9 @@ def test_screened_diagnosis_is_the_same_serial_pooled_and_on_a_dask_cluster(camp
 
 
 def test_the_diagnose_page_runs_a_screened_diagnosis_and_lists_what_it_screened_out(campaign, monkeypatch):
-    """The page's "Screened" box hands ``screen`` = SCREEN_KEEP to the service (unticked: no
-    screen), and the page says which candidates the screen left out, with their shares."""
+    """The page's "Screened" box, ticked by default, hands ``screen`` = SCREEN_KEEP to the
+    service (unticked: no screen), and the page says which candidates the screen left out, with
+    their shares."""
     import panel as pn
 
     from railval.app.pages.diagnose import DiagnosePage
@@ -225,6 +226,8 @@ def test_the_diagnose_page_runs_a_screened_diagnosis_and_lists_what_it_screened_
                   values_per_parameter=2)
         return real(c, k, progress=progress, **kw)
     monkeypatch.setattr(app.backend, "diagnose_and_list", spy)
+    assert page.state.screened is True  # the default (docs/diagnosis.md round 11)
+    page.state.screened = False
     assert "about half" not in page.diag_estimate.object
     page.state.screened = True
     assert "screened, every candidate on 4 sections" in page.diag_estimate.object  # the cost shown
@@ -285,3 +288,55 @@ def test_a_floor_only_family_counts_in_the_noise_floor_exactly_as_a_ranked_one_a
     one = next(c for c in both.candidates if c.name == "one")
     assert (marked.candidates[0].held_out_explained, marked.candidates[0].explained_ci) == \
            (one.held_out_explained, one.explained_ci)
+
+
+def test_the_command_line_screens_by_default_and_whole_turns_it_off(campaign, monkeypatch, capsys):
+    """``railval diagnose`` hands ``screen`` = SCREEN_KEEP to the service unless ``--whole``
+    (``--screen K`` another K); ``--screen`` and ``--whole`` together are refused."""
+    from railval.app.cli import main
+    from railval.app.services import diagnosis as service
+    from railval.core.diagnosis.screen import SCREEN_KEEP
+
+    seen: list[dict] = []
+    real = service.diagnose
+
+    def spy(*a, **kw):
+        seen.append(kw)
+        return real(*a, **kw)
+    monkeypatch.setattr(service, "diagnose", spy)
+    url = str(campaign.engine.url)
+    base = ["--db", url, "diagnose", "demo", "--config", "baseline", "--candidates", "conicity", "--values", "2"]
+    assert main(base) == 0 and seen[-1]["screen"] == SCREEN_KEEP
+    assert main([*base, "--screen", "3"]) == 0 and seen[-1]["screen"] == 3
+    assert main([*base, "--whole"]) == 0 and "screen" not in seen[-1]
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main([*base, "--whole", "--screen", "3"])
+    assert "not allowed with argument" in capsys.readouterr().err
+
+
+def test_the_trust_bench_compares_a_screened_case_with_its_whole_diagnosis():
+    """``bench diagnosis_trust --screen K --against-whole``: same or not, and the floor's move."""
+    from railval.app.bench.trust_against_whole import (
+        against_whole_lines,
+        against_whole_summary,
+        whole_of,
+    )
+
+    def doc(verdict, top, causes, floor):
+        return {"verdict": verdict, "candidates": [{"name": top}], "causes": [{"name": c} for c in causes],
+                "noise_floor": floor}
+    same = whole_of(doc("cause", "a", ["a"], 0.20), doc("cause", "a", ["a"], 0.18), 9.04)
+    assert same["same"] and same["floor_change"] == 0.02 and same["diagnose_s"] == 9.0
+    other = whole_of(doc("cause", "a", ["a"], 0.10), doc("uncertain", "a", ["a"], 0.15), 1.0)
+    assert not other["same"] and other["floor_change"] == -0.05
+    records = [{"class": "a", "case": "x", "verdict": "cause", "top": "a", "causes": ["a"], "whole": same},
+               {"class": "b", "case": "y", "verdict": "cause", "top": "a", "causes": ["a"], "whole": other},
+               {"class": "c", "case": "z", "verdict": "none", "top": None}]
+    summary = against_whole_summary(records)
+    assert summary["against_whole"] == {"cases": 2, "same_verdict_top_causes": 1, "floor_lower": 1, "floor_higher": 1,
+                                        "floor_change_min": -0.05, "floor_change_max": 0.02}
+    lines = against_whole_lines(records, summary)
+    assert lines[0].startswith("screened against whole: verdict, top and cause set the same in 1 of 2")
+    assert len(lines) == 2 and "(b) y: screened cause a ['a'], whole uncertain a ['a']" in lines[1]
+    assert against_whole_summary(records[2:]) == {} and against_whole_lines(records[2:], {}) == []

@@ -63,6 +63,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from railval.app.bench.trust_against_whole import (
+    against_whole_lines,
+    against_whole_summary,
+    whole_of,
+)
 from railval.app.bench.trust_profiles import profile_cases
 from railval.core import lazy
 
@@ -350,19 +355,6 @@ def run_case(database: Any, name: str, klass: str, label: str, kwargs: dict[str,
     return rec
 
 
-def whole_of(screened: dict, whole: dict, seconds: float) -> dict:
-    """The whole diagnosis of a case beside its screened one: verdict, top, cause set, noise
-    floor, seconds, and whether verdict, top and cause set are the same and how far the noise
-    floor moved (screened − whole)."""
-    causes = lambda d: sorted(c["name"] for c in d.get("causes") or [])
-    top = lambda d: d["candidates"][0]["name"] if d["candidates"] else None
-    return {"verdict": whole["verdict"], "top": top(whole), "causes": causes(whole),
-            "noise_floor": whole["noise_floor"], "diagnose_s": round(seconds, 1),
-            "same": (screened["verdict"], top(screened), causes(screened)) == (whole["verdict"], top(whole),
-                                                                                causes(whole)),
-            "floor_change": round(screened["noise_floor"] - whole["noise_floor"], 4)}
-
-
 def flagged(calibration: dict) -> bool:
     """A calibration result warns that its candidate may be wrong: a fitted value implausible
     or at a bound, or a warning (not a ``note:``) from the held-out check or the parent's
@@ -401,12 +393,7 @@ def summarise(records: list[dict]) -> dict:
         out[k] = item
     out["confident_wrong"] = sum(r["confident_wrong"] for r in records) / max(1, len(records))
     out["explained_ge_0_5_and_wrong"] = sum(r["explained_wrong"] for r in records) / max(1, len(records))
-    paired = [r["whole"] for r in records if r.get("whole")]
-    if paired:
-        ch = [w["floor_change"] for w in paired]
-        out["against_whole"] = {"cases": len(paired), "same_verdict_top_causes": sum(w["same"] for w in paired),
-                                "floor_lower": sum(c < -1e-9 for c in ch), "floor_higher": sum(c > 1e-9 for c in ch),
-                                "floor_change_min": min(ch), "floor_change_max": max(ch)}
+    out.update(against_whole_summary(records))
     passes = [r for r in records if r.get("wrong_calibration_passes")]
     if passes:
         out["wrong_calibrations_passing"] = len(passes)
@@ -462,14 +449,7 @@ def format_table(records: list[dict], summary: dict) -> str:
             lines.append(f"class ({k}) n={s['n']}: {fig}; verdicts {s['verdicts']}")
     lines.append(f"confident wrong (verdict cause and wrong): {100 * summary['confident_wrong']:.0f} %; "
                  f"explained ≥ 0.5 and wrong: {100 * summary['explained_ge_0_5_and_wrong']:.0f} %")
-    if "against_whole" in summary:
-        a = summary["against_whole"]
-        lines.append(f"screened against whole: verdict, top and cause set the same in {a['same_verdict_top_causes']} of "
-                     f"{a['cases']}; noise floor lower in {a['floor_lower']}, higher in {a['floor_higher']} "
-                     f"(change {a['floor_change_min']:+.3f} … {a['floor_change_max']:+.3f})")
-        lines += [f"  differs: ({r['class']}) {r['case']}: screened {r['verdict']} {r['top']} {r.get('causes')}, whole "
-                  f"{r['whole']['verdict']} {r['whole']['top']} {r['whole']['causes']}"
-                  for r in records if r.get("whole") and not r["whole"]["same"]]
+    lines += against_whole_lines(records, summary)
     if "wrong_calibrations_passing" in summary:
         lines.append(f"wrong calibrations that pass: {summary['wrong_calibrations_passing']}, flagged "
                      f"{100 * summary['of_those_flagged']:.0f} %")

@@ -157,19 +157,22 @@ class _Fit:
     """One candidate against a :class:`_Setup`: its curve, the fit on all sections (best fine-grid
     index ``k``, cost, pattern ``Pk``, the cost at every fine-grid point), the held-out share
     and fold values; :func:`_bootstrap_all` adds the bootstrap (``boot``, ``v_ci``,
-    ``noise_share``)."""
+    ``noise_share``). A ``floor_only`` family needs its curve and patterns alone (its share of
+    scatter comes from the bootstrap)."""
 
     def __init__(self, fam: CandidateFamily, st: _Setup):
         self.fam = fam
         self.curve = curve = _Curve(fam)
         self.P_full = np.stack([e.values() for e in fam.evidence])
+        self.boot: list[float] = []
+        self.noise_share = np.zeros(0)
+        if fam.floor_only:
+            return
         self.k, self.costs, self.Pk = _fit_costs(curve, self.P_full, st.w)
         self.cost = float(self.costs[self.k])
         self.v = curve.value(self.k)
-        self.held, self.fold_values = (0.0, []) if fam.floor_only else _held_out(curve, fam, st)
-        self.boot: list[float] = []
+        self.held, self.fold_values = _held_out(curve, fam, st)
         self.v_ci = (self.v, self.v)
-        self.noise_share = np.zeros(0)
 
 
 def _held_out(curve: _Curve, fam: CandidateFamily, st: _Setup) -> tuple[float, list[float]]:
