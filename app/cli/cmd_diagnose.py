@@ -69,6 +69,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
               + (f" — STRUCTURAL: {f.structural_reason}" if f.structural else ""))
     for s in view.skipped:
         print(f"left out: {s.name} ({s.kind}) — {s.reason}")
+    if view.screened_out:
+        print("screened: the candidates below are not ranked and count in the noise floor; --whole simulates "
+              "every candidate on every section")
     for s in view.screened_out:
         print(f"screened out (simulated on {', '.join(view.screen_sections)} only): {s.name} ({s.kind}) — {s.reason}")
     if view.verdict == "none" and view.unexplained:

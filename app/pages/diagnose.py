@@ -225,8 +225,9 @@ class DiagnosePage(PageBase):
                 f"{s.name} — {s.reason}" for s in candidates), "info"))
         screened = view.screened_out if view is not None else []
         if screened:
-            extra.append(message(f"Screened out (simulated on {', '.join(view.screen_sections)} only, not ranked; "
-                                 "share of the residual each explains there): " + "; ".join(
+            extra.append(message(f"Screened out (simulated on {', '.join(view.screen_sections)} only, not ranked, "
+                                 "counted in the noise floor; share of the residual each explains there; untick "
+                                 "Screened for every candidate on every section): " + "; ".join(
                                      f"{s.name} {s.reason.split(' on ')[0]}" for s in screened), "info"))
         # the verdict first: a reader must not scroll past 20 candidates to learn how sure it is
         # 890 px in all: fits the main area at 1280 px (what it fixes and worsens: below, per candidate);
