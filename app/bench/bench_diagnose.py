@@ -9,8 +9,10 @@ and the speed-up printed (``--no-dask``: skipped); the three diagnoses must agre
 Baseline measured in the same run: one simulation + evaluation of the whole campaign (the unit
 of work both jobs repeat), so the figures can be read as "number of campaign simulations".
 The screened diagnosis (``--screen K``: every candidate on 4 sections first, the K best on the
-rest) is timed beside it and checked against it: verdict, top candidate, cause set, the kept
-candidates' held-out shares. The diagnosis's CPU seconds — its calling process's and its pool workers' (forked children,
+rest; with K = 8 the default of ``railval diagnose`` and the Diagnose page, so
+``diagnose_screened_s`` is what a user waits for and ``diagnose_s`` the whole diagnosis of
+``--whole``) is timed beside it and checked against it: verdict, top candidate, cause set, the
+kept candidates' held-out shares. The diagnosis's CPU seconds — its calling process's and its pool workers' (forked children,
 joined when it ends) — and the cores they kept busy on average: at the machine's core count the
 diagnosis is CPU-bound and only less CPU makes it faster.
 The campaign is synthesised into a temporary SQLite database (or ``--db``) with a hidden effect.
