@@ -159,9 +159,13 @@ def test_batched_group_reevaluation_equals_each_groups_own_evaluation(sqlite_dat
 def test_group_gain_evidence_equals_the_corrected_pairs_evidence_exactly():
     """Independent expectation: at every node the evidence of :func:`corrected_pairs` (M/g^d,
     ΣY from the re-evaluation, a zero and a NaN measurement among the records) through
-    :func:`section_evidence` — equal bit for bit to the array path of :func:`group_gain_family`."""
+    :func:`section_evidence` — equal bit for bit to the array path of :func:`group_gain_families`."""
     from railval.core.diagnosis.evidence import section_evidence
-    from railval.core.diagnosis.measurement import FORCE_GAIN_NODES, corrected_pairs, group_gain_family
+    from railval.core.diagnosis.measurement import (
+        FORCE_GAIN_NODES,
+        corrected_pairs,
+        group_gain_families,
+    )
 
     rng = np.random.default_rng(11)
     comps = [("Y_qst", "w1L"), ("YQ_max", "w1L"), ("SumY_max", "ws1"), ("Q_qst", "w1R"), ("az_rms", "b1")]
@@ -179,7 +183,8 @@ def test_group_gain_evidence_equals_the_corrected_pairs_evidence_exactly():
     redo_vals = {g: {(f"S{k}", "SumY_max", "ws1"): float(rng.normal(2, 1)) for k in range(8) if k != 3}
                  for g in FORCE_GAIN_NODES}
     group = ("Y_w1L", "Q_w1R")
-    fam = group_gain_family(base, pairs, {}, {}, sections, "x", group, limits, lambda g, c: redo_vals[g])
+    fam = group_gain_families(base, pairs, {}, {}, sections, {"x": group}, limits,
+                              {"x": lambda g, c: redo_vals[g]})["x"]
     degs = {c: gain_degree(*c, group) for c in comps}
     assert degs[("YQ_max", "w1L")] == 1 and degs[("SumY_max", "ws1")] is None and degs[("az_rms", "b1")] == 0
     for g, ev in zip(FORCE_GAIN_NODES, fam.evidence, strict=True):

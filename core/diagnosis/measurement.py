@@ -556,7 +556,7 @@ def group_gain_reevaluations(signalsets: Mapping[str, SignalSet], sections: Sequ
                               groups: Mapping[str, Sequence[str]], components: Sequence[tuple[str, str]],
                               values: Sequence[float] = FORCE_GAIN_NODES
                               ) -> dict[str, Callable[[float, Sequence[tuple[str, str]]], dict]]:
-    """The ``reevaluate`` of :func:`group_gain_family` for every group at once: the components
+    """The ``reevaluate`` of :func:`group_gain_families` for every group at once: the components
     of ``components`` without a power law for a group (:func:`gain_degree` None: ΣY with one
     of its wheels in the group) re-evaluated from the signals with the group's channels
     divided by each g of ``values``, all in one batched EN evaluation
@@ -589,20 +589,6 @@ def group_gain_reevaluations(signalsets: Mapping[str, SignalSet], sections: Sequ
     return {name: reevaluate_for(group) for name, group in groups.items()}
 
 
-def group_gain_family(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]], sim_bands: Mapping,
-                      meas_bands: Mapping, sections: Sequence[tuple[str, int]], name: str, group: Sequence[str],
-                      std_limits: Mapping[str, float],
-                      reevaluate: Callable[[float, Sequence[tuple[str, str]]], Mapping[tuple[str, str, str], float]],
-                      *, bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ,
-                      values: Sequence[float] = FORCE_GAIN_NODES) -> CandidateFamily | None:
-    """The measurement candidate "the channels of ``group`` read g × the true value" along g
-    (log scale): the measured statistics corrected to M/g^d (:func:`gain_degree`), those without
-    a power law from ``reevaluate(g, components)`` (the signals re-evaluated with the group's
-    channels divided by g). None when no measured quantity uses the group."""
-    return group_gain_families(base, pairs, sim_bands, meas_bands, sections, {name: group}, std_limits,
-                               {name: reevaluate}, bands=bands, values=values).get(name)
-
-
 def group_gain_families(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]], sim_bands: Mapping,
                         meas_bands: Mapping, sections: Sequence[tuple[str, int]], groups: Mapping[str, Sequence[str]],
                         std_limits: Mapping[str, float],
@@ -610,9 +596,11 @@ def group_gain_families(base: SectionEvidence, pairs: Sequence[Mapping[str, Any]
                                                              Mapping[tuple[str, str, str], float]]],
                         *, bands: Sequence[tuple[float, float]] = DEFAULT_BANDS_HZ,
                         values: Sequence[float] = FORCE_GAIN_NODES) -> dict[str, CandidateFamily]:
-    """:func:`group_gain_family` of every group of ``groups`` (name → channels; ``reevaluations``:
-    name → its ``reevaluate``, :func:`group_gain_reevaluations`), the groups no measured
-    quantity uses left out. The records (:class:`PairRecords`), their components and the
+    """The measurement candidates "the channels of group G read g × the true value" along g (log
+    scale), one per group of ``groups`` (name → channels), the groups no measured quantity uses
+    left out: the measured statistics corrected to M/g^d (:func:`gain_degree`), those without a
+    power law from the group's ``reevaluations[name](g, components)`` (the signals re-evaluated
+    with the group's channels divided by g, :func:`group_gain_reevaluations`). The records (:class:`PairRecords`), their components and the
     band powers and component layout of the evidence are formed once for all groups (they
     are the same at every node of every group); per group and node the corrected measurement
     M/g^d is one array division per degree d — g^d the same Python power, M/g^d the same IEEE
