@@ -183,10 +183,39 @@ def test_class_r_a_rougher_track_without_measured_geometry_is_the_track_input(da
     st = next(x for x in d["statements"] if x["kind"] == "track input")
     assert set(st["candidates"]) <= {"track_level_vertical", "track_level_lateral"}
     # the same campaign with measured geometry: the candidate is skipped with its reason
-    from railval.app.services.diagnosis_ranking import inapplicable_effects
     from types import SimpleNamespace
+
+    from railval.app.services.diagnosis_ranking import inapplicable_effects
 
     ctx = SimpleNamespace(vehicle={"template": "coach"}, layouts={"S1": {"irregularities": {"ds_m": 0.25}}},
                           measured_values={})
     why = {x["name"]: x["reason"] for x in inapplicable_effects(ctx, {}, ["track_level_vertical"])}
     assert "measured track geometry" in why["track_level_vertical"]
+
+
+def test_sections_flag_reaches_every_case(monkeypatch):
+    """``--sections N`` builds every case's campaign with N sections (more per test zone, so more
+    of them off a screened diagnosis's screen); fewer than 12 is refused by the synthesis."""
+    import argparse
+
+    from railval.app.bench import bench_diagnosis_trust as bench
+
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    args = parser.parse_args(["--sections", "24", "--classes", "a", "d", "--cases", "1", "--screen", "8"])
+    seen = []
+
+    def fake_case(database, name, klass, label, kwargs, truth, **kw):
+        seen.append((klass, kw["n_sections"], kw["screen"]))
+        return {"class": klass, "case": label, "truth": truth, "verdict": "none", "noise_floor": 0.0, "top": None,
+                "top_explained": 0.0, "top_held_out": 0.0, "right": False, "confident_wrong": False,
+                "explained_wrong": False, "diagnose_s": 0.0}
+
+    monkeypatch.setattr(bench, "run_case", fake_case)
+    bench.run(args, progress=lambda *a: None)
+    assert seen == [("a", 24, 8), ("d", 24, 8)]
+    assert parser.parse_args([]).sections == 12
+    from railval.core.errors import InvalidParameter
+    from railval.core.sim.synth import build_campaign
+    with pytest.raises(InvalidParameter, match="at least 12 sections"):
+        build_campaign(n_sections=8)

@@ -50,7 +50,7 @@ Per class also (:func:`class_scores`): named as cause, named in the set, ``uncer
 right top, confidently wrong. With ``--screen K --against-whole`` every case is diagnosed screened
 and whole (:func:`whole_of`): where verdict, top or cause set differ, and how the noise floor moved.
 
-``railval bench diagnosis_trust [--cases N] [--classes a b c d e f m g t r w p] [--workers 2] [--screen K [--against-whole]] [--calibrate-wrong]``
+``railval bench diagnosis_trust [--cases N] [--classes a b c d e f m g t r w p] [--workers 2] [--sections N] [--screen K [--against-whole]] [--calibrate-wrong]``
 """
 
 from __future__ import annotations
@@ -283,6 +283,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run the screened diagnosis keeping K candidates (docs/diagnosis.md)")
     parser.add_argument("--against-whole", action="store_true",
                         help="with --screen: also the whole diagnosis of every case; print where they differ")
+    parser.add_argument("--sections", type=int, default=12, metavar="N",
+                        help="sections per campaign (default 12, at least 12: ≥ 3 per EN 14363 test zone); more "
+                             "sections per zone put more of them off the screen (--screen)")
     parser.add_argument("--calibrate-wrong", action="store_true",
                         help="calibrate the top candidate where it is wrong (short search, --split) and "
                              "check a pass is flagged")
@@ -476,7 +479,8 @@ def run(args: argparse.Namespace, progress=None) -> dict:
                                oversample=getattr(args, "oversample", 4),
                                calibrate_wrong=getattr(args, "calibrate_wrong", False),
                                screen=getattr(args, "screen", None),
-                               against_whole=getattr(args, "against_whole", False))
+                               against_whole=getattr(args, "against_whole", False),
+                               n_sections=getattr(args, "sections", 12))
             except Exception as exc:  # noqa: BLE001 - one failing case is a finding, not the end of the bench
                 rec = {"class": k, "case": label, "truth": truth, "verdict": "error", "error": str(exc),
                        "noise_floor": 0.0, "top": None, "top_explained": 0.0, "top_held_out": 0.0,
