@@ -283,8 +283,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run the screened diagnosis keeping K candidates (docs/diagnosis.md)")
     parser.add_argument("--against-whole", action="store_true",
                         help="with --screen: also the whole diagnosis of every case; print where they differ")
-    parser.add_argument("--sections", type=int, default=12, metavar="N", help="sections per campaign (default "
-                        "and least 12, ≥ 3 per test zone); more per zone put more of them off the screen (--screen)")
+    parser.add_argument("--sections", type=int, default=12, metavar="N", help="sections per campaign (default and "
+                        "minimum 12: ≥ 3 per test zone); more per zone put more of them off the screen (--screen)")
     parser.add_argument("--calibrate-wrong", action="store_true",
                         help="calibrate the top candidate where it is wrong (short search, --split) and "
                              "check a pass is flagged")
