@@ -380,6 +380,27 @@ def test_lack_of_fit_region_grows_with_what_the_fit_leaves():
     assert lo == pytest.approx(0.8 - half, abs=2e-4) and hi == pytest.approx(0.8 + half, abs=2e-4)
 
 
+def test_f_quantile_equals_scipy_stats_without_importing_it():
+    """The lack-of-fit region's F_{1, n−1} quantile (``scipy.special.fdtri``) equals
+    ``scipy.stats.f.ppf`` bit for bit over the levels and degrees of freedom a diagnosis meets,
+    and computing it does not import scipy.stats (a fresh process: its import is ≈ 0.4 s on
+    the screened diagnosis's critical path)."""
+    import subprocess
+    import sys
+
+    from scipy.stats import f as f_dist
+
+    from railval.core.diagnosis.engine import _f_ppf
+
+    for level in (0.5, 0.8, 0.9, 0.95, 0.99):
+        for dof in range(1, 200):
+            assert _f_ppf(level, dof) == float(f_dist.ppf(level, 1, dof)), (level, dof)
+    code = ("import sys; from railval.core.diagnosis.engine import _f_ppf; _f_ppf(0.9, 7); "
+            "print('scipy.stats' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
 def test_cause_set_carries_on_past_an_implausible_candidate():
     """Candidate T explains the residual best but only at a value outside its plausible range;
     the plausible cause A behind it must still be tried and named, T reported as passed over."""
