@@ -30,7 +30,7 @@ from railval.db import repo, runs
 
 #: version of the diagnosis procedure in the stored runs' digest (with the EN processing
 #: version): a change of the procedure computes afresh instead of reusing an older run
-DIAGNOSIS_VERSION = f"diagnosis/10+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets; 5: sign/swap/shift; 6: interface and mass rules; 7: passed-over causes, force gains, track input, contact statement; 8: group offsets, redundancy rule on offsets; 9: a conicity on top never the cause, conicity skipped with measured profiles; 10: runs end at the evaluated range + EN filter run-out, band powers over that span on both sides
+DIAGNOSIS_VERSION = f"diagnosis/11+{PROCESSING_VERSION}"  # 3: skipped, causes, families; 4: configuration effects that cannot apply left out, offsets; 5: sign/swap/shift; 6: interface and mass rules; 7: passed-over causes, force gains, track input, contact statement; 8: group offsets, redundancy rule on offsets; 9: a conicity on top never the cause, conicity skipped with measured profiles; 10: runs end at the evaluated range + EN filter run-out, band powers over that span on both sides; 11: the simulator's kernel compiled with floating-point freedoms (values move by rounding)
 
 __all__ = ["DIAGNOSIS_VERSION", "diagnose", "diagnose_and_list", "diagnosis_fit_record", "diagnosis_lineage", "diagnosis_runs", "diagnosis_simulations",
            "latest_diagnosis", "scan_points"]

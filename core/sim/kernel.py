@@ -79,7 +79,9 @@ def cbrt_positive(x):
     (tests/test_sim_kernel_cbrt.py: 2 million arguments over 10⁻³⁰⁰…10³⁰⁰; within 3 ulp of the
     true root); the library call it replaces cost the contact loop ≈ 14 % of the kernel's time
     (8 calls per step, every live register saved around each; docs/diagnosis.md, round 8).
-    Zero, negative, infinite and NaN arguments go to ``np.cbrt``."""
+    Inlined into :func:`run_kernel` it is compiled with that kernel's :data:`KERNEL_FASTMATH`,
+    so there its last bits may differ from the library's (the tests check this function on its
+    own). Zero, negative, infinite and NaN arguments go to ``np.cbrt``."""
     if not (0.0 < x < 1.7976931348623157e308):
         return np.cbrt(x)
     xm = x
@@ -220,7 +222,18 @@ def table_value(T, col, y):
     return T[lo, col] + w * (T[lo + 1, col] - T[lo, col])
 
 
-@njit(cache=True)
+#: LLVM's floating-point freedoms for the step (docs/simulator.md "Numerical scheme"): fused
+#: multiply–add (``contract``), reassociation (``reassoc``), reciprocals of divisors
+#: (``arcp``) and the sign of zero (``nsz``) — not ``nnan``/``ninf``, so non-finite values are
+#: still seen as such. They move a run's values by rounding (≤ 3·10⁻¹³ of a channel's largest
+#: value on the bench campaign) and make the kernel ≈ 17 % faster (docs/diagnosis.md round 13);
+#: the bits then follow the compiler and the processor, no longer the IEEE operation order
+#: alone (the same installation on the same machine still gives the same bits, serial or on
+#: any number of workers). The inlined helpers above are compiled into the step with them.
+KERNEL_FASTMATH = frozenset({"contract", "reassoc", "arcp", "nsz"})
+
+
+@njit(cache=True, fastmath=set(KERNEL_FASTMATH))
 def run_kernel(SC, massd, free, xabs, CONN, ws_body, bogie_body, s_arr0, ds, TR, n_steps, dt, decim, out, RRD):
     """Integrate ``n_steps`` steps of ``dt`` s; write ``out[n_steps // decim, nch]`` block means.
 
