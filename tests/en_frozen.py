@@ -27,10 +27,15 @@ def bench_inputs():
 
 
 def campaign_inputs():
+    """The synthetic campaign's measured and baseline signal sets, simulated with the IEEE step
+    (tests/sim_ieee.py): the frozen values were made from such runs, and the check holds the EN
+    chain, not the simulator's last bits."""
     from railval.core.sim.synth import build_campaign
     from railval.core.types import SectionInfo
+    from tests.sim_ieee import ieee_kernel
 
-    sc = build_campaign(n_sections=12)
+    with ieee_kernel():
+        sc = build_campaign(n_sections=12)
     infos = []
     for s in sc.sections:
         rec = s.manifest_record()

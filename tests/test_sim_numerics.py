@@ -149,13 +149,12 @@ def test_kernel_freedoms_move_a_run_by_rounding_only(monkeypatch):
     the independent reference) gives every output channel within 10⁻⁹ of its largest value, on
     the 200 km/h straight and on a 300 m curve with flange contact and the wheel loads' cube
     root; the two runs are not the same bits (the freedoms are in effect)."""
-    from numba import njit
-
     from railval.core.sim import kernel
+    from tests.sim_ieee import ieee_run_kernel
 
     assert kernel.KERNEL_FASTMATH <= {"contract", "reassoc", "arcp", "nsz"}
     assert not kernel.KERNEL_FASTMATH & {"nnan", "ninf", "fast", "afn"}
-    ieee = njit(cache=False)(kernel.run_kernel.py_func)
+    ieee = ieee_run_kernel()
     veh = VehicleModel("coach")
     sec = TrackSection("R0", speed_kmh=80.0, straight_in_m=60.0, curve_m=120.0, straight_out_m=60.0,
                        radius_m=300.0, cant_mm=150.0,
