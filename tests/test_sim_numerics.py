@@ -142,7 +142,7 @@ def test_track_flexibility_corners_stay_finite_and_step_converged(kv, kl):
         assert a == pytest.approx(b, rel=0.01), ch
 
 
-def test_kernel_freedoms_move_a_run_by_rounding_only(monkeypatch):
+def test_kernel_freedoms_move_a_run_by_rounding_only():
     """The step's floating-point freedoms (``KERNEL_FASTMATH``, docs/simulator.md "Numerical
     scheme") keep NaN and infinity meaningful (no ``nnan``, ``ninf`` or ``fast``) and move a run
     only by rounding: the same step compiled here with IEEE semantics (numba without fastmath,
@@ -150,11 +150,10 @@ def test_kernel_freedoms_move_a_run_by_rounding_only(monkeypatch):
     the 200 km/h straight and on a 300 m curve with flange contact and the wheel loads' cube
     root; the two runs are not the same bits (the freedoms are in effect)."""
     from railval.core.sim import kernel
-    from tests.sim_ieee import ieee_run_kernel
+    from tests.sim_ieee import ieee_kernel
 
     assert kernel.KERNEL_FASTMATH <= {"contract", "reassoc", "arcp", "nsz"}
     assert not kernel.KERNEL_FASTMATH & {"nnan", "ninf", "fast", "afn"}
-    ieee = ieee_run_kernel()
     veh = VehicleModel("coach")
     sec = TrackSection("R0", speed_kmh=80.0, straight_in_m=60.0, curve_m=120.0, straight_out_m=60.0,
                        radius_m=300.0, cant_mm=150.0,
@@ -163,9 +162,8 @@ def test_kernel_freedoms_move_a_run_by_rounding_only(monkeypatch):
     for section in (sec, TrackSection("H1", speed_kmh=200.0, straight_in_m=150.0, curve_m=0.0, straight_out_m=150.0,
                                       irregularities=generate_irregularities(380.0, level="low", seed=23, s0=-40.0))):
         fast = simulate_section(veh, section, {})
-        monkeypatch.setattr(kernel, "run_kernel", ieee)
-        ref = simulate_section(veh, section, {})
-        monkeypatch.undo()
+        with ieee_kernel():
+            ref = simulate_section(veh, section, {})
         for ch, x in ref.channels.items():
             assert np.isfinite(x).all() and np.isfinite(fast.channels[ch]).all(), ch
             assert np.max(np.abs(fast.channels[ch] - x)) <= 1e-9 * max(np.max(np.abs(x)), 1e-12), (section.id, ch)
