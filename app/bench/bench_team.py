@@ -15,7 +15,10 @@ Phases:
    → the server's confirmation that the row is committed; ``--think`` seconds before each);
    answers lost counted from the database. With ``--during-answers N``, up to N further
    sessions of the signed-in engineers open one after another meanwhile ("first Panel page
-   while reviewers answer": only those that started and ended with answers coming in);
+   while reviewers answer": only those that started and ended with answers coming in), each
+   in a new browser context with an empty cache; ``--during-cached`` adds after each one a new
+   tab of a first-wave engineer's browser, whose cache holds the static files (a returning
+   engineer);
 3. the sessions are closed; after ``--settle`` seconds (Bokeh discards a disconnected session
    after ``unused-session-lifetime``, 15 s by default) the memory is read again;
 4. a second wave of as many sessions is opened by the same users, already signed in (each
@@ -90,6 +93,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also open up to N sessions of the signed-in engineers while the "
                         "reviewers answer, and time their first pages (use --think so that the "
                         "answering lasts)")
+    parser.add_argument("--during-cached", action="store_true",
+                        help="with --during-answers: after each such session in a new browser "
+                        "context (empty cache), one in a new tab of a first-wave engineer's "
+                        "browser context, whose cache holds the app's static files from its first "
+                        "visit (a returning engineer), timed the same way and printed apart")
     parser.add_argument("--settle", type=float, default=60.0,
                         help="seconds after the sessions closed before memory is read again")
     parser.add_argument("--admin", action="store_true",
@@ -352,8 +360,9 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
         t0 = time.perf_counter()
         for t in threads:
             t.start()
-        m["first_page_during"], m["during_open"] = _open_during(
-            browser, topo.url, states, threads, getattr(args, "during_answers", 0))
+        m["first_page_during"], m["during_open"], m["first_page_during_cached"] = _open_during(
+            browser, topo.url, states, threads, getattr(args, "during_answers", 0),
+            pages if getattr(args, "during_cached", False) else None)
         for t in threads:
             t.join()
         m["wall"] = time.perf_counter() - t0
@@ -371,27 +380,40 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
     return m
 
 
-def _open_during(browser, base: str, states: list, threads: list, n: int) -> tuple[list[float], int]:
+def _open_during(browser, base: str, states: list, threads: list, n: int,
+                 visited: list | None = None) -> tuple[list[float], int, list[float]]:
     """While the reviewers' ``threads`` answer: up to ``n`` sessions of the signed-in engineers
-    (their cookies ``states``, in turn), one after another, each timed from its ``/app``
-    request until the navigation shows and closed again; stops when the reviewers are done.
-    Returns the first pages (ms) of the sessions that started while answers were still coming
-    in, and how many sessions were open at the time (the first wave's)."""
+    (their cookies ``states``, in turn), one after another, each in a new browser context (an
+    empty cache: every static file fetched and every script compiled afresh), timed from its
+    ``/app`` request until the navigation shows and closed again; stops when the reviewers are
+    done. ``visited``: the first wave's pages; after each such session one more opens in a new
+    tab of one of their contexts (a returning engineer: the browser's cache holds the static
+    files, served immutable, from the first visit), timed the same way. Returns the first pages
+    (ms) of the sessions that started while answers were still coming in, how many sessions
+    were open at the time (the first wave's), and the cached tabs' first pages (ms)."""
     times: list[float] = []
-    for k in range(n):
-        if not any(t.is_alive() for t in threads):
-            break
-        ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900},
-                                  storage_state=states[k % len(states)])
-        page = ctx.new_page()
+    cached: list[float] = []
+
+    def timed(page, out: list[float]) -> None:
         page.route("**/fonts.g*/**", lambda route: route.abort())
         t0 = time.perf_counter()
         page.goto(f"{base}/app")
         page.locator(".rv-nav").wait_for(timeout=120_000)
         if any(t.is_alive() for t in threads):  # the answers went on throughout
-            times.append((time.perf_counter() - t0) * 1000)
+            out.append((time.perf_counter() - t0) * 1000)
+
+    for k in range(n):
+        if not any(t.is_alive() for t in threads):
+            break
+        ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900},
+                                  storage_state=states[k % len(states)])
+        timed(ctx.new_page(), times)
         ctx.close()
-    return times, len(states)
+        if visited and any(t.is_alive() for t in threads):
+            tab = visited[k % len(visited)].context.new_page()
+            timed(tab, cached)
+            tab.close()
+    return times, len(states), cached
 
 
 def _stored_answers(db: Any) -> int:
@@ -447,6 +469,11 @@ def _figures(args: argparse.Namespace, m: dict[str, Any], stored: int, answers: 
             "sessions": len(m["first_page_during"]), "engineers_open": m["during_open"],
             "p50": _pct(m["first_page_during"], 50), "p95": _pct(m["first_page_during"], 95),
             "max": round(max(m["first_page_during"]), 1)}} if m.get("first_page_during") else {}),
+        # the same, in a new tab of a browser that visited the app before (its cache warm)
+        **({"first_panel_page_during_answers_cached_ms": {
+            "sessions": len(m["first_page_during_cached"]),
+            "p50": _pct(m["first_page_during_cached"], 50), "p95": _pct(m["first_page_during_cached"], 95),
+            "max": round(max(m["first_page_during_cached"]), 1)}} if m.get("first_page_during_cached") else {}),
         "panel_sessions_per_process": sorted(m["per_process"].values()),
         "answer_round_trip_ms": {"p50": _pct(m["rtt"], 50), "p95": _pct(m["rtt"], 95),
                                  "max": round(max(m["rtt"]), 1)},
