@@ -35,6 +35,9 @@ sessions are discarded by Bokeh after ``unused-session-lifetime`` (15 s) at its 
 The app processes run with the deployment's environment (``railval.app.upkeep.SERVE_ENV``:
 Python objects in glibc's heap, so the trim returns them); ``--pymalloc`` runs them with
 Python's own allocator instead, for comparison.
+
+Length: one benchmark — the phases above, driven in one browser, and the figures they print —
+in steps of ≤ 60 lines; the topology it runs on is :mod:`railval.app.bench.topology`.
 """
 
 from __future__ import annotations
@@ -59,7 +62,7 @@ from typing import Any
 from sqlalchemy import func, select
 
 from railval.app.bench.bench_workshop import xsrf_headers, xsrf_of
-from railval.app.bench.topology import REPO, TEMPLATE, Topology
+from railval.app.bench.topology import REPO, TEMPLATE, Topology, browser_trust
 from railval.core import lazy
 from railval.core.errors import InvalidParameter
 from railval.db.catalogue import head_revision
@@ -195,10 +198,9 @@ def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | N
     ``/app`` directly, without signing in, timed from the request."""
     pages, warm = [], None
     for k in range(n):
-        ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900},
+        ctx = browser.new_context(viewport={"width": 1280, "height": 900},
                                   storage_state=signed_in[k] if signed_in else None)
         page = ctx.new_page()
-        page.route("**/fonts.g*/**", lambda route: route.abort())
         if not signed_in:
             page.goto(f"{base}/login")
             page.fill("#username", "eng")
@@ -230,6 +232,7 @@ def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | N
 
 
 _PIDS: list[int] = []
+
 
 
 def _export(commit: str, work: Path) -> str:
@@ -345,7 +348,8 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
                          "cpu": [], "first_page_signed_in": [], "cpu_signed_in": []}
     states: list = []
     with playwright_sync.sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=report.CHROMIUM_ARGS)
+        browser = pw.chromium.launch(executable_path="/usr/bin/chromium",
+                                     args=[*report.CHROMIUM_ARGS, *browser_trust(topo.workdir / "tls.crt")])
         m["served_by"] = []
         pages, m["warm"] = _open_sessions(browser, topo.url, args.engineers, m["first_page"], m["cpu"],
                                           m["served_by"], states=states)
@@ -360,9 +364,10 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
         t0 = time.perf_counter()
         for t in threads:
             t.start()
+        m["during_phases"] = {}
         m["first_page_during"], m["during_open"], m["first_page_during_cached"] = _open_during(
             browser, topo.url, states, threads, getattr(args, "during_answers", 0),
-            pages if getattr(args, "during_cached", False) else None)
+            pages if getattr(args, "during_cached", False) else None, m["during_phases"])
         for t in threads:
             t.join()
         m["wall"] = time.perf_counter() - t0
@@ -380,8 +385,21 @@ def _drive(args: argparse.Namespace, topo: Any, tokens: list[str], answers: int)
     return m
 
 
-def _open_during(browser, base: str, states: list, threads: list, n: int,
-                 visited: list | None = None) -> tuple[list[float], int, list[float]]:
+#: where a first page's time went, read in the browser once the navigation shows (Navigation and
+#: Resource Timing, ms from the request): the HTML's response end, the scripts run
+#: (DOMContentLoaded's end), the static files' bytes over the wire and how many came from the
+#: browser's cache (0 bytes over the wire: fresh; fewer than the body's: revalidated, a 304)
+_PHASES_JS = """() => { const n = performance.getEntriesByType('navigation')[0];
+  const r = performance.getEntriesByType('resource').filter(x => x.name.includes('/static/'));
+  return {html_ms: n.responseEnd, scripts_run_ms: n.domContentLoadedEventEnd,
+          static_files: r.length, static_bytes: r.reduce((a, x) => a + x.transferSize, 0),
+          from_cache: r.filter(x => x.transferSize === 0).length,
+          revalidated: r.filter(x => x.transferSize > 0 && x.transferSize < x.encodedBodySize).length,
+          static_done_ms: Math.max(0, ...r.map(x => x.responseEnd))}; }"""
+
+
+def _open_during(browser, base: str, states: list, threads: list, n: int, visited: list | None = None,
+                 phases: dict | None = None) -> tuple[list[float], int, list[float]]:
     """While the reviewers' ``threads`` answer: up to ``n`` sessions of the signed-in engineers
     (their cookies ``states``, in turn), one after another, each in a new browser context (an
     empty cache: every static file fetched and every script compiled afresh), timed from its
@@ -390,23 +408,25 @@ def _open_during(browser, base: str, states: list, threads: list, n: int,
     tab of one of their contexts (a returning engineer: the browser's cache holds the static
     files, served immutable, from the first visit), timed the same way. Returns the first pages
     (ms) of the sessions that started while answers were still coming in, how many sessions
-    were open at the time (the first wave's), and the cached tabs' first pages (ms)."""
+    were open at the time (the first wave's), and the cached tabs' first pages (ms). ``phases``
+    receives, per kind (``empty_cache``, ``cached``), each timed page's :data:`_PHASES_JS`
+    reading."""
+    phases = {} if phases is None else phases
     times: list[float] = []
     cached: list[float] = []
 
     def timed(page, out: list[float]) -> None:
-        page.route("**/fonts.g*/**", lambda route: route.abort())
         t0 = time.perf_counter()
         page.goto(f"{base}/app")
         page.locator(".rv-nav").wait_for(timeout=120_000)
         if any(t.is_alive() for t in threads):  # the answers went on throughout
             out.append((time.perf_counter() - t0) * 1000)
+            phases.setdefault("cached" if out is cached else "empty_cache", []).append(page.evaluate(_PHASES_JS))
 
     for k in range(n):
         if not any(t.is_alive() for t in threads):
             break
-        ctx = browser.new_context(ignore_https_errors=True, viewport={"width": 1280, "height": 900},
-                                  storage_state=states[k % len(states)])
+        ctx = browser.new_context(viewport={"width": 1280, "height": 900}, storage_state=states[k % len(states)])
         timed(ctx.new_page(), times)
         ctx.close()
         if visited and any(t.is_alive() for t in threads):
@@ -469,6 +489,11 @@ def _figures(args: argparse.Namespace, m: dict[str, Any], stored: int, answers: 
             "sessions": len(m["first_page_during"]), "engineers_open": m["during_open"],
             "p50": _pct(m["first_page_during"], 50), "p95": _pct(m["first_page_during"], 95),
             "max": round(max(m["first_page_during"]), 1)}} if m.get("first_page_during") else {}),
+        # where those first pages' time went (medians; _PHASES_JS)
+        **({"first_page_during_answers_phases": {kind: {key: round(statistics.median(r[key] for r in rows), 1)
+                                                        for key in rows[0]}
+                                                 for kind, rows in m["during_phases"].items()}}
+           if m.get("during_phases") else {}),
         # the same, in a new tab of a browser that visited the app before (its cache warm)
         **({"first_panel_page_during_answers_cached_ms": {
             "sessions": len(m["first_page_during_cached"]),

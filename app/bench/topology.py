@@ -12,6 +12,7 @@ starts the app processes and nginx, and waits until ``/health`` answers through 
 
 from __future__ import annotations
 
+import base64
 import json
 import os
 import re
@@ -35,6 +36,10 @@ from railval.core import lazy
 #: not in the one that starts them
 upkeep = lazy.module("railval.app.upkeep")
 nginx_static = lazy.module("railval.app.nginx_static")
+#: the certificate's key read by :func:`browser_trust` only
+x509 = lazy.module("cryptography.x509")
+hashes = lazy.module("cryptography.hazmat.primitives.hashes")
+serialization = lazy.module("cryptography.hazmat.primitives.serialization")
 
 REPO = Path(__file__).resolve().parents[2]
 TEMPLATE = REPO / "deploy" / "nginx" / "railval.conf.template"
@@ -77,6 +82,24 @@ def self_signed(folder: Path, host: str = "127.0.0.1") -> tuple[Path, Path]:
                     "-keyout", str(key), "-out", str(cert)], check=True, capture_output=True)
     key.chmod(0o600)
     return cert, key
+
+
+#: FastListTemplate's Google Fonts requests fail at once (no route: Playwright's request
+#: interception turns the browser's HTTP cache off)
+NO_FONT_HOSTS = "--host-resolver-rules=MAP fonts.googleapis.com ~NOTFOUND, MAP fonts.gstatic.com ~NOTFOUND"
+
+
+def browser_trust(cert: Path) -> list[str]:
+    """Chromium flags under which the topology's self-signed certificate ``cert`` is trusted
+    (its public key's SHA-256 in ``--ignore-certificate-errors-spki-list``) rather than an
+    error passed over: a page whose certificate is in error is never stored in the browser's
+    cache, so a returning engineer's cached static files could not be measured otherwise; and
+    :data:`NO_FONT_HOSTS`."""
+    key = x509.load_pem_x509_certificate(cert.read_bytes()).public_key()
+    spki = key.public_bytes(serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo)
+    digest = hashes.Hash(hashes.SHA256())
+    digest.update(spki)
+    return [f"--ignore-certificate-errors-spki-list={base64.b64encode(digest.finalize()).decode()}", NO_FONT_HOSTS]
 
 
 def insecure_context() -> ssl.SSLContext:
