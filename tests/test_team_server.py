@@ -217,3 +217,57 @@ def test_batch_validation_on_a_dask_cluster_equals_local(team):
 
     assert dask["baseline"].info["sections_measured"] == {"cached": 0, "computed": 4}
     assert verdict(dask["baseline"]) == verdict(local["baseline"])
+
+
+def test_a_returning_engineers_tab_reads_the_browser_cache(team, playwright):
+    """What ``bench team --during-cached`` measures is a real cache (docs/app.md "A returning
+    engineer's first page"): with the topology's certificate trusted by its key
+    (:func:`railval.app.bench.topology.browser_trust`) and no request interception, a second tab
+    of a signed-in engineer's browser takes the versioned static files (nginx: immutable) from
+    the cache — 0 bytes over the wire — where the first tab fetched them."""
+    from railval.app.bench.topology import browser_trust
+    from tests.browser_support import CHROMIUM, CHROMIUM_ARGS
+
+    topo, _db, _tokens = team
+    browser = playwright.chromium.launch(executable_path=CHROMIUM,
+                                         args=[*CHROMIUM_ARGS, *browser_trust(topo.workdir / "tls.crt")])
+    try:
+        ctx = browser.new_context(viewport={"width": 1280, "height": 900})  # no certificate error passed over
+        page = ctx.new_page()
+        page.goto(f"{topo.url}/app")
+        page.fill("#username", "eng")
+        page.fill("#password", "engineer password")
+        page.click("#signin")
+        page.locator(".rv-nav").wait_for(timeout=TIMEOUT_MS)
+        versioned = """() => performance.getEntriesByType('resource')
+            .filter(r => r.name.includes('/static/') && r.name.includes('?v='))
+            .map(r => [r.name, r.transferSize])"""
+        first = page.evaluate(versioned)
+        tab = ctx.new_page()
+        tab.goto(f"{topo.url}/app")
+        tab.locator(".rv-nav").wait_for(timeout=TIMEOUT_MS)
+        second = tab.evaluate(versioned)
+    finally:
+        browser.close()
+    assert len(first) >= 5 and all(size > 0 for _, size in first), first
+    assert {name for name, _ in second} == {name for name, _ in first}
+    assert [name for name, size in second if size != 0] == [], second
+
+
+def test_browser_trust_names_the_certificates_key_as_openssl_hashes_it(tmp_path):
+    """The key hash Chromium is given equals base64(SHA-256(SubjectPublicKeyInfo, DER)) computed
+    by openssl alone from the certificate."""
+    import base64
+    import subprocess
+
+    from railval.app.bench.topology import NO_FONT_HOSTS, browser_trust, self_signed
+
+    cert, _key = self_signed(tmp_path)
+    pub = subprocess.run(["openssl", "x509", "-in", str(cert), "-noout", "-pubkey"], check=True,
+                         capture_output=True).stdout
+    der = subprocess.run(["openssl", "pkey", "-pubin", "-outform", "DER"], input=pub, check=True,
+                         capture_output=True).stdout
+    digest = subprocess.run(["openssl", "dgst", "-sha256", "-binary"], input=der, check=True,
+                            capture_output=True).stdout
+    flags = browser_trust(cert)
+    assert flags == [f"--ignore-certificate-errors-spki-list={base64.b64encode(digest).decode()}", NO_FONT_HOSTS]
