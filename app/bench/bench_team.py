@@ -234,7 +234,6 @@ def _open_sessions(browser, base: str, n: int, times: list[float], cpu: list | N
 _PIDS: list[int] = []
 
 
-
 def _export(commit: str, work: Path) -> str:
     """The code of ``commit`` (``git archive`` of this checkout) laid out as the ``railval``
     namespace (``railval/app``, ``railval/core``, ``railval/db``) in ``work``; returns the
@@ -394,8 +393,7 @@ _PHASES_JS = """() => { const n = performance.getEntriesByType('navigation')[0];
   return {html_ms: n.responseEnd, scripts_run_ms: n.domContentLoadedEventEnd,
           static_files: r.length, static_bytes: r.reduce((a, x) => a + x.transferSize, 0),
           from_cache: r.filter(x => x.transferSize === 0).length,
-          revalidated: r.filter(x => x.transferSize > 0 && x.transferSize < x.encodedBodySize).length,
-          static_done_ms: Math.max(0, ...r.map(x => x.responseEnd))}; }"""
+          revalidated: r.filter(x => x.transferSize > 0 && x.transferSize < x.encodedBodySize).length}; }"""
 
 
 def _open_during(browser, base: str, states: list, threads: list, n: int, visited: list | None = None,
@@ -415,23 +413,23 @@ def _open_during(browser, base: str, states: list, threads: list, n: int, visite
     times: list[float] = []
     cached: list[float] = []
 
-    def timed(page, out: list[float]) -> None:
+    def timed(page, out: list[float], kind: str) -> None:
         t0 = time.perf_counter()
         page.goto(f"{base}/app")
         page.locator(".rv-nav").wait_for(timeout=120_000)
         if any(t.is_alive() for t in threads):  # the answers went on throughout
             out.append((time.perf_counter() - t0) * 1000)
-            phases.setdefault("cached" if out is cached else "empty_cache", []).append(page.evaluate(_PHASES_JS))
+            phases.setdefault(kind, []).append(page.evaluate(_PHASES_JS))
 
     for k in range(n):
         if not any(t.is_alive() for t in threads):
             break
         ctx = browser.new_context(viewport={"width": 1280, "height": 900}, storage_state=states[k % len(states)])
-        timed(ctx.new_page(), times)
+        timed(ctx.new_page(), times, "empty_cache")
         ctx.close()
         if visited and any(t.is_alive() for t in threads):
             tab = visited[k % len(visited)].context.new_page()
-            timed(tab, cached)
+            timed(tab, cached, "cached")
             tab.close()
     return times, len(states), cached
 
