@@ -242,6 +242,13 @@ def test_the_diagnose_page_runs_a_screened_diagnosis_and_lists_what_it_screened_
         assert f"{x['name']} {100 * x['explained_on_screen']:.1f} %" in text
     line = " ".join(o.object for o in page.candidates_box.objects if "rv-stored-run" in (o.css_classes or []))
     assert f"10 chosen candidates, screened to the {SCREEN_KEEP} best" in line  # the stored run says it
+    # the candidates' heading and caption sit directly above their table, after the verdict
+    objs = list(page.candidates_box.objects)
+    at = next(i for i, o in enumerate(objs) if "rv-candidates" in (getattr(o, "css_classes", None) or []))
+    assert str(getattr(objs[at - 2], "object", "")).startswith("#### Ranked candidates")
+    assert str(getattr(objs[at - 1], "object", "")).startswith("Shares of the residual explained")
+    verdict = next(i for i, o in enumerate(objs) if isinstance(o, pn.pane.Alert))
+    assert verdict < at - 2
     page.state.screened = False
     page.state.run_diagnosis(background=False)
     assert "screen" not in seen[-1]

@@ -234,14 +234,17 @@ class DiagnosePage(PageBase):
         # "#" beside its sort arrow and "measurement" in the kind column shown whole (browser test)
         widths = {"#": 50, "candidate": 165, "kind": 106, "held-out": 92, "in-sample": 104,
                   "plausible": 98, "flags": 68, "fitted parameters": 207}
-        self.candidates_box.objects = [
+        # each heading directly above what it names: the candidates' heading and the caption of
+        # their shares over their table, after the verdict, the cause set and the families
+        ranked_table = [
             pn.pane.Markdown("#### Ranked candidates (effects and model parameters), by the share "
                              "explained on held-out sections"),
             pn.pane.Markdown("Shares of the residual explained, in %: on held-out sections (the "
                              "ranking) and in-sample (all sections).", sizing_mode="stretch_width"),
-            *self._run_line(), *extra,
-            *([table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"], widths=widths,
-                     layout="fit_columns")] if cands else []),
+            table(df, height=40 + 32 * len(df), css_classes=["rv-candidates"], widths=widths,
+                  layout="fit_columns")] if cands else []
+        self.candidates_box.objects = [
+            pn.pane.Markdown("#### Verdict and causes"), *self._run_line(), *extra, *ranked_table,
             *self._earlier_runs(), self.candidate_box,
         ]
         ranked = [c.name for c in cands]
