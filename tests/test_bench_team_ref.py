@@ -3,13 +3,15 @@ working tree's: both codes serve one database (app/bench/bench_team.py ``check_s
 
 from __future__ import annotations
 
+import base64
 import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
 
 from railval.app.bench.bench_team import MIGRATIONS, _export, check_same_schema
-from railval.app.bench.topology import REPO
+from railval.app.bench.topology import NO_FONT_HOSTS, REPO, browser_trust, self_signed
 from railval.core.errors import InvalidParameter
 from railval.db.catalogue import head_revision
 
@@ -58,3 +60,17 @@ def test_an_extra_script_is_refused(tmp_path):
     (versions / "0099_planted.py").write_text('revision = "0099"\ndown_revision = "x"\n', "utf-8")
     with pytest.raises(InvalidParameter, match="0099_planted.py"):
         check_same_schema("new", tmp_path)
+
+
+def test_browser_trust_names_the_certificates_key_as_openssl_hashes_it(tmp_path):
+    """The key hash Chromium is given equals base64(SHA-256(SubjectPublicKeyInfo, DER)) computed
+    by openssl alone from the certificate."""
+    cert, _key = self_signed(tmp_path)
+    pub = subprocess.run(["openssl", "x509", "-in", str(cert), "-noout", "-pubkey"], check=True,
+                         capture_output=True).stdout
+    der = subprocess.run(["openssl", "pkey", "-pubin", "-outform", "DER"], input=pub, check=True,
+                         capture_output=True).stdout
+    digest = subprocess.run(["openssl", "dgst", "-sha256", "-binary"], input=der, check=True,
+                            capture_output=True).stdout
+    flags = browser_trust(cert)
+    assert flags == [f"--ignore-certificate-errors-spki-list={base64.b64encode(digest).decode()}", NO_FONT_HOSTS]

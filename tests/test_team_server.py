@@ -47,9 +47,12 @@ def team(tmp_path_factory):
         yield topo, db, tokens
 
 
-def _sign_in(context, base: str, username: str, password: str):
+def _sign_in(context, base: str, username: str, password: str, *, route_fonts: bool = True):
+    """Sign in on a new page of ``context``; ``route_fonts=False`` where the browser fails the font
+    hosts itself (``topology.NO_FONT_HOSTS``): a routed page reads nothing from the browser's cache."""
     page = context.new_page()
-    block_fonts(page)
+    if route_fonts:
+        block_fonts(page)
     page.goto(f"{base}/app")
     page.fill("#username", username)
     page.fill("#password", password)
@@ -233,12 +236,7 @@ def test_a_returning_engineers_tab_reads_the_browser_cache(team, playwright):
                                          args=[*CHROMIUM_ARGS, *browser_trust(topo.workdir / "tls.crt")])
     try:
         ctx = browser.new_context(viewport={"width": 1280, "height": 900})  # no certificate error passed over
-        page = ctx.new_page()
-        page.goto(f"{topo.url}/app")
-        page.fill("#username", "eng")
-        page.fill("#password", "engineer password")
-        page.click("#signin")
-        page.locator(".rv-nav").wait_for(timeout=TIMEOUT_MS)
+        page = _sign_in(ctx, topo.url, "eng", "engineer password", route_fonts=False)
         versioned = """() => performance.getEntriesByType('resource')
             .filter(r => r.name.includes('/static/') && r.name.includes('?v='))
             .map(r => [r.name, r.transferSize])"""
@@ -253,21 +251,3 @@ def test_a_returning_engineers_tab_reads_the_browser_cache(team, playwright):
     assert {name for name, _ in second} == {name for name, _ in first}
     assert [name for name, size in second if size != 0] == [], second
 
-
-def test_browser_trust_names_the_certificates_key_as_openssl_hashes_it(tmp_path):
-    """The key hash Chromium is given equals base64(SHA-256(SubjectPublicKeyInfo, DER)) computed
-    by openssl alone from the certificate."""
-    import base64
-    import subprocess
-
-    from railval.app.bench.topology import NO_FONT_HOSTS, browser_trust, self_signed
-
-    cert, _key = self_signed(tmp_path)
-    pub = subprocess.run(["openssl", "x509", "-in", str(cert), "-noout", "-pubkey"], check=True,
-                         capture_output=True).stdout
-    der = subprocess.run(["openssl", "pkey", "-pubin", "-outform", "DER"], input=pub, check=True,
-                         capture_output=True).stdout
-    digest = subprocess.run(["openssl", "dgst", "-sha256", "-binary"], input=der, check=True,
-                            capture_output=True).stdout
-    flags = browser_trust(cert)
-    assert flags == [f"--ignore-certificate-errors-spki-list={base64.b64encode(digest).decode()}", NO_FONT_HOSTS]
