@@ -18,9 +18,26 @@ from railval.core.errors import RailvalError
 
 #: where Chromium is looked for, in this order
 CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "google-chrome")
-#: flags that let Debian's Chromium run headless in containers and CI
+#: the omnibox popup's WebUI features: headless Chromium 156 builds the address bar's dropdown
+#: as two hidden pages (``chrome://omnibox-popup.top-chrome``) for every new window — ≈ 1
+#: CPU-s of its own renderer per new browser context, on the cores the served app and the
+#: page share (docs/app.md, "The browser's own address bar")
+OMNIBOX_WEBUI_FEATURES = ("WebUIOmniboxPopup", "WebUIOmniboxFullPopup", "WebUIOmniboxAimPopup")
+#: the features Playwright turns off in the browsers it starts (its ``chromiumSwitches``,
+#: Playwright 1.5x): Chromium reads only the last ``--disable-features`` switch, and Playwright
+#: puts its own before the caller's, so railval's switch repeats them
+#: (``tests/test_browser_flags.py`` reads both off ``chrome://version``)
+PLAYWRIGHT_OFF_FEATURES = (
+    "AvoidUnnecessaryBeforeUnloadCheckSync", "DestroyProfileOnBrowserClose", "HttpsUpgrades",
+    "HttpsFirstBalancedModeAutoEnable", "LensOverlay", "MediaRouter", "PaintHolding",
+    "ThirdPartyStoragePartitioning", "AvoidCorsURLLoaderRestartOnRedirect", "TcpPortRandomizationWin",
+    "OptimizationHints", "NetworkTimeServiceQuerying", "AimEnabled", "PreconnectToSearch",
+    "msForceBrowserSignIn", "msEdgeUpdateLaunchServicesPreferredVersion")
+#: flags that let Debian's Chromium run headless in containers and CI, without the omnibox
+#: popup's WebUI; the one list for the PDF printer, the benchmarks' and the tests' browsers
 CHROMIUM_ARGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                 "--disable-background-networking", "--disable-component-update", "--disable-sync")
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--disable-features=" + ",".join((*PLAYWRIGHT_OFF_FEATURES, *OMNIBOX_WEBUI_FEATURES)))
 PDF_TIMEOUT_S = 120
 
 #: Print rules of the reports (appended to their CSS): A4 pages, and a wide table of class
