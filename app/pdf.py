@@ -19,13 +19,13 @@ from railval.core.errors import RailvalError
 #: where Chromium is looked for, in this order
 CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "chromium", "chromium-browser", "google-chrome")
 #: the omnibox popup's WebUI features: headless Chromium 156 builds the address bar's dropdown
-#: as two hidden pages (``chrome://omnibox-popup.top-chrome``) for every new window — ≈ 1
-#: CPU-s of its own renderer per new browser context, on the cores the served app and the
-#: page share (docs/app.md, "The browser's own address bar")
+#: as two hidden pages (``chrome://omnibox-popup.top-chrome``) for every new window — 1.0–1.8 s
+#: of its own renderer's tasks per new browser context (six traced loads), on the cores the
+#: served app and the page share (docs/app.md, "The browser's own address bar")
 OMNIBOX_WEBUI_FEATURES = ("WebUIOmniboxPopup", "WebUIOmniboxFullPopup", "WebUIOmniboxAimPopup")
 #: the features Playwright turns off in the browsers it starts (its ``chromiumSwitches``,
-#: Playwright 1.5x): Chromium reads only the last ``--disable-features`` switch, and Playwright
-#: puts its own before the caller's, so railval's switch repeats them
+#: read off Playwright 1.65.2): Chromium reads only the last ``--disable-features`` switch,
+#: and Playwright puts its own before the caller's, so railval's switch repeats them
 #: (``tests/test_browser_flags.py`` reads both off ``chrome://version``)
 PLAYWRIGHT_OFF_FEATURES = (
     "AvoidUnnecessaryBeforeUnloadCheckSync", "DestroyProfileOnBrowserClose", "HttpsUpgrades",

@@ -5,7 +5,7 @@ the benchmarks and these tests), read off the running browser:
   before the caller's: railval's switch must repeat every feature Playwright turns off, or a
   Playwright upgrade's new entry would silently come back on in the tests and benchmarks;
 * the omnibox popup's WebUI (two hidden ``chrome://omnibox-popup.top-chrome`` pages per new
-  window, ≈ 1 CPU-s each time, docs/app.md "The browser's own address bar") is not built; a
+  window, 1.0–1.8 s of a renderer's tasks each time, docs/app.md "The browser's own address bar") is not built; a
   browser started with Playwright's flags alone builds it.
 """
 
